@@ -1,0 +1,88 @@
+"""Argument checks shared by the whole library.
+
+Bad input raises ``ValueError`` or ``TypeError`` naming the argument, what was
+expected and what arrived. The CLI turns these into one readable line.
+"""
+from __future__ import annotations
+
+import math
+from numbers import Real
+
+import numpy as np
+
+
+def finite_number(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
+    """Return ``value`` as a float, raising if it is not a finite real number."""
+    if isinstance(value, bool) or not isinstance(value, (Real, np.floating, np.integer)):
+        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
+    out = float(value)
+    if not math.isfinite(out):
+        raise ValueError(f"{name} must be finite, got {out}")
+    if positive and out <= 0:
+        raise ValueError(f"{name} must be > 0, got {out}")
+    if nonnegative and out < 0:
+        raise ValueError(f"{name} must be >= 0, got {out}")
+    return out
+
+
+def positive_int(name: str, value, *, minimum: int = 1) -> int:
+    """Return ``value`` as an int >= ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
+    if value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {value}")
+    return int(value)
+
+
+def image(name: str, value) -> np.ndarray:
+    """Check an image: HxW or HxWx3, uint8 or floating, non-empty, finite."""
+    if not isinstance(value, np.ndarray):
+        raise TypeError(f"{name} must be a numpy array, got {type(value).__name__}")
+    if value.ndim not in (2, 3) or (value.ndim == 3 and value.shape[2] not in (1, 3)):
+        raise ValueError(f"{name} must have shape (H, W) or (H, W, 3), got {value.shape}")
+    if value.shape[0] == 0 or value.shape[1] == 0:
+        raise ValueError(f"{name} is empty: shape {value.shape}")
+    if value.dtype != np.uint8 and not np.issubdtype(value.dtype, np.floating):
+        if not np.issubdtype(value.dtype, np.integer):
+            raise TypeError(f"{name} must be uint8 or float, got dtype {value.dtype}")
+    return value
+
+
+def gray_float32(name: str, value) -> np.ndarray:
+    """Return an image as float32 gray (BGR colour, OpenCV order, with BT.601 weights)."""
+    value = image(name, value)
+    if value.ndim == 3:
+        if value.shape[2] == 1:
+            value = value[:, :, 0]
+        else:
+            value = value.astype(np.float32) @ np.array([0.114, 0.587, 0.299], np.float32)
+    out = np.ascontiguousarray(value, dtype=np.float32)
+    if not np.isfinite(out).all():
+        raise ValueError(f"{name} contains NaN or inf values")
+    return out
+
+
+def same_shape(name_a: str, a: np.ndarray, name_b: str, b: np.ndarray) -> None:
+    """Raise if two images do not have the same height and width."""
+    if a.shape[:2] != b.shape[:2]:
+        raise ValueError(
+            f"{name_a} and {name_b} must have the same size, got "
+            f"{a.shape[1]}x{a.shape[0]} and {b.shape[1]}x{b.shape[0]}")
+
+
+def points3(name: str, value) -> np.ndarray:
+    """Return an (N, 3) float64 array."""
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3), got {arr.shape}")
+    return arr
+
+
+def matrix(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
+    """Return a finite float64 array of the given shape."""
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} contains NaN or inf values")
+    return arr

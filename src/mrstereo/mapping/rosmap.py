@@ -1,0 +1,94 @@
+"""ROS map_server / Nav2 maps: a PGM image and a YAML description.
+
+PGM values: 254 free, 0 occupied, 205 unknown; the top image row is max y.
+YAML: image, resolution, origin [x, y, yaw] (pose of the lower-left pixel),
+negate, occupied_thresh, free_thresh, mode trinary.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..io import atomic_write, read_image, write_image
+from .grid import GridSpec
+
+__all__ = ["RosMap", "read_ros_map", "write_ros_map", "FREE", "OCCUPIED", "UNKNOWN"]
+
+FREE, OCCUPIED, UNKNOWN = 254, 0, 205
+
+
+@dataclass(frozen=True)
+class RosMap:
+    """A trinary map: ``occupancy`` is float (rows, cols) in [0, 1], NaN unknown, row 0 = min y."""
+
+    occupancy: np.ndarray
+    grid: GridSpec
+    occupied_thresh: float = 0.65
+    free_thresh: float = 0.196   # as ROS map_saver: 205 (p = 0.196) must read back as unknown
+
+    @property
+    def occupied(self) -> np.ndarray:
+        return np.nan_to_num(self.occupancy, nan=0.0) > self.occupied_thresh
+
+    @property
+    def free(self) -> np.ndarray:
+        return np.nan_to_num(self.occupancy, nan=1.0) < self.free_thresh
+
+    @property
+    def unknown(self) -> np.ndarray:
+        return ~(self.occupied | self.free)
+
+
+def write_ros_map(yaml_path: str | os.PathLike, ros_map: RosMap) -> None:
+    """Write ``NAME.yaml`` and ``NAME.pgm`` beside it (atomically)."""
+    yaml_path = Path(yaml_path)
+    pgm_path = yaml_path.with_suffix(".pgm")
+    image = np.full(ros_map.occupancy.shape, UNKNOWN, np.uint8)
+    image[ros_map.free] = FREE
+    image[ros_map.occupied] = OCCUPIED
+    write_image(pgm_path, np.flipud(image))
+    g = ros_map.grid
+    meta = {"image": pgm_path.name, "resolution": float(g.resolution_m),
+            "origin": [float(g.origin_x_m), float(g.origin_y_m), 0.0], "negate": 0,
+            "occupied_thresh": float(ros_map.occupied_thresh), "free_thresh": float(ros_map.free_thresh),
+            "mode": "trinary"}
+    with atomic_write(yaml_path) as tmp:
+        tmp.write_text(yaml.safe_dump(meta, sort_keys=False, default_flow_style=None))
+
+
+def read_ros_map(yaml_path: str | os.PathLike) -> RosMap:
+    """Read a map_server YAML + image (trinary or scale, negate 0/1)."""
+    yaml_path = Path(yaml_path)
+    if not yaml_path.is_file():
+        raise FileNotFoundError(f"map file not found: {yaml_path}")
+    try:
+        meta = yaml.safe_load(yaml_path.read_text())
+    except yaml.YAMLError:
+        raise ValueError(f"map file {yaml_path} is not valid YAML") from None
+    if not isinstance(meta, dict):
+        raise ValueError(f"map file {yaml_path}: expected a mapping")
+    for key in ("image", "resolution", "origin"):
+        if key not in meta:
+            raise ValueError(f"map file {yaml_path}: missing field '{key}'")
+    try:
+        resolution = float(meta["resolution"])
+        ox, oy = float(meta["origin"][0]), float(meta["origin"][1])
+        occ_t = float(meta.get("occupied_thresh", 0.65))
+        free_t = float(meta.get("free_thresh", 0.196))
+    except (TypeError, ValueError, IndexError):
+        raise ValueError(f"map file {yaml_path}: resolution/origin/thresholds must be numbers") from None
+    if not np.isfinite([resolution, ox, oy, occ_t, free_t]).all() or resolution <= 0:
+        raise ValueError(f"map file {yaml_path}: resolution must be > 0 and all numbers finite")
+    image = read_image(yaml_path.parent / meta["image"], gray=True)
+    p = (255.0 - image.astype(np.float64)) / 255.0 if not meta.get("negate", 0) else image / 255.0
+    occupancy = np.flipud(p).copy()
+    if meta.get("mode", "trinary") == "trinary":
+        occupancy[(image == UNKNOWN)[::-1]] = np.nan
+    rows, cols = occupancy.shape
+    grid = GridSpec(width_m=cols * resolution, height_m=rows * resolution, resolution_m=resolution,
+                    origin_x_m=ox, origin_y_m=oy)
+    return RosMap(occupancy=occupancy, grid=grid, occupied_thresh=occ_t, free_thresh=free_t)
