@@ -1,0 +1,2 @@
+"""CLI commands (filled by the stage that owns them)."""
+COMMANDS: list = []
