@@ -1,0 +1,64 @@
+"""Disparity and image files: PFM and KITTI round trips, atomic writes, clear errors."""
+import numpy as np
+import pytest
+
+from mrstereo.io import (atomic_write, read_disparity, read_image, read_pfm, refuse_overwrite_input,
+                         write_disparity, write_image, write_pfm)
+
+DATA = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def test_pfm_round_trip_with_nan(tmp_path):
+    d = np.arange(12, dtype=np.float32).reshape(3, 4) / 3.0
+    d[1, 2] = np.nan
+    write_pfm(tmp_path / "d.pfm", d)
+    raw = (tmp_path / "d.pfm").read_bytes()
+    assert raw.startswith(b"Pf\n4 3\n-1\n")
+    # rows are stored bottom-up: the first stored value is the bottom-left pixel
+    assert np.frombuffer(raw[len(b"Pf\n4 3\n-1\n"):][:4], "<f4")[0] == d[2, 0]
+    assert np.isinf(np.frombuffer(raw[-4 * 4 - 4 * 4:][:16], "<f4")).sum() == 1
+    back = read_pfm(tmp_path / "d.pfm")
+    np.testing.assert_array_equal(np.isnan(back), np.isnan(d))
+    np.testing.assert_array_equal(back[~np.isnan(d)], d[~np.isnan(d)])
+
+
+def test_kitti_png_round_trip(tmp_path):
+    d = np.array([[0.0, 1.5, np.nan], [12.25, 255.99, 3.0]], np.float32)
+    write_disparity(tmp_path / "d.png", d)
+    raw = read_image(tmp_path / "d.png")
+    assert raw.dtype == np.uint16 and raw[0, 1] == 384 and raw[0, 2] == 0 and raw[0, 0] == 0
+    back = read_disparity(tmp_path / "d.png")
+    assert np.isnan(back[0, 0]) and np.isnan(back[0, 2])
+    np.testing.assert_allclose(back[1], d[1], atol=1 / 256)
+
+
+@pytest.mark.skipif(not (DATA / "kitti2012").is_dir(), reason="shared/data not available")
+def test_reads_real_kitti_gt():
+    d = read_disparity(DATA / "kitti2012/000070/disp_noc/000070_10.png")
+    assert d.shape == (376, 1241)
+    assert 4.6 < np.nanmin(d) < 4.7 and 123.0 < np.nanmax(d) < 123.1
+
+
+def test_atomic_write_leaves_nothing_on_failure(tmp_path):
+    target = tmp_path / "out.txt"
+    with pytest.raises(RuntimeError):
+        with atomic_write(target) as tmp:
+            tmp.write_text("partial")
+            raise RuntimeError("boom")
+    assert not target.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_clear_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="image not found"):
+        read_image(tmp_path / "nope.png")
+    (tmp_path / "corrupt.png").write_bytes(b"\x89PNG garbage")
+    with pytest.raises(ValueError, match="cannot decode image"):
+        read_image(tmp_path / "corrupt.png")
+    (tmp_path / "bad.pfm").write_bytes(b"P6\n1 1\n255\n")
+    with pytest.raises(ValueError, match="bad header"):
+        read_pfm(tmp_path / "bad.pfm")
+    with pytest.raises(ValueError, match=r"\.pfm or \.png"):
+        write_disparity(tmp_path / "d.jpg", np.zeros((2, 2), np.float32))
+    write_image(tmp_path / "in.png", np.zeros((2, 2), np.uint8))
+    with pytest.raises(ValueError, match="would overwrite the input"):
+        refuse_overwrite_input(tmp_path / "in.png", [tmp_path / "x.png", tmp_path / "in.png"])
