@@ -1,2 +1,68 @@
-"""CLI commands (filled by the stage that owns them)."""
-COMMANDS: list = []
+"""CLI of the mapping stage: ``mrstereo plan`` (A* on a ROS map)."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import click
+
+from ..io import atomic_write, refuse_overwrite_input
+
+
+def _xy(ctx, param, value):
+    """Parse ``x,y`` (metres) into two floats."""
+    try:
+        x, y = (float(v) for v in value.split(","))
+    except ValueError:
+        raise click.BadParameter(f"expected two numbers 'x,y' in metres, got {value!r}") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise click.BadParameter(f"coordinates must be finite, got {value!r}")
+    return x, y
+
+
+@click.command("plan")
+@click.argument("map_yaml", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--start", required=True, callback=_xy, metavar="X,Y", help="Start (x, y) in metres.")
+@click.option("--goal", required=True, callback=_xy, metavar="X,Y", help="Goal (x, y) in metres.")
+@click.option("--radius", "radius_m", type=float, default=0.25, show_default=True,
+              help="Robot radius [m]: obstacles are inflated by it.")
+@click.option("--unknown", type=click.Choice(["blocked", "free"]), default="blocked",
+              show_default=True, help="How to treat unknown cells.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Path JSON to write.")
+@click.option("--plot", "plot_png", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also draw the map and the path to this image.")
+def plan_command(map_yaml: Path, start, goal, radius_m: float, unknown: str, output: Path,
+                 plot_png: Path | None) -> None:
+    """Plan a collision-free path on MAP_YAML (ROS map_server YAML + PGM) with A*.
+
+    Writes OUTPUT as JSON: path_xy (cell centres, metres), length_m, start, goal,
+    robot_radius_m, unknown, expanded_cells. Exits with an error if there is no path.
+    """
+    from ..mapping import plan_path, plot_map, read_ros_map
+
+    if not (math.isfinite(radius_m) and radius_m >= 0):
+        raise click.BadParameter(f"must be a finite number >= 0, got {radius_m}", param_hint="--radius")
+    inputs = [map_yaml, map_yaml.with_suffix(".pgm")]
+    for out in (output, plot_png):
+        if out is not None:
+            refuse_overwrite_input(out, inputs)
+    ros_map = read_ros_map(map_yaml)
+    result = plan_path(ros_map, start, goal, robot_radius_m=radius_m,
+                       unknown_is_obstacle=unknown == "blocked")
+    if not result.success:
+        raise RuntimeError(result.message)
+    record = {"map": str(map_yaml), "start": list(start), "goal": list(goal),
+              "robot_radius_m": radius_m, "unknown": unknown, "length_m": result.length_m,
+              "expanded_cells": result.expanded_cells,
+              "path_xy": [[round(float(x), 6), round(float(y), 6)] for x, y in result.path_xy]}
+    with atomic_write(output) as tmp:
+        tmp.write_text(json.dumps(record, indent=1) + "\n")
+    if plot_png is not None:
+        plot_map(ros_map, plot_png, planned_path=result.path_xy,
+                 title=f"A* path {result.length_m:.2f} m, robot radius {radius_m:g} m")
+    click.echo(f"path length: {result.length_m:.3f} m ({len(result.path_xy)} cells) -> {output}")
+
+
+COMMANDS: list = [plan_command]

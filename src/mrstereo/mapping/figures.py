@@ -1,0 +1,115 @@
+"""Map figure in the manner of paper Fig. 14: occupied cells, robot path, views, true walls.
+
+Drawn with matplotlib's Agg backend (no display needed), written atomically.
+Conventions (world x forward = figure right, y left = figure up): docs/conventions.md.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from ..io import atomic_write
+from .rosmap import RosMap
+
+__all__ = ["plot_map"]
+
+
+def _probability(value) -> tuple[np.ndarray, object]:
+    if isinstance(value, RosMap):
+        return value.occupancy, value.grid
+    if hasattr(value, "probability") and hasattr(value, "grid"):
+        return value.probability(), value.grid
+    raise TypeError(f"grid_or_rosmap must be an OccupancyGrid or RosMap, got {type(value).__name__}")
+
+
+def _array(name: str, value, columns: int) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] < columns:
+        raise ValueError(f"{name} must have shape (K, {columns}) or wider, got {arr.shape}")
+    return arr
+
+
+def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fov_views=None,
+             planned_path=None, ground_truth=None, title: str | None = None) -> None:
+    """Draw the map and write it as an image (PNG/PDF/SVG by suffix).
+
+    Parameters
+    ----------
+    grid_or_rosmap : OccupancyGrid or RosMap
+        Occupancy shown as gray (black occupied, white free, 1 - p between), unknown pale blue.
+    path_png : path-like
+        Output file, written atomically.
+    robot_path : ndarray of shape (K, 3) or (K, 2), optional
+        Robot poses ``(x_m, y_m, yaw_rad)``; drawn as a line with heading ticks.
+    fov_views : list of (x_m, y_m, heading_rad, half_fov_rad, range_m), optional
+        Fields of view of the stereo views (the paper's front, left and right views).
+    planned_path : ndarray of shape (K, 2), optional
+        A planned path (e.g. ``PlanResult.path_xy``).
+    ground_truth : RosMap, optional
+        True map; its occupied cells are overlaid in red (the paper's solid lines).
+    """
+    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Wedge
+
+    probability, grid = _probability(grid_or_rosmap)
+    rows, cols = grid.shape
+    extent = (grid.origin_x_m, grid.origin_x_m + cols * grid.resolution_m,
+              grid.origin_y_m, grid.origin_y_m + rows * grid.resolution_m)
+    width_in = 10.0
+    height_in = max(3.0, width_in * rows / cols + 1.0)
+    fig = Figure(figsize=(width_in, height_in), dpi=100)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    cmap = matplotlib.colormaps["gray"].with_extremes(bad="#cfd8e6")
+    ax.imshow(np.ma.masked_invalid(1.0 - probability), cmap=cmap, vmin=0.0, vmax=1.0,
+              origin="lower", extent=extent, interpolation="nearest")
+    if ground_truth is not None:
+        if not isinstance(ground_truth, RosMap):
+            raise TypeError(f"ground_truth must be a RosMap, got {type(ground_truth).__name__}")
+        g = ground_truth.grid
+        gt_extent = (g.origin_x_m, g.origin_x_m + g.shape[1] * g.resolution_m,
+                     g.origin_y_m, g.origin_y_m + g.shape[0] * g.resolution_m)
+        overlay = np.ma.masked_where(~ground_truth.occupied, np.ones(g.shape))
+        ax.imshow(overlay, cmap=matplotlib.colors.ListedColormap(["tab:red"]), alpha=0.45,
+                  origin="lower", extent=gt_extent, interpolation="nearest")
+        ax.plot([], [], color="tab:red", lw=4, alpha=0.45, label="true walls")
+    for view in fov_views or ():
+        if len(view) != 5:
+            raise ValueError("each fov_views entry must be (x_m, y_m, heading_rad, half_fov_rad, "
+                             f"range_m), got {view!r}")
+        x, y, heading, half_fov, range_m = (float(v) for v in view)
+        ax.add_patch(Wedge((x, y), range_m, math.degrees(heading - half_fov),
+                           math.degrees(heading + half_fov), facecolor="tab:orange",
+                           edgecolor="tab:orange", alpha=0.12, lw=0.8))
+    if fov_views:
+        ax.plot([], [], color="tab:orange", lw=6, alpha=0.3, label="fields of view")
+    if robot_path is not None:
+        poses = _array("robot_path", robot_path, 2)
+        ax.plot(poses[:, 0], poses[:, 1], "-o", color="tab:blue", ms=3, lw=1.5,
+                label="robot path")
+        if poses.shape[1] >= 3:
+            tick = 0.3
+            ax.quiver(poses[:, 0], poses[:, 1], tick * np.cos(poses[:, 2]),
+                      tick * np.sin(poses[:, 2]), color="tab:blue", angles="xy",
+                      scale_units="xy", scale=1.0, width=0.003)
+    if planned_path is not None:
+        path = _array("planned_path", planned_path, 2)
+        if len(path):
+            ax.plot(path[:, 0], path[:, 1], "-", color="tab:green", lw=2, label="planned path")
+            ax.plot(path[[0, -1], 0], path[[0, -1], 1], "s", color="tab:green", ms=6)
+    ax.set_xlim(extent[0], extent[1])
+    ax.set_ylim(extent[2], extent[3])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m] (forward)")
+    ax.set_ylabel("y [m] (left)")
+    if title:
+        ax.set_title(title)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
+    fig.tight_layout()
+    with atomic_write(path_png) as tmp:
+        fig.savefig(tmp)

@@ -1,0 +1,298 @@
+"""Occupancy grid built along the robot path (paper section 5.2), log-odds or union fusion.
+
+The paper turns the reliable disparity of each view (front, left and right at 45 degrees)
+into obstacle points and accumulates them in a 12 m x 6 m grid; occupied cells give the
+corridor profile of its Fig. 14. The paper's fusion is a plain union of the occupied cells of
+all views. :class:`OccupancyGrid` keeps that as ``fusion="union"`` and adds the standard
+probabilistic fusion of OctoMap: every update casts a ray from the sensor to each point, the
+cells it crosses are observed free (a *miss*), the obstacle's end cell is observed occupied
+(a *hit*), and the log-odds of each cell accumulate with clamping, so that a moved obstacle
+or a stereo ghost is cleared by later views. Unknown (never observed) cells stay NaN.
+
+Conventions (REP 103 world frame, ``[row, col]`` grid with row 0 at min y, ROS map files):
+docs/conventions.md.
+
+References
+----------
+.. [1] Multi-Range Approach of Stereo Vision for Mobile Robot Navigation in Uncertain
+   Environments, section 5.2 "Experiments for grid mapping of corridor profile".
+.. [2] A. Hornung, K. M. Wurm, M. Bennewitz, C. Stachniss, W. Burgard, "OctoMap: an efficient
+   probabilistic 3D mapping framework based on octrees", Autonomous Robots 34(3), 2013.
+.. [3] J. Amanatides, A. Woo, "A fast voxel traversal algorithm for ray tracing",
+   Eurographics 1987.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from .. import _checks
+from ..io import atomic_write
+from . import _kernels
+from .grid import GridSpec
+from .rosmap import RosMap
+
+__all__ = ["MappingConfig", "OccupancyGrid", "GridUpdate", "log_odds_from_probability",
+           "probability_from_log_odds"]
+
+FUSIONS = ("log_odds", "union")
+
+
+def log_odds_from_probability(p) -> np.ndarray:
+    """``l = log(p / (1 - p))``."""
+    p = np.asarray(p, dtype=np.float64)
+    return np.log(p / (1.0 - p))
+
+
+def probability_from_log_odds(log_odds) -> np.ndarray:
+    """``p = 1 / (1 + exp(-l))``; NaN (unknown) stays NaN."""
+    return 1.0 / (1.0 + np.exp(-np.asarray(log_odds, dtype=np.float64)))
+
+
+@dataclass(frozen=True)
+class MappingConfig:
+    """Sensor model and fusion of the occupancy grid.
+
+    Parameters
+    ----------
+    p_hit, p_miss : float
+        Probability that a cell is occupied given a hit / a miss (OctoMap: 0.7 / 0.4).
+    p_clamp_min, p_clamp_max : float
+        Log-odds clamping bounds as probabilities (OctoMap: 0.1192 / 0.971); they keep the map
+        able to change when the world changes.
+    occupied_thresh : float
+        A known cell is occupied when its probability is above this, free otherwise (OctoMap's
+        maximum-likelihood map: 0.5).
+    max_range_m : float or None
+        Points farther than this from the sensor do not mark a hit; their ray clears up to the
+        range (OctoMap's ``maxrange``). None: no limit.
+    fusion : {"log_odds", "union"}
+        ``"union"`` is the paper's fusion: a cell once hit stays occupied, misses only mark
+        cells free that were never hit.
+    """
+
+    p_hit: float = 0.7
+    p_miss: float = 0.4
+    p_clamp_min: float = 0.1192
+    p_clamp_max: float = 0.971
+    occupied_thresh: float = 0.5
+    max_range_m: float | None = None
+    fusion: str = "log_odds"
+
+    def __post_init__(self) -> None:
+        for name in ("p_hit", "p_miss", "p_clamp_min", "p_clamp_max", "occupied_thresh"):
+            value = _checks.finite_number(name, getattr(self, name))
+            if not 0.0 < value < 1.0:
+                raise ValueError(f"{name} must be in (0, 1), got {value}")
+        if not self.p_hit > 0.5:
+            raise ValueError(f"p_hit must be > 0.5, got {self.p_hit}")
+        if not self.p_miss < 0.5:
+            raise ValueError(f"p_miss must be < 0.5, got {self.p_miss}")
+        if not self.p_clamp_min < 0.5 < self.p_clamp_max:
+            raise ValueError(f"need p_clamp_min < 0.5 < p_clamp_max, got {self.p_clamp_min} and "
+                             f"{self.p_clamp_max}")
+        if self.max_range_m is not None:
+            _checks.finite_number("max_range_m", self.max_range_m, positive=True)
+        if self.fusion not in FUSIONS:
+            raise ValueError(f"fusion must be one of {FUSIONS}, got {self.fusion!r}")
+
+    @property
+    def l_hit(self) -> float:
+        return float(log_odds_from_probability(self.p_hit))
+
+    @property
+    def l_miss(self) -> float:
+        return float(log_odds_from_probability(self.p_miss))
+
+    @property
+    def l_min(self) -> float:
+        return float(log_odds_from_probability(self.p_clamp_min))
+
+    @property
+    def l_max(self) -> float:
+        return float(log_odds_from_probability(self.p_clamp_max))
+
+
+class GridUpdate(NamedTuple):
+    """What one :meth:`OccupancyGrid.update` did: distinct cells hit and missed, points cut."""
+
+    hit_cells: int
+    miss_cells: int
+    points_outside: int
+
+
+def _points_xy(name: str, value) -> np.ndarray:
+    if value is None:
+        return np.empty((0, 2))
+    arr = np.asarray(value)
+    if arr.size == 0:
+        return np.empty((0, 2))
+    if arr.ndim != 2 or arr.shape[1] not in (2, 3):
+        raise ValueError(f"{name} must have shape (N, 2) or (N, 3), got {arr.shape}")
+    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise TypeError(f"{name} must hold numbers, got dtype {arr.dtype}")
+    return np.ascontiguousarray(arr, dtype=np.float64)
+
+
+class OccupancyGrid:
+    """A 2D occupancy grid that accumulates stereo views (paper section 5.2).
+
+    Parameters
+    ----------
+    grid : GridSpec, optional
+        Geometry (default: the paper's 12 m x 6 m region in 5 cm cells, origin (0, -3)).
+    config : MappingConfig, optional
+        Sensor model and fusion (default: OctoMap's log-odds parameters).
+    log_odds : ndarray of shape grid.shape, optional
+        Initial state (NaN = unknown), e.g. from :meth:`load_log_odds`; copied.
+
+    Notes
+    -----
+    Log-odds update of a cell observed in a view (OctoMap [2]):
+    ``L <- clamp(L + log(p / (1 - p)), l_min, l_max)`` with ``p = p_hit`` for a hit and
+    ``p = p_miss`` for a miss; after ``k`` hits and ``m`` misses without clamping,
+    ``L = k l_hit + m l_miss`` and ``P(occupied) = 1 / (1 + exp(-L))``.
+    """
+
+    def __init__(self, grid: GridSpec | None = None, *, config: MappingConfig | None = None,
+                 log_odds: np.ndarray | None = None) -> None:
+        grid = GridSpec() if grid is None else grid
+        config = MappingConfig() if config is None else config
+        if not isinstance(grid, GridSpec):
+            raise TypeError(f"grid must be a GridSpec, got {type(grid).__name__}")
+        if not isinstance(config, MappingConfig):
+            raise TypeError(f"config must be a MappingConfig, got {type(config).__name__}")
+        self.grid = grid
+        self.config = config
+        if log_odds is None:
+            self._log_odds = np.full(grid.shape, np.nan)
+        else:
+            arr = np.array(log_odds, dtype=np.float64)
+            if arr.shape != grid.shape:
+                raise ValueError(f"log_odds must have shape {grid.shape} (the grid), got {arr.shape}")
+            if np.isinf(arr).any():
+                raise ValueError("log_odds must be finite or NaN (unknown)")
+            self._log_odds = arr
+        self._flags = np.zeros(grid.shape, np.uint8)
+        self._miss = np.zeros(grid.shape, np.uint8)
+        self._ends = np.zeros(grid.shape + (2,), np.float64)
+        self.n_updates = 0
+
+    # ---------------------------------------------------------------- update
+    def update(self, points_obstacle_world, points_free_world, sensor_origin_world) -> GridUpdate:
+        """Add one view: obstacle points hit their cells, rays to all points clear cells.
+
+        Parameters
+        ----------
+        points_obstacle_world : ndarray of shape (N, 3) or (N, 2), or None
+            Obstacle points in the world frame (metres); z is ignored, rows with NaN skipped.
+        points_free_world : ndarray of shape (M, 3) or (M, 2), or None
+            Floor points (ground-suppressed by eq. 13): their rays and their own cells are free.
+        sensor_origin_world : sequence of 2 or 3 floats
+            World (x, y) of the sensor (the left camera's optical centre).
+
+        Returns
+        -------
+        GridUpdate
+            Distinct cells hit and missed in this update, points ending outside the grid.
+
+        Notes
+        -----
+        Every cell is counted at most once per update for a hit and once for a miss, and a hit
+        cancels a miss of the same cell (OctoMap's per-scan key sets). One ray is traced to the
+        representative point of each distinct end cell (the last point that fell in it;
+        Amanatides-Woo traversal [3]); the end cell of an
+        obstacle ray is not cleared. A ray to a point outside the grid (or beyond
+        ``max_range_m``) is cut at the border and clears the cells inside.
+        """
+        obstacles = _points_xy("points_obstacle_world", points_obstacle_world)
+        floor = _points_xy("points_free_world", points_free_world)
+        origin = np.asarray(sensor_origin_world, dtype=np.float64).ravel()
+        if origin.shape not in ((2,), (3,)) or not np.isfinite(origin).all():
+            raise ValueError(f"sensor_origin_world must be 2 or 3 finite numbers (x, y[, z]), "
+                             f"got {sensor_origin_world!r}")
+        g, c = self.grid, self.config
+        sx = (origin[0] - g.origin_x_m) / g.resolution_m
+        sy = (origin[1] - g.origin_y_m) / g.resolution_m
+        max_range_cells = -1.0 if c.max_range_m is None else c.max_range_m / g.resolution_m
+        self._flags.fill(0)
+        self._miss.fill(0)
+        outside = 0
+        for points, is_obstacle in ((obstacles, True), (floor, False)):
+            if len(points):
+                outside += _kernels.mark_endpoints(points, sx, sy, g.origin_x_m, g.origin_y_m,
+                                                   g.resolution_m, max_range_cells, is_obstacle,
+                                                   self._flags, self._ends)
+        _kernels.cast_rays(self._flags, self._ends, sx, sy, self._miss)
+        n_hit, n_miss = _kernels.apply_update(self._log_odds, self._flags, self._miss, c.l_hit,
+                                              c.l_miss, c.l_min, c.l_max, c.fusion == "union")
+        self.n_updates += 1
+        return GridUpdate(int(n_hit), int(n_miss), int(outside))
+
+    # ---------------------------------------------------------------- outputs
+    @property
+    def log_odds(self) -> np.ndarray:
+        """Log-odds of occupancy, shape ``grid.shape``, NaN = unknown (a read-only view)."""
+        view = self._log_odds.view()
+        view.flags.writeable = False
+        return view
+
+    def probability(self) -> np.ndarray:
+        """Occupancy probability, shape ``grid.shape``, row 0 = min y, NaN = unknown."""
+        return probability_from_log_odds(self._log_odds)
+
+    @property
+    def unknown(self) -> np.ndarray:
+        return np.isnan(self._log_odds)
+
+    @property
+    def occupied(self) -> np.ndarray:
+        threshold = float(log_odds_from_probability(self.config.occupied_thresh))
+        return np.nan_to_num(self._log_odds, nan=-np.inf) > threshold
+
+    @property
+    def free(self) -> np.ndarray:
+        return ~(self.occupied | self.unknown)
+
+    def to_ros_map(self) -> RosMap:
+        """Trinary map (occupied 1, free 0, unknown NaN) for :func:`write_ros_map`."""
+        occupancy = np.where(self.occupied, 1.0, 0.0)
+        occupancy[self.unknown] = np.nan
+        return RosMap(occupancy=occupancy, grid=self.grid)
+
+    def save_log_odds(self, path: str | os.PathLike) -> None:
+        """Write the log-odds array (float64, NaN unknown, row 0 = min y) as ``.npy``, atomically."""
+        path = Path(path)
+        if path.suffix != ".npy":
+            raise ValueError(f"log-odds file must end in .npy, got {path}")
+        with atomic_write(path) as tmp:
+            np.save(tmp, self._log_odds)
+
+    @classmethod
+    def load_log_odds(cls, path: str | os.PathLike, grid: GridSpec | None = None, *,
+                      config: MappingConfig | None = None) -> "OccupancyGrid":
+        """Rebuild a grid from :meth:`save_log_odds` output (the GridSpec is not in the file)."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"log-odds file not found: {path}")
+        try:
+            arr = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise ValueError(f"cannot read log-odds file {path}: {exc}") from None
+        return cls(grid, config=config, log_odds=arr)
+
+    def copy(self) -> "OccupancyGrid":
+        out = OccupancyGrid(self.grid, config=self.config, log_odds=self._log_odds)
+        out.n_updates = self.n_updates
+        return out
+
+    def __repr__(self) -> str:
+        rows, cols = self.grid.shape
+        return (f"OccupancyGrid({rows}x{cols} cells of {self.grid.resolution_m:g} m, "
+                f"fusion={self.config.fusion!r}, updates={self.n_updates}, "
+                f"occupied={int(self.occupied.sum())}, free={int(self.free.sum())})")
+

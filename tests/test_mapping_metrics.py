@@ -1,0 +1,70 @@
+"""Map metrics against a ground-truth map: known answers."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from mrstereo.mapping import GridSpec, RosMap, cells_near_path, map_metrics
+
+
+def corridor(shift_rows: int = 0, *, grid: GridSpec | None = None) -> RosMap:
+    """Free corridor between two 1-cell walls (rows 30 and 90), unknown beyond the walls."""
+    grid = grid or GridSpec()
+    occ = np.full(grid.shape, np.nan)
+    occ[30 + shift_rows:91 + shift_rows] = 0.0
+    occ[30 + shift_rows] = 1.0
+    occ[90 + shift_rows] = 1.0
+    return RosMap(occupancy=occ, grid=grid)
+
+
+def test_ground_truth_against_itself_is_perfect():
+    m = map_metrics(corridor(), corridor())
+    assert m.precision == 1.0 and m.recall == 1.0 and m.mean_distance_m == 0.0
+    assert m.free_accuracy == 1.0 and m.known_fraction == pytest.approx(61 / 120)
+    assert m.true_occupied_cells == 2 * 240 and m.estimated_occupied_cells == 2 * 240
+
+
+def test_shift_by_two_cells_gives_a_tenth_of_a_metre():
+    m = map_metrics(corridor(2), corridor())
+    assert m.mean_distance_m == pytest.approx(0.10)
+    assert m.precision == 0.0 and m.recall == 0.0        # outside the 1-cell tolerance
+    one = map_metrics(corridor(1), corridor())
+    assert one.precision == 1.0 and one.recall == 1.0 and one.mean_distance_m == pytest.approx(0.05)
+    strict = map_metrics(corridor(1), corridor(), tolerance_cells=0)
+    assert strict.precision == 0.0
+    assert 0.9 < m.free_accuracy < 1.0                  # 2 true free rows are now walls/unknown
+
+
+def test_path_band_restricts_the_evaluated_cells():
+    est = corridor()
+    occ = est.occupancy.copy()
+    occ[60, 220] = 1.0                                  # a ghost 10 m down the corridor
+    est = RosMap(occupancy=occ, grid=est.grid)
+    everywhere = map_metrics(est, corridor())
+    path = np.array([[0.5, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    near = map_metrics(est, corridor(), path_xy=path, within_m=4.0)
+    assert everywhere.precision < 1.0 and near.precision == 1.0
+    assert near.evaluated_cells < everywhere.evaluated_cells
+    band = cells_near_path(GridSpec(), path, within_m=1.0)
+    x, y = GridSpec().xy_from_cells(*np.nonzero(band)).T
+    d = np.where(x < 0.5, np.hypot(x - 0.5, y), np.where(x > 3.0, np.hypot(x - 3.0, y), np.abs(y)))
+    half_cell_diagonal = GridSpec().resolution_m / np.sqrt(2)        # rasterization of the path
+    assert d.max() <= 1.0 + half_cell_diagonal and band[60, 40] and not band[60, 100]
+
+
+def test_to_dict_is_json_ready():
+    empty = RosMap(occupancy=np.zeros(GridSpec().shape), grid=GridSpec())
+    m = map_metrics(empty, corridor())
+    d = m.to_dict()
+    assert d["precision"] is None and d["mean_distance_m"] is None and d["recall"] == 0.0
+    json.dumps(d)
+
+
+def test_mismatched_grids_raise():
+    other = corridor(grid=GridSpec(origin_x_m=1.0))
+    with pytest.raises(ValueError, match="share the grid"):
+        map_metrics(corridor(), other)
+    with pytest.raises(TypeError, match="estimated"):
+        map_metrics(np.zeros((120, 240)), corridor())

@@ -1,0 +1,203 @@
+"""Occupancy grid: ray clearing, log-odds closed form, clamping, union fusion, ROS map files."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from mrstereo.mapping import (GridSpec, MappingConfig, OccupancyGrid, plot_map, read_ros_map,
+                              write_ros_map)
+from mrstereo.mapping.occupancy import log_odds_from_probability, probability_from_log_odds
+
+RES = 0.05
+
+
+def centre(row: int, col: int, grid: GridSpec | None = None) -> tuple[float, float]:
+    x, y = (grid or GridSpec()).xy_from_cells(row, col)
+    return float(x), float(y)
+
+
+def test_single_obstacle_clears_the_cells_before_it_and_nothing_behind():
+    grid = OccupancyGrid()
+    sensor = centre(60, 20)
+    stats = grid.update(np.array([[*centre(60, 40), 0.7]]), None, sensor)
+    p = grid.probability()
+    assert stats.hit_cells == 1 and stats.miss_cells == 20 and stats.points_outside == 0
+    assert p[60, 40] == pytest.approx(0.7)
+    np.testing.assert_allclose(p[60, 20:40], 0.4)
+    assert np.isnan(p[60, 41:]).all()                 # behind the obstacle: still unknown
+    assert np.isnan(p[61]).all() and np.isnan(p[59]).all()
+    assert (~np.isnan(p)).sum() == 21
+    assert grid.occupied[60, 40] and grid.free[60, 25] and grid.unknown[60, 45]
+
+
+def test_oblique_ray_clears_every_cell_it_crosses():
+    grid = OccupancyGrid()
+    sensor = np.array([0.512, -0.733])
+    target = np.array([2.71, 1.388])
+    grid.update(target[None], np.empty((0, 3)), sensor)
+    spec = grid.grid
+    t = np.linspace(0.0, 1.0, 20001)[:, None]
+    rows, cols = spec.cells_from_xy(sensor + t * (target - sensor))
+    end = spec.cells_from_xy(target)
+    crossed = {(int(r), int(c)) for r, c in zip(rows, cols)} - {(int(end[0]), int(end[1]))}
+    free = {tuple(rc) for rc in np.argwhere(grid.free)}
+    assert free == crossed                            # exactly the crossed cells, end excluded
+    assert grid.occupied[end] and grid.occupied.sum() == 1
+    behind = spec.cells_from_xy(target + 0.3 * (target - sensor) / np.linalg.norm(target - sensor))
+    assert grid.unknown[behind]
+
+
+def test_floor_points_clear_their_own_cell():
+    grid = OccupancyGrid()
+    grid.update(None, np.array([[*centre(70, 30), 0.0]]), centre(60, 20))
+    assert grid.free[70, 30] and grid.free[60, 20] and not grid.occupied.any()
+
+
+def test_hits_are_counted_once_per_update_and_win_over_misses():
+    grid = OccupancyGrid()
+    x, y = centre(60, 40)
+    pts = np.c_[x + np.linspace(-0.02, 0.02, 500), np.full(500, y), np.zeros(500)]
+    far = np.array([[*centre(60, 50), 0.0]])           # its ray crosses cell (60, 40)
+    grid.update(np.vstack([pts, far]), None, centre(60, 20))
+    p = grid.probability()
+    assert p[60, 40] == pytest.approx(0.7)            # one hit, the miss is dropped
+    assert p[60, 30] == pytest.approx(0.4)            # one miss although 501 rays cross it
+
+
+@pytest.mark.parametrize("k_hits, m_misses", [(1, 0), (3, 2), (4, 1), (0, 3)])
+def test_log_odds_match_closed_form(k_hits, m_misses):
+    config = MappingConfig()
+    grid = OccupancyGrid(config=config)
+    sensor = centre(60, 20)
+    for _ in range(k_hits):
+        grid.update([centre(60, 40)], None, sensor)
+    for _ in range(m_misses):
+        grid.update([centre(60, 60)], None, sensor)    # passes through (60, 40)
+    expected_l = k_hits * np.log(0.7 / 0.3) + m_misses * np.log(0.4 / 0.6)
+    assert grid.log_odds[60, 40] == pytest.approx(expected_l)
+    assert grid.probability()[60, 40] == pytest.approx(1.0 / (1.0 + np.exp(-expected_l)))
+
+
+def test_clamping_limits_are_reached_and_kept():
+    grid = OccupancyGrid()
+    sensor = centre(60, 20)
+    for _ in range(15):
+        grid.update([centre(60, 40)], None, sensor)
+    assert grid.log_odds[60, 40] == pytest.approx(log_odds_from_probability(0.971))
+    assert grid.probability()[60, 40] == pytest.approx(0.971)
+    assert grid.probability()[60, 30] == pytest.approx(0.1192)   # 15 misses, clamped low
+    grid.update([centre(60, 60)], None, sensor)                  # one miss on the clamped cell
+    expected = log_odds_from_probability(0.971) + log_odds_from_probability(0.4)
+    assert grid.log_odds[60, 40] == pytest.approx(expected)      # so it can still change
+
+
+def test_moved_obstacle_is_cleared_by_log_odds_but_not_by_union():
+    sensor = centre(60, 20)
+    grids = {f: OccupancyGrid(config=MappingConfig(fusion=f)) for f in ("log_odds", "union")}
+    for grid in grids.values():
+        for _ in range(2):
+            grid.update([centre(60, 40)], None, sensor)          # a person stands here
+        for _ in range(10):
+            grid.update([centre(60, 70)], None, sensor)          # ... and walks away
+    assert grids["log_odds"].free[60, 40]
+    assert grids["union"].occupied[60, 40]
+    for grid in grids.values():                                  # both agree elsewhere
+        assert grid.occupied[60, 70] and grid.free[60, 55] and grid.free[60, 30]
+
+
+def test_points_outside_the_grid_are_clipped_along_their_ray():
+    grid = OccupancyGrid()
+    stats = grid.update([[25.0, centre(60, 0)[1], 0.5]], None, centre(60, 200))
+    assert stats.points_outside == 1
+    assert grid.free[60, 200:].all() and not grid.occupied.any()
+    assert (~grid.unknown).sum() == 40
+    outside_sensor = OccupancyGrid()
+    outside_sensor.update([centre(60, 10)], None, (-1.0, centre(60, 0)[1]))
+    assert outside_sensor.free[60, :10].all() and outside_sensor.occupied[60, 10]
+
+
+def test_max_range_cuts_the_ray_without_a_hit():
+    grid = OccupancyGrid(config=MappingConfig(max_range_m=1.0))
+    grid.update([centre(60, 60)], None, centre(60, 20))          # 2 m away
+    assert not grid.occupied.any()
+    assert grid.free[60, 20:40].all() and grid.unknown[60, 41:].all()
+
+
+def test_nan_points_are_ignored_and_2d_points_accepted():
+    grid = OccupancyGrid()
+    stats = grid.update(np.array([[np.nan, 1.0], [*centre(60, 40)]]), None, centre(60, 20))
+    assert stats.hit_cells == 1 and grid.occupied[60, 40]
+
+
+def test_map_orientation_left_of_robot_is_upper_half_of_pgm(tmp_path):
+    grid = OccupancyGrid()
+    grid.update([[1.0, 2.0, 0.3]], None, (0.0, 0.0))
+    write_ros_map(tmp_path / "map.yaml", grid.to_ros_map())
+    image = cv2.imread(str(tmp_path / "map.pgm"), cv2.IMREAD_UNCHANGED)
+    rows, cols = np.nonzero(image == 0)
+    assert len(rows) == 1
+    assert rows[0] < image.shape[0] / 2                 # y = +2 m (left): top half
+    assert rows[0] == image.shape[0] - 1 - 100 and cols[0] == 20
+    assert image[image.shape[0] - 1 - 60, 0] == 254    # sensor cell free, y = 0 at row 60 from below
+
+
+def test_ros_map_round_trip_keeps_free_occupied_unknown(tmp_path):
+    grid = OccupancyGrid(GridSpec(width_m=3.0, height_m=2.0, origin_x_m=-0.5, origin_y_m=-1.2))
+    rng = np.random.default_rng(3)
+    grid.update(rng.uniform([0.5, -1.0], [2.4, 0.7], (50, 2)), rng.uniform([0, -1], [2, 0.5], (50, 2)),
+                (0.0, 0.0))
+    ros_map = grid.to_ros_map()
+    write_ros_map(tmp_path / "m.yaml", ros_map)
+    back = read_ros_map(tmp_path / "m.yaml")
+    assert back.grid == ros_map.grid
+    for mask in ("occupied", "free", "unknown"):
+        np.testing.assert_array_equal(getattr(back, mask), getattr(grid, mask))
+    assert grid.occupied.any() and grid.free.any() and grid.unknown.any()
+
+
+def test_log_odds_npy_round_trip(tmp_path):
+    grid = OccupancyGrid()
+    grid.update([centre(60, 40)], None, centre(60, 20))
+    grid.save_log_odds(tmp_path / "lo.npy")
+    back = OccupancyGrid.load_log_odds(tmp_path / "lo.npy")
+    np.testing.assert_array_equal(back.log_odds, grid.log_odds)   # NaN positions included
+    with pytest.raises(ValueError, match="shape"):
+        OccupancyGrid.load_log_odds(tmp_path / "lo.npy", GridSpec(width_m=1.0))
+    with pytest.raises(ValueError, match=".npy"):
+        grid.save_log_odds(tmp_path / "lo.txt")
+
+
+def test_probability_helpers_are_inverse():
+    p = np.array([0.1, 0.4, 0.5, 0.97, np.nan])
+    np.testing.assert_allclose(probability_from_log_odds(log_odds_from_probability(p)), p)
+
+
+def test_bad_inputs_raise():
+    grid = OccupancyGrid()
+    with pytest.raises(ValueError, match="points_obstacle_world"):
+        grid.update(np.zeros((3, 4)), None, (0, 0))
+    with pytest.raises(ValueError, match="sensor_origin_world"):
+        grid.update(np.zeros((3, 3)), None, (np.nan, 0))
+    with pytest.raises(ValueError, match="p_hit"):
+        MappingConfig(p_hit=0.4)
+    with pytest.raises(ValueError, match="fusion"):
+        MappingConfig(fusion="max")
+    with pytest.raises(ValueError, match="p_clamp_min"):
+        MappingConfig(p_clamp_min=0.6)
+    with pytest.raises(TypeError, match="grid"):
+        OccupancyGrid((12, 6))
+
+
+def test_plot_map_writes_an_image(tmp_path):
+    grid = OccupancyGrid()
+    grid.update([centre(60, 40), centre(80, 60)], [centre(65, 30)], centre(60, 20))
+    out = tmp_path / "map.png"
+    plot_map(grid, out, robot_path=np.array([[1.0, 0.0, 0.0], [2.0, 0.2, 0.4]]),
+             fov_views=[(1.0, 0.0, 0.0, 0.4, 4.0), (1.0, 0.0, 0.785, 0.4, 4.0)],
+             planned_path=np.array([[1.0, 0.0], [3.0, 1.0]]), ground_truth=grid.to_ros_map())
+    image = cv2.imread(str(out))
+    assert image is not None and image.shape[1] == 1000
+    with pytest.raises(ValueError, match="fov_views"):
+        plot_map(grid, tmp_path / "bad.png", fov_views=[(1.0, 0.0, 0.0)])
+    assert not (tmp_path / "bad.png").exists()

@@ -1,0 +1,137 @@
+"""A* planning on ROS maps and the ``mrstereo plan`` command."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from mrstereo.cli import entry
+from mrstereo.mapping import GridSpec, RosMap, inflate_obstacles, plan_path, write_ros_map
+
+GRID = GridSpec()           # 240 x 120 cells of 5 cm, x in [0, 12], y in [-3, 3]
+
+
+def free_map() -> np.ndarray:
+    return np.zeros(GRID.shape)
+
+
+def ros(occ: np.ndarray) -> RosMap:
+    return RosMap(occupancy=occ, grid=GRID)
+
+
+def wall_with_gap(gap_cells: int) -> np.ndarray:
+    """A wall across the corridor at column 120 (x = 6 m) with a centred gap of free cells."""
+    occ = free_map()
+    occ[:, 120] = 1.0
+    lo = 60 - gap_cells // 2
+    occ[lo:lo + gap_cells, 120] = 0.0
+    return occ
+
+
+def assert_valid_path(result, blocked):
+    steps = np.diff(result.path_xy, axis=0) / GRID.resolution_m
+    assert np.all(np.abs(np.round(steps)) <= 1) and np.allclose(steps, np.round(steps))
+    r, c = GRID.cells_from_xy(result.path_xy)
+    assert not blocked[r, c].any()
+    length = np.hypot(*np.diff(result.path_xy, axis=0).T).sum()
+    assert result.length_m == pytest.approx(length)
+
+
+def test_empty_map_gives_the_octile_distance():
+    start, goal = (0.62, -2.31), (10.93, 1.77)
+    result = plan_path(ros(free_map()), start, goal)
+    (r0, r1), (c0, c1) = zip(GRID.cells_from_xy(start), GRID.cells_from_xy(goal))
+    dr, dc = abs(r1 - r0), abs(c1 - c0)
+    octile = (max(dr, dc) + (math.sqrt(2) - 1) * min(dr, dc)) * GRID.resolution_m
+    assert result.success and result.length_m == pytest.approx(octile)
+    np.testing.assert_allclose(result.path_xy[0], GRID.xy_from_cells(r0, c0))
+    np.testing.assert_allclose(result.path_xy[-1], GRID.xy_from_cells(r1, c1))
+    assert_valid_path(result, np.zeros(GRID.shape, bool))
+
+
+def test_goes_around_a_wall_and_keeps_the_radius():
+    occ = free_map()
+    occ[20:120, 120] = 1.0                   # wall from y = -2 m up to the top, open below
+    result = plan_path(ros(occ), (3.0, 1.0), (9.0, 1.0), robot_radius_m=0.25)
+    blocked = inflate_obstacles(ros(occ), robot_radius_m=0.25)
+    assert result.success
+    assert_valid_path(result, blocked)
+    assert result.path_xy[:, 1].min() < -2.0 - 0.25       # passed below the wall end
+    around_the_end = 2 * np.hypot(3.0, 1.0 + 2.0 + 0.25)  # via the inflated wall end
+    assert around_the_end < result.length_m < around_the_end * 1.1
+
+
+@pytest.mark.parametrize("gap_cells, passes", [(8, False), (10, False), (11, True), (16, True)])
+def test_inflation_blocks_gaps_narrower_than_the_robot(gap_cells, passes):
+    result = plan_path(ros(wall_with_gap(gap_cells)), (3.0, 0.0), (9.0, 0.0), robot_radius_m=0.25)
+    assert result.success is passes
+    if passes:
+        assert result.length_m == pytest.approx(6.0, abs=0.2)
+    else:
+        assert "no path" in result.message and result.path_xy.shape == (0, 2)
+
+
+def test_no_corner_cutting_through_a_diagonal_wall():
+    occ = free_map()
+    i = np.arange(120)
+    occ[i, i + 60] = 1.0                     # a one-cell diagonal wall corner to corner
+    ok = plan_path(ros(occ), (1.0, 0.0), (2.0, 2.5), robot_radius_m=0.0)
+    assert ok.success
+    result = plan_path(ros(occ), (1.0, 0.0), (11.0, 0.0), robot_radius_m=0.0)
+    assert not result.success and "no path" in result.message
+
+
+def test_enclosed_goal_start_outside_and_blocked_start():
+    occ = free_map()
+    occ[50:71, 180] = occ[50:71, 200] = 1.0
+    occ[50, 180:201] = occ[70, 180:201] = 1.0
+    result = plan_path(ros(occ), (2.0, 0.0), (9.5, 0.0))
+    assert not result.success and "no path" in result.message and result.expanded_cells > 0
+    assert "outside the map" in plan_path(ros(occ), (-1.0, 0.0), (9.5, 0.0)).message
+    assert "obstacle" in plan_path(ros(occ), (9.0, 0.0), (2.0, 0.0)).message
+    assert "robot radius" in plan_path(ros(occ), (8.9, 0.0), (2.0, 0.0)).message
+
+
+def test_unknown_cells_blocked_or_free():
+    occ = free_map()
+    occ[:, 100:140] = np.nan
+    assert not plan_path(ros(occ), (2.0, 0.0), (10.0, 0.0)).success
+    assert plan_path(ros(occ), (2.0, 0.0), (10.0, 0.0), unknown_is_obstacle=False).success
+    assert "unknown" in plan_path(ros(occ), (6.0, 0.0), (10.0, 0.0)).message
+
+
+def test_bad_inputs_raise():
+    with pytest.raises(ValueError, match="start_xy"):
+        plan_path(ros(free_map()), (np.nan, 0.0), (1.0, 1.0))
+    with pytest.raises(ValueError, match="robot_radius_m"):
+        plan_path(ros(free_map()), (1.0, 0.0), (2.0, 0.0), robot_radius_m=-1.0)
+    with pytest.raises(TypeError, match="ros_map"):
+        plan_path(free_map(), (1.0, 0.0), (2.0, 0.0))
+
+
+def test_cli_plan_writes_json_and_fails_with_one_line(tmp_path, capsys):
+    write_ros_map(tmp_path / "map.yaml", ros(wall_with_gap(16)))
+    out = tmp_path / "path.json"
+    code = entry(["plan", str(tmp_path / "map.yaml"), "--start", "3,0", "--goal", "9,0",
+                  "-o", str(out), "--plot", str(tmp_path / "path.png")])
+    assert code == 0, capsys.readouterr().err
+    record = json.loads(out.read_text())
+    assert record["length_m"] == pytest.approx(6.0, abs=0.2)
+    assert record["robot_radius_m"] == 0.25 and record["start"] == [3.0, 0.0]
+    assert len(record["path_xy"]) > 100 and (tmp_path / "path.png").is_file()
+    assert "path length" in capsys.readouterr().out
+
+    write_ros_map(tmp_path / "narrow.yaml", ros(wall_with_gap(8)))
+    code = entry(["plan", str(tmp_path / "narrow.yaml"), "--start", "3,0", "--goal", "9,0",
+                  "-o", str(tmp_path / "none.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("mrstereo: error: no path") and err.count("\n") == 1
+    assert not (tmp_path / "none.json").exists()
+
+    assert entry(["plan", str(tmp_path / "map.yaml"), "--start", "3", "--goal", "9,0",
+                  "-o", str(out)]) == 2
+    assert entry(["plan", str(tmp_path / "map.yaml"), "--start", "3,0", "--goal", "9,0",
+                  "-o", str(tmp_path / "map.yaml")]) == 2
+    assert "overwrite" in capsys.readouterr().err
