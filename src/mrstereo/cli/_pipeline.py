@@ -1,2 +1,64 @@
-"""CLI commands (filled by the stage that owns them)."""
-COMMANDS: list = []
+"""CLI of the whole chain: ``mrstereo map`` (a dataset to a ROS occupancy map)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+__all__ = ["COMMANDS"]
+
+
+@click.command("map")
+@click.argument("manifest", type=click.Path(path_type=Path))
+@click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (map.pgm, map.yaml, map.png, log_odds.npy, metrics.json).")
+@click.option("--calib", "calib", type=click.Path(dir_okay=False, path_type=Path),
+              help="Use this stereo calibration (and the raw images) instead of the manifest's.")
+@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default="log_odds", show_default=True,
+              help="Log-odds fusion (OctoMap) or the paper's union of occupied cells.")
+@click.option("--preset", type=click.Choice(["robust", "paper"]), default="robust", show_default=True,
+              help="Matching preset.")
+@click.option("--resolution", "resolution_m", type=float, default=0.05, show_default=True,
+              help="Cell size [m].")
+@click.option("--size", "size_m", default="12,6", show_default=True, metavar="W,H",
+              help="Map width (x) and height (y) [m].")
+@click.option("--origin", "origin_m", default="0,-3", show_default=True, metavar="X,Y",
+              help="World position of the lower-left map corner [m].")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def map_command(manifest: Path, out_dir: Path, calib: Path | None, fusion: str, preset: str,
+                resolution_m: float, size_m: str, origin_m: str, quiet: bool) -> None:
+    """Build an occupancy grid from the stereo frames of a dataset MANIFEST (docs/dataset.md).
+
+    Every frame is rectified, matched (multi-range), ground-suppressed (eq. 13),
+    triangulated and fused along the robot path. Writes a ROS map_server map
+    (map.pgm + map.yaml), map.png with the path and fields of view, the
+    log-odds array and, when the manifest has a ground-truth map, metrics.json.
+    """
+    from ..camera import read_stereo
+    from ..mapping import GridSpec
+    from ..mapping.occupancy import MappingConfig
+    from ..pipeline import PipelineConfig, build_map, write_map_outputs
+
+    (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
+    grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
+    config = PipelineConfig(preset=preset, mapping=MappingConfig(fusion=fusion), grid=grid)
+    stereo = read_stereo(calib) if calib is not None else None
+    run = build_map(manifest, config=config, calibration=stereo, progress=not quiet)
+    files = write_map_outputs(run, out_dir)
+    click.echo(f"map of {len(run.observations)} frames: {run.grid!r}")
+    if run.metrics is not None:
+        m = run.metrics
+        click.echo(f"vs ground truth: precision {m.precision:.3f}, recall {m.recall:.3f}, "
+                   f"wall profile error {m.mean_distance_m * 100:.1f} cm, free correct {m.free_accuracy:.3f}")
+    click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
+
+
+def _pair(text: str, option: str) -> tuple[float, float]:
+    try:
+        a, b = (float(v) for v in text.split(","))
+    except ValueError:
+        raise click.BadParameter(f"expected two numbers 'a,b', got {text!r}", param_hint=option) from None
+    return a, b
+
+
+COMMANDS = [map_command]
