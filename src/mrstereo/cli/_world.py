@@ -1,2 +1,49 @@
-"""CLI commands (filled by the stage that owns them)."""
-COMMANDS: list = []
+"""CLI of the synthetic world: ``mrstereo synth`` and ``mrstereo demo``."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+__all__ = ["COMMANDS"]
+
+
+@click.command("synth")
+@click.option("--out", "out_dir", required=True, type=click.Path(path_type=Path),
+              help="New (or empty) dataset directory.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
+              help="Texture and sensor-noise seed.")
+@click.option("--frames", "n_frames", default=30, show_default=True, type=click.IntRange(min=1),
+              help="Number of frames (front, +45 and -45 degree views at each stop).")
+@click.option("--width", default=320, show_default=True, type=click.IntRange(min=16), help="Image width.")
+@click.option("--height", default=240, show_default=True, type=click.IntRange(min=16), help="Image height.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, quiet: bool) -> None:
+    """Render the synthetic office corridor into a dataset directory (docs/dataset.md).
+
+    Writes raw and rectified stereo pairs, ground-truth disparity (PFM) and
+    labels, the true calibration, the ground-truth map and manifest.yaml.
+    """
+    from ..world.dataset import write_synthetic_dataset
+
+    path = write_synthetic_dataset(out_dir, seed=seed, n_frames=n_frames, width=width, height=height,
+                                   progress=not quiet)
+    click.echo(f"wrote {n_frames} frames to {path} (manifest: {path / 'manifest.yaml'})")
+
+
+@click.command("demo")
+@click.option("--out", "out_dir", default="mrstereo-demo", show_default=True, type=click.Path(path_type=Path),
+              help="Output directory for the PNG images and figures.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0), help="World seed.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def demo(out_dir: Path, seed: int, quiet: bool) -> None:
+    """Render the built-in corridor world and write its images and ground-truth figures."""
+    from ..world.demo import write_world_demo
+
+    written = write_world_demo(out_dir, seed=seed, progress=not quiet)
+    click.echo(f"wrote {len(written)} files to {out_dir.resolve()}")
+    click.echo(f"  ground-truth map: {out_dir / 'gt_map.png'}")
+    click.echo(f"  first frame:      {out_dir / 'frame_00_images.png'}")
+
+
+COMMANDS = [synth, demo]

@@ -1,0 +1,26 @@
+"""Synthetic office corridor with ground truth: scene, renderer, calibration targets, datasets.
+
+The built-in default data of mrstereo (paper Sec. 5, Figs. 7 and 11-14): a
+deterministic ray-cast corridor seen by a distorted, slightly misaligned
+stereo head on a robot, with exact calibration, disparity, depth, labels and
+map. User guide: docs/world.md; dataset layout: docs/dataset.md; conventions:
+docs/conventions.md.
+"""
+from .dataset import (FrameRecord, Manifest, corridor_path, read_manifest, write_manifest,
+                      write_synthetic_dataset)
+from .groundtruth import ground_truth_map, occupied_footprint
+from .render import StereoFrame, camera_poses, default_stereo, render_stereo_frame, render_view
+from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_NAMES, LABEL_NONE, LABEL_OBSTACLE,
+                    LABEL_POSTER, LABEL_SKIRTING, LABEL_WALL, Box, Cylinder, Decal, Light, Material, Scene,
+                    default_scene, is_obstacle_label)
+from .targets import CalibrationView, render_calibration_views, render_paper_dot_target, target_points
+
+__all__ = [
+    "Scene", "Box", "Cylinder", "Decal", "Light", "Material", "default_scene", "is_obstacle_label",
+    "LABEL_NONE", "LABEL_FLOOR", "LABEL_WALL", "LABEL_CEILING", "LABEL_DOOR", "LABEL_POSTER",
+    "LABEL_SKIRTING", "LABEL_OBSTACLE", "LABEL_NAMES",
+    "StereoFrame", "default_stereo", "render_stereo_frame", "render_view", "camera_poses",
+    "ground_truth_map", "occupied_footprint",
+    "CalibrationView", "render_calibration_views", "render_paper_dot_target", "target_points",
+    "FrameRecord", "Manifest", "read_manifest", "write_manifest", "write_synthetic_dataset", "corridor_path",
+]

@@ -1,0 +1,105 @@
+"""Ground-truth occupancy map of a scene (the "real corridor" lines of paper Fig. 14).
+
+Occupied: every cell whose square overlaps the footprint of a wall, door panel
+or obstacle. Free: the remaining cells of the corridor's free space (including
+the door recesses). Unknown (NaN): everything else, e.g. behind the walls.
+Grid conventions: :class:`mrstereo.mapping.grid.GridSpec`, docs/conventions.md.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..mapping.grid import GridSpec
+from ..mapping.rosmap import RosMap
+from .scene import LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, Scene
+
+__all__ = ["ground_truth_map", "occupied_footprint"]
+
+
+def occupied_footprint(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.0)) -> np.ndarray:
+    """Boolean (rows, cols): cells overlapping a solid box or cylinder within the height band.
+
+    The floor and ceiling slabs are not footprints; parts entirely above or
+    below ``height_band_m`` (e.g. the lintel over a door) are ignored.
+    """
+    z_lo, z_hi = _band(height_band_m)
+    rows, cols = grid.shape
+    res = grid.resolution_m
+    x_lo = grid.origin_x_m + np.arange(cols) * res
+    y_lo = grid.origin_y_m + np.arange(rows) * res
+    occ = np.zeros((rows, cols), bool)
+    for box in scene.boxes:
+        if box.label in (LABEL_FLOOR, LABEL_CEILING) or box.max_m[2] <= z_lo or box.min_m[2] >= z_hi:
+            continue
+        in_x = (x_lo < box.max_m[0]) & (x_lo + res > box.min_m[0])
+        in_y = (y_lo < box.max_m[1]) & (y_lo + res > box.min_m[1])
+        occ |= in_y[:, None] & in_x[None, :]
+    for cyl in scene.cylinders:
+        if cyl.height_m <= z_lo:
+            continue
+        cx, cy = cyl.centre_m
+        # Distance from the centre to the nearest point of each cell square.
+        ex = np.maximum(np.maximum(x_lo - cx, cx - (x_lo + res)), 0.0)
+        ey = np.maximum(np.maximum(y_lo - cy, cy - (y_lo + res)), 0.0)
+        occ |= (ey[:, None] ** 2 + ex[None, :] ** 2) < cyl.radius_m ** 2
+    return occ
+
+
+def _band(height_band_m) -> tuple[float, float]:
+    try:
+        z_lo, z_hi = (float(v) for v in height_band_m)
+    except (TypeError, ValueError):
+        raise ValueError(f"height_band_m must be (low_m, high_m), got {height_band_m!r}") from None
+    if not (np.isfinite(z_lo) and np.isfinite(z_hi) and z_lo < z_hi):
+        raise ValueError(f"height_band_m must be finite with low < high, got {height_band_m!r}")
+    return z_lo, z_hi
+
+
+def ground_truth_map(scene: Scene, grid: GridSpec | None = None, *,
+                     height_band_m=(0.02, 2.0)) -> RosMap:
+    """The true 2D map of ``scene`` on ``grid`` (default: 12 m x 6 m at 5 cm, origin (0, -3)).
+
+    Parameters
+    ----------
+    scene : Scene
+        The world, e.g. :func:`mrstereo.world.default_scene`.
+    grid : GridSpec, optional
+        Map geometry.
+    height_band_m : (float, float)
+        Only solids reaching into this band of heights above the floor are
+        obstacles (the robot passes under a door lintel).
+
+    Returns
+    -------
+    RosMap
+        ``occupancy`` 1.0 occupied, 0.0 free, NaN unknown; row 0 = min y.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+    grid = GridSpec() if grid is None else grid
+    if not isinstance(grid, GridSpec):
+        raise TypeError(f"grid must be a GridSpec, got {type(grid).__name__}")
+    occ = occupied_footprint(scene, grid, height_band_m=height_band_m)
+    centres = grid.cell_centres()
+    x, y = centres[..., 0], centres[..., 1]
+    x0, x1 = scene.x_range_m
+    free_space = (x > x0) & (x < x1) & (np.abs(y) < scene.half_width_m)
+    occupancy = np.full(grid.shape, np.nan)
+    occupancy[free_space] = 0.0
+    occupancy[_recesses(scene, x, y)] = 0.0
+    occupancy[occ] = 1.0
+    return RosMap(occupancy=occupancy, grid=grid)
+
+
+def _recesses(scene: Scene, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Cells between the wall plane and a recessed door panel (floor-level wall gaps)."""
+    out = np.zeros(x.shape, bool)
+    for box in scene.boxes:
+        if box.label != LABEL_DOOR:
+            continue
+        if box.min_m[1] > 0:      # left wall: recess from the wall plane up to the panel
+            ya, yb = scene.half_width_m, box.min_m[1]
+        else:
+            ya, yb = box.max_m[1], -scene.half_width_m
+        out |= (x > box.min_m[0]) & (x < box.max_m[0]) & (y >= ya) & (y < yb)
+    return out

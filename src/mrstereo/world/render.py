@@ -1,0 +1,291 @@
+"""Stereo rendering of the synthetic corridor with exact ground truth.
+
+A :class:`~mrstereo.camera.StereoCamera` returned by :func:`default_stereo` is
+the *true* calibration of the simulated rig, in the format every command reads:
+``K``, ``D`` of the raw (distorted, slightly misaligned) cameras, ``R`` rotating
+each raw camera frame into the rectified frame, ``P`` the ideal rectified
+projections (shared intrinsics, right ``P[0, 3] = -fx * baseline_m``).
+:func:`render_stereo_frame` renders what the raw cameras see (rays through the
+distortion model, paper eq. 1-3, then ``R``), the ideally rectified pair, and the
+ground truth of the rectified left camera: disparity ``d = b f / Z`` (eq. 14),
+depth and a surface label image.
+
+The rectified left camera frame is the one placed on the robot by
+:func:`mrstereo.geometry.frames.T_robot_from_cam`; the right rectified camera
+sits ``baseline_m`` along its +x axis. Conventions: docs/conventions.md; user
+guide: docs/world.md.
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _checks
+from ..camera import Camera, CameraInfo, RigMount, StereoCamera, rotation_from_euler
+from ..geometry.frames import T_robot_from_cam, T_world_from_robot
+from . import _kernels
+from .scene import Scene
+
+__all__ = ["StereoFrame", "default_stereo", "render_stereo_frame", "camera_poses",
+           "render_view", "sensor_noise_sigma"]
+
+sensor_noise_sigma = 2.0
+"""Standard deviation of the simulated sensor noise, grey levels."""
+
+_EXPOSURE = 255.0 * 0.95   # radiance 1.0 -> grey level
+
+
+@dataclass(frozen=True)
+class StereoFrame:
+    """One rendered stereo frame with its ground truth.
+
+    Attributes
+    ----------
+    raw_left, raw_right : ndarray of shape (H, W), uint8
+        What the real (distorted, misaligned) cameras see.
+    left_rect, right_rect : ndarray of shape (H, W), uint8
+        The ideally rectified pair.
+    disparity_px : ndarray of shape (H, W), float32
+        Ground-truth disparity ``d = x_left - x_right`` of the rectified left
+        image, NaN where no surface is hit.
+    depth_m : ndarray of shape (H, W), float32
+        ``Z`` in the rectified left camera frame.
+    labels : ndarray of shape (H, W), uint8
+        Surface class of each rectified left pixel (``LABEL_*`` in
+        :mod:`mrstereo.world.scene`; obstacle k is ``LABEL_OBSTACLE + k``).
+    pose : tuple of float
+        Robot pose ``(x_m, y_m, yaw_rad)`` in the world.
+    pan_rad : float
+        Head pan of this frame.
+    T_world_from_cam : ndarray of shape (4, 4)
+        Pose of the rectified left camera.
+    """
+
+    raw_left: np.ndarray
+    raw_right: np.ndarray
+    left_rect: np.ndarray
+    right_rect: np.ndarray
+    disparity_px: np.ndarray
+    depth_m: np.ndarray
+    labels: np.ndarray
+    pose: tuple[float, float, float]
+    pan_rad: float
+    T_world_from_cam: np.ndarray
+
+
+def default_stereo(width: int = 320, height: int = 240, *, height_m: float = 0.45,
+                   tilt_rad: float = 0.15) -> StereoCamera:
+    """The simulated stereo head: its exact calibration and mount.
+
+    320x240 (the paper's cameras): rectified ``fx = fy = 200 px``, baseline
+    0.12 m, so 0.5 m is 48 px of disparity (paper Sec. 3, Fig. 4).
+    640x480: ``fx = fy = 451 px``, baseline 0.075 m (0.5 m -> 67.7 px).
+    Other sizes scale the 320x240 focal length with the width (baseline
+    0.12 m). Both raw cameras have barrel distortion (``k1 = -0.045,
+    k2 = 0.006`` left, ``-0.040, 0.004`` right: about 8 px at the corners of a
+    320x240 image), principal points a few pixels off-centre, focal lengths
+    within 1 % of the rectified one, and rotations of 0.2 to 0.7 degrees
+    relative to the rectified frame, so rectification is not the identity.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size in pixels.
+    height_m : float
+        Height of the left optical centre above the floor.
+    tilt_rad : float
+        Downward tilt of the head (positive looks down).
+    """
+    width = _checks.positive_int("width", width, minimum=16)
+    height = _checks.positive_int("height", height, minimum=16)
+    rig = RigMount(height_m=height_m, tilt_rad=tilt_rad)
+    if (width, height) == (640, 480):
+        f, baseline = 451.0, 0.075
+    else:
+        f, baseline = 200.0 * width / 320.0, 0.12
+    s = width / 320.0
+    cx, cy = (width - 1) / 2.0 + 1.6 * s, (height - 1) / 2.0 - 1.1 * s
+    rect = Camera(width=width, height=height, fx=f, fy=f, cx=cx, cy=cy)
+    raw_left = Camera(width=width, height=height, fx=f * 1.0075, fy=f * 1.0040, cx=cx + 2.1 * s,
+                      cy=cy + 1.4 * s, k1=-0.045, k2=0.006)
+    raw_right = Camera(width=width, height=height, fx=f * 0.9960, fy=f * 0.9995, cx=cx - 2.7 * s,
+                       cy=cy + 2.3 * s, k1=-0.040, k2=0.004)
+    R_left = rotation_from_euler(0.0040, -0.0060, 0.0030)     # raw left -> rectified
+    R_right = rotation_from_euler(-0.0035, 0.0120, -0.0050)   # raw right -> rectified
+    P_left = np.hstack([rect.K, np.zeros((3, 1))])
+    P_right = P_left.copy()
+    P_right[0, 3] = -f * baseline
+    return StereoCamera(left=CameraInfo(raw_left, R=R_left, P=P_left, name="left"),
+                        right=CameraInfo(raw_right, R=R_right, P=P_right, name="right"), rig=rig)
+
+
+def camera_poses(stereo: StereoCamera, *, pose, pan_rad: float = 0.0,
+                 rig: RigMount | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``T_world_from_cam`` (4x4) of the rectified left and right cameras for a robot pose."""
+    rig = _rig(stereo, rig)
+    x, y, yaw = _pose(pose)
+    T_left = T_world_from_robot(x, y, yaw) @ T_robot_from_cam(
+        height_m=rig.height_m, tilt_rad=rig.tilt_rad, pan_rad=_checks.finite_number("pan_rad", pan_rad))
+    T_right = T_left.copy()
+    T_right[:3, 3] = T_left[:3, 3] + T_left[:3, 0] * stereo.baseline_m
+    return T_left, T_right
+
+
+def _pose(pose) -> tuple[float, float, float]:
+    try:
+        values = [float(v) for v in pose]
+    except (TypeError, ValueError):
+        raise ValueError(f"pose must be (x_m, y_m, yaw_rad) numbers, got {pose!r}") from None
+    if len(values) != 3 or not np.all(np.isfinite(values)):
+        raise ValueError(f"pose must be 3 finite numbers (x_m, y_m, yaw_rad), got {pose!r}")
+    return values[0], values[1], values[2]
+
+
+def _rig(stereo: StereoCamera, rig: RigMount | None) -> RigMount:
+    if not isinstance(stereo, StereoCamera):
+        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    rig = stereo.rig if rig is None else rig
+    if rig is None:
+        raise ValueError("stereo has no rig mount (height_m, tilt_rad); pass rig=RigMount(...)")
+    return rig
+
+
+_RAY_CACHE: OrderedDict = OrderedDict()
+_RAY_CACHE_BYTES = 256 * 2**20     # ray tables kept between frames (a 320x240 2x2 table is 7 MB)
+
+
+def _sample_offsets(supersample: int) -> np.ndarray:
+    g = (np.arange(supersample) + 0.5) / supersample - 0.5
+    return np.stack(np.meshgrid(g, g, indexing="xy"), -1).reshape(-1, 2)   # (S, 2) as (du, dv)
+
+
+def _ray_table(info: CameraInfo, *, raw: bool, supersample: int) -> np.ndarray:
+    """Sample rays (H, W, S, 3) in the *rectified* frame of this camera (cached)."""
+    cam = info.camera
+    key = (cam, raw, info.R.tobytes(), info.P.tobytes(), supersample)
+    table = _RAY_CACHE.get(key)
+    if table is not None:
+        _RAY_CACHE.move_to_end(key)
+        return table
+    v, u = np.mgrid[0:cam.height, 0:cam.width].astype(np.float64)
+    off = _sample_offsets(supersample)
+    uv = np.stack([u[..., None] + off[:, 0], v[..., None] + off[:, 1]], -1).reshape(-1, 2)
+    if raw:
+        dirs = cam.rays(uv) @ info.R.T                     # raw ray -> rectified frame: R @ d
+    else:
+        P = info.P
+        dirs = np.stack([(uv[:, 0] - P[0, 2]) / P[0, 0], (uv[:, 1] - P[1, 2]) / P[1, 1],
+                         np.ones(len(uv))], -1)
+    table = np.ascontiguousarray(dirs.reshape(cam.height, cam.width, len(off), 3))
+    table.setflags(write=False)
+    _RAY_CACHE[key] = table
+    while len(_RAY_CACHE) > 1 and sum(t.nbytes for t in _RAY_CACHE.values()) > _RAY_CACHE_BYTES:
+        _RAY_CACHE.popitem(last=False)
+    return table
+
+
+def render_view(scene: Scene, dirs_cam: np.ndarray, T_world_from_cam: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Noise-free radiance (H, W) float32, depth ``z`` (H, W) float32 and labels (H, W) uint8.
+
+    ``dirs_cam`` holds S sample rays per pixel, shape (H, W, S, 3), in the
+    frame whose pose is ``T_world_from_cam``; the radiance is their mean, the
+    depth and label belong to the first sample.
+    """
+    dirs = np.ascontiguousarray(dirs_cam, dtype=np.float64)
+    if dirs.ndim != 4 or dirs.shape[3] != 3:
+        raise ValueError(f"dirs_cam must have shape (H, W, S, 3), got {dirs.shape}")
+    T = _checks.matrix("T_world_from_cam", T_world_from_cam, (4, 4))
+    H, W = dirs.shape[:2]
+    radiance = np.empty((H, W), np.float32)
+    depth = np.empty((H, W), np.float32)
+    labels = np.empty((H, W), np.uint8)
+    p = scene.packed()
+    _kernels.render_rays(dirs, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+                         p["boxes"], p["box_material"], p["box_label"], p["cylinders"],
+                         p["cylinder_material"], p["cylinder_label"], p["decals"], p["decal_material"],
+                         p["decal_label"], p["materials"], p["lights"], float(scene.skirting_m),
+                         int(scene.skirting_material), float(scene.ambient), int(scene.seed),
+                         radiance, depth, labels)
+    return radiance, depth, labels
+
+
+def _to_uint8(radiance: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    grey = radiance * _EXPOSURE + rng.normal(0.0, sensor_noise_sigma, radiance.shape)
+    return np.clip(np.rint(grey), 0, 255).astype(np.uint8)
+
+
+def _check_free(scene: Scene, point: np.ndarray, what: str) -> None:
+    """Raise if a camera centre lies inside a solid box or cylinder or outside the corridor."""
+    p = scene.packed()
+    b = p["boxes"]
+    inside = np.all((point >= b[:, :3]) & (point <= b[:, 3:]), axis=1)
+    c = p["cylinders"]
+    in_cyl = (np.hypot(point[0] - c[:, 0], point[1] - c[:, 1]) <= c[:, 2]) & (point[2] <= c[:, 3])
+    if inside.any() or in_cyl.any():
+        raise ValueError(f"the {what} camera at ({point[0]:.2f}, {point[1]:.2f}, {point[2]:.2f}) m "
+                         "is inside a solid object of the scene; choose another pose")
+
+
+def render_stereo_frame(scene: Scene, stereo: StereoCamera, *, pose=(0.0, 0.0, 0.0), pan_rad: float = 0.0,
+                        seed: int = 0, supersample: int = 2, rig: RigMount | None = None) -> StereoFrame:
+    """Render raw and rectified stereo images of ``scene`` with ground truth.
+
+    Parameters
+    ----------
+    scene : Scene
+        The world, e.g. :func:`mrstereo.world.default_scene`.
+    stereo : StereoCamera
+        True calibration of the rig (e.g. :func:`default_stereo`); its ``rig``
+        mount places the head unless ``rig`` is given.
+    pose : (x_m, y_m, yaw_rad)
+        Robot pose in the world.
+    pan_rad : float
+        Head pan about the robot's z axis (positive to the left; the paper
+        uses 0 and +-45 degrees, Sec. 5.2).
+    seed : int
+        Seed of the sensor noise (Gaussian, :data:`sensor_noise_sigma` grey levels).
+    supersample : int
+        Anti-aliasing: ``supersample x supersample`` rays per pixel.
+    rig : RigMount, optional
+        Overrides ``stereo.rig``.
+
+    Returns
+    -------
+    StereoFrame
+
+    Notes
+    -----
+    A raw pixel's ray is the undistorted ray ``d_raw`` of the raw camera
+    (``Camera.rays``, inverse of eq. 3) rotated into the rectified frame as
+    ``R d_raw`` (``R`` maps raw to rectified, as in ROS camera_info), so
+    ``stereo.rectify(raw_left, raw_right)`` reproduces ``left_rect, right_rect``
+    up to interpolation and noise. Ground truth is sampled at pixel centres of the
+    rectified left camera: ``Z`` is the depth and ``d = b f / Z - doffs`` (eq. 14).
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+    T_left, T_right = camera_poses(stereo, pose=pose, pan_rad=pan_rad, rig=rig)
+    supersample = _checks.positive_int("supersample", supersample)
+    if supersample > 8:
+        raise ValueError(f"supersample must be <= 8, got {supersample}")
+    seed = _checks.positive_int("seed", seed, minimum=0)
+    _check_free(scene, T_left[:3, 3], "left")
+    _check_free(scene, T_right[:3, 3], "right")
+    rngs = [np.random.default_rng(s) for s in np.random.SeedSequence([seed, 0x57E7E0]).spawn(4)]
+    images = []
+    for k, (info, T) in enumerate(((stereo.left, T_left), (stereo.right, T_right))):
+        for raw in (True, False):
+            rad, _, _ = render_view(scene, _ray_table(info, raw=raw, supersample=supersample), T)
+            images.append(_to_uint8(rad, rngs[2 * k + int(raw)]))
+    raw_left, left_rect, raw_right, right_rect = images
+    _, depth, labels = render_view(scene, _ray_table(stereo.left, raw=False, supersample=1), T_left)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        disparity = (stereo.focal_px * stereo.baseline_m / depth - stereo.doffs_px).astype(np.float32)
+    disparity[~np.isfinite(depth)] = np.nan
+    x, y, yaw = _pose(pose)
+    return StereoFrame(raw_left=raw_left, raw_right=raw_right, left_rect=left_rect, right_rect=right_rect,
+                       disparity_px=disparity, depth_m=depth, labels=labels, pose=(x, y, yaw),
+                       pan_rad=float(pan_rad), T_world_from_cam=T_left)

@@ -1,0 +1,281 @@
+"""The synthetic office corridor: geometry, materials and lights.
+
+The corridor runs along world +x (REP 103: x forward, y left, z up), centred
+on ``y = 0``: a floor at ``z = 0``, a ceiling at ``height_m``, two walls at
+``y = +-width_m / 2`` with recessed doors (gaps with a panel set back into the
+wall), coloured door panels, posters and skirting boards, and box and vertical
+cylinder obstacles standing on the floor, as in the test corridor of the
+paper's experiments (Sec. 5, Figs. 7 and 11-14).
+
+Every surface is an axis-aligned box or a vertical cylinder; posters and
+coloured door panels are *decals* (rectangles painted on a wall face); the
+skirting board is the band ``z < skirting_m`` of every wall face. Textures
+are deterministic functions of world surface coordinates keyed by
+``Scene.seed``, so every camera sees the same surface. Floor, walls and
+ceiling are weakly textured (low contrast, the uniform patches that the
+ground suppression of eq. (13) rejects); obstacles, posters and doors are
+strongly textured. Conventions: docs/conventions.md; user guide: docs/world.md.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from .. import _checks
+
+__all__ = [
+    "Material", "Box", "Cylinder", "Decal", "Light", "Scene", "default_scene",
+    "LABEL_NONE", "LABEL_FLOOR", "LABEL_WALL", "LABEL_CEILING", "LABEL_DOOR", "LABEL_POSTER",
+    "LABEL_SKIRTING", "LABEL_OBSTACLE", "LABEL_NAMES", "is_obstacle_label",
+    "TEXTURE_WEAK", "TEXTURE_TILES", "TEXTURE_BLOTCH", "TEXTURE_CHECKER", "TEXTURE_POSTER",
+    "TEXTURE_WOOD",
+]
+
+# Surface classes of the label image. Obstacle k (0-based) has label LABEL_OBSTACLE + k.
+LABEL_NONE, LABEL_FLOOR, LABEL_WALL, LABEL_CEILING = 0, 1, 2, 3
+LABEL_DOOR, LABEL_POSTER, LABEL_SKIRTING = 4, 5, 6
+LABEL_OBSTACLE = 10
+LABEL_NAMES = {LABEL_NONE: "none", LABEL_FLOOR: "floor", LABEL_WALL: "wall", LABEL_CEILING: "ceiling",
+               LABEL_DOOR: "door", LABEL_POSTER: "poster", LABEL_SKIRTING: "skirting",
+               LABEL_OBSTACLE: "obstacle (10 + index)"}
+
+# Texture kinds (Material.kind), evaluated in world/_kernels.py.
+TEXTURE_WEAK, TEXTURE_TILES, TEXTURE_BLOTCH, TEXTURE_CHECKER, TEXTURE_POSTER, TEXTURE_WOOD = range(6)
+
+
+def is_obstacle_label(labels) -> np.ndarray:
+    """True where a label image shows an obstacle."""
+    return np.asarray(labels) >= LABEL_OBSTACLE
+
+
+@dataclass(frozen=True)
+class Material:
+    """A procedural texture: albedo ``albedo +- contrast`` at feature size ``scale_m``.
+
+    ``kind`` is one of the ``TEXTURE_*`` constants; ``period_m`` is the tile
+    size (tiles), the checker square (checker) or the plank width (wood).
+    """
+
+    kind: int
+    albedo: float
+    contrast: float
+    scale_m: float
+    period_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class Box:
+    """Axis-aligned box ``min_m <= p <= max_m`` (world, metres)."""
+
+    min_m: tuple[float, float, float]
+    max_m: tuple[float, float, float]
+    material: int
+    label: int
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    """Vertical cylinder standing on the floor: centre ``(x, y)``, radius, height (with a top cap)."""
+
+    centre_m: tuple[float, float]
+    radius_m: float
+    height_m: float
+    material: int
+    label: int
+
+
+@dataclass(frozen=True)
+class Decal:
+    """A rectangle painted on the wall face ``y = y_m`` whose outward normal is ``normal_sign`` * y.
+
+    The left wall (y > 0) faces -y (``normal_sign = -1``), the right wall faces +y.
+
+    Covers ``x0_m <= x <= x1_m``, ``z0_m <= z <= z1_m``.
+    """
+
+    normal_sign: int
+    y_m: float
+    x0_m: float
+    x1_m: float
+    z0_m: float
+    z1_m: float
+    material: int
+    label: int
+
+
+@dataclass(frozen=True)
+class Light:
+    """Point light (ceiling lamp) at ``position_m`` with relative ``power``."""
+
+    position_m: tuple[float, float, float]
+    power: float
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A static scene of boxes, cylinders, decals and lights.
+
+    Attributes
+    ----------
+    boxes, cylinders, decals, lights, materials : tuple
+        The primitives; ``material`` fields index ``materials``.
+    skirting_m : float
+        Height of the skirting board drawn at the bottom of every wall face.
+    skirting_material : int
+        Material of the skirting board.
+    ambient : float
+        Ambient light level added to the lamps.
+    x_range_m, half_width_m, height_m : float
+        Free corridor space: ``x_range_m[0] < x < x_range_m[1]``,
+        ``|y| < half_width_m``, ``0 < z < height_m``.
+    seed : int
+        Key of all procedural textures.
+    """
+
+    boxes: tuple[Box, ...]
+    cylinders: tuple[Cylinder, ...]
+    decals: tuple[Decal, ...]
+    lights: tuple[Light, ...]
+    materials: tuple[Material, ...]
+    skirting_m: float = 0.1
+    skirting_material: int = 0
+    ambient: float = 0.3
+    x_range_m: tuple[float, float] = (-1.0, 14.5)
+    half_width_m: float = 1.2
+    height_m: float = 2.5
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        n_mat = len(self.materials)
+        for prim in (*self.boxes, *self.cylinders, *self.decals):
+            if not 0 <= prim.material < n_mat:
+                raise ValueError(f"material index {prim.material} out of range (scene has {n_mat} materials)")
+        _checks.finite_number("skirting_m", self.skirting_m, nonnegative=True)
+        _checks.finite_number("ambient", self.ambient, nonnegative=True)
+
+    def packed(self) -> dict[str, np.ndarray]:
+        """The scene as the flat arrays the render kernels take (cached)."""
+        return _pack(self)
+
+
+@lru_cache(maxsize=16)
+def _pack(scene: Scene) -> dict[str, np.ndarray]:
+    boxes = np.array([[*b.min_m, *b.max_m] for b in scene.boxes], np.float64).reshape(-1, 6)
+    cyl = np.array([[*c.centre_m, c.radius_m, c.height_m] for c in scene.cylinders], np.float64).reshape(-1, 4)
+    decals = np.array([[d.normal_sign, d.y_m, d.x0_m, d.x1_m, d.z0_m, d.z1_m] for d in scene.decals],
+                      np.float64).reshape(-1, 6)
+    mats = np.array([[m.kind, m.albedo, m.contrast, m.scale_m, m.period_m] for m in scene.materials],
+                    np.float64).reshape(-1, 5)
+    lights = np.array([[*li.position_m, li.power] for li in scene.lights], np.float64).reshape(-1, 4)
+
+    def ints(items, attr):
+        return np.array([getattr(p, attr) for p in items], np.int64).reshape(-1)
+
+    out = {"boxes": boxes, "box_material": ints(scene.boxes, "material"), "box_label": ints(scene.boxes, "label"),
+           "cylinders": cyl, "cylinder_material": ints(scene.cylinders, "material"),
+           "cylinder_label": ints(scene.cylinders, "label"), "decals": decals,
+           "decal_material": ints(scene.decals, "material"), "decal_label": ints(scene.decals, "label"),
+           "materials": mats, "lights": lights}
+    for arr in out.values():
+        arr.setflags(write=False)
+    return out
+
+
+def _wall_boxes(side: int, x0: float, x1: float, y_in: float, thickness: float, height: float,
+                gaps: list[tuple[float, float, float]], wall_mat: int) -> list[Box]:
+    """Wall on one side with door openings ``(xa, xb, top_z)``: segments plus lintels."""
+    y_a, y_b = sorted((side * y_in, side * (y_in + thickness)))
+    out, x = [], x0
+    for xa, xb, top in sorted(gaps):
+        out.append(Box((x, y_a, 0.0), (xa, y_b, height), wall_mat, LABEL_WALL))
+        out.append(Box((xa, y_a, top), (xb, y_b, height), wall_mat, LABEL_WALL))
+        x = xb
+    out.append(Box((x, y_a, 0.0), (x1, y_b, height), wall_mat, LABEL_WALL))
+    return out
+
+
+def default_scene(seed: int = 0) -> Scene:
+    """The default office corridor (about 15.5 m x 2.4 m x 2.5 m) with six obstacles.
+
+    Corridor free space: ``-1 < x < 14.5``, ``|y| < 1.2``, ``0 < z < 2.5``; the
+    robot path starts at the origin looking along +x. Obstacles (distance of
+    their near face from the start): a box at 0.6 m right of centre, a
+    cylinder at 1.65 m left, a box at 2.6 m against the left wall, a cylinder
+    at 3.7 m right, a box straight ahead in the middle of the corridor at
+    6.0 m (a 0.95 m gap on its right), and a tall box at 9.0 m against the
+    right wall. ``seed`` keys the textures only; the geometry is fixed so that
+    ground-truth maps of different seeds coincide.
+
+    Parameters
+    ----------
+    seed : int
+        Texture seed (non-negative).
+    """
+    seed = _checks.positive_int("seed", seed, minimum=0)
+    materials = (
+        Material(TEXTURE_WEAK, 0.72, 0.035, 0.25),            # 0 wall paint (weak)
+        Material(TEXTURE_TILES, 0.50, 0.04, 0.20, 0.6),       # 1 floor tiles (weak)
+        Material(TEXTURE_WEAK, 0.80, 0.03, 0.40),             # 2 ceiling (weak)
+        Material(TEXTURE_WOOD, 0.45, 0.25, 0.05, 0.11),       # 3 wooden door
+        Material(TEXTURE_WEAK, 0.25, 0.05, 0.05),             # 4 skirting board (dark)
+        Material(TEXTURE_POSTER, 0.55, 0.45, 0.035),          # 5 poster
+        Material(TEXTURE_BLOTCH, 0.50, 0.45, 0.05),           # 6 obstacle, blotchy
+        Material(TEXTURE_CHECKER, 0.50, 0.40, 0.03, 0.08),    # 7 obstacle, checker
+        Material(TEXTURE_WOOD, 0.30, 0.30, 0.04, 0.07),       # 8 coloured (dark) door panel
+        Material(TEXTURE_BLOTCH, 0.60, 0.40, 0.03),           # 9 obstacle, fine blotches
+    )
+    WALL, FLOOR, CEIL, DOOR, SKIRT, POSTER, OBST_A, OBST_B, PANEL, OBST_C = range(10)
+    x0, x1, half, h, thick = -1.0, 14.5, 1.2, 2.5, 0.2
+    door_top, recess = 2.1, 0.1
+    # Recessed doors: (side, x start); 0.9 m wide.
+    recessed = [(+1, 3.0), (+1, 8.4), (-1, 5.2), (-1, 11.0)]
+    boxes: list[Box] = [
+        Box((x0 - 1.0, -half - 1.0, -0.2), (x1 + 1.0, half + 1.0, 0.0), FLOOR, LABEL_FLOOR),
+        Box((x0 - 1.0, -half - 1.0, h), (x1 + 1.0, half + 1.0, h + 0.2), CEIL, LABEL_CEILING),
+        Box((x0 - 0.2, -half, 0.0), (x0, half, h), WALL, LABEL_WALL),
+        Box((x1, -half, 0.0), (x1 + 0.2, half, h), WALL, LABEL_WALL),
+    ]
+    for side in (+1, -1):
+        gaps = [(xs, xs + 0.9, door_top) for s, xs in recessed if s == side]
+        boxes += _wall_boxes(side, x0, x1, half, thick, h, gaps, WALL)
+        for xa, xb, top in gaps:
+            ya, yb = sorted((side * (half + recess), side * (half + thick)))
+            boxes.append(Box((xa, ya, 0.0), (xb, yb, top), DOOR, LABEL_DOOR))
+    obstacles_box = [
+        Box((0.6, -0.55, 0.0), (0.9, -0.25, 0.4), OBST_A, 0),
+        Box((2.6, 0.75, 0.0), (3.0, 1.2, 0.8), OBST_B, 0),
+        Box((6.0, -0.25, 0.0), (6.4, 0.25, 0.6), OBST_C, 0),
+        Box((9.0, -1.2, 0.0), (9.5, -0.7, 1.2), OBST_A, 0),
+    ]
+    obstacles_cyl = [
+        Cylinder((1.8, 0.55), 0.15, 0.7, OBST_B, 0),
+        Cylinder((3.9, -0.6), 0.2, 0.5, OBST_C, 0),
+    ]
+    # Obstacle labels in order of distance from the start.
+    order = sorted([(b.min_m[0], "b", i) for i, b in enumerate(obstacles_box)]
+                   + [(c.centre_m[0] - c.radius_m, "c", i) for i, c in enumerate(obstacles_cyl)])
+    obst_boxes, obst_cyls = [], []
+    for k, (_, kind, i) in enumerate(order):
+        if kind == "b":
+            b = obstacles_box[i]
+            obst_boxes.append(Box(b.min_m, b.max_m, b.material, LABEL_OBSTACLE + k))
+        else:
+            c = obstacles_cyl[i]
+            obst_cyls.append(Cylinder(c.centre_m, c.radius_m, c.height_m, c.material, LABEL_OBSTACLE + k))
+    boxes += obst_boxes
+    decals = (
+        # The left wall (y = +half) faces -y, the right wall (y = -half) faces +y.
+        Decal(-1, half, 5.0, 5.8, 1.1, 1.9, POSTER, LABEL_POSTER),
+        Decal(-1, half, 10.3, 11.0, 1.2, 1.8, POSTER, LABEL_POSTER),
+        Decal(+1, -half, 2.5, 3.2, 1.0, 1.7, POSTER, LABEL_POSTER),
+        Decal(+1, -half, 7.9, 8.9, 1.1, 1.9, POSTER, LABEL_POSTER),
+        Decal(+1, -half, 12.6, 13.2, 1.2, 1.8, POSTER, LABEL_POSTER),
+        Decal(-1, half, 12.0, 12.9, 0.0, door_top, PANEL, LABEL_DOOR),
+        Decal(+1, -half, 1.0, 1.9, 0.0, door_top, PANEL, LABEL_DOOR),
+    )
+    lights = tuple(Light((float(x), 0.0, h - 0.1), 2.4) for x in np.arange(0.5, 14.0, 2.5))
+    return Scene(boxes=tuple(boxes), cylinders=tuple(obst_cyls), decals=decals, lights=lights,
+                 materials=materials, skirting_m=0.1, skirting_material=SKIRT, ambient=0.3,
+                 x_range_m=(x0, x1), half_width_m=half, height_m=h, seed=seed)

@@ -1,0 +1,274 @@
+"""Rendered calibration targets with exact correspondences (paper Sec. 2, Fig. 2).
+
+A planar target lies in the plane ``z = 0`` of its own frame; a view places it
+at ``points_cam = R p + t`` in the (raw, distorted) left camera frame and
+renders what that camera -- and, for a :class:`~mrstereo.camera.StereoCamera`,
+the right raw camera -- sees, with the true lens distortion (eq. 1-3),
+anti-aliasing and sensor noise. ``points_px`` are the exact distorted
+projections of the target points, i.e. the control points the calibration
+(eq. 4-8) fits. Conventions: docs/conventions.md; user guide: docs/world.md.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _checks
+from ..camera import Camera, CameraInfo, StereoCamera, rotation_from_euler
+from .render import _ray_table, sensor_noise_sigma
+
+__all__ = ["CalibrationView", "render_calibration_views", "render_paper_dot_target", "target_points"]
+
+_WHITE, _BLACK = 0.88, 0.07
+
+
+@dataclass(frozen=True)
+class CalibrationView:
+    """One rendered view of a planar target with its exact correspondences.
+
+    Attributes
+    ----------
+    image : ndarray of shape (H, W), uint8
+        The (left) raw camera image.
+    image_right : ndarray of shape (H, W), uint8 or None
+        The right raw image of the same target pose (stereo only).
+    points_target : ndarray of shape (N, 3)
+        Target points (chessboard inner corners or dot centres) in the target
+        frame, ``z = 0``, row-major: ``(i * spacing, j * spacing, 0)`` with i
+        along the board's first dimension.
+    points_px : ndarray of shape (N, 2)
+        Their exact distorted pixel positions in ``image``.
+    points_px_right : ndarray of shape (N, 2) or None
+        The same in ``image_right`` (may fall outside it for the dot target).
+    R, t : ndarray of shape (3, 3) and (3,)
+        True target pose in the left raw camera frame: ``points_cam = R p + t``.
+    target : str
+        ``"chessboard"`` or ``"dots"``.
+    board : tuple of int
+        Inner corners (chessboard) or dots (dot grid) per row and column.
+    spacing_m : float
+        Square size or dot pitch.
+    """
+
+    image: np.ndarray
+    image_right: np.ndarray | None
+    points_target: np.ndarray
+    points_px: np.ndarray
+    points_px_right: np.ndarray | None
+    R: np.ndarray
+    t: np.ndarray
+    target: str
+    board: tuple[int, int]
+    spacing_m: float
+
+
+def target_points(board: tuple[int, int], spacing_m: float) -> np.ndarray:
+    """Target-frame points (N, 3): ``(i * s, j * s, 0)`` for j rows, i columns, row-major."""
+    nx, ny = board
+    j, i = np.mgrid[0:ny, 0:nx]
+    return np.stack([i.ravel() * spacing_m, j.ravel() * spacing_m, np.zeros(nx * ny)], -1)
+
+
+def _board_extent(target: str, board: tuple[int, int], s: float) -> tuple[float, float, float, float]:
+    """Target-frame rectangle of the white paper (the pattern plus a white margin)."""
+    nx, ny = board
+    m = 2.0 * s if target == "chessboard" else 1.0 * s
+    return -m, (nx - 1) * s + m, -m, (ny - 1) * s + m
+
+
+def _pattern(target: str, board: tuple[int, int], s: float, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Reflectance at target-frame (x, y); background outside the paper."""
+    x0, x1, y0, y1 = _board_extent(target, board, s)
+    on_paper = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+    nx, ny = board
+    if target == "chessboard":
+        ix = np.floor(x / s)
+        iy = np.floor(y / s)
+        in_squares = (x >= -s) & (x <= nx * s) & (y >= -s) & (y <= ny * s)
+        black = in_squares & ((ix + iy) % 2 == 0)
+    else:
+        r = 0.22 * s
+        gx = np.clip(np.rint(x / s), 0, nx - 1) * s
+        gy = np.clip(np.rint(y / s), 0, ny - 1) * s
+        black = (x - gx) ** 2 + (y - gy) ** 2 <= r * r
+    value = np.where(black, _BLACK, _WHITE)
+    background = 0.35 + 0.1 * np.tanh(x) - 0.05 * np.tanh(y)
+    return np.where(on_paper, value, background)
+
+
+def _render_target(cam: Camera, target: str, board, s: float, R: np.ndarray, t: np.ndarray,
+                   supersample: int, rng: np.random.Generator, noise_sigma: float) -> np.ndarray:
+    """Ray-cast the target plane through the distorted camera (its own raw frame)."""
+    dirs = _ray_table(CameraInfo(cam), raw=True, supersample=supersample)     # (H, W, S, 3), R = I
+    n = R[:, 2]
+    denom = dirs @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = (n @ t) / denom
+        pts = lam[..., None] * dirs - t                # R p = lam d - t
+    p = pts @ R                                        # p = R^T (lam d - t)
+    hit = np.isfinite(lam) & (lam > 0)
+    value = np.where(hit, _pattern(target, board, s, p[..., 0], p[..., 1]), 0.3)
+    # Gentle illumination gradient across the image, then anti-aliasing.
+    H, W = dirs.shape[:2]
+    shade = 0.9 + 0.1 * np.linspace(-1, 1, W)[None, :] * np.linspace(1, 0.6, H)[:, None]
+    grey = value.mean(axis=2) * shade * 255.0 + rng.normal(0.0, noise_sigma, (H, W))
+    return np.clip(np.rint(grey), 0, 255).astype(np.uint8)
+
+
+def _cameras(camera_or_stereo) -> tuple[Camera, Camera | None, np.ndarray | None, np.ndarray | None]:
+    """(left raw camera, right raw camera, R_rr_from_lr, t_rr_from_lr)."""
+    if isinstance(camera_or_stereo, Camera):
+        return camera_or_stereo, None, None, None
+    if isinstance(camera_or_stereo, CameraInfo):
+        return camera_or_stereo.camera, None, None, None
+    if isinstance(camera_or_stereo, StereoCamera):
+        st = camera_or_stereo
+        # p_rect_left = R_L p_lr; p_rect_right = p_rect_left - (b, 0, 0); p_rr = R_R^T p_rect_right.
+        R = st.right.R.T @ st.left.R
+        t = -st.right.R.T @ np.array([st.baseline_m, 0.0, 0.0])
+        return st.left.camera, st.right.camera, R, t
+    raise TypeError(f"camera_or_stereo must be a Camera, CameraInfo or StereoCamera, "
+                    f"got {type(camera_or_stereo).__name__}")
+
+
+def _right_offset_m(cams) -> float:
+    """x of the right camera centre in the left raw frame (0 for a single camera)."""
+    if cams[1] is None:
+        return 0.0
+    return float(-(cams[2].T @ cams[3])[0])
+
+
+def _inside(cam: Camera, uv: np.ndarray, margin: float) -> bool:
+    return bool(np.all(np.isfinite(uv)) and np.all(uv >= margin)
+                and np.all(uv[:, 0] <= cam.width - 1 - margin) and np.all(uv[:, 1] <= cam.height - 1 - margin))
+
+
+def _view(cams, target, board, s, R, t, supersample, rng, noise_sigma) -> CalibrationView:
+    left, right, R_rl, t_rl = cams
+    pts = target_points(board, s)
+    px = left.project(pts @ R.T + t)
+    image = _render_target(left, target, board, s, R, t, supersample, rng, noise_sigma)
+    image_r = px_r = None
+    if right is not None:
+        Rr, tr = R_rl @ R, R_rl @ t + t_rl
+        px_r = right.project(pts @ Rr.T + tr)
+        image_r = _render_target(right, target, board, s, Rr, tr, supersample, rng, noise_sigma)
+    return CalibrationView(image=image, image_right=image_r, points_target=pts, points_px=px,
+                           points_px_right=px_r, R=R, t=t, target=target, board=tuple(board), spacing_m=s)
+
+
+def _check_common(target, board, spacing_m, seed, supersample):
+    if target not in ("chessboard", "dots"):
+        raise ValueError(f"target must be 'chessboard' or 'dots', got {target!r}")
+    try:
+        nx, ny = (int(v) for v in board)
+    except (TypeError, ValueError):
+        raise ValueError(f"board must be (columns, rows) integers, got {board!r}") from None
+    if nx < 2 or ny < 2:
+        raise ValueError(f"board needs at least 2 x 2 points, got {board!r}")
+    s = _checks.finite_number("spacing_m", spacing_m, positive=True)
+    seed = _checks.positive_int("seed", seed, minimum=0)
+    supersample = _checks.positive_int("supersample", supersample)
+    return (nx, ny), s, seed, supersample
+
+
+def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", board=(9, 6),
+                             spacing_m: float = 0.03, n_views: int = 10, seed: int = 0,
+                             supersample: int = 4, noise_sigma: float = sensor_noise_sigma
+                             ) -> list[CalibrationView]:
+    """Render ``n_views`` random poses of a planar target with exact correspondences.
+
+    Parameters
+    ----------
+    camera_or_stereo : Camera, CameraInfo or StereoCamera
+        True raw camera(s); a stereo pair renders left and right images of each pose.
+    target : {"chessboard", "dots"}
+        Chessboard (detectable by ``cv2.findChessboardCorners``, with a white
+        margin) or a grid of black dots on white.
+    board : (int, int)
+        Inner corners (chessboard) or dots per row and column, e.g. (9, 6).
+    spacing_m : float
+        Square size or dot pitch in metres.
+    n_views : int
+        Number of views.
+    seed : int
+        Seed of the poses and the sensor noise.
+    supersample : int
+        Anti-aliasing rays per pixel along each axis.
+    noise_sigma : float
+        Sensor noise, grey levels.
+
+    Returns
+    -------
+    list of CalibrationView
+        Poses tilt the board up to about 35 degrees and fill 35-65 % of the
+        image width; the whole paper lies inside every image.
+    """
+    board, s, seed, supersample = _check_common(target, board, spacing_m, seed, supersample)
+    n_views = _checks.positive_int("n_views", n_views)
+    noise_sigma = _checks.finite_number("noise_sigma", noise_sigma, nonnegative=True)
+    cams = _cameras(camera_or_stereo)
+    left = cams[0]
+    rng = np.random.default_rng(seed)
+    x0, x1, y0, y1 = _board_extent(target, board, s)
+    outline = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0],
+                        [(x0 + x1) / 2, y0, 0], [(x0 + x1) / 2, y1, 0], [x0, (y0 + y1) / 2, 0],
+                        [x1, (y0 + y1) / 2, 0]])
+    centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
+    aim_x_m = _right_offset_m(cams) / 2    # aim between the cameras of a stereo pair
+    views = []
+    for k in range(n_views):
+        for _attempt in range(500):
+            angles = rng.uniform([-0.6, -0.6, -0.3], [0.6, 0.6, 0.3])
+            R = rotation_from_euler(*angles)
+            fill = rng.uniform(0.35, 0.65)
+            z = left.fx * (x1 - x0) / (fill * left.width)
+            off = rng.uniform(-0.5, 0.5, 2) * (1.0 - fill) * np.array([left.width / left.fx,
+                                                                        left.height / left.fy])
+            t = np.array([aim_x_m + off[0] * z, off[1] * z, z]) - R @ centre
+            pts = outline @ R.T + t
+            if not _inside(left, left.project(pts), 6.0):
+                continue
+            if cams[1] is not None and not _inside(cams[1], cams[1].project(pts @ cams[2].T + cams[3]), 6.0):
+                continue
+            break
+        else:
+            raise RuntimeError(f"could not place view {k} of the target inside the image(s); "
+                               "use a smaller board or spacing_m")
+        views.append(_view(cams, target, board, s, R, t, supersample, rng, noise_sigma))
+    return views
+
+
+def render_paper_dot_target(camera_or_stereo, *, grid=(15, 11), distance_m: float = 1.0, seed: int = 0,
+                            supersample: int = 4, noise_sigma: float = sensor_noise_sigma) -> CalibrationView:
+    """One fronto-parallel view of a dot grid filling most of the image (paper Fig. 2).
+
+    The dots reach the image corners, where the radial distortion (eq. 3) bends
+    the straight rows of dots the most.
+
+    Parameters
+    ----------
+    camera_or_stereo : Camera, CameraInfo or StereoCamera
+        True raw camera(s).
+    grid : (int, int)
+        Dots per row and column.
+    distance_m : float
+        Distance of the target plane from the left camera.
+    seed, supersample, noise_sigma
+        As in :func:`render_calibration_views`.
+    """
+    board, _, seed, supersample = _check_common("dots", grid, 1.0, seed, supersample)
+    z = _checks.finite_number("distance_m", distance_m, positive=True)
+    noise_sigma = _checks.finite_number("noise_sigma", noise_sigma, nonnegative=True)
+    cams = _cameras(camera_or_stereo)
+    left = cams[0]
+    nx, ny = board
+    span = 0.94 if cams[1] is None else 0.86
+    s = min(span * (left.width / left.fx) * z / (nx - 1), span * (left.height / left.fy) * z / (ny - 1))
+    R = np.eye(3)
+    centre = np.array([(nx - 1) * s / 2, (ny - 1) * s / 2, 0.0])
+    t = np.array([((left.width - 1) / 2 - left.cx) / left.fx * z + _right_offset_m(cams) / 2,
+                  ((left.height - 1) / 2 - left.cy) / left.fy * z, z]) - centre
+    rng = np.random.default_rng(seed)
+    return _view(cams, "dots", board, s, R, t, supersample, rng, noise_sigma)
