@@ -1,4 +1,4 @@
-"""``mrstereo synth`` and ``mrstereo demo`` on tiny outputs."""
+"""``mrstereo synth`` on tiny outputs."""
 from __future__ import annotations
 
 import subprocess
@@ -8,7 +8,6 @@ from click.testing import CliRunner
 
 from mrstereo.cli import entry, main
 from mrstereo.world.dataset import read_manifest
-from mrstereo.world.demo import write_world_demo
 
 
 def test_synth_writes_a_readable_dataset(tmp_path):
@@ -39,11 +38,3 @@ def test_python_m_help():
     proc = subprocess.run([sys.executable, "-m", "mrstereo", "demo", "--help"], capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 0 and "--out" in proc.stdout
-
-
-def test_world_demo_writes_figures(tmp_path):
-    written = write_world_demo(tmp_path / "demo", n_stops=1, width=64, height=48, progress=False)
-    names = {p.name for p in written}
-    assert {"gt_map.png", "frame_00_images.png", "frame_02_gt_disparity.png", "frame_01_left_raw.png"} <= names
-    assert all(p.is_file() and p.stat().st_size > 0 for p in written)
-    assert (tmp_path / "demo" / "gt_map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

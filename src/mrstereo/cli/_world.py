@@ -1,4 +1,4 @@
-"""CLI of the synthetic world: ``mrstereo synth`` and ``mrstereo demo``."""
+"""CLI of the synthetic world: ``mrstereo synth``."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -31,19 +31,4 @@ def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, quie
     click.echo(f"wrote {n_frames} frames to {path} (manifest: {path / 'manifest.yaml'})")
 
 
-@click.command("demo")
-@click.option("--out", "out_dir", default="mrstereo-demo", show_default=True, type=click.Path(path_type=Path),
-              help="Output directory for the PNG images and figures.")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0), help="World seed.")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
-def demo(out_dir: Path, seed: int, quiet: bool) -> None:
-    """Render the built-in corridor world and write its images and ground-truth figures."""
-    from ..world.demo import write_world_demo
-
-    written = write_world_demo(out_dir, seed=seed, progress=not quiet)
-    click.echo(f"wrote {len(written)} files to {out_dir.resolve()}")
-    click.echo(f"  ground-truth map: {out_dir / 'gt_map.png'}")
-    click.echo(f"  first frame:      {out_dir / 'frame_00_images.png'}")
-
-
-COMMANDS = [synth, demo]
+COMMANDS = [synth]
