@@ -1,2 +1,180 @@
-"""CLI commands (filled by the stage that owns them)."""
-COMMANDS: list = []
+"""CLI: ``mrstereo points`` (PLY point cloud) and ``mrstereo scan`` (virtual laser scan).
+
+Both run one stereo pair through rectification, multi-range matching,
+eq. (13) rejection and the 3D stage (:mod:`mrstereo.geometry.pair`).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import click
+import numpy as np
+
+__all__ = ["COMMANDS"]
+
+
+def _common(func):
+    options = [
+        click.argument("left", type=click.Path(dir_okay=False)),
+        click.argument("right", type=click.Path(dir_okay=False)),
+        click.option("--calib", "calib", required=True, type=click.Path(dir_okay=False),
+                     help="Stereo calibration YAML (left:/right: camera_info, optional rig:)."),
+        click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output file."),
+        click.option("--rectified", is_flag=True, help="The images are already rectified."),
+        click.option("--height", "height_m", type=float, default=None,
+                     help="Camera height above the floor [m] (overrides the YAML rig)."),
+        click.option("--tilt", "tilt_rad", type=float, default=None,
+                     help="Downward camera tilt [rad] (overrides the YAML rig; needs --height or a rig)."),
+        click.option("--pan", "pan_rad", type=float, default=0.0, show_default=True,
+                     help="Head pan about the robot's z axis [rad], positive to the left."),
+        click.option("--preset", default="robust", show_default=True, help="Matcher preset."),
+        click.option("--max-disparity", "max_disparity_px", type=float, default=None,
+                     help="Largest disparity to search [px] (default: the matcher's)."),
+        click.option("--texture-threshold", type=float, default=None,
+                     help="T of eq. (13): reject patches with std <= T gray levels (0 disables)."),
+        click.option("--min-height", "min_height_m", type=float, default=None,
+                     help="Obstacles start this high above the floor [m]."),
+        click.option("--max-height", "max_height_m", type=float, default=None,
+                     help="Points above this height [m] are ignored."),
+        click.option("--max-range", "max_range_m", type=float, default=None, help="Drop points farther [m]."),
+        click.option("--ground", "ground_method", type=click.Choice(["v_disparity", "plane"]), default=None,
+                     help="Floor estimator used when the mount is unknown."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def _finite(name: str, value):
+    if value is not None and not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value}")
+    return value
+
+
+def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, preset, max_disparity_px,
+         texture_threshold, min_height_m, max_height_m, max_range_m, ground_method, scan: bool, **scan_kw):
+    from dataclasses import replace
+
+    from ..camera import RigMount, read_stereo
+    from ..geometry import ObstacleConfig, obstacles_from_pair, scan_from_pair
+    from ..io import read_image, refuse_overwrite_input
+    from ..rejection import RejectionConfig
+
+    for name, value in (("--height", height_m), ("--tilt", tilt_rad), ("--pan", pan_rad),
+                        ("--max-disparity", max_disparity_px), ("--texture-threshold", texture_threshold),
+                        ("--min-height", min_height_m), ("--max-height", max_height_m),
+                        ("--max-range", max_range_m)):
+        _finite(name, value)
+    refuse_overwrite_input(output, [left, right, calib])
+    stereo = read_stereo(calib)
+    rig = None
+    if height_m is not None or tilt_rad is not None:
+        base = stereo.rig
+        if height_m is None and base is None:
+            raise ValueError("--tilt needs --height (or a rig: entry in the calibration YAML)")
+        rig = RigMount(height_m=height_m if height_m is not None else base.height_m,
+                       tilt_rad=tilt_rad if tilt_rad is not None else (base.tilt_rad if base else 0.0))
+    left_img, right_img = read_image(left), read_image(right)
+    if left_img.shape != right_img.shape:
+        raise ValueError(f"left and right images differ in size: {left_img.shape[1]}x{left_img.shape[0]} "
+                         f"and {right_img.shape[1]}x{right_img.shape[0]}")
+    rejection = RejectionConfig() if texture_threshold is None else \
+        RejectionConfig(texture_threshold=texture_threshold)
+    config = ObstacleConfig()
+    updates = {k: v for k, v in (("min_obstacle_height_m", min_height_m), ("max_obstacle_height_m", max_height_m),
+                                 ("max_range_m", max_range_m), ("ground_method", ground_method)) if v is not None}
+    config = replace(config, **updates)
+    options = dict(rectified=rectified, rig=rig, pan_rad=pan_rad, preset=preset,
+                   max_disparity_px=max_disparity_px, rejection=rejection, config=config)
+    if scan:
+        return stereo, scan_from_pair(left_img, right_img, stereo, **scan_kw, **options)
+    return stereo, obstacles_from_pair(left_img, right_img, stereo, **options)
+
+
+def _report_ground(obstacles) -> None:
+    g = obstacles.ground
+    click.echo(f"floor ({g.method}): height {g.height_m:.3f} m, tilt {math.degrees(g.tilt_rad):.2f} deg"
+               + (f", roll {math.degrees(g.roll_rad):.2f} deg" if g.method == "plane" else ""), err=True)
+
+
+@click.command("points")
+@_common
+@click.option("--which", type=click.Choice(["all", "obstacles", "floor"]), default="all", show_default=True,
+              help="Which points to write.")
+@click.option("--color", is_flag=True, help="Write red/green/blue from a colour left image (else intensity).")
+def points_command(left, right, calib, output, which, color, **kw):
+    """Write the robot-frame point cloud of a stereo pair as binary PLY.
+
+    LEFT and RIGHT are a raw pair (rectified with --calib first) or a rectified
+    pair (--rectified). The mount comes from --height/--tilt, else the YAML's
+    rig:, else the floor is estimated from the disparity.
+    """
+    from ..geometry import write_ply
+
+    if Path(output).suffix.lower() != ".ply":
+        raise ValueError(f"output must end in .ply, got {output}")
+    _, frame = _run(left, right, calib, output, scan=False, **kw)
+    obs = frame.obstacles
+    if not obs.success:
+        raise RuntimeError(f"{obs.message}; give --height and --tilt (or a rig: entry in the calibration)")
+    valid = np.isfinite(obs.points_robot_image).all(axis=-1)
+    mask = {"all": valid, "obstacles": obs.obstacle_mask, "floor": obs.floor_mask}[which]
+    pts = obs.points_robot_image[mask]
+    img = frame.left_rect
+    if color:
+        if img.ndim != 3:
+            raise ValueError("--color needs a colour left image")
+        n = write_ply(output, pts, colors_rgb=img[mask][:, ::-1], comment="mrstereo robot frame, metres")
+    else:
+        gray = img if img.ndim == 2 else np.asarray(img, np.float32) @ np.float32([0.114, 0.587, 0.299])
+        n = write_ply(output, pts, intensity=np.asarray(gray)[mask], comment="mrstereo robot frame, metres")
+    _report_ground(obs)
+    click.echo(f"wrote {n} points ({int(obs.obstacle_mask.sum())} obstacle, {int(obs.floor_mask.sum())} floor) "
+               f"to {output}", err=True)
+
+
+@click.command("scan")
+@_common
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+              help="Also write a top-view PNG (obstacle points, floor points, scan).")
+@click.option("--angle-increment", "angle_increment_deg", type=float, default=0.5, show_default=True,
+              help="Angular step of the scan [deg].")
+@click.option("--range-min", "range_min_m", type=float, default=0.1, show_default=True, help="[m]")
+def scan_command(left, right, calib, output, plot_path, angle_increment_deg, range_min_m, **kw):
+    """Write a virtual laser scan (nearest obstacle per bearing) as JSON or CSV.
+
+    JSON uses the ROS LaserScan field names (angle_min, angle_max,
+    angle_increment, range_min, range_max, ranges; no return = null); an
+    output ending in .csv is written as angle_rad,range_m rows.
+    """
+    from ..geometry import plot_top_view, write_scan_csv, write_scan_json
+    from ..io import refuse_overwrite_input
+
+    suffix = Path(output).suffix.lower()
+    if suffix not in (".json", ".csv"):
+        raise ValueError(f"output must end in .json or .csv, got {output}")
+    if plot_path is not None:
+        if Path(plot_path).suffix.lower() != ".png":
+            raise ValueError(f"--plot must end in .png, got {plot_path}")
+        refuse_overwrite_input(plot_path, [left, right, calib, output])
+    _finite("--angle-increment", angle_increment_deg)
+    if angle_increment_deg <= 0:
+        raise ValueError(f"--angle-increment must be > 0, got {angle_increment_deg}")
+    _, result = _run(left, right, calib, output, scan=True, angle_increment_rad=math.radians(angle_increment_deg),
+                     range_min_m=_finite("--range-min", range_min_m), **kw)
+    obs = result.frame.obstacles
+    if not obs.success:
+        raise RuntimeError(f"{obs.message}; give --height and --tilt (or a rig: entry in the calibration)")
+    (write_scan_csv if suffix == ".csv" else write_scan_json)(output, result.scan)
+    if plot_path is not None:
+        plot_top_view(plot_path, obstacle_points_robot=obs.obstacle_points_robot,
+                      floor_points_robot=obs.floor_points_robot, scan=result.scan,
+                      x_range_m=(0.0, max(1.0, result.scan.range_max_m)),
+                      title=f"top view: {Path(left).name}")
+    _report_ground(obs)
+    n = int(np.isfinite(result.scan.ranges_m).sum())
+    click.echo(f"wrote a scan of {result.scan.ranges_m.size} rays ({n} returns) to {output}", err=True)
+
+
+COMMANDS = [points_command, scan_command]

@@ -1,0 +1,431 @@
+"""Ground plane of the floor seen by the stereo head: V-disparity and 3D RANSAC.
+
+Beyond the paper, which assumes the mount of the camera is known: the floor is
+found in the disparity itself, so that obstacles can be separated from the
+floor when the camera height and tilt are not known exactly.
+
+Floor geometry (camera frame x right, y down, z forward; no roll). A camera at
+height ``h`` tilted down by ``theta`` sees the floor as the plane
+``n . P = h`` with the downward normal ``n = (0, cos theta, sin theta)``.
+With eq. (14)-(16) (``Z = b f / d``, ``Y = (v - cy) Z / f_y``) every floor
+pixel obeys
+
+    d(v) = a (v - cy) + c,   a = b f cos(theta) / (h f_y),   c = b f sin(theta) / h
+
+i.e. a straight line in the row-by-disparity histogram, the "V-disparity"
+image of Labayrade et al. (2002); obstacles (fronto-parallel surfaces) are
+vertical segments standing on it, the ceiling a line of negative slope. From
+the line: ``tan(theta) = c / (a f_y)`` and ``h = b f cos(theta) / (a f_y)``.
+
+A 3D plane fit (:func:`fit_ground_plane`) also recovers the roll about the
+optical axis: ``n = (sin(roll) cos(tilt), cos(roll) cos(tilt), sin(tilt))``, i.e.
+the camera frame is rolled by ``roll`` about its z axis before the tilt of
+:func:`mrstereo.geometry.frames.T_robot_from_cam`.
+
+Conventions: docs/conventions.md.
+
+References
+----------
+R. Labayrade, D. Aubert, J.-P. Tarel, "Real time obstacle detection in
+stereovision on non flat road geometry through V-disparity representation",
+IEEE Intelligent Vehicle Symposium, 2002.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import _checks
+from ..camera import RigMount, StereoCamera
+from .frames import T_robot_from_cam
+from .triangulation import points_cam_from_disparity
+
+__all__ = [
+    "GroundPlane", "ground_from_rig", "v_disparity", "fit_ground_v_disparity", "fit_ground_plane",
+    "estimate_ground", "T_robot_from_cam_ground", "height_above_ground_m",
+]
+
+
+@dataclass(frozen=True)
+class GroundPlane:
+    """The floor in the left camera frame: ``normal_cam . P = height_m``.
+
+    Attributes
+    ----------
+    height_m : float
+        Height of the left camera's optical centre above the floor.
+    tilt_rad : float
+        Downward tilt of the optical axis (positive = looking down).
+    roll_rad : float
+        Roll about the optical axis (0 for a V-disparity fit).
+    success : bool
+        False when no plausible floor was found (then the other fields are NaN).
+    message : str
+        What was fitted or why it failed.
+    method : str
+        ``"rig"``, ``"v_disparity"`` or ``"plane"``.
+    n_inliers : int
+        Pixels / points supporting the fit (0 for ``"rig"``).
+    line_px : (float, float)
+        V-disparity line ``d = a (v - cy) + c`` as ``(a, c)`` (NaN if not fitted).
+    """
+
+    height_m: float
+    tilt_rad: float
+    roll_rad: float = 0.0
+    success: bool = True
+    message: str = ""
+    method: str = "rig"
+    n_inliers: int = 0
+    line_px: tuple[float, float] = field(default=(math.nan, math.nan))
+
+    @property
+    def normal_cam(self) -> np.ndarray:
+        """Unit downward floor normal in the camera frame."""
+        t, r = self.tilt_rad, self.roll_rad
+        return np.array([math.sin(r) * math.cos(t), math.cos(r) * math.cos(t), math.sin(t)])
+
+    @property
+    def rig(self) -> RigMount:
+        """The fitted mount as a :class:`mrstereo.camera.RigMount` (roll dropped)."""
+        return RigMount(height_m=self.height_m, tilt_rad=self.tilt_rad)
+
+
+def ground_from_rig(rig: RigMount) -> GroundPlane:
+    """The floor implied by a known mount (flat floor, no roll)."""
+    if not isinstance(rig, RigMount):
+        raise TypeError(f"rig must be a RigMount, got {type(rig).__name__}")
+    return GroundPlane(height_m=float(rig.height_m), tilt_rad=float(rig.tilt_rad), method="rig",
+                       message="mount given")
+
+
+def _failed(method: str, message: str, n: int = 0) -> GroundPlane:
+    return GroundPlane(height_m=math.nan, tilt_rad=math.nan, roll_rad=math.nan, success=False,
+                       message=message, method=method, n_inliers=n)
+
+
+def _rotation_roll_cam(roll_rad: float) -> np.ndarray:
+    c, s = math.cos(roll_rad), math.sin(roll_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def T_robot_from_cam_ground(ground: GroundPlane, *, pan_rad: float = 0.0) -> np.ndarray:
+    """4x4 robot-from-camera transform of a fitted floor (roll, then tilt and pan).
+
+    ``T_robot_from_cam(height_m, tilt_rad, pan_rad) @ Rz_cam(roll_rad)``; the
+    floor maps to the robot plane ``z = 0``.
+    """
+    if not isinstance(ground, GroundPlane):
+        raise TypeError(f"ground must be a GroundPlane, got {type(ground).__name__}")
+    if not ground.success:
+        raise ValueError(f"ground plane was not found: {ground.message}")
+    T = T_robot_from_cam(height_m=ground.height_m, tilt_rad=ground.tilt_rad, pan_rad=pan_rad)
+    roll = np.eye(4)
+    roll[:3, :3] = _rotation_roll_cam(ground.roll_rad)
+    return T @ roll
+
+
+def height_above_ground_m(points_cam, ground: GroundPlane) -> np.ndarray:
+    """Height of camera-frame points (..., 3) above the floor: ``h - n . P``."""
+    p = np.asarray(points_cam, dtype=np.float64)
+    return ground.height_m - p @ ground.normal_cam
+
+
+def v_disparity(disparity_px, *, max_disparity_px: float | None = None,
+                bin_px: float = 1.0) -> np.ndarray:
+    """Row-by-disparity histogram (Labayrade et al. 2002).
+
+    Parameters
+    ----------
+    disparity_px : ndarray of shape (H, W)
+        Disparity, NaN invalid.
+    max_disparity_px : float, optional
+        Upper edge of the last bin (default: the largest valid disparity).
+    bin_px : float
+        Bin width; bin ``k`` covers ``[k bin_px, (k + 1) bin_px)``.
+
+    Returns
+    -------
+    ndarray of shape (H, n_bins), int32
+        ``hist[v, k]`` = number of pixels of row ``v`` with disparity in bin ``k``.
+    """
+    d = np.asarray(disparity_px, dtype=np.float64)
+    if d.ndim != 2:
+        raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
+    b = _checks.finite_number("bin_px", bin_px, positive=True)
+    valid = np.isfinite(d) & (d >= 0)
+    if max_disparity_px is None:
+        max_d = float(d[valid].max()) if valid.any() else 0.0
+    else:
+        max_d = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
+    n_bins = int(math.floor(max_d / b)) + 1
+    v, _ = np.nonzero(valid)
+    k = np.floor(d[valid] / b).astype(np.int64)
+    keep = k < n_bins
+    hist = np.bincount(v[keep] * n_bins + k[keep], minlength=d.shape[0] * n_bins)
+    return hist.reshape(d.shape[0], n_bins).astype(np.int32)
+
+
+def _pair(name: str, value) -> tuple[float, float]:
+    try:
+        lo, hi = value
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a pair (low, high), got {value!r}") from None
+    lo, hi = _checks.finite_number(f"{name}[0]", lo), _checks.finite_number(f"{name}[1]", hi)
+    if hi <= lo:
+        raise ValueError(f"{name} must have low < high, got ({lo}, {hi})")
+    return lo, hi
+
+
+def _rng(rng) -> np.random.Generator:
+    return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+
+
+def _subsample(n: int, max_samples: int, rng: np.random.Generator) -> np.ndarray:
+    return np.arange(n) if n <= max_samples else rng.choice(n, size=max_samples, replace=False)
+
+
+def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: float = 1.0,
+                           height_range_m: tuple[float, float] = (0.1, 2.0),
+                           tilt_range_rad: tuple[float, float] = (-0.35, 1.2), below_penalty: float = 1.0,
+                           iterations: int = 500, min_inliers: int = 200, max_samples: int = 20000,
+                           rng=0) -> GroundPlane:
+    """Fit the floor line ``d = a (v - cy) + c`` of the V-disparity by RANSAC + least squares.
+
+    RANSAC draws pairs of valid pixels, keeps lines with a positive slope (the
+    floor's disparity grows toward the bottom of the image; the ceiling's
+    shrinks) whose implied camera height and tilt lie in ``height_range_m`` and
+    ``tilt_range_rad`` (this excludes the nearly vertical V-disparity segments
+    of walls facing the camera), and scores the number of pixels within
+    ``tolerance_px`` of the line; the best line is refined by least squares on
+    its inliers (Labayrade et al. use a Hough transform of the histogram; RANSAC on
+    the pixels is the same fit without choosing accumulator bins).
+
+    Parameters
+    ----------
+    disparity_px : ndarray of shape (H, W)
+        Disparity of the rectified left image, NaN invalid.
+    stereo : StereoCamera
+        Supplies ``f``, ``f_y``, ``cy``, baseline and ``doffs``.
+    tolerance_px : float
+        Inlier band around the line (pixels of disparity).
+    height_range_m, tilt_range_rad : (float, float)
+        Plausible camera height above the floor and downward tilt.
+    below_penalty : float
+        Score of a line = inliers - ``below_penalty`` x pixels farther than the
+        line under its horizon. Every true surface seen below the horizon is
+        nearer than the floor on its ray (it stands on the floor), so a line
+        through a wall at the end of the corridor, which leaves the real floor
+        "below" it, scores low.
+    iterations : int
+        RANSAC hypotheses.
+    min_inliers : int
+        Fewer inliers than this is a failure (``success=False``).
+    max_samples : int
+        Valid pixels are subsampled to at most this many.
+    rng : numpy.random.Generator, int or None
+        Randomness of RANSAC (deterministic for a fixed seed).
+
+    Returns
+    -------
+    GroundPlane
+        ``method="v_disparity"``, roll 0, ``line_px=(a, c)``.
+    """
+    d = np.asarray(disparity_px, dtype=np.float64)
+    if d.ndim != 2:
+        raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
+    if not isinstance(stereo, StereoCamera):
+        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    tol = _checks.finite_number("tolerance_px", tolerance_px, positive=True)
+    iterations = _checks.positive_int("iterations", iterations)
+    min_inliers = _checks.positive_int("min_inliers", min_inliers)
+    rng = _rng(rng)
+    d = d + stereo.doffs_px
+    valid = np.isfinite(d) & (d > 0)
+    v_all, _ = np.nonzero(valid)
+    if v_all.size < max(min_inliers, 2):
+        return _failed("v_disparity", f"only {v_all.size} valid disparities", v_all.size)
+    pick = _subsample(v_all.size, _checks.positive_int("max_samples", max_samples, minimum=2), rng)
+    v = v_all[pick].astype(np.float64) - stereo.cy_px
+    dd = d[valid][pick]
+    i = rng.integers(0, v.size, size=(iterations, 2))
+    dv = v[i[:, 1]] - v[i[:, 0]]
+    ok = np.abs(dv) >= 2.0
+    a = np.where(ok, (dd[i[:, 1]] - dd[i[:, 0]]) / np.where(ok, dv, 1.0), np.nan)
+    c = dd[i[:, 0]] - a * v[i[:, 0]]
+    ok &= a > 0
+    fx, fy = stereo.focal_px, float(stereo.left.P[1, 1])
+    h_lo, h_hi = _pair("height_range_m", height_range_m)
+    t_lo, t_hi = _pair("tilt_range_rad", tilt_range_rad)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tilt_h = np.arctan2(c, a * fy)
+        height_h = stereo.baseline_m * fx * np.cos(tilt_h) / (a * fy)
+    ok &= (height_h >= h_lo) & (height_h <= h_hi) & (tilt_h >= t_lo) & (tilt_h <= t_hi)
+    if not ok.any():
+        return _failed("v_disparity", "no line with a floor-like slope (positive, plausible height and tilt)", 0)
+    a, c = a[ok], c[ok]
+    scores = np.zeros(a.size, dtype=np.float64)
+    for start in range(0, a.size, 32):        # blocks keep the (hypotheses x samples) array small
+        line = a[start:start + 32, None] * v[None, :] + c[start:start + 32, None]
+        res = dd[None, :] - line
+        below = (res < -tol) & (line > 0)      # farther than the floor under the horizon: impossible
+        scores[start:start + 32] = (np.abs(res) <= tol).sum(axis=1) - below_penalty * below.sum(axis=1)
+    best = int(np.argmax(scores))
+    a_best, c_best = a[best], c[best]
+    for _ in range(3):                        # least-squares refinement on the inliers
+        inl = np.abs(dd - (a_best * v + c_best)) <= tol
+        if inl.sum() < 2:
+            break
+        a_new, c_new = np.polyfit(v[inl], dd[inl], 1)
+        t_new = math.atan2(c_new, a_new * fy)
+        h_new = stereo.baseline_m * fx * math.cos(t_new) / (a_new * fy) if a_new > 0 else math.inf
+        if not (h_lo <= h_new <= h_hi and t_lo <= t_new <= t_hi):
+            break                              # keep the last plausible line
+        a_best, c_best = a_new, c_new
+    inl = np.abs(dd - (a_best * v + c_best)) <= tol
+    n_inl = int(round(inl.sum() * v_all.size / v.size))
+    if n_inl < min_inliers or a_best <= 0:
+        return _failed("v_disparity", f"floor line has only {n_inl} supporting pixels (< {min_inliers})", n_inl)
+    tilt = math.atan2(c_best, a_best * fy)
+    height = stereo.baseline_m * fx * math.cos(tilt) / (a_best * fy)
+    return GroundPlane(height_m=float(height), tilt_rad=float(tilt), roll_rad=0.0, success=True,
+                       message=f"V-disparity line d = {a_best:.4f} (v - cy) + {c_best:.3f} from {n_inl} pixels",
+                       method="v_disparity", n_inliers=n_inl, line_px=(float(a_best), float(c_best)))
+
+
+def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
+                     height_range_m: tuple[float, float] = (0.1, 2.0),
+                     tilt_range_rad: tuple[float, float] = (-0.35, 1.2), max_roll_rad: float = 0.35,
+                     below_penalty: float = 1.0, max_range_m: float = 6.0, iterations: int = 1500,
+                     min_inliers: int = 200, max_samples: int = 20000, rng=0) -> GroundPlane:
+    """Fit the floor plane to camera-frame points by RANSAC (3 points) + least squares.
+
+    Only planes below the camera with a plausible height, tilt and roll are
+    considered (this excludes walls and the ceiling); the three points of a
+    hypothesis are drawn among the points below the optical centre
+    (camera ``y > 0``), where the floor is. Hypotheses are scored on at most
+    4000 points, the winner is refined on all. Recovers height, tilt and roll.
+
+    Parameters
+    ----------
+    points_cam : ndarray of shape (N, 3) or (H, W, 3)
+        Camera-frame points; NaN rows are ignored.
+    distance_threshold_m : float
+        Inlier distance to the plane.
+    height_range_m, tilt_range_rad : (float, float)
+        Plausible camera height above the floor and downward tilt.
+    max_roll_rad : float
+        Largest roll about the optical axis.
+    below_penalty : float
+        Score = inliers - ``below_penalty`` x points beyond the plane (below the
+        floor), as in :func:`fit_ground_v_disparity`.
+    max_range_m : float
+        Points farther than this (depth) are not used: their triangulation
+        error exceeds the threshold.
+    iterations, min_inliers, max_samples, rng
+        As in :func:`fit_ground_v_disparity`.
+
+    Returns
+    -------
+    GroundPlane
+        ``method="plane"``.
+    """
+    p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
+    thr = _checks.finite_number("distance_threshold_m", distance_threshold_m, positive=True)
+    max_roll = _checks.finite_number("max_roll_rad", max_roll_rad, positive=True)
+    t_lo, t_hi = _pair("tilt_range_rad", tilt_range_rad)
+    max_range = _checks.finite_number("max_range_m", max_range_m, positive=True)
+    iterations = _checks.positive_int("iterations", iterations)
+    min_inliers = _checks.positive_int("min_inliers", min_inliers)
+    rng = _rng(rng)
+    p = p[np.isfinite(p).all(axis=1) & (p[:, 2] > 0) & (p[:, 2] <= max_range)]
+    if p.shape[0] < max(min_inliers, 3):
+        return _failed("plane", f"only {p.shape[0]} valid points", p.shape[0])
+    n_all = p.shape[0]
+    p = p[_subsample(n_all, _checks.positive_int("max_samples", max_samples, minimum=3), rng)]
+    below_centre = p[p[:, 1] > 0]
+    pool = below_centre if below_centre.shape[0] >= max(min_inliers, 3) else p
+    tri = pool[rng.integers(0, pool.shape[0], size=(iterations, 3))]
+    score_pts = p[_subsample(p.shape[0], 4000, rng)]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norm = np.linalg.norm(n, axis=1)
+    ok = norm > 1e-9
+    n = n[ok] / norm[ok, None]
+    n *= np.where(n[:, 1] < 0, -1.0, 1.0)[:, None]          # downward normal: +y in the camera frame
+    dist = np.einsum("ij,ij->i", n, tri[ok, 0])
+    h_lo, h_hi = _pair("height_range_m", height_range_m)
+    tilt_h = np.arcsin(np.clip(n[:, 2], -1.0, 1.0))
+    roll_h = np.arctan2(n[:, 0], n[:, 1])
+    ok2 = (dist >= h_lo) & (dist <= h_hi) & (tilt_h >= t_lo) & (tilt_h <= t_hi) & (np.abs(roll_h) <= max_roll)
+    if not ok2.any():
+        return _failed("plane", "no plane below the camera with a floor-like normal", 0)
+    n, dist = n[ok2], dist[ok2]
+    scores = np.zeros(n.shape[0], dtype=np.float64)
+    for start in range(0, n.shape[0], 32):
+        res = score_pts @ n[start:start + 32].T - dist[start:start + 32]
+        scores[start:start + 32] = (np.abs(res) <= thr).sum(axis=0) - below_penalty * (res > thr).sum(axis=0)
+    best = int(np.argmax(scores))
+    normal, h = n[best], dist[best]
+    for _ in range(3):                                        # total least squares on the inliers
+        inl = np.abs(p @ normal - h) <= thr
+        if inl.sum() < 3:
+            break
+        centre = p[inl].mean(axis=0)
+        _, _, vt = np.linalg.svd(p[inl] - centre, full_matrices=False)
+        n_new = vt[-1] * (1.0 if vt[-1][1] >= 0 else -1.0)
+        h_new = float(n_new @ centre)
+        t_new, r_new = math.asin(float(np.clip(n_new[2], -1, 1))), math.atan2(float(n_new[0]), float(n_new[1]))
+        if not (h_lo <= h_new <= h_hi and t_lo <= t_new <= t_hi and abs(r_new) <= max_roll):
+            break                                             # keep the last plausible plane
+        normal, h = n_new, h_new
+    inl = np.abs(p @ normal - h) <= thr
+    n_inl = int(round(inl.sum() * n_all / p.shape[0]))
+    if n_inl < min_inliers or h <= 0:
+        return _failed("plane", f"floor plane has only {n_inl} supporting points (< {min_inliers})", n_inl)
+    tilt = math.asin(float(np.clip(normal[2], -1.0, 1.0)))
+    roll = math.atan2(float(normal[0]), float(normal[1]))
+    return GroundPlane(height_m=float(h), tilt_rad=float(tilt), roll_rad=float(roll), success=True,
+                       message=f"plane fit with {n_inl} supporting points", method="plane",
+                       n_inliers=n_inl)
+
+
+def estimate_ground(disparity_px, stereo: StereoCamera, *, method: str = "v_disparity",
+                    prior: RigMount | None = None, prior_height_tolerance_m: float = 0.15,
+                    prior_tilt_tolerance_rad: float = 0.1, rng=0, **options) -> GroundPlane:
+    """Estimate the floor from a disparity map by ``"v_disparity"`` or ``"plane"``.
+
+    Parameters
+    ----------
+    disparity_px : ndarray of shape (H, W)
+        Disparity of the rectified left image, NaN invalid.
+    stereo : StereoCamera
+        The calibration.
+    method : {"v_disparity", "plane"}
+        :func:`fit_ground_v_disparity` or :func:`fit_ground_plane` (with roll).
+    prior : RigMount, optional
+        A roughly known mount: only floors within ``prior_height_tolerance_m``
+        and ``prior_tilt_tolerance_rad`` of it are considered.
+    rng : numpy.random.Generator, int or None
+        RANSAC randomness.
+    **options
+        Passed to the fitting function.
+    """
+    if prior is not None:
+        if not isinstance(prior, RigMount):
+            raise TypeError(f"prior must be a RigMount, got {type(prior).__name__}")
+        dh = _checks.finite_number("prior_height_tolerance_m", prior_height_tolerance_m, positive=True)
+        dt = _checks.finite_number("prior_tilt_tolerance_rad", prior_tilt_tolerance_rad, positive=True)
+        options["height_range_m"] = (max(prior.height_m - dh, 1e-3), prior.height_m + dh)
+        options["tilt_range_rad"] = (prior.tilt_rad - dt, prior.tilt_rad + dt)
+    if method == "v_disparity":
+        return fit_ground_v_disparity(disparity_px, stereo, rng=rng, **options)
+    if method == "plane":
+        if not isinstance(stereo, StereoCamera):
+            raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+        pts = points_cam_from_disparity(disparity_px, focal_px=stereo.focal_px, baseline_m=stereo.baseline_m,
+                                        cx_px=stereo.cx_px, cy_px=stereo.cy_px,
+                                        fy_px=float(stereo.left.P[1, 1]), doffs_px=stereo.doffs_px)
+        return fit_ground_plane(pts, rng=rng, **options)
+    raise ValueError(f"method must be 'v_disparity' or 'plane', got {method!r}")

@@ -1,0 +1,231 @@
+"""Obstacle and floor points in the robot frame from one disparity map.
+
+Eq. (14)-(16) give camera-frame points (:func:`points_cam_from_disparity`);
+:func:`T_robot_from_cam` (or the fitted floor, :mod:`.ground`) takes them into
+the robot frame (x forward, y left, z up, origin on the floor under the
+camera). A point is
+
+* an **obstacle** point when ``min_obstacle_height_m < z <= max_obstacle_height_m``
+  (above the floor, below the robot's own height, like costmap_2d's
+  min/max obstacle height),
+* a **floor** point when ``|z| <= floor_tolerance_m`` (free-space evidence for
+  the occupancy grid),
+* ignored otherwise (below the floor: a mismatch; above the robot: the ceiling).
+
+Conventions: docs/conventions.md.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _checks
+from ..camera import RigMount, StereoCamera
+from .ground import GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_rig
+from .triangulation import points_cam_from_disparity
+
+__all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity"]
+
+
+@dataclass(frozen=True)
+class ObstacleConfig:
+    """Options of :func:`detect_obstacles`.
+
+    Attributes
+    ----------
+    min_obstacle_height_m : float
+        Points higher than this above the floor are obstacles.
+    max_obstacle_height_m : float
+        Points higher than this (above the robot) are ignored.
+    floor_tolerance_m : float
+        Points within this of the floor are floor (free space).
+    max_range_m : float
+        Points farther than this (horizontal distance from the robot) are
+        dropped: their depth error (``dZ = Z^2 / (b f) dd``) is too large.
+    ground_method : str
+        ``"v_disparity"`` or ``"plane"``: how the floor is estimated when no
+        mount is given (or ``estimate_ground`` is true).
+    estimate_ground : bool
+        Estimate the floor even when a mount is given (a mount that is only
+        roughly known): the estimate is searched within
+        ``prior_height_tolerance_m`` / ``prior_tilt_tolerance_rad`` of the
+        mount, and the mount is used if the estimate fails.
+    ground_height_range_m : (float, float)
+        Plausible camera heights when no mount is known at all.
+    prior_height_tolerance_m, prior_tilt_tolerance_rad : float
+        Search window around a roughly known mount.
+    seed : int
+        Seed of the ground-plane RANSAC.
+    """
+
+    min_obstacle_height_m: float = 0.08
+    max_obstacle_height_m: float = 1.5
+    floor_tolerance_m: float = 0.04
+    max_range_m: float = 8.0
+    ground_method: str = "plane"
+    estimate_ground: bool = False
+    ground_height_range_m: tuple[float, float] = (0.1, 2.0)
+    prior_height_tolerance_m: float = 0.15
+    prior_tilt_tolerance_rad: float = 0.1
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        lo = _checks.finite_number("min_obstacle_height_m", self.min_obstacle_height_m, nonnegative=True)
+        hi = _checks.finite_number("max_obstacle_height_m", self.max_obstacle_height_m, positive=True)
+        if hi <= lo:
+            raise ValueError(f"max_obstacle_height_m ({hi}) must exceed min_obstacle_height_m ({lo})")
+        _checks.finite_number("floor_tolerance_m", self.floor_tolerance_m, nonnegative=True)
+        _checks.finite_number("max_range_m", self.max_range_m, positive=True)
+        _checks.finite_number("prior_height_tolerance_m", self.prior_height_tolerance_m, positive=True)
+        _checks.finite_number("prior_tilt_tolerance_rad", self.prior_tilt_tolerance_rad, positive=True)
+        lo, hi = self.ground_height_range_m
+        if not (_checks.finite_number("ground_height_range_m", lo, positive=True)
+                < _checks.finite_number("ground_height_range_m", hi)):
+            raise ValueError("ground_height_range_m must be (low, high) with low < high, "
+                             f"got {self.ground_height_range_m}")
+        if self.ground_method not in ("v_disparity", "plane"):
+            raise ValueError(f"ground_method must be 'v_disparity' or 'plane', got {self.ground_method!r}")
+
+
+@dataclass(frozen=True)
+class ObstacleResult:
+    """Output of :func:`detect_obstacles`.
+
+    Attributes
+    ----------
+    points_robot_image : ndarray of shape (H, W, 3), float64
+        Robot-frame point of every pixel (NaN where the disparity is invalid).
+    obstacle_mask, floor_mask : ndarray of shape (H, W), bool
+        Pixels classified as obstacle / floor (disjoint, within ``max_range_m``).
+    ground : GroundPlane
+        The floor used (given mount or estimate).
+    T_robot_from_cam : ndarray of shape (4, 4)
+        The transform used.
+    success : bool
+        False when no floor was available (then the masks are empty).
+    message : str
+        How the floor was obtained, or why it failed.
+    """
+
+    points_robot_image: np.ndarray
+    obstacle_mask: np.ndarray
+    floor_mask: np.ndarray
+    ground: GroundPlane
+    T_robot_from_cam: np.ndarray
+    success: bool
+    message: str
+
+    @property
+    def points_robot(self) -> np.ndarray:
+        """All valid robot-frame points, (N, 3)."""
+        p = self.points_robot_image.reshape(-1, 3)
+        return p[np.isfinite(p).all(axis=1)]
+
+    @property
+    def obstacle_points_robot(self) -> np.ndarray:
+        """Obstacle points in the robot frame, (N, 3)."""
+        return self.points_robot_image[self.obstacle_mask]
+
+    @property
+    def floor_points_robot(self) -> np.ndarray:
+        """Floor (free-space) points in the robot frame, (N, 3)."""
+        return self.points_robot_image[self.floor_mask]
+
+
+def points_robot_from_disparity(disparity_px, stereo: StereoCamera, T_robot_from_cam) -> np.ndarray:
+    """Eq. (14)-(16) then a rigid transform: robot-frame points (H, W, 3), NaN invalid."""
+    if not isinstance(stereo, StereoCamera):
+        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
+    pts = points_cam_from_disparity(disparity_px, focal_px=stereo.focal_px, baseline_m=stereo.baseline_m,
+                                    cx_px=stereo.cx_px, cy_px=stereo.cy_px,
+                                    fy_px=float(stereo.left.P[1, 1]), doffs_px=stereo.doffs_px)
+    return pts @ T[:3, :3].T + T[:3, 3]
+
+
+def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: RigMount | None,
+                     config: ObstacleConfig = ObstacleConfig()) -> GroundPlane:
+    """The floor to use for a frame: the mount, or an estimate (around the mount if given).
+
+    No mount: estimated with ``config.ground_method`` within
+    ``config.ground_height_range_m``. A mount and ``config.estimate_ground``:
+    estimated near the mount, falling back to the mount. Otherwise the mount.
+    """
+    if mount is not None and not config.estimate_ground:
+        return ground_from_rig(mount)
+    if mount is None:
+        return estimate_ground(disparity_px, stereo, method=config.ground_method, rng=config.seed,
+                               height_range_m=config.ground_height_range_m)
+    ground = estimate_ground(disparity_px, stereo, method=config.ground_method, rng=config.seed, prior=mount,
+                             prior_height_tolerance_m=config.prior_height_tolerance_m,
+                             prior_tilt_tolerance_rad=config.prior_tilt_tolerance_rad)
+    if ground.success:
+        return ground
+    return GroundPlane(height_m=float(mount.height_m), tilt_rad=float(mount.tilt_rad), method="rig",
+                       message=f"floor estimate failed ({ground.message}); mount used")
+
+
+def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None = None,
+                     ground: GroundPlane | None = None, pan_rad: float = 0.0,
+                     config: ObstacleConfig = ObstacleConfig()) -> ObstacleResult:
+    """Split a disparity map into obstacle and floor points in the robot frame.
+
+    Parameters
+    ----------
+    disparity_px : ndarray of shape (H, W)
+        Disparity of the rectified left image (after rejection, eq. 13), NaN invalid.
+    stereo : StereoCamera
+        The calibration (rectified ``P``); its ``rig`` is used when ``rig`` is None.
+    rig : RigMount, optional
+        Camera height and tilt. When neither ``rig``, ``ground`` nor
+        ``stereo.rig`` is given, the floor is estimated from the disparity
+        (``config.ground_method``).
+    ground : GroundPlane, optional
+        A floor estimated beforehand (e.g. on the disparity before rejection);
+        takes precedence over ``rig``.
+    pan_rad : float
+        Pan of the stereo head about the robot's z axis (positive left).
+    config : ObstacleConfig
+        Height band, floor tolerance, range limit, ground method.
+
+    Returns
+    -------
+    ObstacleResult
+    """
+    if not isinstance(stereo, StereoCamera):
+        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    if not isinstance(config, ObstacleConfig):
+        raise TypeError(f"config must be an ObstacleConfig, got {type(config).__name__}")
+    if rig is not None and not isinstance(rig, RigMount):
+        raise TypeError(f"rig must be a RigMount, got {type(rig).__name__}")
+    if ground is not None and not isinstance(ground, GroundPlane):
+        raise TypeError(f"ground must be a GroundPlane, got {type(ground).__name__}")
+    d = np.asarray(disparity_px, dtype=np.float64)
+    if d.ndim != 2:
+        raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
+    if (d.shape[1], d.shape[0]) != tuple(stereo.size):
+        raise ValueError(f"disparity_px is {d.shape[1]}x{d.shape[0]} but the calibration is "
+                         f"{stereo.size[0]}x{stereo.size[1]}")
+    pan = _checks.finite_number("pan_rad", pan_rad)
+    mount = rig if rig is not None else stereo.rig
+    if ground is None:
+        ground = ground_for_frame(d, stereo, mount=mount, config=config)
+    h, w = d.shape
+    if not ground.success:
+        empty = np.zeros((h, w), dtype=bool)
+        return ObstacleResult(points_robot_image=np.full((h, w, 3), np.nan), obstacle_mask=empty,
+                              floor_mask=empty.copy(), ground=ground, T_robot_from_cam=np.full((4, 4), np.nan),
+                              success=False, message=f"no floor: {ground.message}")
+    T = T_robot_from_cam_ground(ground, pan_rad=pan)
+    pts = points_robot_from_disparity(d, stereo, T)
+    z = pts[..., 2]
+    with np.errstate(invalid="ignore"):
+        in_range = np.hypot(pts[..., 0], pts[..., 1]) <= config.max_range_m
+        obstacle = in_range & (z > config.min_obstacle_height_m) & (z <= config.max_obstacle_height_m)
+        floor = in_range & (np.abs(z) <= config.floor_tolerance_m)
+    return ObstacleResult(points_robot_image=pts, obstacle_mask=obstacle, floor_mask=floor & ~obstacle,
+                          ground=ground, T_robot_from_cam=T, success=True,
+                          message=f"floor from {ground.method}: height {ground.height_m:.3f} m, "
+                                  f"tilt {np.degrees(ground.tilt_rad):.2f} deg; "
+                                  f"{int(obstacle.sum())} obstacle and {int(floor.sum())} floor points")

@@ -1,0 +1,131 @@
+"""From one stereo pair to obstacle points, a point cloud and a virtual laser scan.
+
+rectify (unless already rectified) -> multi-range matching (eq. 9-12,
+:func:`mrstereo.matching.compute_disparity`) -> rejection of uniform patches
+(eq. 13, :mod:`mrstereo.rejection`) -> floor (given mount or estimated) ->
+triangulation into the robot frame (eq. 14-16) -> obstacle / floor split ->
+laser scan. These are the functions behind ``mrstereo points`` and
+``mrstereo scan``. Conventions: docs/conventions.md.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _checks
+from ..camera import RigMount, StereoCamera
+from ..rejection import FloorModel, RejectionConfig, RejectionResult, reject_uniform
+from .obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
+from .scan import LaserScan, laser_scan_from_points, scan_angles_of_camera
+
+__all__ = ["PairObstacles", "PairScan", "obstacles_from_pair", "scan_from_pair"]
+
+
+@dataclass(frozen=True)
+class PairObstacles:
+    """Everything :func:`obstacles_from_pair` computed for one frame.
+
+    Attributes
+    ----------
+    left_rect : ndarray of shape (H, W) or (H, W, 3)
+        The rectified left image.
+    raw_disparity_px : ndarray of shape (H, W), float32
+        The matcher's disparity before rejection.
+    rejection : RejectionResult
+        Eq. (13) applied to it (``rejection.disparity_px`` is what was triangulated).
+    obstacles : ObstacleResult
+        Robot-frame points, obstacle and floor masks, the floor used.
+    """
+
+    left_rect: np.ndarray
+    raw_disparity_px: np.ndarray
+    rejection: RejectionResult
+    obstacles: ObstacleResult
+
+    @property
+    def disparity_px(self) -> np.ndarray:
+        return self.rejection.disparity_px
+
+
+@dataclass(frozen=True)
+class PairScan:
+    """A virtual laser scan and the frame it was computed from."""
+
+    scan: LaserScan
+    frame: PairObstacles
+
+
+def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = False, rig: RigMount | None = None,
+                        pan_rad: float = 0.0, preset: str = "robust", max_disparity_px: float | None = None,
+                        rejection: RejectionConfig = RejectionConfig(), floor_model: FloorModel | None = None,
+                        config: ObstacleConfig = ObstacleConfig()) -> PairObstacles:
+    """Obstacle and floor points (robot frame) of one stereo pair.
+
+    Parameters
+    ----------
+    left, right : ndarray of shape (H, W) or (H, W, 3)
+        The pair; raw images are rectified with ``stereo`` first unless ``rectified``.
+    stereo : StereoCamera
+        Calibration (and optionally the ``rig`` mount).
+    rectified : bool
+        The images are already rectified.
+    rig : RigMount, optional
+        Camera height and tilt; default ``stereo.rig``; with neither the floor
+        is estimated (on the disparity before rejection, which has the most
+        floor pixels; RANSAC ignores the ghosts).
+    pan_rad : float
+        Head pan (positive left).
+    preset, max_disparity_px
+        Passed to :func:`mrstereo.matching.compute_disparity`.
+    rejection : RejectionConfig
+        Eq. (13) options (``texture_threshold`` is T).
+    floor_model : FloorModel, optional
+        A learned floor model (paper section 3.5) used in addition to the texture test.
+    config : ObstacleConfig
+        Height band, range limit, ground method.
+    """
+    from ..matching import compute_disparity        # lazy: numba kernels compile on first use
+
+    if not isinstance(stereo, StereoCamera):
+        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    _checks.image("left", left)
+    _checks.image("right", right)
+    _checks.same_shape("left", left, "right", right)
+    if (left.shape[1], left.shape[0]) != tuple(stereo.size):
+        raise ValueError(f"images are {left.shape[1]}x{left.shape[0]} but the calibration is "
+                         f"{stereo.size[0]}x{stereo.size[1]}")
+    if not rectified and not stereo.is_rectified:
+        left, right = stereo.rectify(left, right)
+    kwargs = {"preset": preset, "calibration": stereo}
+    if max_disparity_px is not None:
+        kwargs["max_disparity_px"] = max_disparity_px
+    raw = np.asarray(compute_disparity(left, right, **kwargs).disparity_px, dtype=np.float32)
+    rej = reject_uniform(raw, left, config=rejection, floor_model=floor_model)
+    mount = rig if rig is not None else stereo.rig
+    ground = ground_for_frame(raw, stereo, mount=mount, config=config)
+    obstacles = detect_obstacles(rej.disparity_px, stereo, rig=mount, ground=ground, pan_rad=pan_rad,
+                                 config=config)
+    return PairObstacles(left_rect=left, raw_disparity_px=raw, rejection=rej, obstacles=obstacles)
+
+
+def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: float = math.radians(0.5),
+                   range_min_m: float = 0.1, range_max_m: float | None = None, min_points: int = 3,
+                   **options) -> PairScan:
+    """Virtual laser scan (nearest obstacle per bearing, robot frame) of one stereo pair.
+
+    The bearings span the left camera's horizontal field of view (turned by
+    ``pan_rad``); ``range_max_m`` defaults to ``config.max_range_m``; each ray
+    reports its ``min_points``-th nearest obstacle point (robust to a few stray
+    points, see :func:`laser_scan_from_points`). Other keyword options are those
+    of :func:`obstacles_from_pair`.
+    """
+    frame = obstacles_from_pair(left, right, stereo, **options)
+    config = options.get("config", ObstacleConfig())
+    lo, hi = scan_angles_of_camera(stereo, pan_rad=options.get("pan_rad", 0.0))
+    scan = laser_scan_from_points(frame.obstacles.obstacle_points_robot, angle_min_rad=lo, angle_max_rad=hi,
+                                  angle_increment_rad=angle_increment_rad, range_min_m=range_min_m,
+                                  range_max_m=config.max_range_m if range_max_m is None else range_max_m,
+                                  min_points=min_points)
+    return PairScan(scan=scan, frame=frame)

@@ -1,0 +1,185 @@
+"""Ground plane (V-disparity, 3D RANSAC) and obstacle detection on hand-made geometry.
+
+The scene is ray-cast analytically: a flat floor seen by a camera at height H tilted
+down by TILT, and a box standing on the floor. Off-centre principal point and a
+non-square image so that swapped axes fail.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from mrstereo.camera import Camera, RigMount, StereoCamera
+from mrstereo.geometry import (GroundPlane, ObstacleConfig, T_robot_from_cam, T_robot_from_cam_ground,
+                               detect_obstacles, fit_ground_plane, fit_ground_v_disparity,
+                               height_above_ground_m, points_cam_from_disparity, v_disparity)
+
+W, H, F, CX, CY, B = 200, 150, 180.0, 96.3, 71.8, 0.12
+HEIGHT, TILT = 0.62, 0.21
+BOX = ((1.6, 2.0), (-0.35, 0.15), (0.0, 0.45))      # x, y, z ranges in the robot frame
+
+
+def _stereo(rig=None):
+    return StereoCamera.ideal(Camera(width=W, height=H, fx=F, fy=F, cx=CX, cy=CY), B, rig=rig)
+
+
+def _render(height=HEIGHT, tilt=TILT, pan=0.0, box=BOX):
+    """Exact disparity and labels (0 none, 1 floor, 2 box) by ray casting in the robot frame."""
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    rays = np.stack([(u - CX) / F, (v - CY) / F, np.ones_like(u)], axis=-1)     # camera z = 1
+    T = T_robot_from_cam(height_m=height, tilt_rad=tilt, pan_rad=pan)
+    dirs = rays @ T[:3, :3].T
+    origin = T[:3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_floor = np.where(dirs[..., 2] < 0, -origin[2] / dirs[..., 2], np.inf)
+        t_near = np.full(u.shape, -np.inf)
+        t_far = np.full(u.shape, np.inf)
+        for k, (lo, hi) in enumerate(box):
+            t1, t2 = (lo - origin[k]) / dirs[..., k], (hi - origin[k]) / dirs[..., k]
+            t_near = np.maximum(t_near, np.minimum(t1, t2))
+            t_far = np.minimum(t_far, np.maximum(t1, t2))
+    hit_box = (t_near <= t_far) & (t_near > 0)
+    t = np.where(hit_box, np.minimum(t_near, t_floor), t_floor)
+    labels = np.where(hit_box & (t_near <= t_floor), 2, np.where(np.isfinite(t_floor), 1, 0))
+    with np.errstate(divide="ignore"):
+        d = np.where(np.isfinite(t), B * F / t, np.nan).astype(np.float32)   # t = camera Z since ray z = 1
+    return d, labels
+
+
+def test_floor_disparity_is_the_v_disparity_line():
+    d, labels = _render(box=((50, 51), (0, 1), (0, 1)))        # box out of view: floor only
+    a = B * math.cos(TILT) / HEIGHT
+    c = B * F * math.sin(TILT) / HEIGHT
+    rows = np.arange(H)
+    floor_rows = rows[(labels == 1).all(axis=1)]
+    np.testing.assert_allclose(d[floor_rows, 17], a * (floor_rows - CY) + c, rtol=1e-5)
+    hist = v_disparity(d, bin_px=1.0)
+    peak = hist[floor_rows].argmax(axis=1)
+    np.testing.assert_array_equal(peak, np.floor(a * (floor_rows - CY) + c).astype(int))
+    assert hist[floor_rows].sum(axis=1).tolist() == [W] * floor_rows.size
+
+
+def test_v_disparity_fit_recovers_height_and_tilt_with_box_and_ghosts():
+    d, _ = _render()
+    rng = np.random.default_rng(5)
+    ghosts = rng.random(d.shape) < 0.15
+    d[ghosts] = rng.uniform(0, 40, ghosts.sum())
+    g = fit_ground_v_disparity(d, _stereo(), tolerance_px=0.5, rng=1)
+    assert g.success, g.message
+    assert g.height_m == pytest.approx(HEIGHT, abs=0.005)
+    assert g.tilt_rad == pytest.approx(TILT, abs=0.002)
+    assert g.method == "v_disparity" and g.roll_rad == 0.0
+    again = fit_ground_v_disparity(d, _stereo(), tolerance_px=0.5, rng=1)
+    assert again == g                                         # same seed, same answer
+
+
+def test_plane_fit_recovers_roll_and_matches_the_transform():
+    roll = 0.07
+    n = np.array([math.sin(roll) * math.cos(TILT), math.cos(roll) * math.cos(TILT), math.sin(TILT)])
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    rays = np.stack([(u - CX) / F, (v - CY) / F, np.ones_like(u)], axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(rays @ n > 0, HEIGHT / (rays @ n), np.nan)      # floor n.P = h
+        d = B * F / z
+    pts = points_cam_from_disparity(d, focal_px=F, baseline_m=B, cx_px=CX, cy_px=CY)
+    g = fit_ground_plane(pts, rng=0)
+    assert g.success, g.message
+    assert (g.height_m, g.tilt_rad, g.roll_rad) == pytest.approx((HEIGHT, TILT, roll), abs=1e-6)
+    floor = pts[np.isfinite(pts).all(axis=-1)]
+    T = T_robot_from_cam_ground(g)
+    np.testing.assert_allclose(floor @ T[2, :3] + T[2, 3], 0.0, atol=1e-9)    # floor maps to z = 0
+    np.testing.assert_allclose(height_above_ground_m(floor, g), 0.0, atol=1e-9)
+
+
+def test_ground_fits_fail_cleanly_without_a_floor():
+    d = np.full((H, W), np.nan, np.float32)
+    assert not fit_ground_v_disparity(d, _stereo()).success
+    wall = np.full((H, W), 12.0, np.float32)                          # a fronto-parallel wall: vertical line
+    g = fit_ground_v_disparity(wall, _stereo())
+    assert not g.success and "positive" in g.message
+    pts = points_cam_from_disparity(wall, focal_px=F, baseline_m=B, cx_px=CX, cy_px=CY)
+    assert not fit_ground_plane(pts).success
+
+
+def _box_truth(labels, d, config):
+    T = T_robot_from_cam(height_m=HEIGHT, tilt_rad=TILT)
+    pts = points_cam_from_disparity(d, focal_px=F, baseline_m=B, cx_px=CX, cy_px=CY) @ T[:3, :3].T + T[:3, 3]
+    return (labels == 2) & (pts[..., 2] > config.min_obstacle_height_m), pts
+
+
+def test_detect_obstacles_with_known_mount():
+    d, labels = _render()
+    cfg = ObstacleConfig()
+    res = detect_obstacles(d, _stereo(), rig=RigMount(height_m=HEIGHT, tilt_rad=TILT), config=cfg)
+    assert res.success and res.ground.method == "rig"
+    expected, _ = _box_truth(labels, d, cfg)
+    np.testing.assert_array_equal(res.obstacle_mask, expected)
+    floor_in_range = (labels == 1) & (np.hypot(*res.points_robot_image[..., :2].transpose(2, 0, 1)) <= cfg.max_range_m)
+    np.testing.assert_array_equal(res.floor_mask, floor_in_range | ((labels == 2) & res.floor_mask))
+    obs = res.obstacle_points_robot
+    assert obs.shape == (expected.sum(), 3)
+    assert obs[:, 0].min() == pytest.approx(BOX[0][0], abs=1e-6)       # front face of the box
+    assert BOX[1][0] - 1e-6 <= obs[:, 1].min() and obs[:, 1].max() <= BOX[1][1] + 1e-6
+    assert obs[:, 2].max() == pytest.approx(BOX[2][1], abs=0.02)
+    np.testing.assert_allclose(res.points_robot_image[res.floor_mask & (labels == 1), 2], 0.0, atol=1e-6)
+    assert (res.floor_points_robot[:, 2] <= cfg.floor_tolerance_m).all()   # box foot (z <= 4 cm) counts as floor
+    assert res.points_robot.shape[0] == np.isfinite(d).sum()
+
+
+@pytest.mark.parametrize("method", ["plane", "v_disparity"])
+def test_detect_obstacles_estimates_the_floor_when_no_mount_is_known(method):
+    d, labels = _render()
+    noisy = d + np.random.default_rng(0).normal(0, 0.05, d.shape).astype(np.float32)
+    res = detect_obstacles(noisy, _stereo(), config=ObstacleConfig(ground_method=method))
+    assert res.success and res.ground.method == method, res.message
+    assert res.ground.height_m == pytest.approx(HEIGHT, abs=0.02)
+    assert res.ground.tilt_rad == pytest.approx(TILT, abs=0.01)
+    expected, _ = _box_truth(labels, d, ObstacleConfig())
+    recall = (res.obstacle_mask & expected).sum() / expected.sum()
+    false_floor = (res.obstacle_mask & (labels == 1)).sum() / (labels == 1).sum()
+    assert recall > 0.97 and false_floor < 0.001
+    # The stereo YAML's rig is used when no rig argument is given.
+    from_yaml = detect_obstacles(d, _stereo(rig=RigMount(height_m=HEIGHT, tilt_rad=TILT)))
+    assert from_yaml.ground.method == "rig"
+
+
+def test_rough_mount_is_refined_and_kept_when_the_estimate_fails():
+    d, _ = _render()
+    rough = RigMount(height_m=HEIGHT + 0.1, tilt_rad=TILT - 0.06)
+    res = detect_obstacles(d, _stereo(), rig=rough, config=ObstacleConfig(estimate_ground=True))
+    assert res.ground.method == "plane"
+    assert (res.ground.height_m, res.ground.tilt_rad) == pytest.approx((HEIGHT, TILT), abs=1e-3)
+    # Searched only near the mount: a floor 0.3 m away from it is not accepted, the mount is used.
+    far = RigMount(height_m=HEIGHT + 0.4, tilt_rad=TILT)
+    res = detect_obstacles(d, _stereo(), rig=far, config=ObstacleConfig(estimate_ground=True))
+    assert res.ground.method == "rig" and "mount used" in res.ground.message
+    assert res.ground.height_m == far.height_m
+
+
+def test_pan_rotates_the_obstacles_to_the_left():
+    pan = 0.3
+    # The box placed along the panned view direction appears where the pan says.
+    c, s = math.cos(pan), math.sin(pan)
+    d, labels = _render(pan=pan, box=((1.6, 2.0), (-0.35, 0.15), (0.0, 0.45)))
+    res = detect_obstacles(d, _stereo(), rig=RigMount(height_m=HEIGHT, tilt_rad=TILT), pan_rad=pan)
+    obs = res.obstacle_points_robot
+    assert obs.shape[0] > 0
+    assert obs[:, 0].min() == pytest.approx(1.6, abs=1e-6)
+    unpanned = detect_obstacles(d, _stereo(), rig=RigMount(height_m=HEIGHT, tilt_rad=TILT))
+    rotated = unpanned.obstacle_points_robot[:, :2] @ np.array([[c, -s], [s, c]]).T
+    np.testing.assert_allclose(rotated, obs[:, :2], atol=1e-9)
+
+
+def test_failed_ground_gives_empty_result_and_bad_input_raises():
+    res = detect_obstacles(np.full((H, W), np.nan, np.float32), _stereo())
+    assert not res.success and not res.obstacle_mask.any() and res.points_robot.shape == (0, 3)
+    with pytest.raises(ValueError, match="calibration is 200x150"):
+        detect_obstacles(np.zeros((10, 10)), _stereo())
+    with pytest.raises(TypeError, match="stereo must be a StereoCamera"):
+        detect_obstacles(np.zeros((H, W)), None)
+    with pytest.raises(ValueError, match="max_obstacle_height_m"):
+        ObstacleConfig(min_obstacle_height_m=2.0, max_obstacle_height_m=1.0)
+    with pytest.raises(ValueError, match="ground_method"):
+        ObstacleConfig(ground_method="hough")
+    with pytest.raises(ValueError, match="ground plane was not found"):
+        T_robot_from_cam_ground(GroundPlane(height_m=math.nan, tilt_rad=math.nan, success=False, message="x"))
