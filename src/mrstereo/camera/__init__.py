@@ -7,6 +7,7 @@ from .camera_info import (CameraInfo, RigMount, StereoCamera, read_camera_info, 
 from .model import (Camera, PaperCamera, distort_normalized, euler_from_rotation,
                     normalized_from_pixels, pixels_from_normalized, project_points,
                     rotation_from_euler, undistort_normalized)
+from .rectification import FusielloRectification, fusiello_rotation, rectify_fusiello
 
 __all__ = [
     "Camera", "PaperCamera", "CameraInfo", "RigMount", "StereoCamera", "read_camera_info",
@@ -14,3 +15,4 @@ __all__ = [
     "project_points", "pixels_from_normalized", "normalized_from_pixels", "rotation_from_euler",
     "euler_from_rotation",
 ]
+__all__ += ["FusielloRectification", "fusiello_rotation", "rectify_fusiello"]

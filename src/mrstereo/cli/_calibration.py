@@ -1,2 +1,190 @@
-"""CLI commands (filled by the stage that owns them)."""
-COMMANDS: list = []
+"""CLI: ``calibrate``, ``stereo-calibrate`` and ``rectify`` (see docs/calibration.md)."""
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import click
+from tqdm import tqdm
+
+from .. import _checks
+from ..calibration import (METHODS, MULTIVIEW_GA, GAConfig, calibrate_camera, calibrate_stereo,
+                           chessboard_pairs, chessboard_views, expand_glob, parse_board, read_control_points)
+from ..calibration.report import markdown_report, residual_figure, write_json, write_text
+from ..camera import CameraInfo, read_stereo, write_camera_info, write_stereo
+from ..io import read_image, refuse_overwrite_input, write_image
+
+
+def _progress_bar(total: int, desc: str):
+    bar = tqdm(total=total, desc=desc, unit="gen", leave=False, mininterval=0.5)
+
+    def update(generation: int, best: float) -> None:
+        if generation < bar.n:          # the second camera of a stereo pair starts again
+            bar.reset()
+        bar.set_postfix_str(f"F={best:.4g} px^2", refresh=False)
+        bar.update(generation - bar.n)
+    return bar, update
+
+
+def _square(square: float) -> float:
+    if not math.isfinite(square) or square <= 0:
+        raise ValueError(f"--square must be a positive finite size in metres, got {square}")
+    return square
+
+
+def _siblings(output: Path, stem_suffix: str) -> dict[str, Path]:
+    base = output.with_suffix("")
+    return {k: base.with_name(f"{base.name}{stem_suffix}.{k}") for k in ("json", "md", "png")}
+
+
+@click.command("calibrate")
+@click.option("--points", type=click.Path(dir_okay=False), help="Control points CSV (X, Y, Z, u, v).")
+@click.option("--image-size", default=None, help="WxH of the images (needed with --points), e.g. 640x480.")
+@click.option("--units", type=click.Choice(["m", "mm"]), default=None, help="Units of X, Y, Z in --points "
+              "(default: the file's '# units:' comment, else m).")
+@click.option("--images", "images_glob", help="Glob of chessboard images, e.g. 'left*.jpg'.")
+@click.option("--board", default="9x6", show_default=True, help="Inner corners, columns x rows.")
+@click.option("--square", type=float, default=0.025, show_default=True, help="Square size [m].")
+@click.option("--method", type=click.Choice(METHODS), default="ga+lm", show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True, help="GA seed.")
+@click.option("--generations", type=int, default=None, help="GA generation limit (default 2000 for one "
+              "view, 200 for several).")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="camera_info YAML.")
+def calibrate_cmd(points, image_size, units, images_glob, board, square, method, seed, generations, output):
+    """Calibrate one camera (GA of paper sec. 2.2, GA + LM, or LM).
+
+    Writes OUTPUT (ROS camera_info YAML) and, next to it, OUTPUT_report.json,
+    OUTPUT_report.md and OUTPUT_residuals.png (paper Figs. 2-3).
+    """
+    if (points is None) == (images_glob is None):
+        raise click.UsageError("give exactly one of --points FILE or --images GLOB")
+    output = Path(output)
+    if points is not None:
+        if image_size is None:
+            raise click.UsageError("--points needs --image-size WxH")
+        try:
+            width, height = (int(s) for s in image_size.lower().split("x"))
+        except ValueError:
+            raise ValueError(f"--image-size must look like 640x480, got {image_size!r}") from None
+        _checks.positive_int("image width", width)
+        _checks.positive_int("image height", height)
+        views = [read_control_points(points, units=units)]
+        inputs = [points]
+    else:
+        cols_rows = parse_board(board)
+        paths = expand_glob(images_glob)
+        found, (width, height) = chessboard_views(paths, cols_rows, _square(square))
+        views = [v for v in found if v is not None]
+        missing = [p.name for p, v in zip(paths, found) if v is None]
+        if missing:
+            click.echo(f"board not found in {len(missing)} image(s): {', '.join(missing)}", err=True)
+        inputs = paths
+    refuse_overwrite_input(output, inputs)
+    config = None
+    if generations is not None:
+        base = GAConfig() if len(views) == 1 else MULTIVIEW_GA
+        config = dataclasses.replace(base, generations=_checks.positive_int("--generations", generations))
+    total = (config or (GAConfig() if len(views) == 1 else MULTIVIEW_GA)).generations
+    bar, update = _progress_bar(total, "GA") if method != "lm" else (None, None)
+    try:
+        result = calibrate_camera(views, width=width, height=height, method=method, ga_config=config, rng=seed,
+                                  progress=update)
+    finally:
+        if bar is not None:
+            bar.close()
+    files = _siblings(output, "_report")
+    figure = output.with_suffix("").with_name(output.with_suffix("").name + "_residuals.png")
+    write_camera_info(output, CameraInfo(result.camera, name=output.stem))
+    write_json(files["json"], result.summary())
+    write_text(files["md"], markdown_report(result))
+    residual_figure(figure, result.camera, views)
+    c = result.camera
+    click.echo(f"{method}: RMS {result.rms_px:.4f} px over {len(views)} view(s); fx={c.fx:.2f} fy={c.fy:.2f} "
+               f"cx={c.cx:.2f} cy={c.cy:.2f} k1={c.k1:.4f} k2={c.k2:.4f}"
+               + ("" if result.success else f" [NOT CONVERGED: {result.message}]"))
+    if result.outlier_views:
+        click.echo("outlier views: " + ", ".join(result.view_names[i] for i in result.outlier_views), err=True)
+    click.echo(f"wrote {output}, {files['json'].name}, {files['md'].name}, {figure.name}")
+
+
+@click.command("stereo-calibrate")
+@click.option("--left", "left_glob", required=True, help="Glob of left chessboard images.")
+@click.option("--right", "right_glob", required=True, help="Glob of right chessboard images.")
+@click.option("--board", default="9x6", show_default=True, help="Inner corners, columns x rows.")
+@click.option("--square", type=float, default=0.025, show_default=True, help="Square size [m].")
+@click.option("--method", type=click.Choice(METHODS), default="ga+lm", show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--alpha", type=float, default=0.0, show_default=True,
+              help="Rectified view: 0 = valid pixels only, 1 = all raw pixels.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Stereo YAML.")
+def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, seed, alpha, output):
+    """Calibrate and rectify (Fusiello) a stereo pair from chessboard image pairs.
+
+    Pairs are matched by sorted file order; a pair where either board is not
+    found is skipped and reported. Writes OUTPUT and OUTPUT_report.{json,md}.
+    """
+    output = Path(output)
+    cols_rows = parse_board(board)
+    square = _square(square)
+    alpha = _checks.finite_number("--alpha", alpha)
+    left_paths, right_paths = expand_glob(left_glob, "left images"), expand_glob(right_glob, "right images")
+    if len(left_paths) != len(right_paths):
+        raise ValueError(f"{len(left_paths)} left images but {len(right_paths)} right images; pairs are "
+                         "matched by sorted order and must be equal in number")
+    refuse_overwrite_input(output, left_paths + right_paths)
+    found = chessboard_pairs(left_paths, right_paths, cols_rows, square)
+    skipped = found.skipped
+    if skipped:
+        click.echo(f"skipped {len(skipped)} pair(s) without a board in both images: {', '.join(skipped)}", err=True)
+    if len(found.left) < 2:
+        raise ValueError(f"the board was found in both images of only {len(found.left)} pair(s); need at least 2")
+    pairs = list(zip(found.left, found.right))
+    size_l = found.size
+    bar, update = _progress_bar(MULTIVIEW_GA.generations, "GA") if method != "lm" else (None, None)
+    try:
+        result = calibrate_stereo([p[0] for p in pairs], [p[1] for p in pairs], width=size_l[0], height=size_l[1],
+                                  method=method, alpha=alpha, rng=seed, progress=update)
+    finally:
+        if bar is not None:
+            bar.close()
+    files = _siblings(output, "_report")
+    summary = result.summary()
+    summary["skipped_pairs"] = skipped
+    write_stereo(output, result.stereo)
+    write_json(files["json"], summary)
+    md = [markdown_report(result.left, title="Left camera"), markdown_report(result.right, title="Right camera"),
+          "# Stereo", "", f"- success: {result.success}; {result.message}",
+          f"- joint RMS: {result.rms_px:.4f} px", f"- baseline: {result.baseline_m:.5f} m",
+          f"- rectified vertical error (mean |y_l - y_r|): {result.vertical_error_px:.4f} px",
+          f"- skipped pairs: {', '.join(skipped) or 'none'}", ""]
+    write_text(files["md"], "\n".join(md))
+    click.echo(f"{len(pairs)} pairs: RMS {result.rms_px:.4f} px, baseline {result.baseline_m:.4f} m, "
+               f"rectified vertical error {result.vertical_error_px:.4f} px"
+               + ("" if result.success else f" [NOT CONVERGED: {result.message}]"))
+    click.echo(f"wrote {output}, {files['json'].name}, {files['md'].name}")
+
+
+@click.command("rectify")
+@click.option("--calib", required=True, type=click.Path(dir_okay=False), help="Stereo calibration YAML.")
+@click.argument("left", type=click.Path(dir_okay=False))
+@click.argument("right", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(file_okay=False), help="Output directory.")
+def rectify_cmd(calib, left, right, output):
+    """Undistort and rectify a raw stereo pair; writes DIR/<left name> and DIR/<right name>."""
+    stereo = read_stereo(calib)
+    img_l, img_r = read_image(left), read_image(right)
+    out_dir = Path(output)
+    names = [Path(left).name, Path(right).name]
+    if names[0] == names[1]:
+        names = ["left_" + names[0], "right_" + names[1]]
+    targets = [out_dir / n for n in names]
+    for t in targets:
+        refuse_overwrite_input(t, [left, right, calib])
+    rect_l, rect_r = stereo.rectify(img_l, img_r)
+    for t, img in zip(targets, (rect_l, rect_r)):
+        write_image(t, img)
+    click.echo(f"wrote {targets[0]} and {targets[1]}")
+
+
+COMMANDS = [calibrate_cmd, stereo_calibrate_cmd, rectify_cmd]
