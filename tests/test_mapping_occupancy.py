@@ -201,3 +201,16 @@ def test_plot_map_writes_an_image(tmp_path):
     with pytest.raises(ValueError, match="fov_views"):
         plot_map(grid, tmp_path / "bad.png", fov_views=[(1.0, 0.0, 0.0)])
     assert not (tmp_path / "bad.png").exists()
+
+
+def test_min_points_per_cell_drops_isolated_hits():
+    grid = OccupancyGrid(config=MappingConfig(min_points_per_cell=3))
+    sensor = centre(60, 20)
+    wall = np.repeat(np.array([[*centre(60, 40), 0.5]]), 3, axis=0)   # three points: supported
+    stray = np.array([[*centre(80, 30), 0.5]])                         # one point: not a hit
+    stats = grid.update(np.vstack([wall, stray]), None, sensor)
+    assert stats.hit_cells == 1
+    assert grid.occupied[60, 40] and not grid.occupied[80, 30]
+    assert grid.unknown[80, 30]
+    with pytest.raises(ValueError, match="min_points_per_cell must be >= 1"):
+        MappingConfig(min_points_per_cell=0)
