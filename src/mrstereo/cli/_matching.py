@@ -1,2 +1,105 @@
-"""CLI commands (filled by the stage that owns them)."""
-COMMANDS: list = []
+"""CLI: ``mrstereo disparity`` (multi-range matching, docs/matching.md)."""
+from __future__ import annotations
+
+import math
+
+import click
+
+__all__ = ["COMMANDS"]
+
+
+def _float_list(text: str, what: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ValueError(f"{what} must be comma-separated numbers, got {text!r}") from None
+    if not values or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{what} must be finite numbers, got {text!r}")
+    return values
+
+
+def _bands(text: str) -> list[tuple[float, float]]:
+    bands = []
+    for item in text.split(","):
+        parts = item.split(":")
+        if len(parts) != 2:
+            raise ValueError(f"--bands must look like 0:24,24:48,48:96, got {text!r}")
+        lo, hi = _float_list(parts[0], "--bands")[0], _float_list(parts[1], "--bands")[0]
+        bands.append((lo, hi))
+    return bands
+
+
+@click.command("disparity")
+@click.argument("left", type=click.Path(dir_okay=False))
+@click.argument("right", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="Disparity output: .pfm (Middlebury, inf invalid) or .png (KITTI uint16 x256).")
+@click.option("--max-disparity", type=float, help="Search 0..N px (split into ranges N/4, N/2, N).")
+@click.option("--bands", help="Disparity bands in full-resolution px, e.g. 0:24,24:48,48:96.")
+@click.option("--calib", type=click.Path(dir_okay=False), help="Stereo calibration YAML.")
+@click.option("--depth-bands", help="Depth band edges in metres, e.g. 0.5,1,2.5,15 (needs --calib).")
+@click.option("--rectified", is_flag=True, help="With --calib: the images are already rectified.")
+@click.option("--preset", type=click.Choice(["robust", "paper"]), default="robust", show_default=True)
+@click.option("--single-range", is_flag=True, help="One full-resolution search instead of three ranges.")
+@click.option("--aoi", help="Area of interest row0:row1,col0:col1 (half-open).")
+@click.option("--explain", is_flag=True, help="Print the multi-range plan (levels, bands, work).")
+@click.option("--color", "color_path", type=click.Path(dir_okay=False), help="Colour preview PNG.")
+def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rectified, preset,
+              single_range, aoi, explain, color_path):
+    """Multi-range disparity of a stereo pair (paper section 3)."""
+    from .. import io
+    from ..matching import compute_disparity, preset_config
+
+    if max_disparity is not None and not (math.isfinite(max_disparity) and max_disparity > 0):
+        raise ValueError(f"--max-disparity must be a finite number > 0, got {max_disparity}")
+    if bands is not None and max_disparity is not None:
+        raise ValueError("give --max-disparity or --bands, not both")
+    if calib is None and max_disparity is None and bands is None:
+        raise ValueError("give --max-disparity N, --bands, or --calib stereo.yaml")
+    if depth_bands is not None and calib is None:
+        raise ValueError("--depth-bands needs --calib")
+    if depth_bands is not None and (max_disparity is not None or bands is not None):
+        raise ValueError("give --depth-bands or a disparity search, not both")
+    if not output.lower().endswith((".pfm", ".png")):
+        raise ValueError(f"output must end in .pfm or .png, got {output}")
+    inputs = [left, right] + ([calib] if calib else [])
+    io.refuse_overwrite_input(output, inputs)
+    if color_path:
+        io.refuse_overwrite_input(color_path, inputs)
+    aoi_box = None
+    if aoi is not None:
+        try:
+            rows, cols = aoi.split(",")
+            aoi_box = tuple(int(v) for v in rows.split(":") + cols.split(":"))
+        except ValueError:
+            raise ValueError(f"--aoi must look like row0:row1,col0:col1, got {aoi!r}") from None
+    band_list = _bands(bands) if bands is not None else None
+    depth_list = _float_list(depth_bands, "--depth-bands") if depth_bands is not None else None
+
+    left_img = io.read_image(left)
+    right_img = io.read_image(right)
+    if left_img.shape[:2] != right_img.shape[:2]:
+        raise ValueError(f"left and right images differ in size: {left_img.shape[1]}x{left_img.shape[0]} "
+                         f"and {right_img.shape[1]}x{right_img.shape[0]}")
+    stereo = None
+    if calib is not None:
+        from ..camera import read_stereo
+        stereo = read_stereo(calib)
+        if not rectified and not stereo.is_rectified:
+            left_img, right_img = stereo.rectify(left_img, right_img)
+    config = preset_config(preset)
+    if single_range:
+        config = config.replace(multi_range=False)
+    result = compute_disparity(left_img, right_img, max_disparity_px=max_disparity, disparity_bands_px=band_list,
+                               calibration=stereo, depth_bands_m=depth_list, config=config, aoi=aoi_box)
+    if explain:
+        click.echo(result.plan.describe())
+    io.write_disparity(output, result.disparity_px)
+    if color_path:
+        top = max(level.band_px[1] for level in result.plan.levels)
+        io.write_image(color_path, io.colorize_disparity(result.disparity_px, max_disparity_px=top))
+    valid = float((result.disparity_px == result.disparity_px).mean())
+    click.echo(f"wrote {output}: {valid:.0%} of pixels with a disparity", err=True)
+
+
+COMMANDS = [disparity]

@@ -1,0 +1,141 @@
+"""Speed and accuracy of mrstereo's multi-range matcher vs OpenCV, measured in the same process.
+
+Speed (default): 640x480 (Middlebury 2003 Teddy scaled up, or synthetic texture if the data
+is absent), rig fx = 451 px, baseline 0.075 m, depths 0.5-15 m -> disparities 2.3-67.7 px;
+a single-range StereoBM must search 80 disparities (multiple of 16). StereoBM and each
+mrstereo variant run alternately; prints per variant the median time and the median of the
+per-pair ratios mrstereo / StereoBM (robust to the load of a shared machine), with 1 and 2
+threads (numba.set_num_threads, cv2.setNumThreads).
+
+Accuracy (``--accuracy``): bad-2 (%) dense (missing counts as bad) / among estimated pixels
+on the shared Middlebury/KITTI scenes for StereoBM, StereoSGBM (mrstereo.evaluation
+baselines), mrstereo robust (default), paper, robust single range over the whole search,
+and robust single range with the same work as the multi-range plan.
+
+    python benchmarks/bench_matching.py [--repeats 15]
+    python benchmarks/bench_matching.py --accuracy
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+import cv2
+import numba
+import numpy as np
+
+from mrstereo.camera import Camera, StereoCamera
+from mrstereo.matching import compute_disparity, preset_config
+
+DATA_ROOT = Path(__file__).resolve().parents[2] / "shared" / "data"
+DATA = DATA_ROOT / "middlebury2003" / "teddy"
+SCENES = ["middlebury2001/tsukuba", "middlebury2001/venus", "middlebury2003/teddy", "middlebury2003/cones",
+          "kitti2012/000070", "kitti2015/000000"]
+
+
+def load_pair() -> tuple[np.ndarray, np.ndarray, str]:
+    if (DATA / "im2.ppm").is_file():
+        left = cv2.imread(str(DATA / "im2.ppm"), cv2.IMREAD_GRAYSCALE)
+        right = cv2.imread(str(DATA / "im6.ppm"), cv2.IMREAD_GRAYSCALE)
+        return (cv2.resize(left, (640, 480), interpolation=cv2.INTER_LINEAR),
+                cv2.resize(right, (640, 480), interpolation=cv2.INTER_LINEAR), "Teddy scaled to 640x480")
+    rng = np.random.default_rng(0)
+    img = cv2.GaussianBlur(rng.uniform(0, 255, (480, 720)).astype(np.float32), (0, 0), 1.2)
+    img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    return img[:, 40:680], img[:, 20:660], "synthetic texture 640x480"
+
+
+def paired(fn, base, repeats: int) -> tuple[float, float, float]:
+    """Median time of ``fn``, of ``base``, and median of the per-pair ratios (ms, ms, x)."""
+    fn()
+    base()
+    t_fn, t_base, ratios = [], [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        base()
+        t1 = time.perf_counter()
+        fn()
+        t2 = time.perf_counter()
+        t_base.append(t1 - t0)
+        t_fn.append(t2 - t1)
+        ratios.append((t2 - t1) / (t1 - t0))
+    return 1000 * float(np.median(t_fn)), 1000 * float(np.median(t_base)), float(np.median(ratios))
+
+
+def speed(repeats: int) -> None:
+    left, right, what = load_pair()
+    rig = StereoCamera.ideal(Camera(fx=451.0, fy=451.0, cx=320.0, cy=240.0, width=640, height=480), 0.075)
+    bm = cv2.StereoBM.create(numDisparities=80, blockSize=9)
+    robust = preset_config("robust")
+    runs = {
+        "mrstereo robust multi-range": lambda: compute_disparity(left, right, calibration=rig, config=robust),
+        "mrstereo paper multi-range": lambda: compute_disparity(left, right, calibration=rig, preset="paper"),
+        "mrstereo robust single-range": lambda: compute_disparity(
+            left, right, calibration=rig, config=robust.replace(multi_range=False)),
+    }
+    plan = compute_disparity(left, right, calibration=rig).plan
+    print(f"pair: {what}\n{plan.describe()}\nload average: {os.getloadavg()}\n")
+    for threads in (1, 2):
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        cv2.setNumThreads(threads)
+        for name, fn in runs.items():
+            ms, base_ms, ratio = paired(fn, lambda: bm.compute(left, right), repeats)
+            print(f"threads={threads}  {name:30s} median {ms:6.1f} ms  StereoBM 80 disp 9x9 {base_ms:5.1f} ms"
+                  f"  ratio {ratio:4.2f}")
+        print()
+    print(f"load average after: {os.getloadavg()}")
+
+
+def accuracy() -> None:
+    from mrstereo.evaluation import disparity_metrics, load_scene, stereo_bm, stereo_sgbm
+
+    robust = preset_config("robust")
+
+    def mr(config=None, preset="robust"):
+        return lambda s: compute_disparity(s.left, s.right, max_disparity_px=s.max_disparity_px, config=config,
+                                           preset=preset).disparity_px
+
+    def equal_work(s):
+        h, w = s.gt_disparity_px.shape
+        work = compute_disparity(s.left[:32], s.right[:32], max_disparity_px=s.max_disparity_px).plan.work / 32
+        d_eq = max(1, int(work / w) - 1)
+        return compute_disparity(s.left, s.right, disparity_bands_px=[(0, d_eq)],
+                                 config=robust.replace(multi_range=False)).disparity_px
+
+    methods = {
+        "OpenCV StereoBM": lambda s: stereo_bm(s.left, s.right, max_disparity_px=s.max_disparity_px),
+        "OpenCV StereoSGBM": lambda s: stereo_sgbm(s.left, s.right, max_disparity_px=s.max_disparity_px),
+        "mrstereo robust (default)": mr(),
+        "mrstereo paper": mr(preset="paper"),
+        "robust, single range": mr(robust.replace(multi_range=False)),
+        "robust, single range, equal work": equal_work,
+    }
+    scenes = [load_scene(DATA_ROOT / name) for name in SCENES if (DATA_ROOT / name).is_dir()]
+    print("bad-2 % dense / among estimated; mean over the first five scenes (KITTI 2015 reported beside)\n")
+    print("| method | mean dense | mean est | " + " | ".join(s.name for s in scenes) + " |")
+    print("|---" * (3 + len(scenes)) + "|")
+    for name, run in methods.items():
+        cells = []
+        for s in scenes:
+            m = disparity_metrics(run(s), s.gt_disparity_px, nonocc_mask=s.nonocc_mask)
+            cells.append((m.dense.bad_2_pct, m.estimated.bad_2_pct))
+        first = np.array(cells[:5])
+        print(f"| {name} | {first[:, 0].mean():.1f} | {first[:, 1].mean():.1f} | "
+              + " | ".join(f"{a:.1f}/{b:.1f}" for a, b in cells) + " |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument("--accuracy", action="store_true", help="bad-2 table on the shared scenes")
+    args = parser.parse_args()
+    if args.accuracy:
+        accuracy()
+    else:
+        speed(args.repeats)
+
+
+if __name__ == "__main__":
+    main()

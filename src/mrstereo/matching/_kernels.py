@@ -1,0 +1,638 @@
+"""Numba kernels of the area matcher: window cost + winner-take-all, and full-resolution refinement.
+
+Private: no validation, no defaults; the caller (:mod:`mrstereo.matching.cost`)
+pads, precomputes and allocates. Conventions: docs/conventions.md.
+
+:func:`match_band` searches one disparity band ``[d_lo, d_hi]`` on one image pair.
+Rows are split into strips, one per thread (``prange``). Inside a strip the rows are
+visited in order; for every disparity ``d`` a row of running column sums
+``sum_j I_L(y + j, c) I_R(y + j, c - d)`` is updated by adding the row entering the
+window and subtracting the row leaving it, and a row of window sums is the sum of
+``W`` shifted column-sum rows. Every inner loop runs along the image row over
+contiguous memory (one disparity at a time), so it vectorizes; the cost of one
+pixel and disparity is O(1) in the window size. The window sums of ``I^2`` (and
+``I``) do not depend on the disparity and arrive as per-pixel terms ``a`` and ``b``:
+
+    NSSD (eq. 9):  c = (a_L + a_R - 2 S_LR) * b_L * b_R,  a = sum I^2, b = 1/sqrt(sum I^2)
+    ZNCC:          c = 1 - (S_LR - a_L a_R) * b_L * b_R,  a = sum I / sqrt(n), b = 1/sigma sqrt(n)
+
+A strip holds the costs of one image row (all disparities of the band), never a cost
+volume. Integer-valued images (the x-Sobel pre-filter) are summed exactly in float32.
+
+:func:`refine_warped` re-scores a coarse disparity field at full resolution: for each
+offset ``o`` in ``[-half, half]`` the window sum ``sum I_L(p) I_R(p - c(p) - o)`` over the
+window's pixels ``p`` (``c`` = the coarse disparity of ``p``) is computed with the same
+running sums; where ``c`` is constant over the window this is exactly ``S_LR(x, c + o)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+# Finite "infinity": costs are finite by construction (b uses max(energy, eps)).
+BIG = np.float32(3.0e38)
+# fast-math without "nnan"/"ninf": the kernels write NaN (invalid) on purpose
+_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+# float32 constants: a Python float would promote float32 expressions to float64
+ONE = np.float32(1.0)
+TWO = np.float32(2.0)
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _box(col, out, t2, t4, t8, t16, m, win):
+    """``out[i] = sum_{j < win} col[i + j]`` for ``i < m`` (``win < 32``), by binary
+    decomposition of ``win`` into sums of 1, 2, 4, 8, 16 neighbours (each one vector pass)."""
+    length = m + win - 1
+    if win >= 2:
+        for i in range(length - 1):
+            t2[i] = col[i] + col[i + 1]
+    if win >= 4:
+        for i in range(length - 3):
+            t4[i] = t2[i] + t2[i + 2]
+    if win >= 8:
+        for i in range(length - 7):
+            t8[i] = t4[i] + t4[i + 4]
+    if win >= 16:
+        for i in range(length - 15):
+            t16[i] = t8[i] + t8[i + 8]
+    for i in range(m):
+        out[i] = 0
+    off = 0
+    if win & 1:
+        seg = col[off:off + m]
+        for i in range(m):
+            out[i] += seg[i]
+        off += 1
+    if win & 2:
+        seg = t2[off:off + m]
+        for i in range(m):
+            out[i] += seg[i]
+        off += 2
+    if win & 4:
+        seg = t4[off:off + m]
+        for i in range(m):
+            out[i] += seg[i]
+        off += 4
+    if win & 8:
+        seg = t8[off:off + m]
+        for i in range(m):
+            out[i] += seg[i]
+        off += 8
+    if win & 16:
+        seg = t16[off:off + m]
+        for i in range(m):
+            out[i] += seg[i]
+
+
+@njit(cache=True, fastmath=_FASTMATH)
+def window_terms(padded, radius, zncc, out_a, out_b):
+    """Per-pixel terms ``a``, ``b`` (module docstring) of the ``W x W`` windows of an image
+    padded by ``radius``: running column sums of ``I`` and ``I^2`` down each strip plus
+    :func:`_box` along the row."""
+    height, width = out_a.shape
+    wp = width + 2 * radius
+    win = 2 * radius + 1
+    n = np.float32(win * win)
+    inv_sqrt_n = np.float32(1.0 / np.sqrt(win * win))
+    for _ in range(1):
+        y_start = 0
+        y_end = height
+        col1 = np.zeros(wp, padded.dtype)
+        col2 = np.zeros(wp, padded.dtype)
+        box1 = np.empty(width, padded.dtype)
+        box2 = np.empty(width, padded.dtype)
+        t2 = np.empty(wp, padded.dtype)
+        t4 = np.empty(wp, padded.dtype)
+        t8 = np.empty(wp, padded.dtype)
+        t16 = np.empty(wp, padded.dtype)
+        for yy in range(y_start, y_start + 2 * radius):
+            row = padded[yy]
+            for c in range(wp):
+                col1[c] += row[c]
+                col2[c] += row[c] * row[c]
+        for y in range(y_start, y_end):
+            add = padded[y + 2 * radius]
+            if y > y_start:
+                sub = padded[y - 1]
+                for c in range(wp):
+                    col1[c] += add[c] - sub[c]
+                    col2[c] += add[c] * add[c] - sub[c] * sub[c]
+            else:
+                for c in range(wp):
+                    col1[c] += add[c]
+                    col2[c] += add[c] * add[c]
+            _box(col2, box2, t2, t4, t8, t16, width, win)
+            oa = out_a[y]
+            ob = out_b[y]
+            if zncc:
+                _box(col1, box1, t2, t4, t8, t16, width, win)
+                for x in range(width):
+                    var_n = max(np.float32(box2[x] - box1[x] * box1[x] / n), np.float32(1e-6))
+                    oa[x] = box1[x] * inv_sqrt_n
+                    ob[x] = np.float32(1.0) / np.sqrt(np.float32(var_n))
+            else:
+                for x in range(width):
+                    oa[x] = box2[x]
+                    ob[x] = np.float32(1.0) / np.sqrt(max(np.float32(box2[x]), np.float32(1e-6)))
+
+
+@njit(cache=True, fastmath=_FASTMATH)
+def xsobel_padded(gray, radius, cap, out_pad):
+    """OpenCV StereoBM's pre-filter, ``clip(rint(Sobel_x(gray) / 4), -cap, cap)`` (3x3,
+    replicated border), written into ``out_pad`` padded by ``radius`` (replicated)."""
+    height, width = gray.shape
+    for y in range(height):
+        up = gray[max(y - 1, 0)]
+        mid = gray[y]
+        down = gray[min(y + 1, height - 1)]
+        row = out_pad[y + radius]
+        if width >= 3:
+            m = width - 2
+            u0 = up[:m]
+            u2 = up[2:]
+            m0 = mid[:m]
+            m2 = mid[2:]
+            d0 = down[:m]
+            d2 = down[2:]
+            dst = row[radius + 1:radius + 1 + m]
+            for i in range(m):
+                v = np.float32(0.25) * ((u2[i] - u0[i]) + np.float32(2.0) * (m2[i] - m0[i]) + (d2[i] - d0[i]))
+                dst[i] = min(max(np.rint(v), -cap), cap)
+        for x in (0, width - 1):
+            xm = max(x - 1, 0)
+            xp = min(x + 1, width - 1)
+            v = np.float32(0.25) * ((up[xp] - up[xm]) + np.float32(2.0) * (mid[xp] - mid[xm]) + (down[xp] - down[xm]))
+            row[radius + x] = min(max(np.rint(v), -cap), cap)
+        for x in range(radius):
+            row[x] = row[radius]
+            row[width + radius + x] = row[width + radius - 1]
+    for y in range(radius):
+        out_pad[y] = out_pad[radius]
+        out_pad[height + radius + y] = out_pad[height + radius - 1]
+
+
+@njit(parallel=True, cache=True, fastmath=_FASTMATH)
+def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_lo, d_hi,
+               zncc, row0, row1, col0, col1, n_strips, want_right, raw, lr_tol, ratio, max_cost, use_sub,
+               out_disp, out_sub, out_c1, out_c2, out_right, out_disparity, out_confidence):
+    """Winner-take-all over ``d in [d_lo, d_hi]`` (eq. 10) for rows/cols of the AOI.
+
+    Parameters
+    ----------
+    left_pad, right_pad : ndarray (H + 2r, W + 2r)
+        Images padded by ``radius`` on every side (replicated border); their dtype is
+        the accumulator's (float32 when exact, else float64).
+    a_left, b_left, a_right, b_right : ndarray (H, W)
+        Per-pixel window terms (module docstring); ``a`` in the accumulator's dtype.
+    zncc : bool
+        Cost formula: False NSSD (eq. 9), True ZNCC.
+    raw : bool
+        True: write the raw outputs ``out_disp`` .. ``out_right`` (rows ``row0:row1``, cols
+        ``col0:col1``). False: write only ``out_disparity`` / ``out_confidence`` after the
+        checks below (rows ``row0:row1``, all columns).
+    lr_tol, ratio, max_cost, use_sub
+        Checks of the non-raw mode: left-right tolerance (< 0 off; needs ``want_right``),
+        uniqueness ``c1 <= (1 - ratio) c2`` (0 off), ``c1 <= max_cost`` (< 0 off), and
+        whether the parabola offset is added.
+    out_disp : ndarray int32 (H, W)
+        Integer winner ``d`` (eq. 10), -1 where no candidate exists (``x < d_lo``).
+    out_sub : ndarray float32 (H, W)
+        Parabola vertex offset in [-0.5, 0.5] around the winner (0 at band edges).
+    out_c1, out_c2 : ndarray float32 (H, W)
+        Best cost and best cost outside ``winner +- 1`` (uniqueness), BIG if none.
+    out_right : ndarray int32 (H, W)
+        Winner of the right image (min over d of c(x_r + d, d)), written when ``want_right``.
+    out_disparity, out_confidence : ndarray float32 (H, W)
+        Checked ``d + sub`` (NaN rejected) and ``clip(1 - c1 / c2, 0, 1)`` (0 rejected,
+        1 without a second candidate).
+    """
+    nd = d_hi - d_lo + 1
+    width = a_left.shape[1]
+    n_rows = row1 - row0
+    win = 2 * radius + 1
+    c_end = col1 + 2 * radius
+    wp = width + 2 * radius
+    nx = col1 - col0
+    keep = np.float32(1.0 - ratio)
+    max_c = np.float32(max_cost)
+    lr_int = int(np.floor(lr_tol)) if lr_tol >= 0 else -1
+    for s in prange(n_strips):
+        y_start = row0 + (s * n_rows) // n_strips
+        y_end = row0 + ((s + 1) * n_rows) // n_strips
+        if y_start >= y_end:
+            continue
+        colsum = np.zeros((nd, wp), left_pad.dtype)
+        box = np.empty(width, left_pad.dtype)
+        t2 = np.empty(wp, left_pad.dtype)
+        t4 = np.empty(wp, left_pad.dtype)
+        t8 = np.empty(wp, left_pad.dtype)
+        t16 = np.empty(wp, left_pad.dtype)
+        cost = np.empty((nd, width), np.float32)
+        bc = np.empty(nx, np.float32)
+        bk = np.empty(nx, np.int32)
+        sc = np.empty(nx, np.float32)
+        cm_ = np.empty(nx, np.float32)
+        cp_ = np.empty(nx, np.float32)
+        sub_ = np.empty(nx, np.float32)
+        right_c = np.empty(width, np.float32)
+        right_d = np.empty(width, np.int32)
+        # the window of image row y covers padded rows y .. y + 2r. Loops run over
+        # 0-based ranges of slices: the indices are provably >= 0 and the loops vectorize.
+        for k in range(nd):
+            d = d_lo + k
+            x0 = max(col0, d)
+            n = c_end - x0
+            col = colsum[k, x0:c_end]
+            for yy in range(y_start, y_start + 2 * radius):
+                lrow = left_pad[yy, x0:c_end]
+                rrow = right_pad[yy, x0 - d:c_end - d]
+                for i in range(n):
+                    col[i] += lrow[i] * rrow[i]
+        for y in range(y_start, y_end):
+            sub_on = y > y_start
+            ys = y - 1 if sub_on else y + 2 * radius
+            for k in range(nd):
+                d = d_lo + k
+                x0 = max(col0, d)
+                n = c_end - x0
+                col = colsum[k, x0:c_end]
+                la = left_pad[y + 2 * radius, x0:c_end]
+                ra = right_pad[y + 2 * radius, x0 - d:c_end - d]
+                if sub_on:
+                    ls = left_pad[ys, x0:c_end]
+                    rs = right_pad[ys, x0 - d:c_end - d]
+                    for i in range(n):
+                        col[i] += la[i] * ra[i] - ls[i] * rs[i]
+                else:
+                    for i in range(n):
+                        col[i] += la[i] * ra[i]
+                crow = cost[k, col0:col1]
+                for i in range(min(x0, col1) - col0):
+                    crow[i] = BIG
+                m = col1 - x0
+                if m <= 0:
+                    continue
+                _box(col, box, t2, t4, t8, t16, m, win)
+                al = a_left[y, x0:col1]
+                bl = b_left[y, x0:col1]
+                ar = a_right[y, x0 - d:col1 - d]
+                br = b_right[y, x0 - d:col1 - d]
+                cr = cost[k, x0:col1]
+                if zncc:
+                    for i in range(m):
+                        cr[i] = ONE - np.float32(box[i] - al[i] * ar[i]) * bl[i] * br[i]
+                else:
+                    for i in range(m):
+                        cr[i] = np.float32(al[i] + ar[i] - TWO * box[i]) * bl[i] * br[i]
+            # winner-take-all (eq. 10), first index on ties; the costs next to the
+            # winner (parabola) are tracked on the way: cm when the best changes, cp one
+            # disparity later
+            for i in range(nx):
+                bc[i] = BIG
+                bk[i] = -1
+                sc[i] = BIG
+                cm_[i] = BIG
+                cp_[i] = BIG
+            for k in range(nd):
+                crow = cost[k, col0:col1]
+                prow = cost[max(k - 1, 0), col0:col1]
+                for i in range(nx):
+                    c = crow[i]
+                    cp_[i] = c if bk[i] == k - 1 else cp_[i]
+                    better = c < bc[i]
+                    cm_[i] = (prow[i] if k > 0 else BIG) if better else cm_[i]
+                    cp_[i] = BIG if better else cp_[i]
+                    bk[i] = k if better else bk[i]
+                    bc[i] = c if better else bc[i]
+            # second best at least 2 disparities away (uniqueness)
+            for k in range(nd):
+                crow = cost[k, col0:col1]
+                for i in range(nx):
+                    dk = k - bk[i]
+                    c = crow[i] if (dk > 1 or dk < -1) else BIG
+                    sc[i] = min(sc[i], c)
+            if want_right:
+                for x in range(width):
+                    right_c[x] = BIG
+                    right_d[x] = -1
+                for k in range(nd):
+                    d = d_lo + k
+                    x0 = max(col0, d)
+                    m = col1 - x0
+                    if m <= 0:
+                        continue
+                    crow = cost[k, x0:col1]
+                    rc = right_c[x0 - d:col1 - d]
+                    rd = right_d[x0 - d:col1 - d]
+                    for i in range(m):
+                        c = crow[i]
+                        better = c < rc[i]
+                        rd[i] = d if better else rd[i]
+                        rc[i] = c if better else rc[i]
+            # parabola through (d - 1, d, d + 1), clipped to +-0.5; 0 at band edges
+            for i in range(nx):
+                cb = bc[i]
+                cm = cm_[i]
+                cp = cp_[i]
+                den = cm - TWO * cb + cp
+                fine = (cm < BIG) and (cp < BIG) and (den > 0)
+                sub = np.float32(0.5) * (cm - cp) / (den if fine else np.float32(1.0))
+                sub_[i] = min(max(sub, np.float32(-0.5)), np.float32(0.5)) if fine else np.float32(0.0)
+            if raw:
+                for i in range(nx):
+                    x = col0 + i
+                    kb = bk[i]
+                    out_disp[y, x] = d_lo + kb if kb >= 0 else -1
+                    out_sub[y, x] = sub_[i]
+                    out_c1[y, x] = bc[i]
+                    out_c2[y, x] = sc[i]
+            else:
+                od = out_disparity[y]
+                oc = out_confidence[y]
+                for x in range(col0):
+                    od[x] = np.nan
+                    oc[x] = 0.0
+                for x in range(col1, width):
+                    od[x] = np.nan
+                    oc[x] = 0.0
+                od = out_disparity[y, col0:col1]
+                oc = out_confidence[y, col0:col1]
+                for i in range(nx):
+                    kb = bk[i]
+                    cb = bc[i]
+                    second = sc[i]
+                    d = d_lo + kb
+                    ok = kb >= 0
+                    if want_right:
+                        xr = min(max(col0 + i - d, 0), width - 1)
+                        back = right_d[xr]
+                        ok = ok and (lr_tol < 0 or (back >= 0 and abs(d - back) <= lr_int))
+                    ok = ok and (ratio <= 0 or cb <= keep * second)
+                    ok = ok and (max_cost < 0 or cb <= max_c)
+                    value = np.float32(d) + (sub_[i] if use_sub else np.float32(0.0))
+                    conf = np.float32(1.0) - cb / (second if second > 0 else np.float32(1.0))
+                    conf = min(max(conf, np.float32(0.0)), np.float32(1.0))
+                    conf = np.float32(1.0) if second >= BIG else conf
+                    conf = np.float32(0.0) if second <= 0 else conf
+                    od[i] = value if ok else np.float32(np.nan)
+                    oc[i] = conf if ok else np.float32(0.0)
+            if raw and want_right:
+                for x in range(width):
+                    out_right[y, x] = right_d[x]
+
+
+@njit(cache=True)
+def fill_center(disparity_px, radius, out_center_pad):
+    """Integer coarse field for :func:`refine_warped`: ``round(d)``, NaNs filled with the
+    nearest valid value to the left in the row (else to the right, else 0), padded by
+    ``radius`` with replicated borders."""
+    height, width = disparity_px.shape
+    for y in range(height):
+        first = -1
+        for x in range(width):
+            if np.isfinite(disparity_px[y, x]):
+                first = x
+                break
+        last = 0 if first < 0 else np.int32(np.rint(disparity_px[y, first]))
+        row = out_center_pad[y + radius]
+        for x in range(width):
+            v = disparity_px[y, x]
+            if np.isfinite(v):
+                last = np.int32(np.rint(v))
+            row[x + radius] = last
+        for x in range(radius):
+            row[x] = row[radius]
+            row[width + radius + x] = row[width + radius - 1]
+    for y in range(radius):
+        out_center_pad[y] = out_center_pad[radius]
+        out_center_pad[height + radius + y] = out_center_pad[height + radius - 1]
+
+
+@njit(parallel=True, cache=True, fastmath=_FASTMATH)
+def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, center_pad, want, half,
+                  zncc, row0, row1, n_strips, out_disp, out_cost):
+    """Full-resolution re-scoring of a coarse disparity field over ``c + o``, ``|o| <= half``.
+
+    Parameters
+    ----------
+    left_pad, right_pad : ndarray float32 (H + 2r, W + 2r)
+        Pre-filtered full-resolution images padded by ``radius`` (replicated border).
+    a_left, b_left, a_right, b_right : ndarray float32 (H, W)
+        Per-pixel window terms (module docstring).
+    center_pad : ndarray int32 (H + 2r, W + 2r)
+        Coarse integer disparity ``c`` of every padded pixel (see :func:`fill_center`).
+    want : ndarray bool (H, W)
+        Pixels to refine; the others are left untouched.
+    out_disp : ndarray float32 (H, W)
+        ``c + o* +`` parabola offset; NaN where ``o*`` is on the edge of ``[-half, half]``
+        (the true minimum may lie outside).
+    out_cost : ndarray float32 (H, W)
+        Cost of the winner (BIG where NaN).
+
+    Each strip only touches the columns spanned by its wanted pixels; the products
+    ``I_L(p) I_R(p - c(p) - o)`` of the rows inside the window are kept in a ring buffer,
+    so each is gathered once.
+    """
+    width = a_left.shape[1]
+    nc = 2 * half + 1
+    win = 2 * radius + 1
+    n_rows = row1 - row0
+    for s in prange(n_strips):
+        y_start = row0 + (s * n_rows) // n_strips
+        y_end = row0 + ((s + 1) * n_rows) // n_strips
+        xa = width
+        xb = 0
+        for y in range(y_start, y_end):
+            wy = want[y]
+            for x in range(width):
+                if wy[x]:
+                    xa = min(xa, x)
+                    xb = max(xb, x + 1)
+        if y_start >= y_end or xb <= xa:
+            continue
+        nx = xb - xa                    # pixels xa .. xb - 1
+        ncol = nx + 2 * radius          # padded columns xa .. xb - 1 + 2r
+        wp = right_pad.shape[1]
+        colsum = np.zeros((nc, ncol), np.float32)
+        ring = np.zeros((nc, win, ncol), np.float32)
+        fresh = np.empty(ncol, np.float32)
+        box = np.empty(nx, np.float32)
+        t2 = np.empty(ncol, np.float32)
+        t4 = np.empty(ncol, np.float32)
+        t8 = np.empty(ncol, np.float32)
+        t16 = np.empty(ncol, np.float32)
+        cost = np.empty((nc, nx), np.float32)
+        bc = np.empty(nx, np.float32)
+        bk = np.empty(nx, np.int32)
+        cm_ = np.empty(nx, np.float32)
+        cp_ = np.empty(nx, np.float32)
+        for yy in range(y_start, y_end + 2 * radius):
+            slot = (yy - y_start) % win
+            lrow = left_pad[yy, xa:xa + ncol]
+            rrow = right_pad[yy]
+            crow = center_pad[yy, xa:xa + ncol]
+            for o in range(nc):
+                off = o - half
+                col = colsum[o]
+                old = ring[o, slot]
+                for i in range(ncol):
+                    q = min(max(xa + i - crow[i] - off, 0), wp - 1)
+                    fresh[i] = lrow[i] * rrow[q]
+                for i in range(ncol):
+                    col[i] += fresh[i] - old[i]
+                    old[i] = fresh[i]
+            y = yy - 2 * radius
+            if y < y_start:
+                continue
+            # window sums of row y are complete: costs for every offset
+            cy = center_pad[y + radius, radius + xa:radius + xb]
+            al = a_left[y, xa:xb]
+            bl = b_left[y, xa:xb]
+            ar = a_right[y]
+            br = b_right[y]
+            for o in range(nc):
+                off = o - half
+                _box(colsum[o], box, t2, t4, t8, t16, nx, win)
+                crow = cost[o]
+                for i in range(nx):
+                    d = cy[i] + off
+                    xr = xa + i - d
+                    xq = min(max(xr, 0), width - 1)
+                    if zncc:
+                        c = ONE - (box[i] - al[i] * ar[xq]) * bl[i] * br[xq]
+                    else:
+                        c = (al[i] + ar[xq] - TWO * box[i]) * bl[i] * br[xq]
+                    crow[i] = c if (xr >= 0 and d >= 0) else BIG
+            # winner over the offsets and its neighbours (as in match_band)
+            for i in range(nx):
+                bc[i] = BIG
+                bk[i] = -1
+                cm_[i] = BIG
+                cp_[i] = BIG
+            for o in range(nc):
+                crow = cost[o]
+                prow = cost[max(o - 1, 0)]
+                for i in range(nx):
+                    c = crow[i]
+                    cp_[i] = c if bk[i] == o - 1 else cp_[i]
+                    better = c < bc[i]
+                    cm_[i] = (prow[i] if o > 0 else BIG) if better else cm_[i]
+                    cp_[i] = BIG if better else cp_[i]
+                    bk[i] = o if better else bk[i]
+                    bc[i] = c if better else bc[i]
+            od = out_disp[y, xa:xb]
+            oc = out_cost[y, xa:xb]
+            wy = want[y, xa:xb]
+            for i in range(nx):
+                kb = bk[i]
+                cb = bc[i]
+                cm = cm_[i]
+                cp = cp_[i]
+                den = cm - TWO * cb + cp
+                fine = (cm < BIG) and (cp < BIG) and (den > 0)
+                sub = np.float32(0.5) * (cm - cp) / (den if fine else np.float32(1.0))
+                sub = min(max(sub, np.float32(-0.5)), np.float32(0.5)) if fine else np.float32(0.0)
+                inside = (kb > 0) and (kb < nc - 1) and (cb < BIG)
+                value = np.float32(cy[i] + kb - half) + sub
+                od[i] = (value if inside else np.float32(np.nan)) if wy[i] else od[i]
+                oc[i] = (cb if inside else BIG) if wy[i] else oc[i]
+
+
+@njit(cache=True, fastmath=_FASTMATH)
+def upsample_gate(level_d, level_c, source_cols, scale, lo, hi, top, row0, row1, col0, col1, out_d, out_c):
+    """Step 2 + eq. (11): nearest-neighbour up-sampling along x (full-resolution column
+    ``x`` reads level column ``source_cols[x]``), disparity times ``scale``, kept where inside
+    ``[lo, hi]`` and the AOI rows/cols (level rows start at full-resolution row ``top``)."""
+    height, width = out_d.shape
+    nan = np.float32(np.nan)
+    zero = np.float32(0.0)
+    for y in range(height):
+        od = out_d[y]
+        oc = out_c[y]
+        if y < row0 or y >= row1:
+            for x in range(width):
+                od[x] = nan
+                oc[x] = zero
+            continue
+        ld = level_d[y - top]
+        lc = level_c[y - top]
+        for x in range(width):
+            sx = source_cols[x]
+            d = ld[sx] * scale
+            ok = (d >= lo) and (d <= hi) and (x >= col0) and (x < col1)
+            od[x] = d if ok else nan
+            oc[x] = lc[sx] if ok else zero
+
+
+@njit(cache=True)
+def encode_fixed(disparity, scale, offset, lo_code, hi_code, invalid_code, out):
+    """``round(d * scale) + offset`` clipped to ``[lo_code, hi_code]``, ``invalid_code`` where NaN."""
+    height, width = disparity.shape
+    for y in range(height):
+        for x in range(width):
+            d = disparity[y, x]
+            if np.isfinite(d):
+                out[y, x] = min(max(np.int64(np.rint(d * scale)) + offset, lo_code), hi_code)
+            else:
+                out[y, x] = invalid_code
+
+
+@njit(cache=True)
+def decode_median(coded, disparity, scale, out):
+    """Inverse of the median's code (0 = invalid): NaN where the input was invalid or
+    the median is invalid, else ``(code - 1) / scale``."""
+    height, width = coded.shape
+    for y in range(height):
+        for x in range(width):
+            c = coded[y, x]
+            if c == 0 or not np.isfinite(disparity[y, x]):
+                out[y, x] = np.nan
+            else:
+                out[y, x] = (c - 1) / scale
+
+
+@njit(cache=True)
+def mask_invalid(disparity, coded, invalid_code, out):
+    """``out = disparity`` with NaN where ``coded == invalid_code``."""
+    height, width = disparity.shape
+    for y in range(height):
+        for x in range(width):
+            out[y, x] = np.nan if coded[y, x] == invalid_code else disparity[y, x]
+
+
+@njit(cache=True)
+def gate(disparity, confidence, lo, hi):
+    """Eq. (11) in place: NaN / 0 outside ``[lo, hi]``."""
+    height, width = disparity.shape
+    for y in range(height):
+        for x in range(width):
+            d = disparity[y, x]
+            if not (d >= lo and d <= hi):
+                disparity[y, x] = np.nan
+                confidence[y, x] = 0.0
+
+
+@njit(cache=True)
+def unite(disparity, confidence, rule, index, out_d, out_c, out_source, poisoned):
+    """Eq. (12), one level at a time (finest first): rule 0 = the more confident value
+    wins, 1 = the first (finer) value wins, 2 = as 1 but pixels where two levels differ
+    by more than 1 px are marked in ``poisoned``. ``out_source`` gets ``index`` where
+    this level's value is taken."""
+    height, width = disparity.shape
+    for y in range(height):
+        for x in range(width):
+            d = disparity[y, x]
+            if not np.isfinite(d):
+                continue
+            cur = out_d[y, x]
+            have = np.isfinite(cur)
+            if rule == 0:
+                take = (not have) or confidence[y, x] > out_c[y, x]
+            else:
+                take = not have
+                if rule == 2 and have and abs(d - cur) > 1.0:
+                    poisoned[y, x] = True
+            if take:
+                out_d[y, x] = d
+                out_c[y, x] = confidence[y, x]
+                out_source[y, x] = index

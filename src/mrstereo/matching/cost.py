@@ -1,0 +1,303 @@
+"""Area correlation on one image pair and one disparity band (paper section 3.3).
+
+The per-level solver of the multi-range matcher: image pre-filters, the NSSD
+cost of eq. (9) (or ZNCC), and winner-take-all, eq. (10). Conventions:
+docs/conventions.md (disparity ``d = x_left - x_right >= 0``).
+
+Sign convention. The paper writes eq. (9) as
+
+    SSD(x, y, d) = sum_ij [I_L(x+i, y+j) - I_R(x+i+d, y+j)]^2
+                   / sqrt(sum_ij I_L(x+i, y+j)^2 * sum_ij I_R(x+i+d, y+j)^2)
+
+with the right pixel at ``x + d``. mrstereo uses ``x_right = x_left - d`` with
+``d >= 0`` (a point in front of the rig appears further left in the right image), so
+the paper's ``d`` is our ``-d``: we evaluate ``I_R(x + i - d, y + j)``. The paper's
+search ``min d <= d <= max d`` over negative values is our search over ``[d_lo, d_hi]``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from . import _kernels
+
+__all__ = ["BandMatch", "PreparedImage", "prefilter", "prepare", "match_band", "match_prepared",
+           "match_checked", "prepare_gray", "refine_candidates", "PREFILTERS", "COSTS"]
+
+PREFILTERS = ("none", "xsobel", "mean")
+COSTS = ("nssd", "zncc")
+
+
+@dataclass(frozen=True)
+class BandMatch:
+    """Raw winner-take-all result of one band search (integer + sub-pixel parts).
+
+    Attributes
+    ----------
+    disparity_int : ndarray int32 (H, W)
+        Winner of eq. (10) in pixels of the searched images; -1 where not searched.
+    subpixel_px : ndarray float32 (H, W)
+        Offset in [-0.5, 0.5] of the parabola through the costs at ``d - 1, d, d + 1``.
+    best_cost, second_cost : ndarray float32 (H, W)
+        Cost of the winner and the lowest cost at least 2 px away from it (inf if none).
+    right_disparity_int : ndarray int32 (H, W) or None
+        Winner for each right-image pixel (for the left-right check), -1 if none.
+    d_lo, d_hi : int
+        The band searched.
+    """
+
+    disparity_int: np.ndarray
+    subpixel_px: np.ndarray
+    best_cost: np.ndarray
+    second_cost: np.ndarray
+    right_disparity_int: np.ndarray | None
+    d_lo: int
+    d_hi: int
+
+
+def prefilter(image: np.ndarray, kind: str, *, cap: int = 31, size: int = 9) -> np.ndarray:
+    """Pre-filter a gray image before the cost.
+
+    Parameters
+    ----------
+    image : ndarray float32 (H, W)
+        Gray image.
+    kind : {"none", "xsobel", "mean"}
+        ``"xsobel"``: horizontal 3x3 Sobel derivative clipped to ``[-cap, cap]`` (OpenCV
+        StereoBM's default pre-filter); ``"mean"``: the image minus its ``size x size``
+        local mean, clipped to ``[-cap, cap]``; ``"none"``: the raw intensities (eq. 9).
+        Both filters remove the gain/offset differences of the two cameras.
+    cap : int
+        Clipping bound (grey levels).
+    size : int
+        Window of the local mean (``"mean"`` only).
+
+    Returns
+    -------
+    ndarray (H, W)
+        int32 for integer-valued results (the kernel's running sums are then exact), else
+        float64.
+    """
+    if kind == "none":
+        out = image
+    elif kind == "xsobel":
+        out = np.clip(np.rint(cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3,
+                                        borderType=cv2.BORDER_REPLICATE) / 4.0), -cap, cap)
+    elif kind == "mean":
+        mean = cv2.blur(image, (size, size), borderType=cv2.BORDER_REPLICATE)
+        out = np.clip(np.rint(image - mean), -cap, cap)
+    else:
+        raise ValueError(f"prefilter must be one of {PREFILTERS}, got {kind!r}")
+    if np.array_equal(out, np.rint(out)) and np.abs(out).max(initial=0) < 2 ** 12:
+        return out.astype(np.int32)
+    return out.astype(np.float64)
+
+
+def _accumulator_dtype(left: np.ndarray, right: np.ndarray, window: int):
+    """float32 when every running sum is an integer below 2**24 (exact), else float64."""
+    if left.dtype.kind in "iu" and right.dtype.kind in "iu":
+        peak = max(int(np.abs(left).max(initial=0)), int(np.abs(right).max(initial=0)))
+        if window * window * peak * peak * 2 < 2 ** 24:
+            return np.float32
+    return np.float64
+
+
+def _strips(n_strips: int | None, n_rows: int) -> int:
+    if n_strips is None:
+        import numba
+        n_strips = numba.get_num_threads()
+    return max(1, min(int(n_strips), n_rows))
+
+
+@dataclass(frozen=True)
+class PreparedImage:
+    """A pre-filtered image ready for the kernels: padded by the window radius
+    (replicated border) in the accumulator's dtype, with its window terms ``a``, ``b``
+    (see :mod:`._kernels`)."""
+
+    padded: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    window: int
+    zncc: bool
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.a.shape
+
+
+def prepare(image: np.ndarray, *, window: int, cost: str, dtype=np.float32) -> PreparedImage:
+    """Pad a pre-filtered ``image`` and compute its window terms for :func:`match_prepared`."""
+    if cost not in COSTS:
+        raise ValueError(f"cost must be one of {COSTS}, got {cost!r}")
+    r = window // 2
+    padded = cv2.copyMakeBorder(np.ascontiguousarray(image, dtype=dtype), r, r, r, r, cv2.BORDER_REPLICATE)
+    return _with_terms(padded, window, cost == "zncc")
+
+
+def prepare_gray(gray: np.ndarray, *, kind: str, cap: int, window: int, cost: str) -> PreparedImage:
+    """Pre-filter (:func:`prefilter`) a float32 gray image and prepare it, fused for
+    ``"xsobel"`` (its values are integers in ``[-cap, cap]``: float32 sums are exact)."""
+    if kind != "xsobel" or window * window * cap * cap * 2 >= 2 ** 24:
+        filtered = prefilter(gray, kind, cap=cap)
+        return prepare(filtered, window=window, cost=cost, dtype=_accumulator_dtype(filtered, filtered, window))
+    r = window // 2
+    h, w = gray.shape
+    padded = np.empty((h + 2 * r, w + 2 * r), np.float32)
+    _kernels.xsobel_padded(np.ascontiguousarray(gray, dtype=np.float32), r, np.float32(cap), padded)
+    return _with_terms(padded, window, cost == "zncc")
+
+
+def _with_terms(padded: np.ndarray, window: int, zncc: bool) -> PreparedImage:
+    r = window // 2
+    shape = (padded.shape[0] - 2 * r, padded.shape[1] - 2 * r)
+    a = np.empty(shape, padded.dtype)
+    b = np.empty(shape, np.float32)
+    _kernels.window_terms(padded, r, zncc, a, b)
+    return PreparedImage(padded, a, b, window, zncc)
+
+
+def match_prepared(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi: int,
+                   rows: tuple[int, int], cols: tuple[int, int], right_check: bool,
+                   n_strips: int | None = None) -> tuple[np.ndarray, ...]:
+    """Run the band kernel on prepared images; raw outputs (costs BIG, not inf, when absent):
+    ``(disparity_int, subpixel_px, best_cost, second_cost, right_disparity_int)``."""
+    h, w = left.shape
+    disp = np.full((h, w), -1, np.int32)
+    sub = np.zeros((h, w), np.float32)
+    c1 = np.full((h, w), _kernels.BIG, np.float32)
+    c2 = np.full((h, w), _kernels.BIG, np.float32)
+    disp_right = np.full((h, w), -1, np.int32)
+    if rows[1] > rows[0] and cols[1] > cols[0]:
+        _kernels.match_band(left.padded, right.padded, left.a, left.b, right.a, right.b, left.window // 2,
+                            int(d_lo), int(d_hi), left.zncc, rows[0], rows[1], cols[0], cols[1],
+                            _strips(n_strips, rows[1] - rows[0]), bool(right_check), True, -1.0, 0.0, -1.0,
+                            False, disp, sub, c1, c2, disp_right, _DUMMY_F, _DUMMY_F)
+    return disp, sub, c1, c2, disp_right
+
+
+_DUMMY_F = np.zeros((1, 1), np.float32)
+_DUMMY_I = np.zeros((1, 1), np.int32)
+
+
+def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi: int,
+                  rows: tuple[int, int], cols: tuple[int, int], lr_max_diff_px: float | None,
+                  uniqueness_ratio: float, max_cost: float | None, subpixel: bool,
+                  n_strips: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Band search (eq. 10) with the checks fused into the kernel.
+
+    Returns ``(disparity_px, confidence)`` float32 (H, W): winner (+ parabola offset when
+    ``subpixel``) where it passes the left-right check (``|d_L - d_R| <= lr_max_diff_px``),
+    the uniqueness ratio and the maximum cost (each off when None / 0), else NaN; the
+    confidence ``clip(1 - c1 / c2, 0, 1)`` (0 where NaN). Outside ``rows`` NaN.
+    """
+    h, w = left.shape
+    disparity = np.empty((h, w), np.float32)
+    confidence = np.empty((h, w), np.float32)
+    disparity[:rows[0]] = np.nan
+    disparity[rows[1]:] = np.nan
+    confidence[:rows[0]] = 0.0
+    confidence[rows[1]:] = 0.0
+    if rows[1] > rows[0] and cols[1] > cols[0]:
+        _kernels.match_band(left.padded, right.padded, left.a, left.b, right.a, right.b, left.window // 2,
+                            int(d_lo), int(d_hi), left.zncc, rows[0], rows[1], cols[0], cols[1],
+                            _strips(n_strips, rows[1] - rows[0]), lr_max_diff_px is not None, False,
+                            -1.0 if lr_max_diff_px is None else float(lr_max_diff_px), float(uniqueness_ratio),
+                            -1.0 if max_cost is None else float(max_cost), bool(subpixel),
+                            _DUMMY_I, _DUMMY_F, _DUMMY_F, _DUMMY_F, _DUMMY_I, disparity, confidence)
+    else:
+        disparity[rows[0]:rows[1]] = np.nan
+        confidence[rows[0]:rows[1]] = 0.0
+    return disparity, confidence
+
+
+def match_band(left: np.ndarray, right: np.ndarray, *, d_lo: int, d_hi: int, window: int = 9,
+               cost: str = "nssd", rows: tuple[int, int] | None = None,
+               cols: tuple[int, int] | None = None, right_check: bool = False,
+               n_strips: int | None = None) -> BandMatch:
+    """Winner-take-all (eq. 10) of the window cost (eq. 9 or ZNCC) over one band.
+
+    Parameters
+    ----------
+    left, right : ndarray (H, W)
+        Rectified, pre-filtered images of the same size (int32 or float64, see
+        :func:`prefilter`).
+    d_lo, d_hi : int
+        Disparities searched, ``0 <= d_lo <= d_hi``; a pixel ``x`` searches only
+        ``d <= x`` (its match must lie inside the right image).
+    window : int
+        Odd window size ``W = 2 w + 1``.
+    cost : {"nssd", "zncc"}
+        ``"nssd"`` is eq. (9); ``"zncc"`` is ``1 - `` zero-mean normalized
+        cross-correlation, invariant to gain and offset.
+    rows, cols : (int, int), optional
+        Half-open row and column ranges to evaluate (area of interest, section 3.1);
+        the rest of the output is invalid.
+    right_check : bool
+        Also compute the right image's winners (for the left-right check).
+    n_strips : int, optional
+        Row strips run in parallel (default: numba's thread count).
+    """
+    h, w = left.shape
+    rows = (0, h) if rows is None else rows
+    cols = (0, w) if cols is None else cols
+    if cost not in COSTS:
+        raise ValueError(f"cost must be one of {COSTS}, got {cost!r}")
+    dtype = _accumulator_dtype(left, right, window)
+    pl = prepare(left, window=window, cost=cost, dtype=dtype)
+    pr = prepare(right, window=window, cost=cost, dtype=dtype)
+    disp, sub, c1, c2, disp_right = match_prepared(pl, pr, d_lo=d_lo, d_hi=d_hi, rows=rows, cols=cols,
+                                                   right_check=right_check, n_strips=n_strips)
+    c1[c1 >= _kernels.BIG] = np.inf
+    c2[c2 >= _kernels.BIG] = np.inf
+    return BandMatch(disparity_int=disp, subpixel_px=sub, best_cost=c1, second_cost=c2,
+                     right_disparity_int=disp_right if right_check else None, d_lo=int(d_lo),
+                     d_hi=int(d_hi))
+
+
+def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.ndarray, want: np.ndarray, *, half_px: int,
+                      rows: tuple[int, int] | None = None, n_strips: int | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Re-score a coarse disparity field at full resolution (beyond the paper).
+
+    A level of decimation ``k`` knows its winner only to about ``+-k/2`` full-resolution
+    pixels. For each offset ``o`` in ``[-half_px, half_px]`` the full-resolution cost (eq. 9
+    or ZNCC) is evaluated with every window pixel ``p`` shifted by ``round(c(p)) + o``
+    (exactly ``cost(x, c + o)`` where the coarse field ``c`` is constant over the window);
+    the best offset gets the parabola offset. A winner on the edge of the offsets means
+    the true minimum lies outside them: the pixel becomes invalid rather than keeping a guess.
+
+    Parameters
+    ----------
+    left, right : PreparedImage
+        The full-resolution pre-filtered pair (:func:`prepare`).
+    coarse_px : ndarray float32 (H, W)
+        Coarse disparity in full-resolution pixels; NaNs take the nearest valid value of
+        their row (windows at the edge of a valid region need a shift).
+    want : ndarray bool (H, W)
+        Pixels to refine.
+    half_px : int
+        Offsets searched on each side.
+
+    Returns
+    -------
+    disparity_px, cost : ndarray float32 (H, W)
+        Refined disparity (NaN invalid) and the winner's cost (inf invalid).
+    """
+    h, w = coarse_px.shape
+    r = left.window // 2
+    rows = (0, h) if rows is None else rows
+    center_pad = np.empty((h + 2 * r, w + 2 * r), np.int32)
+    _kernels.fill_center(np.ascontiguousarray(coarse_px, dtype=np.float32), r, center_pad)
+    out = np.full((h, w), np.nan, np.float32)
+    cost = np.full((h, w), np.inf, np.float32)
+    hit = np.flatnonzero(want[rows[0]:rows[1]].any(axis=1))
+    if hit.size:      # only the rows holding pixels to refine
+        rows = (rows[0] + int(hit[0]), rows[0] + int(hit[-1]) + 1)
+        _kernels.refine_warped(left.padded, right.padded, left.a, left.b, right.a, right.b, r, center_pad,
+                               np.ascontiguousarray(want), int(half_px), left.zncc,
+                               rows[0], rows[1], _strips(n_strips, rows[1] - rows[0]), out, cost)
+    cost[cost >= _kernels.BIG] = np.inf
+    return out, cost

@@ -1,0 +1,247 @@
+"""Public entry point of the matcher: :func:`compute_disparity` (paper section 3).
+
+Area of interest (3.1) -> per level: horizontal decimation (3.2), pre-filter,
+window cost eq. (9) and winner-take-all eq. (10) (3.3), checks, median (3.4) ->
+up-sampling, full-resolution refinement of the coarsest level (beyond the paper),
+gating eq. (11) -> union eq. (12) -> speckle removal -> depth-edge guard.
+Conventions: docs/conventions.md.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _checks
+from .config import MatchingConfig, preset_config
+from .cost import match_checked, prepare, prepare_gray, refine_candidates
+from .multirange import (DEFAULT_DEPTH_EDGES_M, decimate_horizontally, LevelOutput, MultiRangePlan, RangeLevel,
+                         bands_px_from_depth_m, default_bands_px, plan_levels, run_levels)
+from .postfilter import guard_depth_edges, median_filter, remove_speckles, textured
+
+__all__ = ["DisparityResult", "compute_disparity", "make_plan", "solve_level"]
+
+
+@dataclass(frozen=True)
+class DisparityResult:
+    """Result of :func:`compute_disparity`.
+
+    Attributes
+    ----------
+    disparity_px : ndarray float32 (H, W)
+        ``d = x_left - x_right`` in full-resolution pixels, NaN invalid.
+    confidence : ndarray float32 (H, W)
+        In [0, 1]; 0 where invalid (see :func:`.postfilter.confidence_from_costs`).
+    plan : MultiRangePlan
+        The levels searched and their work (``plan.describe()``).
+    levels : tuple of ndarray float32 (H, W)
+        Each level's gated, full-width disparity (finest level first; refined levels after
+        their full-resolution re-scoring), before the union.
+    """
+
+    disparity_px: np.ndarray
+    confidence: np.ndarray
+    plan: MultiRangePlan
+    levels: tuple[np.ndarray, ...]
+
+
+def _aoi(aoi, width: int, height: int) -> tuple[int, int, int, int]:
+    if aoi is None:
+        return (0, height, 0, width)
+    if len(aoi) != 4:
+        raise ValueError(f"aoi must be (row0, row1, col0, col1), got {aoi!r}")
+    row0, row1, col0, col1 = (int(v) for v in aoi)
+    if not (0 <= row0 < row1 <= height and 0 <= col0 < col1 <= width):
+        raise ValueError(f"aoi {tuple(aoi)} must satisfy 0 <= row0 < row1 <= {height} and "
+                         f"0 <= col0 < col1 <= {width}")
+    return (row0, row1, col0, col1)
+
+
+def make_plan(image_size: tuple[int, int], *, max_disparity_px=None, disparity_bands_px=None,
+              calibration=None, depth_bands_m=None, config: MatchingConfig | None = None,
+              preset: str = "robust", aoi=None) -> MultiRangePlan:
+    """The multi-range plan :func:`compute_disparity` would run (same arguments, no images).
+
+    Exactly one of ``max_disparity_px``, ``disparity_bands_px``, ``depth_bands_m`` (with
+    ``calibration``) or ``calibration`` alone (default depth bands
+    ``0.5-1, 1-2.5, 2.5-15 m``) determines the search.
+    """
+    config = preset_config(preset) if config is None else config
+    if not isinstance(config, MatchingConfig):
+        raise TypeError(f"config must be a MatchingConfig, got {type(config).__name__}")
+    width, height = image_size
+    given = [name for name, value in (("max_disparity_px", max_disparity_px),
+                                      ("disparity_bands_px", disparity_bands_px),
+                                      ("depth_bands_m", depth_bands_m)) if value is not None]
+    if len(given) > 1:
+        raise ValueError(f"give only one of max_disparity_px, disparity_bands_px, depth_bands_m; "
+                         f"got {', '.join(given)}")
+    if depth_bands_m is not None and calibration is None:
+        raise ValueError("depth_bands_m needs calibration (focal_px and baseline_m)")
+    if not given and calibration is None:
+        raise ValueError("the search is undetermined: give max_disparity_px, disparity_bands_px, "
+                         "or calibration (with optional depth_bands_m)")
+    focal = baseline = None
+    doffs = 0.0
+    if calibration is not None:
+        for attr in ("focal_px", "baseline_m"):
+            if not hasattr(calibration, attr):
+                raise TypeError(f"calibration must be a StereoCamera, got {type(calibration).__name__}")
+        focal, baseline = float(calibration.focal_px), float(calibration.baseline_m)
+        doffs = float(getattr(calibration, "doffs_px", 0.0))
+    depth_bands = None
+    if max_disparity_px is not None:
+        d_max = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
+        n = len(config.decimations) if config.decimations is not None else 3
+        bands = default_bands_px(d_max, n) if config.multi_range else ((0.0, d_max),)
+    elif disparity_bands_px is not None:
+        bands = tuple(tuple(band) for band in disparity_bands_px)
+    else:
+        edges = DEFAULT_DEPTH_EDGES_M if depth_bands_m is None else depth_bands_m
+        pairs = bands_px_from_depth_m(edges, focal_px=focal, baseline_m=baseline, doffs_px=doffs)
+        bands = tuple(p[0] for p in pairs)
+        depth_bands = tuple(p[1] for p in pairs)
+    if depth_bands is None and focal is not None:
+        depth_bands = tuple((_depth(band[1], focal, baseline, doffs), _depth(band[0], focal, baseline, doffs))
+                            for band in bands)
+    decimations = config.decimations
+    if not config.multi_range and len(bands) > 1:
+        bands = ((min(b[0] for b in bands), max(b[1] for b in bands)),)
+        near = min(z[0] for z in depth_bands) if depth_bands else None
+        depth_bands = None if depth_bands is None else ((near, max(z[1] for z in depth_bands)),)
+    if not config.multi_range:
+        decimations = (1,)
+    return plan_levels((width, height), bands, decimations=decimations,
+                       band_margin_px=config.band_margin_px, aoi=_aoi(aoi, width, height),
+                       depth_bands_m=depth_bands, focal_px=focal, baseline_m=baseline)
+
+
+def _depth(d: float, focal: float, baseline: float, doffs: float) -> float:
+    return baseline * focal / (d + doffs) if d + doffs > 0 else math.inf
+
+
+def _prepare_pair(left: np.ndarray, right: np.ndarray, config: MatchingConfig):
+    """Pre-filter both images and prepare them for the kernels."""
+    pair = tuple(prepare_gray(img, kind=config.prefilter, cap=config.prefilter_cap, window=config.window_px,
+                              cost=config.cost) for img in (left, right))
+    if pair[0].padded.dtype != pair[1].padded.dtype:      # one exact, the other not: both float64
+        pair = tuple(prepare(p.padded[p.window // 2:-(p.window // 2), p.window // 2:-(p.window // 2)],
+                             window=config.window_px, cost=config.cost, dtype=np.float64) for p in pair)
+    return pair
+
+
+def _solve_prepared(pair, left: np.ndarray, level: RangeLevel, rows: tuple[int, int], cols: tuple[int, int],
+                    config: MatchingConfig) -> LevelOutput:
+    disparity, confidence = match_checked(*pair, d_lo=level.search_px[0], d_hi=level.search_px[1], rows=rows,
+                                          cols=cols, lr_max_diff_px=config.lr_max_diff_px,
+                                          uniqueness_ratio=config.uniqueness_ratio, max_cost=config.max_cost,
+                                          subpixel=config.subpixel)
+    if config.texture_threshold > 0:
+        disparity[~textured(left, window_px=config.window_px, threshold=config.texture_threshold)] = np.nan
+    if config.median_size:
+        disparity = median_filter(disparity, size=config.median_size)
+        confidence[~np.isfinite(disparity)] = 0.0
+    return LevelOutput(disparity_px=disparity, confidence=confidence)
+
+
+def solve_level(left: np.ndarray, right: np.ndarray, level: RangeLevel, rows: tuple[int, int],
+                cols: tuple[int, int], *, config: MatchingConfig) -> LevelOutput:
+    """The per-level solver: pre-filter, eq. (9)-(10) over ``level.search_px``, checks, median.
+
+    Checks (each off when its setting is): left-right consistency, uniqueness ratio,
+    maximum cost, texture. Disparities are in level pixels; the driver gates and
+    up-samples them.
+    """
+    return _solve_prepared(_prepare_pair(left, right, config), left, level, rows, cols, config)
+
+
+def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=None, calibration=None,
+                      depth_bands_m=None, config: MatchingConfig | None = None, preset: str = "robust",
+                      aoi=None) -> DisparityResult:
+    """Multi-range area-based disparity of a rectified pair (paper section 3, eq. 9-12).
+
+    Parameters
+    ----------
+    left, right : ndarray (H, W) or (H, W, 3)
+        Rectified images (gray or BGR; uint8 or float), same size.
+    max_disparity_px : float, optional
+        Search ``[0, D]``, split into bands ``[0, D/4], [D/4, D/2], [D/2, D]`` at
+        decimations 1, 2, 4 (one band ``[0, D]`` when ``config.multi_range`` is False).
+    disparity_bands_px : sequence of (float, float), optional
+        Explicit bands in full-resolution pixels, one level each.
+    calibration : StereoCamera, optional
+        Rectified rig (``focal_px``, ``baseline_m``, ``doffs_px``); alone it selects the
+        default depth bands ``0.5-1, 1-2.5, 2.5-15 m``; with other arguments it only
+        labels the plan with depths.
+    depth_bands_m : sequence, optional
+        Depth band edges ``(z0, ..., zn)`` or ``(near, far)`` pairs in metres; converted
+        with ``d = b f / Z`` (eq. 14). Needs ``calibration``.
+    config : MatchingConfig, optional
+        Settings; default the preset's.
+    preset : {"robust", "paper"}
+        ``"paper"``: exactly eq. (9)-(12) (+ median); ``"robust"``: see
+        :mod:`mrstereo.matching.config`. Ignored when ``config`` is given.
+    aoi : (row0, row1, col0, col1), optional
+        Area of interest (section 3.1), half-open; NaN and no work outside it.
+
+    Returns
+    -------
+    DisparityResult
+
+    Notes
+    -----
+    Eq. (9) with our sign: ``x_right = x_left - d``, so the paper's ``I_R(x + i + d)``
+    is evaluated as ``I_R(x + i - d)`` with ``d >= 0`` (see :mod:`.cost`). A level of
+    decimation ``k`` matches images of width ``W / k``; its disparity ``d_k`` becomes
+    ``k d_k`` at full resolution before gating to its band (eq. 11). Where several
+    levels keep a value, ``config.union`` decides (eq. 12; default: the more confident).
+    """
+    _checks.image("left", left)
+    _checks.image("right", right)
+    _checks.same_shape("left", left, "right", right)
+    left_gray = _checks.gray_float32("left", left)
+    right_gray = _checks.gray_float32("right", right)
+    height, width = left_gray.shape
+    config = preset_config(preset) if config is None else config
+    plan = make_plan((width, height), max_disparity_px=max_disparity_px,
+                     disparity_bands_px=disparity_bands_px, calibration=calibration,
+                     depth_bands_m=depth_bands_m, config=config, aoi=aoi)
+    if calibration is not None and hasattr(calibration, "size") and tuple(calibration.size) != (width, height):
+        raise ValueError(f"images are {width}x{height} but the calibration is "
+                         f"{calibration.size[0]}x{calibration.size[1]}")
+    if config.window_px > min(width, height):
+        raise ValueError(f"window_px {config.window_px} is larger than the image ({width}x{height})")
+
+    # prepared (pre-filtered, padded, window terms) whole-image pairs by level width: the
+    # finest level's pair also serves the refinement of the coarser ones
+    pairs: dict[int, tuple] = {}
+
+    def pair_at(w_level: int):
+        if w_level not in pairs:
+            pairs[w_level] = _prepare_pair(decimate_horizontally(left_gray, w_level),
+                                           decimate_horizontally(right_gray, w_level), config)
+        return pairs[w_level]
+
+    def solve(lv, rv, level, rows, cols):
+        if lv.shape[0] == height:          # whole-height images: share the prepared pair
+            return _solve_prepared(pair_at(lv.shape[1]), lv, level, rows, cols, config)
+        return solve_level(lv, rv, level, rows, cols, config=config)
+
+    def refine(level, coarse_px, want):
+        """Full-resolution re-scoring of a coarse level (beyond the paper)."""
+        refined, cost = refine_candidates(*pair_at(width), coarse_px, want, rows=plan.aoi[:2],
+                                          half_px=int(math.ceil(level.scale / 2)) + config.refine_margin_px)
+        if config.max_cost is not None:
+            refined[cost > config.max_cost] = np.nan
+        return refined
+
+    disparity, confidence, levels = run_levels(left_gray, right_gray, plan, solve,
+                                               row_pad_px=config.window_px // 2 + 2, union=config.union,
+                                               refine=refine if config.refine else None,
+                                               refine_min_scale=config.refine_min_decimation - 0.5)
+    disparity = remove_speckles(disparity, max_size_px=config.speckle_size_px,
+                                max_diff_px=config.speckle_range_px)
+    disparity = guard_depth_edges(disparity, guard_px=config.edge_guard, jump_px=config.edge_jump_px)
+    confidence[~np.isfinite(disparity)] = 0.0
+    return DisparityResult(disparity_px=disparity, confidence=confidence, plan=plan, levels=levels)

@@ -1,0 +1,112 @@
+"""Post-filters of a disparity map: the paper's median (section 3.4) and the
+usual checks of robot stereo (left-right, uniqueness, texture, speckles).
+
+Disparity maps are float32 ``(H, W)`` in pixels, NaN invalid. Conventions:
+docs/conventions.md.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from . import _kernels
+
+__all__ = ["left_right_consistent", "unique", "textured", "median_filter", "remove_speckles",
+           "confidence_from_costs", "guard_depth_edges"]
+
+
+def left_right_consistent(disparity_int: np.ndarray, right_disparity_int: np.ndarray, *,
+                          max_diff_px: float) -> np.ndarray:
+    """Mask of pixels whose right-image winner points back: ``|d_L(x) - d_R(x - d_L(x))| <= tol``.
+
+    Both inputs are integer winner maps (-1 = none) of the same band search.
+    """
+    h, w = disparity_int.shape
+    valid = disparity_int >= 0
+    xr = np.arange(w)[None, :] - np.where(valid, disparity_int, 0)
+    inside = valid & (xr >= 0)
+    rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
+    back = right_disparity_int[rows, np.clip(xr, 0, w - 1)]
+    return inside & (back >= 0) & (np.abs(disparity_int - back) <= max_diff_px)
+
+
+def unique(best_cost: np.ndarray, second_cost: np.ndarray, *, ratio: float) -> np.ndarray:
+    """Mask of winners whose second-best cost is clearly worse: ``c1 <= (1 - ratio) c2``."""
+    with np.errstate(invalid="ignore"):
+        return ~(best_cost > (1.0 - ratio) * second_cost)
+
+
+def textured(gray: np.ndarray, *, window_px: int, threshold: float) -> np.ndarray:
+    """Mask of pixels whose window standard deviation (grey levels) is at least ``threshold``."""
+    g = gray.astype(np.float32)
+    mean = cv2.blur(g, (window_px, window_px), borderType=cv2.BORDER_REPLICATE)
+    mean_sq = cv2.blur(g * g, (window_px, window_px), borderType=cv2.BORDER_REPLICATE)
+    return mean_sq - mean * mean >= threshold * threshold
+
+
+_MEDIAN_SCALE = 64.0          # median in 1/64 px fixed point (uint16: up to 1023 px)
+
+
+def median_filter(disparity_px: np.ndarray, *, size: int) -> np.ndarray:
+    """Median filter of section 3.4 over valid and invalid pixels (invalid counts as -1).
+
+    A valid pixel becomes invalid when most of its neighbours are; an invalid pixel
+    stays invalid (the filter removes outliers, it does not invent values). Runs
+    ``cv2.medianBlur`` on a 1/64-pixel uint16 code (float32 above 1023 px).
+    """
+    if size == 0:
+        return disparity_px
+    disparity_px = np.ascontiguousarray(disparity_px, dtype=np.float32)
+    if np.nanmax(disparity_px, initial=0.0) >= 65534 / _MEDIAN_SCALE:
+        valid = np.isfinite(disparity_px)
+        out = cv2.medianBlur(np.where(valid, disparity_px, -1.0).astype(np.float32), size)
+        out[(out < 0) | ~valid] = np.nan
+        return out
+    coded = np.empty(disparity_px.shape, np.uint16)
+    _kernels.encode_fixed(disparity_px, _MEDIAN_SCALE, 1, 1, 65535, 0, coded)
+    out = np.empty(disparity_px.shape, np.float32)
+    _kernels.decode_median(cv2.medianBlur(coded, size), disparity_px, _MEDIAN_SCALE, out)
+    return out
+
+
+def remove_speckles(disparity_px: np.ndarray, *, max_size_px: int, max_diff_px: float) -> np.ndarray:
+    """Invalidate connected regions (4-neighbours within ``max_diff_px``) of fewer than
+    ``max_size_px`` pixels, with ``cv2.filterSpeckles`` on a 1/16-pixel fixed-point copy."""
+    if max_size_px <= 0:
+        return disparity_px
+    disparity_px = np.ascontiguousarray(disparity_px, dtype=np.float32)
+    fixed = np.empty(disparity_px.shape, np.int16)
+    _kernels.encode_fixed(disparity_px, 16.0, 0, 0, 2047 * 16, -16, fixed)
+    cv2.filterSpeckles(fixed, -16, int(max_size_px), int(round(max_diff_px * 16)))
+    out = np.empty(disparity_px.shape, np.float32)
+    _kernels.mask_invalid(disparity_px, fixed, -16, out)
+    return out
+
+
+def confidence_from_costs(best_cost: np.ndarray, second_cost: np.ndarray) -> np.ndarray:
+    """Per-pixel confidence in [0, 1]: the relative margin ``1 - c1 / c2`` of the winner
+    over the best cost at least 2 px away (1 when there is no other candidate)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        conf = 1.0 - best_cost / second_cost
+    conf = np.where(np.isinf(second_cost) & np.isfinite(best_cost), 1.0, conf)
+    return np.clip(np.nan_to_num(conf, nan=0.0), 0.0, 1.0).astype(np.float32)
+
+
+def guard_depth_edges(disparity_px: np.ndarray, *, guard_px: int, jump_px: float) -> np.ndarray:
+    """Invalidate the foreground side of depth edges, where window matching "fattens".
+
+    A window straddling a depth edge is dominated by the stronger-textured (usually the
+    nearer) surface, so background pixels up to about a window radius from the edge get
+    the foreground's disparity. A pixel is dropped when some valid pixel within
+    ``guard_px`` columns (and one row) has a disparity smaller by more than ``jump_px``
+    (``cv2.erode`` = running minimum; invalid pixels do not count). Drops correct
+    foreground pixels at edges too: it trades density for fewer wrong values.
+    """
+    if guard_px <= 0:
+        return disparity_px
+    valid = np.isfinite(disparity_px)
+    filled = np.where(valid, disparity_px, np.float32(1e9)).astype(np.float32)
+    lowest = cv2.erode(filled, np.ones((3, 2 * guard_px + 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    out = disparity_px.copy()
+    out[valid & (disparity_px - lowest > jump_px)] = np.nan
+    return out

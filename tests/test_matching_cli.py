@@ -1,0 +1,56 @@
+"""`mrstereo disparity` command: outputs, --explain, one-line errors."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from mrstereo.cli import entry
+from mrstereo.io import read_disparity
+
+
+def _pair(tmp_path, d=6):
+    rng = np.random.default_rng(0)
+    img = cv2.GaussianBlur(rng.uniform(0, 255, (40, 120)).astype(np.float32), (0, 0), 1.0)
+    img = np.round(20 + 215 * (img - img.min()) / (img.max() - img.min())).astype(np.uint8)
+    left, right = img[:, :100], img[:, d:100 + d]
+    cv2.imwrite(str(tmp_path / "l.png"), left)
+    cv2.imwrite(str(tmp_path / "r.png"), right)
+    return str(tmp_path / "l.png"), str(tmp_path / "r.png")
+
+
+def test_disparity_command_writes_pfm_png_and_explains(tmp_path, capsys):
+    left, right = _pair(tmp_path)
+    out = tmp_path / "d.pfm"
+    assert entry(["disparity", left, right, "--max-disparity", "16", "--explain", "-o", str(out),
+                  "--color", str(tmp_path / "c.png")]) == 0
+    assert "single-range" in capsys.readouterr().out
+    d = read_disparity(out)
+    assert d.shape == (40, 100)
+    assert np.nanmedian(d[8:-8, 20:-8]) == np.float32(6.0) or abs(np.nanmedian(d[8:-8, 20:-8]) - 6) < 0.1
+    assert (tmp_path / "c.png").is_file()
+    png = tmp_path / "d.png"
+    assert entry(["disparity", left, right, "--bands", "0:8,8:16", "--preset", "paper", "-o", str(png)]) == 0
+    assert abs(np.nanmedian(read_disparity(png)[8:-8, 20:-8]) - 6) < 0.1
+
+
+def test_disparity_command_bad_input_is_one_line(tmp_path, capsys):
+    left, right = _pair(tmp_path)
+    cases = [
+        (["disparity", left, str(tmp_path / "missing.png"), "--max-disparity", "16", "-o", "x.pfm"], "not found"),
+        (["disparity", left, right, "--max-disparity", "nan", "-o", str(tmp_path / "x.pfm")], "finite"),
+        (["disparity", left, right, "--max-disparity", "-3", "-o", str(tmp_path / "x.pfm")], "> 0"),
+        (["disparity", left, right, "-o", str(tmp_path / "x.pfm")], "--max-disparity"),
+        (["disparity", left, right, "--max-disparity", "16", "-o", left], "overwrite"),
+    ]
+    for argv, message in cases:
+        assert entry(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("mrstereo: error:") and message in err[0]
+    (tmp_path / "bad.png").write_bytes(b"not an image")
+    assert entry(["disparity", left, str(tmp_path / "bad.png"), "--max-disparity", "16", "-o",
+                  str(tmp_path / "x.pfm")]) == 2
+    cv2.imwrite(str(tmp_path / "small.png"), np.zeros((40, 90), np.uint8))
+    assert entry(["disparity", left, str(tmp_path / "small.png"), "--max-disparity", "16", "-o",
+                  str(tmp_path / "x.pfm")]) == 2
+    assert "differ in size" in capsys.readouterr().err
+    assert not (tmp_path / "x.pfm").exists()

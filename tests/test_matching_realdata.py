@@ -1,0 +1,80 @@
+"""Matcher on real data (Middlebury 2001 Tsukuba, 2003 Teddy) against OpenCV StereoBM in the same run."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from mrstereo.matching import MatchingConfig, compute_disparity
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+# (folder, left, right, ground truth, gt divisor, search range)
+SCENES = {
+    "tsukuba": ("middlebury2001/tsukuba", "scene1.row3.col3.ppm", "scene1.row3.col4.ppm", "truedisp.row3.col3.pgm",
+                16.0, 16),
+    "teddy": ("middlebury2003/teddy", "im2.ppm", "im6.ppm", "disp2.pgm", 4.0, 64),
+}
+
+
+def _scene(name):
+    folder, left, right, gt, divisor, max_d = SCENES[name]
+    paths = [DATA / folder / f for f in (left, right, gt)]
+    if not all(p.is_file() for p in paths):
+        pytest.skip(f"{name} not found under {DATA / folder}")
+    read = lambda p: cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+    truth = read(paths[2]).astype(np.float32) / divisor        # 0 = unknown
+    truth[truth == 0] = np.nan
+    nonocc = DATA / folder / "nonocc.png"                         # evaluate the non-occluded pixels
+    if nonocc.is_file():
+        truth[read(nonocc) != 255] = np.nan
+    return read(paths[0]), read(paths[1]), truth, max_d
+
+
+def _bad2(d, truth):
+    """bad-2 % dense (missing counts as bad), among estimated pixels, and density %."""
+    known = np.isfinite(truth)
+    bad = ~(np.abs(d - truth) <= 2.0)
+    est = known & np.isfinite(d)
+    return 100.0 * np.mean(bad[known]), 100.0 * np.mean(bad[est]), 100.0 * est.sum() / known.sum()
+
+
+def _stereo_bm(left, right, max_d):
+    """StereoBM as users run it (ROS stereo_image_proc-like settings, 9x9 below 640 px)."""
+    bm = cv2.StereoBM.create(numDisparities=max_d, blockSize=9)
+    bm.setTextureThreshold(10)
+    bm.setUniquenessRatio(15)
+    bm.setSpeckleWindowSize(100)
+    bm.setSpeckleRange(4)
+    bm.setDisp12MaxDiff(1)
+    raw = bm.compute(left, right).astype(np.float32) / 16.0
+    return np.where(raw >= 0, raw, np.nan)
+
+
+def test_teddy_robust_is_denser_and_as_accurate_as_stereobm():
+    left, right, truth, max_d = _scene("teddy")
+    dense, est, density = _bad2(compute_disparity(left, right, max_disparity_px=max_d).disparity_px, truth)
+    bm_dense, bm_est, _ = _bad2(_stereo_bm(left, right, max_d), truth)
+    assert dense < bm_dense          # missing counts as bad: more right answers than StereoBM
+    assert est < bm_est + 1.5        # and about as few wrong ones among those given
+    assert density > 70.0
+
+
+def test_tsukuba_robust_accurate_where_it_answers_and_paper_answers_everywhere():
+    left, right, truth, max_d = _scene("tsukuba")
+    dense, est, density = _bad2(compute_disparity(left, right, max_disparity_px=max_d).disparity_px, truth)
+    assert density > 70.0
+    assert est < 4.0                 # wrong in-band winners or lost coarse-level precision exceed this
+    _, p_est, p_density = _bad2(compute_disparity(left, right, max_disparity_px=max_d,
+                                                  preset="paper").disparity_px, truth)
+    assert p_density > 95.0 and p_est < 20.0
+
+
+def test_tsukuba_refinement_recovers_the_coarse_level_precision():
+    left, right, truth, max_d = _scene("tsukuba")
+    cfg = MatchingConfig()
+    _, est_refined, _ = _bad2(compute_disparity(left, right, max_disparity_px=max_d, config=cfg).disparity_px, truth)
+    _, est_coarse, _ = _bad2(compute_disparity(left, right, max_disparity_px=max_d,
+                                               config=cfg.replace(refine=False)).disparity_px, truth)
+    assert est_refined < 0.8 * est_coarse
