@@ -5,15 +5,18 @@ from pathlib import Path
 
 import click
 
+from ._bag import bag_export_kwargs, bag_options, check_workers, echo_export, rig_from_options, worker_options
+
 __all__ = ["COMMANDS"]
 
 
 @click.command("map")
-@click.argument("manifest", type=click.Path(path_type=Path))
+@click.argument("manifest", required=False, type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (map.pgm, map.yaml, map.png, log_odds.npy, metrics.json).")
 @click.option("--calib", "calib", type=click.Path(dir_okay=False, path_type=Path),
-              help="Use this stereo calibration (and the raw images) instead of the manifest's.")
+              help="Use this stereo calibration (and the raw images) instead of the manifest's; "
+                   "with --bag, instead of the camera_info topics.")
 @click.option("--fusion", type=click.Choice(["log_odds", "union"]), default="log_odds", show_default=True,
               help="Log-odds fusion (OctoMap) or the paper's union of occupied cells.")
 @click.option("--preset", type=click.Choice(["robust", "paper"]), default="robust", show_default=True,
@@ -24,27 +27,61 @@ __all__ = ["COMMANDS"]
               help="Map width (x) and height (y) [m].")
 @click.option("--origin", "origin_m", default="0,-3", show_default=True, metavar="X,Y",
               help="World position of the lower-left map corner [m].")
+@worker_options
+@click.option("--bag", "bag", type=click.Path(path_type=Path),
+              help="Map a ROS 1 .bag / ROS 2 bag directory instead of a MANIFEST (see the topic options).")
+@bag_options
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def map_command(manifest: Path, out_dir: Path, calib: Path | None, fusion: str, preset: str,
-                resolution_m: float, size_m: str, origin_m: str, quiet: bool) -> None:
-    """Build an occupancy grid from the stereo frames of a dataset MANIFEST (docs/dataset.md).
+def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
+                resolution_m: float, size_m: str, origin_m: str, workers: int | None, scheduler: str | None,
+                bag: Path | None, quiet: bool, **bag_kw) -> None:
+    """Build an occupancy grid from the stereo frames of a dataset MANIFEST (docs/dataset.md)
+    or of a ROS bag (--bag, docs/scale-out.md).
 
     Every frame is rectified, matched (multi-range), ground-suppressed (eq. 13),
     triangulated and fused along the robot path. Writes a ROS map_server map
     (map.pgm + map.yaml), map.png with the path and fields of view, the
     log-odds array and, when the manifest has a ground-truth map, metrics.json.
+    --workers N / --scheduler ADDRESS spread the frames over Dask workers; the
+    map is the same bit for bit.
     """
+    import dataclasses
+    import tempfile
+
     from ..camera import read_stereo
     from ..mapping import GridSpec
     from ..mapping.occupancy import MappingConfig
     from ..pipeline import PipelineConfig, build_map, write_map_outputs
+    from ..world.dataset import read_manifest
 
+    check_workers(workers, scheduler)
+    if (manifest is None) == (bag is None):
+        raise click.UsageError("give a MANIFEST or --bag FILE (one of them)")
     (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
     grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
     config = PipelineConfig(preset=preset, mapping=MappingConfig(fusion=fusion), grid=grid)
-    stereo = read_stereo(calib) if calib is not None else None
-    run = build_map(manifest, config=config, calibration=stereo, progress=not quiet)
-    files = write_map_outputs(run, out_dir)
+    with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
+        stereo = None
+        if bag is not None:
+            from ..bag import export_bag
+
+            result = export_bag(bag, Path(tmp) / "dataset", **bag_export_kwargs(calib=calib, quiet=quiet, **bag_kw))
+            echo_export(result)
+            dataset = read_manifest(result.out_dir)
+        else:
+            used = [f"--{k.replace('_', '-')}" for k, v in bag_kw.items()
+                    if v not in (None, False) and k not in ("height_m", "tilt_rad", "base_frame",
+                                                             "sync_tolerance_s")]
+            if used:
+                raise click.UsageError(f"{', '.join(used)} only with --bag")
+            dataset = read_manifest(manifest)
+            rig = rig_from_options(bag_kw["height_m"], bag_kw["tilt_rad"])
+            if rig is not None:
+                dataset = dataclasses.replace(dataset, rig=rig)
+            stereo = read_stereo(calib) if calib is not None else None
+        run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
+                        scheduler=scheduler)
+        files = write_map_outputs(run, out_dir)
     click.echo(f"map of {len(run.observations)} frames: {run.grid!r}")
     if run.metrics is not None:
         m = run.metrics

@@ -1,0 +1,607 @@
+"""ROS bags as stereo datasets: read ROS 1 ``.bag`` and ROS 2 (sqlite3 / mcap) bags without ROS.
+
+Reading uses the ``rosbags`` library. A bag becomes a dataset directory in
+the manifest format (docs/dataset.md), so every command that reads a
+manifest reads a recording too:
+
+1. left and right ``sensor_msgs/Image`` (mono8, bgr8, rgb8, bgra8, rgba8) or
+   ``sensor_msgs/CompressedImage`` messages are paired by their header
+   stamps, each left with the nearest right within ``sync_tolerance_s``
+   (one-to-one, closest pairs first);
+2. the calibration comes from the first ``sensor_msgs/CameraInfo`` of the
+   left and right camera_info topics (``K, D, R, P`` -> :class:`StereoCamera`,
+   ROS's ``P_right[0, 3] = -fx * baseline``) or from a stereo YAML;
+3. the robot pose ``(x, y, yaw)`` at each left image stamp comes from
+   ``nav_msgs/Odometry`` or from TF (``base_link`` in ``map`` or ``odom``,
+   chained through ``/tf`` and ``/tf_static``), interpolated linearly
+   (slerp for rotations) between the two nearest messages and held
+   constant outside their time span. Lateral offsets of the camera on the
+   robot are ignored (the rig model puts it on the robot's vertical axis);
+4. the head pan is 0 unless a TF ``camera_frame`` is given: then it is the
+   heading of that frame's forward axis (``z`` for a ``*optical*`` frame,
+   else ``x``) in the base frame;
+5. the mount (height, tilt) is the stereo YAML's ``rig:``, else given, else
+   estimated from the floor in a few frames (median of V-disparity fits).
+
+Conventions: docs/conventions.md; user guide: docs/scale-out.md.
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from . import _checks
+from .camera import CameraInfo, RigMount, StereoCamera, write_stereo
+from .io import write_image
+
+__all__ = ["BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message",
+           "camera_info_from_message", "stereo_from_camera_info", "pair_by_stamp", "yaw_from_matrix",
+           "export_bag", "exported_bag", "estimate_rig"]
+
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
+ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
+TF_TOPICS = ("/tf", "/tf_static")
+CALIBRATION_NAME = "stereo.yaml"
+
+
+# --------------------------------------------------------------------------------------------- reading
+
+def _bag_paths(path: str | os.PathLike) -> list[Path]:
+    """What rosbags' AnyReader opens: a ROS 1 ``.bag`` file or a ROS 2 bag directory."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"bag not found: {path}")
+    if path.is_file() and path.suffix in (".db3", ".mcap") and (path.parent / "metadata.yaml").is_file():
+        path = path.parent                  # a ROS 2 storage file: open its bag directory
+    if path.is_file() and path.suffix != ".bag":
+        raise ValueError(f"{path} is not a bag: expected a ROS 1 .bag file or a ROS 2 bag directory "
+                         "(with metadata.yaml)")
+    if path.is_dir() and not (path / "metadata.yaml").is_file():
+        raise ValueError(f"{path} is not a ROS 2 bag: no metadata.yaml in the directory")
+    return [path]
+
+
+@contextlib.contextmanager
+def _open_bag(path: str | os.PathLike):
+    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.typesys import Stores, get_typestore
+
+    paths = _bag_paths(path)
+    try:
+        reader = AnyReader(paths, default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        reader.open()
+    except AnyReaderError as exc:                # corrupt or unsupported file (readers' errors are wrapped)
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"cannot read bag {path}: {first}") from None
+    try:
+        yield reader
+    finally:
+        reader.close()
+
+
+def bag_topics(path: str | os.PathLike) -> dict[str, str]:
+    """``{topic: message type}`` of a bag (types as ``pkg/msg/Name``)."""
+    with _open_bag(path) as reader:
+        return {c.topic: c.msgtype for c in reader.connections}
+
+
+def _stamp_ns(msg, fallback_ns: int) -> int:
+    header = getattr(msg, "header", None)
+    if header is None:
+        return int(fallback_ns)
+    ns = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+    return ns if ns > 0 else int(fallback_ns)
+
+
+def image_from_message(msg, msgtype: str) -> np.ndarray:
+    """A ``sensor_msgs/Image`` or ``CompressedImage`` as an OpenCV array (gray or BGR uint8).
+
+    Raises ``ValueError`` for an unsupported encoding or an undecodable payload.
+    """
+    data = np.asarray(msg.data, dtype=np.uint8).ravel()
+    if msgtype.endswith("CompressedImage"):
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+        if img is None:
+            raise ValueError(f"cannot decode a CompressedImage (format {msg.format!r})")
+        if img.dtype != np.uint8:
+            raise ValueError(f"CompressedImage decodes to {img.dtype}; only 8-bit images are supported")
+        return img[:, :, :3] if img.ndim == 3 and img.shape[2] == 4 else img
+    channels = {"mono8": 1, "8UC1": 1, "bgr8": 3, "rgb8": 3, "8UC3": 3, "bgra8": 4, "rgba8": 4, "8UC4": 4}
+    enc = str(msg.encoding)
+    if enc not in channels:
+        raise ValueError(f"image encoding {enc!r} is not supported (mono8, bgr8, rgb8, bgra8, rgba8)")
+    h, w, ch, step = int(msg.height), int(msg.width), channels[enc], int(msg.step)
+    if step < w * ch or data.size < h * step:
+        raise ValueError(f"image message of {w}x{h} {enc} has step {step} and {data.size} bytes")
+    img = data[:h * step].reshape(h, step)[:, :w * ch].reshape(h, w, ch)
+    if ch == 1:
+        return np.ascontiguousarray(img[:, :, 0])
+    if enc.startswith("rgb"):
+        img = img[:, :, 2::-1]
+    return np.ascontiguousarray(img[:, :, :3])
+
+
+def camera_info_from_message(msg, *, name: str = "camera") -> CameraInfo:
+    """A ``sensor_msgs/CameraInfo`` (ROS 1 ``K, D, R, P`` or ROS 2 ``k, d, r, p``) as :class:`CameraInfo`."""
+    def field_(upper: str):
+        value = getattr(msg, upper, None)
+        return getattr(msg, upper.lower()) if value is None else value
+
+    data = {"image_width": int(msg.width), "image_height": int(msg.height), "camera_name": name,
+            "distortion_model": str(msg.distortion_model) or "plumb_bob",
+            "camera_matrix": [float(v) for v in np.ravel(field_("K"))],
+            "distortion_coefficients": [float(v) for v in np.ravel(field_("D"))] or [0.0] * 5,
+            "rectification_matrix": [float(v) for v in np.ravel(field_("R"))],
+            "projection_matrix": [float(v) for v in np.ravel(field_("P"))]}
+    return CameraInfo.from_dict(data, where=f"camera_info of {name}")
+
+
+def stereo_from_camera_info(left_msg, right_msg, *, rig: RigMount | None = None) -> StereoCamera:
+    """A :class:`StereoCamera` from the left and right ``CameraInfo`` messages of a stereo head."""
+    return StereoCamera(left=camera_info_from_message(left_msg, name="left"),
+                        right=camera_info_from_message(right_msg, name="right"), rig=rig)
+
+
+def pair_by_stamp(left_ns: Sequence[int], right_ns: Sequence[int], *, tolerance_ns: int) -> list[tuple[int, int]]:
+    """Pair left and right image stamps one-to-one, closest pairs first, within ``tolerance_ns``.
+
+    Returns
+    -------
+    list of (int, int)
+        ``(left index, right index)`` sorted by left stamp.
+    """
+    left = np.asarray(left_ns, dtype=np.int64)
+    right = np.asarray(right_ns, dtype=np.int64)
+    if left.size == 0 or right.size == 0:
+        return []
+    order = np.argsort(right, kind="stable")
+    rs = right[order]
+    candidates = []
+    for i, t in enumerate(left):
+        j = int(np.searchsorted(rs, t))
+        for jj in (j - 1, j):
+            if 0 <= jj < rs.size and abs(int(rs[jj]) - int(t)) <= tolerance_ns:
+                candidates.append((abs(int(rs[jj]) - int(t)), i, int(order[jj])))
+    used_left, used_right, pairs = set(), set(), []
+    for _, i, j in sorted(candidates):
+        if i not in used_left and j not in used_right:
+            used_left.add(i)
+            used_right.add(j)
+            pairs.append((i, j))
+    return sorted(pairs, key=lambda p: (int(left[p[0]]), p[0]))
+
+
+# ------------------------------------------------------------------------------------------ transforms
+
+def _matrix_from_quaternion(q) -> np.ndarray:
+    x, y, z, w = (float(v) for v in q)
+    n = x * x + y * y + z * z + w * w
+    if not math.isfinite(n) or n < 1e-12:
+        raise ValueError(f"invalid quaternion {tuple(q)}")
+    s = 2.0 / n
+    return np.array([[1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w)],
+                     [s * (x * y + z * w), 1 - s * (x * x + z * z), s * (y * z - x * w)],
+                     [s * (x * z - y * w), s * (y * z + x * w), 1 - s * (x * x + y * y)]])
+
+
+def _slerp(q0: np.ndarray, q1: np.ndarray, a: float) -> np.ndarray:
+    q0 = q0 / np.linalg.norm(q0)
+    q1 = q1 / np.linalg.norm(q1)
+    dot = float(np.dot(q0, q1))
+    if dot < 0.0:
+        q1, dot = -q1, -dot
+    if dot > 0.9995:
+        q = q0 + a * (q1 - q0)
+        return q / np.linalg.norm(q)
+    theta = math.acos(min(dot, 1.0))
+    return (math.sin((1 - a) * theta) * q0 + math.sin(a * theta) * q1) / math.sin(theta)
+
+
+def yaw_from_matrix(T) -> float:
+    """Heading of the x axis of a rotation (or 4x4 transform) about z: ``atan2(R[1,0], R[0,0])``."""
+    T = np.asarray(T, dtype=float)
+    return math.atan2(T[1, 0], T[0, 0])
+
+
+@dataclass(frozen=True)
+class TransformTrack:
+    """A time series of one transform ``T_parent_from_child`` (odometry or one TF edge).
+
+    ``at(stamp_ns)`` interpolates linearly (slerp for the rotation) between
+    the two nearest samples, returns a sample exactly at its own stamp, and
+    holds the first / last sample outside the span.
+    """
+
+    stamps_ns: np.ndarray
+    translations: np.ndarray          # (N, 3)
+    quaternions: np.ndarray           # (N, 4) x, y, z, w
+
+    @classmethod
+    def from_samples(cls, samples: list[tuple[int, Sequence[float], Sequence[float]]]) -> TransformTrack:
+        if not samples:
+            raise ValueError("a transform track needs at least one sample")
+        samples = sorted(samples, key=lambda s: s[0])
+        dedup = {}
+        for t, tr, q in samples:                       # the last sample of a stamp wins
+            dedup[int(t)] = (tr, q)
+        stamps = np.array(sorted(dedup), dtype=np.int64)
+        return cls(stamps_ns=stamps, translations=np.array([dedup[t][0] for t in stamps], dtype=float),
+                   quaternions=np.array([dedup[t][1] for t in stamps], dtype=float))
+
+    def at(self, stamp_ns: int) -> np.ndarray:
+        """``T_parent_from_child`` (4, 4) at ``stamp_ns``."""
+        i = int(np.searchsorted(self.stamps_ns, stamp_ns, side="right")) - 1
+        T = np.eye(4)
+        if i < 0 or i >= self.stamps_ns.size - 1 or self.stamps_ns[i] == stamp_ns:
+            k = min(max(i, 0), self.stamps_ns.size - 1)
+            T[:3, :3] = _matrix_from_quaternion(self.quaternions[k])
+            T[:3, 3] = self.translations[k]
+            return T
+        t0, t1 = int(self.stamps_ns[i]), int(self.stamps_ns[i + 1])
+        a = (int(stamp_ns) - t0) / (t1 - t0)
+        T[:3, :3] = _matrix_from_quaternion(_slerp(self.quaternions[i], self.quaternions[i + 1], a))
+        T[:3, 3] = self.translations[i] + a * (self.translations[i + 1] - self.translations[i])
+        return T
+
+
+@dataclass
+class TfTree:
+    """Frames and transforms of ``/tf`` and ``/tf_static``: each child frame has one parent."""
+
+    parent: dict[str, str] = field(default_factory=dict)
+    samples: dict[str, list] = field(default_factory=dict)
+    _tracks: dict[str, TransformTrack] = field(default_factory=dict)
+
+    def add(self, parent: str, child: str, stamp_ns: int, translation, quaternion) -> None:
+        parent, child = parent.lstrip("/"), child.lstrip("/")
+        self.parent[child] = parent
+        self.samples.setdefault(child, []).append((int(stamp_ns), tuple(translation), tuple(quaternion)))
+        self._tracks.pop(child, None)
+
+    def add_message(self, msg, *, static: bool) -> None:
+        for tf in msg.transforms:
+            tr, rot = tf.transform.translation, tf.transform.rotation
+            stamp = 0 if static else _stamp_ns(tf, 0)
+            self.add(tf.header.frame_id, tf.child_frame_id, stamp, (tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w))
+
+    @property
+    def frames(self) -> set[str]:
+        return set(self.parent) | set(self.parent.values())
+
+    def chain(self, target: str, source: str) -> list[str]:
+        """Child frames from ``source`` up to (not including) ``target``; error if unconnected."""
+        target, source = target.lstrip("/"), source.lstrip("/")
+        chain, frame = [], source
+        while frame != target:
+            if frame not in self.parent or len(chain) > 1000:
+                raise ValueError(f"TF has no chain from '{target}' down to '{source}' "
+                                 f"(frames in the bag: {', '.join(sorted(self.frames)) or 'none'})")
+            chain.append(frame)
+            frame = self.parent[frame]
+        return chain
+
+    def lookup(self, target: str, source: str, stamp_ns: int) -> np.ndarray:
+        """``T_target_from_source`` (4, 4) at ``stamp_ns``."""
+        T = np.eye(4)
+        for child in self.chain(target, source):
+            if child not in self._tracks:
+                self._tracks[child] = TransformTrack.from_samples(self.samples[child])
+            T = self._tracks[child].at(stamp_ns) @ T
+        return T
+
+
+# -------------------------------------------------------------------------------------------- export
+
+@dataclass(frozen=True)
+class BagExport:
+    """Result of :func:`export_bag`.
+
+    Attributes
+    ----------
+    out_dir : Path
+        The dataset directory (``manifest.yaml``, ``stereo.yaml``, images).
+    n_frames : int
+        Stereo pairs written.
+    n_left, n_right : int
+        Image messages on the two topics.
+    stamps_ns : tuple of int
+        Left image stamp of every frame.
+    rig : RigMount
+        The mount written to the manifest.
+    rig_source : str
+        ``"calibration"``, ``"options"`` or ``"estimated from N frames"``.
+    pose_source : str
+        ``"odometry <topic>"``, ``"tf <world> <- <base>"`` or ``"none (origin)"``.
+    """
+
+    out_dir: Path
+    n_frames: int
+    n_left: int
+    n_right: int
+    stamps_ns: tuple[int, ...]
+    rig: RigMount
+    rig_source: str
+    pose_source: str
+
+
+def _require_topic(topics: dict[str, str], topic: str, option: str, types: Sequence[str]) -> str:
+    if topic not in topics:
+        listed = ", ".join(f"{t} ({m})" for t, m in sorted(topics.items())) or "none"
+        raise ValueError(f"{option}: topic {topic!r} is not in the bag; topics: {listed}")
+    if topics[topic] not in types:
+        raise ValueError(f"{option}: topic {topic!r} has type {topics[topic]}, expected {' or '.join(types)}")
+    return topics[topic]
+
+
+def _round_pose(values) -> tuple[float, ...]:
+    # 1e-9 m / rad: far below any sensor, and a pose read back from YAML or
+    # re-derived from a quaternion gives the very same number.
+    return tuple(round(float(v), 9) + 0.0 for v in values)
+
+
+def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic: str, right_topic: str,
+               camera_info_topics: tuple[str, str] | None = None, calibration: StereoCamera | None = None,
+               odom_topic: str | None = None, use_tf: bool = False, world_frame: str | None = None,
+               base_frame: str = "base_link", camera_frame: str | None = None, sync_tolerance_s: float = 0.02,
+               rig: RigMount | None = None, rectified: bool = False, progress: bool = True) -> BagExport:
+    """Write the stereo pairs of a bag as a dataset directory (manifest format, PNG images).
+
+    Parameters
+    ----------
+    bag : path
+        A ROS 1 ``.bag`` file or a ROS 2 bag directory (sqlite3 or mcap).
+    out_dir : path
+        New (or empty) directory; built beside it and renamed into place.
+    left_topic, right_topic : str
+        ``sensor_msgs/Image`` or ``CompressedImage`` topics.
+    camera_info_topics : (str, str), optional
+        Left and right ``CameraInfo`` topics. Default: ``calibration`` if
+        given, else ``<image topic namespace>/camera_info`` when present.
+    calibration : StereoCamera, optional
+        Use this calibration (a stereo YAML) instead of camera_info messages.
+    odom_topic : str, optional
+        ``nav_msgs/Odometry`` topic giving the robot pose.
+    use_tf : bool
+        Take the pose of ``base_frame`` in ``world_frame`` from ``/tf`` and
+        ``/tf_static`` instead.
+    world_frame : str, optional
+        TF world frame; default ``map`` when TF connects it to ``base_frame``,
+        else ``odom``.
+    base_frame : str
+        The robot's TF frame.
+    camera_frame : str, optional
+        TF frame of the stereo head whose heading in ``base_frame`` is the
+        head pan (default: pan 0).
+    sync_tolerance_s : float
+        Largest left/right stamp difference of a pair.
+    rig : RigMount, optional
+        Camera mount; default the calibration's ``rig:``, else estimated.
+    rectified : bool
+        The images are already rectified (written as ``left_rect``/``right_rect``).
+    progress : bool
+        tqdm progress bar on stderr.
+    """
+    from tqdm.auto import tqdm
+
+    from .world.dataset import MANIFEST_NAME, write_manifest
+
+    out_dir = Path(out_dir)
+    tolerance = _checks.finite_number("sync_tolerance_s", sync_tolerance_s, nonnegative=True)
+    if odom_topic is not None and use_tf:
+        raise ValueError("give an odometry topic or use TF for the pose, not both")
+    if left_topic == right_topic:
+        raise ValueError(f"left and right topics must differ, both are {left_topic!r}")
+    if calibration is not None and not isinstance(calibration, StereoCamera):
+        raise TypeError(f"calibration must be a StereoCamera, got {type(calibration).__name__}")
+    if rig is not None and not isinstance(rig, RigMount):
+        raise TypeError(f"rig must be a RigMount, got {type(rig).__name__}")
+    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
+        raise ValueError(f"output directory {out_dir} already exists and is not empty; choose a new directory")
+    with _open_bag(bag) as reader:
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        left_type = _require_topic(topics, left_topic, "left topic", IMAGE_TYPES)
+        right_type = _require_topic(topics, right_topic, "right topic", IMAGE_TYPES)
+        if calibration is None and camera_info_topics is None:
+            guess = tuple(t.rsplit("/", 1)[0] + "/camera_info" for t in (left_topic, right_topic))
+            if not all(t in topics for t in guess):
+                raise ValueError("no calibration: give the camera_info topics (left,right) or a stereo YAML "
+                                 f"(looked for {guess[0]} and {guess[1]})")
+            camera_info_topics = guess
+        if camera_info_topics is not None and calibration is None:
+            if len(camera_info_topics) != 2:
+                raise ValueError(f"camera_info_topics must be (left, right), got {camera_info_topics!r}")
+            for t, side in zip(camera_info_topics, ("left", "right")):
+                _require_topic(topics, t, f"{side} camera_info topic", (CAMERA_INFO_TYPE,))
+        if odom_topic is not None:
+            _require_topic(topics, odom_topic, "odometry topic", (ODOMETRY_TYPE,))
+        tf_topics = [t for t in TF_TOPICS if topics.get(t) in TF_TYPES]
+        if (use_tf or camera_frame is not None) and not tf_topics:
+            raise ValueError("TF requested but the bag has no /tf or /tf_static topic of type tf2_msgs/msg/TFMessage")
+
+        # pass 1: stamps of the images; calibration, odometry, TF
+        wanted = {left_topic, right_topic}
+        if calibration is None:
+            wanted |= set(camera_info_topics)
+        if odom_topic is not None:
+            wanted.add(odom_topic)
+        if use_tf or camera_frame is not None:
+            wanted |= set(tf_topics)
+        connections = [c for c in reader.connections if c.topic in wanted]
+        stamps: dict[str, list[int]] = {left_topic: [], right_topic: []}
+        infos: dict[str, object] = {}
+        odom_samples, odom_frames = [], set()
+        tf = TfTree()
+        for conn, bag_ns, raw in reader.messages(connections=connections):
+            if conn.topic in (left_topic, right_topic):
+                msg = reader.deserialize(raw, conn.msgtype)
+                stamps[conn.topic].append(_stamp_ns(msg, bag_ns))
+            elif camera_info_topics is not None and conn.topic in camera_info_topics:
+                if conn.topic not in infos:
+                    infos[conn.topic] = reader.deserialize(raw, conn.msgtype)
+            elif conn.topic == odom_topic:
+                msg = reader.deserialize(raw, conn.msgtype)
+                p, q = msg.pose.pose.position, msg.pose.pose.orientation
+                odom_samples.append((_stamp_ns(msg, bag_ns), (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)))
+                odom_frames.add((msg.header.frame_id, msg.child_frame_id))
+            elif conn.topic in tf_topics:
+                tf.add_message(reader.deserialize(raw, conn.msgtype), static=conn.topic == "/tf_static")
+        n_left, n_right = len(stamps[left_topic]), len(stamps[right_topic])
+        if n_left == 0 or n_right == 0:
+            raise ValueError(f"no images: {n_left} messages on {left_topic}, {n_right} on {right_topic}")
+        pairs = pair_by_stamp(stamps[left_topic], stamps[right_topic], tolerance_ns=int(round(tolerance * 1e9)))
+        if not pairs:
+            gaps = [abs(a - b) for a in stamps[left_topic][:50] for b in stamps[right_topic][:50]]
+            raise ValueError(f"no left/right image pairs within {tolerance} s ({n_left} left, {n_right} right "
+                             f"images; smallest stamp difference {min(gaps) / 1e9:.4f} s): "
+                             "raise --sync-tolerance")
+
+        if calibration is None:
+            missing = [t for t in camera_info_topics if t not in infos]
+            if missing:
+                raise ValueError(f"camera_info topic {missing[0]} has no messages")
+            calibration = stereo_from_camera_info(infos[camera_info_topics[0]], infos[camera_info_topics[1]])
+
+        # poses and pans at the left stamps
+        frame_stamps = [stamps[left_topic][i] for i, _ in pairs]
+        if odom_topic is not None:
+            if not odom_samples:
+                raise ValueError(f"odometry topic {odom_topic} has no messages")
+            track = TransformTrack.from_samples(odom_samples)
+            poses = [_pose_of(track.at(t)) for t in frame_stamps]
+            pose_source = f"odometry {odom_topic}"
+        elif use_tf:
+            if world_frame is None:
+                world_frame = "map"
+                try:
+                    tf.chain("map", base_frame)
+                except ValueError:
+                    world_frame = "odom"
+            tf.chain(world_frame, base_frame)
+            poses = [_pose_of(tf.lookup(world_frame, base_frame, t)) for t in frame_stamps]
+            pose_source = f"tf {world_frame} <- {base_frame}"
+        else:
+            poses = [(0.0, 0.0, 0.0)] * len(frame_stamps)
+            pose_source = "none (every frame at the origin)"
+        pans = [0.0] * len(frame_stamps)
+        if camera_frame is not None:
+            axis = 2 if "optical" in camera_frame else 0
+            pans = [_round_pose([_heading(tf.lookup(base_frame, camera_frame, t), axis)])[0] for t in frame_stamps]
+
+        # pass 2: decode and write the paired images
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
+        try:
+            keys = ("left_rect", "right_rect") if rectified else ("left", "right")
+            slot = {left_topic: {i: k for k, (i, _) in enumerate(pairs)},
+                    right_topic: {j: k for k, (_, j) in enumerate(pairs)}}
+            key_of = {left_topic: keys[0], right_topic: keys[1]}
+            type_of = {left_topic: left_type, right_topic: right_type}
+            count = {left_topic: 0, right_topic: 0}
+            image_conns = [c for c in reader.connections if c.topic in (left_topic, right_topic)]
+            bar = tqdm(total=2 * len(pairs), desc="exporting", unit="image", disable=not progress)
+            for conn, _, raw in reader.messages(connections=image_conns):
+                n = count[conn.topic]
+                count[conn.topic] += 1
+                k = slot[conn.topic].get(n)
+                if k is None:
+                    continue
+                image = image_from_message(reader.deserialize(raw, conn.msgtype), type_of[conn.topic])
+                if (image.shape[1], image.shape[0]) != tuple(calibration.size):
+                    raise ValueError(f"{conn.topic}: images are {image.shape[1]}x{image.shape[0]} but the "
+                                     f"calibration is {calibration.size[0]}x{calibration.size[1]}")
+                write_image(tmp / key_of[conn.topic] / f"{k:06d}.png", image)
+                bar.update(1)
+            bar.close()
+            rig_source = "calibration"
+            if rig is not None:
+                rig_source = "options"
+            elif calibration.rig is not None:
+                rig = calibration.rig
+            else:
+                rig, n_used = estimate_rig(tmp, calibration, n_frames=len(pairs), rectified=rectified)
+                rig_source = f"estimated from {n_used} frames"
+            write_stereo(tmp / CALIBRATION_NAME, calibration)
+            frames = []
+            for k in range(len(pairs)):
+                entry = {keys[0]: f"{keys[0]}/{k:06d}.png", keys[1]: f"{keys[1]}/{k:06d}.png",
+                         "pose": [float(v) for v in poses[k]], "pan_rad": float(pans[k])}
+                frames.append(entry)
+            source = {"bag": str(Path(bag).resolve()), "left_topic": left_topic, "right_topic": right_topic,
+                      "pose_source": pose_source, "rig_source": rig_source, "stamps_ns": frame_stamps}
+            write_manifest(tmp / MANIFEST_NAME, calibration=CALIBRATION_NAME, rig=rig, frames=frames,
+                           extra={"source": source})
+            if out_dir.exists():
+                out_dir.rmdir()
+            os.replace(tmp, out_dir)
+        finally:
+            if tmp.exists():
+                shutil.rmtree(tmp, ignore_errors=True)
+    return BagExport(out_dir=out_dir, n_frames=len(pairs), n_left=n_left, n_right=n_right,
+                     stamps_ns=tuple(frame_stamps), rig=rig, rig_source=rig_source, pose_source=pose_source)
+
+
+def _pose_of(T: np.ndarray) -> tuple[float, float, float]:
+    return _round_pose((T[0, 3], T[1, 3], yaw_from_matrix(T)))
+
+
+def _heading(T: np.ndarray, axis: int) -> float:
+    return math.atan2(T[1, axis], T[0, axis])
+
+
+def estimate_rig(dataset_dir: str | os.PathLike, stereo: StereoCamera, *, n_frames: int, rectified: bool = False,
+                 n_samples: int = 7) -> tuple[RigMount, int]:
+    """Camera height and tilt from the floor: median of V-disparity fits on a few frames.
+
+    Single fits can be far off (a frame looking down a long corridor, small
+    images); the median of ``n_samples`` evenly spread frames is robust to a
+    minority of those. Reads ``left/NNNNNN.png`` (or ``left_rect``) of ``dataset_dir``.
+
+    Returns
+    -------
+    (RigMount, int)
+        The mount and the number of frames whose fit succeeded.
+    """
+    from .geometry.pair import obstacles_from_pair
+    from .io import read_image
+
+    keys = ("left_rect", "right_rect") if rectified else ("left", "right")
+    picks = sorted(set(np.linspace(0, n_frames - 1, min(n_samples, n_frames)).round().astype(int).tolist()))
+    heights, tilts = [], []
+    for k in picks:
+        left, right = (read_image(Path(dataset_dir) / key / f"{k:06d}.png") for key in keys)
+        ground = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=None).obstacles.ground
+        if ground.success:
+            heights.append(ground.height_m)
+            tilts.append(ground.tilt_rad)
+    if not heights:
+        raise ValueError("could not estimate the camera mount from the floor in the images; "
+                         "give --height and --tilt (or a rig: entry in a stereo YAML)")
+    return RigMount(height_m=float(np.median(heights)), tilt_rad=float(np.median(tilts))), len(heights)
+
+
+@contextlib.contextmanager
+def exported_bag(bag: str | os.PathLike, **options) -> Iterator:
+    """Export a bag to a temporary dataset and yield its :class:`~mrstereo.world.dataset.Manifest`.
+
+    Options are those of :func:`export_bag`. The directory is removed at the
+    end of the block, e.g.::
+
+        with exported_bag("run.bag", left_topic=..., right_topic=..., odom_topic="/odom") as manifest:
+            run = build_map(manifest, workers=2)
+    """
+    from .world.dataset import read_manifest
+
+    with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
+        export_bag(bag, Path(tmp) / "dataset", **options)
+        yield read_manifest(Path(tmp) / "dataset")

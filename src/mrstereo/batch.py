@@ -1,0 +1,293 @@
+"""Many datasets at once: per-frame products and a map per dataset, resumable, on Dask.
+
+For every frame of every dataset (docs/dataset.md) :func:`run_batch` runs the
+chain of :func:`mrstereo.geometry.pair.scan_from_pair` (rectify -> match ->
+reject (eq. 13) -> 3D (eq. 14-16) -> scan) once and writes::
+
+    OUT/<dataset>/frames/NNNNNN.pfm        disparity after rejection (PFM, NaN -> inf)
+    OUT/<dataset>/frames/NNNNNN.ply        robot-frame point cloud with intensity
+    OUT/<dataset>/frames/NNNNNN.scan.json  virtual laser scan (ROS LaserScan fields)
+    OUT/<dataset>/frames/NNNNNN.obs.npz    the frame's world-frame obstacle / floor points
+    OUT/<dataset>/map/                     map.pgm, map.yaml, map.png, log_odds.npy, batch.json
+    OUT/summary.json                       per dataset counts, and every failed frame
+
+then fuses each dataset's frames in order into its map (the same map as
+``mrstereo map``, bit for bit). Frames of all datasets are spread over the
+workers of :func:`mrstereo.parallel.map_ordered`.
+
+Resumable: every file is written to a temporary name and renamed, so an
+interrupted run leaves complete files only; a re-run skips frames whose four
+files exist (their points are read back from ``.obs.npz``) and datasets whose
+map was completed without failures. A frame that raises is listed in
+``summary.json`` (and the map's ``batch.json``), the others go on, and the map
+is built from the frames that succeeded; the next run retries it.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .camera import RigMount, StereoCamera
+from .geometry import T_world_from_robot, transform_points
+from .geometry.pair import scan_from_pair
+from .geometry.ply import write_ply
+from .geometry.scan import write_scan_json
+from .io import atomic_write, read_image, write_disparity
+from .parallel import ItemFailure, map_ordered
+from .pipeline import FrameObservation, MapRun, PipelineConfig, fuse, write_map_outputs
+from .world.dataset import FrameRecord, Manifest, read_manifest
+
+__all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
+           "SUMMARY_NAME"]
+
+SUMMARY_NAME = "summary.json"
+_MAP_RECORD = "batch.json"
+
+
+def frame_outputs(frames_dir: str | os.PathLike, index: int) -> dict[str, Path]:
+    """The four files of frame ``index``: disparity, cloud, scan, observation."""
+    base = Path(frames_dir) / f"{index:06d}"
+    return {"disparity": base.with_suffix(".pfm"), "cloud": base.with_suffix(".ply"),
+            "scan": Path(f"{base}.scan.json"), "observation": Path(f"{base}.obs.npz")}
+
+
+@dataclass(frozen=True)
+class FrameTask:
+    """One frame to process (small and picklable: paths, not images)."""
+
+    record: FrameRecord
+    index: int
+    stereo: StereoCamera
+    rig: RigMount | None
+    config: PipelineConfig
+    frames_dir: Path
+    dataset: str
+    prefer_raw: bool = False
+
+
+def _frame_pair(record: FrameRecord, prefer_raw: bool) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The pair :func:`mrstereo.pipeline.observe_frame` uses: rectified when listed, unless ``prefer_raw``."""
+    if record.has_rectified and not (prefer_raw and record.has_raw):
+        return read_image(record.left_rect), read_image(record.right_rect), True
+    return read_image(record.left), read_image(record.right), False
+
+
+def _gray(image: np.ndarray) -> np.ndarray:
+    import cv2
+
+    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
+
+
+def process_frame(task: FrameTask) -> FrameObservation:
+    """Run the chain on one frame, write its four files, return what it adds to the map.
+
+    The observation equals :func:`mrstereo.pipeline.observe_frame`'s for the
+    same record and options.
+    """
+    cfg = task.config
+    left, right, rectified = _frame_pair(task.record, task.prefer_raw)
+    result = scan_from_pair(left, right, task.stereo, rectified=rectified, rig=task.rig,
+                            pan_rad=task.record.pan_rad, preset=cfg.preset, max_disparity_px=cfg.max_disparity_px,
+                            rejection=cfg.rejection, config=cfg.obstacles)
+    frame = result.frame
+    obs = frame.obstacles
+    T = T_world_from_robot(*task.record.pose)
+    observation = FrameObservation(
+        index=task.index, pose=tuple(float(v) for v in task.record.pose), pan_rad=float(task.record.pan_rad),
+        obstacle_points_world=transform_points(T, obs.obstacle_points_robot).astype(np.float32),
+        floor_points_world=transform_points(T, obs.floor_points_robot).astype(np.float32),
+        n_valid_disparity=int(np.isfinite(frame.disparity_px).sum()), ground_message=obs.message)
+    files = frame_outputs(task.frames_dir, task.index)
+    write_disparity(files["disparity"], frame.disparity_px)
+    write_ply(files["cloud"], obs.points_robot_image.reshape(-1, 3), intensity=_gray(frame.left_rect).ravel(),
+              comment=f"mrstereo {task.dataset} frame {task.index} (frame: robot, metres)")
+    write_scan_json(files["scan"], result.scan)
+    _save_observation(files["observation"], observation)
+    return observation
+
+
+def _save_observation(path: Path, obs: FrameObservation) -> None:
+    with atomic_write(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, index=obs.index, pose=np.array(obs.pose), pan_rad=obs.pan_rad,
+                 obstacle_points_world=obs.obstacle_points_world, floor_points_world=obs.floor_points_world,
+                 n_valid_disparity=obs.n_valid_disparity, ground_message=np.array(obs.ground_message))
+
+
+def _load_observation(path: Path) -> FrameObservation:
+    with np.load(path) as z:
+        return FrameObservation(index=int(z["index"]), pose=tuple(float(v) for v in z["pose"]),
+                                pan_rad=float(z["pan_rad"]), obstacle_points_world=z["obstacle_points_world"],
+                                floor_points_world=z["floor_points_world"],
+                                n_valid_disparity=int(z["n_valid_disparity"]),
+                                ground_message=str(z["ground_message"]))
+
+
+@dataclass(frozen=True)
+class DatasetSummary:
+    """What :func:`run_batch` did with one dataset."""
+
+    name: str
+    manifest: Path
+    out_dir: Path
+    n_frames: int
+    n_computed: int
+    n_skipped: int
+    n_failed: int
+    map_status: str = ""
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
+                "frames": self.n_frames, "computed": self.n_computed, "skipped": self.n_skipped,
+                "failed": self.n_failed, "map": self.map_status}
+
+
+@dataclass(frozen=True)
+class BatchSummary:
+    """Result of :func:`run_batch` (also written to ``OUT/summary.json``)."""
+
+    path: Path
+    datasets: tuple[DatasetSummary, ...]
+    failures: tuple[dict, ...] = field(default_factory=tuple)
+
+
+def _names(manifests: list[Manifest]) -> list[str]:
+    names, seen = [], {}
+    for m in manifests:
+        base = m.root.name or "dataset"
+        seen[base] = seen.get(base, 0) + 1
+        names.append(base if seen[base] == 1 else f"{base}_{seen[base]}")
+    return names
+
+
+def _map_done(map_dir: Path, n_frames: int) -> bool:
+    try:
+        record = json.loads((map_dir / _MAP_RECORD).read_text())
+    except (OSError, ValueError):
+        return False
+    return record.get("frames") == n_frames and not record.get("failed") and (map_dir / "log_odds.npy").is_file()
+
+
+def _write_map(run: MapRun, map_dir: Path, record: dict) -> None:
+    """Write the map outputs into a temporary directory and swap it into place."""
+    map_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".map.", suffix=".tmp", dir=map_dir.parent))
+    old = None
+    try:
+        write_map_outputs(run, tmp)
+        (tmp / _MAP_RECORD).write_text(json.dumps(record, indent=1) + "\n")
+        if map_dir.exists():
+            old = map_dir.with_name(f".map.old.{os.getpid()}")
+            os.replace(map_dir, old)
+        os.replace(tmp, map_dir)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None and old.exists():
+            shutil.rmtree(old, ignore_errors=True)
+
+
+def _map_run(manifest: Manifest, observations: list[FrameObservation], config: PipelineConfig) -> MapRun:
+    """Fuse in frame order and compare with the ground-truth map, as :func:`mrstereo.pipeline.build_map`."""
+    from .mapping import read_ros_map
+    from .mapping.metrics import map_metrics
+
+    occupancy = fuse(observations, grid=config.grid, config=config.mapping)
+    metrics, gt = None, None
+    if manifest.ground_truth_map is not None:
+        gt = read_ros_map(manifest.ground_truth_map)
+        if gt.grid.shape == occupancy.grid.shape and observations:
+            metrics = map_metrics(occupancy, gt, path_xy=np.array([o.pose for o in observations]))
+    return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
+                  ground_truth_map=gt)
+
+
+def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
+              maps: bool = True, workers: int | None = None, scheduler=None, progress: bool = True) -> BatchSummary:
+    """Process many datasets: per-frame files and one map per dataset (see the module docstring).
+
+    Parameters
+    ----------
+    manifests : sequence of path or Manifest
+        The datasets; all are read (and validated) before any work starts.
+    out_dir : path
+        Output root; created if needed, reused by a re-run.
+    config : PipelineConfig
+        Options of every stage (as for :func:`mrstereo.pipeline.build_map`).
+    maps : bool
+        Also fuse a map per dataset.
+    workers, scheduler
+        Where the frames run (:func:`mrstereo.parallel.map_ordered`).
+    progress : bool
+        A tqdm bar over all frames to compute.
+
+    Returns
+    -------
+    BatchSummary
+    """
+    if not isinstance(config, PipelineConfig):
+        raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
+    if isinstance(manifests, (str, os.PathLike, Manifest)):
+        manifests = [manifests]
+    datasets = [m if isinstance(m, Manifest) else read_manifest(m) for m in manifests]
+    if not datasets:
+        raise ValueError("no datasets given")
+    out = Path(out_dir)
+    for m in datasets:
+        if out.resolve() == m.root:
+            raise ValueError(f"output directory {out} is the dataset {m.root}; choose another one")
+    names = _names(datasets)
+
+    tasks, observations, skipped, done_maps = [], {}, {}, set()
+    for name, m in zip(names, datasets):
+        frames_dir = out / name / "frames"
+        frames_dir.mkdir(parents=True, exist_ok=True)
+        complete = [all(p.is_file() for p in frame_outputs(frames_dir, k).values()) for k in range(len(m.frames))]
+        if maps and all(complete) and _map_done(out / name / "map", len(m.frames)):
+            done_maps.add(name)
+        skipped[name] = sum(complete)
+        for k, record in enumerate(m.frames):
+            if complete[k]:
+                if maps and name not in done_maps:
+                    observations[(name, k)] = _load_observation(frame_outputs(frames_dir, k)["observation"])
+            else:
+                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, rig=m.rig, config=config,
+                                       frames_dir=frames_dir, dataset=name))
+
+    results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, progress=progress,
+                          desc="frames", unit="frame", return_exceptions=True,
+                          label=lambda t: f"{t.dataset} frame {t.index}")
+    failures = []
+    for task, result in zip(tasks, results):
+        if isinstance(result, ItemFailure):
+            failures.append({"dataset": task.dataset, "frame": task.index, "error": result.error})
+        else:
+            observations[(task.dataset, task.index)] = result
+
+    summaries = []
+    for name, m in zip(names, datasets):
+        failed = sorted(f["frame"] for f in failures if f["dataset"] == name)
+        computed = sum(1 for t in tasks if t.dataset == name) - len(failed)
+        status = ""
+        if maps:
+            if name in done_maps:
+                status = "kept"
+            else:
+                obs = [observations[(name, k)] for k in range(len(m.frames)) if (name, k) in observations]
+                run = _map_run(m, obs, config)
+                _write_map(run, out / name / "map", {"frames": len(m.frames), "fused": len(obs), "failed": failed})
+                status = "written" if not failed else f"written from {len(obs)} of {len(m.frames)} frames"
+        summaries.append(DatasetSummary(name=name, manifest=m.root / "manifest.yaml", out_dir=out / name,
+                                        n_frames=len(m.frames), n_computed=computed, n_skipped=skipped[name],
+                                        n_failed=len(failed), map_status=status))
+    path = out / SUMMARY_NAME
+    with atomic_write(path) as tmp:
+        tmp.write_text(json.dumps({"datasets": [s.to_dict() for s in summaries], "failures": failures,
+                                   "config": {"preset": config.preset, "fusion": config.mapping.fusion}},
+                                  indent=1) + "\n")
+    return BatchSummary(path=path, datasets=tuple(summaries), failures=tuple(failures))

@@ -1,0 +1,170 @@
+"""CLI of recordings and scale-out: ``mrstereo export`` (a ROS bag to a dataset directory) and
+``mrstereo batch`` (many datasets: per-frame disparity, cloud and scan, and a map each, on Dask).
+
+:func:`bag_options` is shared with ``mrstereo map --bag`` (cli/_pipeline.py). docs/scale-out.md.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import click
+
+__all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "rig_from_options"]
+
+
+def bag_options(func):
+    """Options naming the topics of a ROS bag (``--bag`` itself is added by the command)."""
+    options = [
+        click.option("--left-topic", help="Left image topic (sensor_msgs/Image or CompressedImage)."),
+        click.option("--right-topic", help="Right image topic."),
+        click.option("--camera-info-topics", metavar="LEFT,RIGHT",
+                     help="Left and right sensor_msgs/CameraInfo topics (default: <image ns>/camera_info; "
+                          "not needed with --calib)."),
+        click.option("--odom-topic", help="nav_msgs/Odometry topic giving the robot pose."),
+        click.option("--tf", "use_tf", is_flag=True,
+                     help="Take the robot pose from /tf and /tf_static (base frame in map, else odom)."),
+        click.option("--world-frame", default=None, help="TF world frame (default: map if connected, else odom)."),
+        click.option("--base-frame", default="base_link", show_default=True, help="TF frame of the robot."),
+        click.option("--camera-frame", default=None,
+                     help="TF frame of the stereo head: its heading in the base frame is the head pan "
+                          "(z axis of an *optical* frame, else x). Default: pan 0."),
+        click.option("--sync-tolerance", "sync_tolerance_s", type=float, default=0.02, show_default=True,
+                     help="Largest left/right stamp difference of a stereo pair [s]."),
+        click.option("--rectified-images", is_flag=True, help="The bag's images are already rectified."),
+        click.option("--height", "height_m", type=float, default=None,
+                     help="Camera height above the floor [m] (else the stereo YAML rig:, else estimated)."),
+        click.option("--tilt", "tilt_rad", type=float, default=None,
+                     help="Downward camera tilt [rad] (with --height)."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def worker_options(func):
+    """``--workers N`` / ``--scheduler ADDRESS`` (docs/scale-out.md)."""
+    func = click.option("--scheduler", default=None, metavar="ADDRESS",
+                        help="Run the per-frame work on an existing Dask cluster (tcp://host:8786); its "
+                             "workers must see the same files.")(func)
+    func = click.option("--workers", type=int, default=None,
+                        help="Run the per-frame work on a local Dask cluster of N worker processes "
+                             "(default: in this process).")(func)
+    return func
+
+
+def check_workers(workers, scheduler) -> None:
+    if workers is not None and scheduler is not None:
+        raise click.UsageError("give --workers or --scheduler, not both")
+    if workers is not None and workers < 1:
+        raise click.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
+
+
+def rig_from_options(height_m, tilt_rad):
+    """A RigMount from ``--height``/``--tilt`` (None when neither is given)."""
+    from ..camera import RigMount
+
+    for name, value in (("--height", height_m), ("--tilt", tilt_rad)):
+        if value is not None and not math.isfinite(value):
+            raise click.BadParameter(f"must be finite, got {value}", param_hint=name)
+    if height_m is None and tilt_rad is None:
+        return None
+    if height_m is None:
+        raise click.UsageError("--tilt needs --height")
+    return RigMount(height_m=height_m, tilt_rad=0.0 if tilt_rad is None else tilt_rad)
+
+
+def bag_export_kwargs(*, calib, left_topic, right_topic, camera_info_topics, odom_topic, use_tf, world_frame,
+                      base_frame, camera_frame, sync_tolerance_s, rectified_images, height_m, tilt_rad,
+                      quiet) -> dict:
+    """Validate the bag options and turn them into :func:`mrstereo.bag.export_bag` keywords."""
+    from ..camera import read_stereo
+
+    if not left_topic or not right_topic:
+        raise click.UsageError("--bag needs --left-topic and --right-topic")
+    if odom_topic and use_tf:
+        raise click.UsageError("give --odom-topic or --tf, not both")
+    if not math.isfinite(sync_tolerance_s) or sync_tolerance_s < 0:
+        raise click.BadParameter(f"must be a finite number >= 0, got {sync_tolerance_s}",
+                                 param_hint="--sync-tolerance")
+    info = None
+    if camera_info_topics:
+        info = tuple(t.strip() for t in camera_info_topics.split(","))
+        if len(info) != 2 or not all(info):
+            raise click.BadParameter(f"expected 'LEFT,RIGHT', got {camera_info_topics!r}",
+                                     param_hint="--camera-info-topics")
+    return dict(left_topic=left_topic, right_topic=right_topic, camera_info_topics=info,
+                calibration=read_stereo(calib) if calib is not None else None, odom_topic=odom_topic,
+                use_tf=use_tf, world_frame=world_frame, base_frame=base_frame, camera_frame=camera_frame,
+                sync_tolerance_s=sync_tolerance_s, rig=rig_from_options(height_m, tilt_rad),
+                rectified=rectified_images, progress=not quiet)
+
+
+def echo_export(result) -> None:
+    click.echo(f"bag: {result.n_frames} stereo pairs from {result.n_left} left / {result.n_right} right images; "
+               f"pose: {result.pose_source}; mount: height {result.rig.height_m:.3f} m, tilt "
+               f"{result.rig.tilt_rad:.3f} rad ({result.rig_source})", err=True)
+
+
+@click.command("export")
+@click.option("--bag", "bag", required=True, type=click.Path(path_type=Path),
+              help="ROS 1 .bag file or ROS 2 bag directory (sqlite3 or mcap).")
+@bag_options
+@click.option("--calib", "calib", type=click.Path(dir_okay=False, path_type=Path),
+              help="Stereo calibration YAML instead of the camera_info topics.")
+@click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="New dataset directory (manifest.yaml, stereo.yaml, left/, right/).")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
+    """Write the stereo pairs of a ROS bag as a dataset directory (docs/dataset.md).
+
+    Left and right images are paired by header stamp, the calibration comes
+    from camera_info (or --calib), the robot pose from --odom-topic or --tf.
+    Every command that reads a dataset MANIFEST then reads the recording.
+    """
+    from ..bag import export_bag
+
+    kwargs = bag_export_kwargs(quiet=quiet, **options)
+    result = export_bag(bag, out_dir, **kwargs)
+    echo_export(result)
+    click.echo(f"wrote {result.n_frames} frames to {out_dir} (manifest: {out_dir / 'manifest.yaml'})")
+
+
+@click.command("batch")
+@click.argument("manifests", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory: one folder per dataset and summary.json.")
+@worker_options
+@click.option("--preset", type=click.Choice(["robust", "paper"]), default="robust", show_default=True,
+              help="Matching preset.")
+@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default="log_odds", show_default=True,
+              help="Map fusion.")
+@click.option("--no-maps", is_flag=True, help="Only the per-frame outputs, no map per dataset.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def batch_command(manifests, out_dir: Path, workers, scheduler, preset: str, fusion: str, no_maps: bool,
+                  quiet: bool) -> None:
+    """Process many datasets: per frame a disparity (PFM), a point cloud (PLY) and a laser scan (JSON);
+    per dataset a map. Resumable: finished outputs are kept on a re-run, failed frames are retried.
+
+    Failures of single frames are listed in OUT/summary.json and the rest goes on;
+    the command then ends with an error line naming how many failed.
+    """
+    from ..mapping.occupancy import MappingConfig
+    from ..pipeline import PipelineConfig
+    from ..batch import run_batch
+
+    check_workers(workers, scheduler)
+    config = PipelineConfig(preset=preset, mapping=MappingConfig(fusion=fusion))
+    summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
+                        scheduler=scheduler, progress=not quiet)
+    for d in summary.datasets:
+        click.echo(f"{d.name}: {d.n_frames} frames ({d.n_computed} computed, {d.n_skipped} already done, "
+                   f"{d.n_failed} failed){'; map ' + d.map_status if d.map_status else ''}")
+    click.echo(f"wrote {out_dir} (summary: {summary.path})")
+    if summary.failures:
+        first = summary.failures[0]
+        raise RuntimeError(f"{len(summary.failures)} frame(s) failed, listed in {summary.path}; first: "
+                           f"{first['dataset']} frame {first['frame']}: {first['error']}")
+
+
+COMMANDS = [export_command, batch_command]

@@ -1,0 +1,283 @@
+"""Scale-out: an ordered parallel map, in-process or on a Dask cluster.
+
+Per-frame work of the chain (rectify, match, reject, triangulate) is
+independent from frame to frame; fusion into the grid is an ordered
+reduction. :func:`map_ordered` runs the independent part:
+
+- in this process (``workers=None, scheduler=None``, the default, so nothing
+  changes for a single user);
+- on a local ``dask.distributed.LocalCluster`` of ``workers`` single-threaded
+  worker processes (``workers=N``);
+- on an existing ``dask.distributed`` cluster (``scheduler="tcp://host:8786"``
+  or a ``distributed.Client``). Its workers must see the same files (the
+  dataset paths are sent, not the images) and have mrstereo installed.
+
+Results come back in input order, whatever order the workers finish in, so a
+reduction over them gives the same result for every worker count. Inside
+workers, numba and OpenCV run on one thread each (``NUMBA_NUM_THREADS=1``,
+``numba.set_num_threads(1)``, ``cv2.setNumThreads(1)``) so that N workers on
+N cores do not oversubscribe them. See docs/scale-out.md.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import traceback as _traceback
+import uuid
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from . import _checks
+
+__all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads"]
+
+_WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+               "OPENBLAS_NUM_THREADS": "1"}
+
+
+@dataclass(frozen=True)
+class ItemFailure:
+    """One item whose call raised (returned in its slot when ``return_exceptions=True``).
+
+    Attributes
+    ----------
+    index : int
+        Position of the item in the input.
+    item : str
+        A short description of the item (``label(item)``, else its ``repr``).
+    error : str
+        ``"ExceptionType: message"``.
+    traceback : str
+        The formatted traceback from the worker.
+    """
+
+    index: int
+    item: str
+    error: str
+    traceback: str = ""
+
+    def to_dict(self) -> dict:
+        return {"index": self.index, "item": self.item, "error": self.error}
+
+
+class ItemError(RuntimeError):
+    """Raised by :func:`map_ordered` when an item fails (``return_exceptions=False``).
+
+    Its message names the item; ``failure`` holds the :class:`ItemFailure` and
+    the original exception is chained as ``__cause__`` when it was raised in
+    this process.
+    """
+
+    def __init__(self, failure: ItemFailure):
+        super().__init__(f"item {failure.index} ({failure.item}) failed: {failure.error}")
+        self.failure = failure
+
+
+def limit_threads() -> None:
+    """Run numba and OpenCV kernels on one thread in the calling thread / process.
+
+    ``numba.set_num_threads`` is thread-local, so this is called at the start
+    of every task on a worker. ``cv2.setNumThreads`` is process-wide and is
+    changed only inside worker processes (never in the user's process).
+    """
+    try:
+        import numba
+        numba.set_num_threads(1)
+    except (ImportError, ValueError):        # pragma: no cover - numba is a dependency
+        pass
+    if os.environ.get("MRSTEREO_WORKER_PROCESS") == "1":
+        import cv2
+        cv2.setNumThreads(1)
+
+
+def _label(item: Any, label: Callable[[Any], str] | None) -> str:
+    if label is not None:
+        try:
+            return str(label(item))
+        except Exception:                       # a bad label must not hide the real error
+            pass
+    text = repr(item)
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+class _Task:
+    """Picklable wrapper run on the worker: limit threads, call ``func``."""
+
+    def __init__(self, func: Callable):
+        self.func = func
+
+    def __call__(self, item):
+        limit_threads()
+        return self.func(item)
+
+
+@contextlib.contextmanager
+def dask_client(*, workers: int | None = None, scheduler=None) -> Iterator[Any]:
+    """A ``distributed.Client`` for ``workers`` local processes or an existing ``scheduler``.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Start a ``LocalCluster(n_workers=workers, threads_per_worker=1,
+        processes=True)`` on loopback for the duration of the block.
+    scheduler : str or distributed.Client, optional
+        Address of a running scheduler (``tcp://127.0.0.1:8786``), or a client
+        to reuse (it is not closed at the end).
+
+    Yields
+    ------
+    distributed.Client
+    """
+    from distributed import Client, LocalCluster
+
+    if (workers is None) == (scheduler is None):
+        raise ValueError("give exactly one of workers or scheduler")
+    if scheduler is not None:
+        if isinstance(scheduler, Client):
+            yield scheduler
+            return
+        if not isinstance(scheduler, str) or not scheduler.strip():
+            raise ValueError(f"scheduler must be an address like 'tcp://127.0.0.1:8786', got {scheduler!r}")
+        _check_reachable(scheduler.strip())
+        try:
+            client = Client(scheduler.strip(), timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise OSError(f"cannot connect to the Dask scheduler at {scheduler}: {exc}") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    import dask
+
+    workers = _checks.positive_int("workers", workers)
+    env = dict(_WORKER_ENV, MRSTEREO_WORKER_PROCESS="1")
+    # distributed's nannies set MALLOC_TRIM_THRESHOLD_=65536 in their workers, which also fixes
+    # glibc's mmap threshold: every image-sized temporary then costs fresh page faults and a frame
+    # takes 2.3 times as long (measured). Leave glibc's adaptive defaults alone.
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=":0", env=env, silence_logs=logging.CRITICAL) as cluster, \
+            Client(cluster) as client:
+        yield client
+
+
+def _check_reachable(address: str) -> None:
+    """Fail at once (not after the client's retries) when nothing listens at a tcp:// address."""
+    import socket
+    from urllib.parse import urlsplit
+
+    if "://" not in address:
+        address = "tcp://" + address
+    parts = urlsplit(address)
+    if parts.scheme not in ("tcp", "tls") or parts.hostname is None:
+        return
+    try:
+        port = parts.port or 8786
+    except ValueError:
+        raise ValueError(f"scheduler address {address!r} has a bad port") from None
+    try:
+        socket.create_connection((parts.hostname, port), timeout=5).close()
+    except OSError as exc:
+        raise OSError(f"cannot connect to the Dask scheduler at {address}: {exc.strerror or exc}") from None
+
+
+def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: int | None = None,
+                scheduler=None, progress: bool = True, desc: str = "working",
+                return_exceptions: bool = False, label: Callable[[Any], str] | None = None,
+                unit: str = "item") -> list:
+    """``[func(item) for item in items]``, in parallel, results in input order.
+
+    Parameters
+    ----------
+    func : callable
+        A picklable function of one item (a module-level function or a
+        ``functools.partial`` of one) when it runs on workers.
+    items : iterable
+        Inputs, each picklable (keep them small: paths rather than images).
+    workers : int, optional
+        Run on a fresh local Dask cluster of this many single-threaded
+        worker processes (started and shut down inside the call).
+    scheduler : str or distributed.Client, optional
+        Run on an existing Dask cluster. With neither ``workers`` nor
+        ``scheduler`` everything runs in this process, one item after another.
+    progress : bool
+        Show a tqdm bar (stderr) that advances as items finish.
+    desc, unit : str
+        The bar's label and unit.
+    return_exceptions : bool
+        False: the first failing item raises :class:`ItemError` naming it.
+        True: a failing item's slot holds an :class:`ItemFailure` and the
+        others go on.
+    label : callable, optional
+        ``label(item) -> str`` names an item in errors (default ``repr``).
+
+    Returns
+    -------
+    list
+        One result (or ``ItemFailure``) per item, in input order.
+    """
+    from tqdm.auto import tqdm
+
+    if not callable(func):
+        raise TypeError(f"func must be callable, got {type(func).__name__}")
+    if workers is not None and scheduler is not None:
+        raise ValueError("give workers or scheduler, not both")
+    if workers is not None:
+        workers = _checks.positive_int("workers", workers)
+    items = list(items)
+
+    def new_bar():
+        return tqdm(total=len(items), desc=desc, unit=unit, disable=not progress or not items)
+
+    if workers is None and scheduler is None:
+        with new_bar() as bar:
+            return _map_local(func, items, bar, return_exceptions, label)
+    if not items:
+        return []
+    with dask_client(workers=workers, scheduler=scheduler) as client, new_bar() as bar:
+        return _map_dask(client, func, items, bar, return_exceptions, label, desc)
+
+
+def _map_local(func, items: Sequence, bar, return_exceptions: bool, label) -> list:
+    results = []
+    for k, item in enumerate(items):
+        try:
+            results.append(func(item))
+        except Exception as exc:
+            failure = ItemFailure(index=k, item=_label(item, label), error=f"{type(exc).__name__}: {exc}",
+                                  traceback=_traceback.format_exc())
+            if not return_exceptions:
+                raise ItemError(failure) from exc
+            results.append(failure)
+        bar.update(1)
+    return results
+
+
+def _map_dask(client, func, items: Sequence, bar, return_exceptions: bool, label, desc: str) -> list:
+    from distributed import as_completed
+
+    task = _Task(func)
+    token = uuid.uuid4().hex[:12]
+    futures = client.map(task, items, key=[f"{desc}-{k}-{token}" for k in range(len(items))])
+    slot = {f.key: k for k, f in enumerate(futures)}
+    results: list = [None] * len(items)
+    try:
+        for future in as_completed(futures):
+            k = slot[future.key]
+            if future.status == "error":
+                exc, tb = future.exception(), future.traceback()
+                failure = ItemFailure(index=k, item=_label(items[k], label), error=f"{type(exc).__name__}: {exc}",
+                                      traceback="".join(_traceback.format_tb(tb)) if tb is not None else "")
+                if not return_exceptions:
+                    raise ItemError(failure) from exc
+                results[k] = failure
+            else:
+                results[k] = future.result()
+            future.release()
+            bar.update(1)
+    finally:
+        client.cancel([f for f in futures if not f.done()])
+    return results

@@ -1,0 +1,341 @@
+"""ROS bags -> datasets and maps: bags written with rosbags from a synthetic dataset must map exactly
+like the dataset itself; pairing, odometry / TF interpolation, image decoding; bad input."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from mrstereo.bag import (TfTree, TransformTrack, bag_topics, camera_info_from_message, export_bag, exported_bag,
+                          image_from_message, pair_by_stamp, stereo_from_camera_info, yaw_from_matrix)
+from mrstereo.cli import entry
+from mrstereo.io import read_image
+from mrstereo.pipeline import build_map
+from mrstereo.world.dataset import read_manifest, write_manifest, write_synthetic_dataset
+
+rosbags = pytest.importorskip("rosbags")
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
+
+T0_NS = 1_700_000_000_000_000_000
+DT_NS = 100_000_000                 # 10 Hz
+RIGHT_LAG_NS = 3_000_000            # right images 3 ms after the left ones
+
+
+# ------------------------------------------------------------------------------ writing test bags
+
+def _typestore(ros1: bool):
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    if "tf2_msgs/msg/TFMessage" not in ts.types:
+        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    return ts
+
+
+class _Msgs:
+    """Build messages for one typestore (ROS 1 headers have a seq, camera_info K/D/R/P upper case)."""
+
+    def __init__(self, ts, ros1: bool):
+        self.ts, self.ros1, self.T = ts, ros1, ts.types
+
+    def header(self, stamp_ns: int, frame: str):
+        t = self.T["builtin_interfaces/msg/Time"](sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
+        if self.ros1:
+            return self.T["std_msgs/msg/Header"](seq=0, stamp=t, frame_id=frame)
+        return self.T["std_msgs/msg/Header"](stamp=t, frame_id=frame)
+
+    def image(self, img: np.ndarray, stamp_ns: int, frame: str, *, compressed: bool = False):
+        if compressed:
+            import cv2
+            ok, buf = cv2.imencode(".png", img)
+            return self.T["sensor_msgs/msg/CompressedImage"](header=self.header(stamp_ns, frame), format="png",
+                                                             data=buf.ravel())
+        enc = "mono8" if img.ndim == 2 else "bgr8"
+        ch = 1 if img.ndim == 2 else 3
+        return self.T["sensor_msgs/msg/Image"](header=self.header(stamp_ns, frame), height=img.shape[0],
+                                               width=img.shape[1], encoding=enc, is_bigendian=0,
+                                               step=img.shape[1] * ch, data=np.ascontiguousarray(img).ravel())
+
+    def camera_info(self, info, stamp_ns: int, frame: str):
+        cam = info.camera
+        fields = dict(D=np.asarray(cam.dist_coeffs, float), K=cam.K.ravel().astype(float),
+                      R=info.R.ravel().astype(float), P=info.P.ravel().astype(float))
+        if not self.ros1:
+            fields = {k.lower(): v for k, v in fields.items()}
+        roi = self.T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+        return self.T["sensor_msgs/msg/CameraInfo"](header=self.header(stamp_ns, frame), height=cam.height,
+                                                    width=cam.width, distortion_model="plumb_bob", binning_x=0,
+                                                    binning_y=0, roi=roi, **fields)
+
+    def _pose(self, x, y, yaw):
+        G = self.T
+        return (G["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                G["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)))
+
+    def odometry(self, pose, stamp_ns: int):
+        G = self.T
+        p, q = self._pose(*pose)
+        cov = np.zeros(36)
+        twist = G["geometry_msgs/msg/TwistWithCovariance"](
+            twist=G["geometry_msgs/msg/Twist"](linear=G["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+                                               angular=G["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)),
+            covariance=cov)
+        return G["nav_msgs/msg/Odometry"](
+            header=self.header(stamp_ns, "odom"), child_frame_id="base_link",
+            pose=G["geometry_msgs/msg/PoseWithCovariance"](pose=G["geometry_msgs/msg/Pose"](position=p,
+                                                                                             orientation=q),
+                                                           covariance=cov),
+            twist=twist)
+
+    def tf(self, items, stamp_ns: int):
+        G = self.T
+        out = []
+        for parent, child, (x, y, yaw) in items:
+            p, q = self._pose(x, y, yaw)
+            tr = G["geometry_msgs/msg/Transform"](translation=G["geometry_msgs/msg/Vector3"](x=p.x, y=p.y, z=0.0),
+                                                  rotation=q)
+            out.append(G["geometry_msgs/msg/TransformStamped"](header=self.header(stamp_ns, parent),
+                                                               child_frame_id=child, transform=tr))
+        return G["tf2_msgs/msg/TFMessage"](transforms=out)
+
+
+def write_bag(path: Path, manifest, *, ros1: bool, storage: str = "sqlite3", odom: bool = True, tf: bool = False,
+              compressed: bool = False, frames=None, right_lag_ns: int = RIGHT_LAG_NS) -> Path:
+    """Write the raw pairs of a manifest as a bag: images, camera_info, odometry and/or TF."""
+    ts = _typestore(ros1)
+    m = _Msgs(ts, ros1)
+    if ros1:
+        from rosbags.rosbag1 import Writer
+        writer = Writer(path)
+        serialize = ts.serialize_ros1
+    else:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        writer = Writer(path, version=9,
+                        storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
+        serialize = ts.serialize_cdr
+    img_type = "sensor_msgs/msg/CompressedImage" if compressed else "sensor_msgs/msg/Image"
+    records = manifest.frames if frames is None else [manifest.frames[k] for k in frames]
+    with writer:
+        conns = {}
+        for topic, typ in (("/stereo/left/image_raw", img_type), ("/stereo/right/image_raw", img_type),
+                           ("/stereo/left/camera_info", "sensor_msgs/msg/CameraInfo"),
+                           ("/stereo/right/camera_info", "sensor_msgs/msg/CameraInfo"),
+                           *((("/odom", "nav_msgs/msg/Odometry"),) if odom else ()),
+                           *((("/tf", "tf2_msgs/msg/TFMessage"), ("/tf_static", "tf2_msgs/msg/TFMessage"))
+                             if tf else ())):
+            conns[topic] = writer.add_connection(topic, typ, typestore=ts)
+
+        def put(topic, msg, t):
+            writer.write(conns[topic], t, serialize(msg, conns[topic].msgtype))
+
+        cal = manifest.calibration
+        if tf:
+            put("/tf_static", m.tf([("map", "odom", (0.0, 0.0, 0.0))], T0_NS - DT_NS), T0_NS - DT_NS)
+        for k, rec in enumerate(records):
+            t = T0_NS + k * DT_NS
+            put("/stereo/left/camera_info", m.camera_info(cal.left, t, "left"), t)
+            put("/stereo/right/camera_info", m.camera_info(cal.right, t + right_lag_ns, "right"), t + right_lag_ns)
+            if odom:
+                put("/odom", m.odometry(rec.pose, t), t)
+            if tf:
+                put("/tf", m.tf([("odom", "base_link", rec.pose),
+                                 ("base_link", "stereo_link", (0.0, 0.0, rec.pan_rad))], t), t)
+            put("/stereo/left/image_raw", m.image(read_image(rec.left), t, "left", compressed=compressed), t)
+            put("/stereo/right/image_raw", m.image(read_image(rec.right), t + right_lag_ns, "right",
+                                                   compressed=compressed), t + right_lag_ns)
+    return path
+
+
+TOPICS = dict(left_topic="/stereo/left/image_raw", right_topic="/stereo/right/image_raw",
+              camera_info_topics=("/stereo/left/camera_info", "/stereo/right/camera_info"))
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bagdata") / "synth"
+    return read_manifest(write_synthetic_dataset(out, seed=4, n_frames=6, width=160, height=120, supersample=1,
+                                                 progress=False))
+
+
+@pytest.fixture(scope="module")
+def reference(dataset):
+    """The map of the raw pairs of the manifest."""
+    return build_map(dataset, prefer_raw=True, progress=False).grid.log_odds
+
+
+def _same(a, b) -> bool:
+    return np.array_equal(a, b, equal_nan=True)
+
+
+def _rig_options(dataset):
+    return {"rig": dataset.rig}
+
+
+# ------------------------------------------------------------------------------------ end to end
+
+def test_ros2_bag_with_tf_maps_exactly_like_the_manifest(dataset, reference, tmp_path):
+    bag = write_bag(tmp_path / "run2", dataset, ros1=False, odom=False, tf=True)
+    assert bag_topics(bag)["/tf"] == "tf2_msgs/msg/TFMessage"
+    with exported_bag(bag, **TOPICS, use_tf=True, camera_frame="stereo_link", progress=False,
+                      **_rig_options(dataset)) as manifest:
+        assert [f.pose for f in manifest.frames] == [f.pose for f in dataset.frames]
+        assert [f.pan_rad for f in manifest.frames] == [f.pan_rad for f in dataset.frames]
+        run = build_map(manifest, progress=False)
+    assert run.grid.n_updates == len(dataset.frames)
+    assert _same(run.grid.log_odds, reference)
+
+
+def test_ros1_bag_with_odometry_maps_like_the_manifest_subset(dataset, tmp_path):
+    front = [0, 3]                                  # the frames looking ahead (pan 0): odometry gives no pan
+    bag = write_bag(tmp_path / "run1.bag", dataset, ros1=True, odom=True, frames=front)
+    subset = tmp_path / "subset.yaml"
+    write_manifest(subset, calibration=str(dataset.calibration_path), rig=dataset.rig,
+                   frames=[{"left": str(dataset.frames[k].left), "right": str(dataset.frames[k].right),
+                            "pose": list(dataset.frames[k].pose)} for k in front])
+    expected = build_map(subset, progress=False).grid.log_odds
+    images = {k: TOPICS[k] for k in ("left_topic", "right_topic")}      # camera_info found beside the images
+    with exported_bag(bag, **images, odom_topic="/odom", progress=False, **_rig_options(dataset)) as manifest:
+        run = build_map(manifest, progress=False)
+    assert _same(run.grid.log_odds, expected)
+
+
+def test_mcap_compressed_bag_and_export_then_map(dataset, reference, tmp_path):
+    bag = write_bag(tmp_path / "runmcap", dataset, ros1=False, storage="mcap", odom=False, tf=True,
+                    compressed=True)
+    out = tmp_path / "exported"
+    result = export_bag(bag, out, **TOPICS, use_tf=True, camera_frame="stereo_link", progress=False,
+                        **_rig_options(dataset))
+    assert result.n_frames == 6 and result.pose_source == "tf map <- base_link"
+    assert result.stamps_ns == tuple(T0_NS + k * DT_NS for k in range(6))
+    data = yaml.safe_load((out / "manifest.yaml").read_text())
+    assert data["calibration"] == "stereo.yaml" and data["source"]["left_topic"] == TOPICS["left_topic"]
+    manifest = read_manifest(out)
+    for a, b in zip(manifest.frames, dataset.frames):             # lossless PNG round trip
+        assert np.array_equal(read_image(a.left), read_image(b.left))
+    assert _same(build_map(out, progress=False).grid.log_odds, reference)
+
+
+def test_cli_map_and_export_from_a_bag(dataset, reference, tmp_path, capsys):
+    bag = write_bag(tmp_path / "cli.bag", dataset, ros1=True, odom=False, tf=True)
+    common = ["--bag", str(bag), "--left-topic", TOPICS["left_topic"], "--right-topic", TOPICS["right_topic"],
+              "--camera-info-topics", ",".join(TOPICS["camera_info_topics"]), "--tf", "--camera-frame",
+              "stereo_link", "--height", str(dataset.rig.height_m), "--tilt", str(dataset.rig.tilt_rad)]
+    assert entry(["map", *common, "-o", str(tmp_path / "m"), "--quiet"]) == 0
+    assert _same(np.load(tmp_path / "m" / "log_odds.npy"), reference)
+    assert entry(["export", *common, "-o", str(tmp_path / "ds"), "--quiet"]) == 0
+    assert entry(["map", str(tmp_path / "ds"), "-o", str(tmp_path / "m2"), "--quiet"]) == 0
+    assert _same(np.load(tmp_path / "m2" / "log_odds.npy"), reference)
+
+
+def test_mount_is_estimated_when_not_given(tmp_path):
+    # the floor fit needs the 320x240 rig; camera_info carries no mount
+    data = read_manifest(write_synthetic_dataset(tmp_path / "d", seed=2, n_frames=5, supersample=1, progress=False))
+    bag = write_bag(tmp_path / "est", data, ros1=False)
+    result = export_bag(bag, tmp_path / "out", **TOPICS, odom_topic="/odom", progress=False)
+    assert result.rig_source == "estimated from 5 frames"
+    # median of single-frame V-disparity fits (each off by up to 0.17 m / 0.11 rad here)
+    assert result.rig.height_m == pytest.approx(data.rig.height_m, abs=0.06)
+    assert result.rig.tilt_rad == pytest.approx(data.rig.tilt_rad, abs=0.05)
+    assert read_manifest(tmp_path / "out").rig == result.rig
+
+
+# ------------------------------------------------------------------------------------- bad input
+
+def test_bad_bag_input_gives_clear_errors(dataset, tmp_path, capsys):
+    bag = write_bag(tmp_path / "bad", dataset, ros1=False, frames=[0, 1])
+    with pytest.raises(FileNotFoundError, match="bag not found"):
+        export_bag(tmp_path / "missing.bag", tmp_path / "o1", **TOPICS)
+    with pytest.raises(ValueError, match="topic '/nope' is not in the bag; topics: .*/odom"):
+        export_bag(bag, tmp_path / "o2", **{**TOPICS, "left_topic": "/nope"})
+    with pytest.raises(ValueError, match="type sensor_msgs/msg/CameraInfo, expected"):
+        export_bag(bag, tmp_path / "o3", **{**TOPICS, "left_topic": "/stereo/left/camera_info"})
+    with pytest.raises(ValueError, match="no left/right image pairs within 0.001 s"):
+        export_bag(bag, tmp_path / "o4", **TOPICS, sync_tolerance_s=0.001, progress=False)
+    with pytest.raises(ValueError, match="TF requested but the bag has no /tf"):
+        export_bag(bag, tmp_path / "o5", **TOPICS, use_tf=True)
+    assert not any(p.name.startswith(("o", ".o")) for p in tmp_path.iterdir())      # nothing half-written
+    (tmp_path / "corrupt.bag").write_text("hello")
+    with pytest.raises(ValueError, match="cannot read bag .*corrupt.bag: File magic is invalid"):
+        bag_topics(tmp_path / "corrupt.bag")
+    (tmp_path / "notabag.txt").write_text("hello")
+    code = entry(["export", "--bag", str(tmp_path / "notabag.txt"), "--left-topic", "/a", "--right-topic", "/b",
+                  "-o", str(tmp_path / "o6")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "is not a bag" in err[0]
+    code = entry(["map", "--bag", str(bag), "--left-topic", "/nope", "--right-topic", TOPICS["right_topic"],
+                  "-o", str(tmp_path / "o7")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("mrstereo: error: left topic: topic '/nope'")
+
+
+# ------------------------------------------------------------------------------------- unit parts
+
+def test_pair_by_stamp_is_one_to_one_and_closest_first():
+    left = [0, 100, 200, 300]
+    right = [5, 96, 104, 390]
+    assert pair_by_stamp(left, right, tolerance_ns=10) == [(0, 0), (1, 1)]   # 104 is farther from 100 than 96
+    assert pair_by_stamp(left, right, tolerance_ns=100) == [(0, 0), (1, 1), (2, 2), (3, 3)]
+    assert pair_by_stamp(left, [], tolerance_ns=10) == []
+
+
+def test_odometry_interpolation_and_yaw_wrap():
+    q = lambda yaw: (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))  # noqa: E731
+    track = TransformTrack.from_samples([(1000, (1.0, 2.0, 0.0), q(3.0)), (0, (0.0, 0.0, 0.0), q(-3.0))])
+    T = track.at(250)
+    assert T[0, 3] == pytest.approx(0.25) and T[1, 3] == pytest.approx(0.5)
+    # from -3.0 to 3.0 rad the short way goes through +-pi: a quarter of the 0.283 rad step
+    expected = -3.0 - 0.25 * (2 * math.pi - 6.0)
+    assert yaw_from_matrix(T) == pytest.approx(expected, abs=1e-9)
+    assert yaw_from_matrix(track.at(-50)) == pytest.approx(-3.0)          # held before the first sample
+    assert track.at(5000)[0, 3] == 1.0                                     # and after the last
+
+
+def test_tf_chain_composes_static_and_dynamic_edges():
+    tree = TfTree()
+    c, s = math.cos(math.pi / 2), math.sin(math.pi / 2)
+    tree.add("map", "odom", 0, (10.0, 0.0, 0.0), (0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4)))
+    tree.add("odom", "base_link", 0, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+    tree.add("odom", "base_link", 100, (3.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+    T = tree.lookup("map", "base_link", 50)                 # base at x=2 in odom; odom turned 90 deg in map
+    assert T[:2, 3] == pytest.approx([10.0, 2.0])
+    assert yaw_from_matrix(T) == pytest.approx(math.pi / 2)
+    assert (c, s) == pytest.approx((0.0, 1.0))
+    with pytest.raises(ValueError, match="no chain from 'map' down to 'camera'"):
+        tree.lookup("map", "camera", 0)
+
+
+def test_image_messages_decode_to_opencv_layout():
+    ts = _typestore(False)
+    m = _Msgs(ts, False)
+    rgb = np.zeros((3, 4, 3), np.uint8)
+    rgb[..., 0] = 200                                      # red in RGB order
+    padded = np.zeros((3, 16), np.uint8)
+    padded[:, :12] = rgb.reshape(3, 12)                     # step 16 > width * 3
+    msg = ts.types["sensor_msgs/msg/Image"](header=m.header(0, "c"), height=3, width=4, encoding="rgb8",
+                                            is_bigendian=0, step=16, data=padded.ravel())
+    bgr = image_from_message(msg, "sensor_msgs/msg/Image")
+    assert bgr.shape == (3, 4, 3) and (bgr[..., 2] == 200).all() and (bgr[..., :2] == 0).all()
+    msg16 = ts.types["sensor_msgs/msg/Image"](header=m.header(0, "c"), height=3, width=4, encoding="mono16",
+                                              is_bigendian=0, step=8, data=np.zeros(24, np.uint8))
+    with pytest.raises(ValueError, match="encoding 'mono16' is not supported"):
+        image_from_message(msg16, "sensor_msgs/msg/Image")
+    gray = np.arange(12, dtype=np.uint8).reshape(3, 4)
+    assert np.array_equal(image_from_message(m.image(gray, 0, "c", compressed=True),
+                                             "sensor_msgs/msg/CompressedImage"), gray)
+
+
+def test_camera_info_messages_round_trip_the_calibration(dataset):
+    for ros1 in (True, False):
+        m = _Msgs(_typestore(ros1), ros1)
+        cal = dataset.calibration
+        stereo = stereo_from_camera_info(m.camera_info(cal.left, 0, "l"), m.camera_info(cal.right, 0, "r"))
+        for a, b in ((stereo.left, cal.left), (stereo.right, cal.right)):
+            assert np.array_equal(a.P, b.P) and np.array_equal(a.R, b.R) and np.array_equal(a.camera.K, b.camera.K)
+            assert (a.camera.k1, a.camera.k2) == (b.camera.k1, b.camera.k2)
+        assert stereo.baseline_m == pytest.approx(cal.baseline_m)
+    bad = m.camera_info(cal.left, 0, "l")
+    bad.p[3] = 0.0
+    with pytest.raises(ValueError, match="P\\[0,3\\]"):
+        stereo_from_camera_info(bad, bad)
+    assert camera_info_from_message(m.camera_info(cal.left, 0, "l")).camera.width == 160

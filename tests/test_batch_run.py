@@ -1,0 +1,120 @@
+"""mrstereo batch: per-frame files and maps of several datasets, resumable, failures listed, on Dask."""
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from mrstereo.batch import SUMMARY_NAME, frame_outputs, run_batch
+from mrstereo.cli import entry
+from mrstereo.geometry import read_ply, read_scan_json
+from mrstereo.geometry.pair import scan_from_pair
+from mrstereo.io import read_disparity, read_image
+from mrstereo.pipeline import build_map
+from mrstereo.world.dataset import read_manifest, write_synthetic_dataset
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory):
+    root = tmp_path_factory.mktemp("batch")
+    return [write_synthetic_dataset(root / name, seed=seed, n_frames=3, width=160, height=120, supersample=1,
+                                    progress=False) for name, seed in (("alpha", 1), ("beta", 2))]
+
+
+def _tree(path):
+    return {p.relative_to(path): p.stat().st_mtime_ns for p in path.rglob("*") if p.is_file()}
+
+
+def test_batch_writes_frames_and_maps_equal_to_the_single_commands(datasets, tmp_path):
+    out = tmp_path / "out"
+    summary = run_batch(datasets, out, progress=False)
+    assert [d.name for d in summary.datasets] == ["alpha", "beta"]
+    assert all(d.n_computed == 3 and d.n_failed == 0 and d.map_status == "written" for d in summary.datasets)
+    m = read_manifest(datasets[0])
+    files = frame_outputs(out / "alpha" / "frames", 1)
+    rec = m.frames[1]
+    ref = scan_from_pair(read_image(rec.left_rect), read_image(rec.right_rect), m.calibration, rectified=True,
+                         rig=m.rig, pan_rad=rec.pan_rad)
+    assert np.array_equal(read_disparity(files["disparity"]), ref.frame.disparity_px, equal_nan=True)
+    assert np.allclose(read_scan_json(files["scan"]).ranges_m, ref.scan.ranges_m, equal_nan=True)
+    cloud = read_ply(files["cloud"])
+    assert cloud.points.shape == ref.frame.obstacles.points_robot.shape and cloud.intensity is not None
+    for name, path in zip(("alpha", "beta"), datasets):
+        expected = build_map(path, progress=False).grid.log_odds
+        assert np.array_equal(np.load(out / name / "map" / "log_odds.npy"), expected, equal_nan=True)
+        assert (out / name / "map" / "map.yaml").is_file()
+    data = json.loads((out / SUMMARY_NAME).read_text())
+    assert data["failures"] == [] and data["datasets"][1]["frames"] == 3
+    assert not [p for p in out.rglob("*") if ".tmp" in p.name]                # no temporary leftovers
+
+
+def test_rerun_skips_finished_outputs_and_redoes_missing_ones(datasets, tmp_path):
+    out = tmp_path / "out"
+    run_batch(datasets, out, progress=False)
+    before = _tree(out)
+    again = run_batch(datasets, out, progress=False)
+    assert all(d.n_computed == 0 and d.n_skipped == 3 and d.map_status == "kept" for d in again.datasets)
+    after = _tree(out)
+    assert {k: v for k, v in after.items() if k.name != SUMMARY_NAME} == \
+        {k: v for k, v in before.items() if k.name != SUMMARY_NAME}
+    frame_outputs(out / "beta" / "frames", 2)["cloud"].unlink()            # an interrupted frame
+    third = run_batch(datasets, out, progress=False)
+    beta = third.datasets[1]
+    assert (beta.n_computed, beta.n_skipped, beta.map_status) == (1, 2, "written")
+    assert third.datasets[0].map_status == "kept"
+    expected = build_map(datasets[1], progress=False).grid.log_odds
+    assert np.array_equal(np.load(out / "beta" / "map" / "log_odds.npy"), expected, equal_nan=True)
+    unchanged = frame_outputs(out / "beta" / "frames", 0)["disparity"].relative_to(out)
+    assert _tree(out)[unchanged] == before[unchanged]
+
+
+def test_failed_frame_is_listed_the_rest_goes_on_and_a_rerun_retries_it(datasets, tmp_path, capsys):
+    broken = tmp_path / "gamma"
+    shutil.copytree(datasets[0], broken)
+    image = read_manifest(broken).frames[1].left_rect
+    good = image.read_bytes()
+    image.write_bytes(b"not a png")
+    out = tmp_path / "out"
+    code = entry(["batch", str(broken), str(datasets[1]), "-o", str(out), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert err[0].startswith("mrstereo: error: 1 frame(s) failed") and "gamma frame 1" in err[0]
+    data = json.loads((out / SUMMARY_NAME).read_text())
+    assert data["failures"][0]["frame"] == 1 and "cannot decode image" in data["failures"][0]["error"]
+    assert data["datasets"][0]["map"] == "written from 2 of 3 frames" and data["datasets"][1]["failed"] == 0
+    assert not frame_outputs(out / "gamma" / "frames", 1)["disparity"].exists()
+    assert frame_outputs(out / "gamma" / "frames", 2)["disparity"].exists()
+    image.write_bytes(good)
+    summary = run_batch([broken, datasets[1]], out, progress=False)
+    assert (summary.datasets[0].n_computed, summary.datasets[0].map_status) == (1, "written")
+    assert summary.failures == ()
+    expected = build_map(broken, progress=False).grid.log_odds
+    assert np.array_equal(np.load(out / "gamma" / "map" / "log_odds.npy"), expected, equal_nan=True)
+
+
+def test_batch_on_a_dask_cluster_gives_the_same_files(datasets, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    local = tmp_path / "local"
+    run_batch(datasets[:1], local, progress=False)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",
+                                  host="127.0.0.1", dashboard_address=":0") as cluster:
+        summary = run_batch(datasets[:1], tmp_path / "dask", scheduler=cluster.scheduler_address, progress=False)
+    assert summary.datasets[0].n_computed == 3
+    for k in range(3):
+        a, b = frame_outputs(local / "alpha" / "frames", k), frame_outputs(tmp_path / "dask" / "alpha" / "frames", k)
+        for key in ("disparity", "cloud", "scan"):
+            assert a[key].read_bytes() == b[key].read_bytes(), (k, key)
+    assert np.array_equal(np.load(local / "alpha" / "map" / "log_odds.npy"),
+                          np.load(tmp_path / "dask" / "alpha" / "map" / "log_odds.npy"), equal_nan=True)
+
+
+def test_bad_batch_input(datasets, tmp_path, capsys):
+    with pytest.raises(FileNotFoundError, match="dataset manifest not found"):
+        run_batch([datasets[0], tmp_path / "nothing"], tmp_path / "o", progress=False)
+    assert not (tmp_path / "o").exists()                    # validated before any work
+    with pytest.raises(ValueError, match="is the dataset"):
+        run_batch([datasets[0]], datasets[0], progress=False)
+    code = entry(["batch", str(datasets[0]), "-o", str(tmp_path / "o2"), "--workers", "0"])
+    assert code == 2 and "--workers" in capsys.readouterr().err
