@@ -68,3 +68,17 @@ def test_mismatched_grids_raise():
         map_metrics(corridor(), other)
     with pytest.raises(TypeError, match="estimated"):
         map_metrics(np.zeros((120, 240)), corridor())
+
+
+def test_recall_counts_only_the_visible_faces_of_thick_walls():
+    from mrstereo.mapping import GridSpec, RosMap, map_metrics
+
+    grid = GridSpec(width_m=1.0, height_m=1.0, resolution_m=0.1, origin_x_m=0.0, origin_y_m=0.0)
+    truth = np.full(grid.shape, np.nan)
+    truth[:, :6] = 0.0          # free corridor
+    truth[:, 6:] = 1.0          # a wall four cells thick, its far side unknown to any sensor
+    seen = np.full(grid.shape, np.nan)
+    seen[:, :6] = 0.0
+    seen[:, 6] = 1.0            # the camera sees the wall's face only
+    m = map_metrics(RosMap(seen, grid), RosMap(truth, grid), tolerance_cells=0)
+    assert m.recall == 1.0 and m.true_occupied_cells == 10 and m.precision == 1.0

@@ -34,13 +34,13 @@ from pathlib import Path
 import numpy as np
 
 from .camera import RigMount, StereoCamera
-from .geometry import T_world_from_robot, transform_points
 from .geometry.pair import scan_from_pair
 from .geometry.ply import write_ply
 from .geometry.scan import write_scan_json
-from .io import atomic_write, read_image, write_disparity
+from .io import atomic_write, write_disparity
 from .parallel import ItemFailure, map_ordered
-from .pipeline import FrameObservation, MapRun, PipelineConfig, fuse, write_map_outputs
+from .pipeline import (FrameObservation, MapRun, PipelineConfig, frame_pair, fuse, observation_from_pair,
+                       pair_options, write_map_outputs)
 from .world.dataset import FrameRecord, Manifest, read_manifest
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
@@ -71,13 +71,6 @@ class FrameTask:
     prefer_raw: bool = False
 
 
-def _frame_pair(record: FrameRecord, prefer_raw: bool) -> tuple[np.ndarray, np.ndarray, bool]:
-    """The pair :func:`mrstereo.pipeline.observe_frame` uses: rectified when listed, unless ``prefer_raw``."""
-    if record.has_rectified and not (prefer_raw and record.has_raw):
-        return read_image(record.left_rect), read_image(record.right_rect), True
-    return read_image(record.left), read_image(record.right), False
-
-
 def _gray(image: np.ndarray) -> np.ndarray:
     import cv2
 
@@ -90,19 +83,12 @@ def process_frame(task: FrameTask) -> FrameObservation:
     The observation equals :func:`mrstereo.pipeline.observe_frame`'s for the
     same record and options.
     """
-    cfg = task.config
-    left, right, rectified = _frame_pair(task.record, task.prefer_raw)
+    left, right, rectified = frame_pair(task.record, prefer_raw=task.prefer_raw)
     result = scan_from_pair(left, right, task.stereo, rectified=rectified, rig=task.rig,
-                            pan_rad=task.record.pan_rad, preset=cfg.preset, max_disparity_px=cfg.max_disparity_px,
-                            rejection=cfg.rejection, config=cfg.obstacles)
+                            pan_rad=task.record.pan_rad, **pair_options(task.config))
     frame = result.frame
     obs = frame.obstacles
-    T = T_world_from_robot(*task.record.pose)
-    observation = FrameObservation(
-        index=task.index, pose=tuple(float(v) for v in task.record.pose), pan_rad=float(task.record.pan_rad),
-        obstacle_points_world=transform_points(T, obs.obstacle_points_robot).astype(np.float32),
-        floor_points_world=transform_points(T, obs.floor_points_robot).astype(np.float32),
-        n_valid_disparity=int(np.isfinite(frame.disparity_px).sum()), ground_message=obs.message)
+    observation = observation_from_pair(frame, task.record, index=task.index)
     files = frame_outputs(task.frames_dir, task.index)
     write_disparity(files["disparity"], frame.disparity_px)
     write_ply(files["cloud"], obs.points_robot_image.reshape(-1, 3), intensity=_gray(frame.left_rect).ravel(),

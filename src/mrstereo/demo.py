@@ -18,7 +18,7 @@ import json
 import math
 import os
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -90,12 +90,11 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     from .camera import write_stereo
     from .geometry.obstacles import detect_obstacles
     from .geometry.scan import laser_scan_from_points, plot_top_view, scan_angles_of_camera
-    from .mapping import plan_path, read_ros_map, write_ros_map
+    from .mapping import plan_path, read_ros_map
     from .mapping.figures import plot_map
     from .mapping.metrics import map_metrics
-    from .mapping.occupancy import MappingConfig
-    from .matching import compute_disparity, make_plan
-    from .pipeline import PipelineConfig, build_map, fuse, fov_views, write_map_outputs
+    from .matching import compute_disparity
+    from .pipeline import PipelineConfig, build_map, fuse, write_map_outputs
     from .rejection import reject_uniform
     from .world.figures import save_stereo_figure
     from .world import (default_stereo, read_manifest, render_calibration_views, render_paper_dot_target,
@@ -205,7 +204,7 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     t0 = time.perf_counter()
     config = PipelineConfig()
     run = build_map(manifest, config=config, calibration=estimated, progress=False)
-    union = fuse(run.observations, grid=config.grid, config=MappingConfig(fusion="union"))
+    union = fuse(run.observations, grid=config.grid, config=config.with_fusion("union").mapping)
     metrics["map"] = run.metrics.to_dict() if run.metrics is not None else None
     metrics["map_union"] = map_metrics(union, gt_map, path_xy=path_xy).to_dict()
     done("mapping", t0)

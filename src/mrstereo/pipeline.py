@@ -16,21 +16,21 @@ import json
 import math
 import os
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from . import _checks
 from .camera import StereoCamera
 from .geometry import T_world_from_robot, transform_points
 from .geometry.obstacles import ObstacleConfig
-from .geometry.pair import obstacles_from_pair
+from .geometry.pair import PairObstacles, obstacles_from_pair
 from .io import atomic_write, read_image
 from .mapping import GridSpec, read_ros_map, write_ros_map
 from .mapping.figures import plot_map
 from .mapping.metrics import MapMetrics, map_metrics
 from .mapping.occupancy import MappingConfig, OccupancyGrid
+from .matching.config import MatchingConfig
 from .rejection import RejectionConfig
 from .world.dataset import FrameRecord, Manifest, read_manifest
 
@@ -48,22 +48,34 @@ class PipelineConfig:
         Matching preset (``"robust"`` or the paper's exact ``"paper"``).
     max_disparity_px : float, optional
         Overrides the disparity search derived from the calibration's depth bands.
+    matching : MatchingConfig, optional
+        Full matcher configuration (overrides ``preset``).
     rejection : RejectionConfig
         Eq. (13) texture / ground suppression.
     obstacles : ObstacleConfig
-        Height band, range limit and floor estimation.
+        Height band, range limit and floor estimation. Mapping keeps points within 4 m (the
+        paper: floor and objects are told apart up to about 4 m; beyond, one pixel of disparity
+        error is more than half a metre at 320x240).
     mapping : MappingConfig
-        Sensor model and fusion (log-odds or the paper's union).
+        Sensor model and fusion (log-odds or the paper's union). Defaults chosen by measurement
+        on the synthetic corridor (two seeds, ``benchmarks/bench_map.py``): a cell needs 5
+        obstacle points of one frame to count as a hit, and a miss is 0.35 (OctoMap: 0.4), which
+        clears isolated stereo mismatches faster.
     grid : GridSpec
         Map extent and resolution.
     """
 
     preset: str = "robust"
     max_disparity_px: float | None = None
+    matching: MatchingConfig | None = None
     rejection: RejectionConfig = field(default_factory=RejectionConfig)
-    obstacles: ObstacleConfig = field(default_factory=ObstacleConfig)
-    mapping: MappingConfig = field(default_factory=MappingConfig)
+    obstacles: ObstacleConfig = field(default_factory=lambda: ObstacleConfig(max_range_m=4.0))
+    mapping: MappingConfig = field(default_factory=lambda: MappingConfig(p_miss=0.35, min_points_per_cell=5))
     grid: GridSpec = field(default_factory=GridSpec)
+
+    def with_fusion(self, fusion: str) -> PipelineConfig:
+        """The same configuration with another grid fusion (``"log_odds"`` or ``"union"``)."""
+        return replace(self, mapping=replace(self.mapping, fusion=fusion))
 
 
 @dataclass(frozen=True)
@@ -94,27 +106,25 @@ class MapRun:
     ground_truth_map: object | None
 
 
-def _frame_images(record: FrameRecord) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Load a frame's pair: the rectified one when present, else the raw one."""
-    if record.has_rectified:
+def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Load a frame's pair ``(left, right, rectified)``: the rectified one when listed.
+
+    ``prefer_raw`` takes the raw pair (to be rectified with the calibration) even when a
+    rectified pair is listed, e.g. to test an estimated calibration.
+    """
+    if record.has_rectified and not (prefer_raw and record.has_raw):
         return read_image(record.left_rect), read_image(record.right_rect), True
     return read_image(record.left), read_image(record.right), False
 
 
-def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, rig=None,
-                  config: PipelineConfig = PipelineConfig(), prefer_raw: bool = False) -> FrameObservation:
-    """Run rectify -> match -> reject -> 3D on one manifest frame; points in the world frame.
+def pair_options(config: PipelineConfig) -> dict:
+    """Keyword options of :func:`mrstereo.geometry.pair.obstacles_from_pair` for a config."""
+    return {"preset": config.preset, "max_disparity_px": config.max_disparity_px, "matching": config.matching,
+            "rejection": config.rejection, "config": config.obstacles}
 
-    ``prefer_raw`` uses the raw pair (rectified with ``stereo``) even when a
-    rectified pair is listed, e.g. to test an estimated calibration.
-    """
-    if prefer_raw and record.has_raw:
-        left, right, rectified = read_image(record.left), read_image(record.right), False
-    else:
-        left, right, rectified = _frame_images(record)
-    frame = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=rig, pan_rad=record.pan_rad,
-                                preset=config.preset, max_disparity_px=config.max_disparity_px,
-                                rejection=config.rejection, config=config.obstacles)
+
+def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: int) -> FrameObservation:
+    """Move a frame's obstacle and floor points from the robot frame into the world frame."""
     T = T_world_from_robot(*record.pose)
     obs = frame.obstacles
     return FrameObservation(index=index, pose=tuple(float(v) for v in record.pose), pan_rad=float(record.pan_rad),
@@ -122,6 +132,15 @@ def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, 
                             floor_points_world=transform_points(T, obs.floor_points_robot).astype(np.float32),
                             n_valid_disparity=int(np.isfinite(frame.disparity_px).sum()),
                             ground_message=obs.message)
+
+
+def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, rig=None,
+                  config: PipelineConfig = PipelineConfig(), prefer_raw: bool = False) -> FrameObservation:
+    """Run rectify -> match -> reject -> 3D on one manifest frame; points in the world frame."""
+    left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
+    frame = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=rig, pan_rad=record.pan_rad,
+                                **pair_options(config))
+    return observation_from_pair(frame, record, index=index)
 
 
 def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec = GridSpec(),

@@ -149,12 +149,11 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, preset: str, fus
     Failures of single frames are listed in OUT/summary.json and the rest goes on;
     the command then ends with an error line naming how many failed.
     """
-    from ..mapping.occupancy import MappingConfig
     from ..pipeline import PipelineConfig
     from ..batch import run_batch
 
     check_workers(workers, scheduler)
-    config = PipelineConfig(preset=preset, mapping=MappingConfig(fusion=fusion))
+    config = PipelineConfig(preset=preset).with_fusion(fusion)
     summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
                         scheduler=scheduler, progress=not quiet)
     for d in summary.datasets:

@@ -50,7 +50,6 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
 
     from ..camera import read_stereo
     from ..mapping import GridSpec
-    from ..mapping.occupancy import MappingConfig
     from ..pipeline import PipelineConfig, build_map, write_map_outputs
     from ..world.dataset import read_manifest
 
@@ -59,7 +58,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
         raise click.UsageError("give a MANIFEST or --bag FILE (one of them)")
     (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
     grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
-    config = PipelineConfig(preset=preset, mapping=MappingConfig(fusion=fusion), grid=grid)
+    config = PipelineConfig(preset=preset, grid=grid).with_fusion(fusion)
     with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
         stereo = None
         if bag is not None:

@@ -59,6 +59,7 @@ class PairScan:
 
 def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = False, rig: RigMount | None = None,
                         pan_rad: float = 0.0, preset: str = "robust", max_disparity_px: float | None = None,
+                        matching=None,
                         rejection: RejectionConfig = RejectionConfig(), floor_model: FloorModel | None = None,
                         config: ObstacleConfig = ObstacleConfig()) -> PairObstacles:
     """Obstacle and floor points (robot frame) of one stereo pair.
@@ -79,6 +80,8 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
         Head pan (positive left).
     preset, max_disparity_px
         Passed to :func:`mrstereo.matching.compute_disparity`.
+    matching : MatchingConfig, optional
+        Full matcher configuration (overrides ``preset``), e.g. a single-range search.
     rejection : RejectionConfig
         Eq. (13) options (``texture_threshold`` is T).
     floor_model : FloorModel, optional
@@ -98,7 +101,7 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
                          f"{stereo.size[0]}x{stereo.size[1]}")
     if not rectified and not stereo.is_rectified:
         left, right = stereo.rectify(left, right)
-    kwargs = {"preset": preset, "calibration": stereo}
+    kwargs = {"preset": preset, "calibration": stereo, "config": matching}
     if max_disparity_px is not None:
         kwargs["max_disparity_px"] = max_disparity_px
     raw = np.asarray(compute_disparity(left, right, **kwargs).disparity_px, dtype=np.float32)

@@ -94,8 +94,9 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
     Returns
     -------
     MapMetrics
-        ``precision`` = correct estimated occupied / estimated occupied; ``recall`` = true
-        occupied cells with an estimated occupied cell within tolerance / true occupied;
+        ``precision`` = correct estimated occupied / estimated occupied; ``recall`` = visible true
+        occupied cells (touching true free space: wall faces, obstacle outlines) with an estimated
+        occupied cell within tolerance / visible true occupied cells;
         ``mean_distance_m`` = mean Euclidean distance of estimated occupied cells to the nearest
         true occupied cell; ``free_accuracy`` = true free cells mapped free / true free cells;
         ``known_fraction`` = evaluated cells the estimate knows (not unknown).
@@ -117,7 +118,11 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
 
     est_occ = est.occupied & region
     gt_occ_all = gt.occupied
-    gt_occ = gt_occ_all & region
+    # Recall counts the occupied cells a sensor can see: those touching true free space (the
+    # wall faces and obstacle outlines of the paper's corridor profile), not the inside of a
+    # wall or a box, which no camera observes.
+    surface = gt_occ_all & ndimage.binary_dilation(gt.free, structure=np.ones((3, 3), bool))
+    gt_occ = surface & region
     gt_free = gt.free & region
     box = np.ones((2 * tol + 1, 2 * tol + 1), bool)
 
