@@ -73,6 +73,21 @@ class PipelineConfig:
     mapping: MappingConfig = field(default_factory=lambda: MappingConfig(p_miss=0.35, min_points_per_cell=5))
     grid: GridSpec = field(default_factory=GridSpec)
 
+    def single_range_equal_work(self, stereo: StereoCamera) -> PipelineConfig:
+        """A single full-resolution range doing the same work as the multi-range plan.
+
+        The baseline the paper argues against: one disparity window ``[0, n]`` with ``n``
+        chosen so that pixel x disparity evaluations equal the three ranges' (it cannot see
+        closer than ``b f / n``: the near blind zone).
+        """
+        from .matching import make_plan
+        from .matching.config import preset_config
+
+        plan = make_plan(stereo.size, calibration=stereo)
+        n = max(1, round(plan.work / (stereo.size[0] * stereo.size[1])))
+        base = self.matching or preset_config(self.preset)
+        return replace(self, matching=base.replace(multi_range=False), max_disparity_px=float(n))
+
     def with_fusion(self, fusion: str) -> PipelineConfig:
         """The same configuration with another grid fusion (``"log_odds"`` or ``"union"``)."""
         return replace(self, mapping=replace(self.mapping, fusion=fusion))
