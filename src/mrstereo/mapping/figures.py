@@ -73,20 +73,19 @@ def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fo
         g = ground_truth.grid
         gt_extent = (g.origin_x_m, g.origin_x_m + g.shape[1] * g.resolution_m,
                      g.origin_y_m, g.origin_y_m + g.shape[0] * g.resolution_m)
-        overlay = np.ma.masked_where(~ground_truth.occupied, np.ones(g.shape))
-        ax.imshow(overlay, cmap=matplotlib.colors.ListedColormap(["tab:red"]), alpha=0.45,
-                  origin="lower", extent=gt_extent, interpolation="nearest")
-        ax.plot([], [], color="tab:red", lw=4, alpha=0.45, label="true walls")
+        ax.contour(ground_truth.occupied.astype(float), levels=[0.5], colors="tab:red", linewidths=1.0,
+                   origin="lower", extent=gt_extent)
+        ax.plot([], [], color="tab:red", lw=1.0, label="true walls and obstacles")
     for view in fov_views or ():
         if len(view) != 5:
             raise ValueError("each fov_views entry must be (x_m, y_m, heading_rad, half_fov_rad, "
                              f"range_m), got {view!r}")
         x, y, heading, half_fov, range_m = (float(v) for v in view)
         ax.add_patch(Wedge((x, y), range_m, math.degrees(heading - half_fov),
-                           math.degrees(heading + half_fov), facecolor="tab:orange",
-                           edgecolor="tab:orange", alpha=0.12, lw=0.8))
+                           math.degrees(heading + half_fov), fill=False, edgecolor="tab:orange",
+                           alpha=0.35, lw=0.6, linestyle="--"))
     if fov_views:
-        ax.plot([], [], color="tab:orange", lw=6, alpha=0.3, label="fields of view")
+        ax.plot([], [], color="tab:orange", lw=0.8, linestyle="--", label="fields of view")
     if robot_path is not None:
         poses = _array("robot_path", robot_path, 2)
         ax.plot(poses[:, 0], poses[:, 1], "-o", color="tab:blue", ms=3, lw=1.5,
