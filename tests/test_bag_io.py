@@ -16,7 +16,7 @@ from mrstereo.io import read_image
 from mrstereo.pipeline import build_map
 from mrstereo.world.dataset import read_manifest, write_manifest, write_synthetic_dataset
 
-rosbags = pytest.importorskip("rosbags")
+
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
 
 T0_NS = 1_700_000_000_000_000_000

@@ -95,7 +95,7 @@ def test_failed_frame_is_listed_the_rest_goes_on_and_a_rerun_retries_it(datasets
 
 
 def test_batch_on_a_dask_cluster_gives_the_same_files(datasets, tmp_path):
-    distributed = pytest.importorskip("distributed")
+    import distributed
     local = tmp_path / "local"
     run_batch(datasets[:1], local, progress=False)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",

@@ -12,7 +12,7 @@ from mrstereo.parallel import ItemError, ItemFailure, map_ordered
 from mrstereo.pipeline import build_map
 from mrstereo.world.dataset import read_manifest, write_synthetic_dataset
 
-distributed = pytest.importorskip("distributed")
+import distributed  # noqa: E402
 
 
 def _slow_square(x: int, *, n: int) -> int:

@@ -1,0 +1,108 @@
+"""evaluate_scenes and the ``mrstereo evaluate`` command: report content, JSON/markdown files, errors."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mrstereo.cli import entry
+from mrstereo.evaluation.baselines import stereo_sgbm
+from mrstereo.evaluation.datasets import load_scene
+from mrstereo.evaluation.metrics import disparity_metrics
+from mrstereo.evaluation.report import evaluate_scenes, run_method
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+TSUKUBA = DATA / "middlebury2001" / "tsukuba"
+needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"shared test data not found at {DATA}")
+BASELINES = ("StereoBM", "StereoSGBM")
+
+
+@needs_data
+def test_evaluate_scenes_rows_match_direct_metrics():
+    report = evaluate_scenes([TSUKUBA], methods=BASELINES, progress=False)
+    assert report.methods == BASELINES and report.scenes == ("tsukuba",)
+    assert [(r.scene, r.method) for r in report.rows] == [("tsukuba", "StereoBM"), ("tsukuba", "StereoSGBM")]
+    scene = load_scene(TSUKUBA)
+    direct = disparity_metrics(stereo_sgbm(scene.left, scene.right, max_disparity_px=16), scene.gt_disparity_px,
+                               nonocc_mask=scene.nonocc_mask)
+    row = report.row("tsukuba", "StereoSGBM")
+    assert row.metrics == direct and row.seconds > 0 and row.max_disparity_px == 16
+    assert report.mean("StereoSGBM")["bad_2_dense_pct"] == pytest.approx(direct.dense.bad_2_pct)
+    with pytest.raises(KeyError, match="no row"):
+        report.row("tsukuba", "mrstereo")
+
+
+@needs_data
+def test_cli_writes_json_and_markdown(tmp_path, capsys):
+    out_json, out_md = tmp_path / "r.json", tmp_path / "sub" / "r.md"
+    code = entry(["evaluate", str(TSUKUBA), str(TSUKUBA), "--methods", "StereoBM,StereoSGBM",
+                  "--json", str(out_json), "--markdown", str(out_md), "--max-disparity", "32", "--no-progress"])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert printed == out_md.read_text()
+    data = json.loads(out_json.read_text())
+    assert data["methods"] == list(BASELINES)
+    assert data["scenes"] == ["tsukuba", "middlebury2001/tsukuba"]  # a repeated name gets the layout prefix
+    assert len(data["rows"]) == 4 and {r["max_disparity_px"] for r in data["rows"]} == {32}
+    bm = data["rows"][0]
+    assert bm["method"] == "StereoBM" and 0 < bm["metrics"]["dense"]["bad_2_pct"] < 30
+    assert data["mean"]["StereoSGBM"]["density_pct"] > 90
+    table = [line for line in printed.splitlines() if line.startswith("| tsukuba |")]
+    assert len(table) == 3  # headline row + one detail row per method
+    cells = table[0].split("|")
+    assert cells[4].strip() == "32" and len(cells) == 2 + 4 + 2
+
+
+def test_json_has_no_nan(tmp_path):
+    rng = np.random.default_rng(0)
+    from mrstereo.io import write_image, write_pfm
+    img = rng.integers(0, 256, (20, 40), dtype=np.uint8)
+    write_image(tmp_path / "im0.png", img)
+    write_image(tmp_path / "im1.png", np.zeros_like(img))  # BM finds nothing: estimated stats are NaN
+    write_pfm(tmp_path / "disp0.pfm", np.full((20, 40), 3.0, np.float32))
+    report = evaluate_scenes([tmp_path], methods=["StereoBM"], progress=False)
+    assert report.rows[0].metrics.density_pct == 0.0
+    text = report.to_json()
+    assert "NaN" not in text and json.loads(text)["rows"][0]["metrics"]["estimated"]["bad_2_pct"] is None
+    assert "n/a" in report.to_markdown()
+
+
+def test_cli_errors(tmp_path, capsys):
+    assert entry(["evaluate", str(tmp_path / "nope"), "--methods", "StereoBM"]) == 2
+    assert "mrstereo: error: scene directory not found" in capsys.readouterr().err
+    assert entry(["evaluate", str(tmp_path), "--methods", "StereoBM"]) == 2
+    assert "matches no known stereo dataset layout" in capsys.readouterr().err
+    assert entry(["evaluate", str(tmp_path), "--methods", "StereoBM,Census"]) == 2
+    assert "unknown method(s) Census" in capsys.readouterr().err
+    assert entry(["evaluate", str(tmp_path), "--max-disparity", "0", "--methods", "StereoBM"]) == 2
+    assert "must be >= 1" in capsys.readouterr().err
+    assert entry(["evaluate", str(tmp_path), "--json", str(tmp_path), "--methods", "StereoBM"]) == 2
+    capsys.readouterr()
+    (tmp_path / "disp0.pfm").write_text("keep")
+    assert entry(["evaluate", str(tmp_path), "--markdown", str(tmp_path / "disp0.pfm"), "--methods", "StereoBM"]) == 2
+    assert "would overwrite a file of the input scene" in capsys.readouterr().err
+    assert (tmp_path / "disp0.pfm").read_text() == "keep"
+
+
+def test_library_errors():
+    with pytest.raises(ValueError, match="unknown method"):
+        evaluate_scenes([TSUKUBA], methods=["SAD"], progress=False)
+    with pytest.raises(ValueError, match="at least one scene"):
+        evaluate_scenes([], methods=BASELINES, progress=False)
+    with pytest.raises(ValueError, match="duplicates"):
+        evaluate_scenes([TSUKUBA], methods=["StereoBM", "StereoBM"], progress=False)
+    with pytest.raises(ValueError, match="unknown method"):
+        run_method("SAD", None)
+
+
+@needs_data
+def test_mrstereo_methods_are_wired_in():
+    pytest.importorskip("mrstereo.matching.disparity", reason="the matcher (mrstereo.matching) is not built yet")
+    from mrstereo.matching import compute_disparity
+
+    report = evaluate_scenes([TSUKUBA], methods=("mrstereo", "mrstereo-paper"), progress=False)
+    scene = load_scene(TSUKUBA)
+    for method, preset in (("mrstereo", "robust"), ("mrstereo-paper", "paper")):
+        direct = compute_disparity(scene.left, scene.right, max_disparity_px=16, preset=preset).disparity_px
+        expected = disparity_metrics(direct, scene.gt_disparity_px, nonocc_mask=scene.nonocc_mask)
+        assert report.row("tsukuba", method).metrics == expected
