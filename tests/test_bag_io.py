@@ -15,9 +15,7 @@ from mrstereo.cli import entry
 from mrstereo.io import read_image
 from mrstereo.pipeline import build_map
 from mrstereo.world.dataset import read_manifest, write_manifest, write_synthetic_dataset
-
-
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 T0_NS = 1_700_000_000_000_000_000
 DT_NS = 100_000_000                 # 10 Hz
