@@ -1,2 +1,69 @@
-"""CLI commands (filled by the stage that owns them)."""
-COMMANDS: list = []
+"""``mrstereo evaluate``: disparity accuracy on Middlebury / KITTI scenes, side by side with OpenCV."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from mrstereo.evaluation.report import METHODS, evaluate_scenes
+from mrstereo.io import atomic_write, refuse_overwrite_input
+
+
+def _write_text(path: Path, text: str) -> None:
+    with atomic_write(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+@click.command("evaluate")
+@click.argument("dirs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--methods", "-m", "methods", default=",".join(METHODS), show_default=True,
+              help=f"Comma-separated methods to run, some of: {', '.join(METHODS)}.")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also write the full report as JSON here.")
+@click.option("--markdown", "markdown_out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also write the markdown tables here.")
+@click.option("--max-disparity", "max_disparity", type=int, default=None,
+              help="Disparity search range in pixels for every scene (default: each scene's ndisp or "
+                   "ground-truth maximum rounded up to 16).")
+@click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
+def evaluate(dirs, methods, json_out, markdown_out, max_disparity, no_progress):
+    """Score matchers on benchmark scene folders DIR... and print a markdown table.
+
+    Each DIR is one scene: Middlebury 2001/2003/2005/2006/2014 or KITTI 2012/2015, detected from
+    its files (see docs/evaluation.md). Metrics are on non-occluded pixels where the dataset has a
+    mask: bad-2 % dense (no estimate = bad), among estimated pixels, density and time.
+
+    Example: mrstereo evaluate data/middlebury2003/teddy data/kitti2012/000070 --json out.json
+    """
+    names = tuple(m.strip() for m in methods.split(",") if m.strip())
+    unknown = [m for m in names if m not in METHODS]
+    if not names or unknown:
+        raise click.BadParameter(f"unknown method(s) {', '.join(unknown) or '(none given)'}; "
+                                 f"choose from {', '.join(METHODS)}", param_hint="--methods")
+    if max_disparity is not None and max_disparity < 1:
+        raise click.BadParameter(f"must be >= 1, got {max_disparity}", param_hint="--max-disparity")
+    for d in dirs:
+        if not d.exists():
+            raise FileNotFoundError(f"scene directory not found: {d}")
+        if not d.is_dir():
+            raise ValueError(f"scene must be a directory, got the file {d}")
+    outputs = [p for p in (json_out, markdown_out) if p is not None]
+    for out in outputs:
+        refuse_overwrite_input(out, dirs)
+        for d in dirs:  # every file of a scene folder is an input
+            if out.exists() and out.resolve().is_relative_to(d.resolve()):
+                raise ValueError(f"output {out} would overwrite a file of the input scene {d}")
+        if out.exists() and out.is_dir():
+            raise ValueError(f"output {out} is a directory")
+    if json_out is not None and markdown_out is not None and json_out.resolve() == markdown_out.resolve():
+        raise ValueError("--json and --markdown must be different files")
+    report = evaluate_scenes(dirs, methods=names, max_disparity_px=max_disparity, progress=not no_progress)
+    markdown = report.to_markdown()
+    if json_out is not None:
+        _write_text(json_out, report.to_json())
+    if markdown_out is not None:
+        _write_text(markdown_out, markdown)
+    click.echo(markdown, nl=False)
+
+
+COMMANDS = [evaluate]
