@@ -118,3 +118,17 @@ def test_mrstereo_methods_are_wired_in(monkeypatch):
     expected = disparity_metrics(np.full(scene.shape, 7.0, np.float32), scene.gt_disparity_px,
                                  nonocc_mask=scene.nonocc_mask)
     assert report.row("tsukuba", "mrstereo-paper").metrics == expected
+
+
+@needs_data
+def test_evaluate_on_a_dask_cluster_gives_the_same_rows():
+    import distributed
+
+    venus = DATA / "middlebury2001" / "venus"
+    local = evaluate_scenes([TSUKUBA, venus], methods=BASELINES, progress=False)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        remote = evaluate_scenes([TSUKUBA, venus], methods=BASELINES, progress=False,
+                                 scheduler=cluster.scheduler_address)
+    assert [(r.scene, r.method) for r in remote.rows] == [(r.scene, r.method) for r in local.rows]
+    assert [r.metrics for r in remote.rows] == [r.metrics for r in local.rows]

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import click
 
+from ._options import check_workers, worker_options
+
 __all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "rig_from_options"]
 
 
@@ -40,24 +42,6 @@ def bag_options(func):
     for option in reversed(options):
         func = option(func)
     return func
-
-
-def worker_options(func):
-    """``--workers N`` / ``--scheduler ADDRESS`` (docs/scale-out.md)."""
-    func = click.option("--scheduler", default=None, metavar="ADDRESS",
-                        help="Run the per-frame work on an existing Dask cluster (tcp://host:8786); its "
-                             "workers must see the same files.")(func)
-    func = click.option("--workers", type=int, default=None,
-                        help="Run the per-frame work on a local Dask cluster of N worker processes "
-                             "(default: in this process).")(func)
-    return func
-
-
-def check_workers(workers, scheduler) -> None:
-    if workers is not None and scheduler is not None:
-        raise click.UsageError("give --workers or --scheduler, not both")
-    if workers is not None and workers < 1:
-        raise click.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
 
 
 def rig_from_options(height_m, tilt_rad):

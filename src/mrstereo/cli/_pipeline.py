@@ -5,7 +5,8 @@ from pathlib import Path
 
 import click
 
-from ._bag import bag_export_kwargs, bag_options, check_workers, echo_export, rig_from_options, worker_options
+from ._bag import bag_export_kwargs, bag_options, echo_export, rig_from_options
+from ._options import check_workers, worker_options
 
 __all__ = ["COMMANDS"]
 

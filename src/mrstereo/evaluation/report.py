@@ -229,8 +229,20 @@ def _warm_up(method: str, scene: Scene, max_d: int) -> None:
         pass
 
 
+def _evaluate_job(job: tuple) -> EvaluationRow:
+    """One (scene, method) run: the unit of work sent to a Dask worker or run in-process."""
+    label, scene, method, max_d = job
+    start = time.perf_counter()
+    disparity = run_method(method, scene, max_disparity_px=max_d)
+    seconds = time.perf_counter() - start
+    return EvaluationRow(
+        scene=label, layout=scene.layout, directory=str(scene.directory), method=method,
+        width_px=scene.shape[1], height_px=scene.shape[0], max_disparity_px=int(max_d), seconds=seconds,
+        metrics=disparity_metrics(disparity, scene.gt_disparity_px, nonocc_mask=scene.nonocc_mask))
+
+
 def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_disparity_px: int | None = None,
-                    progress: bool = True) -> EvaluationReport:
+                    progress: bool = True, workers: int | None = None, scheduler=None) -> EvaluationReport:
     """Evaluate matchers on benchmark scene directories.
 
     Parameters
@@ -243,11 +255,17 @@ def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_dis
         Search range for every scene (default: each scene's own range).
     progress : bool
         Show a tqdm progress bar on stderr.
+    workers, scheduler :
+        Spread the (scene, method) runs over a local Dask cluster of ``workers`` processes or an
+        existing cluster (:func:`mrstereo.parallel.map_ordered`); default in this process. Per-run
+        times on workers include each worker's first numba compilation.
 
     Returns
     -------
     EvaluationReport
     """
+    from mrstereo.parallel import map_ordered
+
     methods = _check_methods(methods)
     dirs = list(dirs)
     if not dirs:
@@ -262,25 +280,11 @@ def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_dis
         while label in labels:
             label = f"{scene.layout}/{label}" if not label.startswith(scene.layout) else f"{label}'"
         labels.append(label)
-    rows = []
-    bar = tqdm(total=len(scenes) * len(methods), desc="evaluate", unit="run", file=sys.stderr,
-               disable=not progress, leave=False)
-    try:
-        for method in methods:
+    if workers is None and scheduler is None:
+        for method in methods:      # compile the kernels before timing (in-process only)
             _warm_up(method, scenes[0], max_disparity_px or scenes[0].max_disparity_px)
-        for label, scene in zip(labels, scenes):
-            max_d = max_disparity_px or scene.max_disparity_px
-            for method in methods:
-                bar.set_postfix_str(f"{label} {method}")
-                start = time.perf_counter()
-                disparity = run_method(method, scene, max_disparity_px=max_d)
-                seconds = time.perf_counter() - start
-                rows.append(EvaluationRow(
-                    scene=label, layout=scene.layout, directory=str(scene.directory), method=method,
-                    width_px=scene.shape[1], height_px=scene.shape[0], max_disparity_px=int(max_d),
-                    seconds=seconds,
-                    metrics=disparity_metrics(disparity, scene.gt_disparity_px, nonocc_mask=scene.nonocc_mask)))
-                bar.update(1)
-    finally:
-        bar.close()
+    jobs = [(label, scene, method, max_disparity_px or scene.max_disparity_px)
+            for label, scene in zip(labels, scenes) for method in methods]
+    rows = map_ordered(_evaluate_job, jobs, workers=workers, scheduler=scheduler, progress=progress,
+                       desc="evaluate", label=lambda job: f"{job[0]} {job[2]}", unit="run")
     return EvaluationReport(rows=tuple(rows), methods=methods, scenes=tuple(labels))
