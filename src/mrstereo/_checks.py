@@ -86,3 +86,24 @@ def matrix(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
     if not np.isfinite(arr).all():
         raise ValueError(f"{name} contains NaN or inf values")
     return arr
+
+
+def ordered_pair(name: str, value, *, strict: bool = True) -> tuple[float, float]:
+    """Return ``(low, high)`` finite floats with ``low < high`` (``<=`` when not ``strict``)."""
+    try:
+        lo, hi = value
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a pair (low, high), got {value!r}") from None
+    lo, hi = finite_number(f"{name}[0]", lo), finite_number(f"{name}[1]", hi)
+    if hi < lo or (strict and hi == lo):
+        raise ValueError(f"{name} must have low {'<' if strict else '<='} high, got ({lo}, {hi})")
+    return lo, hi
+
+
+def rng(value) -> np.random.Generator:
+    """A numpy Generator from a Generator, an int seed or None."""
+    if isinstance(value, np.random.Generator):
+        return value
+    if value is None or (isinstance(value, (int, np.integer)) and not isinstance(value, bool)):
+        return np.random.default_rng(value)
+    raise TypeError(f"rng must be a numpy Generator, an int seed or None, got {type(value).__name__}")

@@ -83,20 +83,8 @@ class RejectionConfig:
         _checks.finite_number("texture_threshold", self.texture_threshold, nonnegative=True)
         _checks.finite_number("k_sigma", self.k_sigma, positive=True)
         if self.mean_range is not None:
-            lo, hi = _mean_range(self.mean_range)
+            lo, hi = _checks.ordered_pair("mean_range", self.mean_range, strict=False)
             object.__setattr__(self, "mean_range", (lo, hi))
-
-
-def _mean_range(value) -> tuple[float, float]:
-    try:
-        lo, hi = value
-    except (TypeError, ValueError):
-        raise ValueError(f"mean_range must be a pair (low, high), got {value!r}") from None
-    lo = _checks.finite_number("mean_range[0]", lo)
-    hi = _checks.finite_number("mean_range[1]", hi)
-    if hi < lo:
-        raise ValueError(f"mean_range must have low <= high, got ({lo}, {hi})")
-    return lo, hi
 
 
 @dataclass(frozen=True)

@@ -235,14 +235,6 @@ class GAResult:
 MULTIVIEW_GA = GAConfig(generations=200, stall_generations=50)
 
 
-def _make_rng(rng) -> np.random.Generator:
-    if isinstance(rng, np.random.Generator):
-        return rng
-    if rng is None or isinstance(rng, (int, np.integer)):
-        return np.random.default_rng(rng)
-    raise TypeError(f"rng must be a numpy Generator, an int seed or None, got {type(rng).__name__}")
-
-
 def _evolve(fitness: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray, config: GAConfig,
             rng: np.random.Generator, progress=None) -> tuple[np.ndarray, float, int, np.ndarray, str]:
     """Generic real-coded GA loop (module notes); minimizes ``fitness`` over the box [lo, hi]."""
@@ -357,7 +349,7 @@ def ga_calibrate_single(view: CalibrationView, *, width: int, height: int, bound
         uv_hat = project_points(points_cam, fx=fx, fy=fy, cx=cx, cy=cy, k1=k1, k2=k2)
         return _sum_sq(uv_hat, uv)
 
-    genes, fit, gens, history, stop = _evolve(fitness, lo, hi, config, _make_rng(rng), progress)
+    genes, fit, gens, history, stop = _evolve(fitness, lo, hi, config, _checks.rng(rng), progress)
     paper = PaperCamera(width=width, height=height, f_mm=genes[0], alpha_x=density, alpha_y=density * aspect,
                         u0=genes[1], v0=genes[2], k1_mm=genes[3], k2_mm=genes[4])
     T = np.eye(4)
@@ -465,7 +457,7 @@ def ga_calibrate_intrinsics(views: Sequence[CalibrationView], *, width: int, hei
             total += np.sum((uv_hat - uv[None]) ** 2, axis=(-3, -2, -1))
         return np.where(np.isfinite(total), total, np.inf)
 
-    genes, fit, gens, history, stop = _evolve(fitness, lo, hi, config, _make_rng(rng), progress)
+    genes, fit, gens, history, stop = _evolve(fitness, lo, hi, config, _checks.rng(rng), progress)
     paper = PaperCamera(width=width, height=height, f_mm=genes[0], alpha_x=density, alpha_y=density * aspect,
                         u0=genes[1], v0=genes[2], k1_mm=genes[3], k2_mm=genes[4])
     poses: list = [None] * len(views)

@@ -20,7 +20,7 @@ from scipy.optimize import least_squares
 from .. import _checks
 from ..camera import Camera, RigMount, StereoCamera, project_points, rectify_fusiello, rotation_from_euler
 from .calibrate import CalibrationResult, _rms, calibrate_camera
-from .ga import GABounds, GAConfig, _make_rng
+from .ga import GABounds, GAConfig
 from .refine import INTRINSIC_NAMES, fit_statistics, grouped_jacobian, pose_matrix, pose_vector
 from .targets import CalibrationView
 
@@ -172,7 +172,7 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
     width = _checks.positive_int("width", width)
     height = _checks.positive_int("height", height)
     right_views = [_agree_with_left(a, b) for a, b in zip(left_views, right_views)]
-    gen = _make_rng(rng)
+    gen = _checks.rng(rng)
     kw = dict(width=width, height=height, method=method, ga_config=ga_config, bounds=bounds,
               pixel_density_px_per_mm=pixel_density_px_per_mm, rng=gen, progress=progress)
     left = calibrate_camera(left_views, **kw)

@@ -21,14 +21,12 @@ from __future__ import annotations
 import json
 import math
 import platform
-import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, replace
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from mrstereo.evaluation.baselines import BASELINES
 from mrstereo.evaluation.datasets import Scene, load_scene

@@ -168,21 +168,6 @@ def v_disparity(disparity_px, *, max_disparity_px: float | None = None,
     return hist.reshape(d.shape[0], n_bins).astype(np.int32)
 
 
-def _pair(name: str, value) -> tuple[float, float]:
-    try:
-        lo, hi = value
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a pair (low, high), got {value!r}") from None
-    lo, hi = _checks.finite_number(f"{name}[0]", lo), _checks.finite_number(f"{name}[1]", hi)
-    if hi <= lo:
-        raise ValueError(f"{name} must have low < high, got ({lo}, {hi})")
-    return lo, hi
-
-
-def _rng(rng) -> np.random.Generator:
-    return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-
-
 def _subsample(n: int, max_samples: int, rng: np.random.Generator) -> np.ndarray:
     return np.arange(n) if n <= max_samples else rng.choice(n, size=max_samples, replace=False)
 
@@ -241,7 +226,7 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
     tol = _checks.finite_number("tolerance_px", tolerance_px, positive=True)
     iterations = _checks.positive_int("iterations", iterations)
     min_inliers = _checks.positive_int("min_inliers", min_inliers)
-    rng = _rng(rng)
+    rng = _checks.rng(rng)
     d = d + stereo.doffs_px
     valid = np.isfinite(d) & (d > 0)
     v_all, _ = np.nonzero(valid)
@@ -257,8 +242,8 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
     c = dd[i[:, 0]] - a * v[i[:, 0]]
     ok &= a > 0
     fx, fy = stereo.focal_px, float(stereo.left.P[1, 1])
-    h_lo, h_hi = _pair("height_range_m", height_range_m)
-    t_lo, t_hi = _pair("tilt_range_rad", tilt_range_rad)
+    h_lo, h_hi = _checks.ordered_pair("height_range_m", height_range_m)
+    t_lo, t_hi = _checks.ordered_pair("tilt_range_rad", tilt_range_rad)
     with np.errstate(invalid="ignore", divide="ignore"):
         tilt_h = np.arctan2(c, a * fy)
         height_h = stereo.baseline_m * fx * np.cos(tilt_h) / (a * fy)
@@ -335,11 +320,11 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
     p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
     thr = _checks.finite_number("distance_threshold_m", distance_threshold_m, positive=True)
     max_roll = _checks.finite_number("max_roll_rad", max_roll_rad, positive=True)
-    t_lo, t_hi = _pair("tilt_range_rad", tilt_range_rad)
+    t_lo, t_hi = _checks.ordered_pair("tilt_range_rad", tilt_range_rad)
     max_range = _checks.finite_number("max_range_m", max_range_m, positive=True)
     iterations = _checks.positive_int("iterations", iterations)
     min_inliers = _checks.positive_int("min_inliers", min_inliers)
-    rng = _rng(rng)
+    rng = _checks.rng(rng)
     p = p[np.isfinite(p).all(axis=1) & (p[:, 2] > 0) & (p[:, 2] <= max_range)]
     if p.shape[0] < max(min_inliers, 3):
         return _failed("plane", f"only {p.shape[0]} valid points", p.shape[0])
@@ -355,7 +340,7 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
     n = n[ok] / norm[ok, None]
     n *= np.where(n[:, 1] < 0, -1.0, 1.0)[:, None]          # downward normal: +y in the camera frame
     dist = np.einsum("ij,ij->i", n, tri[ok, 0])
-    h_lo, h_hi = _pair("height_range_m", height_range_m)
+    h_lo, h_hi = _checks.ordered_pair("height_range_m", height_range_m)
     tilt_h = np.arcsin(np.clip(n[:, 2], -1.0, 1.0))
     roll_h = np.arctan2(n[:, 0], n[:, 1])
     ok2 = (dist >= h_lo) & (dist <= h_hi) & (tilt_h >= t_lo) & (tilt_h <= t_hi) & (np.abs(roll_h) <= max_roll)

@@ -169,7 +169,7 @@ def top_view(points_robot, *, x_range_m: tuple[float, float] = (0.0, 8.0),
     """
     p = _checks.points3("points_robot", points_robot)
     res = _checks.finite_number("resolution_m", resolution_m, positive=True)
-    (x0, x1), (y0, y1) = (_range("x_range_m", x_range_m), _range("y_range_m", y_range_m))
+    (x0, x1), (y0, y1) = (_checks.ordered_pair("x_range_m", x_range_m), _checks.ordered_pair("y_range_m", y_range_m))
     rows, cols = int(round((y1 - y0) / res)), int(round((x1 - x0) / res))
     p = p[np.isfinite(p).all(axis=1)]
     col = np.floor((p[:, 0] - x0) / res).astype(np.int64)
@@ -177,17 +177,6 @@ def top_view(points_robot, *, x_range_m: tuple[float, float] = (0.0, 8.0),
     inside = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
     counts = np.bincount(row[inside] * cols + col[inside], minlength=rows * cols)
     return counts.reshape(rows, cols).astype(np.int32)
-
-
-def _range(name: str, value) -> tuple[float, float]:
-    try:
-        lo, hi = value
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a pair (low, high), got {value!r}") from None
-    lo, hi = _checks.finite_number(f"{name}[0]", lo), _checks.finite_number(f"{name}[1]", hi)
-    if hi <= lo:
-        raise ValueError(f"{name} must have low < high, got ({lo}, {hi})")
-    return lo, hi
 
 
 def write_scan_json(path: str | os.PathLike, scan: LaserScan) -> None:
