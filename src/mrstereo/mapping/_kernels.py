@@ -109,6 +109,16 @@ def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cel
 
 
 @njit(cache=True)
+def _axis_step(d, cell, start):
+    """Amanatides-Woo set-up along one axis: step sign, t per cell, t to the first boundary."""
+    if d > 0.0:
+        return 1, 1.0 / d, (cell + 1 - start) / d
+    if d < 0.0:
+        return -1, -1.0 / d, (cell - start) / d
+    return 0, np.inf, np.inf
+
+
+@njit(cache=True)
 def _trace(sx, sy, tx, ty, include_end, miss):
     """Amanatides-Woo traversal from ``(sx, sy)`` to the point ``(tx, ty)`` (grid units).
 
@@ -132,30 +142,8 @@ def _trace(sx, sy, tx, ty, include_end, miss):
         include_end = True
     nx = abs(ex - cx)
     ny = abs(ey - cy)
-    if dx > 0.0:
-        stepx = 1
-        tdx = 1.0 / dx
-        tmx = (cx + 1 - sx) / dx
-    elif dx < 0.0:
-        stepx = -1
-        tdx = -1.0 / dx
-        tmx = (cx - sx) / dx
-    else:
-        stepx = 0
-        tdx = np.inf
-        tmx = np.inf
-    if dy > 0.0:
-        stepy = 1
-        tdy = 1.0 / dy
-        tmy = (cy + 1 - sy) / dy
-    elif dy < 0.0:
-        stepy = -1
-        tdy = -1.0 / dy
-        tmy = (cy - sy) / dy
-    else:
-        stepy = 0
-        tdy = np.inf
-        tmy = np.inf
+    stepx, tdx, tmx = _axis_step(dx, cx, sx)
+    stepy, tdy, tmy = _axis_step(dy, cy, sy)
     if nx + ny == 0:
         if include_end:
             miss[cy, cx] = 1
