@@ -85,7 +85,7 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     from tqdm.auto import tqdm
 
     from .calibration import calibrate_stereo, chessboard_views, ga_calibrate_single
-    from .calibration import CalibrationView as ControlPoints
+    from .calibration import CalibrationView
     from .calibration.report import residual_figure
     from .camera import write_stereo
     from .geometry.obstacles import detect_obstacles
@@ -149,7 +149,7 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     residual_figure(calib_dir / "residuals_left.png", estimated.left.camera, [a for a, _ in pairs])
     # the paper's single-view dot target and GA alone (Figs 2-3)
     dots = render_paper_dot_target(truth, seed=seed)
-    dot_view = ControlPoints(dots.points_target, dots.points_px, name="paper dot target")
+    dot_view = CalibrationView(dots.points_target, dots.points_px, name="paper dot target")
     ga = ga_calibrate_single(dot_view, width=size[0], height=size[1], rng=seed)
     residual_figure(calib_dir / "paper_dot_target_ga.png", ga.camera, [dot_view])
     write_image(calib_dir / "paper_dot_target.png", dots.image)

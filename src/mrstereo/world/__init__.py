@@ -13,7 +13,7 @@ from .render import StereoFrame, camera_poses, default_stereo, render_stereo_fra
 from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_NAMES, LABEL_NONE, LABEL_OBSTACLE,
                     LABEL_POSTER, LABEL_SKIRTING, LABEL_WALL, Box, Cylinder, Decal, Light, Material, Scene,
                     default_scene, is_obstacle_label)
-from .targets import CalibrationView, render_calibration_views, render_paper_dot_target, target_points
+from .targets import RenderedTarget, render_calibration_views, render_paper_dot_target, target_points
 
 __all__ = [
     "Scene", "Box", "Cylinder", "Decal", "Light", "Material", "default_scene", "is_obstacle_label",
@@ -21,6 +21,6 @@ __all__ = [
     "LABEL_SKIRTING", "LABEL_OBSTACLE", "LABEL_NAMES",
     "StereoFrame", "default_stereo", "render_stereo_frame", "render_view", "camera_poses",
     "ground_truth_map", "occupied_footprint",
-    "CalibrationView", "render_calibration_views", "render_paper_dot_target", "target_points",
+    "RenderedTarget", "render_calibration_views", "render_paper_dot_target", "target_points",
     "FrameRecord", "Manifest", "read_manifest", "write_manifest", "write_synthetic_dataset", "corridor_path",
 ]

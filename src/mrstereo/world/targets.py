@@ -18,13 +18,13 @@ from .. import _checks
 from ..camera import Camera, CameraInfo, StereoCamera, rotation_from_euler
 from .render import _ray_table, sensor_noise_sigma
 
-__all__ = ["CalibrationView", "render_calibration_views", "render_paper_dot_target", "target_points"]
+__all__ = ["RenderedTarget", "render_calibration_views", "render_paper_dot_target", "target_points"]
 
 _WHITE, _BLACK = 0.88, 0.07
 
 
 @dataclass(frozen=True)
-class CalibrationView:
+class RenderedTarget:
     """One rendered view of a planar target with its exact correspondences.
 
     Attributes
@@ -144,7 +144,7 @@ def _inside(cam: Camera, uv: np.ndarray, margin: float) -> bool:
                 and np.all(uv[:, 0] <= cam.width - 1 - margin) and np.all(uv[:, 1] <= cam.height - 1 - margin))
 
 
-def _view(cams, target, board, s, R, t, supersample, rng, noise_sigma) -> CalibrationView:
+def _view(cams, target, board, s, R, t, supersample, rng, noise_sigma) -> RenderedTarget:
     left, right, R_rl, t_rl = cams
     pts = target_points(board, s)
     px = left.project(pts @ R.T + t)
@@ -154,7 +154,7 @@ def _view(cams, target, board, s, R, t, supersample, rng, noise_sigma) -> Calibr
         Rr, tr = R_rl @ R, R_rl @ t + t_rl
         px_r = right.project(pts @ Rr.T + tr)
         image_r = _render_target(right, target, board, s, Rr, tr, supersample, rng, noise_sigma)
-    return CalibrationView(image=image, image_right=image_r, points_target=pts, points_px=px,
+    return RenderedTarget(image=image, image_right=image_r, points_target=pts, points_px=px,
                            points_px_right=px_r, R=R, t=t, target=target, board=tuple(board), spacing_m=s)
 
 
@@ -176,7 +176,7 @@ def _check_common(target, board, spacing_m, seed, supersample):
 def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", board=(9, 6),
                              spacing_m: float = 0.03, n_views: int = 10, seed: int = 0,
                              supersample: int = 4, noise_sigma: float = sensor_noise_sigma
-                             ) -> list[CalibrationView]:
+                             ) -> list[RenderedTarget]:
     """Render ``n_views`` random poses of a planar target with exact correspondences.
 
     Parameters
@@ -201,7 +201,7 @@ def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", bo
 
     Returns
     -------
-    list of CalibrationView
+    list of RenderedTarget
         Poses tilt the board up to about 35 degrees and fill 35-65 % of the
         image width; the whole paper lies inside every image.
     """
@@ -241,7 +241,7 @@ def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", bo
 
 
 def render_paper_dot_target(camera_or_stereo, *, grid=(15, 11), distance_m: float = 1.0, seed: int = 0,
-                            supersample: int = 4, noise_sigma: float = sensor_noise_sigma) -> CalibrationView:
+                            supersample: int = 4, noise_sigma: float = sensor_noise_sigma) -> RenderedTarget:
     """One fronto-parallel view of a dot grid filling most of the image (paper Fig. 2).
 
     The dots reach the image corners, where the radial distortion (eq. 3) bends
