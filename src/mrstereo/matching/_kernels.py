@@ -8,7 +8,7 @@ Rows are split into strips, one per thread (``prange``). Inside a strip the rows
 visited in order; for every disparity ``d`` a row of running column sums
 ``sum_j I_L(y + j, c) I_R(y + j, c - d)`` is updated by adding the row entering the
 window and subtracting the row leaving it, and a row of window sums is the sum of
-``W`` shifted column-sum rows. Every inner loop runs along the image row over
+``W`` shifted column-sum rows (in few passes, :func:`_box`). Every inner loop runs along the image row over
 contiguous memory (one disparity at a time), so it vectorizes; the cost of one
 pixel and disparity is O(1) in the window size. The window sums of ``I^2`` (and
 ``I``) do not depend on the disparity and arrive as per-pixel terms ``a`` and ``b``:
@@ -40,9 +40,33 @@ TWO = np.float32(2.0)
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
 def _box(col, out, t2, t4, t8, t16, m, win):
-    """``out[i] = sum_{j < win} col[i + j]`` for ``i < m`` (``win < 32``), by binary
-    decomposition of ``win`` into sums of 1, 2, 4, 8, 16 neighbours (each one vector pass)."""
+    """``out[i] = sum_{j < win} col[i + j]`` for ``i < m`` (``win < 32``), in few vector passes:
+    for a multiple of 3 (9, the default) sums of 3 neighbours then ``win / 3`` of those;
+    otherwise a binary decomposition of ``win`` into sums of 1, 2, 4, 8, 16 neighbours.
+    The 3-split is used only for float32 (``col.itemsize == 4``): the matcher's float32
+    inputs are integer-valued and their sums exact in any grouping; float64 (non-integer
+    images) keeps the binary grouping, so results do not depend on the split."""
     length = m + win - 1
+    if win % 3 == 0 and col.itemsize == 4:
+        for i in range(length - 2):
+            t2[i] = col[i] + col[i + 1] + col[i + 2]
+        if win == 3:
+            for i in range(m):
+                out[i] = t2[i]
+        elif win == 9:
+            s0 = t2[0:m]
+            s1 = t2[3:3 + m]
+            s2 = t2[6:6 + m]
+            for i in range(m):
+                out[i] = s0[i] + s1[i] + s2[i]
+        else:
+            for i in range(m):
+                out[i] = t2[i] + t2[i + 3]
+            for j in range(6, win, 3):
+                seg = t2[j:j + m]
+                for i in range(m):
+                    out[i] += seg[i]
+        return
     if win >= 2:
         for i in range(length - 1):
             t2[i] = col[i] + col[i + 1]
@@ -55,14 +79,10 @@ def _box(col, out, t2, t4, t8, t16, m, win):
     if win >= 16:
         for i in range(length - 15):
             t16[i] = t8[i] + t8[i + 8]
+    # win is odd: the first term is col itself
     for i in range(m):
-        out[i] = 0
-    off = 0
-    if win & 1:
-        seg = col[off:off + m]
-        for i in range(m):
-            out[i] += seg[i]
-        off += 1
+        out[i] = col[i]
+    off = 1
     if win & 2:
         seg = t2[off:off + m]
         for i in range(m):
@@ -427,7 +447,7 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
         ``c + o* +`` parabola offset; NaN where ``o*`` is on the edge of ``[-half, half]``
         (the true minimum may lie outside).
     out_cost : ndarray float32 (H, W)
-        Cost of the winner (BIG where NaN).
+        Cost of the winner (inf where NaN).
 
     Each strip only touches the columns spanned by its wanted pixels; the products
     ``I_L(p) I_R(p - c(p) - o)`` of the rows inside the window are kept in a ring buffer,
@@ -535,7 +555,7 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
                 inside = (kb > 0) and (kb < nc - 1) and (cb < BIG)
                 value = np.float32(cy[i] + kb - half) + sub
                 od[i] = (value if inside else np.float32(np.nan)) if wy[i] else od[i]
-                oc[i] = (cb if inside else BIG) if wy[i] else oc[i]
+                oc[i] = (cb if inside else np.float32(np.inf)) if wy[i] else oc[i]
 
 
 @njit(cache=True, fastmath=_FASTMATH)
@@ -556,6 +576,13 @@ def upsample_gate(level_d, level_c, source_cols, scale, lo, hi, top, row0, row1,
             continue
         ld = level_d[y - top]
         lc = level_c[y - top]
+        if level_d.shape[1] == width:       # full-resolution level: no gather (vectorizes)
+            for x in range(width):
+                d = ld[x] * scale
+                ok = (d >= lo) and (d <= hi) and (x >= col0) and (x < col1)
+                od[x] = d if ok else nan
+                oc[x] = lc[x] if ok else zero
+            continue
         for x in range(width):
             sx = source_cols[x]
             d = ld[sx] * scale
@@ -582,13 +609,15 @@ def decode_median(coded, disparity, scale, out):
     """Inverse of the median's code (0 = invalid): NaN where the input was invalid or
     the median is invalid, else ``(code - 1) / scale``."""
     height, width = coded.shape
+    nan = np.float32(np.nan)
     for y in range(height):
-        for x in range(width):
-            c = coded[y, x]
-            if c == 0 or not np.isfinite(disparity[y, x]):
-                out[y, x] = np.nan
-            else:
-                out[y, x] = (c - 1) / scale
+        cr = coded[y]
+        dr = disparity[y]
+        orow = out[y]
+        for x in range(width):       # branch-free (vectorizes)
+            c = cr[x]
+            v = np.float32((c - 1) / scale)
+            orow[x] = v if (c != 0) & np.isfinite(dr[x]) else nan
 
 
 @njit(cache=True)
@@ -636,3 +665,40 @@ def unite(disparity, confidence, rule, index, out_d, out_c, out_source, poisoned
                 out_d[y, x] = d
                 out_c[y, x] = confidence[y, x]
                 out_source[y, x] = index
+
+
+@njit(cache=True)
+def fill_invalid(disparity, value, out):
+    """``out = disparity`` with ``value`` where NaN."""
+    height, width = disparity.shape
+    for y in range(height):
+        dr = disparity[y]
+        orow = out[y]
+        for x in range(width):
+            d = dr[x]
+            orow[x] = d if np.isfinite(d) else value
+
+
+@njit(cache=True)
+def drop_above(disparity, lowest, jump, out):
+    """``out = disparity`` with NaN where ``disparity - lowest > jump`` (depth-edge guard)."""
+    height, width = disparity.shape
+    nan = np.float32(np.nan)
+    for y in range(height):
+        dr = disparity[y]
+        lr = lowest[y]
+        orow = out[y]
+        for x in range(width):
+            d = dr[x]
+            orow[x] = nan if (d - lr[x] > jump) else d
+
+
+@njit(cache=True)
+def zero_where_invalid(disparity, confidence):
+    """In place: ``confidence = 0`` where ``disparity`` is NaN."""
+    height, width = disparity.shape
+    for y in range(height):
+        dr = disparity[y]
+        cr = confidence[y]
+        for x in range(width):
+            cr[x] = cr[x] if np.isfinite(dr[x]) else np.float32(0.0)

@@ -299,5 +299,4 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
         _kernels.refine_warped(left.padded, right.padded, left.a, left.b, right.a, right.b, r, center_pad,
                                np.ascontiguousarray(want), int(half_px), left.zncc,
                                rows[0], rows[1], _strips(n_strips, rows[1] - rows[0]), out, cost)
-    cost[cost >= _kernels.BIG] = np.inf
     return out, cost

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
+from . import _kernels
 from .config import MatchingConfig, preset_config
 from .cost import match_checked, prepare, prepare_gray, refine_candidates
 from .multirange import (DEFAULT_DEPTH_EDGES_M, decimate_horizontally, LevelOutput, MultiRangePlan, RangeLevel,
@@ -141,7 +142,7 @@ def _solve_prepared(pair, left: np.ndarray, level: RangeLevel, rows: tuple[int, 
         disparity[~textured(left, window_px=config.window_px, threshold=config.texture_threshold)] = np.nan
     if config.median_size:
         disparity = median_filter(disparity, size=config.median_size)
-        confidence[~np.isfinite(disparity)] = 0.0
+        _kernels.zero_where_invalid(disparity, confidence)
     return LevelOutput(disparity_px=disparity, confidence=confidence)
 
 
@@ -216,11 +217,14 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
     # prepared (pre-filtered, padded, window terms) whole-image pairs by level width: the
     # finest level's pair also serves the refinement of the coarser ones
     pairs: dict[int, tuple] = {}
+    decimated: dict[int, tuple] = {}      # whole-image decimated pairs, shared with run_levels
 
     def pair_at(w_level: int):
         if w_level not in pairs:
-            pairs[w_level] = _prepare_pair(decimate_horizontally(left_gray, w_level),
-                                           decimate_horizontally(right_gray, w_level), config)
+            if w_level not in decimated:
+                decimated[w_level] = (decimate_horizontally(left_gray, w_level),
+                                      decimate_horizontally(right_gray, w_level))
+            pairs[w_level] = _prepare_pair(*decimated[w_level], config)
         return pairs[w_level]
 
     def solve(lv, rv, level, rows, cols):
@@ -239,9 +243,10 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
     disparity, confidence, levels = run_levels(left_gray, right_gray, plan, solve,
                                                row_pad_px=config.window_px // 2 + 2, union=config.union,
                                                refine=refine if config.refine else None,
-                                               refine_min_scale=config.refine_min_decimation - 0.5)
+                                               refine_min_scale=config.refine_min_decimation - 0.5,
+                                               decimated=decimated)
     disparity = remove_speckles(disparity, max_size_px=config.speckle_size_px,
                                 max_diff_px=config.speckle_range_px)
     disparity = guard_depth_edges(disparity, guard_px=config.edge_guard, jump_px=config.edge_jump_px)
-    confidence[~np.isfinite(disparity)] = 0.0
+    _kernels.zero_where_invalid(disparity, confidence)
     return DisparityResult(disparity_px=disparity, confidence=confidence, plan=plan, levels=levels)

@@ -274,7 +274,7 @@ Refiner = Callable[[RangeLevel, np.ndarray, np.ndarray], tuple[np.ndarray, np.nd
 
 def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve: Solver, *,
                row_pad_px: int = 0, union: str = "finer", refine: Refiner | None = None,
-               refine_min_scale: float | None = 2.0) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+               refine_min_scale: float | None = 2.0, decimated: dict | None = None) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
     """Run a per-level solver on every level and unite the results (eq. 11-12).
 
     Parameters
@@ -297,6 +297,9 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
         the up-sampled map of a decimated level (``scale >= refine_min_scale``) at the pixels ``want`` (its
         values within one level pixel of the band), NaN = rejected, before the exact gate
         (beyond the paper, see :func:`.cost.refine_candidates`).
+    decimated : dict, optional
+        Cache ``{width: (left, right)}`` of whole-height decimated images, filled and
+        reused (the caller may share it with its own per-width work).
 
     Returns
     -------
@@ -316,8 +319,14 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
     maps, confs = [], []
     for level in plan.levels:
         w_level = level.size[0]
-        out = solve(decimate_horizontally(left_rows, w_level), decimate_horizontally(right_rows, w_level),
-                    level, rows, _level_cols(col0, col1, level.scale, w_level))
+        if decimated is not None and top == 0 and bottom == height:
+            if w_level not in decimated:
+                decimated[w_level] = (decimate_horizontally(left, w_level), decimate_horizontally(right, w_level))
+            left_level, right_level = decimated[w_level]
+        else:
+            left_level = decimate_horizontally(left_rows, w_level)
+            right_level = decimate_horizontally(right_rows, w_level)
+        out = solve(left_level, right_level, level, rows, _level_cols(col0, col1, level.scale, w_level))
         # Step 2: nearest-neighbour up-sampling along x (source column floor((x + 0.5) / scale));
         # disparities scale with the width. Eq. (11): keep only disparities inside the
         # level's band (and inside the AOI); a refined level is first cut one level pixel

@@ -104,9 +104,10 @@ def guard_depth_edges(disparity_px: np.ndarray, *, guard_px: int, jump_px: float
     """
     if guard_px <= 0:
         return disparity_px
-    valid = np.isfinite(disparity_px)
-    filled = np.where(valid, disparity_px, np.float32(1e9)).astype(np.float32)
+    disparity_px = np.ascontiguousarray(disparity_px, dtype=np.float32)
+    filled = np.empty_like(disparity_px)
+    _kernels.fill_invalid(disparity_px, np.float32(1e9), filled)
     lowest = cv2.erode(filled, np.ones((3, 2 * guard_px + 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
-    out = disparity_px.copy()
-    out[valid & (disparity_px - lowest > jump_px)] = np.nan
+    out = np.empty_like(disparity_px)
+    _kernels.drop_above(disparity_px, lowest, np.float32(jump_px), out)     # NaN stays NaN
     return out
