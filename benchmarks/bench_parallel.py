@@ -2,10 +2,10 @@
 
 Usage::
 
-    python benchmarks/bench_parallel.py [--frames 100] [--repeat 2] [--data DIR]
+    python benchmarks/bench_parallel.py [--frames 100] [--repeat 2] [--data DIR] [--width 640 --height 480]
 
 Renders (once, into DIR, default a temp dir) a synthetic corridor sequence
-(``mrstereo synth --frames N``, 320x240) and maps it:
+(``mrstereo synth --frames N``, 320x240 unless ``--width/--height``) and maps it:
 
 - in this process (the default of ``mrstereo map``; numba may use both cores);
 - ``workers=1`` and ``workers=2``: end to end, each call starting and stopping
@@ -39,12 +39,15 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--data", type=Path, default=None, help="dataset directory (rendered if absent)")
+    ap.add_argument("--width", type=int, default=320, help="image width of the rendered sequence")
+    ap.add_argument("--height", type=int, default=240, help="image height of the rendered sequence")
     args = ap.parse_args(argv)
 
     data = args.data or Path(tempfile.gettempdir()) / f"mrstereo-bench-parallel-{args.frames}"
     if not (data / "manifest.yaml").is_file():
         print(f"rendering {args.frames} frames into {data} ...", file=sys.stderr)
-        write_synthetic_dataset(data, seed=0, n_frames=args.frames, progress=True)
+        write_synthetic_dataset(data, seed=0, n_frames=args.frames, width=args.width, height=args.height,
+                                progress=True)
     manifest = read_manifest(data)
     n = len(manifest.frames)
 
