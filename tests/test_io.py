@@ -62,3 +62,14 @@ def test_clear_errors(tmp_path):
     write_image(tmp_path / "in.png", np.zeros((2, 2), np.uint8))
     with pytest.raises(ValueError, match="would overwrite the input"):
         refuse_overwrite_input(tmp_path / "in.png", [tmp_path / "x.png", tmp_path / "in.png"])
+
+
+def test_outputs_get_normal_permissions(tmp_path):
+    import os
+    import stat
+
+    write_pfm(tmp_path / "d.pfm", np.zeros((2, 2), np.float32))
+    mode = stat.S_IMODE(os.stat(tmp_path / "d.pfm").st_mode)
+    mask = os.umask(0)
+    os.umask(mask)
+    assert mode == 0o666 & ~mask
