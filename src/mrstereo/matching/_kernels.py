@@ -39,6 +39,30 @@ TWO = np.float32(2.0)
 
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _track_winner(crow, prow, k, n, bc, bk, cm_, cp_):
+    """One candidate row ``k`` of eq. (10): keep the first minimum per pixel (``bc``, ``bk``) and
+    the costs next to it for the parabola (``cm_`` when the best changes, ``cp_`` one row later)."""
+    for i in range(n):
+        c = crow[i]
+        cp_[i] = c if bk[i] == k - 1 else cp_[i]
+        better = c < bc[i]
+        cm_[i] = (prow[i] if k > 0 else BIG) if better else cm_[i]
+        cp_[i] = BIG if better else cp_[i]
+        bk[i] = k if better else bk[i]
+        bc[i] = c if better else bc[i]
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _parabola(cb, cm, cp):
+    """Sub-pixel offset of the parabola through (-1, cm), (0, cb), (1, cp), clipped to +-0.5;
+    0 when a neighbour is missing or the parabola is not convex."""
+    den = cm - TWO * cb + cp
+    fine = (cm < BIG) and (cp < BIG) and (den > 0)
+    sub = np.float32(0.5) * (cm - cp) / (den if fine else np.float32(1.0))
+    return min(max(sub, np.float32(-0.5)), np.float32(0.5)) if fine else np.float32(0.0)
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def _box(col, out, t2, t4, t8, t16, m, win):
     """``out[i] = sum_{j < win} col[i + j]`` for ``i < m`` (``win < 32``), in few vector passes:
     for a multiple of 3 (9, the default) sums of 3 neighbours then ``win / 3`` of those;
@@ -314,16 +338,7 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
                 cm_[i] = BIG
                 cp_[i] = BIG
             for k in range(nd):
-                crow = cost[k, col0:col1]
-                prow = cost[max(k - 1, 0), col0:col1]
-                for i in range(nx):
-                    c = crow[i]
-                    cp_[i] = c if bk[i] == k - 1 else cp_[i]
-                    better = c < bc[i]
-                    cm_[i] = (prow[i] if k > 0 else BIG) if better else cm_[i]
-                    cp_[i] = BIG if better else cp_[i]
-                    bk[i] = k if better else bk[i]
-                    bc[i] = c if better else bc[i]
+                _track_winner(cost[k, col0:col1], cost[max(k - 1, 0), col0:col1], k, nx, bc, bk, cm_, cp_)
             # second best at least 2 disparities away (uniqueness)
             for k in range(nd):
                 crow = cost[k, col0:col1]
@@ -351,13 +366,7 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
                         rc[i] = c if better else rc[i]
             # parabola through (d - 1, d, d + 1), clipped to +-0.5; 0 at band edges
             for i in range(nx):
-                cb = bc[i]
-                cm = cm_[i]
-                cp = cp_[i]
-                den = cm - TWO * cb + cp
-                fine = (cm < BIG) and (cp < BIG) and (den > 0)
-                sub = np.float32(0.5) * (cm - cp) / (den if fine else np.float32(1.0))
-                sub_[i] = min(max(sub, np.float32(-0.5)), np.float32(0.5)) if fine else np.float32(0.0)
+                sub_[i] = _parabola(bc[i], cm_[i], cp_[i])
             if raw:
                 for i in range(nx):
                     x = col0 + i
@@ -530,28 +539,14 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
                 cm_[i] = BIG
                 cp_[i] = BIG
             for o in range(nc):
-                crow = cost[o]
-                prow = cost[max(o - 1, 0)]
-                for i in range(nx):
-                    c = crow[i]
-                    cp_[i] = c if bk[i] == o - 1 else cp_[i]
-                    better = c < bc[i]
-                    cm_[i] = (prow[i] if o > 0 else BIG) if better else cm_[i]
-                    cp_[i] = BIG if better else cp_[i]
-                    bk[i] = o if better else bk[i]
-                    bc[i] = c if better else bc[i]
+                _track_winner(cost[o], cost[max(o - 1, 0)], o, nx, bc, bk, cm_, cp_)
             od = out_disp[y, xa:xb]
             oc = out_cost[y, xa:xb]
             wy = want[y, xa:xb]
             for i in range(nx):
                 kb = bk[i]
                 cb = bc[i]
-                cm = cm_[i]
-                cp = cp_[i]
-                den = cm - TWO * cb + cp
-                fine = (cm < BIG) and (cp < BIG) and (den > 0)
-                sub = np.float32(0.5) * (cm - cp) / (den if fine else np.float32(1.0))
-                sub = min(max(sub, np.float32(-0.5)), np.float32(0.5)) if fine else np.float32(0.0)
+                sub = _parabola(cb, cm_[i], cp_[i])
                 inside = (kb > 0) and (kb < nc - 1) and (cb < BIG)
                 value = np.float32(cy[i] + kb - half) + sub
                 od[i] = (value if inside else np.float32(np.nan)) if wy[i] else od[i]
