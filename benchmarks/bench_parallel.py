@@ -1,27 +1,35 @@
-"""Speed-up of build_map (mrstereo map) with 1 vs 2 local Dask workers, and bit-identical maps.
+"""Speed-up of mapping (`mrstereo map`) with 1 vs 2 local Dask workers, and bit-identical maps.
 
 Usage::
 
-    python benchmarks/bench_parallel.py [--frames 100] [--repeat 2] [--data DIR] [--width 640 --height 480]
+    python benchmarks/bench_parallel.py [--frames 100] [--repeat 3] [--data DIR] [--width 640 --height 480]
+                                        [--no-cli] [--no-processes]
 
 Renders (once, into DIR, default a temp dir) a synthetic corridor sequence
-(``mrstereo synth --frames N``, 320x240 unless ``--width/--height``) and maps it:
+(``mrstereo synth --frames N``; 640x480 unless ``--width/--height``) and maps it,
+each configuration end to end (a local cluster is started and stopped inside
+every run, as ``mrstereo map --workers N`` does):
 
-- in this process (the default of ``mrstereo map``; numba may use both cores);
-- ``workers=1`` and ``workers=2``: end to end, each call starting and stopping
-  its LocalCluster of single-threaded worker processes (what ``mrstereo map
-  --workers N`` costs);
-- on a started, warmed-up cluster of 1 and 2 workers (the per-frame work alone).
+- ``build_map`` in this process (the default of ``mrstereo map``; numba may use
+  both cores);
+- ``build_map(workers=N)``, N = 1, 2: single-threaded worker threads (the
+  default of ``--workers``);
+- ``build_map(workers=N, processes=True)``: single-threaded worker processes;
+- the command ``mrstereo map DIR -o OUT --quiet --workers N`` as a subprocess
+  (Python start-up, imports and the map files included).
 
-Prints the median wall time of each, the 2-vs-1 worker ratios, and whether
-every log-odds array equals the in-process one exactly. The machine is shared:
-run it when quiet and more than once.
+Configurations run in interleaved rounds (load drift hits them alike). Prints
+the median wall time of each, the 2-vs-1 worker ratios, and whether every
+log-odds array equals the in-process one exactly. The machine may be shared:
+run it when quiet.
 """
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -31,58 +39,72 @@ import numpy as np
 
 
 def main(argv=None) -> int:
-    from mrstereo.parallel import dask_client, map_ordered
     from mrstereo.pipeline import build_map
     from mrstereo.world.dataset import read_manifest, write_synthetic_dataset
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=100)
-    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--data", type=Path, default=None, help="dataset directory (rendered if absent)")
-    ap.add_argument("--width", type=int, default=320, help="image width of the rendered sequence")
-    ap.add_argument("--height", type=int, default=240, help="image height of the rendered sequence")
+    ap.add_argument("--width", type=int, default=640, help="image width of the rendered sequence")
+    ap.add_argument("--height", type=int, default=480, help="image height of the rendered sequence")
+    ap.add_argument("--no-cli", action="store_true", help="skip the `mrstereo map` subprocess runs")
+    ap.add_argument("--no-processes", action="store_true", help="skip the worker-process runs")
     args = ap.parse_args(argv)
 
-    data = args.data or Path(tempfile.gettempdir()) / f"mrstereo-bench-parallel-{args.frames}"
+    data = args.data or Path(tempfile.gettempdir()) / f"mrstereo-bench-parallel-{args.frames}-{args.width}"
     if not (data / "manifest.yaml").is_file():
-        print(f"rendering {args.frames} frames into {data} ...", file=sys.stderr)
+        print(f"rendering {args.frames} frames of {args.width}x{args.height} into {data} ...", file=sys.stderr)
         write_synthetic_dataset(data, seed=0, n_frames=args.frames, width=args.width, height=args.height,
                                 progress=True)
     manifest = read_manifest(data)
     n = len(manifest.frames)
+    out_root = Path(tempfile.mkdtemp(prefix="mrstereo-bench-parallel-out-"))
+    cli = shutil.which("mrstereo")
 
-    def timed(**kw):
-        t = time.perf_counter()
-        run = build_map(manifest, progress=False, **kw)
-        return time.perf_counter() - t, run.grid.log_odds
+    def in_python(**kw):
+        def run():
+            return build_map(manifest, progress=False, **kw).grid.log_odds
+        return run
+
+    def command(workers):
+        def run():
+            out = Path(tempfile.mkdtemp(dir=out_root))
+            subprocess.run([cli, "map", str(data), "-o", str(out), "--quiet", "--workers", str(workers)],
+                           check=True, stdout=subprocess.DEVNULL)
+            return np.load(out / "log_odds.npy")
+        return run
+
+    configs = {"in-process (default)": in_python(),
+               "1 worker thread": in_python(workers=1), "2 worker threads": in_python(workers=2)}
+    if not args.no_processes:
+        configs.update({"1 worker process": in_python(workers=1, processes=True),
+                        "2 worker processes": in_python(workers=2, processes=True)})
+    if not args.no_cli and cli is not None:
+        configs.update({"`mrstereo map --workers 1`": command(1), "`mrstereo map --workers 2`": command(2)})
 
     print(f"{n} frames of {manifest.calibration.size[0]}x{manifest.calibration.size[1]}; load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
-    _, reference = timed()                          # warm-up: numba kernels loaded / compiled
-    with dask_client(workers=1) as c1, dask_client(workers=2) as c2:
-        for client in (c1, c2):                     # load the kernels in every worker
-            map_ordered(abs, range(-4, 0), scheduler=client, progress=False)
-            build_map(manifest, progress=False, scheduler=client)
-        configs = {"in-process (default)": {}, "workers=1 (end to end)": {"workers": 1},
-                   "workers=2 (end to end)": {"workers": 2}, "1 started worker (frames only)": {"scheduler": c1},
-                   "2 started workers (frames only)": {"scheduler": c2}}
-        times = {name: [] for name in configs}
-        identical = True
-        for _ in range(args.repeat):                # interleaved rounds: load drift hits every config alike
-            for name, kw in configs.items():
-                dt, lo = timed(**kw)
-                times[name].append(dt)
-                identical &= bool(np.array_equal(lo, reference, equal_nan=True))
-    rows = {name: statistics.median(t) for name, t in times.items()}
+    reference = configs["in-process (default)"]()     # warm-up: numba kernels loaded / compiled
+    times = {name: [] for name in configs}
+    identical = True
+    for _ in range(args.repeat):
+        for name, run in configs.items():
+            t = time.perf_counter()
+            log_odds = run()
+            times[name].append(time.perf_counter() - t)
+            identical &= bool(np.array_equal(log_odds, reference, equal_nan=True))
+    shutil.rmtree(out_root, ignore_errors=True)
+    med = {name: statistics.median(t) for name, t in times.items()}
     for name, t in times.items():
-        print(f"{name:34s} median {rows[name]:7.2f} s  ({n / rows[name]:5.2f} frames/s)  runs: "
+        print(f"{name:30s} median {med[name]:7.2f} s  ({n / med[name]:5.1f} frames/s)  runs: "
               + ", ".join(f"{v:.2f}" for v in t), flush=True)
-    e2e = rows["workers=1 (end to end)"] / rows["workers=2 (end to end)"]
-    print(f"speed-up 2 vs 1 workers, end to end : {e2e:.2f}x")
-    print(f"speed-up 2 vs 1 workers, frames only: "
-          f"{rows['1 started worker (frames only)'] / rows['2 started workers (frames only)']:.2f}x")
-    print(f"workers=2 vs in-process             : {rows['in-process (default)'] / rows['workers=2 (end to end)']:.2f}x")
-    print(f"log-odds identical in every run     : {identical}")
+    for one, two in (("1 worker thread", "2 worker threads"), ("1 worker process", "2 worker processes"),
+                     ("`mrstereo map --workers 1`", "`mrstereo map --workers 2`")):
+        if one in med:
+            print(f"speed-up 2 vs 1: {two:28s} {med[one] / med[two]:.2f}x")
+    print(f"2 worker threads vs in-process: {med['in-process (default)'] / med['2 worker threads']:.2f}x")
+    print(f"log-odds identical in every run: {identical}")
     print(f"load average at the end: {os.getloadavg()[0]:.2f}")
     return 0 if identical else 1
 

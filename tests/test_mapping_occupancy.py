@@ -214,3 +214,33 @@ def test_min_points_per_cell_drops_isolated_hits():
     assert grid.unknown[80, 30]
     with pytest.raises(ValueError, match="min_points_per_cell must be >= 1"):
         MappingConfig(min_points_per_cell=0)
+
+
+def test_view_cells_of_one_ray_and_their_ordered_application():
+    from mrstereo.mapping import ViewCells, view_cells
+    spec = GridSpec()
+    cells = view_cells(np.array([[*centre(60, 40), 0.7]]), None, centre(60, 20))
+    assert isinstance(cells, ViewCells)
+    np.testing.assert_array_equal(cells.hit, [np.ravel_multi_index((60, 40), spec.shape)])
+    np.testing.assert_array_equal(cells.miss, np.ravel_multi_index((np.full(20, 60), np.arange(20, 40)), spec.shape))
+    # views computed anywhere (in any order), applied in order == updated one after another
+    rng = np.random.default_rng(3)
+    views = [(rng.uniform([0.5, -2.5], [6.0, 2.5], (200, 2)), rng.uniform([0.5, -2.5], [6.0, 2.5], (300, 2)),
+              rng.uniform([0.0, -1.0], [1.0, 1.0])) for _ in range(6)]
+    config = MappingConfig(min_points_per_cell=1, max_range_m=4.0)
+    precomputed = [view_cells(*v, config=config) for v in reversed(views)][::-1]
+    a, b = OccupancyGrid(config=config), OccupancyGrid(config=config)
+    for v, c in zip(views, precomputed):
+        ua, ub = a.update(*v), b.apply(c)
+        assert ua == ub
+    np.testing.assert_array_equal(a.log_odds, b.log_odds)
+    assert np.isfinite(a.log_odds).sum() > 100
+
+
+def test_apply_refuses_cells_of_another_config():
+    from mrstereo.mapping import view_cells
+    cells = view_cells(np.array([[1.0, 0.0]]), None, (0.0, 0.0), config=MappingConfig(max_range_m=4.0))
+    with pytest.raises(ValueError, match="max_range_m"):
+        OccupancyGrid(config=MappingConfig()).apply(cells)
+    with pytest.raises(TypeError, match="cells must be ViewCells"):
+        OccupancyGrid().apply([1, 2])

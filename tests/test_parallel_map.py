@@ -94,11 +94,11 @@ def test_build_map_on_a_thread_cluster_is_bit_identical(dataset, threaded_cluste
 
 
 def test_two_worker_processes_single_threaded_and_bit_identical(dataset):
-    """A LocalCluster of 2 processes (what workers=2 starts): one numba and OpenCV thread each; the same map."""
+    """A LocalCluster of 2 processes (workers=2, processes=True): one numba and OpenCV thread each; the same map."""
     from mrstereo.parallel import dask_client
 
     local = build_map(dataset, progress=False)
-    with dask_client(workers=2) as client:
+    with dask_client(workers=2, processes=True) as client:
         assert len(client.scheduler_info()["workers"]) == 2
         info = map_ordered(_threads, range(4), scheduler=client, progress=False)
         parallel = build_map(dataset, progress=False, scheduler=client)
@@ -112,6 +112,30 @@ def test_two_worker_processes_single_threaded_and_bit_identical(dataset):
 
 def test_workers_option_runs_a_local_cluster():
     assert map_ordered(partial(_slow_square, n=0), [0, 1, 2], workers=1, progress=False) == [0, 1, 4]
+    assert map_ordered(partial(_slow_square, n=0), [0, 1, 2], workers=1, processes=True, progress=False) == [0, 1, 4]
+
+
+def test_two_worker_threads_single_threaded_and_bit_identical(dataset):
+    """workers=2 (the default): two worker threads in this process, one numba and OpenCV thread each while
+    the cluster runs, OpenCV's setting restored after; the same map and observations."""
+    import os
+
+    import cv2
+
+    from mrstereo.parallel import dask_client
+
+    local = build_map(dataset, progress=False)
+    before = cv2.getNumThreads()
+    with dask_client(workers=2) as client:
+        assert len(client.scheduler_info()["workers"]) == 2
+        info = map_ordered(_threads, range(4), scheduler=client, progress=False)
+    assert cv2.getNumThreads() == before
+    assert all(r[:2] == (1, 1) and r[3] == os.getpid() for r in info)
+    parallel = build_map(dataset, progress=False, workers=2)
+    assert np.array_equal(local.grid.log_odds, parallel.grid.log_odds, equal_nan=True)
+    for a, b in zip(local.observations, parallel.observations):
+        assert a.index == b.index and np.array_equal(a.floor_points_world, b.floor_points_world)
+        assert np.array_equal(a.cells.miss, b.cells.miss)
 
 
 def test_cli_map_on_a_scheduler_matches_in_process(dataset, threaded_cluster, tmp_path, capsys):
@@ -127,3 +151,27 @@ def test_cli_map_on_a_scheduler_matches_in_process(dataset, threaded_cluster, tm
     assert entry(["map", str(dataset.root), "-o", str(tmp_path / "c"), "--workers", "2",
                   "--scheduler", cluster.scheduler_address]) == 2
     assert "give --workers or --scheduler, not both" in capsys.readouterr().err
+
+
+def test_fuse_uses_the_frames_cells_only_when_they_fit(dataset):
+    from dataclasses import replace
+
+    from mrstereo.pipeline import PipelineConfig, fuse
+
+    run = build_map(dataset, progress=False)
+    config = PipelineConfig()
+    assert all(o.cells is not None and o.cells.fits(config.grid, config.mapping) for o in run.observations)
+    bare = [replace(o, cells=None) for o in run.observations]      # fuse computes the cells from the points
+    np.testing.assert_array_equal(fuse(bare, grid=config.grid, config=config.mapping).log_odds, run.grid.log_odds)
+    other = replace(config.mapping, min_points_per_cell=1)        # other cells: the stored ones must not be used
+    fused_other = fuse(run.observations, grid=config.grid, config=other).log_odds
+    np.testing.assert_array_equal(fused_other, fuse(bare, grid=config.grid, config=other).log_odds)
+    assert not np.array_equal(fused_other, run.grid.log_odds, equal_nan=True)
+
+
+def test_cli_processes_needs_workers(dataset, tmp_path, capsys):
+    from mrstereo.cli import entry
+
+    assert entry(["map", str(dataset.root), "-o", str(tmp_path / "a"), "--quiet", "--processes"]) == 2
+    assert "--processes only with --workers" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists()

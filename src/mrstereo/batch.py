@@ -88,7 +88,7 @@ def process_frame(task: FrameTask) -> FrameObservation:
                             pan_rad=task.record.pan_rad, **pair_options(task.config))
     frame = result.frame
     obs = frame.obstacles
-    observation = observation_from_pair(frame, task.record, index=task.index)
+    observation = observation_from_pair(frame, task.record, index=task.index, config=task.config)
     files = frame_outputs(task.frames_dir, task.index)
     write_disparity(files["disparity"], frame.disparity_px)
     write_ply(files["cloud"], obs.points_robot_image.reshape(-1, 3), intensity=_gray(frame.left_rect).ravel(),
@@ -194,7 +194,8 @@ def _map_run(manifest: Manifest, observations: list[FrameObservation], config: P
 
 
 def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
-              maps: bool = True, workers: int | None = None, scheduler=None, progress: bool = True) -> BatchSummary:
+              maps: bool = True, workers: int | None = None, scheduler=None, processes: bool = False,
+              progress: bool = True) -> BatchSummary:
     """Process many datasets: per-frame files and one map per dataset (see the module docstring).
 
     Parameters
@@ -207,7 +208,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         Options of every stage (as for :func:`mrstereo.pipeline.build_map`).
     maps : bool
         Also fuse a map per dataset.
-    workers, scheduler
+    workers, scheduler, processes
         Where the frames run (:func:`mrstereo.parallel.map_ordered`).
     progress : bool
         A tqdm bar over all frames to compute.
@@ -245,7 +246,8 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
                 tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, rig=m.rig, config=config,
                                        frames_dir=frames_dir, dataset=name))
 
-    results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, progress=progress,
+    results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, processes=processes,
+                          progress=progress,
                           desc="frames", unit="frame", return_exceptions=True,
                           label=lambda t: f"{t.dataset} frame {t.index}")
     failures = []

@@ -7,16 +7,21 @@ reduction. :func:`map_ordered` runs the independent part:
 - in this process (``workers=None, scheduler=None``, the default, so nothing
   changes for a single user);
 - on a local ``dask.distributed.LocalCluster`` of ``workers`` single-threaded
-  worker processes (``workers=N``);
+  workers (``workers=N``): threads of this process by default (every hot loop
+  is a numba kernel compiled with ``nogil=True`` or an OpenCV call, both
+  release the GIL, so threads scale like processes without their start-up
+  and without pickling images and results), or worker processes
+  (``processes=True``);
 - on an existing ``dask.distributed`` cluster (``scheduler="tcp://host:8786"``
   or a ``distributed.Client``). Its workers must see the same files (the
   dataset paths are sent, not the images) and have mrstereo installed.
 
 Results come back in input order, whatever order the workers finish in, so a
 reduction over them gives the same result for every worker count. Inside
-workers, numba and OpenCV run on one thread each (``NUMBA_NUM_THREADS=1``,
-``numba.set_num_threads(1)``, ``cv2.setNumThreads(1)``) so that N workers on
-N cores do not oversubscribe them. See docs/scale-out.md.
+workers, numba and OpenCV run on one thread each (``numba.set_num_threads(1)``
+per task, ``cv2.setNumThreads(1)`` while a local cluster runs; worker processes
+also get ``NUMBA_NUM_THREADS=1``) so that N workers on N cores do not
+oversubscribe them. See docs/scale-out.md.
 """
 from __future__ import annotations
 
@@ -79,8 +84,9 @@ def limit_threads() -> None:
     """Run numba and OpenCV kernels on one thread in the calling thread / process.
 
     ``numba.set_num_threads`` is thread-local, so this is called at the start
-    of every task on a worker. ``cv2.setNumThreads`` is process-wide and is
-    changed only inside worker processes (never in the user's process).
+    of every task on a worker. ``cv2.setNumThreads`` is process-wide: it is
+    set here only inside worker processes, and by :func:`dask_client` for the
+    lifetime of a cluster of thread workers (then restored).
     """
     try:
         import numba
@@ -114,14 +120,18 @@ class _Task:
 
 
 @contextlib.contextmanager
-def dask_client(*, workers: int | None = None, scheduler=None) -> Iterator[Any]:
-    """A ``distributed.Client`` for ``workers`` local processes or an existing ``scheduler``.
+def dask_client(*, workers: int | None = None, scheduler=None, processes: bool = False) -> Iterator[Any]:
+    """A ``distributed.Client`` for ``workers`` local workers or an existing ``scheduler``.
 
     Parameters
     ----------
     workers : int, optional
-        Start a ``LocalCluster(n_workers=workers, threads_per_worker=1,
-        processes=True)`` on loopback for the duration of the block.
+        Start a ``LocalCluster(n_workers=workers, threads_per_worker=1)`` for
+        the duration of the block.
+    processes : bool
+        With ``workers``: worker processes on loopback (tcp://127.0.0.1)
+        instead of worker threads in this process (the default; OpenCV is
+        limited to one thread meanwhile).
     scheduler : str or distributed.Client, optional
         Address of a running scheduler (``tcp://127.0.0.1:8786``), or a client
         to reuse (it is not closed at the end).
@@ -153,6 +163,9 @@ def dask_client(*, workers: int | None = None, scheduler=None) -> Iterator[Any]:
     import dask
 
     workers = _checks.positive_int("workers", workers)
+    if not processes:
+        yield from _thread_client(workers)
+        return
     env = dict(_WORKER_ENV, MRSTEREO_WORKER_PROCESS="1")
     # distributed's nannies set MALLOC_TRIM_THRESHOLD_=65536 in their workers, which also fixes
     # glibc's mmap threshold: every image-sized temporary then costs fresh page faults and a frame
@@ -162,6 +175,21 @@ def dask_client(*, workers: int | None = None, scheduler=None) -> Iterator[Any]:
                       dashboard_address=":0", env=env, silence_logs=logging.CRITICAL) as cluster, \
             Client(cluster) as client:
         yield client
+
+
+def _thread_client(workers: int) -> Iterator[Any]:
+    """A client of ``workers`` single-threaded worker threads in this process."""
+    import cv2
+    from distributed import Client, LocalCluster
+
+    cv_threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=False, dashboard_address=None,
+                          silence_logs=logging.CRITICAL) as cluster, Client(cluster) as client:
+            yield client
+    finally:
+        cv2.setNumThreads(cv_threads)
 
 
 def _check_reachable(address: str) -> None:
@@ -185,7 +213,7 @@ def _check_reachable(address: str) -> None:
 
 
 def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: int | None = None,
-                scheduler=None, progress: bool = True, desc: str = "working",
+                scheduler=None, processes: bool = False, progress: bool = True, desc: str = "working",
                 return_exceptions: bool = False, label: Callable[[Any], str] | None = None,
                 unit: str = "item") -> list:
     """``[func(item) for item in items]``, in parallel, results in input order.
@@ -199,10 +227,13 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
         Inputs, each picklable (keep them small: paths rather than images).
     workers : int, optional
         Run on a fresh local Dask cluster of this many single-threaded
-        worker processes (started and shut down inside the call).
+        workers (started and shut down inside the call).
     scheduler : str or distributed.Client, optional
         Run on an existing Dask cluster. With neither ``workers`` nor
         ``scheduler`` everything runs in this process, one item after another.
+    processes : bool
+        With ``workers``: worker processes instead of worker threads
+        (:func:`dask_client`).
     progress : bool
         Show a tqdm bar (stderr) that advances as items finish.
     desc, unit : str
@@ -237,7 +268,7 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
             return _map_local(func, items, bar, return_exceptions, label)
     if not items:
         return []
-    with dask_client(workers=workers, scheduler=scheduler) as client, new_bar() as bar:
+    with dask_client(workers=workers, scheduler=scheduler, processes=processes) as client, new_bar() as bar:
         return _map_dask(client, func, items, bar, return_exceptions, label, desc)
 
 

@@ -5,8 +5,10 @@ Per frame (independent, so it can run anywhere):
 with the calibration, matches it with the multi-range approach (paper eq.
 9-12), rejects uniform patches (eq. 13), triangulates (eq. 14-16), splits
 obstacle from floor points in the robot frame and moves them into the world
-frame with the frame's pose. Then an ordered reduction, :func:`fuse`, adds the
-observations to a log-odds (or union) occupancy grid (paper section 5.2).
+frame with the frame's pose, and finds the grid cells they hit and the rays
+clear (:func:`mrstereo.mapping.occupancy.view_cells`). Then an ordered
+reduction, :func:`fuse`, adds these cells to a log-odds (or union) occupancy
+grid (paper section 5.2), a few microseconds per frame.
 :func:`build_map` runs both over a manifest; :func:`write_map_outputs` writes
 the ROS map, figures and metrics. Conventions: docs/conventions.md.
 """
@@ -29,7 +31,7 @@ from .io import atomic_write, read_image
 from .mapping import GridSpec, read_ros_map, write_ros_map
 from .mapping.figures import plot_map
 from .mapping.metrics import MapMetrics, map_metrics
-from .mapping.occupancy import MappingConfig, OccupancyGrid
+from .mapping.occupancy import MappingConfig, OccupancyGrid, ViewCells, view_cells
 from .matching.config import MatchingConfig
 from .rejection import RejectionConfig
 from .world.dataset import FrameRecord, Manifest, read_manifest
@@ -104,6 +106,8 @@ class FrameObservation:
     floor_points_world: np.ndarray
     n_valid_disparity: int
     ground_message: str
+    cells: ViewCells | None = None
+    """Cells hit and cleared in the grid of the run's config (None: :func:`fuse` computes them)."""
 
     @property
     def sensor_origin_world(self) -> tuple[float, float]:
@@ -138,15 +142,18 @@ def pair_options(config: PipelineConfig) -> dict:
             "rejection": config.rejection, "config": config.obstacles}
 
 
-def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: int) -> FrameObservation:
-    """Move a frame's obstacle and floor points from the robot frame into the world frame."""
+def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: int,
+                          config: PipelineConfig = PipelineConfig()) -> FrameObservation:
+    """Move a frame's obstacle and floor points into the world frame; find their grid cells."""
     T = T_world_from_robot(*record.pose)
     obs = frame.obstacles
+    obstacles = transform_points(T, obs.obstacle_points_robot).astype(np.float32)
+    floor = transform_points(T, obs.floor_points_robot).astype(np.float32)
+    cells = view_cells(obstacles, floor, record.pose[:2], grid=config.grid, config=config.mapping)
     return FrameObservation(index=index, pose=tuple(float(v) for v in record.pose), pan_rad=float(record.pan_rad),
-                            obstacle_points_world=transform_points(T, obs.obstacle_points_robot).astype(np.float32),
-                            floor_points_world=transform_points(T, obs.floor_points_robot).astype(np.float32),
+                            obstacle_points_world=obstacles, floor_points_world=floor,
                             n_valid_disparity=int(np.isfinite(frame.disparity_px).sum()),
-                            ground_message=obs.message)
+                            ground_message=obs.message, cells=cells)
 
 
 def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, rig=None,
@@ -155,15 +162,22 @@ def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, 
     left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
     frame = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=rig, pan_rad=record.pan_rad,
                                 **pair_options(config))
-    return observation_from_pair(frame, record, index=index)
+    return observation_from_pair(frame, record, index=index, config=config)
 
 
 def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec = GridSpec(),
          config: MappingConfig = MappingConfig()) -> OccupancyGrid:
-    """Ordered reduction: add each frame's points to one occupancy grid (paper section 5.2)."""
+    """Ordered reduction: add each frame's cells to one occupancy grid (paper section 5.2).
+
+    A frame's precomputed ``cells`` are used when they fit ``grid`` and ``config``; otherwise
+    they are computed from its points (the result is the same).
+    """
     occupancy = OccupancyGrid(grid, config=config)
     for obs in observations:
-        occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world)
+        if obs.cells is not None and obs.cells.fits(grid, config):
+            occupancy.apply(obs.cells)
+        else:
+            occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world)
     return occupancy
 
 
@@ -176,7 +190,8 @@ def _observe_indexed(indexed: tuple[int, FrameRecord], *, stereo: StereoCamera, 
 
 def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
               calibration: StereoCamera | None = None, prefer_raw: bool = False,
-              progress: bool = True, workers: int | None = None, scheduler=None) -> MapRun:
+              progress: bool = True, workers: int | None = None, scheduler=None,
+              processes: bool = False) -> MapRun:
     """Map a whole dataset: observe every frame, fuse in order, compare with the GT map if any.
 
     Parameters
@@ -187,7 +202,8 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         Overrides the manifest's calibration (e.g. one estimated by ``mrstereo
         stereo-calibrate``); then the raw images are used.
     workers : int, optional
-        Observe the frames on a local Dask cluster of this many worker processes.
+        Observe the frames on a local Dask cluster of this many single-threaded
+        workers: threads of this process, or processes with ``processes=True``.
     scheduler : str or distributed.Client, optional
         Observe the frames on an existing Dask cluster (its workers must see
         the dataset's files). With neither, everything runs in this process.
@@ -206,7 +222,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     prefer_raw = prefer_raw or calibration is not None
     observe = partial(_observe_indexed, stereo=stereo, rig=manifest.rig, config=config, prefer_raw=prefer_raw)
     observations = map_ordered(observe, list(enumerate(manifest.frames)), workers=workers, scheduler=scheduler,
-                               progress=progress, desc="mapping", unit="frame",
+                               processes=processes, progress=progress, desc="mapping", unit="frame",
                                label=lambda item: f"frame {item[0]} ({(item[1].left_rect or item[1].left).name})")
     occupancy = fuse(observations, grid=config.grid, config=config.mapping)
     metrics, gt = None, None

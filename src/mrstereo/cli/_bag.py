@@ -125,8 +125,8 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
               help="Map fusion.")
 @click.option("--no-maps", is_flag=True, help="Only the per-frame outputs, no map per dataset.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def batch_command(manifests, out_dir: Path, workers, scheduler, preset: str, fusion: str, no_maps: bool,
-                  quiet: bool) -> None:
+def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool, preset: str, fusion: str,
+                  no_maps: bool, quiet: bool) -> None:
     """Process many datasets: per frame a disparity (PFM), a point cloud (PLY) and a laser scan (JSON);
     per dataset a map. Resumable: finished outputs are kept on a re-run, failed frames are retried.
 
@@ -136,10 +136,10 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, preset: str, fus
     from ..pipeline import PipelineConfig
     from ..batch import run_batch
 
-    check_workers(workers, scheduler)
+    check_workers(workers, scheduler, processes)
     config = PipelineConfig(preset=preset).with_fusion(fusion)
     summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
-                        scheduler=scheduler, progress=not quiet)
+                        scheduler=scheduler, processes=processes, progress=not quiet)
     for d in summary.datasets:
         click.echo(f"{d.name}: {d.n_frames} frames ({d.n_computed} computed, {d.n_skipped} already done, "
                    f"{d.n_failed} failed){'; map ' + d.map_status if d.map_status else ''}")

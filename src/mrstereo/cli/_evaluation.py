@@ -29,7 +29,7 @@ def _write_text(path: Path, text: str) -> None:
                    "ground-truth maximum rounded up to 16).")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
 @worker_options
-def evaluate(dirs, methods, json_out, markdown_out, max_disparity, no_progress, workers, scheduler):
+def evaluate(dirs, methods, json_out, markdown_out, max_disparity, no_progress, workers, scheduler, processes):
     """Score matchers on benchmark scene folders DIR... and print a markdown table.
 
     Each DIR is one scene: Middlebury 2001/2003/2005/2006/2014 or KITTI 2012/2015, detected from
@@ -38,7 +38,7 @@ def evaluate(dirs, methods, json_out, markdown_out, max_disparity, no_progress, 
 
     Example: mrstereo evaluate data/middlebury2003/teddy data/kitti2012/000070 --json out.json
     """
-    check_workers(workers, scheduler)
+    check_workers(workers, scheduler, processes)
     names = tuple(m.strip() for m in methods.split(",") if m.strip())
     unknown = [m for m in names if m not in METHODS]
     if not names or unknown:
@@ -62,7 +62,7 @@ def evaluate(dirs, methods, json_out, markdown_out, max_disparity, no_progress, 
     if json_out is not None and markdown_out is not None and json_out.resolve() == markdown_out.resolve():
         raise ValueError("--json and --markdown must be different files")
     report = evaluate_scenes(dirs, methods=names, max_disparity_px=max_disparity, progress=not no_progress,
-                             workers=workers, scheduler=scheduler)
+                             workers=workers, scheduler=scheduler, processes=processes)
     markdown = report.to_markdown()
     if json_out is not None:
         _write_text(json_out, report.to_json())

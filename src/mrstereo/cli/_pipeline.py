@@ -34,7 +34,7 @@ __all__ = ["COMMANDS"]
 @bag_options
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
-                resolution_m: float, size_m: str, origin_m: str, workers: int | None, scheduler: str | None,
+                resolution_m: float, size_m: str, origin_m: str, workers: int | None, scheduler: str | None, processes: bool,
                 bag: Path | None, quiet: bool, **bag_kw) -> None:
     """Build an occupancy grid from the stereo frames of a dataset MANIFEST (docs/dataset.md)
     or of a ROS bag (--bag, docs/scale-out.md).
@@ -54,7 +54,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     from ..pipeline import PipelineConfig, build_map, write_map_outputs
     from ..world.dataset import read_manifest
 
-    check_workers(workers, scheduler)
+    check_workers(workers, scheduler, processes)
     if (manifest is None) == (bag is None):
         raise click.UsageError("give a MANIFEST or --bag FILE (one of them)")
     (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
@@ -80,7 +80,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
                 dataset = dataclasses.replace(dataset, rig=rig)
             stereo = read_stereo(calib) if calib is not None else None
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
-                        scheduler=scheduler)
+                        scheduler=scheduler, processes=processes)
         files = write_map_outputs(run, out_dir)
     click.echo(f"map of {len(run.observations)} frames: {run.grid!r}")
     if run.metrics is not None:

@@ -240,7 +240,8 @@ def _evaluate_job(job: tuple) -> EvaluationRow:
 
 
 def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_disparity_px: int | None = None,
-                    progress: bool = True, workers: int | None = None, scheduler=None) -> EvaluationReport:
+                    progress: bool = True, workers: int | None = None, scheduler=None,
+                    processes: bool = False) -> EvaluationReport:
     """Evaluate matchers on benchmark scene directories.
 
     Parameters
@@ -253,9 +254,9 @@ def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_dis
         Search range for every scene (default: each scene's own range).
     progress : bool
         Show a tqdm progress bar on stderr.
-    workers, scheduler :
-        Spread the (scene, method) runs over a local Dask cluster of ``workers`` processes or an
-        existing cluster (:func:`mrstereo.parallel.map_ordered`); default in this process. Per-run
+    workers, scheduler, processes :
+        Spread the (scene, method) runs over a local Dask cluster of ``workers`` threads (or
+        processes with ``processes=True``) or an existing cluster (:func:`mrstereo.parallel.map_ordered`); default in this process. Per-run
         times on workers include each worker's first numba compilation.
 
     Returns
@@ -283,6 +284,7 @@ def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_dis
             _warm_up(method, scenes[0], max_disparity_px or scenes[0].max_disparity_px)
     jobs = [(label, scene, method, max_disparity_px or scene.max_disparity_px)
             for label, scene in zip(labels, scenes) for method in methods]
-    rows = map_ordered(_evaluate_job, jobs, workers=workers, scheduler=scheduler, progress=progress,
+    rows = map_ordered(_evaluate_job, jobs, workers=workers, scheduler=scheduler, processes=processes,
+                       progress=progress,
                        desc="evaluate", label=lambda job: f"{job[0]} {job[2]}", unit="run")
     return EvaluationReport(rows=tuple(rows), methods=methods, scenes=tuple(labels))

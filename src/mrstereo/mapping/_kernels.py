@@ -18,7 +18,7 @@ END_FREE = np.uint8(2)   # a ray ends here and clears its end cell (floor point,
 MISS = np.uint8(4)       # a ray crossed this cell
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def _clip_segment(x0, y0, x1, y1, cols, rows):
     """Liang-Barsky: parameters ``(t0, t1)`` of the part of the segment inside the grid box."""
     dx = x1 - x0
@@ -47,7 +47,7 @@ def _clip_segment(x0, y0, x1, y1, cols, rows):
     return t0, t1
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def _cell(v, n):
     c = int(math.floor(v))
     if c < 0:
@@ -57,7 +57,7 @@ def _cell(v, n):
     return c
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cells, is_obstacle, flags,
                    ends):
     """Flag the end cell of every ray; return the number of points ending outside the grid.
@@ -108,7 +108,7 @@ def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cel
     return outside
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def _axis_step(d, cell, start):
     """Amanatides-Woo set-up along one axis: step sign, t per cell, t to the first boundary."""
     if d > 0.0:
@@ -118,7 +118,7 @@ def _axis_step(d, cell, start):
     return 0, np.inf, np.inf
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def _trace(sx, sy, tx, ty, include_end, miss):
     """Amanatides-Woo traversal from ``(sx, sy)`` to the point ``(tx, ty)`` (grid units).
 
@@ -165,7 +165,7 @@ def _trace(sx, sy, tx, ty, include_end, miss):
         miss[cy, cx] = 1
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def cast_rays(flags, ends, sx, sy, miss):
     """Trace one ray from the sensor to each flagged end cell (deduplicated rays).
 
@@ -181,44 +181,32 @@ def cast_rays(flags, ends, sx, sy, miss):
             _trace(sx, sy, ends[r, c, 0], ends[r, c, 1], include_end, miss)
 
 
-@njit(cache=True)
-def apply_update(log_odds, flags, miss, l_hit, l_miss, l_min, l_max, union):
-    """Add one update to the log-odds (NaN = unknown); hits win over misses in the same update.
+@njit(nogil=True, cache=True)
+def apply_cells(log_odds, hit, miss, l_hit, l_miss, l_min, l_max, union):
+    """Add one view to the flat log-odds (NaN = unknown): ``hit`` and ``miss`` are flat indices.
 
     ``union``: a hit sets ``l_max`` for good; a miss sets ``l_min`` unless the cell is occupied.
-    Returns ``(hit_cells, miss_cells)``.
     """
-    rows, cols = log_odds.shape
-    n_hit = 0
-    n_miss = 0
-    for r in range(rows):
-        for c in range(cols):
-            hit = (flags[r, c] & HIT) != 0
-            if not hit and miss[r, c] == 0:
-                continue
-            old = log_odds[r, c]
-            if union:
-                if hit:
-                    log_odds[r, c] = l_max
-                    n_hit += 1
-                else:
-                    if not old == l_max:
-                        log_odds[r, c] = l_min
-                    n_miss += 1
-                continue
-            if math.isnan(old):
-                old = 0.0
-            if hit:
-                new = old + l_hit
-                n_hit += 1
-            else:
-                new = old + l_miss
-                n_miss += 1
-            log_odds[r, c] = min(max(new, l_min), l_max)
-    return n_hit, n_miss
+    for i in hit:
+        if union:
+            log_odds[i] = l_max
+            continue
+        old = log_odds[i]
+        if math.isnan(old):
+            old = 0.0
+        log_odds[i] = min(max(old + l_hit, l_min), l_max)
+    for i in miss:
+        old = log_odds[i]
+        if union:
+            if not old == l_max:
+                log_odds[i] = l_min
+            continue
+        if math.isnan(old):
+            old = 0.0
+        log_odds[i] = min(max(old + l_miss, l_min), l_max)
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def astar(blocked, start_r, start_c, goal_r, goal_c, came_from, g_cost):
     """A* on an 8-connected grid, octile heuristic, no corner cutting; costs in cells.
 

@@ -36,8 +36,8 @@ from . import _kernels
 from .grid import GridSpec
 from .rosmap import RosMap
 
-__all__ = ["MappingConfig", "OccupancyGrid", "GridUpdate", "log_odds_from_probability",
-           "probability_from_log_odds"]
+__all__ = ["MappingConfig", "OccupancyGrid", "GridUpdate", "ViewCells", "view_cells",
+           "log_odds_from_probability", "probability_from_log_odds"]
 
 FUSIONS = ("log_odds", "union")
 
@@ -144,6 +144,97 @@ def _points_xy(name: str, value) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
+class ViewCells(NamedTuple):
+    """The cells one view hits and clears, ready to be added to a grid in order.
+
+    Computing them is the per-frame part of mapping (independent between frames, so it runs
+    on parallel workers); :meth:`OccupancyGrid.apply` is the cheap ordered part.
+    """
+
+    hit: np.ndarray
+    """Flat indices (into ``grid.shape``) of the cells hit, ascending, int64."""
+    miss: np.ndarray
+    """Flat indices of the cells a ray crossed and no obstacle point hit, ascending, int64."""
+    points_outside: int
+    """Points whose ray was cut at the grid border."""
+    grid: GridSpec
+    max_range_m: float | None
+    min_points_per_cell: int
+
+    def fits(self, grid: GridSpec, config: MappingConfig) -> bool:
+        """True when these cells are what ``grid`` and ``config`` would compute."""
+        return (self.grid == grid and self.max_range_m == config.max_range_m
+                and self.min_points_per_cell == config.min_points_per_cell)
+
+
+def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
+               grid: GridSpec = GridSpec(), config: MappingConfig = MappingConfig()) -> ViewCells:
+    """The cells one view hits and clears (OctoMap's per-scan key sets [2]).
+
+    Parameters
+    ----------
+    points_obstacle_world : ndarray of shape (N, 3) or (N, 2), or None
+        Obstacle points in the world frame (metres); z is ignored, rows with NaN skipped.
+    points_free_world : ndarray of shape (M, 3) or (M, 2), or None
+        Floor points (ground-suppressed by eq. 13): their rays and their own cells are free.
+    sensor_origin_world : sequence of 2 or 3 floats
+        World (x, y) of the sensor (the left camera's optical centre).
+    grid : GridSpec
+    config : MappingConfig
+        Only ``max_range_m`` and ``min_points_per_cell`` matter here.
+
+    Returns
+    -------
+    ViewCells
+
+    Notes
+    -----
+    Every cell is counted at most once per view for a hit and once for a miss, and a hit
+    cancels a miss of the same cell. One ray is traced to the representative point of each
+    distinct end cell (the last point that fell in it; Amanatides-Woo traversal [3]); the end
+    cell of an obstacle ray is not cleared. A ray to a point outside the grid (or beyond
+    ``max_range_m``) is cut at the border and clears the cells inside.
+    """
+    if not isinstance(grid, GridSpec):
+        raise TypeError(f"grid must be a GridSpec, got {type(grid).__name__}")
+    if not isinstance(config, MappingConfig):
+        raise TypeError(f"config must be a MappingConfig, got {type(config).__name__}")
+    obstacles = _points_xy("points_obstacle_world", points_obstacle_world)
+    floor = _points_xy("points_free_world", points_free_world)
+    origin = np.asarray(sensor_origin_world, dtype=np.float64).ravel()
+    if origin.shape not in ((2,), (3,)) or not np.isfinite(origin).all():
+        raise ValueError(f"sensor_origin_world must be 2 or 3 finite numbers (x, y[, z]), "
+                         f"got {sensor_origin_world!r}")
+    sx = (origin[0] - grid.origin_x_m) / grid.resolution_m
+    sy = (origin[1] - grid.origin_y_m) / grid.resolution_m
+    max_range_cells = -1.0 if config.max_range_m is None else config.max_range_m / grid.resolution_m
+    flags = np.zeros(grid.shape, np.uint8)
+    miss = np.zeros(grid.shape, np.uint8)
+    ends = np.empty(grid.shape + (2,), np.float64)
+    if config.min_points_per_cell > 1 and len(obstacles):
+        obstacles = _supported(obstacles, grid, config.min_points_per_cell)
+    outside = 0
+    for points, is_obstacle in ((obstacles, True), (floor, False)):
+        if len(points):
+            outside += _kernels.mark_endpoints(points, sx, sy, grid.origin_x_m, grid.origin_y_m,
+                                               grid.resolution_m, max_range_cells, is_obstacle, flags, ends)
+    _kernels.cast_rays(flags, ends, sx, sy, miss)
+    hit = (flags & _kernels.HIT) != 0
+    return ViewCells(hit=np.flatnonzero(hit), miss=np.flatnonzero((miss != 0) & ~hit), points_outside=int(outside),
+                     grid=grid, max_range_m=config.max_range_m, min_points_per_cell=config.min_points_per_cell)
+
+
+def _supported(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:
+    """Obstacle points whose cell holds at least ``min_points`` of them (others dropped)."""
+    col = np.floor((points[:, 0] - grid.origin_x_m) / grid.resolution_m)
+    row = np.floor((points[:, 1] - grid.origin_y_m) / grid.resolution_m)
+    finite = np.isfinite(col) & np.isfinite(row)
+    key = np.full(len(points), -1, np.int64)
+    key[finite] = (row[finite].astype(np.int64) << 32) + col[finite].astype(np.int64)
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    return points[finite & (counts[inverse] >= min_points)]
+
+
 class OccupancyGrid:
     """A 2D occupancy grid that accumulates stereo views (paper section 5.2).
 
@@ -177,80 +268,46 @@ class OccupancyGrid:
         if log_odds is None:
             self._log_odds = np.full(grid.shape, np.nan)
         else:
-            arr = np.array(log_odds, dtype=np.float64)
+            arr = np.array(log_odds, dtype=np.float64, order="C")
             if arr.shape != grid.shape:
                 raise ValueError(f"log_odds must have shape {grid.shape} (the grid), got {arr.shape}")
             if np.isinf(arr).any():
                 raise ValueError("log_odds must be finite or NaN (unknown)")
             self._log_odds = arr
-        self._flags = np.zeros(grid.shape, np.uint8)
-        self._miss = np.zeros(grid.shape, np.uint8)
-        self._ends = np.zeros(grid.shape + (2,), np.float64)
         self.n_updates = 0
 
     # ---------------------------------------------------------------- update
     def update(self, points_obstacle_world, points_free_world, sensor_origin_world) -> GridUpdate:
         """Add one view: obstacle points hit their cells, rays to all points clear cells.
 
-        Parameters
-        ----------
-        points_obstacle_world : ndarray of shape (N, 3) or (N, 2), or None
-            Obstacle points in the world frame (metres); z is ignored, rows with NaN skipped.
-        points_free_world : ndarray of shape (M, 3) or (M, 2), or None
-            Floor points (ground-suppressed by eq. 13): their rays and their own cells are free.
-        sensor_origin_world : sequence of 2 or 3 floats
-            World (x, y) of the sensor (the left camera's optical centre).
+        The same as ``apply(view_cells(..., grid=self.grid, config=self.config))``; see
+        :func:`view_cells` for the parameters and the ray model.
 
         Returns
         -------
         GridUpdate
             Distinct cells hit and missed in this update, points ending outside the grid.
-
-        Notes
-        -----
-        Every cell is counted at most once per update for a hit and once for a miss, and a hit
-        cancels a miss of the same cell (OctoMap's per-scan key sets). One ray is traced to the
-        representative point of each distinct end cell (the last point that fell in it;
-        Amanatides-Woo traversal [3]); the end cell of an
-        obstacle ray is not cleared. A ray to a point outside the grid (or beyond
-        ``max_range_m``) is cut at the border and clears the cells inside.
         """
-        obstacles = _points_xy("points_obstacle_world", points_obstacle_world)
-        floor = _points_xy("points_free_world", points_free_world)
-        origin = np.asarray(sensor_origin_world, dtype=np.float64).ravel()
-        if origin.shape not in ((2,), (3,)) or not np.isfinite(origin).all():
-            raise ValueError(f"sensor_origin_world must be 2 or 3 finite numbers (x, y[, z]), "
-                             f"got {sensor_origin_world!r}")
-        g, c = self.grid, self.config
-        sx = (origin[0] - g.origin_x_m) / g.resolution_m
-        sy = (origin[1] - g.origin_y_m) / g.resolution_m
-        max_range_cells = -1.0 if c.max_range_m is None else c.max_range_m / g.resolution_m
-        self._flags.fill(0)
-        self._miss.fill(0)
-        outside = 0
-        if c.min_points_per_cell > 1 and len(obstacles):
-            obstacles = self._supported(obstacles, c.min_points_per_cell)
-        for points, is_obstacle in ((obstacles, True), (floor, False)):
-            if len(points):
-                outside += _kernels.mark_endpoints(points, sx, sy, g.origin_x_m, g.origin_y_m,
-                                                   g.resolution_m, max_range_cells, is_obstacle,
-                                                   self._flags, self._ends)
-        _kernels.cast_rays(self._flags, self._ends, sx, sy, self._miss)
-        n_hit, n_miss = _kernels.apply_update(self._log_odds, self._flags, self._miss, c.l_hit,
-                                              c.l_miss, c.l_min, c.l_max, c.fusion == "union")
-        self.n_updates += 1
-        return GridUpdate(int(n_hit), int(n_miss), int(outside))
+        return self.apply(view_cells(points_obstacle_world, points_free_world, sensor_origin_world,
+                                     grid=self.grid, config=self.config))
 
-    def _supported(self, points: np.ndarray, min_points: int) -> np.ndarray:
-        """Obstacle points whose cell holds at least ``min_points`` of them (others dropped)."""
-        g = self.grid
-        col = np.floor((points[:, 0] - g.origin_x_m) / g.resolution_m)
-        row = np.floor((points[:, 1] - g.origin_y_m) / g.resolution_m)
-        finite = np.isfinite(col) & np.isfinite(row)
-        key = np.full(len(points), -1, np.int64)
-        key[finite] = (row[finite].astype(np.int64) << 32) + col[finite].astype(np.int64)
-        _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-        return points[finite & (counts[inverse] >= min_points)]
+    def apply(self, cells: ViewCells) -> GridUpdate:
+        """Add one view's hit and missed cells (from :func:`view_cells`) to the log-odds.
+
+        Each cell changes once per view: ``L <- clamp(L + l_hit)`` for a hit, ``clamp(L + l_miss)``
+        for a miss (``fusion="union"``: ``l_max`` for a hit, ``l_min`` for a miss of a cell that
+        is not occupied). Views must be applied in their order (clamping does not commute).
+        """
+        if not isinstance(cells, ViewCells):
+            raise TypeError(f"cells must be ViewCells (from view_cells), got {type(cells).__name__}")
+        if not cells.fits(self.grid, self.config):
+            raise ValueError("cells were computed for another grid or another max_range_m / "
+                             "min_points_per_cell than this OccupancyGrid's")
+        c = self.config
+        _kernels.apply_cells(self._log_odds.reshape(-1), cells.hit, cells.miss, c.l_hit, c.l_miss, c.l_min,
+                             c.l_max, c.fusion == "union")
+        self.n_updates += 1
+        return GridUpdate(len(cells.hit), len(cells.miss), cells.points_outside)
 
     # ---------------------------------------------------------------- outputs
     @property

@@ -14,7 +14,7 @@ _EPS = 1e-9
 _MASK = 0xFFFFFFFF
 
 
-@njit(cache=True, inline="always")
+@njit(nogil=True, cache=True, inline="always")
 def _hash01(ix, iy, seed):
     """Integer lattice hash -> [0, 1]."""
     h = (ix * 374761393 + iy * 668265263 + seed * 1442695041) & _MASK
@@ -23,7 +23,7 @@ def _hash01(ix, iy, seed):
     return h / 4294967295.0
 
 
-@njit(cache=True, inline="always")
+@njit(nogil=True, cache=True, inline="always")
 def _value_noise(u, v, seed):
     """Smooth value noise in [0, 1] with unit lattice spacing."""
     fu = math.floor(u)
@@ -41,7 +41,7 @@ def _value_noise(u, v, seed):
     return (n00 * (1.0 - a) + n10 * a) * (1.0 - b) + (n01 * (1.0 - a) + n11 * a) * b
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def _fbm(u, v, seed, octaves):
     """Fractal sum of value noise, normalized to [0, 1]."""
     total = 0.0
@@ -56,7 +56,7 @@ def _fbm(u, v, seed, octaves):
     return total / norm
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def _albedo(mat, u, v, seed):
     """Albedo of material row ``mat`` (kind, albedo, contrast, scale_m, period_m) at (u, v) metres."""
     kind = int(mat[0])
@@ -96,14 +96,14 @@ def _albedo(mat, u, v, seed):
     return a
 
 
-@njit(cache=True, inline="always")
+@njit(nogil=True, cache=True, inline="always")
 def _safe_inv(x):
     if abs(x) > 1e-15:
         return 1.0 / x
     return 1e15 if x >= 0.0 else -1e15
 
 
-@njit(cache=True, inline="always")
+@njit(nogil=True, cache=True, inline="always")
 def _slab(lo, hi, o, inv, t_near, t_far):
     t1 = (lo - o) * inv
     t2 = (hi - o) * inv
@@ -112,7 +112,7 @@ def _slab(lo, hi, o, inv, t_near, t_far):
     return max(t_near, t1), min(t_far, t2), t1
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def _trace(ox, oy, oz, dx, dy, dz, boxes, cylinders):
     """Nearest hit: returns (t, kind 0 box / 1 cylinder side / 2 cylinder cap / -1 none, index, axis, sign)."""
     best_t = np.inf
@@ -174,7 +174,7 @@ def _trace(ox, oy, oz, dx, dy, dz, boxes, cylinders):
     return best_t, kind, index, axis, sign
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def _surface(ox, oy, oz, dx, dy, dz, boxes, box_mat, box_label, cylinders, cyl_mat, cyl_label,
              decals, decal_mat, decal_label, materials, skirting_m, skirting_mat, seed):
     """Hit of one ray: (albedo, t, label, point xyz, normal xyz, primitive id); t = inf on a miss."""
@@ -236,7 +236,7 @@ def _surface(ox, oy, oz, dx, dy, dz, boxes, box_mat, box_label, cylinders, cyl_m
     return albedo, t, label, px, py, pz, nx, ny, nz, prim
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def _irradiance(px, py, pz, nx, ny, nz, lights, ambient):
     """Ambient plus Lambertian point lights with inverse-square falloff ``P cos / (1 + r^2)``."""
     light = ambient
@@ -251,7 +251,7 @@ def _irradiance(px, py, pz, nx, ny, nz, lights, ambient):
     return light
 
 
-@njit(cache=True, parallel=True)
+@njit(nogil=True, cache=True, parallel=True)
 def render_rays(dirs_cam, R_world_from_cam, origin, boxes, box_mat, box_label, cylinders, cyl_mat,
                 cyl_label, decals, decal_mat, decal_label, materials, lights, skirting_m, skirting_mat,
                 ambient, seed, out_radiance, out_depth, out_label):
