@@ -173,11 +173,106 @@ def _check_common(target, board, spacing_m, seed, supersample):
     return (nx, ny), s, seed, supersample
 
 
+_COVERAGES = ("random", "grid")
+# "grid" coverage: aim regions as (x, y) in {-1, 0, 1}, corners first, then edges, then the centre, so
+# that every 9 consecutive views cover the whole image. Paper width / image width per pass over the
+# regions: small boards reach deepest into the corners (the paper's white margin keeps the corners
+# of the pattern away from the image corners), large close boards pin down focal length and distortion.
+_GRID_AIMS = ((-1, -1), (1, 1), (1, -1), (-1, 1), (0, -1), (0, 1), (-1, 0), (1, 0), (0, 0))
+_GRID_CORNER_FILLS = (0.3, 0.25)
+_GRID_FILLS = (0.8, 0.65)
+_GRID_TILT_RAD = 0.45
+_GRID_ROLL_RAD = 0.1
+
+
+def _outline(target, board, s) -> tuple[np.ndarray, np.ndarray]:
+    """Paper outline points (corners and edge midpoints) and the paper centre, target frame."""
+    x0, x1, y0, y1 = _board_extent(target, board, s)
+    outline = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0],
+                        [(x0 + x1) / 2, y0, 0], [(x0 + x1) / 2, y1, 0], [x0, (y0 + y1) / 2, 0],
+                        [x1, (y0 + y1) / 2, 0]])
+    return outline, np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
+
+
+def _fits(cams, pts: np.ndarray, margin: float) -> bool:
+    """Whether the left-raw-frame points ``pts`` project inside the left (and right) image."""
+    if not _inside(cams[0], cams[0].project(pts), margin):
+        return False
+    return cams[1] is None or _inside(cams[1], cams[1].project(pts @ cams[2].T + cams[3]), margin)
+
+
+def _random_pose(cams, outline, centre, rng) -> tuple[np.ndarray, np.ndarray] | None:
+    """A random pose: tilt up to about 35 degrees, 35-65 % of the image width, anywhere inside."""
+    left = cams[0]
+    width_m = outline[1, 0] - outline[0, 0]
+    aim_x_m = _right_offset_m(cams) / 2    # aim between the cameras of a stereo pair
+    for _attempt in range(500):
+        angles = rng.uniform([-0.6, -0.6, -0.3], [0.6, 0.6, 0.3])
+        R = rotation_from_euler(*angles)
+        fill = rng.uniform(0.35, 0.65)
+        z = left.fx * width_m / (fill * left.width)
+        off = rng.uniform(-0.5, 0.5, 2) * (1.0 - fill) * np.array([left.width / left.fx,
+                                                                    left.height / left.fy])
+        t = np.array([aim_x_m + off[0] * z, off[1] * z, z]) - R @ centre
+        if _fits(cams, outline @ R.T + t, 6.0):
+            return R, t
+    return None
+
+
+def _grid_pose(cams, outline, centre, k, rng) -> tuple[np.ndarray, np.ndarray] | None:
+    """Pose ``k`` of the "grid" coverage: the board pushed into aim region ``k mod 9``.
+
+    The board is tilted by ``_GRID_TILT_RAD`` about the image axes so that its
+    edge at the aim region recedes (first pass over the regions) or approaches
+    (second pass), plus up to 0.1 rad of random tilt and ``_GRID_ROLL_RAD`` of
+    random roll; then it is shifted until its outline touches the image
+    border(s) of the region (7 px, in both images of a stereo pair) or is
+    centred along the free axis. The distance is reduced when it does not fit.
+    """
+    left = cams[0]
+    width_m = outline[1, 0] - outline[0, 0]
+    ax, ay = _GRID_AIMS[k % len(_GRID_AIMS)]
+    npass = k // len(_GRID_AIMS)
+    sign = 1.0 if npass % 2 == 0 else -1.0
+    fills = _GRID_CORNER_FILLS if (ax != 0 and ay != 0) else _GRID_FILLS
+    fill0 = fills[npass % len(fills)]
+    for attempt in range(200):
+        jitter = rng.uniform(-0.1, 0.1, 2)
+        if ax == 0 and ay == 0:          # centre: tilt in a random direction
+            direction = rng.uniform(-1.0, 1.0, 2)
+            tilt = _GRID_TILT_RAD * direction / max(float(np.linalg.norm(direction)), 1e-9)
+        else:
+            tilt = sign * _GRID_TILT_RAD * np.array([ax, ay], dtype=float)
+        # Rx(alpha > 0) turns the board's +y (lower) edge away from the camera, Ry(beta < 0) its +x edge.
+        R = rotation_from_euler(tilt[1] + jitter[0], -tilt[0] + jitter[1], rng.uniform(-1, 1) * _GRID_ROLL_RAD)
+        z = left.fx * width_m / (fill0 * 0.97**attempt * left.width)
+        t = np.array([_right_offset_m(cams) / 2, 0.0, z]) - R @ centre
+        for _ in range(20):              # shift the board (Newton-like, in pixels) against the border(s)
+            pts = outline @ R.T + t
+            uv = left.project(pts)
+            if cams[1] is not None:
+                uv = np.concatenate([uv, cams[1].project(pts @ cams[2].T + cams[3])])
+            if not np.all(np.isfinite(uv)):
+                break
+            shift = np.zeros(2)
+            for axis, aim, size in ((0, ax, left.width), (1, ay, left.height)):
+                lo, hi = uv[:, axis].min(), uv[:, axis].max()
+                shift[axis] = (7.0 - lo if aim < 0 else size - 8.0 - hi if aim > 0
+                               else (size - 1) / 2 - (lo + hi) / 2)
+            depth_m = float((R @ centre + t)[2])
+            t[:2] += shift * depth_m / np.array([left.fx, left.fy])
+            if np.all(np.abs(shift) < 0.05):
+                break
+        if _fits(cams, outline @ R.T + t, 6.0):
+            return R, t
+    return None
+
+
 def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", board=(9, 6),
                              spacing_m: float = 0.03, n_views: int = 10, seed: int = 0,
-                             supersample: int = 4, noise_sigma: float = sensor_noise_sigma
-                             ) -> list[RenderedTarget]:
-    """Render ``n_views`` random poses of a planar target with exact correspondences.
+                             supersample: int = 4, noise_sigma: float = sensor_noise_sigma,
+                             coverage: str = "random") -> list[RenderedTarget]:
+    """Render ``n_views`` poses of a planar target with exact correspondences.
 
     Parameters
     ----------
@@ -198,45 +293,51 @@ def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", bo
         Anti-aliasing rays per pixel along each axis.
     noise_sigma : float
         Sensor noise, grey levels.
+    coverage : {"random", "grid"}
+        How the poses are placed. ``"random"`` (default): tilts up to about
+        35 degrees, the paper filling 35-65 % of the image width, anywhere in
+        the image -- the image corners are often left uncovered. ``"grid"``:
+        what calibration guides ask of a user -- view ``k`` pushes the board
+        into one of nine regions (the four image corners, the four edges, the
+        centre, in that order, repeating) until the paper touches the image
+        border(s) there. The board is tilted by about 25 degrees, its edge at
+        the region receding in the first pass over the regions and approaching
+        in the second; the paper fills 30 % / 25 % of the image width in the
+        corners (far away, to reach deep into them) and 80 % / 65 % elsewhere
+        (close, for focal length and distortion), with a little random tilt
+        and roll. Take 18 views (two passes) or more.
 
     Returns
     -------
     list of RenderedTarget
-        Poses tilt the board up to about 35 degrees and fill 35-65 % of the
-        image width; the whole paper lies inside every image.
+        The whole paper lies inside every image (6 px margin), in both images
+        of a stereo pair. Deterministic for a seed.
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``target`` or ``coverage`` and bad numbers.
+    RuntimeError
+        When the board cannot be placed inside the image(s) (too large).
     """
     board, s, seed, supersample = _check_common(target, board, spacing_m, seed, supersample)
     n_views = _checks.positive_int("n_views", n_views)
     noise_sigma = _checks.finite_number("noise_sigma", noise_sigma, nonnegative=True)
+    if coverage not in _COVERAGES:
+        raise ValueError(f"coverage must be 'random' or 'grid', got {coverage!r}")
     cams = _cameras(camera_or_stereo)
-    left = cams[0]
     rng = np.random.default_rng(seed)
-    x0, x1, y0, y1 = _board_extent(target, board, s)
-    outline = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0],
-                        [(x0 + x1) / 2, y0, 0], [(x0 + x1) / 2, y1, 0], [x0, (y0 + y1) / 2, 0],
-                        [x1, (y0 + y1) / 2, 0]])
-    centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
-    aim_x_m = _right_offset_m(cams) / 2    # aim between the cameras of a stereo pair
+    outline, centre = _outline(target, board, s)
     views = []
     for k in range(n_views):
-        for _attempt in range(500):
-            angles = rng.uniform([-0.6, -0.6, -0.3], [0.6, 0.6, 0.3])
-            R = rotation_from_euler(*angles)
-            fill = rng.uniform(0.35, 0.65)
-            z = left.fx * (x1 - x0) / (fill * left.width)
-            off = rng.uniform(-0.5, 0.5, 2) * (1.0 - fill) * np.array([left.width / left.fx,
-                                                                        left.height / left.fy])
-            t = np.array([aim_x_m + off[0] * z, off[1] * z, z]) - R @ centre
-            pts = outline @ R.T + t
-            if not _inside(left, left.project(pts), 6.0):
-                continue
-            if cams[1] is not None and not _inside(cams[1], cams[1].project(pts @ cams[2].T + cams[3]), 6.0):
-                continue
-            break
+        if coverage == "random":
+            pose = _random_pose(cams, outline, centre, rng)
         else:
+            pose = _grid_pose(cams, outline, centre, k, rng)
+        if pose is None:
             raise RuntimeError(f"could not place view {k} of the target inside the image(s); "
                                "use a smaller board or spacing_m")
-        views.append(_view(cams, target, board, s, R, t, supersample, rng, noise_sigma))
+        views.append(_view(cams, target, board, s, *pose, supersample, rng, noise_sigma))
     return views
 
 
