@@ -175,3 +175,13 @@ def test_cli_processes_needs_workers(dataset, tmp_path, capsys):
     assert entry(["map", str(dataset.root), "-o", str(tmp_path / "a"), "--quiet", "--processes"]) == 2
     assert "--processes only with --workers" in capsys.readouterr().err
     assert not (tmp_path / "a").exists()
+
+
+def test_worker_threads_fall_back_to_processes_without_a_thread_safe_numba_layer(monkeypatch):
+    import mrstereo.parallel as parallel
+
+    monkeypatch.setattr(parallel, "numba_thread_safe", lambda: False)
+    with pytest.warns(UserWarning, match="workqueue threading layer"):
+        info = map_ordered(_threads, range(2), workers=1, progress=False)
+    import os
+    assert all(r[3] != os.getpid() for r in info)          # ran in a worker process

@@ -30,9 +30,13 @@ import logging
 import os
 import traceback as _traceback
 import uuid
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
+
+import numba
+import numpy as np
 
 from . import _checks
 
@@ -88,11 +92,7 @@ def limit_threads() -> None:
     set here only inside worker processes, and by :func:`dask_client` for the
     lifetime of a cluster of thread workers (then restored).
     """
-    try:
-        import numba
-        numba.set_num_threads(1)
-    except (ImportError, ValueError):        # pragma: no cover - numba is a dependency
-        pass
+    numba.set_num_threads(1)
     if os.environ.get("MRSTEREO_WORKER_PROCESS") == "1":
         import cv2
         cv2.setNumThreads(1)
@@ -163,6 +163,10 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
     import dask
 
     workers = _checks.positive_int("workers", workers)
+    if not processes and not numba_thread_safe():
+        warnings.warn("numba's workqueue threading layer cannot run kernels from several threads at once: "
+                      "using worker processes (install tbb or have libgomp for worker threads)", stacklevel=3)
+        processes = True
     if not processes:
         yield from _thread_client(workers)
         return
@@ -175,6 +179,22 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
                       dashboard_address=":0", env=env, silence_logs=logging.CRITICAL) as cluster, \
             Client(cluster) as client:
         yield client
+
+
+def numba_thread_safe() -> bool:
+    """Whether numba's threading layer runs parallel kernels from several threads at once.
+
+    The tbb and omp layers do; workqueue aborts the process on concurrent launches. The layer is
+    chosen at the first parallel launch, so this launches a tiny kernel first.
+    """
+    _probe_kernel(np.zeros(2))
+    return numba.threading_layer() != "workqueue"
+
+
+@numba.njit(parallel=True, nogil=True, cache=True)
+def _probe_kernel(out):
+    for i in numba.prange(out.shape[0]):
+        out[i] = i
 
 
 def _thread_client(workers: int) -> Iterator[Any]:

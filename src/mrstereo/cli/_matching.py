@@ -34,7 +34,9 @@ def _bands(text: str) -> list[tuple[float, float]]:
 @click.argument("right", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Disparity output: .pfm (Middlebury, inf invalid) or .png (KITTI uint16 x256).")
-@click.option("--max-disparity", type=float, help="Search 0..N px (split into ranges N/4, N/2, N).")
+@click.option("--max-disparity", type=float,
+              help="Search 0..N px (split into ranges N/4, N/2, N at decimations 4, 2, 1; fewer levels "
+                   "for N < 32).")
 @click.option("--bands", help="Disparity bands in full-resolution px, e.g. 0:24,24:48,48:96.")
 @click.option("--calib", type=click.Path(dir_okay=False), help="Stereo calibration YAML.")
 @click.option("--depth-bands", help="Depth band edges in metres, e.g. 0.5,1,2.5,15 (needs --calib).")
