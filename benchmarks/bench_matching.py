@@ -5,7 +5,7 @@ is absent), rig fx = 451 px, baseline 0.075 m, depths 0.5-15 m -> disparities 2.
 a single-range StereoBM must search 80 disparities (multiple of 16). StereoBM and each
 mrstereo variant run alternately; prints per variant the median time and the median of the
 per-pair ratios mrstereo / StereoBM (robust to the load of a shared machine), with 1 and 2
-threads (numba.set_num_threads, cv2.setNumThreads).
+threads (numba.set_num_threads, cv2.setNumThreads), and the minor page faults per frame.
 
 Accuracy (``--accuracy``): bad-2 (%) dense (missing counts as bad) / among estimated pixels
 on the shared Middlebury/KITTI scenes for StereoBM, StereoSGBM (mrstereo.evaluation
@@ -85,7 +85,25 @@ def speed(repeats: int) -> None:
             print(f"threads={threads}  {name:30s} median {ms:6.1f} ms  StereoBM 80 disp 9x9 {base_ms:5.1f} ms"
                   f"  ratio {ratio:4.2f}")
         print()
+    faults = page_faults_per_call(runs["mrstereo robust multi-range"])
+    if faults is not None:
+        print(f"minor page faults per robust frame: {faults:.0f} (StereoBM: "
+              f"{page_faults_per_call(lambda: bm.compute(left, right)):.0f})")
     print(f"load average after: {os.getloadavg()}")
+
+
+def page_faults_per_call(fn, calls: int = 10) -> float | None:
+    """Minor page faults per call of ``fn`` (fresh pages the allocator maps; each costs
+    about 1-2 us). None where the ``resource`` module is missing (Windows)."""
+    try:
+        import resource
+    except ImportError:
+        return None
+    fn()
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(calls):
+        fn()
+    return (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / calls
 
 
 def accuracy() -> None:

@@ -6,7 +6,7 @@ Usage::
 
 Renders frames of ``mrstereo.world.default_scene()`` along the corridor (head
 pans 0 and +-45 degrees as in the paper's Sec. 5.2), matches them with
-``mrstereo.matching.compute_disparity`` (``robust`` preset, multi-range) and
+``mrstereo.matching.compute_disparity`` (``mapping`` preset (the chain's default), multi-range) and
 measures, within 4 m of the robot, on 5 cm cells of the robot frame:
 
 * obstacle recall: GT obstacle cells (cells holding a ground-truth point of a
@@ -180,12 +180,12 @@ def main(argv=None) -> int:
     candidates = [(float(x), float(rng.uniform(-0.35, 0.35)), float(rng.uniform(-0.1, 0.1)))
                   for x in np.linspace(0.3, 11.0, 4 * n_frames)]
     pans = [0.0, math.radians(45), -math.radians(45)]
-    robust = preset_config("robust")
+    robust = preset_config("mapping")
     default_t = RejectionConfig().texture_threshold
     thresholds = [0.0, default_t] if args.quick else sorted({0.0, 1.5, 2.0, 2.5, 3.0, 4.0, default_t})
     bands = [name for *_, name in BANDS_M]
     rows = {k: [] for k in ("multi", "single", "multi, floor estimated")}
-    scan_t = {(p, t): [] for p in ("robust", "paper") for t in thresholds}
+    scan_t = {(p, t): [] for p in ("mapping", "paper") for t in thresholds}
     errors = {k: {b: [] for b in bands} for k in ("multi", "single")}
     grounds = {"v_disparity": [], "plane": []}
     t_match, n_eq, plan = [], None, None
@@ -200,7 +200,7 @@ def main(argv=None) -> int:
             continue
         L, R = frame.left_rect, frame.right_rect
         t0 = time.perf_counter()
-        multi = compute_disparity(L, R, calibration=stereo, preset="robust")
+        multi = compute_disparity(L, R, calibration=stereo, preset="mapping")
         t_match.append(time.perf_counter() - t0)
         plan = multi.plan
         min_depth = min(lv.depth_band_m[0] for lv in plan.levels)
@@ -210,7 +210,7 @@ def main(argv=None) -> int:
         single = compute_disparity(L, R, max_disparity_px=n_eq, config=robust.replace(multi_range=False),
                                    aoi=plan.aoi)
         paper = compute_disparity(L, R, calibration=stereo, preset="paper")
-        for name, raw in (("robust", multi.disparity_px), ("paper", paper.disparity_px)):
+        for name, raw in (("mapping", multi.disparity_px), ("paper", paper.disparity_px)):
             for t in thresholds:
                 d = reject_uniform(raw, L, config=RejectionConfig(texture_threshold=t)).disparity_px
                 scan_t[(name, t)].append(evaluate(d, frame, stereo, config, truth, raw=raw))
@@ -230,7 +230,7 @@ def main(argv=None) -> int:
               f"{_fmt(summary(rows['multi'][-1:]))}", file=sys.stderr)
         k += 1
 
-    print(f"# Obstacles on the synthetic corridor: {k} frames (seed {args.seed}), 320x240, robust "
+    print(f"# Obstacles on the synthetic corridor: {k} frames (seed {args.seed}), 320x240, mapping "
           f"preset, T = {default_t} (eq. 13); obstacles = world objects (labels >= 10) at "
           f"{min_depth:.2f} m <= Z and range <= {RADIUS_M} m; {RES_M * 100:.0f} cm cells")
     print(f"matcher median {np.median(t_match) * 1e3:.0f} ms/frame; plan:\n{plan.describe()}\n")

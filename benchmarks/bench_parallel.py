@@ -16,7 +16,10 @@ every run, as ``mrstereo map --workers N`` does):
   default of ``--workers``);
 - ``build_map(workers=N, processes=True)``: single-threaded worker processes;
 - the command ``mrstereo map DIR -o OUT --quiet --workers N`` as a subprocess
-  (Python start-up, imports and the map files included).
+  (Python start-up, imports and the map files included);
+- the machine's ceiling: the per-frame work (``observe_frame``) of all frames in
+  one plain Python process vs half of them in each of two independent processes
+  started together (no Dask, no communication; loop times without start-up).
 
 Configurations run in interleaved rounds (load drift hits them alike). Prints
 the median wall time of each, the 2-vs-1 worker ratios, and whether every
@@ -38,7 +41,41 @@ from pathlib import Path
 import numpy as np
 
 
+def _observe_range(data: Path, start: int, stop: int) -> None:
+    """Child of the ceiling measurement: observe frames start..stop-1, print the loop time."""
+    import numba
+
+    from mrstereo.parallel import keep_freed_memory
+    from mrstereo.pipeline import observe_frame
+    from mrstereo.world.dataset import read_manifest
+
+    import cv2
+    keep_freed_memory()
+    numba.set_num_threads(1)
+    cv2.setNumThreads(1)
+    m = read_manifest(data)
+    observe_frame(m.frames[start], m.calibration, rig=m.rig)        # kernels loaded
+    t = time.perf_counter()
+    for k in range(start, stop):
+        observe_frame(m.frames[k], m.calibration, index=k, rig=m.rig)
+    print(time.perf_counter() - t)
+
+
+def _ceiling(data: Path, n: int) -> tuple[float, float]:
+    """Wall time of the frames' work in one process, and in two independent processes."""
+    def start(a, b):
+        return subprocess.Popen([sys.executable, __file__, "--observe-range", str(data), str(a), str(b)],
+                                stdout=subprocess.PIPE, text=True)
+    one = float(start(0, n).communicate()[0])
+    pair = [start(0, n // 2), start(n // 2, n)]
+    return one, max(float(p.communicate()[0]) for p in pair)
+
+
 def main(argv=None) -> int:
+    if argv is None and len(sys.argv) == 5 and sys.argv[1] == "--observe-range":
+        _observe_range(Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]))
+        return 0
+    from mrstereo.parallel import keep_freed_memory
     from mrstereo.pipeline import build_map
     from mrstereo.world.dataset import read_manifest, write_synthetic_dataset
 
@@ -50,7 +87,9 @@ def main(argv=None) -> int:
     ap.add_argument("--height", type=int, default=480, help="image height of the rendered sequence")
     ap.add_argument("--no-cli", action="store_true", help="skip the `mrstereo map` subprocess runs")
     ap.add_argument("--no-processes", action="store_true", help="skip the worker-process runs")
+    ap.add_argument("--no-ceiling", action="store_true", help="skip the two-independent-processes runs")
     args = ap.parse_args(argv)
+    keep_freed_memory()            # as the `mrstereo` command does
 
     data = args.data or Path(tempfile.gettempdir()) / f"mrstereo-bench-parallel-{args.frames}-{args.width}"
     if not (data / "manifest.yaml").is_file():
@@ -87,6 +126,7 @@ def main(argv=None) -> int:
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
     reference = configs["in-process (default)"]()     # warm-up: numba kernels loaded / compiled
     times = {name: [] for name in configs}
+    ceiling = []
     identical = True
     for _ in range(args.repeat):
         for name, run in configs.items():
@@ -94,6 +134,8 @@ def main(argv=None) -> int:
             log_odds = run()
             times[name].append(time.perf_counter() - t)
             identical &= bool(np.array_equal(log_odds, reference, equal_nan=True))
+        if not args.no_ceiling:
+            ceiling.append(_ceiling(data, n))
     shutil.rmtree(out_root, ignore_errors=True)
     med = {name: statistics.median(t) for name, t in times.items()}
     for name, t in times.items():
@@ -104,6 +146,10 @@ def main(argv=None) -> int:
         if one in med:
             print(f"speed-up 2 vs 1: {two:28s} {med[one] / med[two]:.2f}x")
     print(f"2 worker threads vs in-process: {med['in-process (default)'] / med['2 worker threads']:.2f}x")
+    if ceiling:
+        one, two = (statistics.median(c[k] for c in ceiling) for k in (0, 1))
+        print(f"ceiling, per-frame work alone: 1 process {one:.2f} s, 2 independent processes {two:.2f} s: "
+              f"{one / two:.2f}x (runs: " + ", ".join(f"{a / b:.2f}x" for a, b in ceiling) + ")")
     print(f"log-odds identical in every run: {identical}")
     print(f"load average at the end: {os.getloadavg()[0]:.2f}")
     return 0 if identical else 1

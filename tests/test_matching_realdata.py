@@ -73,7 +73,7 @@ def test_tsukuba_robust_accurate_where_it_answers_and_paper_answers_everywhere()
 
 def test_tsukuba_refinement_recovers_the_coarse_level_precision():
     left, right, truth, max_d = _scene("tsukuba")
-    cfg = MatchingConfig()
+    cfg = MatchingConfig(decimations=(4, 2, 1))      # D = 16 alone would plan no k = 4 level
     _, est_refined, _ = _bad2(compute_disparity(left, right, max_disparity_px=max_d, config=cfg).disparity_px, truth)
     _, est_coarse, _ = _bad2(compute_disparity(left, right, max_disparity_px=max_d,
                                                config=cfg.replace(refine=False)).disparity_px, truth)

@@ -181,7 +181,7 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
         "right_mean": float(shift[1].mean()), "right_max": float(shift[1].max())}
     metrics["calibration"]["rectified_focal_px"] = estimated.focal_px
     metrics["calibration"]["true_rectified_focal_px"] = truth.focal_px
-    result = compute_disparity(left, right, calibration=estimated)
+    result = compute_disparity(left, right, calibration=estimated, preset=PipelineConfig().preset)
     rejected = reject_uniform(result.disparity_px, left)
     obstacles = detect_obstacles(rejected.disparity_px, estimated, rig=manifest.rig, pan_rad=record.pan_rad)
     top = float(max(level.band_px[1] for level in result.plan.levels))

@@ -47,7 +47,8 @@ class PipelineConfig:
     Attributes
     ----------
     preset : str
-        Matching preset (``"robust"`` or the paper's exact ``"paper"``).
+        Matching preset: ``"mapping"`` (the robust matcher with the stricter acceptance a map
+        needs), ``"robust"`` or the paper's exact ``"paper"``.
     max_disparity_px : float, optional
         Overrides the disparity search derived from the calibration's depth bands.
     matching : MatchingConfig, optional
@@ -67,7 +68,7 @@ class PipelineConfig:
         Map extent and resolution.
     """
 
-    preset: str = "robust"
+    preset: str = "mapping"
     max_disparity_px: float | None = None
     matching: MatchingConfig | None = None
     rejection: RejectionConfig = field(default_factory=RejectionConfig)

@@ -26,6 +26,9 @@ for _name in _COMMAND_MODULES:
 
 def entry(argv: list[str] | None = None) -> int:
     """Console-script entry point: run the CLI, turn errors into one line."""
+    from ..parallel import keep_freed_memory
+
+    keep_freed_memory()          # this process is ours: no page faults on every frame's arrays
     try:
         main.main(args=argv, prog_name="mrstereo", standalone_mode=False)
     except click.exceptions.Abort:

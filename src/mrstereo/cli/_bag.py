@@ -119,7 +119,7 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output directory: one folder per dataset and summary.json.")
 @worker_options
-@click.option("--preset", type=click.Choice(["robust", "paper"]), default="robust", show_default=True,
+@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default="mapping", show_default=True,
               help="Matching preset.")
 @click.option("--fusion", type=click.Choice(["log_odds", "union"]), default="log_odds", show_default=True,
               help="Map fusion.")

@@ -41,7 +41,7 @@ def _bands(text: str) -> list[tuple[float, float]]:
 @click.option("--calib", type=click.Path(dir_okay=False), help="Stereo calibration YAML.")
 @click.option("--depth-bands", help="Depth band edges in metres, e.g. 0.5,1,2.5,15 (needs --calib).")
 @click.option("--rectified", is_flag=True, help="With --calib: the images are already rectified.")
-@click.option("--preset", type=click.Choice(["robust", "paper"]), default="robust", show_default=True)
+@click.option("--preset", type=click.Choice(["robust", "mapping", "paper"]), default="robust", show_default=True)
 @click.option("--single-range", is_flag=True, help="One full-resolution search instead of three ranges.")
 @click.option("--aoi", help="Area of interest row0:row1,col0:col1 (half-open).")
 @click.option("--explain", is_flag=True, help="Print the multi-range plan (levels, bands, work).")

@@ -20,7 +20,7 @@ __all__ = ["COMMANDS"]
                    "with --bag, instead of the camera_info topics.")
 @click.option("--fusion", type=click.Choice(["log_odds", "union"]), default="log_odds", show_default=True,
               help="Log-odds fusion (OctoMap) or the paper's union of occupied cells.")
-@click.option("--preset", type=click.Choice(["robust", "paper"]), default="robust", show_default=True,
+@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default="mapping", show_default=True,
               help="Matching preset.")
 @click.option("--resolution", "resolution_m", type=float, default=0.05, show_default=True,
               help="Cell size [m].")

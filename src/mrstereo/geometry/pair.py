@@ -58,7 +58,7 @@ class PairScan:
 
 
 def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = False, rig: RigMount | None = None,
-                        pan_rad: float = 0.0, preset: str = "robust", max_disparity_px: float | None = None,
+                        pan_rad: float = 0.0, preset: str = "mapping", max_disparity_px: float | None = None,
                         matching=None,
                         rejection: RejectionConfig = RejectionConfig(), floor_model: FloorModel | None = None,
                         config: ObstacleConfig = ObstacleConfig()) -> PairObstacles:

@@ -1,7 +1,8 @@
 """Numba kernels of the area matcher: window cost + winner-take-all, and full-resolution refinement.
 
 Private: no validation, no defaults; the caller (:mod:`mrstereo.matching.cost`)
-pads, precomputes and allocates. Conventions: docs/conventions.md.
+pads, precomputes and allocates, with :func:`recycled_empty` for the large arrays (fresh
+pages cost a fault each on first touch). Conventions: docs/conventions.md.
 
 :func:`match_band` searches one disparity band ``[d_lo, d_hi]`` on one image pair.
 Rows are split into strips, one per thread (``prange``). Inside a strip the rows are
@@ -26,6 +27,10 @@ running sums; where ``c`` is constant over the window this is exactly ``S_LR(x, 
 """
 from __future__ import annotations
 
+import sys
+import threading
+from collections import OrderedDict
+
 import numpy as np
 from numba import njit, prange
 
@@ -38,7 +43,7 @@ ONE = np.float32(1.0)
 TWO = np.float32(2.0)
 
 
-@njit(cache=True, fastmath=_FASTMATH, inline="always")
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
 def _track_winner(crow, prow, k, n, bc, bk, cm_, cp_):
     """One candidate row ``k`` of eq. (10): keep the first minimum per pixel (``bc``, ``bk``) and
     the costs next to it for the parabola (``cm_`` when the best changes, ``cp_`` one row later)."""
@@ -52,7 +57,7 @@ def _track_winner(crow, prow, k, n, bc, bk, cm_, cp_):
         bc[i] = c if better else bc[i]
 
 
-@njit(cache=True, fastmath=_FASTMATH, inline="always")
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
 def _parabola(cb, cm, cp):
     """Sub-pixel offset of the parabola through (-1, cm), (0, cb), (1, cp), clipped to +-0.5;
     0 when a neighbour is missing or the parabola is not convex."""
@@ -62,7 +67,7 @@ def _parabola(cb, cm, cp):
     return min(max(sub, np.float32(-0.5)), np.float32(0.5)) if fine else np.float32(0.0)
 
 
-@njit(cache=True, fastmath=_FASTMATH, inline="always")
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
 def _box(col, out, t2, t4, t8, t16, m, win):
     """``out[i] = sum_{j < win} col[i + j]`` for ``i < m`` (``win < 32``), in few vector passes:
     for a multiple of 3 (9, the default) sums of 3 neighbours then ``win / 3`` of those;
@@ -128,7 +133,7 @@ def _box(col, out, t2, t4, t8, t16, m, win):
             out[i] += seg[i]
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(nogil=True, cache=True, fastmath=_FASTMATH)
 def window_terms(padded, radius, zncc, out_a, out_b):
     """Per-pixel terms ``a``, ``b`` (module docstring) of the ``W x W`` windows of an image
     padded by ``radius``: running column sums of ``I`` and ``I^2`` down each strip plus
@@ -165,9 +170,22 @@ def window_terms(padded, radius, zncc, out_a, out_b):
                 for c in range(wp):
                     col1[c] += add[c]
                     col2[c] += add[c] * add[c]
-            _box(col2, box2, t2, t4, t8, t16, width, win)
             oa = out_a[y]
             ob = out_b[y]
+            if zncc and win == 9 and col1.itemsize == 4:
+                # the default window on exact (integer-valued float32) sums: both boxes as
+                # 3 x 3 neighbours inside the per-pixel loop (2 passes instead of 6)
+                for i in range(width + 6):
+                    t2[i] = col1[i] + col1[i + 1] + col1[i + 2]
+                    t4[i] = col2[i] + col2[i + 1] + col2[i + 2]
+                for x in range(width):
+                    b1 = t2[x] + t2[x + 3] + t2[x + 6]
+                    b2 = t4[x] + t4[x + 3] + t4[x + 6]
+                    var_n = max(np.float32(b2 - b1 * b1 / n), np.float32(1e-6))
+                    oa[x] = b1 * inv_sqrt_n
+                    ob[x] = np.float32(1.0) / np.sqrt(np.float32(var_n))
+                continue
+            _box(col2, box2, t2, t4, t8, t16, width, win)
             if zncc:
                 _box(col1, box1, t2, t4, t8, t16, width, win)
                 for x in range(width):
@@ -180,7 +198,7 @@ def window_terms(padded, radius, zncc, out_a, out_b):
                     ob[x] = np.float32(1.0) / np.sqrt(max(np.float32(box2[x]), np.float32(1e-6)))
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(nogil=True, cache=True, fastmath=_FASTMATH)
 def xsobel_padded(gray, radius, cap, out_pad):
     """OpenCV StereoBM's pre-filter, ``clip(rint(Sobel_x(gray) / 4), -cap, cap)`` (3x3,
     replicated border), written into ``out_pad`` padded by ``radius`` (replicated)."""
@@ -215,7 +233,7 @@ def xsobel_padded(gray, radius, cap, out_pad):
         out_pad[height + radius + y] = out_pad[height + radius - 1]
 
 
-@njit(parallel=True, cache=True, fastmath=_FASTMATH)
+@njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
 def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_lo, d_hi,
                zncc, row0, row1, col0, col1, n_strips, want_right, raw, lr_tol, ratio, max_cost, use_sub,
                out_disp, out_sub, out_c1, out_c2, out_right, out_disparity, out_confidence):
@@ -410,7 +428,7 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
                     out_right[y, x] = right_d[x]
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def fill_center(disparity_px, radius, out_center_pad):
     """Integer coarse field for :func:`refine_warped`: ``round(d)``, NaNs filled with the
     nearest valid value to the left in the row (else to the right, else 0), padded by
@@ -437,7 +455,7 @@ def fill_center(disparity_px, radius, out_center_pad):
         out_center_pad[height + radius + y] = out_center_pad[height + radius - 1]
 
 
-@njit(parallel=True, cache=True, fastmath=_FASTMATH)
+@njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
 def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, center_pad, want, half,
                   zncc, row0, row1, n_strips, out_disp, out_cost):
     """Full-resolution re-scoring of a coarse disparity field over ``c + o``, ``|o| <= half``.
@@ -553,7 +571,7 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
                 oc[i] = (cb if inside else np.float32(np.inf)) if wy[i] else oc[i]
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(nogil=True, cache=True, fastmath=_FASTMATH)
 def upsample_gate(level_d, level_c, source_cols, scale, lo, hi, top, row0, row1, col0, col1, out_d, out_c):
     """Step 2 + eq. (11): nearest-neighbour up-sampling along x (full-resolution column
     ``x`` reads level column ``source_cols[x]``), disparity times ``scale``, kept where inside
@@ -586,7 +604,7 @@ def upsample_gate(level_d, level_c, source_cols, scale, lo, hi, top, row0, row1,
             oc[x] = lc[sx] if ok else zero
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def encode_fixed(disparity, scale, offset, lo_code, hi_code, invalid_code, out):
     """``round(d * scale) + offset`` clipped to ``[lo_code, hi_code]``, ``invalid_code`` where NaN."""
     height, width = disparity.shape
@@ -599,7 +617,7 @@ def encode_fixed(disparity, scale, offset, lo_code, hi_code, invalid_code, out):
                 out[y, x] = invalid_code
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def decode_median(coded, disparity, scale, out):
     """Inverse of the median's code (0 = invalid): NaN where the input was invalid or
     the median is invalid, else ``(code - 1) / scale``."""
@@ -615,7 +633,7 @@ def decode_median(coded, disparity, scale, out):
             orow[x] = v if (c != 0) & np.isfinite(dr[x]) else nan
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def mask_invalid(disparity, coded, invalid_code, out):
     """``out = disparity`` with NaN where ``coded == invalid_code``."""
     height, width = disparity.shape
@@ -624,7 +642,7 @@ def mask_invalid(disparity, coded, invalid_code, out):
             out[y, x] = np.nan if coded[y, x] == invalid_code else disparity[y, x]
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def gate(disparity, confidence, lo, hi):
     """Eq. (11) in place: NaN / 0 outside ``[lo, hi]``."""
     height, width = disparity.shape
@@ -636,7 +654,7 @@ def gate(disparity, confidence, lo, hi):
                 confidence[y, x] = 0.0
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def unite(disparity, confidence, rule, index, out_d, out_c, out_source, poisoned):
     """Eq. (12), one level at a time (finest first): rule 0 = the more confident value
     wins, 1 = the first (finer) value wins, 2 = as 1 but pixels where two levels differ
@@ -662,7 +680,7 @@ def unite(disparity, confidence, rule, index, out_d, out_c, out_source, poisoned
                 out_source[y, x] = index
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def fill_invalid(disparity, value, out):
     """``out = disparity`` with ``value`` where NaN."""
     height, width = disparity.shape
@@ -674,7 +692,7 @@ def fill_invalid(disparity, value, out):
             orow[x] = d if np.isfinite(d) else value
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def drop_above(disparity, lowest, jump, out):
     """``out = disparity`` with NaN where ``disparity - lowest > jump`` (depth-edge guard)."""
     height, width = disparity.shape
@@ -688,7 +706,7 @@ def drop_above(disparity, lowest, jump, out):
             orow[x] = nan if (d - lr[x] > jump) else d
 
 
-@njit(cache=True)
+@njit(nogil=True, cache=True)
 def zero_where_invalid(disparity, confidence):
     """In place: ``confidence = 0`` where ``disparity`` is NaN."""
     height, width = disparity.shape
@@ -697,3 +715,56 @@ def zero_where_invalid(disparity, confidence):
         cr = confidence[y]
         for x in range(width):
             cr[x] = cr[x] if np.isfinite(dr[x]) else np.float32(0.0)
+
+
+# Recycled buffers. A 640x480 frame allocates and frees about 40 arrays of 0.3-1.3 MB;
+# glibc serves them from fresh pages (mmap, or a heap trimmed after each frame), and the
+# page faults cost about as much as the post-filters (3200 faults, ~5 ms per frame).
+_POOL: OrderedDict[tuple, list[np.ndarray]] = OrderedDict()
+_POOL_LOCK = threading.Lock()
+_POOL_MAX_BYTES = 128 * 2 ** 20
+_POOL_MAX_PER_SHAPE = 32
+_POOL_MIN_BYTES = 64 * 2 ** 10          # smaller arrays come from malloc's free lists anyway
+_pool_bytes = 0
+
+
+def _refs_in_loop(bufs: list) -> int:
+    for buf in bufs:
+        return sys.getrefcount(buf)
+    return 0
+
+
+# reference count of a buffer held only by its pool list, seen from the loop below (the
+# list, the loop variable, getrefcount's argument: 3 on CPython 3.11; measured, not assumed)
+_FREE_REFS = _refs_in_loop([np.empty(1)])
+
+
+def recycled_empty(shape, dtype) -> np.ndarray:
+    """``np.empty(shape, dtype)`` that reuses a buffer of an earlier call when nothing
+    references it any more (only this pool does: its reference count says so).
+
+    The buffer is a plain array, safe to return to callers and to keep: while anyone
+    holds it or a view of it, it is not handed out again. Thread-safe (a lock around
+    the look-up). Buffers of the most recently used shapes are kept, up to 128 MB.
+    """
+    global _pool_bytes
+    key = (tuple(shape), dtype)
+    with _POOL_LOCK:
+        bufs = _POOL.get(key)
+        if bufs is not None:
+            _POOL.move_to_end(key)
+            for buf in bufs:
+                if sys.getrefcount(buf) == _FREE_REFS:
+                    return buf
+        buf = np.empty(shape, dtype)
+        if buf.nbytes < _POOL_MIN_BYTES:
+            return buf
+        if bufs is None:
+            bufs = _POOL[key] = []
+        if len(bufs) < _POOL_MAX_PER_SHAPE:
+            bufs.append(buf)
+            _pool_bytes += buf.nbytes
+            while _pool_bytes > _POOL_MAX_BYTES and len(_POOL) > 1:
+                _, old = _POOL.popitem(last=False)
+                _pool_bytes -= sum(b.nbytes for b in old)
+        return buf

@@ -145,7 +145,7 @@ def prepare_gray(gray: np.ndarray, *, kind: str, cap: int, window: int, cost: st
         return prepare(filtered, window=window, cost=cost, dtype=_accumulator_dtype(filtered, filtered, window))
     r = window // 2
     h, w = gray.shape
-    padded = np.empty((h + 2 * r, w + 2 * r), np.float32)
+    padded = _kernels.recycled_empty((h + 2 * r, w + 2 * r), np.float32)
     _kernels.xsobel_padded(np.ascontiguousarray(gray, dtype=np.float32), r, np.float32(cap), padded)
     return _with_terms(padded, window, cost == "zncc")
 
@@ -153,8 +153,8 @@ def prepare_gray(gray: np.ndarray, *, kind: str, cap: int, window: int, cost: st
 def _with_terms(padded: np.ndarray, window: int, zncc: bool) -> PreparedImage:
     r = window // 2
     shape = (padded.shape[0] - 2 * r, padded.shape[1] - 2 * r)
-    a = np.empty(shape, padded.dtype)
-    b = np.empty(shape, np.float32)
+    a = _kernels.recycled_empty(shape, padded.dtype)
+    b = _kernels.recycled_empty(shape, np.float32)
     _kernels.window_terms(padded, r, zncc, a, b)
     return PreparedImage(padded, a, b, window, zncc)
 
@@ -194,8 +194,8 @@ def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi:
     confidence ``clip(1 - c1 / c2, 0, 1)`` (0 where NaN). Outside ``rows`` NaN.
     """
     h, w = left.shape
-    disparity = np.empty((h, w), np.float32)
-    confidence = np.empty((h, w), np.float32)
+    disparity = _kernels.recycled_empty((h, w), np.float32)
+    confidence = _kernels.recycled_empty((h, w), np.float32)
     disparity[:rows[0]] = np.nan
     disparity[rows[1]:] = np.nan
     confidence[:rows[0]] = 0.0
@@ -289,10 +289,12 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     h, w = coarse_px.shape
     r = left.window // 2
     rows = (0, h) if rows is None else rows
-    center_pad = np.empty((h + 2 * r, w + 2 * r), np.int32)
+    center_pad = _kernels.recycled_empty((h + 2 * r, w + 2 * r), np.int32)
     _kernels.fill_center(np.ascontiguousarray(coarse_px, dtype=np.float32), r, center_pad)
-    out = np.full((h, w), np.nan, np.float32)
-    cost = np.full((h, w), np.inf, np.float32)
+    out = _kernels.recycled_empty((h, w), np.float32)
+    out.fill(np.nan)
+    cost = _kernels.recycled_empty((h, w), np.float32)
+    cost.fill(np.inf)
     hit = np.flatnonzero(want[rows[0]:rows[1]].any(axis=1))
     if hit.size:      # only the rows holding pixels to refine
         rows = (rows[0] + int(hit[0]), rows[0] + int(hit[-1]) + 1)

@@ -18,7 +18,8 @@ from . import _kernels
 from .config import MatchingConfig, preset_config
 from .cost import match_checked, prepare, prepare_gray, refine_candidates
 from .multirange import (DEFAULT_DEPTH_EDGES_M, decimate_horizontally, LevelOutput, MultiRangePlan, RangeLevel,
-                         bands_px_from_depth_m, default_bands_px, plan_levels, run_levels)
+                         bands_px_from_depth_m, default_bands_px, default_level_count, plan_levels,
+                         run_levels)
 from .postfilter import guard_depth_edges, median_filter, remove_speckles, textured
 
 __all__ = ["DisparityResult", "compute_disparity", "make_plan", "solve_level"]
@@ -94,7 +95,8 @@ def make_plan(image_size: tuple[int, int], *, max_disparity_px=None, disparity_b
     depth_bands = None
     if max_disparity_px is not None:
         d_max = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
-        n = len(config.decimations) if config.decimations is not None else 3
+        n = (len(config.decimations) if config.decimations is not None
+             else default_level_count(d_max, min_band_level_px=config.min_band_level_px))
         bands = default_bands_px(d_max, n) if config.multi_range else ((0.0, d_max),)
     elif disparity_bands_px is not None:
         bands = tuple(tuple(band) for band in disparity_bands_px)
@@ -168,7 +170,10 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
         Rectified images (gray or BGR; uint8 or float), same size.
     max_disparity_px : float, optional
         Search ``[0, D]``, split into bands ``[0, D/4], [D/4, D/2], [D/2, D]`` at
-        decimations 1, 2, 4 (one band ``[0, D]`` when ``config.multi_range`` is False).
+        decimations 1, 2, 4 when ``D >= 32``; for a smaller range fewer levels
+        (``[0, D/2], [D/2, D]`` at 1, 2 when ``D >= 16``, else ``[0, D]``: see
+        ``config.min_band_level_px``); one band ``[0, D]`` when ``config.multi_range``
+        is False.
     disparity_bands_px : sequence of (float, float), optional
         Explicit bands in full-resolution pixels, one level each.
     calibration : StereoCamera, optional
@@ -180,9 +185,10 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
         with ``d = b f / Z`` (eq. 14). Needs ``calibration``.
     config : MatchingConfig, optional
         Settings; default the preset's.
-    preset : {"robust", "paper"}
-        ``"paper"``: exactly eq. (9)-(12) (+ median); ``"robust"``: see
-        :mod:`mrstereo.matching.config`. Ignored when ``config`` is given.
+    preset : {"robust", "mapping", "paper"}
+        ``"paper"``: exactly eq. (9)-(12) (+ median); ``"robust"`` and ``"mapping"`` (its
+        stricter variant used by the mapping chain): see :mod:`mrstereo.matching.config`.
+        Ignored when ``config`` is given.
     aoi : (row0, row1, col0, col1), optional
         Area of interest (section 3.1), half-open; NaN and no work outside it.
 

@@ -24,7 +24,8 @@ from .. import _checks
 from . import _kernels
 
 __all__ = ["RangeLevel", "MultiRangePlan", "LevelOutput", "plan_levels", "default_bands_px",
-           "bands_px_from_depth_m", "decimate_horizontally", "run_levels", "DEFAULT_DEPTH_EDGES_M"]
+           "default_level_count", "bands_px_from_depth_m", "decimate_horizontally", "run_levels",
+           "DEFAULT_DEPTH_EDGES_M"]
 
 DEFAULT_DEPTH_EDGES_M = (0.5, 1.0, 2.5, 15.0)
 
@@ -148,6 +149,27 @@ def default_bands_px(max_disparity_px: float, n_levels: int = 3) -> tuple[tuple[
     return tuple((edges[i], edges[i + 1]) for i in range(n))
 
 
+def default_level_count(max_disparity_px: float, *, min_band_level_px: float = 4.0,
+                        max_levels: int = 3) -> int:
+    """Number of levels for a search ``[0, D]``: the most (up to ``max_levels``) for which the
+    nearest band ``[D/2, D]``, at decimation ``2^(n-1)``, still spans ``min_band_level_px``
+    level pixels.
+
+    The nearest band of ``n`` levels spans ``D / 2^n`` level pixels. Below about 4 the
+    level's search is mostly its margins, the uniqueness test (second best at least 2 px
+    away) and the parabola have no room, and a level pixel is as wide as the whole band
+    in full-resolution pixels; multi-range also saves little work when ``D`` is small. With
+    the default 4: ``D >= 32`` three levels (4, 2, 1), ``16 <= D < 32`` two (2, 1), else one.
+    ``min_band_level_px = 0`` always gives ``max_levels`` (the paper's three ranges).
+    """
+    d = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
+    least = _checks.finite_number("min_band_level_px", min_band_level_px, nonnegative=True)
+    n = _checks.positive_int("max_levels", max_levels)
+    while n > 1 and d / 2 ** n < least:
+        n -= 1
+    return n
+
+
 def bands_px_from_depth_m(depth_bands_m, *, focal_px: float, baseline_m: float,
                           doffs_px: float = 0.0) -> tuple[tuple[tuple[float, float], tuple[float, float]], ...]:
     """Convert depth bands to disparity bands with ``d = b f / Z - doffs`` (eq. 14).
@@ -197,7 +219,8 @@ def decimate_horizontally(image: np.ndarray, width: int) -> np.ndarray:
     """Reduce the width only, anti-aliased (area average, ``cv2.INTER_AREA``)."""
     if width == image.shape[1]:
         return image
-    return cv2.resize(image, (width, image.shape[0]), interpolation=cv2.INTER_AREA)
+    return cv2.resize(image, (width, image.shape[0]), interpolation=cv2.INTER_AREA,
+                      dst=_kernels.recycled_empty((image.shape[0], width) + image.shape[2:], image.dtype))
 
 
 def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, float]], *,
@@ -334,8 +357,8 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
         lo, hi = level.band_px
         refining = refine is not None and refine_min_scale is not None and level.scale >= refine_min_scale
         slack = level.scale if refining else 0.0
-        d_full = np.empty((height, width), np.float32)
-        c_full = np.empty((height, width), np.float32)
+        d_full = _kernels.recycled_empty((height, width), np.float32)     # (no page faults)
+        c_full = _kernels.recycled_empty((height, width), np.float32)
         source_cols = np.minimum(((np.arange(width) + 0.5) / level.scale).astype(np.intp), w_level - 1)
         _kernels.upsample_gate(out.disparity_px, out.confidence, source_cols, np.float32(level.scale),
                                np.float32(lo - slack), np.float32(hi + slack), top, row0, row1, col0, col1,
@@ -353,10 +376,14 @@ def _union(maps: list[np.ndarray], confs: list[np.ndarray], rule: str
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Eq. (12): unite gated level maps (finest first) under a precedence rule; also
     returns the index of the level each pixel's value came from (-1 none)."""
-    disparity = np.full(maps[0].shape, np.nan, np.float32)
-    confidence = np.zeros(maps[0].shape, np.float32)
-    source = np.full(maps[0].shape, -1, np.int8)
-    poisoned = np.zeros(maps[0].shape, bool)
+    disparity = _kernels.recycled_empty(maps[0].shape, np.float32)
+    disparity.fill(np.nan)
+    confidence = _kernels.recycled_empty(maps[0].shape, np.float32)
+    confidence.fill(0.0)
+    source = _kernels.recycled_empty(maps[0].shape, np.int8)
+    source.fill(-1)
+    poisoned = _kernels.recycled_empty(maps[0].shape, bool)
+    poisoned.fill(False)
     code = {"confidence": 0, "finer": 1, "reject": 2}[rule]
     for i, (d, c) in enumerate(zip(maps, confs)):
         _kernels.unite(d, c, code, i, disparity, confidence, source, poisoned)
