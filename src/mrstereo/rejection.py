@@ -42,6 +42,7 @@ import cv2
 import numpy as np
 
 from . import _checks
+from . import _rejection_kernels as _kernels
 
 __all__ = [
     "RejectionConfig", "PatchStatistics", "FloorModel", "RejectionResult", "patch_statistics",
@@ -165,10 +166,13 @@ def patch_statistics(image, *, window_px: int = 9) -> PatchStatistics:
     if w % 2 == 0:
         raise ValueError(f"window_px must be odd, got {w}")
     mean = cv2.boxFilter(gray, cv2.CV_64F, (w, w), normalize=True, borderType=cv2.BORDER_REFLECT_101)
-    mean_sq = cv2.boxFilter(gray * gray, cv2.CV_64F, (w, w), normalize=True,
-                            borderType=cv2.BORDER_REFLECT_101)
-    std = np.sqrt(np.maximum(mean_sq - mean * mean, 0.0))
-    return PatchStatistics(mean=mean.astype(np.float32), std=std.astype(np.float32), window_px=w)
+    gray_sq = np.empty_like(gray)
+    _kernels.square(gray, gray_sq)
+    mean_sq = cv2.boxFilter(gray_sq, cv2.CV_64F, (w, w), normalize=True, borderType=cv2.BORDER_REFLECT_101)
+    mean32 = np.empty(mean.shape, dtype=np.float32)
+    std32 = np.empty(mean.shape, dtype=np.float32)
+    _kernels.mean_std(mean, mean_sq, mean32, std32)      # sigma = sqrt(max(E[I^2] - mu^2, 0))
+    return PatchStatistics(mean=mean32, std=std32, window_px=w)
 
 
 def uniform_mask(stats: PatchStatistics, *, config: RejectionConfig = RejectionConfig(),
@@ -265,6 +269,6 @@ def reject_uniform(disparity_px, left, *, config: RejectionConfig = RejectionCon
     stats = patch_statistics(left, window_px=window)
     uniform = uniform_mask(stats, config=config, floor_model=floor_model)
     out = np.array(d, dtype=np.float32, copy=True)
-    rejected = uniform & np.isfinite(out)
-    out[rejected] = np.nan
+    rejected = np.empty(out.shape, dtype=bool)
+    _kernels.reject(out, uniform, rejected)          # eq. (13): NaN where uniform and valid
     return RejectionResult(disparity_px=out, rejected=rejected, uniform=uniform, stats=stats)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
+from . import _kernels
 from ..camera import RigMount, StereoCamera
 from .ground import GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_rig
 from .triangulation import points_cam_from_disparity
@@ -125,12 +126,23 @@ class ObstacleResult:
     @property
     def obstacle_points_robot(self) -> np.ndarray:
         """Obstacle points in the robot frame, (N, 3)."""
-        return self.points_robot_image[self.obstacle_mask]
+        return _masked_points(self.points_robot_image, self.obstacle_mask)
 
     @property
     def floor_points_robot(self) -> np.ndarray:
         """Floor (free-space) points in the robot frame, (N, 3)."""
-        return self.points_robot_image[self.floor_mask]
+        return _masked_points(self.points_robot_image, self.floor_mask)
+
+
+def _masked_points(points_image, mask) -> np.ndarray:
+    """``points_image[mask]`` (raster order); a GIL-free kernel for the usual (H, W, 3) float64 images."""
+    if not (isinstance(points_image, np.ndarray) and isinstance(mask, np.ndarray)
+            and points_image.dtype == np.float64 and mask.dtype == np.bool_ and points_image.ndim == 3
+            and points_image.shape[2] == 3 and points_image.shape[:2] == mask.shape):
+        return points_image[mask]
+    out = np.empty((_kernels.count_true(mask), 3), dtype=np.float64)
+    _kernels.gather_points(points_image, mask, out)
+    return out
 
 
 def points_robot_from_disparity(disparity_px, stereo: StereoCamera, T_robot_from_cam) -> np.ndarray:
@@ -141,7 +153,9 @@ def points_robot_from_disparity(disparity_px, stereo: StereoCamera, T_robot_from
     pts = points_cam_from_disparity(disparity_px, focal_px=stereo.focal_px, baseline_m=stereo.baseline_m,
                                     cx_px=stereo.cx_px, cy_px=stereo.cy_px,
                                     fy_px=float(stereo.left.P[1, 1]), doffs_px=stereo.doffs_px)
-    return pts @ T[:3, :3].T + T[:3, 3]
+    pts = pts @ T[:3, :3].T            # numpy's matmul, as transform_points (same rounding)
+    _kernels.add_offset(pts, np.ascontiguousarray(T[:3, 3]))
+    return pts
 
 
 def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: RigMount | None,
@@ -219,13 +233,14 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
                               success=False, message=f"no floor: {ground.message}")
     T = T_robot_from_cam_ground(ground, pan_rad=pan)
     pts = points_robot_from_disparity(d, stereo, T)
-    z = pts[..., 2]
-    with np.errstate(invalid="ignore"):
-        in_range = np.hypot(pts[..., 0], pts[..., 1]) <= config.max_range_m
-        obstacle = in_range & (z > config.min_obstacle_height_m) & (z <= config.max_obstacle_height_m)
-        floor = in_range & (np.abs(z) <= config.floor_tolerance_m)
-    return ObstacleResult(points_robot_image=pts, obstacle_mask=obstacle, floor_mask=floor & ~obstacle,
+    # within range: hypot(x, y) <= max_range; obstacle: min < z <= max height; floor: |z| <= tolerance
+    obstacle = np.empty((h, w), dtype=bool)
+    floor = np.empty((h, w), dtype=bool)
+    n_obstacle, n_floor = _kernels.classify(pts, float(config.max_range_m), float(config.min_obstacle_height_m),
+                                            float(config.max_obstacle_height_m), float(config.floor_tolerance_m),
+                                            obstacle, floor)
+    return ObstacleResult(points_robot_image=pts, obstacle_mask=obstacle, floor_mask=floor,
                           ground=ground, T_robot_from_cam=T, success=True,
                           message=f"floor from {ground.method}: height {ground.height_m:.3f} m, "
                                   f"tilt {np.degrees(ground.tilt_rad):.2f} deg; "
-                                  f"{int(obstacle.sum())} obstacle and {int(floor.sum())} floor points")
+                                  f"{int(n_obstacle)} obstacle and {int(n_floor)} floor points")

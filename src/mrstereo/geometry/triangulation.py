@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _checks
+from . import _kernels
 
 __all__ = ["depth_m_from_disparity_px", "disparity_px_from_depth_m", "points_cam_from_disparity"]
 
@@ -50,12 +51,17 @@ def points_cam_from_disparity(disparity_px, *, focal_px: float, baseline_m: floa
     fy_px : float, optional
         Vertical focal length when pixels are not square (default ``focal_px``).
     """
-    d = np.asarray(disparity_px, dtype=np.float64)
+    d = np.asarray(disparity_px)
+    if d.dtype not in (np.float32, np.float64):
+        d = np.asarray(d, dtype=np.float64)
     if d.ndim != 2:
         raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
-    fy = focal_px if fy_px is None else fy_px
-    z = depth_m_from_disparity_px(d, focal_px=focal_px, baseline_m=baseline_m, doffs_px=doffs_px)
-    v, u = np.mgrid[0:d.shape[0], 0:d.shape[1]].astype(np.float64)
-    x = (u - _checks.finite_number("cx_px", cx_px)) * z / focal_px              # eq. (15)
-    y = (v - _checks.finite_number("cy_px", cy_px)) * z / _checks.finite_number("fy_px", fy, positive=True)  # eq. (16)
-    return np.stack([x, y, z], axis=-1)
+    f = _checks.finite_number("focal_px", focal_px, positive=True)
+    b = _checks.finite_number("baseline_m", baseline_m, positive=True)
+    doffs = _checks.finite_number("doffs_px", doffs_px)
+    cx = _checks.finite_number("cx_px", cx_px)
+    cy = _checks.finite_number("cy_px", cy_px)
+    fy = _checks.finite_number("fy_px", focal_px if fy_px is None else fy_px, positive=True)
+    out = np.empty(d.shape + (3,), dtype=np.float64)
+    _kernels.points_cam(d, f, b, doffs, cx, cy, fy, out)          # eq. (14), (15), (16) per pixel
+    return out

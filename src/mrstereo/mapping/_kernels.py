@@ -275,3 +275,41 @@ def astar(blocked, start_r, start_c, goal_r, goal_c, came_from, g_cost):
                 nh = max(ar, ac) + (sqrt2 - 1.0) * min(ar, ac)
                 heapq.heappush(heap, (ng + nh, nh, nidx))
     return -expanded - 1
+
+
+@njit(nogil=True, cache=True)
+def count_cells(points, origin_x, origin_y, resolution, counts, cell):
+    """Count points per grid cell (``counts`` of grid.shape, zeroed); ``cell[i]`` = flat cell of point i.
+
+    ``col = floor((x - origin_x) / resolution)``, ``row = floor((y - origin_y) / resolution)``;
+    ``cell[i]`` is -1 for a non-finite point and -2 for a finite point outside the grid.
+    Returns the number of finite points outside the grid.
+    """
+    rows, cols = counts.shape
+    outside = 0
+    for i in range(points.shape[0]):
+        col = np.floor((points[i, 0] - origin_x) / resolution)
+        row = np.floor((points[i, 1] - origin_y) / resolution)
+        if not (np.isfinite(col) and np.isfinite(row)):
+            cell[i] = -1
+        elif 0 <= col < cols and 0 <= row < rows:
+            r = int(row)
+            c = int(col)
+            counts[r, c] += 1
+            cell[i] = r * cols + c
+        else:
+            cell[i] = -2
+            outside += 1
+    return outside
+
+
+@njit(nogil=True, cache=True)
+def keep_supported(cell, counts, min_points, keep):
+    """``keep[i]`` = point i lies in a grid cell holding at least ``min_points`` points (outside: False)."""
+    flat = counts.ravel()
+    n = 0
+    for i in range(cell.shape[0]):
+        k = cell[i] >= 0 and flat[cell[i]] >= min_points
+        keep[i] = k
+        n += k
+    return n

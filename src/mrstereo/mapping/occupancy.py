@@ -225,7 +225,33 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
 
 
 def _supported(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:
-    """Obstacle points whose cell holds at least ``min_points`` of them (others dropped)."""
+    """Obstacle points whose cell holds at least ``min_points`` of them (others dropped).
+
+    Points inside the grid are counted per cell by a kernel; the few outside it are grouped by
+    their (row, col) keys with ``np.unique`` (cells outside the grid never equal cells inside).
+    """
+    counts = np.zeros(grid.shape, np.int64)
+    cell = np.empty(len(points), np.int64)
+    outside = _kernels.count_cells(points, float(grid.origin_x_m), float(grid.origin_y_m), float(grid.resolution_m),
+                                   counts, cell)
+    keep = np.empty(len(points), bool)
+    _kernels.keep_supported(cell, counts, min_points, keep)
+    if outside:
+        idx = np.flatnonzero(cell == -2)
+        col = np.floor((points[idx, 0] - grid.origin_x_m) / grid.resolution_m)
+        row = np.floor((points[idx, 1] - grid.origin_y_m) / grid.resolution_m)
+        if max(np.abs(col).max(), np.abs(row).max()) >= 2.0 ** 31:      # keys may collide: group all at once
+            return _supported_by_keys(points, grid, min_points)
+        key = (row.astype(np.int64) << 32) + col.astype(np.int64)
+        _, inverse, n_per_key = np.unique(key, return_inverse=True, return_counts=True)
+        n = n_per_key[inverse]
+        n[key == -1] += np.count_nonzero(cell == -1)    # cell (0, -1) shares key -1 with the non-finite points
+        keep[idx] = n >= min_points
+    return points[keep]
+
+
+def _supported_by_keys(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:
+    """:func:`_supported` by grouping ``(row << 32) + col`` keys of all points with ``np.unique``."""
     col = np.floor((points[:, 0] - grid.origin_x_m) / grid.resolution_m)
     row = np.floor((points[:, 1] - grid.origin_y_m) / grid.resolution_m)
     finite = np.isfinite(col) & np.isfinite(row)

@@ -1,0 +1,47 @@
+"""Numba kernels of the eq. (13) rejection (:mod:`mrstereo.rejection`; no validation, preallocated outputs).
+
+Each kernel does per element exactly the arithmetic of the numpy expression it replaces, in
+the same order and dtype (no fastmath), so the results are bit-identical; ``nogil`` lets the
+per-frame chain run on worker threads.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(nogil=True, cache=True)
+def square(image, out):
+    """``out = image * image`` for (H, W) float64 images."""
+    h, w = image.shape
+    for v in range(h):
+        for u in range(w):
+            out[v, u] = image[v, u] * image[v, u]
+
+
+@njit(nogil=True, cache=True)
+def mean_std(mean, mean_sq, mean_out, std_out):
+    """``mu = E[I]``, ``sigma = sqrt(max(E[I^2] - mu^2, 0))`` in float64, stored as float32."""
+    h, w = mean.shape
+    for v in range(h):
+        for u in range(w):
+            m = mean[v, u]
+            var = mean_sq[v, u] - m * m
+            if var < 0.0:              # max(var, 0); a NaN stays NaN like np.maximum
+                var = 0.0
+            mean_out[v, u] = np.float32(m)
+            std_out[v, u] = np.float32(math.sqrt(var))
+
+
+@njit(nogil=True, cache=True)
+def reject(disparity, uniform, rejected):
+    """Eq. (13) in place: NaN where ``uniform`` and the float32 disparity is finite (marked in ``rejected``)."""
+    h, w = disparity.shape
+    for v in range(h):
+        for u in range(w):
+            r = uniform[v, u] and math.isfinite(disparity[v, u])
+            rejected[v, u] = r
+            if r:
+                disparity[v, u] = np.nan
