@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..camera import Camera, euler_from_rotation, project_points, rotation_from_euler
 from .targets import CalibrationView
@@ -143,6 +142,7 @@ def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequen
         return grouped_jacobian(residuals, x, col_block, col_local, row_block)
 
     kwargs = {"x_scale": "jac"} if method == "trf" else {}
+    from scipy.optimize import least_squares   # lazy: 0.4 s to import, every CLI start paid it
     sol = least_squares(residuals, x0, jac=jac, method=method, max_nfev=max_evaluations, **kwargs)
     x = sol.x
     fx, fy, cx, cy, k1, k2 = _intrinsics(x, fix_aspect)

@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from .. import _checks
 from ..camera import Camera, RigMount, StereoCamera, project_points, rectify_fusiello, rotation_from_euler
@@ -216,6 +215,7 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
         def jac(x):
             return grouped_jacobian(residuals, x, col_block, col_local, row_block)
 
+        from scipy.optimize import least_squares   # lazy: 0.4 s to import, every CLI start paid it
         sol = least_squares(residuals, x0, jac=jac, method="lm", max_nfev=200)
         try:
             il, ir, pl, relT = unpack(sol.x)
