@@ -13,7 +13,7 @@ baselines), mrstereo robust (default), paper, robust single range over the whole
 and robust single range with the same work as the multi-range plan.
 
     python benchmarks/bench_matching.py [--repeats 15]
-    python benchmarks/bench_matching.py --accuracy
+    python benchmarks/bench_matching.py --accuracy [--scale 0.5]
 """
 from __future__ import annotations
 
@@ -106,7 +106,27 @@ def page_faults_per_call(fn, calls: int = 10) -> float | None:
     return (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / calls
 
 
-def accuracy() -> None:
+def rescaled(scene, factor: float):
+    """The scene resized by ``factor`` (area filter; GT nearest, disparities times ``factor``)."""
+    import dataclasses
+
+    import cv2
+
+    h, w = scene.gt_disparity_px.shape
+    size = (int(round(w * factor)), int(round(h * factor)))
+
+    def resize(image, interpolation=cv2.INTER_AREA):
+        return cv2.resize(image, size, interpolation=interpolation)
+
+    mask = scene.nonocc_mask
+    if mask is not None:
+        mask = resize(mask.astype(np.uint8), cv2.INTER_NEAREST) > 0
+    return dataclasses.replace(scene, left=resize(scene.left), right=resize(scene.right), nonocc_mask=mask,
+                               gt_disparity_px=resize(scene.gt_disparity_px, cv2.INTER_NEAREST) * factor,
+                               max_disparity_px=int(np.ceil(scene.max_disparity_px * factor)))
+
+
+def accuracy(scale: float = 1.0) -> None:
     from mrstereo.evaluation import disparity_metrics, load_scene, stereo_bm, stereo_sgbm
 
     robust = preset_config("robust")
@@ -126,12 +146,16 @@ def accuracy() -> None:
         "OpenCV StereoBM": lambda s: stereo_bm(s.left, s.right, max_disparity_px=s.max_disparity_px),
         "OpenCV StereoSGBM": lambda s: stereo_sgbm(s.left, s.right, max_disparity_px=s.max_disparity_px),
         "mrstereo robust (default)": mr(),
+        "mrstereo mapping (the mapping chain's)": mr(preset="mapping"),
         "mrstereo paper": mr(preset="paper"),
         "robust, single range": mr(robust.replace(multi_range=False)),
         "robust, single range, equal work": equal_work,
     }
     scenes = [load_scene(DATA_ROOT / name) for name in SCENES if (DATA_ROOT / name).is_dir()]
-    print("bad-2 % dense / among estimated; mean over the first five scenes (KITTI 2015 reported beside)\n")
+    if scale != 1.0:
+        scenes = [rescaled(s, scale) for s in scenes]
+    print(f"bad-2 % dense / among estimated; mean over the first five scenes (KITTI 2015 reported beside); "
+          f"scenes scaled by {scale:g}: " + ", ".join(f"{s.name} D={s.max_disparity_px}" for s in scenes) + "\n")
     print("| method | mean dense | mean est | " + " | ".join(s.name for s in scenes) + " |")
     print("|---" * (3 + len(scenes)) + "|")
     for name, run in methods.items():
@@ -148,9 +172,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=15)
     parser.add_argument("--accuracy", action="store_true", help="bad-2 table on the shared scenes")
+    parser.add_argument("--scale", type=float, default=1.0,
+                        help="with --accuracy: resize the scenes (e.g. 0.5: other search ranges)")
     args = parser.parse_args()
     if args.accuracy:
-        accuracy()
+        accuracy(args.scale)
     else:
         speed(args.repeats)
 
