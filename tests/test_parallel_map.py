@@ -185,3 +185,16 @@ def test_worker_threads_fall_back_to_processes_without_a_thread_safe_numba_layer
         info = map_ordered(_threads, range(2), workers=1, progress=False)
     import os
     assert all(r[3] != os.getpid() for r in info)          # ran in a worker process
+
+
+def test_chunked_tasks_keep_order_and_per_item_failures(threaded_cluster):
+    from mrstereo.parallel import _chunk_size
+
+    _, client = threaded_cluster
+    assert _chunk_size(client, 40) == 2 and _chunk_size(client, 5) == 1 and _chunk_size(client, 10_000) == 8
+    f = partial(_slow_square, n=0)
+    out = map_ordered(f, range(41), scheduler=client, progress=False, return_exceptions=True)
+    assert [o for k, o in enumerate(out) if k != 3] == [k * k for k in range(41) if k != 3]
+    assert isinstance(out[3], ItemFailure) and out[3].index == 3 and "three is not allowed" in out[3].traceback
+    with pytest.raises(ItemError, match=r"item 3 \(3\) failed: ValueError"):
+        map_ordered(f, range(41), scheduler=client, progress=False)
