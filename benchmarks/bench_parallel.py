@@ -19,7 +19,8 @@ every run, as ``mrstereo map --workers N`` does):
   (Python start-up, imports and the map files included);
 - the machine's ceiling: the per-frame work (``observe_frame``) of all frames in
   one plain Python process vs half of them in each of two independent processes
-  started together (no Dask, no communication; loop times without start-up).
+  started together (no Dask, no communication; loop times without start-up; each
+  single-threaded as a worker is: numba, OpenCV and BLAS).
 
 Configurations run in interleaved rounds (load drift hits them alike). Prints
 the median wall time of each, the 2-vs-1 worker ratios, and whether every
@@ -50,9 +51,12 @@ def _observe_range(data: Path, start: int, stop: int) -> None:
     from mrstereo.world.dataset import read_manifest
 
     import cv2
+    from threadpoolctl import threadpool_limits
+
     keep_freed_memory()
     numba.set_num_threads(1)
     cv2.setNumThreads(1)
+    threadpool_limits(limits=1, user_api="blas")      # as the workers: OpenBLAS's idle threads spin
     m = read_manifest(data)
     observe_frame(m.frames[start], m.calibration, rig=m.rig)        # kernels loaded
     t = time.perf_counter()
@@ -144,8 +148,18 @@ def main(argv=None) -> int:
     for one, two in (("1 worker thread", "2 worker threads"), ("1 worker process", "2 worker processes"),
                      ("`mrstereo map --workers 1`", "`mrstereo map --workers 2`")):
         if one in med:
-            print(f"speed-up 2 vs 1: {two:28s} {med[one] / med[two]:.2f}x")
+            rounds = [a / b for a, b in zip(times[one], times[two])]
+            print(f"speed-up 2 vs 1: {two:28s} {med[one] / med[two]:.2f}x (ratio of medians); per round: median "
+                  f"{statistics.median(rounds):.2f}x, " + ", ".join(f"{r:.2f}x" for r in rounds))
     print(f"2 worker threads vs in-process: {med['in-process (default)'] / med['2 worker threads']:.2f}x")
+    cli_one = "`mrstereo map --workers 1`"
+    if cli_one in med:
+        # What the command does besides build_map (Python start-up, imports, reading the manifest,
+        # map files and figure) is serial: it bounds the command's speed-up (Amdahl).
+        fixed = med[cli_one] - med["1 worker thread"]
+        work = med["1 worker thread"]
+        print(f"command's own serial cost (start-up, imports, outputs): {fixed:.2f} s of {med[cli_one]:.2f} s; "
+              f"even with 2.00x on build_map the command could reach {(fixed + work) / (fixed + work / 2):.2f}x")
     if ceiling:
         one, two = (statistics.median(c[k] for c in ceiling) for k in (0, 1))
         print(f"ceiling, per-frame work alone: 1 process {one:.2f} s, 2 independent processes {two:.2f} s: "

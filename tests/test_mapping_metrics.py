@@ -82,3 +82,21 @@ def test_recall_counts_only_the_visible_faces_of_thick_walls():
     seen[:, 6] = 1.0            # the camera sees the wall's face only
     m = map_metrics(RosMap(seen, grid), RosMap(truth, grid), tolerance_cells=0)
     assert m.recall == 1.0 and m.true_occupied_cells == 10 and m.precision == 1.0
+
+
+@pytest.mark.parametrize("density", [0.002, 0.05, 0.6])
+def test_grid_distance_and_dilation_equal_scipy(density):
+    # The map metrics and the planner's inflation use OpenCV (scipy.ndimage costs 0.25 s of start-up):
+    # the values must be scipy's exactly, also at the grid border.
+    from scipy import ndimage
+
+    from mrstereo.mapping.grid import dilate_cells, distance_cells
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        mask = rng.random((int(rng.integers(1, 130)), int(rng.integers(1, 250)))) < density
+        mask.flat[int(rng.integers(mask.size))] = True
+        assert np.array_equal(distance_cells(mask), ndimage.distance_transform_edt(~mask))
+        for r in (0, 1, 3):
+            box = np.ones((2 * r + 1, 2 * r + 1), bool)
+            assert np.array_equal(dilate_cells(mask, r), ndimage.binary_dilation(mask, structure=box))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from .. import _checks
@@ -62,3 +63,25 @@ class GridSpec:
         rows, cols = self.shape
         r, c = np.mgrid[0:rows, 0:cols]
         return self.xy_from_cells(r, c)
+
+
+def distance_cells(mask: np.ndarray) -> np.ndarray:
+    """Exact Euclidean distance (float64, in cells) from every cell to the nearest ``True`` cell.
+
+    ``cv2.distanceTransform`` (precise L2 mask: the exact transform) returns float32; the
+    squared distances are integers, so they are recovered exactly and the root is taken in
+    float64 (the values of ``scipy.ndimage.distance_transform_edt(~mask)``). ``mask`` must
+    have a ``True`` cell.
+    """
+    d32 = cv2.distanceTransform(np.where(mask, 0, 255).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return np.sqrt(np.rint(d32.astype(np.float64) ** 2))
+
+
+def dilate_cells(mask: np.ndarray, radius_cells: int) -> np.ndarray:
+    """``mask`` grown by a ``(2 r + 1)``-square of cells (outside the grid counts as ``False``)."""
+    if radius_cells <= 0:
+        return mask.copy()
+    size = 2 * radius_cells + 1
+    grown = cv2.dilate(mask.astype(np.uint8), np.ones((size, size), np.uint8),
+                       borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    return grown.astype(bool)

@@ -12,9 +12,9 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from .. import _checks
+from .grid import dilate_cells, distance_cells
 from .rosmap import RosMap
 
 __all__ = ["MapMetrics", "map_metrics", "cells_near_path"]
@@ -72,7 +72,7 @@ def cells_near_path(grid, path_xy, *, within_m: float) -> np.ndarray:
     on_path[r[ok], c[ok]] = True
     if not on_path.any():
         return on_path
-    return ndimage.distance_transform_edt(~on_path) * grid.resolution_m <= within + 1e-9
+    return distance_cells(on_path) * grid.resolution_m <= within + 1e-9
 
 
 def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
@@ -121,23 +121,22 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
     # Recall counts the occupied cells a sensor can see: those touching true free space (the
     # wall faces and obstacle outlines of the paper's corridor profile), not the inside of a
     # wall or a box, which no camera observes.
-    surface = gt_occ_all & ndimage.binary_dilation(gt.free, structure=np.ones((3, 3), bool))
+    surface = gt_occ_all & dilate_cells(gt.free, 1)
     gt_occ = surface & region
     gt_free = gt.free & region
-    box = np.ones((2 * tol + 1, 2 * tol + 1), bool)
 
     def ratio(num, den):
         return float(num) / float(den) if den else math.nan
 
     if gt_occ_all.any():
-        near_gt = ndimage.binary_dilation(gt_occ_all, structure=box) if tol else gt_occ_all
-        dist_m = ndimage.distance_transform_edt(~gt_occ_all) * ge.resolution_m
+        near_gt = dilate_cells(gt_occ_all, tol)
+        dist_m = distance_cells(gt_occ_all) * ge.resolution_m
         precision = ratio((est_occ & near_gt).sum(), est_occ.sum())
         mean_distance = float(dist_m[est_occ].mean()) if est_occ.any() else math.nan
     else:
         precision = 0.0 if est_occ.any() else math.nan
         mean_distance = math.nan
-    near_est = ndimage.binary_dilation(est.occupied, structure=box) if tol else est.occupied
+    near_est = dilate_cells(est.occupied, tol)
     recall = ratio((gt_occ & near_est).sum(), gt_occ.sum())
     free_accuracy = ratio((gt_free & est.free).sum(), gt_free.sum())
     known_fraction = ratio((region & ~est.unknown).sum(), region.sum())

@@ -18,10 +18,10 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
 
 from .. import _checks
 from . import _kernels
+from .grid import distance_cells
 from .rosmap import RosMap
 
 __all__ = ["PlanResult", "plan_path", "inflate_obstacles"]
@@ -53,7 +53,7 @@ def inflate_obstacles(ros_map: RosMap, *, robot_radius_m: float = 0.25,
     obstacles = ros_map.occupied | (ros_map.unknown if unknown_is_obstacle else False)
     if not obstacles.any():
         return obstacles.copy()
-    distance_m = ndimage.distance_transform_edt(~obstacles) * ros_map.grid.resolution_m
+    distance_m = distance_cells(obstacles) * ros_map.grid.resolution_m
     return distance_m <= radius + 1e-9
 
 
