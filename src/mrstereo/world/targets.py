@@ -175,14 +175,23 @@ def _check_common(target, board, spacing_m, seed, supersample):
 
 _COVERAGES = ("random", "grid")
 # "grid" coverage: aim regions as (x, y) in {-1, 0, 1}, corners first, then edges, then the centre, so
-# that every 9 consecutive views cover the whole image. Paper width / image width per pass over the
-# regions: small boards reach deepest into the corners (the paper's white margin keeps the corners
-# of the pattern away from the image corners), large close boards pin down focal length and distortion.
+# that every 9 consecutive views cover the whole image. The distortion far out in the image corners is
+# extrapolated from the corner points nearest to them, so the corner views push the pattern as deep into
+# the corners as a detector allows: the board is small (no square below _GRID_MIN_SQUARE_PX in the image),
+# tilted with its corner at the image corner approaching the camera (an acute vertex that fits into the
+# image corner), and the paper may be cut by the image border as long as the pattern and a quiet zone of
+# _GRID_QUIET_ZONE squares of white around it stay _GRID_BORDER_PX inside. Large, strongly tilted boards
+# elsewhere pin down focal length and the distortion across the image. Measured in
+# benchmarks/bench_calibration.py [2].
 _GRID_AIMS = ((-1, -1), (1, 1), (1, -1), (-1, 1), (0, -1), (0, 1), (-1, 0), (1, 0), (0, 0))
-_GRID_CORNER_FILLS = (0.3, 0.25)
-_GRID_FILLS = (0.8, 0.65)
-_GRID_TILT_RAD = 0.45
+_GRID_CORNER_FILLS = (0.3, 0.25)      # quiet-zone outline width / image width, per pass over the regions
+_GRID_MIN_SQUARE_PX = 8.0             # smallest projected square side (or dot pitch) anywhere on the board
+_GRID_CORNER_TILT_RAD = 0.45
+_GRID_FILLS = (0.95, 0.85)            # edges and centre
+_GRID_TILTS_RAD = (0.7, 0.45)         # edges and centre: receding by 0.7 rad, then approaching by 0.45
 _GRID_ROLL_RAD = 0.1
+_GRID_QUIET_ZONE = 0.25
+_GRID_BORDER_PX = 3.0
 
 
 def _outline(target, board, s) -> tuple[np.ndarray, np.ndarray]:
@@ -192,6 +201,17 @@ def _outline(target, board, s) -> tuple[np.ndarray, np.ndarray]:
                         [(x0 + x1) / 2, y0, 0], [(x0 + x1) / 2, y1, 0], [x0, (y0 + y1) / 2, 0],
                         [x1, (y0 + y1) / 2, 0]])
     return outline, np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
+
+
+def _grid_outline(target, board, s) -> np.ndarray:
+    """What must stay inside the image for "grid": the pattern plus its quiet zone (chessboard), the paper (dots)."""
+    if target != "chessboard":
+        return _outline(target, board, s)[0]
+    nx, ny = board
+    m = (1.0 + _GRID_QUIET_ZONE) * s
+    x0, x1, y0, y1 = -m, (nx - 1) * s + m, -m, (ny - 1) * s + m
+    return np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0], [(x0 + x1) / 2, y0, 0],
+                     [(x0 + x1) / 2, y1, 0], [x0, (y0 + y1) / 2, 0], [x1, (y0 + y1) / 2, 0]])
 
 
 def _fits(cams, pts: np.ndarray, margin: float) -> bool:
@@ -219,35 +239,62 @@ def _random_pose(cams, outline, centre, rng) -> tuple[np.ndarray, np.ndarray] | 
     return None
 
 
-def _grid_pose(cams, outline, centre, k, rng) -> tuple[np.ndarray, np.ndarray] | None:
+def _min_square_px(cams, points: np.ndarray, board) -> float:
+    """Smallest projected distance between neighbouring pattern points, left (and right) image."""
+    nx, ny = board
+    views = [cams[0].project(points)]
+    if cams[1] is not None:
+        views.append(cams[1].project(points @ cams[2].T + cams[3]))
+    smallest = np.inf
+    for uv in views:
+        grid = uv.reshape(ny, nx, 2)
+        smallest = min(smallest, np.linalg.norm(np.diff(grid, axis=0), axis=-1).min(),
+                       np.linalg.norm(np.diff(grid, axis=1), axis=-1).min())
+    return float(smallest)
+
+
+def _grid_pose(cams, outline, centre, pattern, board, k, rng) -> tuple[np.ndarray, np.ndarray] | None:
     """Pose ``k`` of the "grid" coverage: the board pushed into aim region ``k mod 9``.
 
-    The board is tilted by ``_GRID_TILT_RAD`` about the image axes so that its
-    edge at the aim region recedes (first pass over the regions) or approaches
-    (second pass), plus up to 0.1 rad of random tilt and ``_GRID_ROLL_RAD`` of
-    random roll; then it is shifted until its outline touches the image
-    border(s) of the region (7 px, in both images of a stereo pair) or is
-    centred along the free axis. The distance is reduced when it does not fit.
+    ``outline`` is what must stay inside the image(s) (:func:`_grid_outline`),
+    ``pattern`` the target points on a ``board`` grid. Corner regions: the
+    board is tilted by ``_GRID_CORNER_TILT_RAD`` about the image axes so that
+    its corner at the image corner approaches the camera, and its outline
+    fills ``_GRID_CORNER_FILLS`` of the image width (alternating per pass).
+    Edges: tilted by ``_GRID_TILTS_RAD`` with the edge at the region receding
+    (even passes) or approaching (odd passes), filling ``_GRID_FILLS``;
+    centre: the same tilt in a random direction. Plus up to 0.1 rad of random
+    tilt and ``_GRID_ROLL_RAD`` of random roll; then the board is shifted until
+    its outline touches the image border(s) of the region (``_GRID_BORDER_PX``,
+    in both images of a stereo pair) or is centred along the free axis. The
+    board is moved away while its outline does not fit; while a square is
+    smaller than ``_GRID_MIN_SQUARE_PX`` (a detector must find it), a corner
+    board is brought closer and an edge or centre board tilted less.
     """
     left = cams[0]
     width_m = outline[1, 0] - outline[0, 0]
     ax, ay = _GRID_AIMS[k % len(_GRID_AIMS)]
     npass = k // len(_GRID_AIMS)
-    sign = 1.0 if npass % 2 == 0 else -1.0
-    fills = _GRID_CORNER_FILLS if (ax != 0 and ay != 0) else _GRID_FILLS
-    fill0 = fills[npass % len(fills)]
-    for attempt in range(200):
+    corner = ax != 0 and ay != 0
+    if corner:
+        sign, tilt_rad, fill = -1.0, _GRID_CORNER_TILT_RAD, _GRID_CORNER_FILLS[npass % len(_GRID_CORNER_FILLS)]
+    else:
+        sign = 1.0 if npass % 2 == 0 else -1.0
+        tilt_rad = _GRID_TILTS_RAD[npass % len(_GRID_TILTS_RAD)]
+        fill = _GRID_FILLS[npass % len(_GRID_FILLS)]
+    border = _GRID_BORDER_PX
+    for _attempt in range(200):
         jitter = rng.uniform(-0.1, 0.1, 2)
         if ax == 0 and ay == 0:          # centre: tilt in a random direction
             direction = rng.uniform(-1.0, 1.0, 2)
-            tilt = _GRID_TILT_RAD * direction / max(float(np.linalg.norm(direction)), 1e-9)
+            tilt = tilt_rad * direction / max(float(np.linalg.norm(direction)), 1e-9)
         else:
-            tilt = sign * _GRID_TILT_RAD * np.array([ax, ay], dtype=float)
+            tilt = sign * tilt_rad * np.array([ax, ay], dtype=float)
         # Rx(alpha > 0) turns the board's +y (lower) edge away from the camera, Ry(beta < 0) its +x edge.
         R = rotation_from_euler(tilt[1] + jitter[0], -tilt[0] + jitter[1], rng.uniform(-1, 1) * _GRID_ROLL_RAD)
-        z = left.fx * width_m / (fill0 * 0.97**attempt * left.width)
+        z = left.fx * width_m / (fill * left.width)
         t = np.array([_right_offset_m(cams) / 2, 0.0, z]) - R @ centre
-        for _ in range(20):              # shift the board (Newton-like, in pixels) against the border(s)
+        for _ in range(30):              # shift the board (Newton-like, in pixels) against the border(s)
             pts = outline @ R.T + t
             uv = left.project(pts)
             if cams[1] is not None:
@@ -257,13 +304,20 @@ def _grid_pose(cams, outline, centre, k, rng) -> tuple[np.ndarray, np.ndarray] |
             shift = np.zeros(2)
             for axis, aim, size in ((0, ax, left.width), (1, ay, left.height)):
                 lo, hi = uv[:, axis].min(), uv[:, axis].max()
-                shift[axis] = (7.0 - lo if aim < 0 else size - 8.0 - hi if aim > 0
+                shift[axis] = (border - lo if aim < 0 else size - 1 - border - hi if aim > 0
                                else (size - 1) / 2 - (lo + hi) / 2)
             depth_m = float((R @ centre + t)[2])
             t[:2] += shift * depth_m / np.array([left.fx, left.fy])
             if np.all(np.abs(shift) < 0.05):
                 break
-        if _fits(cams, outline @ R.T + t, 6.0):
+        if not _fits(cams, outline @ R.T + t, border - 1.0):
+            fill *= 0.97
+        elif _min_square_px(cams, pattern @ R.T + t, board) < _GRID_MIN_SQUARE_PX:
+            if corner:
+                fill *= 1.03
+            else:
+                tilt_rad *= 0.95
+        else:
             return R, t
     return None
 
@@ -299,19 +353,27 @@ def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", bo
         the image -- the image corners are often left uncovered. ``"grid"``:
         what calibration guides ask of a user -- view ``k`` pushes the board
         into one of nine regions (the four image corners, the four edges, the
-        centre, in that order, repeating) until the paper touches the image
-        border(s) there. The board is tilted by about 25 degrees, its edge at
-        the region receding in the first pass over the regions and approaching
-        in the second; the paper fills 30 % / 25 % of the image width in the
-        corners (far away, to reach deep into them) and 80 % / 65 % elsewhere
-        (close, for focal length and distortion), with a little random tilt
-        and roll. Take 18 views (two passes) or more.
+        centre, in that order, repeating) until it touches the image border(s)
+        there. In a corner the board is small (its outline 30 % / 25 % of the
+        image width in alternate passes, closer when a square would be smaller
+        than 8 px) and tilted by about 35 degrees with its corner at the image
+        corner toward the camera, so that the pattern reaches deep into the
+        image corner; elsewhere it is large (95 % / 85 %) and tilted by 40
+        degrees with the edge at the region receding / 26 degrees approaching
+        (less when a square would be smaller than 8 px), with a little random
+        tilt and roll. The paper may be cut by the image border, but the
+        pattern and a quarter square of white around it stay 3 px inside, and
+        no square is smaller than 8 px: ``cv2.findChessboardCorners`` finds
+        the rendered board. Take 18 views (two passes) or more; a 0.05 px
+        distortion error over the whole image needs a dense board and many
+        views (docs/calibration.md, Measured).
 
     Returns
     -------
     list of RenderedTarget
-        The whole paper lies inside every image (6 px margin), in both images
-        of a stereo pair. Deterministic for a seed.
+        ``"random"``: the whole paper lies inside every image (6 px margin);
+        ``"grid"``: the pattern and its quiet zone do (3 px margin). In both
+        images of a stereo pair. Deterministic for a seed.
 
     Raises
     ------
@@ -333,7 +395,7 @@ def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", bo
         if coverage == "random":
             pose = _random_pose(cams, outline, centre, rng)
         else:
-            pose = _grid_pose(cams, outline, centre, k, rng)
+            pose = _grid_pose(cams, _grid_outline(target, board, s), centre, target_points(board, s), board, k, rng)
         if pose is None:
             raise RuntimeError(f"could not place view {k} of the target inside the image(s); "
                                "use a smaller board or spacing_m")
