@@ -9,8 +9,11 @@ threads (numba.set_num_threads, cv2.setNumThreads), and the minor page faults pe
 
 Accuracy (``--accuracy``): bad-2 (%) dense (missing counts as bad) / among estimated pixels
 on the shared Middlebury/KITTI scenes for StereoBM, StereoSGBM (mrstereo.evaluation
-baselines), mrstereo robust (default), paper, robust single range over the whole search,
-and robust single range with the same work as the multi-range plan.
+baselines), mrstereo robust (default), mapping, paper, robust without gap filling and with
+gap filling from the ends alone (ELAS-like), robust single range over the whole search, and
+robust single range with the same work as the multi-range plan; then the robust variants on
+the built-in corridor (plain walls and floor; 8 frames, 320x240, search from the calibration):
+bad-2 among estimated pixels and density.
 
     python benchmarks/bench_matching.py [--repeats 15]
     python benchmarks/bench_matching.py --accuracy [--scale 0.5]
@@ -68,12 +71,17 @@ def speed(repeats: int) -> None:
     left, right, what = load_pair()
     rig = StereoCamera.ideal(Camera(fx=451.0, fy=451.0, cx=320.0, cy=240.0, width=640, height=480), 0.075)
     bm = cv2.StereoBM.create(numDisparities=80, blockSize=9)
-    robust = preset_config("robust")
+    robust, paper = preset_config("robust"), preset_config("paper")
+
+    def run(config):
+        return lambda: compute_disparity(left, right, calibration=rig, config=config)
+
     runs = {
-        "mrstereo robust multi-range": lambda: compute_disparity(left, right, calibration=rig, config=robust),
-        "mrstereo paper multi-range": lambda: compute_disparity(left, right, calibration=rig, preset="paper"),
-        "mrstereo robust single-range": lambda: compute_disparity(
-            left, right, calibration=rig, config=robust.replace(multi_range=False)),
+        "mrstereo robust multi-range": run(robust),
+        "robust without gap filling": run(robust.replace(gap_fill_px=0)),
+        "mrstereo paper multi-range": run(paper),
+        "mrstereo robust single-range": run(robust.replace(multi_range=False)),
+        "mrstereo paper single-range": run(paper.replace(multi_range=False)),
     }
     plan = compute_disparity(left, right, calibration=rig).plan
     print(f"pair: {what}\n{plan.describe()}\nload average: {os.getloadavg()}\n")
@@ -84,6 +92,11 @@ def speed(repeats: int) -> None:
             ms, base_ms, ratio = paired(fn, lambda: bm.compute(left, right), repeats)
             print(f"threads={threads}  {name:30s} median {ms:6.1f} ms  StereoBM 80 disp 9x9 {base_ms:5.1f} ms"
                   f"  ratio {ratio:4.2f}")
+        for name in ("robust", "paper"):     # the same matcher over the same depths, alternating
+            multi_ms, single_ms, ratio = paired(runs[f"mrstereo {name} multi-range"],
+                                                runs[f"mrstereo {name} single-range"], repeats)
+            print(f"threads={threads}  {name} multi-range {multi_ms:.1f} ms vs single range {single_ms:.1f} ms: "
+                  f"{1 / ratio:.2f}x faster (work {plan.work / plan.single_range_work:.2f}x)")
         print()
     faults = page_faults_per_call(runs["mrstereo robust multi-range"])
     if faults is not None:
@@ -148,6 +161,8 @@ def accuracy(scale: float = 1.0) -> None:
         "mrstereo robust (default)": mr(),
         "mrstereo mapping (the mapping chain's)": mr(preset="mapping"),
         "mrstereo paper": mr(preset="paper"),
+        "robust without gap filling": mr(robust.replace(gap_fill_px=0)),
+        "robust, gap filling from the ends alone (support 1)": mr(robust.replace(gap_fill_support_px=1)),
         "robust, single range": mr(robust.replace(multi_range=False)),
         "robust, single range, equal work": equal_work,
     }
@@ -165,7 +180,33 @@ def accuracy(scale: float = 1.0) -> None:
             cells.append((m.dense.bad_2_pct, m.estimated.bad_2_pct))
         first = np.array(cells[:5])
         print(f"| {name} | {first[:, 0].mean():.1f} | {first[:, 1].mean():.1f} | "
-              + " | ".join(f"{a:.1f}/{b:.1f}" for a, b in cells) + " |")
+              + " | ".join(f"{a:.1f}/{b:.1f}" for a, b in cells) + " |", flush=True)
+    corridor({"robust (default)": robust, "mapping": preset_config("mapping"),
+              "robust without gap filling": robust.replace(gap_fill_px=0),
+              "robust, gap filling from the ends alone": robust.replace(gap_fill_support_px=1)})
+
+
+def corridor(configs: dict) -> None:
+    """bad-2 among estimated pixels and density on 8 frames of the built-in corridor (seed 0)."""
+    import tempfile
+
+    from mrstereo.io import read_disparity, read_image
+    from mrstereo.world.dataset import read_manifest, write_synthetic_dataset
+
+    with tempfile.TemporaryDirectory() as tmp:
+        manifest = read_manifest(write_synthetic_dataset(Path(tmp) / "corridor", seed=0, n_frames=8, progress=False))
+        frames = [(read_image(f.left_rect, gray=True), read_image(f.right_rect, gray=True),
+                   read_disparity(f.gt_disparity)) for f in manifest.frames]
+    print("\ncorridor (seed 0, 8 frames, 320x240, `calibration=`): bad-2 % among estimated / density %")
+    for name, config in configs.items():
+        wrong = estimated = known = 0
+        for left, right, gt in frames:
+            d = compute_disparity(left, right, calibration=manifest.calibration, config=config).disparity_px
+            ok = np.isfinite(gt) & (gt > 0)
+            est = ok & np.isfinite(d)
+            known, estimated = known + ok.sum(), estimated + est.sum()
+            wrong += (np.abs(d - gt)[est] > 2.0).sum()
+        print(f"  {name}: {100 * wrong / estimated:.2f} / {100 * estimated / known:.1f}", flush=True)
 
 
 def main() -> None:

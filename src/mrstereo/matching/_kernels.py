@@ -706,6 +706,62 @@ def drop_above(disparity, lowest, jump, out):
             orow[x] = nan if (d - lr[x] > jump) else d
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _fill_gap(d, c, base, step, hi, start, n, max_gap, max_diff, support):
+    """In place on one line of the flat maps ``d``, ``c`` (element ``i`` at ``base + i * step``,
+    ``n`` elements): fill the gap before ``hi``, the first pixel of a valid run, when the rule
+    of :func:`mrstereo.matching.postfilter.fill_gaps` allows. ``start``: the first pixel of the
+    valid run before the gap, in which the left support must lie.
+    """
+    lo = hi - 1
+    while lo >= 0 and hi - lo - 1 <= max_gap and not np.isfinite(d[base + lo * step]):
+        lo -= 1
+    gap = hi - lo - 1
+    if lo < 0 or gap > max_gap or lo - support + 1 < start or hi + support > n:
+        return
+    a = d[base + lo * step]
+    b = d[base + hi * step]
+    if not abs(a - b) <= max_diff:
+        return
+    for j in range(1, support):              # both ends backed by `support` agreeing pixels
+        if not (abs(d[base + (lo - j) * step] - a) <= max_diff and abs(d[base + (hi + j) * step] - b) <= max_diff):
+            return
+    c_end = min(c[base + lo * step], c[base + hi * step])
+    slope = (b - a) / np.float32(gap + 1)
+    for i in range(1, gap + 1):
+        d[base + (lo + i) * step] = a + slope * np.float32(i)
+        c[base + (lo + i) * step] = c_end
+
+
+@njit(nogil=True, cache=True)
+def fill_gap_rows(disparity, confidence, run_starts, max_gap, max_diff, support):
+    """Gap filling along the rows, in place. ``run_starts``: ascending flat indices of the
+    valid pixels that follow an invalid one (a gap's right end, or a row's first run)."""
+    width = disparity.shape[1]
+    d, c = disparity.ravel(), confidence.ravel()
+    row, start = -1, 0
+    for i in run_starts:
+        y, x = i // width, i % width
+        if y != row:
+            row, start = y, 0
+        if x > 0:
+            _fill_gap(d, c, y * width, 1, x, start, width, max_gap, max_diff, support)
+            start = x
+
+
+@njit(nogil=True, cache=True)
+def fill_gap_columns(disparity, confidence, run_starts, first_row, max_gap, max_diff, support):
+    """Gap filling along the columns, in place. ``run_starts``: ascending flat indices of the
+    valid pixels below an invalid one; ``first_row`` (int32, width) is scratch."""
+    height, width = disparity.shape
+    d, c = disparity.ravel(), confidence.ravel()
+    first_row[:] = 0
+    for i in run_starts:
+        y, x = i // width, i % width
+        _fill_gap(d, c, x, width, y, first_row[x], height, max_gap, max_diff, support)
+        first_row[x] = y
+
+
 @njit(nogil=True, cache=True)
 def zero_where_invalid(disparity, confidence):
     """In place: ``confidence = 0`` where ``disparity`` is NaN."""

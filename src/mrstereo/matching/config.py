@@ -1,13 +1,15 @@
-"""Matcher settings: one frozen dataclass and two presets.
+"""Matcher settings: one frozen dataclass and three presets.
 
 ``paper`` is exactly the paper's matcher (section 3.3-3.4): NSSD of eq. (9) on the
 raw intensities, winner-take-all eq. (10), a median filter per level, gating
 (eq. 11) and union (eq. 12), nothing else. ``robust`` (the default) adds what
 robot users expect from OpenCV StereoBM / ROS stereo_image_proc: an x-Sobel
 pre-filter (gain/offset differences of real cameras), ZNCC, a left-right check,
-uniqueness ratio, maximum cost, sub-pixel parabola and speckle removal, plus three steps
+uniqueness ratio, maximum cost, sub-pixel parabola and speckle removal, plus four steps
 beyond the paper: fewer levels for a small search range, full-resolution re-scoring of
-the coarsest level and a guard against window "fattening" at depth edges. Defaults were
+the coarsest level, a guard against window "fattening" at depth edges and the filling of
+short gaps between two ends on one surface. ``mapping`` is ``robust`` with stricter
+acceptance and no gap filling, for the robot's map. Defaults were
 chosen by measurement on Middlebury/KITTI (docs/matching.md).
 Conventions: docs/conventions.md.
 """
@@ -98,6 +100,17 @@ class MatchingConfig:
         ``window_px // 2 + 2``; 0: off.
     edge_jump_px : float
         Disparity step that counts as a depth edge for ``edge_guard_px``.
+    gap_fill_px : int
+        Fill runs of at most this many invalid pixels along rows, then columns, by
+        linear interpolation, when the two ends differ by at most ``gap_fill_diff_px``
+        and each is backed by ``gap_fill_support_px`` valid pixels agreeing with it (one
+        surface on both sides; beyond the paper, see
+        :func:`mrstereo.matching.postfilter.fill_gaps`). 0: off (holes stay holes).
+    gap_fill_diff_px : float
+        Largest disparity difference between the two ends of a filled gap.
+    gap_fill_support_px : int or None
+        Consecutive valid pixels (the end included) within ``gap_fill_diff_px`` of each
+        end. None: ``window_px // 2 + 1`` (half a window); 1: the ends alone (ELAS).
     """
 
     window_px: int = 9
@@ -122,6 +135,9 @@ class MatchingConfig:
     refine_min_decimation: int = 3
     edge_guard_px: int | None = None
     edge_jump_px: float = 2.0
+    gap_fill_px: int = 12
+    gap_fill_diff_px: float = 1.0
+    gap_fill_support_px: int | None = None
 
     def __post_init__(self) -> None:
         window = _checks.positive_int("window_px", self.window_px, minimum=3)
@@ -156,6 +172,10 @@ class MatchingConfig:
         if self.edge_guard_px is not None:
             _checks.positive_int("edge_guard_px", self.edge_guard_px, minimum=0)
         _checks.finite_number("edge_jump_px", self.edge_jump_px, positive=True)
+        _checks.positive_int("gap_fill_px", self.gap_fill_px, minimum=0)
+        _checks.finite_number("gap_fill_diff_px", self.gap_fill_diff_px, nonnegative=True)
+        if self.gap_fill_support_px is not None:
+            _checks.positive_int("gap_fill_support_px", self.gap_fill_support_px)
         if window > 31:
             raise ValueError(f"window_px must be <= 31, got {window}")
         if self.union not in UNIONS:
@@ -165,6 +185,11 @@ class MatchingConfig:
     def edge_guard(self) -> int:
         """Effective ``edge_guard_px`` (None resolved from the window)."""
         return self.window_px // 2 + 2 if self.edge_guard_px is None else self.edge_guard_px
+
+    @property
+    def gap_support(self) -> int:
+        """Effective ``gap_fill_support_px`` (None resolved from the window)."""
+        return self.window_px // 2 + 1 if self.gap_fill_support_px is None else self.gap_fill_support_px
 
     def replace(self, **changes) -> MatchingConfig:
         """A copy with some fields changed (validated again)."""
@@ -176,14 +201,15 @@ PRESETS: dict[str, MatchingConfig] = {
     "paper": MatchingConfig(cost="nssd", prefilter="none", min_band_level_px=0.0, band_margin_px=2,
                             median_size=5, lr_max_diff_px=None, uniqueness_ratio=0.0, texture_threshold=0.0,
                             max_cost=None, subpixel=False, speckle_size_px=0, union="confidence",
-                            refine=False, edge_guard_px=0),
+                            refine=False, edge_guard_px=0, gap_fill_px=0),
     "robust": MatchingConfig(),
     # The robust matcher as the robot's mapping chain uses it: stricter acceptance (a wrong
     # match becomes an obstacle cell that later frames must clear) and StereoBM's pre-filter
     # clip, which keeps more texture on plain corridor walls. Chosen by the map and obstacle
     # metrics of the synthetic corridor (seeds 0, 1; checked on 2): precision 0.909 vs 0.879
     # with the robust values, obstacle-cell recall 0.971 vs 0.926 (docs/matching.md).
-    "mapping": MatchingConfig(prefilter_cap=31, max_cost=0.5, speckle_range_px=2.0),
+    # No gap filling: map cells come from measured points only.
+    "mapping": MatchingConfig(prefilter_cap=31, max_cost=0.5, speckle_range_px=2.0, gap_fill_px=0),
 }
 
 

@@ -133,7 +133,9 @@ def prepare(image: np.ndarray, *, window: int, cost: str, dtype=np.float32) -> P
     if cost not in COSTS:
         raise ValueError(f"cost must be one of {COSTS}, got {cost!r}")
     r = window // 2
-    padded = cv2.copyMakeBorder(np.ascontiguousarray(image, dtype=dtype), r, r, r, r, cv2.BORDER_REPLICATE)
+    image = np.ascontiguousarray(image, dtype=dtype)
+    padded = cv2.copyMakeBorder(image, r, r, r, r, cv2.BORDER_REPLICATE,
+                                dst=_kernels.recycled_empty((image.shape[0] + 2 * r, image.shape[1] + 2 * r), dtype))
     return _with_terms(padded, window, cost == "zncc")
 
 

@@ -3,7 +3,7 @@
 Area of interest (3.1) -> per level: horizontal decimation (3.2), pre-filter,
 window cost eq. (9) and winner-take-all eq. (10) (3.3), checks, median (3.4) ->
 up-sampling, full-resolution refinement of the coarsest level (beyond the paper),
-gating eq. (11) -> union eq. (12) -> speckle removal -> depth-edge guard.
+gating eq. (11) -> union eq. (12) -> speckle removal -> depth-edge guard -> gap filling.
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -20,7 +20,7 @@ from .cost import match_checked, prepare, prepare_gray, refine_candidates
 from .multirange import (DEFAULT_DEPTH_EDGES_M, decimate_horizontally, LevelOutput, MultiRangePlan, RangeLevel,
                          bands_px_from_depth_m, default_bands_px, default_level_count, plan_levels,
                          run_levels)
-from .postfilter import guard_depth_edges, median_filter, remove_speckles, textured
+from .postfilter import fill_gaps, guard_depth_edges, median_filter, remove_speckles, textured
 
 __all__ = ["DisparityResult", "compute_disparity", "make_plan", "solve_level"]
 
@@ -254,5 +254,7 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
     disparity = remove_speckles(disparity, max_size_px=config.speckle_size_px,
                                 max_diff_px=config.speckle_range_px)
     disparity = guard_depth_edges(disparity, guard_px=config.edge_guard, jump_px=config.edge_jump_px)
+    disparity, confidence = fill_gaps(disparity, confidence, max_gap_px=config.gap_fill_px,
+                                      max_diff_px=config.gap_fill_diff_px, support_px=config.gap_support)
     _kernels.zero_where_invalid(disparity, confidence)
     return DisparityResult(disparity_px=disparity, confidence=confidence, plan=plan, levels=levels)

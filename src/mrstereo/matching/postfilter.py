@@ -12,7 +12,7 @@ import numpy as np
 from . import _kernels
 
 __all__ = ["left_right_consistent", "unique", "textured", "median_filter", "remove_speckles",
-           "confidence_from_costs", "guard_depth_edges"]
+           "confidence_from_costs", "guard_depth_edges", "fill_gaps"]
 
 
 def left_right_consistent(disparity_int: np.ndarray, right_disparity_int: np.ndarray, *,
@@ -116,3 +116,37 @@ def guard_depth_edges(disparity_px: np.ndarray, *, guard_px: int, jump_px: float
     out = _kernels.recycled_empty(disparity_px.shape, np.float32)
     _kernels.drop_above(disparity_px, lowest, np.float32(jump_px), out)     # NaN stays NaN
     return out
+
+
+def fill_gaps(disparity_px: np.ndarray, confidence: np.ndarray, *, max_gap_px: int, max_diff_px: float,
+              support_px: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fill short runs of invalid pixels that lie on one surface (beyond the paper).
+
+    Along each row, then along each column of the result, a run of at most
+    ``max_gap_px`` invalid pixels is filled by linear interpolation between its two
+    ends when the ends differ by at most ``max_diff_px`` and each is backed by
+    ``support_px`` consecutive valid pixels (the end included) within ``max_diff_px``
+    of it: the ends are on one surface patch, not lone survivors of the checks. Gaps
+    at depth edges (ends on different surfaces), at the image border and longer gaps
+    stay invalid. Filled pixels get the lower confidence of the two ends. The same
+    idea as ELAS's gap interpolation (Geiger et al. 2010), stricter. Returns new
+    ``(disparity_px, confidence)``; ``max_gap_px = 0`` returns the inputs.
+    """
+    if max_gap_px <= 0:
+        return disparity_px, confidence
+    disparity_px = np.ascontiguousarray(disparity_px, dtype=np.float32)
+    confidence = np.ascontiguousarray(confidence, dtype=np.float32)
+    if disparity_px.shape != confidence.shape:
+        raise ValueError(f"confidence must have the disparity's shape {disparity_px.shape}, got {confidence.shape}")
+    h, w = disparity_px.shape
+    out_d, out_c = (_kernels.recycled_empty((h, w), np.float32) for _ in range(2))
+    np.copyto(out_d, disparity_px)
+    np.copyto(out_c, confidence)
+    args = int(max_gap_px), np.float32(max_diff_px), max(int(support_px), 1)
+    # only the first pixels of valid runs (a gap's right end) do work; found with numpy
+    valid = np.isfinite(out_d).ravel()
+    _kernels.fill_gap_rows(out_d, out_c, np.flatnonzero(valid[1:] > valid[:-1]) + 1, *args)
+    valid = np.isfinite(out_d).ravel()
+    _kernels.fill_gap_columns(out_d, out_c, np.flatnonzero(valid[w:] > valid[:-w]) + w,
+                              _kernels.recycled_empty((w,), np.int32), *args)
+    return out_d, out_c
