@@ -298,6 +298,7 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
         sub_ = np.empty(nx, np.float32)
         right_c = np.empty(width, np.float32)
         right_d = np.empty(width, np.int32)
+        lr_ok = np.empty(nx, np.bool_)
         # the window of image row y covers padded rows y .. y + 2r. Loops run over
         # 0-based ranges of slices: the indices are provably >= 0 and the loops vectorize.
         for k in range(nd):
@@ -404,16 +405,21 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
                     oc[x] = 0.0
                 od = out_disparity[y, col0:col1]
                 oc = out_confidence[y, col0:col1]
+                # the left-right check's gather apart, so that the loop below vectorizes
+                if want_right and lr_tol >= 0:
+                    for i in range(nx):
+                        d = d_lo + bk[i]
+                        back = right_d[min(max(col0 + i - d, 0), width - 1)]
+                        lr_ok[i] = back >= 0 and abs(d - back) <= lr_int
+                else:
+                    for i in range(nx):
+                        lr_ok[i] = True
                 for i in range(nx):
                     kb = bk[i]
                     cb = bc[i]
                     second = sc[i]
                     d = d_lo + kb
-                    ok = kb >= 0
-                    if want_right:
-                        xr = min(max(col0 + i - d, 0), width - 1)
-                        back = right_d[xr]
-                        ok = ok and (lr_tol < 0 or (back >= 0 and abs(d - back) <= lr_int))
+                    ok = kb >= 0 and lr_ok[i]
                     ok = ok and (ratio <= 0 or cb <= keep * second)
                     ok = ok and (max_cost < 0 or cb <= max_c)
                     value = np.float32(d) + (sub_[i] if use_sub else np.float32(0.0))
