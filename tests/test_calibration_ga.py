@@ -160,3 +160,24 @@ def test_paper_ga_on_the_rendered_paper_dot_target():
     polished = refine_views([view], res.camera, res.poses, fix_aspect=1.0)       # what "ga+lm" does next
     rms = float(np.sqrt(np.mean(np.sum(polished.residuals_px[0] ** 2, axis=1))))
     assert polished.success and rms < min(0.2, res.ga_rms_px)
+
+
+def test_multiview_ga_searches_a_subset_of_points_and_reports_all():
+    views = board_views()                                   # 54 corners per view
+    cfg = GAConfig(generations=15, stall_generations=15)
+    kw = dict(width=TRUE.width, height=TRUE.height, rng=3)
+    full = ga_calibrate_intrinsics(views, config=cfg, **kw)
+    # a cap at or above the view size changes nothing, bit for bit
+    same = ga_calibrate_intrinsics(views, config=GAConfig(generations=15, stall_generations=15,
+                                                          max_points_per_view=54), **kw)
+    np.testing.assert_array_equal(full.genes, same.genes)
+    assert full.fitness == same.fitness
+    sub = ga_calibrate_intrinsics(views, config=GAConfig(generations=15, stall_generations=15,
+                                                         max_points_per_view=12), **kw)
+    n_points = sum(len(v.uv) for v in views)
+    # fitness, RMS and poses over every point, not the 12 searched per view
+    assert sub.rms_px == pytest.approx(math.sqrt(sub.fitness / n_points))
+    assert sub.fitness > sub.history[-1] * 3               # history sums the 12 points per view only
+    assert sub.rms_px < 1.0 and abs(sub.camera.fx / TRUE.fx - 1) < 0.02
+    with pytest.raises(ValueError, match="max_points_per_view"):
+        GAConfig(max_points_per_view=3)
