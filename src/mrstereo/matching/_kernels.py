@@ -57,6 +57,18 @@ def _track_winner(crow, prow, k, n, bc, bk, cm_, cp_):
         bc[i] = c if better else bc[i]
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _runs(values, n, out_starts):
+    """Starts of the runs of equal ``values[:n]`` into ``out_starts`` (then ``n``); their count."""
+    count = 0
+    for i in range(n):
+        if i == 0 or values[i] != values[i - 1]:
+            out_starts[count] = i
+            count += 1
+    out_starts[count] = n
+    return count
+
+
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
 def _parabola(cb, cm, cp):
     """Sub-pixel offset of the parabola through (-1, cm), (0, cb), (1, cp), clipped to +-0.5;
@@ -519,18 +531,33 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
         bk = np.empty(nx, np.int32)
         cm_ = np.empty(nx, np.float32)
         cp_ = np.empty(nx, np.float32)
+        run_at = np.empty(ncol + 1, np.int64)
         for yy in range(y_start, y_end + 2 * radius):
             slot = (yy - y_start) % win
             lrow = left_pad[yy, xa:xa + ncol]
             rrow = right_pad[yy]
             crow = center_pad[yy, xa:xa + ncol]
+            n_runs = _runs(crow, ncol, run_at)
             for o in range(nc):
                 off = o - half
                 col = colsum[o]
                 old = ring[o, slot]
-                for i in range(ncol):
-                    q = min(max(xa + i - crow[i] - off, 0), wp - 1)
-                    fresh[i] = lrow[i] * rrow[q]
+                # runs of constant coarse disparity read the right row contiguously
+                for r in range(n_runs):
+                    i0 = run_at[r]
+                    i1 = run_at[r + 1]
+                    base = xa - crow[i0] - off          # q = base + i, clamped to the padded row
+                    lo = min(max(i0, -base), i1)
+                    hi = max(min(i1, wp - base), lo)
+                    for i in range(i0, lo):
+                        fresh[i] = lrow[i] * rrow[0]
+                    seg_l = lrow[lo:hi]
+                    seg_r = rrow[base + lo:base + hi]
+                    seg_f = fresh[lo:hi]
+                    for i in range(hi - lo):
+                        seg_f[i] = seg_l[i] * seg_r[i]
+                    for i in range(hi, i1):
+                        fresh[i] = lrow[i] * rrow[wp - 1]
                 for i in range(ncol):
                     col[i] += fresh[i] - old[i]
                     old[i] = fresh[i]
@@ -543,19 +570,31 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
             bl = b_left[y, xa:xb]
             ar = a_right[y]
             br = b_right[y]
+            n_runs = _runs(cy, nx, run_at)
             for o in range(nc):
                 off = o - half
                 _box(colsum[o], box, t2, t4, t8, t16, nx, win)
                 crow = cost[o]
-                for i in range(nx):
-                    d = cy[i] + off
-                    xr = xa + i - d
-                    xq = min(max(xr, 0), width - 1)
+                for r in range(n_runs):     # x_right = xa + i - d, contiguous within a run
+                    i0 = run_at[r]
+                    i1 = run_at[r + 1]
+                    d = cy[i0] + off
+                    k0 = min(max(i0, d - xa), i1) if d >= 0 else i1
+                    for i in range(i0, k0):
+                        crow[i] = BIG           # x_right < 0 or d < 0: no candidate
+                    base = xa - d
+                    seg_ar = ar[base + k0:base + i1]
+                    seg_br = br[base + k0:base + i1]
+                    seg_box = box[k0:i1]
+                    seg_al = al[k0:i1]
+                    seg_bl = bl[k0:i1]
+                    seg_c = crow[k0:i1]
                     if zncc:
-                        c = ONE - (box[i] - al[i] * ar[xq]) * bl[i] * br[xq]
+                        for i in range(i1 - k0):
+                            seg_c[i] = ONE - (seg_box[i] - seg_al[i] * seg_ar[i]) * seg_bl[i] * seg_br[i]
                     else:
-                        c = (al[i] + ar[xq] - TWO * box[i]) * bl[i] * br[xq]
-                    crow[i] = c if (xr >= 0 and d >= 0) else BIG
+                        for i in range(i1 - k0):
+                            seg_c[i] = (seg_al[i] + seg_ar[i] - TWO * seg_box[i]) * seg_bl[i] * seg_br[i]
             # winner over the offsets and its neighbours (as in match_band)
             for i in range(nx):
                 bc[i] = BIG
