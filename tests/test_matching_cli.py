@@ -54,3 +54,16 @@ def test_disparity_command_bad_input_is_one_line(tmp_path, capsys):
                   str(tmp_path / "x.pfm")]) == 2
     assert "differ in size" in capsys.readouterr().err
     assert not (tmp_path / "x.pfm").exists()
+
+
+def test_disparity_command_no_fill_leaves_holes(tmp_path):
+    left, right = _pair(tmp_path)
+    img = cv2.imread(right, cv2.IMREAD_GRAYSCALE)
+    img[18:22, 40:46] = 128                     # a flat patch: no match there, a hole to fill
+    cv2.imwrite(right, img)
+    filled, holes = tmp_path / "f.pfm", tmp_path / "h.pfm"
+    assert entry(["disparity", left, right, "--max-disparity", "16", "-o", str(filled)]) == 0
+    assert entry(["disparity", left, right, "--max-disparity", "16", "--no-fill", "-o", str(holes)]) == 0
+    f, h = read_disparity(filled), read_disparity(holes)
+    assert np.isfinite(f).sum() > np.isfinite(h).sum()
+    np.testing.assert_array_equal(f[np.isfinite(h)], h[np.isfinite(h)])     # filling only adds pixels

@@ -43,11 +43,12 @@ def _bands(text: str) -> list[tuple[float, float]]:
 @click.option("--rectified", is_flag=True, help="With --calib: the images are already rectified.")
 @click.option("--preset", type=click.Choice(["robust", "mapping", "paper"]), default="robust", show_default=True)
 @click.option("--single-range", is_flag=True, help="One full-resolution search instead of three ranges.")
+@click.option("--no-fill", is_flag=True, help="Leave holes as holes: no gap filling (robust preset).")
 @click.option("--aoi", help="Area of interest row0:row1,col0:col1 (half-open).")
 @click.option("--explain", is_flag=True, help="Print the multi-range plan (levels, bands, work).")
 @click.option("--color", "color_path", type=click.Path(dir_okay=False), help="Colour preview PNG.")
 def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rectified, preset,
-              single_range, aoi, explain, color_path):
+              single_range, no_fill, aoi, explain, color_path):
     """Multi-range disparity of a stereo pair (paper section 3)."""
     from .. import io
     from ..matching import compute_disparity, preset_config
@@ -92,6 +93,8 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
     config = preset_config(preset)
     if single_range:
         config = config.replace(multi_range=False)
+    if no_fill:
+        config = config.replace(gap_fill_px=0)
     result = compute_disparity(left_img, right_img, max_disparity_px=max_disparity, disparity_bands_px=band_list,
                                calibration=stereo, depth_bands_m=depth_list, config=config, aoi=aoi_box)
     if explain:
