@@ -678,13 +678,96 @@ def decode_median(coded, disparity, scale, out):
             orow[x] = v if (c != 0) & np.isfinite(dr[x]) else nan
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _root(parent, i):
+    """Union-find root of ``i`` (path halving)."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
 @njit(nogil=True, cache=True)
-def mask_invalid(disparity, coded, invalid_code, out):
-    """``out = disparity`` with NaN where ``coded == invalid_code``."""
+def drop_speckles(disparity, scale, max_code, max_diff_code, max_size, code, labels, parent, size, out):
+    """``out = disparity`` with NaN on connected regions of at most ``max_size`` pixels.
+
+    Pixels are coded ``clip(rint(d * scale), 0, max_code)``; 4-neighbours connect when
+    both are valid and their codes differ by at most ``max_diff_code``: the regions of
+    ``cv2.filterSpeckles`` on that code, found by union-find over the horizontal runs of
+    connected pixels instead of a flood fill. Per row: codes and links (branch-free
+    passes), run labels (a running count), then the unions with the row above where a
+    vertical link joins two runs not yet seen joined. Scratch: ``code``, ``labels`` int32
+    (H, W); ``parent``, ``size`` int32 (H * W).
+    """
     height, width = disparity.shape
+    link = np.empty(width, np.bool_)          # link[x]: x - 1 and x connect
+    n_runs = 0
     for y in range(height):
+        dr = disparity[y]
+        cr = code[y]
+        lr = labels[y]
         for x in range(width):
-            out[y, x] = np.nan if coded[y, x] == invalid_code else disparity[y, x]
+            d = dr[x]
+            ok = np.isfinite(d)
+            v = np.rint((d if ok else np.float32(0.0)) * scale)
+            v = min(max(v, np.float32(0.0)), np.float32(max_code))
+            cr[x] = np.int32(v) if ok else np.int32(-1)
+        link[0] = False
+        for x in range(1, width):
+            c = cr[x]
+            p = cr[x - 1]
+            link[x] = (c >= 0) & (p >= 0) & (abs(c - p) <= max_diff_code)
+        count = 0                        # pixels of the current run (in a register)
+        for x in range(width):
+            valid = cr[x] >= 0
+            if valid and not link[x]:
+                if count:
+                    size[n_runs - 1] = count
+                parent[n_runs] = n_runs
+                n_runs += 1
+                count = 0
+            count += 1 if valid else 0
+            lr[x] = n_runs - 1 if valid else -1
+        if count:
+            size[n_runs - 1] = count
+        if y == 0:
+            continue
+        up_codes = code[y - 1]
+        up_labels = labels[y - 1]
+        for x in range(width):           # vertical links, in place of the row links
+            c = cr[x]
+            u = up_codes[x]
+            link[x] = (c >= 0) & (u >= 0) & (abs(c - u) <= max_diff_code)
+        prev_up, prev_here = -1, -1
+        for x in range(width):           # unite where a link joins two runs not yet seen joined
+            if not link[x]:
+                continue
+            up = up_labels[x]
+            run = lr[x]
+            if up == prev_up and run == prev_here:
+                continue
+            prev_up, prev_here = up, run
+            a = _root(parent, up)
+            b = _root(parent, run)
+            if a != b:                   # the older run's root stays the root
+                parent[max(a, b)] = min(a, b)
+    # a root is the smallest run of its region: sizes add up into it going up, and the
+    # flag "small" overwrites it last going down
+    for run in range(n_runs):
+        root = _root(parent, run)
+        parent[run] = root
+        if root != run:
+            size[root] += size[run]
+    for run in range(n_runs - 1, -1, -1):
+        size[run] = 1 if size[parent[run]] <= max_size else 0
+    nan = np.float32(np.nan)
+    for y in range(height):
+        dr = disparity[y]
+        lr = labels[y]
+        orow = out[y]
+        for x in range(width):
+            run = lr[x]
+            orow[x] = nan if run >= 0 and size[run] != 0 else dr[x]
 
 
 @njit(nogil=True, cache=True)
@@ -704,25 +787,42 @@ def unite(disparity, confidence, rule, index, out_d, out_c, out_source, poisoned
     """Eq. (12), one level at a time (finest first): rule 0 = the more confident value
     wins, 1 = the first (finer) value wins, 2 = as 1 but pixels where two levels differ
     by more than 1 px are marked in ``poisoned``. ``out_source`` gets ``index`` where
-    this level's value is taken."""
+    this level's value is taken. ``index == 0`` initializes the outputs (no prior value).
+    Branch-free per pixel (the loops vectorize)."""
     height, width = disparity.shape
+    nan = np.float32(np.nan)
     for y in range(height):
-        for x in range(width):
-            d = disparity[y, x]
-            if not np.isfinite(d):
-                continue
-            cur = out_d[y, x]
-            have = np.isfinite(cur)
-            if rule == 0:
-                take = (not have) or confidence[y, x] > out_c[y, x]
-            else:
-                take = not have
-                if rule == 2 and have and abs(d - cur) > 1.0:
-                    poisoned[y, x] = True
-            if take:
-                out_d[y, x] = d
-                out_c[y, x] = confidence[y, x]
-                out_source[y, x] = index
+        dr = disparity[y]
+        cr = confidence[y]
+        od = out_d[y]
+        oc = out_c[y]
+        os_ = out_source[y]
+        po = poisoned[y]
+        if index == 0:
+            for x in range(width):
+                valid = np.isfinite(dr[x])
+                od[x] = dr[x] if valid else nan
+                oc[x] = cr[x] if valid else np.float32(0.0)
+                os_[x] = np.int8(0) if valid else np.int8(-1)
+                po[x] = False
+        elif rule == 0:
+            for x in range(width):
+                take = np.isfinite(dr[x]) and not (np.isfinite(od[x]) and cr[x] <= oc[x])
+                od[x] = dr[x] if take else od[x]
+                oc[x] = cr[x] if take else oc[x]
+                os_[x] = np.int8(index) if take else os_[x]
+        else:
+            for x in range(width):
+                d = dr[x]
+                if not np.isfinite(d):
+                    continue
+                cur = od[x]
+                if np.isfinite(cur):
+                    po[x] = po[x] or (rule == 2 and abs(d - cur) > 1.0)
+                    continue
+                od[x] = d
+                oc[x] = cr[x]
+                os_[x] = index
 
 
 @njit(nogil=True, cache=True)

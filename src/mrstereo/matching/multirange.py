@@ -376,14 +376,9 @@ def _union(maps: list[np.ndarray], confs: list[np.ndarray], rule: str
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Eq. (12): unite gated level maps (finest first) under a precedence rule; also
     returns the index of the level each pixel's value came from (-1 none)."""
-    disparity = _kernels.recycled_empty(maps[0].shape, np.float32)
-    disparity.fill(np.nan)
-    confidence = _kernels.recycled_empty(maps[0].shape, np.float32)
-    confidence.fill(0.0)
+    disparity, confidence = (_kernels.recycled_empty(maps[0].shape, np.float32) for _ in range(2))
     source = _kernels.recycled_empty(maps[0].shape, np.int8)
-    source.fill(-1)
-    poisoned = _kernels.recycled_empty(maps[0].shape, bool)
-    poisoned.fill(False)
+    poisoned = _kernels.recycled_empty(maps[0].shape, bool)      # (the first level initializes all four)
     code = {"confidence": 0, "finer": 1, "reject": 2}[rule]
     for i, (d, c) in enumerate(zip(maps, confs)):
         _kernels.unite(d, c, code, i, disparity, confidence, source, poisoned)

@@ -71,20 +71,23 @@ def median_filter(disparity_px: np.ndarray, *, size: int) -> np.ndarray:
 
 
 def remove_speckles(disparity_px: np.ndarray, *, max_size_px: int, max_diff_px: float) -> np.ndarray:
-    """Invalidate connected regions (4-neighbours within ``max_diff_px``) of fewer than
-    ``max_size_px`` pixels, with ``cv2.filterSpeckles`` on a 1/16-pixel fixed-point copy."""
+    """Invalidate connected regions (4-neighbours within ``max_diff_px``) of at most
+    ``max_size_px`` pixels: exactly ``cv2.filterSpeckles`` on a 1/16-pixel fixed-point
+    copy, by union-find over row runs (about 3x faster than its flood fill)."""
     if max_size_px <= 0:
         return disparity_px
     disparity_px = np.ascontiguousarray(disparity_px, dtype=np.float32)
-    fixed = _kernels.recycled_empty(disparity_px.shape, np.int16)
-    _kernels.encode_fixed(disparity_px, 16.0, 0, 0, 2047 * 16, -16, fixed)
-    # OpenCV's work buffer, recycled instead of allocated per call (9 bytes per pixel, 13 with
-    # IPP; OpenCV reallocates it when it is too small)
-    buf = _kernels.recycled_empty((1, 16 * fixed.size + 2 ** 16), np.uint8)
-    cv2.filterSpeckles(fixed, -16, int(max_size_px), int(round(max_diff_px * 16)), buf)
-    out = _kernels.recycled_empty(disparity_px.shape, np.float32)
-    _kernels.mask_invalid(disparity_px, fixed, -16, out)
+    h, w = disparity_px.shape
+    out = _kernels.recycled_empty((h, w), np.float32)
+    _kernels.drop_speckles(disparity_px, np.float32(_SPECKLE_SCALE), 2047 * _SPECKLE_SCALE,
+                           int(round(max_diff_px * _SPECKLE_SCALE)), int(max_size_px),
+                           _kernels.recycled_empty((h, w), np.int32), _kernels.recycled_empty((h, w), np.int32),
+                           _kernels.recycled_empty((h * w,), np.int32), _kernels.recycled_empty((h * w,), np.int32),
+                           out)
     return out
+
+
+_SPECKLE_SCALE = 16           # the speckle filter's fixed point: 1/16 px, as StereoBM's output
 
 
 def confidence_from_costs(best_cost: np.ndarray, second_cost: np.ndarray) -> np.ndarray:
