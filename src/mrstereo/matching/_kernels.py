@@ -475,7 +475,7 @@ def fill_center(disparity_px, radius, out_center_pad):
 
 @njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
 def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, center_pad, want, half,
-                  zncc, row0, row1, n_strips, out_disp, out_cost):
+                  zncc, max_cost, row0, row1, n_strips, out_disp, out_cost):
     """Full-resolution re-scoring of a coarse disparity field over ``c + o``, ``|o| <= half``.
 
     Parameters
@@ -488,9 +488,11 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
         Coarse integer disparity ``c`` of every padded pixel (see :func:`fill_center`).
     want : ndarray bool (H, W)
         Pixels to refine; the others are left untouched.
+    max_cost : float
+        Winners costing more are rejected (< 0: off).
     out_disp : ndarray float32 (H, W)
         ``c + o* +`` parabola offset; NaN where ``o*`` is on the edge of ``[-half, half]``
-        (the true minimum may lie outside).
+        (the true minimum may lie outside) or its cost is above ``max_cost``.
     out_cost : ndarray float32 (H, W)
         Cost of the winner (inf where NaN).
 
@@ -502,6 +504,7 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
     nc = 2 * half + 1
     win = 2 * radius + 1
     n_rows = row1 - row0
+    max_c = np.float32(max_cost)
     for s in prange(n_strips):
         y_start = row0 + (s * n_rows) // n_strips
         y_end = row0 + ((s + 1) * n_rows) // n_strips
@@ -610,7 +613,7 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
                 kb = bk[i]
                 cb = bc[i]
                 sub = _parabola(cb, cm_[i], cp_[i])
-                inside = (kb > 0) and (kb < nc - 1) and (cb < BIG)
+                inside = (kb > 0) and (kb < nc - 1) and (cb < BIG) and (max_cost < 0 or cb <= max_c)
                 value = np.float32(cy[i] + kb - half) + sub
                 od[i] = (value if inside else np.float32(np.nan)) if wy[i] else od[i]
                 oc[i] = (cb if inside else np.float32(np.inf)) if wy[i] else oc[i]
@@ -654,12 +657,13 @@ def encode_fixed(disparity, scale, offset, lo_code, hi_code, invalid_code, out):
     """``round(d * scale) + offset`` clipped to ``[lo_code, hi_code]``, ``invalid_code`` where NaN."""
     height, width = disparity.shape
     for y in range(height):
-        for x in range(width):
-            d = disparity[y, x]
-            if np.isfinite(d):
-                out[y, x] = min(max(np.int64(np.rint(d * scale)) + offset, lo_code), hi_code)
-            else:
-                out[y, x] = invalid_code
+        dr = disparity[y]
+        orow = out[y]
+        for x in range(width):            # branch-free (vectorizes)
+            d = dr[x]
+            ok = np.isfinite(d)
+            v = min(max(np.rint((d if ok else 0.0) * scale) + offset, lo_code), hi_code)
+            orow[x] = v if ok else invalid_code
 
 
 @njit(nogil=True, cache=True)

@@ -260,7 +260,7 @@ def match_band(left: np.ndarray, right: np.ndarray, *, d_lo: int, d_hi: int, win
 
 
 def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.ndarray, want: np.ndarray, *, half_px: int,
-                      rows: tuple[int, int] | None = None, n_strips: int | None = None
+                      max_cost: float | None = None, rows: tuple[int, int] | None = None, n_strips: int | None = None
                       ) -> tuple[np.ndarray, np.ndarray]:
     """Re-score a coarse disparity field at full resolution (beyond the paper).
 
@@ -282,6 +282,8 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
         Pixels to refine.
     half_px : int
         Offsets searched on each side.
+    max_cost : float, optional
+        Winners costing more become invalid.
 
     Returns
     -------
@@ -302,5 +304,6 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
         rows = (rows[0] + int(hit[0]), rows[0] + int(hit[-1]) + 1)
         _kernels.refine_warped(left.padded, right.padded, left.a, left.b, right.a, right.b, r, center_pad,
                                np.ascontiguousarray(want), int(half_px), left.zncc,
+                               -1.0 if max_cost is None else float(max_cost),
                                rows[0], rows[1], _strips(n_strips, rows[1] - rows[0]), out, cost)
     return out, cost

@@ -143,7 +143,8 @@ def _solve_prepared(pair, left: np.ndarray, level: RangeLevel, rows: tuple[int, 
     if config.texture_threshold > 0:
         disparity[~textured(left, window_px=config.window_px, threshold=config.texture_threshold)] = np.nan
     if config.median_size:
-        disparity = median_filter(disparity, size=config.median_size)
+        disparity = median_filter(disparity, size=config.median_size,
+                                  max_px=level.search_px[1] + 0.5)      # (+ the parabola offset)
         _kernels.zero_where_invalid(disparity, confidence)
     return LevelOutput(disparity_px=disparity, confidence=confidence)
 
@@ -240,10 +241,9 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
 
     def refine(level, coarse_px, want):
         """Full-resolution re-scoring of a coarse level (beyond the paper)."""
-        refined, cost = refine_candidates(*pair_at(width), coarse_px, want, rows=plan.aoi[:2],
-                                          half_px=int(math.ceil(level.scale / 2)) + config.refine_margin_px)
-        if config.max_cost is not None:
-            refined[cost > config.max_cost] = np.nan
+        refined, _ = refine_candidates(*pair_at(width), coarse_px, want, rows=plan.aoi[:2],
+                                       half_px=int(math.ceil(level.scale / 2)) + config.refine_margin_px,
+                                       max_cost=config.max_cost)
         return refined
 
     disparity, confidence, levels = run_levels(left_gray, right_gray, plan, solve,

@@ -47,17 +47,20 @@ def textured(gray: np.ndarray, *, window_px: int, threshold: float) -> np.ndarra
 _MEDIAN_SCALE = 64.0          # median in 1/64 px fixed point (uint16: up to 1023 px)
 
 
-def median_filter(disparity_px: np.ndarray, *, size: int) -> np.ndarray:
+def median_filter(disparity_px: np.ndarray, *, size: int, max_px: float | None = None) -> np.ndarray:
     """Median filter of section 3.4 over valid and invalid pixels (invalid counts as -1).
 
     A valid pixel becomes invalid when most of its neighbours are; an invalid pixel
     stays invalid (the filter removes outliers, it does not invent values). Runs
-    ``cv2.medianBlur`` on a 1/64-pixel uint16 code (float32 above 1023 px).
+    ``cv2.medianBlur`` on a 1/64-pixel uint16 code (float32 above 1023 px). ``max_px``:
+    a bound on the disparities when the caller knows one (saves a pass over the map).
     """
     if size == 0:
         return disparity_px
     disparity_px = np.ascontiguousarray(disparity_px, dtype=np.float32)
-    if np.nanmax(disparity_px, initial=0.0) >= 65534 / _MEDIAN_SCALE:
+    if max_px is None:
+        max_px = np.nanmax(disparity_px, initial=0.0)
+    if max_px >= 65534 / _MEDIAN_SCALE:
         valid = np.isfinite(disparity_px)
         out = cv2.medianBlur(np.where(valid, disparity_px, -1.0).astype(np.float32), size)
         out[(out < 0) | ~valid] = np.nan
