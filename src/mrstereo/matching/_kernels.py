@@ -422,7 +422,7 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
                     for i in range(nx):
                         d = d_lo + bk[i]
                         back = right_d[min(max(col0 + i - d, 0), width - 1)]
-                        lr_ok[i] = back >= 0 and abs(d - back) <= lr_int
+                        lr_ok[i] = (back >= 0) & (abs(d - back) <= lr_int)
                 else:
                     for i in range(nx):
                         lr_ok[i] = True
