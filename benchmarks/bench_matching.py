@@ -15,8 +15,14 @@ robust single range with the same work as the multi-range plan; then the robust 
 the built-in corridor (plain walls and floor; 8 frames, 320x240, search from the calibration):
 bad-2 among estimated pixels and density.
 
+Near-limit sweep (``--near-sweep``): the same rig and pair, the default far bands
+(1-2.5 m at decimation 2, 2.5-15 m at full resolution) and a near band from 0.5, 0.3, 0.2
+or 0.15 m to 1 m at decimation 4, against the same matcher on one full-resolution range
+over the same depths: where the paper's multi-range pays, and the work ratio's bound.
+
     python benchmarks/bench_matching.py [--repeats 15]
     python benchmarks/bench_matching.py --accuracy [--scale 0.5]
+    python benchmarks/bench_matching.py --near-sweep [--repeats 15]
 """
 from __future__ import annotations
 
@@ -30,7 +36,7 @@ import numba
 import numpy as np
 
 from mrstereo.camera import Camera, StereoCamera
-from mrstereo.matching import compute_disparity, preset_config
+from mrstereo.matching import compute_disparity, make_plan, preset_config
 
 DATA_ROOT = Path(__file__).resolve().parents[2] / "shared" / "data"
 DATA = DATA_ROOT / "middlebury2003" / "teddy"
@@ -103,6 +109,28 @@ def speed(repeats: int) -> None:
         print(f"minor page faults per robust frame: {faults:.0f} (StereoBM: "
               f"{page_faults_per_call(lambda: bm.compute(left, right)):.0f})")
     print(f"load average after: {os.getloadavg()}")
+
+
+def near_sweep(repeats: int) -> None:
+    left, right, what = load_pair()
+    rig = StereoCamera.ideal(Camera(fx=451.0, fy=451.0, cx=320.0, cy=240.0, width=640, height=480), 0.075)
+    numba.set_num_threads(1)
+    cv2.setNumThreads(1)
+    print(f"pair: {what}; single thread; multi-range bands (near-1, 1-2.5, 2.5-15 m) vs one range near-15 m\n")
+    print("| near limit | max disparity | work ratio | bound 1/work | preset | multi-range | single range | faster |")
+    print("|---|---|---|---|---|---|---|---|")
+    for near in (0.5, 0.3, 0.2, 0.15):
+        edges = (near, 1.0, 2.5, 15.0)
+        plan = make_plan((640, 480), calibration=rig, depth_bands_m=edges, config=preset_config("robust"))
+        work = plan.work / plan.single_range_work
+        for name in ("robust", "paper"):
+            config = preset_config(name)
+            multi_ms, single_ms, ratio = paired(
+                lambda: compute_disparity(left, right, calibration=rig, depth_bands_m=edges, config=config),
+                lambda: compute_disparity(left, right, calibration=rig, depth_bands_m=(near, 15.0),
+                                          config=config.replace(multi_range=False)), repeats)
+            print(f"| {near:g} m | {plan.levels[-1].band_px[1]:.0f} px | {work:.2f} | {1 / work:.1f}x | {name} | "
+                  f"{multi_ms:.1f} ms | {single_ms:.1f} ms | {1 / ratio:.2f}x |", flush=True)
 
 
 def page_faults_per_call(fn, calls: int = 10) -> float | None:
@@ -215,9 +243,13 @@ def main() -> None:
     parser.add_argument("--accuracy", action="store_true", help="bad-2 table on the shared scenes")
     parser.add_argument("--scale", type=float, default=1.0,
                         help="with --accuracy: resize the scenes (e.g. 0.5: other search ranges)")
+    parser.add_argument("--near-sweep", action="store_true",
+                        help="multi-range vs one range as the near limit shrinks")
     args = parser.parse_args()
     if args.accuracy:
         accuracy(args.scale)
+    elif args.near_sweep:
+        near_sweep(args.repeats)
     else:
         speed(args.repeats)
 
