@@ -698,24 +698,18 @@ def drop_speckles(disparity, scale, max_code, max_diff_code, max_size, code, lab
     Pixels are coded ``clip(rint(d * scale), 0, max_code)``; 4-neighbours connect when
     both are valid and their codes differ by at most ``max_diff_code``: the regions of
     ``cv2.filterSpeckles`` on that code, found by union-find over the horizontal runs of
-    connected pixels instead of a flood fill. Per row: codes and links (branch-free
-    passes), run labels (a running count), then the unions with the row above where a
+    connected pixels instead of a flood fill. Per row: links (a branch-free pass), run
+    labels (a running count), then the unions with the row above where a
     vertical link joins two runs not yet seen joined. Scratch: ``code``, ``labels`` int32
     (H, W); ``parent``, ``size`` int32 (H * W).
     """
     height, width = disparity.shape
+    encode_fixed(disparity, scale, 0, 0, max_code, -1, code)
     link = np.empty(width, np.bool_)          # link[x]: x - 1 and x connect
     n_runs = 0
     for y in range(height):
-        dr = disparity[y]
         cr = code[y]
         lr = labels[y]
-        for x in range(width):
-            d = dr[x]
-            ok = np.isfinite(d)
-            v = np.rint((d if ok else np.float32(0.0)) * scale)
-            v = min(max(v, np.float32(0.0)), np.float32(max_code))
-            cr[x] = np.int32(v) if ok else np.int32(-1)
         link[0] = False
         for x in range(1, width):
             c = cr[x]
