@@ -42,6 +42,8 @@ def test_speckles_known_answer():
     np.testing.assert_array_equal(remove_speckles(ramp, max_size_px=50, max_diff_px=1.0), ramp)
     assert np.isnan(remove_speckles(ramp, max_size_px=90, max_diff_px=1.0)).all()
     assert remove_speckles(d, max_size_px=0, max_diff_px=1.0) is d
+    with pytest.raises(ValueError, match="disparity_px"):
+        remove_speckles(d[0], max_size_px=10, max_diff_px=1.0)
 
 
 

@@ -80,6 +80,8 @@ def remove_speckles(disparity_px: np.ndarray, *, max_size_px: int, max_diff_px: 
     if max_size_px <= 0:
         return disparity_px
     disparity_px = np.ascontiguousarray(disparity_px, dtype=np.float32)
+    if disparity_px.ndim != 2:
+        raise ValueError(f"disparity_px must be a 2-D map (H, W), got shape {disparity_px.shape}")
     h, w = disparity_px.shape
     out = _kernels.recycled_empty((h, w), np.float32)
     _kernels.drop_speckles(disparity_px, np.float32(_SPECKLE_SCALE), 2047 * _SPECKLE_SCALE,
