@@ -219,7 +219,8 @@ def corridor(configs: dict) -> None:
     import tempfile
 
     from mrstereo.io import read_disparity, read_image
-    from mrstereo.world.dataset import read_manifest, write_synthetic_dataset
+    from mrstereo.recording import read_manifest
+    from mrstereo.world.dataset import write_synthetic_dataset
 
     with tempfile.TemporaryDirectory() as tmp:
         manifest = read_manifest(write_synthetic_dataset(Path(tmp) / "corridor", seed=0, n_frames=8, progress=False))

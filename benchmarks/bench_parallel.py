@@ -48,7 +48,7 @@ def _observe_range(data: Path, start: int, stop: int) -> None:
 
     from mrstereo.parallel import keep_freed_memory
     from mrstereo.pipeline import observe_frame
-    from mrstereo.world.dataset import read_manifest
+    from mrstereo.recording import read_manifest
 
     import cv2
     from threadpoolctl import threadpool_limits
@@ -81,7 +81,8 @@ def main(argv=None) -> int:
         return 0
     from mrstereo.parallel import keep_freed_memory
     from mrstereo.pipeline import build_map
-    from mrstereo.world.dataset import read_manifest, write_synthetic_dataset
+    from mrstereo.recording import read_manifest
+    from mrstereo.world.dataset import write_synthetic_dataset
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=100)

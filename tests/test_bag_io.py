@@ -14,7 +14,8 @@ from mrstereo.bag import (TfTree, TransformTrack, bag_topics, camera_info_from_m
 from mrstereo.cli import entry
 from mrstereo.io import read_image
 from mrstereo.pipeline import build_map
-from mrstereo.world.dataset import read_manifest, write_manifest, write_synthetic_dataset
+from mrstereo.recording import read_manifest, write_manifest
+from mrstereo.world.dataset import write_synthetic_dataset
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 T0_NS = 1_700_000_000_000_000_000

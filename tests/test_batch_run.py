@@ -13,7 +13,8 @@ from mrstereo.geometry import read_ply, read_scan_json
 from mrstereo.geometry.pair import scan_from_pair
 from mrstereo.io import read_disparity, read_image
 from mrstereo.pipeline import PipelineConfig, build_map
-from mrstereo.world.dataset import read_manifest, write_synthetic_dataset
+from mrstereo.recording import read_manifest
+from mrstereo.world.dataset import write_synthetic_dataset
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,8 @@ import pytest
 
 from mrstereo.parallel import ItemError, ItemFailure, map_ordered
 from mrstereo.pipeline import build_map
-from mrstereo.world.dataset import read_manifest, write_synthetic_dataset
+from mrstereo.recording import read_manifest
+from mrstereo.world.dataset import write_synthetic_dataset
 
 import distributed  # noqa: E402
 

@@ -11,7 +11,8 @@ import yaml
 from mrstereo.io import read_image, read_pfm
 from mrstereo.mapping.rosmap import read_ros_map
 from mrstereo.world import default_scene, default_stereo, render_stereo_frame
-from mrstereo.world.dataset import corridor_path, read_manifest, write_synthetic_dataset
+from mrstereo.recording import read_manifest
+from mrstereo.world.dataset import corridor_path, write_synthetic_dataset
 
 
 @pytest.fixture(scope="module")

@@ -394,7 +394,7 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
     """
     from tqdm.auto import tqdm
 
-    from .world.dataset import MANIFEST_NAME, write_manifest
+    from .recording import MANIFEST_NAME, write_manifest
 
     out_dir = Path(out_dir)
     tolerance = _checks.finite_number("sync_tolerance_s", sync_tolerance_s, nonnegative=True)
@@ -592,7 +592,7 @@ def estimate_rig(dataset_dir: str | os.PathLike, stereo: StereoCamera, *, n_fram
 
 @contextlib.contextmanager
 def exported_bag(bag: str | os.PathLike, **options) -> Iterator:
-    """Export a bag to a temporary dataset and yield its :class:`~mrstereo.world.dataset.Manifest`.
+    """Export a bag to a temporary dataset and yield its :class:`~mrstereo.recording.Manifest`.
 
     Options are those of :func:`export_bag`. The directory is removed at the
     end of the block, e.g.::
@@ -600,7 +600,7 @@ def exported_bag(bag: str | os.PathLike, **options) -> Iterator:
         with exported_bag("run.bag", left_topic=..., right_topic=..., odom_topic="/odom") as manifest:
             run = build_map(manifest, workers=2)
     """
-    from .world.dataset import read_manifest
+    from .recording import read_manifest
 
     with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
         export_bag(bag, Path(tmp) / "dataset", **options)

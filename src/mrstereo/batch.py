@@ -41,7 +41,7 @@ from .io import atomic_write, write_disparity
 from .parallel import ItemFailure, map_ordered
 from .pipeline import (FrameObservation, MapRun, PipelineConfig, frame_pair, fuse, observation_from_pair,
                        pair_options, write_map_outputs)
-from .world.dataset import FrameRecord, Manifest, read_manifest
+from .recording import FrameRecord, Manifest, read_manifest
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
            "SUMMARY_NAME"]

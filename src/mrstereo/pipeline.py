@@ -34,7 +34,7 @@ from .mapping.metrics import MapMetrics, map_metrics
 from .mapping.occupancy import MappingConfig, OccupancyGrid, ViewCells, view_cells
 from .matching.config import MatchingConfig
 from .rejection import RejectionConfig
-from .world.dataset import FrameRecord, Manifest, read_manifest
+from .recording import FrameRecord, Manifest, read_manifest
 
 __all__ = ["PipelineConfig", "FrameObservation", "MapRun", "observe_frame", "fuse", "build_map",
            "write_map_outputs"]

@@ -52,7 +52,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     from ..camera import read_stereo
     from ..mapping import GridSpec
     from ..pipeline import PipelineConfig, build_map, write_map_outputs
-    from ..world.dataset import read_manifest
+    from ..recording import read_manifest
 
     check_workers(workers, scheduler, processes)
     if (manifest is None) == (bag is None):

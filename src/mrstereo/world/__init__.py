@@ -6,8 +6,8 @@ stereo head on a robot, with exact calibration, disparity, depth, labels and
 map. User guide: docs/world.md; dataset layout: docs/dataset.md; conventions:
 docs/conventions.md.
 """
-from .dataset import (FrameRecord, Manifest, corridor_path, read_manifest, write_manifest,
-                      write_synthetic_dataset)
+from ..recording import FrameRecord, Manifest, read_manifest, write_manifest
+from .dataset import corridor_path, write_synthetic_dataset
 from .groundtruth import ground_truth_map, occupied_footprint
 from .render import StereoFrame, camera_poses, default_stereo, render_stereo_frame, render_view
 from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_NAMES, LABEL_NONE, LABEL_OBSTACLE,

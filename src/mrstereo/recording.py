@@ -1,0 +1,186 @@
+"""Recordings on disk: the dataset manifest shared by bags, synthetic worlds and the pipeline.
+
+Layout (docs/dataset.md)::
+
+    DIR/manifest.yaml        calibration, rig, ground_truth_map, frames
+    DIR/calibration.yaml     stereo calibration (mrstereo.camera.write_stereo)
+    DIR/gt_map.yaml, .pgm    ROS map_server ground-truth map (optional)
+    DIR/left/000000.png ...  raw images; left_rect/, right_rect/ rectified;
+    DIR/gt_disparity/*.pfm   ground-truth disparity (optional); gt_labels/*.png
+
+Paths in the manifest are relative to DIR. ``mrstereo bag export`` and the
+synthetic world (:mod:`mrstereo.world.dataset`) write it; ``map``, ``batch``
+and the pipeline read it. A frame may give only raw or only rectified images,
+and every ground-truth entry is optional. Conventions: docs/conventions.md.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from .camera import RigMount, StereoCamera, read_stereo
+
+__all__ = ["FrameRecord", "Manifest", "read_manifest", "write_manifest", "MANIFEST_NAME",
+           "IMAGE_KEYS", "GT_KEYS"]
+
+MANIFEST_NAME = "manifest.yaml"
+IMAGE_KEYS = ("left", "right", "left_rect", "right_rect")
+GT_KEYS = ("gt_disparity", "gt_labels")
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """One frame of a dataset: absolute image paths (None when absent), pose and head pan."""
+
+    pose: tuple[float, float, float]
+    pan_rad: float = 0.0
+    left: Path | None = None
+    right: Path | None = None
+    left_rect: Path | None = None
+    right_rect: Path | None = None
+    gt_disparity: Path | None = None
+    gt_labels: Path | None = None
+
+    @property
+    def has_raw(self) -> bool:
+        return self.left is not None and self.right is not None
+
+    @property
+    def has_rectified(self) -> bool:
+        return self.left_rect is not None and self.right_rect is not None
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """A dataset read from ``manifest.yaml``.
+
+    Attributes
+    ----------
+    root : Path
+        The dataset directory (paths in the file are relative to it).
+    calibration : StereoCamera
+        Stereo calibration read from ``calibration_path``.
+    calibration_path : Path
+    rig : RigMount
+        Camera mount (the manifest's ``rig:``, else the calibration's).
+    ground_truth_map : Path or None
+        ROS map YAML of the true map.
+    frames : tuple of FrameRecord
+    """
+
+    root: Path
+    calibration: StereoCamera
+    calibration_path: Path
+    rig: RigMount
+    ground_truth_map: Path | None
+    frames: tuple[FrameRecord, ...]
+
+
+def _fail(path: Path, message: str) -> ValueError:
+    return ValueError(f"manifest {path}: {message}")
+
+
+def _existing_file(root: Path, rel, what: str, manifest: Path) -> Path:
+    if not isinstance(rel, str) or not rel:
+        raise _fail(manifest, f"{what} must be a file path, got {rel!r}")
+    path = (root / rel).resolve()
+    if not path.is_file():
+        raise FileNotFoundError(f"manifest {manifest}: {what} not found: {path}")
+    return path
+
+
+def read_manifest(path_or_dir: str | os.PathLike) -> Manifest:
+    """Read and validate a dataset manifest (a directory or its ``manifest.yaml``).
+
+    Raises
+    ------
+    FileNotFoundError
+        The manifest, the calibration or a referenced image is missing.
+    ValueError
+        Corrupt YAML, no frames, a frame without a raw or rectified image pair,
+        a bad pose or pan, or a bad rig -- naming the frame and field.
+    """
+    path = Path(path_or_dir)
+    if path.is_dir():
+        path = path / MANIFEST_NAME
+    if not path.is_file():
+        raise FileNotFoundError(f"dataset manifest not found: {path}")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1})" if mark is not None else ""
+        raise ValueError(f"manifest {path} is not valid YAML{where}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"manifest {path} is not a text file") from None
+    if not isinstance(data, dict):
+        raise _fail(path, "expected a mapping with 'calibration' and 'frames'")
+    root = path.parent.resolve()
+    if "calibration" not in data:
+        raise _fail(path, "missing 'calibration: <stereo YAML path>'")
+    calib_path = _existing_file(root, data["calibration"], "calibration", path)
+    calibration = read_stereo(calib_path)
+    rig = calibration.rig
+    if data.get("rig") is not None:
+        r = data["rig"]
+        if not isinstance(r, dict) or "height_m" not in r:
+            raise _fail(path, "'rig' needs height_m (and optional tilt_rad)")
+        try:
+            rig = RigMount(height_m=r["height_m"], tilt_rad=r.get("tilt_rad", 0.0))
+        except (TypeError, ValueError) as exc:
+            raise _fail(path, f"rig: {exc}") from None
+    if rig is None:
+        raise _fail(path, "no rig mount: give 'rig: {height_m, tilt_rad}' in the manifest or the calibration")
+    gt_map = None
+    if data.get("ground_truth_map") is not None:
+        gt_map = _existing_file(root, data["ground_truth_map"], "ground_truth_map", path)
+    frames_data = data.get("frames")
+    if not isinstance(frames_data, list) or not frames_data:
+        raise _fail(path, "'frames' must be a non-empty list")
+    frames = tuple(_frame(root, path, k, item) for k, item in enumerate(frames_data))
+    return Manifest(root=root, calibration=calibration, calibration_path=calib_path, rig=rig,
+                    ground_truth_map=gt_map, frames=frames)
+
+
+def _frame(root: Path, manifest: Path, k: int, item) -> FrameRecord:
+    where = f"frame {k}"
+    if not isinstance(item, dict):
+        raise _fail(manifest, f"{where} must be a mapping")
+    unknown = set(item) - set(IMAGE_KEYS) - set(GT_KEYS) - {"pose", "pan_rad"}
+    if unknown:
+        raise _fail(manifest, f"{where}: unknown field(s) {sorted(unknown)}")
+    pose = item.get("pose")
+    if (not isinstance(pose, (list, tuple)) or len(pose) != 3
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in pose)
+            or not all(math.isfinite(v) for v in pose)):
+        raise _fail(manifest, f"{where}: pose must be [x_m, y_m, yaw_rad] (3 finite numbers), got {pose!r}")
+    pan = item.get("pan_rad", 0.0)
+    if isinstance(pan, bool) or not isinstance(pan, (int, float)) or not math.isfinite(pan):
+        raise _fail(manifest, f"{where}: pan_rad must be a finite number, got {pan!r}")
+    files = {key: _existing_file(root, item[key], f"{where}: {key}", manifest)
+             for key in (*IMAGE_KEYS, *GT_KEYS) if item.get(key) is not None}
+    record = FrameRecord(pose=tuple(float(v) for v in pose), pan_rad=float(pan), **files)
+    for a, b in (("left", "right"), ("left_rect", "right_rect")):
+        if (a in files) != (b in files):
+            raise _fail(manifest, f"{where}: '{a}' and '{b}' must be given together")
+    if not (record.has_raw or record.has_rectified):
+        raise _fail(manifest, f"{where}: needs a raw pair (left, right) or a rectified pair "
+                              "(left_rect, right_rect)")
+    return record
+
+
+def write_manifest(path: str | os.PathLike, *, calibration: str, rig: RigMount, frames: list[dict],
+                   ground_truth_map: str | None = None, extra: dict | None = None) -> None:
+    """Write ``manifest.yaml``; ``frames`` are dicts of relative paths, ``pose``, ``pan_rad``."""
+    data = {"calibration": calibration,
+            "rig": {"height_m": float(rig.height_m), "tilt_rad": float(rig.tilt_rad)}}
+    if ground_truth_map is not None:
+        data["ground_truth_map"] = ground_truth_map
+    if extra:
+        data.update(extra)
+    data["frames"] = frames
+    Path(path).write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
