@@ -17,15 +17,14 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
 
+from mrstereo import data as sample_data
 from mrstereo.calibration import (CalibrationView, calibrate_camera, calibrate_stereo, chessboard_pairs,
                                   detect_chessboard, expand_glob, planar_grid)
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "opencv_calib" / "stereo_chessboard_9x6"
 FLAGS = cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
 
 
@@ -182,8 +181,10 @@ def rendered_images(n_views):
 
 
 def real_data(repeats):
-    if not DATA.is_dir():
-        print(f"\n[4] skipped: {DATA} not found")
+    try:
+        DATA = sample_data.fetch("opencv-stereo-chessboard")   # $MRSTEREO_DATA or the download cache
+    except (OSError, ValueError) as exc:
+        print(f"\n[4] skipped: OpenCV's stereo chessboards not available ({exc})")
         return
     pairs = chessboard_pairs(expand_glob(str(DATA / "left*.jpg")), expand_glob(str(DATA / "right*.jpg")),
                              (9, 6), 0.025)

@@ -8,7 +8,7 @@ per-pair ratios mrstereo / StereoBM (robust to the load of a shared machine), wi
 threads (numba.set_num_threads, cv2.setNumThreads), and the minor page faults per frame.
 
 Accuracy (``--accuracy``): bad-2 (%) dense (missing counts as bad) / among estimated pixels
-on the shared Middlebury/KITTI scenes for StereoBM, StereoSGBM (mrstereo.evaluation
+on the public Middlebury/KITTI sample scenes (mrstereo.data) for StereoBM, StereoSGBM (mrstereo.evaluation
 baselines), mrstereo robust (default), mapping, paper, robust without gap filling and with
 gap filling from the ends alone (ELAS-like), robust single range over the whole search, and
 robust single range with the same work as the multi-range plan; then the robust variants on
@@ -35,19 +35,23 @@ import cv2
 import numba
 import numpy as np
 
+from mrstereo import data as sample_data
 from mrstereo.camera import Camera, StereoCamera
 from mrstereo.matching import compute_disparity, make_plan, preset_config
 
-DATA_ROOT = Path(__file__).resolve().parents[2] / "shared" / "data"
-DATA = DATA_ROOT / "middlebury2003" / "teddy"
-SCENES = ["middlebury2001/tsukuba", "middlebury2001/venus", "middlebury2003/teddy", "middlebury2003/cones",
-          "kitti2012/000070", "kitti2015/000000"]
+# the public sample scenes (mrstereo.data: $MRSTEREO_DATA or `mrstereo data fetch`)
+SCENES = ["tsukuba", "venus", "teddy", "cones", "kitti2012-000070", "kitti2015-000000"]
 
 
 def load_pair() -> tuple[np.ndarray, np.ndarray, str]:
-    if (DATA / "im2.ppm").is_file():
-        left = cv2.imread(str(DATA / "im2.ppm"), cv2.IMREAD_GRAYSCALE)
-        right = cv2.imread(str(DATA / "im6.ppm"), cv2.IMREAD_GRAYSCALE)
+    try:
+        teddy = sample_data.fetch("teddy")
+    except (OSError, ValueError) as exc:
+        print(f"Teddy not available ({exc}); timing a synthetic texture instead")
+        teddy = None
+    if teddy is not None:
+        left = cv2.imread(str(teddy / "im2.ppm"), cv2.IMREAD_GRAYSCALE)
+        right = cv2.imread(str(teddy / "im6.ppm"), cv2.IMREAD_GRAYSCALE)
         return (cv2.resize(left, (640, 480), interpolation=cv2.INTER_LINEAR),
                 cv2.resize(right, (640, 480), interpolation=cv2.INTER_LINEAR), "Teddy scaled to 640x480")
     rng = np.random.default_rng(0)
@@ -194,7 +198,7 @@ def accuracy(scale: float = 1.0) -> None:
         "robust, single range": mr(robust.replace(multi_range=False)),
         "robust, single range, equal work": equal_work,
     }
-    scenes = [load_scene(DATA_ROOT / name) for name in SCENES if (DATA_ROOT / name).is_dir()]
+    scenes = [load_scene(sample_data.fetch(name)) for name in SCENES]
     if scale != 1.0:
         scenes = [rescaled(s, scale) for s in scenes]
     print(f"bad-2 % dense / among estimated; mean over the first five scenes (KITTI 2015 reported beside); "
@@ -241,7 +245,7 @@ def corridor(configs: dict) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=15)
-    parser.add_argument("--accuracy", action="store_true", help="bad-2 table on the shared scenes")
+    parser.add_argument("--accuracy", action="store_true", help="bad-2 table on the sample scenes")
     parser.add_argument("--scale", type=float, default=1.0,
                         help="with --accuracy: resize the scenes (e.g. 0.5: other search ranges)")
     parser.add_argument("--near-sweep", action="store_true",

@@ -1,5 +1,4 @@
 """CLI: calibrate, stereo-calibrate, rectify; clear one-line errors."""
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -9,8 +8,10 @@ from mrstereo.calibration import planar_grid, pose_looking_at, synthetic_view
 from mrstereo.cli import entry
 from mrstereo.io import read_image
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "opencv_calib" / "stereo_chessboard_9x6"
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real calibration data not found at {DATA}")
+from mrstereo.data import local_path
+
+DATA = local_path("opencv-stereo-chessboard")
+needs_data = pytest.mark.sample_data("opencv-stereo-chessboard")
 
 
 def test_calibrate_from_points_csv(tmp_path, capsys):

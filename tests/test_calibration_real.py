@@ -1,5 +1,4 @@
 """OpenCV's stereo chessboard set: compare with cv2.calibrateCamera / stereoCalibrate on the same corners."""
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -7,8 +6,10 @@ import pytest
 
 from mrstereo.calibration import calibrate_camera, calibrate_stereo, chessboard_pairs, expand_glob
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "opencv_calib" / "stereo_chessboard_9x6"
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"real calibration data not found at {DATA}")
+from mrstereo.data import local_path
+
+DATA = local_path("opencv-stereo-chessboard")
+pytestmark = pytest.mark.sample_data("opencv-stereo-chessboard")
 FLAGS = cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
 
 

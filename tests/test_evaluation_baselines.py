@@ -1,5 +1,4 @@
 """OpenCV baselines: accuracy on Tsukuba, scaling of OpenCV's int16 output, known synthetic shift."""
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -7,16 +6,16 @@ import pytest
 
 from mrstereo.evaluation.baselines import (
     BMSettings, disparity_from_opencv, num_disparities, stereo_bm, stereo_sgbm)
+from mrstereo.data import local_path
 from mrstereo.evaluation.datasets import load_scene
 from mrstereo.evaluation.metrics import disparity_metrics
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"shared test data not found at {DATA}")
+needs_data = pytest.mark.sample_data("tsukuba")
 
 
 @pytest.fixture(scope="module")
 def tsukuba():
-    return load_scene(DATA / "middlebury2001/tsukuba")
+    return load_scene(local_path("tsukuba"))
 
 
 @needs_data

@@ -1,6 +1,5 @@
 """evaluate_scenes and the ``mrstereo evaluate`` command: report content, JSON/markdown files, errors."""
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,9 +10,10 @@ from mrstereo.evaluation.datasets import load_scene
 from mrstereo.evaluation.metrics import disparity_metrics
 from mrstereo.evaluation.report import evaluate_scenes, run_method
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-TSUKUBA = DATA / "middlebury2001" / "tsukuba"
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"shared test data not found at {DATA}")
+from mrstereo.data import local_path
+
+TSUKUBA = local_path("tsukuba")
+needs_data = pytest.mark.sample_data("tsukuba")
 BASELINES = ("StereoBM", "StereoSGBM")
 
 
@@ -124,7 +124,7 @@ def test_mrstereo_methods_are_wired_in(monkeypatch):
 def test_evaluate_on_a_dask_cluster_gives_the_same_rows():
     import distributed
 
-    venus = DATA / "middlebury2001" / "venus"
+    venus = local_path("venus")
     local = evaluate_scenes([TSUKUBA, venus], methods=BASELINES, progress=False)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",
                                   host="127.0.0.1", dashboard_address=None) as cluster:

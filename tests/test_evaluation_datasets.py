@@ -1,32 +1,29 @@
-"""Scene readers: every layout on real data (shared/data) and on synthetic mini-datasets."""
-from pathlib import Path
+"""Scene readers: every layout on the public sample scenes (mrstereo.data) and on synthetic mini-datasets."""
 
 import cv2
 import numpy as np
 import pytest
 
+from mrstereo.data import local_path
 from mrstereo.evaluation.datasets import load_scene, photometric_error, search_range_px
 from mrstereo.io import write_image, write_kitti_disparity, write_pfm
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"shared test data not found at {DATA}")
 
 
-# name, folder, layout, (H, W), GT min, GT max, valid fraction, max disparity, has mask
+# name, sample data, layout, (H, W), GT min, GT max, valid fraction, max disparity, has mask
 REAL = [
-    ("tsukuba", "middlebury2001/tsukuba", "middlebury2001", (288, 384), 5.0, 14.0, 0.79, 16, True),
-    ("venus", "middlebury2001/venus", "middlebury2001", (383, 434), 3.0, 19.75, 1.00, 32, True),
-    ("teddy", "middlebury2003/teddy", "middlebury2003", (375, 450), 12.5, 52.75, 0.98, 64, True),
-    ("cones", "middlebury2003/cones", "middlebury2003", (375, 450), 5.5, 55.0, 0.97, 64, True),
-    ("000070_10", "kitti2012/000070", "kitti2012", (376, 1241), 4.67, 147.02, 0.29, 160, True),
-    ("000000_10", "kitti2015/000000", "kitti2015", (375, 1242), 4.62, 64.09, 0.19, 80, False),
+    ("tsukuba", "tsukuba", "middlebury2001", (288, 384), 5.0, 14.0, 0.79, 16, True),
+    ("venus", "venus", "middlebury2001", (383, 434), 3.0, 19.75, 1.00, 32, True),
+    ("teddy", "teddy", "middlebury2003", (375, 450), 12.5, 52.75, 0.98, 64, True),
+    ("cones", "cones", "middlebury2003", (375, 450), 5.5, 55.0, 0.97, 64, True),
+    ("000070_10", "kitti2012-000070", "kitti2012", (376, 1241), 4.67, 147.02, 0.29, 160, True),
+    ("000000_10", "kitti2015-000000", "kitti2015", (375, 1242), 4.62, 64.09, 0.19, 80, False),
 ]
 
 
-@needs_data
-@pytest.mark.parametrize("name, folder, layout, shape, lo, hi, valid, max_d, has_mask", REAL, ids=[r[0] for r in REAL])
-def test_real_scene_matches_sources_md(name, folder, layout, shape, lo, hi, valid, max_d, has_mask):
-    scene = load_scene(DATA / folder)
+@pytest.mark.parametrize("name, sample, layout, shape, lo, hi, valid, max_d, has_mask", REAL, ids=[r[0] for r in REAL])
+def test_real_scene_matches_sources_md(sample_data, name, sample, layout, shape, lo, hi, valid, max_d, has_mask):
+    scene = load_scene(sample_data(sample))
     gt = scene.gt_disparity_px
     assert scene.name == name and scene.layout == layout
     assert scene.shape == shape and scene.left.shape[:2] == shape and scene.right.shape[:2] == shape
@@ -42,14 +39,14 @@ def test_real_scene_matches_sources_md(name, folder, layout, shape, lo, hi, vali
     assert err < 0.5 * photometric_error(scene.left, scene.right, 2.0 * gt)
 
 
-@needs_data
+@pytest.mark.sample_data("tsukuba", "venus", "kitti2012-000070")
 def test_middlebury_mask_fraction_and_kitti_noc_region():
-    tsukuba = load_scene(DATA / "middlebury2001/tsukuba")
+    tsukuba = load_scene(local_path("tsukuba"))
     assert tsukuba.nonocc_mask.dtype == np.bool_
     assert tsukuba.nonocc_mask.mean() == pytest.approx(0.773, abs=0.003)
     # Venus GT is 100 % dense, the non-occluded mask removes occlusions and the border.
-    assert load_scene(DATA / "middlebury2001/venus").nonocc_mask.mean() == pytest.approx(0.887, abs=0.005)
-    kitti = load_scene(DATA / "kitti2012/000070")
+    assert load_scene(local_path("venus")).nonocc_mask.mean() == pytest.approx(0.887, abs=0.005)
+    kitti = load_scene(local_path("kitti2012-000070"))
     noc = kitti.gt_disparity_px[kitti.nonocc_mask]
     assert np.isfinite(noc).all()
     assert noc.max() == pytest.approx(123.04, abs=0.01) and noc.min() == pytest.approx(4.67, abs=0.01)

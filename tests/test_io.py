@@ -5,7 +5,6 @@ import pytest
 from mrstereo.io import (atomic_write, read_disparity, read_image, read_pfm, refuse_overwrite_input,
                          write_disparity, write_image, write_pfm)
 
-DATA = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def test_pfm_round_trip_with_nan(tmp_path):
@@ -32,9 +31,8 @@ def test_kitti_png_round_trip(tmp_path):
     np.testing.assert_allclose(back[1], d[1], atol=1 / 256)
 
 
-@pytest.mark.skipif(not (DATA / "kitti2012").is_dir(), reason="shared/data not available")
-def test_reads_real_kitti_gt():
-    d = read_disparity(DATA / "kitti2012/000070/disp_noc/000070_10.png")
+def test_reads_real_kitti_gt(sample_data):
+    d = read_disparity(sample_data("kitti2012-000070") / "disp_noc/000070_10.png")
     assert d.shape == (376, 1241)
     assert 4.6 < np.nanmin(d) < 4.7 and 123.0 < np.nanmax(d) < 123.1
 

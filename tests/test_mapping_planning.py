@@ -102,6 +102,23 @@ def test_unknown_cells_blocked_or_free():
     assert "unknown" in plan_path(ros(occ), (6.0, 0.0), (10.0, 0.0)).message
 
 
+def test_goal_near_unknown_says_unknown_not_obstacle():
+    """A goal in free space next to unknown cells: the message names unknown space, not an obstacle."""
+    occ = free_map()
+    occ[58:63, 198:203] = np.nan             # an unseen pocket around x = 10 m, y = 0
+    occ[0, :] = 1.0                          # a wall far away (y = -3 m)
+    goal = (10.0, 0.2)                       # free, 0.1-0.2 m from the pocket
+    r, c = GRID.cells_from_xy(goal)
+    assert occ[r, c] == 0.0
+    blocked = plan_path(ros(occ), (2.0, 0.0), goal, robot_radius_m=0.25)
+    assert not blocked.success
+    assert "unknown space" in blocked.message and "occupied" not in blocked.message
+    assert "--unknown free" in blocked.message
+    assert plan_path(ros(occ), (2.0, 0.0), goal, robot_radius_m=0.25, unknown_is_obstacle=False).success
+    occ[62, 200] = 1.0                       # now an occupied cell is within the radius too
+    assert "occupied cell" in plan_path(ros(occ), (2.0, 0.0), goal, robot_radius_m=0.25).message
+
+
 def test_bad_inputs_raise():
     with pytest.raises(ValueError, match="start_xy"):
         plan_path(ros(free_map()), (np.nan, 0.0), (1.0, 1.0))

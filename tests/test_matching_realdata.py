@@ -1,32 +1,28 @@
 """Matcher on real data (Middlebury 2001 Tsukuba, 2003 Teddy) against OpenCV StereoBM in the same run."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import cv2
 import numpy as np
-import pytest
 
 from mrstereo.matching import MatchingConfig, compute_disparity
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-# (folder, left, right, ground truth, gt divisor, search range)
+# (sample data, left, right, ground truth, gt divisor, search range)
 SCENES = {
-    "tsukuba": ("middlebury2001/tsukuba", "scene1.row3.col3.ppm", "scene1.row3.col4.ppm", "truedisp.row3.col3.pgm",
+    "tsukuba": ("tsukuba", "scene1.row3.col3.ppm", "scene1.row3.col4.ppm", "truedisp.row3.col3.pgm",
                 16.0, 16),
-    "teddy": ("middlebury2003/teddy", "im2.ppm", "im6.ppm", "disp2.pgm", 4.0, 64),
+    "teddy": ("teddy", "im2.ppm", "im6.ppm", "disp2.pgm", 4.0, 64),
 }
 
 
-def _scene(name):
-    folder, left, right, gt, divisor, max_d = SCENES[name]
-    paths = [DATA / folder / f for f in (left, right, gt)]
-    if not all(p.is_file() for p in paths):
-        pytest.skip(f"{name} not found under {DATA / folder}")
+def _scene(sample_data, name):
+    sample, left, right, gt, divisor, max_d = SCENES[name]
+    folder = sample_data(sample)
+    paths = [folder / f for f in (left, right, gt)]
     read = lambda p: cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
     truth = read(paths[2]).astype(np.float32) / divisor        # 0 = unknown
     truth[truth == 0] = np.nan
-    nonocc = DATA / folder / "nonocc.png"                         # evaluate the non-occluded pixels
+    nonocc = folder / "nonocc.png"                         # evaluate the non-occluded pixels
     if nonocc.is_file():
         truth[read(nonocc) != 255] = np.nan
     return read(paths[0]), read(paths[1]), truth, max_d
@@ -52,8 +48,8 @@ def _stereo_bm(left, right, max_d):
     return np.where(raw >= 0, raw, np.nan)
 
 
-def test_teddy_robust_is_denser_and_as_accurate_as_stereobm():
-    left, right, truth, max_d = _scene("teddy")
+def test_teddy_robust_is_denser_and_as_accurate_as_stereobm(sample_data):
+    left, right, truth, max_d = _scene(sample_data, "teddy")
     dense, est, density = _bad2(compute_disparity(left, right, max_disparity_px=max_d).disparity_px, truth)
     bm_dense, bm_est, _ = _bad2(_stereo_bm(left, right, max_d), truth)
     assert dense < bm_dense          # missing counts as bad: more right answers than StereoBM
@@ -61,8 +57,8 @@ def test_teddy_robust_is_denser_and_as_accurate_as_stereobm():
     assert density > 70.0
 
 
-def test_tsukuba_robust_accurate_where_it_answers_and_paper_answers_everywhere():
-    left, right, truth, max_d = _scene("tsukuba")
+def test_tsukuba_robust_accurate_where_it_answers_and_paper_answers_everywhere(sample_data):
+    left, right, truth, max_d = _scene(sample_data, "tsukuba")
     dense, est, density = _bad2(compute_disparity(left, right, max_disparity_px=max_d).disparity_px, truth)
     assert density > 70.0
     assert est < 4.0                 # wrong in-band winners or lost coarse-level precision exceed this
@@ -71,8 +67,8 @@ def test_tsukuba_robust_accurate_where_it_answers_and_paper_answers_everywhere()
     assert p_density > 95.0 and p_est < 20.0
 
 
-def test_tsukuba_refinement_recovers_the_coarse_level_precision():
-    left, right, truth, max_d = _scene("tsukuba")
+def test_tsukuba_refinement_recovers_the_coarse_level_precision(sample_data):
+    left, right, truth, max_d = _scene(sample_data, "tsukuba")
     cfg = MatchingConfig(decimations=(4, 2, 1))      # D = 16 alone would plan no k = 4 level
     _, est_refined, _ = _bad2(compute_disparity(left, right, max_disparity_px=max_d, config=cfg).disparity_px, truth)
     _, est_coarse, _ = _bad2(compute_disparity(left, right, max_disparity_px=max_d,
@@ -80,8 +76,8 @@ def test_tsukuba_refinement_recovers_the_coarse_level_precision():
     assert est_refined < 0.8 * est_coarse
 
 
-def test_tsukuba_gap_filling_answers_more_than_stereobm_and_stays_accurate():
-    left, right, truth, max_d = _scene("tsukuba")
+def test_tsukuba_gap_filling_answers_more_than_stereobm_and_stays_accurate(sample_data):
+    left, right, truth, max_d = _scene(sample_data, "tsukuba")
     dense, est, density = _bad2(compute_disparity(left, right, max_disparity_px=max_d).disparity_px, truth)
     holes = MatchingConfig(gap_fill_px=0)
     dense0, est0, density0 = _bad2(compute_disparity(left, right, max_disparity_px=max_d,

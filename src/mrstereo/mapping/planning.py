@@ -67,6 +67,10 @@ def _point(name: str, value) -> np.ndarray:
     return arr
 
 
+_UNKNOWN_HINT = ("unknown cells are blocked: plan with unknown as free, `--unknown free` / "
+                 "unknown_is_obstacle=False, to allow it")
+
+
 def _fail(message: str, expanded: int = 0) -> PlanResult:
     return PlanResult(False, message, np.empty((0, 2)), math.inf, expanded)
 
@@ -112,10 +116,15 @@ def plan_path(ros_map, start_xy, goal_xy, *, robot_radius_m: float = 0.25,
         if ros_map.occupied[r, c]:
             return _fail(f"{where} is inside an obstacle")
         if unknown_is_obstacle and ros_map.unknown[r, c]:
-            return _fail(f"{where} is in unknown space (use unknown as free to allow it)")
+            return _fail(f"{where} is in unknown space ({_UNKNOWN_HINT})")
         if blocked[r, c]:
-            return _fail(f"{where} is closer than the robot radius {robot_radius_m:g} m "
-                         f"to an obstacle")
+            near_occupied = inflate_obstacles(ros_map, robot_radius_m=robot_radius_m,
+                                              unknown_is_obstacle=False)[r, c]
+            if near_occupied:
+                return _fail(f"{where} is closer than the robot radius {robot_radius_m:g} m "
+                             f"to an occupied cell")
+            return _fail(f"{where} is closer than the robot radius {robot_radius_m:g} m to unknown "
+                         f"space ({_UNKNOWN_HINT})")
         cells.append((r, c))
     (sr, sc), (gr, gc) = cells
     n = blocked.size

@@ -1,0 +1,68 @@
+"""CLI of the sample data: ``mrstereo data fetch|path|list`` (mrstereo.data)."""
+from __future__ import annotations
+
+import click
+
+__all__ = ["COMMANDS"]
+
+
+@click.group("data")
+def data_group() -> None:
+    """Public sample scenes (Middlebury, KITTI, OpenCV chessboards, OpenLORIS).
+
+    Files are read from $MRSTEREO_DATA when it is set (a local copy, used as is),
+    else from pooch's cache folder, where `mrstereo data fetch` downloads them and
+    checks each file's SHA-256.
+    """
+
+
+def _names(names: tuple[str, ...]) -> tuple[str, ...]:
+    from ..data import SCENES, scene
+
+    for name in names:
+        scene(name)            # ValueError naming the unknown scene and the known ones
+    return names or tuple(SCENES)
+
+
+@data_group.command("fetch")
+@click.argument("names", nargs=-1, metavar="[NAME...]")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def fetch_command(names: tuple[str, ...], quiet: bool) -> None:
+    """Download the scenes NAME... (default: all) unless they are already there; print their folders."""
+    from ..data import fetch
+
+    for name in _names(names):
+        click.echo(f"{name}: {fetch(name, progress=not quiet)}")
+
+
+@data_group.command("path")
+@click.argument("name", required=False)
+def path_command(name: str | None) -> None:
+    """Print the data root (or the folder of the scene NAME), whether or not it was fetched."""
+    from ..data import data_root, local_path
+
+    click.echo(local_path(_names((name,))[0]) if name else data_root())
+
+
+@data_group.command("list")
+@click.option("--verify", "check", is_flag=True, help="Also check every local file's SHA-256.")
+def list_command(check: bool) -> None:
+    """List the scenes, whether each is present locally, and where it comes from."""
+    from ..data import is_available, scene, verify
+
+    problems = 0
+    for name in _names(()):
+        entry = scene(name)
+        state = "present" if is_available(name) else "not fetched"
+        if check and state == "present":
+            issues = verify(name)
+            problems += len(issues)
+            state = "verified" if not issues else f"{len(issues)} file(s) differ"
+        repos = sorted({f.repository for f in entry.files})
+        click.echo(f"{name:26s} {state:12s} {len(entry.files):3d} files  {entry.folder}  "
+                   f"{entry.description}; from {', '.join(repos)}")
+    if problems:
+        raise ValueError(f"{problems} local file(s) differ from the registry's SHA-256")
+
+
+COMMANDS = [data_group]
