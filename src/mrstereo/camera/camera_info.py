@@ -6,6 +6,13 @@ fields (camera_calibration_parsers layout), plus an optional
 ``K``/``D`` describe the raw camera, ``R`` rotates the raw camera frame into the
 rectified frame and ``P`` is the rectified projection; for the right camera
 ``P[0, 3] = -fx * baseline_m``. Conventions: docs/conventions.md.
+
+Files from other tools (Kalibr, OpenCV FileStorage, EuRoC, two camera_info
+files, ...) are read by :mod:`mrstereo.camera.formats`; :func:`read_stereo`
+delegates to it. Every calibration read from a file is checked for what would
+otherwise fail silently later: ``R`` must be a rotation, the baseline and the
+projection matrices within plausible ranges, and the two rectified views must
+overlap (:func:`check_stereo`, bounds in docs/calibration-formats.md).
 """
 from __future__ import annotations
 
@@ -23,7 +30,107 @@ from ..io import atomic_write
 from .model import Camera
 
 __all__ = ["CameraInfo", "RigMount", "StereoCamera", "read_camera_info", "write_camera_info",
-           "read_stereo", "write_stereo"]
+           "read_stereo", "write_stereo", "camera_from_ros", "check_stereo", "overlap_share"]
+
+#: Plausible baseline [m]: shorter is no stereo, longer is almost always millimetres read as metres.
+BASELINE_RANGE_M = (1e-3, 20.0)
+#: Plausible focal length [px] relative to the larger image side (a 170 deg fisheye to a 0.06 deg telescope).
+FOCAL_RANGE_PER_SIDE = (0.01, 1000.0)
+#: Largest image side [px] a calibration may describe.
+MAX_IMAGE_SIDE_PX = 65535
+#: Smallest share of the rectified image that both cameras must see.
+MIN_OVERLAP = 0.05
+#: Tolerance of ``R R^T = I`` and ``det R = 1``.
+ROTATION_TOL = 1e-3
+
+_MODEL_NAMES = {
+    "plumb_bob": "plumb_bob", "radtan": "plumb_bob", "radial-tangential": "plumb_bob",
+    "radial_tangential": "plumb_bob", "rational_polynomial": "rational_polynomial",
+    "equidistant": "equidistant", "equi": "equidistant", "fisheye": "equidistant",
+    "kannala-brandt": "equidistant", "kannala_brandt": "equidistant",
+}
+
+
+def numbers(value, *, where: str, field: str, sizes=None, shape=None) -> np.ndarray:
+    """A numeric field of a calibration file as a float array, or a ``ValueError`` naming it.
+
+    ``value`` may be a list, a nested list, an array or a ``{rows, cols, data}``
+    mapping (ROS / OpenCV); ``sizes`` lists the accepted numbers of values,
+    ``shape`` the shape to return.
+    """
+    if isinstance(value, dict):
+        if "data" not in value:
+            raise ValueError(f"{where}: field '{field}' has no 'data'")
+        value = value["data"]
+    flat = list(np.ravel(np.asarray(value, dtype=object))) if value is not None else []
+    for item in flat:
+        if isinstance(item, bool) or not isinstance(item, (int, float, np.integer, np.floating)):
+            raise ValueError(f"{where}: field '{field}' is not numeric (found {item!r})")
+    arr = np.asarray(flat, dtype=np.float64)
+    expected = sizes if sizes is not None else ([int(np.prod(shape))] if shape is not None else None)
+    if expected is not None and arr.size not in expected:
+        want = " or ".join(str(n) for n in expected)
+        raise ValueError(f"{where}: field '{field}' needs {want} values, got {arr.size}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{where}: field '{field}' contains NaN or inf")
+    return arr.reshape(shape) if shape is not None else arr
+
+
+def ros_model_name(name, *, where: str) -> str:
+    """The ROS name of a distortion model given under any of its common names."""
+    key = str(name).strip().lower()
+    if key not in _MODEL_NAMES:
+        raise ValueError(f"{where}: distortion model '{name}' is not supported "
+                         "(plumb_bob/radtan, rational_polynomial, equidistant/fisheye)")
+    return _MODEL_NAMES[key]
+
+
+def camera_from_ros(width, height, K, distortion_model, D, *, where: str) -> Camera:
+    """The one place a calibration file's camera becomes a :class:`Camera`.
+
+    ``K`` (3, 3), ``distortion_model`` a ROS name (or an alias: radtan,
+    fisheye, Kannala-Brandt, ...), ``D`` in ROS order.
+    """
+    for name, value in (("image_width", width), ("image_height", height)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise ValueError(f"{where}: field '{name}' must be an integer, got {value!r}")
+        if not 1 <= value <= MAX_IMAGE_SIDE_PX:
+            raise ValueError(f"{where}: field '{name}' must be within 1..{MAX_IMAGE_SIDE_PX}, got {value}")
+    K = numbers(K, where=where, field="camera_matrix", shape=(3, 3))
+    model = ros_model_name(distortion_model, where=where)
+    D = numbers(D, where=where, field="distortion_coefficients")
+    side = max(width, height)
+    for name, value in (("fx", K[0, 0]), ("fy", K[1, 1])):
+        if not FOCAL_RANGE_PER_SIDE[0] * side <= value <= FOCAL_RANGE_PER_SIDE[1] * side:
+            raise ValueError(f"{where}: camera_matrix {name} = {value:g} px is implausible for a "
+                             f"{width}x{height} image (expected {FOCAL_RANGE_PER_SIDE[0] * side:g}.."
+                             f"{FOCAL_RANGE_PER_SIDE[1] * side:g} px)")
+    for name, value, size in (("cx", K[0, 2], width), ("cy", K[1, 2], height)):
+        if abs(value - size / 2.0) > 10.0 * side:
+            raise ValueError(f"{where}: camera_matrix {name} = {value:g} px is far outside the "
+                             f"{width}x{height} image")
+    if np.any(np.abs(D) > 1e6):
+        raise ValueError(f"{where}: field 'distortion_coefficients' has an implausible value "
+                         f"{D[np.argmax(np.abs(D))]:g}")
+    try:
+        if hasattr(Camera, "from_ros"):
+            return Camera.from_ros(int(width), int(height), K, model, D)
+        D5 = np.concatenate([D, np.zeros(max(0, 5 - D.size))])
+        if model != "plumb_bob" or D.size > 5 or np.any(D5[2:] != 0):
+            raise ValueError(f"distortion model {model} with {D.size} coefficients needs the "
+                             "richer camera models")
+        return Camera(width=int(width), height=int(height), fx=K[0, 0], fy=K[1, 1], cx=K[0, 2],
+                      cy=K[1, 2], k1=D5[0], k2=D5[1])
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def _rotation_error(R: np.ndarray) -> float:
+    return max(float(np.abs(R @ R.T - np.eye(3)).max()), abs(float(np.linalg.det(R)) - 1.0))
+
+
+def _camera_D(camera: Camera) -> np.ndarray:
+    return np.asarray(getattr(camera, "D", camera.dist_coeffs), dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -36,68 +143,47 @@ class CameraInfo:
     name: str = "camera"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "R", _checks.matrix("R", self.R, (3, 3)))
+        R = _checks.matrix("R", self.R, (3, 3))
+        if _rotation_error(R) > ROTATION_TOL:
+            raise ValueError(f"R must be a rotation (orthonormal, det +1), got det {np.linalg.det(R):.4g}")
+        object.__setattr__(self, "R", R)
         P = np.hstack([self.camera.K, np.zeros((3, 1))]) if self.P is None else self.P
         object.__setattr__(self, "P", _checks.matrix("P", P, (3, 4)))
 
     def to_dict(self) -> dict:
         """ROS camera_info fields as plain Python types."""
         cam = self.camera
+        D = [float(v) for v in _camera_D(cam)]
         return {
             "image_width": cam.width, "image_height": cam.height, "camera_name": self.name,
             "camera_matrix": {"rows": 3, "cols": 3, "data": [float(v) for v in cam.K.ravel()]},
-            "distortion_model": "plumb_bob",
-            "distortion_coefficients": {"rows": 1, "cols": 5, "data": [float(v) for v in cam.dist_coeffs]},
+            "distortion_model": getattr(cam, "distortion_model", "plumb_bob"),
+            "distortion_coefficients": {"rows": 1, "cols": len(D), "data": D},
             "rectification_matrix": {"rows": 3, "cols": 3, "data": [float(v) for v in self.R.ravel()]},
             "projection_matrix": {"rows": 3, "cols": 4, "data": [float(v) for v in self.P.ravel()]},
         }
 
     @classmethod
     def from_dict(cls, data, *, where: str = "camera_info") -> CameraInfo:
-        """Parse ROS camera_info fields; raises ``ValueError`` naming what is wrong."""
+        """Parse ROS camera_info fields; raises ``ValueError`` naming the field that is wrong."""
         if not isinstance(data, dict):
             raise ValueError(f"{where}: expected a mapping of camera_info fields")
-
-        def mat(key, rows, cols, default=None):
+        for key in ("image_width", "image_height", "camera_matrix"):
             if key not in data:
-                if default is not None:
-                    return default
                 raise ValueError(f"{where}: missing field '{key}'")
-            entry = data[key]
-            values = entry.get("data") if isinstance(entry, dict) else entry
-            try:
-                arr = np.asarray(values, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ValueError(f"{where}: field '{key}' is not numeric") from None
-            if arr.size != rows * cols:
-                raise ValueError(f"{where}: field '{key}' needs {rows * cols} values, got {arr.size}")
-            if not np.isfinite(arr).all():
-                raise ValueError(f"{where}: field '{key}' contains NaN or inf")
-            return arr.reshape(rows, cols)
-
-        for key in ("image_width", "image_height"):
-            if not isinstance(data.get(key), int):
-                raise ValueError(f"{where}: field '{key}' must be an integer")
-        model = data.get("distortion_model", "plumb_bob")
-        if model not in ("plumb_bob", "rational_polynomial"):
-            raise ValueError(f"{where}: distortion_model '{model}' is not supported (plumb_bob)")
-        K = mat("camera_matrix", 3, 3)
-        D = np.ravel(data.get("distortion_coefficients", {}).get("data", [0.0] * 5)
-                     if isinstance(data.get("distortion_coefficients"), dict)
-                     else data.get("distortion_coefficients", [0.0] * 5)).astype(float)
-        if not np.isfinite(D).all():
-            raise ValueError(f"{where}: field 'distortion_coefficients' contains NaN or inf")
-        D = np.concatenate([D, np.zeros(max(0, 5 - D.size))])
-        if np.any(np.abs(D[2:]) > 0):
-            raise ValueError(f"{where}: only radial k1, k2 are supported; p1, p2, k3 must be 0")
-        try:
-            camera = Camera(width=data["image_width"], height=data["image_height"], fx=K[0, 0],
-                            fy=K[1, 1], cx=K[0, 2], cy=K[1, 2], k1=D[0], k2=D[1])
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{where}: {exc}") from None
-        return cls(camera=camera, R=mat("rectification_matrix", 3, 3, np.eye(3)),
-                   P=mat("projection_matrix", 3, 4, np.hstack([K, np.zeros((3, 1))])),
-                   name=str(data.get("camera_name", "camera")))
+        camera = camera_from_ros(data["image_width"], data["image_height"], data["camera_matrix"],
+                                 data.get("distortion_model") or "plumb_bob",
+                                 data.get("distortion_coefficients") or [0.0] * 5, where=where)
+        R = np.eye(3)
+        if data.get("rectification_matrix") is not None:
+            R = numbers(data["rectification_matrix"], where=where, field="rectification_matrix", shape=(3, 3))
+            if _rotation_error(R) > ROTATION_TOL:
+                raise ValueError(f"{where}: field 'rectification_matrix' is not a rotation (orthonormal "
+                                 f"with det +1; its det is {np.linalg.det(R):.4g})")
+        P = np.hstack([camera.K, np.zeros((3, 1))])
+        if data.get("projection_matrix") is not None:
+            P = numbers(data["projection_matrix"], where=where, field="projection_matrix", shape=(3, 4))
+        return cls(camera=camera, R=R, P=P, name=str(data.get("camera_name", "camera")))
 
 
 @dataclass(frozen=True)
@@ -129,9 +215,7 @@ class StereoCamera:
     def __post_init__(self) -> None:
         if self.left.camera.size != self.right.camera.size:
             raise ValueError("left and right cameras must have the same image size")
-        if self.baseline_m <= 0:
-            raise ValueError("right projection_matrix must have P[0,3] = -fx * baseline_m < 0 "
-                             f"(got P[0,3] = {self.right.P[0, 3]})")
+        _check_projections(self.left, self.right)
 
     @property
     def focal_px(self) -> float:
@@ -169,8 +253,9 @@ class StereoCamera:
     @property
     def is_rectified(self) -> bool:
         """True when the raw images already are the rectified ones (identity maps)."""
-        return all(np.allclose(info.R, np.eye(3)) and info.camera.k1 == 0 and info.camera.k2 == 0
-                   and np.allclose(info.P[:3, :3], info.camera.K) for info in (self.left, self.right))
+        return all(np.allclose(info.R, np.eye(3)) and not getattr(info.camera, "is_fisheye", False)
+                   and not np.any(_camera_D(info.camera)) and np.allclose(info.P[:3, :3], info.camera.K)
+                   for info in (self.left, self.right))
 
     def rectification_maps(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
         """One ``cv2.remap`` map pair per camera: undistort and rectify in one step."""
@@ -207,11 +292,13 @@ class StereoCamera:
                 rig = RigMount(height_m=r["height_m"], tilt_rad=r.get("tilt_rad", 0.0))
             except (TypeError, ValueError) as exc:
                 raise ValueError(f"{where}: rig: {exc}") from None
+        left = CameraInfo.from_dict(data["left"], where=f"{where}: left")
+        right = CameraInfo.from_dict(data["right"], where=f"{where}: right")
         try:
-            return cls(left=CameraInfo.from_dict(data["left"], where=f"{where}: left"),
-                       right=CameraInfo.from_dict(data["right"], where=f"{where}: right"), rig=rig)
-        except TypeError as exc:
+            stereo = cls(left=left, right=right, rig=rig)
+        except (TypeError, ValueError) as exc:
             raise ValueError(f"{where}: {exc}") from None
+        return check_stereo(stereo, where=where)
 
     @classmethod
     def ideal(cls, camera: Camera, baseline_m: float, *, rig: RigMount | None = None) -> StereoCamera:
@@ -222,6 +309,90 @@ class StereoCamera:
         P_right[0, 3] = -camera.fx * baseline_m
         return cls(left=CameraInfo(camera, P=P_left, name="left"),
                    right=CameraInfo(camera, P=P_right, name="right"), rig=rig)
+
+
+def _check_projections(left: CameraInfo, right: CameraInfo) -> None:
+    """Ranges of the rectified projections: a named ``ValueError`` for what later code cannot use."""
+    width, height = left.camera.size
+    side = max(width, height)
+    for label, info in (("left", left), ("right", right)):
+        P = info.P
+        for name, value in (("P[0,0] (fx)", P[0, 0]), ("P[1,1] (fy)", P[1, 1])):
+            if not FOCAL_RANGE_PER_SIDE[0] * side <= value <= FOCAL_RANGE_PER_SIDE[1] * side:
+                raise ValueError(f"{label} projection_matrix {name} = {value:g} px is implausible for a "
+                                 f"{width}x{height} image (expected {FOCAL_RANGE_PER_SIDE[0] * side:g}.."
+                                 f"{FOCAL_RANGE_PER_SIDE[1] * side:g} px)")
+        for name, value, size in (("P[0,2] (cx)", P[0, 2], width), ("P[1,2] (cy)", P[1, 2], height)):
+            if abs(value - size / 2.0) > 10.0 * side:
+                raise ValueError(f"{label} projection_matrix {name} = {value:g} px is far outside the "
+                                 f"{width}x{height} image")
+        off = np.abs([P[0, 1], P[1, 0], P[2, 0], P[2, 1], P[2, 2] - 1.0])
+        if np.any(off > 1e-6 * np.array([P[0, 0], P[1, 1], 1.0, 1.0, 1.0])):
+            raise ValueError(f"{label} projection_matrix must be [fx 0 cx Tx; 0 fy cy Ty; 0 0 1 0] "
+                             f"(rectified pinhole), got {np.round(P, 6).tolist()}")
+    if np.any(np.abs(left.P[:, 3]) > 1e-9):
+        raise ValueError(f"left projection_matrix P[:,3] must be 0 (the left camera is the reference), "
+                         f"got {left.P[:, 3].tolist()}")
+    tx, ty, tz = right.P[:, 3]
+    if abs(tz) > 1e-9 or abs(ty) > 1e-6 * max(abs(tx), 1.0):
+        raise ValueError(f"right projection_matrix P[1,3] = {ty:g}, P[2,3] = {tz:g}: only horizontal "
+                         "stereo is supported (both must be 0)")
+    if tx == 0:
+        raise ValueError("right projection_matrix P[0,3] = 0: no baseline (P[0,3] = -fx * baseline_m; "
+                         "a camera_info of a single camera carries no stereo extrinsics)")
+    baseline_m = -tx / right.P[0, 0]
+    if baseline_m < 0:
+        raise ValueError(f"right projection_matrix P[0,3] = {tx:g} > 0 puts the right camera "
+                         f"{-baseline_m:.4g} m to the left of the left one: the views look swapped, "
+                         "exchange left and right (P[0,3] = -fx * baseline_m < 0)")
+    if not BASELINE_RANGE_M[0] <= baseline_m <= BASELINE_RANGE_M[1]:
+        raise ValueError(f"right projection_matrix P[0,3] = {tx:g} gives a baseline of {baseline_m:.4g} m, "
+                         f"outside the plausible {BASELINE_RANGE_M[0]:g}..{BASELINE_RANGE_M[1]:g} m "
+                         "(P[0,3] = -fx * baseline_m, in metres)")
+
+
+def overlap_share(stereo: StereoCamera, *, grid_px: int = 160) -> float:
+    """Share of the rectified image that both raw images really see (on a coarse grid).
+
+    A rectified pixel counts for a camera when its rectification map lands in
+    the raw image *and* the raw pixel's viewing ray maps back to it: far outside
+    the field of view a distortion polynomial folds back, and the map then
+    points into the image although the camera cannot see that direction.
+    """
+    width, height = stereo.size
+    scale = min(1.0, grid_px / max(width, height))
+    size = (max(2, round(width * scale)), max(2, round(height * scale)))
+    A_small = np.diag([scale, scale, 1.0])
+    grid = np.stack(np.meshgrid(np.arange(size[0], dtype=float), np.arange(size[1], dtype=float)), -1)
+    valid = np.ones((size[1], size[0]), bool)
+    for info in (stereo.left, stereo.right):
+        P_small = A_small @ info.P[:3, :3]
+        map_x, map_y = info.camera.undistort_rectify_maps(R=info.R, P=P_small, size=size)
+        seen = (map_x >= 0) & (map_x <= width - 1) & (map_y >= 0) & (map_y <= height - 1)
+        if seen.any():
+            uv = np.stack([map_x[seen], map_y[seen]], 1).astype(np.float64)
+            with np.errstate(all="ignore"):
+                h = info.camera.rays(uv) @ (P_small @ info.R).T
+                back = h[:, :2] / h[:, 2:3]
+                ok = (h[:, 2] > 0) & (np.abs(back - grid[seen]).max(axis=1) < 0.5)
+            seen[seen] = ok
+        valid &= seen
+    return float(valid.mean())
+
+
+def check_stereo(stereo: StereoCamera, *, where: str = "stereo calibration") -> StereoCamera:
+    """Refuse a calibration whose two rectified views do not overlap; returns ``stereo``.
+
+    Run on every calibration read from a file (the constructor already checks
+    ``R`` and the projection ranges). An all-black rectified image or 0 %
+    valid disparity is the silent symptom this prevents.
+    """
+    share = overlap_share(stereo)
+    if share < MIN_OVERLAP:
+        raise ValueError(f"{where}: the rectified views of the two cameras overlap on {100 * share:.1f} % "
+                         f"of the image (at least {100 * MIN_OVERLAP:.0f} % needed): check "
+                         "rectification_matrix and projection_matrix")
+    return stereo
 
 
 def _load_yaml(path: str | os.PathLike, what: str):
@@ -253,9 +424,16 @@ def write_camera_info(path: str | os.PathLike, info: CameraInfo) -> None:
     _dump_yaml(path, info.to_dict())
 
 
-def read_stereo(path: str | os.PathLike) -> StereoCamera:
-    """Read the stereo calibration YAML (``left:``, ``right:``, optional ``rig:``)."""
-    return StereoCamera.from_dict(_load_yaml(path, "stereo calibration"), where=str(path))
+def read_stereo(path) -> StereoCamera:
+    """Read a stereo calibration in any supported format (see :mod:`mrstereo.camera.formats`).
+
+    ``path`` is the stereo YAML (``left:``, ``right:``, optional ``rig:``), a
+    file of another tool (Kalibr camchain, OpenCV FileStorage, OpenLORIS
+    sensors.yaml), or two per-camera files as ``"left.yaml,right.yaml"`` or a
+    sequence of two paths. Raw (unrectified) calibrations are rectified.
+    """
+    from .formats import read_calibration
+    return read_calibration(path)
 
 
 def write_stereo(path: str | os.PathLike, stereo: StereoCamera) -> None:

@@ -10,7 +10,8 @@ import sys
 
 import click
 
-_COMMAND_MODULES = ("_world", "_calibration", "_matching", "_evaluation", "_geometry", "_mapping", "_pipeline", "_demo", "_bag", "_data")
+_COMMAND_MODULES = ("_world", "_calibration", "_formats", "_matching", "_evaluation", "_geometry", "_mapping", "_pipeline", "_demo", "_bag",
+                    "_data")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
