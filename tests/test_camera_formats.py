@@ -88,6 +88,21 @@ def test_two_camera_info_files_with_rectified_P(tmp_path):
         assert_known_pair(stereo)
 
 
+def test_two_camera_info_message_dumps(tmp_path):
+    """``ros2 topic echo --once /cam0/camera_info > left.yaml`` (ROS 2 ``k d r p``; ROS 1 ``K D R P``)."""
+    expected = expected_fusiello()
+    for (name, info), upper in zip((("left", expected.left), ("right", expected.right)), (False, True)):
+        k, d, r, p = ("K", "D", "R", "P") if upper else ("k", "d", "r", "p")
+        msg = {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": f"cam_{name}"}, "height": 480,
+               "width": 752, "distortion_model": "plumb_bob", d: [float(v) for v in info.camera.D],
+               k: [float(v) for v in info.camera.K.ravel()], r: [float(v) for v in info.R.ravel()],
+               p: [float(v) for v in info.P.ravel()], "binning_x": 0, "binning_y": 0}
+        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump(msg))
+    result = import_calibration(f"{tmp_path / 'left.yaml'},{tmp_path / 'right.yaml'}")
+    assert result.format.startswith("two ROS camera_info") and result.stereo.left.name == "cam_left"
+    assert_known_pair(result.stereo)
+
+
 def test_two_camera_info_files_without_extrinsics(tmp_path):
     write_camera_info(tmp_path / "left.yaml", CameraInfo(LEFT))
     write_camera_info(tmp_path / "right.yaml", CameraInfo(RIGHT))

@@ -125,6 +125,11 @@ def camera_from_ros(width, height, K, distortion_model, D, *, where: str) -> Cam
         raise ValueError(f"{where}: {exc}") from None
 
 
+def _given(value, default):
+    """``value`` unless it is None or an empty list (arrays are never "or"-ed)."""
+    return default if value is None or (isinstance(value, (list, tuple)) and not value) else value
+
+
 def _rotation_error(R: np.ndarray) -> float:
     return max(float(np.abs(R @ R.T - np.eye(3)).max()), abs(float(np.linalg.det(R)) - 1.0))
 
@@ -173,7 +178,7 @@ class CameraInfo:
                 raise ValueError(f"{where}: missing field '{key}'")
         camera = camera_from_ros(data["image_width"], data["image_height"], data["camera_matrix"],
                                  data.get("distortion_model") or "plumb_bob",
-                                 data.get("distortion_coefficients") or [0.0] * 5, where=where)
+                                 _given(data.get("distortion_coefficients"), [0.0] * 5), where=where)
         R = np.eye(3)
         if data.get("rectification_matrix") is not None:
             R = numbers(data["rectification_matrix"], where=where, field="rectification_matrix", shape=(3, 3))
@@ -400,12 +405,14 @@ def _load_yaml(path: str | os.PathLike, what: str):
     if not path.is_file():
         raise FileNotFoundError(f"{what} not found: {path}")
     try:
-        with open(path) as fh:
+        with open(path, encoding="utf-8") as fh:
             return yaml.safe_load(fh)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" (line {mark.line + 1})" if mark is not None else ""
         raise ValueError(f"{what} {path} is not valid YAML{where}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{what} {path} is not a text file (binary or not UTF-8)") from None
 
 
 def _dump_yaml(path: str | os.PathLike, data: dict) -> None:

@@ -242,7 +242,7 @@ def _kind(data: dict) -> str | None:
     """What one file holds, from its fields."""
     if "left" in data or "right" in data:
         return "stereo"
-    if "camera_matrix" in data and "image_width" in data:
+    if ("camera_matrix" in data and "image_width" in data) or _message_fields(data) is not None:
         return "camera_info"
     if isinstance(data.get("cam0"), dict) and "intrinsics" in data["cam0"]:
         return "kalibr"
@@ -257,6 +257,23 @@ def _kind(data: dict) -> str | None:
     if _opencv_key(data, "R", 0) is not None and _opencv_key(data, "T", 0) is not None:
         return "opencv_extrinsics"
     return None
+
+
+def _message_fields(data: dict) -> dict | None:
+    """A dumped sensor_msgs/CameraInfo message (ROS 1 ``K D R P``, ROS 2 ``k d r p``) as camera_info fields."""
+    for k, d, r, p in (("K", "D", "R", "P"), ("k", "d", "r", "p")):
+        if {"width", "height", k, p} <= set(data) and "intrinsics" not in data:
+            return {"image_width": data["width"], "image_height": data["height"], "camera_matrix": data[k],
+                    "distortion_model": data.get("distortion_model") or "plumb_bob",
+                    "distortion_coefficients": data.get(d),
+                    "rectification_matrix": data.get(r), "projection_matrix": data[p],
+                    "camera_name": str((data.get("header") or {}).get("frame_id", "camera"))
+                    if isinstance(data.get("header"), dict) else "camera"}
+    return None
+
+
+def _camera_info(data: dict, where: str) -> CameraInfo:
+    return CameraInfo.from_dict(_message_fields(data) or data, where=where)
 
 
 def _read_one(path: Path, data: dict, image_size):
@@ -294,8 +311,7 @@ def _read_two(files: list[Path], docs: list[dict], image_size):
         if kind is None:
             raise _unknown(path)
     if kinds == ["camera_info", "camera_info"]:
-        left = CameraInfo.from_dict(docs[0], where=f"{files[0]}")
-        right = CameraInfo.from_dict(docs[1], where=f"{files[1]}")
+        left, right = _camera_info(docs[0], str(files[0])), _camera_info(docs[1], str(files[1]))
         if right.P[0, 3] == 0 and left.P[0, 3] == 0:
             raise ValueError(f"{where}: two camera_info files without stereo extrinsics (the right "
                              "projection_matrix P[0,3] is 0); use the files of a stereo calibration "
@@ -392,9 +408,7 @@ def _kalibr(data: dict, where: str) -> _Raw:
             raise ValueError(f"{here}: distortion_model '{dist}' is not supported (radtan, equidistant)")
         K = [[fu, 0, pu], [0, fv, pv], [0, 0, 1]]
         cams.append(camera_from_ros(width, height, K, dist, D, where=here))
-    T = numbers(_field(data["cam1"], "T_cn_cnm1", f"{where}: cam1"), where=f"{where}: cam1",
-                field="T_cn_cnm1", shape=(4, 4))
-    T = _pose(T, where=f"{where}: cam1", field="T_cn_cnm1")
+    T = _pose(_field(data["cam1"], "T_cn_cnm1", f"{where}: cam1"), where=f"{where}: cam1", field="T_cn_cnm1")
     return _Raw(cams[0], cams[1], T[:3, :3], T[:3, 3])          # x_cam1 = T x_cam0
 
 
@@ -482,13 +496,11 @@ def _opencv_model(data: dict, n_coeffs: int, where: str) -> str:
 
 def _opencv(data: dict, where: str, image_size) -> _Raw | StereoCamera:
     keys = {(w, i): _opencv_key(data, w, i) for w in ("K", "D", "R_rect", "P_rect") for i in (1, 2)}
-    for w in ("K", "D"):
-        for i in (1, 2):
-            if keys[(w, i)] is None:
-                found = ", ".join(str(k) for k in data)
-                raise ValueError(f"{where}: OpenCV stereo calibration without the {'camera matrix' if w == 'K' else 'distortion'} "
-                                 f"of camera {i} (M{i}/K{i}/cameraMatrix{i}{'' if w == 'K' else f' or D{i}/distCoeffs{i}'}); "
-                                 f"fields: {found}")
+    for (what, i), key in keys.items():
+        if key is None and what in ("K", "D"):
+            name = f"camera matrix M{i}/K{i}/cameraMatrix{i}" if what == "K" else f"distortion D{i}/distCoeffs{i}"
+            raise ValueError(f"{where}: OpenCV stereo calibration without the {name}; it has "
+                             + ", ".join(str(k) for k in data))
     rect = [keys[("R_rect", 1)], keys[("R_rect", 2)], keys[("P_rect", 1)], keys[("P_rect", 2)]]
     k_R, k_T = _opencv_key(data, "R", 0), _opencv_key(data, "T", 0)
     if (k_R is None or k_T is None) and not all(k is not None for k in rect):
