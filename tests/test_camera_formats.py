@@ -1,6 +1,4 @@
 """Calibration import from other tools' files (known answers), bad calibrations, `calib convert`."""
-from pathlib import Path
-
 import cv2
 import numpy as np
 import pytest
@@ -10,10 +8,10 @@ from mrstereo.camera import (Camera, CameraInfo, StereoCamera, read_stereo, rect
                              rotation_from_euler, write_camera_info, write_stereo)
 from mrstereo.camera.formats import import_calibration, read_calibration
 from mrstereo.cli import entry
+from mrstereo.data import local_path
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-CHESS = DATA / "opencv_calib" / "stereo_chessboard_9x6"
-LORIS = DATA / "openloris_sample"
+CHESS = local_path("opencv-stereo-chessboard")
+LORIS = local_path("openloris-sample")
 
 # A raw pair with known geometry: non-square image, off-centre principal points, 5 plumb_bob coefficients.
 D_LEFT = [-0.28, 0.074, 0.0002, 1.8e-05, -0.0011]
@@ -265,7 +263,7 @@ def test_openloris_sensors_and_trans_matrix(tmp_path):
     assert_known_pair(stereo, left, right)
 
 
-@pytest.mark.skipif(not (LORIS / "sensors.yaml").is_file(), reason="needs ../shared/data/openloris_sample")
+@pytest.mark.sample_data("openloris-sample")
 def test_real_openloris_t265(tmp_path, capsys):
     result = import_calibration(LORIS / "sensors.yaml")          # trans_matrix.yaml found beside it
     stereo = result.stereo
@@ -340,7 +338,7 @@ def corner_dy_mrstereo(stereo: StereoCamera, c):
     return float(np.mean(np.concatenate(dy)))
 
 
-@pytest.mark.skipif(not CHESS.is_dir(), reason="needs ../shared/data/opencv_calib")
+@pytest.mark.sample_data("opencv-stereo-chessboard")
 @pytest.mark.parametrize("suffix", [".yml", ".xml"])
 def test_opencv_chessboard_calibration_imported_rectifies_like_opencv(tmp_path, chessboard_calibration, suffix):
     c = chessboard_calibration
@@ -356,7 +354,7 @@ def test_opencv_chessboard_calibration_imported_rectifies_like_opencv(tmp_path, 
     assert abs(dy_ms - dy_cv) <= 0.02, (dy_ms, dy_cv)
 
 
-@pytest.mark.skipif(not CHESS.is_dir(), reason="needs ../shared/data/opencv_calib")
+@pytest.mark.sample_data("opencv-stereo-chessboard")
 def test_opencv_sample_intrinsics_without_extrinsics(tmp_path, capsys):
     assert entry(["rectify", "--calib", str(CHESS / "intrinsics.yml"), str(CHESS / "left01.jpg"),
                   str(CHESS / "right01.jpg"), "-o", str(tmp_path / "r")]) == 2
