@@ -32,8 +32,8 @@ from .model import Camera
 __all__ = ["CameraInfo", "RigMount", "StereoCamera", "read_camera_info", "write_camera_info",
            "read_stereo", "write_stereo", "camera_from_ros", "check_stereo", "overlap_share"]
 
-#: Plausible baseline [m]: shorter is no stereo, longer is almost always millimetres read as metres.
-BASELINE_RANGE_M = (1e-3, 20.0)
+#: Plausible baseline [m]: shorter is one viewpoint twice, longer is almost always millimetres read as metres.
+BASELINE_RANGE_M = (1e-4, 20.0)
 #: Plausible focal length [px] relative to the larger image side (a 170 deg fisheye to a 0.06 deg telescope).
 FOCAL_RANGE_PER_SIDE = (0.01, 1000.0)
 #: Largest image side [px] a calibration may describe.
@@ -80,7 +80,7 @@ def ros_model_name(name, *, where: str) -> str:
     """The ROS name of a distortion model given under any of its common names."""
     key = str(name).strip().lower()
     if key not in _MODEL_NAMES:
-        raise ValueError(f"{where}: distortion model '{name}' is not supported "
+        raise ValueError(f"{where}: distortion_model '{name}' is not supported "
                          "(plumb_bob/radtan, rational_polynomial, equidistant/fisheye)")
     return _MODEL_NAMES[key]
 
