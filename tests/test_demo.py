@@ -2,11 +2,16 @@
 import json
 
 from mrstereo.cli import entry
-from mrstereo.demo import run_demo
+from mrstereo.demo import DEMO_STEPS, run_demo
 
 
-def test_demo_runs_the_whole_pipeline(tmp_path):
-    result = run_demo(tmp_path / "demo", n_frames=6, n_calibration_views=6, progress=False)
+def test_demo_runs_the_whole_pipeline(tmp_path, capsys):
+    result = run_demo(tmp_path / "demo", n_frames=6, n_calibration_views=6, progress=True)
+    # the progress bar names the step that is running (before it finishes) and ends at 100 %
+    bar = [line.strip() for line in capsys.readouterr().err.replace("\r", "\n").splitlines() if line.strip()]
+    for k, name in enumerate(DEMO_STEPS):
+        assert any(line.startswith(f"demo: {name}:") and f" {k}/{len(DEMO_STEPS)} " in line for line in bar), name
+    assert bar[-1].startswith("demo: done: 100%") and f"{len(DEMO_STEPS)}/{len(DEMO_STEPS)}" in bar[-1]
     m = result.metrics
     c = m["calibration"]
     assert c["pairs_used"] >= 4

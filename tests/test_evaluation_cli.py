@@ -132,3 +132,22 @@ def test_evaluate_on_a_dask_cluster_gives_the_same_rows():
                                  scheduler=cluster.scheduler_address)
     assert [(r.scene, r.method) for r in remote.rows] == [(r.scene, r.method) for r in local.rows]
     assert [r.metrics for r in remote.rows] == [r.metrics for r in local.rows]
+
+
+def test_cli_evaluates_a_synth_dataset_frame_by_frame(tmp_path, capsys):
+    """`mrstereo evaluate` on what `mrstereo synth` writes: one row per frame, scored against its PFM."""
+    ds = tmp_path / "corridor"
+    assert entry(["synth", "--out", str(ds), "--frames", "2", "--width", "160", "--height", "120",
+                  "--quiet"]) == 0
+    out = tmp_path / "r.json"
+    code = entry(["evaluate", str(ds), "--methods", "StereoSGBM", "--json", str(out), "--quiet"])
+    assert code == 0, capsys.readouterr().err
+    report = json.loads(out.read_text())
+    assert report["scenes"] == ["corridor/000000", "corridor/000001"]
+    scene = load_scene(ds, frame="000001")
+    direct = disparity_metrics(stereo_sgbm(scene.left, scene.right, max_disparity_px=scene.max_disparity_px),
+                               scene.gt_disparity_px)
+    row = report["rows"][1]
+    assert row["layout"] == "mrstereo" and row["max_disparity_px"] == scene.max_disparity_px
+    assert row["metrics"]["dense"]["bad_2_pct"] == pytest.approx(direct.dense.bad_2_pct)
+    assert row["metrics"]["estimated"]["bad_2_pct"] < 25      # SGBM on the textured corridor

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mrstereo.data import local_path
-from mrstereo.evaluation.datasets import load_scene, photometric_error, search_range_px
+from mrstereo.evaluation.datasets import load_scene, load_scenes, photometric_error, search_range_px
 from mrstereo.io import write_image, write_kitti_disparity, write_pfm
 
 
@@ -181,3 +181,64 @@ def test_middlebury_v2_bundle_with_and_without_info(tmp_path):
     (tmp_path / "info.txt").write_text("sixteen")
     with pytest.raises(ValueError, match="expected two numbers"):
         load_scene(tmp_path)
+
+
+# ----------------------------------------------------------------------------- mrstereo datasets
+
+@pytest.fixture(scope="module")
+def synth_dataset(tmp_path_factory):
+    """A 3-frame `mrstereo synth` dataset at 160x120 (rendered once per module)."""
+    from mrstereo.world import write_synthetic_dataset
+
+    return write_synthetic_dataset(tmp_path_factory.mktemp("synth") / "corridor", seed=1, n_frames=3,
+                                   width=160, height=120, progress=False)
+
+
+def test_mrstereo_dataset_frames_are_scenes_with_their_pfm_ground_truth(synth_dataset):
+    from mrstereo.io import read_image, read_pfm
+    from mrstereo.recording import read_manifest
+
+    scenes = load_scenes(synth_dataset)
+    frames = read_manifest(synth_dataset).frames
+    assert [s.name for s in scenes] == ["corridor/000000", "corridor/000001", "corridor/000002"]
+    for scene, record in zip(scenes, frames):
+        assert scene.layout == "mrstereo" and scene.shape == (120, 160) and scene.nonocc_mask is None
+        np.testing.assert_array_equal(scene.left, read_image(record.left_rect))
+        np.testing.assert_array_equal(scene.right, read_image(record.right_rect))
+        truth = read_pfm(record.gt_disparity)
+        np.testing.assert_array_equal(np.isnan(scene.gt_disparity_px), ~np.isfinite(truth))
+        assert scene.max_disparity_px == search_range_px(truth) and scene.max_disparity_px % 16 == 0
+        # left/right and the disparity sign are right: d warps the right view onto the left
+        err = photometric_error(scene.left, scene.right, scene.gt_disparity_px)
+        assert err < 0.5 * photometric_error(scene.left, scene.right, 0.5 * scene.gt_disparity_px)
+        assert err < 0.5 * photometric_error(scene.left, scene.right, -scene.gt_disparity_px)
+    assert load_scene(synth_dataset, frame="000001").name == "corridor/000001"
+    with pytest.raises(ValueError, match="3 frames with ground truth .*pass frame="):
+        load_scene(synth_dataset)
+    with pytest.raises(ValueError, match="no frame '000009'"):
+        load_scene(synth_dataset, frame="000009")
+
+
+def test_mrstereo_dataset_raw_only_is_rectified_and_no_ground_truth_is_refused(synth_dataset, tmp_path):
+    import shutil
+
+    import yaml
+
+    copy = tmp_path / "raw_only"
+    shutil.copytree(synth_dataset, copy)
+    manifest = yaml.safe_load((copy / "manifest.yaml").read_text())
+    for frame in manifest["frames"]:
+        frame.pop("left_rect"), frame.pop("right_rect")
+    (copy / "manifest.yaml").write_text(yaml.safe_dump(manifest))
+    scene = load_scenes(copy)[0]
+    ideal = load_scenes(synth_dataset)[0]
+    assert "rectified with the dataset's calibration" in scene.gt_description
+    # rectified with the true calibration: the ground truth warps its right view onto its left as well
+    err = photometric_error(scene.left, scene.right, scene.gt_disparity_px)
+    assert err < 1.3 * photometric_error(ideal.left, ideal.right, ideal.gt_disparity_px)
+    assert err < 0.5 * photometric_error(scene.left, scene.right, 0.5 * scene.gt_disparity_px)
+    for frame in manifest["frames"]:
+        frame.pop("gt_disparity")
+    (copy / "manifest.yaml").write_text(yaml.safe_dump(manifest))
+    with pytest.raises(ValueError, match="no frame with ground-truth disparity"):
+        load_scenes(copy)

@@ -82,6 +82,30 @@ def test_plot_top_view_writes_a_png(tmp_path):
     assert (tmp_path / "top.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def _red_columns(path):
+    """Columns of the obstacle colour (#c03020) in a top-view PNG."""
+    from mrstereo.io import read_image
+
+    bgr = read_image(path).astype(int)
+    red = (np.abs(bgr[..., 2] - 0xc0) < 30) & (np.abs(bgr[..., 1] - 0x30) < 30) & (np.abs(bgr[..., 0] - 0x20) < 30)
+    return np.nonzero(red)[1]
+
+
+def test_top_view_draws_the_robots_left_on_the_left_with_positive_y_ticks(tmp_path):
+    """REP 103: +y is left. An obstacle at y = +1.5 m is drawn left of one at y = -1.5 m, and the
+    horizontal axis runs from +3 (left edge) to -3 (right edge)."""
+    cluster = np.random.default_rng(0).normal(0, 0.05, (400, 3))
+    cols = {}
+    for y in (1.5, -1.5):
+        plot_top_view(tmp_path / f"top{y}.png", obstacle_points_robot=cluster + [3.0, y, 0.3])
+        cols[y] = _red_columns(tmp_path / f"top{y}.png")
+    width = 600                                           # 6 in at 100 dpi
+    assert cols[1.5].size > 50 and cols[-1.5].size > 50
+    assert cols[1.5].mean() < width / 2 - 50 < width / 2 + 50 < cols[-1.5].mean()
+    import matplotlib.pyplot as plt
+    plt.close("all")
+
+
 def test_bad_input(tmp_path):
     with pytest.raises(ValueError, match="angle_max_rad"):
         laser_scan_from_points(np.zeros((1, 3)), angle_min_rad=0.5, angle_max_rad=0.1)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from mrstereo.cli import entry
 from mrstereo.io import read_disparity
@@ -31,6 +32,36 @@ def test_disparity_command_writes_pfm_png_and_explains(tmp_path, capsys):
     png = tmp_path / "d.png"
     assert entry(["disparity", left, right, "--bands", "0:8,8:16", "--preset", "paper", "-o", str(png)]) == 0
     assert abs(np.nanmedian(read_disparity(png)[8:-8, 20:-8]) - 6) < 0.1
+
+
+def test_preview_is_scaled_to_the_data_not_to_the_search(tmp_path, capsys):
+    """Disparities of 5-60 px searched up to 192 px: the colours span the data (robust percentiles),
+    so the median is mid-scale turbo (green), not the dark blue of 33/192; invalid is black."""
+    import matplotlib
+
+    from mrstereo._plot import disparity_range_px
+    from mrstereo.io import colorize_disparity
+
+    d = np.tile(np.linspace(5, 60, 200, dtype=np.float32), (50, 1))
+    d[:, :3] = np.nan
+    low, high = disparity_range_px(d)
+    assert low == pytest.approx(np.percentile(d[:, 3:], 1)) and high == pytest.approx(np.percentile(d[:, 3:], 99))
+    bgr = colorize_disparity(d)
+    turbo = matplotlib.colormaps["turbo"]
+    mid = np.nanargmin(np.abs(d[0] - (low + high) / 2))
+    np.testing.assert_allclose(bgr[10, mid, ::-1] / 255, turbo(0.5)[:3], atol=0.02)
+    assert (bgr[:, :3] == 0).all()
+    old = colorize_disparity(d, max_disparity_px=192)          # the search range as the scale
+    np.testing.assert_allclose(old[10, mid, ::-1] / 255, turbo(((low + high) / 2) / 192)[:3], atol=0.02)
+    # the CLI's preview: a PNG figure (wider than the image: the colour bar) beside the PFM
+    left, right = _pair(tmp_path)
+    assert entry(["disparity", left, right, "--max-disparity", "16", "-o", str(tmp_path / "d.pfm"),
+                  "--plot", str(tmp_path / "p.png")]) == 0
+    preview = cv2.imread(str(tmp_path / "p.png"))
+    assert preview is not None and preview.shape[1] > 3 * 100      # the 100 px map, enlarged, and its bar
+    assert entry(["disparity", left, right, "--max-disparity", "16", "-o", str(tmp_path / "d.pfm"),
+                  "--plot", str(tmp_path / "p.jpg")]) == 2
+    assert "--plot must end in .png" in capsys.readouterr().err
 
 
 def test_disparity_command_bad_input_is_one_line(tmp_path, capsys):

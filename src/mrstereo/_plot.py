@@ -23,3 +23,93 @@ def save_figure(fig, path: str | os.PathLike) -> Path:
     with atomic_write(path) as tmp:
         fig.savefig(tmp, bbox_inches="tight")
     return path
+
+
+# --------------------------------------------------------------------------- disparity colours
+# The one place that turns disparities into colours: the `disparity --plot` preview, the demo's
+# panels, mrstereo.io.colorize_disparity and mrstereo.world.figures all draw through it.
+
+DISPARITY_CMAP = "turbo"
+INVALID_RGB = (0.0, 0.0, 0.0)          # no disparity: black
+DISPLAY_PERCENTILES = (1.0, 99.0)
+
+
+def disparity_range_px(*disparities_px, percentiles: tuple[float, float] = DISPLAY_PERCENTILES) -> tuple[float, float]:
+    """Colour-scale limits ``(low_px, high_px)``: robust percentiles of the valid values of all maps.
+
+    Scaling to the data (not to the searched range) keeps a scene whose disparities fill a small
+    part of the search readable; values outside are drawn in the end colours (the colour bar's
+    arrows). ``(0, 1)`` when no map has a valid value.
+    """
+    import numpy as np
+
+    values = [np.asarray(d, dtype=np.float32) for d in disparities_px]
+    valid = np.concatenate([v[np.isfinite(v)].ravel() for v in values]) if values else np.empty(0)
+    if valid.size == 0:
+        return 0.0, 1.0
+    low, high = (float(v) for v in np.percentile(valid, percentiles))
+    if high - low < 1e-3:
+        low, high = low - 0.5, high + 0.5
+    return low, high
+
+
+def disparity_colors(disparity_px, *, range_px: tuple[float, float]):
+    """RGBA float image (H, W, 4) of a disparity map: turbo over ``range_px``, invalid black."""
+    import matplotlib
+    import numpy as np
+
+    d = np.asarray(disparity_px, dtype=np.float32)
+    low, high = range_px
+    cmap = matplotlib.colormaps[DISPARITY_CMAP].with_extremes(bad=(*INVALID_RGB, 1.0))
+    return cmap(np.ma.masked_invalid((d - low) / max(high - low, 1e-6)))
+
+
+def draw_disparity(ax, disparity_px, *, range_px: tuple[float, float], background=None):
+    """Draw a disparity map on ``ax`` (over a gray ``background`` where invalid, else black).
+
+    Returns a ScalarMappable with the same colours for ``fig.colorbar``.
+    """
+    import matplotlib
+    import numpy as np
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    rgba = disparity_colors(disparity_px, range_px=range_px)
+    if background is not None:
+        ax.imshow(background, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        rgba[..., 3] = np.where(np.isfinite(np.asarray(disparity_px, np.float32)), 1.0, 0.0)
+    ax.imshow(rgba, interpolation="nearest")
+    return ScalarMappable(norm=Normalize(*range_px), cmap=matplotlib.colormaps[DISPARITY_CMAP])
+
+
+def disparity_colorbar(fig, mappable, ax, *, range_px: tuple[float, float], **kwargs):
+    """Colour bar in pixels that says what the colours and black mean."""
+    return fig.colorbar(mappable, ax=ax, extend="both",
+                        label=f"disparity [px], {DISPLAY_PERCENTILES[0]:g}-{DISPLAY_PERCENTILES[1]:g} "
+                              f"percentile ({range_px[0]:.1f}-{range_px[1]:.1f} px)", **kwargs)
+
+
+def save_disparity_preview(path: str | os.PathLike, disparity_px, *, title: str = "disparity",
+                           range_px: tuple[float, float] | None = None, background=None) -> Path:
+    """A disparity preview PNG: the map in colour with a colour bar in pixels, invalid black.
+
+    ``range_px`` defaults to :func:`disparity_range_px` (robust percentiles of the map).
+    """
+    import numpy as np
+
+    d = np.asarray(disparity_px, dtype=np.float32)
+    if d.ndim != 2:
+        raise ValueError(f"disparity_px must be HxW, got shape {d.shape}")
+    range_px = disparity_range_px(d) if range_px is None else range_px
+    height, width = d.shape
+    width_in = min(14.0, max(6.0, width / 100 + 1.8))
+    image_w_in = width_in - 1.8
+    fig = new_figure(width_in, image_w_in * height / width + 1.3)
+    ax = fig.add_subplot(1, 1, 1)
+    mappable = draw_disparity(ax, d, range_px=range_px, background=background)
+    disparity_colorbar(fig, mappable, ax, range_px=range_px, fraction=0.04, pad=0.02)
+    valid = float(np.isfinite(d).mean())
+    ax.set_title(f"{title}: {valid:.0%} of pixels with a disparity "
+                 f"({'transparent' if background is not None else 'black'} = none)", fontsize=10)
+    ax.set_axis_off()
+    return save_figure(fig, path)

@@ -23,10 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ._plot import new_figure, save_figure
+from ._plot import disparity_colorbar, disparity_range_px, draw_disparity, new_figure, save_figure
 from .io import atomic_write, read_disparity, read_image, write_image
 
-__all__ = ["DemoResult", "run_demo"]
+__all__ = ["DemoResult", "run_demo", "DEMO_STEPS"]
+
+DEMO_STEPS = ("world", "calibration", "matching", "mapping", "planning", "report")
 
 
 @dataclass(frozen=True)
@@ -36,24 +38,30 @@ class DemoResult:
     metrics: dict
 
 
-def _disparity_panels(path: Path, panels: dict[str, np.ndarray], *, top: float, background: np.ndarray) -> Path:
-    """Paper Figs 7-10 style: several disparity maps over the left image, one colour scale."""
+def _disparity_panels(path: Path, panels: dict[str, np.ndarray], *, range_px: tuple[float, float],
+                      background: np.ndarray) -> Path:
+    """Paper Figs 7-10 style: several disparity maps over the left image, one colour scale.
+
+    A panel title is ``"name\ndetails"`` (two short lines, so neighbouring titles never overlap).
+    """
     names = list(panels)
     cols = 3
     rows = math.ceil(len(names) / cols)
-    fig = new_figure(4.2 * cols, 3.3 * rows)
+    fig = new_figure(4.4 * cols + 0.8, 3.6 * rows)
+    fig.set_layout_engine("constrained")
+    mappable = None
     for k, name in enumerate(names):
         ax = fig.add_subplot(rows, cols, k + 1)
         img = panels[name]
         if img.dtype == np.uint8:
             ax.imshow(img, cmap="gray", vmin=0, vmax=255)
+            ax.set_title(name, fontsize=9)
         else:
-            ax.imshow(background, cmap="gray", vmin=0, vmax=255, alpha=0.5)
-            im = ax.imshow(np.ma.masked_invalid(img), cmap="turbo", vmin=0, vmax=top, interpolation="nearest")
-        valid = np.isfinite(img).mean() * 100 if img.dtype != np.uint8 else None
-        ax.set_title(name + (f"  ({valid:.0f}% valid)" if valid is not None else ""), fontsize=9)
+            mappable = draw_disparity(ax, img, range_px=range_px, background=background // 2 + 64)
+            ax.set_title(f"{name}\n{np.isfinite(img).mean():.0%} of pixels with a disparity", fontsize=9)
         ax.set_axis_off()
-    fig.colorbar(im, ax=fig.axes, label="disparity [px]", fraction=0.02)
+    if mappable is not None:
+        disparity_colorbar(fig, mappable, fig.axes, range_px=range_px, fraction=0.02, pad=0.01)
     return save_figure(fig, path)
 
 
@@ -105,15 +113,19 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
         raise ValueError(f"output directory {out} already exists and is not empty")
     out.mkdir(parents=True, exist_ok=True)
     metrics: dict = {"seed": seed, "timing_s": {}}
-    steps = tqdm(total=6, desc="demo", unit="step", disable=not progress)
+    steps = tqdm(total=len(DEMO_STEPS), desc="demo", unit="step", disable=not progress)
+
+    def begin(name: str) -> float:
+        """Show the step that is running now (``demo: world 0/6``); return its start time."""
+        steps.set_description_str(f"demo: {name}")
+        return time.perf_counter()
 
     def done(name: str, t0: float) -> None:
         metrics["timing_s"][name] = round(time.perf_counter() - t0, 2)
-        steps.set_postfix_str(name)
         steps.update()
 
     # 1. world ------------------------------------------------------------------------------
-    t0 = time.perf_counter()
+    t0 = begin("world")
     data_dir = write_synthetic_dataset(out / "data", seed=seed, n_frames=n_frames, progress=False)
     manifest = read_manifest(data_dir)
     truth = manifest.calibration
@@ -129,7 +141,7 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     done("world", t0)
 
     # 2. calibration: chessboard images -> corners -> GA + LM -> Fusiello ------------------------
-    t0 = time.perf_counter()
+    t0 = begin("calibration")
     calib_dir = out / "calibration"
     views = render_calibration_views(default_stereo(*truth.size), target="chessboard", board=(9, 6),
                                      spacing_m=0.03, n_views=n_calibration_views, seed=seed)
@@ -165,7 +177,7 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     done("calibration", t0)
 
     # 3.-4. one frame through matching, rejection and 3D (figures) --------------------------------
-    t0 = time.perf_counter()
+    t0 = begin("matching")
     record = manifest.frames[0]
     raw_l, raw_r = read_image(record.left), read_image(record.right)
     left, right = estimated.rectify(raw_l, raw_r)
@@ -184,18 +196,18 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     result = compute_disparity(left, right, calibration=estimated, preset=PipelineConfig().preset)
     rejected = reject_uniform(result.disparity_px, left)
     obstacles = detect_obstacles(rejected.disparity_px, estimated, rig=manifest.rig, pan_rad=record.pan_rad)
-    top = float(max(level.band_px[1] for level in result.plan.levels))
     panels = {"rectified left (estimated calibration)": left}
     names = {1: "III (full resolution)", 2: "II (1/2 horizontal)", 4: "I (1/4 horizontal)"}
     for level, d in zip(result.plan.levels, result.levels):
         depth = (f", {level.depth_band_m[0]:.1f}-{level.depth_band_m[1]:.1f} m" if level.depth_band_m else "")
-        panels[f"range {names.get(level.decimation, level.decimation)}: "
+        panels[f"range {names.get(level.decimation, level.decimation)}\n"
                f"{level.band_px[0]:.0f}-{level.band_px[1]:.0f} px{depth}"] = d
     panels["combined (eq. 12)"] = result.disparity_px
     panels["after ground suppression (eq. 13)"] = rejected.disparity_px
     gt = read_disparity(record.gt_disparity)
     panels["ground truth"] = gt
-    _disparity_panels(out / "disparity.png", panels, top=top, background=left)
+    _disparity_panels(out / "disparity.png", panels, range_px=disparity_range_px(gt, result.disparity_px),
+                      background=left)
     lo, hi = scan_angles_of_camera(estimated, pan_rad=record.pan_rad)
     scan = laser_scan_from_points(obstacles.obstacle_points_robot, angle_min_rad=lo, angle_max_rad=hi,
                                   angle_increment_rad=math.radians(0.5), range_min_m=0.1, range_max_m=8.0)
@@ -209,7 +221,7 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     done("matching", t0)
 
     # 5. map along the path (estimated calibration, raw images), union and single range -----------
-    t0 = time.perf_counter()
+    t0 = begin("mapping")
     config = PipelineConfig()
     run = build_map(manifest, config=config, calibration=estimated, progress=False)
     union = fuse(run.observations, grid=config.grid, config=config.with_fusion("union").mapping)
@@ -225,7 +237,7 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     done("mapping", t0)
 
     # 6. plan through the map ---------------------------------------------------------------------
-    t0 = time.perf_counter()
+    t0 = begin("planning")
     start, goal = tuple(path_xy[0, :2]), tuple(path_xy[-1, :2])
     plan = plan_path(run.grid.to_ros_map(), start, goal, robot_radius_m=0.2, unknown_is_obstacle=False)
     metrics["plan"] = {"success": plan.success, "message": plan.message, "length_m": plan.length_m,
@@ -234,13 +246,16 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     plot_map(union, out / "map" / "map_union.png", robot_path=path_xy, ground_truth=gt_map,
              title="occupancy grid (paper's union)")
     done("planning", t0)
-    steps.close()
 
-    with atomic_write(out / "metrics.json") as tmp:
-        tmp.write_text(json.dumps(metrics, indent=2, default=float))
+    t0 = begin("report")
     report = out / "report.md"
     with atomic_write(report) as tmp:
         tmp.write_text(_report_markdown(metrics, files))
+    done("report", t0)
+    with atomic_write(out / "metrics.json") as tmp:
+        tmp.write_text(json.dumps(metrics, indent=2, default=float))
+    steps.set_description_str("demo: done")
+    steps.close()
     return DemoResult(out_dir=out, report=report, metrics=metrics)
 
 

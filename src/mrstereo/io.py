@@ -172,13 +172,18 @@ def write_disparity(path: str | os.PathLike, disparity_px: np.ndarray) -> None:
         raise ValueError(f"disparity output must end in .pfm or .png, got {path}")
 
 
-def colorize_disparity(disparity_px: np.ndarray, *, max_disparity_px: float | None = None) -> np.ndarray:
-    """Colour preview (BGR uint8) of a disparity map; invalid pixels are black."""
+def colorize_disparity(disparity_px: np.ndarray, *, max_disparity_px: float | None = None,
+                       range_px: tuple[float, float] | None = None) -> np.ndarray:
+    """Colour image (BGR uint8) of a disparity map: turbo, invalid pixels black.
+
+    The colour scale spans ``range_px`` (low, high) in pixels; default: the 1st-99th percentile of
+    the valid values (``mrstereo._plot.disparity_range_px``), or ``0 .. max_disparity_px`` when that
+    is given. Same colours as the ``disparity --plot`` preview, which adds a colour bar.
+    """
+    from ._plot import disparity_colors, disparity_range_px
+
     d = np.asarray(disparity_px, dtype=np.float32)
-    valid = np.isfinite(d)
-    top = max_disparity_px if max_disparity_px else (float(np.nanmax(d)) if valid.any() else 1.0)
-    scaled = np.zeros(d.shape, np.uint8)
-    scaled[valid] = np.clip(d[valid] / max(top, 1e-6) * 255.0, 0, 255).astype(np.uint8)
-    color = cv2.applyColorMap(scaled, cv2.COLORMAP_TURBO)
-    color[~valid] = 0
-    return color
+    if range_px is None:
+        range_px = (0.0, float(max_disparity_px)) if max_disparity_px else disparity_range_px(d)
+    rgb = np.rint(disparity_colors(d, range_px=range_px)[..., :3] * 255).astype(np.uint8)
+    return np.ascontiguousarray(rgb[..., ::-1])

@@ -104,7 +104,7 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 
     Left and right images are paired by header stamp, the calibration comes
     from camera_info (or --calib), the robot pose from --odom-topic or --tf.
-    Every command that reads a dataset MANIFEST then reads the recording.
+    Every command that reads a DATASET then reads the recording.
     """
     from ..bag import export_bag
 
@@ -115,7 +115,7 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 
 
 @click.command("batch")
-@click.argument("manifests", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.argument("manifests", nargs=-1, required=True, metavar="DATASETS...", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output directory: one folder per dataset and summary.json.")
 @worker_options

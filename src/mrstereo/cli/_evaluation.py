@@ -27,16 +27,20 @@ def _write_text(path: Path, text: str) -> None:
 @click.option("--max-disparity", "max_disparity", type=int, default=None,
               help="Disparity search range in pixels for every scene (default: each scene's ndisp or "
                    "ground-truth maximum rounded up to 16).")
-@click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--no-progress", is_flag=True, hidden=True, help="Old spelling of --quiet.")
 @worker_options
-def evaluate(dirs, methods, json_out, markdown_out, max_disparity, no_progress, workers, scheduler, processes):
-    """Score matchers on benchmark scene folders DIR... and print a markdown table.
+def evaluate(dirs, methods, json_out, markdown_out, max_disparity, quiet, no_progress, workers, scheduler,
+             processes):
+    """Score matchers on scene folders DIRS... and print a markdown table.
 
-    Each DIR is one scene: Middlebury 2001/2003/2005/2006/2014 or KITTI 2012/2015, detected from
-    its files (see docs/evaluation.md). Metrics are on non-occluded pixels where the dataset has a
-    mask: bad-2 % dense (no estimate = bad), among estimated pixels, density and time.
+    Each DIR is one scene -- Middlebury 2001/2003/2005/2006/2014 or KITTI 2012/2015, detected from
+    its files -- or an mrstereo dataset (manifest.yaml, e.g. from `mrstereo synth`), whose frames
+    with ground-truth disparity are scored one by one (docs/evaluation.md). Metrics are on
+    non-occluded pixels where the dataset has a mask: bad-2 % dense (no estimate = bad), among
+    estimated pixels, density and time.
 
-    Example: mrstereo evaluate data/middlebury2003/teddy data/kitti2012/000070 --json out.json
+    Example: mrstereo evaluate "$(mrstereo data path teddy)" corridor --json out.json
     """
     check_workers(workers, scheduler, processes)
     names = tuple(m.strip() for m in methods.split(",") if m.strip())
@@ -61,7 +65,7 @@ def evaluate(dirs, methods, json_out, markdown_out, max_disparity, no_progress, 
             raise ValueError(f"output {out} is a directory")
     if json_out is not None and markdown_out is not None and json_out.resolve() == markdown_out.resolve():
         raise ValueError("--json and --markdown must be different files")
-    report = evaluate_scenes(dirs, methods=names, max_disparity_px=max_disparity, progress=not no_progress,
+    report = evaluate_scenes(dirs, methods=names, max_disparity_px=max_disparity, progress=not (quiet or no_progress),
                              workers=workers, scheduler=scheduler, processes=processes)
     markdown = report.to_markdown()
     if json_out is not None:

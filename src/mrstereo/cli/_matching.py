@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import click
 
@@ -46,13 +47,19 @@ def _bands(text: str) -> list[tuple[float, float]]:
 @click.option("--no-fill", is_flag=True, help="Leave holes as holes: no gap filling (robust preset).")
 @click.option("--aoi", help="Area of interest row0:row1,col0:col1 (half-open).")
 @click.option("--explain", is_flag=True, help="Print the multi-range plan (levels, bands, work).")
-@click.option("--color", "color_path", type=click.Path(dir_okay=False), help="Colour preview PNG.")
+@click.option("--plot", "color_path", type=click.Path(dir_okay=False),
+              help="Also write a colour preview PNG with a colour bar in pixels.")
+@click.option("--color", "color_alias", type=click.Path(dir_okay=False), hidden=True, help="Old spelling of --plot.")
 def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rectified, preset,
-              single_range, no_fill, aoi, explain, color_path):
+              single_range, no_fill, aoi, explain, color_path, color_alias):
     """Multi-range disparity of a stereo pair (paper section 3)."""
     from .. import io
     from ..matching import compute_disparity, preset_config
 
+    if color_alias is not None:
+        if color_path is not None:
+            raise click.UsageError("give --plot (or its old spelling --color), not both")
+        color_path = color_alias
     if max_disparity is not None and not (math.isfinite(max_disparity) and max_disparity > 0):
         raise ValueError(f"--max-disparity must be a finite number > 0, got {max_disparity}")
     if bands is not None and max_disparity is not None:
@@ -68,7 +75,9 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
     inputs = [left, right] + ([calib] if calib else [])
     io.refuse_overwrite_input(output, inputs)
     if color_path:
-        io.refuse_overwrite_input(color_path, inputs)
+        io.refuse_overwrite_input(color_path, inputs + [output])
+        if not color_path.lower().endswith(".png"):
+            raise ValueError(f"--plot must end in .png, got {color_path}")
     aoi_box = None
     if aoi is not None:
         try:
@@ -101,8 +110,9 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
         click.echo(result.plan.describe())
     io.write_disparity(output, result.disparity_px)
     if color_path:
-        top = max(level.band_px[1] for level in result.plan.levels)
-        io.write_image(color_path, io.colorize_disparity(result.disparity_px, max_disparity_px=top))
+        from .._plot import save_disparity_preview
+
+        save_disparity_preview(color_path, result.disparity_px, title=f"disparity of {Path(left).name}")
     valid = float((result.disparity_px == result.disparity_px).mean())
     click.echo(f"wrote {output}: {valid:.0%} of pixels with a disparity", err=True)
 

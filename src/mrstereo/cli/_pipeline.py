@@ -12,7 +12,7 @@ __all__ = ["COMMANDS"]
 
 
 @click.command("map")
-@click.argument("manifest", required=False, type=click.Path(path_type=Path))
+@click.argument("manifest", required=False, metavar="[DATASET]", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (map.pgm, map.yaml, map.png, log_odds.npy, metrics.json).")
 @click.option("--calib", "calib", type=click.Path(dir_okay=False, path_type=Path),
@@ -30,13 +30,13 @@ __all__ = ["COMMANDS"]
               help="World position of the lower-left map corner [m].")
 @worker_options
 @click.option("--bag", "bag", type=click.Path(path_type=Path),
-              help="Map a ROS 1 .bag / ROS 2 bag directory instead of a MANIFEST (see the topic options).")
+              help="Map a ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
 @bag_options
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
                 resolution_m: float, size_m: str, origin_m: str, workers: int | None, scheduler: str | None, processes: bool,
                 bag: Path | None, quiet: bool, **bag_kw) -> None:
-    """Build an occupancy grid from the stereo frames of a dataset MANIFEST (docs/dataset.md)
+    """Build an occupancy grid from the stereo frames of a DATASET directory (or its manifest.yaml, docs/dataset.md)
     or of a ROS bag (--bag, docs/scale-out.md).
 
     Every frame is rectified, matched (multi-range), ground-suppressed (eq. 13),
@@ -56,7 +56,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
 
     check_workers(workers, scheduler, processes)
     if (manifest is None) == (bag is None):
-        raise click.UsageError("give a MANIFEST or --bag FILE (one of them)")
+        raise click.UsageError("give a DATASET or --bag FILE (one of them)")
     (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
     grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
     config = PipelineConfig(preset=preset, grid=grid).with_fusion(fusion)

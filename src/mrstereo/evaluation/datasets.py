@@ -1,12 +1,15 @@
-"""Readers for stereo benchmark scenes with ground truth (Middlebury, KITTI).
+"""Readers for stereo scenes with ground truth (Middlebury, KITTI, mrstereo datasets).
 
 :func:`load_scene` takes one scene directory as the benchmarks distribute it,
 recognizes its layout from the file names, and returns a :class:`Scene` with
 the rectified pair, the ground-truth disparity in pixels (NaN = unknown), the
 non-occluded mask when the dataset has one, and the disparity search range.
+:func:`load_scenes` returns every scene of a directory: one for a benchmark
+folder, one per frame with ground-truth disparity for an mrstereo dataset
+(``manifest.yaml``, docs/dataset.md; what ``mrstereo synth`` writes).
 
-Layouts and ground-truth encodings (``/work/shared/data/SOURCES.md`` and the
-benchmarks' own pages):
+Layouts and ground-truth encodings (the sample data's provenance table,
+:mod:`mrstereo.data`, and the benchmarks' own pages):
 
 ===================  =========================================  ===========================================
 layout               files                                      ground truth
@@ -26,6 +29,10 @@ kitti2015            ``image_2`` / ``image_3`` +                as KITTI 2012
                      ``disp_noc_0`` and / or ``disp_occ_0``
 middlebury2001/2003  ``imL.png`` / ``imR.png`` +                ``value / scale``, scale and max disparity
 (v2 bundle)          ``groundtruth.png`` + ``info.txt``          from ``info.txt`` (as LocalExpStereo ships)
+mrstereo             ``manifest.yaml`` with ``left_rect`` /      ``gt_disparity`` PFM in pixels of the
+                     ``right_rect`` (or raw pairs, rectified     rectified left image, ``inf`` = unknown
+                     with the dataset's calibration) and
+                     ``gt_disparity`` per frame
 ===================  =========================================  ===========================================
 
 Middlebury 2001 and 2003 scenes share the file names ``im2``/``im6``/``disp2``
@@ -50,15 +57,17 @@ import numpy as np
 
 from mrstereo.io import read_image, read_kitti_disparity, read_pfm
 
-__all__ = ["Scene", "load_scene", "LAYOUTS", "photometric_error", "search_range_px"]
+__all__ = ["Scene", "load_scene", "load_scenes", "LAYOUTS", "photometric_error", "search_range_px"]
 
-LAYOUTS = ("middlebury2001", "middlebury2003", "middlebury2005", "middlebury2014", "kitti2012", "kitti2015")
+LAYOUTS = ("middlebury2001", "middlebury2003", "middlebury2005", "middlebury2014", "kitti2012", "kitti2015",
+           "mrstereo")
 
 _EXPECTED = (
     "one of: Middlebury v2 bundle (imL.png, imR.png, groundtruth.png, info.txt); Middlebury 2001 Tsukuba (scene1.row3.col3.ppm, scene1.row3.col4.ppm, truedisp.row3.col3.pgm); "
     "Middlebury 2001/2003 (im2, im6, disp2 as .ppm/.pgm/.png); Middlebury 2005/2006 (view1.png, view5.png, "
     "disp1.png); Middlebury 2014 (im0.png, im1.png, disp0.pfm); KITTI 2012 (image_0/, image_1/, disp_noc/ or "
-    "disp_occ/); KITTI 2015 (image_2/, image_3/, disp_noc_0/ or disp_occ_0/)"
+    "disp_occ/); KITTI 2015 (image_2/, image_3/, disp_noc_0/ or disp_occ_0/); an mrstereo dataset "
+    "(manifest.yaml with gt_disparity per frame, as `mrstereo synth` writes)"
 )
 
 
@@ -145,8 +154,10 @@ def load_scene(directory, *, frame: str | None = None) -> Scene:
         A scene folder in one of the layouts of :data:`LAYOUTS` (see the
         module docstring for the files each needs).
     frame : str, optional
-        KITTI only: the frame name (e.g. ``"000070_10"``) when the folder holds
+        KITTI: the frame name (e.g. ``"000070_10"``) when the folder holds
         several frames. Default: the only ``*_10.png`` frame with ground truth.
+        mrstereo dataset: the stem of the frame's ``gt_disparity`` file (e.g.
+        ``"000003"``). Default: the only frame with ground truth.
 
     Returns
     -------
@@ -160,11 +171,9 @@ def load_scene(directory, *, frame: str | None = None) -> Scene:
         The folder matches no known layout (the message lists what was
         expected) or its files disagree in size.
     """
-    path = Path(directory)
-    if not path.exists():
-        raise FileNotFoundError(f"scene directory not found: {path}")
-    if not path.is_dir():
-        raise ValueError(f"scene must be a directory, got the file {path}")
+    path = _directory(directory)
+    if (path / _MANIFEST).is_file():
+        return _one_dataset_frame(path, frame)
     for reader in (_read_kitti, _read_middlebury2014, _read_middlebury2005, _read_tsukuba,
                    _read_middlebury_im2_im6, _read_middlebury_v2_bundle):
         scene = reader(path, frame)
@@ -172,6 +181,85 @@ def load_scene(directory, *, frame: str | None = None) -> Scene:
             _check_sizes(scene)
             return scene
     raise ValueError(f"{path} matches no known stereo dataset layout; expected {_EXPECTED}")
+
+
+def load_scenes(directory) -> list[Scene]:
+    """Every scene of ``directory``: one per frame with ground-truth disparity for an mrstereo
+    dataset (in manifest order, named ``<dataset folder>/<frame>``), else ``[load_scene(directory)]``.
+
+    Raises as :func:`load_scene`; an mrstereo dataset without any ``gt_disparity`` is a ``ValueError``.
+    """
+    path = _directory(directory)
+    if (path / _MANIFEST).is_file():
+        return [_dataset_scene(path, manifest, record) for manifest, record in _dataset_frames(path)]
+    return [load_scene(path)]
+
+
+def _directory(directory) -> Path:
+    path = Path(directory)
+    if not path.exists():
+        raise FileNotFoundError(f"scene directory not found: {path}")
+    if not path.is_dir():
+        raise ValueError(f"scene must be a directory, got the file {path}")
+    return path
+
+
+# --------------------------------------------------------------------------- mrstereo datasets
+
+_MANIFEST = "manifest.yaml"
+
+
+def _dataset_frames(path: Path) -> list:
+    """(manifest, frame record) of every frame with ground-truth disparity."""
+    from mrstereo.recording import read_manifest
+
+    manifest = read_manifest(path)
+    frames = [(manifest, f) for f in manifest.frames if f.gt_disparity is not None]
+    if not frames:
+        raise ValueError(f"{path}: the mrstereo dataset has no frame with ground-truth disparity "
+                         f"(gt_disparity in {_MANIFEST}); nothing to evaluate")
+    return frames
+
+
+def _one_dataset_frame(path: Path, frame: str | None) -> Scene:
+    frames = _dataset_frames(path)
+    names = [record.gt_disparity.stem for _, record in frames]
+    if frame is None:
+        if len(frames) != 1:
+            raise ValueError(f"{path}: the dataset has {len(frames)} frames with ground truth "
+                             f"({', '.join(names[:3])}{', ...' if len(names) > 3 else ''}); pass frame= "
+                             "or use load_scenes")
+        return _dataset_scene(path, *frames[0])
+    if frame not in names:
+        raise ValueError(f"{path}: no frame {frame!r} with ground truth; frames: "
+                         f"{', '.join(names[:5])}{', ...' if len(names) > 5 else ''}")
+    return _dataset_scene(path, *frames[names.index(frame)])
+
+
+def _dataset_scene(path: Path, manifest, record) -> Scene:
+    """One frame of an mrstereo dataset: the rectified pair (rectified here from the raw pair and the
+    dataset's calibration when the frame has no rectified images) and its PFM ground truth."""
+    if record.has_rectified:
+        left, right = _uint8_view(record.left_rect), _uint8_view(record.right_rect)
+        how = "rectified pair"
+    else:
+        left, right = _uint8_view(record.left), _uint8_view(record.right)
+        if not manifest.calibration.is_rectified:
+            left, right = manifest.calibration.rectify(left, right)
+        how = "raw pair rectified with the dataset's calibration"
+    gt = read_pfm(record.gt_disparity)
+    if gt.ndim != 2:
+        raise ValueError(f"{record.gt_disparity}: expected a single-channel PFM disparity map, got shape {gt.shape}")
+    gt = np.where(np.isfinite(gt), gt, np.nan).astype(np.float32)
+    return _checked(Scene(name=f"{path.name}/{record.gt_disparity.stem}", left=left, right=right,
+                          gt_disparity_px=gt, nonocc_mask=None, max_disparity_px=search_range_px(gt),
+                          layout="mrstereo", directory=path,
+                          gt_description=f"{record.gt_disparity.relative_to(manifest.root)} (pixels); {how}"))
+
+
+def _checked(scene: Scene) -> Scene:
+    _check_sizes(scene)
+    return scene
 
 
 # --------------------------------------------------------------------------- helpers

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from mrstereo.evaluation.baselines import BASELINES
-from mrstereo.evaluation.datasets import Scene, load_scene
+from mrstereo.evaluation.datasets import Scene, load_scenes
 from mrstereo.evaluation.metrics import DisparityMetrics, disparity_metrics
 
 __all__ = ["METHODS", "EvaluationRow", "EvaluationReport", "evaluate_scenes", "run_method"]
@@ -247,7 +247,8 @@ def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_dis
     Parameters
     ----------
     dirs : iterable of str or Path
-        Scene directories in any layout :func:`~mrstereo.evaluation.datasets.load_scene` reads.
+        Scene directories in any layout :func:`~mrstereo.evaluation.datasets.load_scene` reads; an
+        mrstereo dataset (``manifest.yaml``) contributes every frame with ground-truth disparity.
     methods : sequence of str
         Some of :data:`METHODS`.
     max_disparity_px : int, optional
@@ -272,7 +273,7 @@ def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_dis
     if max_disparity_px is not None:
         from mrstereo import _checks
         max_disparity_px = _checks.positive_int("max_disparity_px", max_disparity_px)
-    scenes = [load_scene(d) for d in dirs]  # fail on a bad directory before any long work
+    scenes = [scene for d in dirs for scene in load_scenes(d)]  # fail on a bad directory before any work
     labels = []
     for scene in scenes:
         label = scene.name

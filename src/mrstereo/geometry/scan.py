@@ -208,8 +208,10 @@ def plot_top_view(path: str | os.PathLike, *, obstacle_points_robot=None, floor_
                   y_range_m: tuple[float, float] = (-3.0, 3.0), title: str = "top view") -> None:
     """PNG of the top view: floor points, obstacle points and the scan (matplotlib Agg).
 
-    Drawn as the paper's figures: lateral position across (left of the robot
-    on the left), depth upward, the robot at the bottom centre.
+    Drawn as the paper's figures: depth upward, the robot at the bottom centre,
+    what is on the robot's left on the figure's left. The horizontal axis is the
+    robot-frame y (REP 103: left is +y), so its ticks run from +y on the left to
+    -y on the right and an obstacle at y = +1 m is drawn 1 m left of the robot.
     """
     import matplotlib
     matplotlib.use("Agg")
@@ -226,24 +228,24 @@ def plot_top_view(path: str | os.PathLike, *, obstacle_points_robot=None, floor_
                 p = _checks.points3(label + "_points_robot", pts)
                 if p.shape[0] > 60000:           # a plot does not need every point
                     p = p[:: int(math.ceil(p.shape[0] / 60000))]
-                ax.scatter(-p[:, 1], p[:, 0], s=size, c=colour, linewidths=0)
+                ax.scatter(p[:, 1], p[:, 0], s=size, c=colour, linewidths=0)
                 handles.append(Line2D([], [], ls="", marker="o", ms=4, color=colour,
                                       label=f"{label} points ({len(pts)})"))
         if scan is not None:
             xy = scan.points_robot()
-            ax.plot(-xy[:, 1], xy[:, 0], ".", color="#1040c0", ms=3)
+            ax.plot(xy[:, 1], xy[:, 0], ".", color="#1040c0", ms=3)
             handles.append(Line2D([], [], ls="", marker=".", ms=8, color="#1040c0",
                                   label=f"laser scan ({len(xy)} returns)"))
             for a in (scan.angle_min_rad, scan.angle_max_rad):
-                ax.plot([0, -scan.range_max_m * math.sin(a)], [0, scan.range_max_m * math.cos(a)],
+                ax.plot([0, scan.range_max_m * math.sin(a)], [0, scan.range_max_m * math.cos(a)],
                         "--", color="0.6", lw=0.8)
         ax.plot([0], [0], "k^", ms=9)
         handles.append(Line2D([], [], ls="", marker="^", ms=7, color="k", label="robot"))
-        ax.set_xlim(-y_range_m[1], -y_range_m[0])
+        ax.set_xlim(y_range_m[1], y_range_m[0])       # +y (the robot's left) on the left
         ax.set_ylim(*x_range_m)
         ax.set_aspect("equal")
-        ax.set_xlabel("lateral [m] (left of the robot to the left)")
-        ax.set_ylabel("forward x [m]")
+        ax.set_xlabel("y [m] (left +, right -)")
+        ax.set_ylabel("x [m] (forward)")
         ax.set_title(title)
         ax.grid(True, lw=0.3)
         ax.legend(handles=handles, loc="upper right", fontsize=8)

@@ -15,6 +15,8 @@ from .rosmap import RosMap
 
 __all__ = ["plot_map"]
 
+_UNKNOWN = "#cfd8e6"      # pale blue: cells never observed
+
 
 def _probability(value) -> tuple[np.ndarray, object]:
     if isinstance(value, RosMap):
@@ -38,7 +40,8 @@ def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fo
     Parameters
     ----------
     grid_or_rosmap : OccupancyGrid or RosMap
-        Occupancy shown as gray (black occupied, white free, 1 - p between), unknown pale blue.
+        Occupancy shown as gray (black occupied, white free, 1 - p between), unknown pale blue;
+        the legend under the map names the shades, the path and the start and goal.
     path_png : path-like
         Output file, written atomically.
     robot_path : ndarray of shape (K, 3) or (K, 2), optional
@@ -53,18 +56,18 @@ def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fo
     import matplotlib
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    from matplotlib.patches import Wedge
+    from matplotlib.patches import Patch, Wedge
 
     probability, grid = _probability(grid_or_rosmap)
     rows, cols = grid.shape
     extent = (grid.origin_x_m, grid.origin_x_m + cols * grid.resolution_m,
               grid.origin_y_m, grid.origin_y_m + rows * grid.resolution_m)
     width_in = 10.0
-    height_in = max(3.0, width_in * rows / cols + 1.0)
+    height_in = max(3.0, width_in * rows / cols + 1.0) + 0.8     # + the legend under the map
     fig = Figure(figsize=(width_in, height_in), dpi=100)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
-    cmap = matplotlib.colormaps["gray"].with_extremes(bad="#cfd8e6")
+    cmap = matplotlib.colormaps["gray"].with_extremes(bad=_UNKNOWN)
     ax.imshow(np.ma.masked_invalid(1.0 - probability), cmap=cmap, vmin=0.0, vmax=1.0,
               origin="lower", extent=extent, interpolation="nearest")
     if ground_truth is not None:
@@ -99,7 +102,8 @@ def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fo
         path = _array("planned_path", planned_path, 2)
         if len(path):
             ax.plot(path[:, 0], path[:, 1], "-", color="tab:green", lw=2, label="planned path")
-            ax.plot(path[[0, -1], 0], path[[0, -1], 1], "s", color="tab:green", ms=6)
+            ax.plot(path[0, 0], path[0, 1], "o", color="tab:green", mec="k", ms=8, label="start")
+            ax.plot(path[-1, 0], path[-1, 1], "*", color="tab:green", mec="k", ms=13, label="goal")
     ax.set_xlim(extent[0], extent[1])
     ax.set_ylim(extent[2], extent[3])
     ax.set_aspect("equal")
@@ -107,8 +111,15 @@ def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fo
     ax.set_ylabel("y [m] (left)")
     if title:
         ax.set_title(title)
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
+    shades = [Patch(facecolor="white", edgecolor="0.5", label="free"),
+              Patch(facecolor="black", edgecolor="0.5", label="occupied"),
+              Patch(facecolor=_UNKNOWN, edgecolor="0.5", label="unknown (never observed)")]
+    known = probability[np.isfinite(probability)]
+    if np.any((known > 0.02) & (known < 0.98)):
+        shades.insert(1, Patch(facecolor="0.55", edgecolor="0.5", label="gray: 1 - p(occupied)"))
+    handles, _ = ax.get_legend_handles_labels()
+    ax.legend(handles=shades + handles, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=4,
+              fontsize=8, frameon=False)
     fig.tight_layout()
     with atomic_write(path_png) as tmp:
         fig.savefig(tmp)

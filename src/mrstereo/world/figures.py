@@ -1,8 +1,8 @@
 """PNG figures of stereo frames and disparity maps (matplotlib Agg).
 
 Reusable by every command that shows results (``mrstereo demo``). Each function
-writes one PNG atomically and returns its path. Disparity colours follow
-:func:`mrstereo.io.colorize_disparity` (turbo, invalid black).
+writes one PNG atomically and returns its path. Disparity colours come from
+``mrstereo._plot`` (turbo over robust percentiles, invalid black), as everywhere.
 """
 from __future__ import annotations
 
@@ -36,19 +36,11 @@ def save_stereo_figure(path: str | os.PathLike, images: dict[str, np.ndarray], *
 
 def save_disparity_figure(path: str | os.PathLike, disparity_px: np.ndarray, *, title: str = "disparity",
                           max_disparity_px: float | None = None, background: np.ndarray | None = None) -> Path:
-    """Colourised disparity (turbo, NaN shown transparent over ``background`` or black) with a colour bar."""
-    d = np.asarray(disparity_px, dtype=np.float32)
-    if d.ndim != 2:
-        raise ValueError(f"disparity_px must be HxW, got shape {d.shape}")
-    top = max_disparity_px if max_disparity_px else (float(np.nanmax(d)) if np.isfinite(d).any() else 1.0)
-    fig = _figure(5.5, 4.2)
-    ax = fig.add_subplot(1, 1, 1)
-    if background is not None:
-        ax.imshow(background, cmap="gray", vmin=0, vmax=255)
-    else:
-        ax.imshow(np.zeros_like(d), cmap="gray", vmin=0, vmax=1)
-    im = ax.imshow(np.ma.masked_invalid(d), cmap="turbo", vmin=0.0, vmax=top, interpolation="nearest")
-    fig.colorbar(im, ax=ax, label="disparity [px]", fraction=0.04)
-    ax.set_title(title, fontsize=10)
-    ax.set_axis_off()
-    return _save(fig, path)
+    """Colourised disparity (NaN transparent over ``background``, else black) with a colour bar in px.
+
+    The scale spans ``0 .. max_disparity_px`` when given, else robust percentiles of the map.
+    """
+    from .._plot import save_disparity_preview
+
+    range_px = (0.0, float(max_disparity_px)) if max_disparity_px else None
+    return save_disparity_preview(path, disparity_px, title=title, range_px=range_px, background=background)
