@@ -80,7 +80,7 @@ def test_cli_errors(tmp_path, capsys):
     capsys.readouterr()
     (tmp_path / "disp0.pfm").write_text("keep")
     assert entry(["evaluate", str(tmp_path), "--markdown", str(tmp_path / "disp0.pfm"), "--methods", "StereoBM"]) == 2
-    assert "would overwrite a file of the input scene" in capsys.readouterr().err
+    assert "would overwrite a file of the input folder" in capsys.readouterr().err
     assert (tmp_path / "disp0.pfm").read_text() == "keep"
 
 

@@ -6,6 +6,7 @@ expected and what arrived. The CLI turns these into one readable line.
 from __future__ import annotations
 
 import math
+import os
 from numbers import Real
 
 import numpy as np
@@ -45,6 +46,15 @@ def image(name: str, value) -> np.ndarray:
     if value.dtype != np.uint8 and not np.issubdtype(value.dtype, np.floating):
         if not np.issubdtype(value.dtype, np.integer):
             raise TypeError(f"{name} must be uint8 or float, got dtype {value.dtype}")
+    return value
+
+
+def image_dtype(name: str, value: np.ndarray, allowed=(np.uint8, np.uint16, np.float32, np.float64)) -> np.ndarray:
+    """Check an image (:func:`image`) and that its dtype is one of ``allowed`` (what OpenCV's warps take)."""
+    value = image(name, value)
+    if value.dtype not in [np.dtype(t) for t in allowed]:
+        raise TypeError(f"{name} must have dtype {', '.join(np.dtype(t).name for t in allowed)}; "
+                        f"got {value.dtype} (convert it with .astype)")
     return value
 
 
@@ -115,3 +125,35 @@ def rng(value) -> np.random.Generator:
     if value is None or (isinstance(value, (int, np.integer)) and not isinstance(value, bool)):
         return np.random.default_rng(value)
     raise TypeError(f"rng must be a numpy Generator, an int seed or None, got {type(value).__name__}")
+
+
+def memory_limit_bytes() -> int:
+    """The physical memory of this machine in bytes (the bound of :func:`fits_in_memory`)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):     # not a POSIX system: assume 16 GiB
+        return 16 << 30
+
+
+def format_bytes(n: float) -> str:
+    """``1.5 GiB``-style size."""
+    n = float(n)
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(n) < 1024 or unit == "PiB":
+            break
+        n /= 1024
+    if unit == "bytes":
+        return f"{n:.0f} bytes"
+    return f"{n:.1f} {unit}" if abs(n) < 1e6 else f"{n:.3g} {unit}"
+
+
+def fits_in_memory(name: str, nbytes: float, what: str, *, limit_bytes: int | None = None) -> None:
+    """Raise ``ValueError`` naming ``name`` when ``nbytes`` for ``what`` exceed the machine's memory.
+
+    Called before allocating, so that a mistyped size ends in a message with the size that
+    would be needed instead of a MemoryError deep in a kernel (or the system swapping).
+    """
+    limit = memory_limit_bytes() if limit_bytes is None else limit_bytes
+    if not math.isfinite(nbytes) or nbytes > limit:
+        raise ValueError(f"{name}: {what} would need {format_bytes(nbytes)} of memory, more than this "
+                         f"machine's {format_bytes(limit)}")

@@ -26,8 +26,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,17 +35,30 @@ from .camera import RigMount, StereoCamera
 from .geometry.pair import scan_from_pair
 from .geometry.ply import write_ply
 from .geometry.scan import write_scan_json
-from .io import atomic_write, write_disparity
+from .io import (atomic_write, check_output_dir, check_outputs, read_pfm, remove_stale_temporaries, temporary_dir,
+                 write_disparity)
+from .mapping.rosmap import ros_map_files
 from .parallel import ItemFailure, map_ordered
 from .pipeline import (FrameObservation, MapRun, PipelineConfig, frame_pair, fuse, observation_from_pair,
                        pair_options, write_map_outputs)
 from .recording import FrameRecord, Manifest, read_manifest
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
-           "SUMMARY_NAME"]
+           "dataset_files", "SUMMARY_NAME"]
 
 SUMMARY_NAME = "summary.json"
 _MAP_RECORD = "batch.json"
+
+
+def dataset_files(manifest: Manifest) -> list[Path]:
+    """Every file a run over ``manifest`` reads: the manifest, calibration, ground-truth map, images."""
+    files = [manifest.root / "manifest.yaml", manifest.calibration_path]
+    if manifest.ground_truth_map is not None:
+        files += ros_map_files(manifest.ground_truth_map)
+    for r in manifest.frames:
+        files += [p for p in (r.left, r.right, r.left_rect, r.right_rect, r.gt_disparity, r.gt_labels)
+                  if p is not None]
+    return files
 
 
 def frame_outputs(frames_dir: str | os.PathLike, index: int) -> dict[str, Path]:
@@ -105,6 +116,40 @@ def _save_observation(path: Path, obs: FrameObservation) -> None:
                  n_valid_disparity=obs.n_valid_disparity, ground_message=np.array(obs.ground_message))
 
 
+def _resume(files: dict[str, Path]) -> FrameObservation | None:
+    """The observation of a finished frame, or None when one of its four files is missing or unreadable
+    (then the frame is computed again)."""
+    if not all(p.is_file() for p in files.values()):
+        return None
+    try:
+        read_pfm(files["disparity"])
+        json.loads(files["scan"].read_text(encoding="utf-8"))
+        _check_ply(files["cloud"])
+        return _load_observation(files["observation"])
+    except Exception:                  # any damage: recompute (the files are rewritten atomically)
+        return None
+
+
+def _check_ply(path: Path) -> None:
+    """Raise ValueError unless ``path`` is a complete binary PLY (header and as many bytes as it declares)."""
+    with open(path, "rb") as fh:
+        header = fh.read(4096)
+    end = header.find(b"end_header\n")
+    if not header.startswith(b"ply\n") or end < 0:
+        raise ValueError(f"{path}: not a PLY file")
+    sizes = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
+             "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
+    count, stride = 0, 0
+    for line in header[:end].decode("ascii", "replace").splitlines():
+        words = line.split()
+        if words[:2] == ["element", "vertex"]:
+            count = int(words[2])
+        elif words[:1] == ["property"] and len(words) == 3:
+            stride += sizes[words[1]]
+    if path.stat().st_size < end + len(b"end_header\n") + count * stride:
+        raise ValueError(f"{path}: truncated")
+
+
 def _load_observation(path: Path) -> FrameObservation:
     with np.load(path) as z:
         return FrameObservation(index=int(z["index"]), pose=tuple(float(v) for v in z["pose"]),
@@ -160,22 +205,19 @@ def _map_done(map_dir: Path, n_frames: int) -> bool:
 
 
 def _write_map(run: MapRun, map_dir: Path, record: dict) -> None:
-    """Write the map outputs into a temporary directory and swap it into place."""
-    map_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".map.", suffix=".tmp", dir=map_dir.parent))
-    old = None
-    try:
+    """Write the map outputs into a temporary directory and swap it into place.
+
+    The temporary directory (``.map.PID.XXXX.tmp`` beside ``map_dir``) is removed on failure;
+    one left by a killed run is removed by the next :func:`run_batch` on the same output.
+    """
+    with temporary_dir(map_dir.parent, prefix="map") as staging:
+        tmp = staging / "map"
         write_map_outputs(run, tmp)
         (tmp / _MAP_RECORD).write_text(json.dumps(record, indent=1) + "\n")
         if map_dir.exists():
-            old = map_dir.with_name(f".map.old.{os.getpid()}")
+            old = staging / "old"
             os.replace(map_dir, old)
         os.replace(tmp, map_dir)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
-        if old is not None and old.exists():
-            shutil.rmtree(old, ignore_errors=True)
 
 
 def _map_run(manifest: Manifest, observations: list[FrameObservation], config: PipelineConfig) -> MapRun:
@@ -225,23 +267,30 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     if not datasets:
         raise ValueError("no datasets given")
     out = Path(out_dir)
-    for m in datasets:
-        if out.resolve() == m.root:
-            raise ValueError(f"output directory {out} is the dataset {m.root}; choose another one")
     names = _names(datasets)
+    inputs = [dataset_files(m) for m in datasets]
+    check_output_dir("out_dir", out, input_dirs=[m.root for m in datasets if out.resolve().is_relative_to(m.root.resolve())],
+                     input_kind="dataset")
+    check_outputs({"summary": out / SUMMARY_NAME}, [f for files in inputs for f in files])
+    for name in names:
+        check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, input_kind="dataset",
+                         input_dirs=[m.root for m in datasets], inputs=[f for files in inputs for f in files])
 
     tasks, observations, skipped, done_maps = [], {}, {}, set()
     for name, m in zip(names, datasets):
         frames_dir = out / name / "frames"
         frames_dir.mkdir(parents=True, exist_ok=True)
-        complete = [all(p.is_file() for p in frame_outputs(frames_dir, k).values()) for k in range(len(m.frames))]
+        remove_stale_temporaries(frames_dir)
+        remove_stale_temporaries(out / name)
+        loaded = {k: _resume(frame_outputs(frames_dir, k)) for k in range(len(m.frames))}
+        complete = [loaded[k] is not None for k in range(len(m.frames))]
         if maps and all(complete) and _map_done(out / name / "map", len(m.frames)):
             done_maps.add(name)
         skipped[name] = sum(complete)
         for k, record in enumerate(m.frames):
             if complete[k]:
                 if maps and name not in done_maps:
-                    observations[(name, k)] = _load_observation(frame_outputs(frames_dir, k)["observation"])
+                    observations[(name, k)] = loaded[k]
             else:
                 tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, rig=m.rig, config=config,
                                        frames_dir=frames_dir, dataset=name))

@@ -23,6 +23,7 @@ from pathlib import Path
 import yaml
 
 from .camera import RigMount, StereoCamera, read_stereo
+from .io import read_text
 
 __all__ = ["FrameRecord", "Manifest", "read_manifest", "write_manifest", "MANIFEST_NAME",
            "IMAGE_KEYS", "GT_KEYS"]
@@ -110,7 +111,7 @@ def read_manifest(path_or_dir: str | os.PathLike) -> Manifest:
     if not path.is_file():
         raise FileNotFoundError(f"dataset manifest not found: {path}")
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml.safe_load(read_text(path, "manifest"))
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" (line {mark.line + 1})" if mark is not None else ""

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from .. import _checks
-from ..io import read_image
+from ..io import read_image, read_text
 
 __all__ = ["CalibrationView", "planar_grid", "parse_board", "detect_chessboard", "chessboard_views",
            "read_control_points", "expand_glob", "synthetic_view", "pose_looking_at", "ChessboardPairs",
@@ -200,7 +200,7 @@ def read_control_points(path: str | os.PathLike, *, units: str | None = None) ->
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"control point file not found: {path}")
-    text = path.read_text()
+    text = read_text(path, "control points file")
     declared = None
     body = []
     for line in text.splitlines():

@@ -267,9 +267,9 @@ class StereoCamera:
         return tuple(info.camera.undistort_rectify_maps(R=info.R, P=info.P) for info in (self.left, self.right))
 
     def rectify(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rectify a raw pair (bilinear, border replicated)."""
-        _checks.image("left", left)
-        _checks.image("right", right)
+        """Rectify a raw pair (bilinear, border replicated); uint8, uint16, float32 or float64 images."""
+        _checks.image_dtype("left", left)
+        _checks.image_dtype("right", right)
         _checks.same_shape("left", left, "right", right)
         if (left.shape[1], left.shape[0]) != self.size:
             raise ValueError(f"images are {left.shape[1]}x{left.shape[0]} but the calibration is "

@@ -1,17 +1,32 @@
 """Command-line interface: parse, validate, call one library function per command.
 
-Every failure the user can fix (missing file, bad YAML, mismatched images,
-NaN parameter) ends as one line ``mrstereo: error: ...`` and exit code 2.
+Every failure ends as one line on stderr and a non-zero exit code, never a traceback:
+
+- ``mrstereo: error: ...`` and exit code 2 for everything the user can fix (a usage
+  error, a missing or unreadable file, a bad number, a full disk);
+- ``mrstereo: interrupted`` and exit code 130 for Ctrl-C (SIGINT) or SIGTERM, within a
+  few seconds whatever runs (a Dask cluster starting or stopping included);
+- ``mrstereo: error: internal error ...`` and exit code 1 for a bug, with a request to
+  report it. ``MRSTEREO_DEBUG=1`` shows the traceback instead (docs/errors.md).
 """
 from __future__ import annotations
 
+import errno
 import importlib
+import os
+import signal
 import sys
+import threading
 
 import click
 
 _COMMAND_MODULES = ("_world", "_calibration", "_formats", "_matching", "_evaluation", "_geometry", "_mapping", "_pipeline", "_demo", "_bag",
                     "_data")
+
+DEBUG_ENV = "MRSTEREO_DEBUG"
+EXIT_ERROR, EXIT_BUG, EXIT_INTERRUPTED = 2, 1, 130
+_EXIT_GRACE_S = 3.0           # after an interrupt: time for clean-up before a hard exit
+_ISSUES_URL = "https://github.com/mrstereo/mrstereo/issues"
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -25,25 +40,138 @@ for _name in _COMMAND_MODULES:
         main.add_command(_command)
 
 
+def _say(line: str) -> None:
+    """Write one line to stderr (to the file descriptor if sys.stderr is gone)."""
+    try:
+        sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+    except Exception:
+        try:
+            os.write(2, (line + "\n").encode("utf-8", "replace"))
+        except OSError:
+            pass
+
+
+class _Interrupts:
+    """SIGINT / SIGTERM: one line, exit 130, whatever the program is doing.
+
+    The first signal prints ``mrstereo: interrupted``, silences stderr (threads of a Dask
+    cluster being torn down would otherwise print tracebacks) and raises KeyboardInterrupt
+    in the main thread, so ``finally`` blocks remove temporary files. A watchdog ends the
+    process with code 130 if the clean-up takes longer than a few seconds; a second signal
+    ends it at once. Worker processes started meanwhile are terminated on the hard exit.
+    """
+
+    def __init__(self) -> None:
+        self.fired = False
+        self._previous = {}
+
+    def install(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return                      # signals can only be handled in the main thread
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._previous[sig] = signal.signal(sig, self._handler)
+
+    def uninstall(self) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous.clear()
+
+    def _handler(self, signum, frame) -> None:
+        if self.fired:
+            _hard_exit(EXIT_INTERRUPTED)
+        self.fired = True
+        _say("mrstereo: interrupted")
+        _silence_stderr()
+        timer = threading.Timer(_EXIT_GRACE_S, _hard_exit, args=(EXIT_INTERRUPTED,))
+        timer.daemon = True
+        timer.start()
+        raise KeyboardInterrupt
+
+
+def _silence_stderr() -> None:
+    """Send everything later written to stderr (tracebacks of dying threads, logging) to /dev/null."""
+    import logging
+
+    logging.disable(logging.CRITICAL)
+    threading.excepthook = lambda args: None
+    sys.unraisablehook = lambda args: None
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 2)
+        os.close(devnull)
+    except OSError:
+        pass
+
+
+def _hard_exit(code: int) -> None:
+    """End the process now: terminate child processes (Dask workers), skip the interpreter's clean-up."""
+    try:
+        import multiprocessing
+
+        for child in multiprocessing.active_children():
+            child.kill()
+    except Exception:
+        pass
+    os._exit(code)
+
+
+def _message(exc: BaseException) -> str:
+    """One line for an error the user can fix."""
+    if isinstance(exc, click.ClickException):
+        return exc.format_message()
+    if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+        return f"no space left on device: {exc.filename}" if exc.filename else "no space left on device"
+    if isinstance(exc, UnicodeDecodeError):
+        return f"a file is not UTF-8 text: {exc}"
+    if isinstance(exc, MemoryError):
+        return "out of memory" + (f": {exc}" if str(exc) else "")
+    message = str(exc) or type(exc).__name__
+    if isinstance(exc, OSError) and exc.filename and str(exc.filename) not in message:
+        if isinstance(exc, FileNotFoundError):
+            return f"file not found: {exc.filename}"
+        return f"{exc.strerror or message}: {exc.filename}"
+    return " ".join(message.split())        # one line
+
+
 def entry(argv: list[str] | None = None) -> int:
-    """Console-script entry point: run the CLI, turn errors into one line."""
+    """Console-script entry point (also ``python -m mrstereo``): run the CLI, every failure one line."""
     from ..parallel import keep_freed_memory
 
-    keep_freed_memory()          # this process is ours: no page faults on every frame's arrays
+    debug = os.environ.get(DEBUG_ENV, "") not in ("", "0")
+    interrupts = _Interrupts()
+    interrupts.install()
     try:
-        main.main(args=argv, prog_name="mrstereo", standalone_mode=False)
-    except click.exceptions.Abort:
-        click.echo("mrstereo: aborted", err=True)
-        return 130
-    except click.ClickException as exc:
-        exc.show()
+        keep_freed_memory()          # this process is ours: no page faults on every frame's arrays
+        args = sys.argv[1:] if argv is None else list(argv)
+        with main.make_context("mrstereo", args) as ctx:
+            main.invoke(ctx)
+    except click.exceptions.Exit as exc:           # --help, --version
         return exc.exit_code
-    except (ValueError, TypeError, OSError, RuntimeError) as exc:
-        message = str(exc) or type(exc).__name__
-        if isinstance(exc, FileNotFoundError) and exc.filename and str(exc.filename) not in message:
-            message = f"file not found: {exc.filename}"
-        click.echo(f"mrstereo: error: {message}", err=True)
-        return 2
+    except (KeyboardInterrupt, click.exceptions.Abort):
+        if not interrupts.fired:
+            _say("mrstereo: interrupted")
+        return EXIT_INTERRUPTED
+    except (click.ClickException, ValueError, TypeError, OSError, RuntimeError, MemoryError, LookupError,
+            UnicodeError) as exc:
+        if debug:
+            raise
+        if interrupts.fired:                       # an error raised while unwinding after Ctrl-C
+            return EXIT_INTERRUPTED
+        _say(f"mrstereo: error: {_message(exc)}")
+        return EXIT_ERROR
+    except Exception as exc:
+        if debug:
+            raise
+        if interrupts.fired:
+            return EXIT_INTERRUPTED
+        _say(f"mrstereo: error: internal error {type(exc).__name__}: {_message(exc)} -- please report it "
+             f"at {_ISSUES_URL} (set {DEBUG_ENV}=1 to see the traceback)")
+        return EXIT_BUG
+    finally:
+        interrupts.uninstall()
+    if interrupts.fired:                            # the interrupt was swallowed somewhere: still 130
+        return EXIT_INTERRUPTED
     return 0
 
 

@@ -107,7 +107,10 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
     Every command that reads a DATASET then reads the recording.
     """
     from ..bag import export_bag
+    from ..io import check_output_dir
 
+    check_output_dir("--out", out_dir, inputs=[bag, options.get("calib")], input_dirs=[bag] if bag.is_dir() else [],
+                     must_be_empty=True)
     kwargs = bag_export_kwargs(quiet=quiet, **options)
     result = export_bag(bag, out_dir, **kwargs)
     echo_export(result)
@@ -135,8 +138,10 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool,
     """
     from ..pipeline import PipelineConfig
     from ..batch import run_batch
+    from ..io import check_output_dir
 
     check_workers(workers, scheduler, processes)
+    check_output_dir("--out", out_dir)
     config = PipelineConfig(preset=preset).with_fusion(fusion)
     summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
                         scheduler=scheduler, processes=processes, progress=not quiet)

@@ -13,7 +13,7 @@ from ..calibration import (METHODS, MULTIVIEW_GA, GAConfig, calibrate_camera, ca
                            chessboard_pairs, chessboard_views, expand_glob, parse_board, read_control_points)
 from ..calibration.report import markdown_report, residual_figure, write_json, write_text
 from ..camera import CameraInfo, read_stereo, write_camera_info, write_stereo
-from ..io import read_image, refuse_overwrite_input, write_image
+from ..io import IMAGE_SUFFIXES, check_output_dir, check_outputs, read_image, write_image
 
 
 def _progress_bar(total: int, desc: str):
@@ -31,6 +31,17 @@ def _square(square: float) -> float:
     if not math.isfinite(square) or square <= 0:
         raise ValueError(f"--square must be a positive finite size in metres, got {square}")
     return square
+
+
+def _residuals_path(output: Path) -> Path:
+    return output.with_suffix("").with_name(output.with_suffix("").name + "_residuals.png")
+
+
+def _check_report_outputs(output: Path, stem_suffix: str, inputs, extra=None) -> None:
+    """The calibration file, its report files (and ``extra``) must be new names apart from the inputs."""
+    outputs = {"--output": output, **{f"report {k}": p for k, p in _siblings(output, stem_suffix).items()},
+               **(extra or {})}
+    check_outputs(outputs, inputs, suffixes={"--output": (".yaml", ".yml")})
 
 
 def _siblings(output: Path, stem_suffix: str) -> dict[str, Path]:
@@ -80,7 +91,7 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
         if missing:
             click.echo(f"board not found in {len(missing)} image(s): {', '.join(missing)}", err=True)
         inputs = paths
-    refuse_overwrite_input(output, inputs)
+    _check_report_outputs(output, "_report", inputs, extra={"residuals figure": _residuals_path(output)})
     config = None
     if generations is not None:
         base = GAConfig() if len(views) == 1 else MULTIVIEW_GA
@@ -94,7 +105,7 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
         if bar is not None:
             bar.close()
     files = _siblings(output, "_report")
-    figure = output.with_suffix("").with_name(output.with_suffix("").name + "_residuals.png")
+    figure = _residuals_path(output)
     write_camera_info(output, CameraInfo(result.camera, name=output.stem))
     write_json(files["json"], result.summary())
     write_text(files["md"], markdown_report(result))
@@ -132,7 +143,7 @@ def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, seed, alp
     if len(left_paths) != len(right_paths):
         raise ValueError(f"{len(left_paths)} left images but {len(right_paths)} right images; pairs are "
                          "matched by sorted order and must be equal in number")
-    refuse_overwrite_input(output, left_paths + right_paths)
+    _check_report_outputs(output, "_report", left_paths + right_paths)
     found = chessboard_pairs(left_paths, right_paths, cols_rows, square)
     skipped = found.skipped
     if skipped:
@@ -172,15 +183,16 @@ def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, seed, alp
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False), help="Output directory.")
 def rectify_cmd(calib, left, right, output):
     """Undistort and rectify a raw stereo pair; writes DIR/<left name> and DIR/<right name>."""
-    stereo = read_stereo(calib)
-    img_l, img_r = read_image(left), read_image(right)
     out_dir = Path(output)
     names = [Path(left).name, Path(right).name]
     if names[0] == names[1]:
         names = ["left_" + names[0], "right_" + names[1]]
     targets = [out_dir / n for n in names]
-    for t in targets:
-        refuse_overwrite_input(t, [left, right, calib])
+    check_output_dir("--output", out_dir)
+    check_outputs({f"--output {t}": t for t in targets}, [left, right, calib],
+                  suffixes={f"--output {t}": IMAGE_SUFFIXES for t in targets})
+    stereo = read_stereo(calib)
+    img_l, img_r = read_image(left), read_image(right)
     rect_l, rect_r = stereo.rectify(img_l, img_r)
     for t, img in zip(targets, (rect_l, rect_r)):
         write_image(t, img)

@@ -24,7 +24,9 @@ def demo_command(out_dir: Path, seed: int, n_frames: int, quiet: bool) -> None:
     plans a path through the map, and compares every stage with ground truth.
     """
     from ..demo import run_demo
+    from ..io import check_output_dir
 
+    check_output_dir("--out", out_dir, must_be_empty=True)
     result = run_demo(out_dir, seed=seed, n_frames=n_frames, progress=not quiet)
     m = result.metrics
     c, g = m["calibration"], m.get("map") or {}

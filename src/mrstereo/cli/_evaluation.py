@@ -6,7 +6,7 @@ from pathlib import Path
 import click
 
 from mrstereo.evaluation.report import METHODS, evaluate_scenes
-from mrstereo.io import atomic_write, refuse_overwrite_input
+from mrstereo.io import atomic_write, check_outputs
 
 from ._options import check_workers, worker_options
 
@@ -55,16 +55,7 @@ def evaluate(dirs, methods, json_out, markdown_out, max_disparity, quiet, no_pro
             raise FileNotFoundError(f"scene directory not found: {d}")
         if not d.is_dir():
             raise ValueError(f"scene must be a directory, got the file {d}")
-    outputs = [p for p in (json_out, markdown_out) if p is not None]
-    for out in outputs:
-        refuse_overwrite_input(out, dirs)
-        for d in dirs:  # every file of a scene folder is an input
-            if out.exists() and out.resolve().is_relative_to(d.resolve()):
-                raise ValueError(f"output {out} would overwrite a file of the input scene {d}")
-        if out.exists() and out.is_dir():
-            raise ValueError(f"output {out} is a directory")
-    if json_out is not None and markdown_out is not None and json_out.resolve() == markdown_out.resolve():
-        raise ValueError("--json and --markdown must be different files")
+    check_outputs({"--json": json_out, "--markdown": markdown_out}, input_dirs=dirs)
     report = evaluate_scenes(dirs, methods=names, max_disparity_px=max_disparity, progress=not (quiet or no_progress),
                              workers=workers, scheduler=scheduler, processes=processes)
     markdown = report.to_markdown()

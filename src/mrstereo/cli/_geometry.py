@@ -11,6 +11,8 @@ from pathlib import Path
 import click
 import numpy as np
 
+from ..io import check_outputs
+
 __all__ = ["COMMANDS"]
 
 
@@ -59,7 +61,7 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
 
     from ..camera import RigMount, read_stereo
     from ..geometry import ObstacleConfig, obstacles_from_pair, scan_from_pair
-    from ..io import read_image, refuse_overwrite_input
+    from ..io import read_image
     from ..rejection import RejectionConfig
 
     for name, value in (("--height", height_m), ("--tilt", tilt_rad), ("--pan", pan_rad),
@@ -67,7 +69,6 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
                         ("--min-height", min_height_m), ("--max-height", max_height_m),
                         ("--max-range", max_range_m)):
         _finite(name, value)
-    refuse_overwrite_input(output, [left, right, calib])
     stereo = read_stereo(calib)
     rig = None
     if height_m is not None or tilt_rad is not None:
@@ -113,8 +114,7 @@ def points_command(left, right, calib, output, which, color, **kw):
     """
     from ..geometry import write_ply
 
-    if Path(output).suffix.lower() != ".ply":
-        raise ValueError(f"output must end in .ply, got {output}")
+    check_outputs({"--output": output}, [left, right, calib], suffixes={"--output": (".ply",)})
     _, frame = _run(left, right, calib, output, scan=False, **kw)
     obs = frame.obstacles
     if not obs.success:
@@ -149,19 +149,17 @@ def scan_command(left, right, calib, output, plot_path, angle_increment_deg, ran
     angle_increment, range_min, range_max, ranges; no return = null); an
     output ending in .csv is written as angle_rad,range_m rows.
     """
+    from .. import _checks
     from ..geometry import plot_top_view, write_scan_csv, write_scan_json
-    from ..io import refuse_overwrite_input
 
     suffix = Path(output).suffix.lower()
-    if suffix not in (".json", ".csv"):
-        raise ValueError(f"output must end in .json or .csv, got {output}")
-    if plot_path is not None:
-        if Path(plot_path).suffix.lower() != ".png":
-            raise ValueError(f"--plot must end in .png, got {plot_path}")
-        refuse_overwrite_input(plot_path, [left, right, calib, output])
+    check_outputs({"--output": output, "--plot": plot_path}, [left, right, calib],
+                  suffixes={"--output": (".json", ".csv"), "--plot": (".png",)})
     _finite("--angle-increment", angle_increment_deg)
     if angle_increment_deg <= 0:
         raise ValueError(f"--angle-increment must be > 0, got {angle_increment_deg}")
+    n_rays = 2 * math.pi / math.radians(angle_increment_deg)      # at most a full turn
+    _checks.fits_in_memory("--angle-increment", 40.0 * n_rays, f"a scan of up to {n_rays:.4g} rays")
     _, result = _run(left, right, calib, output, scan=True, angle_increment_rad=math.radians(angle_increment_deg),
                      range_min_m=_finite("--range-min", range_min_m), **kw)
     obs = result.frame.obstacles

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import click
 
-from ..io import atomic_write, refuse_overwrite_input
+from ..io import atomic_write, check_outputs
+from ..mapping.rosmap import ros_map_files
 
 
 def _xy(ctx, param, value):
@@ -44,10 +45,8 @@ def plan_command(map_yaml: Path, start, goal, radius_m: float, unknown: str, out
 
     if not (math.isfinite(radius_m) and radius_m >= 0):
         raise click.BadParameter(f"must be a finite number >= 0, got {radius_m}", param_hint="--radius")
-    inputs = [map_yaml, map_yaml.with_suffix(".pgm")]
-    for out in (output, plot_png):
-        if out is not None:
-            refuse_overwrite_input(out, inputs)
+    check_outputs({"--output": output, "--plot": plot_png}, ros_map_files(map_yaml),
+                  suffixes={"--output": (".json",), "--plot": (".png", ".pdf", ".svg")})
     ros_map = read_ros_map(map_yaml)
     result = plan_path(ros_map, start, goal, robot_radius_m=radius_m,
                        unknown_is_obstacle=unknown == "blocked")

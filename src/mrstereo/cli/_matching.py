@@ -70,14 +70,8 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
         raise ValueError("--depth-bands needs --calib")
     if depth_bands is not None and (max_disparity is not None or bands is not None):
         raise ValueError("give --depth-bands or a disparity search, not both")
-    if not output.lower().endswith((".pfm", ".png")):
-        raise ValueError(f"output must end in .pfm or .png, got {output}")
-    inputs = [left, right] + ([calib] if calib else [])
-    io.refuse_overwrite_input(output, inputs)
-    if color_path:
-        io.refuse_overwrite_input(color_path, inputs + [output])
-        if not color_path.lower().endswith(".png"):
-            raise ValueError(f"--plot must end in .png, got {color_path}")
+    io.check_outputs({"--output": output, "--plot": color_path}, [left, right, calib],
+                     suffixes={"--output": (".pfm", ".png"), "--plot": (".png",)})
     aoi_box = None
     if aoi is not None:
         try:

@@ -10,6 +10,9 @@ from ._options import check_workers, worker_options
 
 __all__ = ["COMMANDS"]
 
+MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
+"""What ``mrstereo map`` writes into its output folder (:func:`mrstereo.pipeline.write_map_outputs`)."""
+
 
 @click.command("map")
 @click.argument("manifest", required=False, metavar="[DATASET]", type=click.Path(path_type=Path))
@@ -49,7 +52,9 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     import dataclasses
     import tempfile
 
+    from ..batch import dataset_files
     from ..camera import read_stereo
+    from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
     from ..mapping import GridSpec
     from ..pipeline import PipelineConfig, build_map, write_map_outputs
     from ..recording import read_manifest
@@ -60,6 +65,12 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
     grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
     config = PipelineConfig(preset=preset, grid=grid).with_fusion(fusion)
+    check_output_dir("--out", out_dir)
+    outputs = {f"--out {out_dir / name}": out_dir / name for name in MAP_FILES}     # (names the file)
+    if bag is not None:
+        check_outputs(outputs, [bag, calib], input_dirs=[bag] if bag.is_dir() else [])
+    else:
+        check_outputs(outputs, [manifest, calib] + dataset_files(read_manifest(manifest)))
     with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
         stereo = None
         if bag is not None:
@@ -81,7 +92,9 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
             stereo = read_stereo(calib) if calib is not None else None
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes)
-        files = write_map_outputs(run, out_dir)
+        remove_stale_temporaries(out_dir)
+        with staged_dir(out_dir, prefix="map") as staging:      # all files or none: a kill leaves the old set
+            files = {key: out_dir / path.name for key, path in write_map_outputs(run, staging).items()}
     click.echo(f"map of {len(run.observations)} frames: {run.grid!r}")
     if run.metrics is not None:
         m = run.metrics

@@ -24,8 +24,10 @@ def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, quie
     Writes raw and rectified stereo pairs, ground-truth disparity (PFM) and
     labels, the true calibration, the ground-truth map and manifest.yaml.
     """
+    from ..io import check_output_dir
     from ..world.dataset import write_synthetic_dataset
 
+    check_output_dir("--out", out_dir, must_be_empty=True)
     path = write_synthetic_dataset(out_dir, seed=seed, n_frames=n_frames, width=width, height=height,
                                    progress=not quiet)
     click.echo(f"wrote {n_frames} frames to {path} (manifest: {path / 'manifest.yaml'})")

@@ -130,7 +130,9 @@ def laser_scan_from_points(points_robot, *, angle_min_rad: float = -math.pi / 4,
         raise ValueError(f"angle_max_rad ({a1}) must exceed angle_min_rad ({a0})")
     if r1 <= r0:
         raise ValueError(f"range_max_m ({r1}) must exceed range_min_m ({r0})")
-    n = int(math.floor((a1 - a0) / inc + 1e-9)) + 1
+    n_float = math.floor((a1 - a0) / inc + 1e-9) + 1
+    _checks.fits_in_memory("angle_increment_rad", n_float * 40.0, f"a scan of {n_float:.4g} rays")
+    n = int(n_float)
     p = p[np.isfinite(p[:, :2]).all(axis=1)]
     r = np.hypot(p[:, 0], p[:, 1])
     k = np.rint((np.arctan2(p[:, 1], p[:, 0]) - a0) / inc).astype(np.int64)

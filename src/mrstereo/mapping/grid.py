@@ -34,6 +34,9 @@ class GridSpec:
             _checks.finite_number(name, getattr(self, name), positive=True)
         for name in ("origin_x_m", "origin_y_m"):
             _checks.finite_number(name, getattr(self, name))
+        rows, cols = self.height_m / self.resolution_m, self.width_m / self.resolution_m
+        _checks.fits_in_memory("resolution_m", rows * cols * 40.0,        # grid, log-odds, ray-casting buffers
+                               f"a grid of {rows:.4g} x {cols:.4g} cells")
 
     @property
     def shape(self) -> tuple[int, int]:

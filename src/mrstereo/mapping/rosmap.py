@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..io import atomic_write, read_image, write_image
+from ..io import atomic_write, read_image, read_text, write_image
 from .grid import GridSpec
 
-__all__ = ["RosMap", "read_ros_map", "write_ros_map", "FREE", "OCCUPIED", "UNKNOWN"]
+__all__ = ["RosMap", "read_ros_map", "write_ros_map", "ros_map_files", "FREE", "OCCUPIED", "UNKNOWN"]
 
 FREE, OCCUPIED, UNKNOWN = 254, 0, 205
 
@@ -60,13 +60,25 @@ def write_ros_map(yaml_path: str | os.PathLike, ros_map: RosMap) -> None:
         tmp.write_text(yaml.safe_dump(meta, sort_keys=False, default_flow_style=None))
 
 
+def ros_map_files(yaml_path: str | os.PathLike) -> list[Path]:
+    """The files of a map: the YAML and the image it names (else ``NAME.pgm``) -- what a reader reads."""
+    yaml_path = Path(yaml_path)
+    files = [yaml_path, yaml_path.with_suffix(".pgm")]
+    try:
+        meta = yaml.safe_load(yaml_path.read_text(encoding="utf-8"))
+        files.append(yaml_path.parent / str(meta["image"]))
+    except (OSError, ValueError, TypeError, KeyError, yaml.YAMLError):
+        pass
+    return files
+
+
 def read_ros_map(yaml_path: str | os.PathLike) -> RosMap:
     """Read a map_server YAML + image (trinary or scale, negate 0/1)."""
     yaml_path = Path(yaml_path)
     if not yaml_path.is_file():
         raise FileNotFoundError(f"map file not found: {yaml_path}")
     try:
-        meta = yaml.safe_load(yaml_path.read_text())
+        meta = yaml.safe_load(read_text(yaml_path, "map file"))
     except yaml.YAMLError:
         raise ValueError(f"map file {yaml_path} is not valid YAML") from None
     if not isinstance(meta, dict):

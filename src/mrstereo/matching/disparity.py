@@ -124,6 +124,18 @@ def _depth(d: float, focal: float, baseline: float, doffs: float) -> float:
     return baseline * focal / (d + doffs) if d + doffs > 0 else math.inf
 
 
+def _check_search_memory(plan, config: MatchingConfig, *, given: str) -> None:
+    """Refuse a search whose per-thread cost buffers (disparities x columns) exceed the memory."""
+    import numba
+
+    threads = numba.get_num_threads()
+    widest = max(plan.levels, key=lambda lv: (lv.search_px[1] - lv.search_px[0] + 1) * lv.size[0])
+    n_disp = widest.search_px[1] - widest.search_px[0] + 1
+    nbytes = threads * n_disp * (widest.size[0] + config.window_px) * 12.0
+    _checks.fits_in_memory(given, nbytes, f"the matching cost buffers ({n_disp:.4g} disparities x "
+                                          f"{widest.size[0]} columns x {threads} threads)")
+
+
 def _prepare_pair(left: np.ndarray, right: np.ndarray, config: MatchingConfig):
     """Pre-filter both images and prepare them for the kernels."""
     pair = tuple(prepare_gray(img, kind=config.prefilter, cap=config.prefilter_cap, window=config.window_px,
@@ -220,6 +232,9 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
                          f"{calibration.size[0]}x{calibration.size[1]}")
     if config.window_px > min(width, height):
         raise ValueError(f"window_px {config.window_px} is larger than the image ({width}x{height})")
+    _check_search_memory(plan, config, given=next(
+        (name for name, value in (("max_disparity_px", max_disparity_px), ("disparity_bands_px", disparity_bands_px),
+                                  ("depth_bands_m", depth_bands_m)) if value is not None), "calibration"))
 
     # prepared (pre-filtered, padded, window terms) whole-image pairs by level width: the
     # finest level's pair also serves the refinement of the coarser ones

@@ -85,6 +85,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     out_dir = Path(out_dir)
     seed = _checks.positive_int("seed", seed, minimum=0)
     n_frames = _checks.positive_int("n_frames", n_frames)
+    width, height = _checks.positive_int("width", width, minimum=16), _checks.positive_int("height", height, minimum=16)
+    supersample = _checks.positive_int("supersample", supersample)
+    _checks.fits_in_memory("width and height", 64.0 * width * height * supersample ** 2,
+                           f"rendering {width}x{height} images")
     if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
         raise ValueError(f"output directory {out_dir} already exists and is not empty; "
                          "choose a new directory")
