@@ -29,6 +29,7 @@ import contextlib
 import functools
 import logging
 import os
+import sys
 import traceback as _traceback
 import uuid
 import warnings
@@ -219,10 +220,37 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
     # glibc's mmap threshold: every image-sized temporary then costs fresh page faults and a frame
     # takes 2.3 times as long (measured). Leave glibc's adaptive defaults alone.
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
-            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=":0", env=env, silence_logs=logging.CRITICAL) as cluster, \
-            Client(cluster) as client:
+            _quiet_children():
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=":0", env=env, silence_logs=logging.CRITICAL)
+    with cluster, Client(cluster) as client:
         yield client
+
+
+@contextlib.contextmanager
+def _quiet_children() -> Iterator[None]:
+    """Worker processes started in the block write their stderr to /dev/null.
+
+    Ctrl-C in a terminal signals the whole process group: worker processes still importing
+    would each print a KeyboardInterrupt traceback over the one line of the command (their
+    failures reach this process through Dask anyway). A process inherits its parent's file
+    descriptors when it starts, so stderr (fd 2) points to /dev/null while they start.
+    """
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        sys.stderr.flush()
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 2)
+        os.close(devnull)
+        yield
+    finally:
+        sys.stderr.flush()
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def numba_thread_safe() -> bool:

@@ -12,16 +12,14 @@ Every failure ends as one line on stderr and a non-zero exit code, never a trace
 from __future__ import annotations
 
 import errno
-import importlib
 import os
 import signal
 import sys
 import threading
 
-import click
-
-_COMMAND_MODULES = ("_world", "_calibration", "_formats", "_matching", "_evaluation", "_geometry", "_mapping", "_pipeline", "_demo", "_bag",
-                    "_data")
+# Only the standard library here: the console script imports this module first, and
+# entry() installs the interrupt handler before the commands (1.5 s of imports) load.
+# The commands are registered in cli/_main.py.
 
 DEBUG_ENV = "MRSTEREO_DEBUG"
 EXIT_ERROR, EXIT_BUG, EXIT_INTERRUPTED = 2, 1, 130
@@ -29,15 +27,11 @@ _EXIT_GRACE_S = 3.0           # after an interrupt: time for clean-up before a h
 _ISSUES_URL = "https://github.com/mrstereo/mrstereo/issues"
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="mrstereo")
-def main() -> None:
-    """mrstereo: multi-range stereo vision for mobile robot navigation."""
-
-
-for _name in _COMMAND_MODULES:
-    for _command in importlib.import_module(f"{__name__}.{_name}").COMMANDS:
-        main.add_command(_command)
+def __getattr__(name: str):
+    if name == "main":                       # the click group, loaded on first use
+        from ._main import main
+        return main
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _say(line: str) -> None:
@@ -65,10 +59,15 @@ class _Interrupts:
     def __init__(self) -> None:
         self.fired = False
         self._previous = {}
+        self._stderr_fd = None
 
     def install(self) -> None:
         if threading.current_thread() is not threading.main_thread():
             return                      # signals can only be handled in the main thread
+        try:
+            self._stderr_fd = os.dup(2)     # the terminal, even while fd 2 is redirected (parallel.py)
+        except OSError:
+            self._stderr_fd = None
         for sig in (signal.SIGINT, signal.SIGTERM):
             self._previous[sig] = signal.signal(sig, self._handler)
 
@@ -76,12 +75,25 @@ class _Interrupts:
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         self._previous.clear()
+        if self._stderr_fd is not None and not self.fired:
+            os.close(self._stderr_fd)
+            self._stderr_fd = None
 
     def _handler(self, signum, frame) -> None:
         if self.fired:
             _hard_exit(EXIT_INTERRUPTED)
         self.fired = True
-        _say("mrstereo: interrupted")
+        try:
+            sys.stderr.flush()
+        except Exception:
+            pass
+        if self._stderr_fd is not None:
+            try:
+                os.write(self._stderr_fd, b"mrstereo: interrupted\n")
+            except OSError:
+                pass
+        else:
+            _say("mrstereo: interrupted")
         _silence_stderr()
         timer = threading.Timer(_EXIT_GRACE_S, _hard_exit, args=(EXIT_INTERRUPTED,))
         timer.daemon = True
@@ -116,10 +128,12 @@ def _hard_exit(code: int) -> None:
     os._exit(code)
 
 
+class _UsageError(Exception):
+    """A click usage error, carried out of the click imports' scope."""
+
+
 def _message(exc: BaseException) -> str:
     """One line for an error the user can fix."""
-    if isinstance(exc, click.ClickException):
-        return exc.format_message()
     if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
         return f"no space left on device: {exc.filename}" if exc.filename else "no space left on device"
     if isinstance(exc, UnicodeDecodeError):
@@ -136,43 +150,62 @@ def _message(exc: BaseException) -> str:
 
 def entry(argv: list[str] | None = None) -> int:
     """Console-script entry point (also ``python -m mrstereo``): run the CLI, every failure one line."""
-    from ..parallel import keep_freed_memory
-
     debug = os.environ.get(DEBUG_ENV, "") not in ("", "0")
     interrupts = _Interrupts()
     interrupts.install()
     try:
+        import click
+
+        from ..parallel import keep_freed_memory
+        from ._main import main
+
         keep_freed_memory()          # this process is ours: no page faults on every frame's arrays
         args = sys.argv[1:] if argv is None else list(argv)
-        with main.make_context("mrstereo", args) as ctx:
-            main.invoke(ctx)
-    except click.exceptions.Exit as exc:           # --help, --version
-        return exc.exit_code
-    except (KeyboardInterrupt, click.exceptions.Abort):
+        try:
+            with main.make_context("mrstereo", args) as ctx:
+                main.invoke(ctx)
+        except click.exceptions.Exit as exc:           # --help, --version
+            return exc.exit_code
+        except click.exceptions.Abort:
+            raise KeyboardInterrupt from None
+        except click.ClickException as exc:
+            raise _UsageError(exc.format_message()) from None
+    except KeyboardInterrupt:
         if not interrupts.fired:
             _say("mrstereo: interrupted")
-        return EXIT_INTERRUPTED
-    except (click.ClickException, ValueError, TypeError, OSError, RuntimeError, MemoryError, LookupError,
-            UnicodeError) as exc:
+        return _interrupted(interrupts)
+    except (_UsageError, ValueError, TypeError, OSError, RuntimeError, MemoryError, LookupError) as exc:
         if debug:
             raise
         if interrupts.fired:                       # an error raised while unwinding after Ctrl-C
-            return EXIT_INTERRUPTED
+            return _interrupted(interrupts)
         _say(f"mrstereo: error: {_message(exc)}")
         return EXIT_ERROR
     except Exception as exc:
         if debug:
             raise
         if interrupts.fired:
-            return EXIT_INTERRUPTED
+            return _interrupted(interrupts)
         _say(f"mrstereo: error: internal error {type(exc).__name__}: {_message(exc)} -- please report it "
              f"at {_ISSUES_URL} (set {DEBUG_ENV}=1 to see the traceback)")
         return EXIT_BUG
     finally:
         interrupts.uninstall()
     if interrupts.fired:                            # the interrupt was swallowed somewhere: still 130
-        return EXIT_INTERRUPTED
+        return _interrupted(interrupts)
     return 0
+
+
+def _interrupted(interrupts: _Interrupts) -> int:
+    """After a signal: exit 130 now (the ``finally`` blocks have run; the interpreter's own shutdown
+    would wait for a Dask cluster's threads and print their complaints)."""
+    if interrupts.fired:
+        try:
+            sys.stdout.flush()
+        except Exception:
+            pass
+        _hard_exit(EXIT_INTERRUPTED)
+    return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":
