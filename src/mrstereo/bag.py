@@ -81,7 +81,7 @@ def _open_bag(path: str | os.PathLike):
     try:
         reader = AnyReader(paths, default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         reader.open()
-    except AnyReaderError as exc:                # corrupt or unsupported file (readers' errors are wrapped)
+    except (AnyReaderError, UnicodeDecodeError) as exc:   # corrupt or unsupported file (readers' errors wrapped)
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ValueError(f"cannot read bag {path}: {first}") from None
     try:

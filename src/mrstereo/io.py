@@ -48,7 +48,10 @@ def atomic_write(path: str | os.PathLike) -> Iterator[Path]:
         try:
             yield tmp
         except OSError as exc:
-            raise no_space_error(exc, path, tmp) from exc
+            error = no_space_error(exc, path, tmp)
+            if error is exc:
+                raise
+            raise error from exc
         if tmp.is_file():   # mkstemp makes 0600 files; give the output the usual umask permissions
             os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
@@ -204,7 +207,13 @@ def temporary_dir(folder: str | os.PathLike, *, prefix: str = "out") -> Iterator
         try:
             yield tmp
         except OSError as exc:
-            raise no_space_error(exc, folder, tmp) from exc
+            target = folder
+            if exc.filename and Path(exc.filename).is_relative_to(tmp):     # name the file as it will be called
+                target = folder / Path(exc.filename).relative_to(tmp)
+            error = no_space_error(exc, target, tmp)
+            if error is exc:
+                raise
+            raise error from exc
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

@@ -169,6 +169,9 @@ def entry(argv: list[str] | None = None) -> int:
         except click.exceptions.Abort:
             raise KeyboardInterrupt from None
         except click.ClickException as exc:
+            if type(exc).__name__ == "NoArgsIsHelpError":     # plain ``mrstereo``: the help, as --help
+                click.echo(exc.format_message())
+                return 0
             raise _UsageError(exc.format_message()) from None
     except KeyboardInterrupt:
         if not interrupts.fired:

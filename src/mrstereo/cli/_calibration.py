@@ -80,18 +80,17 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
             raise ValueError(f"--image-size must look like 640x480, got {image_size!r}") from None
         _checks.positive_int("image width", width)
         _checks.positive_int("image height", height)
+        _check_report_outputs(output, "_report", [points], extra={"residuals figure": _residuals_path(output)})
         views = [read_control_points(points, units=units)]
-        inputs = [points]
     else:
         cols_rows = parse_board(board)
         paths = expand_glob(images_glob)
+        _check_report_outputs(output, "_report", paths, extra={"residuals figure": _residuals_path(output)})
         found, (width, height) = chessboard_views(paths, cols_rows, _square(square))
         views = [v for v in found if v is not None]
         missing = [p.name for p, v in zip(paths, found) if v is None]
         if missing:
             click.echo(f"board not found in {len(missing)} image(s): {', '.join(missing)}", err=True)
-        inputs = paths
-    _check_report_outputs(output, "_report", inputs, extra={"residuals figure": _residuals_path(output)})
     config = None
     if generations is not None:
         base = GAConfig() if len(views) == 1 else MULTIVIEW_GA
