@@ -46,7 +46,7 @@ def plan_command(map_yaml: Path, start, goal, radius_m: float, unknown: str, out
     if not (math.isfinite(radius_m) and radius_m >= 0):
         raise click.BadParameter(f"must be a finite number >= 0, got {radius_m}", param_hint="--radius")
     check_outputs({"--output": output, "--plot": plot_png}, ros_map_files(map_yaml),
-                  suffixes={"--output": (".json",), "--plot": (".png", ".pdf", ".svg")})
+                  suffixes={"--plot": (".png", ".pdf", ".svg")})
     ros_map = read_ros_map(map_yaml)
     result = plan_path(ros_map, start, goal, robot_radius_m=radius_m,
                        unknown_is_obstacle=unknown == "blocked")
