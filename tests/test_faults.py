@@ -154,7 +154,7 @@ BAD_ARGS = {
     "depth-bands 1e-30,1": (["disparity", "{L}", "{R}", "--calib", "{DS}/calibration.yaml", "--rectified",
                              "--depth-bands", "1e-30,1", "-o", "{T}/x.pfm"], "would need"),
     "color suffix": (["disparity", "{L}", "{R}", "--max-disparity", "16", "-o", "{T}/d.pfm", "--color", "{T}/c.txt"],
-                     "--color must end in"),
+                     "--plot must end in .png"),
     "output suffix": (["disparity", "{L}", "{R}", "--max-disparity", "16", "-o", "{T}/d.txt"], "--output must end"),
     "output folder is a file": (["disparity", "{L}", "{R}", "--max-disparity", "16", "-o", "{L}/d.pfm"],
                                 "is a file, not a folder"),
