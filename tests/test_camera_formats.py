@@ -193,6 +193,39 @@ def test_euroc_sensor_yaml_pair(tmp_path):
         read_stereo(tmp_path / "cam0" / "sensor.yaml")
 
 
+# The published calibration of the EuRoC MAV dataset (ASL, ETH Zurich), mav0/cam{0,1}/sensor.yaml.
+EUROC_REAL = {
+    "cam0": dict(T_BS=[0.0148655429818, -0.999880929698, 0.00414029679422, -0.0216401454975,
+                       0.999557249008, 0.0149672133247, 0.025715529948, -0.064676986768,
+                       -0.0257744366974, 0.00375618835797, 0.999660727178, 0.00981073058949,
+                       0.0, 0.0, 0.0, 1.0],
+                 intr=[458.654, 457.296, 367.215, 248.375],
+                 dist=[-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05]),
+    "cam1": dict(T_BS=[0.0125552670891, -0.999755099723, 0.0182237714554, -0.0198435579556,
+                       0.999598781151, 0.0130119051815, 0.0251588363115, 0.0453689425024,
+                       -0.0253898008918, 0.0179005838253, 0.999517347078, 0.00786212447038,
+                       0.0, 0.0, 0.0, 1.0],
+                 intr=[457.587, 456.134, 379.999, 255.238],
+                 dist=[-0.28368365, 0.07451284, -0.00010473, -3.55590700e-05]),
+}
+
+
+def test_euroc_published_calibration(tmp_path):
+    cams, poses = [], []
+    for name, c in EUROC_REAL.items():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "sensor.yaml").write_text(EUROC.format(name=name, **c))
+        fu, fv, cu, cv_ = c["intr"]
+        cams.append(Camera.from_ros(752, 480, [[fu, 0, cu], [0, fv, cv_], [0, 0, 1]], "plumb_bob", c["dist"]))
+        poses.append(np.reshape(c["T_BS"], (4, 4)))
+    T_cam0_cam1 = np.linalg.inv(poses[0]) @ poses[1]
+    R = T_cam0_cam1[:3, :3].T
+    stereo = read_stereo(f"{tmp_path / 'cam0' / 'sensor.yaml'},{tmp_path / 'cam1' / 'sensor.yaml'}")
+    assert stereo.baseline_m == pytest.approx(0.1100778, abs=1e-6)         # cam1 sits 11.0 cm to the right
+    assert T_cam0_cam1[0, 3] > 0.11
+    assert_known_pair(stereo, cams[0], cams[1], R, -R @ T_cam0_cam1[:3, 3], baseline=0.11007784219)
+
+
 @pytest.mark.parametrize("suffix", [".yml", ".xml"])
 @pytest.mark.parametrize("names", [("M1", "D1", "M2", "D2"), ("K1", "D1", "K2", "D2"),
                                    ("cameraMatrix1", "distCoeffs1", "cameraMatrix2", "distCoeffs2")])
