@@ -482,11 +482,13 @@ def test_bad_calibration_cli_one_line(tmp_path, capsys, break_it):
     img = tmp_path / "img.png"
     cv2.imwrite(str(img), np.full((480, 752), 128, np.uint8))
     for args in (["rectify", "--calib", str(path), str(img), str(img), "-o", str(tmp_path / "out")],
-                 ["disparity", str(img), str(img), "--calib", str(path), "-o", str(tmp_path / "d.pfm")]):
+                 ["disparity", str(img), str(img), "--calib", str(path), "-o", str(tmp_path / "d.pfm")],
+                 ["points", str(img), str(img), "--calib", str(path), "-o", str(tmp_path / "p.ply")],
+                 ["calib", "convert", str(path), "-o", str(tmp_path / "s.yaml")]):
         assert entry(args) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith("mrstereo: error: ") and err.count("\n") == 0 and str(path) in err
-    assert not (tmp_path / "out").exists() and not (tmp_path / "d.pfm").exists()
+    assert not any((tmp_path / name).exists() for name in ("out", "d.pfm", "p.ply", "s.yaml"))
 
 
 @pytest.mark.parametrize("content,message", [
