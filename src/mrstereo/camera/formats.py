@@ -126,9 +126,11 @@ def import_calibration(paths, *, image_size: tuple[int, int] | None = None,
         fmt, result = _read_one(files[0], docs[0], image_size)
     else:
         fmt, result = _read_two(files, docs, image_size)
-    if isinstance(result, StereoCamera):
-        return ImportedCalibration(check_stereo(result, where=where), fmt, False)
-    return ImportedCalibration(_rectify(result, where=where, alpha=alpha), fmt, True)
+    rectified_here = not isinstance(result, StereoCamera)
+    stereo = _rectify(result, where=where, alpha=alpha) if rectified_here else result
+    if fmt != FORMATS[0]:                              # StereoCamera.from_dict has checked its own
+        stereo = check_stereo(stereo, where=where)
+    return ImportedCalibration(stereo, fmt, rectified_here)
 
 
 # --------------------------------------------------------------------------- files
