@@ -94,12 +94,19 @@ def test_cli_points_and_scan(tmp_path, frame, capsys):
     assert entry(["scan", left, right, "--calib", calib, "-o", str(tmp_path / "s.json"), "--pan", str(PAN),
                   "--plot", str(tmp_path / "top.png")]) == 0
     raw = json.loads((tmp_path / "s.json").read_text())
-    assert {"angle_min", "angle_max", "angle_increment", "range_min", "range_max", "ranges"} <= set(raw)
-    assert read_scan_json(tmp_path / "s.json").ranges_m.size == len(raw["ranges"])
+    assert {"angle_min", "angle_max", "angle_increment", "range_min", "range_max", "ranges", "intensities",
+            "header", "time_increment", "scan_time"} <= set(raw)
+    scan = read_scan_json(tmp_path / "s.json")
+    assert scan.ranges_m.size == len(raw["ranges"]) == len(raw["intensities"])
+    # range_min is the matcher's near limit, not the 0.1 m default, and no return is nearer
+    assert raw["range_min"] > 0.1 and np.nanmin(np.where(np.isfinite(scan.ranges_m), scan.ranges_m, np.nan)) \
+        >= raw["range_min"]
+    returns = np.isfinite(scan.ranges_m)
+    assert returns.sum() > 20 and np.isfinite(scan.intensities[returns]).all()
     assert (tmp_path / "top.png").stat().st_size > 1000
     assert entry(["scan", left, right, "--calib", calib, "-o", str(tmp_path / "s.csv"), "--height", "0.45",
                   "--tilt", "0.15"]) == 0
-    assert (tmp_path / "s.csv").read_text().startswith("angle_rad,range_m\n")
+    assert (tmp_path / "s.csv").read_text().startswith("angle_rad,range_m,intensity\n")
 
 
 def test_cli_bad_input_is_one_line(tmp_path, frame, capsys):

@@ -52,18 +52,83 @@ def test_camera_fov_angles():
 
 
 def test_json_and_csv_round_trip(tmp_path):
-    scan = LaserScan(angle_min_rad=-0.5, angle_max_rad=0.5, angle_increment_rad=0.25, range_min_m=0.1,
-                     range_max_m=8.0, ranges_m=np.array([1.5, np.nan, 2.25, np.nan, 3.0]))
+    """Every LaserScan field survives JSON; inf / nan / -inf are strings a strict JSON parser reads."""
+    scan = LaserScan(angle_min_rad=-0.5, angle_max_rad=0.5, angle_increment_rad=0.25, range_min_m=0.42,
+                     range_max_m=8.0, ranges_m=np.array([1.5, np.nan, 2.25, np.inf, -np.inf]),
+                     intensities=np.array([120.0, np.nan, 33.0, np.nan, np.nan]), frame_id="base_footprint",
+                     stamp_s=1560004885.437324, time_increment_s=0.0, scan_time_s=0.1)
     write_scan_json(tmp_path / "s.json", scan)
-    raw = json.loads((tmp_path / "s.json").read_text())
-    assert raw["ranges"] == [1.5, None, 2.25, None, 3.0]
-    assert set(raw) == {"angle_min", "angle_max", "angle_increment", "range_min", "range_max", "ranges"}
+    text = (tmp_path / "s.json").read_text()
+
+    def refuse(constant):
+        raise AssertionError(f"non-standard JSON constant {constant}")
+
+    raw = json.loads(text, parse_constant=refuse)               # no NaN / Infinity literals
+    assert raw["ranges"] == [1.5, "NaN", 2.25, "Infinity", "-Infinity"]
+    assert raw["intensities"] == [120.0, "NaN", 33.0, "NaN", "NaN"]
+    assert raw["header"]["frame_id"] == "base_footprint" and raw["header"]["stamp"]["sec"] == 1560004885
+    assert abs(raw["header"]["stamp"]["nanosec"] - 437324000) < 1000      # a float stamp: microseconds
+    assert set(raw) == {"header", "angle_min", "angle_max", "angle_increment", "time_increment", "scan_time",
+                        "range_min", "range_max", "ranges", "intensities"}
+    np.testing.assert_array_equal(np.array(raw["ranges"], dtype=float), scan.ranges_m)   # as users read it
     back = read_scan_json(tmp_path / "s.json")
     np.testing.assert_array_equal(back.ranges_m, scan.ranges_m)
-    assert back.angle_increment_rad == 0.25
+    np.testing.assert_array_equal(back.intensities, scan.intensities)
+    assert (back.frame_id, back.scan_time_s, back.range_min_m) == ("base_footprint", 0.1, 0.42)
+    assert back.stamp_s == pytest.approx(scan.stamp_s, abs=1e-6)
     write_scan_csv(tmp_path / "s.csv", scan)
     rows = list(csv.reader(open(tmp_path / "s.csv")))
-    assert rows[0] == ["angle_rad", "range_m"] and rows[2] == ["-0.250000", ""] and rows[5] == ["0.500000", "3.0000"]
+    assert rows[0] == ["angle_rad", "range_m", "intensity"]
+    assert rows[2] == ["-0.250000", "nan", "nan"] and rows[4] == ["0.250000", "inf", "nan"]
+    assert rows[5] == ["0.500000", "-inf", "nan"] and rows[1] == ["-0.500000", "1.5000", "120.00"]
+    table = np.loadtxt(tmp_path / "s.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(table[:, 1], scan.ranges_m)
+
+
+def test_old_null_ranges_and_bad_values():
+    old = {"angle_min": 0.0, "angle_max": 0.5, "angle_increment": 0.25, "range_min": 0.1, "range_max": 5.0,
+           "ranges": [1.0, None, 2.0]}
+    scan = LaserScan.from_dict(old)
+    assert np.isnan(scan.ranges_m[1]) and scan.frame_id == "base_link" and scan.intensities.size == 0
+    with pytest.raises(ValueError, match="'Infinity' or '-Infinity'"):
+        LaserScan.from_dict({**old, "ranges": [1.0, "inf", 2.0]})
+    with pytest.raises(ValueError, match="3 ranges but 2 intensities"):
+        LaserScan.from_dict({**old, "intensities": [1.0, 2.0]})
+
+
+def test_seen_clear_to_range_max_is_inf_unseen_is_nan():
+    """REP 117: +inf where the bearing was seen clear past range_max, nan where nothing tells."""
+    kw = dict(angle_min_rad=-math.pi / 4, angle_max_rad=math.pi / 4, angle_increment_rad=math.pi / 4,
+              range_min_m=0.3, range_max_m=4.0)
+    obstacles = np.array([[2.0, 0.0, 0.3], [1.0, 0.0, 0.4]])            # ray 1 (ahead): nearest 1.0 m
+    seen = np.array([[5.0, 5.0, 0.0],                                     # ray 2 (left): floor at 7 m
+                     [1.0, -1.0, 0.0]])                                   # ray 0 (right): floor at 1.4 m only
+    scan = laser_scan_from_points(obstacles, observed_points_robot=seen, intensities=[50.0, 80.0], **kw)
+    np.testing.assert_array_equal(scan.ranges_m, [np.nan, 1.0, np.inf])
+    np.testing.assert_array_equal(scan.intensities, [np.nan, 80.0, np.nan])  # the pixel of the return
+    assert laser_scan_from_points(obstacles, min_points=2, intensities=[50.0, 80.0], **kw).intensities[1] == 50.0
+    without = laser_scan_from_points(obstacles, **kw)
+    np.testing.assert_array_equal(without.ranges_m, [np.nan, 1.0, np.nan])
+    assert without.intensities.size == 0
+    beyond = laser_scan_from_points([[6.0, 0.0, 0.3]], **kw)              # an obstacle past range_max
+    assert beyond.ranges_m[1] == np.inf
+    with pytest.raises(ValueError, match="one value per point"):
+        laser_scan_from_points(obstacles, intensities=[1.0], **kw)
+
+
+def test_near_limit_range_is_the_depth_of_the_largest_disparity():
+    from mrstereo.geometry import T_robot_from_cam, near_limit_range_m
+
+    cam = Camera(width=321, height=241, fx=200.0, fy=200.0, cx=160.0, cy=120.0)
+    stereo = StereoCamera.ideal(cam, 0.1)
+    level = T_robot_from_cam(height_m=0.5, tilt_rad=0.0)
+    assert near_limit_range_m(stereo, level, 40.0) == pytest.approx(200.0 * 0.1 / 40.0)   # f B / d_max
+    tilted = near_limit_range_m(stereo, T_robot_from_cam(height_m=0.5, tilt_rad=0.3), 40.0)
+    # the bottom image row looks down by 0.3 + atan(120 / 200): nearer on the floor plane
+    bottom = 0.5 * (math.cos(0.3) - 120 / 200 * math.sin(0.3))
+    assert tilted == pytest.approx(bottom)
+    with pytest.raises(ValueError, match="max_disparity_px"):
+        near_limit_range_m(stereo, level, 0.0)
 
 
 def test_top_view_counts_follow_the_grid_layout():

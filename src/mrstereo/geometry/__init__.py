@@ -9,8 +9,8 @@ from .obstacles import (ObstacleConfig, ObstacleResult, detect_obstacles, ground
                         points_robot_from_disparity)
 from .pair import PairObstacles, PairScan, obstacles_from_pair, scan_from_pair
 from .ply import PointCloud, read_ply, write_ply
-from .scan import (LaserScan, laser_scan_from_points, plot_top_view, read_scan_json, scan_angles_of_camera,
-                   top_view, write_scan_csv, write_scan_json)
+from .scan import (LaserScan, laser_scan_from_points, near_limit_range_m, plot_top_view, read_scan_json,
+                   scan_angles_of_camera, top_view, write_scan_csv, write_scan_json)
 from .triangulation import depth_m_from_disparity_px, disparity_px_from_depth_m, points_cam_from_disparity
 
 __all__ = [
@@ -21,6 +21,6 @@ __all__ = [
     "ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity",
     "PairObstacles", "PairScan", "obstacles_from_pair", "scan_from_pair",
     "PointCloud", "read_ply", "write_ply",
-    "LaserScan", "laser_scan_from_points", "plot_top_view", "read_scan_json", "scan_angles_of_camera",
-    "top_view", "write_scan_csv", "write_scan_json",
+    "LaserScan", "laser_scan_from_points", "near_limit_range_m", "plot_top_view", "read_scan_json",
+    "scan_angles_of_camera", "top_view", "write_scan_csv", "write_scan_json",
 ]

@@ -18,7 +18,7 @@ from .. import _checks
 from ..camera import RigMount, StereoCamera
 from ..rejection import FloorModel, RejectionConfig, RejectionResult, reject_uniform
 from .obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
-from .scan import LaserScan, laser_scan_from_points, scan_angles_of_camera
+from .scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
 
 __all__ = ["PairObstacles", "PairScan", "obstacles_from_pair", "scan_from_pair"]
 
@@ -37,12 +37,15 @@ class PairObstacles:
         Eq. (13) applied to it (``rejection.disparity_px`` is what was triangulated).
     obstacles : ObstacleResult
         Robot-frame points, obstacle and floor masks, the floor used.
+    max_disparity_px : float
+        The largest disparity the matcher searched (its near limit).
     """
 
     left_rect: np.ndarray
     raw_disparity_px: np.ndarray
     rejection: RejectionResult
     obstacles: ObstacleResult
+    max_disparity_px: float = math.inf
 
     @property
     def disparity_px(self) -> np.ndarray:
@@ -104,13 +107,15 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
     kwargs = {"preset": preset, "calibration": stereo, "config": matching}
     if max_disparity_px is not None:
         kwargs["max_disparity_px"] = max_disparity_px
-    raw = np.asarray(compute_disparity(left, right, **kwargs).disparity_px, dtype=np.float32)
+    result = compute_disparity(left, right, **kwargs)
+    raw = np.asarray(result.disparity_px, dtype=np.float32)
     rej = reject_uniform(raw, left, config=rejection, floor_model=floor_model)
     mount = rig if rig is not None else stereo.rig
     ground = ground_for_frame(raw, stereo, mount=mount, config=config)
     obstacles = detect_obstacles(rej.disparity_px, stereo, rig=mount, ground=ground, pan_rad=pan_rad,
                                  config=config)
-    return PairObstacles(left_rect=left, raw_disparity_px=raw, rejection=rej, obstacles=obstacles)
+    return PairObstacles(left_rect=left, raw_disparity_px=raw, rejection=rej, obstacles=obstacles,
+                         max_disparity_px=float(max(level.band_px[1] for level in result.plan.levels)))
 
 
 def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: float = math.radians(0.5),
@@ -121,14 +126,23 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
     The bearings span the left camera's horizontal field of view (turned by
     ``pan_rad``); ``range_max_m`` defaults to ``config.max_range_m``; each ray
     reports its ``min_points``-th nearest obstacle point (robust to a few stray
-    points, see :func:`laser_scan_from_points`). Other keyword options are those
-    of :func:`obstacles_from_pair`.
+    points, see :func:`laser_scan_from_points`), ``+inf`` when the frame saw the
+    bearing clear to ``range_max`` and ``nan`` otherwise. The scan's ``range_min``
+    is ``range_min_m`` or the matcher's near limit (:func:`near_limit_range_m`),
+    whichever is larger; intensities are the gray levels of the returns' pixels.
+    Other keyword options are those of :func:`obstacles_from_pair`.
     """
     frame = obstacles_from_pair(left, right, stereo, **options)
     config = options.get("config", ObstacleConfig())
+    obstacles = frame.obstacles
     lo, hi = scan_angles_of_camera(stereo, pan_rad=options.get("pan_rad", 0.0))
-    scan = laser_scan_from_points(frame.obstacles.obstacle_points_robot, angle_min_rad=lo, angle_max_rad=hi,
-                                  angle_increment_rad=angle_increment_rad, range_min_m=range_min_m,
+    range_min = _checks.finite_number("range_min_m", range_min_m, nonnegative=True)
+    if obstacles.success and math.isfinite(frame.max_disparity_px):
+        range_min = max(range_min, near_limit_range_m(stereo, obstacles.T_robot_from_cam, frame.max_disparity_px))
+    gray = frame.left_rect if frame.left_rect.ndim == 2 else frame.left_rect.mean(axis=2)
+    scan = laser_scan_from_points(obstacles.obstacle_points_robot, angle_min_rad=lo, angle_max_rad=hi,
+                                  angle_increment_rad=angle_increment_rad, range_min_m=range_min,
                                   range_max_m=config.max_range_m if range_max_m is None else range_max_m,
-                                  min_points=min_points)
+                                  min_points=min_points, intensities=gray[obstacles.obstacle_mask],
+                                  observed_points_robot=obstacles.points_robot)
     return PairScan(scan=scan, frame=frame)

@@ -6,8 +6,10 @@
 * :func:`laser_scan_from_points` keeps, for each bearing, the nearest obstacle
   in the robot frame, like ROS ``depthimage_to_laserscan`` /
   ``pointcloud_to_laserscan``: angle 0 straight ahead, positive to the left
-  (REP 103), ``ranges[i]`` at ``angle_min + i * angle_increment``; no return =
-  NaN here, ``null`` in JSON, empty in CSV.
+  (REP 103), ``ranges[i]`` at ``angle_min + i * angle_increment``; REP 117 values:
+  ``+inf`` = seen clear to ``range_max``, ``nan`` = no measurement, ``-inf`` = too
+  close. JSON writes those as the strings ``"Infinity"``, ``"NaN"``, ``"-Infinity"``
+  (proto3 JSON mapping), CSV as ``inf``, ``nan``, ``-inf`` (docs/obstacles.md).
 
 Conventions: docs/conventions.md.
 """
@@ -17,7 +19,7 @@ import csv
 import json
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,17 +28,51 @@ from ..camera import StereoCamera
 from ..io import atomic_write
 
 __all__ = [
-    "LaserScan", "laser_scan_from_points", "scan_angles_of_camera", "top_view", "write_scan_json",
+    "LaserScan", "laser_scan_from_points", "near_limit_range_m", "scan_angles_of_camera", "top_view",
+    "write_scan_json",
     "read_scan_json", "write_scan_csv", "plot_top_view",
 ]
 
 
+_SPECIAL_JSON = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
+
+
+def _json_float(value: float):
+    """A float for JSON: finite numbers as numbers, the others as the proto3 JSON strings."""
+    value = float(value)
+    if math.isfinite(value):
+        return value
+    return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
+
+
+def _from_json_float(value, what: str) -> float:
+    if value is None:                       # files written before the strings: null = no measurement
+        return math.nan
+    if isinstance(value, str):
+        if value not in _SPECIAL_JSON:
+            raise ValueError(f"{what} must be a number, 'NaN', 'Infinity' or '-Infinity', got {value!r}")
+        return _SPECIAL_JSON[value]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{what} must be a number, got {value!r}")
+    return float(value)
+
+
 @dataclass(frozen=True)
 class LaserScan:
-    """A planar scan in the robot frame (the fields of ROS ``sensor_msgs/LaserScan``).
+    """A planar scan in the robot frame: the fields of ROS ``sensor_msgs/LaserScan``.
 
-    ``ranges_m[i]`` is the range at ``angle_min_rad + i * angle_increment_rad``,
-    NaN where there is no return; ``angle_max_rad`` is the angle of the last ray.
+    ``ranges_m[i]`` is the range at ``angle_min_rad + i * angle_increment_rad``
+    (``angle_max_rad`` is the angle of the last ray), with the values of REP 117:
+
+    * a finite range: the nearest obstacle on that bearing;
+    * ``+inf``: the bearing was seen clear up to ``range_max_m`` -- nothing within range;
+    * ``nan``: no measurement on that bearing (nothing seen far enough to tell);
+    * ``-inf``: something nearer than ``range_min_m`` (REP 117's "too close").
+
+    ``intensities`` is empty or one value per ray (the gray level of the image pixel the
+    range came from). ``frame_id``, ``stamp_s``, ``time_increment_s`` and ``scan_time_s``
+    fill the message header and timing fields (a stereo scan is instantaneous:
+    ``time_increment_s = 0``).
     """
 
     angle_min_rad: float
@@ -45,35 +81,71 @@ class LaserScan:
     range_min_m: float
     range_max_m: float
     ranges_m: np.ndarray
+    intensities: np.ndarray = field(default_factory=lambda: np.empty(0))
+    frame_id: str = "base_link"
+    stamp_s: float = 0.0
+    time_increment_s: float = 0.0
+    scan_time_s: float = 0.0
 
     @property
     def angles_rad(self) -> np.ndarray:
         return self.angle_min_rad + self.angle_increment_rad * np.arange(self.ranges_m.size)
 
     def points_robot(self) -> np.ndarray:
-        """The returns as (N, 2) robot-frame (x, y) points."""
+        """The returns (finite ranges) as (N, 2) robot-frame (x, y) points."""
         ok = np.isfinite(self.ranges_m)
         a, r = self.angles_rad[ok], self.ranges_m[ok]
         return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
 
     def to_dict(self) -> dict:
-        """ROS LaserScan field names; ranges without return are None (JSON null)."""
+        """The message as JSON-ready data (docs/obstacles.md, "Laser scan files").
+
+        Field names are those of ``sensor_msgs/LaserScan`` (ROS 2 header: ``stamp`` with ``sec``
+        and ``nanosec``). JSON has no NaN or infinity, so ``ranges`` and ``intensities`` hold
+        numbers and, for the other values, the strings of the proto3 JSON mapping: ``"NaN"``
+        (no measurement), ``"Infinity"`` (nothing within ``range_max``), ``"-Infinity"`` (too
+        close). ``float(s)`` in Python, ``Number(s)`` in JavaScript and
+        ``np.array(ranges, dtype=float)`` read them back as the true values.
+        """
+        sec = math.floor(self.stamp_s)
+        nanosec = min(int(round((self.stamp_s - sec) * 1e9)), 999_999_999)
         return {
+            "header": {"frame_id": self.frame_id, "stamp": {"sec": int(sec), "nanosec": nanosec}},
             "angle_min": float(self.angle_min_rad), "angle_max": float(self.angle_max_rad),
-            "angle_increment": float(self.angle_increment_rad), "range_min": float(self.range_min_m),
-            "range_max": float(self.range_max_m),
-            "ranges": [float(r) if np.isfinite(r) else None for r in self.ranges_m],
+            "angle_increment": float(self.angle_increment_rad),
+            "time_increment": float(self.time_increment_s), "scan_time": float(self.scan_time_s),
+            "range_min": float(self.range_min_m), "range_max": float(self.range_max_m),
+            "ranges": [_json_float(r) for r in self.ranges_m],
+            "intensities": [_json_float(v) for v in self.intensities],
         }
 
     @classmethod
     def from_dict(cls, data) -> LaserScan:
+        """Inverse of :meth:`to_dict`; ``header``, timing and ``intensities`` are optional."""
         keys = ("angle_min", "angle_max", "angle_increment", "range_min", "range_max", "ranges")
         if not isinstance(data, dict) or any(k not in data for k in keys):
             raise ValueError(f"laser scan must have the fields {', '.join(keys)}")
-        ranges = np.array([np.nan if r is None else float(r) for r in data["ranges"]], dtype=np.float64)
-        return cls(angle_min_rad=float(data["angle_min"]), angle_max_rad=float(data["angle_max"]),
-                   angle_increment_rad=float(data["angle_increment"]), range_min_m=float(data["range_min"]),
-                   range_max_m=float(data["range_max"]), ranges_m=ranges)
+        for key in ("ranges", "intensities"):
+            if not isinstance(data.get(key, []), list):
+                raise ValueError(f"laser scan field {key} must be a list")
+        ranges = np.array([_from_json_float(r, "ranges[]") for r in data["ranges"]], dtype=np.float64)
+        intensities = np.array([_from_json_float(v, "intensities[]") for v in data.get("intensities", [])],
+                               dtype=np.float64)
+        if intensities.size not in (0, ranges.size):
+            raise ValueError(f"laser scan has {ranges.size} ranges but {intensities.size} intensities")
+        header = data.get("header") or {}
+        stamp = header.get("stamp") or {}
+        try:
+            stamp_s = float(stamp.get("sec", 0)) + 1e-9 * float(stamp.get("nanosec", 0))
+            numbers = {k: float(data[k]) for k in (*keys[:-1],)}
+            timing = {k: float(data.get(k, 0.0)) for k in ("time_increment", "scan_time")}
+        except (TypeError, ValueError, AttributeError):
+            raise ValueError("laser scan angles, ranges limits, timing and stamp must be numbers") from None
+        return cls(angle_min_rad=numbers["angle_min"], angle_max_rad=numbers["angle_max"],
+                   angle_increment_rad=numbers["angle_increment"], range_min_m=numbers["range_min"],
+                   range_max_m=numbers["range_max"], ranges_m=ranges, intensities=intensities,
+                   frame_id=str(header.get("frame_id", "base_link")), stamp_s=stamp_s,
+                   time_increment_s=timing["time_increment"], scan_time_s=timing["scan_time"])
 
 
 def scan_angles_of_camera(stereo: StereoCamera, *, pan_rad: float = 0.0) -> tuple[float, float]:
@@ -92,7 +164,9 @@ def scan_angles_of_camera(stereo: StereoCamera, *, pan_rad: float = 0.0) -> tupl
 def laser_scan_from_points(points_robot, *, angle_min_rad: float = -math.pi / 4,
                            angle_max_rad: float = math.pi / 4,
                            angle_increment_rad: float = math.radians(0.5), range_min_m: float = 0.1,
-                           range_max_m: float = 10.0, min_points: int = 1) -> LaserScan:
+                           range_max_m: float = 10.0, min_points: int = 1, intensities=None,
+                           observed_points_robot=None, frame_id: str = "base_link",
+                           stamp_s: float = 0.0) -> LaserScan:
     """Nearest obstacle per bearing, like ``depthimage_to_laserscan``.
 
     Parameters
@@ -111,12 +185,23 @@ def laser_scan_from_points(points_robot, *, angle_min_rad: float = -math.pi / 4,
         the nearest, as ``depthimage_to_laserscan``); a larger value ignores up
         to ``min_points - 1`` stray points in front of the obstacle, and rays
         with fewer points report no return.
+    intensities : ndarray of shape (N,), optional
+        One value per obstacle point (e.g. its gray level); the scan's intensity of a
+        ray is that of the point its range came from (NaN for rays without a return).
+    observed_points_robot : ndarray of shape (M, 3) or (M, 2), optional
+        Everything seen in this frame (floor, obstacles, points beyond range). A ray
+        without a return whose farthest seen point is at ``>= range_max_m`` was seen
+        clear to ``range_max``: ``+inf`` (REP 117), else ``nan``. The obstacle points
+        count as seen too.
+    frame_id, stamp_s : str, float
+        Header of the scan.
 
     Returns
     -------
     LaserScan
-        ``ranges_m`` NaN where no point falls in the bearing's bin
-        (bin = nearest ray, half an increment each side).
+        ``ranges_m``: the range of the return; ``+inf`` where the ray was seen clear to
+        ``range_max``; ``nan`` where no point tells (bin = nearest ray, half an increment
+        each side).
     """
     p = np.asarray(points_robot, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] not in (2, 3):
@@ -126,33 +211,88 @@ def laser_scan_from_points(points_robot, *, angle_min_rad: float = -math.pi / 4,
     inc = _checks.finite_number("angle_increment_rad", angle_increment_rad, positive=True)
     r0 = _checks.finite_number("range_min_m", range_min_m, nonnegative=True)
     r1 = _checks.finite_number("range_max_m", range_max_m, positive=True)
+    stamp = _checks.finite_number("stamp_s", stamp_s, nonnegative=True)
+    if not isinstance(frame_id, str) or not frame_id:
+        raise ValueError(f"frame_id must be a non-empty str, got {frame_id!r}")
     if a1 <= a0:
         raise ValueError(f"angle_max_rad ({a1}) must exceed angle_min_rad ({a0})")
     if r1 <= r0:
         raise ValueError(f"range_max_m ({r1}) must exceed range_min_m ({r0})")
+    m = _checks.positive_int("min_points", min_points)
+    value = None
+    if intensities is not None:
+        value = np.asarray(intensities, dtype=np.float64).ravel()
+        if value.shape != (p.shape[0],):
+            raise ValueError(f"intensities must have one value per point ({p.shape[0]}), got shape "
+                             f"{np.shape(intensities)}")
     n_float = math.floor((a1 - a0) / inc + 1e-9) + 1
     _checks.fits_in_memory("angle_increment_rad", n_float * 40.0, f"a scan of {n_float:.4g} rays")
     n = int(n_float)
-    p = p[np.isfinite(p[:, :2]).all(axis=1)]
-    r = np.hypot(p[:, 0], p[:, 1])
-    k = np.rint((np.arctan2(p[:, 1], p[:, 0]) - a0) / inc).astype(np.int64)
-    m = _checks.positive_int("min_points", min_points)
+    finite = np.isfinite(p[:, :2]).all(axis=1)
+    p = p[finite]
+    k, r = _rays(p, a0, inc, n)
     keep = (r >= r0) & (r <= r1) & (k >= 0) & (k < n)
+    index = np.nonzero(keep)[0]
     k, r = k[keep], r[keep]
     ranges = np.full(n, np.nan)
-    if m == 1:
-        ranges_inf = np.full(n, np.inf)
-        np.minimum.at(ranges_inf, k, r)
-        ranges = np.where(np.isfinite(ranges_inf), ranges_inf, np.nan)
-    elif k.size:
+    scan_values = np.full(n, np.nan)
+    if k.size:
         order = np.lexsort((r, k))                 # by ray, then by range
-        k, r = k[order], r[order]
+        k, r, index = k[order], r[order], index[order]
         first = np.searchsorted(k, np.arange(n))   # index of each ray's nearest point
         count = np.bincount(k, minlength=n)
         has = count >= m
         ranges[has] = r[first[has] + m - 1]
+        if value is not None:
+            scan_values[has] = value[finite][index[first[has] + m - 1]]
+    seen = p if observed_points_robot is None else np.concatenate(
+        [p[:, :2], _checks.points3("observed_points_robot", _as3(observed_points_robot))[:, :2]])
+    seen = seen[np.isfinite(seen[:, :2]).all(axis=1)]
+    ks, rs = _rays(seen, a0, inc, n)
+    inside = (ks >= 0) & (ks < n)
+    clear_to = np.zeros(n)
+    np.maximum.at(clear_to, ks[inside], rs[inside])
+    ranges[np.isnan(ranges) & (clear_to >= r1)] = np.inf
     return LaserScan(angle_min_rad=a0, angle_max_rad=a0 + (n - 1) * inc, angle_increment_rad=inc,
-                     range_min_m=r0, range_max_m=r1, ranges_m=ranges)
+                     range_min_m=r0, range_max_m=r1, ranges_m=ranges,
+                     intensities=scan_values if value is not None else np.empty(0),
+                     frame_id=frame_id, stamp_s=stamp)
+
+
+def _rays(points: np.ndarray, angle_min_rad: float, increment_rad: float, n: int):
+    """Ray index (nearest bearing) and horizontal range of each (x, y[, z]) point."""
+    r = np.hypot(points[:, 0], points[:, 1])
+    k = np.rint((np.arctan2(points[:, 1], points[:, 0]) - angle_min_rad) / increment_rad).astype(np.int64)
+    return k, r
+
+
+def _as3(points) -> np.ndarray:
+    arr = np.asarray(points, dtype=np.float64)
+    if arr.ndim == 2 and arr.shape[1] == 2:
+        arr = np.concatenate([arr, np.zeros((arr.shape[0], 1))], axis=1)
+    return arr
+
+
+def near_limit_range_m(stereo: StereoCamera, T_robot_from_cam, max_disparity_px: float) -> float:
+    """Smallest horizontal range (robot frame) at which a search up to ``max_disparity_px`` measures.
+
+    Nothing nearer than the depth ``Z = f B / d_max`` can be matched; over the image, the points at
+    that depth lie at horizontal ranges of at least the returned value (the scan's honest
+    ``range_min``). Evaluated on a grid of rectified pixels back-projected to depth ``Z`` and
+    moved into the robot frame with ``T_robot_from_cam``.
+    """
+    if not isinstance(stereo, StereoCamera):
+        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    d_max = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
+    T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
+    depth_m = stereo.focal_px * stereo.baseline_m / d_max
+    width, height = stereo.size
+    u, v = np.meshgrid(np.linspace(0, width - 1, 33), np.linspace(0, height - 1, 25))
+    f = stereo.focal_px
+    points_cam = np.stack([(u - stereo.cx_px) / f * depth_m, (v - stereo.cy_px) / f * depth_m,
+                           np.full(u.shape, depth_m)], axis=-1).reshape(-1, 3)
+    points_robot = points_cam @ T[:3, :3].T + T[:3, 3]
+    return float(np.hypot(points_robot[:, 0], points_robot[:, 1]).min())
 
 
 def top_view(points_robot, *, x_range_m: tuple[float, float] = (0.0, 8.0),
@@ -182,7 +322,7 @@ def top_view(points_robot, *, x_range_m: tuple[float, float] = (0.0, 8.0),
 
 
 def write_scan_json(path: str | os.PathLike, scan: LaserScan) -> None:
-    """Write a scan as JSON with the ROS LaserScan field names (null = no return)."""
+    """Write a scan as JSON: the ``sensor_msgs/LaserScan`` fields (:meth:`LaserScan.to_dict`)."""
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps(scan.to_dict(), indent=1) + "\n")
 
@@ -197,12 +337,20 @@ def read_scan_json(path: str | os.PathLike) -> LaserScan:
 
 
 def write_scan_csv(path: str | os.PathLike, scan: LaserScan) -> None:
-    """Write a scan as CSV ``angle_rad,range_m`` (empty range = no return)."""
+    """Write a scan as CSV rows ``angle_rad,range_m[,intensity]`` with the true values.
+
+    ``range_m`` is a number, ``inf`` (seen clear to range_max), ``nan`` (no measurement) or
+    ``-inf`` (too close) -- what ``float()``, ``numpy.loadtxt`` and pandas read as such.
+    """
+    def number(value: float, digits: int) -> str:
+        return f"{value:.{digits}f}" if math.isfinite(value) else str(float(value))
+
     with atomic_write(path) as tmp, open(tmp, "w", newline="") as fh:
         out = csv.writer(fh)
-        out.writerow(["angle_rad", "range_m"])
-        for a, r in zip(scan.angles_rad, scan.ranges_m):
-            out.writerow([f"{a:.6f}", f"{r:.4f}" if np.isfinite(r) else ""])
+        with_intensity = scan.intensities.size == scan.ranges_m.size and scan.ranges_m.size > 0
+        out.writerow(["angle_rad", "range_m"] + (["intensity"] if with_intensity else []))
+        for k, (a, r) in enumerate(zip(scan.angles_rad, scan.ranges_m)):
+            out.writerow([f"{a:.6f}", number(r, 4)] + ([number(scan.intensities[k], 2)] if with_intensity else []))
 
 
 def plot_top_view(path: str | os.PathLike, *, obstacle_points_robot=None, floor_points_robot=None,
