@@ -460,6 +460,53 @@ def test_ctrl_c_is_one_line_and_exit_130_within_seconds(ds, tmp_path, delay_s):
         assert names in (set(), {"map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json"})
 
 
+LONG_COMMANDS = {
+    "synth": ["synth", "--out", "{T}/S", "--frames", "3", "--width", "160", "--height", "120", "--quiet"],
+    "map (threads)": ["map", "{DS}", "-o", "{T}/m", "--workers", "2", "--quiet"],
+    "batch (processes)": ["batch", "{DS}", "-o", "{T}/b", "--workers", "2", "--processes", "--quiet"],
+    "disparity": ["disparity", "{DS}/left_rect/000000.png", "{DS}/right_rect/000000.png", "--max-disparity", "64",
+                  "--single-range", "-o", "{T}/d.pfm"],
+}
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("command", sorted(LONG_COMMANDS))
+def test_every_long_command_stops_with_one_line(ds, tmp_path, command, signum):
+    args = [a.replace("{T}", str(tmp_path)).replace("{DS}", str(ds)) for a in LONG_COMMANDS[command]]
+    env = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg")
+    proc = subprocess.Popen([sys.executable, "-m", "mrstereo", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=env, start_new_session=True)
+    time.sleep(2.0)
+    if proc.poll() is not None:
+        pytest.skip("the run ended before the signal")
+    os.killpg(proc.pid, signum)
+    sent = time.monotonic()
+    _, err = proc.communicate(timeout=30)
+    REPORT["cases"] += 1
+    REPORT["tracebacks"] += b"Traceback" in err
+    assert (proc.returncode, err.decode()) == (130, "mrstereo: interrupted\n")
+    assert time.monotonic() - sent < 5.0
+    visible = [p.name for p in tmp_path.rglob("*") if p.is_file() and not any(
+        part.startswith(".") for part in p.relative_to(tmp_path).parts)]
+    partial = [v for v in visible if v not in ("d.pfm",)] if command != "batch (processes)" else []
+    REPORT["partial outputs"] += bool(partial)
+    assert not partial, partial
+
+
+def test_sigkill_during_synth_leaves_only_a_marked_temporary(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg")
+    proc = subprocess.Popen([sys.executable, "-m", "mrstereo", "synth", "--out", str(tmp_path / "S"), "--frames", "3",
+                             "--width", "160", "--height", "120", "--quiet"], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob(".S.*.tmp/left/*.png")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.kill()
+    proc.wait()
+    assert not (tmp_path / "S").exists()
+    assert all(p.name.startswith(".") and p.name.endswith(".tmp") for p in tmp_path.iterdir())
+
+
 def test_sigkill_during_batch_then_resume_gives_the_same_files(ds, tmp_path):
     env = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg")
     ref, out = tmp_path / "ref", tmp_path / "out"

@@ -23,11 +23,18 @@ def demo_command(out_dir: Path, seed: int, n_frames: int, quiet: bool) -> None:
     rectifies, matches multi-range, suppresses the ground, maps along the path,
     plans a path through the map, and compares every stage with ground truth.
     """
+    import os
+
     from ..demo import run_demo
-    from ..io import check_output_dir
+    from ..io import check_output_dir, temporary_dir
 
     check_output_dir("--out", out_dir, must_be_empty=True)
-    result = run_demo(out_dir, seed=seed, n_frames=n_frames, progress=not quiet)
+    with temporary_dir(out_dir.absolute().parent, prefix=out_dir.name) as tmp:     # the report complete or not at all
+        result = run_demo(tmp / "report", seed=seed, n_frames=n_frames, progress=not quiet)
+        if out_dir.is_dir():
+            out_dir.rmdir()                     # empty, checked above
+        os.replace(tmp / "report", out_dir)
+    report = out_dir / result.report.relative_to(tmp / "report")
     m = result.metrics
     c, g = m["calibration"], m.get("map") or {}
     click.echo(f"calibration: RMS {c['rms_px']:.3f} px, focal error {c['focal_error_pct']:+.2f} %, "
@@ -37,7 +44,7 @@ def demo_command(out_dir: Path, seed: int, n_frames: int, quiet: bool) -> None:
                    f"wall profile error {100 * g['mean_distance_m']:.1f} cm")
     p = m["plan"]
     click.echo("planned path: " + (f"{p['length_m']:.2f} m" if p["success"] else p["message"]))
-    click.echo(f"report: {result.report.resolve()}")
+    click.echo(f"report: {report.resolve()}")
 
 
 COMMANDS = [demo_command]
