@@ -186,3 +186,14 @@ def test_bad_input(tmp_path):
     (tmp_path / "junk.json").write_text("not json")
     with pytest.raises(ValueError, match="not a JSON laser scan"):
         read_scan_json(tmp_path / "junk.json")
+
+
+def test_top_view_marks_bearings_seen_clear_to_range_max(tmp_path):
+    from mrstereo.io import read_image
+
+    scan = LaserScan(angle_min_rad=-0.3, angle_max_rad=0.3, angle_increment_rad=0.1, range_min_m=0.3,
+                     range_max_m=6.0, ranges_m=np.array([np.inf, np.inf, 2.0, np.nan, np.nan, np.inf, np.inf]))
+    plot_top_view(tmp_path / "top.png", scan=scan)
+    bgr = read_image(tmp_path / "top.png").astype(int)
+    light = (np.abs(bgr[..., 2] - 0x80) < 12) & (np.abs(bgr[..., 1] - 0xa0) < 12) & (np.abs(bgr[..., 0] - 0xe0) < 12)
+    assert light.sum() > 20                       # the four +inf bearings (and their legend entry)

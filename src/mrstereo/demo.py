@@ -97,7 +97,7 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     from .calibration.report import residual_figure
     from .camera import write_stereo
     from .geometry.obstacles import detect_obstacles
-    from .geometry.scan import laser_scan_from_points, plot_top_view, scan_angles_of_camera
+    from .geometry.scan import laser_scan_from_points, near_limit_range_m, plot_top_view, scan_angles_of_camera
     from .mapping import plan_path, read_ros_map
     from .mapping.figures import plot_map
     from .mapping.metrics import map_metrics
@@ -209,8 +209,11 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     _disparity_panels(out / "disparity.png", panels, range_px=disparity_range_px(gt, result.disparity_px),
                       background=left)
     lo, hi = scan_angles_of_camera(estimated, pan_rad=record.pan_rad)
+    near_m = near_limit_range_m(estimated, obstacles.T_robot_from_cam,
+                                max(level.band_px[1] for level in result.plan.levels))
     scan = laser_scan_from_points(obstacles.obstacle_points_robot, angle_min_rad=lo, angle_max_rad=hi,
-                                  angle_increment_rad=math.radians(0.5), range_min_m=0.1, range_max_m=8.0)
+                                  angle_increment_rad=math.radians(0.5), range_min_m=max(0.1, near_m),
+                                  range_max_m=8.0, observed_points_robot=obstacles.points_robot)
     plot_top_view(out / "top_view.png", obstacle_points_robot=obstacles.obstacle_points_robot,
                   floor_points_robot=obstacles.floor_points_robot, scan=scan,
                   title="top view of frame 0 (robot frame)")

@@ -386,6 +386,12 @@ def plot_top_view(path: str | os.PathLike, *, obstacle_points_robot=None, floor_
             ax.plot(xy[:, 1], xy[:, 0], ".", color="#1040c0", ms=3)
             handles.append(Line2D([], [], ls="", marker=".", ms=8, color="#1040c0",
                                   label=f"laser scan ({len(xy)} returns)"))
+            clear = scan.angles_rad[np.isposinf(scan.ranges_m)]
+            if clear.size:                # +inf: seen clear to range_max, drawn at range_max
+                ax.plot(scan.range_max_m * np.sin(clear), scan.range_max_m * np.cos(clear), "|",
+                        color="#80a0e0", ms=6)
+                handles.append(Line2D([], [], ls="", marker="|", ms=8, color="#80a0e0",
+                                      label=f"clear to range_max ({clear.size} rays)"))
             for a in (scan.angle_min_rad, scan.angle_max_rad):
                 ax.plot([0, scan.range_max_m * math.sin(a)], [0, scan.range_max_m * math.cos(a)],
                         "--", color="0.6", lw=0.8)
