@@ -13,7 +13,7 @@ from mrstereo.bag import (TfTree, TransformTrack, bag_topics, camera_info_from_m
                           image_from_message, pair_by_stamp, stereo_from_camera_info, yaw_from_matrix)
 from mrstereo.cli import entry
 from mrstereo.io import read_image
-from mrstereo.pipeline import build_map
+from mrstereo.pipeline import build_map, floor_for_run
 from mrstereo.recording import read_manifest, write_manifest
 from mrstereo.world.dataset import write_synthetic_dataset
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -228,15 +228,18 @@ def test_cli_map_and_export_from_a_bag(dataset, reference, tmp_path, capsys):
 
 
 def test_mount_is_estimated_when_not_given(tmp_path):
-    # the floor fit needs the 320x240 rig; camera_info carries no mount
+    # camera_info carries no mount: the export has none and mapping estimates the floor (320x240 rig)
     data = read_manifest(write_synthetic_dataset(tmp_path / "d", seed=2, n_frames=5, supersample=1, progress=False))
     bag = write_bag(tmp_path / "est", data, ros1=False)
     result = export_bag(bag, tmp_path / "out", **TOPICS, odom_topic="/odom", progress=False)
-    assert result.rig_source == "estimated from 5 frames"
-    # median of single-frame V-disparity fits (each off by up to 0.17 m / 0.11 rad here)
-    assert result.rig.height_m == pytest.approx(data.rig.height_m, abs=0.06)
-    assert result.rig.tilt_rad == pytest.approx(data.rig.tilt_rad, abs=0.05)
-    assert read_manifest(tmp_path / "out").rig == result.rig
+    assert result.rig is None and result.rig_source.startswith("none")
+    manifest = read_manifest(tmp_path / "out")
+    assert manifest.rig is None
+    mount, floor = floor_for_run(manifest)
+    assert floor.confident and floor.method == "plane"
+    assert floor.height_m == pytest.approx(data.rig.height_m, abs=0.02)
+    assert floor.tilt_rad == pytest.approx(data.rig.tilt_rad, abs=0.02)
+    assert mount.height_m == pytest.approx(floor.height_m) and mount.tilt_rad == pytest.approx(floor.tilt_rad)
 
 
 # ------------------------------------------------------------------------------------- bad input
@@ -338,3 +341,87 @@ def test_camera_info_messages_round_trip_the_calibration(dataset):
     with pytest.raises(ValueError, match="P\\[0,3\\]"):
         stereo_from_camera_info(bad, bad)
     assert camera_info_from_message(m.camera_info(cal.left, 0, "l")).camera.width == 160
+
+
+# ------------------------------------------------------------------------------ camera mount from TF
+
+def _tf_3d(m, items, stamp_ns):
+    """TFMessage of full 3-D transforms ``(parent, child, T_parent_from_child)``."""
+    from scipy.spatial.transform import Rotation
+
+    G, out = m.T, []
+    for parent, child, T in items:
+        q = Rotation.from_matrix(T[:3, :3]).as_quat()
+        tr = G["geometry_msgs/msg/Transform"](
+            translation=G["geometry_msgs/msg/Vector3"](x=float(T[0, 3]), y=float(T[1, 3]), z=float(T[2, 3])),
+            rotation=G["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
+        out.append(G["geometry_msgs/msg/TransformStamped"](header=m.header(stamp_ns, parent), child_frame_id=child,
+                                                           transform=tr))
+    return G["tf2_msgs/msg/TFMessage"](transforms=out)
+
+
+@pytest.mark.parametrize("ros1", [True, False])
+def test_mount_from_tf_chains_3d_frames_to_the_optical_frame(dataset, tmp_path, ros1):
+    from mrstereo.geometry.frames import R_BODY_FROM_OPTICAL, CameraMount, rotation_from_rpy
+
+    def pose(xyz, rpy):
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = rotation_from_rpy(*rpy), xyz
+        return T
+
+    T_base_mast = pose((0.10, -0.05, 0.60), (0.02, -0.03, 0.2))           # base -> mast (3-D)
+    T_mast_body = pose((0.05, 0.03, 0.30), (0.01, 0.25, -0.1))            # mast -> camera body
+    T_body_opt = np.eye(4)
+    T_body_opt[:3, :3] = R_BODY_FROM_OPTICAL                               # REP 103 optical frame
+    ts = _typestore(ros1)
+    m = _Msgs(ts, ros1)
+    path = tmp_path / ("tf.bag" if ros1 else "tf2")
+    if ros1:
+        from rosbags.rosbag1 import Writer
+        writer, serialize = Writer(path), ts.serialize_ros1
+    else:
+        from rosbags.rosbag2 import Writer
+        writer, serialize = Writer(path, version=9), ts.serialize_cdr
+    with writer:
+        conns = {t: writer.add_connection(t, typ, typestore=ts) for t, typ in (
+            ("/l/image_raw", "sensor_msgs/msg/Image"), ("/r/image_raw", "sensor_msgs/msg/Image"),
+            ("/l/camera_info", "sensor_msgs/msg/CameraInfo"), ("/r/camera_info", "sensor_msgs/msg/CameraInfo"),
+            ("/tf_static", "tf2_msgs/msg/TFMessage"))}
+
+        def put(topic, msg, t):
+            writer.write(conns[topic], t, serialize(msg, conns[topic].msgtype))
+
+        put("/tf_static", _tf_3d(m, [("base_link", "mast", T_base_mast), ("mast", "cam_link", T_mast_body),
+                                     ("cam_link", "cam_optical_frame", T_body_opt)], T0_NS), T0_NS)
+        rec, cal = dataset.frames[0], dataset.calibration
+        for k in range(2):
+            t = T0_NS + k * DT_NS
+            put("/l/camera_info", m.camera_info(cal.left, t, "l"), t)
+            put("/r/camera_info", m.camera_info(cal.right, t, "r"), t)
+            put("/l/image_raw", m.image(read_image(rec.left), t, "l"), t)
+            put("/r/image_raw", m.image(read_image(rec.right), t, "r"), t)
+    expected = T_base_mast @ T_mast_body @ T_body_opt
+    for frame in ("cam_optical_frame", "cam_link"):          # the optical frame, or the body frame it derives from
+        out = tmp_path / f"out_{frame}"
+        result = export_bag(path, out, left_topic="/l/image_raw", right_topic="/r/image_raw", camera_frame=frame,
+                            progress=False)
+        assert isinstance(result.rig, CameraMount) and result.rig_source == f"tf base_link <- {frame}"
+        np.testing.assert_allclose(result.rig.T_base_from_cam, expected, atol=1e-9)
+        manifest = read_manifest(out)
+        np.testing.assert_allclose(manifest.rig.T_base_from_cam, expected, atol=1e-9)   # via mount: xyz, rpy
+        assert [f.pan_rad for f in manifest.frames] == [0.0, 0.0]
+
+
+def test_mount_from_tf_of_a_panning_head_is_the_rig_and_the_pans(dataset, tmp_path):
+    # the synthetic rig as TF: base_link -> stereo_link (pan) -> left_optical (height, tilt)
+    from mrstereo.geometry.frames import CameraMount
+
+    bag = write_bag(tmp_path / "pan", dataset, ros1=False, odom=False, tf=True)
+    # stereo_link is a body frame on the floor: its mount is (0, 0, 0) and the rig's height and tilt are lost,
+    # so a real robot publishes the optical frame; here the body frame's heading gives the pan
+    result = export_bag(bag, tmp_path / "o", **TOPICS, use_tf=True, camera_frame="stereo_link", progress=False)
+    assert isinstance(result.rig, CameraMount) and result.rig.xyz == (0.0, 0.0, 0.0)
+    manifest = read_manifest(tmp_path / "o")
+    first = dataset.frames[0].pan_rad
+    assert [f.pan_rad for f in manifest.frames] == pytest.approx([f.pan_rad - first for f in dataset.frames],
+                                                                 abs=1e-9)

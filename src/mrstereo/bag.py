@@ -11,17 +11,21 @@ manifest reads a recording too:
 2. the calibration comes from the first ``sensor_msgs/CameraInfo`` of the
    left and right camera_info topics (``K, D, R, P`` -> :class:`StereoCamera`,
    ROS's ``P_right[0, 3] = -fx * baseline``) or from a stereo YAML;
-3. the robot pose ``(x, y, yaw)`` at each left image stamp comes from
-   ``nav_msgs/Odometry`` or from TF (``base_link`` in ``map`` or ``odom``,
-   chained through ``/tf`` and ``/tf_static``), interpolated linearly
-   (slerp for rotations) between the two nearest messages and held
-   constant outside their time span. Lateral offsets of the camera on the
-   robot are ignored (the rig model puts it on the robot's vertical axis);
-4. the head pan is 0 unless a TF ``camera_frame`` is given: then it is the
-   heading of that frame's forward axis (``z`` for a ``*optical*`` frame,
-   else ``x``) in the base frame;
-5. the mount (height, tilt) is the stereo YAML's ``rig:``, else given, else
-   estimated from the floor in a few frames (median of V-disparity fits).
+3. the robot pose at each left image stamp comes from ``nav_msgs/Odometry``
+   or from TF (``base_link`` in ``map`` or ``odom``, chained through ``/tf``
+   and ``/tf_static`` in 3-D), interpolated linearly (slerp for rotations)
+   between the two nearest messages and held constant outside their time
+   span, then projected onto the floor plane for the 2-D map: ``(x, y, yaw)``
+   of the base frame's x axis;
+4. the camera mount (``T_base_from_cam``, :class:`~mrstereo.geometry.frames.CameraMount`)
+   is the one given (``rig``: a CameraMount or the paper's RigMount), else
+   the stereo YAML's ``mount:``/``rig:``, else the TF pose of ``camera_frame``
+   in ``base_frame`` at the first frame (an ``*optical*`` frame as it is, any
+   other frame as the camera body, x forward, REP 103), else none: the
+   manifest then has no mount and ``map``/``batch`` estimate the floor;
+5. the head pan of a frame is the change of heading of ``camera_frame``'s
+   optical axis in the base frame relative to the mount (0 without a
+   ``camera_frame``).
 
 Conventions: docs/conventions.md; user guide: docs/scale-out.md.
 """
@@ -41,11 +45,12 @@ import numpy as np
 
 from . import _checks
 from .camera import CameraInfo, RigMount, StereoCamera, write_stereo
+from .geometry.frames import R_BODY_FROM_OPTICAL, CameraMount
 from .io import write_image
 
 __all__ = ["BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message",
            "camera_info_from_message", "stereo_from_camera_info", "pair_by_stamp", "yaw_from_matrix",
-           "export_bag", "exported_bag", "estimate_rig"]
+           "export_bag", "exported_bag"]
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
@@ -317,10 +322,10 @@ class BagExport:
         Image messages on the two topics.
     stamps_ns : tuple of int
         Left image stamp of every frame.
-    rig : RigMount
-        The mount written to the manifest.
+    rig : RigMount, CameraMount or None
+        The mount written to the manifest (None: none known, estimated when mapping).
     rig_source : str
-        ``"calibration"``, ``"options"`` or ``"estimated from N frames"``.
+        ``"calibration"``, ``"options"``, ``"tf <base> <- <camera>"`` or ``"none (...)"``.
     pose_source : str
         ``"odometry <topic>"``, ``"tf <world> <- <base>"`` or ``"none (origin)"``.
     """
@@ -330,7 +335,7 @@ class BagExport:
     n_left: int
     n_right: int
     stamps_ns: tuple[int, ...]
-    rig: RigMount
+    rig: RigMount | CameraMount | None
     rig_source: str
     pose_source: str
 
@@ -381,12 +386,14 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
     base_frame : str
         The robot's TF frame.
     camera_frame : str, optional
-        TF frame of the stereo head whose heading in ``base_frame`` is the
-        head pan (default: pan 0).
+        TF frame of the left camera (optical or body frame): its pose in
+        ``base_frame`` is the mount when none is given, its change of heading
+        the head pan (default: pan 0).
     sync_tolerance_s : float
         Largest left/right stamp difference of a pair.
-    rig : RigMount, optional
-        Camera mount; default the calibration's ``rig:``, else estimated.
+    rig : CameraMount or RigMount, optional
+        Camera mount; default the calibration's, else from TF (``camera_frame``),
+        else none (the floor is estimated when mapping).
     rectified : bool
         The images are already rectified (written as ``left_rect``/``right_rect``).
     progress : bool
@@ -404,8 +411,8 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
         raise ValueError(f"left and right topics must differ, both are {left_topic!r}")
     if calibration is not None and not isinstance(calibration, StereoCamera):
         raise TypeError(f"calibration must be a StereoCamera, got {type(calibration).__name__}")
-    if rig is not None and not isinstance(rig, RigMount):
-        raise TypeError(f"rig must be a RigMount, got {type(rig).__name__}")
+    if rig is not None and not isinstance(rig, (RigMount, CameraMount)):
+        raise TypeError(f"rig must be a RigMount or CameraMount, got {type(rig).__name__}")
     if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
         raise ValueError(f"output directory {out_dir} already exists and is not empty; choose a new directory")
     with _open_bag(bag) as reader:
@@ -494,9 +501,18 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
             poses = [(0.0, 0.0, 0.0)] * len(frame_stamps)
             pose_source = "none (every frame at the origin)"
         pans = [0.0] * len(frame_stamps)
+        rig_source = "options" if rig is not None else "calibration"
+        if rig is None:
+            rig = calibration.rig
         if camera_frame is not None:
-            axis = 2 if "optical" in camera_frame else 0
-            pans = [_round_pose([_heading(tf.lookup(base_frame, camera_frame, t), axis)])[0] for t in frame_stamps]
+            T_cams = [_optical_in_base(tf.lookup(base_frame, camera_frame, t), camera_frame) for t in frame_stamps]
+            if rig is None:
+                rig = CameraMount(T_cams[0])
+                rig_source = f"tf {base_frame} <- {camera_frame}"
+            ref = _heading(_mount_matrix(rig), 2)
+            pans = [_round_pose([_wrap(_heading(T, 2) - ref)])[0] for T in T_cams]
+        if rig is None:
+            rig_source = "none (the floor is estimated when mapping)"
 
         # pass 2: decode and write the paired images
         out_dir.parent.mkdir(parents=True, exist_ok=True)
@@ -523,14 +539,6 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
                 write_image(tmp / key_of[conn.topic] / f"{k:06d}.png", image)
                 bar.update(1)
             bar.close()
-            rig_source = "calibration"
-            if rig is not None:
-                rig_source = "options"
-            elif calibration.rig is not None:
-                rig = calibration.rig
-            else:
-                rig, n_used = estimate_rig(tmp, calibration, n_frames=len(pairs), rectified=rectified)
-                rig_source = f"estimated from {n_used} frames"
             write_stereo(tmp / CALIBRATION_NAME, calibration)
             frames = []
             for k in range(len(pairs)):
@@ -559,35 +567,23 @@ def _heading(T: np.ndarray, axis: int) -> float:
     return math.atan2(T[1, axis], T[0, axis])
 
 
-def estimate_rig(dataset_dir: str | os.PathLike, stereo: StereoCamera, *, n_frames: int, rectified: bool = False,
-                 n_samples: int = 7) -> tuple[RigMount, int]:
-    """Camera height and tilt from the floor: median of V-disparity fits on a few frames.
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
-    Single fits can be far off (a frame looking down a long corridor, small
-    images); the median of ``n_samples`` evenly spread frames is robust to a
-    minority of those. Reads ``left/NNNNNN.png`` (or ``left_rect``) of ``dataset_dir``.
 
-    Returns
-    -------
-    (RigMount, int)
-        The mount and the number of frames whose fit succeeded.
-    """
-    from .geometry.pair import obstacles_from_pair
-    from .io import read_image
+def _mount_matrix(mount) -> np.ndarray:
+    """``T_base_from_cam`` of a CameraMount or of the paper's RigMount."""
+    return mount.T_base_from_cam if isinstance(mount, CameraMount) else CameraMount.from_rig(mount).T_base_from_cam
 
-    keys = ("left_rect", "right_rect") if rectified else ("left", "right")
-    picks = sorted(set(np.linspace(0, n_frames - 1, min(n_samples, n_frames)).round().astype(int).tolist()))
-    heights, tilts = [], []
-    for k in picks:
-        left, right = (read_image(Path(dataset_dir) / key / f"{k:06d}.png") for key in keys)
-        ground = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=None).obstacles.ground
-        if ground.success:
-            heights.append(ground.height_m)
-            tilts.append(ground.tilt_rad)
-    if not heights:
-        raise ValueError("could not estimate the camera mount from the floor in the images; "
-                         "give --height and --tilt (or a rig: entry in a stereo YAML)")
-    return RigMount(height_m=float(np.median(heights)), tilt_rad=float(np.median(tilts))), len(heights)
+
+def _optical_in_base(T_base_from_frame: np.ndarray, frame: str) -> np.ndarray:
+    """The optical frame's pose from a TF frame's: an ``*optical*`` frame is one (x right, y down,
+    z forward); any other camera frame is taken as the camera body (x forward, y left, z up, REP 103)."""
+    if "optical" in frame:
+        return T_base_from_frame
+    T = np.eye(4)
+    T[:3, :3] = R_BODY_FROM_OPTICAL
+    return T_base_from_frame @ T
 
 
 @contextlib.contextmanager

@@ -39,8 +39,9 @@ from .io import (atomic_write, check_output_dir, check_outputs, read_pfm, remove
                  write_disparity)
 from .mapping.rosmap import ros_map_files
 from .parallel import ItemFailure, map_ordered
-from .pipeline import (FrameObservation, MapRun, PipelineConfig, frame_pair, fuse, observation_from_pair,
-                       pair_options, write_map_outputs)
+from .geometry.frames import CameraMount
+from .pipeline import (FrameObservation, MapRun, PipelineConfig, floor_for_run, frame_pair, fuse,
+                       observation_from_pair, pair_options, write_map_outputs)
 from .recording import FrameRecord, Manifest, read_manifest
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
@@ -75,7 +76,7 @@ class FrameTask:
     record: FrameRecord
     index: int
     stereo: StereoCamera
-    rig: RigMount | None
+    rig: RigMount | CameraMount | None
     config: PipelineConfig
     frames_dir: Path
     dataset: str
@@ -171,11 +172,16 @@ class DatasetSummary:
     n_skipped: int
     n_failed: int
     map_status: str = ""
+    floor: object | None = None
+    """The floor the frames used (:class:`mrstereo.geometry.GroundPlane`); None when all was kept."""
 
     def to_dict(self) -> dict:
-        return {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
-                "frames": self.n_frames, "computed": self.n_computed, "skipped": self.n_skipped,
-                "failed": self.n_failed, "map": self.map_status}
+        out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
+               "frames": self.n_frames, "computed": self.n_computed, "skipped": self.n_skipped,
+               "failed": self.n_failed, "map": self.map_status}
+        if self.floor is not None:
+            out["floor"] = self.floor.summary()
+        return out
 
 
 @dataclass(frozen=True)
@@ -220,7 +226,8 @@ def _write_map(run: MapRun, map_dir: Path, record: dict) -> None:
         os.replace(tmp, map_dir)
 
 
-def _map_run(manifest: Manifest, observations: list[FrameObservation], config: PipelineConfig) -> MapRun:
+def _map_run(manifest: Manifest, observations: list[FrameObservation], config: PipelineConfig,
+             floor=None, mount=None) -> MapRun:
     """Fuse in frame order and compare with the ground-truth map, as :func:`mrstereo.pipeline.build_map`."""
     from .mapping import read_ros_map
     from .mapping.metrics import map_metrics
@@ -232,7 +239,7 @@ def _map_run(manifest: Manifest, observations: list[FrameObservation], config: P
         if gt.grid.shape == occupancy.grid.shape and observations:
             metrics = map_metrics(occupancy, gt, path_xy=np.array([o.pose for o in observations]))
     return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
-                  ground_truth_map=gt)
+                  ground_truth_map=gt, floor=floor, mount=mount)
 
 
 def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
@@ -276,7 +283,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, input_kind="dataset",
                          input_dirs=[m.root for m in datasets], inputs=[f for files in inputs for f in files])
 
-    tasks, observations, skipped, done_maps = [], {}, {}, set()
+    tasks, observations, skipped, done_maps, floors = [], {}, {}, set(), {}
     for name, m in zip(names, datasets):
         frames_dir = out / name / "frames"
         frames_dir.mkdir(parents=True, exist_ok=True)
@@ -287,12 +294,14 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         if maps and all(complete) and _map_done(out / name / "map", len(m.frames)):
             done_maps.add(name)
         skipped[name] = sum(complete)
+        if not all(complete) or (maps and name not in done_maps):
+            floors[name] = floor_for_run(m, config=config)       # the mount, or the floor estimated once
         for k, record in enumerate(m.frames):
             if complete[k]:
                 if maps and name not in done_maps:
                     observations[(name, k)] = loaded[k]
             else:
-                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, rig=m.rig, config=config,
+                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, rig=floors[name][0], config=config,
                                        frames_dir=frames_dir, dataset=name))
 
     results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, processes=processes,
@@ -316,12 +325,13 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
                 status = "kept"
             else:
                 obs = [observations[(name, k)] for k in range(len(m.frames)) if (name, k) in observations]
-                run = _map_run(m, obs, config)
+                run = _map_run(m, obs, config, floor=floors[name][1], mount=floors[name][0])
                 _write_map(run, out / name / "map", {"frames": len(m.frames), "fused": len(obs), "failed": failed})
                 status = "written" if not failed else f"written from {len(obs)} of {len(m.frames)} frames"
         summaries.append(DatasetSummary(name=name, manifest=m.root / "manifest.yaml", out_dir=out / name,
                                         n_frames=len(m.frames), n_computed=computed, n_skipped=skipped[name],
-                                        n_failed=len(failed), map_status=status))
+                                        n_failed=len(failed), map_status=status,
+                                        floor=floors[name][1] if name in floors else None))
     path = out / SUMMARY_NAME
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps({"datasets": [s.to_dict() for s in summaries], "failures": failures,

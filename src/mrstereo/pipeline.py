@@ -10,7 +10,10 @@ clear (:func:`mrstereo.mapping.occupancy.view_cells`). Then an ordered
 reduction, :func:`fuse`, adds these cells to a log-odds (or union) occupancy
 grid (paper section 5.2), a few microseconds per frame.
 :func:`build_map` runs both over a manifest; :func:`write_map_outputs` writes
-the ROS map, figures and metrics. Conventions: docs/conventions.md.
+the ROS map, figures and metrics. Without a camera mount, :func:`floor_for_run`
+estimates the floor once from the first frames that show enough of it and the
+run uses that mount (reported, with its confidence, in ``MapRun.floor`` and
+metrics.json). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -23,8 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import StereoCamera
+from .camera import RigMount, StereoCamera
 from .geometry import T_world_from_robot, transform_points
+from .geometry.frames import CameraMount, mount_entry
+from .geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount, ground_from_rig
 from .geometry.obstacles import ObstacleConfig
 from .geometry.pair import PairObstacles, obstacles_from_pair
 from .io import atomic_write, read_image
@@ -37,7 +42,7 @@ from .rejection import RejectionConfig
 from .recording import FrameRecord, Manifest, read_manifest
 
 __all__ = ["PipelineConfig", "FrameObservation", "MapRun", "observe_frame", "fuse", "build_map",
-           "write_map_outputs"]
+           "floor_for_run", "write_map_outputs"]
 
 
 @dataclass(frozen=True)
@@ -124,6 +129,10 @@ class MapRun:
     manifest: Manifest
     metrics: MapMetrics | None
     ground_truth_map: object | None
+    floor: GroundPlane | None = None
+    """The floor of the run: the given mount's, or the estimate :func:`floor_for_run` made."""
+    mount: RigMount | CameraMount | None = None
+    """The camera mount every frame used."""
 
 
 def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -189,6 +198,63 @@ def _observe_indexed(indexed: tuple[int, FrameRecord], *, stereo: StereoCamera, 
     return observe_frame(record, stereo, index=k, rig=rig, config=config, prefer_raw=prefer_raw)
 
 
+def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
+                  config: PipelineConfig = PipelineConfig(), prefer_raw: bool = False, max_frames: int = 10,
+                  n_frames: int = 3) -> tuple[RigMount | CameraMount, GroundPlane]:
+    """The camera mount of a run and the floor it implies: given, or estimated from the first frames.
+
+    With a mount in the manifest (``mount:`` or ``rig:``) that mount. Without,
+    the floor is fitted (``config.obstacles.ground_method``, RANSAC) in the
+    first ``max_frames`` frames until ``n_frames`` fits are confident
+    (:attr:`GroundPlane.confident`); the median height, tilt and roll of those
+    is the mount of the whole run (the camera is assumed to look along the
+    robot's x axis, on its vertical axis: a floor says nothing about yaw or
+    the horizontal offset). With no confident fit, the fit with the largest
+    inlier share is used and reported as not confident.
+
+    Returns
+    -------
+    (RigMount or CameraMount, GroundPlane)
+        The mount, and the floor with its confidence (``inlier_share``,
+        ``residual_m``) and in ``message`` which frames it came from.
+
+    Raises
+    ------
+    ValueError
+        No floor in any of the first ``max_frames`` frames.
+    """
+    if not isinstance(manifest, Manifest):
+        raise TypeError(f"manifest must be a Manifest, got {type(manifest).__name__}")
+    if manifest.rig is not None:
+        mount = manifest.rig
+        return mount, ground_from_mount(mount) if isinstance(mount, CameraMount) else ground_from_rig(mount)
+    stereo = replace(manifest.calibration if stereo is None else stereo, rig=None)
+    fits, best = [], None
+    for k, record in enumerate(manifest.frames[:max(1, int(max_frames))]):
+        left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
+        ground = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=None,
+                                     **pair_options(config)).obstacles.ground
+        if ground.success and (best is None or ground.inlier_share > best[1].inlier_share):
+            best = (k, ground)
+        if ground.confident:
+            fits.append((k, ground))
+            if len(fits) >= n_frames:
+                break
+    if best is None:
+        raise ValueError(f"no floor found in the first {min(len(manifest.frames), max_frames)} frames of "
+                         f"{manifest.root}; give the camera mount (--mount x,y,z,roll,pitch,yaw or --height/--tilt, "
+                         "or mount:/rig: in the manifest or stereo YAML)")
+    used = fits or [best]
+    med = {name: float(np.median([getattr(g, name) for _, g in used]))
+           for name in ("height_m", "tilt_rad", "roll_rad", "inlier_share", "residual_m")}
+    frames = ", ".join(str(k) for k, _ in used)
+    ground = GroundPlane(**med, success=True, method=used[0][1].method,
+                         n_inliers=int(np.median([g.n_inliers for _, g in used])),
+                         message=f"estimated: median of {len(used)} floor fit(s), frame(s) {frames}"
+                                 + ("" if fits else " (none confident)"))
+    return CameraMount(T_robot_from_cam_ground(ground)), ground
+
+
 def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
               calibration: StereoCamera | None = None, prefer_raw: bool = False,
               progress: bool = True, workers: int | None = None, scheduler=None,
@@ -221,7 +287,8 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
     stereo = manifest.calibration if calibration is None else calibration
     prefer_raw = prefer_raw or calibration is not None
-    observe = partial(_observe_indexed, stereo=stereo, rig=manifest.rig, config=config, prefer_raw=prefer_raw)
+    mount, floor = floor_for_run(manifest, stereo, config=config, prefer_raw=prefer_raw)
+    observe = partial(_observe_indexed, stereo=stereo, rig=mount, config=config, prefer_raw=prefer_raw)
     observations = map_ordered(observe, list(enumerate(manifest.frames)), workers=workers, scheduler=scheduler,
                                processes=processes, progress=progress, desc="mapping", unit="frame",
                                label=lambda item: f"frame {item[0]} ({(item[1].left_rect or item[1].left).name})")
@@ -233,7 +300,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
             path = np.array([f.pose for f in manifest.frames])
             metrics = map_metrics(occupancy, gt, path_xy=path)
     return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
-                  ground_truth_map=gt)
+                  ground_truth_map=gt, floor=floor, mount=mount)
 
 
 def fov_views(run: MapRun, stereo: StereoCamera, *, range_m: float = 4.0) -> list[tuple]:
@@ -243,7 +310,11 @@ def fov_views(run: MapRun, stereo: StereoCamera, *, range_m: float = 4.0) -> lis
 
 
 def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
-    """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy and metrics.json."""
+    """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy and metrics.json.
+
+    metrics.json holds the comparison with the ground-truth map (when there is
+    one) and ``floor``: the floor of the run with its confidence.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_ros_map(out / "map.yaml", run.grid.to_ros_map())
@@ -254,8 +325,13 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
              ground_truth=run.ground_truth_map, title=f"occupancy grid ({run.grid.config.fusion})")
     files = {"map_yaml": out / "map.yaml", "map_pgm": out / "map.pgm", "map_png": out / "map.png",
              "log_odds": out / "log_odds.npy"}
-    if run.metrics is not None:
+    report = run.metrics.to_dict() if run.metrics is not None else {}
+    if run.floor is not None:
+        report["floor"] = run.floor.summary()
+    if run.mount is not None:
+        report["mount"] = mount_entry(run.mount)
+    if report:
         with atomic_write(out / "metrics.json") as tmp:
-            tmp.write_text(json.dumps(run.metrics.to_dict(), indent=2))
+            tmp.write_text(json.dumps(report, indent=2))
         files["metrics"] = out / "metrics.json"
     return files

@@ -24,6 +24,7 @@ import yaml
 
 from .camera import RigMount, StereoCamera, read_stereo
 from .io import read_text
+from .geometry.frames import CameraMount, mount_entry, read_mount_entry
 
 __all__ = ["FrameRecord", "Manifest", "read_manifest", "write_manifest", "MANIFEST_NAME",
            "IMAGE_KEYS", "GT_KEYS"]
@@ -66,8 +67,10 @@ class Manifest:
     calibration : StereoCamera
         Stereo calibration read from ``calibration_path``.
     calibration_path : Path
-    rig : RigMount
-        Camera mount (the manifest's ``rig:``, else the calibration's).
+    rig : RigMount, CameraMount or None
+        Camera mount: the manifest's ``mount:`` (6-DoF, a CameraMount) or ``rig:``
+        (height and tilt, a RigMount), else the calibration's; None when no mount
+        is known (the floor is then estimated, :func:`mrstereo.pipeline.build_map`).
     ground_truth_map : Path or None
         ROS map YAML of the true map.
     frames : tuple of FrameRecord
@@ -76,7 +79,7 @@ class Manifest:
     root: Path
     calibration: StereoCamera
     calibration_path: Path
-    rig: RigMount
+    rig: RigMount | CameraMount | None
     ground_truth_map: Path | None
     frames: tuple[FrameRecord, ...]
 
@@ -125,17 +128,9 @@ def read_manifest(path_or_dir: str | os.PathLike) -> Manifest:
         raise _fail(path, "missing 'calibration: <stereo YAML path>'")
     calib_path = _existing_file(root, data["calibration"], "calibration", path)
     calibration = read_stereo(calib_path)
-    rig = calibration.rig
-    if data.get("rig") is not None:
-        r = data["rig"]
-        if not isinstance(r, dict) or "height_m" not in r:
-            raise _fail(path, "'rig' needs height_m (and optional tilt_rad)")
-        try:
-            rig = RigMount(height_m=r["height_m"], tilt_rad=r.get("tilt_rad", 0.0))
-        except (TypeError, ValueError) as exc:
-            raise _fail(path, f"rig: {exc}") from None
+    rig = read_mount_entry(data, where=f"manifest {path}")
     if rig is None:
-        raise _fail(path, "no rig mount: give 'rig: {height_m, tilt_rad}' in the manifest or the calibration")
+        rig = calibration.rig
     gt_map = None
     if data.get("ground_truth_map") is not None:
         gt_map = _existing_file(root, data["ground_truth_map"], "ground_truth_map", path)
@@ -174,11 +169,13 @@ def _frame(root: Path, manifest: Path, k: int, item) -> FrameRecord:
     return record
 
 
-def write_manifest(path: str | os.PathLike, *, calibration: str, rig: RigMount, frames: list[dict],
-                   ground_truth_map: str | None = None, extra: dict | None = None) -> None:
-    """Write ``manifest.yaml``; ``frames`` are dicts of relative paths, ``pose``, ``pan_rad``."""
-    data = {"calibration": calibration,
-            "rig": {"height_m": float(rig.height_m), "tilt_rad": float(rig.tilt_rad)}}
+def write_manifest(path: str | os.PathLike, *, calibration: str, rig: RigMount | CameraMount | None,
+                   frames: list[dict], ground_truth_map: str | None = None, extra: dict | None = None) -> None:
+    """Write ``manifest.yaml``; ``frames`` are dicts of relative paths, ``pose``, ``pan_rad``.
+
+    ``rig`` is written as ``rig:`` (a RigMount), ``mount:`` (a CameraMount) or not at all (None).
+    """
+    data = {"calibration": calibration, **mount_entry(rig)}
     if ground_truth_map is not None:
         data["ground_truth_map"] = ground_truth_map
     if extra:

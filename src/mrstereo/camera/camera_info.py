@@ -279,24 +279,17 @@ class StereoCamera:
                 cv2.remap(right, rx, ry, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
 
     def to_dict(self) -> dict:
-        out = {"left": self.left.to_dict(), "right": self.right.to_dict()}
-        if self.rig is not None:
-            out["rig"] = {"height_m": float(self.rig.height_m), "tilt_rad": float(self.rig.tilt_rad)}
-        return out
+        from ..geometry.frames import mount_entry
+
+        return {"left": self.left.to_dict(), "right": self.right.to_dict(), **mount_entry(self.rig)}
 
     @classmethod
     def from_dict(cls, data, *, where: str = "stereo calibration") -> StereoCamera:
         if not isinstance(data, dict) or "left" not in data or "right" not in data:
             raise ValueError(f"{where}: expected 'left:' and 'right:' camera_info sections")
-        rig = None
-        if data.get("rig") is not None:
-            r = data["rig"]
-            if not isinstance(r, dict) or "height_m" not in r:
-                raise ValueError(f"{where}: 'rig' needs height_m (and optional tilt_rad)")
-            try:
-                rig = RigMount(height_m=r["height_m"], tilt_rad=r.get("tilt_rad", 0.0))
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"{where}: rig: {exc}") from None
+        from ..geometry.frames import read_mount_entry
+
+        rig = read_mount_entry(data, where=where)         # rig: (RigMount) or mount: (CameraMount)
         left = CameraInfo.from_dict(data["left"], where=f"{where}: left")
         right = CameraInfo.from_dict(data["right"], where=f"{where}: right")
         try:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from ._options import check_workers, worker_options
+from ._options import check_workers, echo_run_floor, mount_option, parse_mount, worker_options
 
 __all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "rig_from_options"]
 
@@ -29,8 +29,9 @@ def bag_options(func):
         click.option("--world-frame", default=None, help="TF world frame (default: map if connected, else odom)."),
         click.option("--base-frame", default="base_link", show_default=True, help="TF frame of the robot."),
         click.option("--camera-frame", default=None,
-                     help="TF frame of the stereo head: its heading in the base frame is the head pan "
-                          "(z axis of an *optical* frame, else x). Default: pan 0."),
+                     help="TF frame of the left camera (an *_optical_frame, else the camera body frame "
+                          "x forward): its pose in --base-frame is the camera mount (unless --mount or "
+                          "--height is given), its change of heading the head pan."),
         click.option("--sync-tolerance", "sync_tolerance_s", type=float, default=0.02, show_default=True,
                      help="Largest left/right stamp difference of a stereo pair [s]."),
         click.option("--rectified-images", is_flag=True, help="The bag's images are already rectified."),
@@ -41,12 +42,17 @@ def bag_options(func):
     ]
     for option in reversed(options):
         func = option(func)
-    return func
+    return mount_option(func)
 
 
-def rig_from_options(height_m, tilt_rad):
-    """A RigMount from ``--height``/``--tilt`` (None when neither is given)."""
+def rig_from_options(height_m, tilt_rad, mount=None):
+    """A CameraMount from ``--mount``, or a RigMount from ``--height``/``--tilt`` (None when none is given)."""
     from ..camera import RigMount
+
+    if mount is not None:
+        if height_m is not None or tilt_rad is not None:
+            raise click.UsageError("give --mount or --height/--tilt, not both")
+        return parse_mount(mount)
 
     for name, value in (("--height", height_m), ("--tilt", tilt_rad)):
         if value is not None and not math.isfinite(value):
@@ -60,7 +66,7 @@ def rig_from_options(height_m, tilt_rad):
 
 def bag_export_kwargs(*, calib, left_topic, right_topic, camera_info_topics, odom_topic, use_tf, world_frame,
                       base_frame, camera_frame, sync_tolerance_s, rectified_images, height_m, tilt_rad,
-                      quiet) -> dict:
+                      mount, quiet) -> dict:
     """Validate the bag options and turn them into :func:`mrstereo.bag.export_bag` keywords."""
     from ..camera import read_stereo
 
@@ -80,14 +86,15 @@ def bag_export_kwargs(*, calib, left_topic, right_topic, camera_info_topics, odo
     return dict(left_topic=left_topic, right_topic=right_topic, camera_info_topics=info,
                 calibration=read_stereo(calib) if calib is not None else None, odom_topic=odom_topic,
                 use_tf=use_tf, world_frame=world_frame, base_frame=base_frame, camera_frame=camera_frame,
-                sync_tolerance_s=sync_tolerance_s, rig=rig_from_options(height_m, tilt_rad),
+                sync_tolerance_s=sync_tolerance_s, rig=rig_from_options(height_m, tilt_rad, mount),
                 rectified=rectified_images, progress=not quiet)
 
 
 def echo_export(result) -> None:
+    mount = ("none (the floor is estimated when mapping)" if result.rig is None else
+             f"height {result.rig.height_m:.3f} m, tilt {result.rig.tilt_rad:.3f} rad ({result.rig_source})")
     click.echo(f"bag: {result.n_frames} stereo pairs from {result.n_left} left / {result.n_right} right images; "
-               f"pose: {result.pose_source}; mount: height {result.rig.height_m:.3f} m, tilt "
-               f"{result.rig.tilt_rad:.3f} rad ({result.rig_source})", err=True)
+               f"pose: {result.pose_source}; mount: {mount}", err=True)
 
 
 @click.command("export")
@@ -127,27 +134,37 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 @click.option("--fusion", type=click.Choice(["log_odds", "union"]), default="log_odds", show_default=True,
               help="Map fusion.")
 @click.option("--no-maps", is_flag=True, help="Only the per-frame outputs, no map per dataset.")
+@mount_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool, preset: str, fusion: str,
-                  no_maps: bool, quiet: bool) -> None:
+                  no_maps: bool, mount, quiet: bool) -> None:
     """Process many datasets: per frame a disparity (PFM), a point cloud (PLY) and a laser scan (JSON);
     per dataset a map. Resumable: finished outputs are kept on a re-run, failed frames are retried.
 
     Failures of single frames are listed in OUT/summary.json and the rest goes on;
-    the command then ends with an error line naming how many failed.
+    the command then ends with an error line naming how many failed. A dataset
+    without a camera mount (and no --mount) uses the floor estimated from its
+    first frames (reported per dataset, with its confidence).
     """
-    from ..pipeline import PipelineConfig
+    import dataclasses
+
     from ..batch import run_batch
     from ..io import check_output_dir
+    from ..pipeline import PipelineConfig
+    from ..recording import read_manifest
 
     check_workers(workers, scheduler, processes)
     check_output_dir("--out", out_dir)
     config = PipelineConfig(preset=preset).with_fusion(fusion)
+    rig = parse_mount(mount)
+    if rig is not None:
+        manifests = [dataclasses.replace(read_manifest(m), rig=rig) for m in manifests]
     summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
                         scheduler=scheduler, processes=processes, progress=not quiet)
     for d in summary.datasets:
         click.echo(f"{d.name}: {d.n_frames} frames ({d.n_computed} computed, {d.n_skipped} already done, "
                    f"{d.n_failed} failed){'; map ' + d.map_status if d.map_status else ''}")
+        echo_run_floor(d.floor, prefix=f"{d.name}: floor")
     click.echo(f"wrote {out_dir} (summary: {summary.path})")
     if summary.failures:
         first = summary.failures[0]

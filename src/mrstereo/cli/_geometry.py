@@ -12,6 +12,7 @@ import click
 import numpy as np
 
 from ..io import check_outputs
+from ._options import echo_floor, mount_option, parse_mount
 
 __all__ = ["COMMANDS"]
 
@@ -46,7 +47,7 @@ def _common(func):
     ]
     for option in reversed(options):
         func = option(func)
-    return func
+    return mount_option(func)
 
 
 def _finite(name: str, value):
@@ -56,7 +57,7 @@ def _finite(name: str, value):
 
 
 def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, preset, max_disparity_px,
-         texture_threshold, min_height_m, max_height_m, max_range_m, ground_method, scan: bool, **scan_kw):
+         texture_threshold, min_height_m, max_height_m, max_range_m, ground_method, mount, scan: bool, **scan_kw):
     from dataclasses import replace
 
     from ..camera import RigMount, read_stereo
@@ -70,7 +71,9 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
                         ("--max-range", max_range_m)):
         _finite(name, value)
     stereo = read_stereo(calib)
-    rig = None
+    rig = parse_mount(mount)
+    if rig is not None and (height_m is not None or tilt_rad is not None):
+        raise click.UsageError("give --mount or --height/--tilt, not both")
     if height_m is not None or tilt_rad is not None:
         base = stereo.rig
         if height_m is None and base is None:
@@ -95,9 +98,7 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
 
 
 def _report_ground(obstacles) -> None:
-    g = obstacles.ground
-    click.echo(f"floor ({g.method}): height {g.height_m:.3f} m, tilt {math.degrees(g.tilt_rad):.2f} deg"
-               + (f", roll {math.degrees(g.roll_rad):.2f} deg" if g.method == "plane" else ""), err=True)
+    echo_floor(obstacles.ground)
 
 
 @click.command("points")

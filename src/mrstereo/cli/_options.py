@@ -24,3 +24,63 @@ def check_workers(workers, scheduler, processes: bool = False) -> None:
         raise click.UsageError("--processes only with --workers")
     if workers is not None and workers < 1:
         raise click.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
+
+
+def mount_option(func):
+    """``--mount x,y,z,roll,pitch,yaw``: the 6-DoF camera mount (docs/conventions.md, Frames)."""
+    return click.option("--mount", "mount", default=None, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                        help="Camera mount in the robot base frame: position [m] and REP 103 roll, pitch "
+                             "(positive = looking down), yaw [rad] of the camera body (docs/conventions.md). "
+                             "Overrides a mount:/rig: entry; not with --height/--tilt.")(func)
+
+
+def parse_mount(text):
+    """A :class:`~mrstereo.geometry.frames.CameraMount` from ``--mount`` text (None stays None)."""
+    import math
+
+    from ..geometry.frames import CameraMount
+
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in str(text).split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not all(math.isfinite(v) for v in values):
+        raise click.BadParameter(f"expected six finite numbers 'x,y,z,roll,pitch,yaw' (metres, radians), "
+                                 f"got {text!r}", param_hint="--mount")
+    return CameraMount.from_xyz_rpy(values[:3], values[3:])
+
+
+def echo_floor(ground, *, prefix: str = "floor") -> None:
+    """One stderr line for the floor a command used; a warning line when a fit is not confident."""
+    import math
+
+    if ground is None:
+        return
+    if not ground.success:
+        click.echo(f"{prefix} ({ground.method}): not found ({ground.message})", err=True)
+        return
+    click.echo(f"{prefix} ({ground.method}): height {ground.height_m:.3f} m, tilt {math.degrees(ground.tilt_rad):.2f} "
+               f"deg, roll {math.degrees(ground.roll_rad):.2f} deg; {ground.confidence_text}", err=True)
+    warn_floor(ground)
+
+
+def echo_run_floor(ground, *, prefix: str = "floor") -> None:
+    """For a whole run (map, batch): the floor on stdout when it was estimated, and a warning if weak."""
+    if ground is None or ground.method in ("rig", "mount"):
+        return
+    click.echo(f"{prefix} {ground.message}: height {ground.height_m:.3f} m, tilt {ground.tilt_rad:.4f} rad, "
+               f"roll {ground.roll_rad:.4f} rad; {ground.confidence_text}")
+    warn_floor(ground)
+
+
+def warn_floor(ground) -> None:
+    """One ``mrstereo: warning: ...`` line on stderr for a floor estimate that is not confident."""
+    from ..geometry.ground import MAX_FLOOR_RESIDUAL_M, MIN_FLOOR_SHARE
+
+    if ground.success and not ground.confident:
+        click.echo(f"mrstereo: warning: the floor estimate is not confident ({ground.confidence_text}; needs at "
+                   f"least {100 * MIN_FLOOR_SHARE:.0f} % inliers and at most {MAX_FLOOR_RESIDUAL_M:.3f} m): "
+                   "little floor in view, obstacles and free space may be wrong; give the camera mount "
+                   "(--mount or --height/--tilt)", err=True)

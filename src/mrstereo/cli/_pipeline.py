@@ -6,7 +6,7 @@ from pathlib import Path
 import click
 
 from ._bag import bag_export_kwargs, bag_options, echo_export, rig_from_options
-from ._options import check_workers, worker_options
+from ._options import check_workers, echo_run_floor, worker_options
 
 __all__ = ["COMMANDS"]
 
@@ -81,12 +81,12 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
             dataset = read_manifest(result.out_dir)
         else:
             used = [f"--{k.replace('_', '-')}" for k, v in bag_kw.items()
-                    if v not in (None, False) and k not in ("height_m", "tilt_rad", "base_frame",
+                    if v not in (None, False) and k not in ("height_m", "tilt_rad", "mount", "base_frame",
                                                              "sync_tolerance_s")]
             if used:
                 raise click.UsageError(f"{', '.join(used)} only with --bag")
             dataset = read_manifest(manifest)
-            rig = rig_from_options(bag_kw["height_m"], bag_kw["tilt_rad"])
+            rig = rig_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw["mount"])
             if rig is not None:
                 dataset = dataclasses.replace(dataset, rig=rig)
             stereo = read_stereo(calib) if calib is not None else None
@@ -96,6 +96,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
         with staged_dir(out_dir, prefix="map") as staging:      # all files or none: a kill leaves the old set
             files = {key: out_dir / path.name for key, path in write_map_outputs(run, staging).items()}
     click.echo(f"map of {len(run.observations)} frames: {run.grid!r}")
+    echo_run_floor(run.floor)
     if run.metrics is not None:
         m = run.metrics
         click.echo(f"vs ground truth: precision {m.precision:.3f}, recall {m.recall:.3f}, "

@@ -23,7 +23,8 @@ import numpy as np
 from .. import _checks
 from . import _kernels
 from ..camera import RigMount, StereoCamera
-from .ground import GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_rig
+from .frames import CameraMount
+from .ground import GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_mount, ground_from_rig
 from .triangulation import points_cam_from_disparity
 
 __all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity"]
@@ -158,16 +159,24 @@ def points_robot_from_disparity(disparity_px, stereo: StereoCamera, T_robot_from
     return pts
 
 
-def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: RigMount | None,
+def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: RigMount | CameraMount | None,
                      config: ObstacleConfig = ObstacleConfig()) -> GroundPlane:
     """The floor to use for a frame: the mount, or an estimate (around the mount if given).
 
     No mount: estimated with ``config.ground_method`` within
     ``config.ground_height_range_m``. A mount and ``config.estimate_ground``:
-    estimated near the mount, falling back to the mount. Otherwise the mount.
+    estimated near the mount (its height and tilt), falling back to the mount.
+    Otherwise the mount: a :class:`RigMount` (height, tilt) or a full
+    :class:`~mrstereo.geometry.frames.CameraMount`.
     """
+    if mount is not None and not isinstance(mount, (RigMount, CameraMount)):
+        raise TypeError(f"mount must be a RigMount or CameraMount, got {type(mount).__name__}")
     if mount is not None and not config.estimate_ground:
-        return ground_from_rig(mount)
+        return ground_from_mount(mount) if isinstance(mount, CameraMount) else ground_from_rig(mount)
+    if isinstance(mount, CameraMount):
+        full, mount = mount, RigMount(height_m=mount.height_m, tilt_rad=mount.tilt_rad)
+        ground = ground_for_frame(disparity_px, stereo, mount=mount, config=config)
+        return ground if ground.method != "rig" else ground_from_mount(full)
     if mount is None:
         return estimate_ground(disparity_px, stereo, method=config.ground_method, rng=config.seed,
                                height_range_m=config.ground_height_range_m)
@@ -191,8 +200,8 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
         Disparity of the rectified left image (after rejection, eq. 13), NaN invalid.
     stereo : StereoCamera
         The calibration (rectified ``P``); its ``rig`` is used when ``rig`` is None.
-    rig : RigMount, optional
-        Camera height and tilt. When neither ``rig``, ``ground`` nor
+    rig : RigMount or CameraMount, optional
+        Camera height and tilt, or the full mount. When neither ``rig``, ``ground`` nor
         ``stereo.rig`` is given, the floor is estimated from the disparity
         (``config.ground_method``).
     ground : GroundPlane, optional
@@ -211,8 +220,8 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
         raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
     if not isinstance(config, ObstacleConfig):
         raise TypeError(f"config must be an ObstacleConfig, got {type(config).__name__}")
-    if rig is not None and not isinstance(rig, RigMount):
-        raise TypeError(f"rig must be a RigMount, got {type(rig).__name__}")
+    if rig is not None and not isinstance(rig, (RigMount, CameraMount)):
+        raise TypeError(f"rig must be a RigMount or CameraMount, got {type(rig).__name__}")
     if ground is not None and not isinstance(ground, GroundPlane):
         raise TypeError(f"ground must be a GroundPlane, got {type(ground).__name__}")
     d = np.asarray(disparity_px, dtype=np.float64)
