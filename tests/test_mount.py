@@ -19,9 +19,6 @@ from mrstereo.geometry.ground import T_robot_from_cam_ground, ground_from_mount,
 from mrstereo.geometry.triangulation import disparity_px_from_depth_m
 from mrstereo.recording import read_manifest, write_manifest
 
-DATA = Path("/work/shared/data")
-
-
 def test_the_paper_rig_is_the_special_case_bit_for_bit():
     rig = RigMount(height_m=0.45, tilt_rad=0.15)
     a = CameraMount.from_xyz_rpy((0.0, 0.0, 0.45), (0.0, 0.15, 0.0)).T_base_from_cam
@@ -105,10 +102,11 @@ def _ideal_yaml(path: Path, left: Path) -> Path:
     return path
 
 
-def test_points_warns_on_a_scene_without_floor(tmp_path, capsys):
-    left = DATA / "middlebury2003/teddy/im2.ppm"
+def test_points_warns_on_a_scene_without_floor(tmp_path, capsys, sample_data):
+    teddy = sample_data("teddy")
+    left = teddy / "im2.ppm"
     calib = _ideal_yaml(tmp_path / "c.yaml", left)
-    code = entry(["points", str(left), str(DATA / "middlebury2003/teddy/im6.ppm"), "--calib", str(calib),
+    code = entry(["points", str(left), str(teddy / "im6.ppm"), "--calib", str(calib),
                   "--rectified", "-o", str(tmp_path / "t.ply")])
     err = capsys.readouterr().err.splitlines()
     assert code == 0
