@@ -125,13 +125,22 @@ def corridor(tmp_path_factory):
 
 
 def test_points_with_mount_equals_height_and_tilt(corridor, tmp_path, capsys):
-    rec, rig = corridor.frames[0], corridor.rig
+    from mrstereo.geometry import read_ply
+
+    rec, rig, cal = corridor.frames[0], corridor.rig, corridor.calibration
     common = [str(rec.left), str(rec.right), "--calib", str(corridor.calibration_path)]
     assert entry(["points", *common, "-o", str(tmp_path / "a.ply"), "--height", str(rig.height_m),
                   "--tilt", str(rig.tilt_rad)]) == 0
-    assert entry(["points", *common, "-o", str(tmp_path / "b.ply"),
-                  "--mount", f"0,0,{rig.height_m},0,{rig.tilt_rad},0"]) == 0
-    assert (tmp_path / "a.ply").read_bytes() == (tmp_path / "b.ply").read_bytes()
+    # a mount is the raw camera's pose; the paper's rig is that of the rectified frame (p_rect = R p_raw)
+    T = T_robot_from_cam(height_m=rig.height_m, tilt_rad=rig.tilt_rad)
+    T[:3, :3] = T[:3, :3] @ cal.left.R
+    raw = CameraMount(T)
+    assert not np.allclose(cal.left.R, np.eye(3))                    # the synthetic head is misaligned
+    values = ",".join(repr(v) for v in (*raw.xyz, *raw.rpy))
+    assert entry(["points", *common, "-o", str(tmp_path / "b.ply"), "--mount", values]) == 0
+    a, b = read_ply(tmp_path / "a.ply"), read_ply(tmp_path / "b.ply")
+    assert a.points.shape == b.points.shape and a.points.shape[0] > 1000
+    np.testing.assert_allclose(a.points, b.points, atol=1e-5)
     assert "warning" not in capsys.readouterr().err
     assert entry(["points", *common, "-o", str(tmp_path / "c.ply"), "--mount", "0,0,1"]) == 2
     assert "--mount" in capsys.readouterr().err

@@ -4,8 +4,8 @@ Reading uses the ``rosbags`` library. A bag becomes a dataset directory in
 the manifest format (docs/dataset.md), so every command that reads a
 manifest reads a recording too:
 
-1. left and right ``sensor_msgs/Image`` (mono8, bgr8, rgb8, bgra8, rgba8) or
-   ``sensor_msgs/CompressedImage`` messages are paired by their header
+1. left and right ``sensor_msgs/Image`` (mono8/16, 16UC1, bgr8, rgb8, bgra8, rgba8, Bayer
+   rggb8/bggr8/gbrg8/grbg8) or ``sensor_msgs/CompressedImage`` messages are paired by their header
    stamps, each left with the nearest right within ``sync_tolerance_s``
    (one-to-one, closest pairs first);
 2. the calibration comes from the first ``sensor_msgs/CameraInfo`` of the
@@ -48,7 +48,7 @@ from .camera import CameraInfo, RigMount, StereoCamera, write_stereo
 from .geometry.frames import R_BODY_FROM_OPTICAL, CameraMount
 from .io import write_image
 
-__all__ = ["BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message",
+__all__ = ["BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message", "SUPPORTED_ENCODINGS",
            "camera_info_from_message", "stereo_from_camera_info", "pair_by_stamp", "yaw_from_matrix",
            "export_bag", "exported_bag"]
 
@@ -109,8 +109,27 @@ def _stamp_ns(msg, fallback_ns: int) -> int:
     return ns if ns > 0 else int(fallback_ns)
 
 
+# ROS Image encoding -> (channels, dtype); sensor_msgs/image_encodings.h names
+_ENCODINGS = {"mono8": (1, np.uint8), "8UC1": (1, np.uint8), "mono16": (1, np.uint16), "16UC1": (1, np.uint16),
+              "bgr8": (3, np.uint8), "rgb8": (3, np.uint8), "8UC3": (3, np.uint8),
+              "bgra8": (4, np.uint8), "rgba8": (4, np.uint8), "8UC4": (4, np.uint8),
+              "bayer_rggb8": (1, np.uint8), "bayer_bggr8": (1, np.uint8), "bayer_gbrg8": (1, np.uint8),
+              "bayer_grbg8": (1, np.uint8)}
+# OpenCV names a Bayer pattern by the 2x2 block starting at the second row and column, ROS by the
+# first: ROS rggb is OpenCV BG (known-answer test in tests/test_bag_encodings.py, as cv_bridge maps it).
+_DEBAYER = {"bayer_rggb8": cv2.COLOR_BayerBG2BGR, "bayer_bggr8": cv2.COLOR_BayerRG2BGR,
+            "bayer_gbrg8": cv2.COLOR_BayerGR2BGR, "bayer_grbg8": cv2.COLOR_BayerGB2BGR}
+SUPPORTED_ENCODINGS = tuple(_ENCODINGS)
+
+
 def image_from_message(msg, msgtype: str) -> np.ndarray:
-    """A ``sensor_msgs/Image`` or ``CompressedImage`` as an OpenCV array (gray or BGR uint8).
+    """A ``sensor_msgs/Image`` or ``CompressedImage`` as an OpenCV array.
+
+    Gray (``mono8``, ``8UC1``) and colour (``bgr8``, ``rgb8``, ``bgra8``, ``rgba8``, ``8UC3``,
+    ``8UC4``) become uint8 gray or BGR; ``mono16``/``16UC1`` uint16 gray (byte order from
+    ``is_bigendian``); Bayer mosaics (``bayer_rggb8``, ``bayer_bggr8``, ``bayer_gbrg8``,
+    ``bayer_grbg8``) are debayered to BGR with OpenCV. Rows may be padded (``step``).
+    CompressedImage: whatever OpenCV decodes (jpeg, png; 8 or 16 bit).
 
     Raises ``ValueError`` for an unsupported encoding or an undecodable payload.
     """
@@ -119,17 +138,27 @@ def image_from_message(msg, msgtype: str) -> np.ndarray:
         img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
         if img is None:
             raise ValueError(f"cannot decode a CompressedImage (format {msg.format!r})")
-        if img.dtype != np.uint8:
-            raise ValueError(f"CompressedImage decodes to {img.dtype}; only 8-bit images are supported")
+        if img.dtype not in (np.uint8, np.uint16):
+            raise ValueError(f"CompressedImage decodes to {img.dtype}; only 8- and 16-bit images are supported")
         return img[:, :, :3] if img.ndim == 3 and img.shape[2] == 4 else img
-    channels = {"mono8": 1, "8UC1": 1, "bgr8": 3, "rgb8": 3, "8UC3": 3, "bgra8": 4, "rgba8": 4, "8UC4": 4}
     enc = str(msg.encoding)
-    if enc not in channels:
-        raise ValueError(f"image encoding {enc!r} is not supported (mono8, bgr8, rgb8, bgra8, rgba8)")
-    h, w, ch, step = int(msg.height), int(msg.width), channels[enc], int(msg.step)
-    if step < w * ch or data.size < h * step:
-        raise ValueError(f"image message of {w}x{h} {enc} has step {step} and {data.size} bytes")
-    img = data[:h * step].reshape(h, step)[:, :w * ch].reshape(h, w, ch)
+    if enc not in _ENCODINGS:
+        raise ValueError(f"image encoding {enc!r} is not supported (supported: {', '.join(SUPPORTED_ENCODINGS)})")
+    ch, dtype = _ENCODINGS[enc]
+    itemsize = np.dtype(dtype).itemsize
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    if h <= 0 or w <= 0 or step < w * ch * itemsize or data.size < h * step:
+        raise ValueError(f"image message of {w}x{h} {enc} has step {step} and {data.size} bytes "
+                         f"(needs step >= {w * ch * itemsize} and {h} rows of it)")
+    rows = data[:h * step].reshape(h, step)[:, :w * ch * itemsize]
+    if itemsize > 1:
+        order = ">" if int(getattr(msg, "is_bigendian", 0)) else "<"
+        img = np.ascontiguousarray(rows).view(np.dtype(dtype).newbyteorder(order)).astype(dtype)
+    else:
+        img = rows
+    img = img.reshape(h, w, ch)
+    if enc in _DEBAYER:
+        return cv2.cvtColor(np.ascontiguousarray(img[:, :, 0]), _DEBAYER[enc])
     if ch == 1:
         return np.ascontiguousarray(img[:, :, 0])
     if enc.startswith("rgb"):

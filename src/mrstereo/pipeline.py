@@ -42,7 +42,7 @@ from .rejection import RejectionConfig
 from .recording import FrameRecord, Manifest, read_manifest
 
 __all__ = ["PipelineConfig", "FrameObservation", "MapRun", "observe_frame", "fuse", "build_map",
-           "floor_for_run", "write_map_outputs"]
+           "floor_for_run", "frame_pair", "matching_image", "write_map_outputs"]
 
 
 @dataclass(frozen=True)
@@ -135,15 +135,28 @@ class MapRun:
     """The camera mount every frame used."""
 
 
+def matching_image(image: np.ndarray) -> np.ndarray:
+    """An image on the 8-bit gray-level scale the matcher's parameters use.
+
+    16-bit images (``mono16`` cameras, 16-bit PNG) become float32 ``v / 257`` (0..255): every one
+    of the 65536 levels stays distinct (float32 keeps 24 bits), and an 8-bit image scaled by 257
+    comes back exactly; others are returned as they are.
+    """
+    if image.dtype == np.uint16:
+        return image.astype(np.float32) / np.float32(257.0)
+    return image
+
+
 def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.ndarray, np.ndarray, bool]:
     """Load a frame's pair ``(left, right, rectified)``: the rectified one when listed.
 
     ``prefer_raw`` takes the raw pair (to be rectified with the calibration) even when a
-    rectified pair is listed, e.g. to test an estimated calibration.
+    rectified pair is listed, e.g. to test an estimated calibration. 16-bit images are scaled
+    by :func:`matching_image`.
     """
     if record.has_rectified and not (prefer_raw and record.has_raw):
-        return read_image(record.left_rect), read_image(record.right_rect), True
-    return read_image(record.left), read_image(record.right), False
+        return matching_image(read_image(record.left_rect)), matching_image(read_image(record.right_rect)), True
+    return matching_image(read_image(record.left)), matching_image(read_image(record.right)), False
 
 
 def pair_options(config: PipelineConfig) -> dict:
@@ -252,7 +265,10 @@ def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
                          n_inliers=int(np.median([g.n_inliers for _, g in used])),
                          message=f"estimated: median of {len(used)} floor fit(s), frame(s) {frames}"
                                  + ("" if fits else " (none confident)"))
-    return CameraMount(T_robot_from_cam_ground(ground)), ground
+    # the estimate is of the rectified left frame; the mount is of the raw camera (p_rect = R p_raw)
+    T = T_robot_from_cam_ground(ground)
+    T[:3, :3] = T[:3, :3] @ stereo.left.R
+    return CameraMount(T), ground
 
 
 def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),

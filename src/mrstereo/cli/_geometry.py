@@ -80,7 +80,9 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
             raise ValueError("--tilt needs --height (or a rig: entry in the calibration YAML)")
         rig = RigMount(height_m=height_m if height_m is not None else base.height_m,
                        tilt_rad=tilt_rad if tilt_rad is not None else (base.tilt_rad if base else 0.0))
-    left_img, right_img = read_image(left), read_image(right)
+    from ..pipeline import matching_image
+
+    left_img, right_img = matching_image(read_image(left)), matching_image(read_image(right))
     if left_img.shape != right_img.shape:
         raise ValueError(f"left and right images differ in size: {left_img.shape[1]}x{left_img.shape[0]} "
                          f"and {right_img.shape[1]}x{right_img.shape[0]}")

@@ -68,6 +68,10 @@ def planar_pose_from_matrix(T) -> tuple[float, float, float]:
 class CameraMount:
     """Pose of the left camera's optical frame in the robot base frame: ``T_base_from_cam`` (4, 4).
 
+    The physical (raw) left camera, as TF publishes it; points triangulated in the rectified
+    frame are turned back by the calibration's rectification ``R`` first
+    (:func:`mrstereo.geometry.ground.ground_from_mount`).
+
     The base frame is REP 103 (x forward, y left, z up) with its x-y plane on
     the floor (ROS ``base_footprint``; ``base_link`` of most wheeled robots).
     The optical frame is x right, y down, z forward. Built from

@@ -148,11 +148,22 @@ def ground_from_rig(rig: RigMount) -> GroundPlane:
                        message="mount given")
 
 
-def ground_from_mount(mount: CameraMount) -> GroundPlane:
-    """The floor (base ``z = 0``) seen from a full 6-DoF mount; keeps the mount's transform."""
+def ground_from_mount(mount: CameraMount, *, R_rect_from_cam=None) -> GroundPlane:
+    """The floor (base ``z = 0``) seen from a full 6-DoF mount; keeps the mount's transform.
+
+    The mount is the pose of the physical (raw) left camera; points are triangulated in the
+    rectified left frame, turned by ``R_rect_from_cam`` (camera_info ``R`` of the left
+    camera, default identity): the floor is returned in that rectified frame,
+    ``T_base_from_rect = T_base_from_cam @ R^T``.
+    """
     if not isinstance(mount, CameraMount):
         raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
     T = mount.T_base_from_cam
+    if R_rect_from_cam is not None:
+        R = _checks.matrix("R_rect_from_cam", R_rect_from_cam, (3, 3))
+        if not np.array_equal(R, np.eye(3)):
+            T = T.copy()
+            T[:3, :3] = T[:3, :3] @ R.T
     n = -T[2, :3]                       # the base's down axis in the camera frame
     return GroundPlane(height_m=float(T[2, 3]), tilt_rad=math.asin(float(np.clip(n[2], -1.0, 1.0))),
                        roll_rad=math.atan2(float(n[0]), float(n[1])), method="mount", message="mount given",

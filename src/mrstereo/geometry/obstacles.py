@@ -171,12 +171,16 @@ def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: RigMount | Ca
     """
     if mount is not None and not isinstance(mount, (RigMount, CameraMount)):
         raise TypeError(f"mount must be a RigMount or CameraMount, got {type(mount).__name__}")
-    if mount is not None and not config.estimate_ground:
-        return ground_from_mount(mount) if isinstance(mount, CameraMount) else ground_from_rig(mount)
     if isinstance(mount, CameraMount):
-        full, mount = mount, RigMount(height_m=mount.height_m, tilt_rad=mount.tilt_rad)
-        ground = ground_for_frame(disparity_px, stereo, mount=mount, config=config)
-        return ground if ground.method != "rig" else ground_from_mount(full)
+        # the mount is the raw left camera's pose; the points are in its rectified frame
+        full = ground_from_mount(mount, R_rect_from_cam=stereo.left.R)
+        if not config.estimate_ground:
+            return full
+        ground = ground_for_frame(disparity_px, stereo, config=config,
+                                  mount=RigMount(height_m=full.height_m, tilt_rad=full.tilt_rad))
+        return ground if ground.method != "rig" else full
+    if mount is not None and not config.estimate_ground:
+        return ground_from_rig(mount)
     if mount is None:
         return estimate_ground(disparity_px, stereo, method=config.ground_method, rng=config.seed,
                                height_range_m=config.ground_height_range_m)
