@@ -239,7 +239,11 @@ def test_mount_is_estimated_when_not_given(tmp_path):
     assert floor.confident and floor.method == "plane"
     assert floor.height_m == pytest.approx(data.rig.height_m, abs=0.02)
     assert floor.tilt_rad == pytest.approx(data.rig.tilt_rad, abs=0.02)
-    assert mount.height_m == pytest.approx(floor.height_m) and mount.tilt_rad == pytest.approx(floor.tilt_rad)
+    # the mount is of the raw camera; turned into the rectified frame it is the estimated floor
+    from mrstereo.geometry.ground import ground_from_mount
+    seen = ground_from_mount(mount, R_rect_from_cam=manifest.calibration.left.R)
+    assert (seen.height_m, seen.tilt_rad, seen.roll_rad) == pytest.approx(
+        (floor.height_m, floor.tilt_rad, floor.roll_rad), abs=1e-12)
 
 
 # ------------------------------------------------------------------------------------- bad input
