@@ -322,9 +322,9 @@ def test_image_messages_decode_to_opencv_layout():
                                             is_bigendian=0, step=16, data=padded.ravel())
     bgr = image_from_message(msg, "sensor_msgs/msg/Image")
     assert bgr.shape == (3, 4, 3) and (bgr[..., 2] == 200).all() and (bgr[..., :2] == 0).all()
-    msg16 = ts.types["sensor_msgs/msg/Image"](header=m.header(0, "c"), height=3, width=4, encoding="mono16",
-                                              is_bigendian=0, step=8, data=np.zeros(24, np.uint8))
-    with pytest.raises(ValueError, match="encoding 'mono16' is not supported"):
+    msg16 = ts.types["sensor_msgs/msg/Image"](header=m.header(0, "c"), height=3, width=4, encoding="32FC1",
+                                              is_bigendian=0, step=16, data=np.zeros(48, np.uint8))
+    with pytest.raises(ValueError, match="encoding '32FC1' is not supported"):
         image_from_message(msg16, "sensor_msgs/msg/Image")
     gray = np.arange(12, dtype=np.uint8).reshape(3, 4)
     assert np.array_equal(image_from_message(m.image(gray, 0, "c", compressed=True),
