@@ -117,7 +117,8 @@ def test_compressed_png_16_bit_and_jpeg(tmp_path):
 
     assert np.array_equal(_export_one(tmp_path, "png16", False, compressed(g16, "png"), compressed=True), g16)
     got = _export_one(tmp_path, "jpg", True, compressed(smooth, "jpg"), compressed=True)
-    assert np.array_equal(got, cv2.imdecode(cv2.imencode(".jpg", smooth)[1], cv2.IMREAD_UNCHANGED))   # as OpenCV decodes it
+    expected = cv2.imdecode(cv2.imencode(".jpg", smooth)[1], cv2.IMREAD_UNCHANGED)      # as OpenCV decodes it
+    assert np.array_equal(got, expected)
 
 
 def test_unsupported_encoding_is_one_clear_line(tmp_path, capsys):
@@ -142,7 +143,8 @@ def test_16_bit_levels_stay_distinct_and_a_mono16_bag_maps_like_mono8(tmp_path):
     levels = np.arange(65536, dtype=np.uint16).reshape(256, 256)
     scaled = matching_image(levels)
     assert scaled.dtype == np.float32 and np.all(np.diff(scaled.ravel()) > 0)
-    assert scaled.max() == 255.0 and np.array_equal(matching_image(levels[::257] * 0 + 257 * 3), np.full((1, 256), 3.0, np.float32))
+    assert scaled.max() == 255.0
+    assert np.array_equal(matching_image(np.full((2, 3), 257 * 3, np.uint16)), np.full((2, 3), 3.0, np.float32))
     # rectified synthetic pairs as mono8 and as mono16 (x 257): the same map, bit for bit
     from mrstereo.world.dataset import write_synthetic_dataset
     data = read_manifest(write_synthetic_dataset(tmp_path / "d", seed=5, n_frames=3, width=160, height=120,

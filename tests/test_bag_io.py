@@ -58,13 +58,14 @@ class _Msgs:
 
     def camera_info(self, info, stamp_ns: int, frame: str):
         cam = info.camera
-        fields = dict(D=np.asarray(cam.dist_coeffs, float), K=cam.K.ravel().astype(float),
+        model = getattr(cam, "distortion_model", "plumb_bob")           # ROS name and D (equidistant: k1..k4)
+        fields = dict(D=np.asarray(getattr(cam, "D", cam.dist_coeffs), float), K=cam.K.ravel().astype(float),
                       R=info.R.ravel().astype(float), P=info.P.ravel().astype(float))
         if not self.ros1:
             fields = {k.lower(): v for k, v in fields.items()}
         roi = self.T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
         return self.T["sensor_msgs/msg/CameraInfo"](header=self.header(stamp_ns, frame), height=cam.height,
-                                                    width=cam.width, distortion_model="plumb_bob", binning_x=0,
+                                                    width=cam.width, distortion_model=model, binning_x=0,
                                                     binning_y=0, roi=roi, **fields)
 
     def _pose(self, x, y, yaw):

@@ -44,7 +44,8 @@ def test_mount_known_answers_rep103():
     assert g.rpy == pytest.approx((0.05, 0.2, -0.7), abs=1e-12) and g.xyz == pytest.approx((0.3, -0.2, 0.9))
     np.testing.assert_allclose(CameraMount.from_dict(g.to_dict()).T_base_from_cam, g.T_base_from_cam, atol=1e-15)
     # pan turns the head about the base z axis
-    np.testing.assert_allclose(g.T_base_from_cam_panned(0.4)[:3, :3], rotation_from_rpy(0, 0, 0.4) @ g.T_base_from_cam[:3, :3])
+    np.testing.assert_allclose(g.T_base_from_cam_panned(0.4)[:3, :3],
+                               rotation_from_rpy(0, 0, 0.4) @ g.T_base_from_cam[:3, :3])
 
 
 def test_floor_of_a_mount_and_obstacle_split_with_a_rolled_offset_camera():

@@ -50,7 +50,8 @@ MAX_FLOOR_RESIDUAL_M = 0.03
 from .triangulation import points_cam_from_disparity
 
 __all__ = [
-    "GroundPlane", "ground_from_rig", "ground_from_mount", "MIN_FLOOR_SHARE", "MAX_FLOOR_RESIDUAL_M", "v_disparity", "fit_ground_v_disparity", "fit_ground_plane",
+    "GroundPlane", "ground_from_rig", "ground_from_mount", "MIN_FLOOR_SHARE", "MAX_FLOOR_RESIDUAL_M", "v_disparity",
+    "fit_ground_v_disparity", "fit_ground_plane",
     "estimate_ground", "T_robot_from_cam_ground", "height_above_ground_m",
 ]
 
