@@ -51,10 +51,17 @@ def test_multi_range_recovers_near_and_far_single_range_with_same_work_misses_ne
     d_equal = int(work / (H * W)) - 1
     assert d_equal < 36
     single = compute_disparity(left, right, disparity_bands_px=[(0, d_equal)],
-                               config=MatchingConfig(multi_range=False))
+                               config=MatchingConfig(multi_range=False, near_guard=0.0))
     assert single.plan.work <= work * 1.1
     assert _good(single, truth, far_cols) > 0.9
     assert _good(single, truth, near_cols, tol=2.0) < 0.05
+    # with its near guard the single range reports the near plane as too near, not farther
+    guarded = compute_disparity(left, right, disparity_bands_px=[(0, d_equal)],
+                                config=MatchingConfig(multi_range=False))
+    assert guarded.too_near[8:-8, near_cols].mean() > 0.9
+    assert not np.isfinite(guarded.disparity_px[8:-8, near_cols]).any()
+    assert _good(guarded, truth, far_cols) > 0.9
+    assert not multi.too_near[8:-8, 16:150].any()
     # the levels: the near plane comes from the coarsest level, the far one from the finest
     assert np.isfinite(multi.levels[0][8:-8, far_cols]).mean() > 0.8
     assert np.isfinite(multi.levels[-1][8:-8, near_cols]).mean() > 0.8
@@ -72,7 +79,7 @@ def test_left_right_check_removes_occlusion_errors():
     # left pixels just left of the near plane (x in [half - (14-4), half)) are occluded in right
     occluded = slice(W // 2 - 10, W // 2 - 1)
     base = MatchingConfig(multi_range=False, uniqueness_ratio=0.0, median_size=0, speckle_size_px=0,
-                          max_cost=None, texture_threshold=0.0, edge_guard_px=0)
+                          max_cost=None, texture_threshold=0.0, edge_guard_px=0, near_guard=0.0)
     without = compute_disparity(left, right, max_disparity_px=20, config=base.replace(lr_max_diff_px=None))
     with_lr = compute_disparity(left, right, max_disparity_px=20, config=base.replace(lr_max_diff_px=1.0))
     wrong = lambda r: np.mean(np.isfinite(r.disparity_px[8:-8, occluded])

@@ -653,6 +653,34 @@ def upsample_gate(level_d, level_c, source_cols, scale, lo, hi, top, row0, row1,
 
 
 @njit(nogil=True, cache=True)
+def upsample_above(level_d, source_cols, scale, above, top, row0, row1, col0, col1, out_mask):
+    """Too-near mark of the guarded level: ``out_mask[y, x] = True`` where the up-sampled
+    disparity (as :func:`upsample_gate`) exceeds ``above`` inside the AOI; other pixels
+    are left as they are."""
+    height, width = out_mask.shape
+    for y in range(row0, row1):
+        ld = level_d[y - top]
+        om = out_mask[y]
+        for x in range(col0, col1):
+            om[x] = om[x] | (ld[source_cols[x]] * scale > above)
+
+
+@njit(nogil=True, cache=True)
+def invalidate(disparity, confidence, mask):
+    """In place: NaN / 0 where ``mask``."""
+    height, width = disparity.shape
+    nan = np.float32(np.nan)
+    for y in range(height):
+        dr = disparity[y]
+        cr = confidence[y]
+        mr = mask[y]
+        for x in range(width):
+            m = mr[x]
+            dr[x] = nan if m else dr[x]
+            cr[x] = np.float32(0.0) if m else cr[x]
+
+
+@njit(nogil=True, cache=True)
 def encode_fixed(disparity, scale, offset, lo_code, hi_code, invalid_code, out):
     """``round(d * scale) + offset`` clipped to ``[lo_code, hi_code]``, ``invalid_code`` where NaN."""
     height, width = disparity.shape

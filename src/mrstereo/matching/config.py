@@ -111,6 +111,12 @@ class MatchingConfig:
     gap_fill_support_px : int or None
         Consecutive valid pixels (the end included) within ``gap_fill_diff_px`` of each
         end. None: ``window_px // 2 + 1`` (half a window); 1: the ends alone (ELAS).
+    near_guard : float
+        Too-near detection (beyond the paper): the level of the nearest band searches on
+        to ``near_guard`` times the largest disparity ``D``; pixels whose winner there lies
+        more than one level pixel above ``D`` are "too near" (NaN, flagged in
+        ``DisparityResult.too_near``) instead of keeping a smaller, wrong disparity from a
+        band they do not belong to. 0: off (the paper); else at least 1.
     """
 
     window_px: int = 9
@@ -138,6 +144,8 @@ class MatchingConfig:
     gap_fill_px: int = 12
     gap_fill_diff_px: float = 1.0
     gap_fill_support_px: int | None = None
+    near_guard: float = 2.0
+    too_near_margin_px: int | None = None
 
     def __post_init__(self) -> None:
         window = _checks.positive_int("window_px", self.window_px, minimum=3)
@@ -176,6 +184,11 @@ class MatchingConfig:
         _checks.finite_number("gap_fill_diff_px", self.gap_fill_diff_px, nonnegative=True)
         if self.gap_fill_support_px is not None:
             _checks.positive_int("gap_fill_support_px", self.gap_fill_support_px)
+        guard = _checks.finite_number("near_guard", self.near_guard, nonnegative=True)
+        if 0 < guard < 1:
+            raise ValueError(f"near_guard must be 0 (off) or >= 1, got {guard}")
+        if self.too_near_margin_px is not None:
+            _checks.positive_int("too_near_margin_px", self.too_near_margin_px, minimum=0)
         if window > 31:
             raise ValueError(f"window_px must be <= 31, got {window}")
         if self.union not in UNIONS:
@@ -185,6 +198,11 @@ class MatchingConfig:
     def edge_guard(self) -> int:
         """Effective ``edge_guard_px`` (None resolved from the window)."""
         return self.window_px // 2 + 2 if self.edge_guard_px is None else self.edge_guard_px
+
+    @property
+    def too_near_margin(self) -> int:
+        """Effective ``too_near_margin_px`` (None resolved from the window)."""
+        return self.window_px // 2 + 2 if self.too_near_margin_px is None else self.too_near_margin_px
 
     @property
     def gap_support(self) -> int:
@@ -201,7 +219,7 @@ PRESETS: dict[str, MatchingConfig] = {
     "paper": MatchingConfig(cost="nssd", prefilter="none", min_band_level_px=0.0, band_margin_px=2,
                             median_size=5, lr_max_diff_px=None, uniqueness_ratio=0.0, texture_threshold=0.0,
                             max_cost=None, subpixel=False, speckle_size_px=0, union="confidence",
-                            refine=False, edge_guard_px=0, gap_fill_px=0),
+                            refine=False, edge_guard_px=0, gap_fill_px=0, near_guard=0.0),
     "robust": MatchingConfig(),
     # The robust matcher as the robot's mapping chain uses it: stricter acceptance (a wrong
     # match becomes an obstacle cell that later frames must clear) and StereoBM's pre-filter

@@ -20,7 +20,7 @@ from .cost import match_checked, prepare, prepare_gray, refine_candidates
 from .multirange import (DEFAULT_DEPTH_EDGES_M, decimate_horizontally, LevelOutput, MultiRangePlan, RangeLevel,
                          bands_px_from_depth_m, default_bands_px, default_level_count, plan_levels,
                          run_levels)
-from .postfilter import fill_gaps, guard_depth_edges, median_filter, remove_speckles, textured
+from .postfilter import fill_gaps, guard_depth_edges, median_filter, near_side, remove_speckles, textured
 
 __all__ = ["DisparityResult", "compute_disparity", "make_plan", "solve_level"]
 
@@ -32,7 +32,12 @@ class DisparityResult:
     Attributes
     ----------
     disparity_px : ndarray float32 (H, W)
-        ``d = x_left - x_right`` in full-resolution pixels, NaN invalid.
+        ``d = x_left - x_right`` in full-resolution pixels, NaN invalid (also where too near).
+    too_near : ndarray bool (H, W)
+        Pixels whose match lies beyond the largest searched disparity (nearer than the near
+        limit): detected by the near guard (``config.near_guard``; see
+        :attr:`.multirange.RangeLevel.too_near_above_px`), NaN in ``disparity_px``. Robot
+        code treats them as an obstacle at the near limit (docs/obstacles.md).
     confidence : ndarray float32 (H, W)
         In [0, 1]; 0 where invalid (see :func:`.postfilter.confidence_from_costs`).
     plan : MultiRangePlan
@@ -46,6 +51,12 @@ class DisparityResult:
     confidence: np.ndarray
     plan: MultiRangePlan
     levels: tuple[np.ndarray, ...]
+    too_near: np.ndarray
+
+    @property
+    def near_limit_px(self) -> float:
+        """The largest disparity of the search (full-resolution pixels): too-near pixels lie beyond it."""
+        return max(level.band_px[1] for level in self.plan.levels)
 
 
 def _aoi(aoi, width: int, height: int) -> tuple[int, int, int, int]:
@@ -117,7 +128,8 @@ def make_plan(image_size: tuple[int, int], *, max_disparity_px=None, disparity_b
         decimations = (1,)
     return plan_levels((width, height), bands, decimations=decimations,
                        band_margin_px=config.band_margin_px, aoi=_aoi(aoi, width, height),
-                       depth_bands_m=depth_bands, focal_px=focal, baseline_m=baseline)
+                       depth_bands_m=depth_bands, focal_px=focal, baseline_m=baseline,
+                       near_guard=config.near_guard)
 
 
 def _depth(d: float, focal: float, baseline: float, doffs: float) -> float:
@@ -261,7 +273,7 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
                                        max_cost=config.max_cost)
         return refined
 
-    disparity, confidence, levels = run_levels(left_gray, right_gray, plan, solve,
+    disparity, confidence, levels, too_near = run_levels(left_gray, right_gray, plan, solve,
                                                row_pad_px=config.window_px // 2 + 2, union=config.union,
                                                refine=refine if config.refine else None,
                                                refine_min_scale=config.refine_min_decimation - 0.5,
@@ -269,7 +281,13 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
     disparity = remove_speckles(disparity, max_size_px=config.speckle_size_px,
                                 max_diff_px=config.speckle_range_px)
     disparity = guard_depth_edges(disparity, guard_px=config.edge_guard, jump_px=config.edge_jump_px)
+    beside = near_side(too_near, margin_px=config.too_near_margin)
+    if beside is not None:
+        _kernels.invalidate(disparity, confidence, beside)
     disparity, confidence = fill_gaps(disparity, confidence, max_gap_px=config.gap_fill_px,
                                       max_diff_px=config.gap_fill_diff_px, support_px=config.gap_support)
+    if beside is not None:       # gap filling may have bridged them
+        _kernels.invalidate(disparity, confidence, beside)
     _kernels.zero_where_invalid(disparity, confidence)
-    return DisparityResult(disparity_px=disparity, confidence=confidence, plan=plan, levels=levels)
+    return DisparityResult(disparity_px=disparity, confidence=confidence, plan=plan, levels=levels,
+                           too_near=too_near)

@@ -50,6 +50,10 @@ class RangeLevel:
         The band as depths ``(near, far)`` when the rig is calibrated.
     work : int
         Pixel x disparity evaluations of the level (inside the area of interest).
+    too_near_above_px : float or None
+        On the nearest level when the near guard is on: its search runs past the near
+        limit, and a winner above this disparity (full-resolution pixels) marks the pixel
+        "too near" (its match lies beyond the largest disparity of the plan). None elsewhere.
     """
 
     decimation: int
@@ -59,6 +63,7 @@ class RangeLevel:
     search_px: tuple[int, int]
     depth_band_m: tuple[float, float] | None
     work: int
+    too_near_above_px: float | None = None
 
 
 @dataclass(frozen=True)
@@ -110,6 +115,13 @@ class MultiRangePlan:
         lo = min(lvl.band_px[0] for lvl in self.levels)
         hi = max(lvl.band_px[1] for lvl in self.levels)
         ratio = self.work / max(self.single_range_work, 1)
+        for i, lvl in enumerate(self.levels):
+            if lvl.too_near_above_px is not None:
+                top = lvl.search_px[1] * lvl.scale
+                depth = "" if self.focal_px is None else \
+                    f" ({self.baseline_m * self.focal_px / top:.2f} m)"
+                lines.append(f"too-near guard: level {i} searches on to {top:.1f} px{depth}; a winner above "
+                             f"{lvl.too_near_above_px:.1f} px marks the pixel too near (no value)")
         lines.append(f"total work {self.work / 1e6:.2f} Mev; single-range search "
                      f"{math.floor(lo)}-{math.ceil(hi)} px at full resolution: "
                      f"{self.single_range_work / 1e6:.2f} Mev (multi-range = {ratio:.2f} x)")
@@ -227,7 +239,8 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
                 decimations: Sequence[int] | None = None, band_margin_px: int = 1,
                 aoi: tuple[int, int, int, int] | None = None,
                 depth_bands_m: Sequence[tuple[float, float]] | None = None,
-                focal_px: float | None = None, baseline_m: float | None = None) -> MultiRangePlan:
+                focal_px: float | None = None, baseline_m: float | None = None,
+                near_guard: float = 0.0) -> MultiRangePlan:
     """Build the multi-range plan: one level per disparity band.
 
     Parameters
@@ -245,8 +258,16 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
         Area of interest (section 3.1); default the whole image.
     depth_bands_m : sequence of (near, far), optional
         The bands as depths (same order as ``bands_px``), for the description.
+    near_guard : float
+        Too-near detection (beyond the paper): the level of the nearest band (largest
+        disparities ``D``) searches on to ``near_guard * D``, and its winners above
+        ``D`` plus one level pixel mark pixels "too near" (:attr:`RangeLevel.too_near_above_px`).
+        0 = off; else at least 1.
     """
     width, height = image_size
+    guard = _checks.finite_number("near_guard", near_guard, nonnegative=True)
+    if 0 < guard < 1:
+        raise ValueError(f"near_guard must be 0 (off) or >= 1, got {near_guard}")
     bands = []
     for i, band in enumerate(bands_px):
         if np.ndim(band) != 1 or len(band) != 2:
@@ -275,11 +296,16 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
         scale = width / w_level
         s_lo = math.floor(lo / scale) - (band_margin_px if lo > global_lo else 0)
         s_hi = math.ceil(hi / scale) + (band_margin_px if hi < global_hi else 0)
+        above = None
+        if guard > 0 and hi == global_hi and not any(lvl.too_near_above_px for lvl in levels):
+            s_hi = max(s_hi, math.ceil(guard * hi / scale))
+            above = hi + 0.5 * scale
         s_lo = max(s_lo, 0)
         cols = _level_cols(col0, col1, scale, w_level)
         work = (row1 - row0) * (cols[1] - cols[0]) * (s_hi - s_lo + 1)
         levels.append(RangeLevel(decimation=k, scale=scale, size=(w_level, height), band_px=(lo, hi),
-                                 search_px=(s_lo, s_hi), depth_band_m=depth, work=int(work)))
+                                 search_px=(s_lo, s_hi), depth_band_m=depth, work=int(work),
+                                 too_near_above_px=above))
     levels.sort(key=lambda lvl: lvl.scale)        # finest first
     single = (row1 - row0) * (col1 - col0) * (math.ceil(global_hi) - math.floor(global_lo) + 1)
     return MultiRangePlan(levels=tuple(levels), image_size=(width, height), aoi=(row0, row1, col0, col1),
@@ -330,6 +356,10 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
         United disparity (full-resolution pixels, NaN invalid) and its confidence.
     levels : tuple of ndarray float32 (H, W)
         Each level's gated, up-sampled disparity (finest first).
+    too_near : ndarray bool (H, W)
+        Pixels whose winner on the guarded level (:attr:`RangeLevel.too_near_above_px`) lies
+        above the near limit; NaN (confidence 0) in ``disparity_px`` whatever the other
+        levels found there. All False without a guard.
     """
     height, width = left.shape
     row0, row1, col0, col1 = plan.aoi
@@ -340,6 +370,8 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
     right_rows = right[top:bottom]
     rows = (row0 - top, row1 - top)
     maps, confs = [], []
+    too_near = _kernels.recycled_empty((height, width), np.bool_)
+    too_near.fill(False)
     for level in plan.levels:
         w_level = level.size[0]
         if decimated is not None and top == 0 and bottom == height:
@@ -363,13 +395,17 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
         _kernels.upsample_gate(out.disparity_px, out.confidence, source_cols, np.float32(level.scale),
                                np.float32(lo - slack), np.float32(hi + slack), top, row0, row1, col0, col1,
                                d_full, c_full)
+        if level.too_near_above_px is not None:
+            _kernels.upsample_above(out.disparity_px, source_cols, np.float32(level.scale),
+                                    np.float32(level.too_near_above_px), top, row0, row1, col0, col1, too_near)
         if refining:
             d_full = refine(level, d_full, np.isfinite(d_full))
             _kernels.gate(d_full, c_full, float(lo), float(hi))
         maps.append(d_full)
         confs.append(c_full)
     disparity, confidence, _ = _union(maps, confs, union)
-    return disparity, confidence, tuple(maps)
+    _kernels.invalidate(disparity, confidence, too_near)
+    return disparity, confidence, tuple(maps), too_near
 
 
 def _union(maps: list[np.ndarray], confs: list[np.ndarray], rule: str

@@ -12,7 +12,7 @@ import numpy as np
 from . import _kernels
 
 __all__ = ["left_right_consistent", "unique", "textured", "median_filter", "remove_speckles",
-           "confidence_from_costs", "guard_depth_edges", "fill_gaps"]
+           "confidence_from_costs", "guard_depth_edges", "fill_gaps", "near_side"]
 
 
 def left_right_consistent(disparity_int: np.ndarray, right_disparity_int: np.ndarray, *,
@@ -158,3 +158,23 @@ def fill_gaps(disparity_px: np.ndarray, confidence: np.ndarray, *, max_gap_px: i
     _kernels.fill_gap_columns(out_d, out_c, np.flatnonzero(valid[w:] > valid[:-w]) + w,
                               _kernels.recycled_empty((w,), np.int32), *args)
     return out_d, out_c
+
+
+def near_side(too_near: np.ndarray, *, margin_px: int) -> np.ndarray | None:
+    """The too-near pixels and those within ``margin_px`` rows and columns of one (a
+    ``2 margin + 1`` square dilation), or None when no pixel is too near.
+
+    A window straddling the silhouette of a too-near object is dominated by the
+    background, whose disparity lies inside the search: beside a too-near region and on
+    parts of it thinner than a window (a lamp's arm) the matcher returns the background's
+    disparity for pixels of the too-near object. The matcher drops every value there
+    (and gap filling does not bridge it): like :func:`guard_depth_edges`, it trades
+    density at the silhouette for no wrong value on the near object.
+    """
+    if not too_near.any():
+        return None
+    if margin_px <= 0:
+        return too_near
+    kernel = np.ones((2 * margin_px + 1, 2 * margin_px + 1), np.uint8)
+    grown = cv2.dilate(too_near.view(np.uint8), kernel, dst=_kernels.recycled_empty(too_near.shape, np.uint8))
+    return grown.view(np.bool_)
