@@ -31,6 +31,7 @@ def save_figure(fig, path: str | os.PathLike) -> Path:
 
 DISPARITY_CMAP = "turbo"
 INVALID_RGB = (0.0, 0.0, 0.0)          # no disparity: black
+TOO_NEAR_RGB = (1.0, 0.0, 1.0)         # too near (nearer than the search covers): magenta, outside turbo
 DISPLAY_PERCENTILES = (1.0, 99.0)
 
 
@@ -53,19 +54,27 @@ def disparity_range_px(*disparities_px, percentiles: tuple[float, float] = DISPL
     return low, high
 
 
-def disparity_colors(disparity_px, *, range_px: tuple[float, float]):
-    """RGBA float image (H, W, 4) of a disparity map: turbo over ``range_px``, invalid black."""
+def disparity_colors(disparity_px, *, range_px: tuple[float, float], too_near=None):
+    """RGBA float image (H, W, 4) of a disparity map: turbo over ``range_px``, invalid black,
+    pixels of the ``too_near`` mask (``DisparityResult.too_near``) magenta."""
     import matplotlib
     import numpy as np
 
     d = np.asarray(disparity_px, dtype=np.float32)
     low, high = range_px
     cmap = matplotlib.colormaps[DISPARITY_CMAP].with_extremes(bad=(*INVALID_RGB, 1.0))
-    return cmap(np.ma.masked_invalid((d - low) / max(high - low, 1e-6)))
+    rgba = cmap(np.ma.masked_invalid((d - low) / max(high - low, 1e-6)))
+    if too_near is not None:
+        mask = np.asarray(too_near, dtype=bool)
+        if mask.shape != d.shape:
+            raise ValueError(f"too_near must have the disparity's shape {d.shape}, got {mask.shape}")
+        rgba[mask] = (*TOO_NEAR_RGB, 1.0)
+    return rgba
 
 
-def draw_disparity(ax, disparity_px, *, range_px: tuple[float, float], background=None):
-    """Draw a disparity map on ``ax`` (over a gray ``background`` where invalid, else black).
+def draw_disparity(ax, disparity_px, *, range_px: tuple[float, float], background=None, too_near=None):
+    """Draw a disparity map on ``ax`` (over a gray ``background`` where invalid, else black;
+    ``too_near`` pixels magenta).
 
     Returns a ScalarMappable with the same colours for ``fig.colorbar``.
     """
@@ -74,10 +83,13 @@ def draw_disparity(ax, disparity_px, *, range_px: tuple[float, float], backgroun
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
 
-    rgba = disparity_colors(disparity_px, range_px=range_px)
+    rgba = disparity_colors(disparity_px, range_px=range_px, too_near=too_near)
     if background is not None:
         ax.imshow(background, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
-        rgba[..., 3] = np.where(np.isfinite(np.asarray(disparity_px, np.float32)), 1.0, 0.0)
+        shown = np.isfinite(np.asarray(disparity_px, np.float32))
+        if too_near is not None:
+            shown |= np.asarray(too_near, dtype=bool)
+        rgba[..., 3] = np.where(shown, 1.0, 0.0)
     ax.imshow(rgba, interpolation="nearest")
     return ScalarMappable(norm=Normalize(*range_px), cmap=matplotlib.colormaps[DISPARITY_CMAP])
 
@@ -90,8 +102,10 @@ def disparity_colorbar(fig, mappable, ax, *, range_px: tuple[float, float], **kw
 
 
 def save_disparity_preview(path: str | os.PathLike, disparity_px, *, title: str = "disparity",
-                           range_px: tuple[float, float] | None = None, background=None) -> Path:
-    """A disparity preview PNG: the map in colour with a colour bar in pixels, invalid black.
+                           range_px: tuple[float, float] | None = None, background=None,
+                           too_near=None) -> Path:
+    """A disparity preview PNG: the map in colour with a colour bar in pixels, invalid black,
+    ``too_near`` pixels (nearer than the search covers) magenta.
 
     ``range_px`` defaults to :func:`disparity_range_px` (robust percentiles of the map).
     """
@@ -106,10 +120,12 @@ def save_disparity_preview(path: str | os.PathLike, disparity_px, *, title: str 
     image_w_in = width_in - 1.8
     fig = new_figure(width_in, image_w_in * height / width + 1.3)
     ax = fig.add_subplot(1, 1, 1)
-    mappable = draw_disparity(ax, d, range_px=range_px, background=background)
+    mappable = draw_disparity(ax, d, range_px=range_px, background=background, too_near=too_near)
     disparity_colorbar(fig, mappable, ax, range_px=range_px, fraction=0.04, pad=0.02)
     valid = float(np.isfinite(d).mean())
+    near = float(np.asarray(too_near, dtype=bool).mean()) if too_near is not None else 0.0
     ax.set_title(f"{title}: {valid:.0%} of pixels with a disparity "
-                 f"({'transparent' if background is not None else 'black'} = none)", fontsize=10)
+                 f"({'transparent' if background is not None else 'black'} = none"
+                 + (f"; magenta = too near, {near:.0%}" if near > 0 else "") + ")", fontsize=10)
     ax.set_axis_off()
     return save_figure(fig, path)

@@ -398,8 +398,9 @@ def write_disparity(path: str | os.PathLike, disparity_px: np.ndarray) -> None:
 
 
 def colorize_disparity(disparity_px: np.ndarray, *, max_disparity_px: float | None = None,
-                       range_px: tuple[float, float] | None = None) -> np.ndarray:
-    """Colour image (BGR uint8) of a disparity map: turbo, invalid pixels black.
+                       range_px: tuple[float, float] | None = None, too_near: np.ndarray | None = None) -> np.ndarray:
+    """Colour image (BGR uint8) of a disparity map: turbo, invalid pixels black, pixels of the
+    ``too_near`` mask (nearer than the search covers) magenta.
 
     The colour scale spans ``range_px`` (low, high) in pixels; default: the 1st-99th percentile of
     the valid values (``mrstereo._plot.disparity_range_px``), or ``0 .. max_disparity_px`` when that
@@ -410,5 +411,5 @@ def colorize_disparity(disparity_px: np.ndarray, *, max_disparity_px: float | No
     d = np.asarray(disparity_px, dtype=np.float32)
     if range_px is None:
         range_px = (0.0, float(max_disparity_px)) if max_disparity_px else disparity_range_px(d)
-    rgb = np.rint(disparity_colors(d, range_px=range_px)[..., :3] * 255).astype(np.uint8)
+    rgb = np.rint(disparity_colors(d, range_px=range_px, too_near=too_near)[..., :3] * 255).astype(np.uint8)
     return np.ascontiguousarray(rgb[..., ::-1])

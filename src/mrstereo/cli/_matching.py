@@ -46,9 +46,11 @@ def _bands(text: str) -> list[tuple[float, float]]:
 @click.option("--single-range", is_flag=True, help="One full-resolution search instead of three ranges.")
 @click.option("--no-fill", is_flag=True, help="Leave holes as holes: no gap filling (robust preset).")
 @click.option("--aoi", help="Area of interest row0:row1,col0:col1 (half-open).")
-@click.option("--explain", is_flag=True, help="Print the multi-range plan (levels, bands, work).")
+@click.option("--explain", is_flag=True,
+              help="Print the multi-range plan (levels, bands, work) and the share of too-near pixels.")
 @click.option("--plot", "color_path", type=click.Path(dir_okay=False),
-              help="Also write a colour preview PNG with a colour bar in pixels.")
+              help="Also write a colour preview PNG with a colour bar in pixels (black: no value; "
+                   "magenta: too near).")
 @click.option("--color", "color_alias", type=click.Path(dir_okay=False), hidden=True, help="Old spelling of --plot.")
 def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rectified, preset,
               single_range, no_fill, aoi, explain, color_path, color_alias):
@@ -100,15 +102,22 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
         config = config.replace(gap_fill_px=0)
     result = compute_disparity(left_img, right_img, max_disparity_px=max_disparity, disparity_bands_px=band_list,
                                calibration=stereo, depth_bands_m=depth_list, config=config, aoi=aoi_box)
+    valid = float((result.disparity_px == result.disparity_px).mean())
+    too_near = float(result.too_near.mean())
     if explain:
         click.echo(result.plan.describe())
+        limit = f"match beyond {result.near_limit_px:.1f} px"
+        if stereo is not None:
+            limit += f", nearer than {stereo.baseline_m * stereo.focal_px / (result.near_limit_px + stereo.doffs_px):.2f} m"
+        click.echo(f"valid {valid:.1%} of pixels; too near ({limit}; no value) {too_near:.1%}")
     io.write_disparity(output, result.disparity_px)
     if color_path:
         from .._plot import save_disparity_preview
 
-        save_disparity_preview(color_path, result.disparity_px, title=f"disparity of {Path(left).name}")
-    valid = float((result.disparity_px == result.disparity_px).mean())
-    click.echo(f"wrote {output}: {valid:.0%} of pixels with a disparity", err=True)
+        save_disparity_preview(color_path, result.disparity_px, title=f"disparity of {Path(left).name}",
+                               too_near=result.too_near)
+    click.echo(f"wrote {output}: {valid:.0%} of pixels with a disparity"
+               + (f", {too_near:.0%} too near (nearer than the search)" if too_near > 0 else ""), err=True)
 
 
 COMMANDS = [disparity]

@@ -98,7 +98,16 @@ def _inputs(left, right):
     return gl, gr
 
 
-def stereo_bm(left, right, *, max_disparity_px, settings: BMSettings = BMSettings()) -> np.ndarray:
+def _search(max_disparity_px, exact_max: bool) -> tuple[int, int]:
+    """OpenCV ``(minDisparity, numDisparities)``: ``0 .. n - 1`` with ``n`` a multiple of 16, or
+    with ``exact_max`` a window of ``n`` ending exactly at ``ceil(max_disparity_px)`` (starting
+    at or below 0)."""
+    n = num_disparities(max_disparity_px + (1 if exact_max else 0))
+    return (int(np.ceil(max_disparity_px)) + 1 - n if exact_max else 0), n
+
+
+def stereo_bm(left, right, *, max_disparity_px, settings: BMSettings = BMSettings(),
+              exact_max: bool = False) -> np.ndarray:
     """Disparity (float32 px, NaN invalid) of OpenCV StereoBM with :class:`BMSettings`.
 
     Parameters
@@ -107,10 +116,14 @@ def stereo_bm(left, right, *, max_disparity_px, settings: BMSettings = BMSetting
         Rectified views (colour is BGR and converted to gray).
     max_disparity_px : float
         Largest disparity to search; rounded up to a multiple of 16.
+    exact_max : bool
+        Search up to ``ceil(max_disparity_px)`` exactly (a negative ``minDisparity`` fills
+        the multiple of 16), e.g. to compare what matchers do beyond a given near limit.
     """
     gl, gr = _inputs(left, right)
     window = settings.window_px or (15 if gl.shape[1] >= 640 else 9)
-    bm = cv2.StereoBM_create(numDisparities=num_disparities(max_disparity_px), blockSize=window)
+    lowest, n = _search(max_disparity_px, exact_max)
+    bm = cv2.StereoBM_create(numDisparities=n, blockSize=window)
     bm.setPreFilterType(cv2.StereoBM_PREFILTER_XSOBEL)
     bm.setPreFilterSize(settings.prefilter_size)
     bm.setPreFilterCap(settings.prefilter_cap)
@@ -119,11 +132,12 @@ def stereo_bm(left, right, *, max_disparity_px, settings: BMSettings = BMSetting
     bm.setSpeckleWindowSize(settings.speckle_window_size)
     bm.setSpeckleRange(settings.speckle_range)
     bm.setDisp12MaxDiff(settings.disp12_max_diff)
-    bm.setMinDisparity(0)
-    return disparity_from_opencv(bm.compute(gl, gr))
+    bm.setMinDisparity(lowest)
+    return disparity_from_opencv(bm.compute(gl, gr), min_disparity=lowest)
 
 
-def stereo_sgbm(left, right, *, max_disparity_px, settings: SGBMSettings = SGBMSettings()) -> np.ndarray:
+def stereo_sgbm(left, right, *, max_disparity_px, settings: SGBMSettings = SGBMSettings(),
+                exact_max: bool = False) -> np.ndarray:
     """Disparity (float32 px, NaN invalid) of OpenCV StereoSGBM with :class:`SGBMSettings`.
 
     Parameters
@@ -132,17 +146,20 @@ def stereo_sgbm(left, right, *, max_disparity_px, settings: SGBMSettings = SGBMS
         Rectified views (colour is BGR and converted to gray, so ``ch = 1``).
     max_disparity_px : float
         Largest disparity to search; rounded up to a multiple of 16.
+    exact_max : bool
+        As :func:`stereo_bm`.
     """
     gl, gr = _inputs(left, right)
     block = settings.block_size
+    lowest, n = _search(max_disparity_px, exact_max)
     sgbm = cv2.StereoSGBM_create(
-        minDisparity=0, numDisparities=num_disparities(max_disparity_px), blockSize=block,
+        minDisparity=lowest, numDisparities=n, blockSize=block,
         P1=settings.p1 if settings.p1 is not None else 8 * block * block,
         P2=settings.p2 if settings.p2 is not None else 32 * block * block,
         disp12MaxDiff=settings.disp12_max_diff, preFilterCap=settings.prefilter_cap,
         uniquenessRatio=settings.uniqueness_ratio, speckleWindowSize=settings.speckle_window_size,
         speckleRange=settings.speckle_range, mode=settings.mode)
-    return disparity_from_opencv(sgbm.compute(gl, gr))
+    return disparity_from_opencv(sgbm.compute(gl, gr), min_disparity=lowest)
 
 
 BASELINES = {"StereoBM": stereo_bm, "StereoSGBM": stereo_sgbm}

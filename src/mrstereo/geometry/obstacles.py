@@ -12,6 +12,15 @@ camera). A point is
   the occupancy grid),
 * ignored otherwise (below the floor: a mismatch; above the robot: the ceiling).
 
+**Too near (fail-safe).** A pixel the matcher reports too near (its match lies beyond the
+largest searched disparity, ``DisparityResult.too_near``) has no disparity, but something
+is nearer than the near limit along its ray. It is placed at the near-limit depth along
+its ray (the disparity ``near_limit_px``) and classified by the same height rules: above
+the floor it is an obstacle at the near limit in that direction (a robot stops rather
+than drives on); never floor (no free-space evidence); a ray that meets the floor before
+the near limit (the floor itself nearer than the near limit) lands below the floor and is
+ignored. Rule and limits: docs/obstacles.md.
+
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -108,6 +117,9 @@ class ObstacleResult:
         False when no floor was available (then the masks are empty).
     message : str
         How the floor was obtained, or why it failed.
+    too_near_mask : ndarray of shape (H, W), bool
+        Too-near pixels placed at the near limit (module docstring); those of them in the
+        obstacle band are in ``obstacle_mask`` too. All False when none were given.
     """
 
     points_robot_image: np.ndarray
@@ -117,6 +129,14 @@ class ObstacleResult:
     T_robot_from_cam: np.ndarray
     success: bool
     message: str
+    too_near_mask: np.ndarray | None = None
+
+    @property
+    def too_near_obstacle_mask(self) -> np.ndarray:
+        """Obstacle pixels that are fail-safe placements at the near limit (not measured)."""
+        if self.too_near_mask is None:
+            return np.zeros_like(self.obstacle_mask)
+        return self.obstacle_mask & self.too_near_mask
 
     @property
     def points_robot(self) -> np.ndarray:
@@ -195,7 +215,8 @@ def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: RigMount | Ca
 
 def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None = None,
                      ground: GroundPlane | None = None, pan_rad: float = 0.0,
-                     config: ObstacleConfig = ObstacleConfig()) -> ObstacleResult:
+                     config: ObstacleConfig = ObstacleConfig(), too_near=None,
+                     near_limit_px: float | None = None) -> ObstacleResult:
     """Split a disparity map into obstacle and floor points in the robot frame.
 
     Parameters
@@ -215,6 +236,12 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
         Pan of the stereo head about the robot's z axis (positive left).
     config : ObstacleConfig
         Height band, floor tolerance, range limit, ground method.
+    too_near : ndarray of shape (H, W), bool, optional
+        Pixels nearer than the search covers (``DisparityResult.too_near``): placed at
+        ``near_limit_px`` along their rays, fail-safe (module docstring).
+    near_limit_px : float, optional
+        The largest searched disparity (``DisparityResult.near_limit_px``); needed with
+        ``too_near``.
 
     Returns
     -------
@@ -235,6 +262,18 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
         raise ValueError(f"disparity_px is {d.shape[1]}x{d.shape[0]} but the calibration is "
                          f"{stereo.size[0]}x{stereo.size[1]}")
     pan = _checks.finite_number("pan_rad", pan_rad)
+    near = None
+    if too_near is not None:
+        near = np.asarray(too_near)
+        if near.dtype != np.bool_ or near.shape != d.shape:
+            raise ValueError(f"too_near must be a boolean mask of shape {d.shape}, got {near.dtype} {near.shape}")
+        if near_limit_px is None:
+            raise ValueError("too_near needs near_limit_px (the largest searched disparity)")
+        limit = _checks.finite_number("near_limit_px", near_limit_px, positive=True)
+        if near.any():
+            d = np.where(near, limit, d)      # fail-safe: something at the near limit along the ray
+        else:
+            near = None
     mount = rig if rig is not None else stereo.rig
     if ground is None:
         ground = ground_for_frame(d, stereo, mount=mount, config=config)
@@ -243,7 +282,7 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
         empty = np.zeros((h, w), dtype=bool)
         return ObstacleResult(points_robot_image=np.full((h, w, 3), np.nan), obstacle_mask=empty,
                               floor_mask=empty.copy(), ground=ground, T_robot_from_cam=np.full((4, 4), np.nan),
-                              success=False, message=f"no floor: {ground.message}")
+                              success=False, message=f"no floor: {ground.message}", too_near_mask=empty.copy())
     T = T_robot_from_cam_ground(ground, pan_rad=pan)
     pts = points_robot_from_disparity(d, stereo, T)
     # within range: hypot(x, y) <= max_range; obstacle: min < z <= max height; floor: |z| <= tolerance
@@ -252,8 +291,15 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
     n_obstacle, n_floor = _kernels.classify(pts, float(config.max_range_m), float(config.min_obstacle_height_m),
                                             float(config.max_obstacle_height_m), float(config.floor_tolerance_m),
                                             obstacle, floor)
+    n_near = 0
+    if near is not None:
+        floor &= ~near                        # a fail-safe placement is never free-space evidence
+        n_near = int(np.count_nonzero(obstacle & near))
     return ObstacleResult(points_robot_image=pts, obstacle_mask=obstacle, floor_mask=floor,
                           ground=ground, T_robot_from_cam=T, success=True,
                           message=f"floor from {ground.method}: height {ground.height_m:.3f} m, "
                                   f"tilt {np.degrees(ground.tilt_rad):.2f} deg; "
-                                  f"{int(n_obstacle)} obstacle and {int(n_floor)} floor points")
+                                  f"{int(n_obstacle)} obstacle and {int(n_floor)} floor points"
+                                  + (f" ({n_near} obstacle points too near, placed at the near limit)"
+                                     if n_near else ""),
+                          too_near_mask=np.zeros((h, w), dtype=bool) if near is None else near)

@@ -5,7 +5,10 @@ rectify (unless already rectified) -> multi-range matching (eq. 9-12,
 (eq. 13, :mod:`mrstereo.rejection`) -> floor (given mount or estimated) ->
 triangulation into the robot frame (eq. 14-16) -> obstacle / floor split ->
 laser scan. These are the functions behind ``mrstereo points`` and
-``mrstereo scan``. Conventions: docs/conventions.md.
+``mrstereo scan``. Pixels nearer than the search covers (the matcher's ``too_near``) are
+fail-safe: obstacle points at the near limit along their rays
+(:func:`mrstereo.geometry.obstacles.detect_obstacles`), and a scan return at
+``range_min`` on their bearings (docs/obstacles.md). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -36,7 +39,9 @@ class PairObstacles:
     rejection : RejectionResult
         Eq. (13) applied to it (``rejection.disparity_px`` is what was triangulated).
     obstacles : ObstacleResult
-        Robot-frame points, obstacle and floor masks, the floor used.
+        Robot-frame points, obstacle and floor masks, the floor used; the matcher's
+        too-near pixels as fail-safe obstacle points at the near limit
+        (``obstacles.too_near_mask``).
     max_disparity_px : float
         The largest disparity the matcher searched (its near limit).
     """
@@ -113,9 +118,9 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
     mount = rig if rig is not None else stereo.rig
     ground = ground_for_frame(raw, stereo, mount=mount, config=config)
     obstacles = detect_obstacles(rej.disparity_px, stereo, rig=mount, ground=ground, pan_rad=pan_rad,
-                                 config=config)
+                                 config=config, too_near=result.too_near, near_limit_px=result.near_limit_px)
     return PairObstacles(left_rect=left, raw_disparity_px=raw, rejection=rej, obstacles=obstacles,
-                         max_disparity_px=float(max(level.band_px[1] for level in result.plan.levels)))
+                         max_disparity_px=float(result.near_limit_px))
 
 
 def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: float = math.radians(0.5),
@@ -130,7 +135,10 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
     bearing clear to ``range_max`` and ``nan`` otherwise. The scan's ``range_min``
     is ``range_min_m`` or the matcher's near limit (:func:`near_limit_range_m`),
     whichever is larger; intensities are the gray levels of the returns' pixels.
-    Other keyword options are those of :func:`obstacles_from_pair`.
+    A ray with at least ``min_points`` too-near obstacle points (fail-safe
+    placements: something nearer than the near limit) reports ``range_min``,
+    whatever else it saw. Other keyword options are those of
+    :func:`obstacles_from_pair`.
     """
     frame = obstacles_from_pair(left, right, stereo, **options)
     config = options.get("config", ObstacleConfig())
@@ -140,9 +148,17 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
     if obstacles.success and math.isfinite(frame.max_disparity_px):
         range_min = max(range_min, near_limit_range_m(stereo, obstacles.T_robot_from_cam, frame.max_disparity_px))
     gray = frame.left_rect if frame.left_rect.ndim == 2 else frame.left_rect.mean(axis=2)
-    scan = laser_scan_from_points(obstacles.obstacle_points_robot, angle_min_rad=lo, angle_max_rad=hi,
+    near = obstacles.too_near_obstacle_mask
+    measured = obstacles.obstacle_mask & ~near
+    scan = laser_scan_from_points(obstacles.points_robot_image[measured], angle_min_rad=lo, angle_max_rad=hi,
                                   angle_increment_rad=angle_increment_rad, range_min_m=range_min,
                                   range_max_m=config.max_range_m if range_max_m is None else range_max_m,
-                                  min_points=min_points, intensities=gray[obstacles.obstacle_mask],
+                                  min_points=min_points, intensities=gray[measured],
                                   observed_points_robot=obstacles.points_robot)
+    if near.any():
+        # the too-near bearings, whatever the placement's range (it is a bound, not a measurement)
+        hits = laser_scan_from_points(obstacles.points_robot_image[near], angle_min_rad=lo, angle_max_rad=hi,
+                                      angle_increment_rad=angle_increment_rad, range_min_m=0.0,
+                                      range_max_m=1e9, min_points=min_points)
+        scan.ranges_m[np.isfinite(hits.ranges_m)] = scan.range_min_m
     return PairScan(scan=scan, frame=frame)

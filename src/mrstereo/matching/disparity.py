@@ -273,7 +273,7 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
                                        max_cost=config.max_cost)
         return refined
 
-    disparity, confidence, levels, too_near = run_levels(left_gray, right_gray, plan, solve,
+    disparity, confidence, levels, too_near, beyond = run_levels(left_gray, right_gray, plan, solve,
                                                row_pad_px=config.window_px // 2 + 2, union=config.union,
                                                refine=refine if config.refine else None,
                                                refine_min_scale=config.refine_min_decimation - 0.5,
@@ -286,8 +286,23 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
         _kernels.invalidate(disparity, confidence, beside)
     disparity, confidence = fill_gaps(disparity, confidence, max_gap_px=config.gap_fill_px,
                                       max_diff_px=config.gap_fill_diff_px, support_px=config.gap_support)
-    if beside is not None:       # gap filling may have bridged them
+    if beside is not None:
+        # gap filling may have bridged them; cut off from their surroundings, values left
+        # between too-near regions are speckles again (e.g. a repeated pattern's wrong match)
         _kernels.invalidate(disparity, confidence, beside)
+        disparity = remove_speckles(disparity, max_size_px=config.speckle_size_px,
+                                    max_diff_px=config.speckle_range_px)
     _kernels.zero_where_invalid(disparity, confidence)
+    if beside is not None:
+        # Only verified too-near pixels are reported (a robot stops for them); the others stay
+        # without a value. Verified: the guard's winner is re-scored at full resolution (as the
+        # refinement, with its maximum cost) and a minimum is found, and the pixel lies in a
+        # connected region of the guard's disparities larger than a speckle.
+        guard = next(level for level in plan.levels if level.too_near_above_px is not None)
+        beyond = refine(guard, beyond, too_near)
+        if config.speckle_size_px > 0:
+            beyond = remove_speckles(beyond, max_size_px=config.speckle_size_px,
+                                     max_diff_px=config.speckle_range_px * guard.scale)
+        too_near = np.isfinite(beyond)
     return DisparityResult(disparity_px=disparity, confidence=confidence, plan=plan, levels=levels,
                            too_near=too_near)

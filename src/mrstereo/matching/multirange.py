@@ -358,8 +358,10 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
         Each level's gated, up-sampled disparity (finest first).
     too_near : ndarray bool (H, W)
         Pixels whose winner on the guarded level (:attr:`RangeLevel.too_near_above_px`) lies
-        above the near limit; NaN (confidence 0) in ``disparity_px`` whatever the other
-        levels found there. All False without a guard.
+        above the near limit with a higher confidence than the united value of the levels
+        (if any); NaN (confidence 0) in ``disparity_px``. All False without a guard.
+    beyond_px : ndarray float32 (H, W)
+        That winner (full-resolution pixels) where ``too_near``, NaN elsewhere.
     """
     height, width = left.shape
     row0, row1, col0, col1 = plan.aoi
@@ -370,8 +372,9 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
     right_rows = right[top:bottom]
     rows = (row0 - top, row1 - top)
     maps, confs = [], []
-    too_near = _kernels.recycled_empty((height, width), np.bool_)
-    too_near.fill(False)
+    too_near = np.zeros((height, width), np.bool_)
+    beyond = np.full((height, width), np.nan, np.float32)
+    beyond_conf = np.zeros((height, width), np.float32)
     for level in plan.levels:
         w_level = level.size[0]
         if decimated is not None and top == 0 and bottom == height:
@@ -396,16 +399,19 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
                                np.float32(lo - slack), np.float32(hi + slack), top, row0, row1, col0, col1,
                                d_full, c_full)
         if level.too_near_above_px is not None:
-            _kernels.upsample_above(out.disparity_px, source_cols, np.float32(level.scale),
-                                    np.float32(level.too_near_above_px), top, row0, row1, col0, col1, too_near)
+            _kernels.upsample_above(out.disparity_px, out.confidence, source_cols, np.float32(level.scale),
+                                    np.float32(level.too_near_above_px), top, row0, row1, col0, col1, beyond,
+                                    beyond_conf, too_near)
         if refining:
             d_full = refine(level, d_full, np.isfinite(d_full))
             _kernels.gate(d_full, c_full, float(lo), float(hi))
         maps.append(d_full)
         confs.append(c_full)
     disparity, confidence, _ = _union(maps, confs, union)
-    _kernels.invalidate(disparity, confidence, too_near)
-    return disparity, confidence, tuple(maps), too_near
+    # the guard's verdict against the levels' united value, as eq. (12)'s confidence rule:
+    # the more confident wins (repeated structures past the near limit lose to a surer match)
+    _kernels.settle_too_near(disparity, confidence, beyond, beyond_conf, too_near)
+    return disparity, confidence, tuple(maps), too_near, beyond
 
 
 def _union(maps: list[np.ndarray], confs: list[np.ndarray], rule: str
