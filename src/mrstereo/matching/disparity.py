@@ -184,6 +184,28 @@ def solve_level(left: np.ndarray, right: np.ndarray, level: RangeLevel, rows: tu
     return _solve_prepared(_prepare_pair(left, right, config), left, level, rows, cols, config)
 
 
+def _verified_too_near(candidates: np.ndarray, beyond: np.ndarray, plan: MultiRangePlan, config: MatchingConfig,
+                       refine) -> np.ndarray:
+    """The guard's too-near candidates that are confirmed (beyond the paper): reported, a robot
+    stops for them.
+
+    A candidate's winner (decimated, so known to about half a level pixel) is re-scored at
+    full resolution as the refinement does (offsets ``+-(ceil(k / 2) + refine_margin_px)``, the
+    maximum cost; a minimum on the edge fails), and the confirmed pixels must form a region of
+    guard disparities larger than a speckle (``speckle_size_px``, connected within
+    ``speckle_range_px`` level pixels). Unconfirmed candidates (stray matches past the near
+    limit: repeated structures, plain paint at decimation 4) stay without a value, unreported.
+    """
+    if not candidates.any():
+        return candidates
+    guard = next(level for level in plan.levels if level.too_near_above_px is not None)
+    beyond = refine(guard, beyond, candidates)
+    if config.speckle_size_px > 0:
+        beyond = remove_speckles(beyond, max_size_px=config.speckle_size_px,
+                                 max_diff_px=config.speckle_range_px * guard.scale)
+    return np.isfinite(beyond)
+
+
 def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=None, calibration=None,
                       depth_bands_m=None, config: MatchingConfig | None = None, preset: str = "robust",
                       aoi=None) -> DisparityResult:
@@ -273,36 +295,28 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
                                        max_cost=config.max_cost)
         return refined
 
-    disparity, confidence, levels, too_near, beyond = run_levels(left_gray, right_gray, plan, solve,
-                                               row_pad_px=config.window_px // 2 + 2, union=config.union,
-                                               refine=refine if config.refine else None,
-                                               refine_min_scale=config.refine_min_decimation - 0.5,
-                                               decimated=decimated)
+    disparity, confidence, levels, candidates, beyond = run_levels(
+        left_gray, right_gray, plan, solve, row_pad_px=config.window_px // 2 + 2, union=config.union,
+        refine=refine if config.refine else None, refine_min_scale=config.refine_min_decimation - 0.5,
+        decimated=decimated)
+    too_near = _verified_too_near(candidates, beyond, plan, config, refine)
+    # Beside a confirmed too-near object, every guard candidate's surroundings lose their values
+    # (silhouettes, thin parts, a repeated pattern's wrong matches on the near object); without
+    # one, the few stray candidates only lose their own values (run_levels).
+    beside = near_side(candidates, margin_px=config.too_near_margin) if too_near.any() else None
     disparity = remove_speckles(disparity, max_size_px=config.speckle_size_px,
                                 max_diff_px=config.speckle_range_px)
     disparity = guard_depth_edges(disparity, guard_px=config.edge_guard, jump_px=config.edge_jump_px)
-    beside = near_side(too_near, margin_px=config.too_near_margin)
     if beside is not None:
         _kernels.invalidate(disparity, confidence, beside)
     disparity, confidence = fill_gaps(disparity, confidence, max_gap_px=config.gap_fill_px,
                                       max_diff_px=config.gap_fill_diff_px, support_px=config.gap_support)
     if beside is not None:
         # gap filling may have bridged them; cut off from their surroundings, values left
-        # between too-near regions are speckles again (e.g. a repeated pattern's wrong match)
+        # between too-near regions are speckles again
         _kernels.invalidate(disparity, confidence, beside)
         disparity = remove_speckles(disparity, max_size_px=config.speckle_size_px,
                                     max_diff_px=config.speckle_range_px)
     _kernels.zero_where_invalid(disparity, confidence)
-    if beside is not None:
-        # Only verified too-near pixels are reported (a robot stops for them); the others stay
-        # without a value. Verified: the guard's winner is re-scored at full resolution (as the
-        # refinement, with its maximum cost) and a minimum is found, and the pixel lies in a
-        # connected region of the guard's disparities larger than a speckle.
-        guard = next(level for level in plan.levels if level.too_near_above_px is not None)
-        beyond = refine(guard, beyond, too_near)
-        if config.speckle_size_px > 0:
-            beyond = remove_speckles(beyond, max_size_px=config.speckle_size_px,
-                                     max_diff_px=config.speckle_range_px * guard.scale)
-        too_near = np.isfinite(beyond)
     return DisparityResult(disparity_px=disparity, confidence=confidence, plan=plan, levels=levels,
                            too_near=too_near)
