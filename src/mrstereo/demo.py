@@ -76,7 +76,7 @@ def _disparity_errors(estimate: np.ndarray, truth: np.ndarray) -> dict:
 
 
 def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_frames: int = 30,
-             n_calibration_views: int = 12, progress: bool = True) -> DemoResult:
+             n_calibration_views: int = 12, progress: bool = True, randomize: bool = False) -> DemoResult:
     """Run the whole pipeline on the built-in world and write a report directory.
 
     Parameters
@@ -89,6 +89,9 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
         Frames of the corridor sequence (front, +45 and -45 degree views per stop).
     n_calibration_views : int
         Chessboard poses rendered for the stereo calibration.
+    randomize : bool
+        A randomized world drawn from ``seed`` (:func:`mrstereo.world.randomize.random_world`:
+        corridor, textures, lights, rig, sensors, obstacles) instead of the built-in corridor.
     """
     from tqdm.auto import tqdm
 
@@ -105,14 +108,13 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     from .pipeline import PipelineConfig, build_map, fuse, write_map_outputs
     from .rejection import reject_uniform
     from .world.figures import save_stereo_figure
-    from .world import (default_stereo, read_manifest, render_calibration_views, render_paper_dot_target,
-                        write_synthetic_dataset)
+    from .world import read_manifest, render_calibration_views, render_paper_dot_target, write_synthetic_dataset
 
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()):
         raise ValueError(f"output directory {out} already exists and is not empty")
     out.mkdir(parents=True, exist_ok=True)
-    metrics: dict = {"seed": seed, "timing_s": {}}
+    metrics: dict = {"seed": seed, "randomize": bool(randomize), "timing_s": {}}
     steps = tqdm(total=len(DEMO_STEPS), desc="demo", unit="step", disable=not progress)
 
     def begin(name: str) -> float:
@@ -126,7 +128,8 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
 
     # 1. world ------------------------------------------------------------------------------
     t0 = begin("world")
-    data_dir = write_synthetic_dataset(out / "data", seed=seed, n_frames=n_frames, progress=False)
+    data_dir = write_synthetic_dataset(out / "data", seed=seed, n_frames=n_frames, progress=False,
+                                       randomize=randomize)
     manifest = read_manifest(data_dir)
     truth = manifest.calibration
     first = manifest.frames[0]
@@ -143,7 +146,7 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     # 2. calibration: chessboard images -> corners -> GA + LM -> Fusiello ------------------------
     t0 = begin("calibration")
     calib_dir = out / "calibration"
-    views = render_calibration_views(default_stereo(*truth.size), target="chessboard", board=(9, 6),
+    views = render_calibration_views(truth, target="chessboard", board=(9, 6),
                                      spacing_m=0.03, n_views=n_calibration_views, seed=seed)
     paths_l, paths_r = [], []
     for k, v in enumerate(views):

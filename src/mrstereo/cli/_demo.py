@@ -15,8 +15,10 @@ __all__ = ["COMMANDS"]
               help="Seed of the world's textures and noise and of the GA.")
 @click.option("--frames", "n_frames", default=30, show_default=True, type=click.IntRange(min=1),
               help="Frames of the corridor sequence (front, +45 and -45 degree views per stop).")
+@click.option("--randomize", is_flag=True,
+              help="A randomized world drawn from --seed instead of the built-in corridor (docs/world.md).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def demo_command(out_dir: Path, seed: int, n_frames: int, quiet: bool) -> None:
+def demo_command(out_dir: Path, seed: int, n_frames: int, randomize: bool, quiet: bool) -> None:
     """Run the whole pipeline on the built-in synthetic corridor and write a report.
 
     Renders the corridor, calibrates the rig from rendered chessboards (GA + LM),
@@ -30,7 +32,8 @@ def demo_command(out_dir: Path, seed: int, n_frames: int, quiet: bool) -> None:
 
     check_output_dir("--out", out_dir, must_be_empty=True)
     with temporary_dir(out_dir.absolute().parent, prefix=out_dir.name) as tmp:     # the report complete or not at all
-        result = run_demo(tmp / "report", seed=seed, n_frames=n_frames, progress=not quiet)
+        result = run_demo(tmp / "report", seed=seed, n_frames=n_frames, progress=not quiet,
+                          randomize=randomize)
         if out_dir.is_dir():
             out_dir.rmdir()                     # empty, checked above
         os.replace(tmp / "report", out_dir)

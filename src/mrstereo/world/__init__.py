@@ -3,13 +3,14 @@
 The built-in default data of mrstereo (paper Sec. 5, Figs. 7 and 11-14): a
 deterministic ray-cast corridor seen by a distorted, slightly misaligned
 stereo head on a robot, with exact calibration, disparity, depth, labels and
-map. User guide: docs/world.md; dataset layout: docs/dataset.md; conventions:
+map; and randomized corridor worlds drawn from a seed (:func:`random_world`). User guide: docs/world.md; dataset layout: docs/dataset.md; conventions:
 docs/conventions.md.
 """
 from ..recording import FrameRecord, Manifest, read_manifest, write_manifest
-from .dataset import corridor_path, write_synthetic_dataset
+from .dataset import corridor_path, poses_along, write_synthetic_dataset
 from .groundtruth import ground_truth_map, occupied_footprint
-from .render import StereoFrame, camera_poses, default_stereo, render_stereo_frame, render_view
+from .randomize import RandomWorld, random_stereo, random_world
+from .render import SensorModel, StereoFrame, camera_poses, default_stereo, render_stereo_frame, render_view
 from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_NAMES, LABEL_NONE, LABEL_OBSTACLE,
                     LABEL_POSTER, LABEL_SKIRTING, LABEL_WALL, Box, Cylinder, Decal, Light, Material, Scene,
                     default_scene, is_obstacle_label)
@@ -19,8 +20,10 @@ __all__ = [
     "Scene", "Box", "Cylinder", "Decal", "Light", "Material", "default_scene", "is_obstacle_label",
     "LABEL_NONE", "LABEL_FLOOR", "LABEL_WALL", "LABEL_CEILING", "LABEL_DOOR", "LABEL_POSTER",
     "LABEL_SKIRTING", "LABEL_OBSTACLE", "LABEL_NAMES",
+    "RandomWorld", "random_world", "random_stereo", "SensorModel",
     "StereoFrame", "default_stereo", "render_stereo_frame", "render_view", "camera_poses",
     "ground_truth_map", "occupied_footprint",
     "RenderedTarget", "render_calibration_views", "render_paper_dot_target", "target_points",
     "FrameRecord", "Manifest", "read_manifest", "write_manifest", "write_synthetic_dataset", "corridor_path",
+    "poses_along",
 ]

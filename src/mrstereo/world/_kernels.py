@@ -85,6 +85,11 @@ def _albedo(mat, u, v, seed):
         n = _fbm(u / s, v / s, seed, 4)
         m = _value_noise(u / (4.0 * s), v / (4.0 * s), seed + 7)
         return base + contrast * math.tanh(4.0 * (n - 0.5)) + 0.25 * (m - 0.5)
+    if kind == 6 or kind == 7:   # stripes across u (6) or v (7), sharp-edged, with weak noise
+        w = u if kind == 6 else v
+        f = w / period - math.floor(w / period)
+        sign = 1.0 if f < 0.5 else -1.0
+        return base + contrast * (0.8 * sign + 0.4 * (_fbm(u / s, v / s, seed, 2) - 0.5))
     # kind 5, wood: vertical planks with grain
     plank = math.floor(u / period)
     grain = _value_noise(u / (0.2 * s), v / (6.0 * s) + 13.0 * plank, seed)

@@ -18,10 +18,11 @@ from ..io import write_image, write_pfm
 from ..mapping.rosmap import write_ros_map
 from ..recording import IMAGE_KEYS, MANIFEST_NAME, write_manifest
 from .groundtruth import ground_truth_map
-from .render import default_stereo, render_stereo_frame
+from .randomize import random_world
+from .render import SensorModel, default_stereo, render_stereo_frame
 from .scene import default_scene
 
-__all__ = ["write_synthetic_dataset", "corridor_path"]
+__all__ = ["write_synthetic_dataset", "corridor_path", "poses_along"]
 
 
 def corridor_path(n_stops: int, *, x_end_m: float = 10.5) -> np.ndarray:
@@ -33,6 +34,15 @@ def corridor_path(n_stops: int, *, x_end_m: float = 10.5) -> np.ndarray:
     """
     n_stops = _checks.positive_int("n_stops", n_stops)
     way = np.array([[0.0, 0.0], [5.0, 0.0], [5.7, -0.7], [6.8, -0.7], [7.5, 0.0], [x_end_m, 0.0]])
+    return poses_along(way, n_stops)
+
+
+def poses_along(waypoints_xy, n_stops: int) -> np.ndarray:
+    """``n_stops`` robot poses (n_stops, 3) evenly spaced along a polyline; yaw follows the path."""
+    n_stops = _checks.positive_int("n_stops", n_stops)
+    way = np.asarray(waypoints_xy, dtype=np.float64)
+    if way.ndim != 2 or way.shape[1] != 2 or len(way) < 2 or not np.isfinite(way).all():
+        raise ValueError(f"waypoints_xy must be (K >= 2, 2) finite numbers, got shape {way.shape}")
     seg = np.diff(way, axis=0)
     seg_len = np.hypot(seg[:, 0], seg[:, 1])
     cum = np.concatenate([[0.0], np.cumsum(seg_len)])
@@ -51,11 +61,11 @@ _PANS = (0.0, math.pi / 4, -math.pi / 4)   # front, left and right views (paper 
 
 def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_frames: int = 30,
                             width: int = 320, height: int = 240, supersample: int = 2,
-                            progress: bool = True) -> Path:
-    """Render the default corridor along its path and write a dataset directory.
+                            progress: bool = True, randomize: bool = False) -> Path:
+    """Render the default corridor (or a randomized world) along its path and write a dataset directory.
 
-    At each stop along :func:`corridor_path` the head looks front, +45 and
-    -45 degrees (paper Sec. 5.2, Figs. 11-13); frames cycle through these views.
+    At each stop along :func:`corridor_path` (a randomized world: its own path) the head looks
+    front, +45 and -45 degrees (paper Sec. 5.2, Figs. 11-13); frames cycle through these views.
     Written: raw and rectified images, GT disparity (PFM), GT labels (PNG),
     the true calibration, the GT map and ``manifest.yaml``. The directory is
     built beside ``out_dir`` and renamed into place when complete.
@@ -74,6 +84,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         Anti-aliasing rays per pixel along each axis.
     progress : bool
         Show a tqdm progress bar on stderr.
+    randomize : bool
+        Render :func:`mrstereo.world.randomize.random_world` of ``seed`` (its corridor, rig,
+        sensors and path) instead of the built-in corridor; the drawn parameters are written
+        under ``generator:`` in the manifest. The same seed gives the same files.
 
     Returns
     -------
@@ -92,10 +106,16 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
         raise ValueError(f"output directory {out_dir} already exists and is not empty; "
                          "choose a new directory")
-    stereo = default_stereo(width, height)
-    scene = default_scene(seed)
     n_stops = -(-n_frames // len(_PANS))
-    poses = corridor_path(n_stops)
+    generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height}
+    if randomize:
+        world = random_world(seed, width=width, height=height)
+        stereo, scene, sensors = world.stereo, world.scene, world.sensors
+        poses = poses_along(world.waypoints_xy, n_stops)
+        generator["randomized"] = world.summary
+    else:
+        stereo, scene, sensors = default_stereo(width, height), default_scene(seed), (SensorModel(), SensorModel())
+        poses = corridor_path(n_stops)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
     try:
@@ -107,7 +127,7 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
             pose = tuple(round(float(v), 6) for v in poses[k // len(_PANS)])
             pan = round(_PANS[k % len(_PANS)], 9)
             frame = render_stereo_frame(scene, stereo, pose=pose, pan_rad=pan, seed=seed * 100003 + k,
-                                        supersample=supersample)
+                                        supersample=supersample, sensors=sensors)
             name = f"{k:06d}"
             entry = {}
             for key, image in (("left", frame.raw_left), ("right", frame.raw_right),
@@ -123,8 +143,7 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                                                         "pan_rad")})
         write_manifest(tmp / MANIFEST_NAME, calibration="calibration.yaml", rig=stereo.rig, frames=frames,
                        ground_truth_map="gt_map.yaml",
-                       extra={"generator": {"name": "mrstereo.world", "seed": seed, "width": width,
-                                            "height": height}})
+                       extra={"generator": generator})
         if out_dir.exists():
             out_dir.rmdir()          # empty, checked above
         os.replace(tmp, out_dir)

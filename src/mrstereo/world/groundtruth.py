@@ -2,7 +2,7 @@
 
 Occupied: every cell whose square overlaps the footprint of a wall, door panel
 or obstacle. Free: the remaining cells of the corridor's free space (including
-the door recesses). Unknown (NaN): everything else, e.g. behind the walls.
+the door recesses and the scene's ``free_regions_m``, e.g. side rooms). Unknown (NaN): everything else, e.g. behind the walls.
 Grid conventions: :class:`mrstereo.mapping.grid.GridSpec`, docs/conventions.md.
 """
 from __future__ import annotations
@@ -87,6 +87,8 @@ def ground_truth_map(scene: Scene, grid: GridSpec | None = None, *,
     occupancy = np.full(grid.shape, np.nan)
     occupancy[free_space] = 0.0
     occupancy[_recesses(scene, x, y)] = 0.0
+    for rx0, rx1, ry0, ry1 in scene.free_regions_m:
+        occupancy[(x > rx0) & (x < rx1) & (y > ry0) & (y < ry1)] = 0.0
     occupancy[occ] = 1.0
     return RosMap(occupancy=occupancy, grid=grid)
 

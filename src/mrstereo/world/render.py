@@ -28,13 +28,41 @@ from ..geometry.frames import T_robot_from_cam, T_world_from_robot
 from . import _kernels
 from .scene import Scene
 
-__all__ = ["StereoFrame", "default_stereo", "render_stereo_frame", "camera_poses",
+__all__ = ["StereoFrame", "SensorModel", "default_stereo", "render_stereo_frame", "camera_poses",
            "render_view", "sensor_noise_sigma"]
 
 sensor_noise_sigma = 2.0
 """Standard deviation of the simulated sensor noise, grey levels."""
 
 _EXPOSURE = 255.0 * 0.95   # radiance 1.0 -> grey level
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """How one camera turns radiance into grey levels.
+
+    ``grey = clip(round(gain * 242.25 * radiance + black_level + N(0, noise_sigma)), 0, 255)``
+    (radiance 1.0 is 95 % of full scale at gain 1). The defaults are the built-in corridor's
+    cameras; two different models give a pair with unequal exposure, gain and noise.
+
+    Attributes
+    ----------
+    gain : float
+        Exposure times gain, relative (positive).
+    black_level : float
+        Offset added to every pixel, grey levels.
+    noise_sigma : float
+        Standard deviation of the Gaussian sensor noise, grey levels.
+    """
+
+    gain: float = 1.0
+    black_level: float = 0.0
+    noise_sigma: float = sensor_noise_sigma
+
+    def __post_init__(self) -> None:
+        _checks.finite_number("gain", self.gain, positive=True)
+        _checks.finite_number("black_level", self.black_level)
+        _checks.finite_number("noise_sigma", self.noise_sigma, nonnegative=True)
 
 
 @dataclass(frozen=True)
@@ -212,8 +240,10 @@ def render_view(scene: Scene, dirs_cam: np.ndarray, T_world_from_cam: np.ndarray
     return radiance, depth, labels
 
 
-def _to_uint8(radiance: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    grey = radiance * _EXPOSURE + rng.normal(0.0, sensor_noise_sigma, radiance.shape)
+def _to_uint8(radiance: np.ndarray, rng: np.random.Generator, sensor: SensorModel) -> np.ndarray:
+    grey = radiance * (_EXPOSURE * sensor.gain) + rng.normal(0.0, sensor.noise_sigma, radiance.shape)
+    if sensor.black_level:
+        grey += sensor.black_level
     return np.clip(np.rint(grey), 0, 255).astype(np.uint8)
 
 
@@ -230,7 +260,8 @@ def _check_free(scene: Scene, point: np.ndarray, what: str) -> None:
 
 
 def render_stereo_frame(scene: Scene, stereo: StereoCamera, *, pose=(0.0, 0.0, 0.0), pan_rad: float = 0.0,
-                        seed: int = 0, supersample: int = 2, rig: RigMount | None = None) -> StereoFrame:
+                        seed: int = 0, supersample: int = 2, rig: RigMount | None = None,
+                        sensors: tuple[SensorModel, SensorModel] = (SensorModel(), SensorModel())) -> StereoFrame:
     """Render raw and rectified stereo images of ``scene`` with ground truth.
 
     Parameters
@@ -246,11 +277,14 @@ def render_stereo_frame(scene: Scene, stereo: StereoCamera, *, pose=(0.0, 0.0, 0
         Head pan about the robot's z axis (positive to the left; the paper
         uses 0 and +-45 degrees, Sec. 5.2).
     seed : int
-        Seed of the sensor noise (Gaussian, :data:`sensor_noise_sigma` grey levels).
+        Seed of the sensor noise.
     supersample : int
         Anti-aliasing: ``supersample x supersample`` rays per pixel.
     rig : RigMount, optional
         Overrides ``stereo.rig``.
+    sensors : (SensorModel, SensorModel)
+        Gain, black level and noise of the left and right camera (default: equal cameras with
+        :data:`sensor_noise_sigma` grey levels of noise).
 
     Returns
     -------
@@ -272,6 +306,9 @@ def render_stereo_frame(scene: Scene, stereo: StereoCamera, *, pose=(0.0, 0.0, 0
     if supersample > 8:
         raise ValueError(f"supersample must be <= 8, got {supersample}")
     seed = _checks.positive_int("seed", seed, minimum=0)
+    if (not isinstance(sensors, (tuple, list)) or len(sensors) != 2
+            or not all(isinstance(m, SensorModel) for m in sensors)):
+        raise TypeError(f"sensors must be two SensorModel (left, right), got {sensors!r}")
     _check_free(scene, T_left[:3, 3], "left")
     _check_free(scene, T_right[:3, 3], "right")
     rngs = [np.random.default_rng(s) for s in np.random.SeedSequence([seed, 0x57E7E0]).spawn(4)]
@@ -279,7 +316,7 @@ def render_stereo_frame(scene: Scene, stereo: StereoCamera, *, pose=(0.0, 0.0, 0
     for k, (info, T) in enumerate(((stereo.left, T_left), (stereo.right, T_right))):
         for raw in (True, False):
             rad, _, _ = render_view(scene, _ray_table(info, raw=raw, supersample=supersample), T)
-            images.append(_to_uint8(rad, rngs[2 * k + int(raw)]))
+            images.append(_to_uint8(rad, rngs[2 * k + int(raw)], sensors[k]))
     raw_left, left_rect, raw_right, right_rect = images
     _, depth, labels = render_view(scene, _ray_table(stereo.left, raw=False, supersample=1), T_left)
     with np.errstate(divide="ignore", invalid="ignore"):

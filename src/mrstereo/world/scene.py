@@ -30,7 +30,7 @@ __all__ = [
     "LABEL_NONE", "LABEL_FLOOR", "LABEL_WALL", "LABEL_CEILING", "LABEL_DOOR", "LABEL_POSTER",
     "LABEL_SKIRTING", "LABEL_OBSTACLE", "LABEL_NAMES", "is_obstacle_label",
     "TEXTURE_WEAK", "TEXTURE_TILES", "TEXTURE_BLOTCH", "TEXTURE_CHECKER", "TEXTURE_POSTER",
-    "TEXTURE_WOOD",
+    "TEXTURE_WOOD", "TEXTURE_STRIPES_U", "TEXTURE_STRIPES_V",
 ]
 
 # Surface classes of the label image. Obstacle k (0-based) has label LABEL_OBSTACLE + k.
@@ -43,6 +43,7 @@ LABEL_NAMES = {LABEL_NONE: "none", LABEL_FLOOR: "floor", LABEL_WALL: "wall", LAB
 
 # Texture kinds (Material.kind), evaluated in world/_kernels.py.
 TEXTURE_WEAK, TEXTURE_TILES, TEXTURE_BLOTCH, TEXTURE_CHECKER, TEXTURE_POSTER, TEXTURE_WOOD = range(6)
+TEXTURE_STRIPES_U, TEXTURE_STRIPES_V = 6, 7   # stripes across the surface's u (along x or y) / v axis
 
 
 def is_obstacle_label(labels) -> np.ndarray:
@@ -55,7 +56,10 @@ class Material:
     """A procedural texture: albedo ``albedo +- contrast`` at feature size ``scale_m``.
 
     ``kind`` is one of the ``TEXTURE_*`` constants; ``period_m`` is the tile
-    size (tiles), the checker square (checker) or the plank width (wood).
+    size (tiles), the checker square (checker), the plank width (wood) or the
+    stripe period (stripes). Surface coordinates ``(u, v)``: ``(y, z)`` on faces
+    normal to x, ``(x, z)`` on faces normal to y, ``(x, y)`` on floors and tops,
+    (arc length, z) on cylinders.
     """
 
     kind: int
@@ -132,6 +136,9 @@ class Scene:
         ``|y| < half_width_m``, ``0 < z < height_m``.
     seed : int
         Key of all procedural textures.
+    free_regions_m : tuple of (x0, x1, y0, y1)
+        Free floor space outside the corridor rectangle (side rooms behind wall
+        openings), for the ground-truth map.
     """
 
     boxes: tuple[Box, ...]
@@ -146,6 +153,7 @@ class Scene:
     half_width_m: float = 1.2
     height_m: float = 2.5
     seed: int = 0
+    free_regions_m: tuple[tuple[float, float, float, float], ...] = ()
 
     def __post_init__(self) -> None:
         n_mat = len(self.materials)
@@ -154,6 +162,9 @@ class Scene:
                 raise ValueError(f"material index {prim.material} out of range (scene has {n_mat} materials)")
         _checks.finite_number("skirting_m", self.skirting_m, nonnegative=True)
         _checks.finite_number("ambient", self.ambient, nonnegative=True)
+        for m in self.materials:
+            if m.kind not in range(8):
+                raise ValueError(f"material kind must be one of the TEXTURE_* constants (0-7), got {m.kind}")
 
     def packed(self) -> dict[str, np.ndarray]:
         """The scene as the flat arrays the render kernels take (cached)."""
@@ -190,7 +201,8 @@ def _wall_boxes(side: int, x0: float, x1: float, y_in: float, thickness: float, 
     out, x = [], x0
     for xa, xb, top in sorted(gaps):
         out.append(Box((x, y_a, 0.0), (xa, y_b, height), wall_mat, LABEL_WALL))
-        out.append(Box((xa, y_a, top), (xb, y_b, height), wall_mat, LABEL_WALL))
+        if top < height:
+            out.append(Box((xa, y_a, top), (xb, y_b, height), wall_mat, LABEL_WALL))
         x = xb
     out.append(Box((x, y_a, 0.0), (x1, y_b, height), wall_mat, LABEL_WALL))
     return out

@@ -1,0 +1,450 @@
+"""Randomized corridor worlds: many different corridors, each fixed by one integer seed.
+
+The built-in corridor (:func:`mrstereo.world.default_scene`) is one world; defaults tuned on it
+may not carry over. :func:`random_world` draws a whole corridor world from a seed: its width,
+length and ceiling height; wall, floor and ceiling textures from a bank that holds low-texture
+paint, repetitive patterns (tiles, stripes, chessboard posters) and strongly textured posters;
+lamps and ambient light; the stereo head (height 0.3-1.2 m, tilt 0-0.4 rad, baseline 6-16 cm,
+horizontal field of view 50-80 degrees, distortion and misalignment of the raw cameras); an
+exposure, gain, black level and noise level per camera; obstacles of several kinds (boxes,
+cylinders, thin poles, tables and chairs on thin legs, low objects near the floor), side
+openings into small rooms, recessed doors; and a robot path that keeps clear of the obstacles.
+
+Everything is drawn from ``numpy.random.default_rng(seed)`` in a fixed order, so a seed always
+gives the same world (and :func:`mrstereo.world.write_synthetic_dataset` with ``randomize=True``
+the same files). The ground truth stays exact: the renderer ray-casts the same primitives the
+ground-truth map rasterizes. Seeds 0-9 are the ones mrstereo's defaults are chosen on; seeds
+100-119 are the report seeds of ``benchmarks/bench_map.py --randomized``. User guide:
+docs/world.md; conventions: docs/conventions.md.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _checks
+from ..camera import Camera, CameraInfo, RigMount, StereoCamera, rotation_from_euler
+from .render import SensorModel
+from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, LABEL_POSTER, LABEL_WALL,
+                    TEXTURE_BLOTCH, TEXTURE_CHECKER, TEXTURE_POSTER, TEXTURE_STRIPES_U, TEXTURE_STRIPES_V,
+                    TEXTURE_TILES, TEXTURE_WEAK, TEXTURE_WOOD, Box, Cylinder, Decal, Light, Material, Scene,
+                    _wall_boxes)
+
+__all__ = ["RandomWorld", "random_world", "random_stereo", "RANGES"]
+
+RANGES = {
+    "corridor_width_m": (1.6, 3.0),
+    "corridor_length_m": (8.0, 15.5),
+    "ceiling_m": (2.2, 3.0),
+    "camera_height_m": (0.3, 1.2),
+    "tilt_rad": (0.0, 0.4),
+    "baseline_m": (0.06, 0.16),
+    "horizontal_fov_deg": (50.0, 80.0),
+    "noise_sigma": (0.8, 4.0),
+    "gain": (0.6, 1.3),
+    "right_gain_ratio": (0.85, 1.15),
+    "black_level": (0.0, 12.0),
+    "obstacles": (4, 9),
+}
+"""Ranges of the randomized quantities (uniform draws)."""
+
+_CLEARANCE_M = 0.4      # obstacles keep this far from the robot path (robot radius + margin)
+_WALL_THICK_M = 0.2
+_GRID_HALF_M = 2.95     # everything the map should show stays within |y| < 3 m (the default grid)
+
+
+@dataclass(frozen=True)
+class RandomWorld:
+    """One randomized world: the scene, the true stereo rig, the cameras' sensors and a path.
+
+    Attributes
+    ----------
+    seed : int
+    scene : Scene
+    stereo : StereoCamera
+        The exact calibration and mount (``stereo.rig``).
+    sensors : (SensorModel, SensorModel)
+        Left and right camera exposure, gain, black level and noise.
+    waypoints_xy : ndarray of shape (K, 2)
+        The robot path (world metres) as a polyline, clear of every obstacle by 0.4 m.
+    summary : dict
+        The drawn parameters in plain numbers (written into the dataset manifest).
+    """
+
+    seed: int
+    scene: Scene
+    stereo: StereoCamera
+    sensors: tuple[SensorModel, SensorModel]
+    waypoints_xy: np.ndarray
+    summary: dict
+
+
+def _u(rng: np.random.Generator, lo_hi) -> float:
+    lo, hi = lo_hi
+    return float(rng.uniform(lo, hi))
+
+
+def random_stereo(rng, width: int = 320, height: int = 240) -> StereoCamera:
+    """A realistic stereo head: baseline 6-16 cm, 50-80 degree field of view, mount, raw cameras.
+
+    The raw cameras have barrel distortion (``k1`` in [-0.08, 0], ``k2`` in [0, 0.01]), focal
+    lengths within 1 % of the rectified one, principal points up to 3 px off and rotations up to
+    0.8 degrees relative to the rectified frame, like :func:`mrstereo.world.default_stereo`.
+    """
+    rng = np.random.default_rng(rng)
+    width = _checks.positive_int("width", width, minimum=16)
+    height = _checks.positive_int("height", height, minimum=16)
+    fov = math.radians(_u(rng, RANGES["horizontal_fov_deg"]))
+    f = (width / 2.0) / math.tan(fov / 2.0)
+    baseline = _u(rng, RANGES["baseline_m"])
+    rig = RigMount(height_m=_u(rng, RANGES["camera_height_m"]), tilt_rad=_u(rng, RANGES["tilt_rad"]))
+    s = width / 320.0
+    cx = (width - 1) / 2.0 + rng.uniform(-3, 3) * s
+    cy = (height - 1) / 2.0 + rng.uniform(-3, 3) * s
+    rect = Camera(width=width, height=height, fx=f, fy=f, cx=cx, cy=cy)
+    raws, Rs = [], []
+    for _ in range(2):
+        raws.append(Camera(width=width, height=height, fx=f * rng.uniform(0.99, 1.01),
+                           fy=f * rng.uniform(0.99, 1.01), cx=cx + rng.uniform(-3, 3) * s,
+                           cy=cy + rng.uniform(-3, 3) * s, k1=rng.uniform(-0.08, 0.0), k2=rng.uniform(0.0, 0.01)))
+        Rs.append(rotation_from_euler(*rng.uniform(-0.014, 0.014, 3)))
+    P_left = np.hstack([rect.K, np.zeros((3, 1))])
+    P_right = P_left.copy()
+    P_right[0, 3] = -f * baseline
+    return StereoCamera(left=CameraInfo(raws[0], R=Rs[0], P=P_left, name="left"),
+                        right=CameraInfo(raws[1], R=Rs[1], P=P_right, name="right"), rig=rig)
+
+
+# --------------------------------------------------------------------------- texture bank
+def _wall_material(rng) -> tuple[str, Material]:
+    kind = rng.choice(["paint", "paint", "tiles", "stripes", "blotch", "wood"])
+    a = rng.uniform(0.45, 0.85)
+    if kind == "paint":        # low-texture paint: a few grey levels, comparable to the noise
+        return kind, Material(TEXTURE_WEAK, a, rng.uniform(0.01, 0.05), rng.uniform(0.1, 0.5))
+    if kind == "tiles":        # repetitive
+        return kind, Material(TEXTURE_TILES, a, rng.uniform(0.03, 0.1), rng.uniform(0.1, 0.3),
+                              rng.uniform(0.15, 0.5))
+    if kind == "stripes":      # repetitive: vertical stripes along the wall
+        return kind, Material(TEXTURE_STRIPES_U, a, rng.uniform(0.04, 0.2), rng.uniform(0.1, 0.4),
+                              rng.uniform(0.06, 0.4))
+    if kind == "blotch":
+        return kind, Material(TEXTURE_BLOTCH, a, rng.uniform(0.08, 0.3), rng.uniform(0.03, 0.2))
+    return kind, Material(TEXTURE_WOOD, a * 0.7, rng.uniform(0.1, 0.25), rng.uniform(0.03, 0.08),
+                          rng.uniform(0.08, 0.2))
+
+
+def _floor_material(rng) -> tuple[str, Material]:
+    kind = rng.choice(["paint", "tiles", "tiles", "checker", "wood", "carpet", "stripes"])
+    a = rng.uniform(0.3, 0.7)
+    if kind == "paint":
+        return kind, Material(TEXTURE_WEAK, a, rng.uniform(0.01, 0.04), rng.uniform(0.1, 0.5))
+    if kind == "tiles":
+        return kind, Material(TEXTURE_TILES, a, rng.uniform(0.02, 0.08), rng.uniform(0.1, 0.3),
+                              rng.uniform(0.3, 0.6))
+    if kind == "checker":      # chequered tiles: strongly repetitive
+        return kind, Material(TEXTURE_CHECKER, a, rng.uniform(0.1, 0.3), rng.uniform(0.2, 0.6),
+                              rng.uniform(0.2, 0.5))
+    if kind == "wood":
+        return kind, Material(TEXTURE_WOOD, a, rng.uniform(0.08, 0.2), rng.uniform(0.03, 0.08),
+                              rng.uniform(0.1, 0.25))
+    if kind == "carpet":
+        return kind, Material(TEXTURE_BLOTCH, a, rng.uniform(0.05, 0.15), rng.uniform(0.01, 0.04))
+    return kind, Material(TEXTURE_STRIPES_V, a, rng.uniform(0.03, 0.1), rng.uniform(0.1, 0.4),
+                          rng.uniform(0.2, 0.6))
+
+
+def _ceiling_material(rng) -> tuple[str, Material]:
+    if rng.uniform() < 0.5:
+        return "paint", Material(TEXTURE_WEAK, rng.uniform(0.7, 0.9), rng.uniform(0.01, 0.04), 0.4)
+    return "tiles", Material(TEXTURE_TILES, rng.uniform(0.7, 0.9), rng.uniform(0.02, 0.06), 0.3,
+                             rng.uniform(0.5, 0.7))
+
+
+def _poster_material(rng) -> tuple[str, Material]:
+    kind = rng.choice(["poster", "poster", "chessboard", "stripes"])
+    if kind == "poster":       # strong texture
+        return kind, Material(TEXTURE_POSTER, rng.uniform(0.4, 0.6), rng.uniform(0.3, 0.5), rng.uniform(0.02, 0.05))
+    if kind == "chessboard":   # a chessboard poster: perfectly repetitive
+        return kind, Material(TEXTURE_CHECKER, 0.5, rng.uniform(0.4, 0.55), 5.0, rng.uniform(0.03, 0.1))
+    return kind, Material(TEXTURE_STRIPES_U, 0.5, rng.uniform(0.3, 0.5), 1.0, rng.uniform(0.03, 0.12))
+
+
+def _obstacle_material(rng) -> tuple[str, Material]:
+    kind = rng.choice(["blotch", "blotch", "checker", "wood", "poster", "plain"])
+    a = rng.uniform(0.25, 0.75)
+    if kind == "blotch":
+        return kind, Material(TEXTURE_BLOTCH, a, rng.uniform(0.2, 0.45), rng.uniform(0.02, 0.06))
+    if kind == "checker":
+        return kind, Material(TEXTURE_CHECKER, a, rng.uniform(0.2, 0.4), rng.uniform(0.02, 0.05),
+                              rng.uniform(0.04, 0.12))
+    if kind == "wood":
+        return kind, Material(TEXTURE_WOOD, a, rng.uniform(0.15, 0.3), rng.uniform(0.03, 0.06),
+                              rng.uniform(0.05, 0.12))
+    if kind == "poster":
+        return kind, Material(TEXTURE_POSTER, a, rng.uniform(0.25, 0.45), rng.uniform(0.02, 0.05))
+    return kind, Material(TEXTURE_WEAK, a, rng.uniform(0.06, 0.12), rng.uniform(0.03, 0.08))   # plain paint
+
+
+# --------------------------------------------------------------------------- layout helpers
+def _path_points(waypoints: np.ndarray, step_m: float = 0.05) -> np.ndarray:
+    out = [waypoints[:1]]
+    for a, b in zip(waypoints[:-1], waypoints[1:]):
+        n = max(1, int(math.ceil(np.hypot(*(b - a)) / step_m)))
+        out.append(a + (b - a) * (np.arange(1, n + 1)[:, None] / n))
+    return np.concatenate(out)
+
+
+def _rect_clear(rect, path_pts: np.ndarray, placed: list, gap: float) -> bool:
+    """``rect`` (x0, x1, y0, y1) keeps ``_CLEARANCE_M`` from the path and ``gap`` from ``placed``."""
+    x0, x1, y0, y1 = rect
+    dx = np.maximum(np.maximum(x0 - path_pts[:, 0], path_pts[:, 0] - x1), 0.0)
+    dy = np.maximum(np.maximum(y0 - path_pts[:, 1], path_pts[:, 1] - y1), 0.0)
+    if np.min(np.hypot(dx, dy)) < _CLEARANCE_M:
+        return False
+    return all(x1 + gap <= a0 or a1 + gap <= x0 or y1 + gap <= b0 or b1 + gap <= y0 for a0, a1, b0, b1 in placed)
+
+
+def _intervals_free(a: float, b: float, taken: list[tuple[float, float]], gap: float) -> bool:
+    return all(b + gap <= lo or hi + gap <= a for lo, hi in taken)
+
+
+def _obstacle(rng, kind: str, x: float, y: float, mat: int) -> tuple[list[Box], list[Cylinder], tuple]:
+    """Primitives of one obstacle centred at (x, y) and its footprint rectangle (label set later)."""
+    boxes: list[Box] = []
+    cyls: list[Cylinder] = []
+    if kind == "box":
+        sx, sy, h = rng.uniform(0.2, 0.7), rng.uniform(0.2, 0.7), rng.uniform(0.3, 1.2)
+        boxes.append(Box((x - sx / 2, y - sy / 2, 0.0), (x + sx / 2, y + sy / 2, h), mat, 0))
+        rect = (x - sx / 2, x + sx / 2, y - sy / 2, y + sy / 2)
+    elif kind == "low":         # low object near the floor
+        sx, sy, h = rng.uniform(0.2, 0.6), rng.uniform(0.2, 0.6), rng.uniform(0.12, 0.22)
+        boxes.append(Box((x - sx / 2, y - sy / 2, 0.0), (x + sx / 2, y + sy / 2, h), mat, 0))
+        rect = (x - sx / 2, x + sx / 2, y - sy / 2, y + sy / 2)
+    elif kind == "cylinder":
+        r, h = rng.uniform(0.08, 0.3), rng.uniform(0.3, 1.2)
+        cyls.append(Cylinder((x, y), r, h, mat, 0))
+        rect = (x - r, x + r, y - r, y + r)
+    elif kind == "pole":        # thin pole
+        r, h = rng.uniform(0.02, 0.05), rng.uniform(0.9, 1.6)
+        cyls.append(Cylinder((x, y), r, h, mat, 0))
+        rect = (x - r, x + r, y - r, y + r)
+    else:                       # table or chair: a top on four thin legs (a chair has a backrest)
+        table = kind == "table"
+        sx = rng.uniform(0.6, 1.2) if table else rng.uniform(0.38, 0.48)
+        sy = rng.uniform(0.5, 0.8) if table else rng.uniform(0.38, 0.48)
+        h = rng.uniform(0.68, 0.76) if table else rng.uniform(0.42, 0.48)
+        leg = rng.uniform(0.02, 0.03) if table else rng.uniform(0.012, 0.02)
+        boxes.append(Box((x - sx / 2, y - sy / 2, h - 0.035), (x + sx / 2, y + sy / 2, h), mat, 0))
+        for ex in (-1, 1):
+            for ey in (-1, 1):
+                cyls.append(Cylinder((x + ex * (sx / 2 - 2 * leg), y + ey * (sy / 2 - 2 * leg)), leg, h - 0.035,
+                                     mat, 0))
+        if not table:
+            side = rng.choice([-1, 1])
+            bx = x + side * (sx / 2 - 0.015)
+            boxes.append(Box((bx - 0.015, y - sy / 2, h), (bx + 0.015, y + sy / 2, h + 0.4), mat, 0))
+        rect = (x - sx / 2, x + sx / 2, y - sy / 2, y + sy / 2)
+    return boxes, cyls, rect
+
+
+def _labelled(boxes: list[Box], cyls: list[Cylinder], label: int) -> tuple[list[Box], list[Cylinder]]:
+    return ([Box(b.min_m, b.max_m, b.material, label) for b in boxes],
+            [Cylinder(c.centre_m, c.radius_m, c.height_m, c.material, label) for c in cyls])
+
+
+# --------------------------------------------------------------------------- the world
+def random_world(seed: int, *, width: int = 320, height: int = 240) -> RandomWorld:
+    """Draw a corridor world, its stereo rig, sensors and robot path from ``seed``.
+
+    Parameters
+    ----------
+    seed : int
+        Non-negative; the same seed gives the same world.
+    width, height : int
+        Image size of the rig (the field of view is drawn independently of it).
+
+    Returns
+    -------
+    RandomWorld
+
+    Notes
+    -----
+    World frame as in :func:`mrstereo.world.default_scene`: the corridor runs along +x, centred
+    on ``y = 0``, the path starts near the origin looking along +x. Everything that matters for
+    the default map (12 m x 6 m from (0, -3)) lies within ``|y| < 3 m``. Obstacle labels
+    ``LABEL_OBSTACLE + k`` are numbered by the x of their footprint; all primitives of a table
+    or chair share its label.
+    """
+    seed = _checks.positive_int("seed", seed, minimum=0)
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0xC0441D0]))
+    stereo = random_stereo(rng, width, height)
+    width_m = _u(rng, RANGES["corridor_width_m"])
+    half = width_m / 2.0
+    h = _u(rng, RANGES["ceiling_m"])
+    x0 = -rng.uniform(0.6, 1.5)
+    x1 = x0 + _u(rng, RANGES["corridor_length_m"])
+    x_end = min(10.5, x1 - 1.2)
+
+    # materials: the bank is drawn per world
+    names, mats = [], []
+
+    def add(pair) -> int:
+        names.append(str(pair[0]))
+        mats.append(pair[1])
+        return len(mats) - 1
+
+    WALL = add(_wall_material(rng))
+    FLOOR = add(_floor_material(rng))
+    CEIL = add(_ceiling_material(rng))
+    SKIRT = add(("skirting", Material(TEXTURE_WEAK, rng.uniform(0.15, 0.6), 0.04, 0.05)))
+    DOOR = add(("door", Material(TEXTURE_WOOD, rng.uniform(0.3, 0.55), rng.uniform(0.15, 0.3), 0.05,
+                                 rng.uniform(0.08, 0.13))))
+    skirting_m = float(rng.choice([0.0, 0.06, 0.1, 0.15]))
+
+    # path: waypoints every ~2.5 m with lateral offsets inside the corridor
+    n_way = int(rng.integers(3, 6))
+    xs = np.linspace(0.0, x_end, n_way)
+    lateral = max(half - 0.55, 0.0)
+    ys = rng.uniform(-lateral, lateral, n_way) * rng.uniform(0.0, 1.0)
+    ys[0] = rng.uniform(-0.3, 0.3) * lateral
+    waypoints = np.round(np.stack([xs, ys], 1), 3)
+    path_pts = _path_points(waypoints)
+
+    # side openings (into small rooms) and recessed doors along both walls
+    openings: list[tuple[int, float, float, float, float]] = []   # side, xa, xb, top, depth
+    doors: list[tuple[int, float, float]] = []
+    taken: dict[int, list] = {+1: [], -1: []}
+    max_depth = _GRID_HALF_M - half - _WALL_THICK_M
+    for _ in range(int(rng.integers(0, 3))):
+        side = int(rng.choice([-1, 1]))
+        w = rng.uniform(0.8, 1.8)
+        xa = rng.uniform(0.5, x1 - w - 0.5)
+        depth = rng.uniform(0.6, 1.4)
+        if depth <= max_depth - 0.05 and _intervals_free(xa - 0.3, xa + w + 0.3, taken[side], 0.3):
+            top = float(rng.choice([2.1, h]))
+            openings.append((side, float(xa), float(xa + w), top, float(min(depth, max_depth - 0.05))))
+            taken[side].append((xa - 0.3, xa + w + 0.3))
+    for _ in range(int(rng.integers(0, 5))):
+        side = int(rng.choice([-1, 1]))
+        xa = rng.uniform(0.0, x1 - 1.2)
+        if _intervals_free(xa, xa + 0.9, taken[side], 0.2):
+            doors.append((side, float(xa), float(xa + 0.9)))
+            taken[side].append((xa, xa + 0.9))
+
+    boxes: list[Box] = [
+        Box((x0 - 1.0, -_GRID_HALF_M - 1.0, -0.2), (x1 + 1.0, _GRID_HALF_M + 1.0, 0.0), FLOOR, LABEL_FLOOR),
+        Box((x0 - 1.0, -_GRID_HALF_M - 1.0, h), (x1 + 1.0, _GRID_HALF_M + 1.0, h + 0.2), CEIL, LABEL_CEILING),
+        Box((x0 - _WALL_THICK_M, -half, 0.0), (x0, half, h), WALL, LABEL_WALL),
+        Box((x1, -half, 0.0), (x1 + _WALL_THICK_M, half, h), WALL, LABEL_WALL),
+    ]
+    free_regions = []
+    recess = 0.1
+    for side in (+1, -1):
+        gaps = ([(xa, xb, 2.1) for s, xa, xb in doors if s == side]
+                + [(xa, xb, top) for s, xa, xb, top, _ in openings if s == side])
+        boxes += _wall_boxes(side, x0, x1, half, _WALL_THICK_M, h, gaps, WALL)
+        for s, xa, xb in doors:
+            if s == side:
+                ya, yb = sorted((side * (half + recess), side * (half + _WALL_THICK_M)))
+                boxes.append(Box((xa, ya, 0.0), (xb, yb, 2.1), DOOR, LABEL_DOOR))
+        for s, xa, xb, top, depth in openings:
+            if s != side:
+                continue
+            # a small room behind the opening: back wall and two side walls
+            y_in, y_back = side * half, side * (half + depth)
+            ya, yb = sorted((y_back, y_back + side * _WALL_THICK_M))
+            boxes.append(Box((xa - _WALL_THICK_M, ya, 0.0), (xb + _WALL_THICK_M, yb, h), WALL, LABEL_WALL))
+            ya, yb = sorted((y_in, y_back))
+            boxes.append(Box((xa - _WALL_THICK_M, ya, 0.0), (xa, yb, h), WALL, LABEL_WALL))
+            boxes.append(Box((xb, ya, 0.0), (xb + _WALL_THICK_M, yb, h), WALL, LABEL_WALL))
+            free_regions.append((xa, xb, ya, yb))
+
+    # posters and flat door panels painted on the walls
+    decals = []
+    for _ in range(int(rng.integers(2, 7))):
+        side = int(rng.choice([-1, 1]))
+        w = rng.uniform(0.4, 1.2)
+        xa = rng.uniform(0.0, x1 - w)
+        if not _intervals_free(xa, xa + w, taken[side], 0.1):
+            continue
+        z0 = rng.uniform(0.3, 1.2)
+        zh = rng.uniform(0.4, 1.0)
+        mat = add(_poster_material(rng))
+        decals.append(Decal(-side, side * half, xa, xa + w, z0, min(z0 + zh, h - 0.1), mat, LABEL_POSTER))
+        taken[side].append((xa, xa + w))
+    for _ in range(int(rng.integers(0, 3))):
+        side = int(rng.choice([-1, 1]))
+        xa = rng.uniform(0.0, x1 - 0.9)
+        if not _intervals_free(xa, xa + 0.9, taken[side], 0.1):
+            continue
+        mat = add(("panel", Material(TEXTURE_WOOD, rng.uniform(0.2, 0.5), rng.uniform(0.15, 0.3), 0.04,
+                                     rng.uniform(0.06, 0.12))))
+        decals.append(Decal(-side, side * half, xa, xa + 0.9, 0.0, 2.1, mat, LABEL_DOOR))
+        taken[side].append((xa, xa + 0.9))
+
+    # obstacles: shapes placed by rejection sampling, clear of the path and of each other
+    placed: list[tuple] = []
+    parts: list[tuple] = []
+    kinds = ["box", "box", "cylinder", "low", "pole", "table", "chair"]
+    n_obstacles = int(rng.integers(RANGES["obstacles"][0], RANGES["obstacles"][1] + 1))
+    for _ in range(n_obstacles):
+        kind = str(rng.choice(kinds))
+        mat = add(_obstacle_material(rng))
+        for _attempt in range(40):
+            x = rng.uniform(0.4, min(x1, 12.0) - 0.4)
+            y = rng.uniform(-half, half)
+            if rng.uniform() < 0.3:           # against a wall
+                y = np.sign(y) * half
+            b, c, rect = _obstacle(rng, kind, x, y, mat)
+            # shift into the corridor if it pokes through a wall
+            shift = min(0.0, half - rect[3]) + max(0.0, -half - rect[2])
+            if shift:
+                b = [Box((p.min_m[0], p.min_m[1] + shift, p.min_m[2]), (p.max_m[0], p.max_m[1] + shift, p.max_m[2]),
+                         p.material, 0) for p in b]
+                c = [Cylinder((p.centre_m[0], p.centre_m[1] + shift), p.radius_m, p.height_m, p.material, 0)
+                     for p in c]
+                rect = (rect[0], rect[1], rect[2] + shift, rect[3] + shift)
+            if rect[1] < x1 - 0.05 and rect[0] > x0 + 0.05 and _rect_clear(rect, path_pts, placed, 0.15):
+                placed.append(rect)
+                parts.append((rect[0], kind, b, c))
+                break
+    obstacle_kinds, cylinders = [], []
+    for k, (_, kind, b, c) in enumerate(sorted(parts, key=lambda p: p[0])):
+        b, c = _labelled(b, c, LABEL_OBSTACLE + k)
+        boxes += b
+        cylinders += c
+        obstacle_kinds.append(kind)
+
+    # lamps along the ceiling, ambient light
+    spacing = rng.uniform(1.5, 3.5)
+    power = rng.uniform(1.2, 3.5)
+    rows = [0.0] if rng.uniform() < 0.7 else [-half / 2, half / 2]
+    lights = tuple(Light((float(x), float(y), h - 0.1), power * (1.0 if len(rows) == 1 else 0.6))
+                   for x in np.arange(x0 + rng.uniform(0.3, spacing), x1, spacing) for y in rows)
+    ambient = rng.uniform(0.15, 0.5)
+
+    gain = _u(rng, RANGES["gain"])
+    noise = _u(rng, RANGES["noise_sigma"])
+    sensors = (SensorModel(gain=gain, black_level=_u(rng, RANGES["black_level"]), noise_sigma=noise),
+               SensorModel(gain=gain * _u(rng, RANGES["right_gain_ratio"]), black_level=_u(rng, RANGES["black_level"]),
+                           noise_sigma=noise * rng.uniform(0.8, 1.25)))
+    scene = Scene(boxes=tuple(boxes), cylinders=tuple(cylinders), decals=tuple(decals), lights=lights,
+                  materials=tuple(mats), skirting_m=skirting_m, skirting_material=SKIRT, ambient=ambient,
+                  x_range_m=(x0, x1), half_width_m=half, height_m=h, seed=seed,
+                  free_regions_m=tuple(free_regions))
+    summary = {
+        "seed": seed, "corridor_width_m": round(width_m, 3), "corridor_x_range_m": [round(x0, 3), round(x1, 3)],
+        "ceiling_m": round(h, 3), "camera_height_m": round(stereo.rig.height_m, 3),
+        "tilt_rad": round(stereo.rig.tilt_rad, 3), "baseline_m": round(stereo.baseline_m, 4),
+        "focal_px": round(stereo.focal_px, 1),
+        "textures": {"wall": names[WALL], "floor": names[FLOOR], "ceiling": names[CEIL],
+                     "posters": [names[d.material] for d in decals if d.label == LABEL_POSTER]},
+        "obstacles": obstacle_kinds, "side_openings": len(openings), "doors": len(doors),
+        "lamps": len(lights), "ambient": round(ambient, 3),
+        "sensors": [{"gain": round(s.gain, 3), "black_level": round(s.black_level, 2),
+                     "noise_sigma": round(s.noise_sigma, 2)} for s in sensors],
+    }
+    return RandomWorld(seed=seed, scene=scene, stereo=stereo, sensors=sensors, waypoints_xy=waypoints,
+                       summary=summary)
