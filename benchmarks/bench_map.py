@@ -1,70 +1,175 @@
-"""The paper's corridor-mapping experiment (section 5.2, Figs 11-14) on the synthetic world.
+"""The paper's corridor-mapping experiment (section 5.2, Figs 11-14) on synthetic worlds.
 
-For several world seeds: render a 30-frame run along the 12 m corridor (front, +45 and -45
-degree views), map it with the default pipeline and compare with the ground-truth map:
-occupied precision / recall (1-cell tolerance, recall over the visible wall faces and obstacle
-outlines), the corridor-profile error (mean distance of occupied cells to the true walls) and
-the share of free cells mapped free, within 4 m of the path; and the same within 1 m of the
-path ("near": where the multi-range approach matters). Rows:
+For several world seeds: render a run along the corridor (front, +45 and -45 degree views at
+each stop), map it with the default pipeline and compare with the ground-truth map within 4 m
+of the path: occupied precision / recall (1-cell tolerance, recall over the visible wall faces
+and obstacle outlines), the corridor-profile error (mean distance of occupied cells to the true
+walls), the share of cells mapped free that are truly free ("free correct"), the share of the
+true free cells in view of some frame that are mapped free ("free coverage"), and recall within
+1 m of the path ("near": where the multi-range approach matters).
 
-* multi-range + log-odds (the default),
-* multi-range + the paper's union fusion,
-* a single full-resolution range of equal work + log-odds (the near blind zone).
+Two worlds:
+
+* the fixed corridor (``default_scene``), 30 frames per seed; rows: multi-range + log-odds (the
+  default), the paper's union fusion, a single full-resolution range of equal work;
+* ``--randomized``: a different corridor per seed (``mrstereo.world.random_world``: widths,
+  textures, lights, rig, sensors, obstacles). mrstereo's defaults are chosen on seeds 0-9 only;
+  the report seeds are 100-119. Prints one row per seed, the mean and the worst seed.
+
+``--variants`` also maps every seed with the mapping variants of ``VARIANTS`` (the steps from
+the paper's plain ray casting to the default sensor model) on the same observations.
 
 Usage::
 
     python benchmarks/bench_map.py [--seeds 0 1 2] [--frames 30]
+    python benchmarks/bench_map.py --randomized --seeds 100-119 [--frames 24] [--workers 2]
+    python benchmarks/bench_map.py --randomized --seeds 0-9 --variants
 """
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from mrstereo.mapping import read_ros_map
-from mrstereo.mapping.metrics import map_metrics
-from mrstereo.pipeline import MapRun, PipelineConfig, build_map, fuse
-from mrstereo.world import read_manifest, write_synthetic_dataset
+COLUMNS = ("occupied precision", "occupied recall", "wall profile error [cm]", "free correct",
+           "free coverage", "recall within 1 m")
+
+
+def _parse_seeds(values: list[str]) -> list[int]:
+    seeds: list[int] = []
+    for v in values:
+        for part in v.split(","):
+            if "-" in part:
+                a, b = part.split("-")
+                seeds += list(range(int(a), int(b) + 1))
+            elif part:
+                seeds.append(int(part))
+    return seeds
+
+
+def variants() -> dict:
+    """Named pipeline configurations: how each step of the mapping sensor model changes the map."""
+    from mrstereo.pipeline import PipelineConfig
+
+    base = PipelineConfig()
+    m = base.mapping
+    plain = replace(m, disparity_sigma_px=None, occlusion_gap_m=None, see_through_ratio=None)
+    return {
+        "plain rays (the previous default)": replace(base, mapping=plain),
+        "+ range uncertainty (0.25 px, 2 sigma)": replace(base, mapping=replace(
+            plain, disparity_sigma_px=m.disparity_sigma_px)),
+        "+ occlusion in the view, 2-D (no heights)": replace(base, mapping=replace(
+            plain, disparity_sigma_px=m.disparity_sigma_px, occlusion_gap_m=m.occlusion_gap_m,
+            height_tolerance_m=100.0)),
+        "+ occlusion at the sight line's height": replace(base, mapping=replace(
+            plain, disparity_sigma_px=m.disparity_sigma_px, occlusion_gap_m=m.occlusion_gap_m)),
+        "+ floor seen through a cell clears it (the default)": base,
+    }
+
+
+def _metrics(grid, gt, path, views) -> tuple:
+    from mrstereo.mapping.metrics import map_metrics
+
+    far = map_metrics(grid, gt, path_xy=path, within_m=4.0, views=views)
+    near = map_metrics(grid, gt, path_xy=path, within_m=1.0)
+    return (far.precision, far.recall, far.mean_distance_m * 100, far.free_precision, far.free_coverage,
+            near.recall)
+
+
+def evaluate_seed(seed: int, *, randomized: bool, frames: int, data_dir: str | None, with_variants: bool,
+                  fixed_rows: bool) -> tuple[int, dict, float]:
+    """Render (or reuse) one world, map it, return {row name: metrics tuple} and the time taken."""
+    from mrstereo.mapping import read_ros_map
+    from mrstereo.pipeline import PipelineConfig, build_map, fuse, views_of_frames
+    from mrstereo.world import read_manifest, write_synthetic_dataset
+
+    t0 = time.perf_counter()
+    root = Path(data_dir) if data_dir else Path(tempfile.mkdtemp(prefix="bench_map_"))
+    ds = root / f"{'random' if randomized else 'corridor'}_seed{seed}_{frames}f"
+    if not (ds / "manifest.yaml").is_file():
+        write_synthetic_dataset(ds, seed=seed, n_frames=frames, progress=False, randomize=randomized)
+    manifest = read_manifest(ds)
+    gt = read_ros_map(manifest.ground_truth_map)
+    path = np.array([f.pose for f in manifest.frames])
+    config = PipelineConfig()
+    views = views_of_frames(manifest.frames, manifest.calibration, range_m=config.obstacles.max_range_m)
+    rows: dict[str, tuple] = {}
+    run = build_map(manifest, config=config, progress=False)
+    rows["multi-range, log-odds (default)"] = _metrics(run.grid, gt, path, views)
+    if fixed_rows:
+        union = fuse(run.observations, grid=config.grid, config=config.with_fusion("union").mapping)
+        rows["multi-range, union (the paper's fusion)"] = _metrics(union, gt, path, views)
+        single = config.single_range_equal_work(manifest.calibration)
+        grid = build_map(manifest, config=single, progress=False).grid
+        rows[f"single range 0-{single.max_disparity_px:.0f} px, equal work"] = _metrics(grid, gt, path, views)
+    if with_variants:
+        for name, variant in variants().items():
+            if replace(variant, mapping=config.mapping) == config:     # only the mapping differs: re-fuse
+                grid = fuse(run.observations, grid=config.grid, config=variant.mapping)
+            else:
+                grid = build_map(manifest, config=variant, progress=False).grid
+            rows[f"variant: {name}"] = _metrics(grid, gt, path, views)
+    return seed, rows, time.perf_counter() - t0
+
+
+def _fmt(k: int, v: float) -> str:
+    return f"{v:.1f}" if k == 2 else f"{v:.3f}"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--frames", type=int, default=30)
+    parser.add_argument("--seeds", nargs="+", default=None, help="seeds, e.g. 0 1 2 or 100-119")
+    parser.add_argument("--frames", type=int, default=None, help="frames per seed (30 fixed, 24 randomized)")
+    parser.add_argument("--randomized", action="store_true", help="randomized worlds instead of the fixed corridor")
+    parser.add_argument("--variants", action="store_true", help="also map with the mapping variants")
+    parser.add_argument("--workers", type=int, default=1, help="seeds mapped in parallel processes")
+    parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
     args = parser.parse_args()
-    rows: dict[str, list] = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        for seed in args.seeds:
-            t0 = time.perf_counter()
-            manifest = read_manifest(write_synthetic_dataset(Path(tmp) / f"seed{seed}", seed=seed,
-                                                             n_frames=args.frames, progress=False))
-            gt = read_ros_map(manifest.ground_truth_map)
-            path = np.array([f.pose for f in manifest.frames])
-            config = PipelineConfig()
-            runs = {"multi-range, log-odds": build_map(manifest, config=config, progress=False)}
-            runs["multi-range, union (paper)"] = fuse(runs["multi-range, log-odds"].observations, grid=config.grid,
-                                                      config=config.with_fusion("union").mapping)
-            single = config.single_range_equal_work(manifest.calibration)
-            runs[f"single range 0-{single.max_disparity_px:.0f} px, equal work"] = build_map(
-                manifest, config=single, progress=False)
-            for name, run in runs.items():
-                grid = run.grid if isinstance(run, MapRun) else run
-                far = map_metrics(grid, gt, path_xy=path, within_m=4.0)
-                near = map_metrics(grid, gt, path_xy=path, within_m=1.0)
-                rows.setdefault(name, []).append((far.precision, far.recall, far.mean_distance_m * 100,
-                                                  far.free_accuracy, near.recall))
-            print(f"seed {seed}: {time.perf_counter() - t0:.1f} s", flush=True)
-    print(f"\n{len(args.seeds)} seeds x {args.frames} frames, 320x240; mean (min..max) over seeds\n")
-    print("| run | occupied precision | occupied recall | wall profile error [cm] | free correct | "
-          "recall within 1 m |")
-    print("|---|---|---|---|---|---|")
-    for name, values in rows.items():
-        v = np.array(values)
-        cells = [f"{m:.3f} ({lo:.3f}..{hi:.3f})" if k != 2 else f"{m:.1f} ({lo:.1f}..{hi:.1f})"
-                 for k, (m, lo, hi) in enumerate(zip(v.mean(0), v.min(0), v.max(0)))]
+    seeds = _parse_seeds(args.seeds) if args.seeds else ([100 + k for k in range(20)] if args.randomized
+                                                          else [0, 1, 2])
+    frames = args.frames or (24 if args.randomized else 30)
+    kwargs = dict(randomized=args.randomized, frames=frames, data_dir=args.data, with_variants=args.variants,
+                  fixed_rows=not args.randomized)
+    per_seed: dict[int, dict] = {}
+    t0 = time.perf_counter()
+    if args.workers > 1:
+        os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+        with ProcessPoolExecutor(args.workers) as pool:
+            futures = [pool.submit(evaluate_seed, s, **kwargs) for s in seeds]
+            for f in futures:
+                seed, rows, dt = f.result()
+                per_seed[seed] = rows
+                print(f"seed {seed}: {dt:.1f} s", flush=True)
+    else:
+        for s in seeds:
+            seed, rows, dt = evaluate_seed(s, **kwargs)
+            per_seed[seed] = rows
+            print(f"seed {seed}: {dt:.1f} s", flush=True)
+    wall = time.perf_counter() - t0
+    world = "randomized worlds" if args.randomized else "the fixed corridor"
+    print(f"\n{world}, seeds {seeds[0]}..{seeds[-1]} ({len(seeds)}), {frames} frames each, 320x240, "
+          f"{wall:.0f} s wall with {args.workers} worker(s)\n")
+    names = list(per_seed[seeds[0]])
+    if args.randomized:
+        print("| seed | " + " | ".join(COLUMNS) + " |")
+        print("|---" * (len(COLUMNS) + 1) + "|")
+        default = names[0]
+        for s in seeds:
+            print(f"| {s} | " + " | ".join(_fmt(k, v) for k, v in enumerate(per_seed[s][default])) + " |")
+        print()
+    print("| run | " + " | ".join(COLUMNS) + " |")
+    print("|---" * (len(COLUMNS) + 1) + "|")
+    for name in names:
+        v = np.array([per_seed[s][name] for s in seeds], dtype=float)
+        mean = np.nanmean(v, 0)
+        worst = np.concatenate([np.nanmin(v[:, :2], 0), np.nanmax(v[:, 2:3], 0), np.nanmin(v[:, 3:], 0)])
+        cells = [f"{_fmt(k, m)} (worst {_fmt(k, w)})" for k, (m, w) in enumerate(zip(mean, worst))]
         print(f"| {name} | " + " | ".join(cells) + " |")
 
 

@@ -100,3 +100,31 @@ def test_grid_distance_and_dilation_equal_scipy(density):
         for r in (0, 1, 3):
             box = np.ones((2 * r + 1, 2 * r + 1), bool)
             assert np.array_equal(dilate_cells(mask, r), ndimage.binary_dilation(mask, structure=box))
+
+
+def test_cells_in_view_follow_the_field_of_view_and_stop_at_walls():
+    from mrstereo.mapping import cells_in_view
+
+    truth = corridor()                                   # free rows 31..89 (y -1.45 .. 1.5), walls at 30, 90
+    occ = truth.occupancy.copy()
+    occ[60, 60] = 1.0                                    # a one-cell post 2 m ahead of the sensor
+    truth = RosMap(occupancy=occ, grid=truth.grid)
+    x0, y0 = GridSpec().xy_from_cells(60, 20)
+    seen = cells_in_view(truth, [(x0, y0, 0.0, np.radians(30), 4.0)])
+    assert seen[60, 21:60].all() and not seen[60, 61:].any()      # the post hides the cells behind it
+    assert seen[70, 50] and not seen[85, 30]                      # inside / outside the 30 degree half-angle
+    assert not seen[:30].any() and not seen[91:].any()            # never beyond the walls
+    assert not seen[:, 101:].any()                                # 4 m range
+    est = truth.occupancy.copy()
+    est[seen] = 0.0
+    est[~seen & (truth.occupancy == 0)] = np.nan
+    m = map_metrics(RosMap(est, truth.grid), truth, views=[(x0, y0, 0.0, np.radians(30), 4.0)])
+    assert m.free_coverage == 1.0 and m.free_precision == 1.0
+    est[seen & (np.arange(240)[None, :] > 60)] = np.nan           # half of the view unknown
+    half = map_metrics(RosMap(est, truth.grid), truth, views=[(x0, y0, 0.0, np.radians(30), 4.0)])
+    assert 0.2 < half.free_coverage < 0.8
+    est[25:28, 20:40] = 0.0                                       # cells mapped free behind a wall
+    wrong = map_metrics(RosMap(est, truth.grid), truth)
+    assert wrong.free_precision < 1.0 and np.isnan(wrong.free_coverage)
+    with pytest.raises(ValueError, match="views"):
+        cells_in_view(truth, [(0.0, 0.0, 0.0)])

@@ -7,7 +7,7 @@ import pytest
 
 from mrstereo.mapping import (GridSpec, MappingConfig, OccupancyGrid, plot_map, read_ros_map,
                               write_ros_map)
-from mrstereo.mapping.occupancy import log_odds_from_probability, probability_from_log_odds
+from mrstereo.mapping.occupancy import log_odds_from_probability, probability_from_log_odds, view_cells
 
 RES = 0.05
 
@@ -244,3 +244,94 @@ def test_apply_refuses_cells_of_another_config():
         OccupancyGrid(config=MappingConfig()).apply(cells)
     with pytest.raises(TypeError, match="cells must be ViewCells"):
         OccupancyGrid().apply([1, 2])
+
+
+def test_range_uncertainty_keeps_the_cells_just_before_a_far_return_unchanged():
+    """sigma_r = r^2 sigma_d / (b f): 3 m, 0.25 px, b f = 24 m px -> 9.4 cm; k = 2 -> 18.75 cm (3.75 cells)."""
+    config = MappingConfig(disparity_sigma_px=0.25, clear_margin_sigmas=2.0)
+    grid = OccupancyGrid(config=config)
+    sensor = centre(60, 20)
+    target = np.array([[sensor[0] + 3.0, sensor[1]]])          # 60 cells ahead, centre of cell (60, 80)
+    grid.update(target, None, sensor, baseline_focal_m_px=24.0)
+    # cells are entered at x = 0.5, 1.5, ... cells from the sensor; cleared while entry < 60 - 3.75
+    assert grid.free[60, 20:77].all() and grid.unknown[60, 77:80].all() and grid.occupied[60, 80]
+    near = OccupancyGrid(config=config)
+    near.update(np.array([[sensor[0] + 0.5, sensor[1]]]), None, sensor, baseline_focal_m_px=24.0)
+    assert near.free[60, 20:30].all() and near.occupied[60, 30]    # 0.5 m: margin 0.5 mm, all cleared
+    plain = OccupancyGrid(config=MappingConfig())
+    plain.update(target, None, sensor, baseline_focal_m_px=24.0)   # no sigma: up to the point
+    assert plain.free[60, 20:80].all()
+    with pytest.raises(ValueError, match="baseline_focal_m_px"):
+        grid.update(target, None, sensor, baseline_focal_m_px=-1.0)
+    with pytest.raises(ValueError, match="disparity_sigma_px"):
+        MappingConfig(disparity_sigma_px=0.0)
+
+
+def test_a_point_seen_through_a_wall_of_the_same_view_is_dropped():
+    sensor = centre(60, 20)
+    wall = np.array([[centre(r, 60)[0], centre(r, 60)[1]] for r in range(40, 81) for _ in range(6)])
+    phantom = np.array([[centre(61, 100)[0], centre(61, 100)[1]]] * 6)       # 2 m behind the wall
+    points = np.vstack([wall, phantom])
+    tested = MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5)
+    cells = view_cells(points, None, sensor, config=tested)
+    hit = np.zeros(GridSpec().shape, bool).ravel()
+    hit[cells.hit] = True
+    hit = hit.reshape(GridSpec().shape)
+    assert hit[40:81, 60].all() and not hit[61, 100] and cells.occluded == 1
+    missed = np.zeros(hit.size, bool)
+    missed[cells.miss] = True
+    missed = missed.reshape(hit.shape)
+    assert not missed[55:66, 61:101].any()                        # nothing cleared behind the wall
+    plain = view_cells(points, None, sensor, config=MappingConfig(min_points_per_cell=5))
+    assert np.ravel_multi_index((61, 100), hit.shape) in plain.hit and plain.occluded == 0
+    # a floor point behind the wall clears nothing behind it either
+    floor = view_cells(wall, np.array([[*centre(60, 90), 0.0]]), sensor, config=tested)
+    assert np.ravel_multi_index((60, 90), hit.shape) not in floor.miss and floor.occluded == 1
+
+
+def test_grazing_wall_is_not_occluded_by_itself():
+    """A wall 1 m to the side seen along its length up to 4 m: every wall cell stays a hit."""
+    sensor = (0.5, 0.0)
+    xs = np.arange(1.0, 4.5, 0.01)
+    wall = np.c_[xs, np.full(xs.size, 1.02)]
+    cells = view_cells(wall, None, sensor, config=MappingConfig(occlusion_gap_m=0.25))
+    assert cells.occluded == 0
+    plain = view_cells(wall, None, sensor, config=MappingConfig())
+    np.testing.assert_array_equal(cells.hit, plain.hit)
+
+
+def _hit_mask(cells):
+    mask = np.zeros(GridSpec().shape, bool).ravel()
+    mask[cells.hit] = True
+    return mask.reshape(GridSpec().shape)
+
+
+def test_occlusion_is_three_dimensional_a_table_top_hides_nothing_below_it():
+    sensor_xy = centre(60, 20)
+    table = np.array([[*centre(60, 40), z] for z in np.linspace(0.68, 0.72, 8)])     # a table-top edge, 1 m
+    wall = np.array([[*centre(60, 80), z] for z in np.linspace(0.1, 0.45, 8)])        # 3 m, seen below it
+    config = MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5)
+    with_height = view_cells(np.vstack([table, wall]), None, (*sensor_xy, 0.5), config=config)
+    assert _hit_mask(with_height)[60, 40] and _hit_mask(with_height)[60, 80] and with_height.occluded == 0
+    flat = view_cells(np.vstack([table, wall]), None, sensor_xy, config=config)      # 2-D: the top hides the wall
+    assert _hit_mask(flat)[60, 40] and not _hit_mask(flat)[60, 80] and flat.occluded == 1
+    # a wall point whose sight line crosses the table top's height is hidden by it
+    high = np.array([[*centre(60, 80), 0.95]] * 8)
+    hidden = view_cells(np.vstack([table, high]), None, (*sensor_xy, 0.5), config=config)
+    assert not _hit_mask(hidden)[60, 80] and hidden.occluded == 1
+
+
+def test_a_floating_mismatch_with_the_floor_seen_through_it_is_cleared():
+    """Obstacle points 0.3 m up, 1 m ahead, with floor points 1.8-2.5 m ahead along the same sight lines."""
+    sensor = (*centre(60, 20), 0.5)
+    ghost = np.array([[*centre(60, 40), 0.3]] * 6)
+    floor = np.array([[*centre(60, c), 0.0] for c in range(56, 71) for _ in range(10)])
+    config = MappingConfig(occlusion_gap_m=0.25, see_through_ratio=1.0, min_points_per_cell=5)
+    cells = view_cells(ghost, floor, sensor, config=config)
+    flat = np.ravel_multi_index((60, 40), GridSpec().shape)
+    assert flat not in cells.hit and flat in cells.miss and cells.occluded == 1
+    kept = view_cells(ghost, floor, sensor, config=MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5))
+    assert flat in kept.hit                        # without the test the ghost hides the floor instead
+    table = np.array([[*centre(60, 40), 0.7]] * 6)  # the floor seen *below* a table top is no evidence against it
+    under = view_cells(table, floor, sensor, config=config)
+    assert flat in under.hit

@@ -100,7 +100,7 @@ def process_frame(task: FrameTask) -> FrameObservation:
                             pan_rad=task.record.pan_rad, **pair_options(task.config))
     frame = result.frame
     obs = frame.obstacles
-    observation = observation_from_pair(frame, task.record, index=task.index, config=task.config)
+    observation = observation_from_pair(frame, task.record, index=task.index, config=task.config, stereo=task.stereo)
     files = frame_outputs(task.frames_dir, task.index)
     write_disparity(files["disparity"], frame.disparity_px)
     write_ply(files["cloud"], obs.points_robot_image.reshape(-1, 3), intensity=_gray(frame.left_rect).ravel(),
@@ -114,7 +114,9 @@ def _save_observation(path: Path, obs: FrameObservation) -> None:
     with atomic_write(path) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, index=obs.index, pose=np.array(obs.pose), pan_rad=obs.pan_rad,
                  obstacle_points_world=obs.obstacle_points_world, floor_points_world=obs.floor_points_world,
-                 n_valid_disparity=obs.n_valid_disparity, ground_message=np.array(obs.ground_message))
+                 n_valid_disparity=obs.n_valid_disparity, ground_message=np.array(obs.ground_message),
+                 baseline_focal_m_px=np.nan if obs.baseline_focal_m_px is None else obs.baseline_focal_m_px,
+                 sensor_height_m=np.nan if obs.sensor_height_m is None else obs.sensor_height_m)
 
 
 def _resume(files: dict[str, Path]) -> FrameObservation | None:
@@ -157,7 +159,17 @@ def _load_observation(path: Path) -> FrameObservation:
                                 pan_rad=float(z["pan_rad"]), obstacle_points_world=z["obstacle_points_world"],
                                 floor_points_world=z["floor_points_world"],
                                 n_valid_disparity=int(z["n_valid_disparity"]),
-                                ground_message=str(z["ground_message"]))
+                                ground_message=str(z["ground_message"]),
+                                baseline_focal_m_px=_optional_float(z, "baseline_focal_m_px"),
+                                sensor_height_m=_optional_float(z, "sensor_height_m"))
+
+
+def _optional_float(z, key: str) -> float | None:
+    """A scalar saved by :func:`_save_observation` (NaN or absent in older files: None)."""
+    if key not in z.files:
+        return None
+    value = float(z[key])
+    return None if np.isnan(value) else value
 
 
 @dataclass(frozen=True)

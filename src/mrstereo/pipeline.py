@@ -66,9 +66,12 @@ class PipelineConfig:
         error is more than half a metre at 320x240).
     mapping : MappingConfig
         Sensor model and fusion (log-odds or the paper's union). Defaults chosen by measurement
-        on the synthetic corridor (two seeds, ``benchmarks/bench_map.py``): a cell needs 5
-        obstacle points of one frame to count as a hit, and a miss is 0.35 (OctoMap: 0.4), which
-        clears isolated stereo mismatches faster.
+        on randomized worlds 0-9 only (``benchmarks/bench_map.py --randomized --seeds 0-9
+        --variants``; docs/mapping.md): a cell needs 5 obstacle points of one frame to count as a
+        hit, a miss is 0.35 (OctoMap: 0.4); rays stop two range sigmas short of their point
+        (``sigma_r = r^2 0.25 px / (b f)``); a point seen through a surface hit in the same view
+        (more than 0.25 m before it, at the sight line's height) is dropped; a cell through which
+        the same view sees more floor points than it holds obstacle points is cleared.
     grid : GridSpec
         Map extent and resolution.
     """
@@ -78,7 +81,9 @@ class PipelineConfig:
     matching: MatchingConfig | None = None
     rejection: RejectionConfig = field(default_factory=RejectionConfig)
     obstacles: ObstacleConfig = field(default_factory=lambda: ObstacleConfig(max_range_m=4.0))
-    mapping: MappingConfig = field(default_factory=lambda: MappingConfig(p_miss=0.35, min_points_per_cell=5))
+    mapping: MappingConfig = field(default_factory=lambda: MappingConfig(
+        p_miss=0.35, min_points_per_cell=5, disparity_sigma_px=0.25, clear_margin_sigmas=2.0, occlusion_gap_m=0.25,
+        see_through_ratio=1.0))
     grid: GridSpec = field(default_factory=GridSpec)
 
     def single_range_equal_work(self, stereo: StereoCamera) -> PipelineConfig:
@@ -114,10 +119,16 @@ class FrameObservation:
     ground_message: str
     cells: ViewCells | None = None
     """Cells hit and cleared in the grid of the run's config (None: :func:`fuse` computes them)."""
+    baseline_focal_m_px: float | None = None
+    """``b f`` of the rig, for the mapping's range uncertainty (None: rays clear up to each point)."""
+    sensor_height_m: float | None = None
+    """Height of the camera above the floor, for the mapping's height-aware occlusion test."""
 
     @property
-    def sensor_origin_world(self) -> tuple[float, float]:
-        return (self.pose[0], self.pose[1])
+    def sensor_origin_world(self) -> tuple[float, ...]:
+        if self.sensor_height_m is None:
+            return (self.pose[0], self.pose[1])
+        return (self.pose[0], self.pose[1], self.sensor_height_m)
 
 
 @dataclass
@@ -166,17 +177,26 @@ def pair_options(config: PipelineConfig) -> dict:
 
 
 def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: int,
-                          config: PipelineConfig = PipelineConfig()) -> FrameObservation:
-    """Move a frame's obstacle and floor points into the world frame; find their grid cells."""
+                          config: PipelineConfig = PipelineConfig(),
+                          stereo: StereoCamera | None = None) -> FrameObservation:
+    """Move a frame's obstacle and floor points into the world frame; find their grid cells.
+
+    ``stereo`` (the calibration the frame was matched with) gives the mapping's range
+    uncertainty its ``b f``; without it rays clear up to each point.
+    """
     T = T_world_from_robot(*record.pose)
     obs = frame.obstacles
     obstacles = transform_points(T, obs.obstacle_points_robot).astype(np.float32)
     floor = transform_points(T, obs.floor_points_robot).astype(np.float32)
-    cells = view_cells(obstacles, floor, record.pose[:2], grid=config.grid, config=config.mapping)
+    bf = None if stereo is None else float(stereo.baseline_m * stereo.focal_px)
+    height = float(obs.ground.height_m) if obs.success else None
+    origin = tuple(record.pose[:2]) + (() if height is None else (height,))
+    cells = view_cells(obstacles, floor, origin, grid=config.grid, config=config.mapping, baseline_focal_m_px=bf)
     return FrameObservation(index=index, pose=tuple(float(v) for v in record.pose), pan_rad=float(record.pan_rad),
                             obstacle_points_world=obstacles, floor_points_world=floor,
                             n_valid_disparity=int(np.isfinite(frame.disparity_px).sum()),
-                            ground_message=obs.message, cells=cells)
+                            ground_message=obs.message, cells=cells, baseline_focal_m_px=bf,
+                            sensor_height_m=height)
 
 
 def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, rig=None,
@@ -185,7 +205,7 @@ def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, 
     left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
     frame = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=rig, pan_rad=record.pan_rad,
                                 **pair_options(config))
-    return observation_from_pair(frame, record, index=index, config=config)
+    return observation_from_pair(frame, record, index=index, config=config, stereo=stereo)
 
 
 def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec = GridSpec(),
@@ -200,7 +220,8 @@ def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec = GridSpec(
         if obs.cells is not None and obs.cells.fits(grid, config):
             occupancy.apply(obs.cells)
         else:
-            occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world)
+            occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world,
+                             baseline_focal_m_px=obs.baseline_focal_m_px)
     return occupancy
 
 
@@ -314,15 +335,21 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         gt = read_ros_map(manifest.ground_truth_map)
         if gt.grid.shape == occupancy.grid.shape:
             path = np.array([f.pose for f in manifest.frames])
-            metrics = map_metrics(occupancy, gt, path_xy=path)
+            views = views_of_frames(manifest.frames, stereo, range_m=config.obstacles.max_range_m)
+            metrics = map_metrics(occupancy, gt, path_xy=path, views=views)
     return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
                   ground_truth_map=gt, floor=floor, mount=mount)
 
 
+def views_of_frames(frames, stereo: StereoCamera, *, range_m: float = 4.0) -> list[tuple]:
+    """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of frames (anything with ``pose``, ``pan_rad``)."""
+    half = math.atan2(stereo.size[0] / 2.0, stereo.focal_px)
+    return [(f.pose[0], f.pose[1], f.pose[2] + f.pan_rad, half, range_m) for f in frames]
+
+
 def fov_views(run: MapRun, stereo: StereoCamera, *, range_m: float = 4.0) -> list[tuple]:
     """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of every frame, for the map figure."""
-    half = math.atan2(stereo.size[0] / 2.0, stereo.focal_px)
-    return [(o.pose[0], o.pose[1], o.pose[2] + o.pan_rad, half, range_m) for o in run.observations]
+    return views_of_frames(run.observations, stereo, range_m=range_m)
 
 
 def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:

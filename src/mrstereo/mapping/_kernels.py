@@ -16,6 +16,7 @@ from numba import njit
 HIT = np.uint8(1)        # an obstacle point ends in this cell
 END_FREE = np.uint8(2)   # a ray ends here and clears its end cell (floor point, or clipped ray)
 MISS = np.uint8(4)       # a ray crossed this cell
+FLOOR = np.uint8(8)      # a floor point ends in this cell
 
 
 @njit(nogil=True, cache=True)
@@ -58,41 +59,59 @@ def _cell(v, n):
 
 
 @njit(nogil=True, cache=True)
-def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cells, is_obstacle, flags,
-                   ends):
+def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cells, is_obstacle, margin_per_cell2,
+                   flags, ends, n_points, z_range):
     """Flag the end cell of every ray; return the number of points ending outside the grid.
 
     ``points`` is (N, 2 or 3) in world metres (columns 0, 1 used; rows with NaN skipped);
     ``(sx, sy)`` is the sensor in grid units. Obstacle ends inside the grid and within
-    ``max_range_cells`` (<= 0: unlimited) get ``HIT``, floor ends ``END_FREE``. A ray whose end
-    lies outside the grid or beyond the range is cut there and its last cell gets ``END_FREE``.
-    ``ends`` (rows, cols, 2) receives, per flagged cell, the grid coordinates of the last ray end
-    that fell in it (the target of the one ray traced to that cell).
+    ``max_range_cells`` (<= 0: unlimited) get ``HIT``, floor ends ``END_FREE | FLOOR``. A ray
+    whose end lies outside the grid or beyond the range is cut there and its last cell gets
+    ``END_FREE``. ``ends`` (rows, cols, 4) receives, per flagged cell, the grid coordinates of the
+    last ray end that fell in it (the target of the one ray traced to that cell), its clearing
+    margin in cells -- ``margin_per_cell2 * r^2`` for an obstacle end at ``r`` cells from the
+    sensor (the range uncertainty of a stereo point grows with the square of its range), 0
+    otherwise -- and its height z in metres (NaN for 2-column points). ``n_points`` counts the
+    points ending in each cell (not the cut ones); ``z_range`` (rows, cols, 2), initialized to
+    (inf, -inf), gets the lowest and highest obstacle point of each hit cell.
     """
     rows, cols = flags.shape
+    has_z = points.shape[1] > 2
     outside = 0
     for i in range(points.shape[0]):
         x = (points[i, 0] - origin_x) / resolution
         y = (points[i, 1] - origin_y) / resolution
         if not (math.isfinite(x) and math.isfinite(y)):
             continue
+        z = points[i, 2] if has_z else np.nan
         cut = False
-        if max_range_cells > 0.0:
-            d = math.hypot(x - sx, y - sy)
-            if d > max_range_cells:
-                s = max_range_cells / d
-                x = sx + (x - sx) * s
-                y = sy + (y - sy) * s
-                cut = True
+        d = math.hypot(x - sx, y - sy)
+        if max_range_cells > 0.0 and d > max_range_cells:
+            s = max_range_cells / d
+            x = sx + (x - sx) * s
+            y = sy + (y - sy) * s
+            d = max_range_cells
+            cut = True
+        margin = margin_per_cell2 * d * d if is_obstacle and not cut else 0.0
         if 0.0 <= x < cols and 0.0 <= y < rows:
             r = int(y)
             c = int(x)
             if is_obstacle and not cut:
                 flags[r, c] |= HIT
+                n_points[r, c] += 1
+                if z < z_range[r, c, 0]:
+                    z_range[r, c, 0] = z
+                if z > z_range[r, c, 1]:
+                    z_range[r, c, 1] = z
+            elif not is_obstacle and not cut:
+                flags[r, c] |= END_FREE | FLOOR
+                n_points[r, c] += 1
             else:
                 flags[r, c] |= END_FREE
             ends[r, c, 0] = x
             ends[r, c, 1] = y
+            ends[r, c, 2] = margin
+            ends[r, c, 3] = z if not cut else np.nan
             continue
         outside += 1
         t0, t1 = _clip_segment(sx, sy, x, y, cols, rows)
@@ -105,6 +124,8 @@ def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cel
         flags[r, c] |= END_FREE
         ends[r, c, 0] = ex
         ends[r, c, 1] = ey
+        ends[r, c, 2] = 0.0
+        ends[r, c, 3] = np.nan
     return outside
 
 
@@ -118,67 +139,149 @@ def _axis_step(d, cell, start):
     return 0, np.inf, np.inf
 
 
-@njit(nogil=True, cache=True)
-def _trace(sx, sy, tx, ty, include_end, miss):
-    """Amanatides-Woo traversal from ``(sx, sy)`` to the point ``(tx, ty)`` (grid units).
+@njit(nogil=True, cache=True, inline="always")
+def _blocks(z_range, r, c, sz, tz, t_a, t_b, z_tol):
+    """Does the sight line, at heights ``sz + t (tz - sz)`` for t in [t_a, t_b], meet the cell's
+    obstacle points (``z_range`` +- ``z_tol``)? Without heights (NaN) every hit cell blocks."""
+    if not (math.isfinite(sz) and math.isfinite(tz)):
+        return True
+    za = sz + t_a * (tz - sz)
+    zb = sz + t_b * (tz - sz)
+    lo = min(za, zb)
+    hi = max(za, zb)
+    return hi >= z_range[r, c, 0] - z_tol and lo <= z_range[r, c, 1] + z_tol
 
-    Marks ``miss`` on every crossed cell inside the grid; the end cell only if ``include_end``.
+
+@njit(nogil=True, cache=True)
+def _trace(sx, sy, sz, tx, ty, tz, t_cut, t_occ, flags, z_range, z_tol, through, votes, miss):
+    """Amanatides-Woo traversal from the sensor ``(sx, sy)`` towards the end ``(tx, ty)`` (grid units).
+
+    The segment is parametrized by ``t`` in [0, 1] (the 3-D sight line from the sensor at height
+    ``sz`` to the end at height ``tz`` has the same parameter). Two uses:
+
+    * ``votes == 0``: marks ``miss`` on every cell inside the grid that the ray enters before
+      ``t_cut`` (> 1: up to and including the end cell); returns True (and stops) when the ray
+      enters, at some ``0 < t < t_occ``, a ``HIT`` cell other than the end cell whose obstacle
+      points the sight line meets (:func:`_blocks`): the end lies behind a surface seen in the
+      same view (occluded);
+    * ``votes > 0``: adds ``votes`` to ``through`` of every such cell before ``t_occ`` (the end
+      is seen through it) and marks nothing.
     """
     rows, cols = miss.shape
     t0, t1 = _clip_segment(sx, sy, tx, ty, cols, rows)
     if t0 > t1:
-        return
+        return False
     dx = tx - sx
     dy = ty - sy
-    ax = sx + dx * t0
-    ay = sy + dy * t0
-    bx = sx + dx * t1
-    by = sy + dy * t1
-    cx = _cell(ax, cols)
-    cy = _cell(ay, rows)
-    ex = _cell(bx, cols)
-    ey = _cell(by, rows)
-    if t1 < 1.0:        # the ray leaves the grid: its last inside cell is cleared
-        include_end = True
+    cx = _cell(sx + dx * t0, cols)
+    cy = _cell(sy + dy * t0, rows)
+    ex = _cell(sx + dx * t1, cols)
+    ey = _cell(sy + dy * t1, rows)
+    end_c = _cell(tx, cols) if t1 >= 1.0 else -1
+    end_r = _cell(ty, rows) if t1 >= 1.0 else -1
     nx = abs(ex - cx)
     ny = abs(ey - cy)
     stepx, tdx, tmx = _axis_step(dx, cx, sx)
     stepy, tdy, tmy = _axis_step(dy, cy, sy)
-    if nx + ny == 0:
-        if include_end:
-            miss[cy, cx] = 1
-        return
-    miss[cy, cx] = 1
+    t_enter = t0
     while True:
-        if nx > 0 and (ny == 0 or tmx < tmy):
+        if votes == 0.0 and t_enter >= t_cut:
+            return False
+        last = nx + ny == 0
+        step_x = not last and nx > 0 and (ny == 0 or tmx < tmy)
+        t_exit = t1 if last else (tmx if step_x else tmy)
+        if (t_enter > 0.0 and t_enter < t_occ and (flags[cy, cx] & HIT) != 0
+                and not (cy == end_r and cx == end_c)
+                and _blocks(z_range, cy, cx, sz, tz, t_enter, min(t_exit, t_occ), z_tol)):
+            if votes == 0.0:
+                return True
+            through[cy, cx] += votes
+        if votes == 0.0:
+            miss[cy, cx] = 1
+        elif t_enter >= t_occ:
+            return False
+        if last:
+            return False
+        if step_x:
+            t_enter = tmx
             cx += stepx
             tmx += tdx
             nx -= 1
         else:
+            t_enter = tmy
             cy += stepy
             tmy += tdy
             ny -= 1
-        if nx + ny == 0:
-            if include_end:
-                miss[cy, cx] = 1
-            return
-        miss[cy, cx] = 1
 
 
 @njit(nogil=True, cache=True)
-def cast_rays(flags, ends, sx, sy, miss):
-    """Trace one ray from the sensor to each flagged end cell (deduplicated rays).
+def drop_seen_through(flags, ends, n_points, z_range, sx, sy, sz, gap_cells, z_tol, ratio, through, miss, dropped):
+    """Un-hit the cells through which the floor is seen more than they are seen occupied.
 
-    The ray goes to the cell's representative end point ``ends[r, c]``, a measured point.
+    Every floor end cell votes its number of floor points into ``through`` of each hit cell its
+    sight line meets more than ``gap_cells`` before the end (the floor seen *behind* that cell in
+    the same view); a hit cell with ``through > ratio * n_points`` loses its ``HIT`` flag, becomes
+    a free end (its ray clears it) and is flagged in ``dropped`` (a floating mismatch, e.g. on a
+    repetitive floor). Returns the count.
     """
     rows, cols = flags.shape
+    for r in range(rows):
+        for c in range(cols):
+            if (flags[r, c] & FLOOR) == 0:
+                continue
+            tx = ends[r, c, 0]
+            ty = ends[r, c, 1]
+            length = math.hypot(tx - sx, ty - sy)
+            if length <= gap_cells:
+                continue
+            _trace(sx, sy, sz, tx, ty, ends[r, c, 3], 2.0, 1.0 - gap_cells / length, flags, z_range, z_tol, through,
+                   n_points[r, c], miss)
+    n = 0
+    for r in range(rows):
+        for c in range(cols):
+            if (flags[r, c] & HIT) != 0 and through[r, c] > ratio * n_points[r, c]:
+                flags[r, c] = (flags[r, c] & ~HIT) | END_FREE
+                ends[r, c, 2] = 0.0
+                dropped[r, c] = 1
+                n += 1
+    return n
+
+
+@njit(nogil=True, cache=True)
+def cast_rays(flags, ends, z_range, sx, sy, sz, occlusion_gap_cells, z_tol, miss, occluded):
+    """Trace one ray from the sensor to each flagged end cell (deduplicated rays).
+
+    The ray goes to the cell's representative end point ``ends[r, c, :2]``, a measured point.
+    An obstacle ray clears the cells it enters before ``margin = ends[r, c, 2]`` cells short of
+    its end; a free ray (floor point, cut ray) clears up to and including its end cell. With
+    ``occlusion_gap_cells >= 0`` a ray whose sight line (from the sensor at height ``sz`` to the
+    end at height ``ends[r, c, 3]``) meets the obstacle points of a cell hit in this view more
+    than ``margin + occlusion_gap_cells`` before its end stops there, and its end cell is
+    flagged in ``occluded`` (the point lies behind a seen surface: a mismatch). Returns the
+    number of occluded ends.
+    """
+    rows, cols = flags.shape
+    unused = np.zeros((1, 1))
+    n = 0
     for r in range(rows):
         for c in range(cols):
             f = flags[r, c]
             if f == 0:
                 continue
-            include_end = (f & HIT) == 0
-            _trace(sx, sy, ends[r, c, 0], ends[r, c, 1], include_end, miss)
+            tx = ends[r, c, 0]
+            ty = ends[r, c, 1]
+            length = math.hypot(tx - sx, ty - sy)
+            if (f & HIT) != 0:
+                t_cut = 1.0 - ends[r, c, 2] / length if length > 0.0 else 1.0
+                gap = ends[r, c, 2] + occlusion_gap_cells
+            else:
+                t_cut = 2.0
+                gap = occlusion_gap_cells
+            t_occ = 1.0 - gap / length if occlusion_gap_cells >= 0.0 and length > 0.0 else -1.0
+            if _trace(sx, sy, sz, tx, ty, ends[r, c, 3], t_cut, t_occ, flags, z_range, z_tol, unused, 0.0, miss):
+                occluded[r, c] = 1
+                n += 1
+    return n
 
 
 @njit(nogil=True, cache=True)

@@ -17,7 +17,7 @@ from .. import _checks
 from .grid import dilate_cells, distance_cells
 from .rosmap import RosMap
 
-__all__ = ["MapMetrics", "map_metrics", "cells_near_path"]
+__all__ = ["MapMetrics", "map_metrics", "cells_near_path", "cells_in_view"]
 
 
 @dataclass(frozen=True)
@@ -38,6 +38,8 @@ class MapMetrics:
     evaluated_cells: int
     tolerance_cells: int
     within_m: float | None
+    free_precision: float = math.nan
+    free_coverage: float = math.nan
 
     def to_dict(self) -> dict:
         return {k: (None if isinstance(v, float) and math.isnan(v) else v)
@@ -75,8 +77,50 @@ def cells_near_path(grid, path_xy, *, within_m: float) -> np.ndarray:
     return distance_cells(on_path) * grid.resolution_m <= within + 1e-9
 
 
+def cells_in_view(ground_truth, views, *, angle_step_rad: float = math.radians(0.25)) -> np.ndarray:
+    """Bool mask of the true free cells some view can see: inside its field of view and range, with a
+    clear line of sight through the ground-truth map.
+
+    Parameters
+    ----------
+    ground_truth : RosMap
+        Occupied cells block the sight; unknown cells (behind walls) are never in view.
+    views : sequence of (x_m, y_m, heading_rad, half_fov_rad, range_m)
+        The sensor's world position, viewing direction (robot yaw + head pan), half the horizontal
+        field of view and the mapping range (as :func:`mrstereo.pipeline.fov_views` gives them).
+    angle_step_rad : float
+        Angular spacing of the sight rays (each ray is marched in quarter-cell steps).
+    """
+    gt = _as_ros_map("ground_truth", ground_truth)
+    grid = gt.grid
+    step = _checks.finite_number("angle_step_rad", angle_step_rad, positive=True)
+    free = gt.free
+    rows, cols = grid.shape
+    seen = np.zeros(grid.shape, bool)
+    for view in views:
+        try:
+            x, y, heading, half, rng_m = (float(v) for v in view)
+        except (TypeError, ValueError):
+            raise ValueError(f"views must hold (x_m, y_m, heading_rad, half_fov_rad, range_m), got {view!r}") from None
+        if not all(map(math.isfinite, (x, y, heading, half, rng_m))) or half <= 0 or rng_m <= 0:
+            raise ValueError(f"views must hold finite (x, y, heading, half_fov > 0, range > 0), got {view!r}")
+        n_rays = max(2, int(math.ceil(2 * half / step)) + 1)
+        angles = heading + np.linspace(-half, half, n_rays)
+        t = np.arange(0.0, rng_m, grid.resolution_m / 4)
+        px = x + np.cos(angles)[:, None] * t[None, :]
+        py = y + np.sin(angles)[:, None] * t[None, :]
+        r, c = grid.cells_from_xy(np.stack([px, py], -1))
+        inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+        rc, cc = np.clip(r, 0, rows - 1), np.clip(c, 0, cols - 1)
+        open_ = inside & free[rc, cc]
+        # a ray sees up to its first blocked (occupied, unknown or outside) sample
+        visible = np.cumprod(open_, axis=1).astype(bool)
+        seen[rc[visible], cc[visible]] = True
+    return seen
+
+
 def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
-                tolerance_cells: int = 1) -> MapMetrics:
+                tolerance_cells: int = 1, views=None) -> MapMetrics:
     """Compare an estimated map with a ground-truth map of the same grid.
 
     Parameters
@@ -90,6 +134,8 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
     tolerance_cells : int
         An estimated occupied cell is correct when a true occupied cell lies within this many
         cells (Chebyshev distance), and conversely for recall.
+    views : sequence of (x_m, y_m, heading_rad, half_fov_rad, range_m), optional
+        The frames' fields of view (:func:`cells_in_view`); needed for ``free_coverage``.
 
     Returns
     -------
@@ -99,7 +145,11 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
         occupied cell within tolerance / visible true occupied cells;
         ``mean_distance_m`` = mean Euclidean distance of estimated occupied cells to the nearest
         true occupied cell; ``free_accuracy`` = true free cells mapped free / true free cells;
-        ``known_fraction`` = evaluated cells the estimate knows (not unknown).
+        ``known_fraction`` = evaluated cells the estimate knows (not unknown);
+        ``free_precision`` = estimated free cells that are truly free / estimated free cells (a
+        cell mapped free on a wall, an obstacle or behind a wall is wrong);
+        ``free_coverage`` = true free cells in view of some frame (:func:`cells_in_view`) mapped
+        free / true free cells in view (NaN without ``views``).
     """
     est = _as_ros_map("estimated", estimated)
     gt = _as_ros_map("ground_truth", ground_truth)
@@ -140,8 +190,15 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
     recall = ratio((gt_occ & near_est).sum(), gt_occ.sum())
     free_accuracy = ratio((gt_free & est.free).sum(), gt_free.sum())
     known_fraction = ratio((region & ~est.unknown).sum(), region.sum())
+    est_free = est.free & region
+    free_precision = ratio((est_free & gt.free).sum(), est_free.sum())
+    free_coverage = math.nan
+    if views is not None:
+        in_view = cells_in_view(gt, views) & region
+        free_coverage = ratio((in_view & est.free).sum(), in_view.sum())
     return MapMetrics(precision=precision, recall=recall, mean_distance_m=mean_distance,
                       free_accuracy=free_accuracy, known_fraction=known_fraction,
                       estimated_occupied_cells=int(est_occ.sum()),
                       true_occupied_cells=int(gt_occ.sum()), true_free_cells=int(gt_free.sum()),
-                      evaluated_cells=int(region.sum()), tolerance_cells=tol, within_m=within)
+                      evaluated_cells=int(region.sum()), tolerance_cells=tol, within_m=within,
+                      free_precision=free_precision, free_coverage=free_coverage)

@@ -77,6 +77,30 @@ class MappingConfig:
         A cell is hit only when at least this many obstacle points of one update fall in it
         (a per-scan support test: a real surface 5 cm wide holds hundreds of stereo points,
         an isolated mismatch a few); points of weaker cells are dropped from the update.
+    disparity_sigma_px : float or None
+        Disparity uncertainty of the inverse sensor model. A stereo point at range ``r`` is
+        uncertain by ``sigma_r = r^2 sigma_d / (b f)`` (eq. 14 differentiated: 0.25 px is
+        about 1 cm at 1 m and 17 cm at 4 m for b f = 24 m px), so its ray clears only the cells
+        more than ``clear_margin_sigmas * sigma_r`` short of it: space around an uncertain
+        return stays as it was. Needs the rig's ``b f`` (``baseline_focal_m_px`` of
+        :func:`view_cells`); None: rays clear up to the point.
+    clear_margin_sigmas : float
+        The margin in units of ``sigma_r``.
+    occlusion_gap_m : float or None
+        Occlusion test within a view: a ray that passes through a cell hit in the same view
+        more than ``occlusion_gap_m`` (plus the point's clearing margin) before its end is a
+        point seen *through* a surface -- a mismatch: it is not a hit and its ray stops at that
+        surface. Floor rays are tested the same way. None: no test.
+    see_through_ratio : float or None
+        Floor seen through a hit cell: every floor point of a view votes for the hit cells its
+        ray passes more than ``occlusion_gap_m`` before it; a cell whose votes exceed this ratio
+        times its own obstacle points is no hit in that view (a floating mismatch such as a
+        repetitive floor matched one period off) and is cleared instead. None: no test.
+    height_tolerance_m : float
+        Both tests are three-dimensional when the points and the sensor have heights: a hit
+        cell stands in the way of a point only where the sight line from the sensor to the
+        point passes within this of the heights of the cell's obstacle points (a table top
+        hides nothing below it).
     """
 
     p_hit: float = 0.7
@@ -87,9 +111,22 @@ class MappingConfig:
     max_range_m: float | None = None
     fusion: str = "log_odds"
     min_points_per_cell: int = 1
+    disparity_sigma_px: float | None = None
+    clear_margin_sigmas: float = 2.0
+    occlusion_gap_m: float | None = None
+    see_through_ratio: float | None = None
+    height_tolerance_m: float = 0.05
 
     def __post_init__(self) -> None:
         _checks.positive_int("min_points_per_cell", self.min_points_per_cell)
+        if self.disparity_sigma_px is not None:
+            _checks.finite_number("disparity_sigma_px", self.disparity_sigma_px, positive=True)
+        _checks.finite_number("clear_margin_sigmas", self.clear_margin_sigmas, nonnegative=True)
+        if self.occlusion_gap_m is not None:
+            _checks.finite_number("occlusion_gap_m", self.occlusion_gap_m, nonnegative=True)
+        if self.see_through_ratio is not None:
+            _checks.finite_number("see_through_ratio", self.see_through_ratio, nonnegative=True)
+        _checks.finite_number("height_tolerance_m", self.height_tolerance_m, nonnegative=True)
         for name in ("p_hit", "p_miss", "p_clamp_min", "p_clamp_max", "occupied_thresh"):
             value = _checks.finite_number(name, getattr(self, name))
             if not 0.0 < value < 1.0:
@@ -160,15 +197,26 @@ class ViewCells(NamedTuple):
     grid: GridSpec
     max_range_m: float | None
     min_points_per_cell: int
+    sensor_model: tuple = ()
+    """The sensor-model fields of the config used (:func:`_sensor_model`)."""
+    occluded: int = 0
+    """Hit cells dropped by the occlusion and see-through tests."""
 
     def fits(self, grid: GridSpec, config: MappingConfig) -> bool:
         """True when these cells are what ``grid`` and ``config`` would compute."""
         return (self.grid == grid and self.max_range_m == config.max_range_m
-                and self.min_points_per_cell == config.min_points_per_cell)
+                and self.min_points_per_cell == config.min_points_per_cell
+                and self.sensor_model == _sensor_model(config))
+
+
+def _sensor_model(config: MappingConfig) -> tuple:
+    return (config.disparity_sigma_px, config.clear_margin_sigmas, config.occlusion_gap_m, config.see_through_ratio,
+            config.height_tolerance_m)
 
 
 def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
-               grid: GridSpec = GridSpec(), config: MappingConfig = MappingConfig()) -> ViewCells:
+               grid: GridSpec = GridSpec(), config: MappingConfig = MappingConfig(),
+               baseline_focal_m_px: float | None = None) -> ViewCells:
     """The cells one view hits and clears (OctoMap's per-scan key sets [2]).
 
     Parameters
@@ -178,10 +226,14 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
     points_free_world : ndarray of shape (M, 3) or (M, 2), or None
         Floor points (ground-suppressed by eq. 13): their rays and their own cells are free.
     sensor_origin_world : sequence of 2 or 3 floats
-        World (x, y) of the sensor (the left camera's optical centre).
+        World (x, y) of the sensor (the left camera's optical centre), and its height z above
+        the floor (needed for the height-aware occlusion and see-through tests).
     grid : GridSpec
     config : MappingConfig
-        Only ``max_range_m`` and ``min_points_per_cell`` matter here.
+        Everything but the fusion matters here.
+    baseline_focal_m_px : float, optional
+        ``b f`` of the rig (baseline in metres times rectified focal length in pixels), for the
+        range uncertainty of ``config.disparity_sigma_px``; without it rays clear up to the point.
 
     Returns
     -------
@@ -194,6 +246,14 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
     distinct end cell (the last point that fell in it; Amanatides-Woo traversal [3]); the end
     cell of an obstacle ray is not cleared. A ray to a point outside the grid (or beyond
     ``max_range_m``) is cut at the border and clears the cells inside.
+
+    Inverse sensor model (``config.disparity_sigma_px``): an obstacle point at range ``r`` from
+    the sensor clears only up to ``r - k sigma_r``, ``sigma_r = r^2 sigma_d / (b f)``, ``k =
+    clear_margin_sigmas``. Occlusion (``config.occlusion_gap_m``): the rays of one view are
+    traced against the cells hit in that same view; a ray entering a hit cell more than the gap
+    (plus its margin) before its end stops there and its end is not hit. See-through
+    (``config.see_through_ratio``, tested first): hit cells through which the same view sees
+    more floor points than the cell holds obstacle points are cleared instead.
     """
     if not isinstance(grid, GridSpec):
         raise TypeError(f"grid must be a GridSpec, got {type(grid).__name__}")
@@ -208,20 +268,40 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
     sx = (origin[0] - grid.origin_x_m) / grid.resolution_m
     sy = (origin[1] - grid.origin_y_m) / grid.resolution_m
     max_range_cells = -1.0 if config.max_range_m is None else config.max_range_m / grid.resolution_m
+    margin_per_cell2 = 0.0
+    if config.disparity_sigma_px is not None and baseline_focal_m_px is not None:
+        bf = _checks.finite_number("baseline_focal_m_px", baseline_focal_m_px, positive=True)
+        # sigma_r [cells] = (r res)^2 sigma_d / (b f) / res = r^2 res sigma_d / (b f)
+        margin_per_cell2 = config.clear_margin_sigmas * grid.resolution_m * config.disparity_sigma_px / bf
+    gap_cells = -1.0 if config.occlusion_gap_m is None else config.occlusion_gap_m / grid.resolution_m
     flags = np.zeros(grid.shape, np.uint8)
     miss = np.zeros(grid.shape, np.uint8)
-    ends = np.empty(grid.shape + (2,), np.float64)
+    occluded = np.zeros(grid.shape, np.uint8)
+    ends = np.empty(grid.shape + (4,), np.float64)
+    n_points = np.zeros(grid.shape, np.float64)
+    z_range = np.empty(grid.shape + (2,), np.float64)
+    z_range[..., 0] = np.inf
+    z_range[..., 1] = -np.inf
+    sz = float(origin[2]) if origin.shape == (3,) else np.nan
+    z_tol = float(config.height_tolerance_m)
     if config.min_points_per_cell > 1 and len(obstacles):
         obstacles = _supported(obstacles, grid, config.min_points_per_cell)
     outside = 0
     for points, is_obstacle in ((obstacles, True), (floor, False)):
         if len(points):
             outside += _kernels.mark_endpoints(points, sx, sy, grid.origin_x_m, grid.origin_y_m,
-                                               grid.resolution_m, max_range_cells, is_obstacle, flags, ends)
-    _kernels.cast_rays(flags, ends, sx, sy, miss)
-    hit = (flags & _kernels.HIT) != 0
+                                               grid.resolution_m, max_range_cells, is_obstacle, margin_per_cell2,
+                                               flags, ends, n_points, z_range)
+    n_occluded = 0
+    if config.see_through_ratio is not None:
+        through = np.zeros(grid.shape, np.float64)
+        n_occluded += _kernels.drop_seen_through(flags, ends, n_points, z_range, sx, sy, sz, max(gap_cells, 0.0),
+                                                 z_tol, config.see_through_ratio, through, miss, occluded)
+    n_occluded += _kernels.cast_rays(flags, ends, z_range, sx, sy, sz, gap_cells, z_tol, miss, occluded)
+    hit = ((flags & _kernels.HIT) != 0) & (occluded == 0)
     return ViewCells(hit=np.flatnonzero(hit), miss=np.flatnonzero((miss != 0) & ~hit), points_outside=int(outside),
-                     grid=grid, max_range_m=config.max_range_m, min_points_per_cell=config.min_points_per_cell)
+                     grid=grid, max_range_m=config.max_range_m, min_points_per_cell=config.min_points_per_cell,
+                     sensor_model=_sensor_model(config), occluded=int(n_occluded))
 
 
 def _supported(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:
@@ -303,7 +383,8 @@ class OccupancyGrid:
         self.n_updates = 0
 
     # ---------------------------------------------------------------- update
-    def update(self, points_obstacle_world, points_free_world, sensor_origin_world) -> GridUpdate:
+    def update(self, points_obstacle_world, points_free_world, sensor_origin_world, *,
+               baseline_focal_m_px: float | None = None) -> GridUpdate:
         """Add one view: obstacle points hit their cells, rays to all points clear cells.
 
         The same as ``apply(view_cells(..., grid=self.grid, config=self.config))``; see
@@ -315,7 +396,7 @@ class OccupancyGrid:
             Distinct cells hit and missed in this update, points ending outside the grid.
         """
         return self.apply(view_cells(points_obstacle_world, points_free_world, sensor_origin_world,
-                                     grid=self.grid, config=self.config))
+                                     grid=self.grid, config=self.config, baseline_focal_m_px=baseline_focal_m_px))
 
     def apply(self, cells: ViewCells) -> GridUpdate:
         """Add one view's hit and missed cells (from :func:`view_cells`) to the log-odds.
@@ -328,7 +409,7 @@ class OccupancyGrid:
             raise TypeError(f"cells must be ViewCells (from view_cells), got {type(cells).__name__}")
         if not cells.fits(self.grid, self.config):
             raise ValueError("cells were computed for another grid or another max_range_m / "
-                             "min_points_per_cell than this OccupancyGrid's")
+                             "min_points_per_cell / sensor model than this OccupancyGrid's")
         c = self.config
         _kernels.apply_cells(self._log_odds.reshape(-1), cells.hit, cells.miss, c.l_hit, c.l_miss, c.l_min,
                              c.l_max, c.fusion == "union")
