@@ -85,3 +85,43 @@ def test_rectify_rejects_mismatched_sizes():
         stereo.rectify(np.zeros((240, 320), np.uint8), np.zeros((240, 321), np.uint8))
     with pytest.raises(ValueError, match="calibration is 320x240"):
         stereo.rectify(np.zeros((100, 100), np.uint8), np.zeros((100, 100), np.uint8))
+
+
+@pytest.mark.parametrize("model, D", [
+    ("plumb_bob", [-0.28, 0.09, 1e-3, -5e-4, -0.01]),
+    ("rational_polynomial", [7.9, 3.1, -4e-4, 2e-4, 0.08, 8.3, 5.4, 0.6]),
+    ("rational_polynomial", [-0.3, 0.1, 1e-3, -2e-4, 0.02, 0.05, 0.01, 0.002, 1e-3, -2e-3, 5e-4, 1e-3]),
+    ("rational_polynomial", [-0.3, 0.1, 1e-3, -2e-4, 0.02, 0.05, 0.01, 0.002, 1e-3, -2e-3, 5e-4, 1e-3, 0.01, -0.02]),
+    ("equidistant", [-0.0089, 0.0472, -0.0448, 0.0086]),
+])
+def test_every_model_round_trips_through_camera_info(tmp_path, model, D):
+    cam = Camera.from_ros(320, 240, CAM.K, model, D)
+    info = CameraInfo(cam, R=rotation_from_euler(0.01, -0.005, 0.002), name="cam0")
+    write_camera_info(tmp_path / "cam.yaml", info)
+    data = yaml.safe_load((tmp_path / "cam.yaml").read_text())
+    assert data["distortion_model"] == model and data["distortion_coefficients"]["data"] == D
+    assert data["distortion_coefficients"]["cols"] == len(D)
+    back = read_camera_info(tmp_path / "cam.yaml")
+    assert back.camera == cam and back.camera.distortion_model == model
+    np.testing.assert_array_equal(back.R, info.R)
+    assert CameraInfo.from_dict(info.to_dict()).to_dict() == info.to_dict()
+
+
+def test_unknown_model_in_camera_info_is_named():
+    data = CameraInfo(CAM).to_dict()
+    data["distortion_model"] = "double_sphere"
+    with pytest.raises(ValueError, match="cam.yaml: distortion_model 'double_sphere' is not supported"):
+        CameraInfo.from_dict(data, where="cam.yaml")
+    data = CameraInfo(CAM).to_dict()
+    data["distortion_coefficients"]["data"] = ["a", 0, 0, 0, 0]
+    with pytest.raises(ValueError, match="cam.yaml: field 'distortion_coefficients' is not numeric"):
+        CameraInfo.from_dict(data, where="cam.yaml")
+
+
+def test_is_rectified_sees_every_coefficient():
+    ideal = StereoCamera.ideal(Camera(width=320, height=240, fx=200.0, fy=200.0, cx=160.0, cy=120.0), 0.1)
+    assert ideal.is_rectified
+    tangential = Camera.from_ros(320, 240, ideal.left.camera.K, "plumb_bob", [0, 0, 1e-3, 0, 0])
+    assert not StereoCamera.ideal(tangential, 0.1).is_rectified
+    fisheye = Camera.from_ros(320, 240, ideal.left.camera.K, "equidistant", [0, 0, 0, 0])
+    assert not StereoCamera.ideal(fisheye, 0.1).is_rectified       # equidistant is not a pinhole

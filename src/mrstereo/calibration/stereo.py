@@ -17,7 +17,8 @@ from typing import Sequence
 import numpy as np
 
 from .. import _checks
-from ..camera import Camera, RigMount, StereoCamera, project_points, rectify_fusiello, rotation_from_euler
+from ..camera import (Camera, RigMount, StereoCamera, project_points, rectified_px_from_raw_px, rectify_fusiello,
+                      rotation_from_euler)
 from .calibrate import CalibrationResult, _rms, calibrate_camera
 from .ga import GABounds, GAConfig
 from .refine import INTRINSIC_NAMES, fit_statistics, grouped_jacobian, pose_matrix, pose_vector
@@ -91,10 +92,9 @@ class StereoCalibrationResult:
 
 def rectified_points(stereo: StereoCamera, uv: np.ndarray, *, side: str) -> np.ndarray:
     """Raw distorted pixels (N, 2) of one camera mapped to its rectified image."""
-    info = stereo.left if side == "left" else stereo.right
-    rays = info.camera.rays(np.asarray(uv, dtype=np.float64)) @ info.R.T
-    p = rays @ info.P[:3, :3].T
-    return p[:, :2] / p[:, 2:3]
+    if side not in ("left", "right"):
+        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    return rectified_px_from_raw_px(stereo.left if side == "left" else stereo.right, uv)
 
 
 def rectified_vertical_error_px(stereo: StereoCamera, left_uv: Sequence[np.ndarray],

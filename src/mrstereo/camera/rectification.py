@@ -27,7 +27,14 @@ one is ``R_n`` (left) and ``R_n R^T`` (right). Images are resampled by inverse
 warping through ``cv2.initUndistortRectifyMap``, which also removes the radial
 distortion.
 
-Choice of ``A``: the raw image border of each camera is undistorted and rotated
+Every camera model of :mod:`mrstereo.camera.model` is accepted: the raw
+border is undistorted through ``Camera.rays`` and the maps come from
+``Camera.undistort_rectify_maps`` (``cv2.fisheye`` for a fisheye); the
+rectified view is always a pinhole.
+
+Choice of ``A``: the raw image border of each camera (where a border ray lies more
+than 80 degrees off the optical axis, or beyond a fisheye's 90 degrees, the
+point of that line toward the principal point at the limit) is undistorted and rotated
 into the rectified frame. The inner box (every pixel inside it is seen by both
 cameras) and the outer box (every raw pixel kept) are computed;
 ``alpha = 0`` chooses the focal length and principal point so that the inner
@@ -35,6 +42,20 @@ box exactly fills the image (no invalid pixels, like ``cv2.stereoRectify``
 with ``alpha=0``), ``alpha = 1`` so that the outer box fits in the image, and
 values in between interpolate. Square pixels (``fx = fy``) and one shared
 principal point (``doffs = 0``).
+
+A fisheye (``equidistant``) sees up to 90 degrees and more off its axis, where a
+pinhole image would need an unbounded focal plane: the box rule would pick a
+tiny focal length and waste the centre of the image. For a fisheye pair the
+rectified focal length is therefore never below the smaller raw focal length
+(the raw pixels per radian at the image centre: the centre keeps its
+resolution) and the principal point is the mean of the two raw optical axes
+in the rectified image; the rectified view then spans ``2 atan(W / 2 f)``
+horizontally (about 112 degrees for a 848x800 T265 with f = 286 px) and shows
+what both cameras see there.
+
+Swapped cameras: the right camera must sit on the +x side of the left one
+(OpenCV's ``T[0] < 0``); :func:`check_not_swapped` refuses the other order
+with a message that says to exchange left and right.
 
 References
 ----------
@@ -49,9 +70,15 @@ import numpy as np
 
 from .. import _checks
 from .camera_info import CameraInfo, RigMount, StereoCamera
-from .model import Camera, normalized_from_pixels, undistort_normalized
+from .model import Camera
 
-__all__ = ["FusielloRectification", "rectify_fusiello", "fusiello_rotation"]
+__all__ = ["FusielloRectification", "rectify_fusiello", "fusiello_rotation", "check_not_swapped",
+           "check_baseline", "rectified_px_from_raw_px", "raw_px_from_rectified_px"]
+
+MIN_BASELINE_M = 1e-4
+"""Baselines shorter than this (0.1 mm) are taken as zero: the same view given twice."""
+MAX_RAY_ANGLE_RAD = np.radians(80.0)
+"""The rectified field of view is chosen from raw border rays at most this far off the axis."""
 
 
 @dataclass(frozen=True)
@@ -87,7 +114,7 @@ def fusiello_rotation(R, T) -> np.ndarray:
     c2 = -R.T @ T
     norm = float(np.linalg.norm(c2))
     if norm <= 0:
-        raise ValueError("T must be non-zero: the two optical centres coincide")
+        raise ValueError("T must be non-zero: the two optical centres coincide (the baseline is zero)")
     e1 = c2 / norm
     e2 = np.cross(np.array([0.0, 0.0, 1.0]), e1)
     n2 = float(np.linalg.norm(e2))
@@ -107,15 +134,90 @@ def _border_pixels(width: int, height: int, n: int = 64) -> dict[str, np.ndarray
     }
 
 
+def check_baseline(R, T, *, where: str = "stereo calibration") -> float:
+    """Baseline ``|c2 - c1|`` in metres; ``ValueError`` when it is (near) zero.
+
+    A baseline below ``MIN_BASELINE_M`` (0.1 mm) means both views were taken
+    from one place -- typically the same images or topic given as left and
+    right.
+    """
+    R = _checks.matrix("R", R, (3, 3))
+    T = _checks.matrix("T", np.ravel(T), (3,))
+    baseline_m = float(np.linalg.norm(T))
+    if baseline_m < MIN_BASELINE_M:
+        raise ValueError(f"{where}: the baseline is zero ({baseline_m:.2g} m): both views were taken from "
+                         "the same place; are the same images (or topic) given as left and right?")
+    return baseline_m
+
+
+def check_not_swapped(R, T, *, where: str = "stereo calibration") -> None:
+    """Refuse a pair whose right camera sits on the left of the left camera.
+
+    ``R``, ``T`` map left-camera points to the right camera (``x_right = R
+    x_left + T``, OpenCV's convention). The right optical centre in the left
+    frame is ``c2 = -R^T T``; for the usual rig it lies at +x (OpenCV's
+    ``T[0] < 0``). ``c2[0] < 0`` means the views were given the wrong way
+    round, and the rectified pair would be mirrored (negative disparities).
+
+    Raises
+    ------
+    ValueError
+        One sentence that says the views look swapped and how to fix it.
+    """
+    R = _checks.matrix("R", R, (3, 3))
+    T = _checks.matrix("T", np.ravel(T), (3,))
+    c2 = -R.T @ T
+    if c2[0] < 0 and abs(c2[0]) >= 0.5 * float(np.linalg.norm(c2)):
+        raise ValueError(f"{where}: the left and right views look swapped: the camera given as right sits "
+                         f"{abs(c2[0]):.4g} m to the LEFT of the one given as left; exchange --left and "
+                         "--right (or the left and right topics/files)")
+
+
+def _border_rays(camera: Camera, uv: np.ndarray, *, steps: int = 200) -> np.ndarray:
+    """Rays (N, 3) of border pixels, pulled in toward the principal point where a ray is
+    more than ``MAX_RAY_ANGLE_RAD`` off the optical axis or does not exist (fisheye corners)."""
+    def usable(rays):
+        with np.errstate(invalid="ignore"):
+            return np.isfinite(rays).all(axis=-1) & (np.hypot(rays[..., 0], rays[..., 1])
+                                                     <= np.tan(MAX_RAY_ANGLE_RAD))
+    rays = camera.rays(uv)
+    bad = ~usable(rays)
+    if bad.any():
+        centre = np.array([camera.cx, camera.cy])
+        frac = np.linspace(1.0, 0.0, steps)[:, None, None]                  # border -> centre
+        pts = centre + frac * (uv[bad] - centre)                            # (steps, n_bad, 2)
+        cand = camera.rays(pts.reshape(-1, 2)).reshape(steps, -1, 3)
+        first = np.argmax(usable(cand), axis=0)                             # outermost usable sample
+        rays[bad] = cand[first, np.arange(cand.shape[1])]
+    return rays
+
+
 def _rectified_border(camera: Camera, R_rect: np.ndarray) -> dict[str, np.ndarray]:
-    """Border pixels of the raw image in rectified normalized coordinates."""
+    """Border pixels of the raw image in rectified normalized coordinates (rays in front only)."""
     out = {}
     for side, uv in _border_pixels(camera.width, camera.height).items():
-        xy = undistort_normalized(normalized_from_pixels(uv, camera.fx, camera.fy, camera.cx, camera.cy),
-                                  camera.k1, camera.k2)
-        rays = np.concatenate([xy, np.ones((len(xy), 1))], 1) @ R_rect.T
-        out[side] = rays[:, :2] / rays[:, 2:3]
+        rays = _border_rays(camera, uv) @ R_rect.T
+        keep = np.isfinite(rays).all(axis=1) & (rays[:, 2] > 1e-6)
+        out[side] = rays[keep, :2] / rays[keep, 2:3]
     return out
+
+
+def rectified_px_from_raw_px(info: CameraInfo, uv) -> np.ndarray:
+    """Raw (distorted) pixels (N, 2) of one camera -> its rectified image (``R``, ``P``)."""
+    rays = info.camera.rays(np.asarray(uv, dtype=np.float64)) @ info.R.T
+    p = rays @ info.P[:3, :3].T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return p[:, :2] / p[:, 2:3]
+
+
+def raw_px_from_rectified_px(info: CameraInfo, uv_rect) -> np.ndarray:
+    """Rectified pixels (N, 2) -> raw (distorted) pixels of the same camera; inverse of
+    :func:`rectified_px_from_raw_px` (NaN where the ray is behind the raw camera)."""
+    uv_rect = np.asarray(uv_rect, dtype=np.float64)
+    if uv_rect.ndim != 2 or uv_rect.shape[1] != 2:
+        raise ValueError(f"uv_rect must have shape (N, 2), got {uv_rect.shape}")
+    q = np.concatenate([uv_rect, np.ones((len(uv_rect), 1))], 1) @ np.linalg.inv(info.P[:3, :3]).T
+    return info.camera.project(q @ info.R)          # R^T q: rectified frame -> raw frame
 
 
 def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0,
@@ -142,7 +244,8 @@ def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0,
         Holds the :class:`StereoCamera` every other command reads.
     """
     if not isinstance(left, Camera) or not isinstance(right, Camera):
-        raise TypeError("left and right must be Camera instances")
+        raise TypeError(f"left and right must be Camera instances, got {type(left).__name__} and "
+                        f"{type(right).__name__}")
     if left.size != right.size:
         raise ValueError(f"left and right image sizes differ: {left.size} vs {right.size}")
     alpha = _checks.finite_number("alpha", alpha)
@@ -150,18 +253,25 @@ def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0,
         raise ValueError(f"alpha must be within [0, 1], got {alpha}")
     R = _checks.matrix("R", R, (3, 3))
     T = _checks.matrix("T", np.ravel(T), (3,))
+    baseline_m = check_baseline(R, T, where="rectify")
+    check_not_swapped(R, T, where="rectify")
     R_new = fusiello_rotation(R, T)
     R_right = R_new @ R.T
-    baseline_m = float(np.linalg.norm(T))
     width, height = left.size
 
     borders = [_rectified_border(left, R_new), _rectified_border(right, R_right)]
+    for name, b in zip(("left", "right"), borders):
+        empty = [side for side, pts in b.items() if len(pts) == 0]
+        if empty:
+            raise ValueError(f"the {empty[0]} border of the {name} image has no viewing ray in front of the "
+                             "rectified camera; check the intrinsics, R and T")
     inner = (max(b["left"][:, 0].max() for b in borders), min(b["right"][:, 0].min() for b in borders),
              max(b["top"][:, 1].max() for b in borders), min(b["bottom"][:, 1].min() for b in borders))
     allpts = np.concatenate([np.concatenate(list(b.values())) for b in borders])
     outer = (allpts[:, 0].min(), allpts[:, 0].max(), allpts[:, 1].min(), allpts[:, 1].max())
     if inner[1] <= inner[0] or inner[3] <= inner[2]:
-        raise ValueError("the two rectified views do not overlap; check R and T")
+        raise ValueError("the two rectified views do not overlap (the cameras look in too different "
+                         "directions); check R and T")
 
     def fit(box, zoom_in: bool):
         x0, x1, y0, y1 = box
@@ -172,6 +282,12 @@ def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0,
     focal = (1.0 - alpha) * f_inner + alpha * f_outer
     centre = [(1.0 - alpha) * 0.5 * (inner[0] + inner[1]) + alpha * 0.5 * (outer[0] + outer[1]),
               (1.0 - alpha) * 0.5 * (inner[2] + inner[3]) + alpha * 0.5 * (outer[2] + outer[3])]
+    fisheyes = [c for c in (left, right) if c.is_fisheye]
+    f_fisheye = min(min(c.fx, c.fy) for c in fisheyes) if fisheyes else 0.0
+    if focal < f_fisheye:             # a fisheye: keep the centre's resolution (module Notes)
+        focal = f_fisheye
+        axes = np.stack([R_new[:, 2], R_right[:, 2]])          # raw optical axes, rectified frame
+        centre = list(np.mean(axes[:, :2] / axes[:, 2:3], axis=0))
     cx = (width - 1.0) / 2.0 - focal * centre[0]
     cy = (height - 1.0) / 2.0 - focal * centre[1]
     A = np.array([[focal, 0.0, cx], [0.0, focal, cy], [0.0, 0.0, 1.0]])

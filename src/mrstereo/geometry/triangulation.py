@@ -12,7 +12,8 @@ import numpy as np
 from .. import _checks
 from . import _kernels
 
-__all__ = ["depth_m_from_disparity_px", "disparity_px_from_depth_m", "points_cam_from_disparity"]
+__all__ = ["depth_m_from_disparity_px", "disparity_px_from_depth_m", "points_cam_from_disparity",
+           "points_cam_from_raw_px"]
 
 
 def depth_m_from_disparity_px(disparity_px, *, focal_px: float, baseline_m: float,
@@ -65,3 +66,46 @@ def points_cam_from_disparity(disparity_px, *, focal_px: float, baseline_m: floa
     out = np.empty(d.shape + (3,), dtype=np.float64)
     _kernels.points_cam(d, f, b, doffs, cx, cy, fy, out)          # eq. (14), (15), (16) per pixel
     return out
+
+
+def points_cam_from_raw_px(stereo, uv_left, uv_right, *, frame: str = "rectified") -> np.ndarray:
+    """Triangulate matching raw (distorted) pixels of a calibrated pair, eq. (14)-(16).
+
+    Each raw pixel is undistorted and rectified through its camera's model
+    (:func:`mrstereo.camera.rectified_px_from_raw_px`, any distortion model),
+    then ``Z = b f / (x_l - x_r + doffs)``, ``X = (x_l - cx) Z / f`` and
+    ``Y = (y - cy) Z / fy`` with ``y`` the mean rectified row of both pixels.
+
+    Parameters
+    ----------
+    stereo : StereoCamera
+        The calibration (raw ``K``, ``D``; ``R``; rectified ``P``).
+    uv_left, uv_right : ndarray of shape (N, 2)
+        Matching raw pixels ``(u, v)`` of the left and right images.
+    frame : {"rectified", "raw_left"}
+        Return points in the rectified left camera frame (the frame of
+        :func:`points_cam_from_disparity`) or in the raw left camera frame.
+
+    Returns
+    -------
+    ndarray of shape (N, 3)
+        Metres; NaN where the rectified disparity is not positive.
+    """
+    from ..camera import rectified_px_from_raw_px
+    if frame not in ("rectified", "raw_left"):
+        raise ValueError(f"frame must be 'rectified' or 'raw_left', got {frame!r}")
+    uv_left = np.asarray(uv_left, dtype=np.float64)
+    uv_right = np.asarray(uv_right, dtype=np.float64)
+    for name, uv in (("uv_left", uv_left), ("uv_right", uv_right)):
+        if uv.ndim != 2 or uv.shape[1] != 2:
+            raise ValueError(f"{name} must have shape (N, 2), got {uv.shape}")
+    if len(uv_left) != len(uv_right):
+        raise ValueError(f"uv_left and uv_right must hold the same number of points, got {len(uv_left)} "
+                         f"and {len(uv_right)}")
+    a = rectified_px_from_raw_px(stereo.left, uv_left)
+    b = rectified_px_from_raw_px(stereo.right, uv_right)
+    P = stereo.left.P
+    z = depth_m_from_disparity_px(a[:, 0] - b[:, 0], focal_px=P[0, 0], baseline_m=stereo.baseline_m,
+                                  doffs_px=stereo.doffs_px)
+    points = np.stack([(a[:, 0] - P[0, 2]) * z / P[0, 0], (0.5 * (a[:, 1] + b[:, 1]) - P[1, 2]) * z / P[1, 1], z], 1)
+    return points if frame == "rectified" else points @ stereo.left.R      # R^T p: rectified -> raw left
