@@ -74,3 +74,53 @@ def test_rectify_corrupt_yaml(tmp_path, capsys):
     cv2.imwrite(str(img), np.zeros((10, 10), np.uint8))
     code = entry(["rectify", "--calib", str(bad), str(img), str(img), "-o", str(tmp_path / "r")])
     assert code == 2 and "not valid YAML" in capsys.readouterr().err
+
+
+@needs_data
+@pytest.mark.parametrize("left, right, message", [
+    ("right0[1-6].jpg", "left0[1-6].jpg", r"^mrstereo: error: stereo-calibrate: the left and right views look swapped: "
+                                          r"the camera given as right sits 0\.0\d+ m to the LEFT of the one given as "
+                                          r"left; exchange --left and --right"),
+    ("left0[1-6].jpg", "left0[1-6].jpg", r"^mrstereo: error: stereo-calibrate: the baseline is zero .*are the same "
+                                         r"images given as --left and --right\?$"),
+])
+def test_stereo_calibrate_refuses_swapped_and_identical_views(tmp_path, capsys, left, right, message):
+    import re
+    out = tmp_path / "stereo.yaml"
+    code = entry(["stereo-calibrate", "--left", str(DATA / left), "--right", str(DATA / right), "--method", "lm",
+                  "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and re.search(message, err[-1]), err
+    assert not any(tmp_path.iterdir())                                   # nothing written
+
+
+@pytest.mark.parametrize("points, message", [
+    ([(0.01 * i, 0.02 * i, 0.0, 100.0 + 5 * i, 80.0 + 7 * i) for i in range(20)], "are collinear"),
+    ([(0.1, 0.2, 0.0, 320.0, 240.0)] * 30, "coincide"),
+])
+def test_calibrate_refuses_degenerate_points(tmp_path, capsys, points, message):
+    csv = tmp_path / "pts.csv"
+    csv.write_text("X,Y,Z,u,v\n" + "\n".join(",".join(str(v) for v in p) for p in points) + "\n")
+    out = tmp_path / "cam.yaml"
+    code = entry(["calibrate", "--points", str(csv), "--image-size", "640x480", "--generations", "5",
+                  "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("mrstereo: error: view pts.csv:") and message in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pts.csv"]
+
+
+@needs_data
+def test_calibrate_with_a_richer_model_writes_it(tmp_path, capsys):
+    out = tmp_path / "left.yaml"
+    code = entry(["calibrate", "--images", str(DATA / "left0[1-5].jpg"), "--method", "lm", "--model", "plumb_bob",
+                  "-o", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0 and "plumb_bob k1=" in text and " p1=" in text
+    cam = read_camera_info(out).camera
+    assert cam.distortion_model == "plumb_bob" and cam.D.size == 5 and np.all(cam.D[2:] != 0)
+    import json
+    report = json.loads((tmp_path / "left_report.json").read_text())
+    assert report["model"] == "plumb_bob" and set(report["sigmas"]) >= {"p1", "p2", "k3"}
+    code = entry(["calibrate", "--images", str(DATA / "left0[1-5].jpg"), "--method", "ga", "--model", "fisheye",
+                  "-o", str(tmp_path / "x.yaml")])
+    assert code == 2 and "--method ga fits the paper's k1k2 model only" in capsys.readouterr().err

@@ -54,4 +54,11 @@ def test_stereo_matches_opencv_and_rows_align(pairs):
     assert abs(res.rms_px / rms - 1) < 0.02
     assert np.allclose(res.T, T.ravel(), atol=5e-4)
     assert res.vertical_error_px < 0.5
+    # rectified |dy| of the same corners: cv2.stereoRectify on OpenCV's calibration vs ours (Fusiello)
+    R1, R2, P1, P2, *_ = cv2.stereoRectify(K1, D1, K2, D2, size, R, T, alpha=0)
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+    dy_cv = np.mean([np.mean(np.abs(cv2.undistortPoints(a.reshape(-1, 1, 2), K1, D1, R=R1, P=P1, criteria=crit)[:, 0, 1]
+                                    - cv2.undistortPoints(b.reshape(-1, 1, 2), K2, D2, R=R2, P=P2, criteria=crit)[:, 0, 1]))
+                     for a, b in zip(il, ir)])
+    assert abs(res.vertical_error_px / dy_cv - 1) < 0.02
     assert res.stereo.right.P[0, 3] < 0 and res.baseline_m == pytest.approx(np.linalg.norm(T), rel=0.01)

@@ -7,6 +7,12 @@ GA's best chromosome by Levenberg-Marquardt over all parameters. ``"lm"``
 starts LM from Zhang's closed form (``cv2.initCameraMatrix2D`` with the
 principal point at the image centre, no distortion, poses by ``cv2.solvePnP``)
 and needs planar views. Conventions: docs/conventions.md.
+
+``model`` chooses the distortion model (:data:`CALIBRATION_MODELS`): the
+paper's ``k1k2`` is what the GA searches and the default; ``plumb_bob``,
+``rational`` and ``fisheye`` are fitted by a further LM started from the
+``k1k2`` fit (its intrinsics and poses; its k1, k2 seed the pinhole models, a
+fisheye starts from zero distortion).
 """
 from __future__ import annotations
 
@@ -20,10 +26,13 @@ import numpy as np
 from .. import _checks
 from ..camera import Camera
 from .ga import MULTIVIEW_GA, GABounds, GAConfig, GAResult, ga_calibrate_intrinsics, ga_calibrate_single
-from .refine import refine_views
+from .refine import CALIBRATION_MODELS, calibration_model, refine_views
 from .targets import CalibrationView
 
-__all__ = ["METHODS", "CalibrationResult", "calibrate_camera", "zhang_init", "reprojection_residuals"]
+__all__ = ["METHODS", "MODELS", "CalibrationResult", "calibrate_camera", "zhang_init", "reprojection_residuals",
+           "check_view_geometry"]
+
+MODELS = tuple(CALIBRATION_MODELS)
 
 METHODS = ("ga", "ga+lm", "lm")
 OUTLIER_FACTOR = 3.0
@@ -51,7 +60,9 @@ class CalibrationResult:
     message : str
     method : str
     ga_rms_px, lm_rms_px : float
-        RMS after the GA and after LM (NaN where that stage did not run).
+        RMS after the GA and after the k1k2 LM (NaN where that stage did not run).
+    model : str
+        The fitted model (``k1k2``, ``plumb_bob``, ``rational``, ``fisheye``).
     generations : int
         GA generations run (0 without GA).
     ga : GAResult or None
@@ -73,14 +84,18 @@ class CalibrationResult:
     generations: int = 0
     ga: GAResult | None = field(default=None, repr=False)
     view_names: tuple = ()
+    model: str = "k1k2"
 
     def summary(self) -> dict:
         """Plain-Python summary for JSON reports."""
         c = self.camera
+        names = c.distortion.params_info[:c.D.size]
         return {
-            "method": self.method, "success": self.success, "message": self.message,
+            "method": self.method, "model": self.model, "success": self.success, "message": self.message,
             "image_size": [c.width, c.height],
-            "camera": {k: float(getattr(c, k)) for k in ("fx", "fy", "cx", "cy", "k1", "k2")},
+            "camera": {**{k: float(getattr(c, k)) for k in ("fx", "fy", "cx", "cy")},
+                       "distortion_model": c.distortion_model, "D": [float(v) for v in c.D],
+                       **{k: float(v) for k, v in zip(names, c.D)}},
             "sigmas": {k: float(v) for k, v in self.sigmas.items()},
             "rms_px": float(self.rms_px), "ga_rms_px": _num(self.ga_rms_px), "lm_rms_px": _num(self.lm_rms_px),
             "generations": int(self.generations),
@@ -109,6 +124,26 @@ def _rms(residuals: Sequence[np.ndarray]) -> tuple[float, np.ndarray]:
     return (math.sqrt(total / n) if math.isfinite(total) else math.inf), per
 
 
+def check_view_geometry(view: CalibrationView) -> None:
+    """Refuse control points that cannot determine a camera: collinear or coincident.
+
+    The target points (and their pixels) must span a plane: the second
+    singular value of the centred points must exceed 1e-6 of the first (and
+    the first must not vanish). Collinear points or one point repeated would
+    otherwise "fit" with an RMS of zero.
+    """
+    for what, pts in (("target points", view.points_target), ("pixels", view.uv)):
+        centred = pts - pts.mean(axis=0)
+        s = np.linalg.svd(centred, compute_uv=False)
+        scale = float(np.abs(pts).max()) or 1.0
+        if s[0] <= 1e-9 * scale:
+            raise ValueError(f"view {view.name}: all {len(pts)} {what} coincide; calibration needs points "
+                             "spread over a plane or in 3D")
+        if s[1] <= 1e-6 * s[0]:
+            raise ValueError(f"view {view.name}: the {len(pts)} {what} are collinear; calibration needs points "
+                             "spread over a plane or in 3D")
+
+
 def zhang_init(views: Sequence[CalibrationView], *, width: int, height: int,
                fix_aspect: float | None = None) -> tuple[Camera, list[np.ndarray]]:
     """Closed-form start: ``cv2.initCameraMatrix2D`` (Zhang) and ``cv2.solvePnP`` poses, no distortion."""
@@ -132,7 +167,7 @@ def zhang_init(views: Sequence[CalibrationView], *, width: int, height: int,
 
 
 def calibrate_camera(views: Sequence[CalibrationView], *, width: int, height: int, method: str = "ga+lm",
-                     ga_config: GAConfig | None = None, bounds: GABounds | None = None,
+                     model: str = "k1k2", ga_config: GAConfig | None = None, bounds: GABounds | None = None,
                      pixel_density_px_per_mm: float | None = None, rng=None, progress=None) -> CalibrationResult:
     """Calibrate one camera from one or more views of known control points.
 
@@ -144,6 +179,8 @@ def calibrate_camera(views: Sequence[CalibrationView], *, width: int, height: in
         Image size in pixels.
     method : {"ga", "ga+lm", "lm"}
         See the module docstring.
+    model : {"k1k2", "plumb_bob", "rational", "fisheye"}
+        Distortion model; anything but ``k1k2`` needs LM (``method`` "ga+lm" or "lm").
     ga_config, bounds, pixel_density_px_per_mm :
         GA settings (:class:`GAConfig`, :class:`GABounds`, pixel density of eq. 2).
     rng : numpy Generator, int or None
@@ -165,6 +202,12 @@ def calibrate_camera(views: Sequence[CalibrationView], *, width: int, height: in
         raise TypeError("views must be CalibrationView instances")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    spec = calibration_model(model)
+    if spec.name != "k1k2" and method == "ga":
+        raise ValueError(f"the GA fits the paper's k1k2 model only; model {spec.name!r} needs method 'ga+lm' "
+                         "or 'lm'")
+    for view in views:
+        check_view_geometry(view)
     width = _checks.positive_int("width", width)
     height = _checks.positive_int("height", height)
     single = len(views) == 1
@@ -192,6 +235,14 @@ def calibrate_camera(views: Sequence[CalibrationView], *, width: int, height: in
         else:
             success = False
             message = (message + "; " if ga_res else "") + f"LM did not improve: {fit.message}"
+    if spec.name != "k1k2" and success:
+        fit = refine_views(views, camera, poses, fix_aspect=fix_aspect, model=spec)
+        if fit.success or _rms(fit.residuals_px)[0] < _rms(reprojection_residuals(views, camera, poses))[0]:
+            camera, poses, sigmas = fit.camera, list(fit.poses), fit.sigmas
+            message += f"; LM {spec.name}: {fit.message}"
+        else:
+            success = False
+            message += f"; LM {spec.name} failed: {fit.message}"
     rms, per_view = _rms(reprojection_residuals(views, camera, poses))
     if not math.isfinite(rms):
         success, message = False, message + "; non-finite reprojection error"
@@ -201,4 +252,4 @@ def calibrate_camera(views: Sequence[CalibrationView], *, width: int, height: in
                              sigmas=sigmas, outlier_views=outliers, success=success, message=message,
                              method=method, ga_rms_px=ga_rms, lm_rms_px=lm_rms,
                              generations=0 if ga_res is None else ga_res.generations, ga=ga_res,
-                             view_names=tuple(v.name for v in views))
+                             view_names=tuple(v.name for v in views), model=spec.name)

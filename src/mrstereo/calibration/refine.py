@@ -3,9 +3,12 @@
 Minimizes the same objective as the GA, eq. (6) -- the sum of squared
 reprojection errors -- but with a local, gradient-based method
 (``scipy.optimize.least_squares``), from a GA result or from a closed-form
-initialisation. Parameters are the intrinsics ``[fx, fy, cx, cy, k1, k2]`` (or
-``[f, cx, cy, k1, k2]`` with ``fy = aspect * fx`` fixed) followed by six pose
-parameters ``(alpha, beta, gamma, tx, ty, tz)`` per view (conventions:
+initialisation. Parameters are the intrinsics ``[fx, fy, cx, cy]`` (or
+``[f, cx, cy]`` with ``fy = aspect * fx`` fixed) and the distortion
+coefficients of the fitted model (:data:`CALIBRATION_MODELS`: the paper's
+``k1, k2``; ``plumb_bob`` k1, k2, p1, p2, k3; ``rational`` k1, k2, p1, p2,
+k3, k4, k5, k6; ``fisheye`` k1..k4), followed by six pose parameters
+``(alpha, beta, gamma, tx, ty, tz)`` per view (conventions:
 docs/conventions.md). The Jacobian is computed by central differences grouped by
 the block structure (the poses of different views touch different residuals), so
 one Jacobian costs about 24 residual evaluations whatever the number of views.
@@ -20,14 +23,71 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..camera import Camera, euler_from_rotation, project_points, rotation_from_euler
+from ..camera import Camera, euler_from_rotation, get_distortion_model, project_points, rotation_from_euler
 from .targets import CalibrationView
 
-__all__ = ["INTRINSIC_NAMES", "LMFit", "refine_views", "grouped_jacobian", "pose_vector", "pose_matrix",
-           "fit_statistics"]
+__all__ = ["INTRINSIC_NAMES", "CALIBRATION_MODELS", "CalibrationModel", "calibration_model", "LMFit",
+           "refine_views", "project_views", "grouped_jacobian", "pose_vector", "pose_matrix", "fit_statistics"]
 
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2")
 POSE_NAMES = ("alpha", "beta", "gamma", "tx", "ty", "tz")
+
+
+@dataclass(frozen=True)
+class CalibrationModel:
+    """What a calibration fits: a ROS distortion model and how many of its leading coefficients.
+
+    ``k1k2`` (the paper's eq. 3, the GA's model) is ``plumb_bob`` with the first
+    two coefficients free and p1 = p2 = k3 = 0.
+    """
+
+    name: str
+    distortion_model: str
+    n_free: int
+
+    @property
+    def coefficient_names(self) -> tuple[str, ...]:
+        return get_distortion_model(self.distortion_model).params_info[:self.n_free]
+
+    def seed(self, camera: Camera) -> np.ndarray:
+        """Free coefficients to start from: the camera's where the models agree, else zero.
+
+        A pinhole model seeds a pinhole one (k1, k2, p1, p2, k3 share their
+        order); a fisheye starts without distortion.
+        """
+        x = np.zeros(self.n_free)
+        if camera.is_fisheye == get_distortion_model(self.distortion_model).is_fisheye:
+            n = min(self.n_free, camera.D.size)
+            x[:n] = camera.D[:n]
+        return x
+
+    def full_coefficients(self, free) -> np.ndarray:
+        """Free coefficients zero-padded to the model's coefficient vector."""
+        size = get_distortion_model(self.distortion_model).sizes[0]
+        return np.concatenate([np.asarray(free, dtype=np.float64), np.zeros(size - self.n_free)])
+
+    def camera(self, width: int, height: int, fx, fy, cx, cy, free) -> Camera:
+        """The :class:`Camera` of an intrinsic parameter vector."""
+        return Camera(width=width, height=height, fx=float(fx), fy=float(fy), cx=float(cx), cy=float(cy),
+                      distortion_model=self.distortion_model,
+                      coefficients=tuple(float(v) for v in self.full_coefficients(free)))
+
+
+CALIBRATION_MODELS = {
+    "k1k2": CalibrationModel("k1k2", "plumb_bob", 2),
+    "plumb_bob": CalibrationModel("plumb_bob", "plumb_bob", 5),
+    "rational": CalibrationModel("rational", "rational_polynomial", 8),
+    "fisheye": CalibrationModel("fisheye", "equidistant", 4),
+}
+
+
+def calibration_model(name) -> CalibrationModel:
+    """The :class:`CalibrationModel` of ``k1k2``, ``plumb_bob``, ``rational`` or ``fisheye``."""
+    if isinstance(name, CalibrationModel):
+        return name
+    if name not in CALIBRATION_MODELS:
+        raise ValueError(f"model must be one of {', '.join(CALIBRATION_MODELS)}, got {name!r}")
+    return CALIBRATION_MODELS[name]
 
 
 def pose_vector(T: np.ndarray) -> np.ndarray:
@@ -95,21 +155,41 @@ def fit_statistics(residuals: np.ndarray, J: np.ndarray) -> np.ndarray:
 
 
 def _intrinsics(x: np.ndarray, fix_aspect: float | None):
+    """``fx, fy, cx, cy, free coefficients`` of the intrinsic block of ``x``."""
     if fix_aspect is None:
-        return x[0], x[1], x[2], x[3], x[4], x[5]
-    return x[0], x[0] * fix_aspect, x[1], x[2], x[3], x[4]
+        return x[0], x[1], x[2], x[3], x[4:]
+    return x[0], x[0] * fix_aspect, x[1], x[2], x[3:]
+
+
+def project_views(views: Sequence[CalibrationView], R: np.ndarray, t: np.ndarray, *, fx, fy, cx, cy,
+                  distortion_model: str, D) -> np.ndarray:
+    """Reprojection residuals (projected - measured), flattened view by view, non-finite as 1e6.
+
+    ``R`` (V, 3, 3) and ``t`` (V, 3) are ``T_cam_from_target`` per view. Views
+    with equal point counts (a chessboard set) are projected in one broadcast
+    call.
+    """
+    kw = dict(fx=fx, fy=fy, cx=cx, cy=cy, distortion_model=distortion_model, D=D)
+    if len({len(v.uv) for v in views}) == 1:
+        pts = np.stack([v.points_target for v in views])
+        r = (project_points(pts, R=R, t=t, **kw) - np.stack([v.uv for v in views])).ravel()
+    else:
+        r = np.concatenate([(project_points(v.points_target, R=R[i], t=t[i], **kw) - v.uv).ravel()
+                            for i, v in enumerate(views)])
+    return np.where(np.isfinite(r), r, 1e6)
 
 
 def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequence[np.ndarray], *,
-                 fix_aspect: float | None = None, method: str = "lm", max_evaluations: int = 200
-                 ) -> LMFit:
+                 fix_aspect: float | None = None, method: str = "lm", max_evaluations: int = 200,
+                 model="k1k2") -> LMFit:
     """Levenberg-Marquardt over shared intrinsics and one pose per view.
 
     Parameters
     ----------
     views : sequence of CalibrationView
     camera : Camera
-        Initial intrinsics (image size is kept).
+        Initial intrinsics (image size is kept); its distortion seeds the
+        model's coefficients where the models agree (:meth:`CalibrationModel.seed`).
     poses : sequence of ndarray (4, 4)
         Initial ``T_cam_from_target`` per view.
     fix_aspect : float, optional
@@ -117,26 +197,23 @@ def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequen
         single planar view, where ``fx`` and ``fy`` are not separable).
     method : {"lm", "trf"}
         ``scipy.optimize.least_squares`` method ("trf" uses ``x_scale="jac"``).
+    model : {"k1k2", "plumb_bob", "rational", "fisheye"} or CalibrationModel
+        The distortion model fitted (:data:`CALIBRATION_MODELS`).
     """
-    n_int = 6 if fix_aspect is None else 5
-    x0_int = (np.array([camera.fx, camera.fy, camera.cx, camera.cy, camera.k1, camera.k2]) if fix_aspect is None
-              else np.array([camera.fx, camera.cx, camera.cy, camera.k1, camera.k2]))
-    x0 = np.concatenate([x0_int] + [pose_vector(T) for T in poses])
+    spec = calibration_model(model)
+    n_int = (4 if fix_aspect is None else 3) + spec.n_free
+    lin = [camera.fx, camera.fy, camera.cx, camera.cy] if fix_aspect is None else [camera.fx, camera.cx, camera.cy]
+    x0 = np.concatenate([lin, spec.seed(camera)] + [pose_vector(T) for T in poses])
     counts = [len(v.uv) for v in views]
     row_block = np.repeat(np.arange(len(views)), [2 * c for c in counts])
     col_block = np.concatenate([np.full(n_int, -1), np.repeat(np.arange(len(views)), 6)])
     col_local = np.concatenate([np.arange(n_int), np.tile(np.arange(6), len(views))])
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        fx, fy, cx, cy, k1, k2 = _intrinsics(x, fix_aspect)
-        out = []
-        for i, view in enumerate(views):
-            p = x[n_int + 6 * i: n_int + 6 * i + 6]
-            uv = project_points(view.points_target, fx=fx, fy=fy, cx=cx, cy=cy, k1=k1, k2=k2,
-                                R=rotation_from_euler(p[0], p[1], p[2]), t=p[3:6])
-            out.append((uv - view.uv).ravel())
-        r = np.concatenate(out)
-        return np.where(np.isfinite(r), r, 1e6)
+        fx, fy, cx, cy, free = _intrinsics(x[:n_int], fix_aspect)
+        p = x[n_int:].reshape(-1, 6)
+        return project_views(views, rotation_from_euler(p[:, 0], p[:, 1], p[:, 2]), p[:, 3:6], fx=fx, fy=fy, cx=cx,
+                             cy=cy, distortion_model=spec.distortion_model, D=spec.full_coefficients(free))
 
     def jac(x: np.ndarray) -> np.ndarray:
         return grouped_jacobian(residuals, x, col_block, col_local, row_block)
@@ -145,17 +222,17 @@ def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequen
     from scipy.optimize import least_squares   # lazy: 0.4 s to import, every CLI start paid it
     sol = least_squares(residuals, x0, jac=jac, method=method, max_nfev=max_evaluations, **kwargs)
     x = sol.x
-    fx, fy, cx, cy, k1, k2 = _intrinsics(x, fix_aspect)
     try:
-        cam = Camera(width=camera.width, height=camera.height, fx=float(fx), fy=float(fy), cx=float(cx),
-                     cy=float(cy), k1=float(k1), k2=float(k2))
+        cam = spec.camera(camera.width, camera.height, *_intrinsics(x[:n_int], fix_aspect))
         ok = bool(sol.success)
         message = str(sol.message)
     except ValueError as exc:            # e.g. a negative focal length: keep the start, report
-        cam, ok, message, x = camera, False, f"LM left the valid region: {exc}", x0
+        x = x0
+        cam = spec.camera(camera.width, camera.height, *_intrinsics(x[:n_int], fix_aspect))
+        ok, message = False, f"LM left the valid region: {exc}"
     r = residuals(x)
     sig = fit_statistics(r, jac(x))
-    names = INTRINSIC_NAMES if fix_aspect is None else ("fx", "cx", "cy", "k1", "k2")
+    names = (("fx", "fy", "cx", "cy") if fix_aspect is None else ("fx", "cx", "cy")) + spec.coefficient_names
     sigmas = {name: float(s) for name, s in zip(names, sig[:n_int])}
     if fix_aspect is not None:
         sigmas["fy"] = sigmas["fx"] * fix_aspect

@@ -17,11 +17,11 @@ from typing import Sequence
 import numpy as np
 
 from .. import _checks
-from ..camera import (Camera, RigMount, StereoCamera, project_points, rectified_px_from_raw_px, rectify_fusiello,
-                      rotation_from_euler)
-from .calibrate import CalibrationResult, _rms, calibrate_camera
+from ..camera import (MIN_BASELINE_M, RigMount, StereoCamera, check_not_swapped,
+                      rectified_px_from_raw_px, rectify_fusiello, rotation_from_euler)
+from .calibrate import CalibrationResult, _rms, calibrate_camera, reprojection_residuals
 from .ga import GABounds, GAConfig
-from .refine import INTRINSIC_NAMES, fit_statistics, grouped_jacobian, pose_matrix, pose_vector
+from .refine import calibration_model, fit_statistics, grouped_jacobian, pose_matrix, pose_vector, project_views
 from .targets import CalibrationView
 
 __all__ = ["StereoCalibrationResult", "calibrate_stereo", "rectified_points", "rectified_vertical_error_px"]
@@ -132,15 +132,21 @@ def _mean_rotation(Rs: Sequence[np.ndarray]) -> np.ndarray:
     return R
 
 
-def _cam_vec(c: Camera) -> np.ndarray:
-    return np.array([c.fx, c.fy, c.cx, c.cy, c.k1, c.k2])
+def _check_baseline(T: np.ndarray, poses_left: Sequence[np.ndarray]) -> None:
+    """Refuse a (near) zero baseline: shorter than 0.1 mm or than 1e-4 of the target distance."""
+    distance_m = float(np.median([np.linalg.norm(P[:3, 3]) for P in poses_left]))
+    baseline_m = float(np.linalg.norm(T))
+    if baseline_m < max(MIN_BASELINE_M, 1e-4 * distance_m):
+        raise ValueError(f"stereo-calibrate: the baseline is zero ({baseline_m:.2g} m for a target "
+                         f"{distance_m:.3g} m away): both views were taken from the same place; are the same "
+                         "images given as --left and --right?")
 
 
 def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequence[CalibrationView], *,
                      width: int, height: int, method: str = "ga+lm", ga_config: GAConfig | None = None,
                      bounds: GABounds | None = None, pixel_density_px_per_mm: float | None = None,
-                     alpha: float = 0.0, rig: RigMount | None = None, rng=None, progress=None
-                     ) -> StereoCalibrationResult:
+                     alpha: float = 0.0, rig: RigMount | None = None, rng=None, progress=None,
+                     model: str = "k1k2") -> StereoCalibrationResult:
     """Calibrate a stereo pair from views of the same target poses, and rectify it.
 
     Parameters
@@ -158,7 +164,17 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
         (:func:`mrstereo.camera.rectify_fusiello`).
     rng : numpy Generator, int or None
         Seed of both GAs.
+    model : {"k1k2", "plumb_bob", "rational", "fisheye"}
+        Distortion model of both cameras (:func:`calibrate_camera`).
+
+    Raises
+    ------
+    ValueError
+        Also when the baseline is (near) zero (the same images given twice)
+        or the views look swapped (the right camera sits on the left,
+        :func:`mrstereo.camera.check_not_swapped`).
     """
+    spec = calibration_model(model)
     left_views, right_views = list(left_views), list(right_views)
     if len(left_views) != len(right_views):
         raise ValueError(f"left and right need the same number of views, got {len(left_views)} and "
@@ -173,44 +189,45 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
     right_views = [_agree_with_left(a, b) for a, b in zip(left_views, right_views)]
     gen = _checks.rng(rng)
     kw = dict(width=width, height=height, method=method, ga_config=ga_config, bounds=bounds,
-              pixel_density_px_per_mm=pixel_density_px_per_mm, rng=gen, progress=progress)
+              pixel_density_px_per_mm=pixel_density_px_per_mm, rng=gen, progress=progress, model=spec.name)
     left = calibrate_camera(left_views, **kw)
     right = calibrate_camera(right_views, **kw)
     rel = [Tr @ np.linalg.inv(Tl) for Tl, Tr in zip(left.poses, right.poses)]
     R = _mean_rotation([T[:3, :3] for T in rel])
     T = np.median(np.stack([Tr[:3, 3] - R @ Tl[:3, 3] for Tl, Tr in zip(left.poses, right.poses)]), axis=0)
+    _check_baseline(T, left.poses)
+    check_not_swapped(R, T, where="stereo-calibrate")
     cam_l, cam_r = left.camera, right.camera
     poses_l = list(left.poses)
     success = left.success and right.success
     message = f"left: {left.message} | right: {right.message}"
     sigmas: dict = {}
     V = len(left_views)
+    n = 4 + spec.n_free                 # fx, fy, cx, cy and the model's coefficients, per camera
 
     def unpack(x):
-        rel_T = pose_matrix(x[12 + 6 * V:])
-        return x[:6], x[6:12], [x[12 + 6 * i: 18 + 6 * i] for i in range(V)], rel_T
+        rel_T = pose_matrix(x[2 * n + 6 * V:])
+        return x[:n], x[n:2 * n], [x[2 * n + 6 * i: 2 * n + 6 + 6 * i] for i in range(V)], rel_T
 
     def residuals(x):
         il, ir, pl, relT = unpack(x)
-        out = []
-        for i in range(V):
-            Rl, tl = rotation_from_euler(*pl[i][:3]), pl[i][3:]
-            Rr, tr = relT[:3, :3] @ Rl, relT[:3, :3] @ tl + relT[:3, 3]
-            for intr, R_, t_, view in ((il, Rl, tl, left_views[i]), (ir, Rr, tr, right_views[i])):
-                uv = project_points(view.points_target, fx=intr[0], fy=intr[1], cx=intr[2], cy=intr[3],
-                                    k1=intr[4], k2=intr[5], R=R_, t=t_)
-                out.append((uv - view.uv).ravel())
-        r = np.concatenate(out)
-        return np.where(np.isfinite(r), r, 1e6)
+        pl = np.asarray(pl)
+        Rl, tl = rotation_from_euler(pl[:, 0], pl[:, 1], pl[:, 2]), pl[:, 3:6]
+        Rr, tr = relT[:3, :3] @ Rl, tl @ relT[:3, :3].T + relT[:3, 3]
+        return np.concatenate([project_views(views, R_, t_, fx=intr[0], fy=intr[1], cx=intr[2], cy=intr[3],
+                                             distortion_model=spec.distortion_model,
+                                             D=spec.full_coefficients(intr[4:]))
+                               for intr, R_, t_, views in ((il, Rl, tl, left_views), (ir, Rr, tr, right_views))])
 
     Trel = np.eye(4)
     Trel[:3, :3], Trel[:3, 3] = R, T
-    x0 = np.concatenate([_cam_vec(cam_l), _cam_vec(cam_r)] + [pose_vector(P) for P in poses_l]
-                        + [pose_vector(Trel)])
+    x0 = np.concatenate([[c.fx, c.fy, c.cx, c.cy, *spec.seed(c)] for c in (cam_l, cam_r)]
+                        + [pose_vector(P) for P in poses_l] + [pose_vector(Trel)])
     if method != "ga":
-        row_block = np.repeat(np.arange(V), [2 * (len(a.uv) + len(b.uv)) for a, b in zip(left_views, right_views)])
-        col_block = np.concatenate([np.full(12, -1), np.repeat(np.arange(V), 6), np.full(6, -1)])
-        col_local = np.concatenate([np.arange(12), np.tile(np.arange(6), V), np.arange(6)])
+        row_block = np.concatenate([np.repeat(np.arange(V), [2 * len(v.uv) for v in views])
+                                    for views in (left_views, right_views)])     # residuals: all left, all right
+        col_block = np.concatenate([np.full(2 * n, -1), np.repeat(np.arange(V), 6), np.full(6, -1)])
+        col_local = np.concatenate([np.arange(2 * n), np.tile(np.arange(6), V), np.arange(6)])
 
         def jac(x):
             return grouped_jacobian(residuals, x, col_block, col_local, row_block)
@@ -219,15 +236,16 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
         sol = least_squares(residuals, x0, jac=jac, method="lm", max_nfev=200)
         try:
             il, ir, pl, relT = unpack(sol.x)
-            new_l = Camera(width, height, *(float(v) for v in il))
-            new_r = Camera(width, height, *(float(v) for v in ir))
+            new_l = spec.camera(width, height, *il[:4], il[4:])
+            new_r = spec.camera(width, height, *ir[:4], ir[4:])
             if sol.fun @ sol.fun > residuals(x0) @ residuals(x0) + 1e-9:
                 raise ValueError("joint fit increased the error")
             cam_l, cam_r, poses_l = new_l, new_r, [pose_matrix(p) for p in pl]
             R, T = relT[:3, :3], relT[:3, 3]
             sig = fit_statistics(sol.fun, jac(sol.x))
-            sigmas = {f"{side}_{n}": float(s) for side, block in (("left", sig[:6]), ("right", sig[6:12]))
-                      for n, s in zip(INTRINSIC_NAMES, block)}
+            names = ("fx", "fy", "cx", "cy") + spec.coefficient_names
+            sigmas = {f"{side}_{name}": float(s) for side, block in (("left", sig[:n]), ("right", sig[n:2 * n]))
+                      for name, s in zip(names, block)}
             sigmas.update({f"T{a}": float(s) for a, s in zip("xyz", sig[-3:])})
             success = success and bool(sol.success)
             message += f" | joint LM: {sol.message}"
@@ -236,11 +254,10 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
             message += f" | joint LM failed: {exc}"
     Trel = np.eye(4)
     Trel[:3, :3], Trel[:3, 3] = R, T
-    res_l = [project_points(v.points_target, fx=cam_l.fx, fy=cam_l.fy, cx=cam_l.cx, cy=cam_l.cy, k1=cam_l.k1,
-                            k2=cam_l.k2, R=P[:3, :3], t=P[:3, 3]) - v.uv for v, P in zip(left_views, poses_l)]
+    check_not_swapped(R, T, where="stereo-calibrate")
     poses_r = [Trel @ P for P in poses_l]
-    res_r = [project_points(v.points_target, fx=cam_r.fx, fy=cam_r.fy, cx=cam_r.cx, cy=cam_r.cy, k1=cam_r.k1,
-                            k2=cam_r.k2, R=P[:3, :3], t=P[:3, 3]) - v.uv for v, P in zip(right_views, poses_r)]
+    res_l = reprojection_residuals(left_views, cam_l, poses_l)
+    res_r = reprojection_residuals(right_views, cam_r, poses_r)
     rms = _rms(res_l + res_r)[0]
     per_view = np.stack([_rms(res_l)[1], _rms(res_r)[1]], axis=1)
     rect = rectify_fusiello(cam_l, cam_r, R, T, alpha=alpha, rig=rig)

@@ -7,14 +7,14 @@ from .camera_info import (CameraInfo, RigMount, StereoCamera, read_camera_info, 
 from .model import (DISTORTION_MODELS, Camera, DistortionModel, PaperCamera, distort_normalized,
                     euler_from_rotation, get_distortion_model, normalized_from_pixels, pixels_from_normalized,
                     project_points, rotation_from_euler, undistort_normalized)
-from .rectification import (FusielloRectification, check_baseline, check_not_swapped, fusiello_rotation,
+from .rectification import (MIN_BASELINE_M, FusielloRectification, check_baseline, check_not_swapped, fusiello_rotation,
                             raw_px_from_rectified_px, rectified_px_from_raw_px, rectify_fusiello)
 
 __all__ = [
     "Camera", "PaperCamera", "CameraInfo", "RigMount", "StereoCamera", "read_camera_info",
     "write_camera_info", "read_stereo", "write_stereo", "distort_normalized", "undistort_normalized",
     "project_points", "pixels_from_normalized", "normalized_from_pixels", "rotation_from_euler",
-    "euler_from_rotation", "DistortionModel", "DISTORTION_MODELS", "get_distortion_model",
+    "euler_from_rotation", "DistortionModel", "DISTORTION_MODELS", "get_distortion_model", "MIN_BASELINE_M",
 ]
 __all__ += ["FusielloRectification", "fusiello_rotation", "rectify_fusiello", "check_not_swapped",
             "check_baseline", "rectified_px_from_raw_px", "raw_px_from_rectified_px"]

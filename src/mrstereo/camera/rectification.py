@@ -33,8 +33,9 @@ border is undistorted through ``Camera.rays`` and the maps come from
 rectified view is always a pinhole.
 
 Choice of ``A``: the raw image border of each camera (where a border ray lies more
-than 80 degrees off the optical axis, or beyond a fisheye's 90 degrees, the
-point of that line toward the principal point at the limit) is undistorted and rotated
+than 80 degrees off the optical axis, beyond a fisheye's 90 degrees or beyond
+the fold of a distortion polynomial, the outermost usable point on the line
+toward the principal point) is undistorted and rotated
 into the rectified frame. The inner box (every pixel inside it is seen by both
 cameras) and the outer box (every raw pixel kept) are computed;
 ``alpha = 0`` chooses the focal length and principal point so that the inner
@@ -173,23 +174,27 @@ def check_not_swapped(R, T, *, where: str = "stereo calibration") -> None:
                          "--right (or the left and right topics/files)")
 
 
-def _border_rays(camera: Camera, uv: np.ndarray, *, steps: int = 200) -> np.ndarray:
-    """Rays (N, 3) of border pixels, pulled in toward the principal point where a ray is
-    more than ``MAX_RAY_ANGLE_RAD`` off the optical axis or does not exist (fisheye corners)."""
-    def usable(rays):
-        with np.errstate(invalid="ignore"):
-            return np.isfinite(rays).all(axis=-1) & (np.hypot(rays[..., 0], rays[..., 1])
-                                                     <= np.tan(MAX_RAY_ANGLE_RAD))
-    rays = camera.rays(uv)
-    bad = ~usable(rays)
-    if bad.any():
-        centre = np.array([camera.cx, camera.cy])
-        frac = np.linspace(1.0, 0.0, steps)[:, None, None]                  # border -> centre
-        pts = centre + frac * (uv[bad] - centre)                            # (steps, n_bad, 2)
-        cand = camera.rays(pts.reshape(-1, 2)).reshape(steps, -1, 3)
-        first = np.argmax(usable(cand), axis=0)                             # outermost usable sample
-        rays[bad] = cand[first, np.arange(cand.shape[1])]
-    return rays
+def _border_rays(camera: Camera, uv: np.ndarray, *, steps: int = 64) -> np.ndarray:
+    """Rays (N, 3) of border pixels, or of the outermost usable pixel on the line to the principal point.
+
+    A pixel is usable when its ray exists (inside a fisheye's 90 degrees),
+    lies at most ``MAX_RAY_ANGLE_RAD`` off the optical axis on the pixel's side
+    of it, and every pixel between it and the principal point is usable with
+    the ray's angle growing outward -- a polynomial fitted to the image centre may fold back beyond
+    the calibrated area, where its inverse jumps to another branch.
+    """
+    centre = np.array([camera.cx, camera.cy])
+    frac = np.linspace(0.0, 1.0, steps)[:, None, None]                     # centre -> border
+    pts = centre + frac * (uv - centre)                                     # (steps, N, 2)
+    rays = camera.rays(pts.reshape(-1, 2)).reshape(steps, len(uv), 3)
+    with np.errstate(invalid="ignore"):
+        radius = np.hypot(rays[..., 0], rays[..., 1])
+        ok = np.isfinite(radius) & (radius <= np.tan(MAX_RAY_ANGLE_RAD))
+        ok[1:] &= radius[1:] > radius[:-1]
+        ok &= np.sum(rays[..., :2] * ((uv - centre) / [camera.fx, camera.fy]), axis=-1) >= 0   # not mirrored
+    ok = np.logical_and.accumulate(ok, axis=0)
+    last = steps - 1 - np.argmax(ok[::-1], axis=0)                          # outermost usable sample
+    return rays[last, np.arange(len(uv))]
 
 
 def _rectified_border(camera: Camera, R_rect: np.ndarray) -> dict[str, np.ndarray]:

@@ -9,9 +9,10 @@ import click
 from tqdm import tqdm
 
 from .. import _checks
-from ..calibration import (METHODS, MULTIVIEW_GA, GAConfig, calibrate_camera, calibrate_stereo,
-                           chessboard_pairs, chessboard_views, expand_glob, parse_board, read_control_points)
-from ..calibration.report import markdown_report, residual_figure, write_json, write_text
+from ..calibration import (METHODS, MODELS, MULTIVIEW_GA, GAConfig, calibrate_camera, calibrate_stereo,
+                           check_view_geometry, chessboard_pairs, chessboard_views, expand_glob, parse_board,
+                           read_control_points, reprojection_residuals)
+from ..calibration.report import camera_line, markdown_report, residual_figure, write_json, write_text
 from ..camera import CameraInfo, read_stereo, write_camera_info, write_stereo
 from ..io import IMAGE_SUFFIXES, check_output_dir, check_outputs, read_image, write_image
 
@@ -44,6 +45,13 @@ def _check_report_outputs(output: Path, stem_suffix: str, inputs, extra=None) ->
     check_outputs(outputs, inputs, suffixes={"--output": (".yaml", ".yml")})
 
 
+def _model_option():
+    return click.option("--model", type=click.Choice(MODELS), default="k1k2", show_default=True,
+                        help="Distortion model: k1k2 (the paper's, what the GA fits), plumb_bob (k1, k2, p1, "
+                             "p2, k3), rational (k1..k6, p1, p2) or fisheye (equidistant k1..k4); the richer "
+                             "models are fitted by LM from the k1k2 result.")
+
+
 def _siblings(output: Path, stem_suffix: str) -> dict[str, Path]:
     base = output.with_suffix("")
     return {k: base.with_name(f"{base.name}{stem_suffix}.{k}") for k in ("json", "md", "png")}
@@ -58,11 +66,12 @@ def _siblings(output: Path, stem_suffix: str) -> dict[str, Path]:
 @click.option("--board", default="9x6", show_default=True, help="Inner corners, columns x rows.")
 @click.option("--square", type=float, default=0.025, show_default=True, help="Square size [m].")
 @click.option("--method", type=click.Choice(METHODS), default="ga+lm", show_default=True)
+@_model_option()
 @click.option("--seed", type=int, default=0, show_default=True, help="GA seed.")
 @click.option("--generations", type=int, default=None, help="GA generation limit (default 2000 for one "
               "view, 200 for several).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="camera_info YAML.")
-def calibrate_cmd(points, image_size, units, images_glob, board, square, method, seed, generations, output):
+def calibrate_cmd(points, image_size, units, images_glob, board, square, method, model, seed, generations, output):
     """Calibrate one camera (GA of paper sec. 2.2, GA + LM, or LM).
 
     Writes OUTPUT (ROS camera_info YAML) and, next to it, OUTPUT_report.json,
@@ -70,6 +79,9 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
     """
     if (points is None) == (images_glob is None):
         raise click.UsageError("give exactly one of --points FILE or --images GLOB")
+    if method == "ga" and model != "k1k2":
+        raise ValueError(f"--method ga fits the paper's k1k2 model only; --model {model} needs "
+                         "--method ga+lm or lm")
     output = Path(output)
     if points is not None:
         if image_size is None:
@@ -91,6 +103,8 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
         missing = [p.name for p, v in zip(paths, found) if v is None]
         if missing:
             click.echo(f"board not found in {len(missing)} image(s): {', '.join(missing)}", err=True)
+    for view in views:
+        check_view_geometry(view)          # before any progress bar: one line for degenerate points
     config = None
     if generations is not None:
         base = GAConfig() if len(views) == 1 else MULTIVIEW_GA
@@ -98,8 +112,8 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
     total = (config or (GAConfig() if len(views) == 1 else MULTIVIEW_GA)).generations
     bar, update = _progress_bar(total, "GA") if method != "lm" else (None, None)
     try:
-        result = calibrate_camera(views, width=width, height=height, method=method, ga_config=config, rng=seed,
-                                  progress=update)
+        result = calibrate_camera(views, width=width, height=height, method=method, model=model, ga_config=config,
+                                  rng=seed, progress=update)
     finally:
         if bar is not None:
             bar.close()
@@ -108,10 +122,8 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
     write_camera_info(output, CameraInfo(result.camera, name=output.stem))
     write_json(files["json"], result.summary())
     write_text(files["md"], markdown_report(result))
-    residual_figure(figure, result.camera, views)
-    c = result.camera
-    click.echo(f"{method}: RMS {result.rms_px:.4f} px over {len(views)} view(s); fx={c.fx:.2f} fy={c.fy:.2f} "
-               f"cx={c.cx:.2f} cy={c.cy:.2f} k1={c.k1:.4f} k2={c.k2:.4f}"
+    residual_figure(figure, result.camera, views, residuals=reprojection_residuals(views, result.camera, result.poses))
+    click.echo(f"{method}: RMS {result.rms_px:.4f} px over {len(views)} view(s); {camera_line(result.camera)}"
                + ("" if result.success else f" [NOT CONVERGED: {result.message}]"))
     if result.outlier_views:
         click.echo("outlier views: " + ", ".join(result.view_names[i] for i in result.outlier_views), err=True)
@@ -124,17 +136,21 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
 @click.option("--board", default="9x6", show_default=True, help="Inner corners, columns x rows.")
 @click.option("--square", type=float, default=0.025, show_default=True, help="Square size [m].")
 @click.option("--method", type=click.Choice(METHODS), default="ga+lm", show_default=True)
+@_model_option()
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--alpha", type=float, default=0.0, show_default=True,
               help="Rectified view: 0 = valid pixels only, 1 = all raw pixels.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Stereo YAML.")
-def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, seed, alpha, output):
+def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, seed, alpha, output):
     """Calibrate and rectify (Fusiello) a stereo pair from chessboard image pairs.
 
     Pairs are matched by sorted file order; a pair where either board is not
     found is skipped and reported. Writes OUTPUT and OUTPUT_report.{json,md}.
     """
     output = Path(output)
+    if method == "ga" and model != "k1k2":
+        raise ValueError(f"--method ga fits the paper's k1k2 model only; --model {model} needs "
+                         "--method ga+lm or lm")
     cols_rows = parse_board(board)
     square = _square(square)
     alpha = _checks.finite_number("--alpha", alpha)
@@ -154,7 +170,7 @@ def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, seed, alp
     bar, update = _progress_bar(MULTIVIEW_GA.generations, "GA") if method != "lm" else (None, None)
     try:
         result = calibrate_stereo([p[0] for p in pairs], [p[1] for p in pairs], width=size_l[0], height=size_l[1],
-                                  method=method, alpha=alpha, rng=seed, progress=update)
+                                  method=method, model=model, alpha=alpha, rng=seed, progress=update)
     finally:
         if bar is not None:
             bar.close()
