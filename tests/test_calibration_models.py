@@ -1,6 +1,4 @@
 """--model plumb_bob | rational | fisheye: LM fits checked against OpenCV and a known synthetic fisheye."""
-from pathlib import Path
-
 import cv2
 import numpy as np
 import pytest
@@ -8,9 +6,10 @@ import pytest
 from mrstereo.camera import Camera
 from mrstereo.calibration import (CALIBRATION_MODELS, calibrate_camera, chessboard_views, expand_glob,
                                   planar_grid, pose_looking_at, synthetic_view)
+from mrstereo.data import local_path
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "opencv_calib" / "stereo_chessboard_9x6"
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real calibration data not found at {DATA}")
+DATA = local_path("opencv-stereo-chessboard")
+needs_data = pytest.mark.sample_data("opencv-stereo-chessboard")
 
 
 @pytest.fixture(scope="module")
