@@ -11,6 +11,11 @@ Run:  python benchmarks/bench_calibration.py [--quick]
 3. Rendered chessboard images through cv2.findChessboardCorners: stereo GA + LM.
 4. OpenCV's real stereo set (13 pairs): GA + LM vs cv2.calibrateCamera /
    stereoCalibrate + stereoRectify on the same corners, with timings.
+5. Every --model (k1k2, plumb_bob, rational, fisheye) on the same set with LM vs
+   cv2.calibrateCamera (matching flags) + cv2.stereoCalibrate + cv2.stereoRectify, or their
+   cv2.fisheye counterparts; and the set given swapped.
+
+Run one section: python benchmarks/bench_calibration.py --section 5
 """
 from __future__ import annotations
 
@@ -224,16 +229,83 @@ def real_data(repeats):
               f"cv2.stereoRectify {cv_vert:.4f} px")
 
 
+MODEL_FLAGS = {"k1k2": FLAGS, "plumb_bob": 0, "rational": cv2.CALIB_RATIONAL_MODEL}
+
+
+def real_models():
+    try:
+        DATA = sample_data.fetch("opencv-stereo-chessboard")
+    except (OSError, ValueError) as exc:
+        print(f"\n[5] skipped: OpenCV's stereo chessboards not available ({exc})")
+        return
+    pairs = chessboard_pairs(expand_glob(str(DATA / "left*.jpg")), expand_glob(str(DATA / "right*.jpg")),
+                             (9, 6), 0.025)
+    size = pairs.size
+    obj = [v.points_target.astype(np.float32) for v in pairs.left]
+    il = [v.uv.astype(np.float32) for v in pairs.left]
+    ir = [v.uv.astype(np.float32) for v in pairs.right]
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+    print(f"\n[5] every --model, LM, OpenCV stereo set ({len(il)} pairs), same corners")
+    for model in ("k1k2", "plumb_bob", "rational", "fisheye"):
+        t0 = time.perf_counter()
+        res = calibrate_stereo(pairs.left, pairs.right, width=size[0], height=size[1], method="lm", model=model)
+        dt = time.perf_counter() - t0
+        if model == "fisheye":
+            o3 = [o.reshape(1, -1, 3).astype(np.float64) for o in obj]
+            l2, r2_ = ([i.reshape(1, -1, 2).astype(np.float64) for i in img] for img in (il, ir))
+            fl = cv2.CALIB_RECOMPUTE_EXTRINSIC | cv2.CALIB_FIX_SKEW
+            r1, K1, D1, *_ = cv2.fisheye.calibrate(o3, l2, size, np.eye(3), np.zeros(4), flags=fl, criteria=crit)
+            r2, K2, D2, *_ = cv2.fisheye.calibrate(o3, r2_, size, np.eye(3), np.zeros(4), flags=fl, criteria=crit)
+            rs, K1, D1, K2, D2, R, T, *_ = cv2.fisheye.stereoCalibrate(
+                o3, l2, r2_, K1, D1, K2, D2, size, flags=fl | cv2.CALIB_USE_INTRINSIC_GUESS, criteria=crit)
+            R1, R2, P1, P2, _ = cv2.fisheye.stereoRectify(K1, D1, K2, D2, size, R, T, cv2.CALIB_ZERO_DISPARITY)
+            dy = np.mean([np.mean(np.abs(
+                cv2.fisheye.undistortPoints(a, K1, D1, R=R1, P=P1, criteria=crit)[0, :, 1]
+                - cv2.fisheye.undistortPoints(b, K2, D2, R=R2, P=P2, criteria=crit)[0, :, 1]))
+                for a, b in zip(l2, r2_)])
+        else:
+            flags = MODEL_FLAGS[model]
+            r1, K1, D1, *_ = cv2.calibrateCamera(obj, il, size, None, None, flags=flags)
+            r2, K2, D2, *_ = cv2.calibrateCamera(obj, ir, size, None, None, flags=flags)
+            rs, K1, D1, K2, D2, R, T, *_ = cv2.stereoCalibrate(obj, il, ir, K1, D1, K2, D2, size,
+                                                              flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS)
+            R1, R2, P1, P2, *_ = cv2.stereoRectify(K1, D1, K2, D2, size, R, T, alpha=0)
+            dy = np.mean([np.mean(np.abs(
+                cv2.undistortPoints(a.reshape(-1, 1, 2), K1, D1, R=R1, P=P1, criteria=crit)[:, 0, 1]
+                - cv2.undistortPoints(b.reshape(-1, 1, 2), K2, D2, R=R2, P=P2, criteria=crit)[:, 0, 1]))
+                for a, b in zip(il, ir)])
+        dy_f = res.vertical_error_px / res.stereo.focal_px          # in radians: independent of the zoom
+        print(f"  {model:9s}: left RMS {res.left.rms_px:.4f} vs cv2 {r1:.4f}, right {res.right.rms_px:.4f} vs "
+              f"{r2:.4f}; joint RMS {res.rms_px:.4f} vs cv2.stereoCalibrate {rs:.4f} "
+              f"({100 * (res.rms_px / rs - 1):+.2f} %); rectified mean |dy| {res.vertical_error_px:.4f} vs "
+              f"cv2.stereoRectify {dy:.4f} px ({100 * (res.vertical_error_px / dy - 1):+.2f} %) at rectified focal "
+              f"lengths {res.stereo.focal_px:.1f} vs {P1[0, 0]:.1f} px, |dy| / f {100 * (dy_f / (dy / P1[0, 0]) - 1):+.2f} "
+              f"%; {dt:.1f} s")
+    try:
+        calibrate_stereo(pairs.right, pairs.left, width=size[0], height=size[1], method="lm")
+        print("  swapped: NOT refused")
+    except ValueError as exc:
+        print(f"  swapped (right images as left): {exc}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer seeds and repeats")
+    ap.add_argument("--section", type=int, choices=range(1, 6), help="run only this section")
     args = ap.parse_args()
     seeds = [0, 1] if args.quick else [0, 1, 2, 3, 4]
     repeats = 1 if args.quick else 2
-    paper_dot_target(seeds)
-    synthetic_multiview([0, 1, 2] if args.quick else list(range(20)), default_ga_timing=not args.quick)
-    rendered_images(12)
-    real_data(repeats)
+    run = (lambda k: args.section in (None, k))
+    if run(1):
+        paper_dot_target(seeds)
+    if run(2):
+        synthetic_multiview([0, 1, 2] if args.quick else list(range(20)), default_ga_timing=not args.quick)
+    if run(3):
+        rendered_images(12)
+    if run(4):
+        real_data(repeats)
+    if run(5):
+        real_models()
 
 
 if __name__ == "__main__":

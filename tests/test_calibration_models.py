@@ -59,9 +59,8 @@ def test_models_equal_opencv_on_real_chessboards(left_views, model):
     corners = np.concatenate([v.uv for v in views])
     if model != "rational":
         assert _field_difference_px(res.camera, cam_cv, corners) < 0.05
-    # ... and a wrong model would not: the k1k2 fit differs by more
-    k1k2 = calibrate_camera(views, width=size[0], height=size[1], method="lm")
-    assert res.rms_px < k1k2.rms_px
+    # the richer model fits better than the paper's k1k2 (its own LM stage, from the same start)
+    assert res.rms_px < res.lm_rms_px
     assert set(res.sigmas) >= {"fx", "cx"} | set(CALIBRATION_MODELS[model].coefficient_names)
     s = res.summary()
     assert s["model"] == model and len(s["camera"]["D"]) == res.camera.D.size
