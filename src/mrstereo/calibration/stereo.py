@@ -19,7 +19,7 @@ import numpy as np
 from .. import _checks
 from ..camera import (MIN_BASELINE_M, RigMount, StereoCamera, check_not_swapped,
                       rectified_px_from_raw_px, rectify_fusiello, rotation_from_euler)
-from .calibrate import CalibrationResult, _rms, calibrate_camera, reprojection_residuals
+from .calibrate import CalibrationResult, _rms, calibrate_camera, reprojection_residuals, zhang_init
 from .ga import GABounds, GAConfig
 from .refine import calibration_model, fit_statistics, grouped_jacobian, pose_matrix, pose_vector, project_views
 from .targets import CalibrationView
@@ -132,6 +132,13 @@ def _mean_rotation(Rs: Sequence[np.ndarray]) -> np.ndarray:
     return R
 
 
+def _relative_pose(poses_left, poses_right) -> tuple[np.ndarray, np.ndarray]:
+    """``R``, ``T`` (``x_right = R x_left + T``) from per-view poses: chordal mean, median."""
+    R = _mean_rotation([(Tr @ np.linalg.inv(Tl))[:3, :3] for Tl, Tr in zip(poses_left, poses_right)])
+    T = np.median(np.stack([Tr[:3, 3] - R @ Tl[:3, 3] for Tl, Tr in zip(poses_left, poses_right)]), axis=0)
+    return R, T
+
+
 def _check_baseline(T: np.ndarray, poses_left: Sequence[np.ndarray]) -> None:
     """Refuse a (near) zero baseline: shorter than 0.1 mm or than 1e-4 of the target distance."""
     distance_m = float(np.median([np.linalg.norm(P[:3, 3]) for P in poses_left]))
@@ -190,11 +197,21 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
     gen = _checks.rng(rng)
     kw = dict(width=width, height=height, method=method, ga_config=ga_config, bounds=bounds,
               pixel_density_px_per_mm=pixel_density_px_per_mm, rng=gen, progress=progress, model=spec.name)
+    if all(v.is_planar for v in left_views):
+        # before the (slow) GA: the closed-form poses already tell a swapped or zero baseline
+        poses = [zhang_init(views, width=width, height=height)[1] for views in (left_views, right_views)]
+        R, T = _relative_pose(*poses)
+        _check_baseline(T, poses[0])
+        try:
+            check_not_swapped(R, T, where="stereo-calibrate")
+        except ValueError:      # confirm (and measure) with LM poses: the closed form ignores distortion
+            poses = [calibrate_camera(views, width=width, height=height, method="lm").poses
+                     for views in (left_views, right_views)]
+            R, T = _relative_pose(*poses)
+            check_not_swapped(R, T, where="stereo-calibrate")
     left = calibrate_camera(left_views, **kw)
     right = calibrate_camera(right_views, **kw)
-    rel = [Tr @ np.linalg.inv(Tl) for Tl, Tr in zip(left.poses, right.poses)]
-    R = _mean_rotation([T[:3, :3] for T in rel])
-    T = np.median(np.stack([Tr[:3, 3] - R @ Tl[:3, 3] for Tl, Tr in zip(left.poses, right.poses)]), axis=0)
+    R, T = _relative_pose(left.poses, right.poses)
     _check_baseline(T, left.poses)
     check_not_swapped(R, T, where="stereo-calibrate")
     cam_l, cam_r = left.camera, right.camera
