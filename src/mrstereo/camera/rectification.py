@@ -232,7 +232,7 @@ def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0,
     Parameters
     ----------
     left, right : Camera
-        Raw intrinsics (with radial distortion) of both cameras, same image size.
+        Raw intrinsics of both cameras (any distortion model), same image size.
     R : ndarray of shape (3, 3)
         Rotation from the left to the right camera frame.
     T : ndarray of shape (3,)
