@@ -10,9 +10,6 @@ from mrstereo.camera.formats import import_calibration, read_calibration
 from mrstereo.cli import entry
 from mrstereo.data import local_path
 
-if not hasattr(Camera, "from_ros"):
-    pytest.skip("needs the ROS camera models (Camera.from_ros)", allow_module_level=True)
-
 CHESS = local_path("opencv-stereo-chessboard")
 LORIS = local_path("openloris-sample")
 

@@ -27,7 +27,7 @@ import yaml
 
 from .. import _checks
 from ..io import atomic_write
-from .model import Camera
+from .model import Camera, get_distortion_model
 
 __all__ = ["CameraInfo", "RigMount", "StereoCamera", "read_camera_info", "write_camera_info",
            "read_stereo", "write_stereo", "camera_from_ros", "check_stereo", "overlap_share"]
@@ -43,12 +43,8 @@ MIN_OVERLAP = 0.05
 #: Tolerance of ``R R^T = I`` and ``det R = 1``.
 ROTATION_TOL = 1e-3
 
-_MODEL_NAMES = {
-    "plumb_bob": "plumb_bob", "radtan": "plumb_bob", "radial-tangential": "plumb_bob",
-    "radial_tangential": "plumb_bob", "rational_polynomial": "rational_polynomial",
-    "equidistant": "equidistant", "equi": "equidistant", "fisheye": "equidistant",
-    "kannala-brandt": "equidistant", "kannala_brandt": "equidistant",
-}
+#: Spellings of other tools' files that the model registry does not list as aliases.
+_FILE_SPELLINGS = {"radial-tangential": "radtan", "radial_tangential": "radtan", "kannala-brandt": "kannala_brandt"}
 
 
 def numbers(value, *, where: str, field: str, sizes=None, shape=None) -> np.ndarray:
@@ -77,12 +73,12 @@ def numbers(value, *, where: str, field: str, sizes=None, shape=None) -> np.ndar
 
 
 def ros_model_name(name, *, where: str) -> str:
-    """The ROS name of a distortion model given under any of its common names."""
+    """The ROS name of a distortion model given under any of its names (registry aliases, EuRoC, OpenLORIS)."""
     key = str(name).strip().lower()
-    if key not in _MODEL_NAMES:
-        raise ValueError(f"{where}: distortion_model '{name}' is not supported "
-                         "(plumb_bob/radtan, rational_polynomial, equidistant/fisheye)")
-    return _MODEL_NAMES[key]
+    try:
+        return get_distortion_model(_FILE_SPELLINGS.get(key, key)).name
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
 
 
 def camera_from_ros(width, height, K, distortion_model, D, *, where: str) -> Camera:
@@ -113,14 +109,7 @@ def camera_from_ros(width, height, K, distortion_model, D, *, where: str) -> Cam
         raise ValueError(f"{where}: field 'distortion_coefficients' has an implausible value "
                          f"{D[np.argmax(np.abs(D))]:g}")
     try:
-        if hasattr(Camera, "from_ros"):
-            return Camera.from_ros(int(width), int(height), K, model, D)
-        D5 = np.concatenate([D, np.zeros(max(0, 5 - D.size))])
-        if model != "plumb_bob" or D.size > 5 or np.any(D5[2:] != 0):
-            raise ValueError(f"distortion model {model} with {D.size} coefficients needs the "
-                             "richer camera models")
-        return Camera(width=int(width), height=int(height), fx=K[0, 0], fy=K[1, 1], cx=K[0, 2],
-                      cy=K[1, 2], k1=D5[0], k2=D5[1])
+        return Camera.from_ros(int(width), int(height), K, model, D)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
 
@@ -132,10 +121,6 @@ def _given(value, default):
 
 def _rotation_error(R: np.ndarray) -> float:
     return max(float(np.abs(R @ R.T - np.eye(3)).max()), abs(float(np.linalg.det(R)) - 1.0))
-
-
-def _camera_D(camera: Camera) -> np.ndarray:
-    return np.asarray(getattr(camera, "D", camera.dist_coeffs), dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -158,12 +143,12 @@ class CameraInfo:
     def to_dict(self) -> dict:
         """ROS camera_info fields as plain Python types."""
         cam = self.camera
-        D = [float(v) for v in _camera_D(cam)]
         return {
             "image_width": cam.width, "image_height": cam.height, "camera_name": self.name,
             "camera_matrix": {"rows": 3, "cols": 3, "data": [float(v) for v in cam.K.ravel()]},
-            "distortion_model": getattr(cam, "distortion_model", "plumb_bob"),
-            "distortion_coefficients": {"rows": 1, "cols": len(D), "data": D},
+            "distortion_model": cam.distortion_model,
+            "distortion_coefficients": {"rows": 1, "cols": len(cam.coefficients),
+                                        "data": [float(v) for v in cam.D]},
             "rectification_matrix": {"rows": 3, "cols": 3, "data": [float(v) for v in self.R.ravel()]},
             "projection_matrix": {"rows": 3, "cols": 4, "data": [float(v) for v in self.P.ravel()]},
         }
@@ -258,9 +243,8 @@ class StereoCamera:
     @property
     def is_rectified(self) -> bool:
         """True when the raw images already are the rectified ones (identity maps)."""
-        return all(np.allclose(info.R, np.eye(3)) and not getattr(info.camera, "is_fisheye", False)
-                   and not np.any(_camera_D(info.camera)) and np.allclose(info.P[:3, :3], info.camera.K)
-                   for info in (self.left, self.right))
+        return all(np.allclose(info.R, np.eye(3)) and not info.camera.has_distortion
+                   and np.allclose(info.P[:3, :3], info.camera.K) for info in (self.left, self.right))
 
     def rectification_maps(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
         """One ``cv2.remap`` map pair per camera: undistort and rectify in one step."""

@@ -41,16 +41,7 @@ import yaml
 from .camera_info import (BASELINE_RANGE_M, ROTATION_TOL, CameraInfo, StereoCamera, _rotation_error,
                           camera_from_ros, check_stereo, numbers)
 from .model import Camera
-from .rectification import rectify_fusiello
-
-try:
-    from .rectification import check_not_swapped
-except ImportError:                                    # until the camera models land
-    def check_not_swapped(R, T, *, where: str = "stereo calibration") -> None:
-        c2 = -np.asarray(R).T @ np.ravel(T)
-        if c2[0] < 0:
-            raise ValueError(f"{where}: the views look swapped: the right camera sits {-c2[0]:.4g} m to the left of "
-                             "the left one; exchange left and right")
+from .rectification import check_not_swapped, rectify_fusiello
 
 __all__ = ["FORMATS", "ImportedCalibration", "import_calibration", "read_calibration"]
 
