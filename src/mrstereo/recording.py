@@ -36,7 +36,11 @@ GT_KEYS = ("gt_disparity", "gt_labels")
 
 @dataclass(frozen=True)
 class FrameRecord:
-    """One frame of a dataset: absolute image paths (None when absent), pose and head pan."""
+    """One frame of a dataset: absolute image paths (None when absent), pose and head pan.
+
+    ``pose`` is the pose the robot reported (its odometry); ``true_pose``, when the dataset
+    has it (a synthetic sequence with drifted odometry), the ground truth.
+    """
 
     pose: tuple[float, float, float]
     pan_rad: float = 0.0
@@ -46,6 +50,7 @@ class FrameRecord:
     right_rect: Path | None = None
     gt_disparity: Path | None = None
     gt_labels: Path | None = None
+    true_pose: tuple[float, float, float] | None = None
 
     @property
     def has_raw(self) -> bool:
@@ -146,20 +151,19 @@ def _frame(root: Path, manifest: Path, k: int, item) -> FrameRecord:
     where = f"frame {k}"
     if not isinstance(item, dict):
         raise _fail(manifest, f"{where} must be a mapping")
-    unknown = set(item) - set(IMAGE_KEYS) - set(GT_KEYS) - {"pose", "pan_rad"}
+    unknown = set(item) - set(IMAGE_KEYS) - set(GT_KEYS) - {"pose", "pan_rad", "true_pose"}
     if unknown:
         raise _fail(manifest, f"{where}: unknown field(s) {sorted(unknown)}")
-    pose = item.get("pose")
-    if (not isinstance(pose, (list, tuple)) or len(pose) != 3
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in pose)
-            or not all(math.isfinite(v) for v in pose)):
-        raise _fail(manifest, f"{where}: pose must be [x_m, y_m, yaw_rad] (3 finite numbers), got {pose!r}")
+    pose = _planar_pose(manifest, where, "pose", item.get("pose"))
+    true_pose = None
+    if item.get("true_pose") is not None:
+        true_pose = _planar_pose(manifest, where, "true_pose", item["true_pose"])
     pan = item.get("pan_rad", 0.0)
     if isinstance(pan, bool) or not isinstance(pan, (int, float)) or not math.isfinite(pan):
         raise _fail(manifest, f"{where}: pan_rad must be a finite number, got {pan!r}")
     files = {key: _existing_file(root, item[key], f"{where}: {key}", manifest)
              for key in (*IMAGE_KEYS, *GT_KEYS) if item.get(key) is not None}
-    record = FrameRecord(pose=tuple(float(v) for v in pose), pan_rad=float(pan), **files)
+    record = FrameRecord(pose=pose, pan_rad=float(pan), true_pose=true_pose, **files)
     for a, b in (("left", "right"), ("left_rect", "right_rect")):
         if (a in files) != (b in files):
             raise _fail(manifest, f"{where}: '{a}' and '{b}' must be given together")
@@ -167,6 +171,14 @@ def _frame(root: Path, manifest: Path, k: int, item) -> FrameRecord:
         raise _fail(manifest, f"{where}: needs a raw pair (left, right) or a rectified pair "
                               "(left_rect, right_rect)")
     return record
+
+
+def _planar_pose(manifest: Path, where: str, key: str, pose) -> tuple[float, float, float]:
+    if (not isinstance(pose, (list, tuple)) or len(pose) != 3
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in pose)
+            or not all(math.isfinite(v) for v in pose)):
+        raise _fail(manifest, f"{where}: {key} must be [x_m, y_m, yaw_rad] (3 finite numbers), got {pose!r}")
+    return tuple(float(v) for v in pose)
 
 
 def write_manifest(path: str | os.PathLike, *, calibration: str, rig: RigMount | CameraMount | None,

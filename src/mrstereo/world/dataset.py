@@ -18,6 +18,7 @@ from ..io import write_image, write_pfm
 from ..mapping.rosmap import write_ros_map
 from ..recording import IMAGE_KEYS, MANIFEST_NAME, write_manifest
 from .groundtruth import ground_truth_map
+from .paths import PATH_KINDS, drifted_poses, sequence_path
 from .randomize import random_world
 from .render import SensorModel, default_stereo, render_stereo_frame
 from .scene import default_scene
@@ -61,11 +62,16 @@ _PANS = (0.0, math.pi / 4, -math.pi / 4)   # front, left and right views (paper 
 
 def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_frames: int = 30,
                             width: int = 320, height: int = 240, supersample: int = 2,
+                            path: str = "stops", step_m: float = 0.1,
+                            odometry_noise: tuple[float, float] | None = None,
                             progress: bool = True, randomize: bool = False) -> Path:
     """Render the default corridor (or a randomized world) along its path and write a dataset directory.
 
-    At each stop along :func:`corridor_path` (a randomized world: its own path) the head looks
-    front, +45 and -45 degrees (paper Sec. 5.2, Figs. 11-13); frames cycle through these views.
+    ``path="stops"`` (the paper's run): at each stop along :func:`corridor_path` (a randomized
+    world: its own path) the head looks front, +45 and -45 degrees (paper Sec. 5.2, Figs.
+    11-13); frames cycle through these views. ``"front"`` and ``"s-curve"`` (default corridor
+    only): sequences for visual odometry, one front view every ``step_m``
+    (:func:`mrstereo.world.paths.sequence_path`).
     Written: raw and rectified images, GT disparity (PFM), GT labels (PNG),
     the true calibration, the GT map and ``manifest.yaml``. The directory is
     built beside ``out_dir`` and renamed into place when complete.
@@ -82,6 +88,14 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         Image size (320x240 or 640x480 rigs of :func:`default_stereo`).
     supersample : int
         Anti-aliasing rays per pixel along each axis.
+    path : {"stops", "front", "s-curve"}
+        The robot's path (:data:`mrstereo.world.paths.PATH_KINDS`).
+    step_m : float
+        Path length between frames of a ``front`` or ``s-curve`` sequence.
+    odometry_noise : (scale_error, heading_drift_rad_per_m), optional
+        Store drifted poses (:func:`mrstereo.world.paths.drifted_poses`) as each frame's
+        ``pose`` (the odometry a robot would report) and the true ones as ``true_pose``;
+        images are rendered at the true poses.
     progress : bool
         Show a tqdm progress bar on stderr.
     randomize : bool
@@ -106,16 +120,33 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
         raise ValueError(f"output directory {out_dir} already exists and is not empty; "
                          "choose a new directory")
+    if path not in PATH_KINDS:
+        raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
+    if randomize and path != "stops":
+        raise ValueError(f"randomize works with path='stops' only, got path={path!r}")
     n_stops = -(-n_frames // len(_PANS))
-    generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height}
+    generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
     if randomize:
         world = random_world(seed, width=width, height=height)
         stereo, scene, sensors = world.stereo, world.scene, world.sensors
-        poses = poses_along(world.waypoints_xy, n_stops)
+        stops = poses_along(world.waypoints_xy, n_stops)
         generator["randomized"] = world.summary
     else:
         stereo, scene, sensors = default_stereo(width, height), default_scene(seed), (SensorModel(), SensorModel())
-        poses = corridor_path(n_stops)
+        stops = corridor_path(n_stops)
+    if path == "stops":
+        pans = [_PANS[k % len(_PANS)] for k in range(n_frames)]
+        poses = np.repeat(stops, len(_PANS), axis=0)[:n_frames]
+    else:
+        pans = [0.0] * n_frames
+        poses = sequence_path(path, n_frames, step_m=step_m)
+    poses = np.round(poses, 6)         # render with exactly the numbers the manifest stores
+    given = poses
+    if odometry_noise is not None:
+        if len(odometry_noise) != 2:
+            raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
+        given = np.round(drifted_poses(poses, scale_error=odometry_noise[0],
+                                       heading_drift_rad_per_m=odometry_noise[1]), 6)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
     try:
@@ -123,9 +154,8 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         write_ros_map(tmp / "gt_map.yaml", ground_truth_map(scene))
         frames = []
         for k in tqdm(range(n_frames), desc="rendering", unit="frame", disable=not progress):
-            # Render with exactly the numbers the manifest stores.
-            pose = tuple(round(float(v), 6) for v in poses[k // len(_PANS)])
-            pan = round(_PANS[k % len(_PANS)], 9)
+            pose = tuple(float(v) for v in poses[k])
+            pan = round(pans[k], 9)
             frame = render_stereo_frame(scene, stereo, pose=pose, pan_rad=pan, seed=seed * 100003 + k,
                                         supersample=supersample, sensors=sensors)
             name = f"{k:06d}"
@@ -137,13 +167,19 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                 entry[key] = f"{key}/{name}.png"
             write_pfm(tmp / "gt_disparity" / f"{name}.pfm", frame.disparity_px)
             entry["gt_disparity"] = f"gt_disparity/{name}.pfm"
-            entry["pose"] = list(pose)
+            entry["pose"] = [float(v) for v in given[k]]
             entry["pan_rad"] = pan
+            if odometry_noise is not None:
+                entry["true_pose"] = list(pose)
             frames.append({key: entry[key] for key in (*IMAGE_KEYS, "gt_disparity", "gt_labels", "pose",
-                                                        "pan_rad")})
+                                                        "true_pose", "pan_rad") if key in entry})
+        if path != "stops":
+            generator["step_m"] = float(step_m)
+        if odometry_noise is not None:
+            generator["odometry_noise"] = {"scale_error": float(odometry_noise[0]),
+                                           "heading_drift_rad_per_m": float(odometry_noise[1])}
         write_manifest(tmp / MANIFEST_NAME, calibration="calibration.yaml", rig=stereo.rig, frames=frames,
-                       ground_truth_map="gt_map.yaml",
-                       extra={"generator": generator})
+                       ground_truth_map="gt_map.yaml", extra={"generator": generator})
         if out_dir.exists():
             out_dir.rmdir()          # empty, checked above
         os.replace(tmp, out_dir)

@@ -1,0 +1,100 @@
+"""Robot paths through the synthetic corridor: the mapping stops and odometry sequences.
+
+``stops``: the paper's mapping run (Sec. 5.2), :func:`mrstereo.world.dataset.corridor_path`
+with a front, +45 and -45 degree view at every stop. ``front`` and ``s-curve``: sequences for
+visual odometry, one front view every ``step_m`` metres of path: ``front`` follows the corridor
+centre and passes the box at 6 m on its right with a smooth S-bend; ``s-curve`` adds a gentle
+weave (0 to 0.3 m to the left, 3 m period) to it, so the heading changes all the time. Both start at the
+origin looking along +x. :func:`drifted_poses` corrupts a path as wheel odometry would (scale
+error, heading drift per metre). Conventions: docs/conventions.md.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import _checks
+
+__all__ = ["PATH_KINDS", "sequence_path", "drifted_poses"]
+
+PATH_KINDS = ("stops", "front", "s-curve")
+
+_BEND_X_M = (4.4, 5.8, 6.6, 8.0)    # the S-bend around the box at x = 6.0..6.4 m: down, hold, up
+_BEND_Y_M = -0.7
+_WEAVE_AMPLITUDE_M, _WEAVE_PERIOD_M = 0.15, 3.0
+_END_X_M = 13.5
+
+
+def _smoothstep(t: np.ndarray) -> np.ndarray:
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _centre_y(x: np.ndarray, weave: bool) -> np.ndarray:
+    a, b, c, d = _BEND_X_M
+    y = _BEND_Y_M * (_smoothstep((x - a) / (b - a)) - _smoothstep((x - c) / (d - c)))
+    if weave:
+        y = y + _WEAVE_AMPLITUDE_M * (1.0 - np.cos(2.0 * math.pi * x / _WEAVE_PERIOD_M))
+    return y
+
+
+def sequence_path(kind: str, n_frames: int, *, step_m: float = 0.1) -> np.ndarray:
+    """Robot poses ``(n_frames, 3)`` ``(x_m, y_m, yaw_rad)``, ``step_m`` apart along the path.
+
+    Parameters
+    ----------
+    kind : {"front", "s-curve"}
+        The centre line (see the module docstring); the yaw is its tangent.
+    n_frames : int
+        Number of poses; ``(n_frames - 1) * step_m`` must fit in the corridor (about 13.5 m).
+    step_m : float
+        Path length between consecutive poses.
+    """
+    if kind not in ("front", "s-curve"):
+        raise ValueError(f"kind must be 'front' or 's-curve', got {kind!r}")
+    n_frames = _checks.positive_int("n_frames", n_frames)
+    step = _checks.finite_number("step_m", step_m, positive=True)
+    weave = kind == "s-curve"
+    # the centre line densely sampled, then resampled at equal arc length
+    x = np.linspace(0.0, _END_X_M, 27001)
+    y = _centre_y(x, weave)
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
+    length = (n_frames - 1) * step
+    if length > s[-1]:
+        raise ValueError(f"{n_frames} frames {step} m apart ({length:.2f} m) do not fit the corridor path "
+                         f"({s[-1]:.2f} m): use fewer frames or a smaller step_m")
+    s_k = np.arange(n_frames) * step
+    x_k = np.interp(s_k, s, x)
+    h = 1e-4
+    dy = (_centre_y(x_k + h, weave) - _centre_y(x_k - h, weave)) / (2 * h)
+    return np.column_stack([x_k, _centre_y(x_k, weave), np.arctan2(dy, 1.0)])
+
+
+def drifted_poses(poses, *, scale_error: float, heading_drift_rad_per_m: float) -> np.ndarray:
+    """Dead-reckoned poses with a scale error and a heading drift, as from wheel odometry.
+
+    Each step between consecutive true poses, expressed in the robot frame of the first
+    (``dx, dy, dyaw``), is integrated again with its translation scaled by ``1 + scale_error``
+    and ``heading_drift_rad_per_m`` times its length added to its rotation, from the first
+    true pose. So a path of length L ends with a heading error ``drift * L`` and a position
+    error that grows with L squared.
+    """
+    p = np.asarray(poses, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or not np.isfinite(p).all():
+        raise ValueError(f"poses must be finite (N, 3) (x_m, y_m, yaw_rad), got shape {p.shape}")
+    scale = 1.0 + _checks.finite_number("scale_error", scale_error)
+    drift = _checks.finite_number("heading_drift_rad_per_m", heading_drift_rad_per_m)
+    out = p.copy()
+    for k in range(1, len(p)):
+        dx_w, dy_w = p[k, :2] - p[k - 1, :2]
+        c, s = math.cos(p[k - 1, 2]), math.sin(p[k - 1, 2])
+        dx, dy = c * dx_w + s * dy_w, -s * dx_w + c * dy_w           # step in the previous robot frame
+        dyaw = math.remainder(p[k, 2] - p[k - 1, 2], math.tau)
+        dist = math.hypot(dx, dy)
+        yaw = out[k - 1, 2]
+        c, s = math.cos(yaw), math.sin(yaw)
+        out[k, 0] = out[k - 1, 0] + scale * (c * dx - s * dy)
+        out[k, 1] = out[k - 1, 1] + scale * (s * dx + c * dy)
+        out[k, 2] = math.remainder(yaw + dyaw + drift * dist, math.tau)
+    return out
