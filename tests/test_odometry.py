@@ -63,7 +63,7 @@ def test_tracks_known_motion(corridor):
     # the base stays on the floor and level: z, roll, pitch come out of 6-DoF PnP unforced
     assert np.abs(result.T_world_from_base[:, 2, 3]).max() < 0.01
     assert np.abs(result.T_world_from_base[:, 2, :3] - [0, 0, 1]).max() < 0.005
-    assert result.status[0] == "keyframe" and (result.n_inliers[1:] >= 30).all()
+    assert result.status[0] == "keyframe" and (result.n_inliers[1:] >= 20).all()
 
 
 def test_depth_from_a_given_disparity(corridor):

@@ -8,7 +8,7 @@ import click
 __all__ = ["main"]
 
 _COMMAND_MODULES = ("_world", "_calibration", "_formats", "_matching", "_evaluation", "_geometry", "_mapping",
-                    "_pipeline", "_demo", "_bag", "_data")
+                    "_pipeline", "_demo", "_bag", "_data", "_odometry")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})

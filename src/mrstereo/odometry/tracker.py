@@ -3,7 +3,7 @@
 Per frame (rectified pair):
 
 1. *Keyframe* (first frame, after tracking thinned out, or after a loss): corners
-   (``cv2.goodFeaturesToTrack``, spread over a grid of cells) of the left image are found
+   (FAST, spread over a grid of cells) of the left image are found
    in the right image with pyramidal Lucas-Kanade along the row (or read from a given
    disparity map), kept when the right-to-left track returns within ``max_fb_error_px``
    and ``|y_left - y_right| <= max_row_error_px``, and triangulated with eq. (14)-(16):
@@ -59,8 +59,10 @@ class OdometryConfig:
     ----------
     max_features : int
         Corners per keyframe (spread over ``grid_cells`` cells, rows x columns).
-    min_corner_distance_px, corner_quality : float
-        ``cv2.goodFeaturesToTrack`` minimum distance and quality level.
+    fast_threshold : int
+        FAST corner threshold (grey levels; halved down to 5 on weak texture).
+    min_corner_distance_px : float
+        At most one corner per square of this size.
     klt_window_px, klt_levels : int
         Lucas-Kanade window and pyramid levels (stereo search uses ``klt_levels + 1``).
     max_fb_error_px : float
@@ -87,8 +89,8 @@ class OdometryConfig:
 
     max_features: int = 300
     grid_cells: tuple[int, int] = (4, 6)
-    min_corner_distance_px: float = 7.0
-    corner_quality: float = 0.005
+    fast_threshold: int = 20
+    min_corner_distance_px: float = 8.0
     klt_window_px: int = 15
     klt_levels: int = 3
     max_fb_error_px: float = 0.5
@@ -105,10 +107,10 @@ class OdometryConfig:
     max_lost_streak: int = 2
 
     def __post_init__(self) -> None:
-        for name in ("max_features", "klt_window_px", "klt_levels", "ransac_iterations", "min_inliers",
+        for name in ("max_features", "klt_window_px", "klt_levels", "ransac_iterations", "min_inliers", "fast_threshold",
                      "max_lost_streak"):
             _checks.positive_int(name, getattr(self, name), minimum=4 if name == "min_inliers" else 1)
-        for name in ("min_corner_distance_px", "corner_quality", "max_fb_error_px", "max_row_error_px",
+        for name in ("min_corner_distance_px", "max_fb_error_px", "max_row_error_px",
                      "min_disparity_px", "ransac_threshold_px", "keyframe_distance_m", "keyframe_angle_rad",
                      "max_step_m", "max_step_rad"):
             _checks.finite_number(name, getattr(self, name), positive=True)
@@ -254,21 +256,41 @@ class StereoOdometry:
         return p1, ok
 
     def _corners(self, left: np.ndarray) -> np.ndarray:
-        """Corners spread over a grid of cells (``max_features`` in all), (N, 2) float32."""
+        """FAST corners spread over a grid of cells (``max_features`` in all), (N, 2) float32.
+
+        The strongest corner of every ``min_corner_distance_px`` square is a candidate; each of
+        the ``grid_cells`` keeps its strongest candidates, so corners cover the whole image.
+        A weakly textured image is searched again with half the FAST threshold.
+        """
         c = self.config
         h, w = left.shape
         rows, cols = c.grid_cells
         per_cell = max(1, c.max_features // (rows * cols))
-        out = []
-        for i in range(rows):
-            for j in range(cols):
-                r0, r1 = i * h // rows, (i + 1) * h // rows
-                c0, c1 = j * w // cols, (j + 1) * w // cols
-                pts = cv2.goodFeaturesToTrack(left[r0:r1, c0:c1], per_cell, c.corner_quality,
-                                              c.min_corner_distance_px, blockSize=5)
-                if pts is not None:
-                    out.append(pts.reshape(-1, 2) + np.array([c0, r0], np.float32))
-        return np.concatenate(out).astype(np.float32) if out else np.empty((0, 2), np.float32)
+        margin = c.klt_window_px // 2 + 1
+        threshold = c.fast_threshold
+        while True:
+            keypoints = cv2.FastFeatureDetector_create(threshold=int(threshold), nonmaxSuppression=True).detect(left)
+            uv = cv2.KeyPoint_convert(keypoints).reshape(-1, 2) if keypoints else np.empty((0, 2), np.float32)
+            if len(uv) >= c.max_features or threshold <= 5:
+                break
+            threshold = max(5, threshold // 2)
+        if not len(uv):
+            return np.empty((0, 2), np.float32)
+        response = np.array([k.response for k in keypoints], np.float32)
+        inside = ((uv[:, 0] >= margin) & (uv[:, 0] < w - margin) & (uv[:, 1] >= margin) & (uv[:, 1] < h - margin))
+        uv, response = uv[inside], response[inside]
+        order = np.argsort(-response, kind="stable")
+        uv = uv[order]
+        spacing = c.min_corner_distance_px
+        square = (uv[:, 1] // spacing).astype(np.int64) * (w + 1) + (uv[:, 0] // spacing).astype(np.int64)
+        _, first = np.unique(square, return_index=True)         # the strongest of each square
+        uv = uv[np.sort(first)]
+        cell = (uv[:, 1] * rows // h).astype(np.int64) * cols + (uv[:, 0] * cols // w).astype(np.int64)
+        order = np.argsort(cell, kind="stable")                 # strongest first within each cell
+        sorted_cells = cell[order]
+        start = np.searchsorted(sorted_cells, sorted_cells, side="left")
+        rank = np.arange(len(order)) - start
+        return np.ascontiguousarray(uv[order[rank < per_cell]], dtype=np.float32)
 
     def _new_keyframe(self, left, right, disparity_px, T_world_from_cam) -> tuple[int, int]:
         """Corners of ``left`` with their 3-D points; becomes the keyframe. Returns (points, points)."""

@@ -1,0 +1,120 @@
+"""CLI of the visual odometry: ``mrstereo odometry`` (a dataset or a bag to a TUM trajectory)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from ._bag import bag_export_kwargs, bag_options, echo_export, rig_from_options
+
+__all__ = ["COMMANDS"]
+
+
+@click.command("odometry")
+@click.argument("manifest", required=False, type=click.Path(path_type=Path))
+@click.option("-o", "--out", "out_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Trajectory file (TUM: 't tx ty tz qx qy qz qw' per frame, the robot base in the world).")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Top-view figure (PNG) of the trajectory beside the given odometry and the truth.")
+@click.option("--metrics", "metrics_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="JSON with ATE, RPE per metre and end-point error against the true poses (or the given ones).")
+@click.option("--calib", "calib", type=click.Path(dir_okay=False, path_type=Path),
+              help="Use this stereo calibration (and the raw images) instead of the manifest's; "
+                   "with --bag, instead of the camera_info topics.")
+@click.option("--start", type=click.Choice(["given", "origin"]), default="given", show_default=True,
+              help="Start at the first frame's given pose, or at the origin.")
+@click.option("--bag", "bag", type=click.Path(path_type=Path),
+              help="A ROS 1 .bag / ROS 2 bag directory instead of a MANIFEST (see the topic options).")
+@bag_options
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | None, metrics_path: Path | None,
+                     calib: Path | None, start: str, bag: Path | None, quiet: bool, **bag_kw) -> None:
+    """Stereo visual odometry of a dataset MANIFEST (docs/dataset.md) or a ROS bag (--bag).
+
+    Tracks corners of each rectified left image against a keyframe, takes their depth from
+    the stereo pair, and solves the camera motion with PnP-RANSAC and Levenberg-Marquardt
+    (docs/odometry.md). Writes one TUM line per frame (stamp, or frame index when the
+    dataset has no stamps), readable by the evo tools. A frame where tracking is lost keeps
+    the last pose and is reported.
+    """
+    import dataclasses
+    import tempfile
+
+    import numpy as np
+
+    from ..camera import read_stereo
+    from ..io import refuse_overwrite_input
+    from ..odometry import odometry_from_manifest
+    from ..odometry.se3 import T_from_planar
+    from ..odometry.trajectory import plot_trajectories, trajectory_metrics, write_tum
+    from ..recording import read_manifest
+
+    if (manifest is None) == (bag is None):
+        raise click.UsageError("give a MANIFEST or --bag FILE (one of them)")
+    outputs = [p for p in (out_path, plot_path, metrics_path) if p is not None]
+    if len(set(p.resolve() for p in outputs)) != len(outputs):
+        raise click.UsageError("-o, --plot and --metrics must be different files")
+    inputs = [p for p in (manifest, bag, calib) if p is not None]
+    for p in outputs:
+        refuse_overwrite_input(p, inputs)
+    stamps = None
+    with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
+        stereo = None
+        if bag is not None:
+            from ..bag import export_bag
+
+            result = export_bag(bag, Path(tmp) / "dataset", **bag_export_kwargs(calib=calib, quiet=quiet, **bag_kw))
+            echo_export(result)
+            dataset = read_manifest(result.out_dir)
+            stamps = np.asarray(result.stamps_ns, dtype=np.float64) / 1e9
+        else:
+            used = [f"--{k.replace('_', '-')}" for k, v in bag_kw.items()
+                    if v not in (None, False) and k not in ("height_m", "tilt_rad", "base_frame",
+                                                             "sync_tolerance_s")]
+            if used:
+                raise click.UsageError(f"{', '.join(used)} only with --bag")
+            dataset = read_manifest(manifest)
+            for p in outputs:
+                refuse_overwrite_input(p, [dataset.root / "manifest.yaml"])
+            rig = rig_from_options(bag_kw["height_m"], bag_kw["tilt_rad"])
+            if rig is not None:
+                dataset = dataclasses.replace(dataset, rig=rig)
+            stereo = read_stereo(calib) if calib is not None else None
+        run = odometry_from_manifest(dataset, calibration=stereo, progress=not quiet,
+                                     initial_pose="given" if start == "given" else "identity")
+    if stamps is None:
+        stamps = run.stamps_s if run.stamps_s is not None else np.arange(len(run.status), dtype=np.float64)
+    write_tum(out_path, stamps, run.T_world_from_base,
+              comment=f"mrstereo odometry: {run.message}\nstatus per frame: "
+                      + "".join({"keyframe": "K", "tracked": ".", "lost": "x"}[s] for s in run.status))
+    given = np.stack([T_from_planar(*f.pose) for f in dataset.frames])
+    has_truth = all(f.true_pose is not None for f in dataset.frames)
+    truth = np.stack([T_from_planar(*f.true_pose) for f in dataset.frames]) if has_truth else None
+    reference, ref_name = (truth, "true poses") if has_truth else (given, "given poses")
+    if start == "origin":       # compare from the common start
+        reference = np.linalg.inv(reference[0]) @ reference
+    metrics = trajectory_metrics(run.T_world_from_base, reference)
+    click.echo(f"odometry of {len(run.status)} frames: {run.message}; "
+               f"{run.status.count('keyframe')} keyframes, median {np.median(run.n_inliers[1:]) if len(run.status) > 1 else 0:.0f} "
+               f"inliers, {1000 * np.median(run.time_s):.1f} ms per frame (CPU)")
+    click.echo(f"vs {ref_name}: {metrics.describe()}")
+    if metrics_path is not None:
+        data = {"reference": ref_name, **metrics.to_dict(), "frames": len(run.status), "lost": run.n_lost,
+                "keyframes": run.status.count("keyframe"), "status": list(run.status),
+                "n_inliers": run.n_inliers.tolist(), "time_s_median": float(np.median(run.time_s))}
+        from ..io import atomic_write
+
+        with atomic_write(metrics_path) as tmp_path:
+            tmp_path.write_text(json.dumps(data, indent=2))
+    if plot_path is not None:
+        curves = {"visual odometry": run.poses}
+        shift = np.linalg.inv(given[0]) if start == "origin" else np.eye(4)
+        curves["given odometry"] = (shift @ given)[:, :3, 3]
+        if truth is not None:
+            curves["ground truth"] = ((np.linalg.inv(truth[0]) if start == "origin" else np.eye(4)) @ truth)[:, :3, 3]
+        plot_trajectories(plot_path, curves, lost=~run.tracked, title=f"visual odometry, {len(run.status)} frames")
+    click.echo(f"wrote {', '.join(str(p) for p in outputs)}")
+
+
+COMMANDS = [odometry_command]

@@ -1,0 +1,91 @@
+"""``mrstereo odometry``: TUM trajectory, figure, metrics; bad input is one line and exit 2."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from mrstereo.cli import entry
+from mrstereo.odometry.se3 import T_from_planar
+from mrstereo.odometry.trajectory import (read_tum, trajectory_metrics, umeyama_alignment, write_tum)
+from mrstereo.recording import read_manifest
+from mrstereo.world.dataset import write_synthetic_dataset
+
+
+@pytest.fixture(scope="module")
+def sequence(tmp_path_factory):
+    out = tmp_path_factory.mktemp("odo") / "seq"
+    return write_synthetic_dataset(out, n_frames=6, supersample=1, path="s-curve", step_m=0.1,
+                                   odometry_noise=(0.03, math.radians(2)), progress=False)
+
+
+def test_tum_round_trip_and_bad_files(tmp_path):
+    rng = np.random.default_rng(4)
+    T = np.stack([T_from_planar(*rng.normal(size=3)) for _ in range(5)])
+    T[:, 2, 3] = rng.normal(size=5)
+    write_tum(tmp_path / "t.txt", np.arange(5) * 0.1, T, comment="two\nlines")
+    stamps, back = read_tum(tmp_path / "t.txt")
+    np.testing.assert_allclose(stamps, np.arange(5) * 0.1)
+    np.testing.assert_allclose(back, T, atol=1e-8)
+    (tmp_path / "bad.txt").write_text("0 1 2 3 0 0 0\n")
+    with pytest.raises(ValueError, match="line 1: expected 8"):
+        read_tum(tmp_path / "bad.txt")
+    with pytest.raises(ValueError, match="stamps_s"):
+        write_tum(tmp_path / "x.txt", [0.0], T)
+
+
+def test_metrics_known_answers():
+    x = np.linspace(0, 5, 51)
+    truth = np.stack([T_from_planar(v, 0.0, 0.0) for v in x])
+    same = trajectory_metrics(truth, truth)
+    assert same.ate_rmse_m == 0 and same.end_point_error_m == 0 and same.rpe_translation_per_m == 0
+    assert same.path_length_m == pytest.approx(5.0)
+    # a 3 % scale error: end point 15 cm off, RPE 3 cm per metre, no rotation error
+    scaled = np.stack([T_from_planar(1.03 * v, 0.0, 0.0) for v in x])
+    m = trajectory_metrics(scaled, truth)
+    assert m.end_point_error_m == pytest.approx(0.15)
+    assert m.rpe_translation_per_m == pytest.approx(0.03, rel=1e-6)
+    assert m.rpe_rotation_deg_per_m == pytest.approx(0.0, abs=1e-9)
+    assert m.ate_rmse_unaligned_m == pytest.approx(0.03 * np.sqrt(np.mean(x ** 2)))
+    assert m.ate_rmse_m < m.ate_rmse_unaligned_m           # the alignment centres the error
+    # a rigid offset disappears after alignment (SE(3) and SE(2)) but not unaligned
+    moved = np.stack([T_from_planar(1.0, 2.0, 0.3) @ t for t in truth])
+    for alignment in ("se3", "se2"):
+        assert trajectory_metrics(moved, truth, alignment=alignment).ate_rmse_m < 1e-9
+    assert trajectory_metrics(moved, truth, alignment="none").ate_rmse_m > 1.0
+    A = umeyama_alignment(moved[:, :3, 3], truth[:, :3, 3])
+    np.testing.assert_allclose(A @ T_from_planar(1.0, 2.0, 0.3), np.eye(4), atol=1e-9)
+    with pytest.raises(ValueError, match="alignment"):
+        trajectory_metrics(truth, truth, alignment="sim3")
+    with pytest.raises(ValueError, match="same number"):
+        trajectory_metrics(truth[:3], truth)
+
+
+def test_odometry_command(sequence, tmp_path, capsys):
+    out, plot, metrics = tmp_path / "traj.txt", tmp_path / "traj.png", tmp_path / "m.json"
+    code = entry(["odometry", str(sequence), "-o", str(out), "--plot", str(plot), "--metrics", str(metrics),
+                  "--quiet"])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "vs true poses" in text
+    stamps, T = read_tum(out)
+    np.testing.assert_array_equal(stamps, np.arange(6))            # no stamps: frame index
+    manifest = read_manifest(sequence)
+    true = np.array([f.true_pose for f in manifest.frames])
+    np.testing.assert_allclose(T[:, :2, 3], true[:, :2], atol=0.01)  # the visual odometry, not the drifted poses
+    data = json.loads(metrics.read_text())
+    assert data["reference"] == "true poses" and data["lost"] == 0 and data["ate_rmse_m"] < 0.01
+    assert plot.stat().st_size > 10000 and plot.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_odometry_command_bad_input(sequence, tmp_path, capsys):
+    assert entry(["odometry", str(tmp_path / "missing"), "-o", str(tmp_path / "t.txt")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("mrstereo: error:") and "missing" in err and err.count("\n") == 1
+    assert entry(["odometry", str(sequence), "-o", str(sequence / "manifest.yaml")]) == 2
+    assert "would overwrite" in capsys.readouterr().err
+    assert entry(["odometry", "-o", str(tmp_path / "t.txt")]) == 2
+    assert "MANIFEST or --bag" in capsys.readouterr().err
+    assert not (tmp_path / "t.txt").exists()
