@@ -144,6 +144,41 @@ class MapRun:
     """The floor of the run: the given mount's, or the estimate :func:`floor_for_run` made."""
     mount: RigMount | CameraMount | None = None
     """The camera mount every frame used."""
+    odometry: object | None = None
+    """The :class:`mrstereo.odometry.OdometryResult` when the poses came from visual odometry."""
+    alignments: list | None = None
+    """Per frame :class:`mrstereo.odometry.alignment.Alignment` when frames were aligned to the map."""
+
+    def pose_metrics(self) -> dict:
+        """Odometry and alignment figures for metrics.json (empty when the given poses were used)."""
+        out = {}
+        if self.odometry is not None:
+            vo = self.odometry
+            out["visual_odometry"] = {"frames": len(vo.status), "lost": vo.n_lost,
+                                      "keyframes": vo.status.count("keyframe"),
+                                      "median_inliers": float(np.median(vo.n_inliers)),
+                                      "median_time_s": float(np.median(vo.time_s))}
+        if self.alignments is not None:
+            moved = [a.correction_m for a in self.alignments]
+            turned = [math.degrees(a.correction_rad) for a in self.alignments]
+            out["alignment"] = {"frames": len(self.alignments),
+                                "applied": int(sum(a.applied for a in self.alignments)),
+                                "mean_correction_m": float(np.mean(moved)), "max_correction_m": float(np.max(moved)),
+                                "mean_correction_deg": float(np.mean(turned)),
+                                "max_correction_deg": float(np.max(turned))}
+        frames = self.manifest.frames
+        if self.observations and all(f.true_pose is not None for f in frames):
+            from .odometry.se3 import T_from_planar
+            from .odometry.trajectory import trajectory_metrics
+
+            by_index = {o.index: o.pose for o in self.observations}
+            used = sorted(by_index)
+            est = np.stack([T_from_planar(*by_index[k]) for k in used])
+            true = np.stack([T_from_planar(*frames[k].true_pose) for k in used])
+            given = np.stack([T_from_planar(*frames[k].pose) for k in used])
+            out["poses_vs_truth"] = trajectory_metrics(est, true).to_dict()
+            out["given_poses_vs_truth"] = trajectory_metrics(given, true).to_dict()
+        return out
 
 
 def matching_image(image: np.ndarray) -> np.ndarray:
@@ -295,7 +330,7 @@ def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
 def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
               calibration: StereoCamera | None = None, prefer_raw: bool = False,
               progress: bool = True, workers: int | None = None, scheduler=None,
-              processes: bool = False) -> MapRun:
+              processes: bool = False, odometry: str = "given", align=None) -> MapRun:
     """Map a whole dataset: observe every frame, fuse in order, compare with the GT map if any.
 
     Parameters
@@ -313,6 +348,14 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         the dataset's files). With neither, everything runs in this process.
         The fused map is the same, bit for bit, in every case
         (:func:`mrstereo.parallel.map_ordered` keeps the frame order).
+    odometry : {"given", "visual"}
+        ``"visual"``: the poses come from stereo visual odometry
+        (:func:`mrstereo.odometry.odometry_from_manifest`, run in order before the
+        matching), starting at the first frame's given pose; frames where tracking is
+        lost are left out of the map.
+    align : AlignConfig or True, optional
+        Correct each frame's pose by aligning its obstacle points to the map of the
+        frames before it (:func:`mrstereo.odometry.alignment.fuse_aligned`; the ordered part).
     """
     from functools import partial
 
@@ -322,23 +365,42 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         manifest = read_manifest(manifest)
     if not isinstance(config, PipelineConfig):
         raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
+    if odometry not in ("given", "visual"):
+        raise ValueError(f"odometry must be 'given' or 'visual', got {odometry!r}")
     stereo = manifest.calibration if calibration is None else calibration
     prefer_raw = prefer_raw or calibration is not None
     mount, floor = floor_for_run(manifest, stereo, config=config, prefer_raw=prefer_raw)
+    items = list(enumerate(manifest.frames))
+    vo = None
+    if odometry == "visual":
+        from .odometry import odometry_from_manifest
+
+        vo = odometry_from_manifest(manifest, calibration=calibration, progress=progress)
+        items = [(k, replace(record, pose=tuple(float(v) for v in pose)))
+                 for (k, record), pose, ok in zip(items, vo.poses, vo.tracked) if ok]
     observe = partial(_observe_indexed, stereo=stereo, rig=mount, config=config, prefer_raw=prefer_raw)
-    observations = map_ordered(observe, list(enumerate(manifest.frames)), workers=workers, scheduler=scheduler,
+    observations = map_ordered(observe, items, workers=workers, scheduler=scheduler,
                                processes=processes, progress=progress, desc="mapping", unit="frame",
                                label=lambda item: f"frame {item[0]} ({(item[1].left_rect or item[1].left).name})")
-    occupancy = fuse(observations, grid=config.grid, config=config.mapping)
+    alignments = None
+    if align is not None and align is not False:
+        from .odometry.alignment import AlignConfig, fuse_aligned
+
+        occupancy, observations, alignments = fuse_aligned(
+            observations, grid=config.grid, config=config.mapping, align=AlignConfig() if align is True else align)
+    else:
+        occupancy = fuse(observations, grid=config.grid, config=config.mapping)
     metrics, gt = None, None
     if manifest.ground_truth_map is not None:
         gt = read_ros_map(manifest.ground_truth_map)
         if gt.grid.shape == occupancy.grid.shape:
-            path = np.array([f.pose for f in manifest.frames])
-            views = views_of_frames(manifest.frames, stereo, range_m=config.obstacles.max_range_m)
+            # the evaluated band follows the true path when the dataset knows it
+            true_frames = [replace(f, pose=f.true_pose) if f.true_pose is not None else f for f in manifest.frames]
+            path = np.array([f.pose for f in true_frames])
+            views = views_of_frames(true_frames, stereo, range_m=config.obstacles.max_range_m)
             metrics = map_metrics(occupancy, gt, path_xy=path, views=views)
     return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
-                  ground_truth_map=gt, floor=floor, mount=mount)
+                  ground_truth_map=gt, floor=floor, mount=mount, odometry=vo, alignments=alignments)
 
 
 def views_of_frames(frames, stereo: StereoCamera, *, range_m: float = 4.0) -> list[tuple]:
@@ -373,6 +435,7 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
         report["floor"] = run.floor.summary()
     if run.mount is not None:
         report["mount"] = mount_entry(run.mount)
+    report.update(run.pose_metrics())
     if report:
         with atomic_write(out / "metrics.json") as tmp:
             tmp.write_text(json.dumps(report, indent=2))

@@ -31,14 +31,20 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
               help="Map width (x) and height (y) [m].")
 @click.option("--origin", "origin_m", default="0,-3", show_default=True, metavar="X,Y",
               help="World position of the lower-left map corner [m].")
+@click.option("--odometry", type=click.Choice(["given", "visual"]), default="given", show_default=True,
+              help="Robot poses: the dataset's (or the bag's odometry), or stereo visual odometry from the "
+                   "first frame's pose (docs/odometry.md).")
+@click.option("--align", is_flag=True,
+              help="Correct each frame's pose by aligning its obstacle points to the map built so far "
+                   "(scan-to-map); the corrections go to metrics.json.")
 @worker_options
 @click.option("--bag", "bag", type=click.Path(path_type=Path),
               help="Map a ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
 @bag_options
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
-                resolution_m: float, size_m: str, origin_m: str, workers: int | None, scheduler: str | None, processes: bool,
-                bag: Path | None, quiet: bool, **bag_kw) -> None:
+                resolution_m: float, size_m: str, origin_m: str, odometry: str, align: bool, workers: int | None,
+                scheduler: str | None, processes: bool, bag: Path | None, quiet: bool, **bag_kw) -> None:
     """Build an occupancy grid from the stereo frames of a DATASET directory (or its manifest.yaml, docs/dataset.md)
     or of a ROS bag (--bag, docs/scale-out.md).
 
@@ -91,7 +97,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
                 dataset = dataclasses.replace(dataset, rig=rig)
             stereo = read_stereo(calib) if calib is not None else None
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
-                        scheduler=scheduler, processes=processes)
+                        scheduler=scheduler, processes=processes, odometry=odometry, align=align or None)
         remove_stale_temporaries(out_dir)
         with staged_dir(out_dir, prefix="map") as staging:      # all files or none: a kill leaves the old set
             files = {key: out_dir / path.name for key, path in write_map_outputs(run, staging).items()}
@@ -101,6 +107,12 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
         m = run.metrics
         click.echo(f"vs ground truth: precision {m.precision:.3f}, recall {m.recall:.3f}, "
                    f"wall profile error {m.mean_distance_m * 100:.1f} cm, free correct {m.free_accuracy:.3f}")
+    if run.odometry is not None:
+        click.echo(f"visual odometry: {run.odometry.message}")
+    if run.alignments is not None:
+        a = run.pose_metrics()["alignment"]
+        click.echo(f"scan-to-map alignment: {a['applied']} of {a['frames']} frames corrected, mean "
+                   f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg per frame")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
 
 

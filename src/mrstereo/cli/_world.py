@@ -14,14 +14,24 @@ __all__ = ["COMMANDS"]
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
               help="Texture and sensor-noise seed (with --randomize: the whole world).")
 @click.option("--frames", "n_frames", default=30, show_default=True, type=click.IntRange(min=1),
-              help="Number of frames (front, +45 and -45 degree views at each stop).")
+              help="Number of frames (with --path stops: front, +45 and -45 degree views at each stop).")
 @click.option("--width", default=320, show_default=True, type=click.IntRange(min=16), help="Image width.")
 @click.option("--height", default=240, show_default=True, type=click.IntRange(min=16), help="Image height.")
 @click.option("--randomize", is_flag=True,
               help="A randomized world drawn from --seed (corridor, textures, lights, rig, sensors, "
                    "obstacles, path) instead of the built-in corridor.")
+@click.option("--path", "path_kind", type=click.Choice(["stops", "front", "s-curve"]), default="stops",
+              show_default=True,
+              help="stops: front/left/right views at each stop (mapping); front, s-curve: one front view every "
+                   "--step metres (odometry sequences).")
+@click.option("--step", "step_m", type=float, default=0.1, show_default=True,
+              help="Path length between frames of a front or s-curve sequence [m].")
+@click.option("--odometry-noise", "odometry_noise", metavar="SCALE,DEG_PER_M", default=None,
+              help="Store drifted odometry as each frame's pose (scale error, heading drift in degrees per "
+                   "metre, e.g. 0.03,2) and the truth as true_pose.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, randomize: bool, quiet: bool) -> None:
+def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, randomize: bool, path_kind: str,
+          step_m: float, odometry_noise: str | None, quiet: bool) -> None:
     """Render the synthetic office corridor into a dataset directory (docs/dataset.md).
 
     Writes raw and rectified stereo pairs, ground-truth disparity (PFM) and
@@ -32,8 +42,23 @@ def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, rand
     from ..world.dataset import write_synthetic_dataset
 
     check_output_dir("--out", out_dir, must_be_empty=True)
+    import math
+
+    noise = None
+    if odometry_noise is not None:
+        try:
+            scale, deg_per_m = (float(v) for v in odometry_noise.split(","))
+        except ValueError:
+            raise click.BadParameter(f"expected 'scale,deg_per_m' (e.g. 0.03,2), got {odometry_noise!r}",
+                                     param_hint="--odometry-noise") from None
+        if not (math.isfinite(scale) and math.isfinite(deg_per_m)):
+            raise click.BadParameter(f"must be finite, got {odometry_noise!r}", param_hint="--odometry-noise")
+        noise = (scale, math.radians(deg_per_m))
+    if not (math.isfinite(step_m) and step_m > 0):
+        raise click.BadParameter(f"must be a positive number, got {step_m}", param_hint="--step")
     path = write_synthetic_dataset(out_dir, seed=seed, n_frames=n_frames, width=width, height=height,
-                                   progress=not quiet, randomize=randomize)
+                                   path=path_kind, step_m=step_m, odometry_noise=noise, progress=not quiet,
+                                   randomize=randomize)
     click.echo(f"wrote {n_frames} frames to {path} (manifest: {path / 'manifest.yaml'})")
 
 
