@@ -89,3 +89,64 @@ def test_odometry_command_bad_input(sequence, tmp_path, capsys):
     assert entry(["odometry", "-o", str(tmp_path / "t.txt")]) == 2
     assert "MANIFEST or --bag" in capsys.readouterr().err
     assert not (tmp_path / "t.txt").exists()
+
+
+def test_align_points_recovers_a_known_offset():
+    from mrstereo.mapping import GridSpec
+    from mrstereo.odometry.alignment import AlignConfig, align_points, likelihood_field
+
+    grid = GridSpec(width_m=6.0, height_m=4.0, origin_x_m=-1.0, origin_y_m=-2.0)
+    # an L of walls and a box: a wall along x at y = 1.0, one along y at x = 3.0, a box corner
+    occupied = np.zeros(grid.shape, bool)
+    xy = grid.cell_centres()
+    occupied |= np.abs(xy[..., 1] - 1.0) < 0.03
+    occupied |= (np.abs(xy[..., 0] - 3.0) < 0.03) & (xy[..., 1] < 1.0)
+    occupied |= (np.abs(xy[..., 0] - 1.5) < 0.03) & (np.abs(xy[..., 1] + 0.8) < 0.3)
+    field = likelihood_field(occupied, grid, sigma_m=0.05)
+    # points on those walls in the robot frame of the true pose
+    rng = np.random.default_rng(2)
+    world = np.concatenate([np.column_stack([rng.uniform(0, 2.9, 300), np.full(300, 1.0)]),
+                            np.column_stack([np.full(200, 3.0), rng.uniform(-1.5, 1.0, 200)]),
+                            np.column_stack([np.full(100, 1.5), rng.uniform(-1.1, -0.5, 100)])])
+    world = world + rng.normal(scale=0.01, size=world.shape)
+    true = (0.2, -0.1, 0.05)
+    c, s = math.cos(true[2]), math.sin(true[2])
+    d = world - true[:2]
+    robot = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+    prior = (0.26, -0.05, 0.05 + math.radians(1.2))                   # odometry 8 cm and 1.2 degrees off
+    result = align_points(robot, prior, field, grid, config=AlignConfig(min_cell_points=1))
+    assert result.applied and result.score > result.prior_score
+    assert math.hypot(result.pose[0] - true[0], result.pose[1] - true[1]) < 0.01
+    assert abs(result.pose[2] - true[2]) < math.radians(0.2)
+    assert result.correction_m == pytest.approx(math.hypot(result.pose[0] - prior[0], result.pose[1] - prior[1]))
+    # nothing to align to: the prior is kept
+    kept = align_points(robot, prior, np.zeros_like(field), grid)
+    assert not kept.applied and kept.pose == prior
+    with pytest.raises(ValueError, match="points_robot_xy"):
+        align_points(np.zeros(5), prior, field, grid)
+
+
+def test_map_with_visual_odometry_and_alignment(sequence, tmp_path, capsys):
+    manifest = read_manifest(sequence)
+    true = np.array([f.true_pose for f in manifest.frames])
+    for options, key in ((["--odometry", "visual"], "visual_odometry"), (["--align"], "alignment")):
+        out = tmp_path / key
+        code = entry(["map", str(sequence), "-o", str(out), "--quiet", *options])
+        text = capsys.readouterr().out
+        assert code == 0, text
+        data = json.loads((out / "metrics.json").read_text())
+        assert data[key]["frames"] == 6 and "precision" in data
+        assert data["given_poses_vs_truth"]["end_point_error_m"] > 0.005           # the drifted odometry
+        if key == "visual_odometry":
+            assert "visual odometry: tracked all 6 frames" in text
+            assert data["poses_vs_truth"]["end_point_error_m"] < 0.01
+            assert data["poses_vs_truth"]["ate_rmse_unaligned_m"] < 0.01
+        else:
+            assert "scan-to-map alignment" in text
+            assert 0 <= data["alignment"]["mean_correction_m"] <= data["alignment"]["max_correction_m"] < 0.2
+    # with --workers the visual-odometry map is the same
+    code = entry(["map", str(sequence), "-o", str(tmp_path / "w2"), "--quiet", "--odometry", "visual",
+                  "--workers", "2"])
+    assert code == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "w2" / "log_odds.npy"),
+                                  np.load(tmp_path / "visual_odometry" / "log_odds.npy"))

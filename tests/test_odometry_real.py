@@ -18,8 +18,7 @@ from mrstereo.camera import Camera, CameraInfo, StereoCamera
 from mrstereo.odometry import visual_odometry
 from mrstereo.odometry.se3 import T_from_position_quaternion, rotation_angle_rad
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "openloris_sample"
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason="shared/data/openloris_sample not available")
+pytestmark = pytest.mark.sample_data("openloris-sample")
 
 
 def _opencv_yaml(path: Path) -> dict:
@@ -37,6 +36,9 @@ def _opencv_yaml(path: Path) -> dict:
 
 @pytest.fixture(scope="module")
 def loris():
+    from mrstereo.data import local_path
+
+    DATA = local_path("openloris-sample")
     sensors = _opencv_yaml(DATA / "sensors.yaml")
     trans = {(e["parent_frame"], e["child_frame"]): e["matrix"]
              for e in _opencv_yaml(DATA / "trans_matrix.yaml")["trans_matrix"]}
