@@ -12,7 +12,7 @@ __all__ = ["COMMANDS"]
 
 
 @click.command("odometry")
-@click.argument("manifest", required=False, type=click.Path(path_type=Path))
+@click.argument("manifest", required=False, metavar="[DATASET]", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Trajectory file (TUM: 't tx ty tz qx qy qz qw' per frame, the robot base in the world).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
@@ -25,12 +25,12 @@ __all__ = ["COMMANDS"]
 @click.option("--start", type=click.Choice(["given", "origin"]), default="given", show_default=True,
               help="Start at the first frame's given pose, or at the origin.")
 @click.option("--bag", "bag", type=click.Path(path_type=Path),
-              help="A ROS 1 .bag / ROS 2 bag directory instead of a MANIFEST (see the topic options).")
+              help="A ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
 @bag_options
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | None, metrics_path: Path | None,
                      calib: Path | None, start: str, bag: Path | None, quiet: bool, **bag_kw) -> None:
-    """Stereo visual odometry of a dataset MANIFEST (docs/dataset.md) or a ROS bag (--bag).
+    """Stereo visual odometry of a DATASET directory (or its manifest.yaml, docs/dataset.md) or a ROS bag (--bag).
 
     Tracks corners of each rectified left image against a keyframe, takes their depth from
     the stereo pair, and solves the camera motion with PnP-RANSAC and Levenberg-Marquardt
@@ -51,7 +51,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     from ..recording import read_manifest
 
     if (manifest is None) == (bag is None):
-        raise click.UsageError("give a MANIFEST or --bag FILE (one of them)")
+        raise click.UsageError("give a DATASET or --bag FILE (one of them)")
     outputs = [p for p in (out_path, plot_path, metrics_path) if p is not None]
     if len(set(p.resolve() for p in outputs)) != len(outputs):
         raise click.UsageError("-o, --plot and --metrics must be different files")
