@@ -150,3 +150,23 @@ def test_map_with_visual_odometry_and_alignment(sequence, tmp_path, capsys):
     assert code == 0
     np.testing.assert_array_equal(np.load(tmp_path / "w2" / "log_odds.npy"),
                                   np.load(tmp_path / "visual_odometry" / "log_odds.npy"))
+
+
+def test_a_bag_without_odometry(sequence, tmp_path, capsys):
+    """Camera topics only: the odometry command and map --odometry visual work from the images."""
+    from test_bag_io import DT_NS, T0_NS, TOPICS, write_bag
+
+    manifest = read_manifest(sequence)
+    bag = write_bag(tmp_path / "cams.bag", manifest, ros1=True, odom=False)
+    common = ["--bag", str(bag), "--left-topic", TOPICS["left_topic"], "--right-topic", TOPICS["right_topic"],
+              "--camera-info-topics", ",".join(TOPICS["camera_info_topics"]), "--height",
+              str(manifest.rig.height_m), "--tilt", str(manifest.rig.tilt_rad), "--quiet"]
+    assert entry(["odometry", *common, "-o", str(tmp_path / "t.txt")]) == 0
+    stamps, T = read_tum(tmp_path / "t.txt")
+    np.testing.assert_allclose(stamps, (T0_NS + np.arange(6) * DT_NS) / 1e9)      # the image stamps
+    true = np.array([f.true_pose for f in manifest.frames])                          # starts at the origin
+    np.testing.assert_allclose(T[:, :2, 3], true[:, :2], atol=0.01)
+    assert entry(["map", *common, "--odometry", "visual", "-o", str(tmp_path / "m")]) == 0
+    out = capsys.readouterr().out
+    assert "visual odometry: tracked all 6 frames" in out
+    assert (tmp_path / "m" / "map.pgm").is_file()
