@@ -112,7 +112,7 @@ def speed(root: Path, frames: int) -> None:
     manifest = read_manifest(path)
     pairs = [(read_image(f.left_rect), read_image(f.right_rect)) for f in manifest.frames]
     mount = T_base_from_cam_of(manifest.rig)
-    T0 = T_from_planar(*manifest.frames[0].true_pose)
+    T0 = T_from_planar(*(manifest.frames[0].true_pose or manifest.frames[0].pose))
     for label, disparities in (("stereo search", None),
                                ("given disparity", [read_pfm(f.gt_disparity) for f in manifest.frames])):
         t0 = time.perf_counter()

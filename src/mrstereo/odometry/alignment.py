@@ -63,6 +63,9 @@ class AlignConfig:
         Cells scored (an even subsample).
     min_points : int
         Fewer obstacle points, or fewer occupied cells in the map: the prior is kept.
+    gain : float
+        Fraction of the found correction applied to the frame (in (0, 1]); the rest of the drift
+        is left to the next frames, so matching noise averages out over several frames.
     min_gain : float
         The best pose must beat the prior's score by this much to be used (0: any better pose;
         the per-frame drift is small, so a threshold lets it accumulate).
@@ -80,6 +83,7 @@ class AlignConfig:
     max_points: int = 400
     min_points: int = 30
     min_gain: float = 0.0
+    gain: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("search_m", "search_rad", "step_m", "step_rad", "sigma_m", "prior_sigma_m", "prior_sigma_rad",
@@ -89,6 +93,8 @@ class AlignConfig:
         _checks.positive_int("min_cell_points", self.min_cell_points)
         _checks.positive_int("min_points", self.min_points)
         _checks.finite_number("min_gain", self.min_gain, nonnegative=True)
+        if not 0.0 < self.gain <= 1.0:
+            raise ValueError(f"gain must be in (0, 1], got {self.gain}")
 
 
 @dataclass(frozen=True)
@@ -243,6 +249,9 @@ def fuse_aligned(observations, *, grid: GridSpec = GridSpec(), config: MappingCo
         floor = _robot_points(obs.floor_points_world, given)
         field = likelihood_field(occupancy.occupied, grid, sigma_m=align.sigma_m)
         result = align_points(obstacles, prior, field, grid, config=align)
+        if result.applied and align.gain < 1.0:        # move part of the way: per-frame noise averages out
+            step = relative_planar(prior, result.pose)
+            result = replace(result, pose=compose_planar(prior, tuple(align.gain * v for v in step)))
         pose = result.pose
         correction = compose_planar(pose, relative_planar(given, (0.0, 0.0, 0.0)))
         obstacles_w, floor_w = _world_points(obstacles, pose), _world_points(floor, pose)
