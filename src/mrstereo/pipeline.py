@@ -375,7 +375,8 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     if odometry == "visual":
         from .odometry import odometry_from_manifest
 
-        vo = odometry_from_manifest(manifest, calibration=calibration, progress=progress)
+        run_mount = replace(manifest, rig=mount) if mount is not None else manifest     # the floor the map uses
+        vo = odometry_from_manifest(run_mount, calibration=calibration, progress=progress)
         items = [(k, replace(record, pose=tuple(float(v) for v in pose)))
                  for (k, record), pose, ok in zip(items, vo.poses, vo.tracked) if ok]
     observe = partial(_observe_indexed, stereo=stereo, rig=mount, config=config, prefer_raw=prefer_raw)
