@@ -38,6 +38,7 @@ from .mapping.figures import plot_map
 from .mapping.metrics import MapMetrics, map_metrics
 from .mapping.occupancy import MappingConfig, OccupancyGrid, ViewCells, view_cells
 from .matching.config import MatchingConfig
+from .profiling import stage
 from .rejection import RejectionConfig
 from .recording import FrameRecord, Manifest, read_manifest
 
@@ -200,9 +201,10 @@ def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.nda
     rectified pair is listed, e.g. to test an estimated calibration. 16-bit images are scaled
     by :func:`matching_image`.
     """
-    if record.has_rectified and not (prefer_raw and record.has_raw):
-        return matching_image(read_image(record.left_rect)), matching_image(read_image(record.right_rect)), True
-    return matching_image(read_image(record.left)), matching_image(read_image(record.right)), False
+    rectified = record.has_rectified and not (prefer_raw and record.has_raw)
+    left, right = (record.left_rect, record.right_rect) if rectified else (record.left, record.right)
+    with stage("read"):
+        return matching_image(read_image(left)), matching_image(read_image(right)), rectified
 
 
 def pair_options(config: PipelineConfig) -> dict:
@@ -219,14 +221,15 @@ def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: i
     ``stereo`` (the calibration the frame was matched with) gives the mapping's range
     uncertainty its ``b f``; without it rays clear up to each point.
     """
-    T = T_world_from_robot(*record.pose)
-    obs = frame.obstacles
-    obstacles = transform_points(T, obs.obstacle_points_robot).astype(np.float32)
-    floor = transform_points(T, obs.floor_points_robot).astype(np.float32)
-    bf = None if stereo is None else float(stereo.baseline_m * stereo.focal_px)
-    height = float(obs.ground.height_m) if obs.success else None
-    origin = tuple(record.pose[:2]) + (() if height is None else (height,))
-    cells = view_cells(obstacles, floor, origin, grid=config.grid, config=config.mapping, baseline_focal_m_px=bf)
+    with stage("grid"):
+        T = T_world_from_robot(*record.pose)
+        obs = frame.obstacles
+        obstacles = transform_points(T, obs.obstacle_points_robot).astype(np.float32)
+        floor = transform_points(T, obs.floor_points_robot).astype(np.float32)
+        bf = None if stereo is None else float(stereo.baseline_m * stereo.focal_px)
+        height = float(obs.ground.height_m) if obs.success else None
+        origin = tuple(record.pose[:2]) + (() if height is None else (height,))
+        cells = view_cells(obstacles, floor, origin, grid=config.grid, config=config.mapping, baseline_focal_m_px=bf)
     return FrameObservation(index=index, pose=tuple(float(v) for v in record.pose), pan_rad=float(record.pan_rad),
                             obstacle_points_world=obstacles, floor_points_world=floor,
                             n_valid_disparity=int(np.isfinite(frame.disparity_px).sum()),
@@ -252,11 +255,12 @@ def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec = GridSpec(
     """
     occupancy = OccupancyGrid(grid, config=config)
     for obs in observations:
-        if obs.cells is not None and obs.cells.fits(grid, config):
-            occupancy.apply(obs.cells)
-        else:
-            occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world,
-                             baseline_focal_m_px=obs.baseline_focal_m_px)
+        with stage("grid"):
+            if obs.cells is not None and obs.cells.fits(grid, config):
+                occupancy.apply(obs.cells)
+            else:
+                occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world,
+                                 baseline_focal_m_px=obs.baseline_focal_m_px)
     return occupancy
 
 

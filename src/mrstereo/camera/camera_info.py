@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -194,6 +195,34 @@ class RigMount:
             raise ValueError(f"tilt_rad must be within (-pi/2, pi/2), got {self.tilt_rad}")
 
 
+def _maps_key(info: CameraInfo) -> tuple:
+    """What the rectification maps of a camera depend on, hashable: model, size, K, D, R, P."""
+    camera = info.camera
+    arrays = (camera.K, camera.dist_coeffs, info.R, info.P)
+    return (type(camera).__name__, bool(getattr(camera, "is_fisheye", False)), tuple(camera.size),
+            *(np.asarray(a, dtype=np.float64).tobytes() for a in arrays))
+
+
+_MAPS_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+_MAPS_CACHE_SIZE = 16
+_MAPS_LOCK = threading.Lock()
+
+
+def _rectification_maps(info: CameraInfo) -> tuple[np.ndarray, np.ndarray]:
+    """The ``cv2.remap`` maps of ``info``, built once per :func:`_maps_key` and process; read-only."""
+    key = _maps_key(info)
+    maps = _MAPS_CACHE.get(key)
+    if maps is None:
+        maps = info.camera.undistort_rectify_maps(R=info.R, P=info.P)
+        for m in maps:
+            m.setflags(write=False)
+        with _MAPS_LOCK:
+            _MAPS_CACHE[key] = maps
+            while len(_MAPS_CACHE) > _MAPS_CACHE_SIZE:      # oldest first (dicts keep insertion order)
+                del _MAPS_CACHE[next(iter(_MAPS_CACHE))]
+    return maps
+
+
 @dataclass(frozen=True)
 class StereoCamera:
     """A calibrated stereo pair: the format every command reads."""
@@ -247,8 +276,13 @@ class StereoCamera:
                    and np.allclose(info.P[:3, :3], info.camera.K) for info in (self.left, self.right))
 
     def rectification_maps(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-        """One ``cv2.remap`` map pair per camera: undistort and rectify in one step."""
-        return tuple(info.camera.undistort_rectify_maps(R=info.R, P=info.P) for info in (self.left, self.right))
+        """One ``cv2.remap`` map pair per camera: undistort and rectify in one step.
+
+        Built once per calibration and process (:func:`_rectification_maps`, keyed on the
+        numbers: copies of the calibration in other threads or pickled into workers share
+        them); the arrays are read-only.
+        """
+        return tuple(_rectification_maps(info) for info in (self.left, self.right))
 
     def rectify(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rectify a raw pair (bilinear, border replicated); uint8, uint16, float32 or float64 images."""

@@ -12,7 +12,7 @@ import click
 import numpy as np
 
 from ..io import check_outputs
-from ._options import echo_floor, mount_option, parse_mount
+from ._options import echo_floor, mount_option, parse_mount, profile_option
 
 __all__ = ["COMMANDS"]
 
@@ -63,6 +63,7 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     from ..camera import RigMount, read_stereo
     from ..geometry import ObstacleConfig, obstacles_from_pair, scan_from_pair
     from ..io import read_image
+    from ..profiling import stage
     from ..rejection import RejectionConfig
 
     for name, value in (("--height", height_m), ("--tilt", tilt_rad), ("--pan", pan_rad),
@@ -82,7 +83,8 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
                        tilt_rad=tilt_rad if tilt_rad is not None else (base.tilt_rad if base else 0.0))
     from ..pipeline import matching_image
 
-    left_img, right_img = matching_image(read_image(left)), matching_image(read_image(right))
+    with stage("read"):
+        left_img, right_img = matching_image(read_image(left)), matching_image(read_image(right))
     if left_img.shape != right_img.shape:
         raise ValueError(f"left and right images differ in size: {left_img.shape[1]}x{left_img.shape[0]} "
                          f"and {right_img.shape[1]}x{right_img.shape[0]}")
@@ -104,6 +106,7 @@ def _report_ground(obstacles) -> None:
 
 
 @click.command("points")
+@profile_option
 @_common
 @click.option("--which", type=click.Choice(["all", "obstacles", "floor"]), default="all", show_default=True,
               help="Which points to write.")
@@ -139,6 +142,7 @@ def points_command(left, right, calib, output, which, color, **kw):
 
 
 @click.command("scan")
+@profile_option
 @_common
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Also write a top-view PNG (obstacle points, floor points, scan).")

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from ._options import profile_option
+
 __all__ = ["COMMANDS"]
 
 
@@ -31,6 +33,7 @@ def _bands(text: str) -> list[tuple[float, float]]:
 
 
 @click.command("disparity")
+@profile_option
 @click.argument("left", type=click.Path(dir_okay=False))
 @click.argument("right", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
@@ -57,6 +60,7 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
     """Multi-range disparity of a stereo pair (paper section 3)."""
     from .. import io
     from ..matching import compute_disparity, preset_config
+    from ..profiling import stage
 
     if color_alias is not None:
         if color_path is not None:
@@ -84,8 +88,9 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
     band_list = _bands(bands) if bands is not None else None
     depth_list = _float_list(depth_bands, "--depth-bands") if depth_bands is not None else None
 
-    left_img = io.read_image(left)
-    right_img = io.read_image(right)
+    with stage("read"):
+        left_img = io.read_image(left)
+        right_img = io.read_image(right)
     if left_img.shape[:2] != right_img.shape[:2]:
         raise ValueError(f"left and right images differ in size: {left_img.shape[1]}x{left_img.shape[0]} "
                          f"and {right_img.shape[1]}x{right_img.shape[0]}")
@@ -94,14 +99,16 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
         from ..camera import read_stereo
         stereo = read_stereo(calib)
         if not rectified and not stereo.is_rectified:
-            left_img, right_img = stereo.rectify(left_img, right_img)
+            with stage("rectify"):
+                left_img, right_img = stereo.rectify(left_img, right_img)
     config = preset_config(preset)
     if single_range:
         config = config.replace(multi_range=False)
     if no_fill:
         config = config.replace(gap_fill_px=0)
-    result = compute_disparity(left_img, right_img, max_disparity_px=max_disparity, disparity_bands_px=band_list,
-                               calibration=stereo, depth_bands_m=depth_list, config=config, aoi=aoi_box)
+    with stage("match"):
+        result = compute_disparity(left_img, right_img, max_disparity_px=max_disparity, disparity_bands_px=band_list,
+                                   calibration=stereo, depth_bands_m=depth_list, config=config, aoi=aoi_box)
     valid = float((result.disparity_px == result.disparity_px).mean())
     too_near = float(result.too_near.mean())
     if explain:

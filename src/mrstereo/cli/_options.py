@@ -1,6 +1,8 @@
 """Options shared by several commands."""
 from __future__ import annotations
 
+import functools
+
 import click
 
 
@@ -84,3 +86,25 @@ def warn_floor(ground) -> None:
                    f"least {100 * MIN_FLOOR_SHARE:.0f} % inliers and at most {MAX_FLOOR_RESIDUAL_M:.3f} m): "
                    "little floor in view, obstacles and free space may be wrong; give the camera mount "
                    "(--mount or --height/--tilt)", err=True)
+
+
+def profile_option(func):
+    """``--profile``: time every stage (:mod:`mrstereo.profiling`) and print a per-frame table at the end.
+
+    Put it right under ``@click.command``. Off, the command runs unchanged. Worker processes
+    (``--processes``, ``--scheduler``) are not seen: their stages are missing from the table.
+    """
+    @functools.wraps(func)
+    def wrapper(*args, profile: bool = False, **kwargs):
+        if not profile:
+            return func(*args, **kwargs)
+        from ..profiling import profiling
+
+        with profiling() as prof:
+            result = func(*args, **kwargs)
+        click.echo(prof.table(), err=True)
+        return result
+
+    return click.option("--profile", is_flag=True,
+                        help="Print the time of every stage (read, rectify, match, reject, 3-D, grid) "
+                             "per frame at the end (stderr).")(wrapper)

@@ -6,7 +6,7 @@ from pathlib import Path
 import click
 
 from ._bag import bag_export_kwargs, bag_options, echo_export, rig_from_options
-from ._options import check_workers, echo_run_floor, worker_options
+from ._options import check_workers, echo_run_floor, profile_option, worker_options
 
 __all__ = ["COMMANDS"]
 
@@ -15,6 +15,7 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
 
 
 @click.command("map")
+@profile_option
 @click.argument("manifest", required=False, metavar="[DATASET]", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (map.pgm, map.yaml, map.png, log_odds.npy, metrics.json).")

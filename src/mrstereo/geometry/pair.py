@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import _checks
 from ..camera import RigMount, StereoCamera
+from ..profiling import stage
 from ..rejection import FloorModel, RejectionConfig, RejectionResult, reject_uniform
 from .obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
 from .scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
@@ -108,17 +109,21 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
         raise ValueError(f"images are {left.shape[1]}x{left.shape[0]} but the calibration is "
                          f"{stereo.size[0]}x{stereo.size[1]}")
     if not rectified and not stereo.is_rectified:
-        left, right = stereo.rectify(left, right)
+        with stage("rectify"):
+            left, right = stereo.rectify(left, right)
     kwargs = {"preset": preset, "calibration": stereo, "config": matching}
     if max_disparity_px is not None:
         kwargs["max_disparity_px"] = max_disparity_px
-    result = compute_disparity(left, right, **kwargs)
-    raw = np.asarray(result.disparity_px, dtype=np.float32)
-    rej = reject_uniform(raw, left, config=rejection, floor_model=floor_model)
+    with stage("match"):
+        result = compute_disparity(left, right, **kwargs)
+        raw = np.asarray(result.disparity_px, dtype=np.float32)
+    with stage("reject"):
+        rej = reject_uniform(raw, left, config=rejection, floor_model=floor_model)
     mount = rig if rig is not None else stereo.rig
-    ground = ground_for_frame(raw, stereo, mount=mount, config=config)
-    obstacles = detect_obstacles(rej.disparity_px, stereo, rig=mount, ground=ground, pan_rad=pan_rad,
-                                 config=config, too_near=result.too_near, near_limit_px=result.near_limit_px)
+    with stage("3-D"):
+        ground = ground_for_frame(raw, stereo, mount=mount, config=config)
+        obstacles = detect_obstacles(rej.disparity_px, stereo, rig=mount, ground=ground, pan_rad=pan_rad,
+                                     config=config, too_near=result.too_near, near_limit_px=result.near_limit_px)
     return PairObstacles(left_rect=left, raw_disparity_px=raw, rejection=rej, obstacles=obstacles,
                          max_disparity_px=float(result.near_limit_px))
 
@@ -148,17 +153,18 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
     if obstacles.success and math.isfinite(frame.max_disparity_px):
         range_min = max(range_min, near_limit_range_m(stereo, obstacles.T_robot_from_cam, frame.max_disparity_px))
     gray = frame.left_rect if frame.left_rect.ndim == 2 else frame.left_rect.mean(axis=2)
-    near = obstacles.too_near_obstacle_mask
-    measured = obstacles.obstacle_mask & ~near
-    scan = laser_scan_from_points(obstacles.points_robot_image[measured], angle_min_rad=lo, angle_max_rad=hi,
-                                  angle_increment_rad=angle_increment_rad, range_min_m=range_min,
-                                  range_max_m=config.max_range_m if range_max_m is None else range_max_m,
-                                  min_points=min_points, intensities=gray[measured],
-                                  observed_points_robot=obstacles.points_robot)
-    if near.any():
-        # the too-near bearings, whatever the placement's range (it is a bound, not a measurement)
-        hits = laser_scan_from_points(obstacles.points_robot_image[near], angle_min_rad=lo, angle_max_rad=hi,
-                                      angle_increment_rad=angle_increment_rad, range_min_m=0.0,
-                                      range_max_m=1e9, min_points=min_points)
-        scan.ranges_m[np.isfinite(hits.ranges_m)] = scan.range_min_m
+    with stage("scan"):
+        near = obstacles.too_near_obstacle_mask
+        measured = obstacles.obstacle_mask & ~near
+        scan = laser_scan_from_points(obstacles.points_robot_image[measured], angle_min_rad=lo, angle_max_rad=hi,
+                                      angle_increment_rad=angle_increment_rad, range_min_m=range_min,
+                                      range_max_m=config.max_range_m if range_max_m is None else range_max_m,
+                                      min_points=min_points, intensities=gray[measured],
+                                      observed_points_robot=obstacles.points_robot)
+        if near.any():
+            # the too-near bearings, whatever the placement's range (it is a bound, not a measurement)
+            hits = laser_scan_from_points(obstacles.points_robot_image[near], angle_min_rad=lo, angle_max_rad=hi,
+                                          angle_increment_rad=angle_increment_rad, range_min_m=0.0,
+                                          range_max_m=1e9, min_points=min_points)
+            scan.ranges_m[np.isfinite(hits.ranges_m)] = scan.range_min_m
     return PairScan(scan=scan, frame=frame)

@@ -1,0 +1,103 @@
+"""Speed plumbing: rectification maps built once per calibration, per-stage profiling (--profile)."""
+from __future__ import annotations
+
+import pickle
+
+import cv2
+import numpy as np
+
+from mrstereo.camera import Camera, CameraInfo, RigMount, StereoCamera, rotation_from_euler
+from mrstereo.camera import camera_info as camera_info_module
+from mrstereo.cli import entry
+from mrstereo.profiling import Profile, active, profiling, stage
+
+CAM = Camera(width=160, height=120, fx=101.0, fy=99.5, cx=81.3, cy=58.9, k1=-0.08, k2=0.01)
+
+
+def _stereo(baseline_m=0.12):
+    K_rect = np.array([[100.0, 0, 80.0], [0, 100.0, 60.0], [0, 0, 1]])
+    P_left = np.hstack([K_rect, np.zeros((3, 1))])
+    P_right = P_left.copy()
+    P_right[0, 3] = -100.0 * baseline_m
+    return StereoCamera(left=CameraInfo(CAM, R=rotation_from_euler(0.01, -0.005, 0.002), P=P_left, name="left"),
+                        right=CameraInfo(CAM, R=rotation_from_euler(-0.004, 0.008, -0.01), P=P_right,
+                                         name="right"),
+                        rig=RigMount(height_m=0.45, tilt_rad=0.15))
+
+
+def _images():
+    rng = np.random.default_rng(3)
+    return (rng.integers(0, 256, (120, 160), dtype=np.uint8), rng.integers(0, 256, (120, 160), dtype=np.uint8))
+
+
+def test_rectification_maps_are_built_once_per_calibration(monkeypatch):
+    camera_info_module._MAPS_CACHE.clear()
+    built = []
+    original = Camera.undistort_rectify_maps
+
+    def counting(self, **kw):
+        built.append(self)
+        return original(self, **kw)
+
+    monkeypatch.setattr(Camera, "undistort_rectify_maps", counting)
+    stereo, (left, right) = _stereo(), _images()
+    first = stereo.rectify(left, right)
+    assert len(built) == 2                       # one map pair per camera
+    second = stereo.rectify(left, right)
+    copy = pickle.loads(pickle.dumps(stereo))    # a worker's copy of the same calibration
+    third = copy.rectify(left, right)
+    assert len(built) == 2                       # not rebuilt
+    # the same output as the maps a user builds with OpenCV
+    for info, img, a, b, c in zip((stereo.left, stereo.right), (left, right), first, second, third):
+        mx, my = cv2.initUndistortRectifyMap(CAM.K, CAM.dist_coeffs, info.R, info.P, (160, 120), cv2.CV_32FC1)
+        ref = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        assert np.array_equal(a, ref) and np.array_equal(b, ref) and np.array_equal(c, ref)
+    # another baseline: the left camera's maps are shared, the right camera's are new
+    _stereo(baseline_m=0.2).rectify(left, right)
+    assert len(built) == 3
+    maps = stereo.rectification_maps()[0][0]
+    assert not maps.flags.writeable
+
+
+def test_profile_accumulates_named_stages_and_is_off_by_default():
+    assert active() is None
+    with stage("match"):                  # no profile: nothing recorded, nothing raised
+        pass
+    with profiling() as prof:
+        assert isinstance(prof, Profile) and active() is prof
+        for _ in range(3):
+            with stage("match"):
+                sum(range(1000))
+            with stage("reject"):
+                pass
+    assert active() is None
+    assert prof.calls == {"match": 3, "reject": 3}
+    assert prof.seconds["match"] > 0
+    table = prof.table()
+    assert "3 frames" in table and "match" in table and "reject" in table
+
+
+def test_profile_times_the_stages_of_a_pair(tmp_path):
+    from mrstereo.geometry import obstacles_from_pair
+
+    stereo, (left, right) = _stereo(), _images()
+    with profiling() as prof:
+        obstacles_from_pair(left, right, stereo, max_disparity_px=16)
+    assert set(prof.calls) == {"rectify", "match", "reject", "3-D"}
+    assert all(n == 1 for n in prof.calls.values())
+
+
+def test_cli_profile_prints_a_stage_table(tmp_path, capsys):
+    stereo, (left, right) = _stereo(), _images()
+    from mrstereo.camera import write_stereo
+
+    write_stereo(tmp_path / "stereo.yaml", stereo)
+    cv2.imwrite(str(tmp_path / "l.png"), left)
+    cv2.imwrite(str(tmp_path / "r.png"), right)
+    args = [str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--calib", str(tmp_path / "stereo.yaml")]
+    assert entry(["disparity", *args, "--max-disparity", "16", "-o", str(tmp_path / "d.pfm"), "--profile"]) == 0
+    err = capsys.readouterr().err
+    assert "profile (1 frame" in err
+    assert all(f"\n{name} " in err for name in ("read", "rectify", "match"))
+    assert entry(["disparity", *args, "--max-disparity", "16", "-o", str(tmp_path / "e.pfm")]) == 0
+    assert "ms/frame" not in capsys.readouterr().err
