@@ -101,3 +101,49 @@ def test_cli_profile_prints_a_stage_table(tmp_path, capsys):
     assert all(f"\n{name} " in err for name in ("read", "rectify", "match"))
     assert entry(["disparity", *args, "--max-disparity", "16", "-o", str(tmp_path / "e.pfm")]) == 0
     assert "ms/frame" not in capsys.readouterr().err
+
+
+def _textures():
+    """uint8 gray images with plain, weakly and strongly textured areas, saturated spots and a ramp."""
+    rng = np.random.default_rng(7)
+    plain = np.full((90, 130), 117, np.uint8)
+    plain[:, 60:] = np.clip(117 + rng.normal(0, 2.5, (90, 70)), 0, 255).astype(np.uint8)      # sigma near T
+    noise = rng.integers(0, 256, (90, 130), dtype=np.uint8)
+    noise[10:30, 10:40] = 255
+    noise[50:70, 80:120] = 0
+    ramp = np.tile(np.linspace(0, 255, 130).astype(np.uint8), (90, 1))
+    return [plain, noise, ramp, cv2.GaussianBlur(noise, (0, 0), 3.0)]
+
+
+def test_uint8_patch_statistics_are_bit_identical_to_the_float64_filters():
+    """Integer window sums (cv2.boxFilter / sqrBoxFilter of the uint8 image) give the same bits as the
+    float64 path (taken for float images), for windows held in float32 (<= 15 px) and beyond."""
+    from mrstereo.rejection import RejectionConfig, patch_statistics, reject_uniform
+
+    for image in _textures():
+        for w in (3, 5, 9, 15, 17, 31):
+            fast = patch_statistics(image, window_px=w)
+            ref = patch_statistics(image.astype(np.float32), window_px=w)      # float64 filters
+            assert fast.mean.dtype == np.float32 and fast.std.dtype == np.float32
+            assert np.array_equal(fast.mean, ref.mean) and np.array_equal(fast.std, ref.std), w
+        # and against numpy in float64, independent of OpenCV's filters
+        pad = np.pad(image.astype(np.float64), 4, mode="reflect")
+        windows = np.lib.stride_tricks.sliding_window_view(pad, (9, 9))
+        std = np.sqrt(np.maximum((windows ** 2).mean(axis=(2, 3)) - windows.mean(axis=(2, 3)) ** 2, 0))
+        np.testing.assert_allclose(patch_statistics(image).std, std, atol=1e-3)
+        d = np.full(image.shape, 5.0, np.float32)
+        a = reject_uniform(d, image, config=RejectionConfig())
+        b = reject_uniform(d, image.astype(np.float32), config=RejectionConfig())
+        assert np.array_equal(a.uniform, b.uniform) and np.array_equal(a.disparity_px, b.disparity_px,
+                                                                      equal_nan=True)
+
+
+def test_uint8_patch_statistics_on_real_scenes(sample_data):
+    from mrstereo.evaluation import load_scene
+    from mrstereo.rejection import patch_statistics
+
+    for name in ("teddy", "kitti2012-000070"):
+        scene = load_scene(sample_data(name))
+        gray = scene.left if scene.left.ndim == 2 else cv2.cvtColor(scene.left, cv2.COLOR_BGR2GRAY)
+        fast, ref = patch_statistics(gray), patch_statistics(gray.astype(np.float32))
+        assert np.array_equal(fast.std, ref.std) and np.array_equal(fast.mean, ref.mean)

@@ -36,6 +36,25 @@ def mean_std(mean, mean_sq, mean_out, std_out):
 
 
 @njit(nogil=True, cache=True)
+def mean_std_from_sums(sum1, sum2, scale, mean_out, std_out):
+    """As :func:`mean_std` from exact window sums of ``I`` and ``I^2``: ``E[.] = sum * scale`` in float64.
+
+    With integer sums held exactly (float32 below 2**24), ``sum * scale`` is what OpenCV's
+    normalized float64 box filter computes (an exact running sum times ``1 / (w * w)``), so the
+    results are bit-identical to :func:`square` + ``cv2.boxFilter(CV_64F)`` + :func:`mean_std`.
+    """
+    h, w = sum1.shape
+    for v in range(h):
+        for u in range(w):
+            m = np.float64(sum1[v, u]) * scale
+            var = np.float64(sum2[v, u]) * scale - m * m
+            if var < 0.0:
+                var = 0.0
+            mean_out[v, u] = np.float32(m)
+            std_out[v, u] = np.float32(math.sqrt(var))
+
+
+@njit(nogil=True, cache=True)
 def reject(disparity, uniform, rejected):
     """Eq. (13) in place: NaN where ``uniform`` and the float32 disparity is finite (marked in ``rejected``)."""
     h, w = disparity.shape

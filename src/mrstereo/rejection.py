@@ -152,7 +152,11 @@ def patch_statistics(image, *, window_px: int = 9) -> PatchStatistics:
 
     Box filters on ``I`` and ``I^2`` (``cv2.boxFilter``, borders reflected):
     ``mu = E[I]``, ``sigma = sqrt(max(E[I^2] - mu^2, 0))``. Computed in float64
-    so that the difference of large squares does not lose precision.
+    so that the difference of large squares does not lose precision. For a uint8
+    gray image the window sums are integers that OpenCV's SIMD box filters
+    (``cv2.boxFilter`` / ``cv2.sqrBoxFilter`` of the uint8 image) give exactly, in
+    float32 while ``255^2 w^2 < 2^24`` (windows up to 15 px) and in float64 beyond;
+    the result is bit for bit that of the float64 filters, at less than half the cost.
 
     Parameters
     ----------
@@ -161,10 +165,13 @@ def patch_statistics(image, *, window_px: int = 9) -> PatchStatistics:
     window_px : int
         Odd patch side.
     """
-    gray = _checks.gray_float32("image", image).astype(np.float64)
+    image = _checks.image("image", image)
     w = _checks.positive_int("window_px", window_px)
     if w % 2 == 0:
         raise ValueError(f"window_px must be odd, got {w}")
+    if image.dtype == np.uint8 and (image.ndim == 2 or image.shape[2] == 1):
+        return _patch_statistics_uint8(image.reshape(image.shape[:2]), w)
+    gray = _checks.gray_float32("image", image).astype(np.float64)
     mean = cv2.boxFilter(gray, cv2.CV_64F, (w, w), normalize=True, borderType=cv2.BORDER_REFLECT_101)
     gray_sq = np.empty_like(gray)
     _kernels.square(gray, gray_sq)
@@ -172,6 +179,18 @@ def patch_statistics(image, *, window_px: int = 9) -> PatchStatistics:
     mean32 = np.empty(mean.shape, dtype=np.float32)
     std32 = np.empty(mean.shape, dtype=np.float32)
     _kernels.mean_std(mean, mean_sq, mean32, std32)      # sigma = sqrt(max(E[I^2] - mu^2, 0))
+    return PatchStatistics(mean=mean32, std=std32, window_px=w)
+
+
+def _patch_statistics_uint8(gray: np.ndarray, w: int) -> PatchStatistics:
+    """:func:`patch_statistics` of a uint8 gray image from exact integer window sums (same bits)."""
+    depth = cv2.CV_32F if 255 * 255 * w * w < 2 ** 24 else cv2.CV_64F      # sums held exactly
+    gray = np.ascontiguousarray(gray)
+    sum1 = cv2.boxFilter(gray, depth, (w, w), normalize=False, borderType=cv2.BORDER_REFLECT_101)
+    sum2 = cv2.sqrBoxFilter(gray, depth, (w, w), normalize=False, borderType=cv2.BORDER_REFLECT_101)
+    mean32 = np.empty(gray.shape, dtype=np.float32)
+    std32 = np.empty(gray.shape, dtype=np.float32)
+    _kernels.mean_std_from_sums(sum1, sum2, 1.0 / (w * w), mean32, std32)
     return PatchStatistics(mean=mean32, std=std32, window_px=w)
 
 
