@@ -74,7 +74,8 @@ class MrstereoChain:
         with profiling() as prof:
             frame = obstacles_from_pair(left, right, self.manifest.calibration, rectified=False,
                                         rig=self.manifest.rig, pan_rad=record.pan_rad, **pair_options(self.config))
-            obs = observation_from_pair(frame, record, index=k, config=self.config)
+            obs = observation_from_pair(frame, record, index=k, config=self.config,
+                                        stereo=self.manifest.calibration)
             t0 = time.perf_counter()
             self.grid.apply(obs.cells)
             prof.add("grid", time.perf_counter() - t0)
