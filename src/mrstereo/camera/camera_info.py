@@ -96,16 +96,7 @@ def camera_from_ros(width, height, K, distortion_model, D, *, where: str) -> Cam
     K = numbers(K, where=where, field="camera_matrix", shape=(3, 3))
     model = ros_model_name(distortion_model, where=where)
     D = numbers(D, where=where, field="distortion_coefficients")
-    side = max(width, height)
-    for name, value in (("fx", K[0, 0]), ("fy", K[1, 1])):
-        if not FOCAL_RANGE_PER_SIDE[0] * side <= value <= FOCAL_RANGE_PER_SIDE[1] * side:
-            raise ValueError(f"{where}: camera_matrix {name} = {value:g} px is implausible for a "
-                             f"{width}x{height} image (expected {FOCAL_RANGE_PER_SIDE[0] * side:g}.."
-                             f"{FOCAL_RANGE_PER_SIDE[1] * side:g} px)")
-    for name, value, size in (("cx", K[0, 2], width), ("cy", K[1, 2], height)):
-        if abs(value - size / 2.0) > 10.0 * side:
-            raise ValueError(f"{where}: camera_matrix {name} = {value:g} px is far outside the "
-                             f"{width}x{height} image")
+    _check_pinhole(K, width, height, what=f"{where}: camera_matrix", names=("fx", "fy", "cx", "cy"))
     if np.any(np.abs(D) > 1e6):
         raise ValueError(f"{where}: field 'distortion_coefficients' has an implausible value "
                          f"{D[np.argmax(np.abs(D))]:g}")
@@ -113,6 +104,20 @@ def camera_from_ros(width, height, K, distortion_model, D, *, where: str) -> Cam
         return Camera.from_ros(int(width), int(height), K, model, D)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
+
+
+def _check_pinhole(M: np.ndarray, width: int, height: int, *, what: str, names: tuple[str, ...]) -> None:
+    """Plausible focal lengths and principal point of a camera or projection matrix ``M``
+    (3x3 or 3x4) for a ``width`` x ``height`` image; ``names`` label fx, fy, cx, cy in messages."""
+    side = max(width, height)
+    lo, hi = FOCAL_RANGE_PER_SIDE[0] * side, FOCAL_RANGE_PER_SIDE[1] * side
+    for name, value in ((names[0], M[0, 0]), (names[1], M[1, 1])):
+        if not lo <= value <= hi:
+            raise ValueError(f"{what} {name} = {value:g} px is implausible for a {width}x{height} image "
+                             f"(expected {lo:g}..{hi:g} px)")
+    for name, value, size in ((names[2], M[0, 2], width), (names[3], M[1, 2], height)):
+        if abs(value - size / 2.0) > 10.0 * side:
+            raise ValueError(f"{what} {name} = {value:g} px is far outside the {width}x{height} image")
 
 
 def _given(value, default):
@@ -330,18 +335,10 @@ class StereoCamera:
 def _check_projections(left: CameraInfo, right: CameraInfo) -> None:
     """Ranges of the rectified projections: a named ``ValueError`` for what later code cannot use."""
     width, height = left.camera.size
-    side = max(width, height)
     for label, info in (("left", left), ("right", right)):
         P = info.P
-        for name, value in (("P[0,0] (fx)", P[0, 0]), ("P[1,1] (fy)", P[1, 1])):
-            if not FOCAL_RANGE_PER_SIDE[0] * side <= value <= FOCAL_RANGE_PER_SIDE[1] * side:
-                raise ValueError(f"{label} projection_matrix {name} = {value:g} px is implausible for a "
-                                 f"{width}x{height} image (expected {FOCAL_RANGE_PER_SIDE[0] * side:g}.."
-                                 f"{FOCAL_RANGE_PER_SIDE[1] * side:g} px)")
-        for name, value, size in (("P[0,2] (cx)", P[0, 2], width), ("P[1,2] (cy)", P[1, 2], height)):
-            if abs(value - size / 2.0) > 10.0 * side:
-                raise ValueError(f"{label} projection_matrix {name} = {value:g} px is far outside the "
-                                 f"{width}x{height} image")
+        _check_pinhole(P, width, height, what=f"{label} projection_matrix",
+                       names=("P[0,0] (fx)", "P[1,1] (fy)", "P[0,2] (cx)", "P[1,2] (cy)"))
         off = np.abs([P[0, 1], P[1, 0], P[2, 0], P[2, 1], P[2, 2] - 1.0])
         if np.any(off > 1e-6 * np.array([P[0, 0], P[1, 1], 1.0, 1.0, 1.0])):
             raise ValueError(f"{label} projection_matrix must be [fx 0 cx Tx; 0 fy cy Ty; 0 0 1 0] "
