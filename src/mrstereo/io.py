@@ -284,6 +284,24 @@ def read_text(path: str | os.PathLike, what: str = "file") -> str:
         raise ValueError(f"{what} {path} is a folder, not a file") from None
 
 
+def parse_yaml(text: str, what: str, path, *, loader=None):
+    """YAML ``text`` of the file ``path`` as Python data; invalid YAML raises a ``ValueError``
+    naming the file (as ``what``) and the line."""
+    import yaml
+
+    try:
+        return yaml.load(text, Loader=loader or yaml.SafeLoader)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f" (line {mark.line + 1})" if mark is not None else ""
+        raise ValueError(f"{what} {path} is not valid YAML{line}") from None
+
+
+def read_yaml(path: str | os.PathLike, what: str = "file"):
+    """A UTF-8 YAML file as Python data; every failure names the file (:func:`read_text`, :func:`parse_yaml`)."""
+    return parse_yaml(read_text(path, what), what, path)
+
+
 def read_image(path: str | os.PathLike, *, gray: bool = False) -> np.ndarray:
     """Read an image file as uint8 (or uint16) HxW or HxWx3 (BGR, OpenCV order).
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import yaml
 
 from .camera import RigMount, StereoCamera, read_stereo
-from .io import read_text
+from .io import read_yaml
 from .geometry.frames import CameraMount, mount_entry, read_mount_entry
 
 __all__ = ["FrameRecord", "Manifest", "read_manifest", "write_manifest", "MANIFEST_NAME",
@@ -118,14 +118,7 @@ def read_manifest(path_or_dir: str | os.PathLike) -> Manifest:
         path = path / MANIFEST_NAME
     if not path.is_file():
         raise FileNotFoundError(f"dataset manifest not found: {path}")
-    try:
-        data = yaml.safe_load(read_text(path, "manifest"))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" (line {mark.line + 1})" if mark is not None else ""
-        raise ValueError(f"manifest {path} is not valid YAML{where}") from None
-    except UnicodeDecodeError:
-        raise ValueError(f"manifest {path} is not a text file") from None
+    data = read_yaml(path, "manifest")
     if not isinstance(data, dict):
         raise _fail(path, "expected a mapping with 'calibration' and 'frames'")
     root = path.parent.resolve()

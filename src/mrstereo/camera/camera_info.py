@@ -27,7 +27,7 @@ import numpy as np
 import yaml
 
 from .. import _checks
-from ..io import atomic_write
+from ..io import atomic_write, parse_yaml
 from .model import Camera, get_distortion_model
 
 __all__ = ["CameraInfo", "RigMount", "StereoCamera", "read_camera_info", "write_camera_info",
@@ -413,14 +413,10 @@ def _load_yaml(path: str | os.PathLike, what: str):
     if not path.is_file():
         raise FileNotFoundError(f"{what} not found: {path}")
     try:
-        with open(path, encoding="utf-8") as fh:
-            return yaml.safe_load(fh)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" (line {mark.line + 1})" if mark is not None else ""
-        raise ValueError(f"{what} {path} is not valid YAML{where}") from None
+        text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
         raise ValueError(f"{what} {path} is not a text file (binary or not UTF-8)") from None
+    return parse_yaml(text, what, path)
 
 
 def _dump_yaml(path: str | os.PathLike, data: dict) -> None:

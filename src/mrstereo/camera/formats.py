@@ -41,6 +41,7 @@ import yaml
 from .camera_info import (BASELINE_RANGE_M, ROTATION_TOL, CameraInfo, StereoCamera, _rotation_error,
                           camera_from_ros, check_stereo, numbers)
 from .model import Camera
+from ..io import parse_yaml
 from .rectification import check_not_swapped, rectify_fusiello
 
 __all__ = ["FORMATS", "ImportedCalibration", "import_calibration", "read_calibration"]
@@ -171,13 +172,11 @@ def _load(path: Path) -> dict:
     else:
         opencv_error = None
     try:
-        data = yaml.load(text, Loader=_Loader)
-    except yaml.YAMLError as exc:
+        data = parse_yaml(text, "stereo calibration", path, loader=_Loader)
+    except ValueError:
         if opencv_error is not None:
             raise opencv_error from None
-        mark = getattr(exc, "problem_mark", None)
-        line = f" (line {mark.line + 1})" if mark is not None else ""
-        raise ValueError(f"stereo calibration {path} is not valid YAML{line}") from None
+        raise
     if not isinstance(data, dict):
         raise _unknown(path, "not a mapping of fields")
     return data

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..io import atomic_write, read_image, read_text, write_image
+from ..io import atomic_write, read_image, read_yaml, write_image
 from .grid import GridSpec
 
 __all__ = ["RosMap", "read_ros_map", "write_ros_map", "ros_map_files", "FREE", "OCCUPIED", "UNKNOWN"]
@@ -77,10 +77,7 @@ def read_ros_map(yaml_path: str | os.PathLike) -> RosMap:
     yaml_path = Path(yaml_path)
     if not yaml_path.is_file():
         raise FileNotFoundError(f"map file not found: {yaml_path}")
-    try:
-        meta = yaml.safe_load(read_text(yaml_path, "map file"))
-    except yaml.YAMLError:
-        raise ValueError(f"map file {yaml_path} is not valid YAML") from None
+    meta = read_yaml(yaml_path, "map file")
     if not isinstance(meta, dict):
         raise ValueError(f"map file {yaml_path}: expected a mapping")
     for key in ("image", "resolution", "origin"):
