@@ -5,6 +5,7 @@
 """
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 
@@ -12,7 +13,7 @@ import click
 
 from ._options import check_workers, echo_run_floor, mount_option, parse_mount, worker_options
 
-__all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "rig_from_options"]
+__all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "rig_from_options", "opened_dataset"]
 
 
 def bag_options(func):
@@ -88,6 +89,42 @@ def bag_export_kwargs(*, calib, left_topic, right_topic, camera_info_topics, odo
                 use_tf=use_tf, world_frame=world_frame, base_frame=base_frame, camera_frame=camera_frame,
                 sync_tolerance_s=sync_tolerance_s, rig=rig_from_options(height_m, tilt_rad, mount),
                 rectified=rectified_images, progress=not quiet)
+
+
+@contextlib.contextmanager
+def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, *, quiet: bool, bag_kw: dict):
+    """The recording a command works on: ``(dataset, stereo, stamps_s)``.
+
+    A ROS bag (``--bag`` with the topic options) is exported into a temporary dataset that lives as
+    long as the ``with`` block, its stamps in seconds; a MANIFEST gets ``--height``/``--tilt``/``--mount``
+    applied and ``--calib`` read (``stereo`` None: the manifest's own calibration; stamps None).
+    """
+    import dataclasses
+    import tempfile
+
+    import numpy as np
+
+    from ..camera import read_stereo
+    from ..recording import read_manifest
+
+    with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
+        if bag is not None:
+            from ..bag import export_bag
+
+            result = export_bag(bag, Path(tmp) / "dataset", **bag_export_kwargs(calib=calib, quiet=quiet, **bag_kw))
+            echo_export(result)
+            yield read_manifest(result.out_dir), None, np.asarray(result.stamps_ns, dtype=np.float64) / 1e9
+            return
+        used = [f"--{k.replace('_', '-')}" for k, v in bag_kw.items()
+                if v not in (None, False) and k not in ("height_m", "tilt_rad", "mount", "base_frame",
+                                                         "sync_tolerance_s")]
+        if used:
+            raise click.UsageError(f"{', '.join(used)} only with --bag")
+        dataset = read_manifest(manifest)
+        rig = rig_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"))
+        if rig is not None:
+            dataset = dataclasses.replace(dataset, rig=rig)
+        yield dataset, (read_stereo(calib) if calib is not None else None), None
 
 
 def echo_export(result) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ._bag import bag_export_kwargs, bag_options, echo_export, rig_from_options
+from ._bag import bag_options, opened_dataset
 
 __all__ = ["COMMANDS"]
 
@@ -38,17 +38,12 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     dataset has no stamps), readable by the evo tools. A frame where tracking is lost keeps
     the last pose and is reported.
     """
-    import dataclasses
-    import tempfile
-
     import numpy as np
 
-    from ..camera import read_stereo
     from ..io import refuse_overwrite_input
     from ..odometry import odometry_from_manifest
     from ..odometry.se3 import T_from_planar
     from ..odometry.trajectory import plot_trajectories, trajectory_metrics, write_tum
-    from ..recording import read_manifest
 
     if (manifest is None) == (bag is None):
         raise click.UsageError("give a DATASET or --bag FILE (one of them)")
@@ -58,29 +53,10 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     inputs = [p for p in (manifest, bag, calib) if p is not None]
     for p in outputs:
         refuse_overwrite_input(p, inputs)
-    stamps = None
-    with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
-        stereo = None
-        if bag is not None:
-            from ..bag import export_bag
-
-            result = export_bag(bag, Path(tmp) / "dataset", **bag_export_kwargs(calib=calib, quiet=quiet, **bag_kw))
-            echo_export(result)
-            dataset = read_manifest(result.out_dir)
-            stamps = np.asarray(result.stamps_ns, dtype=np.float64) / 1e9
-        else:
-            used = [f"--{k.replace('_', '-')}" for k, v in bag_kw.items()
-                    if v not in (None, False) and k not in ("height_m", "tilt_rad", "base_frame",
-                                                             "sync_tolerance_s")]
-            if used:
-                raise click.UsageError(f"{', '.join(used)} only with --bag")
-            dataset = read_manifest(manifest)
+    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, stamps):
+        if bag is None:
             for p in outputs:
                 refuse_overwrite_input(p, [dataset.root / "manifest.yaml"])
-            rig = rig_from_options(bag_kw["height_m"], bag_kw["tilt_rad"])
-            if rig is not None:
-                dataset = dataclasses.replace(dataset, rig=rig)
-            stereo = read_stereo(calib) if calib is not None else None
         run = odometry_from_manifest(dataset, calibration=stereo, progress=not quiet,
                                      initial_pose="given" if start == "given" else "identity")
     if stamps is None:

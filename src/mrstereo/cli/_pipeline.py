@@ -5,7 +5,7 @@ from pathlib import Path
 
 import click
 
-from ._bag import bag_export_kwargs, bag_options, echo_export, rig_from_options
+from ._bag import bag_options, opened_dataset
 from ._options import check_workers, echo_run_floor, profile_option, worker_options
 
 __all__ = ["COMMANDS"]
@@ -56,11 +56,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     --workers N / --scheduler ADDRESS spread the frames over Dask workers; the
     map is the same bit for bit.
     """
-    import dataclasses
-    import tempfile
-
     from ..batch import dataset_files
-    from ..camera import read_stereo
     from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
     from ..mapping import GridSpec
     from ..pipeline import PipelineConfig, build_map, write_map_outputs
@@ -78,25 +74,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
         check_outputs(outputs, [bag, calib], input_dirs=[bag] if bag.is_dir() else [])
     else:
         check_outputs(outputs, [manifest, calib] + dataset_files(read_manifest(manifest)))
-    with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
-        stereo = None
-        if bag is not None:
-            from ..bag import export_bag
-
-            result = export_bag(bag, Path(tmp) / "dataset", **bag_export_kwargs(calib=calib, quiet=quiet, **bag_kw))
-            echo_export(result)
-            dataset = read_manifest(result.out_dir)
-        else:
-            used = [f"--{k.replace('_', '-')}" for k, v in bag_kw.items()
-                    if v not in (None, False) and k not in ("height_m", "tilt_rad", "mount", "base_frame",
-                                                             "sync_tolerance_s")]
-            if used:
-                raise click.UsageError(f"{', '.join(used)} only with --bag")
-            dataset = read_manifest(manifest)
-            rig = rig_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw["mount"])
-            if rig is not None:
-                dataset = dataclasses.replace(dataset, rig=rig)
-            stereo = read_stereo(calib) if calib is not None else None
+    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes, odometry=odometry, align=align or None)
         remove_stale_temporaries(out_dir)
