@@ -185,18 +185,27 @@ def rendered_images(n_views):
           f"vertical error {r.vertical_error_px:.3f} px")
 
 
-def real_data(repeats):
+def opencv_chessboard_corners(section: int):
+    """OpenCV's real stereo set: ``(pairs, size, object points, left corners, right corners)`` as
+    cv2 wants them, or None (printed as skipped) without the sample data."""
     try:
         DATA = sample_data.fetch("opencv-stereo-chessboard")   # $MRSTEREO_DATA or the download cache
     except (OSError, ValueError) as exc:
-        print(f"\n[4] skipped: OpenCV's stereo chessboards not available ({exc})")
-        return
+        print(f"\n[{section}] skipped: OpenCV's stereo chessboards not available ({exc})")
+        return None
     pairs = chessboard_pairs(expand_glob(str(DATA / "left*.jpg")), expand_glob(str(DATA / "right*.jpg")),
                              (9, 6), 0.025)
-    size = pairs.size
     obj = [v.points_target.astype(np.float32) for v in pairs.left]
     il = [v.uv.astype(np.float32) for v in pairs.left]
     ir = [v.uv.astype(np.float32) for v in pairs.right]
+    return pairs, pairs.size, obj, il, ir
+
+
+def real_data(repeats):
+    corners = opencv_chessboard_corners(4)
+    if corners is None:
+        return
+    pairs, size, obj, il, ir = corners
     print(f"\n[4] OpenCV stereo set: {len(pairs.left)} pairs (skipped {pairs.skipped}), same corners for both")
 
     def cv_all():
@@ -233,17 +242,10 @@ MODEL_FLAGS = {"k1k2": FLAGS, "plumb_bob": 0, "rational": cv2.CALIB_RATIONAL_MOD
 
 
 def real_models():
-    try:
-        DATA = sample_data.fetch("opencv-stereo-chessboard")
-    except (OSError, ValueError) as exc:
-        print(f"\n[5] skipped: OpenCV's stereo chessboards not available ({exc})")
+    corners = opencv_chessboard_corners(5)
+    if corners is None:
         return
-    pairs = chessboard_pairs(expand_glob(str(DATA / "left*.jpg")), expand_glob(str(DATA / "right*.jpg")),
-                             (9, 6), 0.025)
-    size = pairs.size
-    obj = [v.points_target.astype(np.float32) for v in pairs.left]
-    il = [v.uv.astype(np.float32) for v in pairs.left]
-    ir = [v.uv.astype(np.float32) for v in pairs.right]
+    pairs, size, obj, il, ir = corners
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
     print(f"\n[5] every --model, LM, OpenCV stereo set ({len(il)} pairs), same corners")
     for model in ("k1k2", "plumb_bob", "rational", "fisheye"):
