@@ -71,7 +71,9 @@ def _siblings(output: Path, stem_suffix: str) -> dict[str, Path]:
 @click.option("--generations", type=int, default=None, help="GA generation limit (default 2000 for one "
               "view, 200 for several).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="camera_info YAML.")
-def calibrate_cmd(points, image_size, units, images_glob, board, square, method, model, seed, generations, output):
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def calibrate_cmd(points, image_size, units, images_glob, board, square, method, model, seed, generations, output,
+                  quiet):
     """Calibrate one camera (GA of paper sec. 2.2, GA + LM, or LM).
 
     Writes OUTPUT (ROS camera_info YAML) and, next to it, OUTPUT_report.json,
@@ -110,7 +112,7 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
         base = GAConfig() if len(views) == 1 else MULTIVIEW_GA
         config = dataclasses.replace(base, generations=_checks.positive_int("--generations", generations))
     total = (config or (GAConfig() if len(views) == 1 else MULTIVIEW_GA)).generations
-    bar, update = _progress_bar(total, "GA") if method != "lm" else (None, None)
+    bar, update = _progress_bar(total, "GA") if method != "lm" and not quiet else (None, None)
     try:
         result = calibrate_camera(views, width=width, height=height, method=method, model=model, ga_config=config,
                                   rng=seed, progress=update)
@@ -141,7 +143,8 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
 @click.option("--alpha", type=float, default=0.0, show_default=True,
               help="Rectified view: 0 = valid pixels only, 1 = all raw pixels.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Stereo YAML.")
-def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, seed, alpha, output):
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, seed, alpha, output, quiet):
     """Calibrate and rectify (Fusiello) a stereo pair from chessboard image pairs.
 
     Pairs are matched by sorted file order; a pair where either board is not
@@ -167,7 +170,7 @@ def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, se
         raise ValueError(f"the board was found in both images of only {len(found.left)} pair(s); need at least 2")
     pairs = list(zip(found.left, found.right))
     size_l = found.size
-    bar, update = _progress_bar(MULTIVIEW_GA.generations, "GA") if method != "lm" else (None, None)
+    bar, update = _progress_bar(MULTIVIEW_GA.generations, "GA") if method != "lm" and not quiet else (None, None)
     try:
         result = calibrate_stereo([p[0] for p in pairs], [p[1] for p in pairs], width=size_l[0], height=size_l[1],
                                   method=method, model=model, alpha=alpha, rng=seed, progress=update)
