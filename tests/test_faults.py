@@ -460,6 +460,29 @@ def test_ctrl_c_is_one_line_and_exit_130_within_seconds(ds, tmp_path, delay_s):
         assert names in (set(), {"map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json"})
 
 
+def test_ctrl_c_after_the_command_finished_is_still_one_line_and_130():
+    """A signal after the command's work, before the process has ended: one line, exit 130, no
+    traceback (the handler entry() leaves in place for mrstereo's own process)."""
+    script = ("import os, signal, sys, time; from mrstereo.cli import _Interrupts; i = _Interrupts(); "
+              "i.install(); i.linger(); os.kill(os.getpid(), signal.SIGINT); time.sleep(10); sys.exit(0)")
+    env = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg")
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, env=env, timeout=60)
+    REPORT["cases"] += 1
+    REPORT["tracebacks"] += b"Traceback" in proc.stderr
+    assert proc.returncode == 130, proc.stderr.decode()
+    assert proc.stderr.decode() == "mrstereo: interrupted\n"
+
+
+def test_console_run_ends_with_its_exit_code_and_output():
+    """``python -m mrstereo`` ends right after the command (no interpreter teardown) with all its output."""
+    env = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg")
+    ok = subprocess.run([sys.executable, "-m", "mrstereo", "data", "list"], capture_output=True, env=env, timeout=60)
+    assert ok.returncode == 0 and b"openloris-sample" in ok.stdout and ok.stderr == b""
+    bad = subprocess.run([sys.executable, "-m", "mrstereo", "data", "path", "nope"], capture_output=True, env=env,
+                         timeout=60)
+    assert bad.returncode == 2 and bad.stderr.decode().startswith("mrstereo: error: ")
+
+
 LONG_COMMANDS = {
     "synth": ["synth", "--out", "{T}/S", "--frames", "3", "--width", "160", "--height", "120", "--quiet"],
     "map (threads)": ["map", "{DS}", "-o", "{T}/m", "--workers", "2", "--quiet"],

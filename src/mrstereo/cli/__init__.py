@@ -71,6 +71,25 @@ class _Interrupts:
         for sig in (signal.SIGINT, signal.SIGTERM):
             self._previous[sig] = signal.signal(sig, self._handler)
 
+    def linger(self) -> None:
+        """After the command, while the interpreter shuts down (Dask threads, atexit): a signal
+        still ends the process with one line and code 130, without unwinding anything."""
+        if not self._previous:
+            return
+        for sig in self._previous:
+            signal.signal(sig, self._late_handler)
+        self._previous.clear()
+
+    def _late_handler(self, signum, frame) -> None:
+        if self._stderr_fd is not None:
+            try:
+                os.write(self._stderr_fd, b"mrstereo: interrupted\n")
+            except OSError:
+                pass
+        else:
+            _say("mrstereo: interrupted")
+        _hard_exit(EXIT_INTERRUPTED)
+
     def uninstall(self) -> None:
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
@@ -149,7 +168,25 @@ def _message(exc: BaseException) -> str:
 
 
 def entry(argv: list[str] | None = None) -> int:
-    """Console-script entry point (also ``python -m mrstereo``): run the CLI, every failure one line."""
+    """Console-script entry point (also ``python -m mrstereo``): run the CLI, every failure one line.
+
+    Without ``argv`` the process is mrstereo's own: once the command has finished (its outputs
+    written, its clusters closed), the process ends here with the command's exit code, without
+    the interpreter's teardown of numba, Dask and matplotlib -- during that teardown Python no
+    longer handles signals, so a Ctrl-C there would end the process without the one line and code.
+    """
+    code = _run(argv)
+    if argv is None:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except Exception:
+                pass
+        _hard_exit(code)
+    return code
+
+
+def _run(argv: list[str] | None) -> int:
     debug = os.environ.get(DEBUG_ENV, "") not in ("", "0")
     interrupts = _Interrupts()
     interrupts.install()
@@ -193,7 +230,10 @@ def entry(argv: list[str] | None = None) -> int:
              f"at {_ISSUES_URL} (set {DEBUG_ENV}=1 to see the traceback)")
         return EXIT_BUG
     finally:
-        interrupts.uninstall()
+        if argv is None and not interrupts.fired:
+            interrupts.linger()         # the process is ours (console script, python -m): to its very end
+        else:
+            interrupts.uninstall()      # called from Python: leave its signal handlers as they were
     if interrupts.fired:                            # the interrupt was swallowed somewhere: still 130
         return _interrupted(interrupts)
     return 0
