@@ -81,6 +81,11 @@ class _Interrupts:
         self._previous.clear()
 
     def _late_handler(self, signum, frame) -> None:
+        self._say_interrupted()
+        _hard_exit(EXIT_INTERRUPTED)
+
+    def _say_interrupted(self) -> None:
+        """The one line, on the terminal's stderr even while fd 2 is redirected."""
         if self._stderr_fd is not None:
             try:
                 os.write(self._stderr_fd, b"mrstereo: interrupted\n")
@@ -88,7 +93,6 @@ class _Interrupts:
                 pass
         else:
             _say("mrstereo: interrupted")
-        _hard_exit(EXIT_INTERRUPTED)
 
     def uninstall(self) -> None:
         for sig, handler in self._previous.items():
@@ -106,13 +110,7 @@ class _Interrupts:
             sys.stderr.flush()
         except Exception:
             pass
-        if self._stderr_fd is not None:
-            try:
-                os.write(self._stderr_fd, b"mrstereo: interrupted\n")
-            except OSError:
-                pass
-        else:
-            _say("mrstereo: interrupted")
+        self._say_interrupted()
         _silence_stderr()
         timer = threading.Timer(_EXIT_GRACE_S, _hard_exit, args=(EXIT_INTERRUPTED,))
         timer.daemon = True
