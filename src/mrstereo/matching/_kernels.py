@@ -44,17 +44,32 @@ TWO = np.float32(2.0)
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _track_winner(crow, prow, k, n, bc, bk, cm_, cp_):
-    """One candidate row ``k`` of eq. (10): keep the first minimum per pixel (``bc``, ``bk``) and
-    the costs next to it for the parabola (``cm_`` when the best changes, ``cp_`` one row later)."""
+def _blend(m, a, b):
+    """``a`` where the float32 mask ``m`` is 1, ``b`` where it is 0; exact for finite values.
+    Arithmetic on purpose: numba lowers ``a if c else b`` to branches that LLVM turns into
+    predicated scalar stores, which stops a loop from vectorizing (about 10x slower)."""
+    return a * m + b * (ONE - m)
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _winners(cost, rows, n, bc, bk, cm_, cp_):
+    """Eq. (10) per column of ``cost[:rows, :n]``: the first minimum ``bc`` and its row ``bk``
+    (float32, -1 where no row is below BIG), then the costs of the rows beside it for the
+    parabola, ``cm_`` (row ``bk - 1``) and ``cp_`` (row ``bk + 1``), BIG where none."""
     for i in range(n):
-        c = crow[i]
-        cp_[i] = c if bk[i] == k - 1 else cp_[i]
-        better = c < bc[i]
-        cm_[i] = (prow[i] if k > 0 else BIG) if better else cm_[i]
-        cp_[i] = BIG if better else cp_[i]
-        bk[i] = k if better else bk[i]
-        bc[i] = c if better else bc[i]
+        bc[i] = BIG
+        bk[i] = -1.0
+    for k in range(rows):
+        crow = cost[k]
+        kf = np.float32(k)
+        for i in range(n):
+            m = np.float32(crow[i] < bc[i])
+            bk[i] = _blend(m, kf, bk[i])
+            bc[i] = _blend(m, crow[i], bc[i])
+    for i in range(n):
+        b = np.int64(bk[i])
+        cm_[i] = cost[b - 1, i] if b > 0 else BIG
+        cp_[i] = cost[b + 1, i] if 0 <= b < rows - 1 else BIG
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -303,13 +318,13 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
         t16 = np.empty(wp, left_pad.dtype)
         cost = np.empty((nd, width), np.float32)
         bc = np.empty(nx, np.float32)
-        bk = np.empty(nx, np.int32)
+        bk = np.empty(nx, np.float32)
         sc = np.empty(nx, np.float32)
         cm_ = np.empty(nx, np.float32)
         cp_ = np.empty(nx, np.float32)
         sub_ = np.empty(nx, np.float32)
         right_c = np.empty(width, np.float32)
-        right_d = np.empty(width, np.int32)
+        right_d = np.empty(width, np.float32)
         lr_ok = np.empty(nx, np.bool_)
         # the window of image row y covers padded rows y .. y + 2r. Loops run over
         # 0-based ranges of slices: the indices are provably >= 0 and the loops vectorize.
@@ -359,49 +374,42 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
                 else:
                     for i in range(m):
                         cr[i] = np.float32(al[i] + ar[i] - TWO * box[i]) * bl[i] * br[i]
-            # winner-take-all (eq. 10), first index on ties; the costs next to the
-            # winner (parabola) are tracked on the way: cm when the best changes, cp one
-            # disparity later
-            for i in range(nx):
-                bc[i] = BIG
-                bk[i] = -1
-                sc[i] = BIG
-                cm_[i] = BIG
-                cp_[i] = BIG
-            for k in range(nd):
-                _track_winner(cost[k, col0:col1], cost[max(k - 1, 0), col0:col1], k, nx, bc, bk, cm_, cp_)
+            # winner-take-all (eq. 10), first index on ties, and the costs next to the winner
+            _winners(cost[:, col0:col1], nd, nx, bc, bk, cm_, cp_)
             # second best at least 2 disparities away (uniqueness)
+            for i in range(nx):
+                sc[i] = BIG
             for k in range(nd):
                 crow = cost[k, col0:col1]
+                kf = np.float32(k)
                 for i in range(nx):
-                    dk = k - bk[i]
-                    c = crow[i] if (dk > 1 or dk < -1) else BIG
-                    sc[i] = min(sc[i], c)
+                    far = np.float32(abs(kf - bk[i]) > ONE)
+                    sc[i] = np.fmin(sc[i], _blend(far, crow[i], BIG))
             if want_right:
                 for x in range(width):
                     right_c[x] = BIG
-                    right_d[x] = -1
+                    right_d[x] = -1.0
                 for k in range(nd):
                     d = d_lo + k
                     x0 = max(col0, d)
                     m = col1 - x0
                     if m <= 0:
                         continue
+                    df = np.float32(d)
                     crow = cost[k, x0:col1]
                     rc = right_c[x0 - d:col1 - d]
                     rd = right_d[x0 - d:col1 - d]
                     for i in range(m):
-                        c = crow[i]
-                        better = c < rc[i]
-                        rd[i] = d if better else rd[i]
-                        rc[i] = c if better else rc[i]
+                        better = np.float32(crow[i] < rc[i])
+                        rd[i] = _blend(better, df, rd[i])
+                        rc[i] = _blend(better, crow[i], rc[i])
             # parabola through (d - 1, d, d + 1), clipped to +-0.5; 0 at band edges
             for i in range(nx):
                 sub_[i] = _parabola(bc[i], cm_[i], cp_[i])
             if raw:
                 for i in range(nx):
                     x = col0 + i
-                    kb = bk[i]
+                    kb = np.int32(bk[i])
                     out_disp[y, x] = d_lo + kb if kb >= 0 else -1
                     out_sub[y, x] = sub_[i]
                     out_c1[y, x] = bc[i]
@@ -420,14 +428,14 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
                 # the left-right check's gather apart, so that the loop below vectorizes
                 if want_right and lr_tol >= 0:
                     for i in range(nx):
-                        d = d_lo + bk[i]
-                        back = right_d[min(max(col0 + i - d, 0), width - 1)]
+                        d = d_lo + np.int64(bk[i])
+                        back = np.int64(right_d[min(max(col0 + i - d, 0), width - 1)])
                         lr_ok[i] = (back >= 0) & (abs(d - back) <= lr_int)
                 else:
                     for i in range(nx):
                         lr_ok[i] = True
                 for i in range(nx):
-                    kb = bk[i]
+                    kb = np.int64(bk[i])
                     cb = bc[i]
                     second = sc[i]
                     d = d_lo + kb
@@ -443,7 +451,7 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
                     oc[i] = conf if ok else np.float32(0.0)
             if raw and want_right:
                 for x in range(width):
-                    out_right[y, x] = right_d[x]
+                    out_right[y, x] = np.int32(right_d[x])
 
 
 @njit(nogil=True, cache=True)
@@ -531,7 +539,7 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
         t16 = np.empty(ncol, np.float32)
         cost = np.empty((nc, nx), np.float32)
         bc = np.empty(nx, np.float32)
-        bk = np.empty(nx, np.int32)
+        bk = np.empty(nx, np.float32)
         cm_ = np.empty(nx, np.float32)
         cp_ = np.empty(nx, np.float32)
         run_at = np.empty(ncol + 1, np.int64)
@@ -599,18 +607,12 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
                         for i in range(i1 - k0):
                             seg_c[i] = (seg_al[i] + seg_ar[i] - TWO * seg_box[i]) * seg_bl[i] * seg_br[i]
             # winner over the offsets and its neighbours (as in match_band)
-            for i in range(nx):
-                bc[i] = BIG
-                bk[i] = -1
-                cm_[i] = BIG
-                cp_[i] = BIG
-            for o in range(nc):
-                _track_winner(cost[o], cost[max(o - 1, 0)], o, nx, bc, bk, cm_, cp_)
+            _winners(cost, nc, nx, bc, bk, cm_, cp_)
             od = out_disp[y, xa:xb]
             oc = out_cost[y, xa:xb]
             wy = want[y, xa:xb]
             for i in range(nx):
-                kb = bk[i]
+                kb = np.int64(bk[i])
                 cb = bc[i]
                 sub = _parabola(cb, cm_[i], cp_[i])
                 inside = (kb > 0) and (kb < nc - 1) and (cb < BIG) and (max_cost < 0 or cb <= max_c)
