@@ -576,24 +576,34 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
             if y < y_start:
                 continue
             # window sums of row y are complete: costs for every offset
-            cy = center_pad[y + radius, radius + xa:radius + xb]
-            al = a_left[y, xa:xb]
-            bl = b_left[y, xa:xb]
+            # costs only over the columns wa .. wb - 1 of this row's wanted pixels
+            wa = xb
+            wb = xa
+            for x in range(xa, xb):
+                if want[y, x]:
+                    wa = min(wa, x)
+                    wb = x + 1
+            if wb <= wa:
+                continue
+            nw = wb - wa
+            cy = center_pad[y + radius, radius + wa:radius + wb]
+            al = a_left[y, wa:wb]
+            bl = b_left[y, wa:wb]
             ar = a_right[y]
             br = b_right[y]
-            n_runs = _runs(cy, nx, run_at)
+            n_runs = _runs(cy, nw, run_at)
             for o in range(nc):
                 off = o - half
-                _box(colsum[o], box, t2, t4, t8, t16, nx, win)
+                _box(colsum[o, wa - xa:], box, t2, t4, t8, t16, nw, win)
                 crow = cost[o]
-                for r in range(n_runs):     # x_right = xa + i - d, contiguous within a run
+                for r in range(n_runs):     # x_right = wa + i - d, contiguous within a run
                     i0 = run_at[r]
                     i1 = run_at[r + 1]
                     d = cy[i0] + off
-                    k0 = min(max(i0, d - xa), i1) if d >= 0 else i1
+                    k0 = min(max(i0, d - wa), i1) if d >= 0 else i1
                     for i in range(i0, k0):
                         crow[i] = BIG           # x_right < 0 or d < 0: no candidate
-                    base = xa - d
+                    base = wa - d
                     seg_ar = ar[base + k0:base + i1]
                     seg_br = br[base + k0:base + i1]
                     seg_box = box[k0:i1]
@@ -607,11 +617,11 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
                         for i in range(i1 - k0):
                             seg_c[i] = (seg_al[i] + seg_ar[i] - TWO * seg_box[i]) * seg_bl[i] * seg_br[i]
             # winner over the offsets and its neighbours (as in match_band)
-            _winners(cost, nc, nx, bc, bk, cm_, cp_)
-            od = out_disp[y, xa:xb]
-            oc = out_cost[y, xa:xb]
-            wy = want[y, xa:xb]
-            for i in range(nx):
+            _winners(cost, nc, nw, bc, bk, cm_, cp_)
+            od = out_disp[y, wa:wb]
+            oc = out_cost[y, wa:wb]
+            wy = want[y, wa:wb]
+            for i in range(nw):
                 kb = np.int64(bk[i])
                 cb = bc[i]
                 sub = _parabola(cb, cm_[i], cp_[i])
