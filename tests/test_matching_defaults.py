@@ -48,12 +48,13 @@ def test_speed_case_plan_is_unchanged():
     rig = StereoCamera.ideal(Camera(fx=451.0, fy=451.0, cx=320.0, cy=240.0, width=640, height=480), 0.075)
     plan = make_plan((640, 480), calibration=rig)
     assert [lvl.decimation for lvl in plan.levels] == [1, 2, 4]
-    # pixel x disparity evaluations (docs/matching.md, Speed): the near guard adds the quarter
-    # level's search from 68 to 136 px (level disparities 6-17 -> 6-34)
-    assert plan.work == 9_292_800
+    # pixel x disparity evaluations (docs/matching.md, Speed): the near guard searches 68-136 px
+    # apart from the bands, at decimation 8 (level disparities 7-17 on 80 columns)
+    assert plan.work == 8_409_600
     unguarded = make_plan((640, 480), calibration=rig, config=MatchingConfig(near_guard=0.0))
     assert unguarded.work == 7_987_200
-    assert plan.levels[2].search_px == (6, 34) and unguarded.levels[2].search_px == (6, 17)
+    assert plan.levels == unguarded.levels and plan.levels[2].search_px == (6, 17)
+    assert plan.guard.decimation == 8 and plan.guard.search_px == (7, 17)
 
 
 def test_paper_preset_is_exactly_the_paper():

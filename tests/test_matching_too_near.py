@@ -52,14 +52,24 @@ def test_plane_beyond_the_search_is_all_too_near_and_never_valued():
 def test_the_guard_is_in_the_plan_and_counted():
     plan = make_plan((640, 480), max_disparity_px=64)
     off = make_plan((640, 480), max_disparity_px=64, config=MatchingConfig(near_guard=0.0))
-    guard = plan.levels[-1]
-    assert guard.decimation == 4 and guard.too_near_above_px == pytest.approx(64 + 2)
-    assert guard.search_px[1] * guard.scale == 128 and off.levels[-1].search_px[1] * 4 == 64
-    assert plan.work - off.work == 480 * 160 * 16            # 16 more quarter-level disparities
+    assert plan.levels == off.levels                          # the bands' searches are untouched
+    guard = plan.guard
+    # D = 64 spans 8 pixels at twice the nearest band's decimation (4): the guard searches at 8,
+    # from one level pixel below D to 2 D
+    assert guard.decimation == 8 and guard.too_near_above_px == pytest.approx(64 + 4)
+    assert guard.search_px == (7, 16) and guard.band_px == (64, 128)
+    assert plan.work - off.work == guard.work == 480 * 80 * 10
+    assert off.guard is None
     assert "too-near guard" in plan.describe() and "too-near guard" not in off.describe()
-    assert all(lvl.too_near_above_px is None for lvl in plan.levels[:-1])
+    # a small near limit keeps the nearest band's decimation (D = 9: one level at full width)
+    small = make_plan((384, 288), max_disparity_px=9)
+    assert small.guard.decimation == 1 and small.guard.search_px == (8, 18)
+    assert make_plan((640, 480), max_disparity_px=64,
+                     config=MatchingConfig(near_guard_decimation=4)).guard.search_px == (15, 32)
     with pytest.raises(ValueError, match="near_guard"):
         MatchingConfig(near_guard=0.5)
+    with pytest.raises(ValueError, match="near_guard_decimation"):
+        MatchingConfig(near_guard_decimation=0)
 
 
 def _tsukuba():

@@ -665,56 +665,6 @@ def upsample_gate(level_d, level_c, source_cols, scale, lo, hi, top, row0, row1,
 
 
 @njit(nogil=True, cache=True)
-def upsample_above(level_d, level_c, source_cols, scale, above, top, row0, row1, col0, col1, out_beyond, out_conf,
-                   out_mask):
-    """Too-near mark of the guarded level: where the up-sampled disparity (as
-    :func:`upsample_gate`) exceeds ``above`` inside the AOI, ``out_beyond`` gets it and
-    ``out_mask`` True and ``out_conf`` its confidence; elsewhere NaN, 0 and False."""
-    height, width = out_mask.shape
-    nan = np.float32(np.nan)
-    for y in range(height):
-        ob = out_beyond[y]
-        oc = out_conf[y]
-        om = out_mask[y]
-        if y < row0 or y >= row1:
-            for x in range(width):
-                ob[x] = nan
-                oc[x] = 0.0
-                om[x] = False
-            continue
-        ld = level_d[y - top]
-        lc = level_c[y - top]
-        for x in range(width):
-            d = ld[source_cols[x]] * scale
-            m = (d > above) and (x >= col0) and (x < col1)
-            ob[x] = d if m else nan
-            oc[x] = lc[source_cols[x]] if m else np.float32(0.0)
-            om[x] = m
-
-
-@njit(nogil=True, cache=True)
-def settle_too_near(disparity, confidence, beyond, beyond_conf, too_near):
-    """In place: where ``too_near`` and the united ``disparity`` has a value at least as
-    confident as the guard's winner ``beyond`` (confidence ``beyond_conf``), the value stays
-    and the pixel is not too near (``beyond`` NaN); elsewhere too-near pixels lose their value."""
-    height, width = disparity.shape
-    nan = np.float32(np.nan)
-    for y in range(height):
-        dr = disparity[y]
-        cr = confidence[y]
-        br = beyond[y]
-        bc = beyond_conf[y]
-        tr = too_near[y]
-        for x in range(width):
-            keep = tr[x] and np.isfinite(dr[x]) and cr[x] >= bc[x]
-            near = tr[x] and not keep
-            tr[x] = near
-            br[x] = nan if keep else br[x]
-            dr[x] = nan if near else dr[x]
-            cr[x] = np.float32(0.0) if near else cr[x]
-
-
-@njit(nogil=True, cache=True)
 def invalidate(disparity, confidence, mask):
     """In place: NaN / 0 where ``mask``."""
     height, width = disparity.shape

@@ -112,11 +112,16 @@ class MatchingConfig:
         Consecutive valid pixels (the end included) within ``gap_fill_diff_px`` of each
         end. None: ``window_px // 2 + 1`` (half a window); 1: the ends alone (ELAS).
     near_guard : float
-        Too-near detection (beyond the paper): the level of the nearest band searches on
-        to ``near_guard`` times the largest disparity ``D``; pixels whose winner there lies
-        more than one level pixel above ``D`` are "too near" (NaN, flagged in
-        ``DisparityResult.too_near``) instead of keeping a smaller, wrong disparity from a
-        band they do not belong to. 0: off (the paper); else at least 1.
+        Too-near detection (beyond the paper): a search of its own covers the disparities
+        from the largest one ``D`` to ``near_guard * D``; pixels whose confirmed match lies
+        there are "too near" (NaN, flagged in ``DisparityResult.too_near``) instead of
+        keeping a smaller, wrong disparity from a band they do not belong to. The bands'
+        results are not touched unless a too-near region is found (docs/matching.md).
+        0: off (the paper); else at least 1.
+    near_guard_decimation : int or None
+        Horizontal decimation of the guard's search (see
+        :func:`mrstereo.matching.multirange.plan_levels`); None: twice the nearest band's
+        when the near limit spans at least 8 pixels of those images, else the nearest band's.
     """
 
     window_px: int = 9
@@ -145,6 +150,7 @@ class MatchingConfig:
     gap_fill_diff_px: float = 1.0
     gap_fill_support_px: int | None = None
     near_guard: float = 2.0
+    near_guard_decimation: int | None = None
     too_near_margin_px: int | None = None
 
     def __post_init__(self) -> None:
@@ -187,6 +193,8 @@ class MatchingConfig:
         guard = _checks.finite_number("near_guard", self.near_guard, nonnegative=True)
         if 0 < guard < 1:
             raise ValueError(f"near_guard must be 0 (off) or >= 1, got {guard}")
+        if self.near_guard_decimation is not None:
+            _checks.positive_int("near_guard_decimation", self.near_guard_decimation)
         if self.too_near_margin_px is not None:
             _checks.positive_int("too_near_margin_px", self.too_near_margin_px, minimum=0)
         if window > 31:

@@ -11,16 +11,18 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from .. import _checks
 from . import _kernels
 from .config import MatchingConfig, preset_config
-from .cost import match_checked, prepare, prepare_gray, refine_candidates
+from .cost import match_checked, match_prepared, prepare, prepare_gray, refine_candidates
 from .multirange import (DEFAULT_DEPTH_EDGES_M, decimate_horizontally, LevelOutput, MultiRangePlan, RangeLevel,
-                         bands_px_from_depth_m, default_bands_px, default_level_count, plan_levels,
+                         _level_cols, bands_px_from_depth_m, default_bands_px, default_level_count, plan_levels,
                          run_levels)
-from .postfilter import fill_gaps, guard_depth_edges, median_filter, near_side, remove_speckles, textured
+from .postfilter import (fill_gaps, guard_depth_edges, left_right_consistent, median_filter, near_side,
+                         remove_speckles, textured, unique)
 
 __all__ = ["DisparityResult", "compute_disparity", "make_plan", "solve_level"]
 
@@ -35,9 +37,9 @@ class DisparityResult:
         ``d = x_left - x_right`` in full-resolution pixels, NaN invalid (also where too near).
     too_near : ndarray bool (H, W)
         Pixels whose match lies beyond the largest searched disparity (nearer than the near
-        limit): detected by the near guard (``config.near_guard``; see
-        :attr:`.multirange.RangeLevel.too_near_above_px`), NaN in ``disparity_px``. Robot
-        code treats them as an obstacle at the near limit (docs/obstacles.md).
+        limit): detected by the near guard (``config.near_guard``, ``plan.guard``; see
+        ``_near_guard``), NaN in ``disparity_px``. Robot code treats them as an obstacle at
+        the near limit (docs/obstacles.md).
     confidence : ndarray float32 (H, W)
         In [0, 1]; 0 where invalid (see :func:`.postfilter.confidence_from_costs`).
     plan : MultiRangePlan
@@ -129,7 +131,7 @@ def make_plan(image_size: tuple[int, int], *, max_disparity_px=None, disparity_b
     return plan_levels((width, height), bands, decimations=decimations,
                        band_margin_px=config.band_margin_px, aoi=_aoi(aoi, width, height),
                        depth_bands_m=depth_bands, focal_px=focal, baseline_m=baseline,
-                       near_guard=config.near_guard)
+                       near_guard=config.near_guard, near_guard_decimation=config.near_guard_decimation)
 
 
 def _depth(d: float, focal: float, baseline: float, doffs: float) -> float:
@@ -184,26 +186,97 @@ def solve_level(left: np.ndarray, right: np.ndarray, level: RangeLevel, rows: tu
     return _solve_prepared(_prepare_pair(left, right, config), left, level, rows, cols, config)
 
 
-def _verified_too_near(candidates: np.ndarray, beyond: np.ndarray, plan: MultiRangePlan, config: MatchingConfig,
-                       refine) -> np.ndarray:
-    """The guard's too-near candidates that are confirmed (beyond the paper): reported, a robot
-    stops for them.
+def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: MatchingConfig
+                ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The near guard's verdict (beyond the paper): ``(too_near, beside)``.
 
-    A candidate's winner (decimated, so known to about half a level pixel) is re-scored at
-    full resolution as the refinement does (offsets ``+-(ceil(k / 2) + refine_margin_px)``, the
-    maximum cost; a minimum on the edge fails), and the confirmed pixels must form a region of
-    guard disparities larger than a speckle (``speckle_size_px``, connected within
-    ``speckle_range_px`` level pixels). Unconfirmed candidates (stray matches past the near
-    limit: repeated structures, plain paint at decimation 4) stay without a value, unreported.
+    1. The guard's search (``plan.guard``: decimated images, disparities from the near limit
+       ``D`` to ``near_guard * D``) runs apart from the bands, whose winners and checks stay
+       exactly those of the plan without a guard. A winner above ``D`` plus half a level pixel
+       that passes the maximum cost, the left-right and the uniqueness checks is a candidate.
+    2. Where the bands gave the pixel a value, the candidate must beat it, first on the
+       guard's images (the value re-scored over ``+-1`` level px), then at full resolution
+       (step 3; the value re-scored over ``+-2`` px): its cost below ``(1 - uniqueness_ratio)``
+       times the value's, as eq. (10) with the uniqueness test over both searches would
+       decide. (The first test is cheap and removes most stray candidates before step 3.)
+    3. Each candidate is re-scored at full resolution as the refinement does (offsets
+       ``+-(ceil(k / 2) + refine_margin_px)``, the maximum cost; a minimum on the edge fails).
+    4. Too near: the confirmed candidates without a value or whose value lost, in regions
+       larger than a speckle (``speckle_size_px``, connected within ``speckle_range_px`` level
+       pixels).
+    5. ``beside``: the candidates clustered with a too-near region (within
+       ``too_near_margin_px`` of each other) and that margin around them; they lose their
+       values (:func:`.postfilter.near_side`: silhouettes, thin parts, a repeated pattern's
+       wrong matches on the near object). None without a too-near region: a candidate
+       elsewhere (a repeated pattern, plain paint) changes nothing, so a search that covers
+       the scene gives the values of the matcher without a guard.
     """
-    if not candidates.any():
-        return candidates
-    guard = next(level for level in plan.levels if level.too_near_above_px is not None)
-    beyond = refine(guard, beyond, candidates)
+    guard = plan.guard
+    height, width = disparity.shape
+    row0, row1, col0, col1 = plan.aoi
+    w_level = guard.size[0]
+    d_int, sub, c1, c2, d_right = match_prepared(*pair_at(w_level), d_lo=guard.search_px[0],
+                                                 d_hi=guard.search_px[1], rows=(row0, row1),
+                                                 cols=_level_cols(col0, col1, guard.scale, w_level), right_check=True)
+    d_level = (d_int + sub if config.subpixel else d_int).astype(np.float32)
+    beyond = (d_int >= 0) & (d_level * guard.scale > guard.too_near_above_px)
+    candidate = beyond if config.max_cost is None else beyond & (c1 <= config.max_cost)
+    if config.lr_max_diff_px is not None:
+        candidate &= left_right_consistent(d_int, d_right, max_diff_px=config.lr_max_diff_px)
+    if config.uniqueness_ratio > 0:
+        candidate &= unique(c1, c2, ratio=config.uniqueness_ratio)
+    # the bands' value where they have one, at the guard's level (its centre column): a
+    # candidate that does not beat it there (as eq. 10 with the uniqueness test over both
+    # searches would decide) is no candidate
+    centre = np.minimum(((np.arange(w_level) + 0.5) * guard.scale).astype(np.intp), width - 1)
+    value_level = disparity[:, centre] / np.float32(guard.scale)
+    contest = candidate & np.isfinite(value_level)
+    if contest.any():
+        _, value_cost = refine_candidates(*pair_at(w_level), value_level, contest, rows=(row0, row1), half_px=1)
+        candidate &= ~contest | ~(value_cost * (1.0 - config.uniqueness_ratio) <= c1)
+    # Step 2 up-sampling (nearest neighbour along x, disparities times the scale), AOI columns
+    source = np.minimum(((np.arange(col0, col1) + 0.5) / guard.scale).astype(np.intp), w_level - 1)
+    # (every winner beyond D shapes the re-scoring's windows; only the candidates are re-scored)
+    field = np.full((height, width), np.nan, np.float32)
+    field[:, col0:col1] = np.where(beyond[:, source], d_level[:, source] * np.float32(guard.scale), np.nan)
+    want = np.zeros((height, width), bool)
+    want[:, col0:col1] = candidate[:, source]
+    full = pair_at(width)
+    confirmed_px, confirmed_cost = refine_candidates(
+        *full, field, want, rows=(row0, row1), max_cost=config.max_cost,
+        half_px=int(math.ceil(guard.scale / 2)) + config.refine_margin_px)
+    confirmed = np.isfinite(confirmed_px)
+    valued = np.isfinite(disparity)
+    contest = confirmed & valued
+    wins = ~valued
+    if contest.any():
+        _, value_cost = refine_candidates(*full, disparity, contest, rows=(row0, row1), half_px=2)
+        wins |= contest & ~(value_cost * (1.0 - config.uniqueness_ratio) <= confirmed_cost)
+    candidates = confirmed & wins
+    too_near = np.where(candidates, confirmed_px, np.nan).astype(np.float32)
     if config.speckle_size_px > 0:
-        beyond = remove_speckles(beyond, max_size_px=config.speckle_size_px,
-                                 max_diff_px=config.speckle_range_px * guard.scale)
-    return np.isfinite(beyond)
+        too_near = remove_speckles(too_near, max_size_px=config.speckle_size_px,
+                                   max_diff_px=config.speckle_range_px * guard.scale)
+    too_near = np.isfinite(too_near)
+    if not too_near.any():
+        return too_near, None
+    grown = near_side(candidates, margin_px=config.too_near_margin)
+    _, labels = cv2.connectedComponents(grown.view(np.uint8), connectivity=8)
+    keep = np.unique(labels[too_near])
+    return too_near, np.isin(labels, keep[keep > 0])
+
+
+def _drop_cut_off(disparity: np.ndarray, beside: np.ndarray, config: MatchingConfig) -> None:
+    """In place: NaN on the regions that the too-near margins ``beside`` cut down to speckles
+    (speckle regions touching the margins; the rest of the map was filtered before)."""
+    kept = remove_speckles(disparity, max_size_px=config.speckle_size_px, max_diff_px=config.speckle_range_px)
+    dropped = np.isfinite(disparity) & ~np.isfinite(kept)
+    if not dropped.any():
+        return
+    _, labels = cv2.connectedComponents(dropped.view(np.uint8), connectivity=4)
+    ring = cv2.dilate(beside.view(np.uint8), np.ones((3, 3), np.uint8)).view(np.bool_)
+    touching = np.unique(labels[ring & dropped])
+    disparity[np.isin(labels, touching[touching > 0])] = np.nan
 
 
 def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=None, calibration=None,
@@ -295,15 +368,14 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
                                        max_cost=config.max_cost)
         return refined
 
-    disparity, confidence, levels, candidates, beyond = run_levels(
+    disparity, confidence, levels = run_levels(
         left_gray, right_gray, plan, solve, row_pad_px=config.window_px // 2 + 2, union=config.union,
         refine=refine if config.refine else None, refine_min_scale=config.refine_min_decimation - 0.5,
         decimated=decimated)
-    too_near = _verified_too_near(candidates, beyond, plan, config, refine)
-    # Beside a confirmed too-near object, every guard candidate's surroundings lose their values
-    # (silhouettes, thin parts, a repeated pattern's wrong matches on the near object); without
-    # one, the few stray candidates only lose their own values (run_levels).
-    beside = near_side(candidates, margin_px=config.too_near_margin) if too_near.any() else None
+    too_near = np.zeros((height, width), bool)
+    beside = None
+    if plan.guard is not None:
+        too_near, beside = _near_guard(plan, pair_at, disparity, config)
     disparity = remove_speckles(disparity, max_size_px=config.speckle_size_px,
                                 max_diff_px=config.speckle_range_px)
     disparity = guard_depth_edges(disparity, guard_px=config.edge_guard, jump_px=config.edge_jump_px)
@@ -315,8 +387,7 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
         # gap filling may have bridged them; cut off from their surroundings, values left
         # between too-near regions are speckles again
         _kernels.invalidate(disparity, confidence, beside)
-        disparity = remove_speckles(disparity, max_size_px=config.speckle_size_px,
-                                    max_diff_px=config.speckle_range_px)
+        _drop_cut_off(disparity, beside, config)
     _kernels.zero_where_invalid(disparity, confidence)
     return DisparityResult(disparity_px=disparity, confidence=confidence, plan=plan, levels=levels,
                            too_near=too_near)

@@ -28,6 +28,10 @@ __all__ = ["RangeLevel", "MultiRangePlan", "LevelOutput", "plan_levels", "defaul
            "DEFAULT_DEPTH_EDGES_M"]
 
 DEFAULT_DEPTH_EDGES_M = (0.5, 1.0, 2.5, 15.0)
+# The near guard's search runs at twice the nearest band's decimation when the near limit D
+# still spans this many pixels of those images (D >= 16 k), else at the nearest band's
+# (chosen on Tsukuba and Venus cut to half their range, benchmarks/bench_too_near.py).
+GUARD_MIN_LEVEL_PX = 8.0
 
 
 @dataclass(frozen=True)
@@ -51,9 +55,9 @@ class RangeLevel:
     work : int
         Pixel x disparity evaluations of the level (inside the area of interest).
     too_near_above_px : float or None
-        On the nearest level when the near guard is on: its search runs past the near
-        limit, and a winner above this disparity (full-resolution pixels) marks the pixel
-        "too near" (its match lies beyond the largest disparity of the plan). None elsewhere.
+        On the near guard's search (:attr:`MultiRangePlan.guard`): a winner above this
+        disparity (full-resolution pixels) is a too-near candidate (its match lies beyond
+        the largest disparity of the plan). None on the levels of the bands.
     """
 
     decimation: int
@@ -83,6 +87,10 @@ class MultiRangePlan:
         ``[min band, max band]`` (what a single-range matcher would do).
     focal_px, baseline_m : float or None
         Calibration used to express the bands as depths.
+    guard : RangeLevel or None
+        The near guard's search (beyond the paper; None when off): disparities past the
+        near limit, searched apart from the bands (whose results it leaves unchanged) on
+        images decimated at least as much as the nearest band's.
     """
 
     levels: tuple[RangeLevel, ...]
@@ -91,11 +99,12 @@ class MultiRangePlan:
     single_range_work: int
     focal_px: float | None = None
     baseline_m: float | None = None
+    guard: RangeLevel | None = None
 
     @property
     def work(self) -> int:
-        """Total pixel x disparity evaluations of all levels."""
-        return sum(level.work for level in self.levels)
+        """Total pixel x disparity evaluations of all levels and of the near guard."""
+        return sum(level.work for level in self.levels) + (0 if self.guard is None else self.guard.work)
 
     def describe(self) -> str:
         """A human-readable table of the plan (the CLI's ``--explain``)."""
@@ -115,13 +124,13 @@ class MultiRangePlan:
         lo = min(lvl.band_px[0] for lvl in self.levels)
         hi = max(lvl.band_px[1] for lvl in self.levels)
         ratio = self.work / max(self.single_range_work, 1)
-        for i, lvl in enumerate(self.levels):
-            if lvl.too_near_above_px is not None:
-                top = lvl.search_px[1] * lvl.scale
-                depth = "" if self.focal_px is None else \
-                    f" ({self.baseline_m * self.focal_px / top:.2f} m)"
-                lines.append(f"too-near guard: level {i} searches on to {top:.1f} px{depth}; a winner above "
-                             f"{lvl.too_near_above_px:.1f} px marks the pixel too near (no value)")
+        if self.guard is not None:
+            g = self.guard
+            top = g.search_px[1] * g.scale
+            depth = "" if self.focal_px is None else f" ({self.baseline_m * self.focal_px / top:.2f} m)"
+            lines.append(f"too-near guard: decimation {g.decimation} searches {g.search_px[0]}-{g.search_px[1]} "
+                         f"level px, on to {top:.1f} px{depth}, {g.work / 1e6:.2f} Mev; a confirmed winner above "
+                         f"{g.too_near_above_px:.1f} px marks the pixel too near (no value)")
         lines.append(f"total work {self.work / 1e6:.2f} Mev; single-range search "
                      f"{math.floor(lo)}-{math.ceil(hi)} px at full resolution: "
                      f"{self.single_range_work / 1e6:.2f} Mev (multi-range = {ratio:.2f} x)")
@@ -240,7 +249,7 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
                 aoi: tuple[int, int, int, int] | None = None,
                 depth_bands_m: Sequence[tuple[float, float]] | None = None,
                 focal_px: float | None = None, baseline_m: float | None = None,
-                near_guard: float = 0.0) -> MultiRangePlan:
+                near_guard: float = 0.0, near_guard_decimation: int | None = None) -> MultiRangePlan:
     """Build the multi-range plan: one level per disparity band.
 
     Parameters
@@ -259,10 +268,14 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
     depth_bands_m : sequence of (near, far), optional
         The bands as depths (same order as ``bands_px``), for the description.
     near_guard : float
-        Too-near detection (beyond the paper): the level of the nearest band (largest
-        disparities ``D``) searches on to ``near_guard * D``, and its winners above
-        ``D`` plus one level pixel mark pixels "too near" (:attr:`RangeLevel.too_near_above_px`).
-        0 = off; else at least 1.
+        Too-near detection (beyond the paper): a search of its own (:attr:`MultiRangePlan.guard`)
+        covers ``D .. near_guard * D`` past the largest disparity ``D`` of the bands, and its
+        winners above ``D`` plus half a level pixel are too-near candidates
+        (:attr:`RangeLevel.too_near_above_px`). 0 = off; else at least 1.
+    near_guard_decimation : int or None
+        Decimation of the guard's search; None: twice the nearest band's ``k`` when ``D``
+        spans at least ``GUARD_MIN_LEVEL_PX`` (8) pixels of those images (``D >= 16 k``),
+        else ``k`` (a too-near object is large in the image and its disparities are large).
     """
     width, height = image_size
     guard = _checks.finite_number("near_guard", near_guard, nonnegative=True)
@@ -296,20 +309,33 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
         scale = width / w_level
         s_lo = math.floor(lo / scale) - (band_margin_px if lo > global_lo else 0)
         s_hi = math.ceil(hi / scale) + (band_margin_px if hi < global_hi else 0)
-        above = None
-        if guard > 0 and hi == global_hi and not any(lvl.too_near_above_px for lvl in levels):
-            s_hi = max(s_hi, math.ceil(guard * hi / scale))
-            above = hi + 0.5 * scale
         s_lo = max(s_lo, 0)
         cols = _level_cols(col0, col1, scale, w_level)
         work = (row1 - row0) * (cols[1] - cols[0]) * (s_hi - s_lo + 1)
         levels.append(RangeLevel(decimation=k, scale=scale, size=(w_level, height), band_px=(lo, hi),
-                                 search_px=(s_lo, s_hi), depth_band_m=depth, work=int(work),
-                                 too_near_above_px=above))
+                                 search_px=(s_lo, s_hi), depth_band_m=depth, work=int(work)))
     levels.sort(key=lambda lvl: lvl.scale)        # finest first
     single = (row1 - row0) * (col1 - col0) * (math.ceil(global_hi) - math.floor(global_lo) + 1)
+    near_guard_level = None
+    if guard > 0:
+        nearest = max(levels, key=lambda lvl: lvl.band_px[1]).decimation
+        if near_guard_decimation is not None:
+            k = _checks.positive_int("near_guard_decimation", near_guard_decimation)
+        else:       # twice the nearest band's decimation where D still spans enough level pixels
+            k = 2 * nearest if global_hi / (2 * nearest) >= GUARD_MIN_LEVEL_PX else nearest
+        w_level = max(1, int(round(width / k)))
+        scale = width / w_level
+        # from one level pixel below D (a winner at D is no candidate) to near_guard * D
+        s_lo = max(0, math.floor(global_hi / scale) - 1)
+        s_hi = max(s_lo + 2, math.ceil(guard * global_hi / scale))
+        cols = _level_cols(col0, col1, scale, w_level)
+        near_guard_level = RangeLevel(
+            decimation=k, scale=scale, size=(w_level, height), band_px=(global_hi, guard * global_hi),
+            search_px=(s_lo, s_hi), depth_band_m=None, too_near_above_px=global_hi + 0.5 * scale,
+            work=int((row1 - row0) * (cols[1] - cols[0]) * (s_hi - s_lo + 1)))
     return MultiRangePlan(levels=tuple(levels), image_size=(width, height), aoi=(row0, row1, col0, col1),
-                          single_range_work=int(single), focal_px=focal_px, baseline_m=baseline_m)
+                          single_range_work=int(single), focal_px=focal_px, baseline_m=baseline_m,
+                          guard=near_guard_level)
 
 
 def _level_cols(col0: int, col1: int, scale: float, w_level: int) -> tuple[int, int]:
@@ -323,7 +349,8 @@ Refiner = Callable[[RangeLevel, np.ndarray, np.ndarray], tuple[np.ndarray, np.nd
 
 def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve: Solver, *,
                row_pad_px: int = 0, union: str = "finer", refine: Refiner | None = None,
-               refine_min_scale: float | None = 2.0, decimated: dict | None = None) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+               refine_min_scale: float | None = 2.0, decimated: dict | None = None
+               ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
     """Run a per-level solver on every level and unite the results (eq. 11-12).
 
     Parameters
@@ -356,12 +383,9 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
         United disparity (full-resolution pixels, NaN invalid) and its confidence.
     levels : tuple of ndarray float32 (H, W)
         Each level's gated, up-sampled disparity (finest first).
-    too_near : ndarray bool (H, W)
-        Pixels whose winner on the guarded level (:attr:`RangeLevel.too_near_above_px`) lies
-        above the near limit with a higher confidence than the united value of the levels
-        (if any); NaN (confidence 0) in ``disparity_px``. All False without a guard.
-    beyond_px : ndarray float32 (H, W)
-        That winner (full-resolution pixels) where ``too_near``, NaN elsewhere.
+
+    The near guard (``plan.guard``) is not run here: it is not a band of eq. (11)-(12)
+    (see :func:`mrstereo.matching.disparity.compute_disparity`).
     """
     height, width = left.shape
     row0, row1, col0, col1 = plan.aoi
@@ -372,9 +396,6 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
     right_rows = right[top:bottom]
     rows = (row0 - top, row1 - top)
     maps, confs = [], []
-    too_near = np.zeros((height, width), np.bool_)
-    beyond = np.full((height, width), np.nan, np.float32)
-    beyond_conf = np.zeros((height, width), np.float32)
     for level in plan.levels:
         w_level = level.size[0]
         if decimated is not None and top == 0 and bottom == height:
@@ -398,20 +419,13 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
         _kernels.upsample_gate(out.disparity_px, out.confidence, source_cols, np.float32(level.scale),
                                np.float32(lo - slack), np.float32(hi + slack), top, row0, row1, col0, col1,
                                d_full, c_full)
-        if level.too_near_above_px is not None:
-            _kernels.upsample_above(out.disparity_px, out.confidence, source_cols, np.float32(level.scale),
-                                    np.float32(level.too_near_above_px), top, row0, row1, col0, col1, beyond,
-                                    beyond_conf, too_near)
         if refining:
             d_full = refine(level, d_full, np.isfinite(d_full))
             _kernels.gate(d_full, c_full, float(lo), float(hi))
         maps.append(d_full)
         confs.append(c_full)
     disparity, confidence, _ = _union(maps, confs, union)
-    # the guard's verdict against the levels' united value, as eq. (12)'s confidence rule:
-    # the more confident wins (repeated structures past the near limit lose to a surer match)
-    _kernels.settle_too_near(disparity, confidence, beyond, beyond_conf, too_near)
-    return disparity, confidence, tuple(maps), too_near, beyond
+    return disparity, confidence, tuple(maps)
 
 
 def _union(maps: list[np.ndarray], confs: list[np.ndarray], rule: str
