@@ -193,6 +193,7 @@ def accuracy(scale: float = 1.0) -> None:
         "mrstereo robust (default)": mr(),
         "mrstereo mapping (the mapping chain's)": mr(preset="mapping"),
         "mrstereo paper": mr(preset="paper"),
+        "robust without the near guard": mr(robust.replace(near_guard=0.0)),
         "robust without gap filling": mr(robust.replace(gap_fill_px=0)),
         "robust, gap filling from the ends alone (support 1)": mr(robust.replace(gap_fill_support_px=1)),
         "robust, single range": mr(robust.replace(multi_range=False)),

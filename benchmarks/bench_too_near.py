@@ -12,10 +12,11 @@ each scene's true range, ``D = round(max true disparity / 2)``. For each matcher
 OpenCV StereoBM and StereoSGBM (mrstereo.evaluation.baselines settings) search up to exactly
 ``D`` too (``exact_max``: a negative minDisparity fills the multiple of 16). mrstereo runs the
 robust and mapping presets, and the robust preset without the near guard (``near_guard=0``,
-the matcher before too-near detection). The guard's settings (search to 2 D, winners above
-``D`` + half a level pixel, margin of half a window + 2 px, the confidence rule) were chosen on
-tsukuba and venus (with Tsukuba at ``D = 9``); teddy and cones were not looked at while
-choosing them. Also: Tsukuba with ``D = 9`` (true ``d > 10``), and the OpenCV chessboard pair
+the matcher before too-near detection). The guard's settings (a search of its own from ``D``
+to 2 D at twice the nearest band's decimation when ``D`` spans 8 pixels there, winners above
+``D`` + half a level pixel, beating the bands' value by the uniqueness ratio, margin of half a
+window + 2 px around the candidates clustered with a confirmed region) were chosen on tsukuba
+and venus (with Tsukuba at ``D = 9``); teddy and cones were not looked at while choosing them. Also: Tsukuba with ``D = 9`` (true ``d > 10``), and the OpenCV chessboard pair
 left01/right01 (calibrated with the LM method on all 13 pairs): board pixels placed farther
 than 0.5 m (none allowed), and the board's share reported too near.
 

@@ -93,6 +93,40 @@ def test_tsukuba_cut_to_9_px_gives_no_value_to_nearer_pixels():
     assert np.isfinite(before.disparity_px)[beyond].mean() > 0.1
 
 
+@pytest.mark.sample_data("teddy", "cones")
+@pytest.mark.parametrize("name", ["teddy", "cones"])
+def test_a_search_covering_the_scene_gives_the_unguarded_values_bit_for_bit(name):
+    """The guard searches apart from the bands: where nothing is too near, its stray candidates
+    (repeated and plain regions matched past the near limit) change no value."""
+    from mrstereo.evaluation.datasets import load_scene
+    scene = load_scene(local_path(name))
+    guarded = compute_disparity(scene.left, scene.right, max_disparity_px=scene.max_disparity_px)
+    unguarded = compute_disparity(scene.left, scene.right, max_disparity_px=scene.max_disparity_px,
+                                  config=MatchingConfig(near_guard=0.0))
+    assert guarded.plan.guard is not None and not guarded.too_near.any()
+    assert np.array_equal(guarded.disparity_px, unguarded.disparity_px, equal_nan=True)
+    assert np.array_equal(guarded.confidence, unguarded.confidence)
+
+
+@pytest.mark.sample_data("kitti2015-000000")
+def test_kitti_car_nearer_than_the_search_is_flagged_and_only_its_surroundings_change():
+    """KITTI 2015 #0 searched to 80 px (above every ground-truth disparity, 64 px): the parked car
+    at the right border is nearer (86-97 px with a search to 192 px). It is flagged, and values
+    change only around it."""
+    from mrstereo.evaluation.datasets import load_scene
+    scene = load_scene(local_path("kitti2015-000000"))
+    result = compute_disparity(scene.left, scene.right, max_disparity_px=80)
+    unguarded = compute_disparity(scene.left, scene.right, max_disparity_px=80, config=MatchingConfig(near_guard=0.0))
+    rows, cols = np.nonzero(result.too_near)
+    assert rows.size > 3000 and cols.min() > 1000                   # the car's door, nothing else
+    wide = compute_disparity(scene.left, scene.right, max_disparity_px=192, config=MatchingConfig(near_guard=0.0))
+    assert np.nanmedian(wide.disparity_px[result.too_near]) > 85       # truly beyond 80 px
+    changed = ~((result.disparity_px == unguarded.disparity_px)
+                | (np.isnan(result.disparity_px) & np.isnan(unguarded.disparity_px)))
+    assert not changed[:, :800].any()                                  # far from the car: bit for bit
+    assert not np.isfinite(result.disparity_px[result.too_near]).any()
+
+
 @pytest.mark.sample_data("opencv-stereo-chessboard")
 def test_real_chessboard_at_0_4_m_is_never_placed_farther_than_0_5_m():
     import sys
