@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from mrstereo.camera import Camera, RigMount, StereoCamera
+from mrstereo.camera import Camera, CameraInfo, RigMount, StereoCamera
 from mrstereo.geometry import (GroundPlane, ObstacleConfig, T_robot_from_cam, T_robot_from_cam_ground,
                                detect_obstacles, fit_ground_plane, fit_ground_v_disparity,
                                height_above_ground_m, points_cam_from_disparity, v_disparity)
@@ -183,3 +183,55 @@ def test_failed_ground_gives_empty_result_and_bad_input_raises():
         ObstacleConfig(ground_method="hough")
     with pytest.raises(ValueError, match="ground plane was not found"):
         T_robot_from_cam_ground(GroundPlane(height_m=math.nan, tilt_rad=math.nan, success=False, message="x"))
+
+
+def test_one_pass_points_and_band_equal_the_per_pixel_reference():
+    """The fused kernel (eq. 14-16, robot transform, height band, range limit over the valid pixels only)
+    against numpy on the whole image: the triangulation cross-checked with cv2.reprojectImageTo3D, the
+    transform a matmul, the band with np.hypot. Too-near pixels, NaN, zero and negative disparities,
+    a doffs, a roll and a pan; masks equal, points within 1e-12 m (summation order)."""
+    import cv2
+
+    stereo = _stereo()
+    rng = np.random.default_rng(11)
+    d, _ = _render()
+    d = d + rng.normal(0, 0.3, d.shape).astype(np.float32)
+    d[rng.random(d.shape) < 0.1] = np.nan
+    d[5, 7], d[9, 11], d[12, 13] = 0.0, -2.0, -0.5       # -0.5 + doffs > 0: a point
+    too_near = np.zeros(d.shape, bool)
+    too_near[20:40, 150:180] = True
+    too_near[140:150, 0:10] = True                        # the floor nearer than the limit: below it
+    P_right = stereo.right.P.copy()
+    P_right[0, 2] += 0.75                                 # doffs = cx_right - cx_left
+    stereo = StereoCamera(left=stereo.left, right=CameraInfo(stereo.right.camera, P=P_right, name="right"))
+    ground = GroundPlane(height_m=HEIGHT, tilt_rad=TILT, roll_rad=0.03)
+    cfg = ObstacleConfig(max_range_m=3.0)
+    res = detect_obstacles(d, stereo, ground=ground, pan_rad=0.2, config=cfg, too_near=too_near, near_limit_px=40.0)
+    d_ref = np.where(too_near, 40.0, d.astype(np.float64))
+    cam = points_cam_from_disparity(d_ref, focal_px=F, baseline_m=B, cx_px=CX, cy_px=CY, doffs_px=0.75)
+    Q = np.array([[1, 0, 0, -CX], [0, 1, 0, -CY], [0, 0, 0, F], [0, 0, 1 / B, 0.75 / B]])
+    cv = cv2.reprojectImageTo3D(d_ref.astype(np.float32), Q)
+    ok = d_ref + 0.75 > 0
+    np.testing.assert_allclose(cam[ok], cv[ok], rtol=1e-5, atol=1e-5)
+    assert np.isnan(cam[~ok]).all()
+    T = T_robot_from_cam_ground(ground, pan_rad=0.2)
+    ref = cam @ T[:3, :3].T + T[:3, 3]
+    band = (ref[..., 2] > cfg.min_obstacle_height_m) & (ref[..., 2] <= cfg.max_obstacle_height_m)
+    in_range = np.hypot(ref[..., 0], ref[..., 1]) <= cfg.max_range_m
+    obstacle = ok & in_range & band
+    floor = ok & in_range & (np.abs(ref[..., 2]) <= cfg.floor_tolerance_m) & ~obstacle & ~too_near
+    assert obstacle.sum() > 500 and floor.sum() > 500 and (obstacle & too_near).sum() > 100
+    np.testing.assert_array_equal(res.obstacle_mask, obstacle)
+    np.testing.assert_array_equal(res.floor_mask, floor)
+    np.testing.assert_array_equal(np.isnan(res.points_robot_image), np.isnan(ref))
+    np.testing.assert_allclose(res.points_robot_image[ok], ref[ok], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(res.points_robot, ref[ok], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(res.pixels, np.flatnonzero(ok))
+    np.testing.assert_allclose(res.obstacle_points_robot, ref[obstacle], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(res.floor_points_robot, ref[floor], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(res.too_near_obstacle_mask, obstacle & too_near)
+    assert f"{obstacle.sum()} obstacle and" in res.message and f"({(obstacle & too_near).sum()} obstacle" in res.message
+    # the public full-image function computes the same points, bit for bit
+    from mrstereo.geometry import points_robot_from_disparity
+
+    assert np.array_equal(points_robot_from_disparity(d_ref, stereo, T), res.points_robot_image, equal_nan=True)

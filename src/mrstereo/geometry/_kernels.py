@@ -30,60 +30,126 @@ def points_cam(disparity, focal_px, baseline_m, doffs_px, cx_px, cy_px, fy_px, o
             out[v, u, 2] = z
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _point_robot(d, u, v, bf, focal_px, cx_px, cy_px, fy_px, R, t):
+    """Eq. (14)-(16) of one pixel then ``R p + t``: the robot-frame point, or NaNs where ``d <= 0``.
+
+    ``d`` already includes ``doffs``. The camera-frame point is exactly :func:`points_cam`'s;
+    each robot coordinate is summed in the order ``((R[k,0] x + R[k,1] y) + R[k,2] z) + t[k]``.
+    """
+    z = bf / d if d > 0 else np.nan
+    x = (np.float64(u) - cx_px) * z / focal_px
+    y = (np.float64(v) - cy_px) * z / fy_px
+    return (R[0, 0] * x + R[0, 1] * y + R[0, 2] * z + t[0],
+            R[1, 0] * x + R[1, 1] * y + R[1, 2] * z + t[1],
+            R[2, 0] * x + R[2, 1] * y + R[2, 2] * z + t[2])
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _within(x, y, r):
+    """``hypot(x, y) <= r``, exactly, mostly without the (slow) ``hypot``.
+
+    ``x^2 + y^2`` is within a few ulp of ``hypot(x, y)^2``: outside a relative band of 1e-12
+    around ``r^2`` its comparison decides; inside, ``hypot`` does.
+    """
+    s = x * x + y * y
+    r2 = r * r
+    if s < r2 * (1.0 - 1e-12):
+        return True
+    if s > r2 * (1.0 + 1e-12):
+        return False
+    return math.hypot(x, y) <= r
+
+
 @njit(nogil=True, cache=True)
-def add_offset(points, offset):
-    """``points[..., k] += offset[k]`` in place for (H, W, 3) points."""
-    h, w, _ = points.shape
+def points_robot_image(disparity, doffs_px, bf, focal_px, cx_px, cy_px, fy_px, R, t, out):
+    """Robot-frame point of every pixel into ``out`` (H, W, 3) float64: :func:`_point_robot`, NaN invalid."""
+    h, w = disparity.shape
     for v in range(h):
         for u in range(w):
-            for k in range(3):
-                points[v, u, k] = points[v, u, k] + offset[k]
+            px, py, pz = _point_robot(np.float64(disparity[v, u]) + doffs_px, u, v, bf, focal_px, cx_px, cy_px,
+                                      fy_px, R, t)
+            out[v, u, 0] = px
+            out[v, u, 1] = py
+            out[v, u, 2] = pz
 
 
 @njit(nogil=True, cache=True)
-def classify(points, max_range_m, min_height_m, max_height_m, floor_tolerance_m, obstacle, floor):
-    """Obstacle / floor masks of robot-frame points (H, W, 3); NaN points are neither.
+def count_points(disparity, doffs_px, too_near, near_limit_px):
+    """Pixels with ``d + doffs > 0`` (a too-near pixel's disparity is the near limit): a bound on the points.
 
-    ``obstacle = hypot(x, y) <= max_range and min_height < z <= max_height``;
-    ``floor = hypot(x, y) <= max_range and |z| <= floor_tolerance and not obstacle``.
-    Returns ``(n_obstacle, n_floor_band)``, the latter counted before obstacles are removed.
+    ``too_near`` is an (H, W) bool mask, or (0, 0) for none.
     """
-    h, w, _ = points.shape
+    h, w = disparity.shape
+    has_near = too_near.shape[0] > 0
+    n = 0
+    for v in range(h):
+        for u in range(w):
+            d = near_limit_px if has_near and too_near[v, u] else np.float64(disparity[v, u])
+            n += (d + doffs_px) > 0
+    return n
+
+
+@njit(nogil=True, cache=True)
+def obstacle_points(disparity, doffs_px, too_near, near_limit_px, bf, focal_px, cx_px, cy_px, fy_px, R, t,
+                    max_range_m, min_height_m, max_height_m, floor_tolerance_m,
+                    points, pixels, obstacle_points, floor_points, obstacle, floor):
+    """Triangulation (eq. 14-16), robot transform and height band in one pass over the valid pixels.
+
+    Per pixel with ``d + doffs > 0`` (a ``too_near`` pixel has the disparity ``near_limit_px``)
+    and a finite point, the robot point :func:`_point_robot` goes to ``points`` and its flat pixel index to
+    ``pixels`` (raster order, sized by :func:`count_points`); it is an obstacle when
+    ``hypot(x, y) <= max_range and min_height < z <= max_height`` and floor when
+    ``hypot(x, y) <= max_range and |z| <= floor_tolerance``, not an obstacle and not too near.
+    Obstacle and floor points are also copied to ``obstacle_points`` / ``floor_points``
+    (raster order) and marked in the (H, W) masks ``obstacle`` / ``floor`` (zeroed here).
+    ``too_near`` is an (H, W) bool mask, or (0, 0) for none.
+
+    Returns ``(n_points, n_obstacle, n_floor, n_floor_band, n_obstacle_too_near)``;
+    ``n_floor_band`` counts the floor band before obstacles and too-near pixels are removed.
+    """
+    h, w = disparity.shape
+    has_near = too_near.shape[0] > 0
+    n = 0
     n_obstacle = 0
     n_floor = 0
+    n_floor_band = 0
+    n_near = 0
     for v in range(h):
         for u in range(w):
-            z = points[v, u, 2]
-            in_range = math.hypot(points[v, u, 0], points[v, u, 1]) <= max_range_m
-            is_obstacle = in_range and z > min_height_m and z <= max_height_m
-            is_floor = in_range and abs(z) <= floor_tolerance_m
-            obstacle[v, u] = is_obstacle
-            floor[v, u] = is_floor and not is_obstacle
-            n_obstacle += is_obstacle
-            n_floor += is_floor
-    return n_obstacle, n_floor
-
-
-@njit(nogil=True, cache=True)
-def count_true(mask):
-    """Number of True pixels of an (H, W) mask."""
-    n = 0
-    h, w = mask.shape
-    for v in range(h):
-        for u in range(w):
-            n += mask[v, u]
-    return n
-
-
-@njit(nogil=True, cache=True)
-def gather_points(points, mask, out):
-    """Rows of ``points`` (H, W, 3) where ``mask`` (H, W) is True, in raster order, into ``out`` (N, 3)."""
-    h, w = mask.shape
-    n = 0
-    for v in range(h):
-        for u in range(w):
-            if mask[v, u]:
-                for k in range(3):
-                    out[n, k] = points[v, u, k]
-                n += 1
-    return n
+            near = has_near and too_near[v, u]
+            d = (near_limit_px if near else np.float64(disparity[v, u])) + doffs_px
+            obstacle[v, u] = False
+            floor[v, u] = False
+            if not d > 0:
+                continue
+            px, py, pz = _point_robot(d, u, v, bf, focal_px, cx_px, cy_px, fy_px, R, t)
+            if not (math.isfinite(px) and math.isfinite(py) and math.isfinite(pz)):
+                continue              # a disparity so small that Z overflows
+            points[n, 0] = px
+            points[n, 1] = py
+            points[n, 2] = pz
+            pixels[n] = v * w + u
+            n += 1
+            in_band = pz > min_height_m and pz <= max_height_m
+            in_floor_band = abs(pz) <= floor_tolerance_m
+            if not (in_band or in_floor_band):
+                continue
+            in_range = _within(px, py, max_range_m)
+            is_obstacle = in_range and in_band
+            is_floor_band = in_range and in_floor_band
+            n_floor_band += is_floor_band
+            if is_obstacle:
+                obstacle[v, u] = True
+                obstacle_points[n_obstacle, 0] = px
+                obstacle_points[n_obstacle, 1] = py
+                obstacle_points[n_obstacle, 2] = pz
+                n_obstacle += 1
+                n_near += near
+            elif is_floor_band and not near:
+                floor[v, u] = True
+                floor_points[n_floor, 0] = px
+                floor_points[n_floor, 1] = py
+                floor_points[n_floor, 2] = pz
+                n_floor += 1
+    return n, n_obstacle, n_floor, n_floor_band, n_near

@@ -26,6 +26,7 @@ Conventions: docs/conventions.md.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -34,7 +35,6 @@ from . import _kernels
 from ..camera import RigMount, StereoCamera
 from .frames import CameraMount
 from .ground import GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_mount, ground_from_rig
-from .triangulation import points_cam_from_disparity
 
 __all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity"]
 
@@ -105,8 +105,12 @@ class ObstacleResult:
 
     Attributes
     ----------
-    points_robot_image : ndarray of shape (H, W, 3), float64
-        Robot-frame point of every pixel (NaN where the disparity is invalid).
+    points_robot : ndarray of shape (N, 3), float64
+        Robot-frame points of the pixels with a disparity (and the too-near placements), raster order.
+    pixels : ndarray of shape (N,), int64
+        Flat index (``v * W + u``) of the pixel of each of ``points_robot``.
+    obstacle_points_robot, floor_points_robot : ndarray of shape (M, 3), float64
+        The obstacle / floor points among them, raster order.
     obstacle_mask, floor_mask : ndarray of shape (H, W), bool
         Pixels classified as obstacle / floor (disjoint, within ``max_range_m``).
     ground : GroundPlane
@@ -122,7 +126,10 @@ class ObstacleResult:
         obstacle band are in ``obstacle_mask`` too. All False when none were given.
     """
 
-    points_robot_image: np.ndarray
+    points_robot: np.ndarray
+    pixels: np.ndarray
+    obstacle_points_robot: np.ndarray
+    floor_points_robot: np.ndarray
     obstacle_mask: np.ndarray
     floor_mask: np.ndarray
     ground: GroundPlane
@@ -138,45 +145,50 @@ class ObstacleResult:
             return np.zeros_like(self.obstacle_mask)
         return self.obstacle_mask & self.too_near_mask
 
-    @property
-    def points_robot(self) -> np.ndarray:
-        """All valid robot-frame points, (N, 3)."""
-        p = self.points_robot_image.reshape(-1, 3)
-        return p[np.isfinite(p).all(axis=1)]
-
-    @property
-    def obstacle_points_robot(self) -> np.ndarray:
-        """Obstacle points in the robot frame, (N, 3)."""
-        return _masked_points(self.points_robot_image, self.obstacle_mask)
-
-    @property
-    def floor_points_robot(self) -> np.ndarray:
-        """Floor (free-space) points in the robot frame, (N, 3)."""
-        return _masked_points(self.points_robot_image, self.floor_mask)
+    @cached_property
+    def points_robot_image(self) -> np.ndarray:
+        """Robot-frame point of every pixel, (H, W, 3) float64, NaN where there is none (built on first use)."""
+        h, w = self.obstacle_mask.shape
+        image = np.full((h * w, 3), np.nan)
+        image[self.pixels] = self.points_robot
+        return image.reshape(h, w, 3)
 
 
-def _masked_points(points_image, mask) -> np.ndarray:
-    """``points_image[mask]`` (raster order); a GIL-free kernel for the usual (H, W, 3) float64 images."""
-    if not (isinstance(points_image, np.ndarray) and isinstance(mask, np.ndarray)
-            and points_image.dtype == np.float64 and mask.dtype == np.bool_ and points_image.ndim == 3
-            and points_image.shape[2] == 3 and points_image.shape[:2] == mask.shape):
-        return points_image[mask]
-    out = np.empty((_kernels.count_true(mask), 3), dtype=np.float64)
-    _kernels.gather_points(points_image, mask, out)
-    return out
+def _rigid(T) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, t)`` of a 4x4 transform as contiguous float64 arrays for the kernels."""
+    return np.ascontiguousarray(T[:3, :3], dtype=np.float64), np.ascontiguousarray(T[:3, 3], dtype=np.float64)
+
+
+def _rectified_intrinsics(stereo: StereoCamera) -> dict:
+    """Keyword arguments of the eq. (14)-(16) kernels: ``b f``, ``f``, ``cx``, ``cy``, ``fy``."""
+    return {"bf": float(stereo.baseline_m) * float(stereo.focal_px), "focal_px": float(stereo.focal_px),
+            "cx_px": float(stereo.cx_px), "cy_px": float(stereo.cy_px), "fy_px": float(stereo.left.P[1, 1])}
+
+
+def _disparity_image(disparity_px) -> np.ndarray:
+    d = np.asarray(disparity_px)
+    if d.dtype not in (np.float32, np.float64):
+        d = d.astype(np.float64)
+    return d
 
 
 def points_robot_from_disparity(disparity_px, stereo: StereoCamera, T_robot_from_cam) -> np.ndarray:
-    """Eq. (14)-(16) then a rigid transform: robot-frame points (H, W, 3), NaN invalid."""
+    """Eq. (14)-(16) then a rigid transform: robot-frame points (H, W, 3), NaN invalid.
+
+    The camera-frame points are :func:`~mrstereo.geometry.points_cam_from_disparity`'s;
+    the transform is computed per point as :func:`detect_obstacles` does, so its points equal
+    these bit for bit.
+    """
     if not isinstance(stereo, StereoCamera):
         raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
     T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
-    pts = points_cam_from_disparity(disparity_px, focal_px=stereo.focal_px, baseline_m=stereo.baseline_m,
-                                    cx_px=stereo.cx_px, cy_px=stereo.cy_px,
-                                    fy_px=float(stereo.left.P[1, 1]), doffs_px=stereo.doffs_px)
-    pts = pts @ T[:3, :3].T            # numpy's matmul, as transform_points (same rounding)
-    _kernels.add_offset(pts, np.ascontiguousarray(T[:3, 3]))
-    return pts
+    d = _disparity_image(disparity_px)
+    if d.ndim != 2:
+        raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
+    R, t = _rigid(T)
+    out = np.empty(d.shape + (3,), dtype=np.float64)
+    _kernels.points_robot_image(d, float(stereo.doffs_px), **_rectified_intrinsics(stereo), R=R, t=t, out=out)
+    return out
 
 
 def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: RigMount | CameraMount | None,
@@ -255,14 +267,14 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
         raise TypeError(f"rig must be a RigMount or CameraMount, got {type(rig).__name__}")
     if ground is not None and not isinstance(ground, GroundPlane):
         raise TypeError(f"ground must be a GroundPlane, got {type(ground).__name__}")
-    d = np.asarray(disparity_px, dtype=np.float64)
+    d = _disparity_image(disparity_px)
     if d.ndim != 2:
         raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
     if (d.shape[1], d.shape[0]) != tuple(stereo.size):
         raise ValueError(f"disparity_px is {d.shape[1]}x{d.shape[0]} but the calibration is "
                          f"{stereo.size[0]}x{stereo.size[1]}")
     pan = _checks.finite_number("pan_rad", pan_rad)
-    near = None
+    near, limit = None, 0.0
     if too_near is not None:
         near = np.asarray(too_near)
         if near.dtype != np.bool_ or near.shape != d.shape:
@@ -270,36 +282,44 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
         if near_limit_px is None:
             raise ValueError("too_near needs near_limit_px (the largest searched disparity)")
         limit = _checks.finite_number("near_limit_px", near_limit_px, positive=True)
-        if near.any():
-            d = np.where(near, limit, d)      # fail-safe: something at the near limit along the ray
-        else:
+        if not near.any():
             near = None
     mount = rig if rig is not None else stereo.rig
     if ground is None:
-        ground = ground_for_frame(d, stereo, mount=mount, config=config)
+        # fail-safe: something at the near limit along the ray of a too-near pixel
+        d64 = np.asarray(d, dtype=np.float64)
+        ground = ground_for_frame(d64 if near is None else np.where(near, limit, d64), stereo, mount=mount,
+                                  config=config)
     h, w = d.shape
     if not ground.success:
         empty = np.zeros((h, w), dtype=bool)
-        return ObstacleResult(points_robot_image=np.full((h, w, 3), np.nan), obstacle_mask=empty,
-                              floor_mask=empty.copy(), ground=ground, T_robot_from_cam=np.full((4, 4), np.nan),
-                              success=False, message=f"no floor: {ground.message}", too_near_mask=empty.copy())
+        none = np.empty((0, 3))
+        return ObstacleResult(points_robot=none, pixels=np.empty(0, np.int64), obstacle_points_robot=none,
+                              floor_points_robot=none, obstacle_mask=empty, floor_mask=empty.copy(), ground=ground,
+                              T_robot_from_cam=np.full((4, 4), np.nan), success=False,
+                              message=f"no floor: {ground.message}", too_near_mask=empty.copy())
     T = T_robot_from_cam_ground(ground, pan_rad=pan)
-    pts = points_robot_from_disparity(d, stereo, T)
-    # within range: hypot(x, y) <= max_range; obstacle: min < z <= max height; floor: |z| <= tolerance
+    R, t = _rigid(T)
+    doffs = float(stereo.doffs_px)
+    near_arg = np.zeros((0, 0), dtype=bool) if near is None else np.ascontiguousarray(near)
+    n = _kernels.count_points(d, doffs, near_arg, limit)
+    points, pixels = np.empty((n, 3)), np.empty(n, np.int64)
+    obstacle_points, floor_points = np.empty((n, 3)), np.empty((n, 3))
     obstacle = np.empty((h, w), dtype=bool)
     floor = np.empty((h, w), dtype=bool)
-    n_obstacle, n_floor = _kernels.classify(pts, float(config.max_range_m), float(config.min_obstacle_height_m),
-                                            float(config.max_obstacle_height_m), float(config.floor_tolerance_m),
-                                            obstacle, floor)
-    n_near = 0
-    if near is not None:
-        floor &= ~near                        # a fail-safe placement is never free-space evidence
-        n_near = int(np.count_nonzero(obstacle & near))
-    return ObstacleResult(points_robot_image=pts, obstacle_mask=obstacle, floor_mask=floor,
+    # eq. (14)-(16), robot frame, height band and range limit, in one pass over the valid pixels
+    n, n_obstacle, n_floor, n_floor_band, n_near = _kernels.obstacle_points(
+        d, doffs, near_arg, limit, **_rectified_intrinsics(stereo), R=R, t=t,
+        max_range_m=float(config.max_range_m), min_height_m=float(config.min_obstacle_height_m),
+        max_height_m=float(config.max_obstacle_height_m), floor_tolerance_m=float(config.floor_tolerance_m),
+        points=points, pixels=pixels, obstacle_points=obstacle_points, floor_points=floor_points, obstacle=obstacle,
+        floor=floor)
+    return ObstacleResult(points_robot=points[:n], pixels=pixels[:n], obstacle_points_robot=obstacle_points[:n_obstacle],
+                          floor_points_robot=floor_points[:n_floor], obstacle_mask=obstacle, floor_mask=floor,
                           ground=ground, T_robot_from_cam=T, success=True,
                           message=f"floor from {ground.method}: height {ground.height_m:.3f} m, "
                                   f"tilt {np.degrees(ground.tilt_rad):.2f} deg; "
-                                  f"{int(n_obstacle)} obstacle and {int(n_floor)} floor points"
+                                  f"{int(n_obstacle)} obstacle and {int(n_floor_band)} floor points"
                                   + (f" ({n_near} obstacle points too near, placed at the near limit)"
                                      if n_near else ""),
                           too_near_mask=np.zeros((h, w), dtype=bool) if near is None else near)
