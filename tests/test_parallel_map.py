@@ -199,3 +199,66 @@ def test_chunked_tasks_keep_order_and_per_item_failures(threaded_cluster):
     assert isinstance(out[3], ItemFailure) and out[3].index == 3 and "three is not allowed" in out[3].traceback
     with pytest.raises(ItemError, match=r"item 3 \(3\) failed: ValueError"):
         map_ordered(f, range(41), scheduler=client, progress=False)
+
+
+def _loaded(x: int) -> tuple:
+    import threading
+
+    if x == 5:
+        raise OSError("cannot read item five")
+    return x, threading.current_thread().name
+
+
+def _use_loaded(value) -> tuple:
+    import threading
+
+    import cv2
+    import numba
+
+    x, reader = value if isinstance(value, tuple) else (value, None)
+    if x == 2:
+        raise ValueError("two is not allowed")
+    time.sleep(0.002 * (x % 3))                    # finish out of order
+    return x * x, reader, threading.current_thread().name, numba.get_num_threads(), cv2.getNumThreads()
+
+
+@pytest.mark.parametrize("workers", [None, 1, 3])
+def test_worker_threads_and_prefetch_keep_order_and_name_failures(workers):
+    """workers=N: a pool of single-threaded threads of this process (no Dask); prefetch runs on a reader
+    thread ahead of func, in order; a failing prefetch or func is that item's failure."""
+    import threading
+
+    import cv2
+
+    before = cv2.getNumThreads()
+    out = map_ordered(_use_loaded, range(12), workers=workers, prefetch=_loaded, progress=False,
+                      return_exceptions=True, label=lambda x: f"item {x}")
+    assert cv2.getNumThreads() == before
+    assert isinstance(out[2], ItemFailure) and "two is not allowed" in out[2].error and out[2].item == "item 2"
+    assert isinstance(out[5], ItemFailure) and out[5].error == "OSError: cannot read item five"
+    good = [o for k, o in enumerate(out) if k not in (2, 5)]
+    assert [o[0] for o in good] == [k * k for k in range(12) if k not in (2, 5)]
+    assert all(o[1] == "mrstereo-reader" for o in good)
+    if workers is None:
+        assert all(o[2] == threading.current_thread().name for o in good)
+    else:
+        assert {o[2] for o in good} <= {f"mrstereo-worker_{k}" for k in range(workers)}
+        assert all(o[3:] == (1, 1) for o in good)
+    with pytest.raises(ItemError, match=r"item 3 \(5\) failed: OSError: cannot read item five"):
+        map_ordered(_use_loaded, [0, 1, 3, 5, 6], workers=workers, prefetch=_loaded, progress=False)
+    assert map_ordered(_use_loaded, [], workers=workers, prefetch=_loaded, progress=False) == []
+
+
+def test_cli_map_with_worker_threads_starts_no_dask_cluster(dataset, tmp_path):
+    """`mrstereo map --workers 2` in a fresh process: the same map as in-process, without importing distributed."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from mrstereo.cli import entry; "
+            f"rc = entry(['map', {str(dataset.root)!r}, '-o', {str(tmp_path / 'w')!r}, '--quiet', '--workers', '2']); "
+            "print(rc, 'distributed' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "0 False"
+    local = build_map(dataset, progress=False)
+    np.testing.assert_array_equal(np.load(tmp_path / "w" / "log_odds.npy"), local.grid.log_odds)
+    assert (tmp_path / "w" / "map.png").stat().st_size > 1000

@@ -5,6 +5,7 @@ import pickle
 
 import cv2
 import numpy as np
+import pytest
 
 from mrstereo.camera import Camera, CameraInfo, RigMount, StereoCamera, rotation_from_euler
 from mrstereo.camera import camera_info as camera_info_module
@@ -147,3 +148,40 @@ def test_uint8_patch_statistics_on_real_scenes(sample_data):
         gray = scene.left if scene.left.ndim == 2 else cv2.cvtColor(scene.left, cv2.COLOR_BGR2GRAY)
         fast, ref = patch_statistics(gray), patch_statistics(gray.astype(np.float32))
         assert np.array_equal(fast.std, ref.std) and np.array_equal(fast.mean, ref.mean)
+
+
+def test_cli_commands_load_on_demand_and_the_table_lists_every_command():
+    """``mrstereo map`` imports only its own command module; the name -> module table matches every
+    module's COMMANDS, and the group lists all of them."""
+    import importlib
+    import subprocess
+    import sys
+
+    from mrstereo.cli._main import COMMAND_MODULES, main
+
+    for module in set(COMMAND_MODULES.values()):
+        names = {c.name for c in importlib.import_module(f"mrstereo.cli.{module}").COMMANDS}
+        assert names == {n for n, m in COMMAND_MODULES.items() if m == module}, module
+    assert sorted(main.commands) == sorted(COMMAND_MODULES)
+    code = ("import sys; from mrstereo.cli import entry; entry(['map', '--help']); "
+            "print(sorted(m for m in sys.modules if m.startswith('mrstereo.cli.')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    loaded = eval(out.strip().splitlines()[-1])
+    assert "mrstereo.cli._pipeline" in loaded
+    assert not {"mrstereo.cli._calibration", "mrstereo.cli._evaluation", "mrstereo.cli._odometry"} & set(loaded)
+
+
+def test_prestarted_call_returns_the_result_or_raises_the_error():
+    from mrstereo.parallel import PrestartedCall
+
+    with PrestartedCall("math:hypot") as call:
+        assert call(3.0, 4.0) == 5.0
+    with PrestartedCall("math:sqrt") as call, pytest.raises(ValueError, match="math domain error"):
+        call(-1.0)
+    with PrestartedCall("mrstereo.no_such_module:f") as call, pytest.raises(ModuleNotFoundError):
+        call()
+    with PrestartedCall("math:sqrt") as call:       # closed without a call: the process ends
+        pass
+    assert call._proc.poll() is not None
+    with pytest.raises(ValueError, match="module:function"):
+        PrestartedCall("math.sqrt")

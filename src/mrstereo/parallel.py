@@ -6,12 +6,12 @@ reduction. :func:`map_ordered` runs the independent part:
 
 - in this process (``workers=None, scheduler=None``, the default, so nothing
   changes for a single user);
-- on a local ``dask.distributed.LocalCluster`` of ``workers`` single-threaded
-  workers (``workers=N``): threads of this process by default (every hot loop
-  is a numba kernel compiled with ``nogil=True`` or an OpenCV call, both
-  release the GIL, so threads scale like processes without their start-up
-  and without pickling images and results), or worker processes
-  (``processes=True``);
+- on ``workers`` single-threaded workers (``workers=N``): a pool of threads of
+  this process by default (every hot loop is a numba kernel compiled with
+  ``nogil=True`` or an OpenCV call, both release the GIL, so threads scale like
+  processes without their start-up and without pickling images and results;
+  no Dask cluster is started), or the worker processes of a local
+  ``dask.distributed.LocalCluster`` (``processes=True``);
 - on an existing ``dask.distributed`` cluster (``scheduler="tcp://host:8786"``
   or a ``distributed.Client``). Its workers must see the same files (the
   dataset paths are sent, not the images) and have mrstereo installed.
@@ -19,7 +19,7 @@ reduction. :func:`map_ordered` runs the independent part:
 Results come back in input order, whatever order the workers finish in, so a
 reduction over them gives the same result for every worker count. Inside
 workers, numba and OpenCV run on one thread each (``numba.set_num_threads(1)``
-per task, ``cv2.setNumThreads(1)`` while a local cluster runs; worker processes
+per task, ``cv2.setNumThreads(1)`` while worker threads run; worker processes
 also get ``NUMBA_NUM_THREADS=1``) so that N workers on N cores do not
 oversubscribe them. See docs/scale-out.md.
 """
@@ -39,7 +39,8 @@ from typing import Any
 
 from . import _checks
 
-__all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory"]
+__all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory",
+           "PrestartedCall"]
 
 _WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
@@ -257,12 +258,20 @@ def numba_thread_safe() -> bool:
     """Whether numba's threading layer runs parallel kernels from several threads at once.
 
     The tbb and omp layers do; workqueue aborts the process on concurrent launches. The layer is
-    chosen at the first parallel launch, so this launches a tiny kernel first.
+    chosen when numba first starts its thread pool: this starts it (loading the layer's library,
+    about 10 ms) without compiling or loading any kernel. Should numba's internal start-up function
+    be missing, a tiny parallel kernel is launched instead.
     """
     import numba
-    import numpy as np
 
-    _probe_kernel()(np.zeros(2))
+    try:
+        from numba.np.ufunc.parallel import _launch_threads
+
+        _launch_threads()
+    except (ImportError, AttributeError):
+        import numpy as np
+
+        _probe_kernel()(np.zeros(2))
     return numba.threading_layer() != "workqueue"
 
 
@@ -279,26 +288,34 @@ def _probe_kernel():
     return probe
 
 
-def _thread_client(workers: int) -> Iterator[Any]:
-    """A client of ``workers`` single-threaded worker threads in this process.
+@contextlib.contextmanager
+def _single_threaded_kernels() -> Iterator[None]:
+    """OpenCV and the BLAS behind numpy's matmul on one thread for the block (both restored after).
 
-    OpenCV and the BLAS behind numpy's matmul (OpenBLAS's own thread pool, whose
-    idle threads spin) run on one thread while the cluster runs; both are restored.
-    With BLAS threads left on, two worker threads ran 1.45x as fast as one; without, 1.75x.
+    For worker threads of this process: OpenBLAS's own thread pool, whose idle threads spin, and
+    OpenCV's (process-wide) would oversubscribe the cores. With BLAS threads left on, two worker
+    threads ran 1.45x as fast as one; without, 1.75x.
     """
     import cv2
-    from distributed import Client, LocalCluster
     from threadpoolctl import threadpool_limits
 
     cv_threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
-        with threadpool_limits(limits=1, user_api="blas"), \
-                LocalCluster(n_workers=workers, threads_per_worker=1, processes=False, dashboard_address=None,
-                             silence_logs=logging.CRITICAL) as cluster, Client(cluster) as client:
-            yield client
+        with threadpool_limits(limits=1, user_api="blas"):
+            yield
     finally:
         cv2.setNumThreads(cv_threads)
+
+
+def _thread_client(workers: int) -> Iterator[Any]:
+    """A Dask client of ``workers`` single-threaded worker threads in this process."""
+    from distributed import Client, LocalCluster
+
+    with _single_threaded_kernels(), \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=False, dashboard_address=None,
+                         silence_logs=logging.CRITICAL) as cluster, Client(cluster) as client:
+        yield client
 
 
 def _check_reachable(address: str) -> None:
@@ -324,7 +341,7 @@ def _check_reachable(address: str) -> None:
 def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: int | None = None,
                 scheduler=None, processes: bool = False, progress: bool = True, desc: str = "working",
                 return_exceptions: bool = False, label: Callable[[Any], str] | None = None,
-                unit: str = "item") -> list:
+                unit: str = "item", prefetch: Callable[[Any], Any] | None = None) -> list:
     """``[func(item) for item in items]``, in parallel, results in input order.
 
     Parameters
@@ -335,8 +352,10 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
     items : iterable
         Inputs, each picklable (keep them small: paths rather than images).
     workers : int, optional
-        Run on a fresh local Dask cluster of this many single-threaded
-        workers (started and shut down inside the call).
+        Run on this many single-threaded workers: threads of this process (a
+        thread pool: every hot loop is a numba kernel with ``nogil`` or an
+        OpenCV call), or with ``processes=True`` the processes of a fresh local
+        Dask cluster (started and shut down inside the call).
     scheduler : str or distributed.Client, optional
         Run on an existing Dask cluster. With neither ``workers`` nor
         ``scheduler`` everything runs in this process, one item after another.
@@ -353,6 +372,12 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
         others go on.
     label : callable, optional
         ``label(item) -> str`` names an item in errors (default ``repr``).
+    prefetch : callable, optional
+        In this process (no ``scheduler``, no ``processes``): ``func`` is called with
+        ``prefetch(item)`` instead, which a reader thread computes in order a few items
+        ahead (e.g. decoding the images while the previous frames are matched; OpenCV's
+        decoders release the GIL). On Dask workers ``func`` gets the item itself, so it must
+        accept both. A failing ``prefetch`` is that item's failure.
 
     Returns
     -------
@@ -363,6 +388,8 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
 
     if not callable(func):
         raise TypeError(f"func must be callable, got {type(func).__name__}")
+    if prefetch is not None and not callable(prefetch):
+        raise TypeError(f"prefetch must be callable, got {type(prefetch).__name__}")
     if workers is not None and scheduler is not None:
         raise ValueError("give workers or scheduler, not both")
     if workers is not None:
@@ -374,25 +401,127 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
 
     if workers is None and scheduler is None:
         with new_bar() as bar:
-            return _map_local(func, items, bar, return_exceptions, label)
+            return _map_local(func, items, bar, return_exceptions, label, prefetch)
     if not items:
         return []
+    if scheduler is None and not processes:
+        if numba_thread_safe():
+            with new_bar() as bar:
+                return _map_threads(func, items, workers, bar, return_exceptions, label, prefetch)
+        warnings.warn("numba's workqueue threading layer cannot run kernels from several threads at once: "
+                      "using worker processes (install tbb or have libgomp for worker threads)", stacklevel=2)
+        processes = True
     with dask_client(workers=workers, scheduler=scheduler, processes=processes) as client, new_bar() as bar:
         return _map_dask(client, func, items, bar, return_exceptions, label, desc)
 
 
-def _map_local(func, items: Sequence, bar, return_exceptions: bool, label) -> list:
+def _failure(k: int, item, label, exc: BaseException, tb: str) -> ItemFailure:
+    return ItemFailure(index=k, item=_label(item, label), error=f"{type(exc).__name__}: {exc}", traceback=tb)
+
+
+def _prefetched(items: Sequence, prefetch, depth: int) -> Iterator[tuple[bool, Any]]:
+    """``(True, prefetch(item))`` or ``(False, (exception, traceback))`` per item, in order.
+
+    Without ``prefetch``: ``(True, item)``. With it, a daemon reader thread computes up to ``depth``
+    items ahead of the consumer and stops when the consumer does.
+    """
+    if prefetch is None:
+        for item in items:
+            yield True, item
+        return
+    import queue
+    import threading
+
+    ready: queue.Queue = queue.Queue(maxsize=max(1, depth))
+    stop = threading.Event()
+
+    def read() -> None:
+        for item in items:
+            try:
+                value = (True, prefetch(item))
+            except Exception as exc:
+                value = (False, (exc, _traceback.format_exc()))
+            while not stop.is_set():
+                try:
+                    ready.put(value, timeout=0.1)
+                    break
+                except queue.Full:
+                    continue
+            if stop.is_set():
+                return
+
+    threading.Thread(target=read, name="mrstereo-reader", daemon=True).start()
+    try:
+        for _ in items:
+            yield ready.get()
+    finally:
+        stop.set()
+
+
+def _map_local(func, items: Sequence, bar, return_exceptions: bool, label, prefetch=None) -> list:
     results = []
-    for k, item in enumerate(items):
-        try:
-            results.append(func(item))
-        except Exception as exc:
-            failure = ItemFailure(index=k, item=_label(item, label), error=f"{type(exc).__name__}: {exc}",
-                                  traceback=_traceback.format_exc())
-            if not return_exceptions:
-                raise ItemError(failure) from exc
-            results.append(failure)
+    for k, (ok, value) in enumerate(_prefetched(items, prefetch, depth=2)):
+        if ok:
+            try:
+                results.append(func(value))
+                bar.update(1)
+                continue
+            except Exception as exc:
+                error, tb = exc, _traceback.format_exc()
+        else:
+            error, tb = value
+        failure = _failure(k, items[k], label, error, tb)
+        if not return_exceptions:
+            raise ItemError(failure) from error
+        results.append(failure)
         bar.update(1)
+    return results
+
+
+def _map_threads(func, items: Sequence, workers: int, bar, return_exceptions: bool, label, prefetch=None) -> list:
+    """:func:`map_ordered` on a pool of ``workers`` single-threaded worker threads of this process.
+
+    No Dask: a thread pool starts in microseconds (a local Dask cluster costs about a second of
+    imports and start-up per run). At most ``2 * workers`` items are in flight.
+    """
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+    task = _Task(func)
+    results: list = [None] * len(items)
+    pending: dict = {}
+
+    def failed(k: int, exc: BaseException, tb: str) -> None:
+        failure = _failure(k, items[k], label, exc, tb)
+        if not return_exceptions:
+            raise ItemError(failure) from exc
+        results[k] = failure
+
+    def collect(block_until: int) -> None:
+        while len(pending) > block_until:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                k = pending.pop(future)
+                ok, value = future.result()[0]
+                if ok:
+                    results[k] = value
+                else:
+                    failed(k, *value)
+                bar.update(1)
+
+    with _single_threaded_kernels(), ThreadPoolExecutor(workers, thread_name_prefix="mrstereo-worker") as pool:
+        try:
+            for k, (ok, value) in enumerate(_prefetched(items, prefetch, depth=workers + 1)):
+                if ok:
+                    pending[pool.submit(task, [value])] = k
+                else:
+                    failed(k, *value)
+                    bar.update(1)
+                collect(2 * workers - 1)
+            collect(0)
+        except BaseException:
+            for future in pending:
+                future.cancel()
+            raise
     return results
 
 
@@ -446,3 +575,121 @@ def _map_dask(client, func, items: Sequence, bar, return_exceptions: bool, label
     finally:
         client.cancel([f for f in futures if not f.done()])
     return results
+
+
+class PrestartedCall:
+    """One call of ``module.function`` in a fresh Python process that is started now.
+
+    The process imports ``module`` (and ``preload``) at once, on another core, while this
+    process works -- matplotlib's import costs about half a second of CPU, a figure a third
+    more -- and then waits for its arguments: :meth:`submit` sends them (pickled),
+    :meth:`result` waits for the return value or raises the function's exception. ``mrstereo
+    map`` draws its figure this way. Closing (or leaving the ``with`` block) ends a process
+    that was not called. The process ignores Ctrl-C (this process handles it) and ends when
+    this one does.
+
+    Parameters
+    ----------
+    target : str
+        ``"package.module:function"``.
+    preload : sequence of str
+        Further modules to import ahead (e.g. those the function imports when called).
+    """
+
+    def __init__(self, target: str, *, preload: Sequence[str] = ()):
+        import subprocess
+        from pathlib import Path
+
+        module, _, name = str(target).partition(":")
+        if not module or not name:
+            raise ValueError(f"target must be 'module:function', got {target!r}")
+        env = dict(os.environ)
+        root = str(Path(__file__).resolve().parents[1])          # this mrstereo, whatever sys.path says
+        env["PYTHONPATH"] = os.pathsep.join([root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+        self._submitted = False
+        self._proc = subprocess.Popen(
+            [sys.executable, "-c", "import sys; from mrstereo.parallel import _serve_call; _serve_call(sys.argv[1:])",
+             target, *preload], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env)
+
+    def submit(self, *args, **kwargs) -> None:
+        """Send the arguments; the call runs in the other process."""
+        import pickle
+
+        if self._submitted:
+            raise RuntimeError("a PrestartedCall is called once")
+        self._submitted = True
+        try:
+            self._proc.stdin.write(pickle.dumps((args, kwargs), protocol=pickle.HIGHEST_PROTOCOL))
+            self._proc.stdin.close()
+        except (BrokenPipeError, OSError):
+            pass                            # the process is gone: result() says so
+
+    def result(self):
+        """Wait for the call's return value (or raise its exception)."""
+        import pickle
+
+        if not self._submitted:
+            raise RuntimeError("submit() the arguments first")
+        try:
+            out = self._proc.stdout.read()
+            code = self._proc.wait()
+        finally:
+            self.close()
+        if not out:
+            raise RuntimeError(f"the worker process ended without a result (exit code {code})")
+        ok, value = pickle.loads(out)
+        if ok:
+            return value
+        raise value
+
+    def __call__(self, *args, **kwargs):
+        self.submit(*args, **kwargs)
+        return self.result()
+
+    def close(self) -> None:
+        """End the process if it still runs (it was not called, or the caller gave up)."""
+        if self._proc.poll() is None:
+            self._proc.kill()
+            self._proc.wait()
+        for stream in (self._proc.stdin, self._proc.stdout):
+            if stream is not None and not stream.closed:
+                stream.close()
+
+    def __enter__(self) -> "PrestartedCall":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _serve_call(argv: Sequence[str]) -> None:
+    """The other side of :class:`PrestartedCall`: import, read ``(args, kwargs)`` from stdin, call, reply."""
+    import importlib
+    import pickle
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    target, *preload = argv
+    module, _, name = target.partition(":")
+    try:
+        function = getattr(importlib.import_module(module), name)
+        for extra in preload:
+            importlib.import_module(extra)
+    except Exception as exc:                 # reported when the call comes
+        function, failure = None, exc
+    data = sys.stdin.buffer.read()
+    if not data:
+        return                               # closed without a call
+    try:
+        args, kwargs = pickle.loads(data)
+        if function is None:
+            raise failure
+        reply = (True, function(*args, **kwargs))
+    except Exception as exc:
+        reply = (False, exc)
+    try:
+        out = pickle.dumps(reply, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception as exc:                 # an exception (or result) that does not pickle
+        out = pickle.dumps((False, RuntimeError(f"{type(reply[1]).__name__}: {reply[1]} ({exc})")))
+    sys.stdout.buffer.write(out)
+    sys.stdout.buffer.flush()

@@ -238,9 +238,14 @@ def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: i
 
 
 def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, rig=None,
-                  config: PipelineConfig = PipelineConfig(), prefer_raw: bool = False) -> FrameObservation:
-    """Run rectify -> match -> reject -> 3D on one manifest frame; points in the world frame."""
-    left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
+                  config: PipelineConfig = PipelineConfig(), prefer_raw: bool = False,
+                  pair: tuple[np.ndarray, np.ndarray, bool] | None = None) -> FrameObservation:
+    """Run rectify -> match -> reject -> 3D on one manifest frame; points in the world frame.
+
+    ``pair``: the frame's images as :func:`frame_pair` reads them (read ahead by a reader
+    thread); default read here.
+    """
+    left, right, rectified = frame_pair(record, prefer_raw=prefer_raw) if pair is None else pair
     frame = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=rig, pan_rad=record.pan_rad,
                                 **pair_options(config))
     return observation_from_pair(frame, record, index=index, config=config, stereo=stereo)
@@ -264,11 +269,19 @@ def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec = GridSpec(
     return occupancy
 
 
-def _observe_indexed(indexed: tuple[int, FrameRecord], *, stereo: StereoCamera, rig, config: PipelineConfig,
+def _observe_indexed(indexed: tuple, *, stereo: StereoCamera, rig, config: PipelineConfig,
                      prefer_raw: bool) -> FrameObservation:
-    """:func:`observe_frame` of ``(index, record)``: the picklable unit of work of :func:`build_map`."""
+    """:func:`observe_frame` of ``(index, record)`` or ``(index, record, pair)``: the picklable unit of work
+    of :func:`build_map` (``pair`` read ahead by :func:`_read_indexed`)."""
+    k, record, *pair = indexed
+    return observe_frame(record, stereo, index=k, rig=rig, config=config, prefer_raw=prefer_raw,
+                         pair=pair[0] if pair else None)
+
+
+def _read_indexed(indexed: tuple[int, FrameRecord], *, prefer_raw: bool) -> tuple:
+    """``(index, record)`` -> ``(index, record, pair)``: the images decoded (a sequence run's reader thread)."""
     k, record = indexed
-    return observe_frame(record, stereo, index=k, rig=rig, config=config, prefer_raw=prefer_raw)
+    return k, record, frame_pair(record, prefer_raw=prefer_raw)
 
 
 def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
@@ -345,8 +358,8 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         Overrides the manifest's calibration (e.g. one estimated by ``mrstereo
         stereo-calibrate``); then the raw images are used.
     workers : int, optional
-        Observe the frames on a local Dask cluster of this many single-threaded
-        workers: threads of this process, or processes with ``processes=True``.
+        Observe the frames on this many single-threaded workers: threads of this
+        process, or the processes of a local Dask cluster with ``processes=True``.
     scheduler : str or distributed.Client, optional
         Observe the frames on an existing Dask cluster (its workers must see
         the dataset's files). With neither, everything runs in this process.
@@ -386,6 +399,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     observe = partial(_observe_indexed, stereo=stereo, rig=mount, config=config, prefer_raw=prefer_raw)
     observations = map_ordered(observe, items, workers=workers, scheduler=scheduler,
                                processes=processes, progress=progress, desc="mapping", unit="frame",
+                               prefetch=partial(_read_indexed, prefer_raw=prefer_raw),
                                label=lambda item: f"frame {item[0]} ({(item[1].left_rect or item[1].left).name})")
     alignments = None
     if align is not None and align is not False:
@@ -419,20 +433,25 @@ def fov_views(run: MapRun, stereo: StereoCamera, *, range_m: float = 4.0) -> lis
     return views_of_frames(run.observations, stereo, range_m=range_m)
 
 
-def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
+def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None, figures=None) -> dict[str, Path]:
     """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy and metrics.json.
 
     metrics.json holds the comparison with the ground-truth map (when there is
-    one) and ``floor``: the floor of the run with its confidence.
+    one) and ``floor``: the floor of the run with its confidence. ``figures``: a
+    :class:`mrstereo.parallel.PrestartedCall` of :func:`mrstereo.mapping.figures.plot_map`
+    that draws map.png in another process while the other files are written.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    path = np.array([o.pose for o in run.observations]) if run.observations else None
+    figure = ((run.grid, out / "map.png"),
+              {"robot_path": path, "fov_views": fov_views(run, run.manifest.calibration),
+               "planned_path": planned_path, "ground_truth": run.ground_truth_map,
+               "title": f"occupancy grid ({run.grid.config.fusion})"})
+    if figures is not None:
+        figures.submit(*figure[0], **figure[1])
     write_ros_map(out / "map.yaml", run.grid.to_ros_map())
     run.grid.save_log_odds(out / "log_odds.npy")
-    path = np.array([o.pose for o in run.observations]) if run.observations else None
-    plot_map(run.grid, out / "map.png", robot_path=path,
-             fov_views=fov_views(run, run.manifest.calibration), planned_path=planned_path,
-             ground_truth=run.ground_truth_map, title=f"occupancy grid ({run.grid.config.fusion})")
     files = {"map_yaml": out / "map.yaml", "map_pgm": out / "map.pgm", "map_png": out / "map.png",
              "log_odds": out / "log_odds.npy"}
     report = run.metrics.to_dict() if run.metrics is not None else {}
@@ -445,4 +464,8 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
         with atomic_write(out / "metrics.json") as tmp:
             tmp.write_text(json.dumps(report, indent=2))
         files["metrics"] = out / "metrics.json"
+    if figures is None:
+        plot_map(*figure[0], **figure[1])
+    else:
+        figures.result()
     return files

@@ -14,8 +14,8 @@ def worker_options(func):
                         help="Run the work (frames, scenes) on an existing Dask cluster (tcp://host:8786); its "
                              "workers must see the same files.")(func)
     func = click.option("--workers", type=int, default=None,
-                        help="Run the work (frames, scenes) on a local Dask cluster of N single-threaded workers "
-                             "(default: in this process).")(func)
+                        help="Run the work (frames, scenes) on N single-threaded worker threads (with --processes: a "
+                             "local Dask cluster of N worker processes; default: in this process).")(func)
     return func
 
 

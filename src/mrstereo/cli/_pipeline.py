@@ -12,6 +12,8 @@ __all__ = ["COMMANDS"]
 
 MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
 """What ``mrstereo map`` writes into its output folder (:func:`mrstereo.pipeline.write_map_outputs`)."""
+FIGURE_MODULES = ("matplotlib.figure", "matplotlib.backends.backend_agg", "matplotlib.patches")
+"""What :func:`mrstereo.mapping.figures.plot_map` imports when called (imported ahead in its process)."""
 
 
 @click.command("map")
@@ -59,6 +61,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     from ..batch import dataset_files
     from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
     from ..mapping import GridSpec
+    from ..parallel import PrestartedCall
     from ..pipeline import PipelineConfig, build_map, write_map_outputs
     from ..recording import read_manifest
 
@@ -74,12 +77,15 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
         check_outputs(outputs, [bag, calib], input_dirs=[bag] if bag.is_dir() else [])
     else:
         check_outputs(outputs, [manifest, calib] + dataset_files(read_manifest(manifest)))
-    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, _):
+    # map.png is drawn in a process started now: matplotlib's import runs meanwhile on another core
+    with PrestartedCall("mrstereo.mapping.figures:plot_map", preload=FIGURE_MODULES) as figures, \
+            opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes, odometry=odometry, align=align or None)
         remove_stale_temporaries(out_dir)
         with staged_dir(out_dir, prefix="map") as staging:      # all files or none: a kill leaves the old set
-            files = {key: out_dir / path.name for key, path in write_map_outputs(run, staging).items()}
+            files = {key: out_dir / path.name
+                     for key, path in write_map_outputs(run, staging, figures=figures).items()}
     click.echo(f"map of {len(run.observations)} frames: {run.grid!r}")
     echo_run_floor(run.floor)
     if run.metrics is not None:

@@ -256,7 +256,7 @@ def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_dis
     progress : bool
         Show a tqdm progress bar on stderr.
     workers, scheduler, processes :
-        Spread the (scene, method) runs over a local Dask cluster of ``workers`` threads (or
+        Spread the (scene, method) runs over ``workers`` worker threads (or a local Dask cluster of
         processes with ``processes=True``) or an existing cluster (:func:`mrstereo.parallel.map_ordered`); default in this process. Per-run
         times on workers include each worker's first numba compilation.
 
