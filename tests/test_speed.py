@@ -185,3 +185,27 @@ def test_prestarted_call_returns_the_result_or_raises_the_error():
     assert call._proc.poll() is not None
     with pytest.raises(ValueError, match="module:function"):
         PrestartedCall("math.sqrt")
+
+
+def test_fused_texture_rejection_equals_the_statistics_path():
+    """Eq. (13) on a uint8 image in one pass from the integer window sums: the same disparity, rejected and
+    uniform masks, bit for bit, as the float64-statistics path (taken for a float image), for thresholds
+    at which many patches have sigma within float32 rounding of T; the statistics on demand are the same."""
+    from mrstereo.rejection import RejectionConfig, reject_uniform
+
+    rng = np.random.default_rng(5)
+    for image in _textures():
+        d = rng.uniform(-1, 40, image.shape).astype(np.float32)
+        d[rng.random(image.shape) < 0.2] = np.nan
+        ref_stats = reject_uniform(d, image.astype(np.float32)).stats
+        near = np.unique(ref_stats.std[(ref_stats.std > 0.5) & (ref_stats.std < 12)])
+        exact = rng.choice(near, 3).tolist() if near.size else []
+        for t in (3.0, 2.5, 0.7, 10.0, *exact):          # and T equal to some patches' sigma
+            for w in (5, 9, 17):
+                config = RejectionConfig(texture_threshold=t, window_px=w)
+                fast = reject_uniform(d, image, config=config)
+                ref = reject_uniform(d, image.astype(np.float32), config=config)
+                assert np.array_equal(fast.disparity_px, ref.disparity_px, equal_nan=True), (t, w)
+                assert np.array_equal(fast.uniform, ref.uniform) and np.array_equal(fast.rejected, ref.rejected)
+                assert fast.disparity_px.dtype == np.float32
+        assert np.array_equal(reject_uniform(d, image).stats.std, ref_stats.std)

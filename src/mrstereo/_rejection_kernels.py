@@ -64,3 +64,26 @@ def reject(disparity, uniform, rejected):
             rejected[v, u] = r
             if r:
                 disparity[v, u] = np.nan
+
+
+@njit(nogil=True, cache=True)
+def reject_texture_from_sums(sum1, sum2, scale, max_variance, disparity, out, rejected, uniform):
+    """Eq. (13), texture test, in one branch-free pass from exact window sums.
+
+    The variance ``E[I^2] - mu^2`` as :func:`mean_std_from_sums` computes it (float64); a patch
+    is uniform where it is at most ``max_variance``: the largest float64 ``v`` with
+    ``float32(sqrt(v)) <= T`` (:func:`mrstereo.rejection._max_uniform_variance`), so the test is
+    ``float32(sigma) <= T`` bit for bit without the square root. ``out`` is ``disparity`` as
+    float32 with NaN where uniform and finite (:func:`reject`).
+    """
+    h, w = sum1.shape
+    nan = np.float32(np.nan)
+    for v in range(h):
+        for u in range(w):
+            m = np.float64(sum1[v, u]) * scale
+            flat = np.float64(sum2[v, u]) * scale - m * m <= max_variance
+            d = np.float32(disparity[v, u])
+            r = flat and d == d and abs(d) != np.inf
+            uniform[v, u] = flat
+            rejected[v, u] = r
+            out[v, u] = nan if r else d

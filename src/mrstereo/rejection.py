@@ -36,7 +36,9 @@ Environments, section 3.5, eq. (13).
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -133,14 +135,23 @@ class RejectionResult:
         Pixels that had a valid disparity and were rejected.
     uniform : ndarray of shape (H, W), bool
         Pixels whose patch failed the eq. (13) test (whether or not they had a disparity).
-    stats : PatchStatistics
-        ``mu_patch`` and ``sigma_patch`` of the left image.
+    left : ndarray of shape (H, W) or (H, W, 3)
+        The image the patch statistics are of.
+    window_px : int
+        Their patch side.
     """
 
     disparity_px: np.ndarray
     rejected: np.ndarray
     uniform: np.ndarray
-    stats: PatchStatistics
+    left: np.ndarray
+    window_px: int
+
+    @cached_property
+    def stats(self) -> PatchStatistics:
+        """``mu_patch`` and ``sigma_patch`` of the left image (computed on first use when the test did not
+        need the images)."""
+        return patch_statistics(self.left, window_px=self.window_px)
 
     @property
     def n_rejected(self) -> int:
@@ -182,15 +193,42 @@ def patch_statistics(image, *, window_px: int = 9) -> PatchStatistics:
     return PatchStatistics(mean=mean32, std=std32, window_px=w)
 
 
-def _patch_statistics_uint8(gray: np.ndarray, w: int) -> PatchStatistics:
-    """:func:`patch_statistics` of a uint8 gray image from exact integer window sums (same bits)."""
-    depth = cv2.CV_32F if 255 * 255 * w * w < 2 ** 24 else cv2.CV_64F      # sums held exactly
-    gray = np.ascontiguousarray(gray)
+def _window_sums_uint8(gray: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Exact window sums of ``I`` and ``I^2`` of a uint8 gray image (OpenCV's SIMD box filters) and ``1 / w^2``.
+
+    Float32 holds the integer sums exactly while ``255^2 w^2 < 2^24`` (windows up to 15 px), float64 beyond.
+    """
+    depth = cv2.CV_32F if 255 * 255 * w * w < 2 ** 24 else cv2.CV_64F
     sum1 = cv2.boxFilter(gray, depth, (w, w), normalize=False, borderType=cv2.BORDER_REFLECT_101)
     sum2 = cv2.sqrBoxFilter(gray, depth, (w, w), normalize=False, borderType=cv2.BORDER_REFLECT_101)
+    return sum1, sum2, 1.0 / (w * w)
+
+
+@functools.lru_cache(maxsize=64)
+def _max_uniform_variance(threshold: float) -> float:
+    """The largest float64 variance ``v`` with ``float32(sqrt(v)) <= float32(threshold)`` (``threshold > 0``).
+
+    ``sigma <= T`` of eq. (13), with ``sigma`` stored as float32 and compared in float32 (as numpy
+    compares a float32 array with a Python float), is ``variance <= v``: both roundings are
+    monotonic. Found by bisection over the ordered bit patterns of positive doubles.
+    """
+    t = np.float32(threshold)
+    lo, hi = 0, int(np.float64(4.0 * float(t) ** 2 + 1.0).view(np.int64))     # uniform at lo, not at hi
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if np.float32(np.sqrt(np.int64(mid).view(np.float64))) <= t:
+            lo = mid
+        else:
+            hi = mid
+    return float(np.int64(lo).view(np.float64))
+
+
+def _patch_statistics_uint8(gray: np.ndarray, w: int) -> PatchStatistics:
+    """:func:`patch_statistics` of a uint8 gray image from exact integer window sums (same bits)."""
+    sum1, sum2, scale = _window_sums_uint8(np.ascontiguousarray(gray), w)
     mean32 = np.empty(gray.shape, dtype=np.float32)
     std32 = np.empty(gray.shape, dtype=np.float32)
-    _kernels.mean_std_from_sums(sum1, sum2, 1.0 / (w * w), mean32, std32)
+    _kernels.mean_std_from_sums(sum1, sum2, scale, mean32, std32)
     return PatchStatistics(mean=mean32, std=std32, window_px=w)
 
 
@@ -283,11 +321,24 @@ def reject_uniform(disparity_px, left, *, config: RejectionConfig = RejectionCon
     d = np.asarray(disparity_px)
     if d.ndim != 2:
         raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
-    _checks.same_shape("disparity_px", d, "left", _checks.image("left", left))
+    image = _checks.image("left", left)
+    _checks.same_shape("disparity_px", d, "left", image)
     window = floor_model.window_px if floor_model is not None else config.window_px
+    out = np.empty(d.shape, dtype=np.float32)
+    rejected = np.empty(out.shape, dtype=bool)
+    if (floor_model is None and config.mean_range is None and config.texture_threshold > 0
+            and image.dtype == np.uint8 and (image.ndim == 2 or image.shape[2] == 1)):
+        # the texture test alone on a uint8 image: exact integer window sums, then one fused pass
+        gray = np.ascontiguousarray(image.reshape(image.shape[:2]))
+        sum1, sum2, scale = _window_sums_uint8(gray, window)
+        uniform = np.empty(out.shape, dtype=bool)
+        _kernels.reject_texture_from_sums(sum1, sum2, scale, _max_uniform_variance(config.texture_threshold), d,
+                                          out, rejected, uniform)
+        return RejectionResult(disparity_px=out, rejected=rejected, uniform=uniform, left=left, window_px=window)
     stats = patch_statistics(left, window_px=window)
     uniform = uniform_mask(stats, config=config, floor_model=floor_model)
-    out = np.array(d, dtype=np.float32, copy=True)
-    rejected = np.empty(out.shape, dtype=bool)
+    out[...] = d
     _kernels.reject(out, uniform, rejected)          # eq. (13): NaN where uniform and valid
-    return RejectionResult(disparity_px=out, rejected=rejected, uniform=uniform, stats=stats)
+    result = RejectionResult(disparity_px=out, rejected=rejected, uniform=uniform, left=left, window_px=window)
+    result.__dict__["stats"] = stats                 # already computed: the cached property's value
+    return result
