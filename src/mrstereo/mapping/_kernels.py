@@ -17,6 +17,7 @@ HIT = np.uint8(1)        # an obstacle point ends in this cell
 END_FREE = np.uint8(2)   # a ray ends here and clears its end cell (floor point, or clipped ray)
 MISS = np.uint8(4)       # a ray crossed this cell
 FLOOR = np.uint8(8)      # a floor point ends in this cell
+_LATER = -1.0            # ``ends[r, c, 2]`` of an obstacle end whose margin mark_endpoints computes at its end
 
 
 @njit(nogil=True, cache=True)
@@ -70,8 +71,9 @@ def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cel
     ``END_FREE``. ``ends`` (rows, cols, 4) receives, per flagged cell, the grid coordinates of the
     last ray end that fell in it (the target of the one ray traced to that cell), its clearing
     margin in cells -- ``margin_per_cell2 * r^2`` for an obstacle end at ``r`` cells from the
-    sensor (the range uncertainty of a stereo point grows with the square of its range), 0
-    otherwise -- and its height z in metres (NaN for 2-column points). ``n_points`` counts the
+    sensor (the range uncertainty of a stereo point grows with the square of its range; computed
+    once per cell, for the end that stays, rather than per point), 0 otherwise -- and its height
+    z in metres (NaN for 2-column points). ``n_points`` counts the
     points ending in each cell (not the cut ones); ``z_range`` (rows, cols, 2), initialized to
     (inf, -inf), gets the lowest and highest obstacle point of each hit cell.
     """
@@ -85,14 +87,15 @@ def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cel
             continue
         z = points[i, 2] if has_z else np.nan
         cut = False
-        d = math.hypot(x - sx, y - sy)
-        if max_range_cells > 0.0 and d > max_range_cells:
-            s = max_range_cells / d
-            x = sx + (x - sx) * s
-            y = sy + (y - sy) * s
-            d = max_range_cells
-            cut = True
-        margin = margin_per_cell2 * d * d if is_obstacle and not cut else 0.0
+        if max_range_cells > 0.0:
+            d = math.hypot(x - sx, y - sy)
+            if d > max_range_cells:
+                s = max_range_cells / d
+                x = sx + (x - sx) * s
+                y = sy + (y - sy) * s
+                cut = True
+        # an uncut obstacle end's margin depends on its range: taken from the cell's last end below
+        margin = _LATER if is_obstacle and not cut and margin_per_cell2 != 0.0 else 0.0
         if 0.0 <= x < cols and 0.0 <= y < rows:
             r = int(y)
             c = int(x)
@@ -126,6 +129,12 @@ def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cel
         ends[r, c, 1] = ey
         ends[r, c, 2] = 0.0
         ends[r, c, 3] = np.nan
+    if margin_per_cell2 != 0.0:
+        for r in range(rows):
+            for c in range(cols):
+                if flags[r, c] != 0 and ends[r, c, 2] == _LATER:
+                    d = math.hypot(ends[r, c, 0] - sx, ends[r, c, 1] - sy)
+                    ends[r, c, 2] = margin_per_cell2 * d * d
     return outside
 
 
