@@ -7,8 +7,9 @@ Usage::
 
 Renders (once, into DIR, default a temp dir) a synthetic corridor sequence
 (``mrstereo synth --frames N``; 640x480 unless ``--width/--height``) and maps it,
-each configuration end to end (a local cluster is started and stopped inside
-every run, as ``mrstereo map --workers N`` does):
+each configuration end to end (worker threads, or a local Dask cluster of
+processes, started and stopped inside every run as ``mrstereo map --workers N
+[--processes]`` does):
 
 - ``build_map`` in this process (the default of ``mrstereo map``; numba may use
   both cores);
@@ -16,7 +17,9 @@ every run, as ``mrstereo map --workers N`` does):
   default of ``--workers``);
 - ``build_map(workers=N, processes=True)``: single-threaded worker processes;
 - the command ``mrstereo map DIR -o OUT --quiet --workers N`` as a subprocess
-  (Python start-up, imports and the map files included);
+  (Python start-up, imports and the map files included), and the same on the
+  sequence's first frame alone: the command's serial part is its time on one
+  frame less one frame's work (the in-process 1-worker time per frame);
 - the machine's ceiling: the per-frame work (``observe_frame``) of all frames in
   one plain Python process vs half of them in each of two independent processes
   started together (no Dask, no communication; loop times without start-up; each
@@ -111,13 +114,17 @@ def main(argv=None) -> int:
             return build_map(manifest, progress=False, **kw).grid.log_odds
         return run
 
-    def command(workers):
+    def command(workers, folder=data):
         def run():
             out = Path(tempfile.mkdtemp(dir=out_root))
-            subprocess.run([cli, "map", str(data), "-o", str(out), "--quiet", "--workers", str(workers)],
+            subprocess.run([cli, "map", str(folder), "-o", str(out), "--quiet", "--workers", str(workers)],
                            check=True, stdout=subprocess.DEVNULL)
             return np.load(out / "log_odds.npy")
         return run
+
+    one_frame = data.parent / f"{data.name}-first-frame"
+    if not args.no_cli and cli is not None and not (one_frame / "manifest.yaml").is_file():
+        write_synthetic_dataset(one_frame, seed=0, n_frames=1, width=args.width, height=args.height, progress=False)
 
     configs = {"in-process (default)": in_python(),
                "1 worker thread": in_python(workers=1), "2 worker threads": in_python(workers=2)}
@@ -130,7 +137,10 @@ def main(argv=None) -> int:
     print(f"{n} frames of {manifest.calibration.size[0]}x{manifest.calibration.size[1]}; load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
     reference = configs["in-process (default)"]()     # warm-up: numba kernels loaded / compiled
-    times = {name: [] for name in configs}
+    timed_alone = {}
+    if not args.no_cli and cli is not None:
+        timed_alone["`mrstereo map --workers 1`, first frame only"] = command(1, one_frame)
+    times = {name: [] for name in [*configs, *timed_alone]}
     ceiling = []
     identical = True
     for _ in range(args.repeat):
@@ -139,12 +149,17 @@ def main(argv=None) -> int:
             log_odds = run()
             times[name].append(time.perf_counter() - t)
             identical &= bool(np.array_equal(log_odds, reference, equal_nan=True))
+        for name, run in timed_alone.items():
+            t = time.perf_counter()
+            run()
+            times[name].append(time.perf_counter() - t)
         if not args.no_ceiling:
             ceiling.append(_ceiling(data, n))
     shutil.rmtree(out_root, ignore_errors=True)
     med = {name: statistics.median(t) for name, t in times.items()}
     for name, t in times.items():
-        print(f"{name:30s} median {med[name]:7.2f} s  ({n / med[name]:5.1f} frames/s)  runs: "
+        frames = 1 if name in timed_alone else n
+        print(f"{name:30s} median {med[name]:7.2f} s  ({frames / med[name]:5.1f} frames/s)  runs: "
               + ", ".join(f"{v:.2f}" for v in t), flush=True)
     for one, two in (("1 worker thread", "2 worker threads"), ("1 worker process", "2 worker processes"),
                      ("`mrstereo map --workers 1`", "`mrstereo map --workers 2`")):
@@ -154,6 +169,11 @@ def main(argv=None) -> int:
                   f"{statistics.median(rounds):.2f}x, " + ", ".join(f"{r:.2f}x" for r in rounds))
     print(f"2 worker threads vs in-process: {med['in-process (default)'] / med['2 worker threads']:.2f}x")
     cli_one = "`mrstereo map --workers 1`"
+    alone = "`mrstereo map --workers 1`, first frame only"
+    if alone in med:
+        frame = med["1 worker thread"] / n
+        print(f"serial part of the command: {med[alone]:.2f} s on one frame less one frame's work ({frame:.3f} s) = "
+              f"{med[alone] - frame:.2f} s")
     if cli_one in med:
         # What the command does besides build_map (Python start-up, imports, reading the manifest,
         # map files and figure) is serial: it bounds the command's speed-up (Amdahl).

@@ -89,13 +89,19 @@ def _gray(image: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
 
 
-def process_frame(task: FrameTask) -> FrameObservation:
+def _read_task(task: FrameTask) -> tuple[FrameTask, tuple]:
+    """``task`` -> ``(task, pair)``: the frame's images decoded (by the run's reader thread)."""
+    return task, frame_pair(task.record, prefer_raw=task.prefer_raw)
+
+
+def process_frame(task: FrameTask | tuple[FrameTask, tuple]) -> FrameObservation:
     """Run the chain on one frame, write its four files, return what it adds to the map.
 
-    The observation equals :func:`mrstereo.pipeline.observe_frame`'s for the
-    same record and options.
+    ``task`` may come with its images read ahead (:func:`_read_task`). The observation equals
+    :func:`mrstereo.pipeline.observe_frame`'s for the same record and options.
     """
-    left, right, rectified = frame_pair(task.record, prefer_raw=task.prefer_raw)
+    task, pair = task if isinstance(task, tuple) else (task, None)
+    left, right, rectified = frame_pair(task.record, prefer_raw=task.prefer_raw) if pair is None else pair
     result = scan_from_pair(left, right, task.stereo, rectified=rectified, rig=task.rig,
                             pan_rad=task.record.pan_rad, **pair_options(task.config))
     frame = result.frame
@@ -318,7 +324,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
 
     results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, processes=processes,
                           progress=progress,
-                          desc="frames", unit="frame", return_exceptions=True,
+                          desc="frames", unit="frame", return_exceptions=True, prefetch=_read_task,
                           label=lambda t: f"{t.dataset} frame {t.index}")
     failures = []
     for task, result in zip(tasks, results):
