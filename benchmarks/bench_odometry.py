@@ -1,6 +1,7 @@
 """Visual odometry and drift-robust mapping on synthetic corridor sequences (docs/odometry.md).
 
     python benchmarks/bench_odometry.py [--seeds 0 1 2] [--frames 91] [--data DIR]
+    python benchmarks/bench_odometry.py --vo-only [--random-seeds 0 1 2]
     python benchmarks/bench_odometry.py --speed [--speed-frames 30]
 
 Per seed: an S-curve sequence (front view, 0.1 m steps, 320x240) is rendered with drifted
@@ -13,6 +14,10 @@ odometry (3 % scale error, 2 deg/m heading drift) beside the true poses (``mrste
   odometry, ``map --align`` (scan-to-map alignment of the drifted odometry) and
   ``map --odometry visual``. The frames are matched once; each run re-poses their robot-frame
   points (what ``mrstereo map`` does with the same poses) and fuses them in order.
+
+Then visual odometry alone on the straight ``front`` path (seed 0) and on randomized worlds
+(``mrstereo synth --randomize --path front``: the world's own path, 6 m, 61 frames) of
+``--random-seeds``. ``--vo-only`` skips the maps.
 
 ``--speed``: the odometry stage alone at 640x480 on one thread (CPU time of the thread, and
 wall time), with the depth from the stereo search and from a given disparity map (the mapping
@@ -32,7 +37,7 @@ import numpy as np
 from mrstereo.mapping import read_ros_map
 from mrstereo.mapping.metrics import map_metrics
 from mrstereo.odometry import odometry_from_manifest
-from mrstereo.odometry.alignment import AlignConfig, _robot_points, _world_points, fuse_aligned
+from mrstereo.odometry.alignment import AlignConfig, fuse_aligned, observation_at
 from mrstereo.odometry.se3 import T_from_planar
 from mrstereo.odometry.trajectory import trajectory_metrics
 from mrstereo.pipeline import PipelineConfig, build_map, fuse
@@ -42,26 +47,26 @@ from mrstereo.world.dataset import write_synthetic_dataset
 NOISE = (0.03, math.radians(2.0))
 
 
-def dataset(root: Path, seed: int, frames: int, width: int, height: int) -> Path:
-    out = root / f"s-curve-{width}x{height}-{frames}-seed{seed}"
+def dataset(root: Path, seed: int, frames: int, width: int, height: int, path: str = "s-curve",
+            randomize: bool = False) -> Path:
+    out = root / f"{'random-' if randomize else ''}{path}-{width}x{height}-{frames}-seed{seed}"
     if not (out / "manifest.yaml").is_file():
-        write_synthetic_dataset(out, seed=seed, n_frames=frames, width=width, height=height, path="s-curve",
-                                step_m=0.1, odometry_noise=NOISE, progress=False)
+        write_synthetic_dataset(out, seed=seed, n_frames=frames, width=width, height=height, path=path,
+                                step_m=0.1, odometry_noise=NOISE, progress=False, randomize=randomize)
     return out
 
 
 def repose(observations, poses, config: PipelineConfig):
     """The observations at other poses (robot-frame points moved into the world again)."""
-    from mrstereo.mapping.occupancy import view_cells
+    return [observation_at(obs, pose, grid=config.grid, config=config.mapping) for obs, pose in zip(observations, poses)]
 
-    out = []
-    for obs, pose in zip(observations, poses):
-        pose = tuple(float(v) for v in pose)
-        obst = _world_points(_robot_points(obs.obstacle_points_world, obs.pose), pose)
-        floor = _world_points(_robot_points(obs.floor_points_world, obs.pose), pose)
-        cells = view_cells(obst, floor, pose[:2], grid=config.grid, config=config.mapping)
-        out.append(replace(obs, pose=pose, obstacle_points_world=obst, floor_points_world=floor, cells=cells))
-    return out
+
+def run_vo(path: Path) -> dict:
+    manifest = read_manifest(path)
+    T_true = np.stack([T_from_planar(*f.true_pose) for f in manifest.frames])
+    vo = odometry_from_manifest(manifest)
+    return {"vo": trajectory_metrics(vo.T_world_from_base, T_true), "vo_lost": vo.n_lost,
+            "vo_ms": 1000 * float(np.median(vo.time_s))}
 
 
 def run_seed(path: Path) -> dict:
@@ -125,27 +130,41 @@ def speed(root: Path, frames: int) -> None:
               f"{vo.status.count('keyframe')} keyframes of {len(pairs)}, lost {vo.n_lost}")
 
 
+def _vo_line(label: str, r: dict) -> str:
+    v = r["vo"]
+    return (f"{label}: {v.path_length_m:.2f} m, visual odometry: ATE {v.ate_percent:.2f} % "
+            f"({100 * v.ate_rmse_m:.1f} cm SE(3)-aligned, {100 * v.ate_rmse_unaligned_m:.1f} cm unaligned), "
+            f"end point {v.end_point_percent:.2f} %, RPE {100 * v.rpe_translation_per_m:.2f} % "
+            f"{v.rpe_rotation_deg_per_m:.2f} deg per m, lost {r['vo_lost']}, {r['vo_ms']:.1f} ms/frame CPU")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--random-seeds", type=int, nargs="*", default=[0, 1, 2])
     parser.add_argument("--frames", type=int, default=91)
+    parser.add_argument("--random-frames", type=int, default=61)
     parser.add_argument("--data", type=Path, default=Path("bench-odometry-data"),
                         help="where the rendered sequences are kept (reused when present)")
+    parser.add_argument("--vo-only", action="store_true", help="visual odometry only (no maps)")
     parser.add_argument("--speed", action="store_true", help="time the odometry stage at 640x480")
     parser.add_argument("--speed-frames", type=int, default=30)
     args = parser.parse_args()
     if args.speed:
         speed(args.data, args.speed_frames)
         return
-    rows = []
+    rows, vo_rows = [], []
     for seed in args.seeds:
-        r = run_seed(dataset(args.data, seed, args.frames, 320, 240))
+        path = dataset(args.data, seed, args.frames, 320, 240)
+        if args.vo_only:
+            r = run_vo(path)
+            vo_rows.append(r)
+            print(_vo_line(f"s-curve seed {seed}", r))
+            continue
+        r = run_seed(path)
         rows.append(r)
-        v = r["vo"]
-        print(f"seed {seed}: {v.path_length_m:.2f} m, visual odometry: ATE {v.ate_percent:.2f} % "
-              f"({100 * v.ate_rmse_m:.1f} cm SE(3)-aligned, {100 * v.ate_rmse_unaligned_m:.1f} cm unaligned), "
-              f"end point {v.end_point_percent:.2f} %, RPE {100 * v.rpe_translation_per_m:.2f} % "
-              f"{v.rpe_rotation_deg_per_m:.2f} deg per m, lost {r['vo_lost']}, {r['vo_ms']:.1f} ms/frame CPU")
+        vo_rows.append(r)
+        print(_vo_line(f"s-curve seed {seed}", r))
         print(f"         drifted odometry: ATE {r['given'].ate_percent:.2f} %, end point "
               f"{r['given'].end_point_percent:.2f} %; after --align: ATE {r['aligned'].ate_percent:.2f} %, "
               f"end point {r['aligned'].end_point_percent:.2f} % (mean correction {100 * r['corrections'][0]:.1f} cm, "
@@ -153,12 +172,19 @@ def main() -> None:
         for name, (p, rc) in r["maps"].items():
             dp, dr = p - r["maps"]["true poses"][0], rc - r["maps"]["true poses"][1]
             print(f"         map {name:24s} precision {p:.3f} ({dp:+.3f}) recall {rc:.3f} ({dr:+.3f})")
-    print("\nsummary over seeds", args.seeds)
-    ate = [r["vo"].ate_percent for r in rows]
-    end = [r["vo"].end_point_percent for r in rows]
+    r = run_vo(dataset(args.data, 0, args.frames, 320, 240, path="front"))
+    vo_rows.append(r)
+    print(_vo_line("front seed 0", r))
+    for seed in args.random_seeds:
+        r = run_vo(dataset(args.data, seed, args.random_frames, 320, 240, path="front", randomize=True))
+        vo_rows.append(r)
+        print(_vo_line(f"randomized world {seed}", r))
+    print(f"\nsummary: {len(vo_rows)} sequences")
+    ate = [r["vo"].ate_percent for r in vo_rows]
+    end = [r["vo"].end_point_percent for r in vo_rows]
     print(f"visual odometry ATE {np.mean(ate):.2f} % (max {np.max(ate):.2f}), end point {np.mean(end):.2f} % "
           f"(max {np.max(end):.2f}); targets <= 1 % and <= 1.5 %")
-    for name in ("drifted odometry", "map --align", "map --odometry visual"):
+    for name in ("drifted odometry", "map --align", "map --odometry visual") if rows else ():
         dp = [r["maps"][name][0] - r["maps"]["true poses"][0] for r in rows]
         dr = [r["maps"][name][1] - r["maps"]["true poses"][1] for r in rows]
         print(f"{name:24s} precision - true-pose map: worst {min(dp):+.3f}; recall: worst {min(dr):+.3f} "

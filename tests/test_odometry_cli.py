@@ -78,6 +78,10 @@ def test_odometry_command(sequence, tmp_path, capsys):
     data = json.loads(metrics.read_text())
     assert data["reference"] == "true poses" and data["lost"] == 0 and data["ate_rmse_m"] < 0.01
     assert plot.stat().st_size > 10000 and plot.read_bytes()[:4] == b"\x89PNG"
+    # --profile: the odometry is a stage of its own, once per frame
+    assert entry(["odometry", str(sequence), "-o", str(tmp_path / "p.txt"), "--quiet", "--profile"]) == 0
+    rows = {line.split()[0]: line.split() for line in capsys.readouterr().err.splitlines() if line.strip()}
+    assert rows["odometry"][2] == "6" and float(rows["odometry"][1]) > 0
 
 
 def test_odometry_command_bad_input(sequence, tmp_path, capsys):
@@ -114,16 +118,68 @@ def test_align_points_recovers_a_known_offset():
     d = world - true[:2]
     robot = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
     prior = (0.26, -0.05, 0.05 + math.radians(1.2))                   # odometry 8 cm and 1.2 degrees off
-    result = align_points(robot, prior, field, grid, config=AlignConfig(min_cell_points=1))
+    loose = np.diag([0.1 ** 2, 0.1 ** 2, math.radians(3.0) ** 2])
+    config = AlignConfig(min_cell_points=1, effective_points=300)
+    result = align_points(robot, prior, field, grid, prior_covariance=loose, config=config)
     assert result.applied and result.score > result.prior_score
     assert math.hypot(result.pose[0] - true[0], result.pose[1] - true[1]) < 0.01
     assert abs(result.pose[2] - true[2]) < math.radians(0.2)
     assert result.correction_m == pytest.approx(math.hypot(result.pose[0] - prior[0], result.pose[1] - prior[1]))
+    sd = np.sqrt(np.diag(result.covariance))
+    assert (sd < np.sqrt(np.diag(loose)) / 3).all()                  # the scan is worth more than the prior
+    # a tight prior (odometry trusted) keeps the pose near it: the posterior weighs both
+    tight = align_points(robot, prior, field, grid, prior_covariance=loose / 400, config=config)
+    assert tight.correction_m < 0.5 * result.correction_m
     # nothing to align to: the prior is kept
-    kept = align_points(robot, prior, np.zeros_like(field), grid)
+    empty = likelihood_field(np.zeros(grid.shape, bool), grid, sigma_m=0.05)
+    kept = align_points(robot, prior, empty, grid)
     assert not kept.applied and kept.pose == prior
     with pytest.raises(ValueError, match="points_robot_xy"):
         align_points(np.zeros(5), prior, field, grid)
+    with pytest.raises(ValueError, match="prior_covariance"):
+        align_points(robot, prior, field, grid, prior_covariance=np.eye(2))
+
+
+def test_align_points_leaves_a_corridor_axis_to_the_odometry():
+    """Two parallel walls say nothing along their axis: the correction there is the prior's."""
+    from mrstereo.mapping import GridSpec
+    from mrstereo.odometry.alignment import AlignConfig, align_points, likelihood_field
+
+    grid = GridSpec(width_m=8.0, height_m=4.0, origin_x_m=-1.0, origin_y_m=-2.0)
+    xy = grid.cell_centres()
+    occupied = (np.abs(xy[..., 1] - 0.8) < 0.03) | (np.abs(xy[..., 1] + 1.1) < 0.03)
+    field = likelihood_field(occupied, grid, sigma_m=0.05)
+    rng = np.random.default_rng(5)
+    wall_x = rng.uniform(0.5, 4.0, 400)
+    world = np.column_stack([wall_x, np.where(np.arange(400) % 2, 0.8, -1.1)]) + rng.normal(scale=0.01, size=(400, 2))
+    true = (1.0, 0.1, 0.0)
+    robot = world - true[:2]
+    prior = (1.06, 0.14, math.radians(0.8))                           # 6 cm along, 4 cm across, 0.8 degrees
+    P = np.diag([0.05 ** 2, 0.05 ** 2, math.radians(2.0) ** 2])
+    result = align_points(robot, prior, field, grid, prior_covariance=P,
+                          config=AlignConfig(min_cell_points=1, effective_points=300))
+    assert abs(result.pose[1] - true[1]) < 0.01 and abs(result.pose[2] - true[2]) < math.radians(0.2)
+    assert abs(result.pose[0] - prior[0]) < 0.01                      # not moved along the corridor
+    sd = np.sqrt(np.diag(result.covariance))
+    assert sd[0] > 0.8 * 0.05 and sd[1] < 0.3 * sd[0]                 # the posterior knows it
+
+
+def test_odometry_errors_are_estimated_from_the_corrections():
+    """A path whose corrections undo a 3 % scale error and 2 deg/m of heading drift tells both."""
+    from mrstereo.odometry.alignment import AlignConfig, _odometry_errors
+    from mrstereo.world.paths import drifted_poses, sequence_path
+
+    true = sequence_path("s-curve", 61, step_m=0.1)
+    given = drifted_poses(true, scale_error=0.03, heading_drift_rad_per_m=math.radians(2.0))
+    path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(given[:, :2], axis=0).T))])
+    scale, drift = _odometry_errors(given, true, path, AlignConfig(calibration_window_m=6.0),
+                                    variance_m2=1e-6, variance_rad2=1e-8)
+    assert scale == pytest.approx(0.03, abs=0.003)
+    assert drift == pytest.approx(math.radians(2.0), rel=0.05)
+    # no corrections: no error found; too short a window: none either
+    assert _odometry_errors(given, given, path, AlignConfig(), variance_m2=1e-6, variance_rad2=1e-8) == (0.0, 0.0)
+    assert _odometry_errors(given[:2], true[:2], path[:2], AlignConfig(), variance_m2=1e-6,
+                            variance_rad2=1e-8) == (0.0, 0.0)
 
 
 def test_map_with_visual_odometry_and_alignment(sequence, tmp_path, capsys):

@@ -1,9 +1,10 @@
 """Visual odometry on real frames: four T265 fisheye pairs of OpenLORIS-Scene (shared/data).
 
-The fisheye pair is rectified to a 640x480 pinhole pair with OpenCV's own fisheye functions
-(the calibration of sensors.yaml, the extrinsics of trans_matrix.yaml); the odometry's relative
-motion of the robot base is compared with the ground truth (groundtruth.txt, interpolated at the
-image stamps).
+The calibration is mrstereo's import of the recording's own files (sensors.yaml with its
+Kannala-Brandt cameras, trans_matrix.yaml; :func:`mrstereo.camera.formats.import_calibration`),
+the pairs are rectified with it (Fusiello, the equidistant model); the camera mount on the
+robot base is trans_matrix.yaml's. The odometry's relative motion of the robot base is
+compared with the ground truth (groundtruth.txt, interpolated at the image stamps).
 """
 from __future__ import annotations
 
@@ -14,8 +15,9 @@ import numpy as np
 import pytest
 import yaml
 
-from mrstereo.camera import Camera, CameraInfo, StereoCamera
-from mrstereo.odometry import visual_odometry
+from mrstereo.camera.formats import import_calibration
+from mrstereo.geometry.frames import CameraMount
+from mrstereo.odometry import T_base_from_cam_of, visual_odometry
 from mrstereo.odometry.se3 import T_from_position_quaternion, rotation_angle_rad
 
 pytestmark = pytest.mark.sample_data("openloris-sample")
@@ -39,38 +41,19 @@ def loris():
     from mrstereo.data import local_path
 
     DATA = local_path("openloris-sample")
-    sensors = _opencv_yaml(DATA / "sensors.yaml")
+    stereo = import_calibration(DATA / "sensors.yaml").stereo           # trans_matrix.yaml found beside it
+    assert stereo.left.camera.is_fisheye
     trans = {(e["parent_frame"], e["child_frame"]): e["matrix"]
              for e in _opencv_yaml(DATA / "trans_matrix.yaml")["trans_matrix"]}
-
-    def intrinsics(name):
-        s = sensors[name]
-        fx, cx, fy, cy = s["intrinsics"].ravel()                  # note the order
-        return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), s["distortion_coefficients"].ravel()[:4]
-
-    (K1, D1), (K2, D2) = intrinsics("t265_fisheye1_optical_frame"), intrinsics("t265_fisheye2_optical_frame")
-    T_c1_from_c2 = trans[("t265_fisheye1_optical_frame", "t265_fisheye2_optical_frame")]
-    T_c2_from_c1 = np.linalg.inv(T_c1_from_c2)
-    R1, R2, _, _, _ = cv2.fisheye.stereoRectify(K1, D1, K2, D2, (848, 800), T_c2_from_c1[:3, :3],
-                                                T_c2_from_c1[:3, 3], flags=cv2.CALIB_ZERO_DISPARITY)
-    f, size = 250.0, (640, 480)
-    P1 = np.array([[f, 0, 320, 0], [0, f, 240, 0], [0, 0, 1, 0.0]])
-    P2 = P1.copy()
-    P2[0, 3] = -f * np.linalg.norm(T_c2_from_c1[:3, 3])
-    maps = [cv2.fisheye.initUndistortRectifyMap(K, D, R, P, size, cv2.CV_32FC1)
-            for K, D, R, P in ((K1, D1, R1, P1), (K2, D2, R2, P2))]
-    camera = Camera(width=size[0], height=size[1], fx=f, fy=f, cx=320, cy=240)
-    stereo = StereoCamera(left=CameraInfo(camera, P=P1, name="left"), right=CameraInfo(camera, P=P2, name="right"))
-    T_c1_from_rect = np.eye(4)
-    T_c1_from_rect[:3, :3] = R1.T
-    T_base_from_cam = trans[("base_link", "t265_fisheye1_optical_frame")] @ T_c1_from_rect
+    mount = CameraMount(trans[("base_link", "t265_fisheye1_optical_frame")])
+    T_base_from_cam = T_base_from_cam_of(mount, stereo=stereo)           # of the rectified left camera
     stamps, pairs = [], []
     for l1, l2 in zip((DATA / "fisheye1.txt").read_text().split("\n"), (DATA / "fisheye2.txt").read_text().split("\n")):
         if not l1.strip():
             continue
         stamps.append(float(l1.split()[0]))
         images = [cv2.imread(str(DATA / line.split()[1]), cv2.IMREAD_GRAYSCALE) for line in (l1, l2)]
-        pairs.append(tuple(cv2.remap(img, mx, my, cv2.INTER_LINEAR) for img, (mx, my) in zip(images, maps)))
+        pairs.append(stereo.rectify(*images))
     gt = np.loadtxt(DATA / "groundtruth.txt")
 
     def truth(t):

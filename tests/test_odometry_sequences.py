@@ -55,3 +55,29 @@ def test_synthetic_sequence_with_drifted_odometry(tmp_path):
     assert all(f.pan_rad == 0.0 for f in manifest.frames)
     with pytest.raises(ValueError, match="path"):
         write_synthetic_dataset(tmp_path / "bad", n_frames=2, path="zigzag", progress=False)
+
+
+def test_waypoint_path_and_randomized_front_sequence(tmp_path):
+    from mrstereo.world.paths import waypoint_path
+    from mrstereo.world.randomize import random_world
+
+    way = np.array([[0.0, -0.2], [3.0, 0.3], [6.0, 0.0]])
+    poses = waypoint_path(way, 51, step_m=0.1)
+    steps = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+    np.testing.assert_allclose(steps, 0.1, atol=1e-3)
+    np.testing.assert_allclose(poses[0, :2], way[0], atol=1e-9)
+    travel = np.arctan2(*np.diff(poses[:, :2], axis=0).T[::-1])          # yaw follows the curve, smoothly
+    assert np.abs(travel - (poses[:-1, 2] + poses[1:, 2]) / 2).max() < 0.01
+    assert np.abs(np.diff(poses[:, 2])).max() < math.radians(2.0)
+    assert poses[:, 1].min() >= -0.2 - 1e-9 and poses[:, 1].max() <= 0.3 + 1e-9      # no overshoot (PCHIP)
+    with pytest.raises(ValueError, match="do not fit"):
+        waypoint_path(way, 100, step_m=0.1)
+    with pytest.raises(ValueError, match="waypoints_xy"):
+        waypoint_path(way[:1], 3)
+    out = write_synthetic_dataset(tmp_path / "r", seed=3, n_frames=3, width=64, height=48, supersample=1,
+                                  path="front", randomize=True, odometry_noise=(0.03, math.radians(2)),
+                                  progress=False)
+    true = np.array([f.true_pose for f in read_manifest(out).frames])
+    np.testing.assert_allclose(true, waypoint_path(random_world(3, width=64, height=48).waypoints_xy, 3), atol=1e-6)
+    with pytest.raises(ValueError, match="s-curve"):
+        write_synthetic_dataset(tmp_path / "bad", n_frames=2, path="s-curve", randomize=True, progress=False)

@@ -7,11 +7,13 @@ from pathlib import Path
 import click
 
 from ._bag import bag_options, opened_dataset
+from ._options import profile_option
 
 __all__ = ["COMMANDS"]
 
 
 @click.command("odometry")
+@profile_option
 @click.argument("manifest", required=False, metavar="[DATASET]", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Trajectory file (TUM: 't tx ty tz qx qy qz qw' per frame, the robot base in the world).")

@@ -23,7 +23,7 @@ __all__ = ["COMMANDS"]
 @click.option("--path", "path_kind", type=click.Choice(["stops", "front", "s-curve"]), default="stops",
               show_default=True,
               help="stops: front/left/right views at each stop (mapping); front, s-curve: one front view every "
-                   "--step metres (odometry sequences).")
+                   "--step metres (odometry sequences; with --randomize: front, along the world's own path).")
 @click.option("--step", "step_m", type=float, default=0.1, show_default=True,
               help="Path length between frames of a front or s-curve sequence [m].")
 @click.option("--odometry-noise", "odometry_noise", metavar="SCALE,DEG_PER_M", default=None,

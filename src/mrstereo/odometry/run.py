@@ -12,6 +12,7 @@ import numpy as np
 
 from ..camera import StereoCamera
 from ..geometry.frames import T_robot_from_cam
+from ..profiling import stage
 from .se3 import T_from_planar, planar_from_T
 from .tracker import LOST, OdometryConfig, StereoOdometry
 
@@ -124,8 +125,9 @@ def visual_odometry(pairs: Iterable, stereo: StereoCamera, *, T_base_from_cam,
             raise ValueError(f"T_base_from_cam has {len(mounts)} mounts but there are more frames")
         left, right = pair
         disparity = next(disp_iter) if disp_iter is not None else None
-        estimates.append(tracker.step(left, right, T_base_from_cam=mounts[k] if per_frame else mounts,
-                                      disparity_px=disparity))
+        with stage("odometry"):
+            estimates.append(tracker.step(left, right, T_base_from_cam=mounts[k] if per_frame else mounts,
+                                          disparity_px=disparity))
     if not estimates:
         raise ValueError("pairs is empty: visual odometry needs at least one frame")
     stamps = None if stamps_s is None else np.asarray(stamps_s, dtype=np.float64)

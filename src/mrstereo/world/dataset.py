@@ -18,7 +18,7 @@ from ..io import write_image, write_pfm
 from ..mapping.rosmap import write_ros_map
 from ..recording import IMAGE_KEYS, MANIFEST_NAME, write_manifest
 from .groundtruth import ground_truth_map
-from .paths import PATH_KINDS, drifted_poses, sequence_path
+from .paths import PATH_KINDS, drifted_poses, sequence_path, waypoint_path
 from .randomize import random_world
 from .render import SensorModel, default_stereo, render_stereo_frame
 from .scene import default_scene
@@ -69,9 +69,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
 
     ``path="stops"`` (the paper's run): at each stop along :func:`corridor_path` (a randomized
     world: its own path) the head looks front, +45 and -45 degrees (paper Sec. 5.2, Figs.
-    11-13); frames cycle through these views. ``"front"`` and ``"s-curve"`` (default corridor
-    only): sequences for visual odometry, one front view every ``step_m``
-    (:func:`mrstereo.world.paths.sequence_path`).
+    11-13); frames cycle through these views. ``"front"`` and ``"s-curve"``: sequences for
+    visual odometry, one front view every ``step_m`` (:func:`mrstereo.world.paths.sequence_path`;
+    a randomized world: ``"front"`` only, along its own waypoints,
+    :func:`mrstereo.world.paths.waypoint_path`).
     Written: raw and rectified images, GT disparity (PFM), GT labels (PNG),
     the true calibration, the GT map and ``manifest.yaml``. The directory is
     built beside ``out_dir`` and renamed into place when complete.
@@ -122,8 +123,9 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                          "choose a new directory")
     if path not in PATH_KINDS:
         raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
-    if randomize and path != "stops":
-        raise ValueError(f"randomize works with path='stops' only, got path={path!r}")
+    if randomize and path == "s-curve":
+        raise ValueError("path='s-curve' is a path of the built-in corridor; a randomized world's odometry "
+                         "sequence is path='front' (along the world's own waypoints)")
     n_stops = -(-n_frames // len(_PANS))
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
     if randomize:
@@ -139,7 +141,8 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         poses = np.repeat(stops, len(_PANS), axis=0)[:n_frames]
     else:
         pans = [0.0] * n_frames
-        poses = sequence_path(path, n_frames, step_m=step_m)
+        poses = (waypoint_path(world.waypoints_xy, n_frames, step_m=step_m) if randomize
+                 else sequence_path(path, n_frames, step_m=step_m))
     poses = np.round(poses, 6)         # render with exactly the numbers the manifest stores
     given = poses
     if odometry_noise is not None:

@@ -5,7 +5,8 @@ with a front, +45 and -45 degree view at every stop. ``front`` and ``s-curve``: 
 visual odometry, one front view every ``step_m`` metres of path: ``front`` follows the corridor
 centre and passes the box at 6 m on its right with a smooth S-bend; ``s-curve`` adds a gentle
 weave (0 to 0.3 m to the left, 3 m period) to it, so the heading changes all the time. Both start at the
-origin looking along +x. :func:`drifted_poses` corrupts a path as wheel odometry would (scale
+origin looking along +x. A randomized world's ``front`` sequence follows its own waypoints
+(:func:`waypoint_path`). :func:`drifted_poses` corrupts a path as wheel odometry would (scale
 error, heading drift per metre). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -16,7 +17,7 @@ import numpy as np
 
 from .. import _checks
 
-__all__ = ["PATH_KINDS", "sequence_path", "drifted_poses"]
+__all__ = ["PATH_KINDS", "sequence_path", "waypoint_path", "drifted_poses"]
 
 PATH_KINDS = ("stops", "front", "s-curve")
 
@@ -69,6 +70,46 @@ def sequence_path(kind: str, n_frames: int, *, step_m: float = 0.1) -> np.ndarra
     h = 1e-4
     dy = (_centre_y(x_k + h, weave) - _centre_y(x_k - h, weave)) / (2 * h)
     return np.column_stack([x_k, _centre_y(x_k, weave), np.arctan2(dy, 1.0)])
+
+
+def waypoint_path(waypoints_xy, n_frames: int, *, step_m: float = 0.1) -> np.ndarray:
+    """Robot poses ``(n_frames, 3)`` ``step_m`` apart along a smooth curve through waypoints.
+
+    The curve interpolates the waypoints with a monotone cubic (PCHIP) in each coordinate over
+    the chord length, so it does not overshoot them sideways (a randomized world keeps its
+    obstacles clear of the polyline); the yaw is the curve's tangent, continuous from frame to
+    frame. The first pose is at the first waypoint.
+
+    Parameters
+    ----------
+    waypoints_xy : ndarray of shape (K, 2)
+        At least two distinct points (metres, world frame).
+    n_frames : int
+        Number of poses; ``(n_frames - 1) * step_m`` must fit the curve's length.
+    step_m : float
+        Path length between consecutive poses.
+    """
+    from scipy.interpolate import PchipInterpolator
+
+    way = np.asarray(waypoints_xy, dtype=np.float64)
+    if way.ndim != 2 or way.shape[1] != 2 or len(way) < 2 or not np.isfinite(way).all():
+        raise ValueError(f"waypoints_xy must be (K >= 2, 2) finite numbers, got shape {way.shape}")
+    n_frames = _checks.positive_int("n_frames", n_frames)
+    step = _checks.finite_number("step_m", step_m, positive=True)
+    chord = np.hypot(*np.diff(way, axis=0).T)
+    if (chord <= 0).any():
+        raise ValueError("waypoints_xy must not repeat a point")
+    curve = PchipInterpolator(np.concatenate([[0.0], np.cumsum(chord)]), way, axis=0)
+    t = np.linspace(0.0, chord.sum(), 20001)                 # densely sampled, resampled at equal arc length
+    xy = curve(t)
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+    length = (n_frames - 1) * step
+    if length > s[-1] + 1e-9:
+        raise ValueError(f"{n_frames} frames {step} m apart ({length:.2f} m) do not fit the path through the "
+                         f"waypoints ({s[-1]:.2f} m): use fewer frames or a smaller step_m")
+    t_k = np.interp(np.arange(n_frames) * step, s, t)
+    tangent = curve(t_k, 1)
+    return np.column_stack([curve(t_k), np.arctan2(tangent[:, 1], tangent[:, 0])])
 
 
 def drifted_poses(poses, *, scale_error: float, heading_drift_rad_per_m: float) -> np.ndarray:
