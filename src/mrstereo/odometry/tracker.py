@@ -3,9 +3,9 @@
 Per frame (rectified pair):
 
 1. *Keyframe* (first frame, after tracking thinned out, or after a loss): corners
-   (FAST, spread over a grid of cells) of the left image are found
-   in the right image with pyramidal Lucas-Kanade along the row (or read from a given
-   disparity map), kept when the right-to-left track returns within ``max_fb_error_px``
+   (Shi-Tomasi, spread over a grid of cells) of the left image are found in the right image
+   (brought to the left one's gain and offset) with pyramidal Lucas-Kanade along the row (or
+   read from a given disparity map), kept when the right-to-left track returns within ``max_fb_error_px``
    and ``|y_left - y_right| <= max_row_error_px``, and triangulated with eq. (14)-(16):
    ``Z = b f / (d + doffs)``, ``X = (u - cx) Z / f``, ``Y = (v - cy) Z / f_y``.
 2. *Tracking*: the keyframe's corners are tracked into the current left image by
@@ -30,7 +30,8 @@ References
 D. Nister, O. Naroditsky, J. Bergen. Visual odometry. CVPR 2004 (stereo VO with 3-D
 points and RANSAC). B. Kitt, A. Geiger, H. Lategahn. Visual odometry based on stereo image
 sequences with RANSAC-based outlier rejection scheme. IV 2010. J.-Y. Bouguet. Pyramidal
-implementation of the Lucas Kanade feature tracker. Intel, 2000.
+implementation of the Lucas Kanade feature tracker. Intel, 2000. J. Shi, C. Tomasi. Good
+features to track. CVPR 1994.
 """
 from __future__ import annotations
 
@@ -59,12 +60,21 @@ class OdometryConfig:
     ----------
     max_features : int
         Corners per keyframe (spread over ``grid_cells`` cells, rows x columns).
-    fast_threshold : int
-        FAST corner threshold (grey levels; halved down to 5 on weak texture).
+    corner_quality : float
+        Weakest Shi-Tomasi corner kept, as a fraction of the strongest (``qualityLevel`` of
+        ``cv2.goodFeaturesToTrack``).
+    corner_block_px : int
+        Window of the corners' gradient matrix.
     min_corner_distance_px : float
         At most one corner per square of this size.
     klt_window_px, klt_levels : int
-        Lucas-Kanade window and pyramid levels (stereo search uses ``klt_levels + 1``).
+        Lucas-Kanade window and pyramid levels of the tracking from the keyframe (a small window:
+        approaching a surface magnifies it, which a translating window follows with a bias toward
+        too little motion, so a larger window underestimates the distance travelled).
+    stereo_window_px : int
+        Lucas-Kanade window of the left-right search of keyframe corners (``klt_levels + 1``
+        levels; the two views differ by the baseline only, and a larger window matches weak
+        texture more reliably).
     max_fb_error_px : float
         Forward-backward track error above which a track is dropped.
     max_row_error_px : float
@@ -88,10 +98,12 @@ class OdometryConfig:
     """
 
     max_features: int = 300
-    grid_cells: tuple[int, int] = (4, 6)
-    fast_threshold: int = 20
+    grid_cells: tuple[int, int] = (2, 3)
+    corner_quality: float = 0.001
+    corner_block_px: int = 5
     min_corner_distance_px: float = 8.0
-    klt_window_px: int = 15
+    klt_window_px: int = 11
+    stereo_window_px: int = 21
     klt_levels: int = 3
     max_fb_error_px: float = 0.5
     max_row_error_px: float = 1.0
@@ -107,13 +119,15 @@ class OdometryConfig:
     max_lost_streak: int = 2
 
     def __post_init__(self) -> None:
-        for name in ("max_features", "klt_window_px", "klt_levels", "ransac_iterations", "min_inliers", "fast_threshold",
-                     "max_lost_streak"):
+        for name in ("max_features", "klt_window_px", "stereo_window_px", "klt_levels", "ransac_iterations", "min_inliers",
+                     "corner_block_px", "max_lost_streak"):
             _checks.positive_int(name, getattr(self, name), minimum=4 if name == "min_inliers" else 1)
         for name in ("min_corner_distance_px", "max_fb_error_px", "max_row_error_px",
                      "min_disparity_px", "ransac_threshold_px", "keyframe_distance_m", "keyframe_angle_rad",
                      "max_step_m", "max_step_rad"):
             _checks.finite_number(name, getattr(self, name), positive=True)
+        if not 0.0 < self.corner_quality < 1.0:
+            raise ValueError(f"corner_quality must be in (0, 1), got {self.corner_quality}")
         if not 0.0 < self.keyframe_inlier_fraction < 1.0:
             raise ValueError(f"keyframe_inlier_fraction must be in (0, 1), got {self.keyframe_inlier_fraction}")
         if len(self.grid_cells) != 2 or min(self.grid_cells) < 1:
@@ -170,7 +184,6 @@ class StereoOdometry:
         self._velocity = np.eye(4)                             # T_prevcam_from_cam of the last step
         self._lost_streak = 0
         c = self.config
-        self._win = (c.klt_window_px, c.klt_window_px)
         self._criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 0.03)
 
     # -- public -----------------------------------------------------------------------------
@@ -236,7 +249,8 @@ class StereoOdometry:
         return FrameEstimate(T_world_from_base=_readonly(T_world_from_base), status=status,
                              n_tracked=int(n_tracked), n_inliers=int(n_inliers), time_s=time.thread_time() - start)
 
-    def _klt(self, image_a, image_b, pts: np.ndarray, guess: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
+    def _klt(self, image_a, image_b, pts: np.ndarray, guess: np.ndarray, levels: int,
+             window_px: int) -> tuple[np.ndarray, np.ndarray]:
         """Track ``pts`` from a to b (started at ``guess``) and back; (tracked, ok).
 
         The way back starts at the original points, where a good track must end, so it needs
@@ -244,9 +258,10 @@ class StereoOdometry:
         """
         flags = cv2.OPTFLOW_USE_INITIAL_FLOW
         p0 = pts.reshape(-1, 1, 2).astype(np.float32)
+        win = (window_px, window_px)
         p1, st1, _ = cv2.calcOpticalFlowPyrLK(image_a, image_b, p0, guess.reshape(-1, 1, 2).astype(np.float32).copy(),
-                                              winSize=self._win, maxLevel=levels, criteria=self._criteria, flags=flags)
-        back, st2, _ = cv2.calcOpticalFlowPyrLK(image_b, image_a, p1, p0.copy(), winSize=self._win,
+                                              winSize=win, maxLevel=levels, criteria=self._criteria, flags=flags)
+        back, st2, _ = cv2.calcOpticalFlowPyrLK(image_b, image_a, p1, p0.copy(), winSize=win,
                                                 maxLevel=min(1, levels), criteria=self._criteria, flags=flags)
         p1 = p1.reshape(-1, 2)
         fb = np.linalg.norm(back.reshape(-1, 2) - pts, axis=1)
@@ -256,41 +271,37 @@ class StereoOdometry:
         return p1, ok
 
     def _corners(self, left: np.ndarray) -> np.ndarray:
-        """FAST corners spread over a grid of cells (``max_features`` in all), (N, 2) float32.
+        """Shi-Tomasi corners spread over a grid of cells (``max_features`` in all), (N, 2) float32.
 
-        The strongest corner of every ``min_corner_distance_px`` square is a candidate; each of
-        the ``grid_cells`` keeps its strongest candidates, so corners cover the whole image.
-        A weakly textured image is searched again with half the FAST threshold.
+        ``cv2.goodFeaturesToTrack`` (the minimum eigenvalue of the gradient matrix, the corner
+        that Lucas-Kanade tracks well; Shi and Tomasi 1994) keeps corners at least
+        ``min_corner_distance_px`` apart whose strength is ``corner_quality`` of the strongest or
+        more; each of the ``grid_cells`` keeps its strongest ones first, and the places left are
+        filled with the strongest of the rest, so corners cover the image where it has texture
+        and weakly textured images (plain walls) still give their best corners.
         """
         c = self.config
         h, w = left.shape
         rows, cols = c.grid_cells
-        per_cell = max(1, c.max_features // (rows * cols))
         margin = c.klt_window_px // 2 + 1
-        threshold = c.fast_threshold
-        while True:
-            keypoints = cv2.FastFeatureDetector_create(threshold=int(threshold), nonmaxSuppression=True).detect(left)
-            uv = cv2.KeyPoint_convert(keypoints).reshape(-1, 2) if keypoints else np.empty((0, 2), np.float32)
-            if len(uv) >= c.max_features or threshold <= 5:
-                break
-            threshold = max(5, threshold // 2)
-        if not len(uv):
+        if h <= 2 * margin or w <= 2 * margin:
             return np.empty((0, 2), np.float32)
-        response = np.array([k.response for k in keypoints], np.float32)
-        inside = ((uv[:, 0] >= margin) & (uv[:, 0] < w - margin) & (uv[:, 1] >= margin) & (uv[:, 1] < h - margin))
-        uv, response = uv[inside], response[inside]
-        order = np.argsort(-response, kind="stable")
-        uv = uv[order]
-        spacing = c.min_corner_distance_px
-        square = (uv[:, 1] // spacing).astype(np.int64) * (w + 1) + (uv[:, 0] // spacing).astype(np.int64)
-        _, first = np.unique(square, return_index=True)         # the strongest of each square
-        uv = uv[np.sort(first)]
+        inner = left[margin:h - margin, margin:w - margin]
+        found = cv2.goodFeaturesToTrack(inner, 2 * c.max_features, c.corner_quality, c.min_corner_distance_px,
+                                        blockSize=c.corner_block_px)
+        if found is None:
+            return np.empty((0, 2), np.float32)
+        uv = found.reshape(-1, 2) + margin                       # strongest first
         cell = (uv[:, 1] * rows // h).astype(np.int64) * cols + (uv[:, 0] * cols // w).astype(np.int64)
-        order = np.argsort(cell, kind="stable")                 # strongest first within each cell
+        order = np.argsort(cell, kind="stable")                  # strongest first within each cell
         sorted_cells = cell[order]
-        start = np.searchsorted(sorted_cells, sorted_cells, side="left")
-        rank = np.arange(len(order)) - start
-        return np.ascontiguousarray(uv[order[rank < per_cell]], dtype=np.float32)
+        rank = np.empty(len(uv), np.int64)
+        rank[order] = np.arange(len(order)) - np.searchsorted(sorted_cells, sorted_cells, side="left")
+        per_cell = max(1, c.max_features // (rows * cols))
+        first = np.flatnonzero(rank < per_cell)
+        rest = np.flatnonzero(rank >= per_cell)[:max(0, c.max_features - len(first))]
+        keep = np.sort(np.concatenate([first, rest]))[:c.max_features]
+        return np.ascontiguousarray(uv[keep], dtype=np.float32)
 
     def _new_keyframe(self, left, right, disparity_px, T_world_from_cam) -> tuple[int, int]:
         """Corners of ``left`` with their 3-D points; becomes the keyframe. Returns (points, points)."""
@@ -301,7 +312,8 @@ class StereoOdometry:
             if disparity_px is not None:
                 d = _sample_smooth(np.asarray(disparity_px, dtype=np.float64), uv, max_spread=c.max_row_error_px)
             else:
-                uv_right, ok = self._klt(left, right, uv, uv, c.klt_levels + 1)
+                uv_right, ok = self._klt(left, _photometry_like(right, left), uv, uv, c.klt_levels + 1,
+                                         c.stereo_window_px)
                 ok &= np.abs(uv_right[:, 1] - uv[:, 1]) <= c.max_row_error_px
                 d = np.where(ok, uv[:, 0] - uv_right[:, 0], np.nan)
         keep = np.isfinite(d) & (d >= c.min_disparity_px)
@@ -325,7 +337,7 @@ class StereoOdometry:
         front = X[:, 2] > 0.05
         proj = (X[front, :2] / X[front, 2:3]) * [self._K[0, 0], self._K[1, 1]] + self._K[:2, 2]
         guess[front] = proj
-        uv, ok = self._klt(kf.image, left, kf.uv, guess, c.klt_levels)
+        uv, ok = self._klt(kf.image, left, kf.uv, guess, c.klt_levels, c.klt_window_px)
         n_tracked = int(ok.sum())
         if n_tracked < c.min_inliers:
             return LOST, None, n_tracked, 0
@@ -368,6 +380,26 @@ def _sample_smooth(image: np.ndarray, uv: np.ndarray, *, max_spread: float) -> n
         bad = ~np.isfinite(q).all(axis=0) | (np.ptp(q, axis=0) > max_spread)
     value[bad] = np.nan
     return value
+
+
+def _photometry_like(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``image`` mapped linearly to the mean and spread of ``reference`` (uint8).
+
+    The two cameras of a rig differ in gain and black level; Lucas-Kanade assumes equal
+    brightness, and on an intensity ramp a gain difference shifts the match (a disparity bias,
+    hence a scale error of the odometry). The cameras' differences are global, so one gain and
+    one offset from the images' means and standard deviations remove them.
+    """
+    mean_i, sd_i = cv2.meanStdDev(image)
+    mean_r, sd_r = cv2.meanStdDev(reference)
+    sd_i, sd_r = float(sd_i.ravel()[0]), float(sd_r.ravel()[0])
+    if sd_i < 1e-6 or sd_r < 1e-6:
+        return image
+    gain = sd_r / sd_i
+    offset = float(mean_r.ravel()[0]) - gain * float(mean_i.ravel()[0])
+    if abs(gain - 1.0) < 1e-3 and abs(offset) < 0.05:
+        return image
+    return cv2.addWeighted(image, gain, image, 0.0, offset, dtype=cv2.CV_8U)
 
 
 def _gray_u8(name: str, image) -> np.ndarray:
