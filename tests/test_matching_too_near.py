@@ -49,6 +49,17 @@ def test_plane_beyond_the_search_is_all_too_near_and_never_valued():
     assert not paper.too_near.any()
 
 
+def test_a_plane_just_beyond_the_limit_is_too_near_not_a_value_at_the_band_edge():
+    """One pixel past the near limit the band's winner sits on its edge, in the same cost
+    minimum as the guard's: the value must lose (its re-scored minimum lies past the limit)."""
+    for d_px, d_max in ((7, 6), (11, 10), (27, 24)):            # one, one and two levels
+        left, right = _plane_pair(d_px, seed=1)
+        result = compute_disparity(left, right, max_disparity_px=d_max)
+        seen = (slice(6, -6), slice(d_px + 6, -6))
+        assert not np.isfinite(result.disparity_px[seen]).any()
+        assert result.too_near[seen].mean() > 0.95, (d_px, result.too_near[seen].mean())
+
+
 def test_the_guard_is_in_the_plan_and_counted():
     plan = make_plan((640, 480), max_disparity_px=64)
     off = make_plan((640, 480), max_disparity_px=64, config=MatchingConfig(near_guard=0.0))

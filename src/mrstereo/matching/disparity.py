@@ -186,6 +186,18 @@ def solve_level(left: np.ndarray, right: np.ndarray, level: RangeLevel, rows: tu
     return _solve_prepared(_prepare_pair(left, right, config), left, level, rows, cols, config)
 
 
+def _beats(cost: np.ndarray, d_px: np.ndarray, value_cost: np.ndarray, value_px: np.ndarray,
+           ratio: float, value_beyond: np.ndarray) -> np.ndarray:
+    """Where a match past the near limit beats the bands' value: by the uniqueness margin
+    (``cost < (1 - ratio) value_cost``) when the two lie at least 2 px apart (two minima), by a
+    lower cost when nearer; and always when the value's own re-scored minimum lies past the
+    near limit (``value_beyond``: one minimum, cut by the band's edge, which eq. (10) over both
+    searches would place beyond it). A value without a cost (inf: no minimum near it) loses."""
+    with np.errstate(invalid="ignore"):
+        apart = ~(np.abs(d_px - value_px) < 2.0)
+        return value_beyond | np.where(apart, ~(value_cost * (1.0 - ratio) <= cost), ~(value_cost <= cost))
+
+
 def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: MatchingConfig
                 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The near guard's verdict (beyond the paper): ``(too_near, beside)``.
@@ -194,11 +206,12 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
        ``D`` to ``near_guard * D``) runs apart from the bands, whose winners and checks stay
        exactly those of the plan without a guard. A winner above ``D`` plus half a level pixel
        that passes the maximum cost, the left-right and the uniqueness checks is a candidate.
-    2. Where the bands gave the pixel a value, the candidate must beat it, first on the
-       guard's images (the value re-scored over ``+-1`` level px), then at full resolution
-       (step 3; the value re-scored over ``+-2`` px): its cost below ``(1 - uniqueness_ratio)``
-       times the value's, as eq. (10) with the uniqueness test over both searches would
-       decide. (The first test is cheap and removes most stray candidates before step 3.)
+    2. Where the bands gave the pixel a value, the candidate must beat it (:func:`_beats`),
+       first on the guard's images (the value re-scored over ``+-1`` level px), then at full
+       resolution (step 3; the value re-scored over ``+-2`` px): its cost below
+       ``(1 - uniqueness_ratio)`` times the value's when the two lie 2 px apart or more (the
+       uniqueness test's distance), else below the value's (one minimum, cut by the band's
+       edge). (The first test is cheap and removes most stray candidates before step 3.)
     3. Each candidate is re-scored at full resolution as the refinement does (offsets
        ``+-(ceil(k / 2) + refine_margin_px)``, the maximum cost; a minimum on the edge fails).
     4. Too near: the confirmed candidates without a value or whose value lost, in regions
@@ -232,8 +245,10 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     value_level = disparity[:, centre] / np.float32(guard.scale)
     contest = candidate & np.isfinite(value_level)
     if contest.any():
-        _, value_cost = refine_candidates(*pair_at(w_level), value_level, contest, rows=(row0, row1), half_px=1)
-        candidate &= ~contest | ~(value_cost * (1.0 - config.uniqueness_ratio) <= c1)
+        value_min, value_cost = refine_candidates(*pair_at(w_level), value_level, contest, rows=(row0, row1),
+                                                  half_px=1)
+        candidate &= ~contest | _beats(c1, d_level, value_cost, value_level, config.uniqueness_ratio,
+                                       value_min > guard.too_near_above_px / guard.scale)
     # Step 2 up-sampling (nearest neighbour along x, disparities times the scale), AOI columns
     source = np.minimum(((np.arange(col0, col1) + 0.5) / guard.scale).astype(np.intp), w_level - 1)
     # (every winner beyond D shapes the re-scoring's windows; only the candidates are re-scored)
@@ -250,8 +265,9 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     contest = confirmed & valued
     wins = ~valued
     if contest.any():
-        _, value_cost = refine_candidates(*full, disparity, contest, rows=(row0, row1), half_px=2)
-        wins |= contest & ~(value_cost * (1.0 - config.uniqueness_ratio) <= confirmed_cost)
+        value_min, value_cost = refine_candidates(*full, disparity, contest, rows=(row0, row1), half_px=2)
+        wins |= contest & _beats(confirmed_cost, confirmed_px, value_cost, disparity, config.uniqueness_ratio,
+                                 value_min > plan.guard.band_px[0] + 0.5)
     candidates = confirmed & wins
     too_near = np.where(candidates, confirmed_px, np.nan).astype(np.float32)
     if config.speckle_size_px > 0:
