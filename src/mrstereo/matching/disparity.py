@@ -210,8 +210,9 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
        first on the guard's images (the value re-scored over ``+-1`` level px), then at full
        resolution (step 3; the value re-scored over ``+-2`` px): its cost below
        ``(1 - uniqueness_ratio)`` times the value's when the two lie 2 px apart or more (the
-       uniqueness test's distance), else below the value's (one minimum, cut by the band's
-       edge). (The first test is cheap and removes most stray candidates before step 3.)
+       uniqueness test's distance), else below the value's; and always when the value's own
+       re-scored minimum lies past the near limit (one minimum, cut by the band's edge).
+       (The first test is cheap and removes most stray candidates before step 3.)
     3. Each candidate is re-scored at full resolution as the refinement does (offsets
        ``+-(ceil(k / 2) + refine_margin_px)``, the maximum cost; a minimum on the edge fails).
     4. Too near: the confirmed candidates without a value or whose value lost, in regions
@@ -267,7 +268,7 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     if contest.any():
         value_min, value_cost = refine_candidates(*full, disparity, contest, rows=(row0, row1), half_px=2)
         wins |= contest & _beats(confirmed_cost, confirmed_px, value_cost, disparity, config.uniqueness_ratio,
-                                 value_min > plan.guard.band_px[0] + 0.5)
+                                 value_min > guard.band_px[0] + 0.5)
     candidates = confirmed & wins
     too_near = np.where(candidates, confirmed_px, np.nan).astype(np.float32)
     if config.speckle_size_px > 0:
