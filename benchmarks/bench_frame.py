@@ -23,9 +23,11 @@ cover 640x480 and centre-cropped; plus the OpenLORIS T265 fisheye frames rectifi
 their calibration and centre-cropped. Prints per scene and the median and range over scenes.
 
 Timings are medians of alternated runs and robust to a steady load, not to a changing one:
-quote numbers measured on a quiet machine only.
+quote numbers measured on a quiet machine only. ``--cpu`` times the stages in CPU time of the
+calling thread instead (one thread): on a busy machine it still counts each chain's own work
+(not the time other processes took), though shared caches still slow both chains.
 
-    python benchmarks/bench_frame.py [--repeats 3] [--frames 10] [--sizes 640x480,320x240]
+    python benchmarks/bench_frame.py [--repeats 3] [--frames 10] [--sizes 640x480,320x240] [--cpu]
     python benchmarks/bench_frame.py --scenes [--repeats 5]
 """
 from __future__ import annotations
@@ -46,13 +48,17 @@ from mrstereo.geometry.frames import T_robot_from_cam, T_world_from_robot
 from mrstereo.io import read_image
 from mrstereo.mapping import OccupancyGrid
 from mrstereo.pipeline import PipelineConfig, observation_from_pair, pair_options
-from mrstereo.profiling import profiling
+from mrstereo.profiling import Profile, profiling
 from mrstereo.recording import read_manifest
 
 STAGES = ("rectify", "match", "reject", "3-D", "grid")
+CLOCK = time.perf_counter
+"""The clock of every stage time: wall-clock, or with ``--cpu`` the calling thread's CPU time."""
 
 
 def thread_counts() -> list[int]:
+    if CLOCK is not time.perf_counter:
+        return [1]                     # CPU time of the calling thread: one thread only
     return [t for t in (1, 2) if t <= numba.config.NUMBA_NUM_THREADS]
 
 
@@ -71,14 +77,14 @@ class MrstereoChain:
 
     def __call__(self, k: int, left, right) -> dict[str, float]:
         record = self.manifest.frames[k]
-        with profiling() as prof:
+        with profiling(Profile(clock=CLOCK)) as prof:
             frame = obstacles_from_pair(left, right, self.manifest.calibration, rectified=False,
                                         rig=self.manifest.rig, pan_rad=record.pan_rad, **pair_options(self.config))
             obs = observation_from_pair(frame, record, index=k, config=self.config,
                                         stereo=self.manifest.calibration)
-            t0 = time.perf_counter()
+            t0 = CLOCK()
             self.grid.apply(obs.cells)
-            prof.add("grid", time.perf_counter() - t0)
+            prof.add("grid", CLOCK() - t0)
         self.max_disparity_px = frame.max_disparity_px
         return {name: 1000.0 * prof.seconds.get(name, 0.0) for name in STAGES}
 
@@ -101,12 +107,12 @@ class OpenCVChain:
     def __call__(self, k: int, left, right) -> dict[str, float]:
         record, grid, obst = self.manifest.frames[k], self.config.grid, self.config.obstacles
         rig = self.manifest.rig
-        t = [time.perf_counter()]
+        t = [CLOCK()]
         left_r = cv2.remap(left, *self.maps[0], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         right_r = cv2.remap(right, *self.maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        t.append(time.perf_counter())
+        t.append(CLOCK())
         disp16 = self.bm.compute(left_r, right_r)
-        t.append(time.perf_counter())
+        t.append(CLOCK())
         disp = disp16.astype(np.float32) / 16.0
         xyz = cv2.reprojectImageTo3D(disp, self.Q)
         valid = disp > 0
@@ -114,7 +120,7 @@ class OpenCVChain:
         pts = xyz[valid] @ T_rc[:3, :3].T + T_rc[:3, 3]
         band = ((pts[:, 2] > obst.min_obstacle_height_m) & (pts[:, 2] < obst.max_obstacle_height_m)
                 & (np.hypot(pts[:, 0], pts[:, 1]) <= obst.max_range_m))
-        t.append(time.perf_counter())
+        t.append(CLOCK())
         T_wr = T_world_from_robot(*record.pose)
         pts = pts[band] @ T_wr[:3, :3].T + T_wr[:3, 3]
         col = np.floor((pts[:, 0] - grid.origin_x_m) / grid.resolution_m).astype(np.intp)
@@ -122,7 +128,7 @@ class OpenCVChain:
         rows, cols = self.counts.shape
         inside = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
         np.add.at(self.counts, (row[inside], col[inside]), 1)
-        t.append(time.perf_counter())
+        t.append(CLOCK())
         ms = 1000.0 * np.diff(t)
         return {"rectify": ms[0], "match": ms[1], "reject": 0.0, "3-D": ms[2], "grid": ms[3]}
 
@@ -140,7 +146,8 @@ def whole_frame(sizes, n_frames: int, repeats: int, seed: int) -> None:
 
     config = PipelineConfig()
     print(f"whole frame, raw pair -> grid update; synthetic corridor seed {seed}, {n_frames} frames, "
-          f"{repeats} repeats; load average {os.getloadavg()}")
+          f"{repeats} repeats; {'CPU time of the thread' if CLOCK is time.thread_time else 'wall-clock'}; "
+          f"load average {os.getloadavg()}")
     for width, height in sizes:
         with tempfile.TemporaryDirectory(prefix="bench-frame-") as tmp:
             folder = write_synthetic_dataset(Path(tmp) / "corridor", seed=seed, n_frames=n_frames, width=width,
@@ -270,7 +277,13 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=5, help="seed of the synthetic corridor")
     parser.add_argument("--sizes", default="640x480,320x240", help="image sizes, e.g. 640x480,320x240")
     parser.add_argument("--scenes", action="store_true", help="the matcher alone on the shared real scenes")
+    parser.add_argument("--cpu", action="store_true",
+                        help="whole frame: stage times as CPU time of the calling thread, one thread only (robust "
+                             "to other processes on a busy machine; wall-clock by default)")
     args = parser.parse_args()
+    if args.cpu:
+        global CLOCK
+        CLOCK = time.thread_time
     if args.scenes:
         scenes(args.repeats)
     else:

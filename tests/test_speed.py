@@ -209,3 +209,16 @@ def test_fused_texture_rejection_equals_the_statistics_path():
                 assert np.array_equal(fast.uniform, ref.uniform) and np.array_equal(fast.rejected, ref.rejected)
                 assert fast.disparity_px.dtype == np.float32
         assert np.array_equal(reject_uniform(d, image).stats.std, ref_stats.std)
+
+
+def test_profile_clock_is_a_parameter():
+    import time
+
+    ticks = iter(range(100))
+    with profiling(Profile(clock=lambda: float(next(ticks)))) as prof:
+        with stage("match"):
+            pass
+        with stage("match"):
+            pass
+    assert prof.seconds == {"match": 2.0} and prof.calls == {"match": 2}
+    assert Profile().clock is time.perf_counter
