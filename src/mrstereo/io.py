@@ -290,7 +290,7 @@ def parse_yaml(text: str, what: str, path, *, loader=None):
     import yaml
 
     try:
-        return yaml.load(text, Loader=loader or yaml.SafeLoader)
+        return yaml.load(text, Loader=loader or getattr(yaml, "CSafeLoader", yaml.SafeLoader))     # libyaml: 5x
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = f" (line {mark.line + 1})" if mark is not None else ""

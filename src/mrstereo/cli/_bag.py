@@ -96,7 +96,7 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
     """The recording a command works on: ``(dataset, stereo, stamps_s)``.
 
     A ROS bag (``--bag`` with the topic options) is exported into a temporary dataset that lives as
-    long as the ``with`` block, its stamps in seconds; a MANIFEST gets ``--height``/``--tilt``/``--mount``
+    long as the ``with`` block, its stamps in seconds; a MANIFEST (path, or already read) gets ``--height``/``--tilt``/``--mount``
     applied and ``--calib`` read (``stereo`` None: the manifest's own calibration; stamps None).
     """
     import dataclasses
@@ -105,7 +105,7 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
     import numpy as np
 
     from ..camera import read_stereo
-    from ..recording import read_manifest
+    from ..recording import Manifest, read_manifest
 
     with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
         if bag is not None:
@@ -120,7 +120,7 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
                                                          "sync_tolerance_s")]
         if used:
             raise click.UsageError(f"{', '.join(used)} only with --bag")
-        dataset = read_manifest(manifest)
+        dataset = manifest if isinstance(manifest, Manifest) else read_manifest(manifest)
         rig = rig_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"))
         if rig is not None:
             dataset = dataclasses.replace(dataset, rig=rig)

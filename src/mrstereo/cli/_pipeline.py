@@ -61,7 +61,6 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     from ..batch import dataset_files
     from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
     from ..mapping import GridSpec
-    from ..parallel import PrestartedCall
     from ..pipeline import PipelineConfig, build_map, write_map_outputs
     from ..recording import read_manifest
 
@@ -76,9 +75,11 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     if bag is not None:
         check_outputs(outputs, [bag, calib], input_dirs=[bag] if bag.is_dir() else [])
     else:
-        check_outputs(outputs, [manifest, calib] + dataset_files(read_manifest(manifest)))
+        dataset = read_manifest(manifest)            # read once: checked here, mapped below
+        check_outputs(outputs, [manifest, calib] + dataset_files(dataset))
+        manifest = dataset
     # map.png is drawn in a process started now: matplotlib's import runs meanwhile on another core
-    with PrestartedCall("mrstereo.mapping.figures:plot_map", preload=FIGURE_MODULES) as figures, \
+    with _figure_process() as figures, \
             opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes, odometry=odometry, align=align or None)
@@ -99,6 +100,19 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
         click.echo(f"scan-to-map alignment: {a['applied']} of {a['frames']} frames corrected, mean "
                    f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg per frame")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
+
+
+def _figure_process():
+    """A :class:`~mrstereo.parallel.PrestartedCall` of ``plot_map``, or (no second process possible) a
+    context yielding None: the figure is then drawn in this process."""
+    import contextlib
+
+    from ..parallel import PrestartedCall
+
+    try:
+        return PrestartedCall("mrstereo.mapping.figures:plot_map", preload=FIGURE_MODULES)
+    except OSError:
+        return contextlib.nullcontext()
 
 
 def _pair(text: str, option: str) -> tuple[float, float]:
