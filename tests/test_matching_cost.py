@@ -86,3 +86,38 @@ def test_gain_and_offset_change_leaves_zncc_winner_unchanged():
     b = match_band(left, brighter, d_lo=0, d_hi=8, window=7, cost="zncc")
     np.testing.assert_array_equal(a.disparity_int[:, 10:-6], b.disparity_int[:, 10:-6])
     assert (b.disparity_int[:, 10:-6] == 4).all()
+
+
+@pytest.mark.parametrize("share", [0.01, 0.3])
+def test_refinement_of_scattered_pixels_equals_the_running_sums(share):
+    """refine_sparse (direct window sums) and refine_warped (running sums) re-score the same
+    scattered pixels of a piecewise-constant coarse field to the same disparities and costs
+    (float32 rounding of the cost formula aside), including windows clamped at the left edge."""
+    from mrstereo.matching import cost as C
+
+    rng = np.random.default_rng(3)
+    truth = 12
+    right = _textured(rng, 60, 90)
+    left = np.roll(right, truth, axis=1)
+    left[:, :truth] = right[:, :truth]
+    pair = [C.prepare_gray(im, kind="xsobel", cap=31, window=9, cost="zncc") for im in (left, right)]
+    coarse = np.full((60, 90), truth, np.float32)
+    coarse[:, ::7] += rng.integers(-2, 3, coarse[:, ::7].shape)      # runs of other shifts
+    want = rng.random((60, 90)) < share
+    want[:, :3] = True                                                 # clamped windows
+    results = []
+    for sparse in (True, False):
+        old = C.SPARSE_REFINE_SHARE
+        C.SPARSE_REFINE_SHARE = 0 if sparse else 1e9       # 0: always direct sums
+        try:
+            results.append([a.copy() for a in C.refine_candidates(*pair, coarse, want, half_px=3)])
+        finally:
+            C.SPARSE_REFINE_SHARE = old
+    (d_sparse, c_sparse), (d_dense, c_dense) = results
+    assert np.array_equal(np.isnan(d_sparse), np.isnan(d_dense))
+    np.testing.assert_allclose(d_sparse[want], d_dense[want], atol=1e-4)
+    np.testing.assert_allclose(c_sparse[want], c_dense[want], atol=1e-5)
+    inside = want & (np.arange(90) >= truth + 4)
+    assert np.isfinite(d_dense[inside]).mean() > 0.8
+    assert np.nanmedian(np.abs(d_dense[inside] - truth)) < 0.1     # known shift
+    assert np.isnan(d_dense[~want]).all()

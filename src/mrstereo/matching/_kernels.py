@@ -631,6 +631,79 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
                 oc[i] = (cb if inside else np.float32(np.inf)) if wy[i] else oc[i]
 
 
+@njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
+def refine_sparse(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, center_pad, ys, xs, half,
+                  zncc, max_cost, n_strips, out_disp, out_cost):
+    """:func:`refine_warped` for scattered pixels ``(ys[j], xs[j])`` (same arguments and
+    outputs): each window sum ``sum I_L(p) I_R(p - c(p) - o)`` is added up directly, so the
+    work is per wanted pixel rather than per pixel of the rows spanned. The sums are the
+    same float32 sums (exact, so the results identical, for integer-valued images)."""
+    nc = 2 * half + 1
+    win = 2 * radius + 1
+    n = win * win
+    wp = right_pad.shape[1]
+    max_c = np.float32(max_cost)
+    rflat = right_pad.reshape(right_pad.size)
+    for s in prange(n_strips):
+        j0 = (s * ys.size) // n_strips
+        j1 = ((s + 1) * ys.size) // n_strips
+        lv = np.empty(n, np.float32)
+        qs = np.empty(n, np.int64)
+        cj = np.empty(nc, np.float32)
+        for j in range(j0, j1):
+            y = ys[j]
+            x = xs[j]
+            cy = center_pad[y + radius, x + radius]
+            # the window's left values and right columns (flat) at offset 0
+            t = 0
+            q_lo = wp
+            q_hi = -1
+            for dy in range(win):
+                lrow = left_pad[y + dy]
+                crow = center_pad[y + dy]
+                for dx in range(win):
+                    q = x + dx - crow[x + dx]
+                    q_lo = min(q_lo, q)
+                    q_hi = max(q_hi, q)
+                    lv[t] = lrow[x + dx]
+                    qs[t] = (y + dy) * wp + q
+                    t += 1
+            for o in range(nc):
+                off = o - half
+                acc = np.float32(0.0)
+                if q_lo - off >= 0 and q_hi - off < wp:
+                    for t in range(n):
+                        acc += lv[t] * np.float32(rflat[qs[t] - off])
+                else:                       # clamped to the padded row, as refine_warped
+                    for t in range(n):
+                        yy = y + t // win
+                        q = min(max(qs[t] - yy * wp - off, 0), wp - 1)
+                        acc += lv[t] * np.float32(rflat[yy * wp + q])
+                cj[o] = acc
+            al = a_left[y, x]
+            bl = b_left[y, x]
+            kb = -1
+            cb = BIG
+            for o in range(nc):
+                d = cy + o - half
+                if d < 0 or x < d:
+                    c = BIG                 # x_right < 0 or d < 0: no candidate
+                elif zncc:
+                    c = ONE - (cj[o] - al * a_right[y, x - d]) * bl * b_right[y, x - d]
+                else:
+                    c = (al + a_right[y, x - d] - TWO * cj[o]) * bl * b_right[y, x - d]
+                cj[o] = c
+                if c < cb:
+                    cb = c
+                    kb = o
+            cm = cj[kb - 1] if kb > 0 else BIG
+            cp = cj[kb + 1] if 0 <= kb < nc - 1 else BIG
+            inside = (kb > 0) and (kb < nc - 1) and (cb < BIG) and (max_cost < 0 or cb <= max_c)
+            value = np.float32(cy + kb - half) + _parabola(cb, cm, cp)
+            out_disp[y, x] = value if inside else np.float32(np.nan)
+            out_cost[y, x] = cb if inside else np.float32(np.inf)
+
+
 @njit(nogil=True, cache=True, fastmath=_FASTMATH)
 def upsample_gate(level_d, level_c, source_cols, scale, lo, hi, top, row0, row1, col0, col1, out_d, out_c):
     """Step 2 + eq. (11): nearest-neighbour up-sampling along x (full-resolution column

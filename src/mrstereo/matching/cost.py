@@ -259,6 +259,14 @@ def match_band(left: np.ndarray, right: np.ndarray, *, d_lo: int, d_hi: int, win
                      d_hi=int(d_hi))
 
 
+# refine_candidates adds up the windows of single pixels (refine_sparse) when fewer than 1 in
+# SPARSE_REFINE_SHARE pixels of the rows spanned are wanted (the near guard's scattered
+# candidates), else running sums over those rows (refine_warped): on the refinements of the
+# shared real scenes at 640x480 the direct sums cost less below about 2.5 % (6-9 ms against
+# 9.6-10.7 ms at 1.5-2.7 %) and more above (32 ms against 17 ms at 10 %).
+SPARSE_REFINE_SHARE = 40
+
+
 def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.ndarray, want: np.ndarray, *, half_px: int,
                       max_cost: float | None = None, rows: tuple[int, int] | None = None, n_strips: int | None = None
                       ) -> tuple[np.ndarray, np.ndarray]:
@@ -302,6 +310,13 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     hit = np.flatnonzero(want[rows[0]:rows[1]].any(axis=1))
     if hit.size:      # only the rows holding pixels to refine
         rows = (rows[0] + int(hit[0]), rows[0] + int(hit[-1]) + 1)
+        ys, xs = np.nonzero(want[rows[0]:rows[1]])
+        if ys.size * SPARSE_REFINE_SHARE < (rows[1] - rows[0]) * w:
+            _kernels.refine_sparse(left.padded, right.padded, left.a, left.b, right.a, right.b, r, center_pad,
+                                   ys + rows[0], xs, int(half_px), left.zncc,
+                                   -1.0 if max_cost is None else float(max_cost), _strips(n_strips, ys.size),
+                                   out, cost)
+            return out, cost
         _kernels.refine_warped(left.padded, right.padded, left.a, left.b, right.a, right.b, r, center_pad,
                                np.ascontiguousarray(want), int(half_px), left.zncc,
                                -1.0 if max_cost is None else float(max_cost),
