@@ -258,18 +258,28 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     want = np.zeros((height, width), bool)
     want[:, col0:col1] = candidate[:, source]
     full = pair_at(width)
-    confirmed_px, confirmed_cost = refine_candidates(
-        *full, field, want, rows=(row0, row1), max_cost=config.max_cost,
-        half_px=int(math.ceil(guard.scale / 2)) + config.refine_margin_px)
-    confirmed = np.isfinite(confirmed_px)
-    valued = np.isfinite(disparity)
-    contest = confirmed & valued
-    wins = ~valued
-    if contest.any():
-        value_min, value_cost = refine_candidates(*full, disparity, contest, rows=(row0, row1), half_px=2)
-        wins |= contest & _beats(confirmed_cost, confirmed_px, value_cost, disparity, config.uniqueness_ratio,
-                                 value_min > guard.band_px[0] + 0.5)
-    candidates = confirmed & wins
+
+    def confirmed_winners(wanted):
+        """Steps 3 and 2 at full resolution: the confirmed candidates among ``wanted`` that win
+        (bool) and their disparities (NaN elsewhere). Per pixel: any subset gives the same."""
+        confirmed_px, confirmed_cost = refine_candidates(
+            *full, field, wanted, rows=(row0, row1), max_cost=config.max_cost,
+            half_px=int(math.ceil(guard.scale / 2)) + config.refine_margin_px)
+        confirmed = np.isfinite(confirmed_px)
+        valued = np.isfinite(disparity)
+        contest = confirmed & valued
+        wins = ~valued
+        if contest.any():
+            value_min, value_cost = refine_candidates(*full, disparity, contest, rows=(row0, row1), half_px=2)
+            wins |= contest & _beats(confirmed_cost, confirmed_px, value_cost, disparity, config.uniqueness_ratio,
+                                     value_min > guard.band_px[0] + 0.5)
+        return confirmed & wins, confirmed_px
+
+    # A too-near region (more than speckle_size_px pixels) lies inside one 8-connected cluster
+    # of candidates at least as large: the others are re-scored only if a region is found
+    # (their margins, step 5), which gives the same verdict with far less re-scoring.
+    clustered = _in_clusters_larger_than(want, config.speckle_size_px)
+    candidates, confirmed_px = confirmed_winners(clustered)
     too_near = np.where(candidates, confirmed_px, np.nan).astype(np.float32)
     if config.speckle_size_px > 0:
         too_near = remove_speckles(too_near, max_size_px=config.speckle_size_px,
@@ -277,10 +287,23 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     too_near = np.isfinite(too_near)
     if not too_near.any():
         return too_near, None
+    rest = want & ~clustered
+    if rest.any():
+        candidates |= confirmed_winners(rest)[0]
     grown = near_side(candidates, margin_px=config.too_near_margin)
     _, labels = cv2.connectedComponents(grown.view(np.uint8), connectivity=8)
     keep = np.unique(labels[too_near])
     return too_near, np.isin(labels, keep[keep > 0])
+
+
+def _in_clusters_larger_than(mask: np.ndarray, size_px: int) -> np.ndarray:
+    """``mask`` where its 8-connected cluster has more than ``size_px`` pixels (all of it for 0)."""
+    if size_px <= 0 or not mask.any():
+        return mask
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8)
+    large = stats[:, cv2.CC_STAT_AREA] > size_px
+    large[0] = False
+    return large[labels]
 
 
 def _drop_cut_off(disparity: np.ndarray, beside: np.ndarray, config: MatchingConfig) -> None:
