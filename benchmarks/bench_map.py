@@ -60,9 +60,13 @@ def variants() -> dict:
 
     base = PipelineConfig()
     m = base.mapping
-    plain = replace(m, disparity_sigma_px=None, occlusion_gap_m=None, see_through_ratio=None)
+    plain = replace(m, disparity_sigma_px=None, occlusion_gap_m=None, see_through_ratio=None, overhang_shadow=False,
+                    map_occlusion_p=None, clear_below_m=None)
+    view_tests = replace(plain, disparity_sigma_px=m.disparity_sigma_px, occlusion_gap_m=m.occlusion_gap_m,
+                         see_through_ratio=m.see_through_ratio)
+    shadow = replace(view_tests, overhang_shadow=m.overhang_shadow)
     return {
-        "plain rays (the previous default)": replace(base, mapping=plain),
+        "plain rays": replace(base, mapping=plain),
         "+ range uncertainty (0.25 px, 2 sigma)": replace(base, mapping=replace(
             plain, disparity_sigma_px=m.disparity_sigma_px)),
         "+ occlusion in the view, 2-D (no heights)": replace(base, mapping=replace(
@@ -70,7 +74,10 @@ def variants() -> dict:
             height_tolerance_m=100.0)),
         "+ occlusion at the sight line's height": replace(base, mapping=replace(
             plain, disparity_sigma_px=m.disparity_sigma_px, occlusion_gap_m=m.occlusion_gap_m)),
-        "+ floor seen through a cell clears it (the default)": base,
+        "+ floor seen through a cell clears it": replace(base, mapping=view_tests),
+        "+ no clearing beyond an overhang": replace(base, mapping=shadow),
+        "+ occlusion by the map (P >= 0.8)": replace(base, mapping=replace(shadow, map_occlusion_p=m.map_occlusion_p)),
+        "+ clearing only below 0.8 m (the default)": base,
     }
 
 

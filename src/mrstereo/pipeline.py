@@ -72,7 +72,10 @@ class PipelineConfig:
         hit, a miss is 0.35 (OctoMap: 0.4); rays stop two range sigmas short of their point
         (``sigma_r = r^2 0.25 px / (b f)``); a point seen through a surface hit in the same view
         (more than 0.25 m before it, at the sight line's height) is dropped; a cell through which
-        the same view sees more floor points than it holds obstacle points is cleared.
+        the same view sees more floor points than it holds obstacle points is cleared; cells the
+        map already holds occupied with P >= 0.8 stop later rays like cells of the view itself; a
+        ray that passes under an overhang (a table top) clears nothing beyond it; rays clear only
+        where their sight line runs at most 0.8 m above the floor.
     grid : GridSpec
         Map extent and resolution.
     """
@@ -84,7 +87,7 @@ class PipelineConfig:
     obstacles: ObstacleConfig = field(default_factory=lambda: ObstacleConfig(max_range_m=4.0))
     mapping: MappingConfig = field(default_factory=lambda: MappingConfig(
         p_miss=0.35, min_points_per_cell=5, disparity_sigma_px=0.25, clear_margin_sigmas=2.0, occlusion_gap_m=0.25,
-        see_through_ratio=1.0))
+        see_through_ratio=1.0, overhang_shadow=True, map_occlusion_p=0.8, clear_below_m=0.8))
     grid: GridSpec = field(default_factory=GridSpec)
 
     def single_range_equal_work(self, stereo: StereoCamera) -> PipelineConfig:
@@ -256,12 +259,13 @@ def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec = GridSpec(
     """Ordered reduction: add each frame's cells to one occupancy grid (paper section 5.2).
 
     A frame's precomputed ``cells`` are used when they fit ``grid`` and ``config``; otherwise
-    they are computed from its points (the result is the same).
+    they are computed from its points (the result is the same). With ``config.map_occlusion_p``
+    the cells depend on the map so far and are always computed here, in order.
     """
     occupancy = OccupancyGrid(grid, config=config)
     for obs in observations:
         with stage("grid"):
-            if obs.cells is not None and obs.cells.fits(grid, config):
+            if obs.cells is not None and obs.cells.fits(grid, config) and config.map_occlusion_p is None:
                 occupancy.apply(obs.cells)
             else:
                 occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world,

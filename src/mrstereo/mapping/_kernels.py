@@ -17,6 +17,7 @@ HIT = np.uint8(1)        # an obstacle point ends in this cell
 END_FREE = np.uint8(2)   # a ray ends here and clears its end cell (floor point, or clipped ray)
 MISS = np.uint8(4)       # a ray crossed this cell
 FLOOR = np.uint8(8)      # a floor point ends in this cell
+BLOCK = np.uint8(16)     # not hit in this view, but known occupied (stops rays like a hit)
 _LATER = -1.0            # ``ends[r, c, 2]`` of an obstacle end whose margin mark_endpoints computes at its end
 
 
@@ -149,32 +150,41 @@ def _axis_step(d, cell, start):
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _blocks(z_range, r, c, sz, tz, t_a, t_b, z_tol):
-    """Does the sight line, at heights ``sz + t (tz - sz)`` for t in [t_a, t_b], meet the cell's
-    obstacle points (``z_range`` +- ``z_tol``)? Without heights (NaN) every hit cell blocks."""
+def _sight(z_range, r, c, sz, tz, t_a, t_b, z_tol):
+    """Where does the sight line, at heights ``sz + t (tz - sz)`` for t in [t_a, t_b], pass a cell?
+
+    1: it meets the cell's obstacle points (``z_range`` +- ``z_tol``); 2: it passes below them
+    (the cell overhangs the line, e.g. a table top); 0: above them. Without heights (NaN) the
+    line meets every cell.
+    """
     if not (math.isfinite(sz) and math.isfinite(tz)):
-        return True
+        return 1
     za = sz + t_a * (tz - sz)
     zb = sz + t_b * (tz - sz)
-    lo = min(za, zb)
-    hi = max(za, zb)
-    return hi >= z_range[r, c, 0] - z_tol and lo <= z_range[r, c, 1] + z_tol
+    if min(za, zb) > z_range[r, c, 1] + z_tol:
+        return 0
+    if max(za, zb) < z_range[r, c, 0] - z_tol:
+        return 2
+    return 1
 
 
 @njit(nogil=True, cache=True)
-def _trace(sx, sy, sz, tx, ty, tz, t_cut, t_occ, flags, z_range, z_tol, through, votes, miss):
+def _trace(sx, sy, sz, tx, ty, tz, t_cut, t_occ, flags, z_range, z_tol, shadow, z_clear, through, votes, miss):
     """Amanatides-Woo traversal from the sensor ``(sx, sy)`` towards the end ``(tx, ty)`` (grid units).
 
     The segment is parametrized by ``t`` in [0, 1] (the 3-D sight line from the sensor at height
-    ``sz`` to the end at height ``tz`` has the same parameter). Two uses:
+    ``sz`` to the end at height ``tz`` has the same parameter). *Solid* cells are those hit in
+    this view (``HIT``) or known occupied (``BLOCK``), other than the end cell. Two uses:
 
     * ``votes == 0``: marks ``miss`` on every cell inside the grid that the ray enters before
       ``t_cut`` (> 1: up to and including the end cell); returns True (and stops) when the ray
-      enters, at some ``0 < t < t_occ``, a ``HIT`` cell other than the end cell whose obstacle
-      points the sight line meets (:func:`_blocks`): the end lies behind a surface seen in the
-      same view (occluded);
-    * ``votes > 0``: adds ``votes`` to ``through`` of every such cell before ``t_occ`` (the end
-      is seen through it) and marks nothing.
+      enters, at some ``0 < t < t_occ``, a solid cell whose obstacle points the sight line meets
+      (:func:`_sight`): the end lies behind a seen surface (occluded). With ``shadow``, a ray
+      whose sight line passes below a solid cell's points (an overhang) marks no more misses
+      from that cell on. A cell where the sight line runs higher than ``z_clear`` (metres; inf:
+      no limit) is not marked: an obstacle lower than the line would not have stopped it;
+    * ``votes > 0``: adds ``votes`` to ``through`` of every solid cell met before ``t_occ`` (the
+      end is seen through it) and marks nothing.
     """
     rows, cols = miss.shape
     t0, t1 = _clip_segment(sx, sy, tx, ty, cols, rows)
@@ -194,21 +204,25 @@ def _trace(sx, sy, sz, tx, ty, tz, t_cut, t_occ, flags, z_range, z_tol, through,
     stepy, tdy, tmy = _axis_step(dy, cy, sy)
     t_enter = t0
     while True:
-        if votes == 0.0 and t_enter >= t_cut:
+        if t_enter >= t_cut and t_enter >= t_occ:
             return False
         last = nx + ny == 0
         step_x = not last and nx > 0 and (ny == 0 or tmx < tmy)
         t_exit = t1 if last else (tmx if step_x else tmy)
-        if (t_enter > 0.0 and t_enter < t_occ and (flags[cy, cx] & HIT) != 0
-                and not (cy == end_r and cx == end_c)
-                and _blocks(z_range, cy, cx, sz, tz, t_enter, min(t_exit, t_occ), z_tol)):
-            if votes == 0.0:
-                return True
-            through[cy, cx] += votes
-        if votes == 0.0:
+        mark = votes == 0.0 and t_enter < t_cut
+        if mark and z_clear < np.inf and math.isfinite(sz) and math.isfinite(tz):
+            mark = max(sz + t_enter * (tz - sz), sz + t_exit * (tz - sz)) <= z_clear
+        if t_enter > 0.0 and (flags[cy, cx] & (HIT | BLOCK)) != 0 and not (cy == end_r and cx == end_c):
+            where = _sight(z_range, cy, cx, sz, tz, t_enter, min(t_exit, t_occ) if t_enter < t_occ else t_exit, z_tol)
+            if where == 1 and t_enter < t_occ:
+                if votes == 0.0:
+                    return True
+                through[cy, cx] += votes
+            elif votes == 0.0 and where == 2 and shadow:
+                t_cut = -1.0
+                mark = False
+        if mark:
             miss[cy, cx] = 1
-        elif t_enter >= t_occ:
-            return False
         if last:
             return False
         if step_x:
@@ -243,8 +257,8 @@ def drop_seen_through(flags, ends, n_points, z_range, sx, sy, sz, gap_cells, z_t
             length = math.hypot(tx - sx, ty - sy)
             if length <= gap_cells:
                 continue
-            _trace(sx, sy, sz, tx, ty, ends[r, c, 3], 2.0, 1.0 - gap_cells / length, flags, z_range, z_tol, through,
-                   n_points[r, c], miss)
+            _trace(sx, sy, sz, tx, ty, ends[r, c, 3], -1.0, 1.0 - gap_cells / length, flags, z_range, z_tol, False,
+                   np.inf, through, n_points[r, c], miss)
     n = 0
     for r in range(rows):
         for c in range(cols):
@@ -257,7 +271,7 @@ def drop_seen_through(flags, ends, n_points, z_range, sx, sy, sz, gap_cells, z_t
 
 
 @njit(nogil=True, cache=True)
-def cast_rays(flags, ends, z_range, sx, sy, sz, occlusion_gap_cells, z_tol, miss, occluded):
+def cast_rays(flags, ends, z_range, sx, sy, sz, occlusion_gap_cells, z_tol, shadow, z_clear, miss, occluded):
     """Trace one ray from the sensor to each flagged end cell (deduplicated rays).
 
     The ray goes to the cell's representative end point ``ends[r, c, :2]``, a measured point.
@@ -275,7 +289,7 @@ def cast_rays(flags, ends, z_range, sx, sy, sz, occlusion_gap_cells, z_tol, miss
     for r in range(rows):
         for c in range(cols):
             f = flags[r, c]
-            if f == 0:
+            if (f & (HIT | END_FREE)) == 0:
                 continue
             tx = ends[r, c, 0]
             ty = ends[r, c, 1]
@@ -287,7 +301,8 @@ def cast_rays(flags, ends, z_range, sx, sy, sz, occlusion_gap_cells, z_tol, miss
                 t_cut = 2.0
                 gap = occlusion_gap_cells
             t_occ = 1.0 - gap / length if occlusion_gap_cells >= 0.0 and length > 0.0 else -1.0
-            if _trace(sx, sy, sz, tx, ty, ends[r, c, 3], t_cut, t_occ, flags, z_range, z_tol, unused, 0.0, miss):
+            if _trace(sx, sy, sz, tx, ty, ends[r, c, 3], t_cut, t_occ, flags, z_range, z_tol, shadow, z_clear, unused,
+                      0.0, miss):
                 occluded[r, c] = 1
                 n += 1
     return n

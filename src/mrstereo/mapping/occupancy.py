@@ -101,6 +101,27 @@ class MappingConfig:
         cell stands in the way of a point only where the sight line from the sensor to the
         point passes within this of the heights of the cell's obstacle points (a table top
         hides nothing below it).
+    overhang_shadow : bool
+        A ray whose sight line passes below the obstacle points of a solid cell (hit in the same
+        view, or held occupied by the map: ``map_occlusion_p``) -- a table top, a chair seat --
+        clears nothing from that cell on. The 2-D map marks the whole footprint of an overhang
+        occupied; the floor seen under it is no evidence that the footprint is free, and the
+        overhang may reach farther than its seen edge. The ray's end is still hit (a wall seen
+        under a table).
+    map_occlusion_p : float or None
+        Occlusion by the map: cells the map already holds occupied with at least this
+        probability are solid for the next views like cells hit in the view itself (at the
+        heights of all the obstacle points seen in them): a ray whose sight line meets one stops
+        there and a point behind it is no hit. A mismatch seen through a wall that an earlier view
+        measured no longer clears the wall and the space behind it. The map's state enters every
+        update, so views are traced in order (:func:`view_cells` ``known_occupied``). None: off.
+    clear_below_m : float or None
+        A ray clears only the cells where its sight line runs at most this high above the floor.
+        A sight line at height ``h`` over a cell shows that no obstacle taller than ``h`` stands
+        there -- a line over a table top (0.7-0.76 m) or a chair says nothing about the table;
+        the 2-D map needs the whole height band free. Cells near a high camera are cleared by
+        the views that saw them from farther away, with lower sight lines. None: no limit
+        (needs heights: the sensor's and the points').
     """
 
     p_hit: float = 0.7
@@ -116,6 +137,9 @@ class MappingConfig:
     occlusion_gap_m: float | None = None
     see_through_ratio: float | None = None
     height_tolerance_m: float = 0.05
+    overhang_shadow: bool = False
+    map_occlusion_p: float | None = None
+    clear_below_m: float | None = None
 
     def __post_init__(self) -> None:
         _checks.positive_int("min_points_per_cell", self.min_points_per_cell)
@@ -127,6 +151,14 @@ class MappingConfig:
         if self.see_through_ratio is not None:
             _checks.finite_number("see_through_ratio", self.see_through_ratio, nonnegative=True)
         _checks.finite_number("height_tolerance_m", self.height_tolerance_m, nonnegative=True)
+        if not isinstance(self.overhang_shadow, (bool, np.bool_)):
+            raise TypeError(f"overhang_shadow must be a bool, got {type(self.overhang_shadow).__name__}")
+        if self.clear_below_m is not None:
+            _checks.finite_number("clear_below_m", self.clear_below_m, positive=True)
+        if self.map_occlusion_p is not None:
+            p = _checks.finite_number("map_occlusion_p", self.map_occlusion_p)
+            if not self.occupied_thresh <= p < 1.0:
+                raise ValueError(f"map_occlusion_p must be in [occupied_thresh, 1), got {p}")
         for name in ("p_hit", "p_miss", "p_clamp_min", "p_clamp_max", "occupied_thresh"):
             value = _checks.finite_number(name, getattr(self, name))
             if not 0.0 < value < 1.0:
@@ -201,6 +233,9 @@ class ViewCells(NamedTuple):
     """The sensor-model fields of the config used (:func:`_sensor_model`)."""
     occluded: int = 0
     """Hit cells dropped by the occlusion and see-through tests."""
+    hit_z_m: np.ndarray | None = None
+    """(len(hit), 2) float32: lowest and highest obstacle point of each hit cell (metres; inf, -inf
+    without heights)."""
 
     def fits(self, grid: GridSpec, config: MappingConfig) -> bool:
         """True when these cells are what ``grid`` and ``config`` would compute."""
@@ -211,12 +246,12 @@ class ViewCells(NamedTuple):
 
 def _sensor_model(config: MappingConfig) -> tuple:
     return (config.disparity_sigma_px, config.clear_margin_sigmas, config.occlusion_gap_m, config.see_through_ratio,
-            config.height_tolerance_m)
+            config.height_tolerance_m, config.overhang_shadow, config.clear_below_m)
 
 
 def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
                grid: GridSpec = GridSpec(), config: MappingConfig = MappingConfig(),
-               baseline_focal_m_px: float | None = None) -> ViewCells:
+               baseline_focal_m_px: float | None = None, known_occupied=None) -> ViewCells:
     """The cells one view hits and clears (OctoMap's per-scan key sets [2]).
 
     Parameters
@@ -297,11 +332,41 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
         through = np.zeros(grid.shape, np.float64)
         n_occluded += _kernels.drop_seen_through(flags, ends, n_points, z_range, sx, sy, sz, max(gap_cells, 0.0),
                                                  z_tol, config.see_through_ratio, through, miss, occluded)
-    n_occluded += _kernels.cast_rays(flags, ends, z_range, sx, sy, sz, gap_cells, z_tol, miss, occluded)
+    if known_occupied is not None:
+        known, known_z = _known_occupied(known_occupied, grid)
+        solid = known & ((flags & _kernels.HIT) == 0)
+        flags[solid] |= _kernels.BLOCK
+        z_range[solid] = known_z[solid]
+    z_clear = np.inf if config.clear_below_m is None else float(config.clear_below_m)
+    n_occluded += _kernels.cast_rays(flags, ends, z_range, sx, sy, sz, gap_cells, z_tol, bool(config.overhang_shadow),
+                                     z_clear, miss, occluded)
     hit = ((flags & _kernels.HIT) != 0) & (occluded == 0)
-    return ViewCells(hit=np.flatnonzero(hit), miss=np.flatnonzero((miss != 0) & ~hit), points_outside=int(outside),
+    hit_index = np.flatnonzero(hit)
+    return ViewCells(hit=hit_index, miss=np.flatnonzero((miss != 0) & ~hit), points_outside=int(outside),
                      grid=grid, max_range_m=config.max_range_m, min_points_per_cell=config.min_points_per_cell,
-                     sensor_model=_sensor_model(config), occluded=int(n_occluded))
+                     sensor_model=_sensor_model(config), occluded=int(n_occluded),
+                     hit_z_m=z_range.reshape(-1, 2)[hit_index].astype(np.float32))
+
+
+def _known_occupied(value, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
+    """``(mask, z_range_m)`` of :meth:`OccupancyGrid.known_occupied`, checked against ``grid``.
+
+    Cells without heights (never hit by 3-D points) reach from -inf to inf: every sight line meets them.
+    """
+    try:
+        mask, z = value
+    except (TypeError, ValueError):
+        raise TypeError("known_occupied must be (mask, z_range_m), e.g. OccupancyGrid.known_occupied()") from None
+    mask = np.asarray(mask)
+    z = np.array(z, dtype=np.float64)
+    if mask.shape != grid.shape or mask.dtype != bool:
+        raise ValueError(f"known_occupied mask must be a bool array of the grid's shape {grid.shape}, "
+                         f"got {mask.dtype} {mask.shape}")
+    if z.shape != grid.shape + (2,):
+        raise ValueError(f"known_occupied z_range_m must have shape {grid.shape + (2,)}, got {z.shape}")
+    unknown = ~(np.isfinite(z).all(axis=-1) & (z[..., 0] <= z[..., 1]))
+    z[unknown] = (-np.inf, np.inf)
+    return mask, z
 
 
 def _supported(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:
@@ -380,6 +445,10 @@ class OccupancyGrid:
             if np.isinf(arr).any():
                 raise ValueError("log_odds must be finite or NaN (unknown)")
             self._log_odds = arr
+        # lowest and highest obstacle point seen in each hit cell (inf, -inf: none), for map occlusion
+        self._z_range_m = np.empty(grid.shape + (2,), np.float32)
+        self._z_range_m[..., 0] = np.inf
+        self._z_range_m[..., 1] = -np.inf
         self.n_updates = 0
 
     # ---------------------------------------------------------------- update
@@ -387,16 +456,38 @@ class OccupancyGrid:
                baseline_focal_m_px: float | None = None) -> GridUpdate:
         """Add one view: obstacle points hit their cells, rays to all points clear cells.
 
-        The same as ``apply(view_cells(..., grid=self.grid, config=self.config))``; see
-        :func:`view_cells` for the parameters and the ray model.
+        The same as ``apply(view_cells(..., grid=self.grid, config=self.config,
+        known_occupied=self.known_occupied()))`` (``known_occupied`` only with
+        ``config.map_occlusion_p``); see :func:`view_cells` for the parameters and the ray model.
 
         Returns
         -------
         GridUpdate
             Distinct cells hit and missed in this update, points ending outside the grid.
         """
+        known = self.known_occupied() if self.config.map_occlusion_p is not None else None
         return self.apply(view_cells(points_obstacle_world, points_free_world, sensor_origin_world,
-                                     grid=self.grid, config=self.config, baseline_focal_m_px=baseline_focal_m_px))
+                                     grid=self.grid, config=self.config, baseline_focal_m_px=baseline_focal_m_px,
+                                     known_occupied=known))
+
+    def known_occupied(self, p_min: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Cells held occupied with probability at least ``p_min`` (default ``config.map_occlusion_p``,
+        else ``occupied_thresh``) and the height range of the obstacle points seen in each cell.
+
+        Returns
+        -------
+        mask : ndarray of bool, shape grid.shape
+        z_range_m : ndarray of shape grid.shape + (2,)
+            Lowest and highest obstacle point (metres above the floor) over the views that hit the
+            cell; (inf, -inf) where no point had a height.
+        """
+        if p_min is None:
+            p_min = self.config.map_occlusion_p if self.config.map_occlusion_p is not None else self.config.occupied_thresh
+        p_min = _checks.finite_number("p_min", p_min)
+        if not 0.0 < p_min < 1.0:
+            raise ValueError(f"p_min must be in (0, 1), got {p_min}")
+        level = float(log_odds_from_probability(p_min))
+        return np.nan_to_num(self._log_odds, nan=-np.inf) >= level, self._z_range_m.copy()
 
     def apply(self, cells: ViewCells) -> GridUpdate:
         """Add one view's hit and missed cells (from :func:`view_cells`) to the log-odds.
@@ -413,6 +504,10 @@ class OccupancyGrid:
         c = self.config
         _kernels.apply_cells(self._log_odds.reshape(-1), cells.hit, cells.miss, c.l_hit, c.l_miss, c.l_min,
                              c.l_max, c.fusion == "union")
+        if cells.hit_z_m is not None and len(cells.hit):
+            z = self._z_range_m.reshape(-1, 2)
+            z[cells.hit, 0] = np.minimum(z[cells.hit, 0], cells.hit_z_m[:, 0])
+            z[cells.hit, 1] = np.maximum(z[cells.hit, 1], cells.hit_z_m[:, 1])
         self.n_updates += 1
         return GridUpdate(len(cells.hit), len(cells.miss), cells.points_outside)
 
@@ -470,6 +565,7 @@ class OccupancyGrid:
 
     def copy(self) -> "OccupancyGrid":
         out = OccupancyGrid(self.grid, config=self.config, log_odds=self._log_odds)
+        out._z_range_m[...] = self._z_range_m
         out.n_updates = self.n_updates
         return out
 
