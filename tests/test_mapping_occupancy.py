@@ -335,3 +335,115 @@ def test_a_floating_mismatch_with_the_floor_seen_through_it_is_cleared():
     table = np.array([[*centre(60, 40), 0.7]] * 6)  # the floor seen *below* a table top is no evidence against it
     under = view_cells(table, floor, sensor, config=config)
     assert flat in under.hit
+
+
+def _mask(flat_indices):
+    mask = np.zeros(GridSpec().shape, bool).ravel()
+    mask[flat_indices] = True
+    return mask.reshape(GridSpec().shape)
+
+
+def test_no_clearing_beyond_an_overhang_but_the_wall_under_it_is_hit():
+    """Camera 0.5 m up at column 20; a table-top edge 0.7 m up at column 40 (1 m); floor seen under it
+    at columns 45-70; a wall seen under it at column 80 (3 m)."""
+    sensor = (*centre(60, 20), 0.5)
+    table = np.array([[*centre(60, 40), z] for z in np.linspace(0.68, 0.72, 8)])
+    wall = np.array([[*centre(60, 80), z] for z in np.linspace(0.05, 0.2, 8)])
+    floor = np.array([[*centre(60, c), 0.0] for c in range(45, 71)])
+    base = MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5)
+    plain = view_cells(np.vstack([table, wall]), floor, sensor, config=base)
+    shadow = view_cells(np.vstack([table, wall]), floor, sensor, config=MappingConfig(
+        occlusion_gap_m=0.25, min_points_per_cell=5, overhang_shadow=True))
+    assert _mask(plain.miss)[60, 41:80].all()                 # plain: everything under the table cleared
+    missed, hit = _mask(shadow.miss), _mask(shadow.hit)
+    assert missed[60, 21:40].all() and not missed[60, 40:].any()   # up to the table edge, nothing beyond
+    assert hit[60, 40] and hit[60, 80] and shadow.occluded == 0
+    # the floor 2 m ahead seen over a low box (0.15 m, 1 m ahead; the line is 0.25 m high there): the
+    # line is not under the box, clearing goes on behind it
+    box = np.array([[*centre(60, 40), z] for z in np.linspace(0.05, 0.15, 8)])
+    over = view_cells(box, np.array([[*centre(60, 60), 0.0]]), sensor, config=MappingConfig(
+        occlusion_gap_m=0.25, min_points_per_cell=5, overhang_shadow=True))
+    assert _mask(over.miss)[60, 41:61].all() and over.occluded == 0
+
+
+def test_clearing_only_where_the_sight_line_is_low_enough():
+    """Camera 1.2 m up, floor point 3 m ahead: the sight line is 1.2 (1 - d / 3) m high at d, at most
+    0.8 m from d = 1 m on (cells whose whole crossing is below 0.8 m: entered at d >= 1.0 m)."""
+    sensor_xy = centre(60, 20)                            # x at the centre of column 20
+    floor = np.array([[sensor_xy[0] + 3.0, sensor_xy[1], 0.0]])
+    config = MappingConfig(clear_below_m=0.8)
+    missed = _mask(view_cells(None, floor, (*sensor_xy, 1.2), config=config).miss)
+    # column c is entered at d = (c - 20 - 0.5) * 0.05 m: column 41 at 1.025 m is the first cleared
+    assert not missed[60, 20:41].any() and missed[60, 41:81].all()
+    everywhere = _mask(view_cells(None, floor, (*sensor_xy, 1.2), config=MappingConfig()).miss)
+    assert everywhere[60, 20:81].all()
+    flat = _mask(view_cells(None, floor[:, :2], sensor_xy, config=config).miss)     # no heights: no limit
+    assert flat[60, 20:81].all()
+    with pytest.raises(ValueError, match="clear_below_m"):
+        MappingConfig(clear_below_m=0.0)
+
+
+def test_map_occlusion_stops_rays_at_cells_the_map_holds_occupied():
+    """Two views see a wall (column 60, rows 40-80); a third sees only a phantom 2 m behind it and the
+    floor behind it (a low-texture stretch of the same wall): with map occlusion they clear nothing
+    behind the wall and the phantom is no hit."""
+    sensor = (*centre(60, 20), 0.5)
+    wall = np.array([[*centre(r, 60), z] for r in range(40, 81) for z in np.linspace(0.1, 1.0, 6)])
+    phantom = np.array([[*centre(62, 100), 0.3]] * 6)
+    floor_behind = np.array([[*centre(58, c), 0.0] for c in range(70, 90)])
+    config = MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5, map_occlusion_p=0.8)
+    results = {}
+    for name, cfg in (("map", config), ("plain", MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5))):
+        grid = OccupancyGrid(config=cfg)
+        grid.update(wall, None, sensor)
+        grid.update(wall, None, sensor)                     # two hits: P = 0.845 >= 0.8
+        known, z = grid.known_occupied()
+        if name == "map":
+            assert known[40:81, 60].all() and known.sum() == 41
+            np.testing.assert_allclose(z[50, 60], (0.1, 1.0), atol=1e-6)
+        results[name] = (grid.update(np.vstack([phantom]), floor_behind, sensor), grid)
+    (stats, grid), (_, plain) = results["map"], results["plain"]
+    assert stats.hit_cells == 0                                       # the phantom lies behind the wall
+    assert grid.unknown[62, 100] and grid.unknown[58, 61:90].all()   # nothing behind the wall cleared
+    assert grid.occupied[40:81, 60].all()
+    assert plain.occupied[62, 100] and plain.free[58, 70:90].all()   # without: phantom hit, floor cleared
+    # update is apply(view_cells(..., known_occupied=grid.known_occupied())): the same cells
+    again = OccupancyGrid(config=config)
+    again.update(wall, None, sensor)
+    again.update(wall, None, sensor)
+    cells = view_cells(phantom, floor_behind, sensor, config=config, known_occupied=again.known_occupied())
+    np.testing.assert_array_equal(cells.miss, view_cells(phantom, floor_behind, sensor, config=config,
+                                                         known_occupied=grid.copy().known_occupied()).miss)
+    assert len(cells.hit) == 0
+
+
+def test_map_occlusion_keeps_a_wall_seen_under_a_known_table_top():
+    """The map holds a table top (0.7 m, column 40); a later view sees a wall under it at column 80."""
+    sensor = (*centre(60, 20), 0.5)
+    table = np.array([[*centre(60, 40), z] for z in np.linspace(0.68, 0.72, 8)])
+    wall = np.array([[*centre(60, 80), z] for z in np.linspace(0.05, 0.2, 8)])
+    config = MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5, map_occlusion_p=0.8)
+    grid = OccupancyGrid(config=config)
+    grid.update(table, None, sensor)
+    grid.update(table, None, sensor)
+    loaded = OccupancyGrid(config=config, log_odds=grid.log_odds)     # a map read back has no heights
+    assert grid.update(wall, None, sensor).hit_cells == 1 and grid.occupied[60, 80]
+    assert loaded.update(wall, None, sensor).hit_cells == 0           # without heights the top hides the wall
+
+
+def test_map_occlusion_bad_input():
+    with pytest.raises(ValueError, match="map_occlusion_p"):
+        MappingConfig(map_occlusion_p=0.3)
+    with pytest.raises(ValueError, match="map_occlusion_p"):
+        MappingConfig(map_occlusion_p=1.0)
+    with pytest.raises(TypeError, match="overhang_shadow"):
+        MappingConfig(overhang_shadow="yes")
+    sensor = centre(60, 20)
+    with pytest.raises(ValueError, match="known_occupied mask"):
+        view_cells(None, None, sensor, known_occupied=(np.zeros((3, 3), bool), np.zeros((3, 3, 2))))
+    with pytest.raises(ValueError, match="known_occupied z_range_m"):
+        view_cells(None, None, sensor, known_occupied=(np.zeros(GridSpec().shape, bool), np.zeros((3, 3, 2))))
+    with pytest.raises(TypeError, match="known_occupied"):
+        view_cells(None, None, sensor, known_occupied=np.zeros(GridSpec().shape, bool))
+    with pytest.raises(ValueError, match="p_min"):
+        OccupancyGrid().known_occupied(1.5)
