@@ -269,6 +269,10 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
     baseline_focal_m_px : float, optional
         ``b f`` of the rig (baseline in metres times rectified focal length in pixels), for the
         range uncertainty of ``config.disparity_sigma_px``; without it rays clear up to the point.
+    known_occupied : (ndarray of bool, ndarray of float), optional
+        ``(mask, z_range_m)`` of the cells the map already holds occupied, shapes ``grid.shape``
+        and ``grid.shape + (2,)`` (:meth:`OccupancyGrid.known_occupied`): they are solid for this
+        view's rays like its own hit cells (occlusion by the map).
 
     Returns
     -------
@@ -288,7 +292,10 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
     traced against the cells hit in that same view; a ray entering a hit cell more than the gap
     (plus its margin) before its end stops there and its end is not hit. See-through
     (``config.see_through_ratio``, tested first): hit cells through which the same view sees
-    more floor points than the cell holds obstacle points are cleared instead.
+    more floor points than the cell holds obstacle points are cleared instead. Solid cells (hit
+    in this view, or in ``known_occupied``) that a sight line passes below stop its clearing
+    (``config.overhang_shadow``); cells where the sight line runs higher than
+    ``config.clear_below_m`` are not cleared.
     """
     if not isinstance(grid, GridSpec):
         raise TypeError(f"grid must be a GridSpec, got {type(grid).__name__}")
