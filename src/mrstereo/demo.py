@@ -298,8 +298,9 @@ def _report_markdown(m: dict, files: dict) -> str:
                      f"{e['mean_abs_error_px']:.2f} |")
     lines += ["", "![disparity](disparity.png)", "", "![top view](top_view.png)", "",
               "## Occupancy grid along the path", "",
-              "| fusion | occupied precision | occupied recall | wall profile error [cm] | free correct |",
-              "|---|---|---|---|---|"]
+              "| fusion | occupied precision | occupied recall | wall profile error [cm] | free correct | "
+              "true free mapped free |",
+              "|---|---|---|---|---|---|"]
     single = m.get("map_single_range") or {}
     for key, name in (("map", "multi-range, log-odds"), ("map_union", "multi-range, paper's union"),
                       ("map_single_range", f"single range 0-{single.get('max_disparity_px', 0):.0f} px "
@@ -307,7 +308,8 @@ def _report_markdown(m: dict, files: dict) -> str:
         g = m.get(key)
         if g:
             lines.append(f"| {name} | {g['precision']:.3f} | {g['recall']:.3f} | "
-                         f"{100 * g['mean_distance_m']:.1f} | {g['free_accuracy']:.3f} |")
+                         f"{100 * g['mean_distance_m']:.1f} | {g['free_precision']:.3f} | "
+                         f"{g['free_accuracy']:.3f} |")
     near = m["near_recall_within_1m"]
     lines += ["", f"Occupied recall within 1 m of the path (near obstacles): multi-range "
                   f"{near['multi-range']:.3f}, single range of equal work {near['single range']:.3f}."]
