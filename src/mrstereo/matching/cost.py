@@ -310,8 +310,8 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     hit = np.flatnonzero(want[rows[0]:rows[1]].any(axis=1))
     if hit.size:      # only the rows holding pixels to refine
         rows = (rows[0] + int(hit[0]), rows[0] + int(hit[-1]) + 1)
-        ys, xs = np.nonzero(want[rows[0]:rows[1]])
-        if ys.size * SPARSE_REFINE_SHARE < (rows[1] - rows[0]) * w:
+        if np.count_nonzero(want[rows[0]:rows[1]]) * SPARSE_REFINE_SHARE < (rows[1] - rows[0]) * w:
+            ys, xs = np.nonzero(want[rows[0]:rows[1]])
             _kernels.refine_sparse(left.padded, right.padded, left.a, left.b, right.a, right.b, r, center_pad,
                                    ys + rows[0], xs, int(half_px), left.zncc,
                                    -1.0 if max_cost is None else float(max_cost), _strips(n_strips, ys.size),
