@@ -276,9 +276,13 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
         return confirmed & wins, confirmed_px
 
     # A too-near region (more than speckle_size_px pixels) lies inside one 8-connected cluster
-    # of candidates at least as large: the others are re-scored only if a region is found
-    # (their margins, step 5), which gives the same verdict with far less re-scoring.
-    clustered = _in_clusters_larger_than(want, config.speckle_size_px)
+    # of candidates at least as large, which comes from a cluster of more than
+    # speckle_size_px / ceil(scale) candidates at the guard's level (each level pixel spans at
+    # most ceil(scale) columns): the others are re-scored only if a region is found (their
+    # margins, step 5), which gives the same verdict with far less re-scoring.
+    clustered = np.zeros((height, width), bool)
+    clustered[:, col0:col1] = _in_clusters_larger_than(
+        candidate, config.speckle_size_px // math.ceil(guard.scale))[:, source]
     candidates, confirmed_px = confirmed_winners(clustered)
     too_near = np.where(candidates, confirmed_px, np.nan).astype(np.float32)
     if config.speckle_size_px > 0:
