@@ -321,16 +321,20 @@ def _world_points(points_robot: np.ndarray, pose) -> np.ndarray:
                             points_robot[:, 2]]).astype(np.float32)
 
 
-def observation_at(obs, pose, *, grid: GridSpec = GridSpec(), config: MappingConfig = MappingConfig()):
+def observation_at(obs, pose, *, grid: GridSpec = GridSpec(), config: MappingConfig = MappingConfig(),
+                   with_cells: bool = True):
     """A :class:`~mrstereo.pipeline.FrameObservation` moved to another planar ``pose``.
 
     Its points keep their place in the robot frame; its cells are those of ``grid`` and
-    ``config`` (with the frame's sensor height and range uncertainty, as the pipeline makes them).
+    ``config`` (with the frame's sensor height and range uncertainty, as the pipeline makes them),
+    or None without ``with_cells``.
     """
     pose = tuple(float(v) for v in pose)
     obstacles = _world_points(_robot_points(obs.obstacle_points_world, obs.pose), pose)
     floor = _world_points(_robot_points(obs.floor_points_world, obs.pose), pose)
     moved = replace(obs, pose=pose, obstacle_points_world=obstacles, floor_points_world=floor, cells=None)
+    if not with_cells:
+        return moved
     cells = view_cells(obstacles, floor, moved.sensor_origin_world, grid=grid, config=config,
                        baseline_focal_m_px=obs.baseline_focal_m_px)
     return replace(moved, cells=cells)
@@ -420,8 +424,10 @@ def fuse_aligned(observations, *, grid: GridSpec = GridSpec(), config: MappingCo
                                      outlier_probability=align.outlier_probability)
             result = align_points(obstacles, prior, field, grid, prior_covariance=P, config=align)
             P = result.covariance
-        moved = observation_at(obs, result.pose, grid=grid, config=config)
-        occupancy.apply(moved.cells)
+        moved = observation_at(obs, result.pose, grid=grid, config=config, with_cells=False)
+        # as pipeline.fuse: the cells of the map so far (occlusion by the map) in order
+        occupancy.update(moved.obstacle_points_world, moved.floor_points_world, moved.sensor_origin_world,
+                         baseline_focal_m_px=moved.baseline_focal_m_px)
         corrected.append(moved)
         alignments.append(result)
         previous_given, previous_pose = given, result.pose
