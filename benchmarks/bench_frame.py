@@ -8,7 +8,7 @@ process, alternating frame by frame, with one thread and two (``numba.set_num_th
 * mrstereo: :func:`mrstereo.geometry.obstacles_from_pair` on the raw pair (rectify with the
   calibration, multi-range matching of the ``mapping`` preset, eq. 13 rejection, floor from
   the mount, eq. 14-16, obstacle/floor split) then the grid cells it hits and clears and the
-  log-odds update (:func:`mrstereo.pipeline.observation_from_pair`, ``OccupancyGrid.apply``).
+  log-odds update (:func:`mrstereo.pipeline.observation_from_pair`, :func:`mrstereo.pipeline.add_observation`).
 * OpenCV: ``cv2.remap`` x2 with maps built once, ``StereoBM`` (9x9, ``numDisparities`` the
   multiple of 16 covering mrstereo's near limit), ``cv2.reprojectImageTo3D``, the same height
   band and range limit in the robot frame, ``np.add.at`` of the obstacle points into a grid of
@@ -47,7 +47,7 @@ from mrstereo.geometry import obstacles_from_pair
 from mrstereo.geometry.frames import T_robot_from_cam, T_world_from_robot
 from mrstereo.io import read_image
 from mrstereo.mapping import OccupancyGrid
-from mrstereo.pipeline import PipelineConfig, observation_from_pair, pair_options
+from mrstereo.pipeline import PipelineConfig, add_observation, observation_from_pair, pair_options
 from mrstereo.profiling import Profile, profiling
 from mrstereo.recording import read_manifest
 
@@ -82,9 +82,7 @@ class MrstereoChain:
                                         rig=self.manifest.rig, pan_rad=record.pan_rad, **pair_options(self.config))
             obs = observation_from_pair(frame, record, index=k, config=self.config,
                                         stereo=self.manifest.calibration)
-            t0 = CLOCK()
-            self.grid.apply(obs.cells)
-            prof.add("grid", CLOCK() - t0)
+            add_observation(self.grid, obs)       # traced against the map so far, as map does
         self.max_disparity_px = frame.max_disparity_px
         return {name: 1000.0 * prof.seconds.get(name, 0.0) for name in STAGES}
 

@@ -136,7 +136,7 @@ def test_two_worker_threads_single_threaded_and_bit_identical(dataset):
     assert np.array_equal(local.grid.log_odds, parallel.grid.log_odds, equal_nan=True)
     for a, b in zip(local.observations, parallel.observations):
         assert a.index == b.index and np.array_equal(a.floor_points_world, b.floor_points_world)
-        assert np.array_equal(a.cells.miss, b.cells.miss)
+        assert np.array_equal(a.obstacle_points_world, b.obstacle_points_world)
 
 
 def test_cli_map_on_a_scheduler_matches_in_process(dataset, threaded_cluster, tmp_path, capsys):
@@ -159,14 +159,20 @@ def test_fuse_uses_the_frames_cells_only_when_they_fit(dataset):
 
     from mrstereo.pipeline import PipelineConfig, fuse
 
-    run = build_map(dataset, progress=False)
     config = PipelineConfig()
+    config = replace(config, mapping=replace(config.mapping, map_occlusion_p=None))   # cells per frame
+    run = build_map(dataset, progress=False, config=config)
     assert all(o.cells is not None and o.cells.fits(config.grid, config.mapping) for o in run.observations)
     bare = [replace(o, cells=None) for o in run.observations]      # fuse computes the cells from the points
     np.testing.assert_array_equal(fuse(bare, grid=config.grid, config=config.mapping).log_odds, run.grid.log_odds)
     other = replace(config.mapping, min_points_per_cell=1)        # other cells: the stored ones must not be used
     fused_other = fuse(run.observations, grid=config.grid, config=other).log_odds
     np.testing.assert_array_equal(fused_other, fuse(bare, grid=config.grid, config=other).log_odds)
+    # the default map occludes: frames carry no cells, each view is traced in order against the map so far
+    default = build_map(dataset, progress=False)
+    assert all(o.cells is None for o in default.observations)
+    np.testing.assert_array_equal(fuse(default.observations, grid=config.grid, config=PipelineConfig().mapping).log_odds,
+                                  default.grid.log_odds)
     assert not np.array_equal(fused_other, run.grid.log_odds, equal_nan=True)
 
 

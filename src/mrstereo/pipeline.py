@@ -42,7 +42,7 @@ from .profiling import stage
 from .rejection import RejectionConfig
 from .recording import FrameRecord, Manifest, read_manifest
 
-__all__ = ["PipelineConfig", "FrameObservation", "MapRun", "observe_frame", "fuse", "build_map",
+__all__ = ["PipelineConfig", "FrameObservation", "MapRun", "observe_frame", "fuse", "add_observation", "build_map",
            "floor_for_run", "frame_pair", "matching_image", "write_map_outputs"]
 
 
@@ -232,7 +232,9 @@ def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: i
         bf = None if stereo is None else float(stereo.baseline_m * stereo.focal_px)
         height = float(obs.ground.height_m) if obs.success else None
         origin = tuple(record.pose[:2]) + (() if height is None else (height,))
-        cells = view_cells(obstacles, floor, origin, grid=config.grid, config=config.mapping, baseline_focal_m_px=bf)
+        # (a map that occludes traces every view against the map so far, in order: add_observation)
+        cells = None if config.mapping.map_occlusion_p is not None else \
+            view_cells(obstacles, floor, origin, grid=config.grid, config=config.mapping, baseline_focal_m_px=bf)
     return FrameObservation(index=index, pose=tuple(float(v) for v in record.pose), pan_rad=float(record.pan_rad),
                             obstacle_points_world=obstacles, floor_points_world=floor,
                             n_valid_disparity=int(np.isfinite(frame.disparity_px).sum()),
@@ -264,13 +266,21 @@ def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec = GridSpec(
     """
     occupancy = OccupancyGrid(grid, config=config)
     for obs in observations:
-        with stage("grid"):
-            if obs.cells is not None and obs.cells.fits(grid, config) and config.map_occlusion_p is None:
-                occupancy.apply(obs.cells)
-            else:
-                occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world,
-                                 baseline_focal_m_px=obs.baseline_focal_m_px)
+        add_observation(occupancy, obs)
     return occupancy
+
+
+def add_observation(occupancy: OccupancyGrid, obs: FrameObservation) -> None:
+    """One frame into the map, in order: its precomputed cells when they fit the map's grid and
+    config and the map does not occlude (``map_occlusion_p`` None), else its cells traced
+    against the map so far."""
+    grid, config = occupancy.grid, occupancy.config
+    with stage("grid"):
+        if obs.cells is not None and obs.cells.fits(grid, config) and config.map_occlusion_p is None:
+            occupancy.apply(obs.cells)
+        else:
+            occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world,
+                             baseline_focal_m_px=obs.baseline_focal_m_px)
 
 
 def _observe_indexed(indexed: tuple, *, stereo: StereoCamera, rig, config: PipelineConfig,

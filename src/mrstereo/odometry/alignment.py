@@ -397,6 +397,7 @@ def fuse_aligned(observations, *, grid: GridSpec = GridSpec(), config: MappingCo
     -------
     (OccupancyGrid, list of FrameObservation at the corrected poses, list of Alignment)
     """
+    from ..pipeline import add_observation
     from ..profiling import stage
 
     occupancy = OccupancyGrid(grid, config=config)
@@ -425,9 +426,7 @@ def fuse_aligned(observations, *, grid: GridSpec = GridSpec(), config: MappingCo
             result = align_points(obstacles, prior, field, grid, prior_covariance=P, config=align)
             P = result.covariance
         moved = observation_at(obs, result.pose, grid=grid, config=config, with_cells=False)
-        # as pipeline.fuse: the cells of the map so far (occlusion by the map) in order
-        occupancy.update(moved.obstacle_points_world, moved.floor_points_world, moved.sensor_origin_world,
-                         baseline_focal_m_px=moved.baseline_focal_m_px)
+        add_observation(occupancy, moved)
         corrected.append(moved)
         alignments.append(result)
         previous_given, previous_pose = given, result.pose
