@@ -27,7 +27,7 @@ quote numbers measured on a quiet machine only. ``--cpu`` times the stages in CP
 calling thread instead (one thread): on a busy machine it still counts each chain's own work
 (not the time other processes took), though shared caches still slow both chains.
 
-    python benchmarks/bench_frame.py [--repeats 3] [--frames 10] [--sizes 640x480,320x240] [--cpu]
+    python benchmarks/bench_frame.py [--repeats 3] [--frames 10] [--sizes 640x480,320x240] [--cpu] [--odometry]
     python benchmarks/bench_frame.py --scenes [--repeats 5]
 """
 from __future__ import annotations
@@ -69,11 +69,14 @@ def set_threads(n: int) -> None:
 
 # ----------------------------------------------------------------------------- whole frame
 class MrstereoChain:
-    """mrstereo from the raw pair to the log-odds grid, stage times from :mod:`mrstereo.profiling`."""
+    """mrstereo from the raw pair to the log-odds grid, stage times from :mod:`mrstereo.profiling`;
+    with ``odometry`` also the visual odometry's step on the frame (its own stage, fed the rectified
+    pair and the frame's disparity; a new track at frame 0 of every pass)."""
 
-    def __init__(self, manifest, config: PipelineConfig):
+    def __init__(self, manifest, config: PipelineConfig, odometry: bool = False):
         self.manifest, self.config = manifest, config
         self.grid = OccupancyGrid(config.grid, config=config.mapping)
+        self.odometry, self.vo = odometry, None
 
     def __call__(self, k: int, left, right) -> dict[str, float]:
         record = self.manifest.frames[k]
@@ -83,8 +86,19 @@ class MrstereoChain:
             obs = observation_from_pair(frame, record, index=k, config=self.config,
                                         stereo=self.manifest.calibration)
             add_observation(self.grid, obs)       # traced against the map so far, as map does
+        if self.odometry:
+            from mrstereo.odometry import StereoOdometry, T_base_from_cam_of
+
+            stereo = self.manifest.calibration
+            if k == 0 or self.vo is None:
+                self.vo = StereoOdometry(stereo)
+            left_rect, right_rect = stereo.rectify(left, right)       # (done inside the chain above too)
+            t0 = CLOCK()
+            self.vo.step(left_rect, right_rect, T_base_from_cam=T_base_from_cam_of(self.manifest.rig, record.pan_rad),
+                         disparity_px=frame.raw_disparity_px)
+            prof.add("odometry", CLOCK() - t0)
         self.max_disparity_px = frame.max_disparity_px
-        return {name: 1000.0 * prof.seconds.get(name, 0.0) for name in STAGES}
+        return {name: 1000.0 * prof.seconds.get(name, 0.0) for name in STAGES + ("odometry",)}
 
 
 class OpenCVChain:
@@ -139,7 +153,7 @@ def load_frames(manifest) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(gray(f.left), gray(f.right)) for f in manifest.frames]
 
 
-def whole_frame(sizes, n_frames: int, repeats: int, seed: int) -> None:
+def whole_frame(sizes, n_frames: int, repeats: int, seed: int, odometry: bool = False) -> None:
     from mrstereo.world.dataset import write_synthetic_dataset
 
     config = PipelineConfig()
@@ -149,10 +163,10 @@ def whole_frame(sizes, n_frames: int, repeats: int, seed: int) -> None:
     for width, height in sizes:
         with tempfile.TemporaryDirectory(prefix="bench-frame-") as tmp:
             folder = write_synthetic_dataset(Path(tmp) / "corridor", seed=seed, n_frames=n_frames, width=width,
-                                             height=height, progress=False)
+                                             height=height, progress=False, path="front" if odometry else "stops")
             manifest = read_manifest(folder)
             frames = load_frames(manifest)
-        mr = MrstereoChain(manifest, config)
+        mr = MrstereoChain(manifest, config, odometry=odometry)
         for k, (left, right) in enumerate(frames):       # warm-up: numba compile / cache load, every frame
             mr(k, left, right)
         cv = OpenCVChain(manifest, config, mr.max_disparity_px)
@@ -170,15 +184,15 @@ def whole_frame(sizes, n_frames: int, repeats: int, seed: int) -> None:
                     a, b = times[id(mr)], times[id(cv)]
                     t_mr.append(a)
                     t_cv.append(b)
-                    ratios.append(sum(a.values()) / sum(b.values()))
-            total_mr = float(np.median([sum(a.values()) for a in t_mr]))
+                    ratios.append(sum(v for n, v in a.items() if n in STAGES) / sum(b.values()))
+            total_mr = float(np.median([sum(v for n, v in a.items() if n in STAGES) for a in t_mr]))
             total_cv = float(np.median([sum(b.values()) for b in t_cv]))
             print(f"  threads={threads}: mrstereo {total_mr:.1f} ms/frame, OpenCV chain {total_cv:.1f} ms/frame, "
                   f"ratio mrstereo/OpenCV {np.median(ratios):.2f} (range {min(ratios):.2f}-{max(ratios):.2f})")
             print("    | stage | mrstereo ms | OpenCV ms |\n    |---|---|---|")
-            for name in STAGES:
+            for name in STAGES + (("odometry",) if odometry else ()):
                 print(f"    | {name} | {np.median([a[name] for a in t_mr]):.2f} | "
-                      f"{np.median([b[name] for b in t_cv]):.2f} |")
+                      f"{np.median([b.get(name, 0.0) for b in t_cv]):.2f} |")
         set_threads(max(thread_counts()))
     print(f"\nload average after: {os.getloadavg()}")
 
@@ -275,6 +289,9 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=5, help="seed of the synthetic corridor")
     parser.add_argument("--sizes", default="640x480,320x240", help="image sizes, e.g. 640x480,320x240")
     parser.add_argument("--scenes", action="store_true", help="the matcher alone on the shared real scenes")
+    parser.add_argument("--odometry", action="store_true",
+                        help="whole frame along the straight `front` path, with the visual odometry's step as a "
+                             "stage of its own (not counted in the ratio to the OpenCV chain)")
     parser.add_argument("--cpu", action="store_true",
                         help="whole frame: stage times as CPU time of the calling thread, one thread only (robust "
                              "to other processes on a busy machine; wall-clock by default)")
@@ -286,7 +303,7 @@ def main() -> None:
         scenes(args.repeats)
     else:
         sizes = [tuple(int(v) for v in s.lower().split("x")) for s in args.sizes.split(",")]
-        whole_frame(sizes, args.frames, args.repeats, args.seed)
+        whole_frame(sizes, args.frames, args.repeats, args.seed, odometry=args.odometry)
 
 
 if __name__ == "__main__":
