@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -56,9 +55,9 @@ def dataset(root: Path, seed: int, frames: int, width: int, height: int, path: s
     return out
 
 
-def repose(observations, poses, config: PipelineConfig):
+def repose(observations, poses):
     """The observations at other poses (robot-frame points moved into the world again)."""
-    return [observation_at(obs, pose, grid=config.grid, config=config.mapping) for obs, pose in zip(observations, poses)]
+    return [observation_at(obs, pose) for obs, pose in zip(observations, poses)]
 
 
 def run_vo(path: Path) -> dict:
@@ -88,7 +87,7 @@ def run_seed(path: Path) -> dict:
         m = map_metrics(occupancy, gt, path_xy=true)
         return m.precision, m.recall
 
-    maps = {"true poses": metrics(fuse(repose(given_obs, true, config), grid=config.grid, config=config.mapping)),
+    maps = {"true poses": metrics(fuse(repose(given_obs, true), grid=config.grid, config=config.mapping)),
             "drifted odometry": metrics(run.grid)}
     t0 = time.perf_counter()
     aligned, aligned_obs, alignments = fuse_aligned(given_obs, grid=config.grid, config=config.mapping,
@@ -96,8 +95,8 @@ def run_seed(path: Path) -> dict:
     align_s = (time.perf_counter() - t0) / len(given_obs)
     maps["map --align"] = metrics(aligned)
     keep = vo.tracked
-    maps["map --odometry visual"] = metrics(fuse(repose([o for o, k in zip(given_obs, keep) if k], vo.poses[keep],
-                                                        config), grid=config.grid, config=config.mapping))
+    tracked = repose([o for o, k in zip(given_obs, keep) if k], vo.poses[keep])
+    maps["map --odometry visual"] = metrics(fuse(tracked, grid=config.grid, config=config.mapping))
     T_aligned = np.stack([T_from_planar(*o.pose) for o in aligned_obs])
     T_given = np.stack([T_from_planar(*f.pose) for f in manifest.frames])
     return {"vo": traj, "vo_lost": vo.n_lost, "vo_ms": 1000 * float(np.median(vo.time_s)),

@@ -44,7 +44,7 @@ import numpy as np
 from .. import _checks
 from ..mapping import GridSpec
 from ..mapping.grid import distance_cells
-from ..mapping.occupancy import MappingConfig, OccupancyGrid, view_cells
+from ..mapping.occupancy import MappingConfig, OccupancyGrid
 from ._kernels import score_poses
 
 __all__ = ["AlignConfig", "Alignment", "likelihood_field", "align_points", "fuse_aligned", "compose_planar",
@@ -321,23 +321,16 @@ def _world_points(points_robot: np.ndarray, pose) -> np.ndarray:
                             points_robot[:, 2]]).astype(np.float32)
 
 
-def observation_at(obs, pose, *, grid: GridSpec = GridSpec(), config: MappingConfig = MappingConfig(),
-                   with_cells: bool = True):
+def observation_at(obs, pose):
     """A :class:`~mrstereo.pipeline.FrameObservation` moved to another planar ``pose``.
 
-    Its points keep their place in the robot frame; its cells are those of ``grid`` and
-    ``config`` (with the frame's sensor height and range uncertainty, as the pipeline makes them),
-    or None without ``with_cells``.
+    Its points keep their place in the robot frame; it carries no cells (the map traces them,
+    :func:`mrstereo.pipeline.add_observation`).
     """
     pose = tuple(float(v) for v in pose)
     obstacles = _world_points(_robot_points(obs.obstacle_points_world, obs.pose), pose)
     floor = _world_points(_robot_points(obs.floor_points_world, obs.pose), pose)
-    moved = replace(obs, pose=pose, obstacle_points_world=obstacles, floor_points_world=floor, cells=None)
-    if not with_cells:
-        return moved
-    cells = view_cells(obstacles, floor, moved.sensor_origin_world, grid=grid, config=config,
-                       baseline_focal_m_px=obs.baseline_focal_m_px)
-    return replace(moved, cells=cells)
+    return replace(obs, pose=pose, obstacle_points_world=obstacles, floor_points_world=floor, cells=None)
 
 
 def _propagate(P: np.ndarray, pose, step, Q_robot: np.ndarray) -> np.ndarray:
@@ -425,7 +418,7 @@ def fuse_aligned(observations, *, grid: GridSpec = GridSpec(), config: MappingCo
                                      outlier_probability=align.outlier_probability)
             result = align_points(obstacles, prior, field, grid, prior_covariance=P, config=align)
             P = result.covariance
-        moved = observation_at(obs, result.pose, grid=grid, config=config, with_cells=False)
+        moved = observation_at(obs, result.pose)
         add_observation(occupancy, moved)
         corrected.append(moved)
         alignments.append(result)
