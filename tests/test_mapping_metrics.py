@@ -6,7 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from mrstereo.mapping import GridSpec, RosMap, cells_near_path, map_metrics
+from mrstereo.mapping import GridSpec, RosMap, cells_in_view, cells_near_path, map_metrics
+from mrstereo.mapping.grid import dilate_cells
 
 
 def corridor(shift_rows: int = 0, *, grid: GridSpec | None = None) -> RosMap:
@@ -128,3 +129,22 @@ def test_cells_in_view_follow_the_field_of_view_and_stop_at_walls():
     assert wrong.free_precision < 1.0 and np.isnan(wrong.free_coverage)
     with pytest.raises(ValueError, match="views"):
         cells_in_view(truth, [(0.0, 0.0, 0.0)])
+
+
+def test_recall_in_view_counts_the_walls_some_frame_looked_at():
+    truth = corridor()                                   # walls at rows 30 and 90, 240 columns
+    x0, y0 = GridSpec().xy_from_cells(60, 20)
+    view = [(x0, y0, 0.0, np.radians(60), 2.0)]          # sees the walls up to about column 55
+    est = truth.occupancy.copy()
+    est[[30, 90], 60:] = np.nan                          # walls beyond the view missing
+    m = map_metrics(RosMap(est, truth.grid), truth, views=view)
+    assert m.recall_in_view == 1.0 and m.recall == pytest.approx(122 / 480)   # (column 60 within tolerance)
+    est[30, 30:45] = np.nan                              # 15 cells of a wall in view missing
+    m = map_metrics(RosMap(est, truth.grid), truth, views=view)
+    seen_surface = np.zeros(truth.grid.shape, bool)
+    seen_surface[[30, 90]] = True
+    seen_surface &= dilate_cells(cells_in_view(truth, view), 1)
+    missed = seen_surface.copy()
+    missed[30, 30 + 1:45 - 1] = False                    # the 1-cell tolerance keeps the two ends
+    assert m.recall_in_view == pytest.approx(missed.sum() / seen_surface.sum())
+    assert np.isnan(map_metrics(RosMap(est, truth.grid), truth).recall_in_view)

@@ -91,7 +91,8 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     echo_run_floor(run.floor)
     if run.metrics is not None:
         m = run.metrics
-        click.echo(f"vs ground truth: precision {m.precision:.3f}, recall {m.recall:.3f}, "
+        in_view = "" if m.recall_in_view != m.recall_in_view else f" ({m.recall_in_view:.3f} of the walls in view)"
+        click.echo(f"vs ground truth: precision {m.precision:.3f}, recall {m.recall:.3f}{in_view}, "
                    f"wall profile error {m.mean_distance_m * 100:.1f} cm, free correct {m.free_accuracy:.3f}")
     if run.odometry is not None:
         click.echo(f"visual odometry: {run.odometry.message}")

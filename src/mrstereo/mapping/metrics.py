@@ -40,6 +40,7 @@ class MapMetrics:
     within_m: float | None
     free_precision: float = math.nan
     free_coverage: float = math.nan
+    recall_in_view: float = math.nan
 
     def to_dict(self) -> dict:
         return {k: (None if isinstance(v, float) and math.isnan(v) else v)
@@ -149,7 +150,10 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
         ``free_precision`` = estimated free cells that are truly free / estimated free cells (a
         cell mapped free on a wall, an obstacle or behind a wall is wrong);
         ``free_coverage`` = true free cells in view of some frame (:func:`cells_in_view`) mapped
-        free / true free cells in view (NaN without ``views``).
+        free / true free cells in view (NaN without ``views``);
+        ``recall_in_view`` = as ``recall``, over the true occupied surface cells that some frame
+        had in view (touching a true free cell in view: a wall no frame looked at cannot be in
+        the map; NaN without ``views``).
     """
     est = _as_ros_map("estimated", estimated)
     gt = _as_ros_map("ground_truth", ground_truth)
@@ -192,13 +196,16 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
     known_fraction = ratio((region & ~est.unknown).sum(), region.sum())
     est_free = est.free & region
     free_precision = ratio((est_free & gt.free).sum(), est_free.sum())
-    free_coverage = math.nan
+    free_coverage = recall_in_view = math.nan
     if views is not None:
         in_view = cells_in_view(gt, views) & region
         free_coverage = ratio((in_view & est.free).sum(), in_view.sum())
+        seen_surface = gt_occ & dilate_cells(in_view, 1)
+        recall_in_view = ratio((seen_surface & near_est).sum(), seen_surface.sum())
     return MapMetrics(precision=precision, recall=recall, mean_distance_m=mean_distance,
                       free_accuracy=free_accuracy, known_fraction=known_fraction,
                       estimated_occupied_cells=int(est_occ.sum()),
                       true_occupied_cells=int(gt_occ.sum()), true_free_cells=int(gt_free.sum()),
                       evaluated_cells=int(region.sum()), tolerance_cells=tol, within_m=within,
-                      free_precision=free_precision, free_coverage=free_coverage)
+                      free_precision=free_precision, free_coverage=free_coverage,
+                      recall_in_view=recall_in_view)
