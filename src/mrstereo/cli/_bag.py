@@ -11,7 +11,7 @@ from pathlib import Path
 
 import click
 
-from ._options import check_workers, echo_run_floor, mount_option, parse_mount, worker_options
+from ._options import CALIB_HELP, check_workers, echo_run_floor, mount_option, parse_mount, worker_options
 
 __all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "rig_from_options", "opened_dataset"]
 
@@ -139,7 +139,7 @@ def echo_export(result) -> None:
               help="ROS 1 .bag file or ROS 2 bag directory (sqlite3 or mcap).")
 @bag_options
 @click.option("--calib", "calib", type=click.Path(dir_okay=False, path_type=Path),
-              help="Stereo calibration YAML instead of the camera_info topics.")
+              help=CALIB_HELP + " Used instead of the camera_info topics.")
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="New dataset directory (manifest.yaml, stereo.yaml, left/, right/).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")

@@ -6,6 +6,8 @@ import math
 from pathlib import Path
 
 import click
+
+from ._options import CALIB_HELP
 from tqdm import tqdm
 
 from .. import _checks
@@ -195,7 +197,7 @@ def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, se
 
 
 @click.command("rectify")
-@click.option("--calib", required=True, type=click.Path(dir_okay=False), help="Stereo calibration YAML.")
+@click.option("--calib", required=True, type=click.Path(dir_okay=False), help=CALIB_HELP)
 @click.argument("left", type=click.Path(dir_okay=False))
 @click.argument("right", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False), help="Output directory.")

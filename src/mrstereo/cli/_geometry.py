@@ -12,7 +12,7 @@ import click
 import numpy as np
 
 from ..io import check_outputs
-from ._options import echo_floor, mount_option, parse_mount, profile_option
+from ._options import CALIB_HELP, echo_floor, mount_option, parse_mount, profile_option
 
 __all__ = ["COMMANDS"]
 
@@ -22,7 +22,7 @@ def _common(func):
         click.argument("left", type=click.Path(dir_okay=False)),
         click.argument("right", type=click.Path(dir_okay=False)),
         click.option("--calib", "calib", required=True, type=click.Path(dir_okay=False),
-                     help="Stereo calibration YAML (left:/right: camera_info, optional rig:)."),
+                     help=CALIB_HELP + " A stereo YAML may hold the mount (rig:)."),
         click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output file."),
         click.option("--rectified", is_flag=True, help="The images are already rectified."),
         click.option("--height", "height_m", type=float, default=None,

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ._options import profile_option
+from ._options import CALIB_HELP, profile_option
 
 __all__ = ["COMMANDS"]
 
@@ -42,7 +42,7 @@ def _bands(text: str) -> list[tuple[float, float]]:
               help="Search 0..N px (split into ranges N/4, N/2, N at decimations 4, 2, 1; fewer levels "
                    "for N < 32).")
 @click.option("--bands", help="Disparity bands in full-resolution px, e.g. 0:24,24:48,48:96.")
-@click.option("--calib", type=click.Path(dir_okay=False), help="Stereo calibration YAML.")
+@click.option("--calib", type=click.Path(dir_okay=False), help=CALIB_HELP)
 @click.option("--depth-bands", help="Depth band edges in metres, e.g. 0.5,1,2.5,15 (needs --calib).")
 @click.option("--rectified", is_flag=True, help="With --calib: the images are already rectified.")
 @click.option("--preset", type=click.Choice(["robust", "mapping", "paper"]), default="robust", show_default=True)

@@ -5,6 +5,9 @@ import functools
 
 import click
 
+CALIB_HELP = ("Calibration file in any supported format (mrstereo/ROS stereo YAML, Kalibr camchain, OpenCV "
+              "FileStorage, OpenLORIS), or two per-camera files as LEFT,RIGHT; see `mrstereo calib convert --help`.")
+
 
 def worker_options(func):
     """``--workers N [--processes]`` / ``--scheduler ADDRESS`` (docs/scale-out.md)."""
