@@ -6,8 +6,9 @@ of the path: occupied precision / recall (1-cell tolerance, recall over the wall
 obstacle outlines; "recall in view" over those some frame had in view), the corridor-profile
 error (mean distance of occupied cells to the true walls), the share of cells mapped free that are truly free ("free correct"), the share of the
 true free cells in view of some frame that are mapped free ("free coverage"), the share of all
-true free cells within 4 m mapped free, and recall within 1 m of the path ("near": where the
-multi-range approach matters).
+true free cells within 4 m mapped free, recall within 1 m of the path ("near": where the
+multi-range approach matters) and the share of the world's obstacles found (an occupied cell on
+or next to the obstacle's footprint).
 
 Two worlds:
 
@@ -39,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 COLUMNS = ("occupied precision", "occupied recall", "recall in view", "wall profile error [cm]", "free correct",
-           "free coverage", "true free mapped free", "recall within 1 m")
+           "free coverage", "true free mapped free", "recall within 1 m", "obstacles found")
 PROFILE = COLUMNS.index("wall profile error [cm]")      # the one column where less is better
 
 
@@ -82,13 +83,17 @@ def variants() -> dict:
     }
 
 
-def _metrics(grid, gt, path, views) -> tuple:
+def _metrics(grid, gt, path, views, obstacles) -> tuple:
+    from mrstereo.mapping.grid import dilate_cells
     from mrstereo.mapping.metrics import map_metrics
 
     far = map_metrics(grid, gt, path_xy=path, within_m=4.0, views=views)
     near = map_metrics(grid, gt, path_xy=path, within_m=1.0)
+    # an obstacle is found when an occupied cell lies on its footprint or within one cell of it
+    occupied = dilate_cells(grid.to_ros_map().occupied, 1)
+    found = np.mean([(occupied & cells).any() for cells in obstacles]) if obstacles else np.nan
     return (far.precision, far.recall, far.recall_in_view, far.mean_distance_m * 100, far.free_precision,
-            far.free_coverage, far.free_accuracy, near.recall)
+            far.free_coverage, far.free_accuracy, near.recall, found)
 
 
 def evaluate_seed(seed: int, *, randomized: bool, frames: int, data_dir: str | None, with_variants: bool,
@@ -96,7 +101,8 @@ def evaluate_seed(seed: int, *, randomized: bool, frames: int, data_dir: str | N
     """Render (or reuse) one world, map it, return {row name: metrics tuple} and the time taken."""
     from mrstereo.mapping import read_ros_map
     from mrstereo.pipeline import PipelineConfig, build_map, fuse, views_of_frames
-    from mrstereo.world import read_manifest, write_synthetic_dataset
+    from mrstereo.world import (default_scene, obstacle_footprints, random_world, read_manifest,
+                                write_synthetic_dataset)
 
     t0 = time.perf_counter()
     root = Path(data_dir) if data_dir else Path(tempfile.mkdtemp(prefix="bench_map_"))
@@ -108,22 +114,24 @@ def evaluate_seed(seed: int, *, randomized: bool, frames: int, data_dir: str | N
     path = np.array([f.pose for f in manifest.frames])
     config = PipelineConfig()
     views = views_of_frames(manifest.frames, manifest.calibration, range_m=config.obstacles.max_range_m)
+    scene = random_world(seed).scene if randomized else default_scene(seed)
+    obstacles = obstacle_footprints(scene, gt.grid)
     rows: dict[str, tuple] = {}
     run = build_map(manifest, config=config, progress=False)
-    rows["multi-range, log-odds (default)"] = _metrics(run.grid, gt, path, views)
+    rows["multi-range, log-odds (default)"] = _metrics(run.grid, gt, path, views, obstacles)
     if fixed_rows:
         union = fuse(run.observations, grid=config.grid, config=config.with_fusion("union").mapping)
-        rows["multi-range, union (the paper's fusion)"] = _metrics(union, gt, path, views)
+        rows["multi-range, union (the paper's fusion)"] = _metrics(union, gt, path, views, obstacles)
         single = config.single_range_equal_work(manifest.calibration)
         grid = build_map(manifest, config=single, progress=False).grid
-        rows[f"single range 0-{single.max_disparity_px:.0f} px, equal work"] = _metrics(grid, gt, path, views)
+        rows[f"single range 0-{single.max_disparity_px:.0f} px, equal work"] = _metrics(grid, gt, path, views, obstacles)
     if with_variants:
         for name, variant in variants().items():
             if replace(variant, mapping=config.mapping) == config:     # only the mapping differs: re-fuse
                 grid = fuse(run.observations, grid=config.grid, config=variant.mapping)
             else:
                 grid = build_map(manifest, config=variant, progress=False).grid
-            rows[f"variant: {name}"] = _metrics(grid, gt, path, views)
+            rows[f"variant: {name}"] = _metrics(grid, gt, path, views, obstacles)
     return seed, rows, time.perf_counter() - t0
 
 

@@ -72,3 +72,17 @@ def test_other_grid_and_bad_inputs():
         ground_truth_map(default_scene(0), grid=(12, 6))
     with pytest.raises(ValueError, match="height_band_m"):
         ground_truth_map(default_scene(0), height_band_m=(2.0, 0.1))
+
+
+def test_obstacle_footprints_are_the_obstacles_of_the_ground_truth_map():
+    from mrstereo.mapping import GridSpec
+    from mrstereo.world import ground_truth_map, obstacle_footprints, random_world
+
+    world = random_world(3)
+    grid = GridSpec()
+    footprints = obstacle_footprints(world.scene, grid)
+    assert len(footprints) == len(world.summary["obstacles"])        # one per drawn obstacle
+    truth = ground_truth_map(world.scene, grid).occupied
+    for cells in footprints:
+        assert cells.any() and truth[cells].all()
+    assert not np.logical_and(footprints[0], footprints[1]).any()   # placed apart (0.4 m clearance)

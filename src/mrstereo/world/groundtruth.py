@@ -7,13 +7,15 @@ Grid conventions: :class:`mrstereo.mapping.grid.GridSpec`, docs/conventions.md.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..mapping.grid import GridSpec
 from ..mapping.rosmap import RosMap
-from .scene import LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, Scene
+from .scene import LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, Scene
 
-__all__ = ["ground_truth_map", "occupied_footprint"]
+__all__ = ["ground_truth_map", "occupied_footprint", "obstacle_footprints"]
 
 
 def occupied_footprint(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.0)) -> np.ndarray:
@@ -43,6 +45,21 @@ def occupied_footprint(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.0
         ey = np.maximum(np.maximum(y_lo - cy, cy - (y_lo + res)), 0.0)
         occ |= (ey[:, None] ** 2 + ex[None, :] ** 2) < cyl.radius_m ** 2
     return occ
+
+
+def obstacle_footprints(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.0)) -> list[np.ndarray]:
+    """One boolean (rows, cols) footprint per obstacle of ``scene`` (its boxes and cylinders of
+    label ``LABEL_OBSTACLE + k``, e.g. a table's top and legs together), in label order; empty
+    footprints (outside the grid or the height band) are left out."""
+    labels = sorted({p.label for p in (*scene.boxes, *scene.cylinders) if p.label >= LABEL_OBSTACLE})
+    footprints = []
+    for label in labels:
+        one = replace(scene, boxes=tuple(b for b in scene.boxes if b.label == label),
+                      cylinders=tuple(c for c in scene.cylinders if c.label == label))
+        cells = occupied_footprint(one, grid, height_band_m=height_band_m)
+        if cells.any():
+            footprints.append(cells)
+    return footprints
 
 
 def _band(height_band_m) -> tuple[float, float]:
