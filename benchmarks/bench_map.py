@@ -26,6 +26,7 @@ Usage::
     python benchmarks/bench_map.py [--seeds 0 1 2] [--frames 30]
     python benchmarks/bench_map.py --randomized --seeds 100-119 [--frames 24] [--workers 2]
     python benchmarks/bench_map.py --randomized --seeds 0-9 --variants
+    python benchmarks/bench_map.py --randomized --seeds 0-9 --wall-texture stripes   # striped walls
 """
 from __future__ import annotations
 
@@ -97,7 +98,7 @@ def _metrics(grid, gt, path, views, obstacles) -> tuple:
 
 
 def evaluate_seed(seed: int, *, randomized: bool, frames: int, data_dir: str | None, with_variants: bool,
-                  fixed_rows: bool) -> tuple[int, dict, float]:
+                  fixed_rows: bool, wall_texture: str | None = None) -> tuple[int, dict, float]:
     """Render (or reuse) one world, map it, return {row name: metrics tuple} and the time taken."""
     from mrstereo.mapping import read_ros_map
     from mrstereo.pipeline import PipelineConfig, build_map, fuse, views_of_frames
@@ -106,9 +107,10 @@ def evaluate_seed(seed: int, *, randomized: bool, frames: int, data_dir: str | N
 
     t0 = time.perf_counter()
     root = Path(data_dir) if data_dir else Path(tempfile.mkdtemp(prefix="bench_map_"))
-    ds = root / f"{'random' if randomized else 'corridor'}_seed{seed}_{frames}f"
+    ds = root / f"{'random' if randomized else 'corridor'}_seed{seed}_{frames}f{'_' + wall_texture if wall_texture else ''}"
     if not (ds / "manifest.yaml").is_file():
-        write_synthetic_dataset(ds, seed=seed, n_frames=frames, progress=False, randomize=randomized)
+        write_synthetic_dataset(ds, seed=seed, n_frames=frames, progress=False, randomize=randomized,
+                                wall_texture=wall_texture)
     manifest = read_manifest(ds)
     gt = read_ros_map(manifest.ground_truth_map)
     path = np.array([f.pose for f in manifest.frames])
@@ -147,12 +149,17 @@ def main() -> None:
     parser.add_argument("--variants", action="store_true", help="also map with the mapping variants")
     parser.add_argument("--workers", type=int, default=1, help="seeds mapped in parallel processes")
     parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
+    parser.add_argument("--wall-texture", default=None,
+                        help="randomized worlds with this wall material instead of the drawn one "
+                             "(paint, tiles, stripes, blotch, wood): a development variant of the same seeds")
     args = parser.parse_args()
+    if args.wall_texture and not args.randomized:
+        parser.error("--wall-texture needs --randomized")
     seeds = _parse_seeds(args.seeds) if args.seeds else ([100 + k for k in range(20)] if args.randomized
                                                           else [0, 1, 2])
     frames = args.frames or (24 if args.randomized else 30)
     kwargs = dict(randomized=args.randomized, frames=frames, data_dir=args.data, with_variants=args.variants,
-                  fixed_rows=not args.randomized)
+                  fixed_rows=not args.randomized, wall_texture=args.wall_texture)
     per_seed: dict[int, dict] = {}
     t0 = time.perf_counter()
     if args.workers > 1:
@@ -170,6 +177,8 @@ def main() -> None:
             print(f"seed {seed}: {dt:.1f} s", flush=True)
     wall = time.perf_counter() - t0
     world = "randomized worlds" if args.randomized else "the fixed corridor"
+    if args.wall_texture:
+        world += f" with {args.wall_texture} walls"
     print(f"\n{world}, seeds {seeds[0]}..{seeds[-1]} ({len(seeds)}), {frames} frames each, 320x240, "
           f"{wall:.0f} s wall with {args.workers} worker(s)\n")
     names = list(per_seed[seeds[0]])

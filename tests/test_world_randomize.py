@@ -15,6 +15,7 @@ from mrstereo.world import (LABEL_FLOOR, LABEL_OBSTACLE, LABEL_WALL, Scene, Sens
 from mrstereo.recording import read_manifest
 from mrstereo.world.dataset import write_synthetic_dataset
 from mrstereo.world.randomize import RANGES, _path_points
+from mrstereo.world.scene import TEXTURE_STRIPES_U
 
 SEEDS = range(30)
 
@@ -197,3 +198,43 @@ def test_synth_randomize_cli(tmp_path):
     assert result.exit_code == 0, result.output
     m = read_manifest(out)
     assert m.rig == random_world(3, width=64, height=48).stereo.rig
+
+
+def test_wall_texture_variant_changes_the_walls_only():
+    for seed in (0, 1, 3):
+        drawn = random_world(seed)
+        striped = random_world(seed, wall_texture="stripes")
+        a, b = dict(drawn.summary), dict(striped.summary)
+        assert b["textures"]["wall"] == "stripes" and a["textures"]["wall"] != "stripes"
+        a["textures"] = {**a["textures"], "wall": None}
+        b["textures"] = {**b["textures"], "wall": None}
+        assert a == b                                   # every other drawn quantity is the seed's
+        assert drawn.scene.boxes == striped.scene.boxes and drawn.scene.decals == striped.scene.decals
+        np.testing.assert_array_equal(drawn.waypoints_xy, striped.waypoints_xy)
+        assert drawn.sensors == striped.sensors
+        wall = next(box.material for box in drawn.scene.boxes if box.label == LABEL_WALL)
+        changed = [k for k, (m0, m1) in enumerate(zip(drawn.scene.materials, striped.scene.materials)) if m0 != m1]
+        assert changed == [wall]
+        assert striped.scene.materials[wall].kind == TEXTURE_STRIPES_U
+        assert random_world(seed, wall_texture="stripes").scene == striped.scene      # reproducible
+    # a seed whose drawn walls already are of that kind stays the same world
+    kind = random_world(0).summary["textures"]["wall"]
+    assert random_world(0, wall_texture=kind).scene == random_world(0).scene
+
+
+def test_wall_texture_bad_value_and_cli(tmp_path):
+    with pytest.raises(ValueError, match="wall_texture must be one of"):
+        random_world(0, wall_texture="marble")
+    with pytest.raises(ValueError, match="randomize=True"):
+        write_synthetic_dataset(tmp_path / "x", n_frames=1, wall_texture="stripes")
+    result = CliRunner().invoke(main, ["synth", "--out", str(tmp_path / "y"), "--wall-texture", "stripes"])
+    assert result.exit_code == 2 and "--wall-texture needs --randomize" in result.output
+    result = CliRunner().invoke(main, ["synth", "--randomize", "--out", str(tmp_path / "z"),
+                                       "--wall-texture", "marble"])
+    assert result.exit_code == 2 and "--wall-texture" in result.output and "Traceback" not in result.output
+    out = tmp_path / "s"
+    result = CliRunner().invoke(main, ["synth", "--randomize", "--seed", "1", "--frames", "1", "--width", "64",
+                                       "--height", "48", "--wall-texture", "stripes", "--quiet", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    generator = yaml.safe_load((out / "manifest.yaml").read_text())["generator"]
+    assert generator["randomized"]["textures"]["wall"] == "stripes"

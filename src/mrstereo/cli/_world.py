@@ -20,6 +20,10 @@ __all__ = ["COMMANDS"]
 @click.option("--randomize", is_flag=True,
               help="A randomized world drawn from --seed (corridor, textures, lights, rig, sensors, "
                    "obstacles, path) instead of the built-in corridor.")
+@click.option("--wall-texture", "wall_texture", type=click.Choice(["paint", "tiles", "stripes", "blotch", "wood"]),
+              default=None,
+              help="With --randomize: give the walls this material instead of the drawn one; everything else "
+                   "stays the seed's world (e.g. stripes: a repetitive-texture variant).")
 @click.option("--path", "path_kind", type=click.Choice(["stops", "front", "s-curve"]), default="stops",
               show_default=True,
               help="stops: front/left/right views at each stop (mapping); front, s-curve: one front view every "
@@ -30,8 +34,8 @@ __all__ = ["COMMANDS"]
               help="Store drifted odometry as each frame's pose (scale error, heading drift in degrees per "
                    "metre, e.g. 0.03,2) and the truth as true_pose.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, randomize: bool, path_kind: str,
-          step_m: float, odometry_noise: str | None, quiet: bool) -> None:
+def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, randomize: bool,
+          wall_texture: str | None, path_kind: str, step_m: float, odometry_noise: str | None, quiet: bool) -> None:
     """Render the synthetic office corridor into a dataset directory (docs/dataset.md).
 
     Writes raw and rectified stereo pairs, ground-truth disparity (PFM) and
@@ -41,6 +45,8 @@ def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, rand
     from ..io import check_output_dir
     from ..world.dataset import write_synthetic_dataset
 
+    if wall_texture is not None and not randomize:
+        raise click.UsageError("--wall-texture needs --randomize")
     check_output_dir("--out", out_dir, must_be_empty=True)
     import math
 
@@ -58,7 +64,7 @@ def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, rand
         raise click.BadParameter(f"must be a positive number, got {step_m}", param_hint="--step")
     path = write_synthetic_dataset(out_dir, seed=seed, n_frames=n_frames, width=width, height=height,
                                    path=path_kind, step_m=step_m, odometry_noise=noise, progress=not quiet,
-                                   randomize=randomize)
+                                   randomize=randomize, wall_texture=wall_texture)
     click.echo(f"wrote {n_frames} frames to {path} (manifest: {path / 'manifest.yaml'})")
 
 

@@ -64,7 +64,8 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                             width: int = 320, height: int = 240, supersample: int = 2,
                             path: str = "stops", step_m: float = 0.1,
                             odometry_noise: tuple[float, float] | None = None,
-                            progress: bool = True, randomize: bool = False) -> Path:
+                            progress: bool = True, randomize: bool = False,
+                            wall_texture: str | None = None) -> Path:
     """Render the default corridor (or a randomized world) along its path and write a dataset directory.
 
     ``path="stops"`` (the paper's run): at each stop along :func:`corridor_path` (a randomized
@@ -103,6 +104,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         Render :func:`mrstereo.world.randomize.random_world` of ``seed`` (its corridor, rig,
         sensors and path) instead of the built-in corridor; the drawn parameters are written
         under ``generator:`` in the manifest. The same seed gives the same files.
+    wall_texture : str, optional
+        With ``randomize=True``: the walls get this kind of material instead of the drawn one
+        (``random_world(..., wall_texture=...)``; one of
+        :data:`mrstereo.world.randomize.WALL_TEXTURES`), everything else stays the seed's world.
 
     Returns
     -------
@@ -126,10 +131,12 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     if randomize and path == "s-curve":
         raise ValueError("path='s-curve' is a path of the built-in corridor; a randomized world's odometry "
                          "sequence is path='front' (along the world's own waypoints)")
+    if wall_texture is not None and not randomize:
+        raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
     n_stops = -(-n_frames // len(_PANS))
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
     if randomize:
-        world = random_world(seed, width=width, height=height)
+        world = random_world(seed, width=width, height=height, wall_texture=wall_texture)
         stereo, scene, sensors = world.stereo, world.scene, world.sensors
         stops = poses_along(world.waypoints_xy, n_stops)
         generator["randomized"] = world.summary

@@ -32,7 +32,7 @@ from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, LABE
                     TEXTURE_TILES, TEXTURE_WEAK, TEXTURE_WOOD, Box, Cylinder, Decal, Light, Material, Scene,
                     _wall_boxes)
 
-__all__ = ["RandomWorld", "random_world", "random_stereo", "RANGES"]
+__all__ = ["RandomWorld", "random_world", "random_stereo", "RANGES", "WALL_TEXTURES"]
 
 RANGES = {
     "corridor_width_m": (1.6, 3.0),
@@ -118,8 +118,13 @@ def random_stereo(rng, width: int = 320, height: int = 240) -> StereoCamera:
 
 
 # --------------------------------------------------------------------------- texture bank
-def _wall_material(rng) -> tuple[str, Material]:
-    kind = rng.choice(["paint", "paint", "tiles", "stripes", "blotch", "wood"])
+WALL_TEXTURES = ("paint", "tiles", "stripes", "blotch", "wood")
+"""Kinds of wall material in the bank (``random_world(..., wall_texture=...)`` picks one)."""
+
+
+def _wall_material(rng, kind: str | None = None) -> tuple[str, Material]:
+    if kind is None:
+        kind = str(rng.choice(["paint", "paint", "tiles", "stripes", "blotch", "wood"]))
     a = rng.uniform(0.45, 0.85)
     if kind == "paint":        # low-texture paint: a few grey levels, comparable to the noise
         return kind, Material(TEXTURE_WEAK, a, rng.uniform(0.01, 0.05), rng.uniform(0.1, 0.5))
@@ -255,7 +260,8 @@ def _labelled(boxes: list[Box], cyls: list[Cylinder], label: int) -> tuple[list[
 
 
 # --------------------------------------------------------------------------- the world
-def random_world(seed: int, *, width: int = 320, height: int = 240) -> RandomWorld:
+def random_world(seed: int, *, width: int = 320, height: int = 240,
+                 wall_texture: str | None = None) -> RandomWorld:
     """Draw a corridor world, its stereo rig, sensors and robot path from ``seed``.
 
     Parameters
@@ -264,6 +270,12 @@ def random_world(seed: int, *, width: int = 320, height: int = 240) -> RandomWor
         Non-negative; the same seed gives the same world.
     width, height : int
         Image size of the rig (the field of view is drawn independently of it).
+    wall_texture : {"paint", "tiles", "stripes", "blotch", "wood"}, optional
+        Give the walls this kind of material instead of the drawn one (a development variant:
+        e.g. ``"stripes"`` puts vertical stripes of period 0.06-0.4 m on every wall). The
+        replacement is drawn from a stream of its own after all other draws, so everything
+        else (rig, layout, obstacles, posters, lights, sensors, path) stays the world of
+        ``seed``; if the drawn kind already is ``wall_texture`` the world is unchanged.
 
     Returns
     -------
@@ -278,6 +290,8 @@ def random_world(seed: int, *, width: int = 320, height: int = 240) -> RandomWor
     or chair share its label.
     """
     seed = _checks.positive_int("seed", seed, minimum=0)
+    if wall_texture is not None and wall_texture not in WALL_TEXTURES:
+        raise ValueError(f"wall_texture must be one of {', '.join(WALL_TEXTURES)} or None, got {wall_texture!r}")
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0xC0441D0]))
     stereo = random_stereo(rng, width, height)
     width_m = _u(rng, RANGES["corridor_width_m"])
@@ -430,6 +444,10 @@ def random_world(seed: int, *, width: int = 320, height: int = 240) -> RandomWor
     sensors = (SensorModel(gain=gain, black_level=_u(rng, RANGES["black_level"]), noise_sigma=noise),
                SensorModel(gain=gain * _u(rng, RANGES["right_gain_ratio"]), black_level=_u(rng, RANGES["black_level"]),
                            noise_sigma=noise * rng.uniform(0.8, 1.25)))
+    if wall_texture is not None and wall_texture != names[WALL]:
+        # after every other draw, from a stream of its own: the rest of the world stays the seed's
+        names[WALL], mats[WALL] = _wall_material(np.random.default_rng(
+            np.random.SeedSequence([seed, 0xC0441D0, 1])), wall_texture)
     scene = Scene(boxes=tuple(boxes), cylinders=tuple(cylinders), decals=tuple(decals), lights=lights,
                   materials=tuple(mats), skirting_m=skirting_m, skirting_material=SKIRT, ambient=ambient,
                   x_range_m=(x0, x1), half_width_m=half, height_m=h, seed=seed,
