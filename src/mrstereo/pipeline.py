@@ -29,6 +29,7 @@ import numpy as np
 from .camera import RigMount, StereoCamera
 from .geometry import T_world_from_robot, transform_points
 from .geometry.frames import CameraMount, mount_entry
+from .geometry.freespace import FreeSpaceConfig
 from .geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount, ground_from_rig
 from .geometry.obstacles import ObstacleConfig
 from .geometry.pair import PairObstacles, obstacles_from_pair
@@ -78,6 +79,10 @@ class PipelineConfig:
         where their sight line runs at most 0.8 m above the floor.
     grid : GridSpec
         Map extent and resolution.
+    free_space : FreeSpaceConfig or None
+        The free-space boundary (:mod:`mrstereo.geometry.freespace`): where the floor ends in
+        each image column, an obstacle base that the matcher cannot measure (a wall without
+        texture); its points join the frame's obstacle points. None: off.
     """
 
     preset: str = "mapping"
@@ -89,6 +94,7 @@ class PipelineConfig:
         p_miss=0.35, min_points_per_cell=5, disparity_sigma_px=0.25, clear_margin_sigmas=2.0, occlusion_gap_m=0.25,
         see_through_ratio=1.0, overhang_shadow=True, map_occlusion_p=0.8, clear_below_m=0.8))
     grid: GridSpec = field(default_factory=GridSpec)
+    free_space: FreeSpaceConfig | None = None
 
     def single_range_equal_work(self, stereo: StereoCamera) -> PipelineConfig:
         """A single full-resolution range doing the same work as the multi-range plan.
@@ -127,6 +133,9 @@ class FrameObservation:
     """``b f`` of the rig, for the mapping's range uncertainty (None: rays clear up to each point)."""
     sensor_height_m: float | None = None
     """Height of the camera above the floor, for the mapping's height-aware occlusion test."""
+    boundary_points: int = 0
+    """The last ``boundary_points`` rows of ``obstacle_points_world`` are free-space boundary points
+    (:mod:`mrstereo.geometry.freespace`: a floor's end seen in the image, not a stereo measurement)."""
 
     @property
     def sensor_origin_world(self) -> tuple[float, ...]:
@@ -213,7 +222,7 @@ def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.nda
 def pair_options(config: PipelineConfig) -> dict:
     """Keyword options of :func:`mrstereo.geometry.pair.obstacles_from_pair` for a config."""
     return {"preset": config.preset, "max_disparity_px": config.max_disparity_px, "matching": config.matching,
-            "rejection": config.rejection, "config": config.obstacles}
+            "rejection": config.rejection, "config": config.obstacles, "free_space": config.free_space}
 
 
 def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: int,
@@ -227,7 +236,8 @@ def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: i
     with stage("grid"):
         T = T_world_from_robot(*record.pose)
         obs = frame.obstacles
-        obstacles = transform_points(T, obs.obstacle_points_robot).astype(np.float32)
+        boundary = frame.boundary.points_robot if frame.boundary is not None else np.empty((0, 3))
+        obstacles = transform_points(T, np.concatenate([obs.obstacle_points_robot, boundary])).astype(np.float32)
         floor = transform_points(T, obs.floor_points_robot).astype(np.float32)
         bf = None if stereo is None else float(stereo.baseline_m * stereo.focal_px)
         height = float(obs.ground.height_m) if obs.success else None
@@ -239,7 +249,7 @@ def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: i
                             obstacle_points_world=obstacles, floor_points_world=floor,
                             n_valid_disparity=int(np.isfinite(frame.disparity_px).sum()),
                             ground_message=obs.message, cells=cells, baseline_focal_m_px=bf,
-                            sensor_height_m=height)
+                            sensor_height_m=height, boundary_points=len(boundary))
 
 
 def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, rig=None,
@@ -333,7 +343,7 @@ def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
     for k, record in enumerate(manifest.frames[:max(1, int(max_frames))]):
         left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
         ground = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=None,
-                                     **pair_options(config)).obstacles.ground
+                                     **pair_options(replace(config, free_space=None))).obstacles.ground
         if ground.success and (best is None or ground.inlier_share > best[1].inlier_share):
             best = (k, ground)
         if ground.confident:

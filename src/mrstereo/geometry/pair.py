@@ -21,6 +21,7 @@ from .. import _checks
 from ..camera import RigMount, StereoCamera
 from ..profiling import stage
 from ..rejection import FloorModel, RejectionConfig, RejectionResult, reject_uniform
+from .freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
 from .obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
 from .scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
 
@@ -45,6 +46,9 @@ class PairObstacles:
         (``obstacles.too_near_mask``).
     max_disparity_px : float
         The largest disparity the matcher searched (its near limit).
+    boundary : FreeSpaceBoundary, optional
+        Where the floor ends in each column and the obstacle points standing there
+        (:mod:`mrstereo.geometry.freespace`), when asked for (``free_space``).
     """
 
     left_rect: np.ndarray
@@ -52,6 +56,7 @@ class PairObstacles:
     rejection: RejectionResult
     obstacles: ObstacleResult
     max_disparity_px: float = math.inf
+    boundary: FreeSpaceBoundary | None = None
 
     @property
     def disparity_px(self) -> np.ndarray:
@@ -70,7 +75,8 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
                         pan_rad: float = 0.0, preset: str = "mapping", max_disparity_px: float | None = None,
                         matching=None,
                         rejection: RejectionConfig = RejectionConfig(), floor_model: FloorModel | None = None,
-                        config: ObstacleConfig = ObstacleConfig()) -> PairObstacles:
+                        config: ObstacleConfig = ObstacleConfig(),
+                        free_space: FreeSpaceConfig | None = None) -> PairObstacles:
     """Obstacle and floor points (robot frame) of one stereo pair.
 
     Parameters
@@ -97,6 +103,9 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
         A learned floor model (paper section 3.5) used in addition to the texture test.
     config : ObstacleConfig
         Height band, range limit, ground method.
+    free_space : FreeSpaceConfig, optional
+        Also find where the floor ends in each column (:func:`~mrstereo.geometry.freespace.free_space_boundary`):
+        ``PairObstacles.boundary``. None: not computed.
     """
     from ..matching import compute_disparity        # lazy: numba kernels compile on first use
 
@@ -124,8 +133,14 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
         ground = ground_for_frame(raw, stereo, mount=mount, config=config)
         obstacles = detect_obstacles(rej.disparity_px, stereo, rig=mount, ground=ground, pan_rad=pan_rad,
                                      config=config, too_near=result.too_near, near_limit_px=result.near_limit_px)
+    boundary = None
+    if free_space is not None:
+        with stage("free space"):
+            boundary = free_space_boundary(left, obstacles, rej.disparity_px, stereo, config=free_space,
+                                           max_range_m=config.max_range_m, min_height_m=config.min_obstacle_height_m,
+                                           max_height_m=config.max_obstacle_height_m)
     return PairObstacles(left_rect=left, raw_disparity_px=raw, rejection=rej, obstacles=obstacles,
-                         max_disparity_px=float(result.near_limit_px))
+                         max_disparity_px=float(result.near_limit_px), boundary=boundary)
 
 
 def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: float = math.radians(0.5),

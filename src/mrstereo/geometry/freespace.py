@@ -1,0 +1,303 @@
+"""Free-space boundary: where the floor ends in each image column (beyond the paper).
+
+Stereo cannot match a wall without texture, and the line where such a wall meets the floor
+is, seen face on, a horizontal edge: it carries no disparity either. The wall is then missing
+from the map although the image shows it plainly. The floor, seen from a known (or estimated)
+plane, does: in each column of the rectified left image the floor runs up from the bottom of
+the image to where something that is not floor begins (the idea of ground-boundary obstacle
+detection and of the stixel world's free space, Badino et al. 2009). The floor point of that
+row is the base of an obstacle at that range: an occupied cell, and a ray that clears only up
+to it.
+
+Rules (per column, scanning up from the bottom row; numba kernel
+``_freespace_kernels.column_boundaries``; docs/mapping.md "Free-space boundary"):
+
+* **the floor's look is measured**: the frame needs at least ``min_floor_pixels`` measured floor
+  pixels (no boundary otherwise: a frame that sees no floor says nothing about where it ends);
+  their gray levels (5th-95th percentile, widened by ``appearance_threshold``) are the floor's
+  look. A patterned floor (their interquartile range above ``pattern_threshold``: chequered,
+  striped) cannot be followed by its look: there a boundary needs measured floor within
+  ``gap_rows`` rows below it;
+* **start on the floor**: the bottom ``persist_rows`` rows hold no measured obstacle and their
+  mean gray level lies in the floor's look; it starts the column's floor appearance ``mu``, which
+  follows the rows accepted as floor (measured floor pixels, or pixels within
+  ``appearance_threshold`` of ``mu``) with the rate ``adapt`` -- a lamp's slow gradient is
+  followed, a step is not. ``persist_rows`` rows in a row of texture the matcher did not
+  measure (local standard deviation of the smoothed image above ``texture_threshold``) end the
+  scan: something unmeasured stands there;
+* **no gap under the edge**: an edge whose nearest measured floor pixel below lies more than
+  ``gap_rows`` but at most ``check_rows`` rows lower is not a base (the top of a skirting board
+  that looks like the floor: the floor is measured up to the board's foot, not to the edge);
+* **stop where stereo sees**: two measured obstacle pixels on top of each other end the scan
+  (the matcher measured what stands there); the scan also ends where the floor lies beyond
+  ``max_range_m`` (4 m in the pipeline);
+* **a boundary is an edge**: the mean of ``edge_rows`` rows above minus the mean of those below
+  steps by at least ``edge_threshold`` gray levels (a local maximum along the column), at a
+  floor range of at least ``min_range_m``;
+* **above it the appearance changes and stays changed**: at least 3/4 of the
+  ``persist_rows`` rows above differ from ``mu`` by more than ``appearance_threshold`` (a grout
+  line or a thin stripe is one or two rows; the floor beyond it looks like the floor again);
+* **no floor above it, nothing behind it**: no measured floor pixel in the ``check_rows`` rows
+  above (in the column and its two neighbours) -- a floor marking has floor above it, a
+  chequered floor is measured on its square edges -- and no measured point there whose range
+  differs from the base's by more than ``far_margin_m`` (farther: the edge is the top of a low
+  object or a marking with the far floor above it; nearer: the edge lies on an object's face);
+* **a run of columns**: a boundary is kept only in runs of at least ``min_run_columns``
+  neighbouring columns whose rows differ by at most ``max_row_step`` (a wall base is a line in
+  the image; an isolated column is noise).
+
+The base point is measured where possible: the mean of the obstacle points in the
+``check_rows`` rows above the edge (within ``far_margin_m`` of its range), else the measured floor
+point just below the edge (within ``gap_rows``), else the floor point of the edge's row.
+Sizes in rows and columns are given for a 240-row (320-column) image and scale with the image.
+The obstacle stands from the base up to the highest row above it before measured floor or a
+point farther than the base: it is returned as points on the vertical line over the base, every
+``point_spacing_m`` from ``min_height_m`` up (at most ``max_height_m``), so that the occupancy
+grid's per-cell support and height-aware occlusion treat it like a measured surface.
+
+Conventions: docs/conventions.md.
+
+References
+----------
+H. Badino, U. Franke, D. Pfeiffer, "The Stixel World -- A Compact Medium Level Representation
+of the 3D-World", DAGM 2009.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .. import _checks
+from ..camera import StereoCamera
+from . import _freespace_kernels as _kernels
+from .obstacles import ObstacleResult, _disparity_image, _rectified_intrinsics, _rigid
+
+__all__ = ["FreeSpaceConfig", "FreeSpaceBoundary", "free_space_boundary"]
+
+
+@dataclass(frozen=True)
+class FreeSpaceConfig:
+    """Options of :func:`free_space_boundary` (rules in the module docstring).
+
+    Attributes
+    ----------
+    edge_threshold : float
+        Step of the mean gray level across the boundary (0-255 scale).
+    appearance_threshold : float
+        Difference from the floor's appearance that counts as "not floor" (0-255 scale).
+    edge_rows, persist_rows, check_rows : int
+        Rows (at 240 rows) of the edge means, of the changed appearance above the edge, and
+        of the check for floor or farther points above it.
+    min_run_columns : int
+        Shortest run of neighbouring boundary columns kept (at 320 columns).
+    max_row_step : int
+        Largest row difference between neighbouring columns of a run (at 240 rows).
+    adapt : float
+        Rate at which the floor's appearance follows the rows accepted as floor.
+    smooth_sigma_px : float
+        Gaussian smoothing of the image before the tests (at 240 rows).
+    far_margin_m : float
+        A measured point above the edge farther than the base by more than this vetoes it.
+    min_range_m, max_range_m : float
+        Floor ranges (horizontal, robot frame) where a boundary may lie; ``max_range_m`` None:
+        the obstacle config's range.
+    point_spacing_m : float
+        Vertical spacing of the points returned for each boundary column.
+    gap_rows : int
+        Measured floor this close below an edge (rows at 240) supports it.
+    texture_threshold : float
+        Local standard deviation (smoothed image, 0-255 scale) above which an unmeasured pixel
+        is texture the matcher did not measure.
+    min_floor_pixels : int
+        Measured floor pixels a frame needs for its floor's look.
+    pattern_threshold : float
+        Interquartile range of the floor's gray levels above which the floor is patterned.
+    """
+
+    edge_threshold: float = 6.0
+    appearance_threshold: float = 6.0
+    edge_rows: int = 2
+    persist_rows: int = 6
+    check_rows: int = 12
+    min_run_columns: int = 5
+    max_row_step: int = 2
+    adapt: float = 0.1
+    smooth_sigma_px: float = 1.0
+    far_margin_m: float = 0.3
+    min_range_m: float = 0.0
+    max_range_m: float | None = None
+    point_spacing_m: float = 0.1
+    gap_rows: int = 3
+    texture_threshold: float = 4.0
+    min_floor_pixels: int = 50
+    pattern_threshold: float = 12.0
+
+    def __post_init__(self) -> None:
+        _checks.finite_number("edge_threshold", self.edge_threshold, positive=True)
+        _checks.finite_number("appearance_threshold", self.appearance_threshold, positive=True)
+        _checks.positive_int("edge_rows", self.edge_rows)
+        _checks.positive_int("persist_rows", self.persist_rows, minimum=2)
+        _checks.positive_int("check_rows", self.check_rows)
+        if self.check_rows < self.persist_rows:
+            raise ValueError(f"check_rows ({self.check_rows}) must be at least persist_rows ({self.persist_rows})")
+        _checks.positive_int("min_run_columns", self.min_run_columns)
+        _checks.positive_int("max_row_step", self.max_row_step)
+        a = _checks.finite_number("adapt", self.adapt, positive=True)
+        if a > 1.0:
+            raise ValueError(f"adapt must be in (0, 1], got {a}")
+        _checks.finite_number("smooth_sigma_px", self.smooth_sigma_px, nonnegative=True)
+        _checks.finite_number("far_margin_m", self.far_margin_m, nonnegative=True)
+        _checks.finite_number("min_range_m", self.min_range_m, nonnegative=True)
+        if self.max_range_m is not None:
+            _checks.finite_number("max_range_m", self.max_range_m, positive=True)
+        _checks.finite_number("point_spacing_m", self.point_spacing_m, positive=True)
+        _checks.positive_int("gap_rows", self.gap_rows)
+        _checks.finite_number("texture_threshold", self.texture_threshold, positive=True)
+        _checks.positive_int("min_floor_pixels", self.min_floor_pixels)
+        _checks.finite_number("pattern_threshold", self.pattern_threshold, positive=True)
+
+
+@dataclass(frozen=True)
+class FreeSpaceBoundary:
+    """Output of :func:`free_space_boundary`.
+
+    Attributes
+    ----------
+    base_row : ndarray of shape (W,), float64
+        Per column the image row of the obstacle base (the edge between two rows: ``v - 0.5``),
+        NaN where the column has no kept boundary.
+    top_row : ndarray of shape (W,), float64
+        The highest row of the obstacle's evidence above the base (NaN as ``base_row``).
+    base_points_robot : ndarray of shape (K, 3), float64
+        The floor point of each kept column's base (``z = 0``), robot frame, column order.
+    points_robot : ndarray of shape (N, 3), float64
+        Obstacle points on the vertical lines over the bases (module docstring), robot frame.
+    columns : ndarray of shape (K,), int64
+        The image column of each base point.
+    """
+
+    base_row: np.ndarray
+    top_row: np.ndarray
+    base_points_robot: np.ndarray
+    points_robot: np.ndarray
+    columns: np.ndarray
+
+
+def _runs(rows: np.ndarray, min_run: int, max_step: float) -> np.ndarray:
+    """Columns that belong to a run of at least ``min_run`` neighbours with row steps <= ``max_step``."""
+    keep = np.zeros(rows.size, dtype=bool)
+    start = 0
+    for u in range(1, rows.size + 1):
+        if u == rows.size or not (rows[u] >= 0 and rows[u - 1] >= 0 and abs(rows[u] - rows[u - 1]) <= max_step):
+            if rows[start] >= 0 and u - start >= min_run:
+                keep[start:u] = True
+            start = u
+    return keep
+
+
+def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, stereo: StereoCamera, *,
+                        config: FreeSpaceConfig = FreeSpaceConfig(), max_range_m: float = 4.0,
+                        min_height_m: float = 0.08, max_height_m: float = 1.5) -> FreeSpaceBoundary:
+    """Where the floor ends in each column of the rectified left image, and the obstacle standing there.
+
+    Parameters
+    ----------
+    left_rect : ndarray of shape (H, W) or (H, W, 3)
+        The rectified left image.
+    obstacles : ObstacleResult
+        The frame's floor / obstacle split (:func:`mrstereo.geometry.obstacles.detect_obstacles`):
+        its masks, floor and transform.
+    disparity_px : ndarray of shape (H, W)
+        The disparity the obstacles were computed from (NaN invalid).
+    stereo : StereoCamera
+        The calibration (rectified intrinsics).
+    config : FreeSpaceConfig
+        The rules' thresholds (module docstring).
+    max_range_m : float
+        Farthest floor range of a boundary when ``config.max_range_m`` is None.
+    min_height_m, max_height_m : float
+        Height band of the returned obstacle points (the obstacle config's).
+
+    Returns
+    -------
+    FreeSpaceBoundary
+    """
+    if not isinstance(stereo, StereoCamera):
+        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    if not isinstance(obstacles, ObstacleResult):
+        raise TypeError(f"obstacles must be an ObstacleResult, got {type(obstacles).__name__}")
+    if not isinstance(config, FreeSpaceConfig):
+        raise TypeError(f"config must be a FreeSpaceConfig, got {type(config).__name__}")
+    _checks.image("left_rect", left_rect)
+    d = _disparity_image(disparity_px)
+    h, w = obstacles.obstacle_mask.shape
+    if left_rect.shape[:2] != (h, w) or d.shape != (h, w):
+        raise ValueError(f"left_rect {left_rect.shape[:2]} and disparity_px {d.shape} must have the masks' "
+                         f"shape {(h, w)}")
+    none = np.full(w, np.nan)
+    empty = FreeSpaceBoundary(base_row=none, top_row=none.copy(), base_points_robot=np.empty((0, 3)),
+                              points_robot=np.empty((0, 3)), columns=np.empty(0, np.int64))
+    if not obstacles.success:
+        return empty
+    gray = np.asarray(left_rect, dtype=np.float32)
+    if gray.ndim == 3:
+        gray = gray.mean(axis=2, dtype=np.float32)
+    sy, sx = h / 240.0, w / 320.0
+    sigma = config.smooth_sigma_px * sy
+    smooth = cv2.GaussianBlur(gray, (0, 0), sigma) if sigma > 0 else np.ascontiguousarray(gray)
+    rows = lambda n: max(1, int(round(n * sy)))      # noqa: E731 -- sizes given at 240 rows
+    # texture the matcher did not measure: the smoothed image's local standard deviation
+    win = (2 * rows(2) + 1,) * 2
+    mean = cv2.boxFilter(smooth, cv2.CV_32F, win)
+    var = cv2.boxFilter(smooth * smooth, cv2.CV_32F, win) - mean * mean
+    uniform = var <= np.float32(config.texture_threshold) ** 2
+    edge, persist, check = rows(config.edge_rows), rows(config.persist_rows), rows(config.check_rows)
+    if h <= persist + check + edge + 2:
+        return empty
+    # the floor's look in this frame: the gray levels of its measured pixels
+    seen = smooth[obstacles.floor_mask]
+    if seen.size < config.min_floor_pixels:
+        return empty                # no floor measured: its look is unknown
+    lo, q1, q3, hi = np.percentile(seen, [5.0, 25.0, 75.0, 95.0])
+    start_lo, start_hi = lo - config.appearance_threshold, hi + config.appearance_threshold
+    measured_only = bool(q3 - q1 > config.pattern_threshold)
+    R, t = _rigid(obstacles.T_robot_from_cam)
+    intr = _rectified_intrinsics(stereo)
+    base = np.empty(w, np.int64)
+    base_xy = np.empty((w, 2))
+    top = np.empty(w, np.int64)
+    _kernels.column_boundaries(
+        smooth, np.ascontiguousarray(obstacles.floor_mask), np.ascontiguousarray(obstacles.obstacle_mask), uniform, d,
+        float(stereo.doffs_px), intr["bf"], intr["focal_px"], intr["cx_px"], intr["cy_px"], intr["fy_px"], R, t,
+        float(max_range_m if config.max_range_m is None else config.max_range_m), float(config.min_range_m),
+        edge, persist, check, float(config.edge_threshold), float(config.appearance_threshold), float(config.adapt),
+        float(config.far_margin_m), rows(config.gap_rows), float(start_lo), float(start_hi), measured_only,
+        base, top, base_xy)
+    keep = _runs(base, max(1, int(round(config.min_run_columns * sx))), config.max_row_step * sy)
+    cols = np.flatnonzero(keep)
+    if cols.size == 0:
+        return empty
+    base_row = np.full(w, np.nan)
+    top_row = np.full(w, np.nan)
+    base_row[cols] = base[cols] - 0.5
+    top_row[cols] = top[cols]
+    # the base: the floor point of the edge's row; the obstacle: the vertical line over it
+    f, cx, cy, fy = intr["focal_px"], intr["cx_px"], intr["cy_px"], intr["fy_px"]
+
+    def rays(v):
+        c = np.stack([(cols - cx) / f, (v - cy) / fy, np.ones(cols.size)], axis=1)
+        return c @ R.T
+
+    base_xy = base_xy[cols]
+    base_points = np.column_stack([base_xy, np.zeros(cols.size)])
+    ray_top = rays(top_row[cols])
+    reach = np.hypot(*(base_xy - t[:2]).T) / np.maximum(np.hypot(ray_top[:, 0], ray_top[:, 1]), 1e-12)
+    z_top = np.minimum(t[2] + ray_top[:, 2] * reach, max_height_m)
+    heights = np.arange(min_height_m + 0.5 * config.point_spacing_m, max_height_m, config.point_spacing_m)
+    take = heights[None, :] <= z_top[:, None]
+    k, j = np.nonzero(take)
+    points = np.column_stack([base_xy[k], heights[j]])
+    return FreeSpaceBoundary(base_row=base_row, top_row=top_row, base_points_robot=base_points,
+                             points_robot=points, columns=cols.astype(np.int64))

@@ -1,0 +1,113 @@
+"""Free-space boundary (where the floor ends per image column) on hand-made frames.
+
+A camera at height H tilted down by TILT sees a flat floor and, in some frames, a plain wall
+``x = WALL_X`` (robot frame) with no texture: the matcher measures nothing on it, the floor is
+measured on a sparse set of pixels. Image gray levels with noise; no stereo matching involved.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from mrstereo.camera import Camera, RigMount, StereoCamera
+from mrstereo.geometry import ObstacleConfig, T_robot_from_cam, detect_obstacles
+from mrstereo.geometry.freespace import FreeSpaceConfig, free_space_boundary
+
+W, H, F, CX, CY, B = 320, 240, 200.0, 161.0, 118.5, 0.1
+HEIGHT, TILT = 0.6, 0.3
+WALL_X = 2.0
+
+
+def _stereo():
+    return StereoCamera.ideal(Camera(width=W, height=H, fx=F, fy=F, cx=CX, cy=CY), B,
+                              rig=RigMount(height_m=HEIGHT, tilt_rad=TILT))
+
+
+def _frame(*, wall_x=WALL_X, floor_gray=None, measured_share=0.05, measured_below=200, seed=0):
+    """(image, disparity): the floor's gray level from ``floor_gray(x, y)``; a plain wall at ``wall_x`` (None: none).
+
+    The floor is measured on ``measured_share`` of its pixels below row ``measured_below``.
+    """
+    rng = np.random.default_rng(seed)
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    rays = np.stack([(u - CX) / F, (v - CY) / F, np.ones_like(u)], axis=-1)
+    T = T_robot_from_cam(height_m=HEIGHT, tilt_rad=TILT)
+    dirs = rays @ T[:3, :3].T
+    origin = T[:3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_floor = np.where(dirs[..., 2] < 0, -origin[2] / dirs[..., 2], np.inf)
+        t_wall = np.where(dirs[..., 0] > 0, (wall_x - origin[0]) / dirs[..., 0], np.inf) if wall_x else \
+            np.full(u.shape, np.inf)
+    t_hit = np.minimum(t_floor, t_wall)
+    on_floor = np.isfinite(t_floor) & (t_floor <= t_wall)
+    gray = np.where(on_floor, 60.0, 120.0)
+    if floor_gray is not None:
+        p = origin + np.where(on_floor, t_floor, 0.0)[..., None] * dirs
+        gray = np.where(on_floor, floor_gray(p[..., 0], p[..., 1]), gray)
+    image = np.clip(gray + rng.normal(0.0, 3.0, gray.shape), 0, 255).astype(np.uint8)
+    depth = t_hit * (dirs @ T[:3, :3][:, 2])          # camera z of the hit point
+    disparity = np.full((H, W), np.nan, np.float32)
+    measured = on_floor & (rng.uniform(size=(H, W)) < measured_share) & np.isfinite(depth) & (v >= measured_below)
+    disparity[measured] = (B * F / depth[measured]).astype(np.float32)
+    return image, disparity
+
+
+def _boundary(image, disparity, config=FreeSpaceConfig()):
+    stereo = _stereo()
+    obstacles = detect_obstacles(disparity, stereo, config=ObstacleConfig(max_range_m=4.0))
+    return free_space_boundary(image, obstacles, disparity, stereo, config=config, max_range_m=4.0)
+
+
+def test_plain_wall_base_within_two_cells():
+    image, disparity = _frame()
+    out = _boundary(image, disparity)
+    assert out.columns.size > 0.8 * W                  # nearly every column sees the wall's base
+    x = out.base_points_robot[:, 0]
+    assert np.median(np.abs(x - WALL_X)) < 0.05       # one 5 cm cell
+    assert np.mean(np.abs(x - WALL_X) <= 0.10) > 0.95  # two cells
+    assert np.all(out.base_points_robot[:, 2] == 0.0)
+    # obstacle points on the vertical lines over the bases, in the height band
+    z = out.points_robot[:, 2]
+    assert z.min() > 0.08 and z.max() <= 1.5
+    assert np.all(np.isin(out.points_robot[:, 0], x))
+
+
+def test_no_wall_nothing_invented_on_plain_floor():
+    image, disparity = _frame(wall_x=None)
+    assert _boundary(image, disparity).columns.size == 0
+
+
+@pytest.mark.parametrize("name,floor_gray,share", [
+    # thin dark grout lines every 0.5 m (2 cm wide): one or two rows, the floor again above them
+    ("grout", lambda x, y: np.where(np.mod(x, 0.5) < 0.02, 30.0, 60.0), 0.05),
+    # stripes across the view, 0.3 m wide: a patterned floor, measured (its texture) on 30 % of its pixels
+    ("stripes", lambda x, y: np.where(np.mod(x, 0.6) < 0.3, 40.0, 110.0), 0.3),
+    # a chequered floor
+    ("checker", lambda x, y: np.where((np.floor(x / 0.3) + np.floor(y / 0.3)) % 2 == 0, 30.0, 200.0), 0.3),
+    # a lamp's gradient along the floor
+    ("gradient", lambda x, y: 40.0 + 15.0 * x, 0.05),
+])
+def test_patterned_floor_without_wall_gives_no_boundary(name, floor_gray, share):
+    image, disparity = _frame(wall_x=None, floor_gray=floor_gray, measured_share=share, measured_below=0)
+    out = _boundary(image, disparity)
+    assert out.columns.size == 0, f"{name}: {out.columns.size} columns"
+
+
+def test_no_floor_measured_no_boundary():
+    image, disparity = _frame(measured_share=0.0)
+    disparity[:] = np.nan
+    assert _boundary(image, disparity).columns.size == 0
+
+
+def test_bad_input():
+    image, disparity = _frame()
+    stereo = _stereo()
+    obstacles = detect_obstacles(disparity, stereo)
+    with pytest.raises(TypeError, match="obstacles"):
+        free_space_boundary(image, "x", disparity, stereo)
+    with pytest.raises(ValueError, match="disparity_px"):
+        free_space_boundary(image, obstacles, disparity[:-1], stereo)
+    with pytest.raises(ValueError, match="check_rows"):
+        FreeSpaceConfig(persist_rows=8, check_rows=4)
+    with pytest.raises(ValueError, match="adapt"):
+        FreeSpaceConfig(adapt=2.0)
