@@ -28,7 +28,7 @@ calling thread instead (one thread): on a busy machine it still counts each chai
 (not the time other processes took), though shared caches still slow both chains.
 
     python benchmarks/bench_frame.py [--repeats 3] [--frames 10] [--sizes 640x480,320x240] [--cpu] [--odometry]
-    python benchmarks/bench_frame.py --scenes [--repeats 5]
+    python benchmarks/bench_frame.py --scenes [--repeats 5] [--cpu] [--near-guard 0]
 """
 from __future__ import annotations
 
@@ -251,18 +251,22 @@ def paired(fn, base, repeats: int) -> tuple[float, float, float]:
     t_fn, t_base, ratios = [], [], []
     for i in range(repeats):
         for f, store in ((base, t_base), (fn, t_fn)) if i % 2 == 0 else ((fn, t_fn), (base, t_base)):
-            t0 = time.perf_counter()
+            t0 = CLOCK()
             f()
-            store.append(time.perf_counter() - t0)
+            store.append(CLOCK() - t0)
         ratios.append(t_fn[-1] / t_base[-1])
     return 1000 * float(np.median(t_fn)), 1000 * float(np.median(t_base)), float(np.median(ratios))
 
 
-def scenes(repeats: int) -> None:
-    from mrstereo.matching import compute_disparity
+def scenes(repeats: int, near_guard: float | None = None) -> None:
+    from mrstereo.matching import compute_disparity, preset_config
 
-    print(f"matcher alone (robust preset) vs StereoBM 9x9 over the same search, 640x480; {repeats} repeats; "
-          f"load average {os.getloadavg()}")
+    config = preset_config("robust")
+    if near_guard is not None:
+        config = config.replace(near_guard=near_guard)
+    clock = "CPU time of the calling thread" if CLOCK is not time.perf_counter else "wall-clock"
+    print(f"matcher alone (robust preset, near_guard={config.near_guard:g}) vs StereoBM 9x9 over the same search, "
+          f"640x480; {repeats} repeats, {clock}; load average {os.getloadavg()}")
     pairs = real_scenes()
     for threads in thread_counts():
         set_threads(threads)
@@ -272,7 +276,7 @@ def scenes(repeats: int) -> None:
         for name, left, right, max_d in pairs:
             n_disp = 16 * math.ceil(max_d / 16)
             bm = cv2.StereoBM.create(numDisparities=n_disp, blockSize=9)
-            ms, base_ms, ratio = paired(lambda: compute_disparity(left, right, max_disparity_px=max_d),
+            ms, base_ms, ratio = paired(lambda: compute_disparity(left, right, max_disparity_px=max_d, config=config),
                                         lambda: bm.compute(left, right), repeats)
             ratios.append(ratio)
             print(f"| {name} | {max_d:.0f} | {n_disp} | {ms:.1f} | {base_ms:.1f} | {ratio:.2f} |", flush=True)
@@ -293,14 +297,16 @@ def main() -> None:
                         help="whole frame along the straight `front` path, with the visual odometry's step as a "
                              "stage of its own (not counted in the ratio to the OpenCV chain)")
     parser.add_argument("--cpu", action="store_true",
-                        help="whole frame: stage times as CPU time of the calling thread, one thread only (robust "
-                             "to other processes on a busy machine; wall-clock by default)")
+                        help="stage times (scenes: run times) as CPU time of the calling thread, one thread only "
+                             "(robust to other processes on a busy machine; wall-clock by default)")
+    parser.add_argument("--near-guard", type=float, default=None,
+                        help="scenes: the matcher's near_guard (0 = without its too-near guard; default the preset's)")
     args = parser.parse_args()
     if args.cpu:
         global CLOCK
         CLOCK = time.thread_time
     if args.scenes:
-        scenes(args.repeats)
+        scenes(args.repeats, near_guard=args.near_guard)
     else:
         sizes = [tuple(int(v) for v in s.lower().split("x")) for s in args.sizes.split(",")]
         whole_frame(sizes, args.frames, args.repeats, args.seed, odometry=args.odometry)

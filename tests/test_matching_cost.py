@@ -121,3 +121,36 @@ def test_refinement_of_scattered_pixels_equals_the_running_sums(share):
     assert np.isfinite(d_dense[inside]).mean() > 0.8
     assert np.nanmedian(np.abs(d_dense[inside] - truth)) < 0.1     # known shift
     assert np.isnan(d_dense[~want]).all()
+
+
+@pytest.mark.parametrize("kind", ["zncc", "nssd"])
+def test_refinement_in_boxes_equals_the_running_sums_bit_for_bit(kind):
+    """refine_candidates(boxes=...) (running sums per box, products gathered pixel by pixel)
+    gives refine_warped's disparities and costs exactly, on a coarse field that changes at
+    almost every pixel (with NaNs, negative and too large shifts at the borders) and on
+    overlapping boxes that hold the wanted pixels; pixels outside them stay untouched (NaN)."""
+    from mrstereo.matching import cost as C
+
+    rng = np.random.default_rng(5)
+    truth = 9
+    right = _textured(rng, 50, 80)
+    left = np.roll(right, truth, axis=1)
+    pair = [C.prepare_gray(im, kind="xsobel", cap=31, window=9, cost=kind) for im in (left, right)]
+    coarse = (truth + rng.uniform(-2.5, 2.5, (50, 80))).astype(np.float32)
+    coarse[rng.random((50, 80)) < 0.1] = np.nan
+    coarse[:, :4] = rng.uniform(-3, 12, (50, 4))             # shifts past the left edge
+    want = np.zeros((50, 80), bool)
+    want[5:30, 0:40] = rng.random((25, 40)) < 0.7
+    want[20:48, 30:80] |= rng.random((28, 50)) < 0.5
+    boxes = [(5, 30, 0, 40), (20, 48, 30, 80)]              # overlapping
+    max_cost = 0.8 if kind == "zncc" else None
+    old = C.SPARSE_REFINE_SHARE
+    C.SPARSE_REFINE_SHARE = 1e9                              # the running sums, not the direct ones
+    try:
+        dense = [a.copy() for a in C.refine_candidates(*pair, coarse, want, half_px=3, max_cost=max_cost)]
+    finally:
+        C.SPARSE_REFINE_SHARE = old
+    boxed = C.refine_candidates(*pair, coarse, want, half_px=3, max_cost=max_cost, boxes=boxes)
+    np.testing.assert_array_equal(boxed[0], dense[0])
+    np.testing.assert_array_equal(boxed[1], dense[1])
+    assert np.isfinite(boxed[0][want]).mean() > 0.3 and np.isnan(boxed[0][~want]).all()

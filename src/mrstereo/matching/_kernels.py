@@ -704,6 +704,105 @@ def refine_sparse(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
             out_cost[y, x] = cb if inside else np.float32(np.inf)
 
 
+@njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
+def refine_boxes(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, center_pad, want, boxes, half,
+                 zncc, max_cost, out_disp, out_cost):
+    """:func:`refine_warped` box by box: ``boxes[j] = (row0, row1, col0, col1)`` (half-open, image
+    coordinates) hold the wanted pixels; the running sums cover each box only, boxes run in
+    parallel. Same arguments and outputs otherwise, and the same sums bit for bit.
+
+    The products ``I_L(p) I_R(p - c(p) - o)`` are gathered pixel by pixel (the right column
+    clamped to the padded row, as there) instead of along runs of constant ``c``: the cost
+    does not grow when ``c`` changes every few pixels (the near guard's up-sampled fields
+    change every ``k`` pixels, the bands' values at almost every pixel), where the runs'
+    bookkeeping costs several times the products.
+    """
+    nc = 2 * half + 1
+    win = 2 * radius + 1
+    wp = right_pad.shape[1]
+    max_c = np.float32(max_cost)
+    for j in prange(boxes.shape[0]):
+        y_start = boxes[j, 0]
+        y_end = boxes[j, 1]
+        xa = boxes[j, 2]
+        xb = boxes[j, 3]
+        if y_end <= y_start or xb <= xa:
+            continue
+        nx = xb - xa                    # pixels xa .. xb - 1
+        ncol = nx + 2 * radius          # padded columns xa .. xb - 1 + 2r
+        colsum = np.zeros((nc, ncol), np.float32)
+        ring = np.zeros((nc, win, ncol), np.float32)
+        fresh = np.empty(ncol, np.float32)
+        q0 = np.empty(ncol, np.int64)
+        box = np.empty(nx, np.float32)
+        t2 = np.empty(ncol, np.float32)
+        t4 = np.empty(ncol, np.float32)
+        t8 = np.empty(ncol, np.float32)
+        t16 = np.empty(ncol, np.float32)
+        cost = np.empty((nc, nx), np.float32)
+        bc = np.empty(nx, np.float32)
+        bk = np.empty(nx, np.float32)
+        cm_ = np.empty(nx, np.float32)
+        cp_ = np.empty(nx, np.float32)
+        for yy in range(y_start, y_end + 2 * radius):
+            slot = (yy - y_start) % win
+            lrow = left_pad[yy, xa:xa + ncol]
+            rrow = right_pad[yy]
+            crow = center_pad[yy, xa:xa + ncol]
+            for i in range(ncol):
+                q0[i] = xa + i - crow[i]
+            for o in range(nc):
+                off = o - half
+                for i in range(ncol):
+                    fresh[i] = lrow[i] * rrow[min(max(q0[i] - off, 0), wp - 1)]
+                col = colsum[o]
+                old = ring[o, slot]
+                for i in range(ncol):
+                    col[i] += fresh[i] - old[i]
+                    old[i] = fresh[i]
+            y = yy - 2 * radius
+            if y < y_start:
+                continue
+            wa = xb
+            wb = xa
+            for x in range(xa, xb):
+                if want[y, x]:
+                    wa = min(wa, x)
+                    wb = x + 1
+            if wb <= wa:
+                continue
+            nw = wb - wa
+            cy = center_pad[y + radius, radius + wa:radius + wb]
+            al = a_left[y, wa:wb]
+            bl = b_left[y, wa:wb]
+            ar = a_right[y]
+            br = b_right[y]
+            for o in range(nc):
+                off = o - half
+                _box(colsum[o, wa - xa:], box, t2, t4, t8, t16, nw, win)
+                crow_c = cost[o]
+                for i in range(nw):
+                    d = cy[i] + off
+                    xr = min(max(wa + i - d, 0), wa + i)
+                    if zncc:
+                        c = ONE - (box[i] - al[i] * ar[xr]) * bl[i] * br[xr]
+                    else:
+                        c = (al[i] + ar[xr] - TWO * box[i]) * bl[i] * br[xr]
+                    crow_c[i] = c if (d >= 0 and wa + i >= d) else BIG     # x_right < 0 or d < 0: none
+            _winners(cost, nc, nw, bc, bk, cm_, cp_)
+            od = out_disp[y, wa:wb]
+            oc = out_cost[y, wa:wb]
+            wy = want[y, wa:wb]
+            for i in range(nw):
+                kb = np.int64(bk[i])
+                cb = bc[i]
+                sub = _parabola(cb, cm_[i], cp_[i])
+                inside = (kb > 0) and (kb < nc - 1) and (cb < BIG) and (max_cost < 0 or cb <= max_c)
+                value = np.float32(cy[i] + kb - half) + sub
+                od[i] = (value if inside else np.float32(np.nan)) if wy[i] else od[i]
+                oc[i] = (cb if inside else np.float32(np.inf)) if wy[i] else oc[i]
+
+
 @njit(nogil=True, cache=True, fastmath=_FASTMATH)
 def upsample_gate(level_d, level_c, source_cols, scale, lo, hi, top, row0, row1, col0, col1, out_d, out_c):
     """Step 2 + eq. (11): nearest-neighbour up-sampling along x (full-resolution column

@@ -268,8 +268,8 @@ SPARSE_REFINE_SHARE = 40
 
 
 def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.ndarray, want: np.ndarray, *, half_px: int,
-                      max_cost: float | None = None, rows: tuple[int, int] | None = None, n_strips: int | None = None
-                      ) -> tuple[np.ndarray, np.ndarray]:
+                      max_cost: float | None = None, rows: tuple[int, int] | None = None, n_strips: int | None = None,
+                      boxes=None) -> tuple[np.ndarray, np.ndarray]:
     """Re-score a coarse disparity field at full resolution (beyond the paper).
 
     A level of decimation ``k`` knows its winner only to about ``+-k/2`` full-resolution
@@ -292,6 +292,11 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
         Offsets searched on each side.
     max_cost : float, optional
         Winners costing more become invalid.
+    boxes : sequence of (row0, row1, col0, col1), optional
+        Half-open boxes that hold every wanted pixel (clusters, e.g. connected components):
+        the running sums then cover each box instead of every row and column spanned by all
+        the wanted pixels (the near guard's clusters lie scattered over the image), the boxes
+        in parallel (:func:`._kernels.refine_boxes`). Same results.
 
     Returns
     -------
@@ -307,6 +312,16 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     out.fill(np.nan)
     cost = _kernels.recycled_empty((h, w), np.float32)
     cost.fill(np.inf)
+    if boxes is not None:
+        boxes = np.array(boxes, np.int64).reshape(-1, 4)
+        boxes[:, 0] = np.maximum(boxes[:, 0], rows[0])
+        boxes[:, 1] = np.minimum(boxes[:, 1], rows[1])
+        boxes[:, 2] = np.maximum(boxes[:, 2], 0)
+        boxes[:, 3] = np.minimum(boxes[:, 3], w)
+        _kernels.refine_boxes(left.padded, right.padded, left.a, left.b, right.a, right.b, r, center_pad,
+                              np.ascontiguousarray(want), boxes, int(half_px), left.zncc,
+                              -1.0 if max_cost is None else float(max_cost), out, cost)
+        return out, cost
     hit = np.flatnonzero(want[rows[0]:rows[1]].any(axis=1))
     if hit.size:      # only the rows holding pixels to refine
         rows = (rows[0] + int(hit[0]), rows[0] + int(hit[-1]) + 1)
@@ -322,3 +337,4 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
                                -1.0 if max_cost is None else float(max_cost),
                                rows[0], rows[1], _strips(n_strips, rows[1] - rows[0]), out, cost)
     return out, cost
+

@@ -224,14 +224,23 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
        wrong matches on the near object). None without a too-near region: a candidate
        elsewhere (a repeated pattern, plain paint) changes nothing, so a search that covers
        the scene gives the values of the matcher without a guard.
+
+    The order of the work keeps its cost low without changing the verdict: a too-near region
+    lies inside one 8-connected cluster of more than ``speckle_size_px`` confirmed candidates,
+    which comes from a cluster of more than ``speckle_size_px / ceil(k)`` candidates at the
+    guard's level (each level pixel spans at most ``ceil(k)`` columns). Steps 2-4 run on those
+    clusters only, each in its own box (:func:`.cost.refine_candidates`); the other candidates
+    matter only for step 5, when a too-near region is found.
     """
     guard = plan.guard
     height, width = disparity.shape
     row0, row1, col0, col1 = plan.aoi
+    rows = (row0, row1)
     w_level = guard.size[0]
-    d_int, sub, c1, c2, d_right = match_prepared(*pair_at(w_level), d_lo=guard.search_px[0],
-                                                 d_hi=guard.search_px[1], rows=(row0, row1),
-                                                 cols=_level_cols(col0, col1, guard.scale, w_level), right_check=True)
+    level_pair = pair_at(w_level)
+    d_int, sub, c1, c2, d_right = match_prepared(*level_pair, d_lo=guard.search_px[0], d_hi=guard.search_px[1],
+                                                 rows=rows, cols=_level_cols(col0, col1, guard.scale, w_level),
+                                                 right_check=True)
     d_level = (d_int + sub if config.subpixel else d_int).astype(np.float32)
     beyond = (d_int >= 0) & (d_level * guard.scale > guard.too_near_above_px)
     candidate = beyond if config.max_cost is None else beyond & (c1 <= config.max_cost)
@@ -244,70 +253,147 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     # searches would decide) is no candidate
     centre = np.minimum(((np.arange(w_level) + 0.5) * guard.scale).astype(np.intp), width - 1)
     value_level = disparity[:, centre] / np.float32(guard.scale)
-    contest = candidate & np.isfinite(value_level)
-    if contest.any():
-        value_min, value_cost = refine_candidates(*pair_at(w_level), value_level, contest, rows=(row0, row1),
-                                                  half_px=1)
-        candidate &= ~contest | _beats(c1, d_level, value_cost, value_level, config.uniqueness_ratio,
-                                       value_min > guard.too_near_above_px / guard.scale)
-    # Step 2 up-sampling (nearest neighbour along x, disparities times the scale), AOI columns
+    ratio = config.uniqueness_ratio
+
+    def level_contest(among):
+        """Step 2 on the guard's images: the candidates among ``among`` that beat the value."""
+        ys, xs = np.nonzero(among & np.isfinite(value_level))
+        if not ys.size:
+            return among
+        contest = np.zeros_like(among)
+        contest[ys, xs] = True
+        value_min, value_cost = refine_candidates(*level_pair, value_level, contest, rows=rows, half_px=1,
+                                                  boxes=[(ys[0], ys[-1] + 1, xs.min(), xs.max() + 1)])
+        lose = ~_beats(c1[ys, xs], d_level[ys, xs], value_cost[ys, xs], value_level[ys, xs], ratio,
+                       value_min[ys, xs] > guard.too_near_above_px / guard.scale)
+        kept = among.copy()
+        kept[ys[lose], xs[lose]] = False
+        return kept
+
+    min_level = config.speckle_size_px // math.ceil(guard.scale)
+    # clusters of candidates before step 2 hold those after it (a subset's clusters are parts of them)
+    large = _in_large_clusters(candidate, min_level)
+    labels_level, level_boxes = _large_clusters(level_contest(large), min_level)
+    if not labels_level.any():
+        return np.zeros((height, width), bool), None
+    # Step 2 up-sampling (nearest neighbour along x, disparities times the scale), AOI columns;
+    # distinct clusters stay apart (a level column between them spans a column at least)
     source = np.minimum(((np.arange(col0, col1) + 0.5) / guard.scale).astype(np.intp), w_level - 1)
     # (every winner beyond D shapes the re-scoring's windows; only the candidates are re-scored)
     field = np.full((height, width), np.nan, np.float32)
-    field[:, col0:col1] = np.where(beyond[:, source], d_level[:, source] * np.float32(guard.scale), np.nan)
-    want = np.zeros((height, width), bool)
-    want[:, col0:col1] = candidate[:, source]
+    field[:, col0:col1] = np.where(beyond, d_level * np.float32(guard.scale), np.float32(np.nan))[:, source]
+    labels = np.zeros((height, width), labels_level.dtype)
+    labels[:, col0:col1] = labels_level[:, source]
+    n_labels = int(labels_level.max()) + 1
     full = pair_at(width)
-
-    def confirmed_winners(wanted):
-        """Steps 3 and 2 at full resolution: the confirmed candidates among ``wanted`` that win
-        (bool) and their disparities (NaN elsewhere). Per pixel: any subset gives the same."""
-        confirmed_px, confirmed_cost = refine_candidates(
-            *full, field, wanted, rows=(row0, row1), max_cost=config.max_cost,
-            half_px=int(math.ceil(guard.scale / 2)) + config.refine_margin_px)
-        confirmed = np.isfinite(confirmed_px)
-        valued = np.isfinite(disparity)
-        contest = confirmed & valued
-        wins = ~valued
-        if contest.any():
-            value_min, value_cost = refine_candidates(*full, disparity, contest, rows=(row0, row1), half_px=2)
-            wins |= contest & _beats(confirmed_cost, confirmed_px, value_cost, disparity, config.uniqueness_ratio,
-                                     value_min > guard.band_px[0] + 0.5)
-        return confirmed & wins, confirmed_px
-
-    # A too-near region (more than speckle_size_px pixels) lies inside one 8-connected cluster
-    # of candidates at least as large, which comes from a cluster of more than
-    # speckle_size_px / ceil(scale) candidates at the guard's level (each level pixel spans at
-    # most ceil(scale) columns): the others are re-scored only if a region is found (their
-    # margins, step 5), which gives the same verdict with far less re-scoring.
-    clustered = np.zeros((height, width), bool)
-    clustered[:, col0:col1] = _in_clusters_larger_than(
-        candidate, config.speckle_size_px // math.ceil(guard.scale))[:, source]
-    candidates, confirmed_px = confirmed_winners(clustered)
-    too_near = np.where(candidates, confirmed_px, np.nan).astype(np.float32)
+    half_px = int(math.ceil(guard.scale / 2)) + config.refine_margin_px
+    boxes = _full_boxes(level_boxes, guard.scale, col0, col1)
+    confirmed_px, confirmed_cost = refine_candidates(*full, field, labels > 0, rows=rows, max_cost=config.max_cost,
+                                                     half_px=half_px, boxes=boxes)
+    # Steps 2 (full resolution) and 4 on the confirmed candidates of the clusters holding more
+    # than speckle_size_px of them (a too-near region lies in one), as pixel lists
+    ys, xs = np.nonzero(np.isfinite(confirmed_px))
+    cluster = labels[ys, xs]
+    crowd = np.bincount(cluster, minlength=n_labels) > config.speckle_size_px
+    crowd[0] = False
+    keep = crowd[cluster]
+    ys, xs, cluster = ys[keep], xs[keep], cluster[keep]
+    px, cost, value = confirmed_px[ys, xs], confirmed_cost[ys, xs], disparity[ys, xs]
+    wins = ~np.isfinite(value)
+    contest = ~wins
+    if contest.any():
+        wanted = np.zeros((height, width), bool)
+        wanted[ys[contest], xs[contest]] = True
+        value_min, value_cost = refine_candidates(*full, disparity, wanted, rows=rows, half_px=2,
+                                                  boxes=None if boxes is None else boxes[crowd[1:]])
+        yc, xc = ys[contest], xs[contest]
+        wins[contest] = _beats(cost[contest], px[contest], value_cost[yc, xc], value[contest], ratio,
+                               value_min[yc, xc] > guard.band_px[0] + 0.5)
+    crowd = np.bincount(cluster[wins], minlength=n_labels) > config.speckle_size_px
+    crowd[0] = False
+    if not crowd.any():
+        return np.zeros((height, width), bool), None
+    too_near = np.full((height, width), np.nan, np.float32)
+    too_near[ys[wins], xs[wins]] = px[wins]
     if config.speckle_size_px > 0:
         too_near = remove_speckles(too_near, max_size_px=config.speckle_size_px,
                                    max_diff_px=config.speckle_range_px * guard.scale)
     too_near = np.isfinite(too_near)
     if not too_near.any():
         return too_near, None
-    rest = want & ~clustered
+    # step 5 needs every candidate that wins: also the confirmed ones of the other clusters, and
+    # the candidates outside the clusters of step 3 (after step 2 on the guard's images)
+    candidates = np.zeros((height, width), bool)
+    candidates[ys[wins], xs[wins]] = True
+    valued = np.isfinite(disparity)
+
+    def winners(confirmed_px, confirmed_cost, among):
+        contest = among & valued
+        wins = among & ~valued
+        if contest.any():
+            value_min, value_cost = refine_candidates(*full, disparity, contest, rows=rows, half_px=2)
+            wins |= contest & _beats(confirmed_cost, confirmed_px, value_cost, disparity, ratio,
+                                     value_min > guard.band_px[0] + 0.5)
+        return wins
+
+    others = np.isfinite(confirmed_px)
+    others[ys, xs] = False
+    if others.any():
+        candidates |= winners(confirmed_px, confirmed_cost, others)
+    rest_level = level_contest(candidate & ~large) | (level_contest(large) & (labels_level == 0))
+    rest = np.zeros((height, width), bool)
+    rest[:, col0:col1] = rest_level[:, source]
     if rest.any():
-        candidates |= confirmed_winners(rest)[0]
+        rest_px, rest_cost = refine_candidates(*full, field, rest, rows=rows, max_cost=config.max_cost,
+                                               half_px=half_px)
+        candidates |= winners(rest_px, rest_cost, np.isfinite(rest_px))
     grown = near_side(candidates, margin_px=config.too_near_margin)
     _, labels = cv2.connectedComponents(grown.view(np.uint8), connectivity=8)
     keep = np.unique(labels[too_near])
     return too_near, np.isin(labels, keep[keep > 0])
 
 
-def _in_clusters_larger_than(mask: np.ndarray, size_px: int) -> np.ndarray:
+def _label_type(shape) -> int:
+    """The label type of cv2's connected components: 16 bit where every label fits (much faster
+    with statistics), else 32 bit."""
+    return cv2.CV_16U if ((shape[0] + 1) // 2) * ((shape[1] + 1) // 2) < 2 ** 16 - 1 else cv2.CV_32S
+
+
+def _in_large_clusters(mask: np.ndarray, size_px: int) -> np.ndarray:
     """``mask`` where its 8-connected cluster has more than ``size_px`` pixels (all of it for 0)."""
     if size_px <= 0 or not mask.any():
         return mask
-    _, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8)
-    large = stats[:, cv2.CC_STAT_AREA] > size_px
+    _, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8, ltype=_label_type(mask.shape))
+    large = np.bincount(labels.ravel()) > size_px
     large[0] = False
     return large[labels]
+
+
+def _large_clusters(mask: np.ndarray, size_px: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(labels, boxes)``: the 8-connected clusters of ``mask`` with more than ``size_px``
+    pixels numbered from 1 (0 elsewhere) and their bounding boxes ``(row0, row1, col0, col1)``
+    in that order; for ``size_px`` 0 every cluster, and boxes None."""
+    if size_px <= 0:
+        return cv2.connectedComponents(mask.view(np.uint8), connectivity=8, ltype=_label_type(mask.shape))[1], None
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8,
+                                                           ltype=_label_type(mask.shape))
+    large = stats[:, cv2.CC_STAT_AREA] > size_px
+    large[0] = False
+    number = np.zeros(len(large), labels.dtype)
+    number[large] = np.arange(1, np.count_nonzero(large) + 1)
+    x, y, w, h = (stats[large, i] for i in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH,
+                                             cv2.CC_STAT_HEIGHT))
+    return number[labels], np.stack([y, y + h, x, x + w], axis=1)
+
+
+def _full_boxes(level_boxes, scale: float, col0: int, col1: int):
+    """Boxes of the guard's level as full-resolution boxes (the columns their pixels up-sample to)."""
+    if level_boxes is None:
+        return None
+    out = level_boxes.astype(np.float64)
+    out[:, 2] = np.maximum(np.floor(out[:, 2] * scale) - 1, col0)
+    out[:, 3] = np.minimum(np.ceil(out[:, 3] * scale) + 1, col1)
+    return out.astype(np.intp)
 
 
 def _drop_cut_off(disparity: np.ndarray, beside: np.ndarray, config: MatchingConfig) -> None:
