@@ -23,10 +23,11 @@ def _stereo():
                               rig=RigMount(height_m=HEIGHT, tilt_rad=TILT))
 
 
-def _frame(*, wall_x=WALL_X, floor_gray=None, measured_share=0.05, measured_below=200, seed=0):
+def _frame(*, wall_x=WALL_X, floor_gray=None, measured_share=0.05, measured_below=200, skirting_m=0.0, seed=0):
     """(image, disparity): the floor's gray level from ``floor_gray(x, y)``; a plain wall at ``wall_x`` (None: none).
 
-    The floor is measured on ``measured_share`` of its pixels below row ``measured_below``.
+    The floor is measured on ``measured_share`` of its pixels below row ``measured_below``; the
+    wall's lowest ``skirting_m`` is a skirting board of the floor's gray level.
     """
     rng = np.random.default_rng(seed)
     v, u = np.mgrid[0:H, 0:W].astype(np.float64)
@@ -40,7 +41,8 @@ def _frame(*, wall_x=WALL_X, floor_gray=None, measured_share=0.05, measured_belo
             np.full(u.shape, np.inf)
     t_hit = np.minimum(t_floor, t_wall)
     on_floor = np.isfinite(t_floor) & (t_floor <= t_wall)
-    gray = np.where(on_floor, 60.0, 120.0)
+    height = origin[2] + t_hit * dirs[..., 2]
+    gray = np.where(on_floor | (height < skirting_m), 60.0, 120.0)
     if floor_gray is not None:
         p = origin + np.where(on_floor, t_floor, 0.0)[..., None] * dirs
         gray = np.where(on_floor, floor_gray(p[..., 0], p[..., 1]), gray)
@@ -70,6 +72,18 @@ def test_plain_wall_base_within_two_cells():
     z = out.points_robot[:, 2]
     assert z.min() > 0.08 and z.max() <= 1.5
     assert np.all(np.isin(out.points_robot[:, 0], x))
+
+
+def test_skirting_of_the_floor_colour_is_not_taken_for_the_floor():
+    """The floor is measured up to the board's foot; the edge at its top lies 0.4 m farther on the floor."""
+    image, disparity = _frame(skirting_m=0.1, measured_share=0.5, measured_below=0)
+    out = _boundary(image, disparity)
+    # no edge at the foot: no boundary at all is right, one at the board's top (x = 2.4 m) is not
+    assert np.all(np.abs(out.base_points_robot[:, 0] - WALL_X) <= 0.1), out.base_points_robot[:, 0].max()
+    # without the gap rule the board's top edge is taken, and where the floor below is not
+    # measured right up to it the base lands behind the wall
+    loose = _boundary(image, disparity, FreeSpaceConfig(gap_rows=12))
+    assert (loose.base_points_robot[:, 0] > WALL_X + 0.2).any()
 
 
 def test_no_wall_nothing_invented_on_plain_floor():

@@ -82,7 +82,8 @@ class PipelineConfig:
     free_space : FreeSpaceConfig or None
         The free-space boundary (:mod:`mrstereo.geometry.freespace`): where the floor ends in
         each image column, an obstacle base that the matcher cannot measure (a wall without
-        texture); its points join the frame's obstacle points. None: off.
+        texture); its points join the frame's obstacle points. On by default, chosen on
+        randomized worlds 0-9 (docs/mapping.md, "Free-space boundary"). None: off.
     """
 
     preset: str = "mapping"
@@ -94,7 +95,7 @@ class PipelineConfig:
         p_miss=0.35, min_points_per_cell=5, disparity_sigma_px=0.25, clear_margin_sigmas=2.0, occlusion_gap_m=0.25,
         see_through_ratio=1.0, overhang_shadow=True, map_occlusion_p=0.8, clear_below_m=0.8))
     grid: GridSpec = field(default_factory=GridSpec)
-    free_space: FreeSpaceConfig | None = None
+    free_space: FreeSpaceConfig | None = field(default_factory=FreeSpaceConfig)
 
     def single_range_equal_work(self, stereo: StereoCamera) -> PipelineConfig:
         """A single full-resolution range doing the same work as the multi-range plan.

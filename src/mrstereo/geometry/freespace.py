@@ -12,19 +12,20 @@ to it.
 Rules (per column, scanning up from the bottom row; numba kernel
 ``_freespace_kernels.column_boundaries``; docs/mapping.md "Free-space boundary"):
 
-* **the floor's look is measured**: the frame needs at least ``min_floor_pixels`` measured floor
-  pixels (no boundary otherwise: a frame that sees no floor says nothing about where it ends);
-  their gray levels (5th-95th percentile, widened by ``appearance_threshold``) are the floor's
-  look. A patterned floor (their interquartile range above ``pattern_threshold``: chequered,
-  striped) cannot be followed by its look: there a boundary needs measured floor within
-  ``gap_rows`` rows below it;
-* **start on the floor**: the bottom ``persist_rows`` rows hold no measured obstacle and their
-  mean gray level lies in the floor's look; it starts the column's floor appearance ``mu``, which
-  follows the rows accepted as floor (measured floor pixels, or pixels within
-  ``appearance_threshold`` of ``mu``) with the rate ``adapt`` -- a lamp's slow gradient is
-  followed, a step is not. ``persist_rows`` rows in a row of texture the matcher did not
-  measure (local standard deviation of the smoothed image above ``texture_threshold``) end the
-  scan: something unmeasured stands there;
+* **the floor is measured**: the frame needs at least ``min_floor_pixels`` measured floor
+  pixels (no boundary otherwise: a view that shows no floor says nothing about where it ends);
+* **the floor's look**: the gray levels of the image's bottom ``2 persist_rows`` rows (measured
+  obstacles left out), 5th-95th percentile widened by ``appearance_threshold``. A patterned
+  floor (their interquartile range above ``pattern_threshold``: chequered, striped) cannot be
+  followed by its look: there a boundary needs measured floor within ``gap_rows`` rows below it;
+* **start on the floor**: the bottom ``persist_rows`` rows of the column hold no measured
+  obstacle and their mean lies in the floor's look; it starts the column's floor appearance
+  ``mu``, which follows the rows accepted as floor with the rate ``adapt`` -- a lamp's slow
+  gradient is followed, a step is not;
+* **follow the floor without a break**: a row is floor when it is measured floor or lies within
+  ``appearance_threshold`` of ``mu``; ``persist_rows`` rows in a row that are neither, or of
+  texture the matcher did not measure (local standard deviation of the smoothed image above
+  ``texture_threshold``), end the column without a boundary: something unmeasured stands there;
 * **no gap under the edge**: an edge whose nearest measured floor pixel below lies more than
   ``gap_rows`` but at most ``check_rows`` rows lower is not a base (the top of a skirting board
   that looks like the floor: the floor is measured up to the board's foot, not to the edge);
@@ -49,7 +50,8 @@ Rules (per column, scanning up from the bottom row; numba kernel
 The base point is measured where possible: the mean of the obstacle points in the
 ``check_rows`` rows above the edge (within ``far_margin_m`` of its range), else the measured floor
 point just below the edge (within ``gap_rows``), else the floor point of the edge's row.
-Sizes in rows and columns are given for a 240-row (320-column) image and scale with the image.
+Sizes in rows and columns are given for a 240-row (320-column) image and scale with the image;
+a wider image is scanned in every ``round(W / 320)``-th column (the cost grows with the rows only).
 The obstacle stands from the base up to the highest row above it before measured floor or a
 point farther than the base: it is returned as points on the vertical line over the base, every
 ``point_spacing_m`` from ``min_height_m`` up (at most ``max_height_m``), so that the occupancy
@@ -187,14 +189,14 @@ class FreeSpaceBoundary:
 
 def _runs(rows: np.ndarray, min_run: int, max_step: float) -> np.ndarray:
     """Columns that belong to a run of at least ``min_run`` neighbours with row steps <= ``max_step``."""
-    keep = np.zeros(rows.size, dtype=bool)
-    start = 0
-    for u in range(1, rows.size + 1):
-        if u == rows.size or not (rows[u] >= 0 and rows[u - 1] >= 0 and abs(rows[u] - rows[u - 1]) <= max_step):
-            if rows[start] >= 0 and u - start >= min_run:
-                keep[start:u] = True
-            start = u
-    return keep
+    valid = rows >= 0
+    if not valid.any():
+        return valid
+    link = valid[1:] & valid[:-1] & (np.abs(np.diff(rows)) <= max_step)
+    start = valid & ~np.concatenate([[False], link])
+    run = np.cumsum(start) - 1
+    length = np.bincount(run[valid], minlength=int(start.sum()))
+    return valid & (length[np.maximum(run, 0)] >= min_run)
 
 
 def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, stereo: StereoCamera, *,
@@ -257,26 +259,31 @@ def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, ster
     if h <= persist + check + edge + 2:
         return empty
     # the floor's look in this frame: the gray levels of its measured pixels
-    seen = smooth[obstacles.floor_mask]
+    if np.count_nonzero(obstacles.floor_mask) < config.min_floor_pixels:
+        return empty                # no floor measured: nothing says the image's bottom is floor
+    band = slice(h - 2 * persist, h)
+    seen = smooth[band][~obstacles.obstacle_mask[band]]
     if seen.size < config.min_floor_pixels:
-        return empty                # no floor measured: its look is unknown
+        return empty
     lo, q1, q3, hi = np.percentile(seen, [5.0, 25.0, 75.0, 95.0])
     start_lo, start_hi = lo - config.appearance_threshold, hi + config.appearance_threshold
     measured_only = bool(q3 - q1 > config.pattern_threshold)
     R, t = _rigid(obstacles.T_robot_from_cam)
     intr = _rectified_intrinsics(stereo)
-    base = np.empty(w, np.int64)
-    base_xy = np.empty((w, 2))
-    top = np.empty(w, np.int64)
+    # one column in every ``step``: the rules see the image at about 320 columns
+    step = max(1, int(round(sx)))
+    base = np.full(w, -1, np.int64)
+    base_xy = np.zeros((w, 2))
+    top = np.full(w, -1, np.int64)
     _kernels.column_boundaries(
-        smooth, np.ascontiguousarray(obstacles.floor_mask), np.ascontiguousarray(obstacles.obstacle_mask), uniform, d,
+        *(np.ascontiguousarray(a.T) for a in (smooth, obstacles.floor_mask, obstacles.obstacle_mask, uniform, d)),
         float(stereo.doffs_px), intr["bf"], intr["focal_px"], intr["cx_px"], intr["cy_px"], intr["fy_px"], R, t,
         float(max_range_m if config.max_range_m is None else config.max_range_m), float(config.min_range_m),
         edge, persist, check, float(config.edge_threshold), float(config.appearance_threshold), float(config.adapt),
         float(config.far_margin_m), rows(config.gap_rows), float(start_lo), float(start_hi), measured_only,
-        base, top, base_xy)
-    keep = _runs(base, max(1, int(round(config.min_run_columns * sx))), config.max_row_step * sy)
-    cols = np.flatnonzero(keep)
+        step, base, top, base_xy)
+    keep = _runs(base[::step], config.min_run_columns, config.max_row_step * sy)
+    cols = np.flatnonzero(keep) * step
     if cols.size == 0:
         return empty
     base_row = np.full(w, np.nan)
