@@ -154,3 +154,8 @@ def test_refinement_in_boxes_equals_the_running_sums_bit_for_bit(kind):
     np.testing.assert_array_equal(boxed[0], dense[0])
     np.testing.assert_array_equal(boxed[1], dense[1])
     assert np.isfinite(boxed[0][want]).mean() > 0.3 and np.isnan(boxed[0][~want]).all()
+    # one box for three strips: split into row strips, same result
+    strips = C.refine_candidates(*pair, coarse, want, half_px=3, max_cost=max_cost, boxes=[(0, 50, 0, 80)],
+                                 n_strips=3)
+    np.testing.assert_array_equal(strips[0], dense[0])
+    np.testing.assert_array_equal(strips[1], dense[1])

@@ -318,6 +318,11 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
         boxes[:, 1] = np.minimum(boxes[:, 1], rows[1])
         boxes[:, 2] = np.maximum(boxes[:, 2], 0)
         boxes[:, 3] = np.minimum(boxes[:, 3], w)
+        threads = _strips(n_strips, h)
+        if len(boxes) < threads:        # fewer boxes than threads: each in row strips
+            edges = [boxes[:, 0] + (boxes[:, 1] - boxes[:, 0]) * s // threads for s in range(threads + 1)]
+            boxes = np.concatenate([np.stack([edges[s], edges[s + 1], boxes[:, 2], boxes[:, 3]], axis=1)
+                                    for s in range(threads)])
         _kernels.refine_boxes(left.padded, right.padded, left.a, left.b, right.a, right.b, r, center_pad,
                               np.ascontiguousarray(want), boxes, int(half_px), left.zncc,
                               -1.0 if max_cost is None else float(max_cost), out, cost)
