@@ -51,7 +51,7 @@ from mrstereo.pipeline import PipelineConfig, add_observation, observation_from_
 from mrstereo.profiling import Profile, profiling
 from mrstereo.recording import read_manifest
 
-STAGES = ("rectify", "match", "reject", "3-D", "grid")
+STAGES = ("rectify", "match", "reject", "3-D", "free space", "grid")
 CLOCK = time.perf_counter
 """The clock of every stage time: wall-clock, or with ``--cpu`` the calling thread's CPU time."""
 
@@ -142,7 +142,7 @@ class OpenCVChain:
         np.add.at(self.counts, (row[inside], col[inside]), 1)
         t.append(CLOCK())
         ms = 1000.0 * np.diff(t)
-        return {"rectify": ms[0], "match": ms[1], "reject": 0.0, "3-D": ms[2], "grid": ms[3]}
+        return {"rectify": ms[0], "match": ms[1], "reject": 0.0, "3-D": ms[2], "free space": 0.0, "grid": ms[3]}
 
 
 def load_frames(manifest) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -86,6 +86,24 @@ def test_skirting_of_the_floor_colour_is_not_taken_for_the_floor():
     assert (loose.base_points_robot[:, 0] > WALL_X + 0.2).any()
 
 
+def test_wall_base_at_640x480(monkeypatch):
+    """A larger image is reduced to about 320x240 first: the same answer, in full-image rows and columns."""
+    import sys
+    module = sys.modules[__name__]
+    for name, value in (("W", 640), ("H", 480), ("F", 400.0), ("CX", 322.0), ("CY", 237.0)):
+        monkeypatch.setattr(module, name, value)
+    image, disparity = _frame(measured_below=400)
+    out = _boundary(image, disparity)
+    assert out.columns.size > 0.8 * 320 and out.columns.max() < 640
+    assert np.mean(np.abs(out.base_points_robot[:, 0] - WALL_X) <= 0.10) > 0.95
+    # the base row is the wall's foot in the full image: the floor point of that row lies at the wall
+    v = out.base_row[out.columns]
+    ray = np.stack([(out.columns - CX) / F, (v - CY) / F, np.ones(v.size)], axis=1) @ \
+        T_robot_from_cam(height_m=HEIGHT, tilt_rad=TILT)[:3, :3].T
+    x = HEIGHT * ray[:, 0] / -ray[:, 2]
+    assert np.median(np.abs(x - WALL_X)) < 0.05
+
+
 def test_no_wall_nothing_invented_on_plain_floor():
     image, disparity = _frame(wall_x=None)
     assert _boundary(image, disparity).columns.size == 0

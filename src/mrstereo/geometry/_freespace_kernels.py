@@ -39,21 +39,20 @@ def _range_at(disparity, doffs_px, u, v, bf, focal_px, cx_px, cy_px, fy_px, R, t
 def column_boundaries(smooth, floor, obstacle, uniform, disparity, doffs_px, bf, focal_px, cx_px, cy_px, fy_px, R, t,
                       max_range_m, min_range_m, edge_rows, persist_rows, check_rows, edge_threshold,
                       appearance_threshold, adapt, far_margin_m, gap_rows, start_lo, start_hi, measured_only,
-                      col_step, base_row, top_row, base_xy):
+                      base_row, top_row, base_xy):
     """Per column of the rectified left image, the row where the floor ends (rules: :mod:`..freespace`).
 
     The images are transposed, (W, H), so that a column is contiguous in memory: ``smooth``
     float32 is the smoothed gray image, ``floor`` / ``obstacle`` bool the measured floor / obstacle
     pixels, ``uniform`` bool the pixels without texture, ``disparity`` the disparity (NaN invalid). Writes ``base_row[u]`` (the edge lies between
     rows ``base_row - 1`` and ``base_row``; -1: no boundary), ``top_row[u]`` (the highest row of
-    the obstacle's evidence) and ``base_xy[u]`` (robot-frame base point) for every ``col_step``-th
-    column ``u`` (the others are left as they are).
+    the obstacle's evidence) and ``base_xy[u]`` (robot-frame base point).
     """
     w, h = smooth.shape
     k = edge_rows
     max_range2 = max_range_m * max_range_m
     min_range2 = min_range_m * min_range_m
-    for u in range(0, w, col_step):
+    for u in range(w):
         base_row[u] = -1
         top_row[u] = -1
         # the floor's look where the column starts: its bottom rows, no measured obstacle

@@ -51,7 +51,9 @@ The base point is measured where possible: the mean of the obstacle points in th
 ``check_rows`` rows above the edge (within ``far_margin_m`` of its range), else the measured floor
 point just below the edge (within ``gap_rows``), else the floor point of the edge's row.
 Sizes in rows and columns are given for a 240-row (320-column) image and scale with the image;
-a wider image is scanned in every ``round(W / 320)``-th column (the cost grows with the rows only).
+an image of at least twice that size is first reduced by an integer factor (gray levels averaged
+over the block, a block measured floor / obstacle when any of its pixels is, disparities sampled),
+so the cost stays that of about 320x240 and the rules see the same sizes.
 The obstacle stands from the base up to the highest row above it before measured floor or a
 point farther than the base: it is returned as points on the vertical line over the base, every
 ``point_spacing_m`` from ``min_height_m`` up (at most ``max_height_m``), so that the occupancy
@@ -243,68 +245,80 @@ def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, ster
                               points_robot=np.empty((0, 3)), columns=np.empty(0, np.int64))
     if not obstacles.success:
         return empty
+    if np.count_nonzero(obstacles.floor_mask) < config.min_floor_pixels:
+        return empty                # no floor measured: nothing says the image's bottom is floor
     gray = np.asarray(left_rect, dtype=np.float32)
     if gray.ndim == 3:
         gray = gray.mean(axis=2, dtype=np.float32)
-    sy, sx = h / 240.0, w / 320.0
+    floor, obstacle = obstacles.floor_mask, obstacles.obstacle_mask
+    intr = _rectified_intrinsics(stereo)
+    doffs = float(stereo.doffs_px)
+    # the rules see the image at about 320x240: a larger one is reduced by an integer factor
+    # (gray levels averaged, a block measured when any of its pixels is, disparities sampled)
+    n = max(1, int(min(w / 320.0, h / 240.0) + 0.25))
+    if n > 1:
+        hs, ws = h // n, w // n
+        gray = cv2.resize(gray[:hs * n, :ws * n], (ws, hs), interpolation=cv2.INTER_AREA)
+        # any pixel of a block: its mean (INTER_AREA) of 0 / 255 is at least 255 / n^2 > 0
+        floor, obstacle = (cv2.resize(m[:hs * n, :ws * n].view(np.uint8) * np.uint8(255), (ws, hs),
+                                      interpolation=cv2.INTER_AREA) > 0 for m in (floor, obstacle))
+        d = d[n // 2::n, n // 2::n][:hs, :ws] / np.float32(n)
+        off = (n - 1) / 2.0                          # a reduced pixel's centre in the full image
+        intr = {"bf": intr["bf"] / n, "focal_px": intr["focal_px"] / n, "cx_px": (intr["cx_px"] - off) / n,
+                "cy_px": (intr["cy_px"] - off) / n, "fy_px": intr["fy_px"] / n}
+        doffs /= n
+    hh, ww = gray.shape
+    sy = hh / 240.0
     sigma = config.smooth_sigma_px * sy
     smooth = cv2.GaussianBlur(gray, (0, 0), sigma) if sigma > 0 else np.ascontiguousarray(gray)
-    rows = lambda n: max(1, int(round(n * sy)))      # noqa: E731 -- sizes given at 240 rows
+    rows = lambda k: max(1, int(round(k * sy)))      # noqa: E731 -- sizes given at 240 rows
     # texture the matcher did not measure: the smoothed image's local standard deviation
     win = (2 * rows(2) + 1,) * 2
     mean = cv2.boxFilter(smooth, cv2.CV_32F, win)
     var = cv2.boxFilter(smooth * smooth, cv2.CV_32F, win) - mean * mean
     uniform = var <= np.float32(config.texture_threshold) ** 2
     edge, persist, check = rows(config.edge_rows), rows(config.persist_rows), rows(config.check_rows)
-    if h <= persist + check + edge + 2:
+    if hh <= persist + check + edge + 2:
         return empty
-    # the floor's look in this frame: the gray levels of its measured pixels
-    if np.count_nonzero(obstacles.floor_mask) < config.min_floor_pixels:
-        return empty                # no floor measured: nothing says the image's bottom is floor
-    band = slice(h - 2 * persist, h)
-    seen = smooth[band][~obstacles.obstacle_mask[band]]
+    # the floor's look in this frame: the gray levels of the image's bottom rows
+    band = slice(hh - 2 * persist, hh)
+    seen = smooth[band][~obstacle[band]]
     if seen.size < config.min_floor_pixels:
         return empty
     lo, q1, q3, hi = np.percentile(seen, [5.0, 25.0, 75.0, 95.0])
     start_lo, start_hi = lo - config.appearance_threshold, hi + config.appearance_threshold
     measured_only = bool(q3 - q1 > config.pattern_threshold)
     R, t = _rigid(obstacles.T_robot_from_cam)
-    intr = _rectified_intrinsics(stereo)
-    # one column in every ``step``: the rules see the image at about 320 columns
-    step = max(1, int(round(sx)))
-    base = np.full(w, -1, np.int64)
-    base_xy = np.zeros((w, 2))
-    top = np.full(w, -1, np.int64)
+    base = np.full(ww, -1, np.int64)
+    base_xy = np.zeros((ww, 2))
+    top = np.full(ww, -1, np.int64)
     _kernels.column_boundaries(
-        *(np.ascontiguousarray(a.T) for a in (smooth, obstacles.floor_mask, obstacles.obstacle_mask, uniform, d)),
-        float(stereo.doffs_px), intr["bf"], intr["focal_px"], intr["cx_px"], intr["cy_px"], intr["fy_px"], R, t,
+        *(np.ascontiguousarray(a.T) for a in (smooth, floor, obstacle, uniform, d)),
+        doffs, intr["bf"], intr["focal_px"], intr["cx_px"], intr["cy_px"], intr["fy_px"], R, t,
         float(max_range_m if config.max_range_m is None else config.max_range_m), float(config.min_range_m),
         edge, persist, check, float(config.edge_threshold), float(config.appearance_threshold), float(config.adapt),
         float(config.far_margin_m), rows(config.gap_rows), float(start_lo), float(start_hi), measured_only,
-        step, base, top, base_xy)
-    keep = _runs(base[::step], config.min_run_columns, config.max_row_step * sy)
-    cols = np.flatnonzero(keep) * step
-    if cols.size == 0:
+        base, top, base_xy)
+    small = np.flatnonzero(_runs(base, max(1, int(round(config.min_run_columns * ww / 320.0))),
+                                 config.max_row_step * sy))
+    if small.size == 0:
         return empty
+    # back to the full image: a reduced pixel's centre
+    cols = small * n + n // 2
     base_row = np.full(w, np.nan)
     top_row = np.full(w, np.nan)
-    base_row[cols] = base[cols] - 0.5
-    top_row[cols] = top[cols]
-    # the base: the floor point of the edge's row; the obstacle: the vertical line over it
-    f, cx, cy, fy = intr["focal_px"], intr["cx_px"], intr["cy_px"], intr["fy_px"]
-
-    def rays(v):
-        c = np.stack([(cols - cx) / f, (v - cy) / fy, np.ones(cols.size)], axis=1)
-        return c @ R.T
-
-    base_xy = base_xy[cols]
+    base_row[cols] = (base[small] - 0.5) * n + (n - 1) / 2.0
+    top_row[cols] = top[small] * n + (n - 1) / 2.0
+    # the obstacle: the vertical line over the base, up to the top row's sight line
+    full = _rectified_intrinsics(stereo)
+    ray_top = np.stack([(cols - full["cx_px"]) / full["focal_px"], (top_row[cols] - full["cy_px"]) / full["fy_px"],
+                        np.ones(cols.size)], axis=1) @ R.T
+    base_xy = base_xy[small]
     base_points = np.column_stack([base_xy, np.zeros(cols.size)])
-    ray_top = rays(top_row[cols])
     reach = np.hypot(*(base_xy - t[:2]).T) / np.maximum(np.hypot(ray_top[:, 0], ray_top[:, 1]), 1e-12)
     z_top = np.minimum(t[2] + ray_top[:, 2] * reach, max_height_m)
     heights = np.arange(min_height_m + 0.5 * config.point_spacing_m, max_height_m, config.point_spacing_m)
-    take = heights[None, :] <= z_top[:, None]
-    k, j = np.nonzero(take)
+    k, j = np.nonzero(heights[None, :] <= z_top[:, None])
     points = np.column_stack([base_xy[k], heights[j]])
     return FreeSpaceBoundary(base_row=base_row, top_row=top_row, base_points_robot=base_points,
                              points_robot=points, columns=cols.astype(np.int64))
