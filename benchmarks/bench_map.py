@@ -58,7 +58,11 @@ def _parse_seeds(values: list[str]) -> list[int]:
 
 
 def variants() -> dict:
-    """Named pipeline configurations: how each step of the mapping sensor model changes the map."""
+    """Named pipeline configurations: how each step of the mapping sensor model changes the map.
+
+    The mapping steps are re-fused from the default's observations (with the free-space boundary's
+    points); the last but one row maps without the boundary.
+    """
     from mrstereo.pipeline import PipelineConfig
 
     base = PipelineConfig()
@@ -80,7 +84,8 @@ def variants() -> dict:
         "+ floor seen through a cell clears it": replace(base, mapping=view_tests),
         "+ no clearing beyond an overhang": replace(base, mapping=shadow),
         "+ occlusion by the map (P >= 0.8)": replace(base, mapping=replace(shadow, map_occlusion_p=m.map_occlusion_p)),
-        "+ clearing only below 0.8 m (the default)": base,
+        "+ clearing only below 0.8 m": replace(base, free_space=None),
+        "+ free-space boundary (the default)": base,
     }
 
 
