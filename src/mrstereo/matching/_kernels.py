@@ -1115,6 +1115,90 @@ def zero_where_invalid(disparity, confidence):
             cr[x] = cr[x] if np.isfinite(dr[x]) else np.float32(0.0)
 
 
+# ----------------------------------------------------------------------------- near guard
+@njit(nogil=True, cache=True)
+def guard_candidates(d_int, sub, c1, c2, d_right, subpixel, scale, above, wide, max_cost, wide_cost,
+                     lr_max_diff, keep, wide_keep, out_d, out_beyond, out_candidate):
+    """Step 1 of the near guard in one pass (:func:`.disparity._near_guard`): the level
+    disparity ``d_int (+ sub)``; ``beyond`` = a winner with ``d scale > above``; a candidate =
+    beyond and ``c1 <= max_cost`` (``max_cost`` < 0: off), left-right consistent within
+    ``lr_max_diff`` (< 0: off) and unique (``c1 <= keep c2``, ``keep`` < 0: off). ``wide`` (0, 1:
+    the comparison, 2: also the product) and the ``wide_*`` flags evaluate in float64 where
+    numpy's promotion of the settings' types would (float32 otherwise): the verdicts equal
+    the numpy expressions (tests/test_matching_too_near.py)."""
+    height, width = d_int.shape
+    for y in range(height):
+        for x in range(width):
+            d = d_int[y, x]
+            v = np.float32(np.float64(d) + np.float64(sub[y, x])) if subpixel else np.float32(d)
+            out_d[y, x] = v
+            if wide == 2:          # float64 product
+                b = d >= 0 and np.float64(v) * np.float64(scale) > np.float64(above)
+            elif wide == 1:        # float32 product, float64 comparison
+                b = d >= 0 and np.float64(v * np.float32(scale)) > np.float64(above)
+            else:
+                b = d >= 0 and v * np.float32(scale) > np.float32(above)
+            out_beyond[y, x] = b
+            c = b
+            cost = c1[y, x]
+            if c and max_cost >= 0:
+                c = np.float64(cost) <= max_cost if wide_cost else cost <= np.float32(max_cost)
+            if c and lr_max_diff >= 0:
+                xr = x - d
+                if xr < 0:
+                    c = False
+                else:
+                    back = d_right[y, xr]
+                    c = back >= 0 and np.float64(abs(d - back)) <= lr_max_diff
+            if c and keep >= 0:
+                c = not (np.float64(cost) > keep * np.float64(c2[y, x]) if wide_keep
+                         else cost > np.float32(keep) * c2[y, x])
+            out_candidate[y, x] = c
+
+
+@njit(nogil=True, cache=True)
+def guard_upsample(beyond, d_level, labels_level, first_col, end_col, scale, out_field, out_want):
+    """Step 2's up-sampling of the near guard: level column ``c`` spans the full-resolution
+    columns ``first_col[c] .. end_col[c] - 1`` (nearest neighbour); ``out_field`` = the beyond
+    winners' disparity times ``scale`` (float32, NaN elsewhere and outside the spans),
+    ``out_want`` = the labelled clusters."""
+    height, width = out_field.shape
+    n = first_col.size
+    nan = np.float32(np.nan)
+    s = np.float32(scale)
+    for y in range(height):
+        field = out_field[y]
+        want = out_want[y]
+        field[:] = nan
+        want[:] = False
+        for c in range(n):
+            if beyond[y, c]:
+                v = d_level[y, c] * s
+                for x in range(first_col[c], end_col[c]):
+                    field[x] = v
+            if labels_level[y, c] > 0:
+                for x in range(first_col[c], end_col[c]):
+                    want[x] = True
+
+
+@njit(nogil=True, cache=True)
+def guard_finite(values, ys_level, xs_level, first_col, end_col, out_ys, out_xs, out_index):
+    """The finite ``values`` at the full-resolution pixels of level pixels ``(ys_level,
+    xs_level)`` (level column ``c`` spans columns ``first_col[c] .. end_col[c] - 1``), in row-major
+    order when the level pixels are: their rows, columns and level-pixel indices; returns their count."""
+    n = 0
+    for j in range(ys_level.size):
+        y = ys_level[j]
+        c = xs_level[j]
+        for x in range(first_col[c], end_col[c]):
+            if np.isfinite(values[y, x]):
+                out_ys[n] = y
+                out_xs[n] = x
+                out_index[n] = j
+                n += 1
+    return n
+
+
 # Recycled buffers. A 640x480 frame allocates and frees about 40 arrays of 0.3-1.3 MB;
 # glibc serves them from fresh pages (mmap, or a heap trimmed after each frame), and the
 # page faults cost about as much as the post-filters (3200 faults, ~5 ms per frame).

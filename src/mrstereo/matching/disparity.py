@@ -21,8 +21,7 @@ from .cost import match_checked, match_prepared, prepare, prepare_gray, refine_c
 from .multirange import (DEFAULT_DEPTH_EDGES_M, decimate_horizontally, LevelOutput, MultiRangePlan, RangeLevel,
                          _level_cols, bands_px_from_depth_m, default_bands_px, default_level_count, plan_levels,
                          run_levels)
-from .postfilter import (fill_gaps, guard_depth_edges, left_right_consistent, median_filter, near_side,
-                         remove_speckles, textured, unique)
+from .postfilter import fill_gaps, guard_depth_edges, median_filter, near_side, remove_speckles, textured
 
 __all__ = ["DisparityResult", "compute_disparity", "make_plan", "solve_level"]
 
@@ -241,13 +240,7 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     d_int, sub, c1, c2, d_right = match_prepared(*level_pair, d_lo=guard.search_px[0], d_hi=guard.search_px[1],
                                                  rows=rows, cols=_level_cols(col0, col1, guard.scale, w_level),
                                                  right_check=True)
-    d_level = (d_int + sub if config.subpixel else d_int).astype(np.float32)
-    beyond = (d_int >= 0) & (d_level * guard.scale > guard.too_near_above_px)
-    candidate = beyond if config.max_cost is None else beyond & (c1 <= config.max_cost)
-    if config.lr_max_diff_px is not None:
-        candidate &= left_right_consistent(d_int, d_right, max_diff_px=config.lr_max_diff_px)
-    if config.uniqueness_ratio > 0:
-        candidate &= unique(c1, c2, ratio=config.uniqueness_ratio)
+    d_level, beyond, candidate = _guard_candidates(d_int, sub, c1, c2, d_right, guard, config)
     # the bands' value where they have one, at the guard's level (its centre column): a
     # candidate that does not beat it there (as eq. 10 with the uniqueness test over both
     # searches would decide) is no candidate
@@ -280,20 +273,21 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     # distinct clusters stay apart (a level column between them spans a column at least)
     source = np.minimum(((np.arange(col0, col1) + 0.5) / guard.scale).astype(np.intp), w_level - 1)
     # (every winner beyond D shapes the re-scoring's windows; only the candidates are re-scored)
-    field = np.full((height, width), np.nan, np.float32)
-    field[:, col0:col1] = np.where(beyond, d_level * np.float32(guard.scale), np.float32(np.nan))[:, source]
-    labels = np.zeros((height, width), labels_level.dtype)
-    labels[:, col0:col1] = labels_level[:, source]
+    field = _kernels.recycled_empty((height, width), np.float32)
+    want = _kernels.recycled_empty((height, width), np.bool_)
+    first_col, end_col = _level_spans(source, col0, w_level)
+    _kernels.guard_upsample(beyond, d_level, labels_level, first_col, end_col, float(guard.scale), field, want)
     n_labels = int(labels_level.max()) + 1
     full = pair_at(width)
     half_px = int(math.ceil(guard.scale / 2)) + config.refine_margin_px
     boxes = _full_boxes(level_boxes, guard.scale, col0, col1)
-    confirmed_px, confirmed_cost = refine_candidates(*full, field, labels > 0, rows=rows, max_cost=config.max_cost,
+    confirmed_px, confirmed_cost = refine_candidates(*full, field, want, rows=rows, max_cost=config.max_cost,
                                                      half_px=half_px, boxes=boxes)
     # Steps 2 (full resolution) and 4 on the confirmed candidates of the clusters holding more
-    # than speckle_size_px of them (a too-near region lies in one), as pixel lists
-    ys, xs = np.nonzero(np.isfinite(confirmed_px))
-    cluster = labels[ys, xs]
+    # than speckle_size_px of them (a too-near region lies in one), as pixel lists: those of
+    # the clusters' level pixels (the only ones re-scored), each level column spanning the
+    # full-resolution columns that up-sample from it
+    ys, xs, cluster = _finite_in_clusters(confirmed_px, labels_level, first_col, end_col)
     crowd = np.bincount(cluster, minlength=n_labels) > config.speckle_size_px
     crowd[0] = False
     keep = crowd[cluster]
@@ -313,14 +307,19 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     crowd[0] = False
     if not crowd.any():
         return np.zeros((height, width), bool), None
-    too_near = np.full((height, width), np.nan, np.float32)
-    too_near[ys[wins], xs[wins]] = px[wins]
+    # (the speckle filter on the winners' bounding box: its regions are those of the image)
+    yw, xw = ys[wins], xs[wins]
+    top, left = int(yw.min()), int(xw.min())
+    box = np.full((int(yw.max()) + 1 - top, int(xw.max()) + 1 - left), np.nan, np.float32)
+    box[yw - top, xw - left] = px[wins]
     if config.speckle_size_px > 0:
-        too_near = remove_speckles(too_near, max_size_px=config.speckle_size_px,
-                                   max_diff_px=config.speckle_range_px * guard.scale)
-    too_near = np.isfinite(too_near)
-    if not too_near.any():
-        return too_near, None
+        box = remove_speckles(box, max_size_px=config.speckle_size_px,
+                              max_diff_px=config.speckle_range_px * guard.scale)
+    box = np.isfinite(box)
+    if not box.any():
+        return np.zeros((height, width), bool), None
+    too_near = np.zeros((height, width), bool)
+    too_near[top:top + box.shape[0], left:left + box.shape[1]] = box
     # step 5 needs every candidate that wins: also the confirmed ones of the other clusters, and
     # the candidates outside the clusters of step 3 (after step 2 on the guard's images)
     candidates = np.zeros((height, width), bool)
@@ -351,6 +350,49 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     _, labels = cv2.connectedComponents(grown.view(np.uint8), connectivity=8)
     keep = np.unique(labels[too_near])
     return too_near, np.isin(labels, keep[keep > 0])
+
+
+def _guard_candidates(d_int, sub, c1, c2, d_right, guard: RangeLevel, config: MatchingConfig):
+    """Step 1 of :func:`_near_guard` in one kernel (:func:`._kernels.guard_candidates`):
+    ``(d_level, beyond, candidate)``, the level disparity ``d_int (+ sub)`` in float32, the
+    winners above ``guard.too_near_above_px`` and those that pass the maximum cost, the
+    left-right (:func:`.postfilter.left_right_consistent`) and the uniqueness
+    (:func:`.postfilter.unique`) checks; each in the float type numpy gives the expression."""
+    f32 = np.float32
+    product = np.result_type(f32, guard.scale)
+    wide = 2 if product == np.float64 else int(np.result_type(product, guard.too_near_above_px) == np.float64)
+    max_cost = -1.0 if config.max_cost is None else float(config.max_cost)
+    wide_cost = config.max_cost is not None and np.result_type(f32, config.max_cost) == np.float64
+    lr = -1.0 if config.lr_max_diff_px is None else float(config.lr_max_diff_px)
+    keep = 1.0 - config.uniqueness_ratio
+    wide_keep = np.result_type(f32, keep) == np.float64
+    shape = d_int.shape
+    d_level, beyond, candidate = np.empty(shape, f32), np.empty(shape, bool), np.empty(shape, bool)
+    _kernels.guard_candidates(d_int, sub, c1, c2, d_right, bool(config.subpixel), float(guard.scale),
+                              float(guard.too_near_above_px), wide, max_cost, bool(wide_cost), lr,
+                              float(keep) if config.uniqueness_ratio > 0 else -1.0, bool(wide_keep),
+                              d_level, beyond, candidate)
+    return d_level, beyond, candidate
+
+
+def _level_spans(source: np.ndarray, col0: int, w_level: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(first_col, end_col)``: the full-resolution columns ``first_col[c] .. end_col[c] - 1`` that
+    up-sample from level column ``c`` (column ``col0 + i`` from ``source[i]``, non-decreasing)."""
+    levels = np.arange(w_level)
+    return (col0 + np.searchsorted(source, levels, side="left"),
+            col0 + np.searchsorted(source, levels, side="right"))
+
+
+def _finite_in_clusters(values: np.ndarray, labels_level: np.ndarray, first_col: np.ndarray,
+                        end_col: np.ndarray):
+    """``(ys, xs, cluster)``: the pixels where ``values`` is finite among the full-resolution
+    pixels of the labelled level pixels (level column ``c`` spanning ``first_col[c] ..
+    end_col[c] - 1``), in row-major order, and their level labels."""
+    ys_level, xs_level = np.nonzero(labels_level)
+    n_max = int((end_col - first_col)[xs_level].sum())
+    ys, xs, index = np.empty(n_max, np.intp), np.empty(n_max, np.intp), np.empty(n_max, np.intp)
+    n = _kernels.guard_finite(values, ys_level, xs_level, first_col, end_col, ys, xs, index)
+    return ys[:n], xs[:n], labels_level[ys_level[index[:n]], xs_level[index[:n]]]
 
 
 def _label_type(shape) -> int:
