@@ -1,8 +1,10 @@
-"""3D from disparity: triangulation (eq. 14-16), ground plane, obstacles, top view and laser scan, PLY.
+"""3D from disparity: triangulation (eq. 14-16), ground plane, obstacles, free-space boundary, top view,
+laser scan, PLY.
 
 Conventions: docs/conventions.md.
 """
 from .frames import T_robot_from_cam, T_world_from_robot, transform_points
+from .freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
 from .ground import (GroundPlane, T_robot_from_cam_ground, estimate_ground, fit_ground_plane,
                      fit_ground_v_disparity, ground_from_rig, height_above_ground_m, v_disparity)
 from .obstacles import (ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame,
@@ -20,6 +22,7 @@ __all__ = [
     "GroundPlane", "T_robot_from_cam_ground", "estimate_ground", "fit_ground_plane", "fit_ground_v_disparity",
     "ground_from_rig", "height_above_ground_m", "v_disparity",
     "ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity",
+    "FreeSpaceConfig", "FreeSpaceBoundary", "free_space_boundary",
     "PairObstacles", "PairScan", "obstacles_from_pair", "scan_from_pair",
     "PointCloud", "read_ply", "write_ply",
     "LaserScan", "laser_scan_from_points", "near_limit_range_m", "plot_top_view", "read_scan_json",

@@ -44,9 +44,10 @@ def column_boundaries(smooth, floor, obstacle, uniform, disparity, doffs_px, bf,
 
     The images are transposed, (W, H), so that a column is contiguous in memory: ``smooth``
     float32 is the smoothed gray image, ``floor`` / ``obstacle`` bool the measured floor / obstacle
-    pixels, ``uniform`` bool the pixels without texture, ``disparity`` the disparity (NaN invalid). Writes ``base_row[u]`` (the edge lies between
-    rows ``base_row - 1`` and ``base_row``; -1: no boundary), ``top_row[u]`` (the highest row of
-    the obstacle's evidence) and ``base_xy[u]`` (robot-frame base point).
+    pixels, ``uniform`` bool the pixels without texture, ``disparity`` the disparity (NaN invalid).
+    Writes ``base_row[u]`` (the edge lies between rows ``base_row - 1`` and ``base_row``; -1: no
+    boundary), ``top_row[u]`` (the highest row of the obstacle's evidence) and ``base_xy[u]``
+    (robot-frame base point).
     """
     w, h = smooth.shape
     k = edge_rows
