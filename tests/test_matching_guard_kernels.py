@@ -2,11 +2,13 @@
 replace, bit for bit: random winners with ties at the thresholds, both float widths."""
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
 from mrstereo.matching import _kernels, preset_config
-from mrstereo.matching.disparity import _finite_in_clusters, _guard_candidates, _level_spans
+from mrstereo.matching.disparity import (_finite_in_clusters, _guard_candidates, _in_large_clusters, _large_clusters,
+                                        _level_spans)
 from mrstereo.matching.multirange import RangeLevel
 from mrstereo.matching.postfilter import left_right_consistent, unique
 
@@ -85,3 +87,18 @@ def test_guard_upsample_and_cluster_pixels_equal_numpy(width, w_level, col0, col
     ys_np, xs_np = np.nonzero(np.isfinite(values))
     assert ys_np.size and np.array_equal(ys, ys_np) and np.array_equal(xs, xs_np)
     assert np.array_equal(cluster, labels[ys_np, xs_np])
+
+
+@pytest.mark.parametrize("size_px", [1, 4, 30])
+def test_cluster_masks_equal_numpy(size_px):
+    rng = np.random.default_rng(size_px)
+    mask = cv2.GaussianBlur(rng.random((120, 90)).astype(np.float32), (0, 0), 1.5) > 0.5
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8)
+    large = stats[:, cv2.CC_STAT_AREA] > size_px
+    large[0] = False
+    assert large.any() and not large[1:].all()
+    assert np.array_equal(_in_large_clusters(mask, size_px), large[labels])
+    number = np.zeros(len(large), np.int64)
+    number[large] = np.arange(1, np.count_nonzero(large) + 1)
+    numbered, boxes = _large_clusters(mask, size_px)
+    assert np.array_equal(numbered, number[labels]) and len(boxes) == np.count_nonzero(large)

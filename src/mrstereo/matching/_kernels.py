@@ -1199,6 +1199,29 @@ def guard_finite(values, ys_level, xs_level, first_col, end_col, out_ys, out_xs,
     return n
 
 
+@njit(nogil=True, cache=True)
+def in_large_labels(labels, n_labels, size_px, out):
+    """``out`` = the pixels whose label (0: none) counts more than ``size_px`` pixels."""
+    count = np.zeros(n_labels, np.int64)
+    height, width = labels.shape
+    for y in range(height):
+        for x in range(width):
+            count[labels[y, x]] += 1
+    count[0] = 0
+    for y in range(height):
+        for x in range(width):
+            out[y, x] = count[labels[y, x]] > size_px
+
+
+@njit(nogil=True, cache=True)
+def map_labels(labels, table, out):
+    """``out = table[labels]`` (a look-up per pixel)."""
+    height, width = labels.shape
+    for y in range(height):
+        for x in range(width):
+            out[y, x] = table[labels[y, x]]
+
+
 # Recycled buffers. A 640x480 frame allocates and frees about 40 arrays of 0.3-1.3 MB;
 # glibc serves them from fresh pages (mmap, or a heap trimmed after each frame), and the
 # page faults cost about as much as the post-filters (3200 faults, ~5 ms per frame).

@@ -250,11 +250,10 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
 
     def level_contest(among):
         """Step 2 on the guard's images: the candidates among ``among`` that beat the value."""
-        ys, xs = np.nonzero(among & np.isfinite(value_level))
+        contest = among & np.isfinite(value_level)
+        ys, xs = np.nonzero(contest)
         if not ys.size:
             return among
-        contest = np.zeros_like(among)
-        contest[ys, xs] = True
         value_min, value_cost = refine_candidates(*level_pair, value_level, contest, rows=rows, half_px=1,
                                                   boxes=[(ys[0], ys[-1] + 1, xs.min(), xs.max() + 1)])
         lose = ~_beats(c1[ys, xs], d_level[ys, xs], value_cost[ys, xs], value_level[ys, xs], ratio,
@@ -405,10 +404,10 @@ def _in_large_clusters(mask: np.ndarray, size_px: int) -> np.ndarray:
     """``mask`` where its 8-connected cluster has more than ``size_px`` pixels (all of it for 0)."""
     if size_px <= 0 or not mask.any():
         return mask
-    _, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8, ltype=_label_type(mask.shape))
-    large = np.bincount(labels.ravel()) > size_px
-    large[0] = False
-    return large[labels]
+    n_labels, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8, ltype=_label_type(mask.shape))
+    out = np.empty(mask.shape, bool)
+    _kernels.in_large_labels(labels, n_labels, size_px, out)
+    return out
 
 
 def _large_clusters(mask: np.ndarray, size_px: int) -> tuple[np.ndarray, np.ndarray | None]:
@@ -425,7 +424,9 @@ def _large_clusters(mask: np.ndarray, size_px: int) -> tuple[np.ndarray, np.ndar
     number[large] = np.arange(1, np.count_nonzero(large) + 1)
     x, y, w, h = (stats[large, i] for i in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH,
                                              cv2.CC_STAT_HEIGHT))
-    return number[labels], np.stack([y, y + h, x, x + w], axis=1)
+    numbered = np.empty(labels.shape, labels.dtype)
+    _kernels.map_labels(labels, number, numbered)
+    return numbered, np.stack([y, y + h, x, x + w], axis=1)
 
 
 def _full_boxes(level_boxes, scale: float, col0: int, col1: int):
