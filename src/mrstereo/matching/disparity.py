@@ -292,6 +292,10 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     keep = crowd[cluster]
     ys, xs, cluster = ys[keep], xs[keep], cluster[keep]
     px, cost, value = confirmed_px[ys, xs], confirmed_cost[ys, xs], disparity[ys, xs]
+    # the winners are a subset of these pixels, and a subset's regions are parts of theirs:
+    # without a region larger than a speckle among them there is none among the winners
+    if not ys.size or _regions(ys, xs, px, (height, width), config, guard.scale) is None:
+        return np.zeros((height, width), bool), None
     wins = ~np.isfinite(value)
     contest = ~wins
     if contest.any():
@@ -306,19 +310,9 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     crowd[0] = False
     if not crowd.any():
         return np.zeros((height, width), bool), None
-    # (the speckle filter on the winners' bounding box: its regions are those of the image)
-    yw, xw = ys[wins], xs[wins]
-    top, left = int(yw.min()), int(xw.min())
-    box = np.full((int(yw.max()) + 1 - top, int(xw.max()) + 1 - left), np.nan, np.float32)
-    box[yw - top, xw - left] = px[wins]
-    if config.speckle_size_px > 0:
-        box = remove_speckles(box, max_size_px=config.speckle_size_px,
-                              max_diff_px=config.speckle_range_px * guard.scale)
-    box = np.isfinite(box)
-    if not box.any():
+    too_near = _regions(ys[wins], xs[wins], px[wins], (height, width), config, guard.scale)
+    if too_near is None:
         return np.zeros((height, width), bool), None
-    too_near = np.zeros((height, width), bool)
-    too_near[top:top + box.shape[0], left:left + box.shape[1]] = box
     # step 5 needs every candidate that wins: also the confirmed ones of the other clusters, and
     # the candidates outside the clusters of step 3 (after step 2 on the guard's images)
     candidates = np.zeros((height, width), bool)
@@ -349,6 +343,24 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     _, labels = cv2.connectedComponents(grown.view(np.uint8), connectivity=8)
     keep = np.unique(labels[too_near])
     return too_near, np.isin(labels, keep[keep > 0])
+
+
+def _regions(ys: np.ndarray, xs: np.ndarray, px: np.ndarray, shape, config: MatchingConfig, scale: float):
+    """Step 4's speckle filter on the pixels ``(ys, xs)`` of disparities ``px`` (not empty):
+    the mask (``shape``) of those in regions larger than a speckle (``speckle_size_px``,
+    connected within ``speckle_range_px`` level pixels), or None without any. Runs on their
+    bounding box (its regions are those of the image)."""
+    top, left = int(ys.min()), int(xs.min())
+    box = np.full((int(ys.max()) + 1 - top, int(xs.max()) + 1 - left), np.nan, np.float32)
+    box[ys - top, xs - left] = px
+    if config.speckle_size_px > 0:
+        box = remove_speckles(box, max_size_px=config.speckle_size_px, max_diff_px=config.speckle_range_px * scale)
+    box = np.isfinite(box)
+    if not box.any():
+        return None
+    mask = np.zeros(shape, bool)
+    mask[top:top + box.shape[0], left:left + box.shape[1]] = box
+    return mask
 
 
 def _guard_candidates(d_int, sub, c1, c2, d_right, guard: RangeLevel, config: MatchingConfig):
