@@ -251,16 +251,15 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     def level_contest(among):
         """Step 2 on the guard's images: the candidates among ``among`` that beat the value."""
         contest = among & np.isfinite(value_level)
-        ys, xs = np.nonzero(contest)
+        ys, xs = np.flatnonzero(contest.any(axis=1)), np.flatnonzero(contest.any(axis=0))
         if not ys.size:
             return among
         value_min, value_cost = refine_candidates(*level_pair, value_level, contest, rows=rows, half_px=1,
-                                                  boxes=[(ys[0], ys[-1] + 1, xs.min(), xs.max() + 1)])
-        lose = ~_beats(c1[ys, xs], d_level[ys, xs], value_cost[ys, xs], value_level[ys, xs], ratio,
-                       value_min[ys, xs] > guard.too_near_above_px / guard.scale)
-        kept = among.copy()
-        kept[ys[lose], xs[lose]] = False
-        return kept
+                                                  boxes=[(ys[0], ys[-1] + 1, xs[0], xs[-1] + 1)])
+        # (whole level images: pixel by pixel the same verdict as on the contest's pixels)
+        beats = _beats(c1, d_level, value_cost, value_level, ratio,
+                       value_min > guard.too_near_above_px / guard.scale)
+        return among & (beats | ~contest)
 
     min_level = config.speckle_size_px // math.ceil(guard.scale)
     # clusters of candidates before step 2 hold those after it (a subset's clusters are parts of them)
