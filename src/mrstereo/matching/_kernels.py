@@ -1182,20 +1182,23 @@ def guard_upsample(beyond, d_level, labels_level, first_col, end_col, scale, out
 
 
 @njit(nogil=True, cache=True)
-def guard_finite(values, ys_level, xs_level, first_col, end_col, out_ys, out_xs, out_index):
-    """The finite ``values`` at the full-resolution pixels of level pixels ``(ys_level,
-    xs_level)`` (level column ``c`` spans columns ``first_col[c] .. end_col[c] - 1``), in row-major
-    order when the level pixels are: their rows, columns and level-pixel indices; returns their count."""
+def guard_finite(values, labels_level, first_col, end_col, out_ys, out_xs, out_cluster):
+    """The finite ``values`` at the full-resolution pixels of the labelled level pixels
+    (``labels_level > 0``; level column ``c`` spans columns ``first_col[c] .. end_col[c] - 1``),
+    in row-major order: their rows, columns and labels; returns their count."""
     n = 0
-    for j in range(ys_level.size):
-        y = ys_level[j]
-        c = xs_level[j]
-        for x in range(first_col[c], end_col[c]):
-            if np.isfinite(values[y, x]):
-                out_ys[n] = y
-                out_xs[n] = x
-                out_index[n] = j
-                n += 1
+    height, w_level = labels_level.shape
+    for y in range(height):
+        for c in range(w_level):
+            label = labels_level[y, c]
+            if label == 0:
+                continue
+            for x in range(first_col[c], end_col[c]):
+                if np.isfinite(values[y, x]):
+                    out_ys[n] = y
+                    out_xs[n] = x
+                    out_cluster[n] = label
+                    n += 1
     return n
 
 

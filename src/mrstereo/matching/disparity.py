@@ -398,11 +398,10 @@ def _finite_in_clusters(values: np.ndarray, labels_level: np.ndarray, first_col:
     """``(ys, xs, cluster)``: the pixels where ``values`` is finite among the full-resolution
     pixels of the labelled level pixels (level column ``c`` spanning ``first_col[c] ..
     end_col[c] - 1``), in row-major order, and their level labels."""
-    ys_level, xs_level = np.nonzero(labels_level)
-    n_max = int((end_col - first_col)[xs_level].sum())
-    ys, xs, index = np.empty(n_max, np.intp), np.empty(n_max, np.intp), np.empty(n_max, np.intp)
-    n = _kernels.guard_finite(values, ys_level, xs_level, first_col, end_col, ys, xs, index)
-    return ys[:n], xs[:n], labels_level[ys_level[index[:n]], xs_level[index[:n]]]
+    n_max = np.count_nonzero(labels_level) * int((end_col - first_col).max(initial=0))
+    ys, xs, cluster = np.empty(n_max, np.intp), np.empty(n_max, np.intp), np.empty(n_max, labels_level.dtype)
+    n = _kernels.guard_finite(values, labels_level, first_col, end_col, ys, xs, cluster)
+    return ys[:n], xs[:n], cluster[:n]
 
 
 def _label_type(shape) -> int:
