@@ -263,7 +263,8 @@ def xsobel_padded(gray, radius, cap, out_pad):
 @njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
 def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_lo, d_hi,
                zncc, row0, row1, col0, col1, n_strips, want_right, raw, lr_tol, ratio, max_cost, use_sub,
-               out_disp, out_sub, out_c1, out_c2, out_right, out_disparity, out_confidence):
+               out_disp, out_sub, out_c1, out_c2, out_right, out_disparity, out_confidence,
+               alt_lo, alt_hi, out_alt, out_alt_cost, out_best_cost):
     """Winner-take-all over ``d in [d_lo, d_hi]`` (eq. 10) for rows/cols of the AOI.
 
     Parameters
@@ -294,6 +295,14 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
     out_disparity, out_confidence : ndarray float32 (H, W)
         Checked ``d + sub`` (NaN rejected) and ``clip(1 - c1 / c2, 0, 1)`` (0 rejected,
         1 without a second candidate).
+    alt_lo, alt_hi : int
+        Non-raw mode, when ``alt_lo <= alt_hi``: also find the band's own best minimum, the
+        lowest cost among the strict local minima (``c(d - 1) >= c(d) < c(d + 1)``) at
+        disparities ``alt_lo .. alt_hi`` (whatever the winner and the checks), for the
+        cross-band ambiguity test of the union (:mod:`mrstereo.matching.disparity`).
+    out_alt, out_alt_cost, out_best_cost : ndarray float32 (H, W)
+        That minimum's integer disparity (NaN: none) and cost (BIG: none), and the winner's
+        cost ``c1``, rows ``row0:row1``, cols ``col0:col1``.
     """
     nd = d_hi - d_lo + 1
     width = a_left.shape[1]
@@ -323,6 +332,8 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
         cm_ = np.empty(nx, np.float32)
         cp_ = np.empty(nx, np.float32)
         sub_ = np.empty(nx, np.float32)
+        ak = np.empty(nx, np.float32)
+        ac = np.empty(nx, np.float32)
         right_c = np.empty(width, np.float32)
         right_d = np.empty(width, np.float32)
         lr_ok = np.empty(nx, np.bool_)
@@ -385,6 +396,27 @@ def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_
                 for i in range(nx):
                     far = np.float32(abs(kf - bk[i]) > ONE)
                     sc[i] = np.fmin(sc[i], _blend(far, crow[i], BIG))
+            if not raw and alt_lo <= alt_hi:
+                # the band's own best strict local minimum (one more pass over the row's costs)
+                for i in range(nx):
+                    ac[i] = BIG
+                    ak[i] = -1.0
+                for k in range(max(alt_lo - d_lo, 1), min(alt_hi - d_lo, nd - 2) + 1):
+                    c0 = cost[k, col0:col1]
+                    cm = cost[k - 1, col0:col1]
+                    cp = cost[k + 1, col0:col1]
+                    kf = np.float32(k)
+                    for i in range(nx):
+                        m = np.float32(c0[i] <= cm[i]) * np.float32(c0[i] < cp[i]) * np.float32(c0[i] < ac[i])
+                        ak[i] = _blend(m, kf, ak[i])
+                        ac[i] = _blend(m, c0[i], ac[i])
+                oa = out_alt[y, col0:col1]
+                oac = out_alt_cost[y, col0:col1]
+                obc = out_best_cost[y, col0:col1]
+                for i in range(nx):
+                    oa[i] = np.float32(d_lo) + ak[i] if ak[i] >= 0 else np.float32(np.nan)
+                    oac[i] = ac[i]
+                    obc[i] = bc[i]
             if want_right:
                 for x in range(width):
                     right_c[x] = BIG

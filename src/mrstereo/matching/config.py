@@ -9,7 +9,7 @@ uniqueness ratio, maximum cost, sub-pixel parabola and speckle removal, plus fou
 beyond the paper: fewer levels for a small search range, full-resolution re-scoring of
 the coarsest level, a guard against window "fattening" at depth edges and the filling of
 short gaps between two ends on one surface. ``mapping`` is ``robust`` with stricter
-acceptance and no gap filling, for the robot's map. Defaults were
+acceptance, no gap filling and the cross-band ambiguity test, for the robot's map. Defaults were
 chosen by measurement on Middlebury/KITTI (docs/matching.md).
 Conventions: docs/conventions.md.
 """
@@ -66,6 +66,15 @@ class MatchingConfig:
     uniqueness_ratio : float
         Reject when the second-best cost (2+ px from the winner) is within this fraction
         of the best: ``c2 * (1 - ratio) < c1`` (0 = off; StereoBM's uniquenessRatio/100).
+    ambiguity_margin : float or None
+        Cross-band ambiguity test (beyond the paper; None = off): a united value is dropped
+        when another band's own best minimum (a rival, at least 2 of its level pixels away)
+        costs less than the value's winner cost plus this margin (cost units: for ZNCC a
+        correlation margin). Repeated patterns whose period spans more than a band otherwise
+        give a far (or near) band a unique, confident winner one period off (docs/matching.md).
+    ambiguity_max_cost : float
+        A rival counts only when its cost is at most this (a confident minimum: a repeated
+        high-contrast pattern, not weak texture).
     texture_threshold : float
         Reject when the window's standard deviation of the gray image is below this (grey
         levels; 0 = off).
@@ -135,6 +144,8 @@ class MatchingConfig:
     median_size: int = 5
     lr_max_diff_px: float | None = 1.0
     uniqueness_ratio: float = 0.10
+    ambiguity_margin: float | None = None
+    ambiguity_max_cost: float = 0.2
     texture_threshold: float = 0.0
     max_cost: float | None = 0.6
     subpixel: bool = True
@@ -176,6 +187,9 @@ class MatchingConfig:
         ratio = _checks.finite_number("uniqueness_ratio", self.uniqueness_ratio, nonnegative=True)
         if ratio >= 1:
             raise ValueError(f"uniqueness_ratio must be < 1, got {ratio}")
+        if self.ambiguity_margin is not None:
+            _checks.finite_number("ambiguity_margin", self.ambiguity_margin, nonnegative=True)
+        _checks.finite_number("ambiguity_max_cost", self.ambiguity_max_cost, nonnegative=True)
         _checks.finite_number("texture_threshold", self.texture_threshold, nonnegative=True)
         if self.max_cost is not None:
             _checks.finite_number("max_cost", self.max_cost, positive=True)
@@ -234,8 +248,11 @@ PRESETS: dict[str, MatchingConfig] = {
     # clip, which keeps more texture on plain corridor walls. Chosen by the map and obstacle
     # metrics of the synthetic corridor (seeds 0, 1; checked on 2): precision 0.909 vs 0.879
     # with the robust values, obstacle-cell recall 0.971 vs 0.926 (docs/matching.md).
-    # No gap filling: map cells come from measured points only.
-    "mapping": MatchingConfig(prefilter_cap=31, max_cost=0.5, speckle_range_px=2.0, gap_fill_px=0),
+    # No gap filling: map cells come from measured points only. The cross-band ambiguity test
+    # (a repeated pattern gives no value one period off): margin 0.15, rivals within cost 0.2,
+    # chosen on randomized worlds 0-9, plain and with striped walls (docs/matching.md).
+    "mapping": MatchingConfig(prefilter_cap=31, max_cost=0.5, speckle_range_px=2.0, gap_fill_px=0,
+                              ambiguity_margin=0.15, ambiguity_max_cost=0.2),
 }
 
 

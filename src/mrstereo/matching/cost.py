@@ -17,6 +17,7 @@ search ``min d <= d <= max d`` over negative values is our search over ``[d_lo, 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -24,7 +25,7 @@ import numpy as np
 from . import _kernels
 
 __all__ = ["BandMatch", "PreparedImage", "prefilter", "prepare", "match_band", "match_prepared",
-           "match_checked", "prepare_gray", "refine_candidates", "PREFILTERS", "COSTS"]
+           "match_checked", "CheckedMatch", "prepare_gray", "refine_candidates", "PREFILTERS", "COSTS"]
 
 PREFILTERS = ("none", "xsobel", "mean")
 COSTS = ("nssd", "zncc")
@@ -176,7 +177,8 @@ def match_prepared(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi
         _kernels.match_band(left.padded, right.padded, left.a, left.b, right.a, right.b, left.window // 2,
                             int(d_lo), int(d_hi), left.zncc, rows[0], rows[1], cols[0], cols[1],
                             _strips(n_strips, rows[1] - rows[0]), bool(right_check), True, -1.0, 0.0, -1.0,
-                            False, disp, sub, c1, c2, disp_right, _DUMMY_F, _DUMMY_F)
+                            False, disp, sub, c1, c2, disp_right, _DUMMY_F, _DUMMY_F, 1, 0, _DUMMY_F, _DUMMY_F,
+                            _DUMMY_F)
     return disp, sub, c1, c2, disp_right
 
 
@@ -184,16 +186,34 @@ _DUMMY_F = np.zeros((1, 1), np.float32)
 _DUMMY_I = np.zeros((1, 1), np.int32)
 
 
+class CheckedMatch(NamedTuple):
+    """Result of :func:`match_checked` (float32 (H, W) maps, pixels of the searched images)."""
+
+    disparity_px: np.ndarray
+    """Checked winner (+ parabola offset), NaN where rejected."""
+    confidence: np.ndarray
+    """``clip(1 - c1 / c2, 0, 1)``, 0 where rejected."""
+    alt_px: np.ndarray | None
+    """With ``alt_band``: the band's best strict local minimum (integer disparity, NaN none)."""
+    alt_cost: np.ndarray | None
+    """Its cost (BIG where none)."""
+    best_cost: np.ndarray | None
+    """With ``alt_band``: the winner's cost ``c1`` (whatever the checks)."""
+
+
 def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi: int,
                   rows: tuple[int, int], cols: tuple[int, int], lr_max_diff_px: float | None,
                   uniqueness_ratio: float, max_cost: float | None, subpixel: bool,
-                  n_strips: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  alt_band: tuple[int, int] | None = None, n_strips: int | None = None) -> CheckedMatch:
     """Band search (eq. 10) with the checks fused into the kernel.
 
-    Returns ``(disparity_px, confidence)`` float32 (H, W): winner (+ parabola offset when
-    ``subpixel``) where it passes the left-right check (``|d_L - d_R| <= lr_max_diff_px``),
-    the uniqueness ratio and the maximum cost (each off when None / 0), else NaN; the
-    confidence ``clip(1 - c1 / c2, 0, 1)`` (0 where NaN). Outside ``rows`` NaN.
+    Returns the winner (+ parabola offset when ``subpixel``) where it passes the left-right
+    check (``|d_L - d_R| <= lr_max_diff_px``), the uniqueness ratio and the maximum cost
+    (each off when None / 0), else NaN; the confidence ``clip(1 - c1 / c2, 0, 1)`` (0 where
+    NaN). Outside ``rows`` NaN. ``alt_band = (lo, hi)``: also the lowest strict local minimum
+    of the cost at disparities ``lo .. hi`` (the band without its search margins), whatever
+    the winner and the checks, with its cost, and the winner's cost (the cross-band
+    ambiguity test, :func:`mrstereo.matching.disparity.compute_disparity`).
     """
     h, w = left.shape
     disparity = _kernels.recycled_empty((h, w), np.float32)
@@ -202,17 +222,25 @@ def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi:
     disparity[rows[1]:] = np.nan
     confidence[:rows[0]] = 0.0
     confidence[rows[1]:] = 0.0
+    alt_lo, alt_hi = (1, 0) if alt_band is None else (int(alt_band[0]), int(alt_band[1]))
+    alt_px = alt_cost = best_cost = None
+    if alt_band is not None:
+        alt_px = np.full((h, w), np.nan, np.float32)
+        alt_cost = np.full((h, w), _kernels.BIG, np.float32)
+        best_cost = np.full((h, w), _kernels.BIG, np.float32)
     if rows[1] > rows[0] and cols[1] > cols[0]:
         _kernels.match_band(left.padded, right.padded, left.a, left.b, right.a, right.b, left.window // 2,
                             int(d_lo), int(d_hi), left.zncc, rows[0], rows[1], cols[0], cols[1],
                             _strips(n_strips, rows[1] - rows[0]), lr_max_diff_px is not None, False,
                             -1.0 if lr_max_diff_px is None else float(lr_max_diff_px), float(uniqueness_ratio),
                             -1.0 if max_cost is None else float(max_cost), bool(subpixel),
-                            _DUMMY_I, _DUMMY_F, _DUMMY_F, _DUMMY_F, _DUMMY_I, disparity, confidence)
+                            _DUMMY_I, _DUMMY_F, _DUMMY_F, _DUMMY_F, _DUMMY_I, disparity, confidence,
+                            alt_lo, alt_hi, _DUMMY_F if alt_px is None else alt_px,
+                            _DUMMY_F if alt_cost is None else alt_cost, _DUMMY_F if best_cost is None else best_cost)
     else:
         disparity[rows[0]:rows[1]] = np.nan
         confidence[rows[0]:rows[1]] = 0.0
-    return disparity, confidence
+    return CheckedMatch(disparity, confidence, alt_px, alt_cost, best_cost)
 
 
 def match_band(left: np.ndarray, right: np.ndarray, *, d_lo: int, d_hi: int, window: int = 9,

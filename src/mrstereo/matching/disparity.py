@@ -161,17 +161,21 @@ def _prepare_pair(left: np.ndarray, right: np.ndarray, config: MatchingConfig):
 
 def _solve_prepared(pair, left: np.ndarray, level: RangeLevel, rows: tuple[int, int], cols: tuple[int, int],
                     config: MatchingConfig) -> LevelOutput:
-    disparity, confidence = match_checked(*pair, d_lo=level.search_px[0], d_hi=level.search_px[1], rows=rows,
-                                          cols=cols, lr_max_diff_px=config.lr_max_diff_px,
-                                          uniqueness_ratio=config.uniqueness_ratio, max_cost=config.max_cost,
-                                          subpixel=config.subpixel)
+    # the band without its search margins, in level pixels, for the cross-band ambiguity test
+    alt_band = None if config.ambiguity_margin is None else (math.ceil(level.band_px[0] / level.scale),
+                                                             math.floor(level.band_px[1] / level.scale))
+    disparity, confidence, alt_px, alt_cost, best_cost = match_checked(
+        *pair, d_lo=level.search_px[0], d_hi=level.search_px[1], rows=rows, cols=cols,
+        lr_max_diff_px=config.lr_max_diff_px, uniqueness_ratio=config.uniqueness_ratio, max_cost=config.max_cost,
+        subpixel=config.subpixel, alt_band=alt_band)
     if config.texture_threshold > 0:
         disparity[~textured(left, window_px=config.window_px, threshold=config.texture_threshold)] = np.nan
     if config.median_size:
         disparity = median_filter(disparity, size=config.median_size,
                                   max_px=level.search_px[1] + 0.5)      # (+ the parabola offset)
         _kernels.zero_where_invalid(disparity, confidence)
-    return LevelOutput(disparity_px=disparity, confidence=confidence)
+    return LevelOutput(disparity_px=disparity, confidence=confidence, alt_px=alt_px, alt_cost=alt_cost,
+                       best_cost=best_cost)
 
 
 def solve_level(left: np.ndarray, right: np.ndarray, level: RangeLevel, rows: tuple[int, int],
@@ -183,6 +187,49 @@ def solve_level(left: np.ndarray, right: np.ndarray, level: RangeLevel, rows: tu
     up-samples them.
     """
     return _solve_prepared(_prepare_pair(left, right, config), left, level, rows, cols, config)
+
+
+def _ambiguous_across_bands(plan: MultiRangePlan, outputs: dict, disparity: np.ndarray,
+                            config: MatchingConfig) -> np.ndarray:
+    """Pixels whose united value another band contests (beyond the paper; eq. 12 over the bands).
+
+    Each level searches only its band, so its uniqueness test never sees a minimum in another
+    band: on a repeated pattern (stripes, tiles) whose period spans more than a band, a far
+    band finds the pattern one period off as a unique, confident winner while the true band,
+    which holds two minima, rejects its own (or the reverse). Here each band's own best minimum
+    (``LevelOutput.alt_px``: the lowest strict local minimum of its cost inside the band,
+    whatever the checks) is a rival of the pixel's value when the value lies in another band,
+    at least 2 level pixels of that band away, and the rival is a confident match (cost at
+    most ``config.ambiguity_max_cost``: the minima of a repeated high-contrast pattern, not the
+    shallow ones of weak texture). The value is ambiguous when a rival costs less than the
+    value's own winner cost (``LevelOutput.best_cost`` of the level whose band holds it) plus
+    ``config.ambiguity_margin``: the uniqueness test of eq. (10) applied across the bands, with
+    an absolute margin (ZNCC costs of a repeated pattern are near 0, where the ratio test is
+    lenient), each cost at its own level's resolution. Returns a bool mask (H, W).
+    """
+    height, width = disparity.shape
+    valid = np.isfinite(disparity)
+    ambiguous = np.zeros((height, width), bool)
+    levels = [(level, outputs[level.size[0]]) for level in plan.levels
+              if level.size[0] in outputs and outputs[level.size[0]].alt_px is not None]
+    if len(levels) < 2 or not valid.any():
+        return ambiguous
+    up = []
+    value_cost = np.full((height, width), np.inf, np.float32)
+    for level, out in levels:
+        source = np.minimum(((np.arange(width) + 0.5) / level.scale).astype(np.intp), level.size[0] - 1)
+        lo, hi = level.band_px
+        with np.errstate(invalid="ignore"):
+            inside = valid & (disparity >= lo) & (disparity <= hi)
+        value_cost = np.where(inside & (value_cost == np.inf), out.best_cost[:, source], value_cost)
+        up.append((level, inside, out.alt_px[:, source] * np.float32(level.scale), out.alt_cost[:, source]))
+    margin = np.float32(config.ambiguity_margin)
+    rival_cost = np.float32(config.ambiguity_max_cost)
+    for level, inside, alt, alt_cost in up:
+        with np.errstate(invalid="ignore"):
+            rival = valid & ~inside & (np.abs(alt - disparity) >= 2.0 * level.scale)
+            ambiguous |= rival & (alt_cost <= rival_cost) & (alt_cost < value_cost + margin)
+    return ambiguous
 
 
 def _beats(cost: np.ndarray, d_px: np.ndarray, value_cost: np.ndarray, value_px: np.ndarray,
@@ -539,10 +586,16 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
             pairs[w_level] = _prepare_pair(*decimated[w_level], config)
         return pairs[w_level]
 
+    outputs: dict[int, LevelOutput] = {}     # by level width, for the cross-band ambiguity test
+
     def solve(lv, rv, level, rows, cols):
         if lv.shape[0] == height:          # whole-height images: share the prepared pair
-            return _solve_prepared(pair_at(lv.shape[1]), lv, level, rows, cols, config)
-        return solve_level(lv, rv, level, rows, cols, config=config)
+            out = _solve_prepared(pair_at(lv.shape[1]), lv, level, rows, cols, config)
+        else:
+            out = solve_level(lv, rv, level, rows, cols, config=config)
+        if config.ambiguity_margin is not None and lv.shape[0] == height:
+            outputs[lv.shape[1]] = out
+        return out
 
     def refine(level, coarse_px, want):
         """Full-resolution re-scoring of a coarse level (beyond the paper)."""
@@ -555,6 +608,9 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
         left_gray, right_gray, plan, solve, row_pad_px=config.window_px // 2 + 2, union=config.union,
         refine=refine if config.refine else None, refine_min_scale=config.refine_min_decimation - 0.5,
         decimated=decimated)
+    if outputs and len(plan.levels) > 1:
+        _kernels.invalidate(disparity, confidence,
+                            _ambiguous_across_bands(plan, outputs, disparity, config))
     too_near = np.zeros((height, width), bool)
     beside = None
     if plan.guard is not None:

@@ -155,6 +155,13 @@ class LevelOutput:
 
     disparity_px: np.ndarray
     confidence: np.ndarray
+    alt_px: np.ndarray | None = None
+    """Optional: the level's best strict local minimum inside its band, whatever the checks
+    (level pixels, NaN none; for the cross-band ambiguity test of the union)."""
+    alt_cost: np.ndarray | None = None
+    """Its cost."""
+    best_cost: np.ndarray | None = None
+    """Optional: the winner's cost (whatever the checks)."""
 
 
 def default_bands_px(max_disparity_px: float, n_levels: int = 3) -> tuple[tuple[float, float], ...]:
