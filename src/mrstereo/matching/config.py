@@ -72,6 +72,7 @@ class MatchingConfig:
         costs less than the value's winner cost plus this margin (cost units: for ZNCC a
         correlation margin). Repeated patterns whose period spans more than a band otherwise
         give a far (or near) band a unique, confident winner one period off (docs/matching.md).
+        Applied when the area of interest spans every row (the levels then hold whole images).
     ambiguity_max_cost : float
         A rival counts only when its cost is at most this (a confident minimum: a repeated
         high-contrast pattern, not weak texture).

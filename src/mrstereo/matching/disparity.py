@@ -210,8 +210,8 @@ def _ambiguous_across_bands(plan: MultiRangePlan, outputs: dict, disparity: np.n
     height, width = disparity.shape
     valid = np.isfinite(disparity)
     ambiguous = np.zeros((height, width), bool)
-    levels = [(level, outputs[level.size[0]]) for level in plan.levels
-              if level.size[0] in outputs and outputs[level.size[0]].alt_px is not None]
+    levels = [(level, outputs[level]) for level in plan.levels
+              if level in outputs and outputs[level].alt_px is not None]
     if len(levels) < 2 or not valid.any():
         return ambiguous
     up = []
@@ -586,15 +586,15 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
             pairs[w_level] = _prepare_pair(*decimated[w_level], config)
         return pairs[w_level]
 
-    outputs: dict[int, LevelOutput] = {}     # by level width, for the cross-band ambiguity test
+    outputs: dict[RangeLevel, LevelOutput] = {}     # for the cross-band ambiguity test
 
     def solve(lv, rv, level, rows, cols):
         if lv.shape[0] == height:          # whole-height images: share the prepared pair
             out = _solve_prepared(pair_at(lv.shape[1]), lv, level, rows, cols, config)
         else:
             out = solve_level(lv, rv, level, rows, cols, config=config)
-        if config.ambiguity_margin is not None and lv.shape[0] == height:
-            outputs[lv.shape[1]] = out
+        if config.ambiguity_margin is not None and lv.shape[0] == height:     # (whole-height levels)
+            outputs[level] = out
         return out
 
     def refine(level, coarse_px, want):
