@@ -3,7 +3,8 @@
 Area of interest (3.1) -> per level: horizontal decimation (3.2), pre-filter,
 window cost eq. (9) and winner-take-all eq. (10) (3.3), checks, median (3.4) ->
 up-sampling, full-resolution refinement of the coarsest level (beyond the paper),
-gating eq. (11) -> union eq. (12) -> speckle removal -> depth-edge guard -> gap filling.
+gating eq. (11) -> union eq. (12) -> near guard -> cross-band ambiguity test (beyond the paper)
+-> speckle removal -> depth-edge guard -> gap filling.
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -608,13 +609,13 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
         left_gray, right_gray, plan, solve, row_pad_px=config.window_px // 2 + 2, union=config.union,
         refine=refine if config.refine else None, refine_min_scale=config.refine_min_decimation - 0.5,
         decimated=decimated)
+    too_near = np.zeros((height, width), bool)
+    beside = None
+    if plan.guard is not None:     # (contests the bands' values before the ambiguity test drops any)
+        too_near, beside = _near_guard(plan, pair_at, disparity, config)
     if outputs and len(plan.levels) > 1:
         _kernels.invalidate(disparity, confidence,
                             _ambiguous_across_bands(plan, outputs, disparity, config))
-    too_near = np.zeros((height, width), bool)
-    beside = None
-    if plan.guard is not None:
-        too_near, beside = _near_guard(plan, pair_at, disparity, config)
     disparity = remove_speckles(disparity, max_size_px=config.speckle_size_px,
                                 max_diff_px=config.speckle_range_px)
     disparity = guard_depth_edges(disparity, guard_px=config.edge_guard, jump_px=config.edge_jump_px)
