@@ -869,6 +869,46 @@ def upsample_gate(level_d, level_c, source_cols, scale, lo, hi, top, row0, row1,
 
 
 @njit(nogil=True, cache=True)
+def band_value_cost(disparity, best_cost, source_cols, lo, hi, out_cost):
+    """Cross-band ambiguity test, step 1: ``out_cost`` (inf = not yet) gets the level's winner
+    cost ``best_cost[y, source_cols[x]]`` where the value lies in the level's band ``[lo, hi]``
+    (NaN values compare false). Branch-free per pixel."""
+    height, width = disparity.shape
+    inf = np.float32(np.inf)
+    for y in range(height):
+        dr = disparity[y]
+        br = best_cost[y]
+        oc = out_cost[y]
+        for x in range(width):
+            d = dr[x]
+            take = (d >= lo) & (d <= hi) & (oc[x] == inf)
+            oc[x] = br[source_cols[x]] if take else oc[x]
+
+
+@njit(nogil=True, cache=True)
+def band_rivals(disparity, alt, alt_cost, source_cols, scale, lo, hi, min_apart, rival_max, margin, value_cost,
+                out_mask):
+    """Cross-band ambiguity test, step 2: ``out_mask`` is set where the level's band minimum
+    ``alt * scale`` (level pixels -> full resolution) rivals a value outside the band: at least
+    ``min_apart`` away, costing at most ``rival_max`` and less than the value's cost + ``margin``
+    (NaN values and minima compare false). Branch-free per pixel."""
+    height, width = disparity.shape
+    for y in range(height):
+        dr = disparity[y]
+        ar = alt[y]
+        cr = alt_cost[y]
+        vr = value_cost[y]
+        om = out_mask[y]
+        for x in range(width):
+            d = dr[x]
+            s = source_cols[x]
+            c = cr[s]
+            rival = ((d < lo) | (d > hi)) & (abs(ar[s] * scale - d) >= min_apart) & (c <= rival_max) & \
+                (c < vr[x] + margin)
+            om[x] = om[x] | rival
+
+
+@njit(nogil=True, cache=True)
 def invalidate(disparity, confidence, mask):
     """In place: NaN / 0 where ``mask``."""
     height, width = disparity.shape

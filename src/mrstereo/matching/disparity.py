@@ -209,27 +209,22 @@ def _ambiguous_across_bands(plan: MultiRangePlan, outputs: dict, disparity: np.n
     lenient), each cost at its own level's resolution. Returns a bool mask (H, W).
     """
     height, width = disparity.shape
-    valid = np.isfinite(disparity)
     ambiguous = np.zeros((height, width), bool)
     levels = [(level, outputs[level]) for level in plan.levels
               if level in outputs and outputs[level].alt_px is not None]
-    if len(levels) < 2 or not valid.any():
+    if len(levels) < 2:
         return ambiguous
-    up = []
+    sources = [np.minimum(((np.arange(width) + 0.5) / level.scale).astype(np.intp), level.size[0] - 1)
+               for level, _ in levels]
     value_cost = np.full((height, width), np.inf, np.float32)
-    for level, out in levels:
-        source = np.minimum(((np.arange(width) + 0.5) / level.scale).astype(np.intp), level.size[0] - 1)
-        lo, hi = level.band_px
-        with np.errstate(invalid="ignore"):
-            inside = valid & (disparity >= lo) & (disparity <= hi)
-        value_cost = np.where(inside & (value_cost == np.inf), out.best_cost[:, source], value_cost)
-        up.append((level, inside, out.alt_px[:, source] * np.float32(level.scale), out.alt_cost[:, source]))
-    margin = np.float32(config.ambiguity_margin)
-    rival_cost = np.float32(config.ambiguity_max_cost)
-    for level, inside, alt, alt_cost in up:
-        with np.errstate(invalid="ignore"):
-            rival = valid & ~inside & (np.abs(alt - disparity) >= 2.0 * level.scale)
-            ambiguous |= rival & (alt_cost <= rival_cost) & (alt_cost < value_cost + margin)
+    for (level, out), source in zip(levels, sources):
+        _kernels.band_value_cost(disparity, out.best_cost, source, np.float32(level.band_px[0]),
+                                 np.float32(level.band_px[1]), value_cost)
+    for (level, out), source in zip(levels, sources):
+        _kernels.band_rivals(disparity, out.alt_px, out.alt_cost, source, np.float32(level.scale),
+                             np.float32(level.band_px[0]), np.float32(level.band_px[1]),
+                             np.float32(2.0 * level.scale), np.float32(config.ambiguity_max_cost),
+                             np.float32(config.ambiguity_margin), value_cost, ambiguous)
     return ambiguous
 
 
