@@ -76,13 +76,15 @@ def test_other_grid_and_bad_inputs():
 
 def test_obstacle_footprints_are_the_obstacles_of_the_ground_truth_map():
     from mrstereo.mapping import GridSpec
-    from mrstereo.world import ground_truth_map, obstacle_footprints, random_world
+    from mrstereo.world import LABEL_OBSTACLE, ground_truth_map, obstacle_footprints, random_world
 
     world = random_world(3)
     grid = GridSpec()
     footprints = obstacle_footprints(world.scene, grid)
     assert len(footprints) == len(world.summary["obstacles"])        # one per drawn obstacle
     truth = ground_truth_map(world.scene, grid).occupied
-    for cells in footprints:
+    for cells in footprints.values():
         assert cells.any() and truth[cells].all()
-    assert not np.logical_and(footprints[0], footprints[1]).any()   # placed apart (0.4 m clearance)
+    first, second = list(footprints.values())[:2]
+    assert not np.logical_and(first, second).any()                    # placed apart
+    assert sorted(footprints) == [LABEL_OBSTACLE + k for k in range(len(footprints))]

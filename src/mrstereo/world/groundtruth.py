@@ -47,18 +47,19 @@ def occupied_footprint(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.0
     return occ
 
 
-def obstacle_footprints(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.0)) -> list[np.ndarray]:
-    """One boolean (rows, cols) footprint per obstacle of ``scene`` (its boxes and cylinders of
-    label ``LABEL_OBSTACLE + k``, e.g. a table's top and legs together), in label order; empty
-    footprints (outside the grid or the height band) are left out."""
+def obstacle_footprints(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.0)) -> dict[int, np.ndarray]:
+    """``{label: footprint}``: one boolean (rows, cols) footprint per obstacle of ``scene`` (its
+    boxes and cylinders of label ``LABEL_OBSTACLE + k``, e.g. a table's top and legs together,
+    as in the frames' label images); empty footprints (outside the grid or the height band) are
+    left out."""
     labels = sorted({p.label for p in (*scene.boxes, *scene.cylinders) if p.label >= LABEL_OBSTACLE})
-    footprints = []
+    footprints = {}
     for label in labels:
         one = replace(scene, boxes=tuple(b for b in scene.boxes if b.label == label),
                       cylinders=tuple(c for c in scene.cylinders if c.label == label))
         cells = occupied_footprint(one, grid, height_band_m=height_band_m)
         if cells.any():
-            footprints.append(cells)
+            footprints[label] = cells
     return footprints
 
 
