@@ -73,6 +73,19 @@ def _winners(cost, rows, n, bc, bk, cm_, cp_):
 
 
 @njit(nogil=True, cache=True, inline="always")
+def _wanted_span(want_row, xa, xb):
+    """``(first, last + 1)`` of the wanted columns of ``want_row`` in ``xa .. xb - 1``; empty:
+    ``(xb, xa)``."""
+    wa = xb
+    wb = xa
+    for x in range(xa, xb):
+        if want_row[x]:
+            wa = min(wa, x)
+            wb = x + 1
+    return wa, wb
+
+
+@njit(nogil=True, cache=True, inline="always")
 def _runs(values, n, out_starts):
     """Starts of the runs of equal ``values[:n]`` into ``out_starts`` (then ``n``); their count."""
     count = 0
@@ -609,12 +622,7 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
                 continue
             # window sums of row y are complete: costs for every offset
             # costs only over the columns wa .. wb - 1 of this row's wanted pixels
-            wa = xb
-            wb = xa
-            for x in range(xa, xb):
-                if want[y, x]:
-                    wa = min(wa, x)
-                    wb = x + 1
+            wa, wb = _wanted_span(want[y], xa, xb)
             if wb <= wa:
                 continue
             nw = wb - wa
@@ -795,12 +803,7 @@ def refine_boxes(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, 
             y = yy - 2 * radius
             if y < y_start:
                 continue
-            wa = xb
-            wb = xa
-            for x in range(xa, xb):
-                if want[y, x]:
-                    wa = min(wa, x)
-                    wb = x + 1
+            wa, wb = _wanted_span(want[y], xa, xb)
             if wb <= wa:
                 continue
             nw = wb - wa
