@@ -5,6 +5,7 @@ A camera at height H tilted down by TILT sees a flat floor and, in some frames, 
 measured on a sparse set of pixels. Image gray levels with noise; no stereo matching involved.
 """
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -143,3 +144,36 @@ def test_bad_input():
         FreeSpaceConfig(persist_rows=8, check_rows=4)
     with pytest.raises(ValueError, match="adapt"):
         FreeSpaceConfig(adapt=2.0)
+
+
+def test_boundary_points_join_the_observation_marked_and_map_the_plain_wall():
+    from mrstereo.geometry import transform_points
+    from mrstereo.geometry.pair import PairObstacles
+    from mrstereo.geometry import T_world_from_robot
+    from mrstereo.mapping import OccupancyGrid
+    from mrstereo.pipeline import PipelineConfig, add_observation, observation_from_pair
+    from mrstereo.recording import FrameRecord
+    from mrstereo.rejection import reject_uniform
+
+    image, disparity = _frame()
+    stereo = _stereo()
+    obstacles = detect_obstacles(disparity, stereo, config=ObstacleConfig(max_range_m=4.0))
+    boundary = free_space_boundary(image, obstacles, disparity, stereo, max_range_m=4.0)
+    frame = PairObstacles(left_rect=image, raw_disparity_px=disparity, rejection=reject_uniform(disparity, image),
+                          obstacles=obstacles, boundary=boundary)
+    record = FrameRecord(pose=(1.0, 0.5, 0.3))
+    config = PipelineConfig()
+    obs = observation_from_pair(frame, record, index=0, config=config, stereo=stereo)
+    n = len(boundary.points_robot)
+    assert n > 0 and obs.boundary_points == n
+    np.testing.assert_allclose(obs.obstacle_points_world[-n:],
+                               transform_points(T_world_from_robot(*record.pose), boundary.points_robot), atol=1e-5)
+    grid = OccupancyGrid(config.grid, config=config.mapping)
+    add_observation(grid, obs)
+    occupied = grid.to_ros_map().occupied
+    wall_xy = transform_points(T_world_from_robot(*record.pose), boundary.base_points_robot)[:, :2]
+    r, c = config.grid.cells_from_xy(wall_xy)
+    assert occupied[r, c].mean() > 0.8               # the plain wall is in the map
+    without = replace(frame, boundary=None)
+    bare = observation_from_pair(without, record, index=0, config=config, stereo=stereo)
+    assert bare.boundary_points == 0 and len(bare.obstacle_points_world) == len(obs.obstacle_points_world) - n
