@@ -26,9 +26,9 @@ import time
 import cv2
 import numpy as np
 
-from mrstereo import data as sample_data
 from mrstereo.calibration import (CalibrationView, calibrate_camera, calibrate_stereo, chessboard_pairs,
                                   detect_chessboard, expand_glob, planar_grid)
+from mrstereo.recordings import samples as sample_data
 
 FLAGS = cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
 

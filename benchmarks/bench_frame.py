@@ -8,7 +8,7 @@ process, alternating frame by frame, with one thread and two (``numba.set_num_th
 * mrstereo: :func:`mrstereo.geometry.obstacles_from_pair` on the raw pair (rectify with the
   calibration, multi-range matching of the ``mapping`` preset, eq. 13 rejection, floor from
   the mount, eq. 14-16, obstacle/floor split) then the grid cells it hits and clears and the
-  log-odds update (:func:`mrstereo.pipeline.observation_from_pair`, :func:`mrstereo.pipeline.add_observation`).
+  log-odds update (:func:`mrstereo.pipeline.observation_from_pair`, :func:`mrstereo.mapping.fusion.add_observation`).
 * OpenCV: ``cv2.remap`` x2 with maps built once, ``StereoBM`` (9x9, ``numDisparities`` the
   multiple of 16 covering mrstereo's near limit), ``cv2.reprojectImageTo3D``, the same height
   band and range limit in the robot frame, ``np.add.at`` of the obstacle points into a grid of
@@ -18,7 +18,7 @@ Prints per size and thread count the median time per frame of each chain, the me
 per-frame ratios mrstereo / OpenCV, and a per-stage table (median ms per frame).
 
 ``--scenes``: the matcher alone (robust preset) vs StereoBM over the same search on the
-shared real scenes (Middlebury, KITTI: mrstereo.data, ``$MRSTEREO_DATA``), each resized to
+shared real scenes (Middlebury, KITTI: mrstereo.recordings.samples, ``$MRSTEREO_DATA``), each resized to
 cover 640x480 and centre-cropped; plus the OpenLORIS T265 fisheye frames rectified with
 their calibration and centre-cropped. Prints per scene and the median and range over scenes.
 
@@ -43,13 +43,14 @@ import cv2
 import numba
 import numpy as np
 
-from mrstereo.geometry import obstacles_from_pair
-from mrstereo.geometry.frames import T_robot_from_cam, T_world_from_robot
 from mrstereo.io import read_image
 from mrstereo.mapping import OccupancyGrid
-from mrstereo.pipeline import PipelineConfig, add_observation, observation_from_pair, pair_options
+from mrstereo.mapping.fusion import add_observation
+from mrstereo.pipeline.frame import obstacles_from_pair
+from mrstereo.pipeline.run import PipelineConfig, observation_from_pair, pair_options
 from mrstereo.profiling import Profile, profiling
-from mrstereo.recording import read_manifest
+from mrstereo.recordings.manifest import read_manifest
+from mrstereo.transforms import T_from_planar, T_robot_from_cam
 
 STAGES = ("rectify", "match", "reject", "3-D", "free space", "grid")
 CLOCK = time.perf_counter
@@ -87,7 +88,8 @@ class MrstereoChain:
                                         stereo=self.manifest.calibration)
             add_observation(self.grid, obs)       # traced against the map so far, as map does
         if self.odometry:
-            from mrstereo.odometry import StereoOdometry, T_base_from_cam_of
+            from mrstereo.camera.mount import T_base_from_cam_of
+            from mrstereo.odometry import StereoOdometry
 
             stereo = self.manifest.calibration
             if k == 0 or self.vo is None:
@@ -133,7 +135,7 @@ class OpenCVChain:
         band = ((pts[:, 2] > obst.min_obstacle_height_m) & (pts[:, 2] < obst.max_obstacle_height_m)
                 & (np.hypot(pts[:, 0], pts[:, 1]) <= obst.max_range_m))
         t.append(CLOCK())
-        T_wr = T_world_from_robot(*record.pose)
+        T_wr = T_from_planar(*record.pose)
         pts = pts[band] @ T_wr[:3, :3].T + T_wr[:3, 3]
         col = np.floor((pts[:, 0] - grid.origin_x_m) / grid.resolution_m).astype(np.intp)
         row = np.floor((pts[:, 1] - grid.origin_y_m) / grid.resolution_m).astype(np.intp)
@@ -213,8 +215,8 @@ def to_640x480(image, scale: float):
 
 def real_scenes() -> list[tuple[str, np.ndarray, np.ndarray, float]]:
     """(name, left, right, max disparity px) at 640x480; scenes that are not available are skipped."""
-    from mrstereo import data as sample_data
     from mrstereo.evaluation import load_scene
+    from mrstereo.recordings import samples as sample_data
 
     out = []
     for name in SCENES:

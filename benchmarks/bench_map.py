@@ -64,7 +64,7 @@ def variants() -> dict:
     The mapping steps are re-fused from the default's observations (with the free-space boundary's
     points); the last but one row maps without the boundary.
     """
-    from mrstereo.pipeline import PipelineConfig
+    from mrstereo.pipeline.run import PipelineConfig
 
     base = PipelineConfig()
     m = base.mapping
@@ -128,9 +128,9 @@ def evaluate_seed(seed: int, *, randomized: bool, frames: int, data_dir: str | N
     """Render (or reuse) one world, map it, return {row name: metrics tuple}, the time taken and how
     many obstacles the frames show."""
     from mrstereo.mapping import read_ros_map
-    from mrstereo.pipeline import PipelineConfig, build_map, fuse, views_of_frames
-    from mrstereo.world import (default_scene, obstacle_footprints, random_world, read_manifest,
-                                write_synthetic_dataset)
+    from mrstereo.mapping.fusion import fuse
+    from mrstereo.pipeline.run import PipelineConfig, build_map, views_of_frames
+    from mrstereo.world import default_scene, obstacle_footprints, random_world, read_manifest, write_synthetic_dataset
 
     t0 = time.perf_counter()
     root = Path(data_dir) if data_dir else Path(tempfile.mkdtemp(prefix="bench_map_"))

@@ -8,7 +8,7 @@ per-pair ratios mrstereo / StereoBM (robust to the load of a shared machine), wi
 threads (numba.set_num_threads, cv2.setNumThreads), and the minor page faults per frame.
 
 Accuracy (``--accuracy``): bad-2 (%) dense (missing counts as bad) / among estimated pixels
-on the public Middlebury/KITTI sample scenes (mrstereo.data) for StereoBM, StereoSGBM (mrstereo.evaluation
+on the public Middlebury/KITTI sample scenes (mrstereo.recordings.samples) for StereoBM, StereoSGBM (mrstereo.evaluation
 baselines), mrstereo robust (default), mapping, paper, robust without gap filling and with
 gap filling from the ends alone (ELAS-like), robust single range over the whole search, and
 robust single range with the same work as the multi-range plan; then the robust variants on
@@ -35,11 +35,11 @@ import cv2
 import numba
 import numpy as np
 
-from mrstereo import data as sample_data
 from mrstereo.camera import Camera, StereoCamera
 from mrstereo.matching import compute_disparity, make_plan, preset_config
+from mrstereo.recordings import samples as sample_data
 
-# the public sample scenes (mrstereo.data: $MRSTEREO_DATA or `mrstereo data fetch`)
+# the public sample scenes (mrstereo.recordings.samples: $MRSTEREO_DATA or `mrstereo data fetch`)
 SCENES = ["tsukuba", "venus", "teddy", "cones", "kitti2012-000070", "kitti2015-000000"]
 
 
@@ -224,7 +224,7 @@ def corridor(configs: dict) -> None:
     import tempfile
 
     from mrstereo.io import read_disparity, read_image
-    from mrstereo.recording import read_manifest
+    from mrstereo.recordings.manifest import read_manifest
     from mrstereo.world.dataset import write_synthetic_dataset
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -36,11 +36,11 @@ import time
 import numpy as np
 from scipy import ndimage
 
-from mrstereo.geometry import (ObstacleConfig, T_robot_from_cam, detect_obstacles, estimate_ground,
-                               points_robot_from_disparity)
+from mrstereo.geometry import ObstacleConfig, detect_obstacles, estimate_ground, points_robot_from_disparity
 from mrstereo.matching import compute_disparity
 from mrstereo.matching.config import preset_config
 from mrstereo.rejection import RejectionConfig, reject_uniform
+from mrstereo.transforms import T_robot_from_cam
 from mrstereo.world import LABEL_FLOOR, default_scene, default_stereo, is_obstacle_label, render_stereo_frame
 
 RES_M = 0.05

@@ -34,13 +34,14 @@ import cv2
 import numpy as np
 
 from mrstereo.mapping import read_ros_map
+from mrstereo.mapping.fusion import fuse
 from mrstereo.mapping.metrics import map_metrics
-from mrstereo.odometry import odometry_from_manifest
 from mrstereo.odometry.alignment import AlignConfig, fuse_aligned, observation_at
-from mrstereo.odometry.se3 import T_from_planar
 from mrstereo.odometry.trajectory import trajectory_metrics
-from mrstereo.pipeline import PipelineConfig, build_map, fuse
-from mrstereo.recording import read_manifest
+from mrstereo.pipeline.odometry import odometry_from_manifest
+from mrstereo.pipeline.run import PipelineConfig, build_map
+from mrstereo.recordings.manifest import read_manifest
+from mrstereo.transforms import T_from_planar
 from mrstereo.world.dataset import write_synthetic_dataset
 
 NOISE = (0.03, math.radians(2.0))
@@ -108,8 +109,9 @@ def run_seed(path: Path) -> dict:
 
 
 def speed(root: Path, frames: int) -> None:
+    from mrstereo.camera.mount import T_base_from_cam_of
     from mrstereo.io import read_image, read_pfm
-    from mrstereo.odometry import T_base_from_cam_of, visual_odometry
+    from mrstereo.odometry import visual_odometry
 
     cv2.setNumThreads(1)
     path = dataset(root, 0, frames, 640, 480)

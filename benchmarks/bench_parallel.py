@@ -47,14 +47,13 @@ import numpy as np
 
 def _observe_range(data: Path, start: int, stop: int) -> None:
     """Child of the ceiling measurement: observe frames start..stop-1, print the loop time."""
-    import numba
-
-    from mrstereo.parallel import keep_freed_memory
-    from mrstereo.pipeline import observe_frame
-    from mrstereo.recording import read_manifest
-
     import cv2
+    import numba
     from threadpoolctl import threadpool_limits
+
+    from mrstereo.pipeline.parallel import keep_freed_memory
+    from mrstereo.pipeline.run import observe_frame
+    from mrstereo.recordings.manifest import read_manifest
 
     keep_freed_memory()
     numba.set_num_threads(1)
@@ -82,9 +81,9 @@ def main(argv=None) -> int:
     if argv is None and len(sys.argv) == 5 and sys.argv[1] == "--observe-range":
         _observe_range(Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]))
         return 0
-    from mrstereo.parallel import keep_freed_memory
-    from mrstereo.pipeline import build_map
-    from mrstereo.recording import read_manifest
+    from mrstereo.pipeline.parallel import keep_freed_memory
+    from mrstereo.pipeline.run import build_map
+    from mrstereo.recordings.manifest import read_manifest
     from mrstereo.world.dataset import write_synthetic_dataset
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -22,20 +22,21 @@ than 0.5 m (none allowed), and the board's share reported too near.
 
     python benchmarks/bench_too_near.py [--scenes tsukuba venus teddy cones] [--no-chessboard]
 
-Data: :mod:`mrstereo.data` (``MRSTEREO_DATA`` or ``mrstereo data fetch``).
+Data: :mod:`mrstereo.recordings.samples` (``MRSTEREO_DATA`` or ``mrstereo data fetch``).
 """
 from __future__ import annotations
 
 import argparse
+
 import cv2
 import numpy as np
 
-from mrstereo.data import local_path
 from mrstereo.evaluation.baselines import stereo_bm, stereo_sgbm
 from mrstereo.evaluation.datasets import load_scene
 from mrstereo.matching import compute_disparity, preset_config
+from mrstereo.recordings.samples import local_path
 
-SCENES = ("tsukuba", "venus", "teddy", "cones")          # mrstereo.data sample scenes
+SCENES = ("tsukuba", "venus", "teddy", "cones")          # mrstereo.recordings.samples sample scenes
 CHOSEN_ON = ("tsukuba", "venus")
 CHESSBOARD = local_path("opencv-stereo-chessboard")
 

@@ -1,8 +1,8 @@
-"""Shared test helpers: the public sample scenes (mrstereo.data) and how tests skip without them.
+"""Shared test helpers: the public sample scenes (mrstereo.recordings.samples) and how tests skip without them.
 
 Tests that need a real scene either take the ``sample_data`` fixture (``sample_data("tsukuba")``
 returns its folder) or carry ``@pytest.mark.sample_data("tsukuba", ...)`` and build paths with
-:func:`mrstereo.data.local_path`. Without the files they skip with a reason that names the
+:func:`mrstereo.recordings.samples.local_path`. Without the files they skip with a reason that names the
 environment variable and the fetch command; nothing is downloaded during a test run. CI
 (``.ci/run``) points ``MRSTEREO_DATA`` at a local copy.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from mrstereo import data
+from mrstereo.recordings import samples as data
 
 
 def skip_reason(name: str) -> str | None:
@@ -23,7 +23,7 @@ def skip_reason(name: str) -> str | None:
 
 
 def pytest_configure(config):
-    config.addinivalue_line("markers", "sample_data(*names): the test needs these mrstereo.data scenes; "
+    config.addinivalue_line("markers", "sample_data(*names): the test needs these mrstereo.recordings.samples scenes; "
                                        "skipped with the fetch command when they are missing")
 
 

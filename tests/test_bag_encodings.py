@@ -6,14 +6,14 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from test_bag_io import DT_NS, T0_NS, _Msgs, _typestore
 
-from mrstereo.bag import SUPPORTED_ENCODINGS, export_bag, image_from_message
 from mrstereo.camera import Camera, StereoCamera, write_stereo
 from mrstereo.cli import entry
-from mrstereo.io import read_image
-from mrstereo.pipeline import build_map, matching_image
-from mrstereo.recording import read_manifest
-from test_bag_io import DT_NS, T0_NS, _Msgs, _typestore
+from mrstereo.io import matching_image, read_image
+from mrstereo.pipeline.run import build_map
+from mrstereo.recordings.bag import SUPPORTED_ENCODINGS, export_bag, image_from_message
+from mrstereo.recordings.manifest import read_manifest
 
 W, H = 24, 16
 BGR = (10, 100, 200)

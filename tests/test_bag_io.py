@@ -8,15 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from mrstereo.bag import (TfTree, TransformTrack, bag_topics, camera_info_from_message, export_bag, exported_bag,
-                          image_from_message, pair_by_stamp, stereo_from_camera_info, yaw_from_matrix)
 from mrstereo.cli import entry
 from mrstereo.io import read_image
-from mrstereo.pipeline import build_map, floor_for_run
-from mrstereo.recording import read_manifest, write_manifest
+from mrstereo.pipeline.run import build_map, floor_for_run
+from mrstereo.recordings.bag import (TfTree, TransformTrack, bag_topics, camera_info_from_message, export_bag,
+                                     exported_bag, image_from_message, pair_by_stamp, stereo_from_camera_info)
+from mrstereo.recordings.manifest import read_manifest, write_manifest
+from mrstereo.transforms import planar_from_T
 from mrstereo.world.dataset import write_synthetic_dataset
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 T0_NS = 1_700_000_000_000_000_000
 DT_NS = 100_000_000                 # 10 Hz
@@ -293,8 +294,8 @@ def test_odometry_interpolation_and_yaw_wrap():
     assert T[0, 3] == pytest.approx(0.25) and T[1, 3] == pytest.approx(0.5)
     # from -3.0 to 3.0 rad the short way goes through +-pi: a quarter of the 0.283 rad step
     expected = -3.0 - 0.25 * (2 * math.pi - 6.0)
-    assert yaw_from_matrix(T) == pytest.approx(expected, abs=1e-9)
-    assert yaw_from_matrix(track.at(-50)) == pytest.approx(-3.0)          # held before the first sample
+    assert planar_from_T(T)[2] == pytest.approx(expected, abs=1e-9)
+    assert planar_from_T(track.at(-50))[2] == pytest.approx(-3.0)          # held before the first sample
     assert track.at(5000)[0, 3] == 1.0                                     # and after the last
 
 
@@ -306,7 +307,7 @@ def test_tf_chain_composes_static_and_dynamic_edges():
     tree.add("odom", "base_link", 100, (3.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
     T = tree.lookup("map", "base_link", 50)                 # base at x=2 in odom; odom turned 90 deg in map
     assert T[:2, 3] == pytest.approx([10.0, 2.0])
-    assert yaw_from_matrix(T) == pytest.approx(math.pi / 2)
+    assert planar_from_T(T)[2] == pytest.approx(math.pi / 2)
     assert (c, s) == pytest.approx((0.0, 1.0))
     with pytest.raises(ValueError, match="no chain from 'map' down to 'camera'"):
         tree.lookup("map", "camera", 0)
@@ -367,7 +368,8 @@ def _tf_3d(m, items, stamp_ns):
 
 @pytest.mark.parametrize("ros1", [True, False])
 def test_mount_from_tf_chains_3d_frames_to_the_optical_frame(dataset, tmp_path, ros1):
-    from mrstereo.geometry.frames import R_BODY_FROM_OPTICAL, CameraMount, rotation_from_rpy
+    from mrstereo.camera.mount import CameraMount
+    from mrstereo.transforms import R_BODY_FROM_OPTICAL, rotation_from_rpy
 
     def pose(xyz, rpy):
         T = np.eye(4)
@@ -419,7 +421,7 @@ def test_mount_from_tf_chains_3d_frames_to_the_optical_frame(dataset, tmp_path, 
 
 def test_mount_from_tf_of_a_panning_head_is_the_rig_and_the_pans(dataset, tmp_path):
     # the synthetic rig as TF: base_link -> stereo_link (pan) -> left_optical (height, tilt)
-    from mrstereo.geometry.frames import CameraMount
+    from mrstereo.camera.mount import CameraMount
 
     bag = write_bag(tmp_path / "pan", dataset, ros1=False, odom=False, tf=True)
     # stereo_link is a body frame on the floor: its mount is (0, 0, 0) and the rig's height and tilt are lost,

@@ -8,9 +8,9 @@ import json
 import cv2
 import numpy as np
 import pytest
+from test_bag_io import _Msgs, _tf_3d, _typestore
 
 from mrstereo.cli import entry
-from test_bag_io import _Msgs, _tf_3d, _typestore
 
 pytestmark = pytest.mark.sample_data("openloris-sample")
 
@@ -103,7 +103,7 @@ def _stereo(cams, tf):
 
 def test_openloris_fisheye_bags_map_from_camera_info_and_tf(sample_data, tmp_path, capsys):
     from mrstereo.geometry.ground import ground_from_mount
-    from mrstereo.recording import read_manifest
+    from mrstereo.recordings.manifest import read_manifest
 
     root = sample_data("openloris-sample")
     cams, tf, frames, odom = _load(root)

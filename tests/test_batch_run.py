@@ -7,13 +7,13 @@ import shutil
 import numpy as np
 import pytest
 
-from mrstereo.batch import SUMMARY_NAME, frame_outputs, run_batch
 from mrstereo.cli import entry
 from mrstereo.geometry import read_ply, read_scan_json
-from mrstereo.geometry.pair import scan_from_pair
 from mrstereo.io import read_disparity, read_image
-from mrstereo.pipeline import PipelineConfig, build_map
-from mrstereo.recording import read_manifest
+from mrstereo.pipeline.batch import SUMMARY_NAME, frame_outputs, run_batch
+from mrstereo.pipeline.frame import scan_from_pair
+from mrstereo.pipeline.run import PipelineConfig, build_map
+from mrstereo.recordings.manifest import read_manifest
 from mrstereo.world.dataset import write_synthetic_dataset
 
 

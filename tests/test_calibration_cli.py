@@ -3,12 +3,11 @@
 import numpy as np
 import pytest
 
-from mrstereo.camera import Camera, read_camera_info, read_stereo
 from mrstereo.calibration import planar_grid, pose_looking_at, synthetic_view
+from mrstereo.camera import Camera, read_camera_info, read_stereo
 from mrstereo.cli import entry
 from mrstereo.io import read_image
-
-from mrstereo.data import local_path
+from mrstereo.recordings.samples import local_path
 
 DATA = local_path("opencv-stereo-chessboard")
 needs_data = pytest.mark.sample_data("opencv-stereo-chessboard")

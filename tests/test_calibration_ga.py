@@ -4,12 +4,12 @@ import math
 import numpy as np
 import pytest
 
-from mrstereo.camera import Camera, PaperCamera
 from mrstereo.calibration import (CalibrationView, GABounds, GAConfig, calibrate_camera, default_bounds,
                                   ga_calibrate_intrinsics, ga_calibrate_single, paper_bounds, planar_grid,
                                   pose_looking_at, synthetic_view)
 from mrstereo.calibration.ga import homography_poses
 from mrstereo.calibration.refine import refine_views
+from mrstereo.camera import Camera, PaperCamera
 
 # non-square image, off-centre principal point, fx != fy: axis swaps fail
 TRUE = Camera(width=640, height=400, fx=520.0, fy=523.0, cx=331.0, cy=192.0, k1=-0.21, k2=0.05)

@@ -3,10 +3,10 @@ import cv2
 import numpy as np
 import pytest
 
+from mrstereo.calibration import (CALIBRATION_MODELS, calibrate_camera, chessboard_views, expand_glob, planar_grid,
+                                  pose_looking_at, synthetic_view)
 from mrstereo.camera import Camera
-from mrstereo.calibration import (CALIBRATION_MODELS, calibrate_camera, chessboard_views, expand_glob,
-                                  planar_grid, pose_looking_at, synthetic_view)
-from mrstereo.data import local_path
+from mrstereo.recordings.samples import local_path
 
 DATA = local_path("opencv-stereo-chessboard")
 needs_data = pytest.mark.sample_data("opencv-stereo-chessboard")

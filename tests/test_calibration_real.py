@@ -5,8 +5,7 @@ import numpy as np
 import pytest
 
 from mrstereo.calibration import calibrate_camera, calibrate_stereo, chessboard_pairs, expand_glob
-
-from mrstereo.data import local_path
+from mrstereo.recordings.samples import local_path
 
 DATA = local_path("opencv-stereo-chessboard")
 pytestmark = pytest.mark.sample_data("opencv-stereo-chessboard")

@@ -5,13 +5,14 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.camera import Camera, StereoCamera, rectify_fusiello, rotation_from_euler
-from mrstereo.calibration import (calibrate_stereo, detect_chessboard, planar_grid, pose_looking_at,
-                                  rectified_vertical_error_px, synthetic_view, CalibrationView)
+from mrstereo.calibration import (CalibrationView, calibrate_stereo, detect_chessboard, planar_grid, pose_looking_at,
+                                  rectified_vertical_error_px, synthetic_view)
+from mrstereo.camera import Camera, StereoCamera, rectify_fusiello
+from mrstereo.transforms import rotation_from_rpy
 
 LEFT = Camera(width=640, height=400, fx=520.0, fy=523.0, cx=331.0, cy=192.0, k1=-0.21, k2=0.05)
 RIGHT = Camera(width=640, height=400, fx=515.0, fy=516.0, cx=318.0, cy=205.0, k1=-0.19, k2=0.04)
-R_LR = rotation_from_euler(0.01, -0.02, 0.005)
+R_LR = rotation_from_rpy(0.01, -0.02, 0.005)
 T_LR = np.array([-0.12, 0.003, 0.002])            # right camera 12 cm to the right: c2 = -R^T T ~ (+0.12, ...)
 GRID = planar_grid(9, 6, 0.03)
 

@@ -4,11 +4,12 @@ import numpy as np
 import pytest
 import yaml
 
-from mrstereo.camera import (Camera, CameraInfo, StereoCamera, read_stereo, rectify_fusiello,
-                             rotation_from_euler, write_camera_info, write_stereo)
+from mrstereo.camera import (Camera, CameraInfo, StereoCamera, read_stereo, rectify_fusiello, write_camera_info,
+                             write_stereo)
 from mrstereo.camera.formats import import_calibration, read_calibration
 from mrstereo.cli import entry
-from mrstereo.data import local_path
+from mrstereo.recordings.samples import local_path
+from mrstereo.transforms import rotation_from_rpy
 
 CHESS = local_path("opencv-stereo-chessboard")
 LORIS = local_path("openloris-sample")
@@ -18,7 +19,7 @@ D_LEFT = [-0.28, 0.074, 0.0002, 1.8e-05, -0.0011]
 D_RIGHT = [-0.283, 0.0739, -0.0003, 1.2e-05, 0.0009]
 LEFT = Camera.from_ros(752, 480, [[458.654, 0, 367.215], [0, 457.296, 248.375], [0, 0, 1]], "plumb_bob", D_LEFT)
 RIGHT = Camera.from_ros(752, 480, [[457.587, 0, 379.999], [0, 456.134, 255.238], [0, 0, 1]], "plumb_bob", D_RIGHT)
-R_LR = rotation_from_euler(0.0021, -0.0105, 0.0043)      # x_right = R x_left + T
+R_LR = rotation_from_rpy(0.0021, -0.0105, 0.0043)      # x_right = R x_left + T
 C2 = np.array([0.1101, -0.0009, 0.0007])                   # right optical centre in the left frame [m]
 T_LR = -R_LR @ C2
 BASELINE = float(np.linalg.norm(C2))
@@ -176,7 +177,7 @@ distortion_coefficients: {dist}
 def test_euroc_sensor_yaml_pair(tmp_path):
     left = Camera.from_ros(752, 480, LEFT.K, "plumb_bob", D_LEFT[:4])
     right = Camera.from_ros(752, 480, RIGHT.K, "plumb_bob", D_RIGHT[:4])
-    T_B_cam0 = pose(rotation_from_euler(-1.58, 0.01, -1.55), [-0.0216, -0.0647, 0.0098])
+    T_B_cam0 = pose(rotation_from_rpy(-1.58, 0.01, -1.55), [-0.0216, -0.0647, 0.0098])
     T_B_cam1 = T_B_cam0 @ np.linalg.inv(pose(R_LR, T_LR))       # cam1's pose: T_B_cam0 @ T_cam0_cam1
     for name, cam, T_BS in (("cam0", left, T_B_cam0), ("cam1", right, T_B_cam1)):
         (tmp_path / name).mkdir()
@@ -275,7 +276,7 @@ def test_openloris_sensors_and_trans_matrix(tmp_path):
     left = Camera.from_ros(752, 480, LEFT.K, "equidistant", [-0.0073, 0.0435, -0.0413, 0.0077])
     right = Camera.from_ros(752, 480, RIGHT.K, "equidistant", [-0.0064, 0.0415, -0.0395, 0.0070])
     openloris_sensors(tmp_path / "sensors.yaml", left, right)
-    T_base_f1 = pose(rotation_from_euler(-1.57, 0.0, -1.56), [0.2376, -0.0387, 0.895])
+    T_base_f1 = pose(rotation_from_rpy(-1.57, 0.0, -1.56), [0.2376, -0.0387, 0.895])
     T_f1_f2 = np.linalg.inv(pose(R_LR, T_LR))
     # Chain base -> f1 and base -> f2 only: the reader has to go through base_link.
     fs = cv2.FileStorage(str(tmp_path / "poses.yaml"), cv2.FILE_STORAGE_WRITE)
@@ -424,7 +425,7 @@ def string_in_D(d):
 
 
 def no_overlap(d):
-    d["right"]["rectification_matrix"]["data"] = [float(v) for v in rotation_from_euler(0, 2.5, 0).ravel()]
+    d["right"]["rectification_matrix"]["data"] = [float(v) for v in rotation_from_rpy(0, 2.5, 0).ravel()]
 
 
 def swapped(d):

@@ -3,8 +3,9 @@ import numpy as np
 import pytest
 import yaml
 
-from mrstereo.camera import (Camera, CameraInfo, RigMount, StereoCamera, read_camera_info,
-                             read_stereo, rotation_from_euler, write_camera_info, write_stereo)
+from mrstereo.camera import (Camera, CameraInfo, RigMount, StereoCamera, read_camera_info, read_stereo,
+                             write_camera_info, write_stereo)
+from mrstereo.transforms import rotation_from_rpy
 
 CAM = Camera(width=320, height=240, fx=201.0, fy=199.5, cx=162.3, cy=117.9, k1=-0.08, k2=0.01)
 
@@ -14,8 +15,8 @@ def make_stereo():
     P_left = np.hstack([K_rect, np.zeros((3, 1))])
     P_right = P_left.copy()
     P_right[0, 3] = -200.0 * 0.12
-    return StereoCamera(left=CameraInfo(CAM, R=rotation_from_euler(0.01, -0.005, 0.002), P=P_left, name="left"),
-                        right=CameraInfo(CAM, R=rotation_from_euler(-0.004, 0.008, -0.01), P=P_right, name="right"),
+    return StereoCamera(left=CameraInfo(CAM, R=rotation_from_rpy(0.01, -0.005, 0.002), P=P_left, name="left"),
+                        right=CameraInfo(CAM, R=rotation_from_rpy(-0.004, 0.008, -0.01), P=P_right, name="right"),
                         rig=RigMount(height_m=0.45, tilt_rad=0.15))
 
 
@@ -96,7 +97,7 @@ def test_rectify_rejects_mismatched_sizes():
 ])
 def test_every_model_round_trips_through_camera_info(tmp_path, model, D):
     cam = Camera.from_ros(320, 240, CAM.K, model, D)
-    info = CameraInfo(cam, R=rotation_from_euler(0.01, -0.005, 0.002), name="cam0")
+    info = CameraInfo(cam, R=rotation_from_rpy(0.01, -0.005, 0.002), name="cam0")
     write_camera_info(tmp_path / "cam.yaml", info)
     data = yaml.safe_load((tmp_path / "cam.yaml").read_text())
     assert data["distortion_model"] == model and data["distortion_coefficients"]["data"] == D

@@ -3,8 +3,8 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.camera import (Camera, PaperCamera, distort_normalized, euler_from_rotation,
-                             project_points, rotation_from_euler, undistort_normalized)
+from mrstereo.camera import Camera, PaperCamera, distort_normalized, project_points, undistort_normalized
+from mrstereo.transforms import rotation_from_rpy, rpy_from_rotation
 
 # Non-square image, off-centre principal point, non-square pixels: an axis swap must fail.
 CAM = Camera(width=640, height=400, fx=452.0, fy=447.5, cx=331.7, cy=188.2, k1=-0.21, k2=0.06)
@@ -63,12 +63,12 @@ def test_paper_bounds_example():
 
 def test_euler_round_trip_and_convention():
     a, b, g = 0.3, -0.2, 1.1
-    R = rotation_from_euler(a, b, g)
+    R = rotation_from_rpy(a, b, g)
     Rx = cv2.Rodrigues(np.array([a, 0, 0.0]))[0]
     Ry = cv2.Rodrigues(np.array([0, b, 0.0]))[0]
     Rz = cv2.Rodrigues(np.array([0, 0, g]))[0]
     np.testing.assert_allclose(R, Rz @ Ry @ Rx, atol=1e-12)
-    np.testing.assert_allclose(np.array(euler_from_rotation(R)), [a, b, g], atol=1e-12)
+    np.testing.assert_allclose(np.array(rpy_from_rotation(R)), [a, b, g], atol=1e-12)
 
 
 def test_project_points_batches_over_population():
@@ -76,7 +76,7 @@ def test_project_points_batches_over_population():
     pts = rng.uniform(-0.2, 0.2, size=(30, 3)) * [1, 1, 0]
     P = 7
     fx = rng.uniform(300, 500, P)
-    R = rotation_from_euler(rng.uniform(-0.2, 0.2, P), rng.uniform(-0.2, 0.2, P), rng.uniform(-0.2, 0.2, P))
+    R = rotation_from_rpy(rng.uniform(-0.2, 0.2, P), rng.uniform(-0.2, 0.2, P), rng.uniform(-0.2, 0.2, P))
     t = np.stack([rng.uniform(-0.1, 0.1, P), rng.uniform(-0.1, 0.1, P), rng.uniform(1, 2, P)], 1)
     batch = project_points(pts, fx=fx, fy=fx * 1.01, cx=320.0, cy=200.0, k1=-0.1, k2=0.02, R=R, t=t)
     assert batch.shape == (P, 30, 2)
@@ -168,7 +168,7 @@ def test_every_model_rays_invert_projection_over_the_image(name):
 def test_every_model_maps_equal_opencv_within_0_01_px(name):
     """The remap maps (OpenCV's) and our numpy projection of the same rays agree over the image."""
     cam = MODELS[name]
-    R = rotation_from_euler(0.02, -0.03, 0.01)
+    R = rotation_from_rpy(0.02, -0.03, 0.01)
     P = np.array([[0.9 * cam.fx, 0.0, 0.47 * cam.width], [0.0, 0.9 * cam.fx, 0.52 * cam.height], [0, 0, 1.0]])
     map_x, map_y = cam.undistort_rectify_maps(R=R, P=P)
     assert map_x.shape == (cam.height, cam.width) and map_x.dtype == np.float32

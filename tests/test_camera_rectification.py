@@ -3,10 +3,11 @@ import numpy as np
 import pytest
 
 from mrstereo.camera import (Camera, check_baseline, check_not_swapped, raw_px_from_rectified_px,
-                             rectified_px_from_raw_px, rectify_fusiello, rotation_from_euler)
+                             rectified_px_from_raw_px, rectify_fusiello)
 from mrstereo.geometry import points_cam_from_raw_px
+from mrstereo.transforms import rotation_from_rpy
 
-R_LR = rotation_from_euler(0.01, -0.02, 0.005)
+R_LR = rotation_from_rpy(0.01, -0.02, 0.005)
 T_LR = np.array([-0.12, 0.003, 0.002])          # right camera 12 cm on the +x side of the left one
 
 

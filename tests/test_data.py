@@ -9,8 +9,8 @@ import threading
 
 import pytest
 
-from mrstereo import data
 from mrstereo.cli import entry
+from mrstereo.recordings import samples as data
 
 
 def test_registry_names_every_file_once_with_a_source_and_a_sha256():

@@ -4,11 +4,10 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.evaluation.baselines import (
-    BMSettings, disparity_from_opencv, num_disparities, stereo_bm, stereo_sgbm)
-from mrstereo.data import local_path
+from mrstereo.evaluation.baselines import BMSettings, disparity_from_opencv, num_disparities, stereo_bm, stereo_sgbm
 from mrstereo.evaluation.datasets import load_scene
 from mrstereo.evaluation.metrics import disparity_metrics
+from mrstereo.recordings.samples import local_path
 
 needs_data = pytest.mark.sample_data("tsukuba")
 

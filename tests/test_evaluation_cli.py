@@ -9,8 +9,7 @@ from mrstereo.evaluation.baselines import stereo_sgbm
 from mrstereo.evaluation.datasets import load_scene
 from mrstereo.evaluation.metrics import disparity_metrics
 from mrstereo.evaluation.report import evaluate_scenes, run_method
-
-from mrstereo.data import local_path
+from mrstereo.recordings.samples import local_path
 
 TSUKUBA = local_path("tsukuba")
 needs_data = pytest.mark.sample_data("tsukuba")

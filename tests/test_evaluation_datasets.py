@@ -1,14 +1,12 @@
-"""Scene readers: every layout on the public sample scenes (mrstereo.data) and on synthetic mini-datasets."""
+"""Scene readers: every layout on the public sample scenes (mrstereo.recordings.samples) and on synthetic mini-datasets."""
 
 import cv2
 import numpy as np
 import pytest
 
-from mrstereo.data import local_path
 from mrstereo.evaluation.datasets import load_scene, load_scenes, photometric_error, search_range_px
 from mrstereo.io import write_image, write_kitti_disparity, write_pfm
-
-
+from mrstereo.recordings.samples import local_path
 
 # name, sample data, layout, (H, W), GT min, GT max, valid fraction, max disparity, has mask
 REAL = [
@@ -196,7 +194,7 @@ def synth_dataset(tmp_path_factory):
 
 def test_mrstereo_dataset_frames_are_scenes_with_their_pfm_ground_truth(synth_dataset):
     from mrstereo.io import read_image, read_pfm
-    from mrstereo.recording import read_manifest
+    from mrstereo.recordings.manifest import read_manifest
 
     scenes = load_scenes(synth_dataset)
     frames = read_manifest(synth_dataset).frames

@@ -332,7 +332,7 @@ def _full_disk_tmp(monkeypatch):
         os.symlink("/dev/full", path)
         return os.open(path, os.O_WRONLY), path
 
-    monkeypatch.setattr(io.tempfile, "mkstemp", mkstemp)
+    monkeypatch.setattr(io.files.tempfile, "mkstemp", mkstemp)
 
 
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
@@ -380,8 +380,8 @@ def test_a_really_full_disk(ds, tmp_path, capsys, command):
 # ------------------------------------------------------------------------------------------ partial outputs
 
 def test_map_writes_all_files_or_none(ds, tmp_path, capsys, monkeypatch):
-    import mrstereo.parallel
-    import mrstereo.pipeline
+    import mrstereo.pipeline.parallel
+    import mrstereo.pipeline.run
 
     out = tmp_path / "m"
     out.mkdir()
@@ -390,8 +390,8 @@ def test_map_writes_all_files_or_none(ds, tmp_path, capsys, monkeypatch):
     def fail(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device", "map.png")
 
-    monkeypatch.setattr(mrstereo.pipeline, "plot_map", fail)
-    monkeypatch.setattr(mrstereo.parallel.PrestartedCall, "result", fail)      # the CLI draws in another process
+    monkeypatch.setattr(mrstereo.pipeline.run, "plot_map", fail)
+    monkeypatch.setattr(mrstereo.pipeline.parallel.PrestartedCall, "result", fail)      # the CLI draws in another process
     _run(capsys, ["map", ds, "-o", out, "--quiet"], must="no space left on device")
     assert sorted(p.name for p in out.iterdir()) == ["map.yaml"]           # the old set, nothing new, no temp
     assert (out / "map.yaml").read_text() == "an older map\n"

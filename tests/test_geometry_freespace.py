@@ -4,15 +4,15 @@ A camera at height H tilted down by TILT sees a flat floor and, in some frames, 
 ``x = WALL_X`` (robot frame) with no texture: the matcher measures nothing on it, the floor is
 measured on a sparse set of pixels. Image gray levels with noise; no stereo matching involved.
 """
-import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from mrstereo.camera import Camera, RigMount, StereoCamera
-from mrstereo.geometry import ObstacleConfig, T_robot_from_cam, detect_obstacles
+from mrstereo.geometry import ObstacleConfig, detect_obstacles
 from mrstereo.geometry.freespace import FreeSpaceConfig, free_space_boundary
+from mrstereo.transforms import T_robot_from_cam
 
 W, H, F, CX, CY, B = 320, 240, 200.0, 161.0, 118.5, 0.1
 HEIGHT, TILT = 0.6, 0.3
@@ -147,13 +147,13 @@ def test_bad_input():
 
 
 def test_boundary_points_join_the_observation_marked_and_map_the_plain_wall():
-    from mrstereo.geometry import transform_points
-    from mrstereo.geometry.pair import PairObstacles
-    from mrstereo.geometry import T_world_from_robot
     from mrstereo.mapping import OccupancyGrid
-    from mrstereo.pipeline import PipelineConfig, add_observation, observation_from_pair
-    from mrstereo.recording import FrameRecord
+    from mrstereo.mapping.fusion import add_observation
+    from mrstereo.pipeline.frame import PairObstacles
+    from mrstereo.pipeline.run import PipelineConfig, observation_from_pair
+    from mrstereo.recordings.manifest import FrameRecord
     from mrstereo.rejection import reject_uniform
+    from mrstereo.transforms import T_from_planar, transform_points
 
     image, disparity = _frame()
     stereo = _stereo()
@@ -167,11 +167,11 @@ def test_boundary_points_join_the_observation_marked_and_map_the_plain_wall():
     n = len(boundary.points_robot)
     assert n > 0 and obs.boundary_points == n
     np.testing.assert_allclose(obs.obstacle_points_world[-n:],
-                               transform_points(T_world_from_robot(*record.pose), boundary.points_robot), atol=1e-5)
+                               transform_points(T_from_planar(*record.pose), boundary.points_robot), atol=1e-5)
     grid = OccupancyGrid(config.grid, config=config.mapping)
     add_observation(grid, obs)
     occupied = grid.to_ros_map().occupied
-    wall_xy = transform_points(T_world_from_robot(*record.pose), boundary.base_points_robot)[:, :2]
+    wall_xy = transform_points(T_from_planar(*record.pose), boundary.base_points_robot)[:, :2]
     r, c = config.grid.cells_from_xy(wall_xy)
     assert occupied[r, c].mean() > 0.8               # the plain wall is in the map
     without = replace(frame, boundary=None)

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from mrstereo.camera import Camera, CameraInfo, RigMount, StereoCamera
-from mrstereo.geometry import (GroundPlane, ObstacleConfig, T_robot_from_cam, T_robot_from_cam_ground,
-                               detect_obstacles, fit_ground_plane, fit_ground_v_disparity,
-                               height_above_ground_m, points_cam_from_disparity, v_disparity)
+from mrstereo.geometry import (GroundPlane, ObstacleConfig, T_robot_from_cam_ground, detect_obstacles,
+                               fit_ground_plane, fit_ground_v_disparity, height_above_ground_m,
+                               points_cam_from_disparity, v_disparity)
+from mrstereo.transforms import T_robot_from_cam
 
 W, H, F, CX, CY, B = 200, 150, 180.0, 96.3, 71.8, 0.12
 HEIGHT, TILT = 0.62, 0.21

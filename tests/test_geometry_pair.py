@@ -8,11 +8,12 @@ from scipy.spatial import cKDTree
 
 from mrstereo.camera import write_stereo
 from mrstereo.cli import entry
-from mrstereo.geometry import (ObstacleConfig, T_robot_from_cam, laser_scan_from_points, obstacles_from_pair,
-                               points_robot_from_disparity, read_ply, read_scan_json, scan_from_pair)
+from mrstereo.geometry import (ObstacleConfig, laser_scan_from_points, points_robot_from_disparity, read_ply,
+                               read_scan_json)
 from mrstereo.io import write_image
-from mrstereo.world import (LABEL_FLOOR, default_scene, default_stereo, is_obstacle_label,
-                            render_stereo_frame)
+from mrstereo.pipeline.frame import obstacles_from_pair, scan_from_pair
+from mrstereo.transforms import T_robot_from_cam
+from mrstereo.world import LABEL_FLOOR, default_scene, default_stereo, is_obstacle_label, render_stereo_frame
 
 POSE, PAN = (1.2, -0.3, 0.0), 0.35
 

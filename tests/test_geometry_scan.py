@@ -117,7 +117,8 @@ def test_seen_clear_to_range_max_is_inf_unseen_is_nan():
 
 
 def test_near_limit_range_is_the_depth_of_the_largest_disparity():
-    from mrstereo.geometry import T_robot_from_cam, near_limit_range_m
+    from mrstereo.geometry import near_limit_range_m
+    from mrstereo.transforms import T_robot_from_cam
 
     cam = Camera(width=321, height=241, fx=200.0, fy=200.0, cx=160.0, cy=120.0)
     stereo = StereoCamera.ideal(cam, 0.1)

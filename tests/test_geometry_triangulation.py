@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from mrstereo.camera import Camera
-from mrstereo.geometry import (T_robot_from_cam, T_world_from_robot, depth_m_from_disparity_px,
-                               disparity_px_from_depth_m, points_cam_from_disparity, transform_points)
+from mrstereo.geometry import depth_m_from_disparity_px, disparity_px_from_depth_m, points_cam_from_disparity
+from mrstereo.transforms import T_from_planar, T_robot_from_cam, transform_points
 
 
 def test_triangulation_recovers_projected_points():
@@ -42,5 +42,5 @@ def test_frames_axes():
     # Tilted down: a point on the optical axis is below the camera; panned left: y > 0.
     p = transform_points(T_robot_from_cam(height_m=0.5, tilt_rad=0.3, pan_rad=np.pi / 2), [[0, 0, 1.0]])[0]
     np.testing.assert_allclose(p, [0, np.cos(0.3), 0.5 - np.sin(0.3)], atol=1e-12)
-    w = transform_points(T_world_from_robot(1.0, 2.0, np.pi / 2), [[1.0, 0, 0]])[0]
+    w = transform_points(T_from_planar(1.0, 2.0, np.pi / 2), [[1.0, 0, 0]])[0]
     np.testing.assert_allclose(w, [1.0, 3.0, 0.0], atol=1e-12)

@@ -2,9 +2,8 @@
 import numpy as np
 import pytest
 
-from mrstereo.io import (atomic_write, read_disparity, read_image, read_pfm, refuse_overwrite_input,
-                         write_disparity, write_image, write_pfm)
-
+from mrstereo.io import (atomic_write, read_disparity, read_image, read_pfm, refuse_overwrite_input, write_disparity,
+                         write_image, write_pfm)
 
 
 def test_pfm_round_trip_with_nan(tmp_path):

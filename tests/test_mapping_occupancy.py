@@ -5,8 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.mapping import (GridSpec, MappingConfig, OccupancyGrid, plot_map, read_ros_map,
-                              write_ros_map)
+from mrstereo.mapping import GridSpec, MappingConfig, OccupancyGrid, plot_map, read_ros_map, write_ros_map
 from mrstereo.mapping.occupancy import log_odds_from_probability, probability_from_log_odds, view_cells
 
 RES = 0.05

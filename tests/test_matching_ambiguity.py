@@ -5,11 +5,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from test_matching_realdata import _scene
 
 from mrstereo.matching import MatchingConfig, compute_disparity, preset_config
 from mrstereo.matching.cost import match_checked, prepare
-
-from test_matching_realdata import SCENES, _scene
 
 TRUE_D = 26          # band [16, 32] of a search up to 64 px (decimation 2)
 PERIOD = 14          # the pattern one period off lies in band [0, 16] (12 px) and in band [32, 64] (40 px)

@@ -39,8 +39,7 @@ def test_preview_is_scaled_to_the_data_not_to_the_search(tmp_path, capsys):
     so the median is mid-scale turbo (green), not the dark blue of 33/192; invalid is black."""
     import matplotlib
 
-    from mrstereo._plot import disparity_range_px
-    from mrstereo.io import colorize_disparity
+    from mrstereo.viz.plot import colorize_disparity, disparity_range_px
 
     d = np.tile(np.linspace(5, 60, 200, dtype=np.float32), (50, 1))
     d[:, :3] = np.nan

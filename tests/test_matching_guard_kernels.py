@@ -8,7 +8,7 @@ import pytest
 
 from mrstereo.matching import _kernels, preset_config
 from mrstereo.matching.disparity import (_finite_in_clusters, _guard_candidates, _in_large_clusters, _large_clusters,
-                                        _level_spans)
+                                         _level_spans)
 from mrstereo.matching.multirange import RangeLevel
 from mrstereo.matching.postfilter import left_right_consistent, unique
 

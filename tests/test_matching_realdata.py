@@ -1,7 +1,6 @@
 """Matcher on real data (Middlebury 2001 Tsukuba, 2003 Teddy) against OpenCV StereoBM in the same run."""
 from __future__ import annotations
 
-
 import cv2
 import numpy as np
 

@@ -3,7 +3,6 @@
 plane beyond the search, Tsukuba with a cut search, the real OpenCV chessboard pair."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import cv2
@@ -12,14 +11,16 @@ import pytest
 
 from mrstereo.camera import Camera, RigMount, StereoCamera, write_stereo
 from mrstereo.cli import entry
-from mrstereo.data import local_path
-from mrstereo.geometry import detect_obstacles, scan_from_pair
-from mrstereo.io import colorize_disparity, read_disparity
+from mrstereo.geometry import detect_obstacles
+from mrstereo.io import read_disparity
 from mrstereo.matching import MatchingConfig, compute_disparity, make_plan
+from mrstereo.pipeline.frame import scan_from_pair
+from mrstereo.recordings.samples import local_path
+from mrstereo.viz.plot import colorize_disparity
 
 TSUKUBA = local_path("tsukuba")
 CHESSBOARD = local_path("opencv-stereo-chessboard")
-TOO_NEAR_BGR = (255, 0, 255)          # magenta (mrstereo._plot.TOO_NEAR_RGB)
+TOO_NEAR_BGR = (255, 0, 255)          # magenta (mrstereo.viz.plot.TOO_NEAR_RGB)
 
 
 def _plane_pair(d_px: int, height: int = 96, width: int = 240, seed: int = 0):
@@ -143,6 +144,7 @@ def test_real_chessboard_at_0_4_m_is_never_placed_farther_than_0_5_m():
     import sys
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from bench_too_near import board_mask
+
     from mrstereo.calibration import calibrate_stereo, chessboard_pairs, expand_glob
 
     found = chessboard_pairs(expand_glob(str(CHESSBOARD / "left*.jpg")), expand_glob(str(CHESSBOARD / "right*.jpg")),

@@ -12,12 +12,14 @@ import pytest
 import yaml
 
 from mrstereo.camera import Camera, RigMount, StereoCamera, read_stereo, write_stereo
+from mrstereo.camera.mount import CameraMount, read_mount_entry
 from mrstereo.cli import entry
-from mrstereo.geometry import T_robot_from_cam, detect_obstacles
-from mrstereo.geometry.frames import CameraMount, read_mount_entry, rotation_from_rpy
+from mrstereo.geometry import detect_obstacles
 from mrstereo.geometry.ground import T_robot_from_cam_ground, ground_from_mount, height_above_ground_m
 from mrstereo.geometry.triangulation import disparity_px_from_depth_m
-from mrstereo.recording import read_manifest, write_manifest
+from mrstereo.recordings.manifest import read_manifest, write_manifest
+from mrstereo.transforms import T_robot_from_cam, rotation_from_rpy
+
 
 def test_the_paper_rig_is_the_special_case_bit_for_bit():
     rig = RigMount(height_m=0.45, tilt_rad=0.15)

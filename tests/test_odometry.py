@@ -7,9 +7,10 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.odometry import LOST, OdometryConfig, StereoOdometry, T_base_from_cam_of, visual_odometry
-from mrstereo.odometry.se3 import (T_from_planar, T_from_rvec_t, planar_from_T, quaternion_from_rotation,
-                                   rotation_angle_rad, rotation_from_quaternion, rvec_t_from_T)
+from mrstereo.camera.mount import T_base_from_cam_of
+from mrstereo.odometry import LOST, OdometryConfig, StereoOdometry, visual_odometry
+from mrstereo.transforms import (T_from_planar, T_from_rvec_t, planar_from_T, quaternion_from_rotation,
+                                 rotation_angle_rad, rotation_from_quaternion, rvec_t_from_T)
 from mrstereo.world import default_scene
 from mrstereo.world.paths import sequence_path
 from mrstereo.world.render import default_stereo, render_stereo_frame

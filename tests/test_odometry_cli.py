@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from mrstereo.cli import entry
-from mrstereo.odometry.se3 import T_from_planar
-from mrstereo.odometry.trajectory import (read_tum, trajectory_metrics, umeyama_alignment, write_tum)
-from mrstereo.recording import read_manifest
+from mrstereo.odometry.trajectory import read_tum, trajectory_metrics, umeyama_alignment, write_tum
+from mrstereo.recordings.manifest import read_manifest
+from mrstereo.transforms import T_from_planar
 from mrstereo.world.dataset import write_synthetic_dataset
 
 
@@ -232,8 +232,8 @@ def test_fuse_aligned_undoes_odometry_drift_on_synthetic_scans():
     """Scans of a corridor with boxes, seen from the true poses, fused at drifted odometry poses:
     the aligned trajectory stays near the truth (the drifted one ends 1 m off)."""
     from mrstereo.mapping import GridSpec
+    from mrstereo.mapping.fusion import FrameObservation
     from mrstereo.odometry.alignment import AlignConfig, fuse_aligned
-    from mrstereo.pipeline import FrameObservation
     from mrstereo.world.paths import drifted_poses, sequence_path
 
     rng = np.random.default_rng(7)

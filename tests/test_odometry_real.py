@@ -16,9 +16,9 @@ import pytest
 import yaml
 
 from mrstereo.camera.formats import import_calibration
-from mrstereo.geometry.frames import CameraMount
-from mrstereo.odometry import T_base_from_cam_of, visual_odometry
-from mrstereo.odometry.se3 import T_from_position_quaternion, rotation_angle_rad
+from mrstereo.camera.mount import CameraMount, T_base_from_cam_of
+from mrstereo.odometry import visual_odometry
+from mrstereo.transforms import T_from_position_quaternion, rotation_angle_rad
 
 pytestmark = pytest.mark.sample_data("openloris-sample")
 
@@ -38,7 +38,7 @@ def _opencv_yaml(path: Path) -> dict:
 
 @pytest.fixture(scope="module")
 def loris():
-    from mrstereo.data import local_path
+    from mrstereo.recordings.samples import local_path
 
     DATA = local_path("openloris-sample")
     stereo = import_calibration(DATA / "sensors.yaml").stereo           # trans_matrix.yaml found beside it

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from mrstereo.recording import read_manifest
+from mrstereo.recordings.manifest import read_manifest
 from mrstereo.world.dataset import write_synthetic_dataset
 from mrstereo.world.paths import drifted_poses, sequence_path
 

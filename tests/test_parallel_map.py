@@ -1,19 +1,18 @@
-"""mrstereo.parallel.map_ordered on real dask.distributed clusters (loopback), and build_map on workers:
+"""mrstereo.pipeline.parallel.map_ordered on real dask.distributed clusters (loopback), and build_map on workers:
 input order, failures named or returned, one thread per worker, the same map bit for bit."""
 from __future__ import annotations
 
 import time
 from functools import partial
 
+import distributed  # noqa: E402
 import numpy as np
 import pytest
 
-from mrstereo.parallel import ItemError, ItemFailure, map_ordered
-from mrstereo.pipeline import build_map
-from mrstereo.recording import read_manifest
+from mrstereo.pipeline.parallel import ItemError, ItemFailure, map_ordered
+from mrstereo.pipeline.run import build_map
+from mrstereo.recordings.manifest import read_manifest
 from mrstereo.world.dataset import write_synthetic_dataset
-
-import distributed  # noqa: E402
 
 
 def _slow_square(x: int, *, n: int) -> int:
@@ -96,7 +95,7 @@ def test_build_map_on_a_thread_cluster_is_bit_identical(dataset, threaded_cluste
 
 def test_two_worker_processes_single_threaded_and_bit_identical(dataset):
     """A LocalCluster of 2 processes (workers=2, processes=True): one numba and OpenCV thread each; the same map."""
-    from mrstereo.parallel import dask_client
+    from mrstereo.pipeline.parallel import dask_client
 
     local = build_map(dataset, progress=False)
     with dask_client(workers=2, processes=True) as client:
@@ -123,7 +122,7 @@ def test_two_worker_threads_single_threaded_and_bit_identical(dataset):
 
     import cv2
 
-    from mrstereo.parallel import dask_client
+    from mrstereo.pipeline.parallel import dask_client
 
     local = build_map(dataset, progress=False)
     before = cv2.getNumThreads()
@@ -157,7 +156,8 @@ def test_cli_map_on_a_scheduler_matches_in_process(dataset, threaded_cluster, tm
 def test_fuse_uses_the_frames_cells_only_when_they_fit(dataset):
     from dataclasses import replace
 
-    from mrstereo.pipeline import PipelineConfig, fuse
+    from mrstereo.mapping.fusion import fuse
+    from mrstereo.pipeline.run import PipelineConfig
 
     config = PipelineConfig()
     config = replace(config, mapping=replace(config.mapping, map_occlusion_p=None))   # cells per frame
@@ -185,7 +185,7 @@ def test_cli_processes_needs_workers(dataset, tmp_path, capsys):
 
 
 def test_worker_threads_fall_back_to_processes_without_a_thread_safe_numba_layer(monkeypatch):
-    import mrstereo.parallel as parallel
+    import mrstereo.pipeline.parallel as parallel
 
     monkeypatch.setattr(parallel, "numba_thread_safe", lambda: False)
     with pytest.warns(UserWarning, match="workqueue threading layer"):
@@ -195,7 +195,7 @@ def test_worker_threads_fall_back_to_processes_without_a_thread_safe_numba_layer
 
 
 def test_chunked_tasks_keep_order_and_per_item_failures(threaded_cluster):
-    from mrstereo.parallel import _chunk_size
+    from mrstereo.pipeline.parallel import _chunk_size
 
     _, client = threaded_cluster
     assert _chunk_size(client, 40) == 2 and _chunk_size(client, 5) == 1 and _chunk_size(client, 10_000) == 8

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from mrstereo.rejection import (FloorModel, RejectionConfig, learn_floor_model, patch_statistics,
-                                reject_uniform, uniform_mask)
+from mrstereo.rejection import (FloorModel, RejectionConfig, learn_floor_model, patch_statistics, reject_uniform,
+                                uniform_mask)
 
 
 def _scene(seed=0, h=60, w=90):

@@ -7,10 +7,11 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.camera import Camera, CameraInfo, RigMount, StereoCamera, rotation_from_euler
+from mrstereo.camera import Camera, CameraInfo, RigMount, StereoCamera
 from mrstereo.camera import camera_info as camera_info_module
 from mrstereo.cli import entry
 from mrstereo.profiling import Profile, active, profiling, stage
+from mrstereo.transforms import rotation_from_rpy
 
 CAM = Camera(width=160, height=120, fx=101.0, fy=99.5, cx=81.3, cy=58.9, k1=-0.08, k2=0.01)
 
@@ -20,8 +21,8 @@ def _stereo(baseline_m=0.12):
     P_left = np.hstack([K_rect, np.zeros((3, 1))])
     P_right = P_left.copy()
     P_right[0, 3] = -100.0 * baseline_m
-    return StereoCamera(left=CameraInfo(CAM, R=rotation_from_euler(0.01, -0.005, 0.002), P=P_left, name="left"),
-                        right=CameraInfo(CAM, R=rotation_from_euler(-0.004, 0.008, -0.01), P=P_right,
+    return StereoCamera(left=CameraInfo(CAM, R=rotation_from_rpy(0.01, -0.005, 0.002), P=P_left, name="left"),
+                        right=CameraInfo(CAM, R=rotation_from_rpy(-0.004, 0.008, -0.01), P=P_right,
                                          name="right"),
                         rig=RigMount(height_m=0.45, tilt_rad=0.15))
 
@@ -79,7 +80,7 @@ def test_profile_accumulates_named_stages_and_is_off_by_default():
 
 
 def test_profile_times_the_stages_of_a_pair(tmp_path):
-    from mrstereo.geometry import obstacles_from_pair
+    from mrstereo.pipeline.frame import obstacles_from_pair
 
     stereo, (left, right) = _stereo(), _images()
     with profiling() as prof:
@@ -172,7 +173,7 @@ def test_cli_commands_load_on_demand_and_the_table_lists_every_command():
 
 
 def test_prestarted_call_returns_the_result_or_raises_the_error():
-    from mrstereo.parallel import PrestartedCall
+    from mrstereo.pipeline.parallel import PrestartedCall
 
     with PrestartedCall("math:hypot") as call:
         assert call(3.0, 4.0) == 5.0
@@ -233,7 +234,7 @@ def test_map_figure_in_a_second_process_only_on_a_free_core(monkeypatch, tmp_pat
     from mrstereo.cli import _pipeline
     from mrstereo.mapping import GridSpec, OccupancyGrid
     from mrstereo.mapping.figures import plot_map
-    from mrstereo.parallel import PrestartedCall
+    from mrstereo.pipeline.parallel import PrestartedCall
 
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
     monkeypatch.setattr(os, "getloadavg", lambda: (0.2, 0.2, 0.2))

@@ -7,7 +7,7 @@ import sys
 from click.testing import CliRunner
 
 from mrstereo.cli import entry, main
-from mrstereo.recording import read_manifest
+from mrstereo.recordings.manifest import read_manifest
 
 
 def test_synth_writes_a_readable_dataset(tmp_path):

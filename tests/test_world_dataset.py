@@ -10,8 +10,8 @@ import yaml
 
 from mrstereo.io import read_image, read_pfm
 from mrstereo.mapping.rosmap import read_ros_map
+from mrstereo.recordings.manifest import read_manifest
 from mrstereo.world import default_scene, default_stereo, render_stereo_frame
-from mrstereo.recording import read_manifest
 from mrstereo.world.dataset import corridor_path, write_synthetic_dataset
 
 

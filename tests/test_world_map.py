@@ -4,8 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrstereo.geometry import points_cam_from_disparity, transform_points
+from mrstereo.geometry import points_cam_from_disparity
 from mrstereo.mapping.grid import GridSpec
+from mrstereo.transforms import transform_points
 from mrstereo.world import LABEL_FLOOR, default_scene, default_stereo, is_obstacle_label, render_stereo_frame
 from mrstereo.world.groundtruth import ground_truth_map
 

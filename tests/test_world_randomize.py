@@ -10,9 +10,9 @@ from click.testing import CliRunner
 
 from mrstereo.cli import main
 from mrstereo.mapping import GridSpec
+from mrstereo.recordings.manifest import read_manifest
 from mrstereo.world import (LABEL_FLOOR, LABEL_OBSTACLE, LABEL_WALL, Scene, SensorModel, ground_truth_map,
                             occupied_footprint, poses_along, random_world, render_stereo_frame)
-from mrstereo.recording import read_manifest
 from mrstereo.world.dataset import write_synthetic_dataset
 from mrstereo.world.randomize import RANGES, _path_points
 from mrstereo.world.scene import TEXTURE_STRIPES_U

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from mrstereo.camera import RigMount
-from mrstereo.geometry import points_cam_from_disparity, transform_points
-from mrstereo.world import (LABEL_FLOOR, LABEL_OBSTACLE, LABEL_WALL, default_scene, default_stereo,
-                            render_stereo_frame)
+from mrstereo.geometry import points_cam_from_disparity
+from mrstereo.transforms import transform_points
+from mrstereo.world import LABEL_FLOOR, LABEL_OBSTACLE, LABEL_WALL, default_scene, default_stereo, render_stereo_frame
 
 
 @pytest.fixture(scope="module")

@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._plot import disparity_colorbar, disparity_range_px, draw_disparity, new_figure, save_figure
 from .io import atomic_write, read_disparity, read_image, write_image
+from .viz.plot import disparity_colorbar, disparity_range_px, draw_disparity, new_figure, save_figure
 
 __all__ = ["DemoResult", "run_demo", "DEMO_STEPS"]
 
@@ -95,20 +95,20 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     """
     from tqdm.auto import tqdm
 
-    from .calibration import calibrate_stereo, chessboard_views, ga_calibrate_single
-    from .calibration import CalibrationView
+    from .calibration import CalibrationView, calibrate_stereo, chessboard_views, ga_calibrate_single
     from .calibration.report import residual_figure
     from .camera import write_stereo
     from .geometry.obstacles import detect_obstacles
     from .geometry.scan import laser_scan_from_points, near_limit_range_m, plot_top_view, scan_angles_of_camera
     from .mapping import plan_path, read_ros_map
     from .mapping.figures import plot_map
+    from .mapping.fusion import fuse
     from .mapping.metrics import map_metrics
     from .matching import compute_disparity
-    from .pipeline import PipelineConfig, build_map, fuse, write_map_outputs
+    from .pipeline.run import PipelineConfig, build_map, write_map_outputs
     from .rejection import reject_uniform
-    from .world.figures import save_stereo_figure
     from .world import read_manifest, render_calibration_views, render_paper_dot_target, write_synthetic_dataset
+    from .world.figures import save_stereo_figure
 
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()):

@@ -10,8 +10,7 @@ from .ga import (GENES, MULTIVIEW_GA, GABounds, GAConfig, GAResult, default_boun
 from .refine import CALIBRATION_MODELS, CalibrationModel, LMFit, calibration_model, refine_views
 from .stereo import StereoCalibrationResult, calibrate_stereo, rectified_points, rectified_vertical_error_px
 from .targets import (CalibrationView, ChessboardPairs, chessboard_pairs, chessboard_views, detect_chessboard,
-                      expand_glob, parse_board, planar_grid,
-                      pose_looking_at, read_control_points, synthetic_view)
+                      expand_glob, parse_board, planar_grid, pose_looking_at, read_control_points, synthetic_view)
 
 __all__ = [
     "METHODS", "MODELS", "CalibrationResult", "calibrate_camera", "reprojection_residuals", "zhang_init",

@@ -60,8 +60,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from .. import _checks
-from ..camera import (Camera, PaperCamera, normalized_from_pixels, project_points, rotation_from_euler,
-                      undistort_normalized)
+from ..camera import Camera, PaperCamera, normalized_from_pixels, project_points, undistort_normalized
+from ..transforms import rotation_from_rpy
 from .targets import CalibrationView
 
 __all__ = ["GENES", "GABounds", "GAConfig", "GAResult", "paper_bounds", "default_bounds",
@@ -352,7 +352,7 @@ def ga_calibrate_single(view: CalibrationView, *, width: int, height: int, bound
 
     def fitness(pop: np.ndarray) -> np.ndarray:                        # eq. (6)
         fx, fy, cx, cy, k1, k2 = _paper_to_opencv(pop, density, aspect)
-        R = rotation_from_euler(pop[:, 5], pop[:, 6], pop[:, 7])
+        R = rotation_from_rpy(pop[:, 5], pop[:, 6], pop[:, 7])
         points_cam = pts @ np.swapaxes(R, -1, -2) + pop[:, None, 8:11]     # batched BLAS, (P, N, 3)
         uv_hat = project_points(points_cam, fx=fx, fy=fy, cx=cx, cy=cy, k1=k1, k2=k2)
         return _sum_sq(uv_hat, uv)
@@ -361,7 +361,7 @@ def ga_calibrate_single(view: CalibrationView, *, width: int, height: int, bound
     paper = PaperCamera(width=width, height=height, f_mm=genes[0], alpha_x=density, alpha_y=density * aspect,
                         u0=genes[1], v0=genes[2], k1_mm=genes[3], k2_mm=genes[4])
     T = np.eye(4)
-    T[:3, :3] = rotation_from_euler(*genes[5:8])
+    T[:3, :3] = rotation_from_rpy(*genes[5:8])
     T[:3, 3] = genes[8:11]
     return GAResult(genes=genes, fitness=fit, rms_px=math.sqrt(fit / len(pts)), generations=gens,
                     history=history, stop_reason=stop, camera=paper.to_camera(), poses=(T,),

@@ -23,7 +23,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..camera import Camera, euler_from_rotation, get_distortion_model, project_points, rotation_from_euler
+from ..camera import Camera, get_distortion_model, project_points
+from ..transforms import rotation_from_rpy, rpy_from_rotation
 from .targets import CalibrationView
 
 __all__ = ["INTRINSIC_NAMES", "CALIBRATION_MODELS", "CalibrationModel", "calibration_model", "LMFit",
@@ -92,14 +93,14 @@ def calibration_model(name) -> CalibrationModel:
 
 def pose_vector(T: np.ndarray) -> np.ndarray:
     """``(alpha, beta, gamma, tx, ty, tz)`` of a 4x4 ``T_cam_from_target``."""
-    a, b, g = euler_from_rotation(T[:3, :3])
+    a, b, g = rpy_from_rotation(T[:3, :3])
     return np.array([a, b, g, *T[:3, 3]], dtype=np.float64)
 
 
 def pose_matrix(x: np.ndarray) -> np.ndarray:
     """4x4 ``T_cam_from_target`` of a pose vector."""
     T = np.eye(4)
-    T[:3, :3] = rotation_from_euler(x[0], x[1], x[2])
+    T[:3, :3] = rotation_from_rpy(x[0], x[1], x[2])
     T[:3, 3] = x[3:6]
     return T
 
@@ -212,14 +213,14 @@ def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequen
     def residuals(x: np.ndarray) -> np.ndarray:
         fx, fy, cx, cy, free = _intrinsics(x[:n_int], fix_aspect)
         p = x[n_int:].reshape(-1, 6)
-        return project_views(views, rotation_from_euler(p[:, 0], p[:, 1], p[:, 2]), p[:, 3:6], fx=fx, fy=fy, cx=cx,
+        return project_views(views, rotation_from_rpy(p[:, 0], p[:, 1], p[:, 2]), p[:, 3:6], fx=fx, fy=fy, cx=cx,
                              cy=cy, distortion_model=spec.distortion_model, D=spec.full_coefficients(free))
 
     def jac(x: np.ndarray) -> np.ndarray:
         return grouped_jacobian(residuals, x, col_block, col_local, row_block)
 
     kwargs = {"x_scale": "jac"} if method == "trf" else {}
-    from scipy.optimize import least_squares   # lazy: 0.4 s to import, every CLI start paid it
+    from scipy.optimize import least_squares  # lazy: 0.4 s to import, every CLI start paid it
     sol = least_squares(residuals, x0, jac=jac, method=method, max_nfev=max_evaluations, **kwargs)
     x = sol.x
     try:

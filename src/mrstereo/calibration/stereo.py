@@ -17,8 +17,9 @@ from typing import Sequence
 import numpy as np
 
 from .. import _checks
-from ..camera import (MIN_BASELINE_M, RigMount, StereoCamera, check_not_swapped,
-                      rectified_px_from_raw_px, rectify_fusiello, rotation_from_euler)
+from ..camera import (MIN_BASELINE_M, RigMount, StereoCamera, check_not_swapped, rectified_px_from_raw_px,
+                      rectify_fusiello)
+from ..transforms import rotation_from_rpy
 from .calibrate import CalibrationResult, _rms, calibrate_camera, reprojection_residuals, zhang_init
 from .ga import GABounds, GAConfig
 from .refine import calibration_model, fit_statistics, grouped_jacobian, pose_matrix, pose_vector, project_views
@@ -229,7 +230,7 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
     def residuals(x):
         il, ir, pl, relT = unpack(x)
         pl = np.asarray(pl)
-        Rl, tl = rotation_from_euler(pl[:, 0], pl[:, 1], pl[:, 2]), pl[:, 3:6]
+        Rl, tl = rotation_from_rpy(pl[:, 0], pl[:, 1], pl[:, 2]), pl[:, 3:6]
         Rr, tr = relT[:3, :3] @ Rl, tl @ relT[:3, :3].T + relT[:3, 3]
         return np.concatenate([project_views(views, R_, t_, fx=intr[0], fy=intr[1], cx=intr[2], cy=intr[3],
                                              distortion_model=spec.distortion_model,
@@ -249,7 +250,7 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
         def jac(x):
             return grouped_jacobian(residuals, x, col_block, col_local, row_block)
 
-        from scipy.optimize import least_squares   # lazy: 0.4 s to import, every CLI start paid it
+        from scipy.optimize import least_squares  # lazy: 0.4 s to import, every CLI start paid it
         sol = least_squares(residuals, x0, jac=jac, method="lm", max_nfev=200)
         try:
             il, ir, pl, relT = unpack(sol.x)

@@ -241,8 +241,8 @@ def pose_looking_at(centre_target, *, distance_m: float, tilt_x_rad: float = 0.0
     axes and rolled about the optical axis; ``offset_px`` shifts the target
     point off the image centre (in pixels for ``focal_px``).
     """
-    from ..camera import rotation_from_euler
-    R = rotation_from_euler(tilt_x_rad, tilt_y_rad, roll_rad)
+    from ..transforms import rotation_from_rpy
+    R = rotation_from_rpy(tilt_x_rad, tilt_y_rad, roll_rad)
     c = np.asarray(centre_target, dtype=np.float64)
     pos = np.array([offset_px[0] / focal_px * distance_m, offset_px[1] / focal_px * distance_m, distance_m])
     T = np.eye(4)

@@ -16,7 +16,6 @@ overlap (:func:`check_stereo`, bounds in docs/calibration-formats.md).
 """
 from __future__ import annotations
 
-import math
 import os
 import threading
 from dataclasses import dataclass, field
@@ -29,9 +28,10 @@ import yaml
 from .. import _checks
 from ..io import atomic_write, parse_yaml
 from .model import Camera, get_distortion_model
+from .mount import RigMount, mount_entry, read_mount_entry
 
-__all__ = ["CameraInfo", "RigMount", "StereoCamera", "read_camera_info", "write_camera_info",
-           "read_stereo", "write_stereo", "camera_from_ros", "check_stereo", "overlap_share"]
+__all__ = ["CameraInfo", "StereoCamera", "read_camera_info", "write_camera_info",
+           "write_stereo", "camera_from_ros", "check_stereo", "overlap_share"]
 
 #: Plausible baseline [m]: shorter is one viewpoint twice, longer is almost always millimetres read as metres.
 BASELINE_RANGE_M = (1e-4, 20.0)
@@ -182,24 +182,6 @@ class CameraInfo:
         return cls(camera=camera, R=R, P=P, name=str(data.get("camera_name", "camera")))
 
 
-@dataclass(frozen=True)
-class RigMount:
-    """Mount of the left camera on the robot: height above the floor and downward tilt.
-
-    ``height_m`` is the optical centre above the floor; ``tilt_rad`` > 0 tilts
-    the optical axis down toward the floor.
-    """
-
-    height_m: float
-    tilt_rad: float = 0.0
-
-    def __post_init__(self) -> None:
-        _checks.finite_number("height_m", self.height_m, positive=True)
-        _checks.finite_number("tilt_rad", self.tilt_rad)
-        if abs(self.tilt_rad) >= math.pi / 2:
-            raise ValueError(f"tilt_rad must be within (-pi/2, pi/2), got {self.tilt_rad}")
-
-
 def _maps_key(info: CameraInfo) -> tuple:
     """What the rectification maps of a camera depend on, hashable: model, size, K, D, R, P."""
     camera = info.camera
@@ -302,16 +284,12 @@ class StereoCamera:
                 cv2.remap(right, rx, ry, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
 
     def to_dict(self) -> dict:
-        from ..geometry.frames import mount_entry
-
         return {"left": self.left.to_dict(), "right": self.right.to_dict(), **mount_entry(self.rig)}
 
     @classmethod
     def from_dict(cls, data, *, where: str = "stereo calibration") -> StereoCamera:
         if not isinstance(data, dict) or "left" not in data or "right" not in data:
             raise ValueError(f"{where}: expected 'left:' and 'right:' camera_info sections")
-        from ..geometry.frames import read_mount_entry
-
         rig = read_mount_entry(data, where=where)         # rig: (RigMount) or mount: (CameraMount)
         left = CameraInfo.from_dict(data["left"], where=f"{where}: left")
         right = CameraInfo.from_dict(data["right"], where=f"{where}: right")
@@ -433,18 +411,6 @@ def read_camera_info(path: str | os.PathLike) -> CameraInfo:
 def write_camera_info(path: str | os.PathLike, info: CameraInfo) -> None:
     """Write a ROS camera_info YAML file (atomically)."""
     _dump_yaml(path, info.to_dict())
-
-
-def read_stereo(path) -> StereoCamera:
-    """Read a stereo calibration in any supported format (see :mod:`mrstereo.camera.formats`).
-
-    ``path`` is the stereo YAML (``left:``, ``right:``, optional ``rig:``), a
-    file of another tool (Kalibr camchain, OpenCV FileStorage, OpenLORIS
-    sensors.yaml), or two per-camera files as ``"left.yaml,right.yaml"`` or a
-    sequence of two paths. Raw (unrectified) calibrations are rectified.
-    """
-    from .formats import read_calibration
-    return read_calibration(path)
 
 
 def write_stereo(path: str | os.PathLike, stereo: StereoCamera) -> None:

@@ -38,13 +38,13 @@ import cv2
 import numpy as np
 import yaml
 
-from .camera_info import (BASELINE_RANGE_M, ROTATION_TOL, CameraInfo, StereoCamera, _rotation_error,
-                          camera_from_ros, check_stereo, numbers)
-from .model import Camera
 from ..io import parse_yaml
+from .camera_info import (BASELINE_RANGE_M, ROTATION_TOL, CameraInfo, StereoCamera, _rotation_error, camera_from_ros,
+                          check_stereo, numbers)
+from .model import Camera
 from .rectification import check_not_swapped, rectify_fusiello
 
-__all__ = ["FORMATS", "ImportedCalibration", "import_calibration", "read_calibration"]
+__all__ = ["FORMATS", "ImportedCalibration", "import_calibration", "read_calibration", "read_stereo"]
 
 #: The formats tried, in the words of the error message.
 FORMATS = ("mrstereo/ROS stereo YAML", "two ROS camera_info YAMLs", "Kalibr camchain.yaml",
@@ -84,6 +84,17 @@ class _Raw:
 def read_calibration(paths, *, image_size: tuple[int, int] | None = None, alpha: float = 0.0) -> StereoCamera:
     """Read a stereo calibration in any supported format; see :func:`import_calibration`."""
     return import_calibration(paths, image_size=image_size, alpha=alpha).stereo
+
+
+def read_stereo(path) -> StereoCamera:
+    """Read a stereo calibration in any supported format (see :mod:`mrstereo.camera.formats`).
+
+    ``path`` is the stereo YAML (``left:``, ``right:``, optional ``rig:``), a
+    file of another tool (Kalibr camchain, OpenCV FileStorage, OpenLORIS
+    sensors.yaml), or two per-camera files as ``"left.yaml,right.yaml"`` or a
+    sequence of two paths. Raw (unrectified) calibrations are rectified.
+    """
+    return read_calibration(path)
 
 
 def import_calibration(paths, *, image_size: tuple[int, int] | None = None,

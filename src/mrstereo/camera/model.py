@@ -42,37 +42,11 @@ import numpy as np
 from .. import _checks
 
 __all__ = [
-    "Camera", "PaperCamera", "rotation_from_euler", "euler_from_rotation",
+    "Camera", "PaperCamera",
     "distort_normalized", "undistort_normalized", "project_points",
     "pixels_from_normalized", "normalized_from_pixels",
     "DistortionModel", "DISTORTION_MODELS", "get_distortion_model",
 ]
-
-
-def rotation_from_euler(alpha, beta, gamma) -> np.ndarray:
-    """Rotation ``Rz(gamma) @ Ry(beta) @ Rx(alpha)``; broadcasts, returns (..., 3, 3)."""
-    a, b, g = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (alpha, beta, gamma)))
-    ca, sa, cb, sb, cg, sg = np.cos(a), np.sin(a), np.cos(b), np.sin(b), np.cos(g), np.sin(g)
-    R = np.empty(a.shape + (3, 3))
-    R[..., 0, 0] = cg * cb
-    R[..., 0, 1] = cg * sb * sa - sg * ca
-    R[..., 0, 2] = cg * sb * ca + sg * sa
-    R[..., 1, 0] = sg * cb
-    R[..., 1, 1] = sg * sb * sa + cg * ca
-    R[..., 1, 2] = sg * sb * ca - cg * sa
-    R[..., 2, 0] = -sb
-    R[..., 2, 1] = cb * sa
-    R[..., 2, 2] = cb * ca
-    return R
-
-
-def euler_from_rotation(R) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Inverse of :func:`rotation_from_euler` (beta in [-pi/2, pi/2])."""
-    R = np.asarray(R, dtype=np.float64)
-    beta = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
-    alpha = np.arctan2(R[..., 2, 1], R[..., 2, 2])
-    gamma = np.arctan2(R[..., 1, 0], R[..., 0, 0])
-    return alpha, beta, gamma
 
 
 def distort_normalized(xy_n, k1, k2) -> np.ndarray:

@@ -70,8 +70,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
-from .camera_info import CameraInfo, RigMount, StereoCamera
+from .camera_info import CameraInfo, StereoCamera
 from .model import Camera
+from .mount import RigMount
 
 __all__ = ["FusielloRectification", "rectify_fusiello", "fusiello_rotation", "check_not_swapped",
            "check_baseline", "rectified_px_from_raw_px", "raw_px_from_rectified_px"]

@@ -68,7 +68,7 @@ def rig_from_options(height_m, tilt_rad, mount=None):
 def bag_export_kwargs(*, calib, left_topic, right_topic, camera_info_topics, odom_topic, use_tf, world_frame,
                       base_frame, camera_frame, sync_tolerance_s, rectified_images, height_m, tilt_rad,
                       mount, quiet) -> dict:
-    """Validate the bag options and turn them into :func:`mrstereo.bag.export_bag` keywords."""
+    """Validate the bag options and turn them into :func:`mrstereo.recordings.bag.export_bag` keywords."""
     from ..camera import read_stereo
 
     if not left_topic or not right_topic:
@@ -105,11 +105,11 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
     import numpy as np
 
     from ..camera import read_stereo
-    from ..recording import Manifest, read_manifest
+    from ..recordings.manifest import Manifest, read_manifest
 
     with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
         if bag is not None:
-            from ..bag import export_bag
+            from ..recordings.bag import export_bag
 
             result = export_bag(bag, Path(tmp) / "dataset", **bag_export_kwargs(calib=calib, quiet=quiet, **bag_kw))
             echo_export(result)
@@ -150,8 +150,8 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
     from camera_info (or --calib), the robot pose from --odom-topic or --tf.
     Every command that reads a DATASET then reads the recording.
     """
-    from ..bag import export_bag
     from ..io import check_output_dir
+    from ..recordings.bag import export_bag
 
     check_output_dir("--out", out_dir, inputs=[bag, options.get("calib")], input_dirs=[bag] if bag.is_dir() else [],
                      must_be_empty=True)
@@ -185,10 +185,10 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool,
     """
     import dataclasses
 
-    from ..batch import run_batch
     from ..io import check_output_dir
-    from ..pipeline import PipelineConfig
-    from ..recording import read_manifest
+    from ..pipeline.batch import run_batch
+    from ..pipeline.run import PipelineConfig
+    from ..recordings.manifest import read_manifest
 
     check_workers(workers, scheduler, processes)
     check_output_dir("--out", out_dir)

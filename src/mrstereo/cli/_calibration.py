@@ -6,8 +6,6 @@ import math
 from pathlib import Path
 
 import click
-
-from ._options import CALIB_HELP
 from tqdm import tqdm
 
 from .. import _checks
@@ -17,6 +15,7 @@ from ..calibration import (METHODS, MODELS, MULTIVIEW_GA, GAConfig, calibrate_ca
 from ..calibration.report import camera_line, markdown_report, residual_figure, write_json, write_text
 from ..camera import CameraInfo, read_stereo, write_camera_info, write_stereo
 from ..io import IMAGE_SUFFIXES, check_output_dir, check_outputs, read_image, write_image
+from ._options import CALIB_HELP
 
 
 def _progress_bar(total: int, desc: str):

@@ -1,4 +1,4 @@
-"""CLI of the sample data: ``mrstereo data fetch|path|list`` (mrstereo.data)."""
+"""CLI of the sample data: ``mrstereo data fetch|path|list`` (mrstereo.recordings.samples)."""
 from __future__ import annotations
 
 import click
@@ -17,7 +17,7 @@ def data_group() -> None:
 
 
 def _names(names: tuple[str, ...]) -> tuple[str, ...]:
-    from ..data import SCENES, scene
+    from ..recordings.samples import SCENES, scene
 
     for name in names:
         scene(name)            # ValueError naming the unknown scene and the known ones
@@ -29,7 +29,7 @@ def _names(names: tuple[str, ...]) -> tuple[str, ...]:
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def fetch_command(names: tuple[str, ...], quiet: bool) -> None:
     """Download the scenes NAME... (default: all) unless they are already there; print their folders."""
-    from ..data import fetch
+    from ..recordings.samples import fetch
 
     for name in _names(names):
         click.echo(f"{name}: {fetch(name, progress=not quiet)}")
@@ -39,7 +39,7 @@ def fetch_command(names: tuple[str, ...], quiet: bool) -> None:
 @click.argument("name", required=False)
 def path_command(name: str | None) -> None:
     """Print the data root (or the folder of the scene NAME), whether or not it was fetched."""
-    from ..data import data_root, local_path
+    from ..recordings.samples import data_root, local_path
 
     click.echo(local_path(_names((name,))[0]) if name else data_root())
 
@@ -48,7 +48,7 @@ def path_command(name: str | None) -> None:
 @click.option("--verify", "check", is_flag=True, help="Also check every local file's SHA-256.")
 def list_command(check: bool) -> None:
     """List the scenes, whether each is present locally, and where it comes from."""
-    from ..data import is_available, scene, verify
+    from ..recordings.samples import is_available, scene, verify
 
     problems = 0
     for name in _names(()):

@@ -5,9 +5,8 @@ from pathlib import Path
 
 import click
 
-from mrstereo.evaluation.report import METHODS, evaluate_scenes
-from mrstereo.io import atomic_write, check_outputs
-
+from ..evaluation.report import METHODS, evaluate_scenes
+from ..io import atomic_write, check_outputs
 from ._options import check_workers, worker_options
 
 

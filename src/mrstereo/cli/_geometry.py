@@ -1,7 +1,7 @@
 """CLI: ``mrstereo points`` (PLY point cloud) and ``mrstereo scan`` (virtual laser scan).
 
 Both run one stereo pair through rectification, multi-range matching,
-eq. (13) rejection and the 3D stage (:mod:`mrstereo.geometry.pair`).
+eq. (13) rejection and the 3D stage (:mod:`mrstereo.pipeline.frame`).
 """
 from __future__ import annotations
 
@@ -61,8 +61,9 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     from dataclasses import replace
 
     from ..camera import RigMount, read_stereo
-    from ..geometry import ObstacleConfig, obstacles_from_pair, scan_from_pair
+    from ..geometry import ObstacleConfig
     from ..io import read_image
+    from ..pipeline.frame import obstacles_from_pair, scan_from_pair
     from ..profiling import stage
     from ..rejection import RejectionConfig
 
@@ -81,7 +82,7 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
             raise ValueError("--tilt needs --height (or a rig: entry in the calibration YAML)")
         rig = RigMount(height_m=height_m if height_m is not None else base.height_m,
                        tilt_rad=tilt_rad if tilt_rad is not None else (base.tilt_rad if base else 0.0))
-    from ..pipeline import matching_image
+    from ..io import matching_image
 
     with stage("read"):
         left_img, right_img = matching_image(read_image(left)), matching_image(read_image(right))

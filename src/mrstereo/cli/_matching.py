@@ -119,7 +119,7 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
         click.echo(f"valid {valid:.1%} of pixels; too near ({limit}; no value) {too_near:.1%}")
     io.write_disparity(output, result.disparity_px)
     if color_path:
-        from .._plot import save_disparity_preview
+        from ..viz.plot import save_disparity_preview
 
         save_disparity_preview(color_path, result.disparity_px, title=f"disparity of {Path(left).name}",
                                too_near=result.too_near)

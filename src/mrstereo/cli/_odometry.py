@@ -43,9 +43,9 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     import numpy as np
 
     from ..io import refuse_overwrite_input
-    from ..odometry import odometry_from_manifest
-    from ..odometry.se3 import T_from_planar
     from ..odometry.trajectory import plot_trajectories, trajectory_metrics, write_tum
+    from ..pipeline.odometry import odometry_from_manifest
+    from ..transforms import T_from_planar
 
     if (manifest is None) == (bag is None):
         raise click.UsageError("give a DATASET or --bag FILE (one of them)")

@@ -40,10 +40,10 @@ def mount_option(func):
 
 
 def parse_mount(text):
-    """A :class:`~mrstereo.geometry.frames.CameraMount` from ``--mount`` text (None stays None)."""
+    """A :class:`~mrstereo.camera.mount.CameraMount` from ``--mount`` text (None stays None)."""
     import math
 
-    from ..geometry.frames import CameraMount
+    from ..camera.mount import CameraMount
 
     if text is None:
         return None

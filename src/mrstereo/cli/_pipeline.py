@@ -58,11 +58,11 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     --workers N / --scheduler ADDRESS spread the frames over Dask workers; the
     map is the same bit for bit.
     """
-    from ..batch import dataset_files
     from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
     from ..mapping import GridSpec
-    from ..pipeline import PipelineConfig, build_map, write_map_outputs
-    from ..recording import read_manifest
+    from ..pipeline.batch import dataset_files
+    from ..pipeline.run import PipelineConfig, build_map, write_map_outputs
+    from ..recordings.manifest import read_manifest
 
     check_workers(workers, scheduler, processes)
     if (manifest is None) == (bag is None):
@@ -104,7 +104,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
 
 
 def _figure_process(*, workers: int | None, scheduler: str | None):
-    """A :class:`~mrstereo.parallel.PrestartedCall` of ``plot_map`` when a core would otherwise idle, else a
+    """A :class:`~mrstereo.pipeline.parallel.PrestartedCall` of ``plot_map`` when a core would otherwise idle, else a
     context yielding None (the figure is then drawn in this process, after the frames).
 
     The second process imports numpy, numba and matplotlib again (about 1.3 s of CPU): it saves
@@ -116,7 +116,7 @@ def _figure_process(*, workers: int | None, scheduler: str | None):
     import contextlib
     import os
 
-    from ..parallel import PrestartedCall
+    from ..pipeline.parallel import PrestartedCall
 
     try:
         cores = len(os.sched_getaffinity(0))

@@ -11,10 +11,10 @@
 
 User guide: docs/evaluation.md. Conventions (disparity sign, NaN invalid): docs/conventions.md.
 """
-from mrstereo.evaluation.baselines import BMSettings, SGBMSettings, disparity_from_opencv, stereo_bm, stereo_sgbm
-from mrstereo.evaluation.datasets import LAYOUTS, Scene, load_scene, load_scenes, photometric_error
-from mrstereo.evaluation.metrics import BAD_THRESHOLDS_PX, DisparityMetrics, ErrorStats, disparity_metrics
-from mrstereo.evaluation.report import METHODS, EvaluationReport, EvaluationRow, evaluate_scenes, run_method
+from .baselines import BMSettings, SGBMSettings, disparity_from_opencv, stereo_bm, stereo_sgbm
+from .datasets import LAYOUTS, Scene, load_scene, load_scenes, photometric_error
+from .metrics import BAD_THRESHOLDS_PX, DisparityMetrics, ErrorStats, disparity_metrics
+from .report import METHODS, EvaluationReport, EvaluationRow, evaluate_scenes, run_method
 
 __all__ = [
     "BAD_THRESHOLDS_PX", "BMSettings", "DisparityMetrics", "ErrorStats", "EvaluationReport", "EvaluationRow",

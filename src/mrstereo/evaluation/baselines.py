@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from mrstereo import _checks
+from .. import _checks
 
 __all__ = ["BASELINES", "BMSettings", "SGBMSettings", "stereo_bm", "stereo_sgbm", "disparity_from_opencv",
            "num_disparities"]

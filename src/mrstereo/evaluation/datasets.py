@@ -9,7 +9,7 @@ folder, one per frame with ground-truth disparity for an mrstereo dataset
 (``manifest.yaml``, docs/dataset.md; what ``mrstereo synth`` writes).
 
 Layouts and ground-truth encodings (the sample data's provenance table,
-:mod:`mrstereo.data`, and the benchmarks' own pages):
+:mod:`mrstereo.recordings.samples`, and the benchmarks' own pages):
 
 ===================  =========================================  ===========================================
 layout               files                                      ground truth
@@ -55,7 +55,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from mrstereo.io import read_image, read_kitti_disparity, read_pfm
+from ..io import read_image, read_kitti_disparity, read_pfm
 
 __all__ = ["Scene", "load_scene", "load_scenes", "LAYOUTS", "photometric_error", "search_range_px"]
 
@@ -211,7 +211,7 @@ _MANIFEST = "manifest.yaml"
 
 def _dataset_frames(path: Path) -> list:
     """(manifest, frame record) of every frame with ground-truth disparity."""
-    from mrstereo.recording import read_manifest
+    from ..recordings.manifest import read_manifest
 
     manifest = read_manifest(path)
     frames = [(manifest, f) for f in manifest.frames if f.gt_disparity is not None]

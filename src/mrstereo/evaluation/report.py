@@ -28,9 +28,9 @@ from dataclasses import asdict, dataclass, replace
 import cv2
 import numpy as np
 
-from mrstereo.evaluation.baselines import BASELINES
-from mrstereo.evaluation.datasets import Scene, load_scenes
-from mrstereo.evaluation.metrics import DisparityMetrics, disparity_metrics
+from .baselines import BASELINES
+from .datasets import Scene, load_scenes
+from .metrics import DisparityMetrics, disparity_metrics
 
 __all__ = ["METHODS", "EvaluationRow", "EvaluationReport", "evaluate_scenes", "run_method"]
 
@@ -40,7 +40,7 @@ METHODS = ("mrstereo", "mrstereo-paper", "StereoBM", "StereoSGBM")
 def _mrstereo(preset: str) -> Callable[..., np.ndarray]:
     def run(left, right, *, max_disparity_px):
         try:
-            from mrstereo.matching import compute_disparity
+            from ..matching import compute_disparity
         except ImportError as exc:  # the matcher is another stage; say what is missing
             raise RuntimeError(f"method mrstereo needs mrstereo.matching.compute_disparity: {exc}") from exc
         return compute_disparity(left, right, max_disparity_px=max_disparity_px, preset=preset).disparity_px
@@ -257,21 +257,21 @@ def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_dis
         Show a tqdm progress bar on stderr.
     workers, scheduler, processes :
         Spread the (scene, method) runs over ``workers`` worker threads (or a local Dask cluster of
-        processes with ``processes=True``) or an existing cluster (:func:`mrstereo.parallel.map_ordered`); default in this process. Per-run
+        processes with ``processes=True``) or an existing cluster (:func:`mrstereo.pipeline.parallel.map_ordered`); default in this process. Per-run
         times on workers include each worker's first numba compilation.
 
     Returns
     -------
     EvaluationReport
     """
-    from mrstereo.parallel import map_ordered
+    from ..pipeline.parallel import map_ordered
 
     methods = _check_methods(methods)
     dirs = list(dirs)
     if not dirs:
         raise ValueError("dirs must name at least one scene directory")
     if max_disparity_px is not None:
-        from mrstereo import _checks
+        from .. import _checks
         max_disparity_px = _checks.positive_int("max_disparity_px", max_disparity_px)
     scenes = [scene for d in dirs for scene in load_scenes(d)]  # fail on a bad directory before any work
     labels = []

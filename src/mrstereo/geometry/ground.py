@@ -20,7 +20,7 @@ the line: ``tan(theta) = c / (a f_y)`` and ``h = b f cos(theta) / (a f_y)``.
 A 3D plane fit (:func:`fit_ground_plane`) also recovers the roll about the
 optical axis: ``n = (sin(roll) cos(tilt), cos(roll) cos(tilt), sin(tilt))``, i.e.
 the camera frame is rolled by ``roll`` about its z axis before the tilt of
-:func:`mrstereo.geometry.frames.T_robot_from_cam`.
+:func:`mrstereo.transforms.T_robot_from_cam`.
 
 Conventions: docs/conventions.md.
 
@@ -39,7 +39,8 @@ import numpy as np
 
 from .. import _checks
 from ..camera import RigMount, StereoCamera
-from .frames import CameraMount, T_robot_from_cam
+from ..camera.mount import CameraMount
+from ..transforms import T_robot_from_cam
 
 # Below / above these a floor fit is reported as weak (docs/obstacles.md, "Floor confidence").
 # Measured (mapping preset, 4 m range): synthetic corridor 320x240, 12 frames, plane fit: share

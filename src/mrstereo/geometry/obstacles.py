@@ -31,9 +31,9 @@ from functools import cached_property
 import numpy as np
 
 from .. import _checks
-from . import _kernels
 from ..camera import RigMount, StereoCamera
-from .frames import CameraMount
+from ..camera.mount import CameraMount
+from . import _kernels
 from .ground import GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_mount, ground_from_rig
 
 __all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity"]
@@ -199,7 +199,7 @@ def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: RigMount | Ca
     ``config.ground_height_range_m``. A mount and ``config.estimate_ground``:
     estimated near the mount (its height and tilt), falling back to the mount.
     Otherwise the mount: a :class:`RigMount` (height, tilt) or a full
-    :class:`~mrstereo.geometry.frames.CameraMount`.
+    :class:`~mrstereo.camera.mount.CameraMount`.
     """
     if mount is not None and not isinstance(mount, (RigMount, CameraMount)):
         raise TypeError(f"mount must be a RigMount or CameraMount, got {type(mount).__name__}")

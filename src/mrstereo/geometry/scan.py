@@ -366,7 +366,6 @@ def plot_top_view(path: str | os.PathLike, *, obstacle_points_robot=None, floor_
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
     from matplotlib.lines import Line2D
 
     fig, ax = plt.subplots(figsize=(6, 7), dpi=100)

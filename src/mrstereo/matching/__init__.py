@@ -10,8 +10,8 @@ from __future__ import annotations
 from .config import PRESETS, MatchingConfig, preset_config
 from .cost import BandMatch, match_band, prefilter
 from .disparity import DisparityResult, compute_disparity, make_plan, solve_level
-from .multirange import (DEFAULT_DEPTH_EDGES_M, LevelOutput, MultiRangePlan, RangeLevel,
-                         bands_px_from_depth_m, default_bands_px, plan_levels, run_levels)
+from .multirange import (DEFAULT_DEPTH_EDGES_M, LevelOutput, MultiRangePlan, RangeLevel, bands_px_from_depth_m,
+                         default_bands_px, plan_levels, run_levels)
 
 __all__ = [
     "compute_disparity", "DisparityResult", "MatchingConfig", "PRESETS", "preset_config", "make_plan",

@@ -19,9 +19,9 @@ from .. import _checks
 from . import _kernels
 from .config import MatchingConfig, preset_config
 from .cost import match_checked, match_prepared, prepare, prepare_gray, refine_candidates
-from .multirange import (DEFAULT_DEPTH_EDGES_M, decimate_horizontally, LevelOutput, MultiRangePlan, RangeLevel,
-                         _level_cols, bands_px_from_depth_m, default_bands_px, default_level_count, plan_levels,
-                         run_levels)
+from .multirange import (DEFAULT_DEPTH_EDGES_M, LevelOutput, MultiRangePlan, RangeLevel, _level_cols,
+                         bands_px_from_depth_m, decimate_horizontally, default_bands_px, default_level_count,
+                         plan_levels, run_levels)
 from .postfilter import fill_gaps, guard_depth_edges, median_filter, near_side, remove_speckles, textured
 
 __all__ = ["DisparityResult", "compute_disparity", "make_plan", "solve_level"]

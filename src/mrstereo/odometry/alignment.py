@@ -45,10 +45,11 @@ from .. import _checks
 from ..mapping import GridSpec
 from ..mapping.grid import distance_cells
 from ..mapping.occupancy import MappingConfig, OccupancyGrid
+from ..transforms import compose_planar, relative_planar, wrap_angle
 from ._kernels import score_poses
 
-__all__ = ["AlignConfig", "Alignment", "likelihood_field", "align_points", "fuse_aligned", "compose_planar",
-           "relative_planar", "observation_at"]
+__all__ = ["AlignConfig", "Alignment", "likelihood_field", "align_points", "fuse_aligned",
+           "observation_at"]
 
 
 @dataclass(frozen=True)
@@ -174,20 +175,7 @@ class Alignment:
 
     @property
     def correction_rad(self) -> float:
-        return abs(math.remainder(self.pose[2] - self.prior[2], math.tau))
-
-
-def compose_planar(a, b) -> tuple[float, float, float]:
-    """``a * b`` of planar poses ``(x, y, yaw)``."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], math.remainder(a[2] + b[2], math.tau))
-
-
-def relative_planar(a, b) -> tuple[float, float, float]:
-    """``inv(a) * b`` of planar poses."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    return (c * dx + s * dy, -s * dx + c * dy, math.remainder(b[2] - a[2], math.tau))
+        return abs(wrap_angle(self.pose[2] - self.prior[2]))
 
 
 def likelihood_field(occupied: np.ndarray, grid: GridSpec, *, sigma_m: float,
@@ -301,7 +289,7 @@ def align_points(points_robot_xy, prior_pose, field: np.ndarray, grid: GridSpec,
     score = np.empty((1, 1))
     score_poses(field, grid.origin_x_m, grid.origin_y_m, grid.resolution_m, outside, pts,
                 np.array([mean[2]]), np.array([mean[:2]]), score)
-    pose = (float(mean[0]), float(mean[1]), math.remainder(float(mean[2]), math.tau))
+    pose = (float(mean[0]), float(mean[1]), wrap_angle(float(mean[2])))
     return Alignment(pose=pose, prior=prior, score=float(score[0, 0]), prior_score=float(prior_ll[0, 0]),
                      applied=True, covariance=cov, prior_covariance=P)
 
@@ -322,10 +310,10 @@ def _world_points(points_robot: np.ndarray, pose) -> np.ndarray:
 
 
 def observation_at(obs, pose):
-    """A :class:`~mrstereo.pipeline.FrameObservation` moved to another planar ``pose``.
+    """A :class:`~mrstereo.mapping.fusion.FrameObservation` moved to another planar ``pose``.
 
     Its points keep their place in the robot frame; it carries no cells (the map traces them,
-    :func:`mrstereo.pipeline.add_observation`).
+    :func:`mrstereo.mapping.fusion.add_observation`).
     """
     pose = tuple(float(v) for v in pose)
     obstacles = _world_points(_robot_points(obs.obstacle_points_world, obs.pose), pose)
@@ -358,8 +346,8 @@ def _odometry_errors(given: np.ndarray, corrected: np.ndarray, path_m: np.ndarra
     s = path_m[k] - path_m[j]
     if k - j < 2 or s <= 0:
         return 0.0, 0.0
-    turn_g = math.remainder(given[k, 2] - given[j, 2], math.tau)
-    turn_c = math.remainder(corrected[k, 2] - corrected[j, 2], math.tau)
+    turn_g = wrap_angle(given[k, 2] - given[j, 2])
+    turn_c = wrap_angle(corrected[k, 2] - corrected[j, 2])
     prior_b = max(align.drift_rad_per_m, 1e-9) ** 2
     drift = (turn_g - turn_c) * s / (s * s + 2.0 * variance_rad2 / prior_b)
     # the given path of the window again with the drift taken out: its chord against the corrected one's
@@ -390,7 +378,7 @@ def fuse_aligned(observations, *, grid: GridSpec = GridSpec(), config: MappingCo
     -------
     (OccupancyGrid, list of FrameObservation at the corrected poses, list of Alignment)
     """
-    from ..pipeline import add_observation
+    from ..mapping.fusion import add_observation
     from ..profiling import stage
 
     occupancy = OccupancyGrid(grid, config=config)

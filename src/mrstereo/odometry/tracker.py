@@ -45,7 +45,7 @@ import numpy as np
 from .. import _checks
 from ..camera import StereoCamera
 from ..geometry.triangulation import depth_m_from_disparity_px
-from .se3 import T_from_rvec_t, rotation_angle_rad, rvec_t_from_T
+from ..transforms import T_from_rvec_t, rotation_angle_rad, rvec_t_from_T
 
 __all__ = ["OdometryConfig", "FrameEstimate", "StereoOdometry", "TRACKED", "KEYFRAME", "LOST"]
 

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import atomic_write
-from .se3 import T_from_position_quaternion, quaternion_from_rotation, rotation_angle_rad
+from ..transforms import T_from_position_quaternion, quaternion_from_rotation, rotation_angle_rad
 
 __all__ = ["write_tum", "read_tum", "umeyama_alignment", "TrajectoryMetrics", "trajectory_metrics",
            "path_length_m", "plot_trajectories"]
@@ -226,7 +226,7 @@ def plot_trajectories(path: str | os.PathLike, trajectories: dict, *, lost=None,
 
     ``lost`` (bool per frame of the first trajectory) marks the frames visual odometry lost.
     """
-    from .._plot import new_figure, save_figure
+    from ..viz.plot import new_figure, save_figure
 
     fig = new_figure(7.0, 5.0)
     ax = fig.add_subplot(1, 1, 1)

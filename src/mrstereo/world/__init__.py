@@ -6,14 +6,14 @@ stereo head on a robot, with exact calibration, disparity, depth, labels and
 map; and randomized corridor worlds drawn from a seed (:func:`random_world`). User guide: docs/world.md; dataset layout: docs/dataset.md; conventions:
 docs/conventions.md.
 """
-from ..recording import FrameRecord, Manifest, read_manifest, write_manifest
+from ..recordings.manifest import FrameRecord, Manifest, read_manifest, write_manifest
 from .dataset import corridor_path, poses_along, write_synthetic_dataset
 from .groundtruth import ground_truth_map, obstacle_footprints, occupied_footprint
 from .randomize import RandomWorld, random_stereo, random_world
 from .render import SensorModel, StereoFrame, camera_poses, default_stereo, render_stereo_frame, render_view
-from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_NAMES, LABEL_NONE, LABEL_OBSTACLE,
-                    LABEL_POSTER, LABEL_SKIRTING, LABEL_WALL, Box, Cylinder, Decal, Light, Material, Scene,
-                    default_scene, is_obstacle_label)
+from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_NAMES, LABEL_NONE, LABEL_OBSTACLE, LABEL_POSTER,
+                    LABEL_SKIRTING, LABEL_WALL, Box, Cylinder, Decal, Light, Material, Scene, default_scene,
+                    is_obstacle_label)
 from .targets import RenderedTarget, render_calibration_views, render_paper_dot_target, target_points
 
 __all__ = [

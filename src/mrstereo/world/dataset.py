@@ -1,4 +1,4 @@
-"""The synthetic corridor sequence written as a dataset (format: :mod:`mrstereo.recording`).
+"""The synthetic corridor sequence written as a dataset (format: :mod:`mrstereo.recordings.manifest`).
 
 Layout and manifest: docs/dataset.md. Conventions: docs/conventions.md.
 """
@@ -16,7 +16,7 @@ from .. import _checks
 from ..camera import write_stereo
 from ..io import write_image, write_pfm
 from ..mapping.rosmap import write_ros_map
-from ..recording import IMAGE_KEYS, MANIFEST_NAME, write_manifest
+from ..recordings.manifest import IMAGE_KEYS, MANIFEST_NAME, write_manifest
 from .groundtruth import ground_truth_map
 from .paths import PATH_KINDS, drifted_poses, sequence_path, waypoint_path
 from .randomize import random_world

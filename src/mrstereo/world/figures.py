@@ -2,7 +2,7 @@
 
 Reusable by every command that shows results (``mrstereo demo``). Each function
 writes one PNG atomically and returns its path. Disparity colours come from
-``mrstereo._plot`` (turbo over robust percentiles, invalid black), as everywhere.
+``mrstereo.viz.plot`` (turbo over robust percentiles, invalid black), as everywhere.
 """
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._plot import new_figure as _figure
-from .._plot import save_figure as _save
+from ..viz.plot import new_figure as _figure
+from ..viz.plot import save_figure as _save
 
 __all__ = ["save_stereo_figure", "save_disparity_figure"]
 
@@ -40,7 +40,7 @@ def save_disparity_figure(path: str | os.PathLike, disparity_px: np.ndarray, *, 
 
     The scale spans ``0 .. max_disparity_px`` when given, else robust percentiles of the map.
     """
-    from .._plot import save_disparity_preview
+    from ..viz.plot import save_disparity_preview
 
     range_px = (0.0, float(max_disparity_px)) if max_disparity_px else None
     return save_disparity_preview(path, disparity_px, title=title, range_px=range_px, background=background)

@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from .. import _checks
+from ..transforms import relative_planar, wrap_angle
 
 __all__ = ["PATH_KINDS", "sequence_path", "waypoint_path", "drifted_poses"]
 
@@ -128,14 +129,11 @@ def drifted_poses(poses, *, scale_error: float, heading_drift_rad_per_m: float) 
     drift = _checks.finite_number("heading_drift_rad_per_m", heading_drift_rad_per_m)
     out = p.copy()
     for k in range(1, len(p)):
-        dx_w, dy_w = p[k, :2] - p[k - 1, :2]
-        c, s = math.cos(p[k - 1, 2]), math.sin(p[k - 1, 2])
-        dx, dy = c * dx_w + s * dy_w, -s * dx_w + c * dy_w           # step in the previous robot frame
-        dyaw = math.remainder(p[k, 2] - p[k - 1, 2], math.tau)
+        dx, dy, dyaw = relative_planar(p[k - 1], p[k])               # step in the previous robot frame
         dist = math.hypot(dx, dy)
         yaw = out[k - 1, 2]
         c, s = math.cos(yaw), math.sin(yaw)
         out[k, 0] = out[k - 1, 0] + scale * (c * dx - s * dy)
         out[k, 1] = out[k - 1, 1] + scale * (s * dx + c * dy)
-        out[k, 2] = math.remainder(yaw + dyaw + drift * dist, math.tau)
+        out[k, 2] = wrap_angle(yaw + dyaw + drift * dist)
     return out

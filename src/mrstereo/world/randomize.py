@@ -25,12 +25,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
-from ..camera import Camera, CameraInfo, RigMount, StereoCamera, rotation_from_euler
+from ..camera import Camera, CameraInfo, RigMount, StereoCamera
+from ..transforms import rotation_from_rpy
 from .render import SensorModel
-from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, LABEL_POSTER, LABEL_WALL,
-                    TEXTURE_BLOTCH, TEXTURE_CHECKER, TEXTURE_POSTER, TEXTURE_STRIPES_U, TEXTURE_STRIPES_V,
-                    TEXTURE_TILES, TEXTURE_WEAK, TEXTURE_WOOD, Box, Cylinder, Decal, Light, Material, Scene,
-                    _wall_boxes)
+from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, LABEL_POSTER, LABEL_WALL, TEXTURE_BLOTCH,
+                    TEXTURE_CHECKER, TEXTURE_POSTER, TEXTURE_STRIPES_U, TEXTURE_STRIPES_V, TEXTURE_TILES,
+                    TEXTURE_WEAK, TEXTURE_WOOD, Box, Cylinder, Decal, Light, Material, Scene, _wall_boxes)
 
 __all__ = ["RandomWorld", "random_world", "random_stereo", "RANGES", "WALL_TEXTURES"]
 
@@ -109,7 +109,7 @@ def random_stereo(rng, width: int = 320, height: int = 240) -> StereoCamera:
         raws.append(Camera(width=width, height=height, fx=f * rng.uniform(0.99, 1.01),
                            fy=f * rng.uniform(0.99, 1.01), cx=cx + rng.uniform(-3, 3) * s,
                            cy=cy + rng.uniform(-3, 3) * s, k1=rng.uniform(-0.08, 0.0), k2=rng.uniform(0.0, 0.01)))
-        Rs.append(rotation_from_euler(*rng.uniform(-0.014, 0.014, 3)))
+        Rs.append(rotation_from_rpy(*rng.uniform(-0.014, 0.014, 3)))
     P_left = np.hstack([rect.K, np.zeros((3, 1))])
     P_right = P_left.copy()
     P_right[0, 3] = -f * baseline

@@ -11,7 +11,7 @@ ground truth of the rectified left camera: disparity ``d = b f / Z`` (eq. 14),
 depth and a surface label image.
 
 The rectified left camera frame is the one placed on the robot by
-:func:`mrstereo.geometry.frames.T_robot_from_cam`; the right rectified camera
+:func:`mrstereo.transforms.T_robot_from_cam`; the right rectified camera
 sits ``baseline_m`` along its +x axis. Conventions: docs/conventions.md; user
 guide: docs/world.md.
 """
@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
-from ..camera import Camera, CameraInfo, RigMount, StereoCamera, rotation_from_euler
-from ..geometry.frames import T_robot_from_cam, T_world_from_robot
+from ..camera import Camera, CameraInfo, RigMount, StereoCamera
+from ..transforms import T_from_planar, T_robot_from_cam, rotation_from_rpy
 from . import _kernels
 from .scene import Scene
 
@@ -140,8 +140,8 @@ def default_stereo(width: int = 320, height: int = 240, *, height_m: float = 0.4
                       cy=cy + 1.4 * s, k1=-0.045, k2=0.006)
     raw_right = Camera(width=width, height=height, fx=f * 0.9960, fy=f * 0.9995, cx=cx - 2.7 * s,
                        cy=cy + 2.3 * s, k1=-0.040, k2=0.004)
-    R_left = rotation_from_euler(0.0040, -0.0060, 0.0030)     # raw left -> rectified
-    R_right = rotation_from_euler(-0.0035, 0.0120, -0.0050)   # raw right -> rectified
+    R_left = rotation_from_rpy(0.0040, -0.0060, 0.0030)     # raw left -> rectified
+    R_right = rotation_from_rpy(-0.0035, 0.0120, -0.0050)   # raw right -> rectified
     P_left = np.hstack([rect.K, np.zeros((3, 1))])
     P_right = P_left.copy()
     P_right[0, 3] = -f * baseline
@@ -154,7 +154,7 @@ def camera_poses(stereo: StereoCamera, *, pose, pan_rad: float = 0.0,
     """``T_world_from_cam`` (4x4) of the rectified left and right cameras for a robot pose."""
     rig = _rig(stereo, rig)
     x, y, yaw = _pose(pose)
-    T_left = T_world_from_robot(x, y, yaw) @ T_robot_from_cam(
+    T_left = T_from_planar(x, y, yaw) @ T_robot_from_cam(
         height_m=rig.height_m, tilt_rad=rig.tilt_rad, pan_rad=_checks.finite_number("pan_rad", pan_rad))
     T_right = T_left.copy()
     T_right[:3, 3] = T_left[:3, 3] + T_left[:3, 0] * stereo.baseline_m

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
-from ..camera import Camera, CameraInfo, StereoCamera, rotation_from_euler
+from ..camera import Camera, CameraInfo, StereoCamera
+from ..transforms import rotation_from_rpy
 from .render import _ray_table, sensor_noise_sigma
 
 __all__ = ["RenderedTarget", "render_calibration_views", "render_paper_dot_target", "target_points"]
@@ -228,7 +229,7 @@ def _random_pose(cams, outline, centre, rng) -> tuple[np.ndarray, np.ndarray] | 
     aim_x_m = _right_offset_m(cams) / 2    # aim between the cameras of a stereo pair
     for _attempt in range(500):
         angles = rng.uniform([-0.6, -0.6, -0.3], [0.6, 0.6, 0.3])
-        R = rotation_from_euler(*angles)
+        R = rotation_from_rpy(*angles)
         fill = rng.uniform(0.35, 0.65)
         z = left.fx * width_m / (fill * left.width)
         off = rng.uniform(-0.5, 0.5, 2) * (1.0 - fill) * np.array([left.width / left.fx,
@@ -291,7 +292,7 @@ def _grid_pose(cams, outline, centre, pattern, board, k, rng) -> tuple[np.ndarra
         else:
             tilt = sign * tilt_rad * np.array([ax, ay], dtype=float)
         # Rx(alpha > 0) turns the board's +y (lower) edge away from the camera, Ry(beta < 0) its +x edge.
-        R = rotation_from_euler(tilt[1] + jitter[0], -tilt[0] + jitter[1], rng.uniform(-1, 1) * _GRID_ROLL_RAD)
+        R = rotation_from_rpy(tilt[1] + jitter[0], -tilt[0] + jitter[1], rng.uniform(-1, 1) * _GRID_ROLL_RAD)
         z = left.fx * width_m / (fill * left.width)
         t = np.array([_right_offset_m(cams) / 2, 0.0, z]) - R @ centre
         for _ in range(30):              # shift the board (Newton-like, in pixels) against the border(s)

@@ -20,13 +20,15 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import yaml
 
-from .camera import RigMount, StereoCamera, read_stereo
-from .io import read_yaml
-from .geometry.frames import CameraMount, mount_entry, read_mount_entry
+from ..camera import RigMount, StereoCamera, read_stereo
+from ..camera.mount import CameraMount, mount_entry, read_mount_entry
+from ..io import matching_image, read_image, read_yaml
+from ..profiling import stage
 
-__all__ = ["FrameRecord", "Manifest", "read_manifest", "write_manifest", "MANIFEST_NAME",
+__all__ = ["FrameRecord", "Manifest", "read_manifest", "write_manifest", "frame_pair", "MANIFEST_NAME",
            "IMAGE_KEYS", "GT_KEYS"]
 
 MANIFEST_NAME = "manifest.yaml"
@@ -187,3 +189,16 @@ def write_manifest(path: str | os.PathLike, *, calibration: str, rig: RigMount |
         data.update(extra)
     data["frames"] = frames
     Path(path).write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
+
+
+def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Load a frame's pair ``(left, right, rectified)``: the rectified one when listed.
+
+    ``prefer_raw`` takes the raw pair (to be rectified with the calibration) even when a
+    rectified pair is listed, e.g. to test an estimated calibration. 16-bit images are scaled
+    by :func:`matching_image`.
+    """
+    rectified = record.has_rectified and not (prefer_raw and record.has_raw)
+    left, right = (record.left_rect, record.right_rect) if rectified else (record.left, record.right)
+    with stage("read"):
+        return matching_image(read_image(left)), matching_image(read_image(right)), rectified

@@ -19,11 +19,11 @@ import numpy as np
 
 from .. import _checks
 from ..camera import RigMount, StereoCamera
+from ..geometry.freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
+from ..geometry.obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
+from ..geometry.scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
 from ..profiling import stage
 from ..rejection import FloorModel, RejectionConfig, RejectionResult, reject_uniform
-from .freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
-from .obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
-from .scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
 
 __all__ = ["PairObstacles", "PairScan", "obstacles_from_pair", "scan_from_pair"]
 
@@ -107,7 +107,7 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
         Also find where the floor ends in each column (:func:`~mrstereo.geometry.freespace.free_space_boundary`):
         ``PairObstacles.boundary``. None: not computed.
     """
-    from ..matching import compute_disparity        # lazy: numba kernels compile on first use
+    from ..matching import compute_disparity  # lazy: numba kernels compile on first use
 
     if not isinstance(stereo, StereoCamera):
         raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")

@@ -1,7 +1,7 @@
 """Many datasets at once: per-frame products and a map per dataset, resumable, on Dask.
 
 For every frame of every dataset (docs/dataset.md) :func:`run_batch` runs the
-chain of :func:`mrstereo.geometry.pair.scan_from_pair` (rectify -> match ->
+chain of :func:`mrstereo.pipeline.frame.scan_from_pair` (rectify -> match ->
 reject (eq. 13) -> 3D (eq. 14-16) -> scan) once and writes::
 
     OUT/<dataset>/frames/NNNNNN.pfm        disparity after rejection (PFM, NaN -> inf)
@@ -13,7 +13,7 @@ reject (eq. 13) -> 3D (eq. 14-16) -> scan) once and writes::
 
 then fuses each dataset's frames in order into its map (the same map as
 ``mrstereo map``, bit for bit). Frames of all datasets are spread over the
-workers of :func:`mrstereo.parallel.map_ordered`.
+workers of :func:`mrstereo.pipeline.parallel.map_ordered`.
 
 Resumable: every file is written to a temporary name and renamed, so an
 interrupted run leaves complete files only; a re-run skips frames whose four
@@ -31,18 +31,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import RigMount, StereoCamera
-from .geometry.pair import scan_from_pair
-from .geometry.ply import write_ply
-from .geometry.scan import write_scan_json
-from .io import (atomic_write, check_output_dir, check_outputs, read_pfm, remove_stale_temporaries, temporary_dir,
-                 write_disparity)
-from .mapping.rosmap import ros_map_files
+from ..camera import RigMount, StereoCamera
+from ..camera.mount import CameraMount
+from ..geometry.ply import write_ply
+from ..geometry.scan import write_scan_json
+from ..io import (atomic_write, check_output_dir, check_outputs, read_pfm, remove_stale_temporaries, temporary_dir,
+                  write_disparity)
+from ..mapping.fusion import FrameObservation, fuse
+from ..mapping.rosmap import ros_map_files
+from ..recordings.manifest import FrameRecord, Manifest, frame_pair, read_manifest
+from .frame import scan_from_pair
 from .parallel import ItemFailure, map_ordered
-from .geometry.frames import CameraMount
-from .pipeline import (FrameObservation, MapRun, PipelineConfig, floor_for_run, frame_pair, fuse,
-                       observation_from_pair, pair_options, write_map_outputs)
-from .recording import FrameRecord, Manifest, read_manifest
+from .run import MapRun, PipelineConfig, floor_for_run, observation_from_pair, pair_options, write_map_outputs
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
            "dataset_files", "SUMMARY_NAME"]
@@ -247,8 +247,8 @@ def _write_map(run: MapRun, map_dir: Path, record: dict) -> None:
 def _map_run(manifest: Manifest, observations: list[FrameObservation], config: PipelineConfig,
              floor=None, mount=None) -> MapRun:
     """Fuse in frame order and compare with the ground-truth map, as :func:`mrstereo.pipeline.build_map`."""
-    from .mapping import read_ros_map
-    from .mapping.metrics import map_metrics
+    from ..mapping import read_ros_map
+    from ..mapping.metrics import map_metrics
 
     occupancy = fuse(observations, grid=config.grid, config=config.mapping)
     metrics, gt = None, None
@@ -276,7 +276,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     maps : bool
         Also fuse a map per dataset.
     workers, scheduler, processes
-        Where the frames run (:func:`mrstereo.parallel.map_ordered`).
+        Where the frames run (:func:`mrstereo.pipeline.parallel.map_ordered`).
     progress : bool
         A tqdm bar over all frames to compute.
 

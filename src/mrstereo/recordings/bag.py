@@ -17,7 +17,7 @@ manifest reads a recording too:
    between the two nearest messages and held constant outside their time
    span, then projected onto the floor plane for the 2-D map: ``(x, y, yaw)``
    of the base frame's x axis;
-4. the camera mount (``T_base_from_cam``, :class:`~mrstereo.geometry.frames.CameraMount`)
+4. the camera mount (``T_base_from_cam``, :class:`~mrstereo.camera.mount.CameraMount`)
    is the one given (``rig``: a CameraMount or the paper's RigMount), else
    the stereo YAML's ``mount:``/``rig:``, else the TF pose of ``camera_frame``
    in ``base_frame`` at the first frame (an ``*optical*`` frame as it is, any
@@ -43,13 +43,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from . import _checks
-from .camera import CameraInfo, RigMount, StereoCamera, write_stereo
-from .geometry.frames import R_BODY_FROM_OPTICAL, CameraMount
-from .io import write_image
+from .. import _checks
+from ..camera import CameraInfo, RigMount, StereoCamera, write_stereo
+from ..camera.mount import CameraMount
+from ..io import write_image
+from ..transforms import R_BODY_FROM_OPTICAL, planar_from_T, rotation_from_quaternion, slerp, wrap_angle
 
 __all__ = ["BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message", "SUPPORTED_ENCODINGS",
-           "camera_info_from_message", "stereo_from_camera_info", "pair_by_stamp", "yaw_from_matrix",
+           "camera_info_from_message", "stereo_from_camera_info", "pair_by_stamp",
            "export_bag", "exported_bag"]
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -216,38 +217,6 @@ def pair_by_stamp(left_ns: Sequence[int], right_ns: Sequence[int], *, tolerance_
     return sorted(pairs, key=lambda p: (int(left[p[0]]), p[0]))
 
 
-# ------------------------------------------------------------------------------------------ transforms
-
-def _matrix_from_quaternion(q) -> np.ndarray:
-    x, y, z, w = (float(v) for v in q)
-    n = x * x + y * y + z * z + w * w
-    if not math.isfinite(n) or n < 1e-12:
-        raise ValueError(f"invalid quaternion {tuple(q)}")
-    s = 2.0 / n
-    return np.array([[1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w)],
-                     [s * (x * y + z * w), 1 - s * (x * x + z * z), s * (y * z - x * w)],
-                     [s * (x * z - y * w), s * (y * z + x * w), 1 - s * (x * x + y * y)]])
-
-
-def _slerp(q0: np.ndarray, q1: np.ndarray, a: float) -> np.ndarray:
-    q0 = q0 / np.linalg.norm(q0)
-    q1 = q1 / np.linalg.norm(q1)
-    dot = float(np.dot(q0, q1))
-    if dot < 0.0:
-        q1, dot = -q1, -dot
-    if dot > 0.9995:
-        q = q0 + a * (q1 - q0)
-        return q / np.linalg.norm(q)
-    theta = math.acos(min(dot, 1.0))
-    return (math.sin((1 - a) * theta) * q0 + math.sin(a * theta) * q1) / math.sin(theta)
-
-
-def yaw_from_matrix(T) -> float:
-    """Heading of the x axis of a rotation (or 4x4 transform) about z: ``atan2(R[1,0], R[0,0])``."""
-    T = np.asarray(T, dtype=float)
-    return math.atan2(T[1, 0], T[0, 0])
-
-
 @dataclass(frozen=True)
 class TransformTrack:
     """A time series of one transform ``T_parent_from_child`` (odometry or one TF edge).
@@ -279,12 +248,12 @@ class TransformTrack:
         T = np.eye(4)
         if i < 0 or i >= self.stamps_ns.size - 1 or self.stamps_ns[i] == stamp_ns:
             k = min(max(i, 0), self.stamps_ns.size - 1)
-            T[:3, :3] = _matrix_from_quaternion(self.quaternions[k])
+            T[:3, :3] = rotation_from_quaternion(self.quaternions[k])
             T[:3, 3] = self.translations[k]
             return T
         t0, t1 = int(self.stamps_ns[i]), int(self.stamps_ns[i + 1])
         a = (int(stamp_ns) - t0) / (t1 - t0)
-        T[:3, :3] = _matrix_from_quaternion(_slerp(self.quaternions[i], self.quaternions[i + 1], a))
+        T[:3, :3] = rotation_from_quaternion(slerp(self.quaternions[i], self.quaternions[i + 1], a))
         T[:3, 3] = self.translations[i] + a * (self.translations[i + 1] - self.translations[i])
         return T
 
@@ -430,7 +399,7 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
     """
     from tqdm.auto import tqdm
 
-    from .recording import MANIFEST_NAME, write_manifest
+    from .manifest import MANIFEST_NAME, write_manifest
 
     out_dir = Path(out_dir)
     tolerance = _checks.finite_number("sync_tolerance_s", sync_tolerance_s, nonnegative=True)
@@ -539,7 +508,7 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
                 rig = CameraMount(T_cams[0])
                 rig_source = f"tf {base_frame} <- {camera_frame}"
             ref = _heading(_mount_matrix(rig), 2)
-            pans = [_round_pose([_wrap(_heading(T, 2) - ref)])[0] for T in T_cams]
+            pans = [_round_pose([wrap_angle(_heading(T, 2) - ref)])[0] for T in T_cams]
         if rig is None:
             rig_source = "none (the floor is estimated when mapping)"
 
@@ -589,15 +558,11 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
 
 
 def _pose_of(T: np.ndarray) -> tuple[float, float, float]:
-    return _round_pose((T[0, 3], T[1, 3], yaw_from_matrix(T)))
+    return _round_pose(tuple(planar_from_T(T)))
 
 
 def _heading(T: np.ndarray, axis: int) -> float:
     return math.atan2(T[1, axis], T[0, axis])
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _mount_matrix(mount) -> np.ndarray:
@@ -617,7 +582,7 @@ def _optical_in_base(T_base_from_frame: np.ndarray, frame: str) -> np.ndarray:
 
 @contextlib.contextmanager
 def exported_bag(bag: str | os.PathLike, **options) -> Iterator:
-    """Export a bag to a temporary dataset and yield its :class:`~mrstereo.recording.Manifest`.
+    """Export a bag to a temporary dataset and yield its :class:`~mrstereo.recordings.manifest.Manifest`.
 
     Options are those of :func:`export_bag`. The directory is removed at the
     end of the block, e.g.::
@@ -625,7 +590,7 @@ def exported_bag(bag: str | os.PathLike, **options) -> Iterator:
         with exported_bag("run.bag", left_topic=..., right_topic=..., odom_topic="/odom") as manifest:
             run = build_map(manifest, workers=2)
     """
-    from .recording import read_manifest
+    from .manifest import read_manifest
 
     with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
         export_bag(bag, Path(tmp) / "dataset", **options)

@@ -1,6 +1,6 @@
 """Sample data: the public stereo scenes the tests, the ``evaluate`` examples and the benchmarks use.
 
-Every file has a name in a small registry (:mod:`mrstereo._data_registry`): where it lies under
+Every file has a name in a small registry (:mod:`mrstereo.recordings._registry`): where it lies under
 the data root, the public GitHub repository, commit and path it comes from, and its SHA-256.
 
 Where the files are read from:
@@ -26,7 +26,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from ._data_registry import FILES, SCENES
+from ._registry import FILES, SCENES
 
 __all__ = ["ENV_VAR", "NAMES", "SampleScene", "data_root", "scene", "local_path", "is_available",
            "missing_files", "fetch", "verify"]

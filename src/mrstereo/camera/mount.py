@@ -1,68 +1,41 @@
-"""Rigid transforms between the camera, robot and world frames.
+"""The camera mount: the pose of the left optical frame in the robot base frame.
 
-Camera frame: x right, y down, z forward. Robot and world frames (REP 103):
-x forward, y left, z up. The stereo head carries the left camera's optical
-centre at ``height_m`` above the floor on the robot's vertical axis; the head
-pans by ``pan_rad`` about that axis (positive to the left) and the camera is
-tilted down by ``tilt_rad``. That is the paper's rig, the special case of a
-general :class:`CameraMount`: the 6-DoF pose ``T_base_from_cam`` of the left
-optical frame in the robot base frame (whose x-y plane is the floor).
-Conventions: docs/conventions.md (Frames).
+The stereo head carries the left camera's optical centre at ``height_m`` above the floor on the
+robot's vertical axis; the head pans by ``pan_rad`` about that axis (positive to the left) and the
+camera is tilted down by ``tilt_rad``. That is the paper's rig, the special case of a general
+:class:`CameraMount`: the 6-DoF pose ``T_base_from_cam`` of the left optical frame in the robot
+base frame (whose x-y plane is the floor). Conventions: docs/conventions.md (Frames).
 """
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import _checks
+from ..transforms import R_BODY_FROM_OPTICAL, T_robot_from_cam, _rot_z, rotation_from_rpy, rpy_from_rotation
 
-__all__ = ["R_ROBOT_FROM_CAM_LEVEL", "R_BODY_FROM_OPTICAL", "CameraMount", "T_robot_from_cam",
-           "T_world_from_robot", "transform_points", "rotation_from_rpy", "rpy_from_rotation",
-           "planar_pose_from_matrix", "read_mount_entry", "mount_entry"]
-
-# Axes of a level, forward-looking camera in the robot frame: cam x -> -y, cam y -> -z, cam z -> x.
-R_ROBOT_FROM_CAM_LEVEL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-# The same fixed rotation from a camera's optical frame (x right, y down, z forward) to its body
-# frame (REP 103: x forward, y left, z up); ROS names the two "<camera>_link" and
-# "<camera>_optical_frame" (REP 103, "Suffix Frames").
-R_BODY_FROM_OPTICAL = R_ROBOT_FROM_CAM_LEVEL
+__all__ = ["RigMount", "CameraMount", "read_mount_entry", "mount_entry", "T_base_from_cam_of"]
 
 
-def _rot_z(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+@dataclass(frozen=True)
+class RigMount:
+    """Mount of the left camera on the robot: height above the floor and downward tilt.
 
+    ``height_m`` is the optical centre above the floor; ``tilt_rad`` > 0 tilts
+    the optical axis down toward the floor.
+    """
 
-def _rot_y(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    height_m: float
+    tilt_rad: float = 0.0
 
-
-def _rot_x(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def rotation_from_rpy(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:
-    """REP 103 fixed-axis roll, pitch, yaw: ``Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (3, 3)."""
-    return _rot_z(yaw_rad) @ _rot_y(pitch_rad) @ _rot_x(roll_rad)
-
-
-def rpy_from_rotation(R) -> tuple[float, float, float]:
-    """Inverse of :func:`rotation_from_rpy` (pitch in [-pi/2, pi/2]; at +-pi/2 roll is set to 0)."""
-    R = np.asarray(R, dtype=float)
-    pitch = math.asin(float(np.clip(-R[2, 0], -1.0, 1.0)))
-    if abs(R[2, 0]) > 1.0 - 1e-12:
-        return 0.0, pitch, math.atan2(-R[0, 1], R[1, 1])
-    return math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])
-
-
-def planar_pose_from_matrix(T) -> tuple[float, float, float]:
-    """A 3-D pose (4, 4) projected onto the floor plane: ``(x_m, y_m, yaw_rad)`` of its x axis."""
-    T = np.asarray(T, dtype=float)
-    return float(T[0, 3]), float(T[1, 3]), math.atan2(T[1, 0], T[0, 0])
+    def __post_init__(self) -> None:
+        _checks.finite_number("height_m", self.height_m, positive=True)
+        _checks.finite_number("tilt_rad", self.tilt_rad)
+        if abs(self.tilt_rad) >= math.pi / 2:
+            raise ValueError(f"tilt_rad must be within (-pi/2, pi/2), got {self.tilt_rad}")
 
 
 class CameraMount:
@@ -83,7 +56,7 @@ class CameraMount:
       All zeros: a level camera on the floor looking along the robot's x axis;
     * :meth:`from_rig`: the paper's rig ``(height_m, tilt_rad)`` = ``xyz = (0, 0,
       height_m)``, ``rpy = (0, tilt_rad, 0)``;
-    * a TF lookup (:mod:`mrstereo.bag`) or a 4x4 matrix.
+    * a TF lookup (:mod:`mrstereo.recordings.bag`) or a 4x4 matrix.
 
     Head pan (positive left) turns the mount about the base z axis:
     :meth:`T_base_from_cam_panned`.
@@ -135,7 +108,7 @@ class CameraMount:
     @property
     def rpy(self) -> tuple[float, float, float]:
         """Roll, pitch, yaw [rad] of the camera body frame (inverse of :meth:`from_xyz_rpy`)."""
-        return rpy_from_rotation(self._T[:3, :3] @ R_BODY_FROM_OPTICAL.T)
+        return tuple(float(v) for v in rpy_from_rotation(self._T[:3, :3] @ R_BODY_FROM_OPTICAL.T))
 
     @property
     def height_m(self) -> float:
@@ -198,8 +171,6 @@ def read_mount_entry(data: dict, *, where: str):
     the paper's ``rig: {height_m, tilt_rad}`` a :class:`mrstereo.camera.RigMount`; neither
     None. Both at once is an error.
     """
-    from ..camera import RigMount
-
     if data.get("mount") is not None and data.get("rig") is not None:
         raise ValueError(f"{where}: give 'mount:' or 'rig:', not both")
     if data.get("mount") is not None:
@@ -228,32 +199,21 @@ def mount_entry(mount) -> dict:
     return {"rig": {"height_m": float(mount.height_m), "tilt_rad": float(mount.tilt_rad)}}
 
 
-def T_robot_from_cam(*, height_m: float, tilt_rad: float = 0.0, pan_rad: float = 0.0) -> np.ndarray:
-    """4x4 transform taking left-camera points into the robot frame.
+def T_base_from_cam_of(rig, pan_rad: float = 0.0, *, stereo=None) -> np.ndarray:
+    """The left *rectified* camera's mount on the base, with the head's pan.
 
-    ``R = Rz(pan) @ Ry(tilt) @ R_ROBOT_FROM_CAM_LEVEL``; a positive tilt turns
-    the optical axis toward the floor, a positive pan turns it to the left.
+    ``rig``: the paper's ``RigMount`` (height, tilt: the rectified frame, as the mapping chain
+    uses it), a 6-DoF ``CameraMount`` of the raw camera (turned into the rectified frame with
+    ``stereo.left.R``), or None (a level camera on the floor: the base is the camera's REP 103
+    body frame).
     """
-    h = _checks.finite_number("height_m", height_m)
-    tilt = _checks.finite_number("tilt_rad", tilt_rad)
-    pan = _checks.finite_number("pan_rad", pan_rad)
-    T = np.eye(4)
-    T[:3, :3] = _rot_z(pan) @ _rot_y(tilt) @ R_ROBOT_FROM_CAM_LEVEL
-    T[2, 3] = h
-    return T
-
-
-def T_world_from_robot(x_m: float, y_m: float, yaw_rad: float) -> np.ndarray:
-    """4x4 transform of a planar robot pose ``(x, y, yaw)`` in the world frame."""
-    T = np.eye(4)
-    T[:3, :3] = _rot_z(_checks.finite_number("yaw_rad", yaw_rad))
-    T[0, 3] = _checks.finite_number("x_m", x_m)
-    T[1, 3] = _checks.finite_number("y_m", y_m)
-    return T
-
-
-def transform_points(T_b_from_a: np.ndarray, points_a) -> np.ndarray:
-    """Apply a 4x4 transform to points of shape (..., 3); NaN rows stay NaN."""
-    p = np.asarray(points_a, dtype=np.float64)
-    T = _checks.matrix("T_b_from_a", T_b_from_a, (4, 4))
-    return p @ T[:3, :3].T + T[:3, 3]
+    if rig is None:
+        rig = CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    if isinstance(rig, CameraMount):
+        T = rig.T_base_from_cam_panned(pan_rad)
+        if stereo is not None:
+            T_cam_from_rect = np.eye(4)
+            T_cam_from_rect[:3, :3] = np.asarray(stereo.left.R, dtype=np.float64).T
+            T = T @ T_cam_from_rect
+        return T
+    return T_robot_from_cam(height_m=rig.height_m, tilt_rad=rig.tilt_rad, pan_rad=pan_rad)

@@ -1,10 +1,12 @@
-"""Shared figure plumbing: an Agg figure without pyplot state, saved atomically as PNG."""
+"""Figure plumbing: an Agg figure without pyplot state, saved atomically as PNG; disparity colours."""
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
-from .io import atomic_write
+import numpy as np
+
+from ..io import atomic_write
 
 
 def new_figure(width_in: float, height_in: float, *, dpi: int = 100):
@@ -27,7 +29,7 @@ def save_figure(fig, path: str | os.PathLike) -> Path:
 
 # --------------------------------------------------------------------------- disparity colours
 # The one place that turns disparities into colours: the `disparity --plot` preview, the demo's
-# panels, mrstereo.io.colorize_disparity and mrstereo.world.figures all draw through it.
+# panels, colorize_disparity and mrstereo.world.figures all draw through it.
 
 DISPARITY_CMAP = "turbo"
 INVALID_RGB = (0.0, 0.0, 0.0)          # no disparity: black
@@ -42,8 +44,6 @@ def disparity_range_px(*disparities_px, percentiles: tuple[float, float] = DISPL
     part of the search readable; values outside are drawn in the end colours (the colour bar's
     arrows). ``(0, 1)`` when no map has a valid value.
     """
-    import numpy as np
-
     values = [np.asarray(d, dtype=np.float32) for d in disparities_px]
     valid = np.concatenate([v[np.isfinite(v)].ravel() for v in values]) if values else np.empty(0)
     if valid.size == 0:
@@ -58,8 +58,6 @@ def disparity_colors(disparity_px, *, range_px: tuple[float, float], too_near=No
     """RGBA float image (H, W, 4) of a disparity map: turbo over ``range_px``, invalid black,
     pixels of the ``too_near`` mask (``DisparityResult.too_near``) magenta."""
     import matplotlib
-    import numpy as np
-
     d = np.asarray(disparity_px, dtype=np.float32)
     low, high = range_px
     cmap = matplotlib.colormaps[DISPARITY_CMAP].with_extremes(bad=(*INVALID_RGB, 1.0))
@@ -79,7 +77,6 @@ def draw_disparity(ax, disparity_px, *, range_px: tuple[float, float], backgroun
     Returns a ScalarMappable with the same colours for ``fig.colorbar``.
     """
     import matplotlib
-    import numpy as np
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
 
@@ -109,8 +106,6 @@ def save_disparity_preview(path: str | os.PathLike, disparity_px, *, title: str 
 
     ``range_px`` defaults to :func:`disparity_range_px` (robust percentiles of the map).
     """
-    import numpy as np
-
     d = np.asarray(disparity_px, dtype=np.float32)
     if d.ndim != 2:
         raise ValueError(f"disparity_px must be HxW, got shape {d.shape}")
@@ -129,3 +124,19 @@ def save_disparity_preview(path: str | os.PathLike, disparity_px, *, title: str 
                  + (f"; magenta = too near, {near:.0%}" if near > 0 else "") + ")", fontsize=10)
     ax.set_axis_off()
     return save_figure(fig, path)
+
+
+def colorize_disparity(disparity_px: np.ndarray, *, max_disparity_px: float | None = None,
+                       range_px: tuple[float, float] | None = None, too_near: np.ndarray | None = None) -> np.ndarray:
+    """Colour image (BGR uint8) of a disparity map: turbo, invalid pixels black, pixels of the
+    ``too_near`` mask (nearer than the search covers) magenta.
+
+    The colour scale spans ``range_px`` (low, high) in pixels; default: the 1st-99th percentile of
+    the valid values (:func:`disparity_range_px`), or ``0 .. max_disparity_px`` when that
+    is given. Same colours as the ``disparity --plot`` preview, which adds a colour bar.
+    """
+    d = np.asarray(disparity_px, dtype=np.float32)
+    if range_px is None:
+        range_px = (0.0, float(max_disparity_px)) if max_disparity_px else disparity_range_px(d)
+    rgb = np.rint(disparity_colors(d, range_px=range_px, too_near=too_near)[..., :3] * 255).astype(np.uint8)
+    return np.ascontiguousarray(rgb[..., ::-1])

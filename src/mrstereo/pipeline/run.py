@@ -20,31 +20,30 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from .camera import RigMount, StereoCamera
-from .geometry import T_world_from_robot, transform_points
-from .geometry.frames import CameraMount, mount_entry
-from .geometry.freespace import FreeSpaceConfig
-from .geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount, ground_from_rig
-from .geometry.obstacles import ObstacleConfig
-from .geometry.pair import PairObstacles, obstacles_from_pair
-from .io import atomic_write, read_image
-from .mapping import GridSpec, read_ros_map, write_ros_map
-from .mapping.figures import plot_map
-from .mapping.metrics import MapMetrics, map_metrics
-from .mapping.occupancy import MappingConfig, OccupancyGrid, ViewCells, view_cells
-from .matching.config import MatchingConfig
-from .profiling import stage
-from .rejection import RejectionConfig
-from .recording import FrameRecord, Manifest, read_manifest
+from ..camera import RigMount, StereoCamera
+from ..camera.mount import CameraMount, mount_entry
+from ..geometry.freespace import FreeSpaceConfig
+from ..geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount, ground_from_rig
+from ..geometry.obstacles import ObstacleConfig
+from ..io import atomic_write
+from ..mapping import GridSpec, read_ros_map, write_ros_map
+from ..mapping.figures import plot_map
+from ..mapping.fusion import FrameObservation, fuse
+from ..mapping.metrics import MapMetrics, map_metrics
+from ..mapping.occupancy import MappingConfig, OccupancyGrid, view_cells
+from ..matching.config import MatchingConfig
+from ..profiling import stage
+from ..recordings.manifest import FrameRecord, Manifest, frame_pair, read_manifest
+from ..rejection import RejectionConfig
+from ..transforms import T_from_planar, transform_points
+from .frame import PairObstacles, obstacles_from_pair
 
-__all__ = ["PipelineConfig", "FrameObservation", "MapRun", "observe_frame", "fuse", "add_observation", "build_map",
-           "floor_for_run", "frame_pair", "matching_image", "write_map_outputs"]
+__all__ = ["PipelineConfig", "MapRun", "observe_frame", "build_map", "floor_for_run", "write_map_outputs"]
 
 
 @dataclass(frozen=True)
@@ -104,8 +103,8 @@ class PipelineConfig:
         chosen so that pixel x disparity evaluations equal the three ranges' (it cannot see
         closer than ``b f / n``: the near blind zone).
         """
-        from .matching import make_plan
-        from .matching.config import preset_config
+        from ..matching import make_plan
+        from ..matching.config import preset_config
 
         plan = make_plan(stereo.size, calibration=stereo)
         n = max(1, round(plan.work / (stereo.size[0] * stereo.size[1])))
@@ -115,34 +114,6 @@ class PipelineConfig:
     def with_fusion(self, fusion: str) -> PipelineConfig:
         """The same configuration with another grid fusion (``"log_odds"`` or ``"union"``)."""
         return replace(self, mapping=replace(self.mapping, fusion=fusion))
-
-
-@dataclass(frozen=True)
-class FrameObservation:
-    """What one frame contributes to the map (world frame)."""
-
-    index: int
-    pose: tuple[float, float, float]
-    pan_rad: float
-    obstacle_points_world: np.ndarray
-    floor_points_world: np.ndarray
-    n_valid_disparity: int
-    ground_message: str
-    cells: ViewCells | None = None
-    """Cells hit and cleared in the grid of the run's config (None: :func:`fuse` computes them)."""
-    baseline_focal_m_px: float | None = None
-    """``b f`` of the rig, for the mapping's range uncertainty (None: rays clear up to each point)."""
-    sensor_height_m: float | None = None
-    """Height of the camera above the floor, for the mapping's height-aware occlusion test."""
-    boundary_points: int = 0
-    """The last ``boundary_points`` rows of ``obstacle_points_world`` are free-space boundary points
-    (:mod:`mrstereo.geometry.freespace`: a floor's end seen in the image, not a stereo measurement)."""
-
-    @property
-    def sensor_origin_world(self) -> tuple[float, ...]:
-        if self.sensor_height_m is None:
-            return (self.pose[0], self.pose[1])
-        return (self.pose[0], self.pose[1], self.sensor_height_m)
 
 
 @dataclass
@@ -182,8 +153,8 @@ class MapRun:
                                 "max_correction_deg": float(np.max(turned))}
         frames = self.manifest.frames
         if self.observations and all(f.true_pose is not None for f in frames):
-            from .odometry.se3 import T_from_planar
-            from .odometry.trajectory import trajectory_metrics
+            from ..odometry.trajectory import trajectory_metrics
+            from ..transforms import T_from_planar
 
             by_index = {o.index: o.pose for o in self.observations}
             used = sorted(by_index)
@@ -195,33 +166,8 @@ class MapRun:
         return out
 
 
-def matching_image(image: np.ndarray) -> np.ndarray:
-    """An image on the 8-bit gray-level scale the matcher's parameters use.
-
-    16-bit images (``mono16`` cameras, 16-bit PNG) become float32 ``v / 257`` (0..255): every one
-    of the 65536 levels stays distinct (float32 keeps 24 bits), and an 8-bit image scaled by 257
-    comes back exactly; others are returned as they are.
-    """
-    if image.dtype == np.uint16:
-        return image.astype(np.float32) / np.float32(257.0)
-    return image
-
-
-def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Load a frame's pair ``(left, right, rectified)``: the rectified one when listed.
-
-    ``prefer_raw`` takes the raw pair (to be rectified with the calibration) even when a
-    rectified pair is listed, e.g. to test an estimated calibration. 16-bit images are scaled
-    by :func:`matching_image`.
-    """
-    rectified = record.has_rectified and not (prefer_raw and record.has_raw)
-    left, right = (record.left_rect, record.right_rect) if rectified else (record.left, record.right)
-    with stage("read"):
-        return matching_image(read_image(left)), matching_image(read_image(right)), rectified
-
-
 def pair_options(config: PipelineConfig) -> dict:
-    """Keyword options of :func:`mrstereo.geometry.pair.obstacles_from_pair` for a config."""
+    """Keyword options of :func:`mrstereo.pipeline.frame.obstacles_from_pair` for a config."""
     return {"preset": config.preset, "max_disparity_px": config.max_disparity_px, "matching": config.matching,
             "rejection": config.rejection, "config": config.obstacles, "free_space": config.free_space}
 
@@ -235,7 +181,7 @@ def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: i
     uncertainty its ``b f``; without it rays clear up to each point.
     """
     with stage("grid"):
-        T = T_world_from_robot(*record.pose)
+        T = T_from_planar(*record.pose)
         obs = frame.obstacles
         boundary = frame.boundary.points_robot if frame.boundary is not None else np.empty((0, 3))
         obstacles = transform_points(T, np.concatenate([obs.obstacle_points_robot, boundary])).astype(np.float32)
@@ -265,33 +211,6 @@ def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, 
     frame = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=rig, pan_rad=record.pan_rad,
                                 **pair_options(config))
     return observation_from_pair(frame, record, index=index, config=config, stereo=stereo)
-
-
-def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec = GridSpec(),
-         config: MappingConfig = MappingConfig()) -> OccupancyGrid:
-    """Ordered reduction: add each frame's cells to one occupancy grid (paper section 5.2).
-
-    A frame's precomputed ``cells`` are used when they fit ``grid`` and ``config``; otherwise
-    they are computed from its points (the result is the same). With ``config.map_occlusion_p``
-    the cells depend on the map so far and are always computed here, in order.
-    """
-    occupancy = OccupancyGrid(grid, config=config)
-    for obs in observations:
-        add_observation(occupancy, obs)
-    return occupancy
-
-
-def add_observation(occupancy: OccupancyGrid, obs: FrameObservation) -> None:
-    """One frame into the map, in order: its precomputed cells when they fit the map's grid and
-    config and the map does not occlude (``map_occlusion_p`` None), else its cells traced
-    against the map so far."""
-    grid, config = occupancy.grid, occupancy.config
-    with stage("grid"):
-        if obs.cells is not None and obs.cells.fits(grid, config) and config.map_occlusion_p is None:
-            occupancy.apply(obs.cells)
-        else:
-            occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world,
-                             baseline_focal_m_px=obs.baseline_focal_m_px)
 
 
 def _observe_indexed(indexed: tuple, *, stereo: StereoCamera, rig, config: PipelineConfig,
@@ -389,10 +308,10 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         Observe the frames on an existing Dask cluster (its workers must see
         the dataset's files). With neither, everything runs in this process.
         The fused map is the same, bit for bit, in every case
-        (:func:`mrstereo.parallel.map_ordered` keeps the frame order).
+        (:func:`mrstereo.pipeline.parallel.map_ordered` keeps the frame order).
     odometry : {"given", "visual"}
         ``"visual"``: the poses come from stereo visual odometry
-        (:func:`mrstereo.odometry.odometry_from_manifest`, run in order before the
+        (:func:`mrstereo.pipeline.odometry_from_manifest`, run in order before the
         matching), starting at the first frame's given pose; frames where tracking is
         lost are left out of the map.
     align : AlignConfig or True, optional
@@ -428,7 +347,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
                                label=lambda item: f"frame {item[0]} ({(item[1].left_rect or item[1].left).name})")
     alignments = None
     if align is not None and align is not False:
-        from .odometry.alignment import AlignConfig, fuse_aligned
+        from ..odometry.alignment import AlignConfig, fuse_aligned
 
         occupancy, observations, alignments = fuse_aligned(
             observations, grid=config.grid, config=config.mapping, align=AlignConfig() if align is True else align)
@@ -463,7 +382,7 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
 
     metrics.json holds the comparison with the ground-truth map (when there is
     one) and ``floor``: the floor of the run with its confidence. ``figures``: a
-    :class:`mrstereo.parallel.PrestartedCall` of :func:`mrstereo.mapping.figures.plot_map`
+    :class:`mrstereo.pipeline.parallel.PrestartedCall` of :func:`mrstereo.mapping.figures.plot_map`
     that draws map.png in another process while the other files are written.
     """
     out = Path(out_dir)

@@ -37,7 +37,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from . import _checks
+from .. import _checks
 
 __all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory",
            "PrestartedCall"]
@@ -604,11 +604,11 @@ class PrestartedCall:
         if not module or not name:
             raise ValueError(f"target must be 'module:function', got {target!r}")
         env = dict(os.environ)
-        root = str(Path(__file__).resolve().parents[1])          # this mrstereo, whatever sys.path says
+        root = str(Path(__file__).resolve().parents[2])          # this mrstereo, whatever sys.path says
         env["PYTHONPATH"] = os.pathsep.join([root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
         self._submitted = False
         self._proc = subprocess.Popen(
-            [sys.executable, "-c", "import sys; from mrstereo.parallel import _serve_call; _serve_call(sys.argv[1:])",
+            [sys.executable, "-c", "import sys; from mrstereo.pipeline.parallel import _serve_call; _serve_call(sys.argv[1:])",
              target, *preload], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env)
 
     def submit(self, *args, **kwargs) -> None:

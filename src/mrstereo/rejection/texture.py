@@ -43,8 +43,8 @@ from functools import cached_property
 import cv2
 import numpy as np
 
-from . import _checks
-from . import _rejection_kernels as _kernels
+from .. import _checks
+from . import _kernels
 
 __all__ = [
     "RejectionConfig", "PatchStatistics", "FloorModel", "RejectionResult", "patch_statistics",

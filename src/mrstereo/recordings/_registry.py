@@ -1,4 +1,4 @@
-"""The sample-data registry: every file of :mod:`mrstereo.data`, its public source and its SHA-256.
+"""The sample-data registry: every file of :mod:`mrstereo.recordings.samples`, its public source and its SHA-256.
 
 Generated from the per-file provenance table of the sample data (repository, commit, path;
 files are byte-identical to the source blobs). One row per file:

@@ -1,22 +1,20 @@
-"""Visual odometry over a sequence: a dataset manifest or any iterable of rectified pairs.
+"""Visual odometry over a sequence of rectified pairs.
 
 Conventions: docs/conventions.md; user guide: docs/odometry.md.
 """
 from __future__ import annotations
 
-import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..camera import StereoCamera
-from ..geometry.frames import T_robot_from_cam
 from ..profiling import stage
-from .se3 import T_from_planar, planar_from_T
+from ..transforms import planar_from_T
 from .tracker import LOST, OdometryConfig, StereoOdometry
 
-__all__ = ["OdometryResult", "visual_odometry", "odometry_from_manifest", "T_base_from_cam_of"]
+__all__ = ["OdometryResult", "visual_odometry"]
 
 
 @dataclass(frozen=True)
@@ -71,28 +69,6 @@ class OdometryResult:
         return f"lost tracking on {len(lost)} of {len(self.status)} frames ({shown}); their poses hold the last one"
 
 
-def T_base_from_cam_of(rig, pan_rad: float = 0.0, *, stereo: StereoCamera | None = None) -> np.ndarray:
-    """The left *rectified* camera's mount on the base, with the head's pan.
-
-    ``rig``: the paper's ``RigMount`` (height, tilt: the rectified frame, as the mapping chain
-    uses it), a 6-DoF ``CameraMount`` of the raw camera (turned into the rectified frame with
-    ``stereo.left.R``), or None (a level camera on the floor: the base is the camera's REP 103
-    body frame).
-    """
-    from ..geometry.frames import CameraMount
-
-    if rig is None:
-        rig = CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-    if isinstance(rig, CameraMount):
-        T = rig.T_base_from_cam_panned(pan_rad)
-        if stereo is not None:
-            T_cam_from_rect = np.eye(4)
-            T_cam_from_rect[:3, :3] = np.asarray(stereo.left.R, dtype=np.float64).T
-            T = T @ T_cam_from_rect
-        return T
-    return T_robot_from_cam(height_m=rig.height_m, tilt_rad=rig.tilt_rad, pan_rad=pan_rad)
-
-
 def visual_odometry(pairs: Iterable, stereo: StereoCamera, *, T_base_from_cam,
                     T_world_from_base0=None, config: OdometryConfig | None = None,
                     disparities: Iterable | None = None, stamps_s: Sequence[float] | None = None,
@@ -139,48 +115,3 @@ def visual_odometry(pairs: Iterable, stereo: StereoCamera, *, T_base_from_cam,
                           n_tracked=np.array([e.n_tracked for e in estimates]),
                           n_inliers=np.array([e.n_inliers for e in estimates]),
                           time_s=np.array([e.time_s for e in estimates]), stamps_s=stamps)
-
-
-def odometry_from_manifest(manifest, *, config: OdometryConfig | None = None, calibration: StereoCamera | None = None,
-                           initial_pose: str = "given", progress: bool = False) -> OdometryResult:
-    """Visual odometry of a dataset (docs/dataset.md): rectified pairs, or raw ones rectified.
-
-    Parameters
-    ----------
-    manifest : Manifest or path
-    calibration : StereoCamera, optional
-        Overrides the manifest's (the raw images are then rectified with it).
-    initial_pose : {"given", "identity"}
-        Start at the first frame's pose in the manifest, or at the origin.
-    """
-    from ..pipeline import frame_pair
-    from ..recording import Manifest, read_manifest
-
-    if not isinstance(manifest, Manifest):
-        if not isinstance(manifest, (str, os.PathLike)):
-            raise TypeError(f"manifest must be a Manifest or a path, got {type(manifest).__name__}")
-        manifest = read_manifest(manifest)
-    if initial_pose not in ("given", "identity"):
-        raise ValueError(f"initial_pose must be 'given' or 'identity', got {initial_pose!r}")
-    stereo = manifest.calibration if calibration is None else calibration
-    prefer_raw = calibration is not None
-
-    def pairs():
-        for record in manifest.frames:
-            left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
-            if not rectified and not stereo.is_rectified:
-                left, right = stereo.rectify(left, right)
-            yield left, right
-
-    mounts = np.stack([T_base_from_cam_of(manifest.rig, r.pan_rad, stereo=stereo) for r in manifest.frames])
-    T0 = T_from_planar(*manifest.frames[0].pose) if initial_pose == "given" else np.eye(4)
-    wrap = None
-    if progress:
-        from tqdm import tqdm
-
-        def wrap(it):
-            return tqdm(it, total=len(manifest.frames), desc="odometry", unit="frame")
-    stamps = [getattr(r, "stamp_s", None) for r in manifest.frames]
-    stamps = None if any(s is None for s in stamps) else stamps
-    return visual_odometry(pairs(), stereo, T_base_from_cam=mounts, T_world_from_base0=T0, config=config,
-                           stamps_s=stamps, progress=wrap)

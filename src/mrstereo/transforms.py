@@ -1,0 +1,195 @@
+"""Rigid transforms: the one place for SE(3), planar poses, roll-pitch-yaw and quaternions.
+
+4x4 homogeneous matrices ``T_b_from_a`` map frame-a points into frame b. Camera frame: x right,
+y down, z forward. Robot and world frames (REP 103): x forward, y left, z up; roll-pitch-yaw are
+REP 103 fixed axes, ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (positive pitch looks down). Planar poses
+are ``(x_m, y_m, yaw_rad)``. Quaternions are ``(qx, qy, qz, qw)`` (the TUM and ROS order).
+Conventions: docs/conventions.md (Frames).
+"""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from . import _checks
+
+__all__ = ["R_ROBOT_FROM_CAM_LEVEL", "R_BODY_FROM_OPTICAL", "rotation_from_rpy", "rpy_from_rotation",
+           "T_robot_from_cam", "transform_points", "T_from_rvec_t", "rvec_t_from_T", "rotation_angle_rad",
+           "quaternion_from_rotation", "rotation_from_quaternion", "slerp", "T_from_position_quaternion",
+           "T_from_planar", "planar_from_T", "compose_planar", "relative_planar", "wrap_angle"]
+
+# Axes of a level, forward-looking camera in the robot frame: cam x -> -y, cam y -> -z, cam z -> x.
+R_ROBOT_FROM_CAM_LEVEL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+# The same fixed rotation from a camera's optical frame (x right, y down, z forward) to its body
+# frame (REP 103: x forward, y left, z up); ROS names the two "<camera>_link" and
+# "<camera>_optical_frame" (REP 103, "Suffix Frames").
+R_BODY_FROM_OPTICAL = R_ROBOT_FROM_CAM_LEVEL
+
+
+def _rot_z(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _rot_y(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rotation_from_rpy(roll_rad, pitch_rad, yaw_rad) -> np.ndarray:
+    """``Rz(yaw) @ Ry(pitch) @ Rx(roll)``; broadcasts over arrays of angles, returns (..., 3, 3).
+
+    The paper's Euler angles (alpha, beta, gamma) of eq. (1) are these roll, pitch and yaw.
+    """
+    a, b, g = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (roll_rad, pitch_rad, yaw_rad)))
+    ca, sa, cb, sb, cg, sg = np.cos(a), np.sin(a), np.cos(b), np.sin(b), np.cos(g), np.sin(g)
+    R = np.empty(a.shape + (3, 3))
+    R[..., 0, 0] = cg * cb
+    R[..., 0, 1] = cg * sb * sa - sg * ca
+    R[..., 0, 2] = cg * sb * ca + sg * sa
+    R[..., 1, 0] = sg * cb
+    R[..., 1, 1] = sg * sb * sa + cg * ca
+    R[..., 1, 2] = sg * sb * ca - cg * sa
+    R[..., 2, 0] = -sb
+    R[..., 2, 1] = cb * sa
+    R[..., 2, 2] = cb * ca
+    return R
+
+
+def rpy_from_rotation(R) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inverse of :func:`rotation_from_rpy` for (..., 3, 3): ``(roll, pitch, yaw)``, pitch in
+    [-pi/2, pi/2] (0-d arrays for one rotation); at pitch +-pi/2 (gimbal lock) roll is 0."""
+    R = np.asarray(R, dtype=np.float64)
+    pitch = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
+    locked = np.abs(R[..., 2, 0]) > 1.0 - 1e-12
+    roll = np.where(locked, 0.0, np.arctan2(R[..., 2, 1], R[..., 2, 2]))
+    yaw = np.where(locked, np.arctan2(-R[..., 0, 1], R[..., 1, 1]), np.arctan2(R[..., 1, 0], R[..., 0, 0]))
+    return roll, pitch, yaw
+
+
+def T_robot_from_cam(*, height_m: float, tilt_rad: float = 0.0, pan_rad: float = 0.0) -> np.ndarray:
+    """4x4 transform taking left-camera points into the robot frame (the paper's rig).
+
+    ``R = Rz(pan) @ Ry(tilt) @ R_ROBOT_FROM_CAM_LEVEL``; a positive tilt turns
+    the optical axis toward the floor, a positive pan turns it to the left.
+    """
+    h = _checks.finite_number("height_m", height_m)
+    tilt = _checks.finite_number("tilt_rad", tilt_rad)
+    pan = _checks.finite_number("pan_rad", pan_rad)
+    T = np.eye(4)
+    T[:3, :3] = _rot_z(pan) @ _rot_y(tilt) @ R_ROBOT_FROM_CAM_LEVEL
+    T[2, 3] = h
+    return T
+
+
+def transform_points(T_b_from_a: np.ndarray, points_a) -> np.ndarray:
+    """Apply a 4x4 transform to points of shape (..., 3); NaN rows stay NaN."""
+    p = np.asarray(points_a, dtype=np.float64)
+    T = _checks.matrix("T_b_from_a", T_b_from_a, (4, 4))
+    return p @ T[:3, :3].T + T[:3, 3]
+
+
+def T_from_rvec_t(rvec, tvec) -> np.ndarray:
+    """4x4 transform of an OpenCV rotation vector (Rodrigues) and translation."""
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))[0]
+    T[:3, 3] = np.asarray(tvec, dtype=np.float64).ravel()
+    return T
+
+
+def rvec_t_from_T(T) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV ``(rvec, tvec)`` (3x1 each) of a 4x4 transform."""
+    T = np.asarray(T, dtype=np.float64)
+    return cv2.Rodrigues(T[:3, :3])[0].reshape(3, 1), T[:3, 3].reshape(3, 1).copy()
+
+
+def rotation_angle_rad(R) -> float:
+    """Angle of a rotation matrix, in [0, pi]."""
+    c = (np.trace(np.asarray(R, dtype=np.float64)[:3, :3]) - 1.0) / 2.0
+    return float(math.acos(min(1.0, max(-1.0, c))))
+
+
+def quaternion_from_rotation(R) -> np.ndarray:
+    """Unit quaternion ``(qx, qy, qz, qw)`` with ``qw >= 0`` of a rotation matrix."""
+    R = np.asarray(R, dtype=np.float64)[:3, :3]
+    rvec = cv2.Rodrigues(R)[0].ravel()
+    angle = float(np.linalg.norm(rvec))
+    if angle < 1e-12:
+        return np.array([0.0, 0.0, 0.0, 1.0])
+    axis = rvec / angle
+    q = np.concatenate([axis * math.sin(angle / 2.0), [math.cos(angle / 2.0)]])
+    return q if q[3] >= 0 else -q
+
+
+def rotation_from_quaternion(q) -> np.ndarray:
+    """Rotation matrix of a quaternion ``(qx, qy, qz, qw)`` of any non-zero norm."""
+    q = np.asarray(q, dtype=np.float64).ravel()
+    n = float(q @ q) if q.shape == (4,) else 0.0
+    if not (n > 1e-12 and math.isfinite(n)):
+        raise ValueError(f"quaternion must be 4 finite numbers, not all zero, got {q.tolist()}")
+    x, y, z, w = (float(v) for v in q)
+    s = 2.0 / n
+    return np.array([[1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w)],
+                     [s * (x * y + z * w), 1 - s * (x * x + z * z), s * (y * z - x * w)],
+                     [s * (x * z - y * w), s * (y * z + x * w), 1 - s * (x * x + y * y)]])
+
+
+def slerp(q0, q1, fraction: float) -> np.ndarray:
+    """Spherical linear interpolation of two quaternions (``fraction`` 0 gives ``q0``, 1 ``q1``)."""
+    q0 = np.asarray(q0, dtype=np.float64) / np.linalg.norm(q0)
+    q1 = np.asarray(q1, dtype=np.float64) / np.linalg.norm(q1)
+    dot = float(np.dot(q0, q1))
+    if dot < 0.0:
+        q1, dot = -q1, -dot
+    if dot > 0.9995:
+        q = q0 + fraction * (q1 - q0)
+        return q / np.linalg.norm(q)
+    theta = math.acos(min(dot, 1.0))
+    return (math.sin((1 - fraction) * theta) * q0 + math.sin(fraction * theta) * q1) / math.sin(theta)
+
+
+def T_from_position_quaternion(position, quaternion) -> np.ndarray:
+    """4x4 transform from a position and a quaternion ``(qx, qy, qz, qw)``."""
+    T = np.eye(4)
+    T[:3, :3] = rotation_from_quaternion(quaternion)
+    T[:3, 3] = np.asarray(position, dtype=np.float64).ravel()
+    return T
+
+
+def T_from_planar(x_m: float, y_m: float, yaw_rad: float) -> np.ndarray:
+    """4x4 transform of a planar pose ``(x, y, yaw)`` (REP 103, z up), e.g. ``T_from_planar``."""
+    yaw = _checks.finite_number("yaw_rad", yaw_rad)
+    c, s = math.cos(yaw), math.sin(yaw)
+    T = np.eye(4)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[0, 3] = _checks.finite_number("x_m", x_m)
+    T[1, 3] = _checks.finite_number("y_m", y_m)
+    return T
+
+
+def planar_from_T(T) -> np.ndarray:
+    """``(x_m, y_m, yaw_rad)`` of 4x4 transforms (..., 4, 4): the position and the heading of x."""
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape[-2:] != (4, 4):
+        raise ValueError(f"T must have shape (..., 4, 4), got {T.shape}")
+    return np.stack([T[..., 0, 3], T[..., 1, 3], np.arctan2(T[..., 1, 0], T[..., 0, 0])], axis=-1)
+
+
+def compose_planar(a, b) -> tuple[float, float, float]:
+    """``a * b`` of planar poses ``(x, y, yaw)``."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2]))
+
+
+def relative_planar(a, b) -> tuple[float, float, float]:
+    """``inv(a) * b`` of planar poses."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return (c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[2] - a[2]))
+
+
+def wrap_angle(angle_rad: float) -> float:
+    """The angle in [-pi, pi]."""
+    return math.remainder(angle_rad, math.tau)

@@ -1,0 +1,1 @@
+"""Figures: matplotlib plumbing and the disparity colours every figure shares."""
