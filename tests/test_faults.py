@@ -138,7 +138,7 @@ def test_batch_refuses_an_output_folder_that_is_or_is_inside_the_dataset(ds, tmp
 def test_two_outputs_of_one_run_must_differ(ds, tmp_path, capsys):
     left, right = ds / "left_rect" / "000000.png", ds / "right_rect" / "000000.png"
     d = tmp_path / "d.png"
-    _run(capsys, ["disparity", left, right, "--max-disparity", "16", "-o", d, "--color", d],
+    _run(capsys, ["disparity", left, right, "--max-disparity", "16", "-o", d, "--plot", d],
          must="are the same file")
     assert not d.exists()
 
@@ -168,9 +168,9 @@ BAD_ARGS = {
     "bands 0:1e9": (["disparity", "{L}", "{R}", "--bands", "0:1e9", "-o", "{T}/x.pfm"], "would need"),
     "depth-bands 1e-30,1": (["disparity", "{L}", "{R}", "--calib", "{DS}/calibration.yaml", "--rectified",
                              "--depth-bands", "1e-30,1", "-o", "{T}/x.pfm"], "would need"),
-    "color suffix": (["disparity", "{L}", "{R}", "--max-disparity", "16", "-o", "{T}/d.pfm", "--color", "{T}/c.txt"],
-                     "--plot must end in .png"),
-    "output suffix": (["disparity", "{L}", "{R}", "--max-disparity", "16", "-o", "{T}/d.txt"], "--output must end"),
+    "plot suffix": (["disparity", "{L}", "{R}", "--max-disparity", "16", "-o", "{T}/d.pfm", "--plot", "{T}/c.txt"],
+                    "--plot must end in .png"),
+    "output suffix": (["disparity", "{L}", "{R}", "--max-disparity", "16", "-o", "{T}/d.txt"], "--out must end"),
     "output folder is a file": (["disparity", "{L}", "{R}", "--max-disparity", "16", "-o", "{L}/d.pfm"],
                                 "is a file, not a folder"),
     "max-disparity abc": (["disparity", "{L}", "{R}", "--max-disparity", "abc", "-o", "{T}/x.pfm"], "--max-disparity"),

@@ -63,7 +63,7 @@ def demo_like(tmp_path_factory):
 
 def _outputs(argv: list[str]) -> list[str]:
     return [argv[k + 1] for k, arg in enumerate(argv[:-1])
-            if arg in ("-o", "--out", "--output", "--plot", "--json", "--markdown")]
+            if arg in ("-o", "--out", "--plot", "--json", "--markdown")]
 
 
 @pytest.mark.parametrize("line", [line for block in _shell_blocks(README, marked=True) for line in block])

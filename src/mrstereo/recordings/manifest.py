@@ -8,7 +8,7 @@ Layout (docs/dataset.md)::
     DIR/left/000000.png ...  raw images; left_rect/, right_rect/ rectified;
     DIR/gt_disparity/*.pfm   ground-truth disparity (optional); gt_labels/*.png
 
-Paths in the manifest are relative to DIR. ``mrstereo bag export`` and the
+Paths in the manifest are relative to DIR. ``mrstereo export`` and the
 synthetic world (:mod:`mrstereo.world.dataset`) write it; ``map``, ``batch``
 and the pipeline read it. A frame may give only raw or only rectified images,
 and every ground-truth entry is optional. Conventions: docs/conventions.md.
