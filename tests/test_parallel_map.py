@@ -12,7 +12,6 @@ import pytest
 from mrstereo.pipeline.parallel import ItemError, ItemFailure, map_ordered
 from mrstereo.pipeline.run import build_map
 from mrstereo.recordings.manifest import read_manifest
-from mrstereo.world.dataset import write_synthetic_dataset
 
 
 def _slow_square(x: int, *, n: int) -> int:
@@ -41,10 +40,8 @@ def threaded_cluster():
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory):
-    out = tmp_path_factory.mktemp("par") / "synth"
-    return read_manifest(write_synthetic_dataset(out, seed=1, n_frames=4, width=160, height=120, supersample=1,
-                                                 progress=False))
+def dataset(synthetic_dataset):
+    return read_manifest(synthetic_dataset(seed=1, n_frames=4, width=160, height=120, supersample=1))
 
 
 def test_in_process_keeps_order_and_reports_failures():

@@ -48,14 +48,12 @@ def test_the_readme_marks_runnable_examples():
 
 
 @pytest.fixture(scope="module")
-def demo_like(tmp_path_factory):
+def demo_like(synthetic_dataset, tmp_path_factory):
     """The parts of a demo output the examples read: data/, map/map.yaml, calibration/stereo.yaml."""
-    from mrstereo.world import write_synthetic_dataset
-
     root = tmp_path_factory.mktemp("readme")
     demo = root / "mrstereo-demo"
-    write_synthetic_dataset(demo / "data", seed=0, n_frames=3, progress=False)
-    (demo / "calibration").mkdir()
+    (demo / "calibration").mkdir(parents=True)
+    (demo / "data").symlink_to(synthetic_dataset(seed=0, n_frames=3))
     shutil.copy(demo / "data" / "calibration.yaml", demo / "calibration" / "stereo.yaml")
     assert entry(["map", str(demo / "data"), "-o", str(demo / "map"), "--quiet"]) == 0
     return root
