@@ -11,6 +11,8 @@
 6. planning: A* through the map.
 
 Everything lands in one report directory (report.md, metrics.json, PNG figures).
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -2,6 +2,8 @@
 ``mrstereo batch`` (many datasets: per-frame disparity, cloud and scan, and a map each, on Dask).
 
 :func:`bag_options` is shared with ``mrstereo map --bag`` (cli/_pipeline.py). docs/scale-out.md.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -1,4 +1,7 @@
-"""CLI: ``calibrate``, ``stereo-calibrate`` and ``rectify`` (see docs/calibration.md)."""
+"""CLI: ``calibrate``, ``stereo-calibrate`` and ``rectify`` (see docs/calibration.md).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import dataclasses

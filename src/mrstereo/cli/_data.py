@@ -1,4 +1,7 @@
-"""CLI of the sample data: ``mrstereo data fetch|path|list`` (mrstereo.recordings.samples)."""
+"""CLI of the sample data: ``mrstereo data fetch|path|list`` (mrstereo.recordings.samples).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import click
@@ -56,7 +59,7 @@ def path_command(name: str | None) -> None:
 @data_group.command("list")
 @click.option("--verify", "check", is_flag=True, help="Also check every local file's SHA-256.")
 def list_command(check: bool) -> None:
-    """List the sample scenes, whether each is here, their sources."""
+    """List the sample scenes, their sources and presence."""
     from ..recordings.samples import is_available, scene, verify
 
     problems = 0

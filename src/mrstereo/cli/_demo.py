@@ -1,4 +1,7 @@
-"""CLI of the main job: ``mrstereo demo``."""
+"""CLI of the main job: ``mrstereo demo``.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,4 +1,7 @@
-"""``mrstereo evaluate``: disparity accuracy on Middlebury / KITTI scenes, side by side with OpenCV."""
+"""``mrstereo evaluate``: disparity accuracy on Middlebury / KITTI scenes, side by side with OpenCV.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 from pathlib import Path

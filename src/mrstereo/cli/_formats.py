@@ -1,6 +1,8 @@
 """CLI: ``calib convert`` -- a calibration of another tool as mrstereo's stereo YAML.
 
 Formats and detection: docs/calibration-formats.md.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -35,7 +37,7 @@ def calib_group() -> None:
 @click.option("--alpha", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True,
               help="Rectification of raw pairs: 0 keeps only valid pixels, 1 keeps every raw pixel.")
 def convert_cmd(inputs, output: Path, image_size, alpha: float) -> None:
-    """Convert another tool's calibration to mrstereo's stereo YAML.
+    """Write another tool's calibration as a stereo YAML.
 
     INPUTS is one file, or one file per camera (also written LEFT,RIGHT). The
     format is detected from the content: mrstereo/ROS stereo YAML, two ROS

@@ -2,6 +2,8 @@
 
 Both run one stereo pair through rectification, multi-range matching,
 eq. (13) rejection and the 3D stage (:mod:`mrstereo.pipeline.frame`).
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -1,4 +1,7 @@
-"""CLI of the mapping stage: ``mrstereo plan`` (A* on a ROS map)."""
+"""CLI of the mapping stage: ``mrstereo plan`` (A* on a ROS map).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import json

@@ -1,4 +1,7 @@
-"""CLI: ``mrstereo disparity`` (multi-range matching, docs/matching.md)."""
+"""CLI: ``mrstereo disparity`` (multi-range matching, docs/matching.md).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import math

@@ -1,4 +1,7 @@
-"""CLI of the visual odometry: ``mrstereo odometry`` (a dataset or a bag to a TUM trajectory)."""
+"""CLI of the visual odometry: ``mrstereo odometry`` (a dataset or a bag to a TUM trajectory).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import json

@@ -1,4 +1,7 @@
-"""Options shared by several commands."""
+"""Options shared by several commands.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import functools

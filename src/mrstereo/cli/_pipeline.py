@@ -1,4 +1,7 @@
-"""CLI of the whole chain: ``mrstereo map`` (a dataset to a ROS occupancy map)."""
+"""CLI of the whole chain: ``mrstereo map`` (a dataset to a ROS occupancy map).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 from pathlib import Path

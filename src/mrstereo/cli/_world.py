@@ -1,4 +1,7 @@
-"""CLI of the synthetic world: ``mrstereo synth``."""
+"""CLI of the synthetic world: ``mrstereo synth``.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 from pathlib import Path

@@ -3,6 +3,8 @@
 Each kernel does per element exactly the arithmetic of the numpy expression it replaces, in
 the same order and dtype (no fastmath), so the results are bit-identical; ``nogil`` lets the
 per-frame chain run on worker threads.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
