@@ -31,11 +31,6 @@ def skip_reason(name: str) -> str | None:
             f"or run `mrstereo data fetch {name}`")
 
 
-def pytest_configure(config):
-    config.addinivalue_line("markers", "sample_data(*names): the test needs these mrstereo.recordings.samples scenes; "
-                                       "skipped with the fetch command when they are missing")
-
-
 def pytest_runtest_setup(item):
     for marker in item.iter_markers("sample_data"):
         for name in marker.args:

@@ -81,6 +81,7 @@ def _stereo(cams, tf):
     return rectify_fusiello(left, right, T_f2_f1[:3, :3], T_f2_f1[:3, 3]).stereo
 
 
+@pytest.mark.slow
 def test_openloris_fisheye_bags_map_from_camera_info_and_tf(sample_data, tmp_path, capsys):
     from mrstereo.geometry.ground import ground_from_mount
     from mrstereo.recordings.manifest import read_manifest

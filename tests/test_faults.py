@@ -431,6 +431,7 @@ def _children(pid: int) -> list[int]:
         return []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("delay_s", [0.7, 2.5, 4.0])
 def test_ctrl_c_is_one_line_and_exit_130_within_seconds(long_inputs, tmp_path, delay_s):
     """SIGINT to the process group, as a terminal's Ctrl-C, during start-up, cluster start and work."""
@@ -492,6 +493,7 @@ LONG_COMMANDS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 @pytest.mark.parametrize("command", sorted(LONG_COMMANDS))
 def test_every_long_command_stops_with_one_line(long_inputs, tmp_path, command, signum):

@@ -90,6 +90,7 @@ def test_build_map_on_a_thread_cluster_is_bit_identical(dataset, threaded_cluste
     assert local.grid.n_updates == remote.grid.n_updates == 4
 
 
+@pytest.mark.slow
 def test_two_worker_processes_single_threaded_and_bit_identical(dataset):
     """A LocalCluster of 2 processes (workers=2, processes=True): one numba and OpenCV thread each; the same map."""
     from mrstereo.pipeline.parallel import dask_client

@@ -61,8 +61,8 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     triangulated and fused along the robot path. Writes a ROS map_server map
     (map.pgm + map.yaml), map.png with the path and fields of view, the
     log-odds array and, when the manifest has a ground-truth map, metrics.json.
-    --workers N / --scheduler ADDRESS spread the frames over Dask workers; the
-    map is the same bit for bit.
+    --workers N (threads, or processes with --processes) and --scheduler
+    ADDRESS (a Dask cluster) spread the frames; the map is the same bit for bit.
     """
     from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
     from ..mapping import GridSpec
