@@ -8,7 +8,8 @@ process, alternating frame by frame, with one thread and two (``numba.set_num_th
 * mrstereo: :func:`mrstereo.pipeline.frame.obstacles_from_pair` on the raw pair (rectify with the
   calibration, multi-range matching of the ``mapping`` preset, eq. 13 rejection, floor from
   the mount, eq. 14-16, obstacle/floor split) then the grid cells it hits and clears and the
-  log-odds update (:func:`mrstereo.pipeline.run.observation_from_pair`, :func:`mrstereo.mapping.fusion.add_observation`).
+  log-odds update (:func:`mrstereo.pipeline.run.observation_from_pair`,
+  :func:`mrstereo.mapping.fusion.add_observation`).
 * OpenCV: ``cv2.remap`` x2 with maps built once, ``StereoBM`` (9x9, ``numDisparities`` the
   multiple of 16 covering mrstereo's near limit), ``cv2.reprojectImageTo3D``, the same height
   band and range limit in the robot frame, ``np.add.at`` of the obstacle points into a grid of

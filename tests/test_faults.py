@@ -440,8 +440,8 @@ def test_ctrl_c_is_one_line_and_exit_130_within_seconds(long_inputs, tmp_path, d
     out = tmp_path / "m"
     env = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg")
     proc = subprocess.Popen([sys.executable, "-m", "mrstereo", "map", str(long_inputs["DS"]), "-o", str(out),
-                             "--workers", "2", "--processes", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            env=env, start_new_session=True)
+                             "--workers", "2", "--processes", "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, start_new_session=True)
     time.sleep(delay_s)
     children = _children(proc.pid)
     if proc.poll() is not None:

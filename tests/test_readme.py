@@ -139,7 +139,8 @@ def test_every_output_is_dash_o_or_dash_dash_out():
 def test_every_help_starts_with_a_whole_sentence():
     """``mrstereo --help`` lists each command with the first sentence of its help, uncut."""
     width = 80 - 6 - max(len(name) for name in main.commands)      # what click's command list leaves
-    groups = [("mrstereo", main)] + [(f"mrstereo {n}", c) for n, c in main.commands.items() if isinstance(c, click.Group)]
+    groups = [("mrstereo", main)]
+    groups += [(f"mrstereo {name}", c) for name, c in main.commands.items() if isinstance(c, click.Group)]
     for group_name, group in groups:
         for name, command in group.commands.items():
             short = command.get_short_help_str(limit=width)
@@ -209,7 +210,7 @@ def test_every_module_docstring_links_the_conventions():
 
     for path in sorted((ROOT / "src" / "mrstereo").rglob("*.py")):
         doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
-        assert "docs/conventions.md" in doc, f"{path.relative_to(ROOT)}: its docstring does not link docs/conventions.md"
+        assert "docs/conventions.md" in doc, f"{path.relative_to(ROOT)}: its docstring does not link the conventions"
 
 
 def test_quick_start_is_two_commands_on_one_editable_install():

@@ -81,7 +81,8 @@ def _siblings(output: Path, stem_suffix: str) -> dict[str, Path]:
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the GA's random numbers.")
 @click.option("--generations", type=int, default=None, help="GA generation limit (default 2000 for one "
               "view, 200 for several).")
-@click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False), help="camera_info YAML to write (.yaml or .yml).")
+@click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False),
+              help="camera_info YAML to write (.yaml or .yml).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def calibrate_cmd(points, image_size, units, images_glob, board, square, method, model, seed, generations, output,
                   quiet):
@@ -155,7 +156,8 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the GA's random numbers.")
 @click.option("--alpha", type=float, default=0.0, show_default=True,
               help="Rectified view: 0 = valid pixels only, 1 = all raw pixels.")
-@click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False), help="Stereo YAML to write (.yaml or .yml).")
+@click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False),
+              help="Stereo YAML to write (.yaml or .yml).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, seed, alpha, output, quiet):
     """Calibrate a stereo rig from chessboard image pairs.

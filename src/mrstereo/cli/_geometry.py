@@ -154,7 +154,8 @@ def points_command(left, right, calib, output, which, color, **kw):
               help="Also write a top-view PNG (obstacle points, floor points, scan).")
 @click.option("--angle-increment", "angle_increment_deg", type=float, default=0.5, show_default=True,
               help="Angular step of the scan [deg].")
-@click.option("--range-min", "range_min_m", type=float, default=0.1, show_default=True, help="Smallest range [m] (raised to the matcher's near limit).")
+@click.option("--range-min", "range_min_m", type=float, default=0.1, show_default=True,
+              help="Smallest range [m] (raised to the matcher's near limit).")
 def scan_command(left, right, calib, output, plot_path, angle_increment_deg, range_min_m, **kw):
     """Write a stereo pair's virtual laser scan (JSON or CSV).
 
