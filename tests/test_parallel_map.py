@@ -2,6 +2,7 @@
 input order, failures named or returned, one thread per worker, the same map bit for bit."""
 from __future__ import annotations
 
+import json
 import time
 from functools import partial
 
@@ -141,6 +142,12 @@ def test_cli_map_on_a_scheduler_matches_in_process(dataset, threaded_cluster, tm
 
     cluster, _ = threaded_cluster
     assert entry(["map", str(dataset.root), "-o", str(tmp_path / "a"), "--quiet"]) == 0
+    # what map prints under each name is the metrics.json value of that name (docs/glossary.md)
+    printed = capsys.readouterr().out
+    metrics = json.loads((tmp_path / "a" / "metrics.json").read_text())
+    for name, key in (("precision", "precision"), ("free correct", "free_precision"),
+                      ("free coverage", "free_coverage")):
+        assert f"{name} {metrics[key]:.3f}" in printed, (name, printed)
     assert entry(["map", str(dataset.root), "-o", str(tmp_path / "b"), "--quiet",
                   "--scheduler", cluster.scheduler_address]) == 0
     assert np.array_equal(np.load(tmp_path / "a" / "log_odds.npy"), np.load(tmp_path / "b" / "log_odds.npy"),
