@@ -29,7 +29,7 @@ def test_round_trip(dataset):
     stereo = default_stereo(96, 72)
     assert m.calibration.baseline_m == pytest.approx(stereo.baseline_m)
     np.testing.assert_allclose(m.calibration.left.R, stereo.left.R, atol=1e-12)
-    assert m.rig == stereo.rig
+    np.testing.assert_allclose(m.mount.T_base_from_cam, stereo.mount.T_base_from_cam, atol=1e-15)
     assert [f.pan_rad for f in m.frames] == pytest.approx([0.0, math.pi / 4, -math.pi / 4, 0.0])
     assert m.frames[0].pose == m.frames[2].pose != m.frames[3].pose
     # Files hold exactly what the renderer gives for that frame.
@@ -89,7 +89,8 @@ def test_rectified_only_frame_is_fine(copy):
     (lambda d: d["frames"][3].update(left="left/missing.png"), FileNotFoundError, "frame 3: left not found"),
     (lambda d: d.update(calibration="nope.yaml"), FileNotFoundError, "calibration not found"),
     (lambda d: d.pop("calibration"), ValueError, "missing 'calibration"),
-    (lambda d: d.update(rig={"tilt_rad": 0.1}), ValueError, "rig"),
+    (lambda d: (d.pop("mount"), d.update(rig={"tilt_rad": 0.1})), ValueError, "'rig' needs height_m"),
+    (lambda d: d.update(rig={"height_m": 0.45}), ValueError, "'mount:' or 'rig:', not both"),
     (lambda d: d["frames"][0].update(colour="red"), ValueError, "unknown field"),
 ])
 def test_bad_manifests(copy, mutate, error, match):

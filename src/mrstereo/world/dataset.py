@@ -6,17 +6,13 @@ from __future__ import annotations
 
 import math
 import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .. import _checks
-from ..camera import write_stereo
-from ..io import write_image, write_pfm
-from ..mapping.rosmap import write_ros_map
-from ..recordings.manifest import IMAGE_KEYS, MANIFEST_NAME, write_manifest
+from ..io import check_output_dir
+from ..recordings.manifest import staged_dataset
 from .groundtruth import ground_truth_map
 from .paths import PATH_KINDS, drifted_poses, sequence_path, waypoint_path
 from .randomize import random_world
@@ -75,8 +71,9 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     a randomized world: ``"front"`` only, along its own waypoints,
     :func:`mrstereo.world.paths.waypoint_path`).
     Written: raw and rectified images, GT disparity (PFM), GT labels (PNG),
-    the true calibration, the GT map and ``manifest.yaml``. The directory is
-    built beside ``out_dir`` and renamed into place when complete.
+    the true calibration, the GT map and ``manifest.yaml``
+    (:func:`mrstereo.recordings.manifest.staged_dataset`: built beside ``out_dir`` and renamed
+    into place when complete).
 
     Parameters
     ----------
@@ -116,16 +113,13 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     """
     from tqdm import tqdm
 
-    out_dir = Path(out_dir)
     seed = _checks.positive_int("seed", seed, minimum=0)
     n_frames = _checks.positive_int("n_frames", n_frames)
     width, height = _checks.positive_int("width", width, minimum=16), _checks.positive_int("height", height, minimum=16)
     supersample = _checks.positive_int("supersample", supersample)
     _checks.fits_in_memory("width and height", 64.0 * width * height * supersample ** 2,
                            f"rendering {width}x{height} images")
-    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
-        raise ValueError(f"output directory {out_dir} already exists and is not empty; "
-                         "choose a new directory")
+    check_output_dir("out_dir", out_dir, must_be_empty=True)
     if path not in PATH_KINDS:
         raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
     if randomize and path == "s-curve":
@@ -133,6 +127,8 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                          "sequence is path='front' (along the world's own waypoints)")
     if wall_texture is not None and not randomize:
         raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
+    if odometry_noise is not None and len(odometry_noise) != 2:
+        raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
     n_stops = -(-n_frames // len(_PANS))
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
     if randomize:
@@ -144,56 +140,29 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         stereo, scene, sensors = default_stereo(width, height), default_scene(seed), (SensorModel(), SensorModel())
         stops = corridor_path(n_stops)
     if path == "stops":
-        pans = [_PANS[k % len(_PANS)] for k in range(n_frames)]
+        pans = [round(_PANS[k % len(_PANS)], 9) for k in range(n_frames)]
         poses = np.repeat(stops, len(_PANS), axis=0)[:n_frames]
     else:
         pans = [0.0] * n_frames
         poses = (waypoint_path(world.waypoints_xy, n_frames, step_m=step_m) if randomize
                  else sequence_path(path, n_frames, step_m=step_m))
+        generator["step_m"] = float(step_m)
     poses = np.round(poses, 6)         # render with exactly the numbers the manifest stores
     given = poses
     if odometry_noise is not None:
-        if len(odometry_noise) != 2:
-            raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
         given = np.round(drifted_poses(poses, scale_error=odometry_noise[0],
                                        heading_drift_rad_per_m=odometry_noise[1]), 6)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
-    try:
-        write_stereo(tmp / "calibration.yaml", stereo)
-        write_ros_map(tmp / "gt_map.yaml", ground_truth_map(scene))
-        frames = []
+        generator["odometry_noise"] = {"scale_error": float(odometry_noise[0]),
+                                       "heading_drift_rad_per_m": float(odometry_noise[1])}
+    with staged_dataset(out_dir, calibration=stereo, mount=stereo.mount, extra={"generator": generator}) as dataset:
+        dataset.write_ground_truth_map(ground_truth_map(scene))
         for k in tqdm(range(n_frames), desc="rendering", unit="frame", disable=not progress):
             pose = tuple(float(v) for v in poses[k])
-            pan = round(pans[k], 9)
-            frame = render_stereo_frame(scene, stereo, pose=pose, pan_rad=pan, seed=seed * 100003 + k,
+            frame = render_stereo_frame(scene, stereo, pose=pose, pan_rad=pans[k], seed=seed * 100003 + k,
                                         supersample=supersample, sensors=sensors)
-            name = f"{k:06d}"
-            entry = {}
-            for key, image in (("left", frame.raw_left), ("right", frame.raw_right),
-                               ("left_rect", frame.left_rect), ("right_rect", frame.right_rect),
-                               ("gt_labels", frame.labels)):
-                write_image(tmp / key / f"{name}.png", image)
-                entry[key] = f"{key}/{name}.png"
-            write_pfm(tmp / "gt_disparity" / f"{name}.pfm", frame.disparity_px)
-            entry["gt_disparity"] = f"gt_disparity/{name}.pfm"
-            entry["pose"] = [float(v) for v in given[k]]
-            entry["pan_rad"] = pan
-            if odometry_noise is not None:
-                entry["true_pose"] = list(pose)
-            frames.append({key: entry[key] for key in (*IMAGE_KEYS, "gt_disparity", "gt_labels", "pose",
-                                                        "true_pose", "pan_rad") if key in entry})
-        if path != "stops":
-            generator["step_m"] = float(step_m)
-        if odometry_noise is not None:
-            generator["odometry_noise"] = {"scale_error": float(odometry_noise[0]),
-                                           "heading_drift_rad_per_m": float(odometry_noise[1])}
-        write_manifest(tmp / MANIFEST_NAME, calibration="calibration.yaml", rig=stereo.rig, frames=frames,
-                       ground_truth_map="gt_map.yaml", extra={"generator": generator})
-        if out_dir.exists():
-            out_dir.rmdir()          # empty, checked above
-        os.replace(tmp, out_dir)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
-    return out_dir
+            for key, image in (("left", frame.raw_left), ("right", frame.raw_right), ("left_rect", frame.left_rect),
+                               ("right_rect", frame.right_rect), ("gt_labels", frame.labels)):
+                dataset.write_image(key, k, image)
+            dataset.write_disparity(k, frame.disparity_px)
+            dataset.add_frame(k, pose=given[k], pan_rad=pans[k], true_pose=pose if odometry_noise is not None else None)
+    return Path(out_dir)
