@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import Sequence
 
 import numpy as np
@@ -214,18 +213,14 @@ class _JointFit:
                                for intr, R_, t_, views in ((il, Rl, tl, self.left_views),
                                                            (ir, Rr, tr, self.right_views))])
 
-    @cached_property
-    def _blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Column blocks (-1: shared; else the view pair), local column indices, row blocks (view pairs)."""
+    def jacobian(self, x) -> np.ndarray:
+        """Central differences, perturbing the columns of different view pairs together."""
         V, n = len(self.left_views), self.n
         col_block = np.concatenate([np.full(2 * n, -1), np.repeat(np.arange(V), 6), np.full(6, -1)])
         col_local = np.concatenate([np.arange(2 * n), np.tile(np.arange(6), V), np.arange(6)])
         row_block = np.concatenate([np.repeat(np.arange(V), [2 * len(v.uv) for v in views])
                                     for views in (self.left_views, self.right_views)])
-        return col_block, col_local, row_block
-
-    def jacobian(self, x) -> np.ndarray:
-        return grouped_jacobian(self.residuals, x, *self._blocks)
+        return grouped_jacobian(self.residuals, x, col_block, col_local, row_block)
 
 
 def _refine_jointly(fit: _JointFit, cam_l, cam_r, poses_l, R, T, *, width: int, height: int) -> tuple:

@@ -41,10 +41,9 @@ from .. import _checks
 from ..camera import CameraMount, StereoCamera
 from ..transforms import T_robot_from_cam
 
-# Below / above these a floor fit is reported as weak (docs/obstacles.md, "Floor confidence").
-# Measured (mapping preset, 4 m range): synthetic corridor 320x240, 12 frames, plane fit: share
-# 0.14-0.70, residual 0.013-0.014 m (V-disparity: 0.12-0.70, 0.012-0.031 m); Middlebury Teddy and
-# Tsukuba with an ideal calibration (no floor in view): share 0.03-0.07.
+# Below / above these a floor fit is reported as weak: a floor in view supports at least this share of the
+# valid points within a few centimetres, a scene without one (a wall, a desk) a few percent
+# (docs/obstacles.md, "Floor confidence", has the measurements).
 MIN_FLOOR_SHARE = 0.12
 MAX_FLOOR_RESIDUAL_M = 0.03
 from .triangulation import points_cam_from_disparity
@@ -225,6 +224,36 @@ def _subsample(n: int, max_samples: int, rng: np.random.Generator) -> np.ndarray
     return np.arange(n) if n <= max_samples else rng.choice(n, size=max_samples, replace=False)
 
 
+def _line_scores(a, c, v, dd, tol: float, below_penalty: float) -> np.ndarray:
+    """RANSAC score of each line ``d = a v + c``: pixels within ``tol``, minus ``below_penalty`` per pixel
+    farther than the line under its horizon (impossible for a floor)."""
+    scores = np.zeros(a.size, dtype=np.float64)
+    for start in range(0, a.size, 32):        # blocks keep the (hypotheses x samples) array small
+        line = a[start:start + 32, None] * v[None, :] + c[start:start + 32, None]
+        res = dd[None, :] - line
+        below = (res < -tol) & (line > 0)
+        scores[start:start + 32] = (np.abs(res) <= tol).sum(axis=1) - below_penalty * below.sum(axis=1)
+    return scores
+
+
+def _refine_line(a: float, c: float, v, dd, tol: float, *, bf: float, fy: float, height_range_m,
+                 tilt_range_rad) -> tuple[float, float]:
+    """Least squares on the inliers of ``d = a v + c``, three times, keeping the last line whose height
+    ``bf cos(tilt) / (a fy)`` and tilt ``atan2(c, a fy)`` are plausible."""
+    (h_lo, h_hi), (t_lo, t_hi) = height_range_m, tilt_range_rad
+    for _ in range(3):
+        inl = np.abs(dd - (a * v + c)) <= tol
+        if inl.sum() < 2:
+            break
+        a_new, c_new = np.polyfit(v[inl], dd[inl], 1)
+        t_new = math.atan2(c_new, a_new * fy)
+        h_new = bf * math.cos(t_new) / (a_new * fy) if a_new > 0 else math.inf
+        if not (h_lo <= h_new <= h_hi and t_lo <= t_new <= t_hi):
+            break
+        a, c = a_new, c_new
+    return a, c
+
+
 def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: float = 1.0,
                            height_range_m: tuple[float, float] = (0.1, 2.0),
                            tilt_range_rad: tuple[float, float] = (-0.35, 1.2), below_penalty: float = 1.0,
@@ -304,24 +333,9 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
     if not ok.any():
         return _failed("v_disparity", "no line with a floor-like slope (positive, plausible height and tilt)", 0)
     a, c = a[ok], c[ok]
-    scores = np.zeros(a.size, dtype=np.float64)
-    for start in range(0, a.size, 32):        # blocks keep the (hypotheses x samples) array small
-        line = a[start:start + 32, None] * v[None, :] + c[start:start + 32, None]
-        res = dd[None, :] - line
-        below = (res < -tol) & (line > 0)      # farther than the floor under the horizon: impossible
-        scores[start:start + 32] = (np.abs(res) <= tol).sum(axis=1) - below_penalty * below.sum(axis=1)
-    best = int(np.argmax(scores))
-    a_best, c_best = a[best], c[best]
-    for _ in range(3):                        # least-squares refinement on the inliers
-        inl = np.abs(dd - (a_best * v + c_best)) <= tol
-        if inl.sum() < 2:
-            break
-        a_new, c_new = np.polyfit(v[inl], dd[inl], 1)
-        t_new = math.atan2(c_new, a_new * fy)
-        h_new = stereo.baseline_m * fx * math.cos(t_new) / (a_new * fy) if a_new > 0 else math.inf
-        if not (h_lo <= h_new <= h_hi and t_lo <= t_new <= t_hi):
-            break                              # keep the last plausible line
-        a_best, c_best = a_new, c_new
+    best = int(np.argmax(_line_scores(a, c, v, dd, tol, below_penalty)))
+    a_best, c_best = _refine_line(a[best], c[best], v, dd, tol, bf=stereo.baseline_m * fx, fy=fy,
+                                  height_range_m=(h_lo, h_hi), tilt_range_rad=(t_lo, t_hi))
     inl = np.abs(dd - (a_best * v + c_best)) <= tol
     n_inl = int(round(inl.sum() * v_all.size / v.size))
     if n_inl < min_inliers or a_best <= 0:

@@ -500,7 +500,7 @@ def _write_pairs(reader, dataset, pairs: list[tuple[int, int]], *, topics: tuple
             if (image.shape[1], image.shape[0]) != tuple(calibration.size):
                 raise ValueError(f"{conn.topic}: images are {image.shape[1]}x{image.shape[0]} but the "
                                  f"calibration is {calibration.size[0]}x{calibration.size[1]}")
-            dataset.write_image(key_of[conn.topic], k, image)
+            dataset.write(key_of[conn.topic], k, image)
             bar.update(1)
 
 

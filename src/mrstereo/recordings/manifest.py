@@ -201,19 +201,13 @@ class DatasetWriter:
         self.ground_truth_map: str | None = None
         self._files: dict[int, dict[str, str]] = {}
 
-    def write_image(self, key: str, index: int, image: np.ndarray) -> None:
-        """Frame ``index``'s image ``key`` (``left``, ``right``, ``left_rect``, ``right_rect`` or ``gt_labels``)."""
-        if key not in (*IMAGE_KEYS, "gt_labels"):
-            raise ValueError(f"key must be one of {', '.join((*IMAGE_KEYS, 'gt_labels'))}, got {key!r}")
-        relative = f"{key}/{index:06d}.png"
-        write_image(self.root / relative, image)
+    def write(self, key: str, index: int, array: np.ndarray) -> None:
+        """Frame ``index``'s file ``key``: an image (:data:`IMAGE_KEYS`, ``gt_labels``) or ``gt_disparity`` (PFM)."""
+        if key not in (*IMAGE_KEYS, *GT_KEYS):
+            raise ValueError(f"key must be one of {', '.join((*IMAGE_KEYS, *GT_KEYS))}, got {key!r}")
+        relative = f"{key}/{index:06d}.{'pfm' if key == 'gt_disparity' else 'png'}"
+        (write_pfm if key == "gt_disparity" else write_image)(self.root / relative, array)
         self._files.setdefault(index, {})[key] = relative
-
-    def write_disparity(self, index: int, disparity_px: np.ndarray) -> None:
-        """Frame ``index``'s ground-truth disparity (PFM, rectified left frame)."""
-        relative = f"gt_disparity/{index:06d}.pfm"
-        write_pfm(self.root / relative, disparity_px)
-        self._files.setdefault(index, {})["gt_disparity"] = relative
 
     def write_ground_truth_map(self, ros_map) -> None:
         """The ground-truth map (a :class:`mrstereo.mapping.rosmap.RosMap`) as ``gt_map.yaml`` + ``.pgm``."""

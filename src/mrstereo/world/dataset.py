@@ -56,6 +56,33 @@ def poses_along(waypoints_xy, n_stops: int) -> np.ndarray:
 _PANS = (0.0, math.pi / 4, -math.pi / 4)   # front, left and right views (paper Sec. 5.2)
 
 
+def _check_world_options(path: str, randomize: bool, wall_texture, odometry_noise) -> None:
+    if path not in PATH_KINDS:
+        raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
+    if randomize and path == "s-curve":
+        raise ValueError("path='s-curve' is a path of the built-in corridor; a randomized world's odometry "
+                         "sequence is path='front' (along the world's own waypoints)")
+    if wall_texture is not None and not randomize:
+        raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
+    if odometry_noise is not None and len(odometry_noise) != 2:
+        raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
+
+
+def _frame_poses(path: str, n_frames: int, waypoints_xy, step_m: float) -> tuple[np.ndarray, list[float]]:
+    """Robot poses (n_frames, 3) and head pans of the frames along ``path`` (``waypoints_xy``: a randomized
+    world's path, None: the built-in corridor's), rounded to the numbers the manifest stores."""
+    if path == "stops":
+        n_stops = -(-n_frames // len(_PANS))
+        stops = corridor_path(n_stops) if waypoints_xy is None else poses_along(waypoints_xy, n_stops)
+        poses = np.repeat(stops, len(_PANS), axis=0)[:n_frames]
+        pans = [round(_PANS[k % len(_PANS)], 9) for k in range(n_frames)]
+    else:
+        poses = (sequence_path(path, n_frames, step_m=step_m) if waypoints_xy is None
+                 else waypoint_path(waypoints_xy, n_frames, step_m=step_m))
+        pans = [0.0] * n_frames
+    return np.round(poses, 6), pans
+
+
 def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_frames: int = 30,
                             width: int = 320, height: int = 240, supersample: int = 2,
                             path: str = "stops", step_m: float = 0.1,
@@ -120,34 +147,18 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     _checks.fits_in_memory("width and height", 64.0 * width * height * supersample ** 2,
                            f"rendering {width}x{height} images")
     check_output_dir("out_dir", out_dir, must_be_empty=True)
-    if path not in PATH_KINDS:
-        raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
-    if randomize and path == "s-curve":
-        raise ValueError("path='s-curve' is a path of the built-in corridor; a randomized world's odometry "
-                         "sequence is path='front' (along the world's own waypoints)")
-    if wall_texture is not None and not randomize:
-        raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
-    if odometry_noise is not None and len(odometry_noise) != 2:
-        raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
-    n_stops = -(-n_frames // len(_PANS))
+    _check_world_options(path, randomize, wall_texture, odometry_noise)
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
     if randomize:
         world = random_world(seed, width=width, height=height, wall_texture=wall_texture)
-        stereo, scene, sensors = world.stereo, world.scene, world.sensors
-        stops = poses_along(world.waypoints_xy, n_stops)
+        stereo, scene, sensors, waypoints = world.stereo, world.scene, world.sensors, world.waypoints_xy
         generator["randomized"] = world.summary
     else:
         stereo, scene, sensors = default_stereo(width, height), default_scene(seed), (SensorModel(), SensorModel())
-        stops = corridor_path(n_stops)
-    if path == "stops":
-        pans = [round(_PANS[k % len(_PANS)], 9) for k in range(n_frames)]
-        poses = np.repeat(stops, len(_PANS), axis=0)[:n_frames]
-    else:
-        pans = [0.0] * n_frames
-        poses = (waypoint_path(world.waypoints_xy, n_frames, step_m=step_m) if randomize
-                 else sequence_path(path, n_frames, step_m=step_m))
+        waypoints = None
+    poses, pans = _frame_poses(path, n_frames, waypoints, step_m)
+    if path != "stops":
         generator["step_m"] = float(step_m)
-    poses = np.round(poses, 6)         # render with exactly the numbers the manifest stores
     given = poses
     if odometry_noise is not None:
         given = np.round(drifted_poses(poses, scale_error=odometry_noise[0],
@@ -160,9 +171,9 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
             pose = tuple(float(v) for v in poses[k])
             frame = render_stereo_frame(scene, stereo, pose=pose, pan_rad=pans[k], seed=seed * 100003 + k,
                                         supersample=supersample, sensors=sensors)
-            for key, image in (("left", frame.raw_left), ("right", frame.raw_right), ("left_rect", frame.left_rect),
-                               ("right_rect", frame.right_rect), ("gt_labels", frame.labels)):
-                dataset.write_image(key, k, image)
-            dataset.write_disparity(k, frame.disparity_px)
+            for key, array in (("left", frame.raw_left), ("right", frame.raw_right), ("left_rect", frame.left_rect),
+                               ("right_rect", frame.right_rect), ("gt_labels", frame.labels),
+                               ("gt_disparity", frame.disparity_px)):
+                dataset.write(key, k, array)
             dataset.add_frame(k, pose=given[k], pan_rad=pans[k], true_pose=pose if odometry_noise is not None else None)
     return Path(out_dir)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -275,25 +276,21 @@ class _MaterialBank:
         return len(self.materials) - 1
 
 
-@dataclass(frozen=True)
-class _Corridor:
-    """The drawn corridor: walls at ``y = +-half_m``, end walls at ``x0_m`` and ``x1_m``, ceiling height."""
+class _Corridor(NamedTuple):
+    """The drawn corridor: side walls at ``y = +-half_m``, end walls at ``x0_m`` and ``x1_m``."""
 
     width_m: float
+    half_m: float
     ceiling_m: float
     x0_m: float
     x1_m: float
-
-    @property
-    def half_m(self) -> float:
-        return self.width_m / 2.0
 
 
 def _draw_corridor(rng) -> _Corridor:
     width_m = _u(rng, RANGES["corridor_width_m"])
     ceiling_m = _u(rng, RANGES["ceiling_m"])
     x0 = -rng.uniform(0.6, 1.5)
-    return _Corridor(width_m=width_m, ceiling_m=ceiling_m, x0_m=x0, x1_m=x0 + _u(rng, RANGES["corridor_length_m"]))
+    return _Corridor(width_m, width_m / 2.0, ceiling_m, x0, x0 + _u(rng, RANGES["corridor_length_m"]))
 
 
 def _draw_path(rng, corridor: _Corridor) -> np.ndarray:
