@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from mrstereo.camera import Camera, CameraInfo, CameraMount, StereoCamera
-from mrstereo.geometry import (GroundPlane, ObstacleConfig, T_robot_from_cam_ground, detect_obstacles,
-                               fit_ground_plane, fit_ground_v_disparity, height_above_ground_m,
+from mrstereo.geometry import (GroundPlane, ObstacleConfig, T_robot_from_cam_ground, detect_obstacles, estimate_ground,
+                               fit_ground_plane, fit_ground_v_disparity, ground_from_mount, height_above_ground_m,
                                points_cam_from_disparity, v_disparity)
 from mrstereo.transforms import T_robot_from_cam
 
@@ -155,6 +155,13 @@ def test_rough_mount_is_refined_and_kept_when_the_estimate_fails():
     res = detect_obstacles(d, _stereo(), mount=far, config=ObstacleConfig(estimate_ground=True))
     assert res.ground.method == "mount" and "mount used" in res.ground.message
     assert res.ground.height_m == HEIGHT + 0.4
+    # the prior of estimate_ground: a mount or the floor it implies, the same search either way
+    for prior in (rough, ground_from_mount(rough)):
+        g = estimate_ground(d, _stereo(), method="plane", prior=prior)
+        assert g.success and g.height_m == pytest.approx(HEIGHT, abs=1e-3)
+    assert not estimate_ground(d, _stereo(), method="plane", prior=far).success
+    with pytest.raises(TypeError, match="prior"):
+        estimate_ground(d, _stereo(), prior=(HEIGHT, TILT))
 
 
 def test_pan_rotates_the_obstacles_to_the_left():

@@ -8,8 +8,8 @@ from scipy.spatial import cKDTree
 
 from mrstereo.camera import write_stereo
 from mrstereo.cli import entry
-from mrstereo.geometry import (ObstacleConfig, ground_from_mount, laser_scan_from_points, points_robot_from_disparity, read_ply,
-                               read_scan_json)
+from mrstereo.geometry import (ObstacleConfig, ground_from_mount, laser_scan_from_points, points_robot_from_disparity,
+                               read_ply, read_scan_json)
 from mrstereo.io import write_image
 from mrstereo.pipeline.frame import obstacles_from_pair, scan_from_pair
 from mrstereo.world import LABEL_FLOOR, default_scene, default_stereo, is_obstacle_label, render_stereo_frame

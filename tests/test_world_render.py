@@ -133,7 +133,8 @@ def test_bad_inputs(scene, stereo):
     with pytest.raises(ValueError, match="pose"):
         render_stereo_frame(scene, stereo, pose=(1.0, np.nan, 0.0))
     with pytest.raises(ValueError, match="inside a solid object"):
-        render_stereo_frame(scene, stereo, pose=(6.2, 0.0, 0.0), mount=CameraMount.from_rig(0.3, 0.0, R_rect_from_cam=stereo.left.R))
+        low = CameraMount.from_rig(0.3, 0.0, R_rect_from_cam=stereo.left.R)
+        render_stereo_frame(scene, stereo, pose=(6.2, 0.0, 0.0), mount=low)
     with pytest.raises(ValueError, match="supersample"):
         render_stereo_frame(scene, stereo, supersample=0)
     with pytest.raises(TypeError, match="scene"):

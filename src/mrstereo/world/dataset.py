@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 
 from .. import _checks
-from ..io import check_output_dir
 from ..recordings.manifest import staged_dataset
 from .groundtruth import ground_truth_map
 from .paths import PATH_KINDS, drifted_poses, sequence_path, waypoint_path
@@ -146,7 +145,6 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     supersample = _checks.positive_int("supersample", supersample)
     _checks.fits_in_memory("width and height", 64.0 * width * height * supersample ** 2,
                            f"rendering {width}x{height} images")
-    check_output_dir("out_dir", out_dir, must_be_empty=True)
     _check_world_options(path, randomize, wall_texture, odometry_noise)
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
     if randomize:
