@@ -5,8 +5,10 @@ from pathlib import Path
 
 import click
 
+from ..mapping import GridSpec, MappingConfig
+from ..pipeline.run import PipelineConfig, build_map
 from ._bag import bag_options, opened_dataset
-from ._options import check_workers, echo_run_floor, profile_option, worker_options
+from ._options import check_workers, echo_run_floor, library_default, profile_option, worker_options
 
 __all__ = ["COMMANDS"]
 
@@ -24,17 +26,18 @@ FIGURE_MODULES = ("matplotlib.figure", "matplotlib.backends.backend_agg", "matpl
 @click.option("--calib", "calib", type=click.Path(dir_okay=False, path_type=Path),
               help="Use this stereo calibration (and the raw images) instead of the manifest's; "
                    "with --bag, instead of the camera_info topics.")
-@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default="log_odds", show_default=True,
+@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default=MappingConfig.fusion, show_default=True,
               help="Log-odds fusion (OctoMap) or the paper's union of occupied cells.")
-@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default="mapping", show_default=True,
-              help="Matching preset.")
-@click.option("--resolution", "resolution_m", type=float, default=0.05, show_default=True,
+@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default=PipelineConfig.preset,
+              show_default=True, help="Matching preset.")
+@click.option("--resolution", "resolution_m", type=float, default=GridSpec.resolution_m, show_default=True,
               help="Cell size [m].")
-@click.option("--size", "size_m", default="12,6", show_default=True, metavar="W,H",
-              help="Map width (x) and height (y) [m].")
-@click.option("--origin", "origin_m", default="0,-3", show_default=True, metavar="X,Y",
-              help="World position of the lower-left map corner [m].")
-@click.option("--odometry", type=click.Choice(["given", "visual"]), default="given", show_default=True,
+@click.option("--size", "size_m", default=f"{GridSpec.width_m:g},{GridSpec.height_m:g}", show_default=True,
+              metavar="W,H", help="Map width (x) and height (y) [m].")
+@click.option("--origin", "origin_m", default=f"{GridSpec.origin_x_m:g},{GridSpec.origin_y_m:g}", show_default=True,
+              metavar="X,Y", help="World position of the lower-left map corner [m].")
+@click.option("--odometry", type=click.Choice(["given", "visual"]), default=library_default(build_map, "odometry"),
+              show_default=True,
               help="Robot poses: the dataset's (or the bag's odometry), or stereo visual odometry from the "
                    "first frame's pose (docs/odometry.md).")
 @click.option("--align", is_flag=True,
@@ -59,9 +62,8 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     map is the same bit for bit.
     """
     from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
-    from ..mapping import GridSpec
     from ..pipeline.batch import dataset_files
-    from ..pipeline.run import PipelineConfig, build_map, write_map_outputs
+    from ..pipeline.run import write_map_outputs
     from ..recordings.manifest import read_manifest
 
     check_workers(workers, scheduler, processes)

@@ -76,7 +76,8 @@ import numpy as np
 from .. import _checks
 from ..camera import StereoCamera
 from . import _freespace_kernels as _kernels
-from .obstacles import ObstacleResult, _disparity_image, _rectified_intrinsics, _rigid
+from .obstacles import (MAPPING_MAX_RANGE_M, ObstacleConfig, ObstacleResult, _disparity_image, _rectified_intrinsics,
+                        _rigid)
 
 __all__ = ["FreeSpaceConfig", "FreeSpaceBoundary", "free_space_boundary"]
 
@@ -202,8 +203,9 @@ def _runs(rows: np.ndarray, min_run: int, max_step: float) -> np.ndarray:
 
 
 def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, stereo: StereoCamera, *,
-                        config: FreeSpaceConfig = FreeSpaceConfig(), max_range_m: float = 4.0,
-                        min_height_m: float = 0.08, max_height_m: float = 1.5) -> FreeSpaceBoundary:
+                        config: FreeSpaceConfig = FreeSpaceConfig(), max_range_m: float = MAPPING_MAX_RANGE_M,
+                        min_height_m: float = ObstacleConfig.min_obstacle_height_m,
+                        max_height_m: float = ObstacleConfig.max_obstacle_height_m) -> FreeSpaceBoundary:
     """Where the floor ends in each column of the rectified left image, and the obstacle standing there.
 
     Parameters

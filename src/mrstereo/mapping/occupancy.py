@@ -57,10 +57,18 @@ def probability_from_log_odds(log_odds) -> np.ndarray:
 class MappingConfig:
     """Sensor model and fusion of the occupancy grid.
 
+    The defaults are the stereo sensor model of ``mrstereo map`` (docs/mapping.md): a stereo point is
+    not a laser return -- its range error grows with the square of the range and a mismatch can put it
+    anywhere along its pixel's ray -- so the rules below keep such points from drawing obstacles and
+    from clearing space that was never seen (``benchmarks/bench_map.py --variants`` maps with each
+    rule added in turn). OctoMap's plain ray model: ``p_miss=0.4``, ``min_points_per_cell=1`` and the
+    optional rules None / False.
+
     Parameters
     ----------
     p_hit, p_miss : float
-        Probability that a cell is occupied given a hit / a miss (OctoMap: 0.7 / 0.4).
+        Probability that a cell is occupied given a hit / a miss (OctoMap: 0.7 / 0.4; a stereo
+        miss, which clears a whole ray, counts for less).
     p_clamp_min, p_clamp_max : float
         Log-odds clamping bounds as probabilities (OctoMap: 0.1192 / 0.971); they keep the map
         able to change when the world changes.
@@ -125,21 +133,21 @@ class MappingConfig:
     """
 
     p_hit: float = 0.7
-    p_miss: float = 0.4
+    p_miss: float = 0.35
     p_clamp_min: float = 0.1192
     p_clamp_max: float = 0.971
     occupied_thresh: float = 0.5
     max_range_m: float | None = None
     fusion: str = "log_odds"
-    min_points_per_cell: int = 1
-    disparity_sigma_px: float | None = None
+    min_points_per_cell: int = 5
+    disparity_sigma_px: float | None = 0.25
     clear_margin_sigmas: float = 2.0
-    occlusion_gap_m: float | None = None
-    see_through_ratio: float | None = None
+    occlusion_gap_m: float | None = 0.25
+    see_through_ratio: float | None = 1.0
     height_tolerance_m: float = 0.05
-    overhang_shadow: bool = False
-    map_occlusion_p: float | None = None
-    clear_below_m: float | None = None
+    overhang_shadow: bool = True
+    map_occlusion_p: float | None = 0.8
+    clear_below_m: float | None = 0.8
 
     def __post_init__(self) -> None:
         _checks.positive_int("min_points_per_cell", self.min_points_per_cell)
@@ -421,7 +429,7 @@ class OccupancyGrid:
     grid : GridSpec, optional
         Geometry (default: the paper's 12 m x 6 m region in 5 cm cells, origin (0, -3)).
     config : MappingConfig, optional
-        Sensor model and fusion (default: OctoMap's log-odds parameters).
+        Sensor model and fusion (default: the stereo sensor model of ``mrstereo map``).
     log_odds : ndarray of shape grid.shape, optional
         Initial state (NaN = unknown), e.g. from :meth:`load_log_odds`; copied.
 
