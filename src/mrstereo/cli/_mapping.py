@@ -28,8 +28,8 @@ def _xy(ctx, param, value):
 @click.argument("map_yaml", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--start", required=True, callback=_xy, metavar="X,Y", help="Start (x, y) in metres.")
 @click.option("--goal", required=True, callback=_xy, metavar="X,Y", help="Goal (x, y) in metres.")
-@click.option("--radius", "radius_m", type=float, default=library_default(plan_path, "robot_radius_m"), show_default=True,
-              help="Robot radius [m]: obstacles are inflated by it.")
+@click.option("--radius", "radius_m", type=float, default=library_default(plan_path, "robot_radius_m"),
+              show_default=True, help="Robot radius [m]: obstacles are inflated by it.")
 @click.option("--unknown", type=click.Choice(["blocked", "free"]),
               default="blocked" if library_default(plan_path, "unknown_is_obstacle") else "free",
               show_default=True, help="How to treat unknown cells.")

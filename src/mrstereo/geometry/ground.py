@@ -323,7 +323,28 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
     ok &= (height_h >= h_lo) & (height_h <= h_hi) & (tilt_h >= t_lo) & (tilt_h <= t_hi)
     if not ok.any():
         return _failed("v_disparity", "no line with a floor-like slope (positive, plausible height and tilt)", 0)
-    a, c = a[ok], c[ok]
+    a_best, c_best = _best_line(a[ok], c[ok], v, dd, tol=tol, below_penalty=below_penalty, fx=fx, fy=fy,
+                                baseline_m=stereo.baseline_m, height_range_m=(h_lo, h_hi), tilt_range_rad=(t_lo, t_hi))
+    inl = np.abs(dd - (a_best * v + c_best)) <= tol
+    n_inl = int(round(inl.sum() * v_all.size / v.size))
+    if n_inl < min_inliers or a_best <= 0:
+        return _failed("v_disparity", f"floor line has only {n_inl} supporting pixels (< {min_inliers})", n_inl)
+    tilt = math.atan2(c_best, a_best * fy)
+    height = stereo.baseline_m * fx * math.cos(tilt) / (a_best * fy)
+    z_inl = stereo.baseline_m * fx / dd[inl]                  # eq. (14)-(16) of the supporting pixels
+    off = height - (math.cos(tilt) * v[inl] * z_inl / fy + math.sin(tilt) * z_inl)
+    return GroundPlane(height_m=float(height), tilt_rad=float(tilt), roll_rad=0.0, success=True,
+                       message=f"V-disparity line d = {a_best:.4f} (v - cy) + {c_best:.3f} from {n_inl} pixels",
+                       method="v_disparity", n_inliers=n_inl, line_px=(float(a_best), float(c_best)),
+                       inlier_share=float(inl.mean()), residual_m=float(np.sqrt(np.mean(off ** 2))))
+
+
+def _best_line(a: np.ndarray, c: np.ndarray, v: np.ndarray, dd: np.ndarray, *, tol: float, below_penalty: float,
+               fx: float, fy: float, baseline_m: float, height_range_m: tuple[float, float],
+               tilt_range_rad: tuple[float, float]) -> tuple[float, float]:
+    """The best scoring of the hypotheses ``d = a v + c`` (:func:`fit_ground_v_disparity`), refined by least
+    squares on its inliers while the line stays plausible."""
+    (h_lo, h_hi), (t_lo, t_hi) = height_range_m, tilt_range_rad
     scores = np.zeros(a.size, dtype=np.float64)
     for start in range(0, a.size, 32):        # blocks keep the (hypotheses x samples) array small
         line = a[start:start + 32, None] * v[None, :] + c[start:start + 32, None]
@@ -338,22 +359,11 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
             break
         a_new, c_new = np.polyfit(v[inl], dd[inl], 1)
         t_new = math.atan2(c_new, a_new * fy)
-        h_new = stereo.baseline_m * fx * math.cos(t_new) / (a_new * fy) if a_new > 0 else math.inf
+        h_new = baseline_m * fx * math.cos(t_new) / (a_new * fy) if a_new > 0 else math.inf
         if not (h_lo <= h_new <= h_hi and t_lo <= t_new <= t_hi):
             break                              # keep the last plausible line
         a_best, c_best = a_new, c_new
-    inl = np.abs(dd - (a_best * v + c_best)) <= tol
-    n_inl = int(round(inl.sum() * v_all.size / v.size))
-    if n_inl < min_inliers or a_best <= 0:
-        return _failed("v_disparity", f"floor line has only {n_inl} supporting pixels (< {min_inliers})", n_inl)
-    tilt = math.atan2(c_best, a_best * fy)
-    height = stereo.baseline_m * fx * math.cos(tilt) / (a_best * fy)
-    z_inl = stereo.baseline_m * fx / dd[inl]                  # eq. (14)-(16) of the supporting pixels
-    off = height - (math.cos(tilt) * v[inl] * z_inl / fy + math.sin(tilt) * z_inl)
-    return GroundPlane(height_m=float(height), tilt_rad=float(tilt), roll_rad=0.0, success=True,
-                       message=f"V-disparity line d = {a_best:.4f} (v - cy) + {c_best:.3f} from {n_inl} pixels",
-                       method="v_disparity", n_inliers=n_inl, line_px=(float(a_best), float(c_best)),
-                       inlier_share=float(inl.mean()), residual_m=float(np.sqrt(np.mean(off ** 2))))
+    return a_best, c_best
 
 
 def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,

@@ -324,24 +324,14 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
         # sigma_r [cells] = (r res)^2 sigma_d / (b f) / res = r^2 res sigma_d / (b f)
         margin_per_cell2 = config.clear_margin_sigmas * grid.resolution_m * config.disparity_sigma_px / bf
     gap_cells = -1.0 if config.occlusion_gap_m is None else config.occlusion_gap_m / grid.resolution_m
-    flags = np.zeros(grid.shape, np.uint8)
-    miss = np.zeros(grid.shape, np.uint8)
-    occluded = np.zeros(grid.shape, np.uint8)
-    ends = np.empty(grid.shape + (4,), np.float64)
-    n_points = np.zeros(grid.shape, np.float64)
-    z_range = np.empty(grid.shape + (2,), np.float64)
-    z_range[..., 0] = np.inf
-    z_range[..., 1] = -np.inf
-    sz = float(origin[2]) if origin.shape == (3,) else np.nan
-    z_tol = float(config.height_tolerance_m)
     if config.min_points_per_cell > 1 and len(obstacles):
         obstacles = _supported(obstacles, grid, config.min_points_per_cell)
-    outside = 0
-    for points, is_obstacle in ((obstacles, True), (floor, False)):
-        if len(points):
-            outside += _kernels.mark_endpoints(points, sx, sy, grid.origin_x_m, grid.origin_y_m,
-                                               grid.resolution_m, max_range_cells, is_obstacle, margin_per_cell2,
-                                               flags, ends, n_points, z_range)
+    flags, ends, n_points, z_range, outside = _ray_ends(obstacles, floor, sx, sy, grid, max_range_cells,
+                                                        margin_per_cell2)
+    miss = np.zeros(grid.shape, np.uint8)
+    occluded = np.zeros(grid.shape, np.uint8)
+    sz = float(origin[2]) if origin.shape == (3,) else np.nan
+    z_tol = float(config.height_tolerance_m)
     n_occluded = 0
     if config.see_through_ratio is not None:
         through = np.zeros(grid.shape, np.float64)
@@ -361,6 +351,26 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
                      grid=grid, max_range_m=config.max_range_m, min_points_per_cell=config.min_points_per_cell,
                      sensor_model=_sensor_model(config), occluded=int(n_occluded),
                      hit_z_m=z_range.reshape(-1, 2)[hit_index].astype(np.float32))
+
+
+def _ray_ends(obstacles: np.ndarray, floor: np.ndarray, sx: float, sy: float, grid: GridSpec,
+              max_range_cells: float, margin_per_cell2: float) -> tuple:
+    """``(flags, ends, n_points, z_range, points_outside)``: the end cell of every ray of a view marked
+    (:func:`_kernels.mark_endpoints`; ``flags`` a bit set per cell, ``ends`` each end cell's representative
+    point and clearing margin, ``z_range`` the lowest and highest obstacle point in each cell)."""
+    flags = np.zeros(grid.shape, np.uint8)
+    ends = np.empty(grid.shape + (4,), np.float64)
+    n_points = np.zeros(grid.shape, np.float64)
+    z_range = np.empty(grid.shape + (2,), np.float64)
+    z_range[..., 0] = np.inf
+    z_range[..., 1] = -np.inf
+    outside = 0
+    for points, is_obstacle in ((obstacles, True), (floor, False)):
+        if len(points):
+            outside += _kernels.mark_endpoints(points, sx, sy, grid.origin_x_m, grid.origin_y_m,
+                                               grid.resolution_m, max_range_cells, is_obstacle, margin_per_cell2,
+                                               flags, ends, n_points, z_range)
+    return flags, ends, n_points, z_range, outside
 
 
 def _known_occupied(value, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
@@ -407,7 +417,7 @@ def _supported(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarra
         n = n_per_key[inverse]
         n[key == -1] += np.count_nonzero(cell == -1)    # cell (0, -1) shares key -1 with the non-finite points
         keep[idx] = n >= min_points
-    return np.compress(keep, points, axis=0)       # points[keep], 4x faster for (N, 3) rows
+    return np.compress(keep, points, axis=0)       # points[keep], copying whole rows
 
 
 def _supported_by_keys(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:

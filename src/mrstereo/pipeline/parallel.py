@@ -258,8 +258,8 @@ def numba_thread_safe() -> bool:
     """Whether numba's threading layer runs parallel kernels from several threads at once.
 
     The tbb and omp layers do; workqueue aborts the process on concurrent launches. The layer is
-    chosen when numba first starts its thread pool: this starts it (loading the layer's library,
-    about 10 ms) without compiling or loading any kernel. Should numba's internal start-up function
+    chosen when numba first starts its thread pool: this starts it (loading the layer's library)
+    without compiling or loading any kernel. Should numba's internal start-up function
     be missing, a tiny parallel kernel is launched instead.
     """
     import numba
@@ -277,7 +277,7 @@ def numba_thread_safe() -> bool:
 
 @functools.cache
 def _probe_kernel():
-    """A tiny parallel kernel (built on first use: importing numba costs 0.3 s)."""
+    """A tiny parallel kernel (built on first use, not on import)."""
     import numba
 
     @numba.njit(parallel=True, nogil=True, cache=True)
@@ -293,8 +293,7 @@ def _single_threaded_kernels() -> Iterator[None]:
     """OpenCV and the BLAS behind numpy's matmul on one thread for the block (both restored after).
 
     For worker threads of this process: OpenBLAS's own thread pool, whose idle threads spin, and
-    OpenCV's (process-wide) would oversubscribe the cores. With BLAS threads left on, two worker
-    threads ran 1.45x as fast as one; without, 1.75x.
+    OpenCV's (process-wide) would oversubscribe the cores the worker threads already fill.
     """
     import cv2
     from threadpoolctl import threadpool_limits
@@ -481,8 +480,8 @@ def _map_local(func, items: Sequence, bar, return_exceptions: bool, label, prefe
 def _map_threads(func, items: Sequence, workers: int, bar, return_exceptions: bool, label, prefetch=None) -> list:
     """:func:`map_ordered` on a pool of ``workers`` single-threaded worker threads of this process.
 
-    No Dask: a thread pool starts in microseconds (a local Dask cluster costs about a second of
-    imports and start-up per run). At most ``2 * workers`` items are in flight.
+    No Dask: a thread pool starts at once, a local Dask cluster only after its imports and
+    start-up. At most ``2 * workers`` items are in flight.
     """
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
@@ -528,7 +527,8 @@ def _map_threads(func, items: Sequence, workers: int, bar, return_exceptions: bo
 def _chunk_size(client, n_items: int) -> int:
     """Items per Dask task: about 8 tasks per worker thread, at most 8 items each.
 
-    A Dask task costs 2-4 ms of scheduling in the client's interpreter; a frame 30 ms.
+    A Dask task costs milliseconds of scheduling in the client's interpreter, a sizeable share of a
+    frame's work: a few frames per task amortize it, enough tasks per thread keep the workers busy.
     """
     try:
         threads = max(1, sum(client.nthreads().values()))

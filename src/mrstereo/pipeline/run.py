@@ -1,19 +1,15 @@
 """The whole chain for a sequence: rectify -> match -> reject -> 3D -> occupancy grid.
 
-Per frame (independent, so it can run anywhere):
-:func:`observe_frame` reads a stereo pair of a dataset manifest, rectifies it
-with the calibration, matches it with the multi-range approach (paper eq.
-9-12), rejects uniform patches (eq. 13), triangulates (eq. 14-16), splits
-obstacle from floor points in the robot frame and moves them into the world
-frame with the frame's pose, and finds the grid cells they hit and the rays
-clear (:func:`mrstereo.mapping.occupancy.view_cells`). Then an ordered
-reduction, :func:`fuse`, adds these cells to a log-odds (or union) occupancy
-grid (paper section 5.2), a few microseconds per frame.
-:func:`build_map` runs both over a manifest; :func:`write_map_outputs` writes
-the ROS map, figures and metrics. Without a camera mount, :func:`floor_for_run`
-estimates the floor once from the first frames that show enough of it and the
-run uses that mount (reported, with its confidence, in ``MapRun.floor`` and
-metrics.json). Conventions: docs/conventions.md.
+Per frame (independent, so it can run anywhere): :func:`observe_frame` reads a stereo pair of a
+dataset manifest, rectifies it with the calibration, matches it with the multi-range approach
+(paper eq. 9-12), rejects uniform patches (eq. 13), triangulates (eq. 14-16), splits obstacle
+from floor points in the robot frame and moves them into the world frame with the frame's pose.
+Then an ordered reduction, :func:`map_from_observations`, fuses them into a log-odds (or union)
+occupancy grid (paper section 5.2) and compares it with the ground-truth map.
+:func:`build_map` runs both over a manifest; :func:`write_map_outputs` writes the ROS map,
+figures and metrics. Without a camera mount, :func:`floor_for_run` estimates the floor once from
+the first frames that show enough of it and the run uses that mount (reported, with its
+confidence, in ``MapRun.floor`` and metrics.json). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -142,7 +138,6 @@ class MapRun:
         frames = self.manifest.frames
         if self.observations and all(f.true_pose is not None for f in frames):
             from ..odometry.trajectory import trajectory_metrics
-            from ..transforms import T_from_planar
 
             by_index = {o.index: o.pose for o in self.observations}
             used = sorted(by_index)

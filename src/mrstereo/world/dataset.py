@@ -126,69 +126,47 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
         raise ValueError(f"output directory {out_dir} already exists and is not empty; "
                          "choose a new directory")
-    if path not in PATH_KINDS:
-        raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
-    if randomize and path == "s-curve":
-        raise ValueError("path='s-curve' is a path of the built-in corridor; a randomized world's odometry "
-                         "sequence is path='front' (along the world's own waypoints)")
-    if wall_texture is not None and not randomize:
-        raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
-    n_stops = -(-n_frames // len(_PANS))
+    _check_world_options(path=path, randomize=randomize, wall_texture=wall_texture, odometry_noise=odometry_noise)
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
-    if randomize:
-        world = random_world(seed, width=width, height=height, wall_texture=wall_texture)
+    world = random_world(seed, width=width, height=height, wall_texture=wall_texture) if randomize else None
+    if world is not None:
         stereo, scene, sensors = world.stereo, world.scene, world.sensors
-        stops = poses_along(world.waypoints_xy, n_stops)
         generator["randomized"] = world.summary
     else:
         stereo, scene, sensors = default_stereo(width, height), default_scene(seed), (SensorModel(), SensorModel())
-        stops = corridor_path(n_stops)
-    if path == "stops":
-        pans = [_PANS[k % len(_PANS)] for k in range(n_frames)]
-        poses = np.repeat(stops, len(_PANS), axis=0)[:n_frames]
-    else:
-        pans = [0.0] * n_frames
-        poses = (waypoint_path(world.waypoints_xy, n_frames, step_m=step_m) if randomize
-                 else sequence_path(path, n_frames, step_m=step_m))
-    poses = np.round(poses, 6)         # render with exactly the numbers the manifest stores
+    poses, pans = _poses_and_pans(path, n_frames, step_m=step_m, world=world)
     given = poses
     if odometry_noise is not None:
-        if len(odometry_noise) != 2:
-            raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
         given = np.round(drifted_poses(poses, scale_error=odometry_noise[0],
                                        heading_drift_rad_per_m=odometry_noise[1]), 6)
+    if path != "stops":
+        generator["step_m"] = float(step_m)
+    if odometry_noise is not None:
+        generator["odometry_noise"] = {"scale_error": float(odometry_noise[0]),
+                                       "heading_drift_rad_per_m": float(odometry_noise[1])}
+    stream = tqdm(range(n_frames), desc="rendering", unit="frame", disable=not progress)
+    return _write_dataset(out_dir, scene, stereo, sensors, poses=poses, given=given, pans=pans, frames=stream,
+                          seed=seed, supersample=supersample, true_poses=odometry_noise is not None,
+                          generator=generator)
+
+
+def _write_dataset(out_dir: Path, scene, stereo, sensors, *, poses, given, pans, frames, seed: int,
+                   supersample: int, true_poses: bool, generator: dict) -> Path:
+    """Render ``frames`` (indices) at ``poses`` and write the dataset, built beside ``out_dir`` and renamed into
+    place when complete; ``given``: the poses the manifest stores (``true_poses``: also the true ones)."""
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
     try:
         write_stereo(tmp / "calibration.yaml", stereo)
         write_ros_map(tmp / "gt_map.yaml", ground_truth_map(scene))
-        frames = []
-        for k in tqdm(range(n_frames), desc="rendering", unit="frame", disable=not progress):
-            pose = tuple(float(v) for v in poses[k])
-            pan = round(pans[k], 9)
+        entries = []
+        for k in frames:
+            pose, pan = tuple(float(v) for v in poses[k]), round(pans[k], 9)
             frame = render_stereo_frame(scene, stereo, pose=pose, pan_rad=pan, seed=seed * 100003 + k,
                                         supersample=supersample, sensors=sensors)
-            name = f"{k:06d}"
-            entry = {}
-            for key, image in (("left", frame.raw_left), ("right", frame.raw_right),
-                               ("left_rect", frame.left_rect), ("right_rect", frame.right_rect),
-                               ("gt_labels", frame.labels)):
-                write_image(tmp / key / f"{name}.png", image)
-                entry[key] = f"{key}/{name}.png"
-            write_pfm(tmp / "gt_disparity" / f"{name}.pfm", frame.disparity_px)
-            entry["gt_disparity"] = f"gt_disparity/{name}.pfm"
-            entry["pose"] = [float(v) for v in given[k]]
-            entry["pan_rad"] = pan
-            if odometry_noise is not None:
-                entry["true_pose"] = list(pose)
-            frames.append({key: entry[key] for key in (*IMAGE_KEYS, "gt_disparity", "gt_labels", "pose",
-                                                        "true_pose", "pan_rad") if key in entry})
-        if path != "stops":
-            generator["step_m"] = float(step_m)
-        if odometry_noise is not None:
-            generator["odometry_noise"] = {"scale_error": float(odometry_noise[0]),
-                                           "heading_drift_rad_per_m": float(odometry_noise[1])}
-        write_manifest(tmp / MANIFEST_NAME, calibration="calibration.yaml", rig=stereo.rig, frames=frames,
+            entries.append(_write_frame(tmp, k, frame, pose=[float(v) for v in given[k]], pan_rad=pan,
+                                        true_pose=list(pose) if true_poses else None))
+        write_manifest(tmp / MANIFEST_NAME, calibration="calibration.yaml", rig=stereo.rig, frames=entries,
                        ground_truth_map="gt_map.yaml", extra={"generator": generator})
         if out_dir.exists():
             out_dir.rmdir()          # empty, checked above
@@ -197,3 +175,49 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
     return out_dir
+
+
+def _check_world_options(*, path: str, randomize: bool, wall_texture, odometry_noise) -> None:
+    if path not in PATH_KINDS:
+        raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
+    if randomize and path == "s-curve":
+        raise ValueError("path='s-curve' is a path of the built-in corridor; a randomized world's odometry "
+                         "sequence is path='front' (along the world's own waypoints)")
+    if wall_texture is not None and not randomize:
+        raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
+    if odometry_noise is not None and len(odometry_noise) != 2:
+        raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
+
+
+def _poses_and_pans(path: str, n_frames: int, *, step_m: float, world) -> tuple[np.ndarray, list[float]]:
+    """The true poses (n_frames, 3) and head pans of the frames of a ``path`` kind, in the built-in corridor
+    or along a randomized ``world``'s waypoints; rounded to the numbers the manifest stores."""
+    if path == "stops":
+        n_stops = -(-n_frames // len(_PANS))
+        stops = corridor_path(n_stops) if world is None else poses_along(world.waypoints_xy, n_stops)
+        pans = [_PANS[k % len(_PANS)] for k in range(n_frames)]
+        poses = np.repeat(stops, len(_PANS), axis=0)[:n_frames]
+    else:
+        pans = [0.0] * n_frames
+        poses = (sequence_path(path, n_frames, step_m=step_m) if world is None
+                 else waypoint_path(world.waypoints_xy, n_frames, step_m=step_m))
+    return np.round(poses, 6), pans
+
+
+def _write_frame(folder: Path, k: int, frame, *, pose: list[float], pan_rad: float,
+                 true_pose: list[float] | None) -> dict:
+    """Write frame ``k``'s images, labels and GT disparity into ``folder``; return its manifest entry."""
+    name = f"{k:06d}"
+    entry = {}
+    for key, image in (("left", frame.raw_left), ("right", frame.raw_right), ("left_rect", frame.left_rect),
+                       ("right_rect", frame.right_rect), ("gt_labels", frame.labels)):
+        write_image(folder / key / f"{name}.png", image)
+        entry[key] = f"{key}/{name}.png"
+    write_pfm(folder / "gt_disparity" / f"{name}.pfm", frame.disparity_px)
+    entry["gt_disparity"] = f"gt_disparity/{name}.pfm"
+    entry["pose"] = pose
+    entry["pan_rad"] = pan_rad
+    if true_pose is not None:
+        entry["true_pose"] = true_pose
+    return {key: entry[key] for key in (*IMAGE_KEYS, "gt_disparity", "gt_labels", "pose", "true_pose", "pan_rad")
+            if key in entry}
