@@ -109,13 +109,13 @@ _malloc_tuned = False
 def keep_freed_memory() -> bool:
     """Let glibc's malloc keep freed memory for reuse instead of returning it to the system.
 
-    One 640x480 frame of the chain allocates and frees about 15 MB of image-sized arrays.
-    With glibc's defaults these are fresh pages every frame (mmap for large blocks, and the
-    heap top trimmed after each frame): about 3,600 page faults, a quarter of the frame's time
-    (49 -> 38 ms per frame, measured). This raises the trim threshold to 256 MB and the mmap
-    threshold and top pad to 64 MB, process-wide, so it is called only in processes
-    mrstereo owns: the ``mrstereo`` command and its Dask worker processes, never on import.
-    Returns False (and changes nothing) without glibc.
+    Every frame of the chain allocates and frees many image-sized arrays. With glibc's defaults
+    these are fresh pages, a page fault each on first touch, every frame: large blocks are
+    mmapped and unmapped, and the heap top is trimmed after each frame. Raising the trim threshold
+    to 256 MB and the mmap threshold and top pad to 64 MB keeps them in the heap for the next
+    frame. The setting is process-wide, so it is made only in processes mrstereo owns: the
+    ``mrstereo`` command and its Dask worker processes, never on import. Returns False (and
+    changes nothing) without glibc.
     """
     global _malloc_tuned
     if _malloc_tuned:
@@ -218,8 +218,8 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
         return
     env = dict(_WORKER_ENV, MRSTEREO_WORKER_PROCESS="1")
     # distributed's nannies set MALLOC_TRIM_THRESHOLD_=65536 in their workers, which also fixes
-    # glibc's mmap threshold: every image-sized temporary then costs fresh page faults and a frame
-    # takes 2.3 times as long (measured). Leave glibc's adaptive defaults alone.
+    # glibc's mmap threshold: every image-sized temporary would cost fresh page faults. The workers
+    # tune malloc themselves (limit_threads -> keep_freed_memory).
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
             _quiet_children():
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
