@@ -382,23 +382,14 @@ def views_of_frames(frames, stereo: StereoCamera, *, range_m: float = MAPPING_MA
     return [(f.pose[0], f.pose[1], f.pose[2] + f.pan_rad, half, range_m) for f in frames]
 
 
-def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None, figures=None) -> dict[str, Path]:
+def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
     """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy and metrics.json.
 
     metrics.json holds the comparison with the ground-truth map (when there is
-    one) and ``floor``: the floor of the run with its confidence. ``figures``: a
-    :class:`mrstereo.pipeline.parallel.PrestartedCall` of :func:`mrstereo.mapping.figures.plot_map`
-    that draws map.png in another process while the other files are written.
+    one) and ``floor``: the floor of the run with its confidence.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    path = np.array([o.pose for o in run.observations]) if run.observations else None
-    figure = ((run.grid, out / "map.png"),
-              {"robot_path": path, "fov_views": views_of_frames(run.observations, run.manifest.calibration),
-               "planned_path": planned_path, "ground_truth": run.ground_truth_map,
-               "title": f"occupancy grid ({run.grid.config.fusion})"})
-    if figures is not None:
-        figures.submit(*figure[0], **figure[1])
     write_ros_map(out / "map.yaml", run.grid.to_ros_map())
     run.grid.save_log_odds(out / "log_odds.npy")
     files = {"map_yaml": out / "map.yaml", "map_pgm": out / "map.pgm", "map_png": out / "map.png",
@@ -413,8 +404,9 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
         with atomic_write(out / "metrics.json") as tmp:
             tmp.write_text(json.dumps(report, indent=2))
         files["metrics"] = out / "metrics.json"
-    if figures is None:
-        plot_map(*figure[0], **figure[1])
-    else:
-        figures.result()
+    path = np.array([o.pose for o in run.observations]) if run.observations else None
+    plot_map(run.grid, out / "map.png", robot_path=path, fov_views=views_of_frames(run.observations,
+                                                                                   run.manifest.calibration),
+             planned_path=planned_path, ground_truth=run.ground_truth_map,
+             title=f"occupancy grid ({run.grid.config.fusion})")
     return files
