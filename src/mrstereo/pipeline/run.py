@@ -160,8 +160,19 @@ def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: i
                           stereo: StereoCamera | None = None) -> FrameObservation:
     """Move a frame's obstacle and floor points into the world frame; find their grid cells.
 
-    ``stereo`` (the calibration the frame was matched with) gives the mapping's range
-    uncertainty its ``b f``; without it rays clear up to each point.
+    Parameters
+    ----------
+    frame : PairObstacles
+        The frame's points (:func:`mrstereo.pipeline.frame.obstacles_from_pair`).
+    record : FrameRecord
+        Its manifest entry: the pose and head pan.
+    index : int
+        Its position in the sequence.
+    config : PipelineConfig
+        The grid and sensor model of the cells.
+    stereo : StereoCamera, optional
+        The calibration the frame was matched with: gives the mapping's range uncertainty its
+        ``b f``; without it rays clear up to each point.
     """
     with stage("grid"):
         T = T_from_planar(*record.pose)
@@ -187,8 +198,23 @@ def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, 
                   pair: tuple[np.ndarray, np.ndarray, bool] | None = None) -> FrameObservation:
     """Run rectify -> match -> reject -> 3D on one manifest frame; points in the world frame.
 
-    ``pair``: the frame's images as :func:`frame_pair` reads them (read ahead by a reader
-    thread); default read here.
+    Parameters
+    ----------
+    record : FrameRecord
+        The manifest frame.
+    stereo : StereoCamera
+        The calibration.
+    index : int
+        The frame's position in the sequence.
+    rig : RigMount or CameraMount, optional
+        The camera mount (default: the calibration's; with neither the floor is estimated).
+    config : PipelineConfig
+        Options of every stage.
+    prefer_raw : bool
+        Rectify the raw images even where the dataset has rectified ones.
+    pair : (ndarray, ndarray, bool), optional
+        The frame's images as :func:`frame_pair` reads them (read ahead by a reader thread);
+        default read here.
     """
     left, right, rectified = frame_pair(record, prefer_raw=prefer_raw) if pair is None else pair
     frame = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=rig, pan_rad=record.pan_rad,
@@ -281,9 +307,15 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     ----------
     manifest : Manifest or path
         The dataset (docs/dataset.md).
+    config : PipelineConfig
+        Options of every stage.
     calibration : StereoCamera, optional
         Overrides the manifest's calibration (e.g. one estimated by ``mrstereo
         stereo-calibrate``); then the raw images are used.
+    prefer_raw : bool
+        Rectify the raw images even where the dataset has rectified ones.
+    progress : bool
+        A tqdm bar over the frames.
     workers : int, optional
         Observe the frames on this many single-threaded workers: threads of this
         process, or the processes of a local Dask cluster with ``processes=True``.
@@ -292,6 +324,8 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         the dataset's files). With neither, everything runs in this process.
         The fused map is the same, bit for bit, in every case
         (:func:`mrstereo.pipeline.parallel.map_ordered` keeps the frame order).
+    processes : bool
+        With ``workers``: worker processes instead of threads.
     odometry : {"given", "visual"}
         ``"visual"``: the poses come from stereo visual odometry
         (:func:`mrstereo.pipeline.odometry_from_manifest`, run in order before the
