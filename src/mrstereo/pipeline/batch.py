@@ -33,7 +33,7 @@ import numpy as np
 
 from ..camera import RigMount, StereoCamera
 from ..camera.mount import CameraMount
-from ..geometry.ply import write_ply
+from ..geometry.ply import read_ply, write_ply
 from ..geometry.scan import write_scan_json
 from ..io import (atomic_write, check_output_dir, check_outputs, read_pfm, remove_stale_temporaries, temporary_dir,
                   write_disparity)
@@ -135,30 +135,10 @@ def _resume(files: dict[str, Path]) -> FrameObservation | None:
     try:
         read_pfm(files["disparity"])
         json.loads(files["scan"].read_text(encoding="utf-8"))
-        _check_ply(files["cloud"])
+        read_ply(files["cloud"])
         return _load_observation(files["observation"])
     except Exception:                  # any damage: recompute (the files are rewritten atomically)
         return None
-
-
-def _check_ply(path: Path) -> None:
-    """Raise ValueError unless ``path`` is a complete binary PLY (header and as many bytes as it declares)."""
-    with open(path, "rb") as fh:
-        header = fh.read(4096)
-    end = header.find(b"end_header\n")
-    if not header.startswith(b"ply\n") or end < 0:
-        raise ValueError(f"{path}: not a PLY file")
-    sizes = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
-             "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
-    count, stride = 0, 0
-    for line in header[:end].decode("ascii", "replace").splitlines():
-        words = line.split()
-        if words[:2] == ["element", "vertex"]:
-            count = int(words[2])
-        elif words[:1] == ["property"] and len(words) == 3:
-            stride += sizes[words[1]]
-    if path.stat().st_size < end + len(b"end_header\n") + count * stride:
-        raise ValueError(f"{path}: truncated")
 
 
 def _load_observation(path: Path) -> FrameObservation:

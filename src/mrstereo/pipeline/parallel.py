@@ -413,8 +413,12 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
         return _map_dask(client, func, items, bar, return_exceptions, label, desc)
 
 
-def _failure(k: int, item, label, exc: BaseException, tb: str) -> ItemFailure:
-    return ItemFailure(index=k, item=_label(item, label), error=f"{type(exc).__name__}: {exc}", traceback=tb)
+def _failure(k: int, items: Sequence, label, exc: BaseException, tb: str, return_exceptions: bool) -> ItemFailure:
+    """Item ``k``'s failure for its slot (``return_exceptions``), else raise :class:`ItemError` naming it."""
+    failure = ItemFailure(index=k, item=_label(items[k], label), error=f"{type(exc).__name__}: {exc}", traceback=tb)
+    if not return_exceptions:
+        raise ItemError(failure) from exc
+    return failure
 
 
 def _prefetched(items: Sequence, prefetch, depth: int) -> Iterator[tuple[bool, Any]]:
@@ -468,10 +472,7 @@ def _map_local(func, items: Sequence, bar, return_exceptions: bool, label, prefe
                 error, tb = exc, _traceback.format_exc()
         else:
             error, tb = value
-        failure = _failure(k, items[k], label, error, tb)
-        if not return_exceptions:
-            raise ItemError(failure) from error
-        results.append(failure)
+        results.append(_failure(k, items, label, error, tb, return_exceptions))
         bar.update(1)
     return results
 
@@ -488,22 +489,13 @@ def _map_threads(func, items: Sequence, workers: int, bar, return_exceptions: bo
     results: list = [None] * len(items)
     pending: dict = {}
 
-    def failed(k: int, exc: BaseException, tb: str) -> None:
-        failure = _failure(k, items[k], label, exc, tb)
-        if not return_exceptions:
-            raise ItemError(failure) from exc
-        results[k] = failure
-
     def collect(block_until: int) -> None:
         while len(pending) > block_until:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in done:
                 k = pending.pop(future)
                 ok, value = future.result()[0]
-                if ok:
-                    results[k] = value
-                else:
-                    failed(k, *value)
+                results[k] = value if ok else _failure(k, items, label, *value, return_exceptions)
                 bar.update(1)
 
     with _single_threaded_kernels(), ThreadPoolExecutor(workers, thread_name_prefix="mrstereo-worker") as pool:
@@ -512,7 +504,7 @@ def _map_threads(func, items: Sequence, workers: int, bar, return_exceptions: bo
                 if ok:
                     pending[pool.submit(task, [value])] = k
                 else:
-                    failed(k, *value)
+                    results[k] = _failure(k, items, label, *value, return_exceptions)
                     bar.update(1)
                 collect(2 * workers - 1)
             collect(0)
@@ -547,28 +539,18 @@ def _map_dask(client, func, items: Sequence, bar, return_exceptions: bool, label
                          key=[f"{desc}-{a}-{token}" for a in starts])
     first = {f.key: a for a, f in zip(starts, futures)}
     results: list = [None] * len(items)
-
-    def failed(k: int, exc: BaseException, tb: str) -> None:
-        failure = ItemFailure(index=k, item=_label(items[k], label), error=f"{type(exc).__name__}: {exc}",
-                              traceback=tb)
-        if not return_exceptions:
-            raise ItemError(failure) from exc
-        results[k] = failure
-
     try:
         for future in as_completed(futures):
             a = first[future.key]
             n = min(size, len(items) - a)
             if future.status == "error":            # the chunk itself failed (e.g. a result that cannot be sent)
                 exc, tb = future.exception(), future.traceback()
+                text = "".join(_traceback.format_tb(tb)) if tb is not None else ""
                 for k in range(a, a + n):
-                    failed(k, exc, "".join(_traceback.format_tb(tb)) if tb is not None else "")
+                    results[k] = _failure(k, items, label, exc, text, return_exceptions)
             else:
                 for k, (ok, value) in enumerate(future.result(), start=a):
-                    if ok:
-                        results[k] = value
-                    else:
-                        failed(k, *value)
+                    results[k] = value if ok else _failure(k, items, label, *value, return_exceptions)
             future.release()
             bar.update(n)
     finally:
