@@ -109,7 +109,6 @@ def run_seed(path: Path) -> dict:
 
 
 def speed(root: Path, frames: int) -> None:
-    from mrstereo.camera.mount import T_base_from_cam_of
     from mrstereo.io import read_image, read_pfm
     from mrstereo.odometry import visual_odometry
 
@@ -117,7 +116,7 @@ def speed(root: Path, frames: int) -> None:
     path = dataset(root, 0, frames, 640, 480)
     manifest = read_manifest(path)
     pairs = [(read_image(f.left_rect), read_image(f.right_rect)) for f in manifest.frames]
-    mount = T_base_from_cam_of(manifest.rig)
+    mount = manifest.mount.T_base_from_rectified(manifest.calibration.left.R)
     T0 = T_from_planar(*(manifest.frames[0].true_pose or manifest.frames[0].pose))
     for label, disparities in (("stereo search", None),
                                ("given disparity", [read_pfm(f.gt_disparity) for f in manifest.frames])):

@@ -19,7 +19,7 @@ import math
 import os
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -185,8 +185,8 @@ def _calibration(calib_dir: Path, manifest, *, seed: int, n_views: int):
     right_views, _ = chessboard_views(paths_r, (9, 6), 0.03)
     pairs = [(a, b) for a, b in zip(left_views, right_views) if a is not None and b is not None]
     cal = calibrate_stereo([a for a, _ in pairs], [b for _, b in pairs], width=size[0], height=size[1],
-                           method="ga+lm", rig=manifest.rig, rng=seed)
-    estimated = cal.stereo
+                           method="ga+lm", rng=seed)
+    estimated = replace(cal.stereo, mount=manifest.mount)
     write_stereo(calib_dir / "stereo.yaml", estimated)
     residual_figure(calib_dir / "residuals_left.png", estimated.left.camera, [a for a, _ in pairs])
     dots = render_paper_dot_target(truth, seed=seed)
@@ -214,8 +214,8 @@ def _first_frame(out: Path, manifest, estimated, calibration: dict) -> dict:
     from .pipeline.run import PipelineConfig
 
     record = manifest.frames[0]
-    pair = scan_from_pair(read_image(record.left), read_image(record.right), estimated, rig=manifest.rig,
-                          pan_rad=record.pan_rad, preset=PipelineConfig.preset)
+    pair = scan_from_pair(read_image(record.left), read_image(record.right), estimated, pan_rad=record.pan_rad,
+                          preset=PipelineConfig.preset)
     frame, result = pair.frame, pair.frame.matching
     left, ideal_l = frame.left_rect, read_image(record.left_rect)
     valid = (left > 0) & (ideal_l > 0)
