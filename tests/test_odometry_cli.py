@@ -231,7 +231,9 @@ def test_a_bag_without_odometry(sequence, tmp_path, capsys):
 def test_fuse_aligned_undoes_odometry_drift_on_synthetic_scans():
     """Scans of a corridor with boxes, seen from the true poses, fused at drifted odometry poses:
     the aligned trajectory stays near the truth (the drifted one ends 1 m off)."""
-    from mrstereo.mapping import GridSpec
+    from functools import partial
+
+    from mrstereo.mapping import GridSpec, MappingConfig
     from mrstereo.mapping.fusion import FrameObservation
     from mrstereo.odometry.alignment import AlignConfig, fuse_aligned
     from mrstereo.world.paths import drifted_poses, sequence_path
@@ -263,6 +265,10 @@ def test_fuse_aligned_undoes_odometry_drift_on_synthetic_scans():
                                              floor_points_world=np.empty((0, 3), np.float32), n_valid_disparity=0,
                                              ground_message=""))
     grid = GridSpec(width_m=12.5, height_m=3.0, origin_x_m=-0.25, origin_y_m=-1.5)
+    # 2-D scan points of a laser-like sensor: OctoMap's plain ray model, not the stereo rules of the default
+    fuse_aligned = partial(fuse_aligned, config=MappingConfig(
+        p_miss=0.4, min_points_per_cell=1, disparity_sigma_px=None, occlusion_gap_m=None, see_through_ratio=None,
+        overhang_shadow=False, map_occlusion_p=None, clear_below_m=None))
     _, corrected, alignments = fuse_aligned(observations, grid=grid, align=AlignConfig())
     est = np.array([o.pose for o in corrected])
     drifted_end = math.hypot(*(given[-1, :2] - true[-1, :2]))

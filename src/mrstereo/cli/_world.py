@@ -8,18 +8,25 @@ from pathlib import Path
 
 import click
 
+from ..world.dataset import write_synthetic_dataset
+from ._options import library_default
+
 __all__ = ["COMMANDS"]
 
 
 @click.command("synth")
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(path_type=Path),
               help="New (or empty) dataset directory.")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
+@click.option("--seed", default=library_default(write_synthetic_dataset, "seed"), show_default=True,
+              type=click.IntRange(min=0),
               help="Texture and sensor-noise seed (with --randomize: the whole world).")
-@click.option("--frames", "n_frames", default=30, show_default=True, type=click.IntRange(min=1),
+@click.option("--frames", "n_frames", default=library_default(write_synthetic_dataset, "n_frames"), show_default=True,
+              type=click.IntRange(min=1),
               help="Number of frames (with --path stops: front, +45 and -45 degree views at each stop).")
-@click.option("--width", default=320, show_default=True, type=click.IntRange(min=16), help="Image width.")
-@click.option("--height", default=240, show_default=True, type=click.IntRange(min=16), help="Image height.")
+@click.option("--width", default=library_default(write_synthetic_dataset, "width"), show_default=True,
+              type=click.IntRange(min=16), help="Image width.")
+@click.option("--height", default=library_default(write_synthetic_dataset, "height"), show_default=True,
+              type=click.IntRange(min=16), help="Image height.")
 @click.option("--randomize", is_flag=True,
               help="A randomized world drawn from --seed (corridor, textures, lights, rig, sensors, "
                    "obstacles, path) instead of the built-in corridor.")
@@ -27,11 +34,12 @@ __all__ = ["COMMANDS"]
               default=None,
               help="With --randomize: give the walls this material instead of the drawn one; everything else "
                    "stays the seed's world (e.g. stripes: a repetitive-texture variant).")
-@click.option("--path", "path_kind", type=click.Choice(["stops", "front", "s-curve"]), default="stops",
-              show_default=True,
+@click.option("--path", "path_kind", type=click.Choice(["stops", "front", "s-curve"]),
+              default=library_default(write_synthetic_dataset, "path"), show_default=True,
               help="stops: front/left/right views at each stop (mapping); front, s-curve: one front view every "
                    "--step metres (odometry sequences; with --randomize: front, along the world's own path).")
-@click.option("--step", "step_m", type=float, default=0.1, show_default=True,
+@click.option("--step", "step_m", type=float, default=library_default(write_synthetic_dataset, "step_m"),
+              show_default=True,
               help="Path length between frames of a front or s-curve sequence [m].")
 @click.option("--odometry-noise", "odometry_noise", metavar="SCALE,DEG_PER_M", default=None,
               help="Store drifted odometry as each frame's pose (scale error, heading drift in degrees per "
@@ -48,7 +56,6 @@ def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, rand
     With --randomize the world itself is drawn from the seed (docs/world.md).
     """
     from ..io import check_output_dir
-    from ..world.dataset import write_synthetic_dataset
 
     if wall_texture is not None and not randomize:
         raise click.UsageError("--wall-texture needs --randomize")
