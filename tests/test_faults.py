@@ -44,7 +44,7 @@ def ds(synthetic_dataset) -> Path:
 def long_inputs(synthetic_dataset, tmp_path_factory) -> dict[str, Path]:
     """Inputs that keep the interrupted commands busy for several seconds on a fast machine (the
     signal must land during the work, not after it): a 40-frame dataset and a 2560x1920 pair."""
-    ds = synthetic_dataset(seed=1, n_frames=40, width=160, height=120, supersample=1)
+    ds = synthetic_dataset(n_frames=40, width=160, height=120, supersample=1)
     root = tmp_path_factory.mktemp("long")
     for side in ("left", "right"):
         image = cv2.imread(str(ds / f"{side}_rect" / "000000.png"), cv2.IMREAD_GRAYSCALE)
