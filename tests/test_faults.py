@@ -6,7 +6,7 @@ Every case checks the four promises of the command line:
   ``mrstereo: interrupted`` (exit 130);
 - no silently accepted bad input: a bad value ends in an error, not exit 0;
 - no partial output without a marker: a failed or killed run leaves the previous outputs
-  or nothing (temporary names start with ``.`` and end in ``.tmp``).
+  or nothing (temporary names carry the marker ``.mrstereo-tmp-PID-XXXXXXXX.``).
 """
 from __future__ import annotations
 
@@ -86,14 +86,14 @@ def _run(capsys, args, *, expect: int = 2, must: str | None = None) -> str:
 
 
 def _no_temporaries(folder: Path) -> list[Path]:
-    return [p for p in folder.rglob(".*") if ".tmp" in p.name]
+    return [p for p in folder.rglob(".*") if io.is_temporary(p)]
 
 
 # ------------------------------------------------------------------------------------------ data loss
 
 def test_map_never_replaces_the_datasets_own_map(ds_copy, capsys):
     before = _digest(ds_copy)
-    _run(capsys, ["map", ds_copy, "-o", ds_copy, "--quiet"], must="would overwrite the input")
+    _run(capsys, ["map", ds_copy, "-o", ds_copy, "--quiet"], must="is the dataset")
     assert _digest(ds_copy) == before
 
 
@@ -157,8 +157,9 @@ def _pair(ds):
 
 
 BAD_ARGS = {
-    "max-disparity 1e9": (["disparity", "{L}", "{R}", "--max-disparity", "1e9", "-o", "{T}/x.pfm"], "would need"),
-    "bands 0:1e9": (["disparity", "{L}", "{R}", "--bands", "0:1e9", "-o", "{T}/x.pfm"], "would need"),
+    "max-disparity 1e9": (["disparity", "{L}", "{R}", "--max-disparity", "1e9", "-o", "{T}/x.pfm"],
+                          "'--max-disparity': 1e9 is not in the range [1, 4096] px"),
+    "bands 0:1e9": (["disparity", "{L}", "{R}", "--bands", "0:1e9", "-o", "{T}/x.pfm"], "--bands need"),
     "depth-bands 1e-30,1": (["disparity", "{L}", "{R}", "--calib", "{DS}/calibration.yaml", "--rectified",
                              "--depth-bands", "1e-30,1", "-o", "{T}/x.pfm"], "would need"),
     "plot suffix": (["disparity", "{L}", "{R}", "--max-disparity", "16", "-o", "{T}/d.pfm", "--plot", "{T}/c.txt"],
@@ -171,21 +172,24 @@ BAD_ARGS = {
     "unknown option": (["disparity", "{L}", "{R}", "-o", "{T}/x.pfm", "--frobnicate"], "No such option"),
     "unknown command": (["frobnicate"], "No such command"),
     "points max-disparity 1e9": (["points", "{L}", "{R}", "--calib", "{DS}/calibration.yaml", "--rectified",
-                                  "--max-disparity", "1e9", "-o", "{T}/p.ply"], "would need"),
+                                  "--max-disparity", "1e9", "-o", "{T}/p.ply"], "--max-disparity"),
     "scan angle-increment 1e-9": (["scan", "{L}", "{R}", "--calib", "{DS}/calibration.yaml", "--rectified",
-                                   "--angle-increment", "1e-9", "-o", "{T}/s.json"], "would need"),
+                                   "--angle-increment", "1e-9", "-o", "{T}/s.json"], "--angle-increment"),
     "scan plot suffix": (["scan", "{L}", "{R}", "--calib", "{DS}/calibration.yaml", "--rectified",
                           "--plot", "{T}/s.txt", "-o", "{T}/s.json"], "--plot must end in"),
-    "synth 1e8 x 1e8": (["synth", "--out", "{T}/S", "--width", "100000000", "--height", "100000000"], "would need"),
-    "map resolution 0.0001": (["map", "{DS}", "-o", "{T}/m", "--resolution", "0.0001", "--quiet"], "would need"),
+    "synth 1e8 x 1e8": (["synth", "--out", "{T}/S", "--width", "100000000", "--height", "100000000"], "--width"),
+    "synth 8192 x 8192 x 1e5 frames": (["synth", "--out", "{T}/S", "--width", "8192", "--height", "8192", "--frames",
+                                        "100000"], "of disk"),
+    "map resolution 0.0001": (["map", "{DS}", "-o", "{T}/m", "--resolution", "0.0001", "--quiet"], "--resolution"),
+    "map size 1e5 x 1e5": (["map", "{DS}", "-o", "{T}/m", "--size", "100000,100000", "--quiet"], "would need"),
     "plan bad start": (["plan", "{DS}/gt_map.yaml", "--start", "a", "--goal", "1,1", "-o", "{T}/p.json"], "--start"),
     "plan missing goal": (["plan", "{DS}/gt_map.yaml", "--start", "1,1", "-o", "{T}/p.json"], "Missing option"),
     "plan overwrites its map": (["plan", "{DS}/gt_map.yaml", "--start", "1,0", "--goal", "2,0", "-o", "{T}/p.json",
                                  "--plot", "{DS}/gt_map.pgm"], "--plot must end in"),
     "rectify into the input": (["rectify", "--calib", "{DS}/calibration.yaml", "{DS}/left/000000.png",
                                 "{DS}/left_rect/000001.png", "-o", "{DS}/left"], "would overwrite the input"),
-    "evaluate json is the markdown": (["evaluate", "{T}", "--json", "{T}/r.txt", "--markdown", "{T}/r.txt"],
-                                      "same file"),
+    "evaluate writes into its scene": (["evaluate", "{T}", "--json", "{T}/r.json"], "lies inside the scene"),
+    "evaluate markdown suffix": (["evaluate", "{T}", "--markdown", "{DS}/../r.json"], "--markdown must end in"),
     "export into the bag": (["export", "--bag", "{T}/x.bag", "--left-topic", "/l", "--right-topic", "/r", "-o",
                              "{T}"], "not empty"),
     "batch workers 0": (["batch", "{DS}", "-o", "{T}/b", "--workers", "0"], "--workers"),
@@ -224,8 +228,8 @@ def test_unexpected_errors_are_one_line_with_a_hint(monkeypatch, capsys):
     args = ["disparity", "a.png", "b.png", "--max-disparity", "16", "-o", "x.pfm"]
     with tempfile.TemporaryDirectory() as tmp:
         from mrstereo.io import write_image
-        for name in ("a.png", "b.png"):
-            write_image(Path(tmp) / name, np.full((32, 48), 100, np.uint8))
+        for k, name in enumerate(("a.png", "b.png")):
+            write_image(Path(tmp) / name, np.random.default_rng(k).integers(0, 255, (32, 48), dtype=np.uint8))
         cwd = os.getcwd()
         os.chdir(tmp)
         try:
@@ -310,16 +314,15 @@ def test_non_utf8_files_are_named(ds, tmp_path, capsys):
 
 def _full_disk_tmp(monkeypatch):
     """Simulated full disk: every temporary file of atomic_write is /dev/full (writes fail with ENOSPC)."""
-    real = tempfile.mkstemp
+    real = io.files._create_temporary
 
-    def mkstemp(*args, **kwargs):
-        fd, path = real(*args, **kwargs)
-        os.close(fd)
+    def create(folder, name):
+        path = real(folder, name)
         os.unlink(path)
         os.symlink("/dev/full", path)
-        return os.open(path, os.O_WRONLY), path
+        return path
 
-    monkeypatch.setattr(io.files.tempfile, "mkstemp", mkstemp)
+    monkeypatch.setattr(io.files, "_create_temporary", create)
 
 
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
@@ -353,7 +356,7 @@ def test_a_really_full_disk(ds, tmp_path, capsys, command):
                           "--quiet"],
                 "map": ["map", ds, "-o", disk / "m", "--quiet"],
                 "batch": ["batch", ds, "-o", disk / "b", "--quiet"]}[command]
-        _run(capsys, args, must="no space left on device")
+        _run(capsys, args, must="of disk" if command == "synth" else "no space left on device")
         assert not _no_temporaries(disk)
         if command == "map":
             assert not (disk / "m").exists() or not any((disk / "m").iterdir())
@@ -396,10 +399,10 @@ def test_batch_resume_cleans_a_killed_runs_temporaries_and_redoes_corrupt_frames
     good = io.read_pfm(frames / "000001.pfm")
     # what SIGKILL leaves: a map folder being written, an atomic_write temporary
     pid = _dead_pid()
-    stale_map = out / ds.name / f".map.{pid}.abcd1234.tmp"
+    stale_map = out / ds.name / f".mrstereo-tmp-{pid}-abcd1234.map"
     (stale_map / "map").mkdir(parents=True)
     (stale_map / "map" / "map.pgm").write_bytes(b"P5 half")
-    stale_file = frames / f".000002.{pid}.xyz.tmp.pfm"
+    stale_file = frames / f".mrstereo-tmp-{pid}-0123abcd.000002.pfm"
     stale_file.write_bytes(b"Pf\n")
     # and a damaged output
     data = (frames / "000001.pfm").read_bytes()
@@ -520,12 +523,12 @@ def test_sigkill_during_synth_leaves_only_a_marked_temporary(tmp_path):
                              "--width", "160", "--height", "120", "--quiet"], env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 60
-    while not list(tmp_path.glob(".S.*.tmp/left/*.png")) and time.monotonic() < deadline:
+    while not list(tmp_path.glob(".mrstereo-tmp-*.S/left/*.png")) and time.monotonic() < deadline:
         time.sleep(0.05)
     proc.kill()
     proc.wait()
     assert not (tmp_path / "S").exists()
-    assert all(p.name.startswith(".") and p.name.endswith(".tmp") for p in tmp_path.iterdir())
+    assert all(io.is_temporary(p) for p in tmp_path.iterdir())
 
 
 def test_sigkill_during_batch_then_resume_gives_the_same_files(ds, tmp_path):

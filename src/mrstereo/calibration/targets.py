@@ -74,6 +74,10 @@ def planar_grid(cols: int, rows: int, spacing_m: float) -> np.ndarray:
     return np.stack([x.ravel() * spacing_m, y.ravel() * spacing_m, np.zeros(x.size)], axis=1)
 
 
+MAX_BOARD_CORNERS = 200
+"""The most inner corners per side of a chessboard (the largest printed targets have a few dozen)."""
+
+
 def parse_board(text: str) -> tuple[int, int]:
     """Parse ``"9x6"`` (inner corners, columns x rows)."""
     parts = str(text).lower().replace(" ", "").split("x")
@@ -81,8 +85,8 @@ def parse_board(text: str) -> tuple[int, int]:
         cols, rows = (int(p) for p in parts)
     except ValueError:
         raise ValueError(f"board must look like 9x6 (inner corners), got {text!r}") from None
-    if cols < 2 or rows < 2:
-        raise ValueError(f"board needs at least 2x2 inner corners, got {text!r}")
+    if not (2 <= cols <= MAX_BOARD_CORNERS and 2 <= rows <= MAX_BOARD_CORNERS):
+        raise ValueError(f"board needs 2 to {MAX_BOARD_CORNERS} inner corners per side, got {text!r}")
     return cols, rows
 
 

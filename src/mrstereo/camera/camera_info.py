@@ -27,7 +27,7 @@ import numpy as np
 import yaml
 
 from .. import _checks
-from ..io import atomic_write, parse_yaml
+from ..io import atomic_write, read_yaml
 from .model import Camera, get_distortion_model
 from .mount import CameraMount, mount_entry, read_mount_entry
 
@@ -390,14 +390,7 @@ def check_stereo(stereo: StereoCamera, *, where: str = "stereo calibration") -> 
 
 
 def _load_yaml(path: str | os.PathLike, what: str):
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{what} not found: {path}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise ValueError(f"{what} {path} is not a text file (binary or not UTF-8)") from None
-    return parse_yaml(text, what, path)
+    return read_yaml(path, what)
 
 
 def _dump_yaml(path: str | os.PathLike, data: dict) -> None:

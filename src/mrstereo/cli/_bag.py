@@ -8,17 +8,16 @@ Conventions: docs/conventions.md.
 from __future__ import annotations
 
 import contextlib
-import math
 from pathlib import Path
 
 import click
 
 from ..mapping import MappingConfig
 from ..pipeline.run import PipelineConfig
-from ._options import (CALIB_HELP, check_mount_options, check_workers, echo_run_floor, mount_from_options,
-                       mount_option, parse_mount, worker_options)
+from ._options import (CALIB_HELP, HEIGHT, TILT, Number, check_mount_options, check_workers, echo_run_floor,
+                       mount_from_options, mount_option, parse_mount, worker_options)
 
-__all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset"]
+__all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset", "read_inputs"]
 
 
 def bag_options(func):
@@ -38,12 +37,13 @@ def bag_options(func):
                      help="TF frame of the left camera (an *_optical_frame, else the camera body frame "
                           "x forward): its pose in --base-frame is the camera mount (unless --mount or "
                           "--height is given), its change of heading the head pan."),
-        click.option("--sync-tolerance", "sync_tolerance_s", type=float, default=0.02, show_default=True,
+        click.option("--sync-tolerance", "sync_tolerance_s", type=Number(0.0, 10.0, unit="s"), default=0.02,
+                     show_default=True,
                      help="Largest left/right stamp difference of a stereo pair [s]."),
         click.option("--rectified-images", is_flag=True, help="The bag's images are already rectified."),
-        click.option("--height", "height_m", type=float, default=None,
+        click.option("--height", "height_m", type=HEIGHT, default=None,
                      help="Camera height above the floor [m] (else the stereo YAML mount:/rig:, else estimated)."),
-        click.option("--tilt", "tilt_rad", type=float, default=None,
+        click.option("--tilt", "tilt_rad", type=TILT, default=None,
                      help="Downward camera tilt [rad] (with --height)."),
     ]
     for option in reversed(options):
@@ -65,9 +65,6 @@ def bag_export_kwargs(*, bag, calib, left_topic, right_topic, camera_info_topics
         raise click.UsageError("--bag needs --left-topic and --right-topic")
     if odom_topic and use_tf:
         raise click.UsageError("give --odom-topic or --tf, not both")
-    if not math.isfinite(sync_tolerance_s) or sync_tolerance_s < 0:
-        raise click.BadParameter(f"must be a finite number >= 0, got {sync_tolerance_s}",
-                                 param_hint="--sync-tolerance")
     info = None
     if camera_info_topics:
         info = tuple(t.strip() for t in camera_info_topics.split(","))
@@ -83,6 +80,23 @@ def bag_export_kwargs(*, bag, calib, left_topic, right_topic, camera_info_topics
                 camera_frame=camera_frame, sync_tolerance_s=sync_tolerance_s,
                 mount=mount_from_options(height_m, tilt_rad, mount, calibration), rectified=rectified_images,
                 progress=not quiet)
+
+
+def read_inputs(manifest, bag: Path | None, calib: Path | None):
+    """Read what a command's recording is made of, before any work: the dataset (returned; None with
+    ``--bag``), ``--calib``, and register the bag's files. Every output check that follows sees them all
+    (:func:`mrstereo.io.protecting_inputs`), calibration siblings such as OpenLORIS' trans_matrix.yaml too."""
+    from ..camera import read_stereo
+    from ..io import note_inputs
+    from ..recordings.bag import bag_inputs
+    from ..recordings.manifest import Manifest, read_manifest
+
+    if calib is not None:
+        read_stereo(calib)
+    if bag is not None:
+        note_inputs(bag_inputs(bag))
+        return None
+    return manifest if isinstance(manifest, Manifest) else read_manifest(manifest)
 
 
 @contextlib.contextmanager
@@ -156,8 +170,8 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
     from ..io import check_output_dir
     from ..recordings.bag import export_bag
 
-    check_output_dir("--out", out_dir, inputs=[bag, options.get("calib")], input_dirs=[bag] if bag.is_dir() else [],
-                     must_be_empty=True)
+    read_inputs(None, bag, options.get("calib"))
+    check_output_dir("--out", out_dir, must_be_empty=True)
     kwargs = bag_export_kwargs(bag=bag, quiet=quiet, **options)
     result = export_bag(bag, out_dir, **kwargs)
     echo_export(result)
@@ -196,11 +210,12 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool,
     from ..recordings.manifest import read_manifest
 
     check_workers(workers, scheduler, processes)
-    check_output_dir("--out", out_dir)
     config = PipelineConfig(preset=preset).with_fusion(fusion)
     camera_mount = parse_mount(mount)
+    manifests = [read_manifest(m) for m in manifests]
+    check_output_dir("--out", out_dir)
     if camera_mount is not None:
-        manifests = [dataclasses.replace(read_manifest(m), mount=camera_mount) for m in manifests]
+        manifests = [dataclasses.replace(m, mount=camera_mount) for m in manifests]
     summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
                         scheduler=scheduler, processes=processes, progress=not quiet)
     for d in summary.datasets:

@@ -12,15 +12,17 @@ import click
 
 from ..camera import write_stereo
 from ..camera.formats import import_calibration
-from ..io import refuse_overwrite_input
+from ..io import check_outputs
+from ._options import MAX_IMAGE_SIDE, Number
 
 
 def _image_size(text: str | None) -> tuple[int, int] | None:
     if text is None:
         return None
     parts = text.lower().split("x")
-    if len(parts) != 2 or not all(p.strip().isdigit() and int(p) > 0 for p in parts):
-        raise ValueError(f"--image-size must be WIDTHxHEIGHT in pixels, like 640x480, got {text!r}")
+    if len(parts) != 2 or not all(p.strip().isdigit() and 0 < int(p) <= MAX_IMAGE_SIDE for p in parts):
+        raise ValueError(f"--image-size must be WIDTHxHEIGHT in pixels (1 to {MAX_IMAGE_SIDE} each), like 640x480, "
+                         f"got {text!r}")
     return int(parts[0]), int(parts[1])
 
 
@@ -34,7 +36,7 @@ def calib_group() -> None:
 @click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Stereo YAML to write (.yaml or .yml).")
 @click.option("--image-size", help="WIDTHxHEIGHT, for OpenCV files that do not store the image size.")
-@click.option("--alpha", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True,
+@click.option("--alpha", type=Number(0.0, 1.0), default=0.0, show_default=True,
               help="Rectification of raw pairs: 0 keeps only valid pixels, 1 keeps every raw pixel.")
 def convert_cmd(inputs, output: Path, image_size, alpha: float) -> None:
     """Write another tool's calibration as a stereo YAML.
@@ -48,11 +50,11 @@ def convert_cmd(inputs, output: Path, image_size, alpha: float) -> None:
 
     mrstereo calib convert cam0/sensor.yaml cam1/sensor.yaml -o stereo.yaml
     """
-    if output.suffix.lower() not in (".yaml", ".yml"):
-        raise ValueError(f"--out must end in .yaml or .yml, got {output}")
     files = [part for item in inputs for part in (item.split(",") if not Path(item).exists() else [item])]
-    refuse_overwrite_input(output, files)
-    result = import_calibration(files, image_size=_image_size(image_size), alpha=alpha)
+    size = _image_size(image_size)
+    check_outputs({"--out": output}, files, suffixes={"--out": (".yaml", ".yml")})
+    result = import_calibration(files, image_size=size, alpha=alpha)      # (reads siblings: trans_matrix.yaml)
+    check_outputs({"--out": output}, files)
     write_stereo(output, result.stereo)
     s = result.stereo
     how = "rectified by mrstereo (Fusiello)" if result.rectified_here else "rectification from the file"

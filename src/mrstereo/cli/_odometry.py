@@ -10,10 +10,13 @@ from pathlib import Path
 import click
 
 from ..pipeline.odometry import odometry_from_manifest
-from ._bag import bag_options, opened_dataset
+from ._bag import bag_options, opened_dataset, read_inputs
 from ._options import library_default, profile_option
 
-__all__ = ["COMMANDS"]
+__all__ = ["COMMANDS", "OUTPUT_SUFFIXES"]
+
+OUTPUT_SUFFIXES = {"--out": (".txt", ".tum"), "--plot": (".png", ".pdf", ".svg"), "--metrics": (".json",)}
+"""What the files of ``mrstereo odometry`` may be called: a TUM trajectory is text, the figure an image."""
 
 
 @click.command("odometry")
@@ -49,22 +52,16 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     """
     import numpy as np
 
-    from ..io import refuse_overwrite_input
+    from ..io import check_outputs
     from ..odometry.trajectory import plot_trajectories, trajectory_metrics, write_tum
     from ..transforms import T_from_planar
 
     if (manifest is None) == (bag is None):
         raise click.UsageError("give a DATASET or --bag FILE (one of them)")
-    outputs = [p for p in (out_path, plot_path, metrics_path) if p is not None]
-    if len(set(p.resolve() for p in outputs)) != len(outputs):
-        raise click.UsageError("-o, --plot and --metrics must be different files")
-    inputs = [p for p in (manifest, bag, calib) if p is not None]
-    for p in outputs:
-        refuse_overwrite_input(p, inputs)
-    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, stamps):
-        if bag is None:
-            for p in outputs:
-                refuse_overwrite_input(p, [dataset.root / "manifest.yaml"])
+    dataset = read_inputs(manifest, bag, calib)
+    outputs = {"--out": out_path, "--plot": plot_path, "--metrics": metrics_path}
+    check_outputs(outputs, suffixes=OUTPUT_SUFFIXES)
+    with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, stamps):
         run = odometry_from_manifest(dataset, calibration=stereo, progress=not quiet,
                                      initial_pose="given" if start == "given" else "identity")
     if stamps is None:
@@ -98,7 +95,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
         if truth is not None:
             curves["ground truth"] = ((np.linalg.inv(truth[0]) if start == "origin" else np.eye(4)) @ truth)[:, :3, 3]
         plot_trajectories(plot_path, curves, lost=~run.tracked, title=f"visual odometry, {len(run.status)} frames")
-    click.echo(f"wrote {', '.join(str(p) for p in outputs)}")
+    click.echo(f"wrote {', '.join(str(p) for p in outputs.values() if p is not None)}")
 
 
 COMMANDS = [odometry_command]

@@ -10,13 +10,16 @@ import click
 
 from ..mapping import GridSpec, MappingConfig
 from ..pipeline.run import PipelineConfig, build_map
-from ._bag import bag_options, opened_dataset
-from ._options import check_workers, echo_run_floor, library_default, profile_option, worker_options
+from ._bag import bag_options, opened_dataset, read_inputs
+from ._options import (Number, check_workers, echo_run_floor, library_default, numbers, profile_option,
+                       worker_options)
 
 __all__ = ["COMMANDS"]
 
 MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
 """What ``mrstereo map`` writes into its output folder (:func:`mrstereo.pipeline.write_map_outputs`)."""
+MAX_MAP_SIZE_M = 100_000.0
+"""The largest map side and origin coordinate of ``--size`` / ``--origin`` [m] (the grid's memory is checked too)."""
 
 
 @click.command("map")
@@ -32,7 +35,8 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
               help="Log-odds fusion (OctoMap) or the paper's union of occupied cells.")
 @click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default=PipelineConfig.preset,
               show_default=True, help="Matching preset.")
-@click.option("--resolution", "resolution_m", type=float, default=GridSpec.resolution_m, show_default=True,
+@click.option("--resolution", "resolution_m", type=Number(0.001, 10.0, unit="m"), default=GridSpec.resolution_m,
+              show_default=True,
               help="Cell size [m].")
 @click.option("--size", "size_m", default=f"{GridSpec.width_m:g},{GridSpec.height_m:g}", show_default=True,
               metavar="W,H", help="Map width (x) and height (y) [m].")
@@ -65,30 +69,25 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     --workers N (threads, or processes with --processes) and --scheduler
     ADDRESS (a Dask cluster) spread the frames; the map is the same bit for bit.
     """
-    from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
-    from ..pipeline.batch import dataset_files
+    from ..io import check_output_dir, check_outputs, staged_dir
     from ..pipeline.run import write_map_outputs
-    from ..recordings.manifest import read_manifest
 
     check_workers(workers, scheduler, processes)
     if (manifest is None) == (bag is None):
         raise click.UsageError("give a DATASET or --bag FILE (one of them)")
-    (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
+    (width, height) = numbers(size_m, "--size", 2, 0.0, MAX_MAP_SIZE_M, unit="m", what="'W,H' in metres")
+    (ox, oy) = numbers(origin_m, "--origin", 2, -MAX_MAP_SIZE_M, MAX_MAP_SIZE_M, unit="m", what="'X,Y' in metres")
+    if width <= 0 or height <= 0:
+        raise click.BadParameter(f"width and height must be > 0, got {size_m!r}", param_hint="--size")
     grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
     config = PipelineConfig(preset=preset, grid=grid).with_fusion(fusion)
-    check_output_dir("--out", out_dir)
-    outputs = {f"--out {out_dir / name}": out_dir / name for name in MAP_FILES}     # (names the file)
-    if bag is not None:
-        check_outputs(outputs, [bag, calib], input_dirs=[bag] if bag.is_dir() else [])
-    else:
-        dataset = read_manifest(manifest)            # read once: checked here, mapped below
-        check_outputs(outputs, [manifest, calib] + dataset_files(dataset))
-        manifest = dataset
-    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, _):
+    dataset = read_inputs(manifest, bag, calib)          # read once: checked here, mapped below
+    check_output_dir("--out", out_dir, may_hold_inputs=True)
+    check_outputs({f"--out {out_dir / name}": out_dir / name for name in MAP_FILES})     # (names the file)
+    with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes, odometry=odometry, align=align or None)
-        remove_stale_temporaries(out_dir)
-        with staged_dir(out_dir, prefix="map") as staging:      # all files or none: a kill leaves the old set
+        with staged_dir(out_dir, prefix="map") as staging:      # all files or none: Ctrl-C leaves the old set
             files = {key: out_dir / path.name for key, path in write_map_outputs(run, staging).items()}
     click.echo(f"map of {len(run.observations)} frames: {run.grid!r}")
     echo_run_floor(run.floor)
@@ -106,14 +105,6 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
         click.echo(f"scan-to-map alignment: {a['applied']} of {a['frames']} frames corrected, mean "
                    f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg per frame")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
-
-
-def _pair(text: str, option: str) -> tuple[float, float]:
-    try:
-        a, b = (float(v) for v in text.split(","))
-    except ValueError:
-        raise click.BadParameter(f"expected two numbers 'a,b', got {text!r}", param_hint=option) from None
-    return a, b
 
 
 COMMANDS = [map_command]

@@ -9,7 +9,11 @@ from pathlib import Path
 import click
 
 from ..world.dataset import write_synthetic_dataset
-from ._options import library_default
+from .._limits import limit
+from ._options import SEED, Number, library_default, numbers
+
+IMAGE_SIDE = Number(16, 8192, integer=True, unit="px")
+"""``--width`` / ``--height`` of rendered images."""
 
 __all__ = ["COMMANDS"]
 
@@ -18,15 +22,15 @@ __all__ = ["COMMANDS"]
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(path_type=Path),
               help="New (or empty) dataset directory.")
 @click.option("--seed", default=library_default(write_synthetic_dataset, "seed"), show_default=True,
-              type=click.IntRange(min=0),
+              type=SEED,
               help="Texture and sensor-noise seed (with --randomize: the whole world).")
 @click.option("--frames", "n_frames", default=library_default(write_synthetic_dataset, "n_frames"), show_default=True,
-              type=click.IntRange(min=1),
+              type=Number(1, lambda: limit("MRSTEREO_MAX_FRAMES"), integer=True),
               help="Number of frames (with --path stops: front, +45 and -45 degree views at each stop).")
 @click.option("--width", default=library_default(write_synthetic_dataset, "width"), show_default=True,
-              type=click.IntRange(min=16), help="Image width.")
+              type=IMAGE_SIDE, help="Image width.")
 @click.option("--height", default=library_default(write_synthetic_dataset, "height"), show_default=True,
-              type=click.IntRange(min=16), help="Image height.")
+              type=IMAGE_SIDE, help="Image height.")
 @click.option("--randomize", is_flag=True,
               help="A randomized world drawn from --seed (corridor, textures, lights, rig, sensors, "
                    "obstacles, path) instead of the built-in corridor.")
@@ -38,7 +42,8 @@ __all__ = ["COMMANDS"]
               default=library_default(write_synthetic_dataset, "path"), show_default=True,
               help="stops: front/left/right views at each stop (mapping); front, s-curve: one front view every "
                    "--step metres (odometry sequences; with --randomize: front, along the world's own path).")
-@click.option("--step", "step_m", type=float, default=library_default(write_synthetic_dataset, "step_m"),
+@click.option("--step", "step_m", type=Number(0.0, 10.0, unit="m", open_low=True),
+              default=library_default(write_synthetic_dataset, "step_m"),
               show_default=True,
               help="Path length between frames of a front or s-curve sequence [m].")
 @click.option("--odometry-noise", "odometry_noise", metavar="SCALE,DEG_PER_M", default=None,
@@ -55,25 +60,21 @@ def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, rand
     labels, the true calibration, the ground-truth map and manifest.yaml.
     With --randomize the world itself is drawn from the seed (docs/world.md).
     """
+    import math
+
     from ..io import check_output_dir
 
     if wall_texture is not None and not randomize:
         raise click.UsageError("--wall-texture needs --randomize")
     check_output_dir("--out", out_dir, must_be_empty=True)
-    import math
-
     noise = None
     if odometry_noise is not None:
-        try:
-            scale, deg_per_m = (float(v) for v in odometry_noise.split(","))
-        except ValueError:
-            raise click.BadParameter(f"expected 'scale,deg_per_m' (e.g. 0.03,2), got {odometry_noise!r}",
-                                     param_hint="--odometry-noise") from None
-        if not (math.isfinite(scale) and math.isfinite(deg_per_m)):
-            raise click.BadParameter(f"must be finite, got {odometry_noise!r}", param_hint="--odometry-noise")
+        scale, deg_per_m = numbers(odometry_noise, "--odometry-noise", 2, -90.0, 90.0,
+                                   what="'scale,deg_per_m' (e.g. 0.03,2)")
+        if abs(scale) > 0.5:
+            raise click.BadParameter(f"the scale error must be in [-0.5, 0.5], got {scale:g}",
+                                     param_hint="--odometry-noise")
         noise = (scale, math.radians(deg_per_m))
-    if not (math.isfinite(step_m) and step_m > 0):
-        raise click.BadParameter(f"must be a positive number, got {step_m}", param_hint="--step")
     path = write_synthetic_dataset(out_dir, seed=seed, n_frames=n_frames, width=width, height=height,
                                    path=path_kind, step_m=step_m, odometry_noise=noise, progress=not quiet,
                                    randomize=randomize, wall_texture=wall_texture)

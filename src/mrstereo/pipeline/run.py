@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from ..geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_
 from ..geometry.obstacles import MAPPING_MAX_RANGE_M, ObstacleConfig
 from ..io import atomic_write
 from ..mapping import GridSpec, read_ros_map, write_ros_map
+from ..mapping.rosmap import ros_map_on_grid
 from ..mapping.figures import plot_map
 from ..mapping.fusion import FrameObservation, fuse
 from ..mapping.metrics import MapMetrics, map_metrics
@@ -335,6 +337,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     from functools import partial
 
     from .parallel import map_ordered
+    from .sanity import check_pair_streams
 
     if not isinstance(manifest, Manifest):
         manifest = read_manifest(manifest)
@@ -344,6 +347,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         raise ValueError(f"odometry must be 'given' or 'visual', got {odometry!r}")
     stereo = manifest.calibration if calibration is None else calibration
     prefer_raw = prefer_raw or calibration is not None
+    check_pair_streams(manifest)
     mount, floor = floor_for_run(manifest, stereo, config=config, prefer_raw=prefer_raw)
     items = list(enumerate(manifest.frames))
     vo = None
@@ -396,15 +400,39 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
             observations, grid=config.grid, config=config.mapping, align=AlignConfig() if align is True else align)
     else:
         occupancy = fuse(observations, grid=config.grid, config=config.mapping)
+    _warn_outside(observations, occupancy)
     metrics, gt = None, None
     if manifest.ground_truth_map is not None:
         gt = read_ros_map(manifest.ground_truth_map)
-        if gt.grid.shape == occupancy.grid.shape:
+        aligned = ros_map_on_grid(gt, occupancy.grid)
+        if aligned is None:
+            warnings.warn(f"no metrics: the ground-truth map {manifest.ground_truth_map} has cells of "
+                          f"{gt.grid.resolution_m:g} m at origin ({gt.grid.origin_x_m:g}, {gt.grid.origin_y_m:g}), "
+                          f"which do not fall on the map's cells of {occupancy.grid.resolution_m:g} m", stacklevel=2)
+        else:
+            gt = aligned              # compared where the two maps overlap
             true_frames = [replace(f, pose=f.true_pose) if f.true_pose is not None else f for f in manifest.frames]
             views = views_of_frames(true_frames, stereo, range_m=config.obstacles.max_range_m)
             metrics = map_metrics(occupancy, gt, path_xy=np.array([f.pose for f in true_frames]), views=views)
     return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
                   ground_truth_map=gt, floor=floor, mount=mount, odometry=odometry, alignments=alignments)
+
+
+def _warn_outside(observations: list[FrameObservation], occupancy: OccupancyGrid) -> None:
+    """A warning when frames were taken outside the map, or when the map observed no cell at all."""
+    grid = occupancy.grid
+    if observations:
+        rows, cols = grid.cells_from_xy(np.array([o.pose[:2] for o in observations], dtype=np.float64))
+        outside = [o.index for o, inside in zip(observations, grid.inside(rows, cols)) if not inside]
+        if outside:
+            x0, y0 = grid.origin_x_m, grid.origin_y_m
+            warnings.warn(f"{len(outside)} of {len(observations)} frames were taken outside the map "
+                          f"[{x0:g}, {x0 + grid.width_m:g}] x [{y0:g}, {y0 + grid.height_m:g}] m (frame(s) "
+                          f"{', '.join(str(k) for k in outside[:5])}{', ...' if len(outside) > 5 else ''}); "
+                          "give a --size and --origin that cover the path", stacklevel=3)
+    if observations and not (~occupancy.unknown).any():
+        warnings.warn("the map observed no cell: every frame's points fell outside it or none were found; "
+                      "check the poses, --size and --origin", stacklevel=3)
 
 
 def views_of_frames(frames, stereo: StereoCamera, *, range_m: float = MAPPING_MAX_RANGE_M) -> list[tuple]:

@@ -25,8 +25,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .. import _limits
 from ..camera import CameraMount, StereoCamera, mount_entry, read_mount_entry, read_stereo, write_stereo
-from ..io import check_output_dir, matching_image, read_image, read_yaml, temporary_dir, write_image, write_pfm
+from ..io import Inputs, matching_image, note_inputs, read_image, read_yaml, staged_new_dir, write_image, write_pfm
 from ..profiling import stage
 
 __all__ = ["FrameRecord", "Manifest", "read_manifest", "write_manifest", "frame_pair", "staged_dataset",
@@ -91,6 +92,19 @@ class Manifest:
     ground_truth_map: Path | None
     frames: tuple[FrameRecord, ...]
 
+    def inputs(self) -> Inputs:
+        """What a run over the dataset reads: its folder (no output may go inside it), the manifest, the
+        calibration, the ground-truth map and every frame's files (wherever they lie)."""
+        from ..mapping.rosmap import ros_map_files
+
+        inputs = Inputs(folders=[self.root], kind="dataset")
+        inputs.add(self.root / MANIFEST_NAME, self.calibration_path)
+        if self.ground_truth_map is not None:
+            inputs.add(*ros_map_files(self.ground_truth_map))
+        for r in self.frames:
+            inputs.add(r.left, r.right, r.left_rect, r.right_rect, r.gt_disparity, r.gt_labels, resolved=True)
+        return inputs
+
 
 def _fail(path: Path, message: str) -> ValueError:
     return ValueError(f"manifest {path}: {message}")
@@ -138,9 +152,13 @@ def read_manifest(path_or_dir: str | os.PathLike) -> Manifest:
     frames_data = data.get("frames")
     if not isinstance(frames_data, list) or not frames_data:
         raise _fail(path, "'frames' must be a non-empty list")
+    if len(frames_data) > _limits.limit("MRSTEREO_MAX_FRAMES"):
+        raise _limits.over_limit("MRSTEREO_MAX_FRAMES", len(frames_data), f"manifest {path}: frames")
     frames = tuple(_frame(root, path, k, item) for k, item in enumerate(frames_data))
-    return Manifest(root=root, calibration=calibration, calibration_path=calib_path, mount=mount,
-                    ground_truth_map=gt_map, frames=frames)
+    manifest = Manifest(root=root, calibration=calibration, calibration_path=calib_path, mount=mount,
+                        ground_truth_map=gt_map, frames=frames)
+    note_inputs(manifest.inputs())
+    return manifest
 
 
 def _frame(root: Path, manifest: Path, k: int, item) -> FrameRecord:
@@ -232,8 +250,9 @@ def staged_dataset(out_dir: str | os.PathLike, *, calibration: StereoCamera, mou
                    calibration_name: str = "calibration.yaml", extra: dict | None = None) -> Iterator[DatasetWriter]:
     """Write a new dataset folder: the block adds frames, the end writes calibration and manifest.
 
-    The folder is built in a hidden temporary folder beside ``out_dir`` and renamed into place when
-    the block ends without an error, so a failed or killed run leaves no half-written dataset.
+    The folder is built in a hidden temporary folder and renamed into place when the block ends
+    without an error (:func:`mrstereo.io.staged_new_dir`), so a failed or killed run leaves no
+    half-written dataset.
 
     Parameters
     ----------
@@ -248,17 +267,12 @@ def staged_dataset(out_dir: str | os.PathLike, *, calibration: StereoCamera, mou
     extra : dict, optional
         Further top-level manifest entries (e.g. ``generator:``, ``source:``).
     """
-    out_dir = Path(out_dir)
-    check_output_dir("out_dir", out_dir, must_be_empty=True)
-    with temporary_dir(out_dir.parent, prefix=out_dir.name) as tmp:
+    with staged_new_dir(out_dir) as tmp:
         dataset = DatasetWriter(tmp)
         yield dataset
         write_stereo(tmp / calibration_name, calibration)
         write_manifest(tmp / MANIFEST_NAME, calibration=calibration_name, mount=mount, frames=dataset.frames,
                        ground_truth_map=dataset.ground_truth_map, extra=extra)
-        if out_dir.exists():
-            out_dir.rmdir()          # empty, checked above
-        os.replace(tmp, out_dir)
 
 
 def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.ndarray, np.ndarray, bool]:

@@ -10,11 +10,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import _checks
+from .. import _checks, _limits
 from ..recordings.manifest import staged_dataset
 from .groundtruth import ground_truth_map
 from .paths import PATH_KINDS, drifted_poses, sequence_path, waypoint_path
 from .randomize import random_world
+
+BYTES_PER_PIXEL = 7.0
+"""Disk space of one pixel of a written frame: ground-truth disparity (PFM, 4 bytes), four PNG images and the
+labels (about 3 bytes of compressed texture)."""
 from .render import SensorModel, default_stereo, render_stereo_frame
 from .scene import default_scene
 
@@ -141,10 +145,14 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
 
     seed = _checks.positive_int("seed", seed, minimum=0)
     n_frames = _checks.positive_int("n_frames", n_frames)
+    if n_frames > _limits.limit("MRSTEREO_MAX_FRAMES"):
+        raise _limits.over_limit("MRSTEREO_MAX_FRAMES", n_frames, "n_frames")
     width, height = _checks.positive_int("width", width, minimum=16), _checks.positive_int("height", height, minimum=16)
     supersample = _checks.positive_int("supersample", supersample)
     _checks.fits_in_memory("width and height", 64.0 * width * height * supersample ** 2,
                            f"rendering {width}x{height} images")
+    _checks.fits_on_disk("n_frames", BYTES_PER_PIXEL * width * height * n_frames, Path(out_dir).absolute(),
+                         f"{n_frames} frames of {width}x{height}")
     _check_world_options(path, randomize, wall_texture, odometry_noise)
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
     if randomize:
