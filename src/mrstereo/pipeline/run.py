@@ -38,7 +38,8 @@ from ..mapping.metrics import MapMetrics, map_metrics
 from ..mapping.occupancy import MappingConfig, OccupancyGrid, view_cells
 from ..matching.config import MatchingConfig
 from ..profiling import stage
-from ..recordings.manifest import FrameRecord, Manifest, frame_pair, read_manifest
+from ..recordings.layouts import read_recording
+from ..recordings.manifest import FrameRecord, Manifest, frame_pair, pose_3d_of
 from ..rejection import RejectionConfig
 from ..transforms import T_from_planar, transform_points
 from .frame import PairObstacles, obstacles_from_pair
@@ -323,7 +324,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     from .parallel import map_ordered
 
     if not isinstance(manifest, Manifest):
-        manifest = read_manifest(manifest)
+        manifest = read_recording(manifest)
     if not isinstance(config, PipelineConfig):
         raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
     if odometry not in ("given", "visual"):
@@ -338,8 +339,8 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
 
         run_mount = replace(manifest, rig=mount) if mount is not None else manifest     # the floor the map uses
         vo = odometry_from_manifest(run_mount, calibration=calibration, progress=progress)
-        items = [(k, replace(record, pose=tuple(float(v) for v in pose)))
-                 for (k, record), pose, ok in zip(items, vo.poses, vo.tracked) if ok]
+        items = [(k, replace(record, pose=None, pose_3d=pose_3d_of(T)))
+                 for (k, record), T, ok in zip(items, vo.T_world_from_base, vo.tracked) if ok]
     observe = partial(_observe_indexed, stereo=stereo, rig=mount, config=config, prefer_raw=prefer_raw)
     observations = map_ordered(observe, items, workers=workers, scheduler=scheduler,
                                processes=processes, progress=progress, desc="mapping", unit="frame",
@@ -358,7 +359,8 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         gt = read_ros_map(manifest.ground_truth_map)
         if gt.grid.shape == occupancy.grid.shape:
             # the evaluated band follows the true path when the dataset knows it
-            true_frames = [replace(f, pose=f.true_pose) if f.true_pose is not None else f for f in manifest.frames]
+            true_frames = [replace(f, pose=f.true_pose, pose_3d=f.true_pose_3d) if f.true_pose is not None else f
+                           for f in manifest.frames]
             path = np.array([f.pose for f in true_frames])
             views = views_of_frames(true_frames, stereo, range_m=config.obstacles.max_range_m)
             metrics = map_metrics(occupancy, gt, path_xy=path, views=views)
