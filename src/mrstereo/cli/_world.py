@@ -24,18 +24,25 @@ __all__ = ["COMMANDS"]
               default=None,
               help="With --randomize: give the walls this material instead of the drawn one; everything else "
                    "stays the seed's world (e.g. stripes: a repetitive-texture variant).")
-@click.option("--path", "path_kind", type=click.Choice(["stops", "front", "s-curve"]), default="stops",
+@click.option("--path", "path_kind", type=click.Choice(["stops", "front", "s-curve", "street"]), default="stops",
               show_default=True,
               help="stops: front/left/right views at each stop (mapping); front, s-curve: one front view every "
-                   "--step metres (odometry sequences; with --randomize: front, along the world's own path).")
+                   "--step metres (odometry sequences; with --randomize: front, along the world's own path); "
+                   "street: a long street world (drawn from --seed) driven from a standstill up to --step metres "
+                   "per frame, turning up to --turn degrees per frame.")
 @click.option("--step", "step_m", type=float, default=0.1, show_default=True,
-              help="Path length between frames of a front or s-curve sequence [m].")
+              help="Path length between frames of a front or s-curve sequence [m] (street: at full speed).")
+@click.option("--turn", "turn_deg", type=float, default=3.0, show_default=True,
+              help="--path street: the largest heading change per frame at full speed [deg].")
+@click.option("--rate", "rate_hz", type=float, default=10.0, show_default=True,
+              help="Frames per second of a sequence (the frames' time stamps).")
 @click.option("--odometry-noise", "odometry_noise", metavar="SCALE,DEG_PER_M", default=None,
               help="Store drifted odometry as each frame's pose (scale error, heading drift in degrees per "
                    "metre, e.g. 0.03,2) and the truth as true_pose.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, randomize: bool,
-          wall_texture: str | None, path_kind: str, step_m: float, odometry_noise: str | None, quiet: bool) -> None:
+          wall_texture: str | None, path_kind: str, step_m: float, turn_deg: float, rate_hz: float,
+          odometry_noise: str | None, quiet: bool) -> None:
     """Render the synthetic office corridor into a dataset directory (docs/dataset.md).
 
     Writes raw and rectified stereo pairs, ground-truth disparity (PFM) and
@@ -60,11 +67,17 @@ def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, rand
         if not (math.isfinite(scale) and math.isfinite(deg_per_m)):
             raise click.BadParameter(f"must be finite, got {odometry_noise!r}", param_hint="--odometry-noise")
         noise = (scale, math.radians(deg_per_m))
-    if not (math.isfinite(step_m) and step_m > 0):
-        raise click.BadParameter(f"must be a positive number, got {step_m}", param_hint="--step")
+    for name, value in (("--step", step_m), ("--rate", rate_hz)):
+        if not (math.isfinite(value) and value > 0):
+            raise click.BadParameter(f"must be a positive number, got {value}", param_hint=name)
+    if not (math.isfinite(turn_deg) and 0 <= turn_deg < 90):
+        raise click.BadParameter(f"must be a number in [0, 90), got {turn_deg}", param_hint="--turn")
+    if randomize and path_kind == "street":
+        raise click.UsageError("--path street has its own world: not with --randomize")
     path = write_synthetic_dataset(out_dir, seed=seed, n_frames=n_frames, width=width, height=height,
                                    path=path_kind, step_m=step_m, odometry_noise=noise, progress=not quiet,
-                                   randomize=randomize, wall_texture=wall_texture)
+                                   randomize=randomize, wall_texture=wall_texture,
+                                   turn_rad_per_frame=math.radians(turn_deg), frame_rate_hz=rate_hz)
     click.echo(f"wrote {n_frames} frames to {path} (manifest: {path / 'manifest.yaml'})")
 
 

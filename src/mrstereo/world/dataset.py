@@ -18,10 +18,11 @@ from ..io import write_image, write_pfm
 from ..mapping.rosmap import write_ros_map
 from ..recordings.manifest import IMAGE_KEYS, MANIFEST_NAME, write_manifest
 from .groundtruth import ground_truth_map
-from .paths import PATH_KINDS, drifted_poses, sequence_path, waypoint_path
+from .paths import PATH_KINDS, drifted_poses, sequence_path, speed_path, waypoint_path
 from .randomize import random_world
 from .render import SensorModel, default_stereo, render_stereo_frame
 from .scene import default_scene
+from .street import street_world
 
 __all__ = ["write_synthetic_dataset", "corridor_path", "poses_along"]
 
@@ -65,7 +66,8 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                             path: str = "stops", step_m: float = 0.1,
                             odometry_noise: tuple[float, float] | None = None,
                             progress: bool = True, randomize: bool = False,
-                            wall_texture: str | None = None) -> Path:
+                            wall_texture: str | None = None, turn_rad_per_frame: float = math.radians(3.0),
+                            frame_rate_hz: float = 10.0) -> Path:
     """Render the default corridor (or a randomized world) along its path and write a dataset directory.
 
     ``path="stops"`` (the paper's run): at each stop along :func:`corridor_path` (a randomized
@@ -73,7 +75,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     11-13); frames cycle through these views. ``"front"`` and ``"s-curve"``: sequences for
     visual odometry, one front view every ``step_m`` (:func:`mrstereo.world.paths.sequence_path`;
     a randomized world: ``"front"`` only, along its own waypoints,
-    :func:`mrstereo.world.paths.waypoint_path`).
+    :func:`mrstereo.world.paths.waypoint_path`). ``"street"``: the street world of ``seed``
+    (:func:`mrstereo.world.street.street_world`) driven from a standstill up to ``step_m`` per
+    frame, turning by up to ``turn_rad_per_frame`` (:func:`mrstereo.world.paths.speed_path`).
+    The frames of a sequence (not ``"stops"``) are stamped ``frame_rate_hz`` apart.
     Written: raw and rectified images, GT disparity (PFM), GT labels (PNG),
     the true calibration, the GT map and ``manifest.yaml``. The directory is
     built beside ``out_dir`` and renamed into place when complete.
@@ -90,10 +95,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         Image size (320x240 or 640x480 rigs of :func:`default_stereo`).
     supersample : int
         Anti-aliasing rays per pixel along each axis.
-    path : {"stops", "front", "s-curve"}
+    path : {"stops", "front", "s-curve", "street"}
         The robot's path (:data:`mrstereo.world.paths.PATH_KINDS`).
     step_m : float
-        Path length between frames of a ``front`` or ``s-curve`` sequence.
+        Path length between frames of a ``front`` or ``s-curve`` sequence (``street``: at full speed).
     odometry_noise : (scale_error, heading_drift_rad_per_m), optional
         Store drifted poses (:func:`mrstereo.world.paths.drifted_poses`) as each frame's
         ``pose`` (the odometry a robot would report) and the true ones as ``true_pose``;
@@ -108,6 +113,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         With ``randomize=True``: the walls get this kind of material instead of the drawn one
         (``random_world(..., wall_texture=...)``; one of
         :data:`mrstereo.world.randomize.WALL_TEXTURES`), everything else stays the seed's world.
+    turn_rad_per_frame : float
+        ``street``: the largest heading change per frame at full speed.
+    frame_rate_hz : float
+        Frames per second of a sequence (its ``stamp_s``).
 
     Returns
     -------
@@ -128,18 +137,20 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                          "choose a new directory")
     if path not in PATH_KINDS:
         raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
-    if randomize and path == "s-curve":
-        raise ValueError("path='s-curve' is a path of the built-in corridor; a randomized world's odometry "
-                         "sequence is path='front' (along the world's own waypoints)")
+    if randomize and path in ("s-curve", "street"):
+        raise ValueError(f"path={path!r} has its own world; a randomized corridor's odometry sequence is "
+                         "path='front' (along the world's own waypoints)")
+    rate = _checks.finite_number("frame_rate_hz", frame_rate_hz, positive=True)
     if wall_texture is not None and not randomize:
         raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
     n_stops = -(-n_frames // len(_PANS))
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
-    if randomize:
-        world = random_world(seed, width=width, height=height, wall_texture=wall_texture)
+    if randomize or path == "street":
+        world = (street_world(seed, width=width, height=height) if path == "street" else
+                 random_world(seed, width=width, height=height, wall_texture=wall_texture))
         stereo, scene, sensors = world.stereo, world.scene, world.sensors
         stops = poses_along(world.waypoints_xy, n_stops)
-        generator["randomized"] = world.summary
+        generator["street" if path == "street" else "randomized"] = world.summary
     else:
         stereo, scene, sensors = default_stereo(width, height), default_scene(seed), (SensorModel(), SensorModel())
         stops = corridor_path(n_stops)
@@ -148,7 +159,8 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         poses = np.repeat(stops, len(_PANS), axis=0)[:n_frames]
     else:
         pans = [0.0] * n_frames
-        poses = (waypoint_path(world.waypoints_xy, n_frames, step_m=step_m) if randomize
+        poses = (speed_path(n_frames, step_m=step_m, turn_rad_per_frame=turn_rad_per_frame) if path == "street"
+                 else waypoint_path(world.waypoints_xy, n_frames, step_m=step_m) if randomize
                  else sequence_path(path, n_frames, step_m=step_m))
     poses = np.round(poses, 6)         # render with exactly the numbers the manifest stores
     given = poses
@@ -179,12 +191,17 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
             entry["gt_disparity"] = f"gt_disparity/{name}.pfm"
             entry["pose"] = [float(v) for v in given[k]]
             entry["pan_rad"] = pan
+            if path != "stops":
+                entry["stamp_s"] = round(k / rate, 9)
             if odometry_noise is not None:
                 entry["true_pose"] = list(pose)
-            frames.append({key: entry[key] for key in (*IMAGE_KEYS, "gt_disparity", "gt_labels", "pose",
+            frames.append({key: entry[key] for key in (*IMAGE_KEYS, "gt_disparity", "gt_labels", "stamp_s", "pose",
                                                         "true_pose", "pan_rad") if key in entry})
         if path != "stops":
             generator["step_m"] = float(step_m)
+            generator["frame_rate_hz"] = rate
+        if path == "street":
+            generator["turn_rad_per_frame"] = float(turn_rad_per_frame)
         if odometry_noise is not None:
             generator["odometry_noise"] = {"scale_error": float(odometry_noise[0]),
                                            "heading_drift_rad_per_m": float(odometry_noise[1])}
