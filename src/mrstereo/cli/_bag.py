@@ -105,6 +105,7 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
     import numpy as np
 
     from ..camera import read_stereo
+    from ..recordings.layouts import read_recording
     from ..recordings.manifest import Manifest, read_manifest
 
     with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
@@ -120,7 +121,7 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
                                                          "sync_tolerance_s")]
         if used:
             raise click.UsageError(f"{', '.join(used)} only with --bag")
-        dataset = manifest if isinstance(manifest, Manifest) else read_manifest(manifest)
+        dataset = manifest if isinstance(manifest, Manifest) else read_recording(manifest)
         rig = rig_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"))
         if rig is not None:
             dataset = dataclasses.replace(dataset, rig=rig)

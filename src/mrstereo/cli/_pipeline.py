@@ -48,8 +48,8 @@ FIGURE_MODULES = ("matplotlib.figure", "matplotlib.backends.backend_agg", "matpl
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
                 resolution_m: float, size_m: str, origin_m: str, odometry: str, align: bool, workers: int | None,
                 scheduler: str | None, processes: bool, bag: Path | None, quiet: bool, **bag_kw) -> None:
-    """Build an occupancy grid from the stereo frames of a DATASET directory (or its manifest.yaml, docs/dataset.md)
-    or of a ROS bag (--bag, docs/scale-out.md).
+    """Build an occupancy grid from the stereo frames of a DATASET directory (or its manifest.yaml, docs/dataset.md,
+    or a KITTI odometry folder) or of a ROS bag (--bag, docs/scale-out.md).
 
     Every frame is rectified, matched (multi-range), ground-suppressed (eq. 13),
     triangulated and fused along the robot path. Writes a ROS map_server map
@@ -62,7 +62,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     from ..mapping import GridSpec
     from ..pipeline.batch import dataset_files
     from ..pipeline.run import PipelineConfig, build_map, write_map_outputs
-    from ..recordings.manifest import read_manifest
+    from ..recordings.layouts import read_recording
 
     check_workers(workers, scheduler, processes)
     if (manifest is None) == (bag is None):
@@ -75,7 +75,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     if bag is not None:
         check_outputs(outputs, [bag, calib], input_dirs=[bag] if bag.is_dir() else [])
     else:
-        dataset = read_manifest(manifest)            # read once: checked here, mapped below
+        dataset = read_recording(manifest)           # read once: checked here, mapped below
         check_outputs(outputs, [manifest, calib] + dataset_files(dataset))
         manifest = dataset
     # map.png is drawn in a process started now when a core is free: matplotlib's import runs meanwhile there

@@ -15,8 +15,9 @@ manifest reads a recording too:
    or from TF (``base_link`` in ``map`` or ``odom``, chained through ``/tf``
    and ``/tf_static`` in 3-D), interpolated linearly (slerp for rotations)
    between the two nearest messages and held constant outside their time
-   span, then projected onto the floor plane for the 2-D map: ``(x, y, yaw)``
-   of the base frame's x axis;
+   span; the manifest keeps the 3-D pose (``[x, y, z, qx, qy, qz, qw]``), whose projection on
+   the floor plane, ``(x, y, yaw)`` of the base frame's x axis, the 2-D map uses; every frame keeps
+   its left image's header stamp (``stamp_s``);
 4. the camera mount (``T_base_from_cam``, :class:`~mrstereo.camera.mount.CameraMount`)
    is the one given (``rig``: a CameraMount or the paper's RigMount), else
    the stereo YAML's ``mount:``/``rig:``, else the TF pose of ``camera_frame``
@@ -47,7 +48,8 @@ from .. import _checks
 from ..camera import CameraInfo, RigMount, StereoCamera, write_stereo
 from ..camera.mount import CameraMount
 from ..io import write_image
-from ..transforms import R_BODY_FROM_OPTICAL, planar_from_T, rotation_from_quaternion, slerp, wrap_angle
+from ..transforms import R_BODY_FROM_OPTICAL, rotation_from_quaternion, slerp, wrap_angle
+from .manifest import pose_3d_of
 
 __all__ = ["BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message", "SUPPORTED_ENCODINGS",
            "camera_info_from_message", "stereo_from_camera_info", "pair_by_stamp",
@@ -496,7 +498,7 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
             poses = [_pose_of(tf.lookup(world_frame, base_frame, t)) for t in frame_stamps]
             pose_source = f"tf {world_frame} <- {base_frame}"
         else:
-            poses = [(0.0, 0.0, 0.0)] * len(frame_stamps)
+            poses = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)] * len(frame_stamps)
             pose_source = "none (every frame at the origin)"
         pans = [0.0] * len(frame_stamps)
         rig_source = "options" if rig is not None else "calibration"
@@ -541,7 +543,8 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
             frames = []
             for k in range(len(pairs)):
                 entry = {keys[0]: f"{keys[0]}/{k:06d}.png", keys[1]: f"{keys[1]}/{k:06d}.png",
-                         "pose": [float(v) for v in poses[k]], "pan_rad": float(pans[k])}
+                         "stamp_s": frame_stamps[k] / 1e9, "pose": [float(v) for v in poses[k]],
+                         "pan_rad": float(pans[k])}
                 frames.append(entry)
             source = {"bag": str(Path(bag).resolve()), "left_topic": left_topic, "right_topic": right_topic,
                       "pose_source": pose_source, "rig_source": rig_source, "stamps_ns": frame_stamps}
@@ -557,8 +560,9 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
                      stamps_ns=tuple(frame_stamps), rig=rig, rig_source=rig_source, pose_source=pose_source)
 
 
-def _pose_of(T: np.ndarray) -> tuple[float, float, float]:
-    return _round_pose(tuple(planar_from_T(T)))
+def _pose_of(T: np.ndarray) -> tuple[float, ...]:
+    """The manifest's 3-D pose ``(x, y, z, qx, qy, qz, qw)`` of a 4x4 transform."""
+    return _round_pose(pose_3d_of(T))
 
 
 def _heading(T: np.ndarray, axis: int) -> float:
