@@ -316,7 +316,8 @@ class StereoOdometry:
         if self._T_world_from_cam is not None:
             self._velocity = np.linalg.inv(self._T_world_from_cam) @ T_world_from_cam
             self._velocity_dt = dt
-            self._velocity_known = self._velocity_known or status != LOST
+            # a lost frame's motion is a guess: the next frame is held to the absolute limits only
+            self._velocity_known = status != LOST
         self._T_world_from_cam = T_world_from_cam
         kf = self._keyframe
         self._links.append(_FrameLink(kf, np.linalg.inv(kf.T_world_from_cam) @ T_world_from_cam, T_base_from_cam))
