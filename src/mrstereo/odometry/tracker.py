@@ -394,7 +394,13 @@ class StereoOdometry:
         return np.ascontiguousarray(uv[keep], dtype=np.float32)
 
     def _right_columns(self, left, right, disparity_px, uv, guess_d) -> np.ndarray:
-        """Right image column of each feature ``uv`` (NaN: no reliable match)."""
+        """Right image column of each feature ``uv`` (NaN: no reliable match).
+
+        Lucas-Kanade finds the match in 2-D; in a rectified pair it lies on the feature's row, so
+        the result is moved back onto the row along the patch's gradients: the 1-D Lucas-Kanade
+        solution ``x_1d = x_2d + (sum Ix Iy / sum Ix^2) dy`` (from ``G d = b`` with ``dy = 0``). On an
+        oblique edge the 2-D solution slides along the edge with the noise; on the row it cannot.
+        """
         c = self.config
         if not len(uv):
             return np.empty(0)
@@ -405,8 +411,9 @@ class StereoOdometry:
             guess[:, 0] -= np.nan_to_num(guess_d, nan=0.0)
             uv_right, ok = self._klt(left, _photometry_like(right, left), uv, guess, c.stereo_levels - 1,
                                      c.stereo_window_px)
-            ok &= np.abs(uv_right[:, 1] - uv[:, 1]) <= c.max_row_error_px
-            d = np.where(ok, uv[:, 0] - uv_right[:, 0], np.nan)
+            dy = uv_right[:, 1] - uv[:, 1]
+            ok &= np.abs(dy) <= c.max_row_error_px
+            d = np.where(ok, uv[:, 0] - uv_right[:, 0] - _row_slope(left, uv, c.stereo_window_px) * dy, np.nan)
         d = np.where(np.isfinite(d) & (d >= c.min_disparity_px), d, np.nan)
         return uv[:, 0] - d
 
@@ -507,6 +514,20 @@ class StereoOdometry:
         off = np.linalg.inv(T_pred) @ T_world_from_cam
         return (np.linalg.norm(off[:3, 3]) <= c.max_acceleration_mps2 * dt * dt
                 and rotation_angle_rad(off[:3, :3]) <= c.max_angular_acceleration_radps2 * dt * dt)
+
+
+def _row_slope(image: np.ndarray, uv: np.ndarray, window_px: int) -> np.ndarray:
+    """``sum Ix Iy / sum Ix^2`` over the ``window_px`` square around each point ``uv`` (N, 2): how far a
+    patch's best match moves along x per pixel it is moved along y."""
+    f = image.astype(np.float32)
+    ix = cv2.Sobel(f, cv2.CV_32F, 1, 0, ksize=3)
+    iy = cv2.Sobel(f, cv2.CV_32F, 0, 1, ksize=3)
+    xx = cv2.boxFilter(ix * ix, -1, (window_px, window_px), normalize=False)
+    xy = cv2.boxFilter(ix * iy, -1, (window_px, window_px), normalize=False)
+    h, w = image.shape
+    r = np.clip(np.rint(uv[:, 1]).astype(np.int64), 0, h - 1)
+    col = np.clip(np.rint(uv[:, 0]).astype(np.int64), 0, w - 1)
+    return xy[r, col] / np.maximum(xx[r, col], 1e-6)
 
 
 def _sample_smooth(image: np.ndarray, uv: np.ndarray, *, max_spread: float) -> np.ndarray:
