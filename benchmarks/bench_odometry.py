@@ -52,7 +52,7 @@ from mrstereo.camera.mount import T_base_from_cam_of
 from mrstereo.mapping import read_ros_map
 from mrstereo.mapping.fusion import fuse
 from mrstereo.mapping.metrics import map_metrics
-from mrstereo.odometry.alignment import AlignConfig, fuse_aligned, observation_at
+from mrstereo.odometry.fusion import fuse_odometry
 from mrstereo.odometry.trajectory import trajectory_metrics
 from mrstereo.pipeline.odometry import odometry_from_manifest
 from mrstereo.pipeline.run import PipelineConfig, build_map
@@ -195,7 +195,14 @@ def dataset(root: Path, seed: int, frames: int, width: int, height: int, path: s
 
 def repose(observations, poses):
     """The observations at other poses (robot-frame points moved into the world again)."""
-    return [observation_at(obs, pose) for obs, pose in zip(observations, poses)]
+    out = []
+    for obs, pose in zip(observations, poses):
+        T = T_from_planar(*pose) @ np.linalg.inv(T_from_planar(*obs.pose))
+        def move(p):
+            return (p.astype(np.float64) @ T[:3, :3].T + T[:3, 3]).astype(np.float32)
+        out.append(replace(obs, pose=tuple(float(v) for v in pose), obstacle_points_world=move(obs.obstacle_points_world),
+                           floor_points_world=move(obs.floor_points_world), cells=None))
+    return out
 
 
 def run_vo(path: Path) -> dict:
@@ -228,21 +235,21 @@ def run_seed(path: Path) -> dict:
     maps = {"true poses": metrics(fuse(repose(given_obs, true), grid=config.grid, config=config.mapping)),
             "drifted odometry": metrics(run.grid)}
     t0 = time.perf_counter()
-    aligned, aligned_obs, alignments = fuse_aligned(given_obs, grid=config.grid, config=config.mapping,
-                                                    align=AlignConfig())
+    given_poses = np.array([f.pose for f in manifest.frames])
+    fused = fuse_odometry(given_poses, vo.poses, vo.tracked)
     align_s = (time.perf_counter() - t0) / len(given_obs)
-    maps["map --align"] = metrics(aligned)
+    maps["map --align"] = metrics(fuse(repose(given_obs, fused.poses), grid=config.grid, config=config.mapping))
     keep = vo.tracked
     tracked = repose([o for o, k in zip(given_obs, keep) if k], vo.poses[keep])
     maps["map --odometry visual"] = metrics(fuse(tracked, grid=config.grid, config=config.mapping))
-    T_aligned = np.stack([T_from_planar(*o.pose) for o in aligned_obs])
+    T_aligned = np.stack([T_from_planar(*p) for p in fused.poses])
     T_given = np.stack([T_from_planar(*f.pose) for f in manifest.frames])
     return {"vo": traj, "vo_lost": vo.n_lost, "vo_ms": 1000 * float(np.median(vo.time_s)),
             "vo_wall_ms": 1000 * vo_wall / len(vo.status), "maps": maps,
             "aligned": trajectory_metrics(T_aligned, T_true), "given": trajectory_metrics(T_given, T_true),
-            "align_ms": 1000 * align_s,
-            "corrections": (np.mean([a.correction_m for a in alignments]),
-                            np.degrees(np.mean([a.correction_rad for a in alignments])))}
+            "align_ms": 1000 * align_s, "visual_steps": int(fused.visual_used.sum()),
+            "corrections": (np.mean(fused.corrections(given_poses)[0]),
+                            np.degrees(np.mean(fused.corrections(given_poses)[1])))}
 
 
 def speed(root: Path, frames: int) -> None:

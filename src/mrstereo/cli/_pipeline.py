@@ -38,8 +38,9 @@ FIGURE_MODULES = ("matplotlib.figure", "matplotlib.backends.backend_agg", "matpl
               help="Robot poses: the dataset's (or the bag's odometry), or stereo visual odometry from the "
                    "first frame's pose (docs/odometry.md).")
 @click.option("--align", is_flag=True,
-              help="Correct each frame's pose by aligning its obstacle points to the map built so far "
-                   "(scan-to-map); the corrections go to metrics.json.")
+              help="Correct the given poses with stereo visual odometry: each step of the given odometry fused "
+                   "with the visual one by their expected errors (docs/odometry.md); the corrections go to "
+                   "metrics.json.")
 @worker_options
 @click.option("--bag", "bag", type=click.Path(path_type=Path),
               help="Map a ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
@@ -65,6 +66,8 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     from ..recordings.layouts import read_recording
 
     check_workers(workers, scheduler, processes)
+    if align and odometry == "visual":
+        raise click.UsageError("--align corrects the given poses with visual odometry: not with --odometry visual")
     if (manifest is None) == (bag is None):
         raise click.UsageError("give a DATASET or --bag FILE (one of them)")
     (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
@@ -96,10 +99,11 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
                    f"wall profile error {m.mean_distance_m * 100:.1f} cm, free correct {m.free_accuracy:.3f}")
     if run.odometry is not None:
         click.echo(f"visual odometry: {run.odometry.message}")
-    if run.alignments is not None:
+    if run.fusion is not None:
         a = run.pose_metrics()["alignment"]
-        click.echo(f"scan-to-map alignment: {a['applied']} of {a['frames']} frames corrected, mean "
-                   f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg per frame")
+        click.echo(f"given odometry fused with visual odometry: {a['visual_steps']} of {a['frames'] - 1} steps "
+                   f"measured visually ({a['rejected_visual_steps']} rejected), the poses moved by "
+                   f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg on average")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
 
 

@@ -1,4 +1,5 @@
-"""Stereo visual odometry, trajectories and their metrics, scan-to-map alignment.
+"""Stereo visual odometry (a keyframe tracker refined over a window), trajectories and their metrics,
+the given odometry fused with the visual one.
 
 The odometry of a recording on disk is :func:`mrstereo.pipeline.odometry_from_manifest`.
 
