@@ -149,3 +149,54 @@ def test_manifest_round_trip_of_stamps_and_3d_poses(tmp_path):
         with pytest.raises(ValueError, match=match):
             read_manifest(tmp_path)
     assert isinstance(m.calibration, StereoCamera)
+
+
+def test_odometry_command_on_kitti(kitti, tmp_path, capsys):
+    """`mrstereo odometry` on the KITTI folder: every frame tracked, a 3-D TUM file with times.txt's stamps."""
+    from mrstereo.cli import entry
+    from mrstereo.odometry.trajectory import read_tum
+
+    out, metrics = tmp_path / "traj.txt", tmp_path / "m.json"
+    assert entry(["odometry", str(kitti), "-o", str(out), "--metrics", str(metrics), "--quiet"]) == 0
+    assert "tracked all 51 frames" in capsys.readouterr().out
+    stamps, T = read_tum(out)
+    np.testing.assert_array_equal(stamps, np.loadtxt(kitti / "sequences" / "06" / "times.txt"))
+    truth = read_kitti_odometry(kitti)
+    assert abs(T[-1, 2, 3] - truth.frames[-1].T_world_from_base_true[2, 3]) < 0.3     # it climbs with the road
+    import json
+
+    data = json.loads(metrics.read_text())
+    assert data["lost"] == 0 and data["reference"] == "true poses" and data["ate_percent"] < 0.5
+
+
+def test_map_command_on_a_kitti_folder(kitti, tmp_path, capsys):
+    """`mrstereo map` reads a KITTI folder directly (two frames of it here)."""
+    from mrstereo.cli import entry
+
+    seq = tmp_path / "sequences" / "06"
+    for sub in ("image_0", "image_1"):
+        (seq / sub).mkdir(parents=True)
+        for name in ("000000.png", "000001.png"):
+            shutil.copy(kitti / "sequences" / "06" / sub / name, seq / sub / name)
+    for name in ("calib.txt", "times.txt"):
+        shutil.copy(kitti / "sequences" / "06" / name, seq / name)
+    (tmp_path / "poses").mkdir()
+    shutil.copy(kitti / "poses" / "06.txt", tmp_path / "poses" / "06.txt")
+    code = entry(["map", str(tmp_path), "-o", str(tmp_path / "map"), "--size", "30,20", "--origin", "0,-10",
+                  "--resolution", "0.1", "--quiet"])
+    assert code == 0, capsys.readouterr()
+    assert "map of 2 frames" in capsys.readouterr().out and (tmp_path / "map" / "map.pgm").is_file()
+    # the default map keeps points within 4 m (a robot's); a car sees the road from 6 m on: with 30 m, the
+    # parked cars and the road come out through the mount 1.65 m up, on the floor plane
+    from mrstereo.geometry.obstacles import ObstacleConfig
+    from mrstereo.mapping import GridSpec
+    from mrstereo.pipeline.run import PipelineConfig, build_map
+
+    config = PipelineConfig(obstacles=ObstacleConfig(max_range_m=30.0),
+                            grid=GridSpec(width_m=30.0, height_m=20.0, resolution_m=0.1, origin_x_m=0.0,
+                                          origin_y_m=-10.0))
+    run = build_map(tmp_path, config=config, progress=False)
+    occupancy = run.grid.probability()
+    assert (occupancy > 0.5).sum() > 20 and (occupancy < 0.5).sum() > 1000
+    obstacles = np.concatenate([o.obstacle_points_world for o in run.observations])
+    assert np.median(obstacles[:, 2]) > 0.1                     # above the road, not under it
