@@ -67,16 +67,8 @@ def window_normal_equations(R, Mrot, t, P, kf, pt, slot, stereo, res, fx, fy, b,
         for a in range(rows):
             for c in range(3):
                 Jl[a, c] = J[a, 0] * R[k, 0, c] + J[a, 1] * R[k, 1, c] + J[a, 2] * R[k, 2, c]
-        for c in range(3):
-            for d in range(3):
-                acc = 0.0
-                for a in range(rows):
-                    acc += Jl[a, c] * Jl[a, d]
-                Hll[m, c, d] += w * acc
-            acc = 0.0
-            for a in range(rows):
-                acc += Jl[a, c] * res[i, a]
-            gl[m, c] += w * acc
+        _add_weighted_products(Jl, Jl, rows, w, Hll[m])
+        _add_weighted_products(Jl, res[i:i + 1].T, rows, w, gl[m:m + 1].T)
         if s < 0:
             continue
         # d X_c / d r = -R [p]x Mrot: D = [p]x Mrot first, then -R D
@@ -91,21 +83,20 @@ def window_normal_equations(R, Mrot, t, P, kf, pt, slot, stereo, res, fx, fy, b,
                     acc -= Jl[a, q] * D[q, c]
                 Jp[a, c] = acc
                 Jp[a, 3 + c] = J[a, c]
-        for c in range(6):
-            for d in range(6):
-                acc = 0.0
-                for a in range(rows):
-                    acc += Jp[a, c] * Jp[a, d]
-                Hpp[s, c, d] += w * acc
+        _add_weighted_products(Jp, Jp, rows, w, Hpp[s])
+        _add_weighted_products(Jp, res[i:i + 1].T, rows, w, gp[s:s + 1].T)
+        _add_weighted_products(Jp, Jl, rows, w, Hpl[i])
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _add_weighted_products(A, B, rows, w, out):
+    """``out += w A[:rows].T @ B[:rows]`` (the weighted Gauss-Newton products of one observation)."""
+    for c in range(out.shape[0]):
+        for d in range(out.shape[1]):
             acc = 0.0
             for a in range(rows):
-                acc += Jp[a, c] * res[i, a]
-            gp[s, c] += w * acc
-            for d in range(3):
-                acc = 0.0
-                for a in range(rows):
-                    acc += Jp[a, c] * Jl[a, d]
-                Hpl[i, c, d] = w * acc
+                acc += A[a, c] * B[a, d]
+            out[c, d] += w * acc
 
 
 @njit(nogil=True, cache=True)
@@ -133,6 +124,7 @@ def window_schur(Hll, gl, Hpl, obs_slot, point_start, point_obs, lam, S, bs, Hll
     """
     A = np.zeros((6, 3))
     Hd = np.zeros((3, 3))
+    posed = np.empty(point_obs.shape[0], np.int64)
     for m in range(point_start.shape[0] - 1):
         for c in range(3):
             for d in range(3):
@@ -140,24 +132,25 @@ def window_schur(Hll, gl, Hpl, obs_slot, point_start, point_obs, lam, S, bs, Hll
             Hd[c, c] += lam * Hll[m, c, c] + 1e-9
         if not _inverse3(Hd, Hll_inv[m]):
             return False
+        n = 0                                     # the landmark's observations from free keyframes
         for ii in range(point_start[m], point_start[m + 1]):
-            i = point_obs[ii]
+            if obs_slot[point_obs[ii]] >= 0:
+                posed[n] = point_obs[ii]
+                n += 1
+        for a in range(n):
+            i = posed[a]
             si = obs_slot[i]
-            if si < 0:
-                continue
             for c in range(6):
                 for d in range(3):
                     A[c, d] = Hpl[i, c, 0] * Hll_inv[m, 0, d] + Hpl[i, c, 1] * Hll_inv[m, 1, d] \
                         + Hpl[i, c, 2] * Hll_inv[m, 2, d]
                 bs[si, c] -= A[c, 0] * gl[m, 0] + A[c, 1] * gl[m, 1] + A[c, 2] * gl[m, 2]
-            for jj in range(point_start[m], point_start[m + 1]):
-                j = point_obs[jj]
-                sj = obs_slot[j]
-                if sj < 0:
-                    continue
+            for b in range(n):
+                j = posed[b]
                 for c in range(6):
                     for d in range(6):
-                        S[si, sj, c, d] -= A[c, 0] * Hpl[j, d, 0] + A[c, 1] * Hpl[j, d, 1] + A[c, 2] * Hpl[j, d, 2]
+                        S[si, obs_slot[j], c, d] -= A[c, 0] * Hpl[j, d, 0] + A[c, 1] * Hpl[j, d, 1] \
+                            + A[c, 2] * Hpl[j, d, 2]
     return True
 
 
