@@ -29,6 +29,17 @@ def test_tum_round_trip_and_bad_files(tmp_path):
     stamps, back = read_tum(tmp_path / "t.txt")
     np.testing.assert_allclose(stamps, np.arange(5) * 0.1)
     np.testing.assert_allclose(back, T, atol=1e-8)
+    # real stamps (a bag's header stamps, seconds since 1970) and full 3-D poses survive the file
+    from mrstereo.transforms import rotation_from_rpy
+
+    T3 = np.stack([np.eye(4)] * 3)
+    T3[:, :3, :3] = rotation_from_rpy([0.1, -0.2, 0.05], [0.02, 0.3, -0.1], [1.0, -2.5, 3.0])
+    T3[:, :3, 3] = [[1.0, 2.0, 0.5], [-3.0, 0.25, 1.75], [10.0, -20.0, -0.125]]
+    real = 1317384506.402581 + np.array([0.0, 0.1037, 0.2071])
+    write_tum(tmp_path / "real.txt", real, T3)
+    stamps3, back3 = read_tum(tmp_path / "real.txt")
+    np.testing.assert_allclose(stamps3, real, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(back3, T3, atol=1e-8)
     (tmp_path / "bad.txt").write_text("0 1 2 3 0 0 0\n")
     with pytest.raises(ValueError, match="line 1: expected 8"):
         read_tum(tmp_path / "bad.txt")
