@@ -51,7 +51,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from mrstereo.camera.mount import T_base_from_cam_of
+from mrstereo.camera import CameraMount
 from mrstereo.mapping import read_ros_map
 from mrstereo.mapping.fusion import fuse
 from mrstereo.mapping.metrics import map_metrics
@@ -133,7 +133,8 @@ def compare(manifest, frames: slice = slice(None)) -> dict:
     records = manifest.frames[frames]
     pairs = _odometry_pairs(replace(manifest, frames=records))
     truth = np.stack([f.T_world_from_base_true if f.true_pose is not None else f.T_world_from_base for f in records])
-    mounts = np.stack([T_base_from_cam_of(manifest.rig, f.pan_rad, stereo=manifest.calibration) for f in records])
+    mount = manifest.mount or CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    mounts = np.stack([mount.T_base_from_rectified(manifest.calibration.left.R, f.pan_rad) for f in records])
     stamps = [f.stamp_s for f in records]
     t0 = time.perf_counter()
     vo = visual_odometry(pairs, manifest.calibration, T_base_from_cam=mounts, T_world_from_base0=truth[0],
@@ -271,7 +272,6 @@ def run_seed(path: Path) -> dict:
 
 
 def speed(root: Path, frames: int) -> None:
-    from mrstereo.camera.mount import T_base_from_cam_of
     from mrstereo.io import read_image, read_pfm
     from mrstereo.odometry import visual_odometry
 
@@ -279,7 +279,7 @@ def speed(root: Path, frames: int) -> None:
     path = dataset(root, 0, frames, 640, 480)
     manifest = read_manifest(path)
     pairs = [(read_image(f.left_rect), read_image(f.right_rect)) for f in manifest.frames]
-    mount = T_base_from_cam_of(manifest.rig)
+    mount = manifest.mount.T_base_from_rectified(manifest.calibration.left.R)
     T0 = T_from_planar(*(manifest.frames[0].true_pose or manifest.frames[0].pose))
     for label, disparities in (("stereo search", None),
                                ("given disparity", [read_pfm(f.gt_disparity) for f in manifest.frames])):

@@ -167,7 +167,7 @@ def test_16_bit_levels_stay_distinct_and_a_mono16_bag_maps_like_mono8(tmp_path):
         bag = _write(tmp_path / f"w{int(wide)}", False, side("left_rect", wide), side("right_rect", wide))
         out = tmp_path / f"o{int(wide)}"
         export_bag(bag, out, left_topic="/l/image", right_topic="/r/image", calibration=data.calibration,
-                   rig=data.rig, rectified=True, progress=False)
+                   mount=data.mount, rectified=True, progress=False)
         assert read_image(read_manifest(out).frames[0].left_rect).dtype == (np.uint16 if wide else np.uint8)
         maps.append(build_map(out, progress=False).grid.log_odds)
     assert np.array_equal(maps[0], maps[1], equal_nan=True)

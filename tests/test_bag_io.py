@@ -11,6 +11,7 @@ import yaml
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from mrstereo.cli import entry
+from mrstereo.geometry.ground import ground_from_mount
 from mrstereo.io import read_image
 from mrstereo.pipeline.run import build_map, floor_for_run
 from mrstereo.recordings.bag import (TfTree, TransformTrack, bag_topics, camera_info_from_message, export_bag,
@@ -170,7 +171,12 @@ def _same(a, b) -> bool:
 
 
 def _rig_options(dataset):
-    return {"rig": dataset.rig}
+    return {"mount": dataset.mount}
+
+
+def _rig(dataset):
+    """The paper's rig of a dataset: its rectified left camera's height and tilt."""
+    return ground_from_mount(dataset.mount, R_rect_from_cam=dataset.calibration.left.R)
 
 
 # ------------------------------------------------------------------------------------ end to end
@@ -191,7 +197,7 @@ def test_ros1_bag_with_odometry_maps_like_the_manifest_subset(dataset, tmp_path)
     front = [0, 3]                                  # the frames looking ahead (pan 0): odometry gives no pan
     bag = write_bag(tmp_path / "run1.bag", dataset, ros1=True, odom=True, frames=front)
     subset = tmp_path / "subset.yaml"
-    write_manifest(subset, calibration=str(dataset.calibration_path), rig=dataset.rig,
+    write_manifest(subset, calibration=str(dataset.calibration_path), mount=dataset.mount,
                    frames=[{"left": str(dataset.frames[k].left), "right": str(dataset.frames[k].right),
                             "pose": list(dataset.frames[k].pose)} for k in front])
     expected = build_map(subset, progress=False).grid.log_odds
@@ -221,7 +227,7 @@ def test_cli_map_and_export_from_a_bag(dataset, reference, tmp_path, capsys):
     bag = write_bag(tmp_path / "cli.bag", dataset, ros1=True, odom=False, tf=True)
     common = ["--bag", str(bag), "--left-topic", TOPICS["left_topic"], "--right-topic", TOPICS["right_topic"],
               "--camera-info-topics", ",".join(TOPICS["camera_info_topics"]), "--tf", "--camera-frame",
-              "stereo_link", "--height", str(dataset.rig.height_m), "--tilt", str(dataset.rig.tilt_rad)]
+              "stereo_link", "--height", str(_rig(dataset).height_m), "--tilt", str(_rig(dataset).tilt_rad)]
     assert entry(["map", *common, "-o", str(tmp_path / "m"), "--quiet"]) == 0
     assert _same(np.load(tmp_path / "m" / "log_odds.npy"), reference)
     assert entry(["export", *common, "-o", str(tmp_path / "ds"), "--quiet"]) == 0
@@ -234,15 +240,14 @@ def test_mount_is_estimated_when_not_given(tmp_path):
     data = read_manifest(write_synthetic_dataset(tmp_path / "d", seed=2, n_frames=5, supersample=1, progress=False))
     bag = write_bag(tmp_path / "est", data, ros1=False)
     result = export_bag(bag, tmp_path / "out", **TOPICS, odom_topic="/odom", progress=False)
-    assert result.rig is None and result.rig_source.startswith("none")
+    assert result.mount is None and result.mount_source.startswith("none")
     manifest = read_manifest(tmp_path / "out")
-    assert manifest.rig is None
+    assert manifest.mount is None
     mount, floor = floor_for_run(manifest)
     assert floor.confident and floor.method == "plane"
-    assert floor.height_m == pytest.approx(data.rig.height_m, abs=0.02)
-    assert floor.tilt_rad == pytest.approx(data.rig.tilt_rad, abs=0.02)
+    assert floor.height_m == pytest.approx(_rig(data).height_m, abs=0.02)
+    assert floor.tilt_rad == pytest.approx(_rig(data).tilt_rad, abs=0.02)
     # the mount is of the raw camera; turned into the rectified frame it is the estimated floor
-    from mrstereo.geometry.ground import ground_from_mount
     seen = ground_from_mount(mount, R_rect_from_cam=manifest.calibration.left.R)
     assert (seen.height_m, seen.tilt_rad, seen.roll_rad) == pytest.approx(
         (floor.height_m, floor.tilt_rad, floor.roll_rad), abs=1e-12)
@@ -412,10 +417,10 @@ def test_mount_from_tf_chains_3d_frames_to_the_optical_frame(dataset, tmp_path, 
         out = tmp_path / f"out_{frame}"
         result = export_bag(path, out, left_topic="/l/image_raw", right_topic="/r/image_raw", camera_frame=frame,
                             progress=False)
-        assert isinstance(result.rig, CameraMount) and result.rig_source == f"tf base_link <- {frame}"
-        np.testing.assert_allclose(result.rig.T_base_from_cam, expected, atol=1e-9)
+        assert isinstance(result.mount, CameraMount) and result.mount_source == f"tf base_link <- {frame}"
+        np.testing.assert_allclose(result.mount.T_base_from_cam, expected, atol=1e-9)
         manifest = read_manifest(out)
-        np.testing.assert_allclose(manifest.rig.T_base_from_cam, expected, atol=1e-9)   # via mount: xyz, rpy
+        np.testing.assert_allclose(manifest.mount.T_base_from_cam, expected, atol=1e-9)   # via mount: xyz, rpy
         assert [f.pan_rad for f in manifest.frames] == [0.0, 0.0]
 
 
@@ -427,7 +432,7 @@ def test_mount_from_tf_of_a_panning_head_is_the_rig_and_the_pans(dataset, tmp_pa
     # stereo_link is a body frame on the floor: its mount is (0, 0, 0) and the rig's height and tilt are lost,
     # so a real robot publishes the optical frame; here the body frame's heading gives the pan
     result = export_bag(bag, tmp_path / "o", **TOPICS, use_tf=True, camera_frame="stereo_link", progress=False)
-    assert isinstance(result.rig, CameraMount) and result.rig.xyz == (0.0, 0.0, 0.0)
+    assert isinstance(result.mount, CameraMount) and result.mount.xyz == (0.0, 0.0, 0.0)
     manifest = read_manifest(tmp_path / "o")
     first = dataset.frames[0].pan_rad
     assert [f.pan_rad for f in manifest.frames] == pytest.approx([f.pan_rad - first for f in dataset.frames],

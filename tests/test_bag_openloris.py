@@ -130,8 +130,8 @@ def test_openloris_fisheye_bags_map_from_camera_info_and_tf(sample_data, tmp_pat
     # the dataset: the fisheye calibration from camera_info, the 6-DoF mount from TF, poses from odometry
     m = read_manifest(tmp_path / "ds")
     assert m.calibration.left.camera.distortion_model == "equidistant"
-    np.testing.assert_allclose(m.rig.T_base_from_cam, T_base_cam, atol=1e-9)
-    g = ground_from_mount(m.rig, R_rect_from_cam=m.calibration.left.R)
+    np.testing.assert_allclose(m.mount.T_base_from_cam, T_base_cam, atol=1e-9)
+    g = ground_from_mount(m.mount, R_rect_from_cam=m.calibration.left.R)
     assert g.height_m == pytest.approx(0.8951, abs=1e-4) and abs(g.tilt_rad) < 0.02
     x, y, yaw = m.frames[0].pose                      # odom.txt between its first two samples (linear, slerp)
     assert (x, y) == pytest.approx((-3.3102, 0.1207), abs=1e-4) and yaw == pytest.approx(-0.5515, abs=1e-4)

@@ -37,7 +37,7 @@ def test_batch_writes_frames_and_maps_equal_to_the_single_commands(datasets, tmp
     files = frame_outputs(out / "alpha" / "frames", 1)
     rec = m.frames[1]
     ref = scan_from_pair(read_image(rec.left_rect), read_image(rec.right_rect), m.calibration, rectified=True,
-                         rig=m.rig, pan_rad=rec.pan_rad, config=PipelineConfig().obstacles)
+                         mount=m.mount, pan_rad=rec.pan_rad, config=PipelineConfig().obstacles)
     assert np.array_equal(read_disparity(files["disparity"]), ref.frame.disparity_px, equal_nan=True)
     assert np.allclose(read_scan_json(files["scan"]).ranges_m, ref.scan.ranges_m, equal_nan=True)
     cloud = read_ply(files["cloud"])

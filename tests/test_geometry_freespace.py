@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mrstereo.camera import Camera, RigMount, StereoCamera
+from mrstereo.camera import Camera, CameraMount, StereoCamera
 from mrstereo.geometry import ObstacleConfig, detect_obstacles
 from mrstereo.geometry.freespace import FreeSpaceConfig, free_space_boundary
 from mrstereo.transforms import T_robot_from_cam
@@ -21,7 +21,7 @@ WALL_X = 2.0
 
 def _stereo():
     return StereoCamera.ideal(Camera(width=W, height=H, fx=F, fy=F, cx=CX, cy=CY), B,
-                              rig=RigMount(height_m=HEIGHT, tilt_rad=TILT))
+                              mount=CameraMount.from_rig(HEIGHT, TILT))
 
 
 def _frame(*, wall_x=WALL_X, floor_gray=None, measured_share=0.05, measured_below=200, skirting_m=0.0, seed=0):

@@ -7,7 +7,6 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.camera.mount import T_base_from_cam_of
 from mrstereo.odometry import LOST, OdometryConfig, StereoOdometry, visual_odometry
 from mrstereo.transforms import (T_from_planar, T_from_rvec_t, planar_from_T, quaternion_from_rotation,
                                  rotation_angle_rad, rotation_from_quaternion, rvec_t_from_T)
@@ -27,7 +26,7 @@ def corridor():
 
 
 def _run(stereo, frames, poses, **kw):
-    mount = T_base_from_cam_of(stereo.rig)
+    mount = stereo.mount.T_base_from_rectified(stereo.left.R)
     return visual_odometry([(f.left_rect, f.right_rect) for f in frames], stereo, T_base_from_cam=mount,
                            T_world_from_base0=T_from_planar(*poses[0]), **kw)
 
@@ -93,7 +92,7 @@ def test_lost_frame_is_reported_and_predicted(corridor):
     blank = np.full_like(frames[0].left_rect, 128)
     pairs = [(f.left_rect, f.right_rect) for f in frames]
     pairs.insert(4, (blank, blank))
-    mount = T_base_from_cam_of(stereo.rig)
+    mount = stereo.mount.T_base_from_rectified(stereo.left.R)
     result = visual_odometry(pairs, stereo, T_base_from_cam=mount, T_world_from_base0=T_from_planar(*poses[0]))
     assert result.status[4] == LOST and not result.success and "1 of 9" in result.message
     # the motion model's prediction: the last step (0.1 m) again, where the next frame is seen
@@ -106,7 +105,7 @@ def test_lost_frame_is_reported_and_predicted(corridor):
 def test_bad_input(corridor):
     stereo, poses, frames = corridor
     tracker = StereoOdometry(stereo)
-    mount = T_base_from_cam_of(stereo.rig)
+    mount = stereo.mount.T_base_from_rectified(stereo.left.R)
     small = cv2.resize(frames[0].left_rect, (160, 120))
     with pytest.raises(ValueError, match="calibration is 320x240"):
         tracker.step(small, small, T_base_from_cam=mount)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from mrstereo.cli import entry
+from mrstereo.geometry.ground import ground_from_mount
 from mrstereo.odometry.trajectory import read_tum, trajectory_metrics, umeyama_alignment, write_tum
 from mrstereo.recordings.manifest import read_manifest
 from mrstereo.transforms import T_from_planar
@@ -181,10 +182,11 @@ def test_a_bag_without_odometry(sequence, tmp_path, capsys):
     from test_bag_io import DT_NS, T0_NS, TOPICS, write_bag
 
     manifest = read_manifest(sequence)
+    rig = ground_from_mount(manifest.mount, R_rect_from_cam=manifest.calibration.left.R)
     bag = write_bag(tmp_path / "cams.bag", manifest, ros1=True, odom=False)
     common = ["--bag", str(bag), "--left-topic", TOPICS["left_topic"], "--right-topic", TOPICS["right_topic"],
               "--camera-info-topics", ",".join(TOPICS["camera_info_topics"]), "--height",
-              str(manifest.rig.height_m), "--tilt", str(manifest.rig.tilt_rad), "--quiet"]
+              str(rig.height_m), "--tilt", str(rig.tilt_rad), "--quiet"]
     assert entry(["odometry", *common, "-o", str(tmp_path / "t.txt")]) == 0
     stamps, T = read_tum(tmp_path / "t.txt")
     np.testing.assert_allclose(stamps, (T0_NS + np.arange(6) * DT_NS) / 1e9)      # the image stamps

@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from mrstereo.camera.mount import T_base_from_cam_of
 from mrstereo.odometry import KEYFRAME, LOST, TRACKED, OdometryConfig, visual_odometry
 from mrstereo.transforms import T_from_planar
 from mrstereo.world.paths import speed_path
@@ -25,7 +24,7 @@ def street():
 
 
 def _run(world, pairs, pose0, stamps, **config):
-    return visual_odometry(pairs, world.stereo, T_base_from_cam=T_base_from_cam_of(world.stereo.rig),
+    return visual_odometry(pairs, world.stereo, T_base_from_cam=world.stereo.mount.T_base_from_rectified(world.stereo.left.R),
                            T_world_from_base0=T_from_planar(*pose0), stamps_s=stamps,
                            config=OdometryConfig(**config))
 

@@ -58,7 +58,7 @@ def test_kitti_reader_on_the_real_sample(kitti):
     np.testing.assert_allclose(end, [rows[50, 11], -rows[50, 3], -rows[50, 7]], atol=0.05)
     assert 59.0 < end[0] < 60.5 and abs(end[2]) > 1.0               # the road climbs 1.2 m
     assert m.frames[50].true_pose_3d == m.frames[50].pose_3d       # no odometry: the given pose is the truth
-    assert m.rig == KITTI_MOUNT
+    assert m.mount == KITTI_MOUNT
     # a sequence folder reads the same (poses from ../../poses)
     same = read_kitti_odometry(seq)
     assert same.frames[50].true_pose_3d == m.frames[50].true_pose_3d
@@ -134,7 +134,7 @@ def test_manifest_round_trip_of_stamps_and_3d_poses(tmp_path):
     frames = [{"left_rect": "l.png", "right_rect": "r.png", "stamp_s": 1700000000.123456789, "pose": pose,
                "true_pose": [1.1, 2.0, 0.4]},
               {"left_rect": "l.png", "right_rect": "r.png", "pose": [0.0, 0.0, 0.0]}]
-    write_manifest(tmp_path / "manifest.yaml", calibration="calib.yaml", rig=None, frames=frames)
+    write_manifest(tmp_path / "manifest.yaml", calibration="calib.yaml", mount=None, frames=frames)
     m = read_manifest(tmp_path)
     f = m.frames[0]
     assert f.stamp_s == 1700000000.123456789 and m.frames[1].stamp_s is None and m.stamps_s is None

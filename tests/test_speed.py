@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.camera import Camera, CameraInfo, RigMount, StereoCamera
+from mrstereo.camera import Camera, CameraInfo, CameraMount, StereoCamera
 from mrstereo.camera import camera_info as camera_info_module
 from mrstereo.cli import entry
 from mrstereo.profiling import Profile, active, profiling, stage
@@ -21,10 +21,11 @@ def _stereo(baseline_m=0.12):
     P_left = np.hstack([K_rect, np.zeros((3, 1))])
     P_right = P_left.copy()
     P_right[0, 3] = -100.0 * baseline_m
-    return StereoCamera(left=CameraInfo(CAM, R=rotation_from_rpy(0.01, -0.005, 0.002), P=P_left, name="left"),
+    R_left = rotation_from_rpy(0.01, -0.005, 0.002)
+    return StereoCamera(left=CameraInfo(CAM, R=R_left, P=P_left, name="left"),
                         right=CameraInfo(CAM, R=rotation_from_rpy(-0.004, 0.008, -0.01), P=P_right,
                                          name="right"),
-                        rig=RigMount(height_m=0.45, tilt_rad=0.15))
+                        mount=CameraMount.from_rig(0.45, 0.15, R_rect_from_cam=R_left))
 
 
 def _images():

@@ -18,7 +18,7 @@ import json
 import math
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -158,8 +158,8 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     right_views, _ = chessboard_views(paths_r, (9, 6), 0.03)
     pairs = [(a, b) for a, b in zip(left_views, right_views) if a is not None and b is not None]
     cal = calibrate_stereo([a for a, _ in pairs], [b for _, b in pairs], width=size[0], height=size[1],
-                           method="ga+lm", rig=manifest.rig, rng=seed)
-    estimated = cal.stereo
+                           method="ga+lm", rng=seed)
+    estimated = replace(cal.stereo, mount=manifest.mount)
     write_stereo(calib_dir / "stereo.yaml", estimated)
     residual_figure(calib_dir / "residuals_left.png", estimated.left.camera, [a for a, _ in pairs])
     # the paper's single-view dot target and GA alone (Figs 2-3)
@@ -198,7 +198,7 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
     metrics["calibration"]["true_rectified_focal_px"] = truth.focal_px
     result = compute_disparity(left, right, calibration=estimated, preset=PipelineConfig().preset)
     rejected = reject_uniform(result.disparity_px, left)
-    obstacles = detect_obstacles(rejected.disparity_px, estimated, rig=manifest.rig, pan_rad=record.pan_rad)
+    obstacles = detect_obstacles(rejected.disparity_px, estimated, pan_rad=record.pan_rad)
     panels = {"rectified left (estimated calibration)": left}
     names = {1: "III (full resolution)", 2: "II (1/2 horizontal)", 4: "I (1/4 horizontal)"}
     for level, d in zip(result.plan.levels, result.levels):

@@ -12,7 +12,7 @@ import click
 import numpy as np
 
 from ..io import check_outputs
-from ._options import CALIB_HELP, echo_floor, mount_option, parse_mount, profile_option
+from ._options import CALIB_HELP, echo_floor, mount_from_options, mount_option, profile_option
 
 __all__ = ["COMMANDS"]
 
@@ -22,13 +22,13 @@ def _common(func):
         click.argument("left", type=click.Path(dir_okay=False)),
         click.argument("right", type=click.Path(dir_okay=False)),
         click.option("--calib", "calib", required=True, type=click.Path(dir_okay=False),
-                     help=CALIB_HELP + " A stereo YAML may hold the mount (rig:)."),
+                     help=CALIB_HELP + " A stereo YAML may hold the mount (mount: or rig:)."),
         click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output file."),
         click.option("--rectified", is_flag=True, help="The images are already rectified."),
         click.option("--height", "height_m", type=float, default=None,
-                     help="Camera height above the floor [m] (overrides the YAML rig)."),
+                     help="Camera height above the floor [m] (overrides the YAML mount)."),
         click.option("--tilt", "tilt_rad", type=float, default=None,
-                     help="Downward camera tilt [rad] (overrides the YAML rig; needs --height or a rig)."),
+                     help="Downward camera tilt [rad] (overrides the YAML mount; needs --height or a YAML mount)."),
         click.option("--pan", "pan_rad", type=float, default=0.0, show_default=True,
                      help="Head pan about the robot's z axis [rad], positive to the left."),
         click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default="mapping",
@@ -60,8 +60,8 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
          texture_threshold, min_height_m, max_height_m, max_range_m, ground_method, mount, scan: bool, **scan_kw):
     from dataclasses import replace
 
-    from ..camera import RigMount, read_stereo
-    from ..geometry import ObstacleConfig
+    from ..camera import read_stereo
+    from ..geometry import ObstacleConfig, ground_from_mount
     from ..io import read_image
     from ..pipeline.frame import obstacles_from_pair, scan_from_pair
     from ..profiling import stage
@@ -73,15 +73,12 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
                         ("--max-range", max_range_m)):
         _finite(name, value)
     stereo = read_stereo(calib)
-    rig = parse_mount(mount)
-    if rig is not None and (height_m is not None or tilt_rad is not None):
-        raise click.UsageError("give --mount or --height/--tilt, not both")
-    if height_m is not None or tilt_rad is not None:
-        base = stereo.rig
-        if height_m is None and base is None:
-            raise ValueError("--tilt needs --height (or a rig: entry in the calibration YAML)")
-        rig = RigMount(height_m=height_m if height_m is not None else base.height_m,
-                       tilt_rad=tilt_rad if tilt_rad is not None else (base.tilt_rad if base else 0.0))
+    if mount is None and stereo.mount is not None and (height_m is not None or tilt_rad is not None):
+        # one of --height/--tilt: the other is the calibration YAML's (of its rectified left camera)
+        given = ground_from_mount(stereo.mount, R_rect_from_cam=stereo.left.R)
+        height_m = given.height_m if height_m is None else height_m
+        tilt_rad = given.tilt_rad if tilt_rad is None else tilt_rad
+    camera_mount = mount_from_options(height_m, tilt_rad, mount, stereo)
     from ..io import matching_image
 
     with stage("read"):
@@ -95,7 +92,7 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     updates = {k: v for k, v in (("min_obstacle_height_m", min_height_m), ("max_obstacle_height_m", max_height_m),
                                  ("max_range_m", max_range_m), ("ground_method", ground_method)) if v is not None}
     config = replace(config, **updates)
-    options = dict(rectified=rectified, rig=rig, pan_rad=pan_rad, preset=preset,
+    options = dict(rectified=rectified, mount=camera_mount, pan_rad=pan_rad, preset=preset,
                    max_disparity_px=max_disparity_px, rejection=rejection, config=config)
     if scan:
         return stereo, scan_from_pair(left_img, right_img, stereo, **scan_kw, **options)
@@ -116,8 +113,8 @@ def points_command(left, right, calib, output, which, color, **kw):
     """Write the robot-frame point cloud of a stereo pair as binary PLY.
 
     LEFT and RIGHT are a raw pair (rectified with --calib first) or a rectified
-    pair (--rectified). The mount comes from --height/--tilt, else the YAML's
-    rig:, else the floor is estimated from the disparity.
+    pair (--rectified). The mount comes from --mount or --height/--tilt, else the YAML's
+    mount: or rig:, else the floor is estimated from the disparity.
     """
     from ..geometry import write_ply
 
@@ -125,7 +122,7 @@ def points_command(left, right, calib, output, which, color, **kw):
     _, frame = _run(left, right, calib, output, scan=False, **kw)
     obs = frame.obstacles
     if not obs.success:
-        raise RuntimeError(f"{obs.message}; give --height and --tilt (or a rig: entry in the calibration)")
+        raise RuntimeError(f"{obs.message}; give --mount or --height and --tilt (or a mount: entry in the calibration)")
     valid = np.isfinite(obs.points_robot_image).all(axis=-1)
     mask = {"all": valid, "obstacles": obs.obstacle_mask, "floor": obs.floor_mask}[which]
     pts = obs.points_robot_image[mask]
@@ -172,7 +169,7 @@ def scan_command(left, right, calib, output, plot_path, angle_increment_deg, ran
                      range_min_m=_finite("--range-min", range_min_m), **kw)
     obs = result.frame.obstacles
     if not obs.success:
-        raise RuntimeError(f"{obs.message}; give --height and --tilt (or a rig: entry in the calibration)")
+        raise RuntimeError(f"{obs.message}; give --mount or --height and --tilt (or a mount: entry in the calibration)")
     (write_scan_csv if suffix == ".csv" else write_scan_json)(output, result.scan)
     if plot_path is not None:
         plot_top_view(plot_path, obstacle_points_robot=obs.obstacle_points_robot,

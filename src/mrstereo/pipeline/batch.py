@@ -31,8 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import RigMount, StereoCamera
-from ..camera.mount import CameraMount
+from ..camera import CameraMount, StereoCamera
 from ..geometry.ply import write_ply
 from ..geometry.scan import write_scan_json
 from ..io import (atomic_write, check_output_dir, check_outputs, read_pfm, remove_stale_temporaries, temporary_dir,
@@ -76,7 +75,7 @@ class FrameTask:
     record: FrameRecord
     index: int
     stereo: StereoCamera
-    rig: RigMount | CameraMount | None
+    mount: CameraMount | None
     config: PipelineConfig
     frames_dir: Path
     dataset: str
@@ -102,7 +101,7 @@ def process_frame(task: FrameTask | tuple[FrameTask, tuple]) -> FrameObservation
     """
     task, pair = task if isinstance(task, tuple) else (task, None)
     left, right, rectified = frame_pair(task.record, prefer_raw=task.prefer_raw) if pair is None else pair
-    result = scan_from_pair(left, right, task.stereo, rectified=rectified, rig=task.rig,
+    result = scan_from_pair(left, right, task.stereo, rectified=rectified, mount=task.mount,
                             pan_rad=task.record.pan_rad, **pair_options(task.config))
     frame = result.frame
     obs = frame.obstacles
@@ -319,8 +318,8 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
                 if maps and name not in done_maps:
                     observations[(name, k)] = loaded[k]
             else:
-                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, rig=floors[name][0], config=config,
-                                       frames_dir=frames_dir, dataset=name))
+                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, mount=floors[name][0],
+                                       config=config, frames_dir=frames_dir, dataset=name))
 
     results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, processes=processes,
                           progress=progress,

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
-from ..camera import RigMount, StereoCamera
+from ..camera import CameraMount, StereoCamera
 from ..geometry.freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
 from ..geometry.obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
 from ..geometry.scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
@@ -71,7 +71,8 @@ class PairScan:
     frame: PairObstacles
 
 
-def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = False, rig: RigMount | None = None,
+def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = False,
+                        mount: CameraMount | None = None,
                         pan_rad: float = 0.0, preset: str = "mapping", max_disparity_px: float | None = None,
                         matching=None,
                         rejection: RejectionConfig = RejectionConfig(), floor_model: FloorModel | None = None,
@@ -84,11 +85,11 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
     left, right : ndarray of shape (H, W) or (H, W, 3)
         The pair; raw images are rectified with ``stereo`` first unless ``rectified``.
     stereo : StereoCamera
-        Calibration (and optionally the ``rig`` mount).
+        Calibration (and optionally the camera ``mount``).
     rectified : bool
         The images are already rectified.
-    rig : RigMount, optional
-        Camera height and tilt; default ``stereo.rig``; with neither the floor
+    mount : CameraMount, optional
+        The camera mount; default ``stereo.mount``; with neither the floor
         is estimated (on the disparity before rejection, which has the most
         floor pixels; RANSAC ignores the ghosts).
     pan_rad : float
@@ -128,10 +129,9 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
         raw = np.asarray(result.disparity_px, dtype=np.float32)
     with stage("reject"):
         rej = reject_uniform(raw, left, config=rejection, floor_model=floor_model)
-    mount = rig if rig is not None else stereo.rig
     with stage("3-D"):
-        ground = ground_for_frame(raw, stereo, mount=mount, config=config)
-        obstacles = detect_obstacles(rej.disparity_px, stereo, rig=mount, ground=ground, pan_rad=pan_rad,
+        ground = ground_for_frame(raw, stereo, mount=stereo.mount if mount is None else mount, config=config)
+        obstacles = detect_obstacles(rej.disparity_px, stereo, ground=ground, pan_rad=pan_rad,
                                      config=config, too_near=result.too_near, near_limit_px=result.near_limit_px)
     boundary = None
     if free_space is not None:

@@ -8,8 +8,7 @@ import os
 
 import numpy as np
 
-from ..camera import StereoCamera
-from ..camera.mount import T_base_from_cam_of
+from ..camera import CameraMount, StereoCamera
 from ..odometry import OdometryConfig, OdometryResult, visual_odometry
 from ..recordings.layouts import read_recording
 from ..recordings.manifest import Manifest, frame_pair
@@ -46,7 +45,9 @@ def odometry_from_manifest(manifest, *, config: OdometryConfig | None = None, ca
                 left, right = stereo.rectify(left, right)
             yield left, right
 
-    mounts = np.stack([T_base_from_cam_of(manifest.rig, r.pan_rad, stereo=stereo) for r in manifest.frames])
+    # no mount: a level camera on the floor (the base is the camera's REP 103 body frame)
+    mount = manifest.mount or CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    mounts = np.stack([mount.T_base_from_rectified(stereo.left.R, r.pan_rad) for r in manifest.frames])
     T0 = manifest.frames[0].T_world_from_base if initial_pose == "given" else np.eye(4)
     wrap = None
     if progress:

@@ -25,10 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import RigMount, StereoCamera
-from ..camera.mount import CameraMount, mount_entry
+from ..camera import CameraMount, StereoCamera, mount_entry
 from ..geometry.freespace import FreeSpaceConfig
-from ..geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount, ground_from_rig
+from ..geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount
 from ..geometry.obstacles import ObstacleConfig
 from ..io import atomic_write
 from ..mapping import GridSpec, read_ros_map, write_ros_map
@@ -128,7 +127,7 @@ class MapRun:
     ground_truth_map: object | None
     floor: GroundPlane | None = None
     """The floor of the run: the given mount's, or the estimate :func:`floor_for_run` made."""
-    mount: RigMount | CameraMount | None = None
+    mount: CameraMount | None = None
     """The camera mount every frame used."""
     odometry: object | None = None
     """The :class:`mrstereo.odometry.OdometryResult` when the poses came from visual odometry."""
@@ -199,7 +198,7 @@ def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: i
                             sensor_height_m=height, boundary_points=len(boundary))
 
 
-def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, rig=None,
+def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, mount: CameraMount | None = None,
                   config: PipelineConfig = PipelineConfig(), prefer_raw: bool = False,
                   pair: tuple[np.ndarray, np.ndarray, bool] | None = None) -> FrameObservation:
     """Run rectify -> match -> reject -> 3D on one manifest frame; points in the world frame.
@@ -208,17 +207,17 @@ def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, 
     thread); default read here.
     """
     left, right, rectified = frame_pair(record, prefer_raw=prefer_raw) if pair is None else pair
-    frame = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=rig, pan_rad=record.pan_rad,
+    frame = obstacles_from_pair(left, right, stereo, rectified=rectified, mount=mount, pan_rad=record.pan_rad,
                                 **pair_options(config))
     return observation_from_pair(frame, record, index=index, config=config, stereo=stereo)
 
 
-def _observe_indexed(indexed: tuple, *, stereo: StereoCamera, rig, config: PipelineConfig,
+def _observe_indexed(indexed: tuple, *, stereo: StereoCamera, mount: CameraMount | None, config: PipelineConfig,
                      prefer_raw: bool) -> FrameObservation:
     """:func:`observe_frame` of ``(index, record)`` or ``(index, record, pair)``: the picklable unit of work
     of :func:`build_map` (``pair`` read ahead by :func:`_read_indexed`)."""
     k, record, *pair = indexed
-    return observe_frame(record, stereo, index=k, rig=rig, config=config, prefer_raw=prefer_raw,
+    return observe_frame(record, stereo, index=k, mount=mount, config=config, prefer_raw=prefer_raw,
                          pair=pair[0] if pair else None)
 
 
@@ -230,7 +229,7 @@ def _read_indexed(indexed: tuple[int, FrameRecord], *, prefer_raw: bool) -> tupl
 
 def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
                   config: PipelineConfig = PipelineConfig(), prefer_raw: bool = False, max_frames: int = 10,
-                  n_frames: int = 3) -> tuple[RigMount | CameraMount, GroundPlane]:
+                  n_frames: int = 3) -> tuple[CameraMount, GroundPlane]:
     """The camera mount of a run and the floor it implies: given, or estimated from the first frames.
 
     With a mount in the manifest (``mount:`` or ``rig:``) that mount. Without,
@@ -244,7 +243,7 @@ def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
 
     Returns
     -------
-    (RigMount or CameraMount, GroundPlane)
+    (CameraMount, GroundPlane)
         The mount, and the floor with its confidence (``inlier_share``,
         ``residual_m``) and in ``message`` which frames it came from.
 
@@ -255,14 +254,14 @@ def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
     """
     if not isinstance(manifest, Manifest):
         raise TypeError(f"manifest must be a Manifest, got {type(manifest).__name__}")
-    if manifest.rig is not None:
-        mount = manifest.rig
-        return mount, ground_from_mount(mount) if isinstance(mount, CameraMount) else ground_from_rig(mount)
-    stereo = replace(manifest.calibration if stereo is None else stereo, rig=None)
+    stereo = manifest.calibration if stereo is None else stereo
+    if manifest.mount is not None:
+        return manifest.mount, ground_from_mount(manifest.mount, R_rect_from_cam=stereo.left.R)
+    stereo = replace(stereo, mount=None)
     fits, best = [], None
     for k, record in enumerate(manifest.frames[:max(1, int(max_frames))]):
         left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
-        ground = obstacles_from_pair(left, right, stereo, rectified=rectified, rig=None,
+        ground = obstacles_from_pair(left, right, stereo, rectified=rectified, mount=None,
                                      **pair_options(replace(config, free_space=None))).obstacles.ground
         if ground.success and (best is None or ground.inlier_share > best[1].inlier_share):
             best = (k, ground)
@@ -283,9 +282,7 @@ def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
                          message=f"estimated: median of {len(used)} floor fit(s), frame(s) {frames}"
                                  + ("" if fits else " (none confident)"))
     # the estimate is of the rectified left frame; the mount is of the raw camera (p_rect = R p_raw)
-    T = T_robot_from_cam_ground(ground)
-    T[:3, :3] = T[:3, :3] @ stereo.left.R
-    return CameraMount(T), ground
+    return CameraMount.from_rectified(T_robot_from_cam_ground(ground), stereo.left.R), ground
 
 
 def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
@@ -340,7 +337,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     if odometry == "visual" or align is not None:
         from .odometry import odometry_from_manifest
 
-        run_mount = replace(manifest, rig=mount) if mount is not None else manifest     # the floor the map uses
+        run_mount = replace(manifest, mount=mount)     # the floor the map uses
         vo = odometry_from_manifest(run_mount, calibration=calibration, progress=progress)
     if odometry == "visual":
         items = [(k, replace(record, pose=None, pose_3d=pose_3d_of(T)))
@@ -352,7 +349,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
                               config=FusionConfig() if align is True else align)
         items = [(k, replace(record, pose=tuple(float(v) for v in pose), pose_3d=None))
                  for (k, record), pose in zip(items, fused.poses)]
-    observe = partial(_observe_indexed, stereo=stereo, rig=mount, config=config, prefer_raw=prefer_raw)
+    observe = partial(_observe_indexed, stereo=stereo, mount=mount, config=config, prefer_raw=prefer_raw)
     observations = map_ordered(observe, items, workers=workers, scheduler=scheduler,
                                processes=processes, progress=progress, desc="mapping", unit="frame",
                                prefetch=partial(_read_indexed, prefer_raw=prefer_raw),

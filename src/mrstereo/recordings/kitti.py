@@ -186,5 +186,5 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
                                pose_3d=origin if truth is None else truth[i],
                                true_pose_3d=None if truth is None else truth[i])
                    for i, (left, right) in enumerate(zip(lefts, rights)))
-    return Manifest(root=seq.resolve(), calibration=stereo, calibration_path=calib_path.resolve(), rig=mount,
+    return Manifest(root=seq.resolve(), calibration=stereo, calibration_path=calib_path.resolve(), mount=mount,
                     ground_truth_map=None, frames=frames)

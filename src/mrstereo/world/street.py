@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from .. import _checks
-from ..camera import Camera, RigMount, StereoCamera
+from ..camera import Camera, CameraMount, StereoCamera
 from .randomize import RandomWorld
 from .render import SensorModel
 from .scene import (LABEL_FLOOR, LABEL_OBSTACLE, LABEL_POSTER, LABEL_WALL, TEXTURE_BLOTCH, TEXTURE_CHECKER,
@@ -126,8 +126,8 @@ def street_world(seed: int, *, width: int = 320, height: int = 240, length_m: fl
                   x_range_m=(x0, x1), half_width_m=half, height_m=40.0, seed=seed)
     f = (width / 2.0) / math.tan(math.radians(77.0) / 2.0)
     camera = Camera(width=width, height=height, fx=f, fy=f, cx=(width - 1) / 2.0, cy=(height - 1) / 2.0)
-    stereo = StereoCamera.ideal(camera, STREET_BASELINE_M, rig=RigMount(height_m=STREET_CAMERA_HEIGHT_M,
-                                                                          tilt_rad=0.0))
+    stereo = StereoCamera.ideal(camera, STREET_BASELINE_M,
+                                mount=CameraMount.from_xyz_rpy((0.0, 0.0, STREET_CAMERA_HEIGHT_M), (0.0, 0.0, 0.0)))
     noise = rng.uniform(1.0, 2.5)
     sensors = (SensorModel(noise_sigma=noise), SensorModel(gain=rng.uniform(0.9, 1.1), noise_sigma=noise))
     summary = {"seed": seed, "kind": "street", "length_m": round(length, 3), "width_m": round(street, 3),
