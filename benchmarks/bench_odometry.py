@@ -136,6 +136,7 @@ def compare(manifest, frames: slice = slice(None)) -> dict:
     mount = manifest.mount or CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
     mounts = np.stack([mount.T_base_from_rectified(manifest.calibration.left.R, f.pan_rad) for f in records])
     stamps = [f.stamp_s for f in records]
+    visual_odometry(pairs[:4], manifest.calibration, T_base_from_cam=mounts[:4])     # numba's cached kernels loaded
     t0 = time.perf_counter()
     vo = visual_odometry(pairs, manifest.calibration, T_base_from_cam=mounts, T_world_from_base0=truth[0],
                          stamps_s=None if None in stamps else stamps)
@@ -281,6 +282,7 @@ def speed(root: Path, frames: int) -> None:
     pairs = [(read_image(f.left_rect), read_image(f.right_rect)) for f in manifest.frames]
     mount = manifest.mount.T_base_from_rectified(manifest.calibration.left.R)
     T0 = T_from_planar(*(manifest.frames[0].true_pose or manifest.frames[0].pose))
+    visual_odometry(pairs[:4], manifest.calibration, T_base_from_cam=mount)          # numba's cached kernels loaded
     for label, disparities in (("stereo search", None),
                                ("given disparity", [read_pfm(f.gt_disparity) for f in manifest.frames])):
         t0 = time.perf_counter()
