@@ -47,6 +47,7 @@ from mrstereo.io import read_image
 from mrstereo.mapping import OccupancyGrid
 from mrstereo.mapping.fusion import add_observation
 from mrstereo.pipeline.frame import obstacles_from_pair
+from mrstereo.pipeline.parallel import keep_freed_memory
 from mrstereo.pipeline.run import PipelineConfig, observation_from_pair, pair_options
 from mrstereo.profiling import Profile, profiling
 from mrstereo.recordings.manifest import read_manifest
@@ -302,6 +303,7 @@ def main() -> None:
     parser.add_argument("--near-guard", type=float, default=None,
                         help="scenes: the matcher's near_guard (0 = without its too-near guard; default the preset's)")
     args = parser.parse_args()
+    keep_freed_memory()          # as the mrstereo command does (for both chains of this process)
     if args.cpu:
         global CLOCK
         CLOCK = time.thread_time

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import shutil
 
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 from mrstereo.cli import entry
 from mrstereo.geometry import read_ply, read_scan_json
 from mrstereo.io import read_disparity, read_image
+from mrstereo.mapping.fusion import fuse
 from mrstereo.pipeline.batch import SUMMARY_NAME, frame_outputs, run_batch
 from mrstereo.pipeline.frame import scan_from_pair
 from mrstereo.pipeline.run import PipelineConfig, build_map
@@ -109,6 +111,36 @@ def test_batch_on_a_dask_cluster_gives_the_same_files(datasets, tmp_path):
             assert a[key].read_bytes() == b[key].read_bytes(), (k, key)
     assert np.array_equal(np.load(local / "alpha" / "map" / "log_odds.npy"),
                           np.load(tmp_path / "dask" / "alpha" / "map" / "log_odds.npy"), equal_nan=True)
+
+
+def test_map_command_build_map_fuse_and_batch_give_one_map_and_one_set_of_metrics(tmp_path, capsys):
+    """Library defaults are the CLI's: ``mrstereo map``, ``build_map`` and ``fuse`` of its observations (default
+    configs) give the same map, bit for bit; ``batch`` gives that map and the same metrics (along the true path,
+    with the fields of view), also when it rebuilds the map from the observations it saved."""
+    ds = write_synthetic_dataset(tmp_path / "drift", seed=3, n_frames=6, width=160, height=120, supersample=1,
+                                 odometry_noise=(0.05, math.radians(4.0)), progress=False)
+    manifest = read_manifest(ds)
+    assert any(f.pose != f.true_pose for f in manifest.frames)          # metrics follow the true path
+    assert entry(["map", str(ds), "-o", str(tmp_path / "map"), "--quiet"]) == 0
+    log_odds = np.load(tmp_path / "map" / "log_odds.npy")
+    run = build_map(ds, progress=False)
+    assert np.array_equal(run.grid.log_odds, log_odds, equal_nan=True)
+    assert np.array_equal(fuse(run.observations).log_odds, log_odds, equal_nan=True)
+    assert any(o.boundary_points for o in run.observations)
+    metrics = json.loads((tmp_path / "map" / "metrics.json").read_text())
+    assert metrics["free_coverage"] is not None and metrics["recall_in_view"] is not None
+    for attempt in ("computed", "rebuilt from the saved observations"):
+        if attempt != "computed":
+            shutil.rmtree(tmp_path / "batch" / "drift" / "map")
+        assert entry(["batch", str(ds), "-o", str(tmp_path / "batch"), "--quiet"]) == 0, attempt
+        assert np.array_equal(np.load(tmp_path / "batch" / "drift" / "map" / "log_odds.npy"), log_odds,
+                              equal_nan=True), attempt
+        assert json.loads((tmp_path / "batch" / "drift" / "map" / "metrics.json").read_text()) == metrics, attempt
+    for obs in run.observations:                                   # the saved observations keep the boundary rows
+        with np.load(frame_outputs(tmp_path / "batch" / "drift" / "frames", obs.index)["observation"]) as saved:
+            assert int(saved["boundary_points"]) == obs.boundary_points
+            assert np.array_equal(saved["obstacle_points_world"], obs.obstacle_points_world)
+    capsys.readouterr()
 
 
 def test_bad_batch_input(datasets, tmp_path, capsys):

@@ -149,6 +149,7 @@ def test_bad_input():
 def test_boundary_points_join_the_observation_marked_and_map_the_plain_wall():
     from mrstereo.mapping import OccupancyGrid
     from mrstereo.mapping.fusion import add_observation
+    from mrstereo.matching import DisparityResult, make_plan
     from mrstereo.pipeline.frame import PairObstacles
     from mrstereo.pipeline.run import PipelineConfig, observation_from_pair
     from mrstereo.recordings.manifest import FrameRecord
@@ -159,7 +160,10 @@ def test_boundary_points_join_the_observation_marked_and_map_the_plain_wall():
     stereo = _stereo()
     obstacles = detect_obstacles(disparity, stereo, config=ObstacleConfig(max_range_m=4.0))
     boundary = free_space_boundary(image, obstacles, disparity, stereo, max_range_m=4.0)
-    frame = PairObstacles(left_rect=image, raw_disparity_px=disparity, rejection=reject_uniform(disparity, image),
+    matching = DisparityResult(disparity_px=disparity, confidence=np.isfinite(disparity).astype(np.float32),
+                               plan=make_plan(stereo.size, max_disparity_px=64), levels=(disparity,),
+                               too_near=np.zeros(disparity.shape, bool))
+    frame = PairObstacles(left_rect=image, matching=matching, rejection=reject_uniform(disparity, image),
                           obstacles=obstacles, boundary=boundary)
     record = FrameRecord(pose=(1.0, 0.5, 0.3))
     config = PipelineConfig()

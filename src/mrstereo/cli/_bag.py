@@ -11,6 +11,8 @@ from pathlib import Path
 
 import click
 
+from ..mapping import MappingConfig
+from ..pipeline.run import PipelineConfig
 from ._options import (CALIB_HELP, check_mount_options, check_workers, echo_run_floor, mount_from_options,
                        mount_option, parse_mount, worker_options)
 
@@ -164,9 +166,9 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output directory: one folder per dataset and summary.json.")
 @worker_options
-@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default="mapping", show_default=True,
-              help="Matching preset.")
-@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default="log_odds", show_default=True,
+@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default=PipelineConfig.preset,
+              show_default=True, help="Matching preset.")
+@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default=MappingConfig.fusion, show_default=True,
               help="Map fusion.")
 @click.option("--no-maps", is_flag=True, help="Only the per-frame outputs, no map per dataset.")
 @mount_option
@@ -185,7 +187,6 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool,
 
     from ..io import check_output_dir
     from ..pipeline.batch import run_batch
-    from ..pipeline.run import PipelineConfig
     from ..recordings.manifest import read_manifest
 
     check_workers(workers, scheduler, processes)

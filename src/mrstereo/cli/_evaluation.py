@@ -7,7 +7,7 @@ import click
 
 from ..evaluation.report import METHODS, evaluate_scenes
 from ..io import atomic_write, check_outputs
-from ._options import check_workers, worker_options
+from ._options import check_workers, library_default, worker_options
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -17,7 +17,8 @@ def _write_text(path: Path, text: str) -> None:
 
 @click.command("evaluate")
 @click.argument("dirs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--methods", "-m", "methods", default=",".join(METHODS), show_default=True,
+@click.option("--methods", "-m", "methods", default=",".join(library_default(evaluate_scenes, "methods")),
+              show_default=True,
               help=f"Comma-separated methods to run, some of: {', '.join(METHODS)}.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write the full report as JSON here.")

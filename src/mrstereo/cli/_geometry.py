@@ -12,7 +12,8 @@ import click
 import numpy as np
 
 from ..io import check_outputs
-from ._options import CALIB_HELP, echo_floor, mount_from_options, mount_option, profile_option
+from ..pipeline.frame import obstacles_from_pair, scan_from_pair
+from ._options import CALIB_HELP, echo_floor, library_default, mount_from_options, mount_option, profile_option
 
 __all__ = ["COMMANDS"]
 
@@ -29,10 +30,10 @@ def _common(func):
                      help="Camera height above the floor [m] (overrides the YAML mount)."),
         click.option("--tilt", "tilt_rad", type=float, default=None,
                      help="Downward camera tilt [rad] (overrides the YAML mount; needs --height or a YAML mount)."),
-        click.option("--pan", "pan_rad", type=float, default=0.0, show_default=True,
-                     help="Head pan about the robot's z axis [rad], positive to the left."),
-        click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default="mapping",
-                     show_default=True, help="Matcher preset."),
+        click.option("--pan", "pan_rad", type=float, default=library_default(obstacles_from_pair, "pan_rad"),
+                     show_default=True, help="Head pan about the robot's z axis [rad], positive to the left."),
+        click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]),
+                     default=library_default(obstacles_from_pair, "preset"), show_default=True, help="Matcher preset."),
         click.option("--max-disparity", "max_disparity_px", type=float, default=None,
                      help="Largest disparity to search [px] (default: the matcher's)."),
         click.option("--texture-threshold", type=float, default=None,
@@ -63,7 +64,6 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     from ..camera import read_stereo
     from ..geometry import ObstacleConfig, ground_from_mount
     from ..io import read_image
-    from ..pipeline.frame import obstacles_from_pair, scan_from_pair
     from ..profiling import stage
     from ..rejection import RejectionConfig
 
@@ -144,9 +144,11 @@ def points_command(left, right, calib, output, which, color, **kw):
 @_common
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Also write a top-view PNG (obstacle points, floor points, scan).")
-@click.option("--angle-increment", "angle_increment_deg", type=float, default=0.5, show_default=True,
+@click.option("--angle-increment", "angle_increment_deg", type=float,
+              default=math.degrees(library_default(scan_from_pair, "angle_increment_rad")), show_default=True,
               help="Angular step of the scan [deg].")
-@click.option("--range-min", "range_min_m", type=float, default=0.1, show_default=True, help="[m]")
+@click.option("--range-min", "range_min_m", type=float, default=library_default(scan_from_pair, "range_min_m"),
+              show_default=True, help="[m]")
 def scan_command(left, right, calib, output, plot_path, angle_increment_deg, range_min_m, **kw):
     """Write a virtual laser scan (nearest obstacle per bearing) as JSON or CSV.
 

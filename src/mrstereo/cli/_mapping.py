@@ -8,7 +8,9 @@ from pathlib import Path
 import click
 
 from ..io import atomic_write, check_outputs
+from ..mapping.planning import plan_path
 from ..mapping.rosmap import ros_map_files
+from ._options import library_default
 
 
 def _xy(ctx, param, value):
@@ -26,9 +28,10 @@ def _xy(ctx, param, value):
 @click.argument("map_yaml", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--start", required=True, callback=_xy, metavar="X,Y", help="Start (x, y) in metres.")
 @click.option("--goal", required=True, callback=_xy, metavar="X,Y", help="Goal (x, y) in metres.")
-@click.option("--radius", "radius_m", type=float, default=0.25, show_default=True,
-              help="Robot radius [m]: obstacles are inflated by it.")
-@click.option("--unknown", type=click.Choice(["blocked", "free"]), default="blocked",
+@click.option("--radius", "radius_m", type=float, default=library_default(plan_path, "robot_radius_m"),
+              show_default=True, help="Robot radius [m]: obstacles are inflated by it.")
+@click.option("--unknown", type=click.Choice(["blocked", "free"]),
+              default="blocked" if library_default(plan_path, "unknown_is_obstacle") else "free",
               show_default=True, help="How to treat unknown cells.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Path JSON to write.")
@@ -41,7 +44,7 @@ def plan_command(map_yaml: Path, start, goal, radius_m: float, unknown: str, out
     Writes OUTPUT as JSON: path_xy (cell centres, metres), length_m, start, goal,
     robot_radius_m, unknown, expanded_cells. Exits with an error if there is no path.
     """
-    from ..mapping import plan_path, plot_map, read_ros_map
+    from ..mapping import plot_map, read_ros_map
 
     if not (math.isfinite(radius_m) and radius_m >= 0):
         raise click.BadParameter(f"must be a finite number >= 0, got {radius_m}", param_hint="--radius")

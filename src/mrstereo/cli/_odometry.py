@@ -6,8 +6,9 @@ from pathlib import Path
 
 import click
 
+from ..pipeline.odometry import odometry_from_manifest
 from ._bag import bag_options, opened_dataset
-from ._options import profile_option
+from ._options import library_default, profile_option
 
 __all__ = ["COMMANDS"]
 
@@ -24,7 +25,8 @@ __all__ = ["COMMANDS"]
 @click.option("--calib", "calib", type=click.Path(dir_okay=False, path_type=Path),
               help="Use this stereo calibration (and the raw images) instead of the manifest's; "
                    "with --bag, instead of the camera_info topics.")
-@click.option("--start", type=click.Choice(["given", "origin"]), default="given", show_default=True,
+@click.option("--start", type=click.Choice(["given", "origin"]), show_default=True,
+              default="given" if library_default(odometry_from_manifest, "initial_pose") == "given" else "origin",
               help="Start at the first frame's given pose, or at the origin.")
 @click.option("--bag", "bag", type=click.Path(path_type=Path),
               help="A ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
@@ -46,7 +48,6 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
 
     from ..io import refuse_overwrite_input
     from ..odometry.trajectory import plot_trajectories, trajectory_metrics, write_tum
-    from ..pipeline.odometry import odometry_from_manifest
 
     if (manifest is None) == (bag is None):
         raise click.UsageError("give a DATASET or --bag FILE (one of them)")

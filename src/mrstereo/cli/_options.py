@@ -2,12 +2,18 @@
 from __future__ import annotations
 
 import functools
+import inspect
 import math
 
 import click
 
 CALIB_HELP = ("Calibration file in any supported format (mrstereo/ROS stereo YAML, Kalibr camchain, OpenCV "
               "FileStorage, OpenLORIS), or two per-camera files as LEFT,RIGHT; see `mrstereo calib convert --help`.")
+
+
+def library_default(func, name: str):
+    """The default of the keyword ``name`` of the library function ``func``: an option's default is the library's."""
+    return inspect.signature(func).parameters[name].default
 
 
 def worker_options(func):

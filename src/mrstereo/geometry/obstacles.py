@@ -35,7 +35,12 @@ from ..camera import CameraMount, StereoCamera
 from . import _kernels
 from .ground import GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_mount
 
-__all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity"]
+__all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity",
+           "MAPPING_MAX_RANGE_M"]
+
+MAPPING_MAX_RANGE_M = 4.0
+"""``ObstacleConfig.max_range_m`` of a map (:class:`mrstereo.pipeline.PipelineConfig`): the paper tells floor and
+objects apart up to about 4 m; beyond, one pixel of disparity error is more than half a metre at 320x240."""
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .. import _checks
+from ..geometry.obstacles import MAPPING_MAX_RANGE_M
 from .grid import dilate_cells, distance_cells
 from .rosmap import RosMap
 
@@ -120,7 +121,7 @@ def cells_in_view(ground_truth, views, *, angle_step_rad: float = math.radians(0
     return seen
 
 
-def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
+def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = MAPPING_MAX_RANGE_M,
                 tolerance_cells: int = 1, views=None) -> MapMetrics:
     """Compare an estimated map with a ground-truth map of the same grid.
 
@@ -131,7 +132,7 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
     path_xy : ndarray of shape (K, 2) or (K, 3), optional
         Robot path (poses' x, y used); when given, only cells within ``within_m`` of it count.
     within_m : float
-        Radius of the evaluated band around the path (default 4 m, the paper's reliable range).
+        Radius of the evaluated band around the path (default: the range a map uses, 4 m).
     tolerance_cells : int
         An estimated occupied cell is correct when a true occupied cell lies within this many
         cells (Chebyshev distance), and conversely for recall.

@@ -314,8 +314,8 @@ def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: Ma
     # distinct clusters stay apart (a level column between them spans a column at least)
     source = np.minimum(((np.arange(col0, col1) + 0.5) / guard.scale).astype(np.intp), w_level - 1)
     # (every winner beyond D shapes the re-scoring's windows; only the candidates are re-scored)
-    field = _kernels.recycled_empty((height, width), np.float32)
-    want = _kernels.recycled_empty((height, width), np.bool_)
+    field = np.empty((height, width), np.float32)
+    want = np.empty((height, width), np.bool_)
     first_col, end_col = _level_spans(source, col0, w_level)
     _kernels.guard_upsample(beyond, d_level, labels_level, first_col, end_col, float(guard.scale), field, want)
     n_labels = int(labels_level.max()) + 1
@@ -553,8 +553,8 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
     _checks.image("left", left)
     _checks.image("right", right)
     _checks.same_shape("left", left, "right", right)
-    left_gray = _checks.gray_float32("left", left, empty=_kernels.recycled_empty)
-    right_gray = _checks.gray_float32("right", right, empty=_kernels.recycled_empty)
+    left_gray = _checks.gray_float32("left", left)
+    right_gray = _checks.gray_float32("right", right)
     height, width = left_gray.shape
     config = preset_config(preset) if config is None else config
     plan = make_plan((width, height), max_disparity_px=max_disparity_px,

@@ -247,8 +247,7 @@ def decimate_horizontally(image: np.ndarray, width: int) -> np.ndarray:
     """Reduce the width only, anti-aliased (area average, ``cv2.INTER_AREA``)."""
     if width == image.shape[1]:
         return image
-    return cv2.resize(image, (width, image.shape[0]), interpolation=cv2.INTER_AREA,
-                      dst=_kernels.recycled_empty((image.shape[0], width) + image.shape[2:], image.dtype))
+    return cv2.resize(image, (width, image.shape[0]), interpolation=cv2.INTER_AREA)
 
 
 def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, float]], *,
@@ -420,8 +419,8 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
         lo, hi = level.band_px
         refining = refine is not None and refine_min_scale is not None and level.scale >= refine_min_scale
         slack = level.scale if refining else 0.0
-        d_full = _kernels.recycled_empty((height, width), np.float32)     # (no page faults)
-        c_full = _kernels.recycled_empty((height, width), np.float32)
+        d_full = np.empty((height, width), np.float32)
+        c_full = np.empty((height, width), np.float32)
         source_cols = np.minimum(((np.arange(width) + 0.5) / level.scale).astype(np.intp), w_level - 1)
         _kernels.upsample_gate(out.disparity_px, out.confidence, source_cols, np.float32(level.scale),
                                np.float32(lo - slack), np.float32(hi + slack), top, row0, row1, col0, col1,
@@ -439,9 +438,9 @@ def _union(maps: list[np.ndarray], confs: list[np.ndarray], rule: str
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Eq. (12): unite gated level maps (finest first) under a precedence rule; also
     returns the index of the level each pixel's value came from (-1 none)."""
-    disparity, confidence = (_kernels.recycled_empty(maps[0].shape, np.float32) for _ in range(2))
-    source = _kernels.recycled_empty(maps[0].shape, np.int8)
-    poisoned = _kernels.recycled_empty(maps[0].shape, bool)      # (the first level initializes all four)
+    disparity, confidence = (np.empty(maps[0].shape, np.float32) for _ in range(2))
+    source = np.empty(maps[0].shape, np.int8)
+    poisoned = np.empty(maps[0].shape, bool)      # (the first level initializes all four)
     code = {"confidence": 0, "finer": 1, "reject": 2}[rule]
     for i, (d, c) in enumerate(zip(maps, confs)):
         _kernels.unite(d, c, code, i, disparity, confidence, source, poisoned)

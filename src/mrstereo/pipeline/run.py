@@ -1,19 +1,15 @@
 """The whole chain for a sequence: rectify -> match -> reject -> 3D -> occupancy grid.
 
-Per frame (independent, so it can run anywhere):
-:func:`observe_frame` reads a stereo pair of a dataset manifest, rectifies it
-with the calibration, matches it with the multi-range approach (paper eq.
-9-12), rejects uniform patches (eq. 13), triangulates (eq. 14-16), splits
-obstacle from floor points in the robot frame and moves them into the world
-frame with the frame's pose, and finds the grid cells they hit and the rays
-clear (:func:`mrstereo.mapping.occupancy.view_cells`). Then an ordered
-reduction, :func:`fuse`, adds these cells to a log-odds (or union) occupancy
-grid (paper section 5.2), a few microseconds per frame.
-:func:`build_map` runs both over a manifest; :func:`write_map_outputs` writes
-the ROS map, figures and metrics. Without a camera mount, :func:`floor_for_run`
-estimates the floor once from the first frames that show enough of it and the
-run uses that mount (reported, with its confidence, in ``MapRun.floor`` and
-metrics.json). Conventions: docs/conventions.md.
+Per frame (independent, so it can run anywhere): :func:`observe_frame` reads a stereo pair of a
+dataset manifest, rectifies it with the calibration, matches it with the multi-range approach
+(paper eq. 9-12), rejects uniform patches (eq. 13), triangulates (eq. 14-16), splits obstacle
+from floor points in the robot frame and moves them into the world frame with the frame's pose.
+Then an ordered reduction, :func:`map_from_observations`, fuses them into a log-odds (or union)
+occupancy grid (paper section 5.2) and compares it with the ground-truth map.
+:func:`build_map` runs both over a manifest; :func:`write_map_outputs` writes the ROS map,
+figures and metrics. Without a camera mount, :func:`floor_for_run` estimates the floor once from
+the first frames that show enough of it and the run uses that mount (reported, with its
+confidence, in ``MapRun.floor`` and metrics.json). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -28,7 +24,7 @@ import numpy as np
 from ..camera import CameraMount, StereoCamera, mount_entry
 from ..geometry.freespace import FreeSpaceConfig
 from ..geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount
-from ..geometry.obstacles import ObstacleConfig
+from ..geometry.obstacles import MAPPING_MAX_RANGE_M, ObstacleConfig
 from ..io import atomic_write
 from ..mapping import GridSpec, read_ros_map, write_ros_map
 from ..mapping.figures import plot_map
@@ -43,12 +39,13 @@ from ..rejection import RejectionConfig
 from ..transforms import T_from_planar, transform_points
 from .frame import PairObstacles, obstacles_from_pair
 
-__all__ = ["PipelineConfig", "MapRun", "observe_frame", "build_map", "floor_for_run", "write_map_outputs"]
+__all__ = ["PipelineConfig", "MapRun", "observe_frame", "build_map", "map_from_observations", "floor_for_run",
+           "write_map_outputs", "views_of_frames"]
 
 
 @dataclass(frozen=True)
 class PipelineConfig:
-    """Options of every stage, defaults in one place.
+    """Options of every stage of a map, each stage's config with its own defaults.
 
     Attributes
     ----------
@@ -62,37 +59,24 @@ class PipelineConfig:
     rejection : RejectionConfig
         Eq. (13) texture / ground suppression.
     obstacles : ObstacleConfig
-        Height band, range limit and floor estimation. Mapping keeps points within 4 m (the
-        paper: floor and objects are told apart up to about 4 m; beyond, one pixel of disparity
-        error is more than half a metre at 320x240).
+        Height band, range limit and floor estimation; a map keeps points within
+        :data:`~mrstereo.geometry.obstacles.MAPPING_MAX_RANGE_M`.
     mapping : MappingConfig
-        Sensor model and fusion (log-odds or the paper's union). Defaults chosen by measurement
-        on randomized worlds 0-9 only (``benchmarks/bench_map.py --randomized --seeds 0-9
-        --variants``; docs/mapping.md): a cell needs 5 obstacle points of one frame to count as a
-        hit, a miss is 0.35 (OctoMap: 0.4); rays stop two range sigmas short of their point
-        (``sigma_r = r^2 0.25 px / (b f)``); a point seen through a surface hit in the same view
-        (more than 0.25 m before it, at the sight line's height) is dropped; a cell through which
-        the same view sees more floor points than it holds obstacle points is cleared; cells the
-        map already holds occupied with P >= 0.8 stop later rays like cells of the view itself; a
-        ray that passes under an overhang (a table top) clears nothing beyond it; rays clear only
-        where their sight line runs at most 0.8 m above the floor.
+        Sensor model and fusion (log-odds or the paper's union).
     grid : GridSpec
         Map extent and resolution.
     free_space : FreeSpaceConfig or None
         The free-space boundary (:mod:`mrstereo.geometry.freespace`): where the floor ends in
         each image column, an obstacle base that the matcher cannot measure (a wall without
-        texture); its points join the frame's obstacle points. On by default, chosen on
-        randomized worlds 0-9 (docs/mapping.md, "Free-space boundary"). None: off.
+        texture); its points join the frame's obstacle points. None: off.
     """
 
     preset: str = "mapping"
     max_disparity_px: float | None = None
     matching: MatchingConfig | None = None
     rejection: RejectionConfig = field(default_factory=RejectionConfig)
-    obstacles: ObstacleConfig = field(default_factory=lambda: ObstacleConfig(max_range_m=4.0))
-    mapping: MappingConfig = field(default_factory=lambda: MappingConfig(
-        p_miss=0.35, min_points_per_cell=5, disparity_sigma_px=0.25, clear_margin_sigmas=2.0, occlusion_gap_m=0.25,
-        see_through_ratio=1.0, overhang_shadow=True, map_occlusion_p=0.8, clear_below_m=0.8))
+    obstacles: ObstacleConfig = field(default_factory=lambda: ObstacleConfig(max_range_m=MAPPING_MAX_RANGE_M))
+    mapping: MappingConfig = field(default_factory=MappingConfig)
     grid: GridSpec = field(default_factory=GridSpec)
     free_space: FreeSpaceConfig | None = field(default_factory=FreeSpaceConfig)
 
@@ -153,7 +137,6 @@ class MapRun:
         frames = self.manifest.frames
         if self.observations and all(f.true_pose is not None for f in frames):
             from ..odometry.trajectory import trajectory_metrics
-            from ..transforms import T_from_planar
 
             by_index = {o.index: o.pose for o in self.observations}
             used = sorted(by_index)
@@ -176,8 +159,19 @@ def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: i
                           stereo: StereoCamera | None = None) -> FrameObservation:
     """Move a frame's obstacle and floor points into the world frame; find their grid cells.
 
-    ``stereo`` (the calibration the frame was matched with) gives the mapping's range
-    uncertainty its ``b f``; without it rays clear up to each point.
+    Parameters
+    ----------
+    frame : PairObstacles
+        The frame's points (:func:`mrstereo.pipeline.frame.obstacles_from_pair`).
+    record : FrameRecord
+        Its manifest entry: the pose and head pan.
+    index : int
+        Its position in the sequence.
+    config : PipelineConfig
+        The grid and sensor model of the cells.
+    stereo : StereoCamera, optional
+        The calibration the frame was matched with: gives the mapping's range uncertainty its
+        ``b f``; without it rays clear up to each point.
     """
     with stage("grid"):
         T = T_from_planar(*record.pose)
@@ -203,8 +197,23 @@ def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, 
                   pair: tuple[np.ndarray, np.ndarray, bool] | None = None) -> FrameObservation:
     """Run rectify -> match -> reject -> 3D on one manifest frame; points in the world frame.
 
-    ``pair``: the frame's images as :func:`frame_pair` reads them (read ahead by a reader
-    thread); default read here.
+    Parameters
+    ----------
+    record : FrameRecord
+        The manifest frame.
+    stereo : StereoCamera
+        The calibration.
+    index : int
+        The frame's position in the sequence.
+    mount : CameraMount, optional
+        The camera mount (default: the calibration's; with neither the floor is estimated).
+    config : PipelineConfig
+        Options of every stage.
+    prefer_raw : bool
+        Rectify the raw images even where the dataset has rectified ones.
+    pair : (ndarray, ndarray, bool), optional
+        The frame's images as :func:`frame_pair` reads them (read ahead by a reader thread);
+        default read here.
     """
     left, right, rectified = frame_pair(record, prefer_raw=prefer_raw) if pair is None else pair
     frame = obstacles_from_pair(left, right, stereo, rectified=rectified, mount=mount, pan_rad=record.pan_rad,
@@ -295,9 +304,15 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     ----------
     manifest : Manifest or path
         The dataset (docs/dataset.md).
+    config : PipelineConfig
+        Options of every stage.
     calibration : StereoCamera, optional
         Overrides the manifest's calibration (e.g. one estimated by ``mrstereo
         stereo-calibrate``); then the raw images are used.
+    prefer_raw : bool
+        Rectify the raw images even where the dataset has rectified ones.
+    progress : bool
+        A tqdm bar over the frames.
     workers : int, optional
         Observe the frames on this many single-threaded workers: threads of this
         process, or the processes of a local Dask cluster with ``processes=True``.
@@ -306,6 +321,8 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         the dataset's files). With neither, everything runs in this process.
         The fused map is the same, bit for bit, in every case
         (:func:`mrstereo.pipeline.parallel.map_ordered` keeps the frame order).
+    processes : bool
+        With ``workers``: worker processes instead of threads.
     odometry : {"given", "visual"}
         ``"visual"``: the poses come from stereo visual odometry
         (:func:`mrstereo.pipeline.odometry_from_manifest`, run in order before the
@@ -354,49 +371,59 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
                                processes=processes, progress=progress, desc="mapping", unit="frame",
                                prefetch=partial(_read_indexed, prefer_raw=prefer_raw),
                                label=lambda item: f"frame {item[0]} ({(item[1].left_rect or item[1].left).name})")
+    return map_from_observations(manifest, observations, config=config, stereo=stereo, floor=floor, mount=mount,
+                                 odometry=vo, fusion=fused)
+
+
+def map_from_observations(manifest: Manifest, observations: list[FrameObservation], *,
+                          config: PipelineConfig = PipelineConfig(), stereo: StereoCamera | None = None,
+                          floor: GroundPlane | None = None, mount=None, odometry=None, fusion=None) -> MapRun:
+    """Fuse a run's frame observations in order and compare the map with the dataset's ground-truth map.
+
+    The metrics are taken along the dataset's true path (``true_pose`` where the frames have one)
+    with the true fields of view, whatever poses the frames were fused at.
+
+    Parameters
+    ----------
+    manifest : Manifest
+        The dataset the observations come from.
+    observations : list of FrameObservation
+        The frames in order (:func:`observe_frame`).
+    config : PipelineConfig
+        Its ``grid`` and ``mapping`` fuse; its obstacle range is the range of the views.
+    stereo : StereoCamera, optional
+        The calibration the frames were matched with (default: the manifest's).
+    floor, mount, odometry, fusion
+        Carried into the :class:`MapRun` (see there).
+    """
+    stereo = manifest.calibration if stereo is None else stereo
     occupancy = fuse(observations, grid=config.grid, config=config.mapping)
     metrics, gt = None, None
     if manifest.ground_truth_map is not None:
         gt = read_ros_map(manifest.ground_truth_map)
         if gt.grid.shape == occupancy.grid.shape:
-            # the evaluated band follows the true path when the dataset knows it
             true_frames = [replace(f, pose=f.true_pose, pose_3d=f.true_pose_3d) if f.true_pose is not None else f
                            for f in manifest.frames]
-            path = np.array([f.pose for f in true_frames])
             views = views_of_frames(true_frames, stereo, range_m=config.obstacles.max_range_m)
-            metrics = map_metrics(occupancy, gt, path_xy=path, views=views)
+            metrics = map_metrics(occupancy, gt, path_xy=np.array([f.pose for f in true_frames]), views=views)
     return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
-                  ground_truth_map=gt, floor=floor, mount=mount, odometry=vo, fusion=fused)
+                  ground_truth_map=gt, floor=floor, mount=mount, odometry=odometry, fusion=fusion)
 
 
-def views_of_frames(frames, stereo: StereoCamera, *, range_m: float = 4.0) -> list[tuple]:
+def views_of_frames(frames, stereo: StereoCamera, *, range_m: float = MAPPING_MAX_RANGE_M) -> list[tuple]:
     """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of frames (anything with ``pose``, ``pan_rad``)."""
     half = math.atan2(stereo.size[0] / 2.0, stereo.focal_px)
     return [(f.pose[0], f.pose[1], f.pose[2] + f.pan_rad, half, range_m) for f in frames]
 
 
-def fov_views(run: MapRun, stereo: StereoCamera, *, range_m: float = 4.0) -> list[tuple]:
-    """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of every frame, for the map figure."""
-    return views_of_frames(run.observations, stereo, range_m=range_m)
-
-
-def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None, figures=None) -> dict[str, Path]:
+def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
     """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy and metrics.json.
 
     metrics.json holds the comparison with the ground-truth map (when there is
-    one) and ``floor``: the floor of the run with its confidence. ``figures``: a
-    :class:`mrstereo.pipeline.parallel.PrestartedCall` of :func:`mrstereo.mapping.figures.plot_map`
-    that draws map.png in another process while the other files are written.
+    one) and ``floor``: the floor of the run with its confidence.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    path = np.array([o.pose for o in run.observations]) if run.observations else None
-    figure = ((run.grid, out / "map.png"),
-              {"robot_path": path, "fov_views": fov_views(run, run.manifest.calibration),
-               "planned_path": planned_path, "ground_truth": run.ground_truth_map,
-               "title": f"occupancy grid ({run.grid.config.fusion})"})
-    if figures is not None:
-        figures.submit(*figure[0], **figure[1])
     write_ros_map(out / "map.yaml", run.grid.to_ros_map())
     run.grid.save_log_odds(out / "log_odds.npy")
     files = {"map_yaml": out / "map.yaml", "map_pgm": out / "map.pgm", "map_png": out / "map.png",
@@ -411,8 +438,9 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
         with atomic_write(out / "metrics.json") as tmp:
             tmp.write_text(json.dumps(report, indent=2))
         files["metrics"] = out / "metrics.json"
-    if figures is None:
-        plot_map(*figure[0], **figure[1])
-    else:
-        figures.result()
+    path = np.array([o.pose for o in run.observations]) if run.observations else None
+    plot_map(run.grid, out / "map.png", robot_path=path, fov_views=views_of_frames(run.observations,
+                                                                                   run.manifest.calibration),
+             planned_path=planned_path, ground_truth=run.ground_truth_map,
+             title=f"occupancy grid ({run.grid.config.fusion})")
     return files
