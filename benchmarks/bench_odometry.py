@@ -60,7 +60,7 @@ from mrstereo.odometry.trajectory import trajectory_metrics
 from mrstereo.pipeline.run import PipelineConfig, build_map
 from mrstereo.recordings.layouts import read_recording
 from mrstereo.recordings.manifest import frame_pair, read_manifest
-from mrstereo.transforms import T_from_planar, T_from_rvec_t
+from mrstereo.transforms import T_from_planar, T_from_rvec_t, transform_points
 from mrstereo.world.dataset import write_synthetic_dataset
 
 NOISE = (0.03, math.radians(2.0))
@@ -93,7 +93,8 @@ def baseline_odometry(pairs, stereo, T_world_from_cam0) -> tuple[np.ndarray, np.
             pkp, pdes, pdisp = prev
             ok = False
             if des is not None and pdes is not None and len(kp) >= 8:
-                good = [m[0] for m in matcher.knnMatch(pdes, des, k=2) if len(m) == 2 and m[0].distance < 0.8 * m[1].distance]
+                good = [m[0] for m in matcher.knnMatch(pdes, des, k=2)
+                        if len(m) == 2 and m[0].distance < 0.8 * m[1].distance]
                 if len(good) >= 8:
                     uv0 = np.float32([pkp[m.queryIdx].pt for m in good])
                     uv1 = np.float32([kp[m.trainIdx].pt for m in good])
@@ -101,7 +102,8 @@ def baseline_odometry(pairs, stereo, T_world_from_cam0) -> tuple[np.ndarray, np.
                               np.clip(np.rint(uv0[:, 0]).astype(int), 0, left.shape[1] - 1)]
                     use = d > 0.5
                     z = fb / np.maximum(d[use], 1e-6)
-                    X = np.column_stack([(uv0[use, 0] - K[0, 2]) * z / K[0, 0], (uv0[use, 1] - K[1, 2]) * z / K[1, 1], z])
+                    X = np.column_stack([(uv0[use, 0] - K[0, 2]) * z / K[0, 0],
+                                         (uv0[use, 1] - K[1, 2]) * z / K[1, 1], z])
                     if len(X) >= 6:
                         found, rvec, tvec, inl = cv2.solvePnPRansac(X, uv1[use], K, None, iterationsCount=200,
                                                                      reprojectionError=1.5, confidence=0.999)
@@ -227,10 +229,9 @@ def repose(observations, poses):
     out = []
     for obs, pose in zip(observations, poses):
         T = T_from_planar(*pose) @ np.linalg.inv(T_from_planar(*obs.pose))
-        def move(p):
-            return (p.astype(np.float64) @ T[:3, :3].T + T[:3, 3]).astype(np.float32)
-        out.append(replace(obs, pose=tuple(float(v) for v in pose), obstacle_points_world=move(obs.obstacle_points_world),
-                           floor_points_world=move(obs.floor_points_world), cells=None))
+        out.append(replace(obs, pose=tuple(float(v) for v in pose), cells=None,
+                           obstacle_points_world=transform_points(T, obs.obstacle_points_world).astype(np.float32),
+                           floor_points_world=transform_points(T, obs.floor_points_world).astype(np.float32)))
     return out
 
 

@@ -24,7 +24,8 @@ def street():
 
 
 def _run(world, pairs, pose0, stamps, **config):
-    return visual_odometry(pairs, world.stereo, T_base_from_cam=world.stereo.mount.T_base_from_rectified(world.stereo.left.R),
+    mount = world.stereo.mount.T_base_from_rectified(world.stereo.left.R)
+    return visual_odometry(pairs, world.stereo, T_base_from_cam=mount,
                            T_world_from_base0=T_from_planar(*pose0), stamps_s=stamps,
                            config=OdometryConfig(**config))
 
