@@ -5,8 +5,11 @@ The odometry of a recording on disk is :func:`mrstereo.pipeline.odometry_from_ma
 
 Conventions: docs/conventions.md; user guide: docs/odometry.md.
 """
+from .fusion import FusedOdometry, FusionConfig, fuse_odometry
 from .sequence import OdometryResult, visual_odometry
 from .tracker import KEYFRAME, LOST, TRACKED, FrameEstimate, OdometryConfig, StereoOdometry
+from .window import WindowResult, refine_window
 
 __all__ = ["OdometryConfig", "StereoOdometry", "FrameEstimate", "OdometryResult", "visual_odometry",
-           "TRACKED", "KEYFRAME", "LOST"]
+           "TRACKED", "KEYFRAME", "LOST", "refine_window", "WindowResult", "FusionConfig", "FusedOdometry",
+           "fuse_odometry"]
