@@ -5,10 +5,11 @@ frames, rendered by this script into a temporary folder) at 640x480 and 320x240,
 process, alternating frame by frame, with one thread and two (``numba.set_num_threads``,
 ``cv2.setNumThreads``; NUMBA_NUM_THREADS must allow 2):
 
-* mrstereo: :func:`mrstereo.geometry.obstacles_from_pair` on the raw pair (rectify with the
+* mrstereo: :func:`mrstereo.pipeline.frame.obstacles_from_pair` on the raw pair (rectify with the
   calibration, multi-range matching of the ``mapping`` preset, eq. 13 rejection, floor from
   the mount, eq. 14-16, obstacle/floor split) then the grid cells it hits and clears and the
-  log-odds update (:func:`mrstereo.pipeline.observation_from_pair`, :func:`mrstereo.mapping.fusion.add_observation`).
+  log-odds update (:func:`mrstereo.pipeline.run.observation_from_pair`,
+  :func:`mrstereo.mapping.fusion.add_observation`).
 * OpenCV: ``cv2.remap`` x2 with maps built once, ``StereoBM`` (9x9, ``numDisparities`` the
   multiple of 16 covering mrstereo's near limit), ``cv2.reprojectImageTo3D``, the same height
   band and range limit in the robot frame, ``np.add.at`` of the obstacle points into a grid of

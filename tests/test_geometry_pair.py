@@ -110,6 +110,27 @@ def test_cli_points_and_scan(tmp_path, frame, capsys):
     assert (tmp_path / "s.csv").read_text().startswith("angle_rad,range_m,intensity\n")
 
 
+def test_cli_points_color_takes_the_colour_left_image_and_refuses_a_gray_one(tmp_path, frame, capsys):
+    import cv2
+
+    stereo, fr = frame
+    left, right, calib = _files(tmp_path, stereo, fr)
+    colour = []
+    for path in (left, right):                  # blue = green = the gray level, red its negative
+        gray = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+        colour.append(path.replace(".png", "_bgr.png"))
+        cv2.imwrite(colour[-1], cv2.merge([gray, gray, 255 - gray]))
+    assert entry(["points", *colour, "--calib", calib, "-o", str(tmp_path / "c.ply"), "--color"]) == 0
+    rgb = read_ply(tmp_path / "c.ply").colors_rgb.astype(int)
+    assert len(rgb) > 200 and (rgb[:, 1] == rgb[:, 2]).all()
+    assert (np.abs(rgb[:, 0] + rgb[:, 1] - 255) <= 1).all() and rgb[:, 1].std() > 10     # rectified per channel
+    capsys.readouterr()
+    assert entry(["points", left, right, "--calib", calib, "-o", str(tmp_path / "g.ply"), "--color"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"mrstereo: error: --color needs a colour left image, {left} is gray\n"
+    assert not (tmp_path / "g.ply").exists()
+
+
 def test_cli_bad_input_is_one_line(tmp_path, frame, capsys):
     stereo, fr = frame
     left, right, calib = _files(tmp_path, stereo, fr)

@@ -229,7 +229,7 @@ def test_disparity_command_explains_and_colours_too_near(tmp_path, capsys):
     cv2.imwrite(str(tmp_path / "r.png"), right)
     out, color = tmp_path / "d.pfm", tmp_path / "c.png"
     assert entry(["disparity", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--max-disparity", "24",
-                  "--explain", "-o", str(out), "--color", str(color)]) == 0
+                  "--explain", "-o", str(out), "--plot", str(color)]) == 0
     captured = capsys.readouterr()
     share = float(captured.out.split("no value) ")[1].split("%")[0])
     assert 70 < share <= 100

@@ -162,10 +162,8 @@ def test_points_warns_on_a_scene_without_floor(tmp_path, capsys, sample_data):
 
 
 @pytest.fixture(scope="module")
-def corridor(tmp_path_factory):
-    from mrstereo.world.dataset import write_synthetic_dataset
-    out = tmp_path_factory.mktemp("mount") / "c"
-    return read_manifest(write_synthetic_dataset(out, seed=3, n_frames=4, supersample=1, progress=False))
+def corridor(synthetic_dataset):
+    return read_manifest(synthetic_dataset(seed=3, n_frames=4, supersample=1))
 
 
 def test_points_with_mount_equals_height_and_tilt(corridor, tmp_path, capsys):

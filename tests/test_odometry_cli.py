@@ -12,14 +12,14 @@ from mrstereo.geometry.ground import ground_from_mount
 from mrstereo.odometry.trajectory import read_tum, trajectory_metrics, umeyama_alignment, write_tum
 from mrstereo.recordings.manifest import read_manifest
 from mrstereo.transforms import T_from_planar
-from mrstereo.world.dataset import write_synthetic_dataset
+
+from _bags import DT_NS, T0_NS, TOPICS, write_bag
 
 
 @pytest.fixture(scope="module")
-def sequence(tmp_path_factory):
-    out = tmp_path_factory.mktemp("odo") / "seq"
-    return write_synthetic_dataset(out, n_frames=6, supersample=1, path="s-curve", step_m=0.1,
-                                   odometry_noise=(0.03, math.radians(2)), progress=False)
+def sequence(synthetic_dataset):
+    return synthetic_dataset(n_frames=6, supersample=1, path="s-curve", step_m=0.1,
+                             odometry_noise=(0.03, math.radians(2)))
 
 
 def test_tum_round_trip_and_bad_files(tmp_path):
@@ -179,8 +179,6 @@ def test_map_with_visual_odometry_and_alignment(sequence, tmp_path, capsys):
 
 def test_a_bag_without_odometry(sequence, tmp_path, capsys):
     """Camera topics only: the odometry command and map --odometry visual work from the images."""
-    from test_bag_io import DT_NS, T0_NS, TOPICS, write_bag
-
     manifest = read_manifest(sequence)
     rig = ground_from_mount(manifest.mount, R_rect_from_cam=manifest.calibration.left.R)
     bag = write_bag(tmp_path / "cams.bag", manifest, ros1=True, odom=False)

@@ -17,10 +17,8 @@ from mrstereo.world.dataset import corridor_path, write_synthetic_dataset
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory):
-    out = tmp_path_factory.mktemp("ds") / "corridor"
-    write_synthetic_dataset(out, seed=2, n_frames=4, width=96, height=72, progress=False)
-    return out
+def dataset(synthetic_dataset):
+    return synthetic_dataset(seed=2, n_frames=4, width=96, height=72)
 
 
 def test_round_trip(dataset):

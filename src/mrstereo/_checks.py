@@ -2,6 +2,8 @@
 
 Bad input raises ``ValueError`` or ``TypeError`` naming the argument, what was
 expected and what arrived. The CLI turns these into one readable line.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

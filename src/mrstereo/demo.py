@@ -11,6 +11,8 @@
 6. planning: A* through the map.
 
 Everything lands in one report directory (report.md, metrics.json, PNG figures).
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -324,7 +326,7 @@ def _report_markdown(m: dict, files: dict) -> str:
     lines += ["", "![disparity](disparity.png)", "", "![top view](top_view.png)", "",
               "## Occupancy grid along the path", "",
               "| fusion | occupied precision | occupied recall | wall profile error [cm] | free correct | "
-              "true free mapped free |",
+              "free recall |",
               "|---|---|---|---|---|---|"]
     single = m.get("map_single_range") or {}
     for key, name in (("map", "multi-range, log-odds"), ("map_union", "multi-range, paper's union"),
@@ -334,7 +336,7 @@ def _report_markdown(m: dict, files: dict) -> str:
         if g:
             lines.append(f"| {name} | {g['precision']:.3f} | {g['recall']:.3f} | "
                          f"{100 * g['mean_distance_m']:.1f} | {g['free_precision']:.3f} | "
-                         f"{g['free_accuracy']:.3f} |")
+                         f"{g['free_recall']:.3f} |")
     near = m["near_recall_within_1m"]
     lines += ["", f"Occupied recall within 1 m of the path (near obstacles): multi-range "
                   f"{near['multi-range']:.3f}, single range of equal work {near['single range']:.3f}."]

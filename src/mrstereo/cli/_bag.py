@@ -2,6 +2,8 @@
 ``mrstereo batch`` (many datasets: per-frame disparity, cloud and scan, and a map each, on Dask).
 
 :func:`bag_options` is shared with ``mrstereo map --bag`` (cli/_pipeline.py). docs/scale-out.md.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -144,7 +146,9 @@ def echo_export(result) -> None:
               help="New dataset directory (manifest.yaml, stereo.yaml, left/, right/).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
-    """Write the stereo pairs of a ROS bag as a dataset directory (docs/dataset.md).
+    """Write the stereo pairs of a ROS bag as a dataset.
+
+    The dataset folder given by -o is laid out as docs/dataset.md describes.
 
     Left and right images are paired by header stamp, the calibration comes
     from camera_info (or --calib), the robot pose from --odom-topic or --tf.
@@ -175,8 +179,11 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool, preset: str, fusion: str,
                   no_maps: bool, mount, quiet: bool) -> None:
-    """Process many datasets: per frame a disparity (PFM), a point cloud (PLY) and a laser scan (JSON);
-    per dataset a map. Resumable: finished outputs are kept on a re-run, failed frames are retried.
+    """Process many datasets: per-frame outputs and a map each.
+
+    Per frame a disparity (PFM), a point cloud (PLY) and a laser scan (JSON);
+    per dataset a map, as `mrstereo map` makes it. Resumable: finished outputs
+    are kept on a re-run, failed frames are retried.
 
     Failures of single frames are listed in OUT/summary.json and the rest goes on;
     the command then ends with an error line naming how many failed. A dataset

@@ -1,4 +1,7 @@
-"""CLI of the main job: ``mrstereo demo``."""
+"""CLI of the main job: ``mrstereo demo``.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -12,7 +15,7 @@ __all__ = ["COMMANDS"]
 
 
 @click.command("demo")
-@click.option("--out", "out_dir", default=library_default(run_demo, "out_dir"), show_default=True,
+@click.option("-o", "--out", "out_dir", default=library_default(run_demo, "out_dir"), show_default=True,
               type=click.Path(path_type=Path),
               help="Report directory (must not exist or be empty).")
 @click.option("--seed", default=library_default(run_demo, "seed"), show_default=True, type=click.IntRange(min=0),
@@ -24,11 +27,12 @@ __all__ = ["COMMANDS"]
               help="A randomized world drawn from --seed instead of the built-in corridor (docs/world.md).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def demo_command(out_dir: Path, seed: int, n_frames: int, randomize: bool, quiet: bool) -> None:
-    """Run the whole pipeline on the built-in synthetic corridor and write a report.
+    """Run the whole pipeline on the built-in corridor.
 
     Renders the corridor, calibrates the rig from rendered chessboards (GA + LM),
     rectifies, matches multi-range, suppresses the ground, maps along the path,
-    plans a path through the map, and compares every stage with ground truth.
+    plans a path through the map, and compares every stage with ground truth
+    in report.md and metrics.json, with its figures.
     """
     import os
 

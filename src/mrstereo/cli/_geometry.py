@@ -2,6 +2,8 @@
 
 Both run one stereo pair through rectification, multi-range matching,
 eq. (13) rejection and the 3D stage (:mod:`mrstereo.pipeline.frame`).
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -24,7 +26,7 @@ def _common(func):
         click.argument("right", type=click.Path(dir_okay=False)),
         click.option("--calib", "calib", required=True, type=click.Path(dir_okay=False),
                      help=CALIB_HELP + " A stereo YAML may hold the mount (mount: or rig:)."),
-        click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output file."),
+        click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False), help="Output file."),
         click.option("--rectified", is_flag=True, help="The images are already rectified."),
         click.option("--height", "height_m", type=float, default=None,
                      help="Camera height above the floor [m] (overrides the YAML mount)."),
@@ -104,21 +106,24 @@ def _report_ground(obstacles) -> None:
 
 
 @click.command("points")
-@profile_option
+@profile_option("read, rectify, match, reject, 3-D")
 @_common
 @click.option("--which", type=click.Choice(["all", "obstacles", "floor"]), default="all", show_default=True,
               help="Which points to write.")
-@click.option("--color", is_flag=True, help="Write red/green/blue from a colour left image (else intensity).")
+@click.option("--color", is_flag=True, help="Write red/green/blue from the colour left image (else its gray level).")
 def points_command(left, right, calib, output, which, color, **kw):
-    """Write the robot-frame point cloud of a stereo pair as binary PLY.
+    """Write a stereo pair's robot-frame point cloud as PLY.
 
     LEFT and RIGHT are a raw pair (rectified with --calib first) or a rectified
-    pair (--rectified). The mount comes from --mount or --height/--tilt, else the YAML's
-    mount: or rig:, else the floor is estimated from the disparity.
+    pair (--rectified). The points are in the robot base frame (REP 103,
+    metres), in a binary PLY with the pixel's gray level (or colour, --color).
+    The camera mount comes from --mount or --height/--tilt, else the
+    calibration's mount:/rig: entry, else the floor is estimated from the
+    disparity (docs/conventions.md).
     """
     from ..geometry import write_ply
 
-    check_outputs({"--output": output}, [left, right, calib], suffixes={"--output": (".ply",)})
+    check_outputs({"--out": output}, [left, right, calib], suffixes={"--out": (".ply",)})
     _, frame = _run(left, right, calib, output, scan=False, **kw)
     obs = frame.obstacles
     if not obs.success:
@@ -129,7 +134,7 @@ def points_command(left, right, calib, output, which, color, **kw):
     img = frame.left_rect
     if color:
         if img.ndim != 3:
-            raise ValueError("--color needs a colour left image")
+            raise ValueError(f"--color needs a colour left image, {left} is gray")
         n = write_ply(output, pts, colors_rgb=img[mask][:, ::-1], comment="mrstereo robot frame, metres")
     else:
         gray = img if img.ndim == 2 else np.asarray(img, np.float32) @ np.float32([0.114, 0.587, 0.299])
@@ -140,7 +145,7 @@ def points_command(left, right, calib, output, which, color, **kw):
 
 
 @click.command("scan")
-@profile_option
+@profile_option("read, rectify, match, reject, 3-D, scan")
 @_common
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Also write a top-view PNG (obstacle points, floor points, scan).")
@@ -148,20 +153,25 @@ def points_command(left, right, calib, output, which, color, **kw):
               default=math.degrees(library_default(scan_from_pair, "angle_increment_rad")), show_default=True,
               help="Angular step of the scan [deg].")
 @click.option("--range-min", "range_min_m", type=float, default=library_default(scan_from_pair, "range_min_m"),
-              show_default=True, help="[m]")
+              show_default=True, help="Smallest range [m] (raised to the matcher's near limit).")
 def scan_command(left, right, calib, output, plot_path, angle_increment_deg, range_min_m, **kw):
-    """Write a virtual laser scan (nearest obstacle per bearing) as JSON or CSV.
+    """Write a stereo pair's virtual laser scan (JSON or CSV).
 
-    JSON uses the ROS LaserScan field names (angle_min, angle_max,
-    angle_increment, range_min, range_max, ranges; no return = null); an
-    output ending in .csv is written as angle_rad,range_m rows.
+    Each bearing holds its nearest obstacle in the robot base frame. JSON uses
+    the fields of ROS sensor_msgs/LaserScan (angle_min, angle_max,
+    angle_increment, range_min, range_max, ranges, intensities, header); a
+    range that is not a number is the string "Infinity" (seen clear past
+    range_max), "NaN" (no measurement) or "-Infinity" (nearer than range_min),
+    the REP 117 values. An output ending in .csv is written as
+    angle_rad,range_m,intensity rows with inf, nan, -inf (docs/obstacles.md).
+    The camera mount is found as for `mrstereo points`.
     """
     from .. import _checks
     from ..geometry import plot_top_view, write_scan_csv, write_scan_json
 
     suffix = Path(output).suffix.lower()
-    check_outputs({"--output": output, "--plot": plot_path}, [left, right, calib],
-                  suffixes={"--output": (".json", ".csv"), "--plot": (".png",)})
+    check_outputs({"--out": output, "--plot": plot_path}, [left, right, calib],
+                  suffixes={"--out": (".json", ".csv"), "--plot": (".png",)})
     _finite("--angle-increment", angle_increment_deg)
     if angle_increment_deg <= 0:
         raise ValueError(f"--angle-increment must be > 0, got {angle_increment_deg}")

@@ -1,4 +1,7 @@
-"""CLI of the visual odometry: ``mrstereo odometry`` (a dataset or a bag to a TUM trajectory)."""
+"""CLI of the visual odometry: ``mrstereo odometry`` (a dataset or a bag to a TUM trajectory).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import json
@@ -14,7 +17,7 @@ __all__ = ["COMMANDS"]
 
 
 @click.command("odometry")
-@profile_option
+@profile_option("read, odometry")
 @click.argument("manifest", required=False, metavar="[DATASET]", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Trajectory file (TUM: 't tx ty tz qx qy qz qw' per frame, the robot base in the world).")
@@ -34,9 +37,10 @@ __all__ = ["COMMANDS"]
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | None, metrics_path: Path | None,
                      calib: Path | None, start: str, bag: Path | None, quiet: bool, **bag_kw) -> None:
-    """Stereo visual odometry of a DATASET directory (or its manifest.yaml, docs/dataset.md), a KITTI odometry
-    folder or a ROS bag (--bag).
+    """Stereo visual odometry of a dataset, a KITTI odometry folder or a ROS bag.
 
+    DATASET is a dataset folder or its manifest.yaml (docs/dataset.md) or a KITTI odometry
+    folder; --bag reads a ROS bag instead.
     Tracks corners of each rectified left image against a keyframe, takes their depth from
     the stereo pair, solves the camera motion with PnP-RANSAC and Levenberg-Marquardt, and
     refines the last keyframes' poses and landmarks by bundle adjustment (docs/odometry.md).

@@ -1,4 +1,7 @@
-"""Options shared by several commands."""
+"""Options shared by several commands.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import functools
@@ -118,23 +121,26 @@ def warn_floor(ground) -> None:
                    "(--mount or --height/--tilt)", err=True)
 
 
-def profile_option(func):
-    """``--profile``: time every stage (:mod:`mrstereo.profiling`) and print a per-frame table at the end.
+def profile_option(stages: str):
+    """``--profile``: time the command's ``stages`` (:mod:`mrstereo.profiling`) and print a per-frame table.
 
-    Put it right under ``@click.command``. Off, the command runs unchanged. Worker processes
-    (``--processes``, ``--scheduler``) are not seen: their stages are missing from the table.
+    ``stages`` names them for the help, e.g. ``"read, rectify, match"``. Put the decorator right
+    under ``@click.command``. Off, the command runs unchanged. Worker processes (``--processes``,
+    ``--scheduler``) are not seen: their stages are missing from the table.
     """
-    @functools.wraps(func)
-    def wrapper(*args, profile: bool = False, **kwargs):
-        if not profile:
-            return func(*args, **kwargs)
-        from ..profiling import profiling
+    def decorate(func):
+        @functools.wraps(func)
+        def wrapper(*args, profile: bool = False, **kwargs):
+            if not profile:
+                return func(*args, **kwargs)
+            from ..profiling import profiling
 
-        with profiling() as prof:
-            result = func(*args, **kwargs)
-        click.echo(prof.table(), err=True)
-        return result
+            with profiling() as prof:
+                result = func(*args, **kwargs)
+            click.echo(prof.table(), err=True)
+            return result
 
-    return click.option("--profile", is_flag=True,
-                        help="Print the time of every stage (read, rectify, match, reject, 3-D, grid) "
-                             "per frame at the end (stderr).")(wrapper)
+        return click.option("--profile", is_flag=True,
+                            help=f"Print the time per frame of every stage ({stages}) at the end "
+                                 "(stderr).")(wrapper)
+    return decorate

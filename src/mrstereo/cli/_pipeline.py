@@ -1,4 +1,7 @@
-"""CLI of the whole chain: ``mrstereo map`` (a dataset to a ROS occupancy map)."""
+"""CLI of the whole chain: ``mrstereo map`` (a dataset to a ROS occupancy map).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -17,7 +20,8 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
 
 
 @click.command("map")
-@profile_option
+@profile_option("read, rectify, match, reject, 3-D, free space, grid; with --odometry visual: odometry; "
+                "with --align: align")
 @click.argument("manifest", required=False, metavar="[DATASET]", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (map.pgm, map.yaml, map.png, log_odds.npy, metrics.json).")
@@ -50,15 +54,17 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
                 resolution_m: float, size_m: str, origin_m: str, odometry: str, align: bool, workers: int | None,
                 scheduler: str | None, processes: bool, bag: Path | None, quiet: bool, **bag_kw) -> None:
-    """Build an occupancy grid from the stereo frames of a DATASET directory (or its manifest.yaml, docs/dataset.md,
-    or a KITTI odometry folder) or of a ROS bag (--bag, docs/scale-out.md).
+    """Build an occupancy grid map from a dataset, a KITTI odometry folder or a ROS bag.
+
+    DATASET is a dataset folder or its manifest.yaml (docs/dataset.md) or a KITTI odometry
+    folder; --bag maps a ROS bag instead (docs/scale-out.md).
 
     Every frame is rectified, matched (multi-range), ground-suppressed (eq. 13),
     triangulated and fused along the robot path. Writes a ROS map_server map
     (map.pgm + map.yaml), map.png with the path and fields of view, the
     log-odds array and, when the manifest has a ground-truth map, metrics.json.
-    --workers N / --scheduler ADDRESS spread the frames over Dask workers; the
-    map is the same bit for bit.
+    --workers N (threads, or processes with --processes) and --scheduler
+    ADDRESS (a Dask cluster) spread the frames; the map is the same bit for bit.
     """
     from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
     from ..pipeline.batch import dataset_files
@@ -92,8 +98,10 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     if run.metrics is not None:
         m = run.metrics
         in_view = "" if m.recall_in_view != m.recall_in_view else f" ({m.recall_in_view:.3f} of the walls in view)"
+        coverage = "" if m.free_coverage != m.free_coverage else f", free coverage {m.free_coverage:.3f}"
         click.echo(f"vs ground truth: precision {m.precision:.3f}, recall {m.recall:.3f}{in_view}, "
-                   f"wall profile error {m.mean_distance_m * 100:.1f} cm, free correct {m.free_accuracy:.3f}")
+                   f"wall profile error {m.mean_distance_m * 100:.1f} cm, free correct {m.free_precision:.3f}"
+                   f"{coverage}")
     if run.odometry is not None:
         click.echo(f"visual odometry: {run.odometry.message}")
     if run.fusion is not None:

@@ -1,4 +1,7 @@
-"""CLI of the synthetic world: ``mrstereo synth``."""
+"""CLI of the synthetic world: ``mrstereo synth``.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import math
@@ -13,7 +16,7 @@ __all__ = ["COMMANDS"]
 
 
 @click.command("synth")
-@click.option("--out", "out_dir", required=True, type=click.Path(path_type=Path),
+@click.option("-o", "--out", "out_dir", required=True, type=click.Path(path_type=Path),
               help="New (or empty) dataset directory.")
 @click.option("--seed", default=library_default(write_synthetic_dataset, "seed"), show_default=True,
               type=click.IntRange(min=0),
@@ -53,7 +56,9 @@ __all__ = ["COMMANDS"]
 def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, randomize: bool,
           wall_texture: str | None, path_kind: str, step_m: float, turn_deg: float, rate_hz: float,
           odometry_noise: str | None, quiet: bool) -> None:
-    """Render the synthetic office corridor into a dataset directory (docs/dataset.md).
+    """Render the synthetic corridor (or, with --path street, a street) as a dataset.
+
+    The dataset folder given by -o is laid out as docs/dataset.md describes.
 
     Writes raw and rectified stereo pairs, ground-truth disparity (PFM) and
     labels, the true calibration, the ground-truth map and manifest.yaml.

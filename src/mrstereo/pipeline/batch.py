@@ -21,6 +21,8 @@ files exist (their points are read back from ``.obs.npz``) and datasets whose
 map was completed without failures. A frame that raises is listed in
 ``summary.json`` (and the map's ``batch.json``), the others go on, and the map
 is built from the frames that succeeded; the next run retries it.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -22,6 +22,8 @@ workers, numba and OpenCV run on one thread each (``numba.set_num_threads(1)``
 per task, ``cv2.setNumThreads(1)`` while worker threads run; worker processes
 also get ``NUMBA_NUM_THREADS=1``) so that N workers on N cores do not
 oversubscribe them. See docs/scale-out.md.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -3,6 +3,8 @@
 Each kernel does per element exactly the arithmetic of the numpy expression it replaces, in
 the same order and dtype (no fastmath), so the results are bit-identical; ``nogil`` lets the
 per-frame chain run on worker threads.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -72,7 +74,7 @@ def reject_texture_from_sums(sum1, sum2, scale, max_variance, disparity, out, re
 
     The variance ``E[I^2] - mu^2`` as :func:`mean_std_from_sums` computes it (float64); a patch
     is uniform where it is at most ``max_variance``: the largest float64 ``v`` with
-    ``float32(sqrt(v)) <= T`` (:func:`mrstereo.rejection._max_uniform_variance`), so the test is
+    ``float32(sqrt(v)) <= T`` (:func:`mrstereo.rejection.texture._max_uniform_variance`), so the test is
     ``float32(sigma) <= T`` bit for bit without the square root. ``out`` is ``disparity`` as
     float32 with NaN where uniform and finite (:func:`reject`).
     """
