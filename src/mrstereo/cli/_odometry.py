@@ -37,7 +37,7 @@ __all__ = ["COMMANDS"]
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | None, metrics_path: Path | None,
                      calib: Path | None, start: str, bag: Path | None, quiet: bool, **bag_kw) -> None:
-    """Stereo visual odometry of a dataset, a KITTI odometry folder or a ROS bag.
+    """Stereo visual odometry of a recording or a ROS bag.
 
     DATASET is a dataset folder or its manifest.yaml (docs/dataset.md) or a KITTI odometry
     folder; --bag reads a ROS bag instead.

@@ -54,7 +54,7 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
                 resolution_m: float, size_m: str, origin_m: str, odometry: str, align: bool, workers: int | None,
                 scheduler: str | None, processes: bool, bag: Path | None, quiet: bool, **bag_kw) -> None:
-    """Build an occupancy grid map from a dataset, a KITTI odometry folder or a ROS bag.
+    """Build an occupancy grid map from a recording or a ROS bag.
 
     DATASET is a dataset folder or its manifest.yaml (docs/dataset.md) or a KITTI odometry
     folder; --bag maps a ROS bag instead (docs/scale-out.md).

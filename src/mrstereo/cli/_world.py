@@ -56,9 +56,10 @@ __all__ = ["COMMANDS"]
 def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, randomize: bool,
           wall_texture: str | None, path_kind: str, step_m: float, turn_deg: float, rate_hz: float,
           odometry_noise: str | None, quiet: bool) -> None:
-    """Render the synthetic corridor (or, with --path street, a street) as a dataset.
+    """Render the synthetic corridor as a dataset.
 
-    The dataset folder given by -o is laid out as docs/dataset.md describes.
+    The dataset folder given by -o is laid out as docs/dataset.md describes; --path street
+    renders a long street instead, driven at car speed (docs/world.md).
 
     Writes raw and rectified stereo pairs, ground-truth disparity (PFM) and
     labels, the true calibration, the ground-truth map and manifest.yaml.
