@@ -99,6 +99,7 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
     import numpy as np
 
     from ..camera import read_stereo
+    from ..recordings.layouts import read_recording
     from ..recordings.manifest import Manifest, read_manifest
 
     with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
@@ -115,7 +116,7 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
                                                          "sync_tolerance_s")]
         if used:
             raise click.UsageError(f"{', '.join(used)} only with --bag")
-        dataset = manifest if isinstance(manifest, Manifest) else read_manifest(manifest)
+        dataset = manifest if isinstance(manifest, Manifest) else read_recording(manifest)
         stereo = read_stereo(calib) if calib is not None else None
         mount = mount_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"),
                                    dataset.calibration if stereo is None else stereo)

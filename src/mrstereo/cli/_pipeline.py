@@ -43,8 +43,9 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
               help="Robot poses: the dataset's (or the bag's odometry), or stereo visual odometry from the "
                    "first frame's pose (docs/odometry.md).")
 @click.option("--align", is_flag=True,
-              help="Correct each frame's pose by aligning its obstacle points to the map built so far "
-                   "(scan-to-map); the corrections go to metrics.json.")
+              help="Correct the given poses with stereo visual odometry: each step of the given odometry fused "
+                   "with the visual one by their expected errors (docs/odometry.md); the corrections go to "
+                   "metrics.json.")
 @worker_options
 @click.option("--bag", "bag", type=click.Path(path_type=Path),
               help="Map a ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
@@ -53,10 +54,10 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
                 resolution_m: float, size_m: str, origin_m: str, odometry: str, align: bool, workers: int | None,
                 scheduler: str | None, processes: bool, bag: Path | None, quiet: bool, **bag_kw) -> None:
-    """Build an occupancy grid map from a dataset or a ROS bag.
+    """Build an occupancy grid map from a recording or a ROS bag.
 
-    DATASET is a dataset folder or its manifest.yaml (docs/dataset.md); --bag
-    maps a ROS bag instead (docs/scale-out.md).
+    DATASET is a dataset folder or its manifest.yaml (docs/dataset.md) or a KITTI odometry
+    folder; --bag maps a ROS bag instead (docs/scale-out.md).
 
     Every frame is rectified, matched (multi-range), ground-suppressed (eq. 13),
     triangulated and fused along the robot path. Writes a ROS map_server map
@@ -68,9 +69,11 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
     from ..pipeline.batch import dataset_files
     from ..pipeline.run import write_map_outputs
-    from ..recordings.manifest import read_manifest
+    from ..recordings.layouts import read_recording
 
     check_workers(workers, scheduler, processes)
+    if align and odometry == "visual":
+        raise click.UsageError("--align corrects the given poses with visual odometry: not with --odometry visual")
     if (manifest is None) == (bag is None):
         raise click.UsageError("give a DATASET or --bag FILE (one of them)")
     (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
@@ -81,7 +84,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     if bag is not None:
         check_outputs(outputs, [bag, calib], input_dirs=[bag] if bag.is_dir() else [])
     else:
-        dataset = read_manifest(manifest)            # read once: checked here, mapped below
+        dataset = read_recording(manifest)           # read once: checked here, mapped below
         check_outputs(outputs, [manifest, calib] + dataset_files(dataset))
         manifest = dataset
     with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, _):
@@ -101,10 +104,11 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
                    f"{coverage}")
     if run.odometry is not None:
         click.echo(f"visual odometry: {run.odometry.message}")
-    if run.alignments is not None:
+    if run.fusion is not None:
         a = run.pose_metrics()["alignment"]
-        click.echo(f"scan-to-map alignment: {a['applied']} of {a['frames']} frames corrected, mean "
-                   f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg per frame")
+        click.echo(f"given odometry fused with visual odometry: {a['visual_steps']} of {a['frames'] - 1} steps "
+                   f"measured visually ({a['rejected_visual_steps']} rejected), the poses moved by "
+                   f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg on average")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
 
 
