@@ -89,14 +89,15 @@ def read_inputs(manifest, bag: Path | None, calib: Path | None):
     from ..camera import read_stereo
     from ..io import note_inputs
     from ..recordings.bag import bag_inputs
-    from ..recordings.manifest import Manifest, read_manifest
+    from ..recordings.layouts import read_recording
+    from ..recordings.manifest import Manifest
 
     if calib is not None:
         read_stereo(calib)
     if bag is not None:
         note_inputs(bag_inputs(bag))
         return None
-    return manifest if isinstance(manifest, Manifest) else read_manifest(manifest)
+    return manifest if isinstance(manifest, Manifest) else read_recording(manifest)
 
 
 @contextlib.contextmanager
@@ -113,6 +114,7 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
     import numpy as np
 
     from ..camera import read_stereo
+    from ..recordings.layouts import read_recording
     from ..recordings.manifest import Manifest, read_manifest
 
     with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
@@ -129,7 +131,7 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
                                                          "sync_tolerance_s")]
         if used:
             raise click.UsageError(f"{', '.join(used)} only with --bag")
-        dataset = manifest if isinstance(manifest, Manifest) else read_manifest(manifest)
+        dataset = manifest if isinstance(manifest, Manifest) else read_recording(manifest)
         stereo = read_stereo(calib) if calib is not None else None
         mount = mount_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"),
                                    dataset.calibration if stereo is None else stereo)

@@ -47,8 +47,9 @@ MAX_MAP_SIZE_M = 100_000.0
               help="Robot poses: the dataset's (or the bag's odometry), or stereo visual odometry from the "
                    "first frame's pose (docs/odometry.md).")
 @click.option("--align", is_flag=True,
-              help="Correct each frame's pose by aligning its obstacle points to the map built so far "
-                   "(scan-to-map); the corrections go to metrics.json.")
+              help="Correct the given poses with stereo visual odometry: each step of the given odometry fused "
+                   "with the visual one by their expected errors (docs/odometry.md); the corrections go to "
+                   "metrics.json.")
 @worker_options
 @click.option("--bag", "bag", type=click.Path(path_type=Path),
               help="Map a ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
@@ -57,10 +58,10 @@ MAX_MAP_SIZE_M = 100_000.0
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
                 resolution_m: float, size_m: str, origin_m: str, odometry: str, align: bool, workers: int | None,
                 scheduler: str | None, processes: bool, bag: Path | None, quiet: bool, **bag_kw) -> None:
-    """Build an occupancy grid map from a dataset or a ROS bag.
+    """Build an occupancy grid map from a recording or a ROS bag.
 
-    DATASET is a dataset folder or its manifest.yaml (docs/dataset.md); --bag
-    maps a ROS bag instead (docs/scale-out.md).
+    DATASET is a dataset folder or its manifest.yaml (docs/dataset.md) or a KITTI odometry
+    folder; --bag maps a ROS bag instead (docs/scale-out.md).
 
     Every frame is rectified, matched (multi-range), ground-suppressed (eq. 13),
     triangulated and fused along the robot path. Writes a ROS map_server map
@@ -73,6 +74,8 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     from ..pipeline.run import write_map_outputs
 
     check_workers(workers, scheduler, processes)
+    if align and odometry == "visual":
+        raise click.UsageError("--align corrects the given poses with visual odometry: not with --odometry visual")
     if (manifest is None) == (bag is None):
         raise click.UsageError("give a DATASET or --bag FILE (one of them)")
     (width, height) = numbers(size_m, "--size", 2, 0.0, MAX_MAP_SIZE_M, unit="m", what="'W,H' in metres")
@@ -100,10 +103,11 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
                    f"{coverage}")
     if run.odometry is not None:
         click.echo(f"visual odometry: {run.odometry.message}")
-    if run.alignments is not None:
+    if run.fusion is not None:
         a = run.pose_metrics()["alignment"]
-        click.echo(f"scan-to-map alignment: {a['applied']} of {a['frames']} frames corrected, mean "
-                   f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg per frame")
+        click.echo(f"given odometry fused with visual odometry: {a['visual_steps']} of {a['frames'] - 1} steps "
+                   f"measured visually ({a['rejected_visual_steps']} rejected), the poses moved by "
+                   f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg on average")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
 
 

@@ -35,7 +35,8 @@ from ..mapping.metrics import MapMetrics, map_metrics
 from ..mapping.occupancy import MappingConfig, OccupancyGrid, view_cells
 from ..matching.config import MatchingConfig
 from ..profiling import stage
-from ..recordings.manifest import FrameRecord, Manifest, frame_pair, read_manifest
+from ..recordings.layouts import read_recording
+from ..recordings.manifest import FrameRecord, Manifest, frame_pair, pose_3d_of
 from ..rejection import RejectionConfig
 from ..transforms import T_from_planar, transform_points
 from .frame import PairObstacles, obstacles_from_pair
@@ -116,8 +117,8 @@ class MapRun:
     """The camera mount every frame used."""
     odometry: object | None = None
     """The :class:`mrstereo.odometry.OdometryResult` when the poses came from visual odometry."""
-    alignments: list | None = None
-    """Per frame :class:`mrstereo.odometry.alignment.Alignment` when frames were aligned to the map."""
+    fusion: object | None = None
+    """The :class:`mrstereo.odometry.fusion.FusedOdometry` when the given poses were fused with visual odometry."""
 
     def pose_metrics(self) -> dict:
         """Odometry and alignment figures for metrics.json (empty when the given poses were used)."""
@@ -128,14 +129,13 @@ class MapRun:
                                       "keyframes": vo.status.count("keyframe"),
                                       "median_inliers": float(np.median(vo.n_inliers)),
                                       "median_time_s": float(np.median(vo.time_s))}
-        if self.alignments is not None:
-            moved = [a.correction_m for a in self.alignments]
-            turned = [math.degrees(a.correction_rad) for a in self.alignments]
-            out["alignment"] = {"frames": len(self.alignments),
-                                "applied": int(sum(a.applied for a in self.alignments)),
+        if self.fusion is not None:
+            moved, turned = self.fusion.corrections([f.pose for f in self.manifest.frames])
+            out["alignment"] = {"frames": len(moved), "visual_steps": int(self.fusion.visual_used.sum()),
+                                "rejected_visual_steps": int(self.fusion.visual_rejected.sum()),
                                 "mean_correction_m": float(np.mean(moved)), "max_correction_m": float(np.max(moved)),
-                                "mean_correction_deg": float(np.mean(turned)),
-                                "max_correction_deg": float(np.max(turned))}
+                                "mean_correction_deg": float(np.degrees(np.mean(turned))),
+                                "max_correction_deg": float(np.degrees(np.max(turned)))}
         frames = self.manifest.frames
         if self.observations and all(f.true_pose is not None for f in frames):
             from ..odometry.trajectory import trajectory_metrics
@@ -330,9 +330,10 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         (:func:`mrstereo.pipeline.odometry_from_manifest`, run in order before the
         matching), starting at the first frame's given pose; frames where tracking is
         lost are left out of the map.
-    align : AlignConfig or True, optional
-        Correct each frame's pose by aligning its obstacle points to the map of the
-        frames before it (:func:`mrstereo.odometry.alignment.fuse_aligned`; the ordered part).
+    align : FusionConfig or True, optional
+        Correct the given poses with visual odometry (with ``odometry="given"``): each step of
+        the given odometry fused with the visual odometry's (:func:`mrstereo.odometry.fusion.
+        fuse_odometry`); every frame is mapped, those visual odometry lost on the given steps.
     """
     from functools import partial
 
@@ -340,36 +341,47 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     from .sanity import check_pair_streams
 
     if not isinstance(manifest, Manifest):
-        manifest = read_manifest(manifest)
+        manifest = read_recording(manifest)
     if not isinstance(config, PipelineConfig):
         raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
     if odometry not in ("given", "visual"):
         raise ValueError(f"odometry must be 'given' or 'visual', got {odometry!r}")
+    align = None if align is False else align
+    if align is not None and odometry != "given":
+        raise ValueError("align corrects the given odometry with visual odometry: use it with odometry='given'")
     stereo = manifest.calibration if calibration is None else calibration
     prefer_raw = prefer_raw or calibration is not None
     check_pair_streams(manifest)
     mount, floor = floor_for_run(manifest, stereo, config=config, prefer_raw=prefer_raw)
     items = list(enumerate(manifest.frames))
-    vo = None
-    if odometry == "visual":
+    vo = fused = None
+    if odometry == "visual" or align is not None:
         from .odometry import odometry_from_manifest
 
         run_mount = replace(manifest, mount=mount)     # the floor the map uses
         vo = odometry_from_manifest(run_mount, calibration=calibration, progress=progress)
-        items = [(k, replace(record, pose=tuple(float(v) for v in pose)))
-                 for (k, record), pose, ok in zip(items, vo.poses, vo.tracked) if ok]
+    if odometry == "visual":
+        items = [(k, replace(record, pose=None, pose_3d=pose_3d_of(T)))
+                 for (k, record), T, ok in zip(items, vo.T_world_from_base, vo.tracked) if ok]
+    elif align is not None:
+        from ..odometry.fusion import FusionConfig, fuse_odometry
+
+        fused = fuse_odometry([f.pose for f in manifest.frames], vo.poses, vo.tracked,
+                              config=FusionConfig() if align is True else align)
+        items = [(k, replace(record, pose=tuple(float(v) for v in pose), pose_3d=None))
+                 for (k, record), pose in zip(items, fused.poses)]
     observe = partial(_observe_indexed, stereo=stereo, mount=mount, config=config, prefer_raw=prefer_raw)
     observations = map_ordered(observe, items, workers=workers, scheduler=scheduler,
                                processes=processes, progress=progress, desc="mapping", unit="frame",
                                prefetch=partial(_read_indexed, prefer_raw=prefer_raw),
                                label=lambda item: f"frame {item[0]} ({(item[1].left_rect or item[1].left).name})")
     return map_from_observations(manifest, observations, config=config, stereo=stereo, floor=floor, mount=mount,
-                                 odometry=vo, align=align)
+                                 odometry=vo, fusion=fused)
 
 
 def map_from_observations(manifest: Manifest, observations: list[FrameObservation], *,
                           config: PipelineConfig = PipelineConfig(), stereo: StereoCamera | None = None,
-                          floor: GroundPlane | None = None, mount=None, odometry=None, align=None) -> MapRun:
+                          floor: GroundPlane | None = None, mount=None, odometry=None, fusion=None) -> MapRun:
     """Fuse a run's frame observations in order and compare the map with the dataset's ground-truth map.
 
     The metrics are taken along the dataset's true path (``true_pose`` where the frames have one)
@@ -385,21 +397,11 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
         Its ``grid`` and ``mapping`` fuse; its obstacle range is the range of the views.
     stereo : StereoCamera, optional
         The calibration the frames were matched with (default: the manifest's).
-    floor, mount, odometry
+    floor, mount, odometry, fusion
         Carried into the :class:`MapRun` (see there).
-    align : AlignConfig or True, optional
-        Align each frame to the map of the frames before it
-        (:func:`mrstereo.odometry.alignment.fuse_aligned`).
     """
     stereo = manifest.calibration if stereo is None else stereo
-    alignments = None
-    if align is not None and align is not False:
-        from ..odometry.alignment import AlignConfig, fuse_aligned
-
-        occupancy, observations, alignments = fuse_aligned(
-            observations, grid=config.grid, config=config.mapping, align=AlignConfig() if align is True else align)
-    else:
-        occupancy = fuse(observations, grid=config.grid, config=config.mapping)
+    occupancy = fuse(observations, grid=config.grid, config=config.mapping)
     _warn_outside(observations, occupancy)
     metrics, gt = None, None
     if manifest.ground_truth_map is not None:
@@ -411,11 +413,12 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
                           f"which do not fall on the map's cells of {occupancy.grid.resolution_m:g} m", stacklevel=2)
         else:
             gt = aligned              # compared where the two maps overlap
-            true_frames = [replace(f, pose=f.true_pose) if f.true_pose is not None else f for f in manifest.frames]
+            true_frames = [replace(f, pose=f.true_pose, pose_3d=f.true_pose_3d) if f.true_pose is not None else f
+                           for f in manifest.frames]
             views = views_of_frames(true_frames, stereo, range_m=config.obstacles.max_range_m)
             metrics = map_metrics(occupancy, gt, path_xy=np.array([f.pose for f in true_frames]), views=views)
     return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
-                  ground_truth_map=gt, floor=floor, mount=mount, odometry=odometry, alignments=alignments)
+                  ground_truth_map=gt, floor=floor, mount=mount, odometry=odometry, fusion=fusion)
 
 
 def _warn_outside(observations: list[FrameObservation], occupancy: OccupancyGrid) -> None:

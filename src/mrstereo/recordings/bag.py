@@ -15,8 +15,9 @@ manifest reads a recording too:
    or from TF (``base_link`` in ``map`` or ``odom``, chained through ``/tf``
    and ``/tf_static`` in 3-D), interpolated linearly (slerp for rotations)
    between the two nearest messages and held constant outside their time
-   span, then projected onto the floor plane for the 2-D map: ``(x, y, yaw)``
-   of the base frame's x axis;
+   span; the manifest keeps the 3-D pose (``[x, y, z, qx, qy, qz, qw]``), whose projection on
+   the floor plane, ``(x, y, yaw)`` of the base frame's x axis, the 2-D map uses; every frame keeps
+   its left image's header stamp (``stamp_s``);
 4. the camera mount (``T_base_from_cam``, :class:`~mrstereo.camera.mount.CameraMount`)
    is the one given, else the stereo YAML's ``mount:``/``rig:``, else the TF pose of ``camera_frame``
    in ``base_frame`` at the first frame (an ``*optical*`` frame as it is, any
@@ -45,9 +46,9 @@ import numpy as np
 from .. import _checks, _limits
 from ..camera import CameraInfo, CameraMount, StereoCamera
 from ..io import check_output_dir, decode_image, note_inputs
-from ..transforms import R_BODY_FROM_OPTICAL, planar_from_T, rotation_from_quaternion, slerp, wrap_angle
+from ..transforms import R_BODY_FROM_OPTICAL, rotation_from_quaternion, slerp, wrap_angle
 from ._bagfiles import bag_errors, bag_inputs, check_bag_file
-from .manifest import staged_dataset
+from .manifest import pose_3d_of, staged_dataset
 
 __all__ = ["BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message", "SUPPORTED_ENCODINGS",
            "camera_info_from_message", "stereo_from_camera_info", "stereo_from_bag", "pair_by_stamp",
@@ -485,7 +486,7 @@ def _robot_poses(stream: _BagStream, frame_stamps: list[int], *, odom_topic: str
         stream.tf.chain(world_frame, base_frame)
         return ([_pose_of(stream.tf.lookup(world_frame, base_frame, t)) for t in frame_stamps],
                 f"tf {world_frame} <- {base_frame}")
-    return [(0.0, 0.0, 0.0)] * len(frame_stamps), "none (every frame at the origin)"
+    return [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)] * len(frame_stamps), "none (every frame at the origin)"
 
 
 def _mount_and_pans(tf: TfTree, frame_stamps: list[int], *, mount: CameraMount | None, calibration: StereoCamera,
@@ -618,14 +619,15 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
             _write_pairs(reader, dataset, pairs, topics=(left_topic, right_topic), calibration=calibration,
                          keys=("left_rect", "right_rect") if rectified else ("left", "right"), progress=progress)
             for k in range(len(pairs)):
-                dataset.add_frame(k, pose=poses[k], pan_rad=pans[k])
+                dataset.add_frame(k, pose=poses[k], pan_rad=pans[k], stamp_s=frame_stamps[k] / 1e9)
     return BagExport(out_dir=Path(out_dir), n_frames=len(pairs), n_left=len(stream.stamps[left_topic]),
                      n_right=len(stream.stamps[right_topic]), stamps_ns=tuple(frame_stamps), calibration=calibration,
                      mount=mount, mount_source=mount_source, pose_source=pose_source)
 
 
-def _pose_of(T: np.ndarray) -> tuple[float, float, float]:
-    return _round_pose(tuple(planar_from_T(T)))
+def _pose_of(T: np.ndarray) -> tuple[float, ...]:
+    """The manifest's 3-D pose ``(x, y, z, qx, qy, qz, qw)`` of a 4x4 transform."""
+    return _round_pose(pose_3d_of(T))
 
 
 def _heading(T: np.ndarray, axis: int) -> float:

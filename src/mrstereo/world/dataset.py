@@ -13,7 +13,7 @@ import numpy as np
 from .. import _checks, _limits
 from ..recordings.manifest import staged_dataset
 from .groundtruth import ground_truth_map
-from .paths import PATH_KINDS, drifted_poses, sequence_path, waypoint_path
+from .paths import PATH_KINDS, drifted_poses, sequence_path, speed_path, waypoint_path
 from .randomize import random_world
 
 BYTES_PER_PIXEL = 7.0
@@ -21,6 +21,7 @@ BYTES_PER_PIXEL = 7.0
 labels (about 3 bytes of compressed texture)."""
 from .render import SensorModel, default_stereo, render_stereo_frame
 from .scene import default_scene
+from .street import street_world
 
 __all__ = ["write_synthetic_dataset", "corridor_path", "poses_along"]
 
@@ -62,16 +63,17 @@ _PANS = (0.0, math.pi / 4, -math.pi / 4)   # front, left and right views (paper 
 def _check_world_options(path: str, randomize: bool, wall_texture, odometry_noise) -> None:
     if path not in PATH_KINDS:
         raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
-    if randomize and path == "s-curve":
-        raise ValueError("path='s-curve' is a path of the built-in corridor; a randomized world's odometry "
-                         "sequence is path='front' (along the world's own waypoints)")
+    if randomize and path in ("s-curve", "street"):
+        raise ValueError(f"path={path!r} has its own world; a randomized corridor's odometry sequence is "
+                         "path='front' (along the world's own waypoints)")
     if wall_texture is not None and not randomize:
         raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
     if odometry_noise is not None and len(odometry_noise) != 2:
         raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
 
 
-def _frame_poses(path: str, n_frames: int, waypoints_xy, step_m: float) -> tuple[np.ndarray, list[float]]:
+def _frame_poses(path: str, n_frames: int, waypoints_xy, step_m: float,
+                 turn_rad_per_frame: float) -> tuple[np.ndarray, list[float]]:
     """Robot poses (n_frames, 3) and head pans of the frames along ``path`` (``waypoints_xy``: a randomized
     world's path, None: the built-in corridor's), rounded to the numbers the manifest stores."""
     if path == "stops":
@@ -80,7 +82,8 @@ def _frame_poses(path: str, n_frames: int, waypoints_xy, step_m: float) -> tuple
         poses = np.repeat(stops, len(_PANS), axis=0)[:n_frames]
         pans = [round(_PANS[k % len(_PANS)], 9) for k in range(n_frames)]
     else:
-        poses = (sequence_path(path, n_frames, step_m=step_m) if waypoints_xy is None
+        poses = (speed_path(n_frames, step_m=step_m, turn_rad_per_frame=turn_rad_per_frame) if path == "street"
+                 else sequence_path(path, n_frames, step_m=step_m) if waypoints_xy is None
                  else waypoint_path(waypoints_xy, n_frames, step_m=step_m))
         pans = [0.0] * n_frames
     return np.round(poses, 6), pans
@@ -91,7 +94,8 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                             path: str = "stops", step_m: float = 0.1,
                             odometry_noise: tuple[float, float] | None = None,
                             progress: bool = True, randomize: bool = False,
-                            wall_texture: str | None = None) -> Path:
+                            wall_texture: str | None = None, turn_rad_per_frame: float = math.radians(3.0),
+                            frame_rate_hz: float = 10.0) -> Path:
     """Render the default corridor (or a randomized world) along its path and write a dataset directory.
 
     ``path="stops"`` (the paper's run): at each stop along :func:`corridor_path` (a randomized
@@ -99,7 +103,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     11-13); frames cycle through these views. ``"front"`` and ``"s-curve"``: sequences for
     visual odometry, one front view every ``step_m`` (:func:`mrstereo.world.paths.sequence_path`;
     a randomized world: ``"front"`` only, along its own waypoints,
-    :func:`mrstereo.world.paths.waypoint_path`).
+    :func:`mrstereo.world.paths.waypoint_path`). ``"street"``: the street world of ``seed``
+    (:func:`mrstereo.world.street.street_world`) driven from a standstill up to ``step_m`` per
+    frame, turning by up to ``turn_rad_per_frame`` (:func:`mrstereo.world.paths.speed_path`).
+    The frames of a sequence (not ``"stops"``) are stamped ``frame_rate_hz`` apart.
     Written: raw and rectified images, GT disparity (PFM), GT labels (PNG),
     the true calibration, the GT map and ``manifest.yaml``
     (:func:`mrstereo.recordings.manifest.staged_dataset`: built beside ``out_dir`` and renamed
@@ -117,10 +124,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         Image size (320x240 or 640x480 rigs of :func:`default_stereo`).
     supersample : int
         Anti-aliasing rays per pixel along each axis.
-    path : {"stops", "front", "s-curve"}
+    path : {"stops", "front", "s-curve", "street"}
         The robot's path (:data:`mrstereo.world.paths.PATH_KINDS`).
     step_m : float
-        Path length between frames of a ``front`` or ``s-curve`` sequence.
+        Path length between frames of a ``front`` or ``s-curve`` sequence (``street``: at full speed).
     odometry_noise : (scale_error, heading_drift_rad_per_m), optional
         Store drifted poses (:func:`mrstereo.world.paths.drifted_poses`) as each frame's
         ``pose`` (the odometry a robot would report) and the true ones as ``true_pose``;
@@ -135,6 +142,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         With ``randomize=True``: the walls get this kind of material instead of the drawn one
         (``random_world(..., wall_texture=...)``; one of
         :data:`mrstereo.world.randomize.WALL_TEXTURES`), everything else stays the seed's world.
+    turn_rad_per_frame : float
+        ``street``: the largest heading change per frame at full speed.
+    frame_rate_hz : float
+        Frames per second of a sequence (its ``stamp_s``).
 
     Returns
     -------
@@ -154,17 +165,22 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     _checks.fits_on_disk("n_frames", BYTES_PER_PIXEL * width * height * n_frames, Path(out_dir).absolute(),
                          f"{n_frames} frames of {width}x{height}")
     _check_world_options(path, randomize, wall_texture, odometry_noise)
+    rate = _checks.finite_number("frame_rate_hz", frame_rate_hz, positive=True)
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
-    if randomize:
-        world = random_world(seed, width=width, height=height, wall_texture=wall_texture)
+    if randomize or path == "street":
+        world = (street_world(seed, width=width, height=height) if path == "street" else
+                 random_world(seed, width=width, height=height, wall_texture=wall_texture))
         stereo, scene, sensors, waypoints = world.stereo, world.scene, world.sensors, world.waypoints_xy
-        generator["randomized"] = world.summary
+        generator["street" if path == "street" else "randomized"] = world.summary
     else:
         stereo, scene, sensors = default_stereo(width, height), default_scene(seed), (SensorModel(), SensorModel())
         waypoints = None
-    poses, pans = _frame_poses(path, n_frames, waypoints, step_m)
+    poses, pans = _frame_poses(path, n_frames, waypoints, step_m, turn_rad_per_frame)
     if path != "stops":
         generator["step_m"] = float(step_m)
+        generator["frame_rate_hz"] = rate
+    if path == "street":
+        generator["turn_rad_per_frame"] = float(turn_rad_per_frame)
     given = poses
     if odometry_noise is not None:
         given = np.round(drifted_poses(poses, scale_error=odometry_noise[0],
@@ -181,5 +197,6 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                                ("right_rect", frame.right_rect), ("gt_labels", frame.labels),
                                ("gt_disparity", frame.disparity_px)):
                 dataset.write(key, k, array)
-            dataset.add_frame(k, pose=given[k], pan_rad=pans[k], true_pose=pose if odometry_noise is not None else None)
+            dataset.add_frame(k, pose=given[k], pan_rad=pans[k], true_pose=pose if odometry_noise is not None else None,
+                              stamp_s=None if path == "stops" else round(k / rate, 9))
     return Path(out_dir)
