@@ -170,13 +170,16 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
     Every command that reads a DATASET then reads the recording.
     """
     from ..io import check_output_dir
+    from ..pipeline.sanity import check_pair_streams
     from ..recordings.bag import export_bag
+    from ..recordings.manifest import read_manifest
 
     read_inputs(None, bag, options.get("calib"))
     check_output_dir("--out", out_dir, must_be_empty=True)
     kwargs = bag_export_kwargs(bag=bag, quiet=quiet, **options)
     result = export_bag(bag, out_dir, **kwargs)
     echo_export(result)
+    check_pair_streams(read_manifest(out_dir))
     click.echo(f"wrote {result.n_frames} frames to {out_dir} (manifest: {out_dir / 'manifest.yaml'})")
 
 

@@ -54,6 +54,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     import numpy as np
 
     from ..io import check_outputs
+    from ..pipeline.sanity import check_pair_streams
     from ..odometry.trajectory import plot_trajectories, trajectory_metrics, write_tum
 
     if (manifest is None) == (bag is None):
@@ -62,6 +63,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     outputs = {"--out": out_path, "--plot": plot_path, "--metrics": metrics_path}
     check_outputs(outputs, suffixes=OUTPUT_SUFFIXES)
     with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, stamps):
+        check_pair_streams(dataset)
         run = odometry_from_manifest(dataset, calibration=stereo, progress=not quiet,
                                      initial_pose="given" if start == "given" else "identity")
     if stamps is None:

@@ -87,8 +87,8 @@ class Inputs:
         return self
 
     def add_output(self, *paths) -> Inputs:
-        """Register output files and folders checked by :func:`check_outputs` / :func:`check_output_dir`:
-        what the command reads back from them (a resumed run's own results) is no input."""
+        """Register output folders checked by :func:`check_output_dir`: what the command reads back from them
+        (a resumed run's own results) is no input."""
         with self._lock:
             self._outputs.update(_resolved(p) for p in paths if p is not None)
         return self
@@ -551,8 +551,6 @@ def check_outputs(outputs: Mapping, inputs: Iterable[str | os.PathLike] | Inputs
         for option_b, b in items[k + 1:]:
             if _resolved(a) == _resolved(b) or (a.exists() and b.exists() and os.path.samefile(a, b)):
                 raise ValueError(f"{option_a} and {option_b} are the same file {a}; give two different names")
-    for active in _active:
-        active.add_output(*(path for _, path in items))
 
 
 def check_output_dir(option: str, folder: str | os.PathLike, *, inputs: Iterable[str | os.PathLike] | Inputs = (),
