@@ -37,6 +37,14 @@ def positive_int(name: str, value, *, minimum: int = 1) -> int:
     return int(value)
 
 
+def instance(name: str, value, types, what: str | None = None):
+    """``value`` when it is one of ``types``, else ``TypeError`` naming the argument and what arrived."""
+    if not isinstance(value, types):
+        names = what or " or ".join(t.__name__ for t in (types if isinstance(types, tuple) else (types,)))
+        raise TypeError(f"{name} must be a {names}, got {type(value).__name__}")
+    return value
+
+
 def image(name: str, value) -> np.ndarray:
     """Check an image: HxW or HxWx3, uint8 or floating, non-empty, finite."""
     if not isinstance(value, np.ndarray):

@@ -108,8 +108,17 @@ def _num(v: float):
     return None if not math.isfinite(v) else float(v)
 
 
+def _views_and_camera(views, camera) -> None:
+    """Views must be CalibrationViews and the camera a Camera (before any field of theirs is read)."""
+    for k, view in enumerate(views):
+        _checks.instance(f"views[{k}]", view, CalibrationView)
+    if camera is not None:
+        _checks.instance("camera", camera, Camera)
+
+
 def reprojection_residuals(views: Sequence[CalibrationView], camera: Camera, poses) -> list[np.ndarray]:
     """Projected minus measured pixels (N, 2) per view."""
+    _views_and_camera(views, camera)
     out = []
     for view, T in zip(views, poses):
         cam_pts = view.points_target @ T[:3, :3].T + T[:3, 3]
@@ -132,6 +141,7 @@ def check_view_geometry(view: CalibrationView) -> None:
     the first must not vanish). Collinear points or one point repeated would
     otherwise "fit" with an RMS of zero.
     """
+    _checks.instance("view", view, CalibrationView)
     for what, pts in (("target points", view.points_target), ("pixels", view.uv)):
         centred = pts - pts.mean(axis=0)
         s = np.linalg.svd(centred, compute_uv=False)

@@ -70,6 +70,7 @@ def planar_grid(cols: int, rows: int, spacing_m: float) -> np.ndarray:
     cols = _checks.positive_int("cols", cols, minimum=2)
     rows = _checks.positive_int("rows", rows, minimum=2)
     spacing_m = _checks.finite_number("spacing_m", spacing_m, positive=True)
+    _checks.fits_in_memory("cols and rows", 72.0 * cols * rows, f"a grid of {cols} x {rows} points")
     x, y = np.meshgrid(np.arange(cols, dtype=np.float64), np.arange(rows, dtype=np.float64))
     return np.stack([x.ravel() * spacing_m, y.ravel() * spacing_m, np.zeros(x.size)], axis=1)
 

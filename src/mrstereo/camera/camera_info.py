@@ -140,6 +140,7 @@ class CameraInfo:
     name: str = "camera"
 
     def __post_init__(self) -> None:
+        _checks.instance("camera", self.camera, Camera)
         R = _checks.matrix("R", self.R, (3, 3))
         if _rotation_error(R) > ROTATION_TOL:
             raise ValueError(f"R must be a rotation (orthonormal, det +1), got det {np.linalg.det(R):.4g}")
@@ -220,6 +221,8 @@ class StereoCamera:
     mount: CameraMount | None = None
 
     def __post_init__(self) -> None:
+        _checks.instance("left", self.left, CameraInfo)
+        _checks.instance("right", self.right, CameraInfo)
         if self.left.camera.size != self.right.camera.size:
             raise ValueError("left and right cameras must have the same image size")
         if self.mount is not None and not isinstance(self.mount, CameraMount):
@@ -406,9 +409,11 @@ def read_camera_info(path: str | os.PathLike) -> CameraInfo:
 
 def write_camera_info(path: str | os.PathLike, info: CameraInfo) -> None:
     """Write a ROS camera_info YAML file (atomically)."""
+    _checks.instance("info", info, CameraInfo)
     _dump_yaml(path, info.to_dict())
 
 
 def write_stereo(path: str | os.PathLike, stereo: StereoCamera) -> None:
     """Write the stereo calibration YAML (atomically)."""
+    _checks.instance("stereo", stereo, StereoCamera)
     _dump_yaml(path, stereo.to_dict())

@@ -313,6 +313,8 @@ def no_space_error(exc: OSError, path: str | os.PathLike, written: str | os.Path
     written"); then the free space of the file system of ``written`` (default ``path``)
     decides.
     """
+    if not isinstance(exc, OSError):
+        raise TypeError(f"exc must be an OSError, got {type(exc).__name__}")
     if exc.errno == errno.ENOSPC:
         return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
     if exc.errno is None and "requested and" in str(exc) and _disk_full(Path(written or path).parent):

@@ -219,6 +219,8 @@ def matching_image(image: np.ndarray) -> np.ndarray:
     become float32 ``v / 257`` (0..255): every one of the 65536 levels stays distinct (float32 keeps
     24 bits). Other dtypes are returned as they are.
     """
+    if not isinstance(image, np.ndarray):
+        raise TypeError(f"image must be a numpy array, got {type(image).__name__}")
     if image.dtype != np.uint16:
         return image
     for step in (257, 256):

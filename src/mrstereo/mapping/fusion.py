@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import _checks
 from ..profiling import stage
 from .grid import GridSpec
 from .occupancy import MappingConfig, OccupancyGrid, ViewCells
@@ -55,6 +56,8 @@ def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec = GridSpec(
     they are computed from its points (the result is the same). With ``config.map_occlusion_p``
     the cells depend on the map so far and are always computed here, in order.
     """
+    if isinstance(observations, (str, bytes)):
+        raise TypeError("observations must be FrameObservations, got a string")
     occupancy = OccupancyGrid(grid, config=config)
     for obs in observations:
         add_observation(occupancy, obs)
@@ -65,6 +68,8 @@ def add_observation(occupancy: OccupancyGrid, obs: FrameObservation) -> None:
     """One frame into the map, in order: its precomputed cells when they fit the map's grid and
     config and the map does not occlude (``map_occlusion_p`` None), else its cells traced
     against the map so far."""
+    _checks.instance("occupancy", occupancy, OccupancyGrid)
+    _checks.instance("obs", obs, FrameObservation)
     grid, config = occupancy.grid, occupancy.config
     with stage("grid"):
         if obs.cells is not None and obs.cells.fits(grid, config) and config.map_occlusion_p is None:

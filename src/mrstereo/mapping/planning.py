@@ -49,6 +49,7 @@ def inflate_obstacles(ros_map: RosMap, *, robot_radius_m: float = 0.25,
     A cell is blocked when the distance between its centre and the centre of the nearest
     occupied cell is <= ``robot_radius_m`` (exact Euclidean distance transform).
     """
+    _checks.instance("ros_map", ros_map, RosMap)
     radius = _checks.finite_number("robot_radius_m", robot_radius_m, nonnegative=True)
     obstacles = ros_map.occupied | (ros_map.unknown if unknown_is_obstacle else False)
     if not obstacles.any():

@@ -81,6 +81,7 @@ class RosMap:
 
 def write_ros_map(yaml_path: str | os.PathLike, ros_map: RosMap) -> None:
     """Write ``NAME.yaml`` and ``NAME.pgm`` beside it (atomically)."""
+    _checks.instance("ros_map", ros_map, RosMap)
     yaml_path = Path(yaml_path)
     pgm_path = yaml_path.with_suffix(".pgm")
     image = np.full(ros_map.occupancy.shape, UNKNOWN, np.uint8)

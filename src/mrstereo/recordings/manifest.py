@@ -353,6 +353,8 @@ def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.nda
     rectified pair is listed, e.g. to test an estimated calibration. 16-bit images are scaled
     by :func:`matching_image`.
     """
+    if not isinstance(record, FrameRecord):
+        raise TypeError(f"record must be a FrameRecord, got {type(record).__name__}")
     rectified = record.has_rectified and not (prefer_raw and record.has_raw)
     left, right = (record.left_rect, record.right_rect) if rectified else (record.left, record.right)
     with stage("read"):

@@ -41,6 +41,7 @@ def corridor_path(n_stops: int, *, x_end_m: float = 10.5) -> np.ndarray:
 def poses_along(waypoints_xy, n_stops: int) -> np.ndarray:
     """``n_stops`` robot poses (n_stops, 3) evenly spaced along a polyline; yaw follows the path."""
     n_stops = _checks.positive_int("n_stops", n_stops)
+    _checks.fits_in_memory("n_stops", 48.0 * n_stops, f"{n_stops} poses")
     way = np.asarray(waypoints_xy, dtype=np.float64)
     if way.ndim != 2 or way.shape[1] != 2 or len(way) < 2 or not np.isfinite(way).all():
         raise ValueError(f"waypoints_xy must be (K >= 2, 2) finite numbers, got shape {way.shape}")
