@@ -272,7 +272,7 @@ def test_library_size_checks_of_grids_scans_and_renders(tmp_path):
     from mrstereo.mapping import GridSpec
     from mrstereo.world.dataset import write_synthetic_dataset
 
-    with pytest.raises(ValueError, match="resolution_m: a grid of .* would need"):
+    with pytest.raises(ValueError, match="width_m, height_m and resolution_m: a grid of .* would need"):
         GridSpec(resolution_m=0.0001)
     with pytest.raises(ValueError, match="angle_increment_rad: a scan of .* would need"):
         laser_scan_from_points(np.zeros((1, 3)), angle_increment_rad=1e-13)

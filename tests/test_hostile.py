@@ -306,7 +306,8 @@ def test_more_workers_than_cores_are_refused_unless_allowed(ds, tmp_path):
 
 def test_a_grid_larger_than_the_available_memory_is_refused(ds, tmp_path):
     from mrstereo._checks import memory_limit_bytes
+    from mrstereo.mapping.grid import BYTES_PER_CELL
 
-    side = int(((memory_limit_bytes() / 40.0) ** 0.5) * 0.05 * 2)          # 4x the memory available
+    side = int(((memory_limit_bytes() / BYTES_PER_CELL) ** 0.5) * 0.05 * 2)      # 4x the memory available
     refused(["map", ds, "-o", tmp_path / "m", "--size", f"{side},{side}", "--quiet"], tmp_path,
             must="available on this machine")
