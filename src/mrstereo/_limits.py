@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["LIMITS", "limit", "over_limit", "cpu_count", "max_workers"]
+__all__ = ["LIMITS", "limit", "within", "cpu_count", "max_workers"]
 
 LIMITS = {
     "MRSTEREO_MAX_IMAGE_PIXELS": (1 << 26, "pixels of one image, read from its header before decoding"),
@@ -37,10 +37,14 @@ def limit(name: str) -> int:
     return value
 
 
-def over_limit(name: str, value: float, what: str) -> ValueError:
-    """The error for ``value`` above the limit ``name``: what was asked, the limit and how to raise it."""
-    return ValueError(f"{what}: {value:,.0f} is more than the limit of {limit(name):,} "
-                      f"({LIMITS[name][1]}); set {name} to raise it")
+def within(name: str, value: float, what: str) -> float:
+    """``value`` when it is at most the limit ``name``, else a ``ValueError`` saying ``what`` asked for it,
+    the limit and how to raise it."""
+    bound = limit(name)
+    if value > bound:
+        raise ValueError(f"{what}: {value:,.0f} is more than the limit of {bound:,} ({LIMITS[name][1]}); "
+                         f"set {name} to raise it")
+    return value
 
 
 def cpu_count() -> int:

@@ -34,9 +34,8 @@ def check_image_size(data, where: str) -> None:
     width, height = size
     if width <= 0 or height <= 0:
         raise ValueError(f"{where}: the image header claims {width}x{height} pixels: corrupt")
-    if width * height > _limits.limit("MRSTEREO_MAX_IMAGE_PIXELS"):
-        raise _limits.over_limit("MRSTEREO_MAX_IMAGE_PIXELS", width * height,
-                                 f"{where}: the image header claims {width}x{height} pixels")
+    _limits.within("MRSTEREO_MAX_IMAGE_PIXELS", width * height,
+                   f"{where}: the image header claims {width}x{height} pixels")
 
 
 _quiet = False
@@ -147,9 +146,8 @@ def read_pfm(path: str | os.PathLike) -> np.ndarray:
         dtype = "<f4" if scale < 0 else ">f4"
         data = np.frombuffer(fh.read(), dtype=dtype)
     count = width * height * channels
-    if width * height > _limits.limit("MRSTEREO_MAX_IMAGE_PIXELS"):
-        raise _limits.over_limit("MRSTEREO_MAX_IMAGE_PIXELS", width * height,
-                                 f"PFM {path}: the header claims {width}x{height} pixels")
+    _limits.within("MRSTEREO_MAX_IMAGE_PIXELS", width * height,
+                   f"PFM {path}: the header claims {width}x{height} pixels")
     if width <= 0 or height <= 0 or data.size < count:
         raise ValueError(f"cannot read PFM {path}: expected {count} values, found {data.size}")
     shape = (height, width, 3) if channels == 3 else (height, width)

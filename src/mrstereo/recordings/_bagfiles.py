@@ -42,16 +42,14 @@ def _fail(path: Path, message: str) -> ValueError:
     return ValueError(f"cannot read bag {path}: {message}")
 
 
-def _drain(decompressor, data: bytes, limit: int, what: str, path: Path) -> int:
-    """Bytes ``data`` decompresses to, in pieces of at most 8 MiB (never more than ``limit``)."""
+def _drain(decompressor, data: bytes, what: str, path: Path) -> int:
+    """Bytes ``data`` decompresses to, in pieces of at most 8 MiB (never more than ``MRSTEREO_MAX_MESSAGE_BYTES``)."""
     total, piece, chunk = 0, 8 << 20, data
     while True:
         out = decompressor.decompress(chunk, max_length=piece)
         chunk = b""
         total += len(out)
-        if total > limit:
-            raise _limits.over_limit("MRSTEREO_MAX_MESSAGE_BYTES", total,
-                                     f"bag {path}: {what} decompresses to more")
+        _limits.within("MRSTEREO_MAX_MESSAGE_BYTES", total, f"bag {path}: {what} decompresses to more")
         if getattr(decompressor, "eof", False) or (not out and getattr(decompressor, "needs_input", True)):
             return total
 
@@ -72,12 +70,11 @@ def _decompressor(kind: str):
     return None
 
 
-def _check_size(path: Path, declared: int, what: str, limit: int) -> None:
-    if declared > limit:
-        raise _limits.over_limit("MRSTEREO_MAX_MESSAGE_BYTES", declared, f"bag {path}: {what} claims")
+def _check_size(path: Path, declared: int, what: str) -> None:
+    _limits.within("MRSTEREO_MAX_MESSAGE_BYTES", declared, f"bag {path}: {what} claims")
 
 
-def _ros1_records(path: Path, fh, size: int, limit: int) -> None:
+def _ros1_records(path: Path, fh, size: int) -> None:
     pos = len(_ROS1_MAGIC)
     while pos < size:
         fh.seek(pos)
@@ -106,11 +103,11 @@ def _ros1_records(path: Path, fh, size: int, limit: int) -> None:
         if fields.get(b"op") == b"\x05":                                      # a chunk
             compression = fields.get(b"compression", b"none").decode("ascii", "replace")
             declared = struct.unpack("<I", fields[b"size"])[0] if len(fields.get(b"size", b"")) == 4 else 0
-            _check_size(path, declared, f"the chunk at byte {pos}", limit)
+            _check_size(path, declared, f"the chunk at byte {pos}")
             decompressor = _decompressor(compression)
             if decompressor is not None:
                 fh.seek(data_pos)
-                _drain(decompressor, fh.read(data_len), limit, f"the chunk at byte {pos}", path)
+                _drain(decompressor, fh.read(data_len), f"the chunk at byte {pos}", path)
         pos = data_pos + data_len
 
 
@@ -119,7 +116,7 @@ def _mcap_string(buf: bytes, k: int) -> tuple[str, int]:
     return buf[k + 4:k + 4 + n].decode("utf-8", "replace"), k + 4 + n
 
 
-def _mcap_records(path: Path, fh, size: int, limit: int) -> None:
+def _mcap_records(path: Path, fh, size: int) -> None:
     pos = len(_MCAP_MAGIC)
     while pos + 9 <= size:
         fh.seek(pos)
@@ -134,19 +131,19 @@ def _mcap_records(path: Path, fh, size: int, limit: int) -> None:
         if opcode == 0x06:                                                    # chunk
             body = fh.read(length)
             declared = struct.unpack_from("<Q", body, 16)[0]
-            _check_size(path, declared, f"the chunk at byte {pos}", limit)
+            _check_size(path, declared, f"the chunk at byte {pos}")
             compression, k = _mcap_string(body, 28)
             records_len = struct.unpack_from("<Q", body, k)[0]
             decompressor = _decompressor(compression) if compression else None
             if decompressor is not None:
-                _drain(decompressor, body[k + 8:k + 8 + records_len], limit, f"the chunk at byte {pos}", path)
+                _drain(decompressor, body[k + 8:k + 8 + records_len], f"the chunk at byte {pos}", path)
         elif opcode == 0x08:                                                  # chunk index
             body = fh.read(length)
             k = 32
             k += 4 + struct.unpack_from("<I", body, k)[0] + 8                 # message index offsets, length
             _, k = _mcap_string(body, k)
             declared = struct.unpack_from("<Q", body, k + 8)[0]
-            _check_size(path, declared, f"the chunk index at byte {pos}", limit)
+            _check_size(path, declared, f"the chunk index at byte {pos}")
         pos += 9 + length
 
 
@@ -156,16 +153,15 @@ def check_bag_file(path: str | os.PathLike) -> None:
     Other files (sqlite3 storage) are left to the reader."""
     path = Path(path)
     files = sorted(path.glob("*.mcap")) if path.is_dir() else [path]
-    limit = _limits.limit("MRSTEREO_MAX_MESSAGE_BYTES")
     for file in files:
         size = file.stat().st_size
         with open(file, "rb") as fh:
             magic = fh.read(len(_ROS1_MAGIC))
             try:
                 if magic.startswith(_ROS1_MAGIC):
-                    _ros1_records(file, fh, size, limit)
+                    _ros1_records(file, fh, size)
                 elif magic.startswith(_MCAP_MAGIC):
-                    _mcap_records(file, fh, size, limit)
+                    _mcap_records(file, fh, size)
             except ValueError:              # the refusals above
                 raise
             except OSError as exc:

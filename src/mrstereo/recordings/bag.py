@@ -156,8 +156,7 @@ def image_from_message(msg, msgtype: str) -> np.ndarray:
     ch, dtype = _ENCODINGS[enc]
     itemsize = np.dtype(dtype).itemsize
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
-    if h * w > _limits.limit("MRSTEREO_MAX_IMAGE_PIXELS"):
-        raise _limits.over_limit("MRSTEREO_MAX_IMAGE_PIXELS", h * w, f"an image message of {w}x{h} pixels")
+    _limits.within("MRSTEREO_MAX_IMAGE_PIXELS", h * w, f"an image message of {w}x{h} pixels")
     if h <= 0 or w <= 0 or step < w * ch * itemsize or data.size < h * step:
         raise ValueError(f"image message of {w}x{h} {enc} has step {step} and {data.size} bytes "
                          f"(needs step >= {w * ch * itemsize} and {h} rows of it)")
@@ -426,9 +425,7 @@ def _read_stream(reader, *, left_topic: str, right_topic: str, odom_topic: str |
         index = count[conn.topic] = count.get(conn.topic, -1) + 1
         if conn.topic in (left_topic, right_topic):
             stream.stamps[conn.topic].append(_stamp_ns(reader.deserialize(raw, conn.msgtype), bag_ns))
-            if len(stream.stamps[conn.topic]) > _limits.limit("MRSTEREO_MAX_FRAMES"):
-                raise _limits.over_limit("MRSTEREO_MAX_FRAMES", len(stream.stamps[conn.topic]),
-                                         f"bag: images on {conn.topic}")
+            _limits.within("MRSTEREO_MAX_FRAMES", len(stream.stamps[conn.topic]), f"bag: images on {conn.topic}")
         elif conn.topic == odom_topic:
             msg = reader.deserialize(raw, conn.msgtype)
             p, q = msg.pose.pose.position, msg.pose.pose.orientation

@@ -151,8 +151,7 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
     lefts = sorted((seq / "image_0").glob("*.png"))
     if not lefts:
         raise ValueError(f"{seq / 'image_0'} has no PNG images")
-    if len(lefts) > _limits.limit("MRSTEREO_MAX_FRAMES"):
-        raise _limits.over_limit("MRSTEREO_MAX_FRAMES", len(lefts), f"KITTI sequence {seq}: frames")
+    _limits.within("MRSTEREO_MAX_FRAMES", len(lefts), f"KITTI sequence {seq}: frames")
     rights = [seq / "image_1" / p.name for p in lefts]
     missing = [p for p in rights if not p.is_file()]
     if missing:

@@ -207,8 +207,7 @@ def read_manifest(path_or_dir: str | os.PathLike) -> Manifest:
     frames_data = data.get("frames")
     if not isinstance(frames_data, list) or not frames_data:
         raise _fail(path, "'frames' must be a non-empty list")
-    if len(frames_data) > _limits.limit("MRSTEREO_MAX_FRAMES"):
-        raise _limits.over_limit("MRSTEREO_MAX_FRAMES", len(frames_data), f"manifest {path}: frames")
+    _limits.within("MRSTEREO_MAX_FRAMES", len(frames_data), f"manifest {path}: frames")
     frames = tuple(_frame(root, path, k, item) for k, item in enumerate(frames_data))
     manifest = Manifest(root=root, calibration=calibration, calibration_path=calib_path, mount=mount,
                         ground_truth_map=gt_map, frames=frames)
