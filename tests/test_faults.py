@@ -587,6 +587,9 @@ def test_a_datasets_files_are_inputs_wherever_they_lie(ds, tmp_path, capsys):
     for args, must in (
             (["odometry", data, "-o", data / "left" / "000001.png"], "--out must end in .txt or .tum"),
             (["odometry", data, "-o", data / "left" / "000001.txt"], "lies inside the dataset"),
+            (["odometry", data, "-o", tmp_path / "t.txt", "--metrics", data / "calibration.json"],
+             "lies inside the dataset"),
+            (["odometry", data, "-o", tmp_path / "t.txt", "--metrics", calib], "--metrics must end in .json"),
             (["odometry", data, "-o", tmp_path / "t.txt", "--metrics", calib.with_suffix(".json")], None),
             (["odometry", data, "-o", calib.with_suffix(".txt"), "--plot", calib], "--plot must end in"),
             (["evaluate", data, "--markdown", calib.with_suffix(".md")], None),
