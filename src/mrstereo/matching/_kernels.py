@@ -303,26 +303,26 @@ def _band_scratch(like, nd, width, radius):
 
 @njit(nogil=True, cache=True, inline="always")
 def _winner_scratch(n):
-    """Per column (:func:`_winners`): best cost, its row, the costs of the rows before and after it."""
-    return np.empty(n, np.float32), np.empty(n, np.float32), np.empty(n, np.float32), np.empty(n, np.float32)
+    """Per column: best cost, its row, the costs of the rows before and after it (:func:`_winners`),
+    the second best (:func:`_second_best`)."""
+    return (np.empty(n, np.float32), np.empty(n, np.float32), np.empty(n, np.float32), np.empty(n, np.float32),
+            np.empty(n, np.float32))
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _start_column_sums(left_pad, right_pad, colsum, y_start, radius, d_lo, cols):
-    """``colsum[k]`` = the products of the first ``2r`` window rows of image row ``y_start`` at
-    disparity ``d_lo + k``, from column ``max(col0, d)`` on."""
+def _add_row_products(left_pad, right_pad, colsum, yy, d_lo, cols, radius):
+    """``colsum[k] +=`` the products of padded row ``yy`` at disparity ``d_lo + k``, from column
+    ``max(col0, d)`` on (a strip's first window rows)."""
     col0, col1 = cols
     c_end = col1 + 2 * radius
     for k in range(colsum.shape[0]):
         d = d_lo + k
         x0 = max(col0, d)
-        n = c_end - x0
         col = colsum[k, x0:c_end]
-        for yy in range(y_start, y_start + 2 * radius):
-            lrow = left_pad[yy, x0:c_end]
-            rrow = right_pad[yy, x0 - d:c_end - d]
-            for i in range(n):
-                col[i] += lrow[i] * rrow[i]
+        lrow = left_pad[yy, x0:c_end]
+        rrow = right_pad[yy, x0 - d:c_end - d]
+        for i in range(c_end - x0):
+            col[i] += lrow[i] * rrow[i]
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
@@ -338,20 +338,18 @@ def _row_costs(left, right, radius, zncc, d_lo, cols, y, first, scratch):
     col0, col1 = cols
     c_end = col1 + 2 * radius
     add = y + 2 * radius
+    if first:
+        _add_row_products(left_pad, right_pad, colsum, add, d_lo, cols, radius)
     for k in range(colsum.shape[0]):
         d = d_lo + k
         x0 = max(col0, d)
-        n = c_end - x0
         col = colsum[k, x0:c_end]
-        la = left_pad[add, x0:c_end]
-        ra = right_pad[add, x0 - d:c_end - d]
-        if first:
-            for i in range(n):
-                col[i] += la[i] * ra[i]
-        else:
+        if not first:
+            la = left_pad[add, x0:c_end]
+            ra = right_pad[add, x0 - d:c_end - d]
             ls = left_pad[y - 1, x0:c_end]
             rs = right_pad[y - 1, x0 - d:c_end - d]
-            for i in range(n):
+            for i in range(c_end - x0):
                 col[i] += la[i] * ra[i] - ls[i] * rs[i]
         crow = cost[k, col0:col1]
         for i in range(min(x0, col1) - col0):
@@ -422,6 +420,18 @@ def _band_minimum(cost, k_lo, k_hi, cols, min_k, min_cost):
             min_cost[i] = _blend(m, c0[i], min_cost[i])
 
 
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _row_winners(left, right, radius, zncc, d_lo, cols, y, first, scratch, winners):
+    """Image row ``y``'s costs (:func:`_row_costs`), winners (eq. 10) with the costs beside them,
+    and second best, into ``winners`` (:func:`_winner_scratch`)."""
+    _row_costs(left, right, radius, zncc, d_lo, cols, y, first, scratch)
+    cost = scratch[3]
+    col0, col1 = cols
+    best_cost, best_k, cost_before, cost_after, second = winners
+    _winners(cost[:, col0:col1], cost.shape[0], col1 - col0, best_cost, best_k, cost_before, cost_after)
+    _second_best(cost, cols, best_k, second)
+
+
 @njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
 def band_winners(left, right, radius, zncc, band, aoi, n_strips, right_check, out):
     """Winner-take-all (eq. 10) over ``d in [d_lo, d_hi]`` for the rows/cols of the AOI, raw.
@@ -458,16 +468,14 @@ def band_winners(left, right, radius, zncc, band, aoi, n_strips, right_check, ou
         if y_start >= y_end:
             continue
         scratch = _band_scratch(left[0], nd, width, radius)
-        cost = scratch[3]
-        best_cost, best_k, cost_before, cost_after = _winner_scratch(nx)
-        second = np.empty(nx, np.float32)
+        winners = _winner_scratch(nx)
+        best_cost, best_k, cost_before, cost_after, second = winners
         right_cost = np.empty(width, np.float32)
         right_d = np.empty(width, np.float32)
-        _start_column_sums(left[0], right[0], scratch[0], y_start, radius, d_lo, cols)
+        for yy in range(y_start, y_start + 2 * radius):
+            _add_row_products(left[0], right[0], scratch[0], yy, d_lo, cols, radius)
         for y in range(y_start, y_end):
-            _row_costs(left, right, radius, zncc, d_lo, cols, y, y == y_start, scratch)
-            _winners(cost[:, col0:col1], nd, nx, best_cost, best_k, cost_before, cost_after)
-            _second_best(cost, cols, best_k, second)
+            _row_winners(left, right, radius, zncc, d_lo, cols, y, y == y_start, scratch, winners)
             for i in range(nx):
                 x = col0 + i
                 kb = np.int32(best_k[i])
@@ -476,7 +484,7 @@ def band_winners(left, right, radius, zncc, band, aoi, n_strips, right_check, ou
                 out_best[y, x] = best_cost[i]
                 out_second[y, x] = second[i]
             if right_check:
-                _right_winners(cost, d_lo, cols, right_cost, right_d)
+                _right_winners(scratch[3], d_lo, cols, right_cost, right_d)
                 for x in range(width):
                     out_right[y, x] = np.int32(right_d[x])
 
@@ -521,18 +529,17 @@ def band_checked(left, right, radius, zncc, band, aoi, n_strips, checks, out, mi
             continue
         scratch = _band_scratch(left[0], nd, width, radius)
         cost = scratch[3]
-        best_cost, best_k, cost_before, cost_after = _winner_scratch(nx)
-        second = np.empty(nx, np.float32)
+        winners = _winner_scratch(nx)
+        best_cost, best_k, cost_before, cost_after, second = winners
         min_k = np.empty(nx, np.float32)
         min_cost = np.empty(nx, np.float32)
         right_cost = np.empty(width, np.float32)
         right_d = np.empty(width, np.float32)
         lr_ok = np.empty(nx, np.bool_)
-        _start_column_sums(left[0], right[0], scratch[0], y_start, radius, d_lo, cols)
+        for yy in range(y_start, y_start + 2 * radius):
+            _add_row_products(left[0], right[0], scratch[0], yy, d_lo, cols, radius)
         for y in range(y_start, y_end):
-            _row_costs(left, right, radius, zncc, d_lo, cols, y, y == y_start, scratch)
-            _winners(cost[:, col0:col1], nd, nx, best_cost, best_k, cost_before, cost_after)
-            _second_best(cost, cols, best_k, second)
+            _row_winners(left, right, radius, zncc, d_lo, cols, y, y == y_start, scratch, winners)
             if minimum_band[0] <= minimum_band[1]:
                 _band_minimum(cost, minimum_band[0] - d_lo, minimum_band[1] - d_lo, cols, min_k, min_cost)
                 om, omc, obc = out_minimum[0][y, col0:col1], out_minimum[1][y, col0:col1], out_minimum[2][y, col0:col1]
@@ -792,7 +799,7 @@ def refine_boxes(left, right, radius, zncc, center_pad, want, boxes, half, max_c
         colsum = np.zeros((nc, ncol), np.float32)
         ring = np.zeros((nc, win, ncol), np.float32)
         cost = np.empty((nc, nx), np.float32)
-        best_cost, best_k, cost_before, cost_after = _winner_scratch(nx)
+        best_cost, best_k, cost_before, cost_after, _ = _winner_scratch(nx)
         run_at = np.empty(ncol + 1, np.int64)
         product_scratch = (np.empty(ncol, np.float32), run_at, np.empty(ncol, np.int64))
         cost_scratch = (np.empty(nx, np.float32), np.empty((4, ncol), np.float32), run_at,
