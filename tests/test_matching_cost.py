@@ -90,7 +90,7 @@ def test_gain_and_offset_change_leaves_zncc_winner_unchanged():
 
 @pytest.mark.parametrize("share", [0.01, 0.3])
 def test_refinement_of_scattered_pixels_equals_the_running_sums(share):
-    """refine_pixels (direct window sums) and refine_boxes (running sums) re-score the same
+    """refine_pixels (direct window sums) and refine_strips (running sums) re-score the same
     scattered pixels of a piecewise-constant coarse field to the same disparities and costs
     (float32 rounding of the cost formula aside), including windows clamped at the left edge."""
     from mrstereo.matching import cost as C

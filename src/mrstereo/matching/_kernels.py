@@ -26,7 +26,8 @@ volume. Integer-valued images (the x-Sobel pre-filter) are summed exactly in flo
 offset ``o`` in ``[-half, half]`` the window sum ``sum I_L(p) I_R(p - c(p) - o)`` over the
 window's pixels ``p`` (``c`` = the coarse disparity of ``p``) is computed with the same
 running sums; where ``c`` is constant over the window this is exactly ``S_LR(x, c + o)``.
-:func:`refine_pixels` adds the same window sums up pixel by pixel, for scattered pixels.
+:func:`refine_strips` does so along runs of constant ``c``, and :func:`refine_pixels` adds the
+same window sums up pixel by pixel, for scattered pixels.
 """
 from __future__ import annotations
 
@@ -126,7 +127,6 @@ def _box(col, out, partial, m, win):
     inputs are integer-valued and their sums exact in any grouping; float64 (non-integer
     images) keeps the binary grouping, so results do not depend on the split."""
     length = m + win - 1
-    sum2 = partial[0]
     if win % 3 == 0 and col.itemsize == 4:
         sum3 = partial[0]
         for i in range(length - 2):
@@ -148,6 +148,7 @@ def _box(col, out, partial, m, win):
                 for i in range(m):
                     out[i] += seg[i]
         return
+    sum2 = partial[0]
     sum4 = partial[1]
     sum8 = partial[2]
     sum16 = partial[3]
@@ -358,8 +359,17 @@ def _row_costs(left, right, radius, zncc, d_lo, cols, y, first, scratch):
         if m <= 0:
             continue
         _box(col, box, partial, m, 2 * radius + 1)
-        _costs(cost[k, x0:col1], box, a_left[y, x0:col1], b_left[y, x0:col1], a_right[y, x0 - d:col1 - d],
-               b_right[y, x0 - d:col1 - d], m, zncc)
+        al = a_left[y, x0:col1]
+        bl = b_left[y, x0:col1]
+        ar = a_right[y, x0 - d:col1 - d]
+        br = b_right[y, x0 - d:col1 - d]
+        cr = cost[k, x0:col1]
+        if zncc:
+            for i in range(m):
+                cr[i] = _zncc_cost(box[i], al[i], ar[i], bl[i], br[i])
+        else:
+            for i in range(m):
+                cr[i] = _nssd_cost(al[i], ar[i], box[i], bl[i], br[i])
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
@@ -536,6 +546,7 @@ def band_checked(left, right, radius, zncc, band, aoi, n_strips, checks, out, mi
         right_cost = np.empty(width, np.float32)
         right_d = np.empty(width, np.float32)
         lr_ok = np.empty(nx, np.bool_)
+        sub = np.empty(nx, np.float32)
         for yy in range(y_start, y_start + 2 * radius):
             _add_row_products(left[0], right[0], scratch[0], yy, d_lo, cols, radius)
         for y in range(y_start, y_end):
@@ -547,16 +558,10 @@ def band_checked(left, right, radius, zncc, band, aoi, n_strips, checks, out, mi
                     om[i] = np.float32(d_lo) + min_k[i] if min_k[i] >= 0 else np.float32(np.nan)
                     omc[i] = min_cost[i]
                     obc[i] = best_cost[i]
-            # the left-right check's gather apart, so that the loop below vectorizes
             if lr_tol >= 0:
                 _right_winners(cost, d_lo, cols, right_cost, right_d)
-                for i in range(nx):
-                    d = d_lo + np.int64(best_k[i])
-                    back = np.int64(right_d[min(max(col0 + i - d, 0), width - 1)])
-                    lr_ok[i] = (back >= 0) & (abs(d - back) <= lr_int)
-            else:
-                for i in range(nx):
-                    lr_ok[i] = True
+            for i in range(nx):         # apart: the loop below then vectorizes
+                sub[i] = _parabola(best_cost[i], cost_before[i], cost_after[i])
             od = out_disparity[y]
             oc = out_confidence[y]
             for x in range(col0):
@@ -567,6 +572,15 @@ def band_checked(left, right, radius, zncc, band, aoi, n_strips, checks, out, mi
                 oc[x] = 0.0
             od = out_disparity[y, col0:col1]
             oc = out_confidence[y, col0:col1]
+            # the left-right check's gather apart, so that the loop below vectorizes
+            if lr_tol >= 0:
+                for i in range(nx):
+                    d = d_lo + np.int64(best_k[i])
+                    back = np.int64(right_d[min(max(col0 + i - d, 0), width - 1)])
+                    lr_ok[i] = (back >= 0) & (abs(d - back) <= lr_int)
+            else:
+                for i in range(nx):
+                    lr_ok[i] = True
             for i in range(nx):
                 kb = np.int64(best_k[i])
                 cb = best_cost[i]
@@ -574,12 +588,11 @@ def band_checked(left, right, radius, zncc, band, aoi, n_strips, checks, out, mi
                 ok = kb >= 0 and lr_ok[i]
                 ok = ok and (ratio <= 0 or cb <= keep * c2)
                 ok = ok and (max_cost < 0 or cb <= max_c)
-                sub = _parabola(cb, cost_before[i], cost_after[i])
                 conf = np.float32(1.0) - cb / (c2 if c2 > 0 else np.float32(1.0))
                 conf = min(max(conf, np.float32(0.0)), np.float32(1.0))
                 conf = np.float32(1.0) if c2 >= BIG else conf
                 conf = np.float32(0.0) if c2 <= 0 else conf
-                value = np.float32(d_lo + kb) + (sub if parabola else np.float32(0.0))
+                value = np.float32(d_lo + kb) + (sub[i] if parabola else np.float32(0.0))
                 od[i] = value if ok else np.float32(np.nan)
                 oc[i] = conf if ok else np.float32(0.0)
 
@@ -620,7 +633,7 @@ def _refined(center, best_k, best_cost, cost_before, cost_after, half, max_cost)
     inside = ((best_k > 0) and (best_k < 2 * half) and (best_cost < BIG)
               and (max_cost < 0 or best_cost <= np.float32(max_cost)))
     value = np.float32(center + best_k - half) + _parabola(best_cost, cost_before, cost_after)
-    return (value, best_cost) if inside else (np.float32(np.nan), np.float32(np.inf))
+    return (value if inside else np.float32(np.nan)), (best_cost if inside else np.float32(np.inf))
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -648,44 +661,6 @@ def _runs(values, n, out_starts):
     return count
 
 
-@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _products_by_runs(lrow, rrow, centers, run_at, n_runs, xa, off, out):
-    """``out[i] = I_L(xa + i) I_R(xa + i - c_i - off)`` (the right column clamped to the padded
-    row) along runs of constant ``c``, each a contiguous read of the right row."""
-    wp = rrow.size
-    for r in range(n_runs):
-        i0 = run_at[r]
-        i1 = run_at[r + 1]
-        base = xa - centers[i0] - off          # q = base + i
-        lo = min(max(i0, -base), i1)
-        hi = max(min(i1, wp - base), lo)
-        for i in range(i0, lo):
-            out[i] = lrow[i] * rrow[0]
-        seg_l = lrow[lo:hi]
-        seg_r = rrow[base + lo:base + hi]
-        seg_o = out[lo:hi]
-        for i in range(hi - lo):
-            seg_o[i] = seg_l[i] * seg_r[i]
-        for i in range(hi, i1):
-            out[i] = lrow[i] * rrow[wp - 1]
-
-
-@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _costs_by_runs(out, box, al, bl, ar, br, centers, run_at, n_runs, wa, off, zncc):
-    """Costs of the wanted span's pixels ``wa + i`` at ``d = c_i + off`` along runs of constant
-    ``c`` (the right terms read contiguously), BIG where ``d < 0`` or ``x_right < 0``."""
-    for r in range(n_runs):
-        i0 = run_at[r]
-        i1 = run_at[r + 1]
-        d = centers[i0] + off
-        k0 = min(max(i0, d - wa), i1) if d >= 0 else i1
-        for i in range(i0, k0):
-            out[i] = BIG
-        base = wa - d                              # x_right = base + i
-        _costs(out[k0:i1], box[k0:i1], al[k0:i1], bl[k0:i1], ar[base + k0:base + i1], br[base + k0:base + i1],
-               i1 - k0, zncc)
-
-
 @njit(nogil=True, cache=True, inline="always")
 def _wanted_columns(want, box):
     """The columns ``(first, last + 1)`` spanned by the wanted pixels of ``box = (row0, row1,
@@ -698,65 +673,138 @@ def _wanted_columns(want, box):
     return xa, xb
 
 
+# One body: the product and cost gathers as inlined helpers measured 3-6 % slower (numba counts
+# the references of an inlined call's array arguments at every call, here per run and offset).
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _slide_products(lrow, rrow, centers, xa, half, by_runs, colsum, ring, slot, scratch):
-    """Add the products ``I_L(p) I_R(p - c(p) - o)`` of one padded row (columns ``xa ..``, coarse
-    disparities ``centers``) at every offset ``o`` to the column sums ``colsum[o]``, less those
-    of the row that leaves the window, which ``ring[o, slot]`` held and now holds the new ones."""
-    fresh, run_at, q0 = scratch
-    ncol = lrow.size
-    wp = rrow.size
-    n_runs = 0
-    if by_runs:
-        n_runs = _runs(centers, ncol, run_at)
-    else:
-        for i in range(ncol):
-            q0[i] = xa + i - centers[i]
-    for o in range(colsum.shape[0]):
-        off = o - half
-        if by_runs:
-            _products_by_runs(lrow, rrow, centers, run_at, n_runs, xa, off, fresh)
-        else:
+def _refine_box(left, right, radius, zncc, center_pad, want, box, half, max_cost, by_runs, out):
+    """Re-score the wanted pixels of one box (:func:`refine_boxes`). ``by_runs`` (a constant of
+    each kernel) gathers the products ``I_L(p) I_R(p - c(p) - o)`` and the right terms along runs
+    of constant ``c`` (contiguous reads) or pixel by pixel (the right column clamped to the
+    padded row; no bookkeeping). The products of the rows inside the window are kept in a ring
+    buffer, so each is gathered once."""
+    left_pad, a_left, b_left = left
+    right_pad, a_right, b_right = right
+    out_disp, out_cost = out
+    nc = 2 * half + 1
+    win = 2 * radius + 1
+    wp = right_pad.shape[1]
+    y_start, y_end = box[0], box[1]
+    xa, xb = _wanted_columns(want, box)
+    if y_end <= y_start or xb <= xa:
+        return
+    nx = xb - xa                    # pixels xa .. xb - 1
+    ncol = nx + 2 * radius          # padded columns xa .. xb - 1 + 2r
+    colsum = np.zeros((nc, ncol), np.float32)
+    ring = np.zeros((nc, win, ncol), np.float32)
+    fresh = np.empty(ncol, np.float32)
+    box_sums = np.empty(nx, np.float32)
+    partial = np.empty((4, ncol), np.float32)
+    cost = np.empty((nc, nx), np.float32)
+    best_cost, best_k, cost_before, cost_after, _ = _winner_scratch(nx)
+    run_at = np.empty(ncol + 1, np.int64)
+    q0 = np.empty(ncol, np.int64)
+    ar_at = np.empty(nx, a_right.dtype)
+    br_at = np.empty(nx, np.float32)
+    for yy in range(y_start, y_end + 2 * radius):
+        slot = (yy - y_start) % win
+        lrow = left_pad[yy, xa:xa + ncol]
+        rrow = right_pad[yy]
+        crow = center_pad[yy, xa:xa + ncol]
+        n_runs = _runs(crow, ncol, run_at) if by_runs else 0
+        if not by_runs:
             for i in range(ncol):
-                fresh[i] = lrow[i] * rrow[min(max(q0[i] - off, 0), wp - 1)]
-        col = colsum[o]
-        old = ring[o, slot]
-        for i in range(ncol):
-            col[i] += fresh[i] - old[i]
-            old[i] = fresh[i]
-
-
-@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _offset_costs(colsum, first, centers, left_terms, right_terms, wa, half, win, zncc, by_runs, scratch, cost):
-    """``cost[o, i]``: the cost of pixel ``wa + i`` (``i < centers.size``) at ``d = c_i + o - half``
-    from its window sum (the column sums ``colsum[o, first + i:]``), BIG where ``d < 0`` or
-    ``x_right < 0``."""
-    box, partial, run_at, ar_at, br_at = scratch
-    al, bl = left_terms
-    ar, br = right_terms
-    nw = centers.size
-    n_runs = _runs(centers, nw, run_at) if by_runs else 0
-    for o in range(cost.shape[0]):
-        off = o - half
-        _box(colsum[o, first:], box, partial, nw, win)
-        crow = cost[o]
-        if by_runs:
-            _costs_by_runs(crow, box, al, bl, ar, br, centers, run_at, n_runs, wa, off, zncc)
+                q0[i] = xa + i - crow[i]
+        for o in range(nc):
+            off = o - half
+            if by_runs:
+                for r in range(n_runs):         # q = base + i along a run, clamped to the padded row
+                    i0 = run_at[r]
+                    i1 = run_at[r + 1]
+                    base = xa - crow[i0] - off
+                    lo = min(max(i0, -base), i1)
+                    hi = max(min(i1, wp - base), lo)
+                    for i in range(i0, lo):
+                        fresh[i] = lrow[i] * rrow[0]
+                    seg_l = lrow[lo:hi]
+                    seg_r = rrow[base + lo:base + hi]
+                    seg_f = fresh[lo:hi]
+                    for i in range(hi - lo):
+                        seg_f[i] = seg_l[i] * seg_r[i]
+                    for i in range(hi, i1):
+                        fresh[i] = lrow[i] * rrow[wp - 1]
+            else:
+                for i in range(ncol):
+                    fresh[i] = lrow[i] * rrow[min(max(q0[i] - off, 0), wp - 1)]
+            col = colsum[o]
+            old = ring[o, slot]
+            for i in range(ncol):
+                col[i] += fresh[i] - old[i]
+                old[i] = fresh[i]
+        y = yy - 2 * radius
+        if y < y_start:
             continue
-        # the right terms gathered pixel by pixel (x_right clamped), then the costs as a row
-        for i in range(nw):
-            xr = min(max(wa + i - centers[i] - off, 0), wa + i)
-            ar_at[i] = ar[xr]
-            br_at[i] = br[xr]
-        _costs(crow, box, al, bl, ar_at, br_at, nw, zncc)
-        for i in range(nw):
-            d = centers[i] + off
-            crow[i] = crow[i] if (d >= 0 and wa + i >= d) else BIG     # x_right < 0 or d < 0: none
+        # window sums of row y are complete: costs over the columns of its wanted pixels
+        wa, wb = _wanted_span(want[y], xa, xb)
+        if wb <= wa:
+            continue
+        nw = wb - wa
+        cy = center_pad[y + radius, radius + wa:radius + wb]
+        al = a_left[y, wa:wb]
+        bl = b_left[y, wa:wb]
+        ar = a_right[y]
+        br = b_right[y]
+        n_runs = _runs(cy, nw, run_at) if by_runs else 0
+        for o in range(nc):
+            off = o - half
+            _box(colsum[o, wa - xa:], box_sums, partial, nw, win)
+            crow_c = cost[o]
+            if by_runs:
+                for r in range(n_runs):         # x_right = base + i along a run
+                    i0 = run_at[r]
+                    i1 = run_at[r + 1]
+                    d = cy[i0] + off
+                    k0 = min(max(i0, d - wa), i1) if d >= 0 else i1
+                    for i in range(i0, k0):
+                        crow_c[i] = BIG         # x_right < 0 or d < 0: no candidate
+                    base = wa - d
+                    seg_ar = ar[base + k0:base + i1]
+                    seg_br = br[base + k0:base + i1]
+                    seg_box = box_sums[k0:i1]
+                    seg_al = al[k0:i1]
+                    seg_bl = bl[k0:i1]
+                    seg_c = crow_c[k0:i1]
+                    if zncc:
+                        for i in range(i1 - k0):
+                            seg_c[i] = _zncc_cost(seg_box[i], seg_al[i], seg_ar[i], seg_bl[i], seg_br[i])
+                    else:
+                        for i in range(i1 - k0):
+                            seg_c[i] = _nssd_cost(seg_al[i], seg_ar[i], seg_box[i], seg_bl[i], seg_br[i])
+                continue
+            for i in range(nw):
+                xr = min(max(wa + i - cy[i] - off, 0), wa + i)
+                ar_at[i] = ar[xr]
+                br_at[i] = br[xr]
+            _costs(crow_c, box_sums, al, bl, ar_at, br_at, nw, zncc)
+            for i in range(nw):
+                d = cy[i] + off
+                crow_c[i] = crow_c[i] if (d >= 0 and wa + i >= d) else BIG     # x_right < 0 or d < 0: none
+        _winners(cost, nc, nw, best_cost, best_k, cost_before, cost_after)
+        od = out_disp[y, wa:wb]
+        oc = out_cost[y, wa:wb]
+        wy = want[y, wa:wb]
+        for i in range(nw):             # branch-free: vectorizes
+            value, c = _refined(cy[i], np.int64(best_k[i]), best_cost[i], cost_before[i], cost_after[i], half,
+                                max_cost)
+            od[i] = value if wy[i] else od[i]
+            oc[i] = c if wy[i] else oc[i]
 
 
 @njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
-def refine_boxes(left, right, radius, zncc, center_pad, want, boxes, half, max_cost, by_runs, out):
-    """Full-resolution re-scoring of a coarse disparity field over ``c + o``, ``|o| <= half``.
+def refine_boxes(left, right, radius, zncc, center_pad, want, boxes, half, max_cost, out):
+    """Full-resolution re-scoring of a coarse disparity field over ``c + o``, ``|o| <= half``,
+    box by box in parallel, the products gathered pixel by pixel (the right column clamped to
+    the padded row): the cost does not grow where ``c`` changes every few pixels (the near
+    guard's fields).
 
     Parameters
     ----------
@@ -767,15 +815,10 @@ def refine_boxes(left, right, radius, zncc, center_pad, want, boxes, half, max_c
     want : ndarray bool (H, W)
         Pixels to refine; the others are left untouched.
     boxes : ndarray int64 (n, 4)
-        ``(row0, row1, col0, col1)`` (half-open) that hold the wanted pixels, in parallel; the
-        running sums cover each box's wanted columns, from its first row on.
+        ``(row0, row1, col0, col1)`` (half-open) that hold the wanted pixels; the running sums
+        cover each box's wanted columns, from its first row on.
     max_cost : float
         Winners costing more are rejected (< 0: off).
-    by_runs : bool
-        Gather the products ``I_L(p) I_R(p - c(p) - o)`` and the costs along runs of constant
-        ``c`` (contiguous reads: fastest where ``c`` is constant over many pixels, a level's
-        up-sampled field) or pixel by pixel (no bookkeeping: where ``c`` changes every few
-        pixels, the near guard's fields). Same sums either way.
     out : tuple of ndarray float32 (H, W)
         ``(disparity, cost)``: ``c + o* +`` parabola offset and its cost where the winner
         ``o*`` passes :func:`_refined`, else NaN and inf.
@@ -783,48 +826,17 @@ def refine_boxes(left, right, radius, zncc, center_pad, want, boxes, half, max_c
     The products of the rows inside the window are kept in a ring buffer, so each is
     gathered once.
     """
-    left_pad, a_left, b_left = left
-    right_pad, a_right, b_right = right
-    out_disp, out_cost = out
-    nc = 2 * half + 1
-    win = 2 * radius + 1
     for j in prange(boxes.shape[0]):
-        y_start = boxes[j, 0]
-        y_end = boxes[j, 1]
-        xa, xb = _wanted_columns(want, boxes[j])
-        if y_end <= y_start or xb <= xa:
-            continue
-        nx = xb - xa                    # pixels xa .. xb - 1
-        ncol = nx + 2 * radius          # padded columns xa .. xb - 1 + 2r
-        colsum = np.zeros((nc, ncol), np.float32)
-        ring = np.zeros((nc, win, ncol), np.float32)
-        cost = np.empty((nc, nx), np.float32)
-        best_cost, best_k, cost_before, cost_after, _ = _winner_scratch(nx)
-        run_at = np.empty(ncol + 1, np.int64)
-        product_scratch = (np.empty(ncol, np.float32), run_at, np.empty(ncol, np.int64))
-        cost_scratch = (np.empty(nx, np.float32), np.empty((4, ncol), np.float32), run_at,
-                        np.empty(nx, a_right.dtype), np.empty(nx, np.float32))
-        for yy in range(y_start, y_end + 2 * radius):
-            _slide_products(left_pad[yy, xa:xa + ncol], right_pad[yy], center_pad[yy, xa:xa + ncol], xa, half,
-                            by_runs, colsum, ring, (yy - y_start) % win, product_scratch)
-            y = yy - 2 * radius
-            if y < y_start:
-                continue
-            # window sums of row y are complete: costs over the columns of its wanted pixels
-            wa, wb = _wanted_span(want[y], xa, xb)
-            if wb <= wa:
-                continue
-            cy = center_pad[y + radius, radius + wa:radius + wb]
-            _offset_costs(colsum, wa - xa, cy, (a_left[y, wa:wb], b_left[y, wa:wb]), (a_right[y], b_right[y]),
-                          wa, half, win, zncc, by_runs, cost_scratch, cost)
-            _winners(cost, nc, wb - wa, best_cost, best_k, cost_before, cost_after)
-            od = out_disp[y, wa:wb]
-            oc = out_cost[y, wa:wb]
-            wy = want[y, wa:wb]
-            for i in range(wb - wa):
-                if wy[i]:
-                    od[i], oc[i] = _refined(cy[i], np.int64(best_k[i]), best_cost[i], cost_before[i],
-                                            cost_after[i], half, max_cost)
+        _refine_box(left, right, radius, zncc, center_pad, want, boxes[j], half, max_cost, False, out)
+
+
+@njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
+def refine_strips(left, right, radius, zncc, center_pad, want, strips, half, max_cost, out):
+    """:func:`refine_boxes` over row strips (``strips`` as ``boxes``), the products and costs
+    gathered along runs of constant ``c`` (contiguous reads: fastest where ``c`` is constant over
+    many pixels, a level's up-sampled field). Same sums, same results."""
+    for j in prange(strips.shape[0]):
+        _refine_box(left, right, radius, zncc, center_pad, want, strips[j], half, max_cost, True, out)
 
 
 @njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
@@ -1132,10 +1144,11 @@ def unite(disparity, confidence, first, out_d, out_c):
                 od[x] = dr[x] if valid else nan
                 oc[x] = cr[x] if valid else np.float32(0.0)
         else:
-            for x in range(width):
-                take = np.isfinite(dr[x]) and not (np.isfinite(od[x]) and cr[x] <= oc[x])
-                od[x] = dr[x] if take else od[x]
-                oc[x] = cr[x] if take else oc[x]
+            for x in range(width):      # & and ~, not the branches of `and`: the loop vectorizes
+                d, c, kept_d, kept_c = dr[x], cr[x], od[x], oc[x]
+                take = np.isfinite(d) & ~(np.isfinite(kept_d) & (c <= kept_c))
+                od[x] = d if take else kept_d
+                oc[x] = c if take else kept_c
 
 
 @njit(nogil=True, cache=True)

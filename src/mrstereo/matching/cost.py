@@ -328,7 +328,7 @@ def match_band(left: np.ndarray, right: np.ndarray, *, d_lo: int, d_hi: int, win
 
 # refine_candidates adds up the windows of single pixels (refine_pixels) when fewer than 1 in
 # SPARSE_REFINE_SHARE pixels of the rows spanned are wanted (the near guard's scattered
-# candidates), else keeps running sums over those rows (refine_boxes): the direct sums cost
+# candidates), else keeps running sums over those rows (refine_strips): the direct sums cost
 # 81 products per pixel and offset, the running sums a few per pixel of the rows spanned, so
 # the direct sums are cheaper while the wanted pixels are few (about 2.5 % on the shared
 # real scenes at 640x480).
@@ -395,7 +395,7 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
                                     for s in range(threads)])
         # the near guard's fields change every few pixels: products gathered pixel by pixel
         _kernels.refine_boxes(left.arrays, right.arrays, r, left.zncc, center_pad, want, boxes, int(half_px),
-                              max_cost, False, (out, cost))
+                              max_cost, (out, cost))
         return out, cost
     hit = np.flatnonzero(want[rows[0]:rows[1]].any(axis=1))
     if not hit.size:
@@ -410,6 +410,6 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     n = _strips(n_strips, rows[1] - rows[0])
     edges = [rows[0] + (s * (rows[1] - rows[0])) // n for s in range(n + 1)]
     strips = np.array([(edges[s], edges[s + 1], 0, w) for s in range(n)], np.int64)
-    _kernels.refine_boxes(left.arrays, right.arrays, r, left.zncc, center_pad, want, strips, int(half_px), max_cost,
-                          True, (out, cost))
+    _kernels.refine_strips(left.arrays, right.arrays, r, left.zncc, center_pad, want, strips, int(half_px), max_cost,
+                           (out, cost))
     return out, cost
