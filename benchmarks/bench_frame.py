@@ -5,10 +5,11 @@ frames, rendered by this script into a temporary folder) at 640x480 and 320x240,
 process, alternating frame by frame, with one thread and two (``numba.set_num_threads``,
 ``cv2.setNumThreads``; NUMBA_NUM_THREADS must allow 2):
 
-* mrstereo: :func:`mrstereo.geometry.obstacles_from_pair` on the raw pair (rectify with the
+* mrstereo: :func:`mrstereo.pipeline.frame.obstacles_from_pair` on the raw pair (rectify with the
   calibration, multi-range matching of the ``mapping`` preset, eq. 13 rejection, floor from
   the mount, eq. 14-16, obstacle/floor split) then the grid cells it hits and clears and the
-  log-odds update (:func:`mrstereo.pipeline.observation_from_pair`, :func:`mrstereo.mapping.fusion.add_observation`).
+  log-odds update (:func:`mrstereo.pipeline.run.observation_from_pair`,
+  :func:`mrstereo.mapping.fusion.add_observation`).
 * OpenCV: ``cv2.remap`` x2 with maps built once, ``StereoBM`` (9x9, ``numDisparities`` the
   multiple of 16 covering mrstereo's near limit), ``cv2.reprojectImageTo3D``, the same height
   band and range limit in the robot frame, ``np.add.at`` of the obstacle points into a grid of
@@ -47,10 +48,11 @@ from mrstereo.io import read_image
 from mrstereo.mapping import OccupancyGrid
 from mrstereo.mapping.fusion import add_observation
 from mrstereo.pipeline.frame import obstacles_from_pair
+from mrstereo.pipeline.parallel import keep_freed_memory
 from mrstereo.pipeline.run import PipelineConfig, observation_from_pair, pair_options
 from mrstereo.profiling import Profile, profiling
 from mrstereo.recordings.manifest import read_manifest
-from mrstereo.transforms import T_from_planar, T_robot_from_cam
+from mrstereo.transforms import T_from_planar
 
 STAGES = ("rectify", "match", "reject", "3-D", "free space", "grid")
 CLOCK = time.perf_counter
@@ -83,12 +85,11 @@ class MrstereoChain:
         record = self.manifest.frames[k]
         with profiling(Profile(clock=CLOCK)) as prof:
             frame = obstacles_from_pair(left, right, self.manifest.calibration, rectified=False,
-                                        rig=self.manifest.rig, pan_rad=record.pan_rad, **pair_options(self.config))
+                                        mount=self.manifest.mount, pan_rad=record.pan_rad, **pair_options(self.config))
             obs = observation_from_pair(frame, record, index=k, config=self.config,
                                         stereo=self.manifest.calibration)
             add_observation(self.grid, obs)       # traced against the map so far, as map does
         if self.odometry:
-            from mrstereo.camera.mount import T_base_from_cam_of
             from mrstereo.odometry import StereoOdometry
 
             stereo = self.manifest.calibration
@@ -96,8 +97,8 @@ class MrstereoChain:
                 self.vo = StereoOdometry(stereo)
             left_rect, right_rect = stereo.rectify(left, right)       # (done inside the chain above too)
             t0 = CLOCK()
-            self.vo.step(left_rect, right_rect, T_base_from_cam=T_base_from_cam_of(self.manifest.rig, record.pan_rad),
-                         disparity_px=frame.raw_disparity_px)
+            mount = self.manifest.mount.T_base_from_rectified(stereo.left.R, record.pan_rad)
+            self.vo.step(left_rect, right_rect, T_base_from_cam=mount, disparity_px=frame.raw_disparity_px)
             prof.add("odometry", CLOCK() - t0)
         self.max_disparity_px = frame.max_disparity_px
         return {name: 1000.0 * prof.seconds.get(name, 0.0) for name in STAGES + ("odometry",)}
@@ -120,7 +121,7 @@ class OpenCVChain:
 
     def __call__(self, k: int, left, right) -> dict[str, float]:
         record, grid, obst = self.manifest.frames[k], self.config.grid, self.config.obstacles
-        rig = self.manifest.rig
+        T_rc = self.manifest.mount.T_base_from_rectified(self.manifest.calibration.left.R, record.pan_rad)
         t = [CLOCK()]
         left_r = cv2.remap(left, *self.maps[0], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         right_r = cv2.remap(right, *self.maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
@@ -130,7 +131,6 @@ class OpenCVChain:
         disp = disp16.astype(np.float32) / 16.0
         xyz = cv2.reprojectImageTo3D(disp, self.Q)
         valid = disp > 0
-        T_rc = T_robot_from_cam(height_m=rig.height_m, tilt_rad=rig.tilt_rad, pan_rad=record.pan_rad)
         pts = xyz[valid] @ T_rc[:3, :3].T + T_rc[:3, 3]
         band = ((pts[:, 2] > obst.min_obstacle_height_m) & (pts[:, 2] < obst.max_obstacle_height_m)
                 & (np.hypot(pts[:, 0], pts[:, 1]) <= obst.max_range_m))
@@ -305,6 +305,7 @@ def main() -> None:
     parser.add_argument("--near-guard", type=float, default=None,
                         help="scenes: the reach of the matcher's too-near guard (0 = without the guard; default the preset's)")
     args = parser.parse_args()
+    keep_freed_memory()          # as the mrstereo command does (for both chains of this process)
     if args.cpu:
         global CLOCK
         CLOCK = time.thread_time

@@ -6,7 +6,7 @@ of the path: occupied precision / recall (1-cell tolerance, recall over the wall
 obstacle outlines; "recall in view" over those some frame had in view), the corridor-profile
 error (mean distance of occupied cells to the true walls), the share of cells mapped free that are truly free ("free correct"), the share of the
 true free cells in view of some frame that are mapped free ("free coverage"), the share of all
-true free cells within 4 m mapped free, recall within 1 m of the path ("near": where the
+true free cells within 4 m mapped free ("free recall"), recall within 1 m of the path ("near": where the
 multi-range approach matters) and the share of the obstacles some frame shows within 4 m (50
 pixels clear of the image border) that the map found (an occupied cell on or next to the
 obstacle's footprint).
@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 COLUMNS = ("occupied precision", "occupied recall", "recall in view", "wall profile error [cm]", "free correct",
-           "free coverage", "true free mapped free", "recall within 1 m", "obstacles found")
+           "free coverage", "free recall", "recall within 1 m", "obstacles found")
 PROFILE = COLUMNS.index("wall profile error [cm]")      # the one column where less is better
 
 
@@ -100,7 +100,7 @@ def _metrics(grid, gt, path, views, obstacles) -> tuple:
     occupied = dilate_cells(grid.to_ros_map().occupied, 1)
     found = np.mean([(occupied & cells).any() for cells in obstacles]) if obstacles else np.nan
     return (far.precision, far.recall, far.recall_in_view, far.mean_distance_m * 100, far.free_precision,
-            far.free_coverage, far.free_accuracy, near.recall, found)
+            far.free_coverage, far.free_recall, near.recall, found)
 
 
 def seen_obstacles(manifest, footprints: dict, *, range_m: float, min_pixels: int = 50, border_px: int = 10) -> list:

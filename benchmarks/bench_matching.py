@@ -37,6 +37,7 @@ import numpy as np
 
 from mrstereo.camera import Camera, StereoCamera
 from mrstereo.matching import compute_disparity, make_plan, preset_config
+from mrstereo.pipeline.parallel import keep_freed_memory
 from mrstereo.recordings import samples as sample_data
 
 # the public sample scenes (mrstereo.recordings.samples: $MRSTEREO_DATA or `mrstereo data fetch`)
@@ -252,6 +253,7 @@ def main() -> None:
     parser.add_argument("--near-sweep", action="store_true",
                         help="multi-range vs one range as the near limit shrinks")
     args = parser.parse_args()
+    keep_freed_memory()          # as the mrstereo command does (for mrstereo and OpenCV alike)
     if args.accuracy:
         accuracy(args.scale)
     elif args.near_sweep:

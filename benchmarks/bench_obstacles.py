@@ -36,11 +36,11 @@ import time
 import numpy as np
 from scipy import ndimage
 
-from mrstereo.geometry import ObstacleConfig, detect_obstacles, estimate_ground, points_robot_from_disparity
+from mrstereo.geometry import (ObstacleConfig, detect_obstacles, estimate_ground, ground_from_mount,
+                               points_robot_from_disparity)
 from mrstereo.matching import compute_disparity
 from mrstereo.matching.config import preset_config
 from mrstereo.rejection import RejectionConfig, reject_uniform
-from mrstereo.transforms import T_robot_from_cam
 from mrstereo.world import LABEL_FLOOR, default_scene, default_stereo, is_obstacle_label, render_stereo_frame
 
 RES_M = 0.05
@@ -84,8 +84,7 @@ def frame_truth(frame, stereo, config: ObstacleConfig, *, min_depth_m: float):
     (what the matcher's plan can see) and their horizontal range is within RADIUS_M;
     obstacles and walls within the height band.
     """
-    rig = stereo.rig
-    T = T_robot_from_cam(height_m=rig.height_m, tilt_rad=rig.tilt_rad, pan_rad=frame.pan_rad)
+    T = stereo.mount.T_base_from_rectified(stereo.left.R, frame.pan_rad)
     gt = points_robot_from_disparity(frame.disparity_px, stereo, T)
     with np.errstate(invalid="ignore"):
         near = ((np.hypot(gt[..., 0], gt[..., 1]) <= RADIUS_M) & (frame.depth_m >= min_depth_m)
@@ -256,15 +255,16 @@ def main(argv=None) -> int:
                 continue
             print(f"{label:>14} {name:>7} {e.size:>7d} {np.median(e) * 1e3:>9.1f} {np.percentile(e, 90) * 1e3:>8.1f} "
                   f"{np.median(e) / (0.5 * (lo + hi)) * 100:>12.2f}")
-    print(f"\n## Floor estimated from the disparity (true: height {stereo.rig.height_m} m, tilt "
-          f"{math.degrees(stereo.rig.tilt_rad):.2f} deg)")
+    rig = ground_from_mount(stereo.mount, R_rect_from_cam=stereo.left.R)      # the true floor
+    print(f"\n## Floor estimated from the disparity (true: height {rig.height_m:g} m, tilt "
+          f"{math.degrees(rig.tilt_rad):.2f} deg)")
     for method, gs in grounds.items():
         ok = [g for g in gs if g.success]
         if not ok:
             print(f"{method:>12}: failed on all frames")
             continue
-        dh = np.array([abs(g.height_m - stereo.rig.height_m) for g in ok])
-        dt = np.array([abs(math.degrees(g.tilt_rad - stereo.rig.tilt_rad)) for g in ok])
+        dh = np.array([abs(g.height_m - rig.height_m) for g in ok])
+        dt = np.array([abs(math.degrees(g.tilt_rad - rig.tilt_rad)) for g in ok])
         print(f"{method:>12}: {len(ok)}/{len(gs)} frames; |dh| median {np.median(dh) * 1e3:.1f} mm, "
               f"max {dh.max() * 1e3:.1f} mm; |dtilt| median {np.median(dt):.3f} deg, max {dt.max():.3f} deg")
     return 0

@@ -60,10 +60,10 @@ def _observe_range(data: Path, start: int, stop: int) -> None:
     cv2.setNumThreads(1)
     threadpool_limits(limits=1, user_api="blas")      # as the workers: OpenBLAS's idle threads spin
     m = read_manifest(data)
-    observe_frame(m.frames[start], m.calibration, rig=m.rig)        # kernels loaded
+    observe_frame(m.frames[start], m.calibration, mount=m.mount)        # kernels loaded
     t = time.perf_counter()
     for k in range(start, stop):
-        observe_frame(m.frames[k], m.calibration, index=k, rig=m.rig)
+        observe_frame(m.frames[k], m.calibration, index=k, mount=m.mount)
     print(time.perf_counter() - t)
 
 

@@ -1,13 +1,22 @@
-"""Shared test helpers: the public sample scenes (mrstereo.recordings.samples) and how tests skip without them.
+"""Shared test fixtures: synthetic datasets, the public sample scenes and how tests skip without them.
 
-Tests that need a real scene either take the ``sample_data`` fixture (``sample_data("tsukuba")``
-returns its folder) or carry ``@pytest.mark.sample_data("tsukuba", ...)`` and build paths with
-:func:`mrstereo.recordings.samples.local_path`. Without the files they skip with a reason that names the
-environment variable and the fetch command; nothing is downloaded during a test run. CI
-(``.ci/run``) points ``MRSTEREO_DATA`` at a local copy.
+* ``synthetic_dataset(**params)``: a rendered corridor dataset, made once per session for each set of
+  parameters and shared by every test that asks for it.
+* Tests that need a real scene either take the ``sample_data`` fixture (``sample_data("tsukuba")``
+  returns its folder), or ``middlebury_scene`` (a Middlebury pair with its ground truth), or carry
+  ``@pytest.mark.sample_data("tsukuba", ...)`` and build paths with
+  :func:`mrstereo.recordings.samples.local_path`. Without the files they skip with a reason that names the
+  environment variable and the fetch command; nothing is downloaded during a test run. CI
+  (``.ci/run``) points ``MRSTEREO_DATA`` at a local copy.
+* ``slow`` (pyproject.toml) marks the tests that take many seconds: ``python -m pytest -m "not slow"``
+  skips them.
+
+Helpers for writing ROS bags live in ``_bags.py``.
 """
 from __future__ import annotations
 
+import cv2
+import numpy as np
 import pytest
 
 from mrstereo.recordings import samples as data
@@ -22,17 +31,35 @@ def skip_reason(name: str) -> str | None:
             f"or run `mrstereo data fetch {name}`")
 
 
-def pytest_configure(config):
-    config.addinivalue_line("markers", "sample_data(*names): the test needs these mrstereo.recordings.samples scenes; "
-                                       "skipped with the fetch command when they are missing")
-
-
 def pytest_runtest_setup(item):
     for marker in item.iter_markers("sample_data"):
         for name in marker.args:
             reason = skip_reason(name)
             if reason:
                 pytest.skip(reason)
+
+
+# Middlebury scenes: sample data name, left, right, ground truth, ground-truth divisor, search range
+MIDDLEBURY = {
+    "tsukuba": ("tsukuba", "scene1.row3.col3.ppm", "scene1.row3.col4.ppm", "truedisp.row3.col3.pgm", 16.0, 16),
+    "teddy": ("teddy", "im2.ppm", "im6.ppm", "disp2.pgm", 4.0, 64),
+}
+
+
+@pytest.fixture
+def middlebury_scene(sample_data):
+    """``middlebury_scene(name) -> (left, right, truth, max_disparity_px)``: a gray pair of :data:`MIDDLEBURY`
+    and its true disparity, NaN where unknown or occluded (non-occluded mask of the scene where it has one)."""
+    def get(name: str):
+        sample, left, right, gt, divisor, max_d = MIDDLEBURY[name]
+        folder = sample_data(sample)
+        read = lambda p: cv2.imread(str(folder / p), cv2.IMREAD_GRAYSCALE)     # noqa: E731
+        truth = read(gt).astype(np.float32) / divisor        # 0 = unknown
+        truth[truth == 0] = np.nan
+        if (folder / "nonocc.png").is_file():
+            truth[read("nonocc.png") != 255] = np.nan
+        return read(left), read(right), truth, max_d
+    return get
 
 
 @pytest.fixture
@@ -44,3 +71,34 @@ def sample_data():
             pytest.skip(reason)
         return data.local_path(name)
     return get
+
+
+@pytest.fixture(scope="session")
+def synthetic_dataset(tmp_path_factory):
+    """``synthetic_dataset(**params) -> Path``: a dataset of :func:`mrstereo.world.write_synthetic_dataset`,
+    rendered once per test session for each set of ``params`` (its folder is ``corridor<seed>``).
+
+    Every test that asks for the same parameters gets the same folder: read it, never change it (copy it
+    first). At the end of the session each dataset is checked to be unchanged.
+    """
+    from mrstereo.world.dataset import write_synthetic_dataset
+
+    made: dict[tuple, tuple] = {}
+
+    def make(**params):
+        key = tuple(sorted(params.items()))
+        if key not in made:
+            folder = tmp_path_factory.mktemp("synthetic") / f"corridor{params.get('seed', 0)}"
+            path = write_synthetic_dataset(folder, progress=False, **params)
+            made[key] = (path, _digest(path))
+        return made[key][0]
+
+    yield make
+    changed = [str(path) for path, digest in made.values() if _digest(path) != digest]
+    assert not changed, f"a test changed the shared synthetic datasets {changed}; copy a dataset before changing it"
+
+
+def _digest(folder) -> dict[str, tuple[int, int]]:
+    """Size and modification time of every file under ``folder``: what a test that writes into it changes."""
+    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
+            for p in sorted(folder.rglob("*")) if p.is_file()}

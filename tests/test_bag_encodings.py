@@ -6,7 +6,6 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from test_bag_io import DT_NS, T0_NS, _Msgs, _typestore
 
 from mrstereo.camera import Camera, StereoCamera, write_stereo
 from mrstereo.cli import entry
@@ -14,6 +13,8 @@ from mrstereo.io import matching_image, read_image
 from mrstereo.pipeline.run import build_map
 from mrstereo.recordings.bag import SUPPORTED_ENCODINGS, export_bag, image_from_message
 from mrstereo.recordings.manifest import read_manifest
+
+from _bags import DT_NS, T0_NS, BagWriter, Msgs, typestore
 
 W, H = 24, 16
 BGR = (10, 100, 200)
@@ -29,21 +30,12 @@ def _image_msg(m, payload: np.ndarray, encoding: str, stamp: int, *, pad: int = 
 
 
 def _write(path, ros1: bool, msgs_left, msgs_right, *, compressed: bool = False):
-    ts = _typestore(ros1)
-    m = _Msgs(ts, ros1)
-    if ros1:
-        from rosbags.rosbag1 import Writer
-        writer, serialize = Writer(path), ts.serialize_ros1
-    else:
-        from rosbags.rosbag2 import Writer
-        writer, serialize = Writer(path, version=9), ts.serialize_cdr
     typ = "sensor_msgs/msg/CompressedImage" if compressed else "sensor_msgs/msg/Image"
-    with writer:
-        c = {t: writer.add_connection(t, typ, typestore=ts) for t in ("/l/image", "/r/image")}
-        for k, (a, b) in enumerate(zip(msgs_left(m), msgs_right(m))):
+    with BagWriter(path, ros1, {"/l/image": typ, "/r/image": typ}) as bag:
+        for k, (a, b) in enumerate(zip(msgs_left(bag.msgs), msgs_right(bag.msgs))):
             t = T0_NS + k * DT_NS
-            writer.write(c["/l/image"], t, serialize(a, typ))
-            writer.write(c["/r/image"], t, serialize(b, typ))
+            bag.put("/l/image", a, t)
+            bag.put("/r/image", b, t)
     return path
 
 
@@ -132,23 +124,21 @@ def test_unsupported_encoding_is_one_clear_line(tmp_path, capsys):
     assert code == 2 and len(err) == 1
     assert err[0].startswith("mrstereo: error: image encoding '32FC1' is not supported (supported: mono8")
     assert not (tmp_path / "o").exists()
-    msg = _Msgs(_typestore(False), False)
+    msg = Msgs(typestore(False), False)
     with pytest.raises(ValueError, match="step 10"):
         bad = _image_msg(msg, np.zeros((H, W), np.uint8), "mono8", T0_NS)
         bad.step = 10
         image_from_message(bad, "sensor_msgs/msg/Image")
 
 
-def test_16_bit_levels_stay_distinct_and_a_mono16_bag_maps_like_mono8(tmp_path):
+def test_16_bit_levels_stay_distinct_and_a_mono16_bag_maps_like_mono8(synthetic_dataset, tmp_path):
     levels = np.arange(65536, dtype=np.uint16).reshape(256, 256)
     scaled = matching_image(levels)
     assert scaled.dtype == np.float32 and np.all(np.diff(scaled.ravel()) > 0)
     assert scaled.max() == 255.0
     assert np.array_equal(matching_image(np.full((2, 3), 257 * 3, np.uint16)), np.full((2, 3), 3.0, np.float32))
     # rectified synthetic pairs as mono8 and as mono16 (x 257): the same map, bit for bit
-    from mrstereo.world.dataset import write_synthetic_dataset
-    data = read_manifest(write_synthetic_dataset(tmp_path / "d", seed=5, n_frames=3, width=160, height=120,
-                                                 supersample=1, progress=False))
+    data = read_manifest(synthetic_dataset(seed=5, n_frames=3, width=160, height=120, supersample=1))
     frames = data.frames
 
     def side(attr, wide):
@@ -167,7 +157,7 @@ def test_16_bit_levels_stay_distinct_and_a_mono16_bag_maps_like_mono8(tmp_path):
         bag = _write(tmp_path / f"w{int(wide)}", False, side("left_rect", wide), side("right_rect", wide))
         out = tmp_path / f"o{int(wide)}"
         export_bag(bag, out, left_topic="/l/image", right_topic="/r/image", calibration=data.calibration,
-                   rig=data.rig, rectified=True, progress=False)
+                   mount=data.mount, rectified=True, progress=False)
         assert read_image(read_manifest(out).frames[0].left_rect).dtype == (np.uint16 if wide else np.uint8)
         maps.append(build_map(out, progress=False).grid.log_odds)
     assert np.array_equal(maps[0], maps[1], equal_nan=True)

@@ -3,160 +3,25 @@ like the dataset itself; pairing, odometry / TF interpolation, image decoding; b
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from mrstereo.cli import entry
+from mrstereo.geometry.ground import ground_from_mount
 from mrstereo.io import read_image
 from mrstereo.pipeline.run import build_map, floor_for_run
 from mrstereo.recordings.bag import (TfTree, TransformTrack, bag_topics, camera_info_from_message, export_bag,
                                      exported_bag, image_from_message, pair_by_stamp, stereo_from_camera_info)
 from mrstereo.recordings.manifest import read_manifest, write_manifest
 from mrstereo.transforms import planar_from_T
-from mrstereo.world.dataset import write_synthetic_dataset
 
-T0_NS = 1_700_000_000_000_000_000
-DT_NS = 100_000_000                 # 10 Hz
-RIGHT_LAG_NS = 3_000_000            # right images 3 ms after the left ones
-
-
-# ------------------------------------------------------------------------------ writing test bags
-
-def _typestore(ros1: bool):
-    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
-    if "tf2_msgs/msg/TFMessage" not in ts.types:
-        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
-    return ts
-
-
-class _Msgs:
-    """Build messages for one typestore (ROS 1 headers have a seq, camera_info K/D/R/P upper case)."""
-
-    def __init__(self, ts, ros1: bool):
-        self.ts, self.ros1, self.T = ts, ros1, ts.types
-
-    def header(self, stamp_ns: int, frame: str):
-        t = self.T["builtin_interfaces/msg/Time"](sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
-        if self.ros1:
-            return self.T["std_msgs/msg/Header"](seq=0, stamp=t, frame_id=frame)
-        return self.T["std_msgs/msg/Header"](stamp=t, frame_id=frame)
-
-    def image(self, img: np.ndarray, stamp_ns: int, frame: str, *, compressed: bool = False):
-        if compressed:
-            import cv2
-            ok, buf = cv2.imencode(".png", img)
-            return self.T["sensor_msgs/msg/CompressedImage"](header=self.header(stamp_ns, frame), format="png",
-                                                             data=buf.ravel())
-        enc = "mono8" if img.ndim == 2 else "bgr8"
-        ch = 1 if img.ndim == 2 else 3
-        return self.T["sensor_msgs/msg/Image"](header=self.header(stamp_ns, frame), height=img.shape[0],
-                                               width=img.shape[1], encoding=enc, is_bigendian=0,
-                                               step=img.shape[1] * ch, data=np.ascontiguousarray(img).ravel())
-
-    def camera_info(self, info, stamp_ns: int, frame: str):
-        cam = info.camera
-        model = getattr(cam, "distortion_model", "plumb_bob")           # ROS name and D (equidistant: k1..k4)
-        fields = dict(D=np.asarray(getattr(cam, "D", cam.dist_coeffs), float), K=cam.K.ravel().astype(float),
-                      R=info.R.ravel().astype(float), P=info.P.ravel().astype(float))
-        if not self.ros1:
-            fields = {k.lower(): v for k, v in fields.items()}
-        roi = self.T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
-        return self.T["sensor_msgs/msg/CameraInfo"](header=self.header(stamp_ns, frame), height=cam.height,
-                                                    width=cam.width, distortion_model=model, binning_x=0,
-                                                    binning_y=0, roi=roi, **fields)
-
-    def _pose(self, x, y, yaw):
-        G = self.T
-        return (G["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-                G["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)))
-
-    def odometry(self, pose, stamp_ns: int):
-        G = self.T
-        p, q = self._pose(*pose)
-        cov = np.zeros(36)
-        twist = G["geometry_msgs/msg/TwistWithCovariance"](
-            twist=G["geometry_msgs/msg/Twist"](linear=G["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
-                                               angular=G["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)),
-            covariance=cov)
-        return G["nav_msgs/msg/Odometry"](
-            header=self.header(stamp_ns, "odom"), child_frame_id="base_link",
-            pose=G["geometry_msgs/msg/PoseWithCovariance"](pose=G["geometry_msgs/msg/Pose"](position=p,
-                                                                                             orientation=q),
-                                                           covariance=cov),
-            twist=twist)
-
-    def tf(self, items, stamp_ns: int):
-        G = self.T
-        out = []
-        for parent, child, (x, y, yaw) in items:
-            p, q = self._pose(x, y, yaw)
-            tr = G["geometry_msgs/msg/Transform"](translation=G["geometry_msgs/msg/Vector3"](x=p.x, y=p.y, z=0.0),
-                                                  rotation=q)
-            out.append(G["geometry_msgs/msg/TransformStamped"](header=self.header(stamp_ns, parent),
-                                                               child_frame_id=child, transform=tr))
-        return G["tf2_msgs/msg/TFMessage"](transforms=out)
-
-
-def write_bag(path: Path, manifest, *, ros1: bool, storage: str = "sqlite3", odom: bool = True, tf: bool = False,
-              compressed: bool = False, frames=None, right_lag_ns: int = RIGHT_LAG_NS) -> Path:
-    """Write the raw pairs of a manifest as a bag: images, camera_info, odometry and/or TF."""
-    ts = _typestore(ros1)
-    m = _Msgs(ts, ros1)
-    if ros1:
-        from rosbags.rosbag1 import Writer
-        writer = Writer(path)
-        serialize = ts.serialize_ros1
-    else:
-        from rosbags.rosbag2 import StoragePlugin, Writer
-        writer = Writer(path, version=9,
-                        storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
-        serialize = ts.serialize_cdr
-    img_type = "sensor_msgs/msg/CompressedImage" if compressed else "sensor_msgs/msg/Image"
-    records = manifest.frames if frames is None else [manifest.frames[k] for k in frames]
-    with writer:
-        conns = {}
-        for topic, typ in (("/stereo/left/image_raw", img_type), ("/stereo/right/image_raw", img_type),
-                           ("/stereo/left/camera_info", "sensor_msgs/msg/CameraInfo"),
-                           ("/stereo/right/camera_info", "sensor_msgs/msg/CameraInfo"),
-                           *((("/odom", "nav_msgs/msg/Odometry"),) if odom else ()),
-                           *((("/tf", "tf2_msgs/msg/TFMessage"), ("/tf_static", "tf2_msgs/msg/TFMessage"))
-                             if tf else ())):
-            conns[topic] = writer.add_connection(topic, typ, typestore=ts)
-
-        def put(topic, msg, t):
-            writer.write(conns[topic], t, serialize(msg, conns[topic].msgtype))
-
-        cal = manifest.calibration
-        if tf:
-            put("/tf_static", m.tf([("map", "odom", (0.0, 0.0, 0.0))], T0_NS - DT_NS), T0_NS - DT_NS)
-        for k, rec in enumerate(records):
-            t = T0_NS + k * DT_NS
-            put("/stereo/left/camera_info", m.camera_info(cal.left, t, "left"), t)
-            put("/stereo/right/camera_info", m.camera_info(cal.right, t + right_lag_ns, "right"), t + right_lag_ns)
-            if odom:
-                put("/odom", m.odometry(rec.pose, t), t)
-            if tf:
-                put("/tf", m.tf([("odom", "base_link", rec.pose),
-                                 ("base_link", "stereo_link", (0.0, 0.0, rec.pan_rad))], t), t)
-            put("/stereo/left/image_raw", m.image(read_image(rec.left), t, "left", compressed=compressed), t)
-            put("/stereo/right/image_raw", m.image(read_image(rec.right), t + right_lag_ns, "right",
-                                                   compressed=compressed), t + right_lag_ns)
-    return path
-
-
-TOPICS = dict(left_topic="/stereo/left/image_raw", right_topic="/stereo/right/image_raw",
-              camera_info_topics=("/stereo/left/camera_info", "/stereo/right/camera_info"))
-
+from _bags import DT_NS, T0_NS, TOPICS, BagWriter, Msgs, typestore, write_bag
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory):
-    out = tmp_path_factory.mktemp("bagdata") / "synth"
-    return read_manifest(write_synthetic_dataset(out, seed=4, n_frames=6, width=160, height=120, supersample=1,
-                                                 progress=False))
+def dataset(synthetic_dataset):
+    return read_manifest(synthetic_dataset(seed=4, n_frames=6, width=160, height=120, supersample=1))
 
 
 @pytest.fixture(scope="module")
@@ -170,7 +35,12 @@ def _same(a, b) -> bool:
 
 
 def _rig_options(dataset):
-    return {"rig": dataset.rig}
+    return {"mount": dataset.mount}
+
+
+def _rig(dataset):
+    """The paper's rig of a dataset: its rectified left camera's height and tilt."""
+    return ground_from_mount(dataset.mount, R_rect_from_cam=dataset.calibration.left.R)
 
 
 # ------------------------------------------------------------------------------------ end to end
@@ -191,7 +61,7 @@ def test_ros1_bag_with_odometry_maps_like_the_manifest_subset(dataset, tmp_path)
     front = [0, 3]                                  # the frames looking ahead (pan 0): odometry gives no pan
     bag = write_bag(tmp_path / "run1.bag", dataset, ros1=True, odom=True, frames=front)
     subset = tmp_path / "subset.yaml"
-    write_manifest(subset, calibration=str(dataset.calibration_path), rig=dataset.rig,
+    write_manifest(subset, calibration=str(dataset.calibration_path), mount=dataset.mount,
                    frames=[{"left": str(dataset.frames[k].left), "right": str(dataset.frames[k].right),
                             "pose": list(dataset.frames[k].pose)} for k in front])
     expected = build_map(subset, progress=False).grid.log_odds
@@ -221,7 +91,7 @@ def test_cli_map_and_export_from_a_bag(dataset, reference, tmp_path, capsys):
     bag = write_bag(tmp_path / "cli.bag", dataset, ros1=True, odom=False, tf=True)
     common = ["--bag", str(bag), "--left-topic", TOPICS["left_topic"], "--right-topic", TOPICS["right_topic"],
               "--camera-info-topics", ",".join(TOPICS["camera_info_topics"]), "--tf", "--camera-frame",
-              "stereo_link", "--height", str(dataset.rig.height_m), "--tilt", str(dataset.rig.tilt_rad)]
+              "stereo_link", "--height", str(_rig(dataset).height_m), "--tilt", str(_rig(dataset).tilt_rad)]
     assert entry(["map", *common, "-o", str(tmp_path / "m"), "--quiet"]) == 0
     assert _same(np.load(tmp_path / "m" / "log_odds.npy"), reference)
     assert entry(["export", *common, "-o", str(tmp_path / "ds"), "--quiet"]) == 0
@@ -229,20 +99,19 @@ def test_cli_map_and_export_from_a_bag(dataset, reference, tmp_path, capsys):
     assert _same(np.load(tmp_path / "m2" / "log_odds.npy"), reference)
 
 
-def test_mount_is_estimated_when_not_given(tmp_path):
+def test_mount_is_estimated_when_not_given(synthetic_dataset, tmp_path):
     # camera_info carries no mount: the export has none and mapping estimates the floor (320x240 rig)
-    data = read_manifest(write_synthetic_dataset(tmp_path / "d", seed=2, n_frames=5, supersample=1, progress=False))
+    data = read_manifest(synthetic_dataset(seed=2, n_frames=5, supersample=1))
     bag = write_bag(tmp_path / "est", data, ros1=False)
     result = export_bag(bag, tmp_path / "out", **TOPICS, odom_topic="/odom", progress=False)
-    assert result.rig is None and result.rig_source.startswith("none")
+    assert result.mount is None and result.mount_source.startswith("none")
     manifest = read_manifest(tmp_path / "out")
-    assert manifest.rig is None
+    assert manifest.mount is None
     mount, floor = floor_for_run(manifest)
     assert floor.confident and floor.method == "plane"
-    assert floor.height_m == pytest.approx(data.rig.height_m, abs=0.02)
-    assert floor.tilt_rad == pytest.approx(data.rig.tilt_rad, abs=0.02)
+    assert floor.height_m == pytest.approx(_rig(data).height_m, abs=0.02)
+    assert floor.tilt_rad == pytest.approx(_rig(data).tilt_rad, abs=0.02)
     # the mount is of the raw camera; turned into the rectified frame it is the estimated floor
-    from mrstereo.geometry.ground import ground_from_mount
     seen = ground_from_mount(mount, R_rect_from_cam=manifest.calibration.left.R)
     assert (seen.height_m, seen.tilt_rad, seen.roll_rad) == pytest.approx(
         (floor.height_m, floor.tilt_rad, floor.roll_rad), abs=1e-12)
@@ -314,8 +183,8 @@ def test_tf_chain_composes_static_and_dynamic_edges():
 
 
 def test_image_messages_decode_to_opencv_layout():
-    ts = _typestore(False)
-    m = _Msgs(ts, False)
+    ts = typestore(False)
+    m = Msgs(ts, False)
     rgb = np.zeros((3, 4, 3), np.uint8)
     rgb[..., 0] = 200                                      # red in RGB order
     padded = np.zeros((3, 16), np.uint8)
@@ -335,7 +204,7 @@ def test_image_messages_decode_to_opencv_layout():
 
 def test_camera_info_messages_round_trip_the_calibration(dataset):
     for ros1 in (True, False):
-        m = _Msgs(_typestore(ros1), ros1)
+        m = Msgs(typestore(ros1), ros1)
         cal = dataset.calibration
         stereo = stereo_from_camera_info(m.camera_info(cal.left, 0, "l"), m.camera_info(cal.right, 0, "r"))
         for a, b in ((stereo.left, cal.left), (stereo.right, cal.right)):
@@ -351,21 +220,6 @@ def test_camera_info_messages_round_trip_the_calibration(dataset):
 
 # ------------------------------------------------------------------------------ camera mount from TF
 
-def _tf_3d(m, items, stamp_ns):
-    """TFMessage of full 3-D transforms ``(parent, child, T_parent_from_child)``."""
-    from scipy.spatial.transform import Rotation
-
-    G, out = m.T, []
-    for parent, child, T in items:
-        q = Rotation.from_matrix(T[:3, :3]).as_quat()
-        tr = G["geometry_msgs/msg/Transform"](
-            translation=G["geometry_msgs/msg/Vector3"](x=float(T[0, 3]), y=float(T[1, 3]), z=float(T[2, 3])),
-            rotation=G["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
-        out.append(G["geometry_msgs/msg/TransformStamped"](header=m.header(stamp_ns, parent), child_frame_id=child,
-                                                           transform=tr))
-    return G["tf2_msgs/msg/TFMessage"](transforms=out)
-
-
 @pytest.mark.parametrize("ros1", [True, False])
 def test_mount_from_tf_chains_3d_frames_to_the_optical_frame(dataset, tmp_path, ros1):
     from mrstereo.camera.mount import CameraMount
@@ -380,42 +234,30 @@ def test_mount_from_tf_chains_3d_frames_to_the_optical_frame(dataset, tmp_path, 
     T_mast_body = pose((0.05, 0.03, 0.30), (0.01, 0.25, -0.1))            # mast -> camera body
     T_body_opt = np.eye(4)
     T_body_opt[:3, :3] = R_BODY_FROM_OPTICAL                               # REP 103 optical frame
-    ts = _typestore(ros1)
-    m = _Msgs(ts, ros1)
     path = tmp_path / ("tf.bag" if ros1 else "tf2")
-    if ros1:
-        from rosbags.rosbag1 import Writer
-        writer, serialize = Writer(path), ts.serialize_ros1
-    else:
-        from rosbags.rosbag2 import Writer
-        writer, serialize = Writer(path, version=9), ts.serialize_cdr
-    with writer:
-        conns = {t: writer.add_connection(t, typ, typestore=ts) for t, typ in (
-            ("/l/image_raw", "sensor_msgs/msg/Image"), ("/r/image_raw", "sensor_msgs/msg/Image"),
-            ("/l/camera_info", "sensor_msgs/msg/CameraInfo"), ("/r/camera_info", "sensor_msgs/msg/CameraInfo"),
-            ("/tf_static", "tf2_msgs/msg/TFMessage"))}
-
-        def put(topic, msg, t):
-            writer.write(conns[topic], t, serialize(msg, conns[topic].msgtype))
-
-        put("/tf_static", _tf_3d(m, [("base_link", "mast", T_base_mast), ("mast", "cam_link", T_mast_body),
-                                     ("cam_link", "cam_optical_frame", T_body_opt)], T0_NS), T0_NS)
+    topics = {"/l/image_raw": "sensor_msgs/msg/Image", "/r/image_raw": "sensor_msgs/msg/Image",
+              "/l/camera_info": "sensor_msgs/msg/CameraInfo", "/r/camera_info": "sensor_msgs/msg/CameraInfo",
+              "/tf_static": "tf2_msgs/msg/TFMessage"}
+    with BagWriter(path, ros1, topics) as bag:
+        m = bag.msgs
+        bag.put("/tf_static", m.tf_3d([("base_link", "mast", T_base_mast), ("mast", "cam_link", T_mast_body),
+                                       ("cam_link", "cam_optical_frame", T_body_opt)], T0_NS), T0_NS)
         rec, cal = dataset.frames[0], dataset.calibration
         for k in range(2):
             t = T0_NS + k * DT_NS
-            put("/l/camera_info", m.camera_info(cal.left, t, "l"), t)
-            put("/r/camera_info", m.camera_info(cal.right, t, "r"), t)
-            put("/l/image_raw", m.image(read_image(rec.left), t, "l"), t)
-            put("/r/image_raw", m.image(read_image(rec.right), t, "r"), t)
+            bag.put("/l/camera_info", m.camera_info(cal.left, t, "l"), t)
+            bag.put("/r/camera_info", m.camera_info(cal.right, t, "r"), t)
+            bag.put("/l/image_raw", m.image(read_image(rec.left), t, "l"), t)
+            bag.put("/r/image_raw", m.image(read_image(rec.right), t, "r"), t)
     expected = T_base_mast @ T_mast_body @ T_body_opt
     for frame in ("cam_optical_frame", "cam_link"):          # the optical frame, or the body frame it derives from
         out = tmp_path / f"out_{frame}"
         result = export_bag(path, out, left_topic="/l/image_raw", right_topic="/r/image_raw", camera_frame=frame,
                             progress=False)
-        assert isinstance(result.rig, CameraMount) and result.rig_source == f"tf base_link <- {frame}"
-        np.testing.assert_allclose(result.rig.T_base_from_cam, expected, atol=1e-9)
+        assert isinstance(result.mount, CameraMount) and result.mount_source == f"tf base_link <- {frame}"
+        np.testing.assert_allclose(result.mount.T_base_from_cam, expected, atol=1e-9)
         manifest = read_manifest(out)
-        np.testing.assert_allclose(manifest.rig.T_base_from_cam, expected, atol=1e-9)   # via mount: xyz, rpy
+        np.testing.assert_allclose(manifest.mount.T_base_from_cam, expected, atol=1e-9)   # via mount: xyz, rpy
         assert [f.pan_rad for f in manifest.frames] == [0.0, 0.0]
 
 
@@ -427,7 +269,7 @@ def test_mount_from_tf_of_a_panning_head_is_the_rig_and_the_pans(dataset, tmp_pa
     # stereo_link is a body frame on the floor: its mount is (0, 0, 0) and the rig's height and tilt are lost,
     # so a real robot publishes the optical frame; here the body frame's heading gives the pan
     result = export_bag(bag, tmp_path / "o", **TOPICS, use_tf=True, camera_frame="stereo_link", progress=False)
-    assert isinstance(result.rig, CameraMount) and result.rig.xyz == (0.0, 0.0, 0.0)
+    assert isinstance(result.mount, CameraMount) and result.mount.xyz == (0.0, 0.0, 0.0)
     manifest = read_manifest(tmp_path / "o")
     first = dataset.frames[0].pan_rad
     assert [f.pan_rad for f in manifest.frames] == pytest.approx([f.pan_rad - first for f in dataset.frames],

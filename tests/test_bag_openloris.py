@@ -8,9 +8,10 @@ import json
 import cv2
 import numpy as np
 import pytest
-from test_bag_io import _Msgs, _tf_3d, _typestore
 
 from mrstereo.cli import entry
+
+from _bags import BagWriter
 
 pytestmark = pytest.mark.sample_data("openloris-sample")
 
@@ -50,44 +51,23 @@ def _load(root):
 
 
 def _write_bag(path, ros1, stereo, T_base_cam, frames, odom):
-    ts = _typestore(ros1)
-    m = _Msgs(ts, ros1)
-    if ros1:
-        from rosbags.rosbag1 import Writer
-        writer, serialize = Writer(path), ts.serialize_ros1
-    else:
-        from rosbags.rosbag2 import Writer
-        writer, serialize = Writer(path, version=9), ts.serialize_cdr
-    G = m.T
-    with writer:
-        c = {t: writer.add_connection(t, typ, typestore=ts) for t, typ in (
-            ("/t265/fisheye1/image_raw", "sensor_msgs/msg/Image"),
-            ("/t265/fisheye2/image_raw", "sensor_msgs/msg/Image"),
-            ("/t265/fisheye1/camera_info", "sensor_msgs/msg/CameraInfo"),
-            ("/t265/fisheye2/camera_info", "sensor_msgs/msg/CameraInfo"),
-            ("/odom", "nav_msgs/msg/Odometry"), ("/tf_static", "tf2_msgs/msg/TFMessage"))}
-
-        def put(topic, msg, t):
-            writer.write(c[topic], t, serialize(msg, c[topic].msgtype))
-
+    topics = {f"/t265/fisheye{side}/{name}": msgtype for side in "12" for name, msgtype in
+              (("image_raw", "sensor_msgs/msg/Image"), ("camera_info", "sensor_msgs/msg/CameraInfo"))}
+    topics.update({"/odom": "nav_msgs/msg/Odometry", "/tf_static": "tf2_msgs/msg/TFMessage"})
+    with BagWriter(path, ros1, topics) as bag:
+        m, G = bag.msgs, bag.msgs.T
         t0 = min(frames[0][0][0], odom[0][0])
-        put("/tf_static", _tf_3d(m, [("base_link", "t265_fisheye1_optical_frame", T_base_cam)], t0), t0)
+        bag.put("/tf_static", m.tf_3d([("base_link", "t265_fisheye1_optical_frame", T_base_cam)], t0), t0)
         for t, pos, q in odom:
-            cov = np.zeros(36)
-            vec = G["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
-            put("/odom", G["nav_msgs/msg/Odometry"](
-                header=m.header(t, "odom"), child_frame_id="base_link",
-                pose=G["geometry_msgs/msg/PoseWithCovariance"](pose=G["geometry_msgs/msg/Pose"](
-                    position=G["geometry_msgs/msg/Point"](x=pos[0], y=pos[1], z=pos[2]),
-                    orientation=G["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])), covariance=cov),
-                twist=G["geometry_msgs/msg/TwistWithCovariance"](
-                    twist=G["geometry_msgs/msg/Twist"](linear=vec, angular=vec), covariance=cov)), t)
+            point = G["geometry_msgs/msg/Point"](x=pos[0], y=pos[1], z=pos[2])
+            quaternion = G["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])
+            bag.put("/odom", m.odometry(point, quaternion, t), t)
         for (tl, left), (tr, right) in zip(*frames):
             for side, t, img_path, info in (("1", tl, left, stereo.left), ("2", tr, right, stereo.right)):
-                msg = m.camera_info(info, t, f"t265_fisheye{side}_optical_frame")
-                put(f"/t265/fisheye{side}/camera_info", msg, t)
+                frame = f"t265_fisheye{side}_optical_frame"
+                bag.put(f"/t265/fisheye{side}/camera_info", m.camera_info(info, t, frame), t)
                 img = cv2.imread(str(img_path), cv2.IMREAD_UNCHANGED)
-                put(f"/t265/fisheye{side}/image_raw", m.image(img, t, f"t265_fisheye{side}_optical_frame"), t)
+                bag.put(f"/t265/fisheye{side}/image_raw", m.image(img, t, frame), t)
     return path
 
 
@@ -101,6 +81,7 @@ def _stereo(cams, tf):
     return rectify_fusiello(left, right, T_f2_f1[:3, :3], T_f2_f1[:3, 3]).stereo
 
 
+@pytest.mark.slow
 def test_openloris_fisheye_bags_map_from_camera_info_and_tf(sample_data, tmp_path, capsys):
     from mrstereo.geometry.ground import ground_from_mount
     from mrstereo.recordings.manifest import read_manifest
@@ -130,8 +111,8 @@ def test_openloris_fisheye_bags_map_from_camera_info_and_tf(sample_data, tmp_pat
     # the dataset: the fisheye calibration from camera_info, the 6-DoF mount from TF, poses from odometry
     m = read_manifest(tmp_path / "ds")
     assert m.calibration.left.camera.distortion_model == "equidistant"
-    np.testing.assert_allclose(m.rig.T_base_from_cam, T_base_cam, atol=1e-9)
-    g = ground_from_mount(m.rig, R_rect_from_cam=m.calibration.left.R)
+    np.testing.assert_allclose(m.mount.T_base_from_cam, T_base_cam, atol=1e-9)
+    g = ground_from_mount(m.mount, R_rect_from_cam=m.calibration.left.R)
     assert g.height_m == pytest.approx(0.8951, abs=1e-4) and abs(g.tilt_rad) < 0.02
     x, y, yaw = m.frames[0].pose                      # odom.txt between its first two samples (linear, slerp)
     assert (x, y) == pytest.approx((-3.3102, 0.1207), abs=1e-4) and yaw == pytest.approx(-0.5515, abs=1e-4)

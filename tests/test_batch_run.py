@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import shutil
 
 import numpy as np
@@ -10,18 +11,17 @@ import pytest
 from mrstereo.cli import entry
 from mrstereo.geometry import read_ply, read_scan_json
 from mrstereo.io import read_disparity, read_image
+from mrstereo.mapping.fusion import fuse
 from mrstereo.pipeline.batch import SUMMARY_NAME, frame_outputs, run_batch
 from mrstereo.pipeline.frame import scan_from_pair
 from mrstereo.pipeline.run import PipelineConfig, build_map
 from mrstereo.recordings.manifest import read_manifest
-from mrstereo.world.dataset import write_synthetic_dataset
 
 
 @pytest.fixture(scope="module")
-def datasets(tmp_path_factory):
-    root = tmp_path_factory.mktemp("batch")
-    return [write_synthetic_dataset(root / name, seed=seed, n_frames=3, width=160, height=120, supersample=1,
-                                    progress=False) for name, seed in (("alpha", 1), ("beta", 2))]
+def datasets(synthetic_dataset):
+    """Two datasets, folders ``corridor1`` and ``corridor2`` (their names in the batch's output)."""
+    return [synthetic_dataset(seed=seed, n_frames=3, width=160, height=120, supersample=1) for seed in (1, 2)]
 
 
 def _tree(path):
@@ -31,18 +31,18 @@ def _tree(path):
 def test_batch_writes_frames_and_maps_equal_to_the_single_commands(datasets, tmp_path):
     out = tmp_path / "out"
     summary = run_batch(datasets, out, progress=False)
-    assert [d.name for d in summary.datasets] == ["alpha", "beta"]
+    assert [d.name for d in summary.datasets] == ["corridor1", "corridor2"]
     assert all(d.n_computed == 3 and d.n_failed == 0 and d.map_status == "written" for d in summary.datasets)
     m = read_manifest(datasets[0])
-    files = frame_outputs(out / "alpha" / "frames", 1)
+    files = frame_outputs(out / "corridor1" / "frames", 1)
     rec = m.frames[1]
     ref = scan_from_pair(read_image(rec.left_rect), read_image(rec.right_rect), m.calibration, rectified=True,
-                         rig=m.rig, pan_rad=rec.pan_rad, config=PipelineConfig().obstacles)
+                         mount=m.mount, pan_rad=rec.pan_rad, config=PipelineConfig().obstacles)
     assert np.array_equal(read_disparity(files["disparity"]), ref.frame.disparity_px, equal_nan=True)
     assert np.allclose(read_scan_json(files["scan"]).ranges_m, ref.scan.ranges_m, equal_nan=True)
     cloud = read_ply(files["cloud"])
     assert cloud.points.shape == ref.frame.obstacles.points_robot.shape and cloud.intensity is not None
-    for name, path in zip(("alpha", "beta"), datasets):
+    for name, path in zip(("corridor1", "corridor2"), datasets):
         expected = build_map(path, progress=False).grid.log_odds
         assert np.array_equal(np.load(out / name / "map" / "log_odds.npy"), expected, equal_nan=True)
         assert (out / name / "map" / "map.yaml").is_file()
@@ -60,14 +60,14 @@ def test_rerun_skips_finished_outputs_and_redoes_missing_ones(datasets, tmp_path
     after = _tree(out)
     assert {k: v for k, v in after.items() if k.name != SUMMARY_NAME} == \
         {k: v for k, v in before.items() if k.name != SUMMARY_NAME}
-    frame_outputs(out / "beta" / "frames", 2)["cloud"].unlink()            # an interrupted frame
+    frame_outputs(out / "corridor2" / "frames", 2)["cloud"].unlink()            # an interrupted frame
     third = run_batch(datasets, out, progress=False)
     beta = third.datasets[1]
     assert (beta.n_computed, beta.n_skipped, beta.map_status) == (1, 2, "written")
     assert third.datasets[0].map_status == "kept"
     expected = build_map(datasets[1], progress=False).grid.log_odds
-    assert np.array_equal(np.load(out / "beta" / "map" / "log_odds.npy"), expected, equal_nan=True)
-    unchanged = frame_outputs(out / "beta" / "frames", 0)["disparity"].relative_to(out)
+    assert np.array_equal(np.load(out / "corridor2" / "map" / "log_odds.npy"), expected, equal_nan=True)
+    unchanged = frame_outputs(out / "corridor2" / "frames", 0)["disparity"].relative_to(out)
     assert _tree(out)[unchanged] == before[unchanged]
 
 
@@ -104,11 +104,42 @@ def test_batch_on_a_dask_cluster_gives_the_same_files(datasets, tmp_path):
         summary = run_batch(datasets[:1], tmp_path / "dask", scheduler=cluster.scheduler_address, progress=False)
     assert summary.datasets[0].n_computed == 3
     for k in range(3):
-        a, b = frame_outputs(local / "alpha" / "frames", k), frame_outputs(tmp_path / "dask" / "alpha" / "frames", k)
+        a = frame_outputs(local / "corridor1" / "frames", k)
+        b = frame_outputs(tmp_path / "dask" / "corridor1" / "frames", k)
         for key in ("disparity", "cloud", "scan"):
             assert a[key].read_bytes() == b[key].read_bytes(), (k, key)
-    assert np.array_equal(np.load(local / "alpha" / "map" / "log_odds.npy"),
-                          np.load(tmp_path / "dask" / "alpha" / "map" / "log_odds.npy"), equal_nan=True)
+    assert np.array_equal(np.load(local / "corridor1" / "map" / "log_odds.npy"),
+                          np.load(tmp_path / "dask" / "corridor1" / "map" / "log_odds.npy"), equal_nan=True)
+
+
+def test_map_command_build_map_fuse_and_batch_give_one_map_and_one_set_of_metrics(synthetic_dataset, tmp_path, capsys):
+    """Library defaults are the CLI's: ``mrstereo map``, ``build_map`` and ``fuse`` of its observations (default
+    configs) give the same map, bit for bit; ``batch`` gives that map and the same metrics (along the true path,
+    with the fields of view), also when it rebuilds the map from the observations it saved."""
+    ds = synthetic_dataset(seed=3, n_frames=6, width=160, height=120, supersample=1,
+                           odometry_noise=(0.05, math.radians(4.0)))
+    manifest = read_manifest(ds)
+    assert any(f.pose != f.true_pose for f in manifest.frames)          # metrics follow the true path
+    assert entry(["map", str(ds), "-o", str(tmp_path / "map"), "--quiet"]) == 0
+    log_odds = np.load(tmp_path / "map" / "log_odds.npy")
+    run = build_map(ds, progress=False)
+    assert np.array_equal(run.grid.log_odds, log_odds, equal_nan=True)
+    assert np.array_equal(fuse(run.observations).log_odds, log_odds, equal_nan=True)
+    assert any(o.boundary_points for o in run.observations)
+    metrics = json.loads((tmp_path / "map" / "metrics.json").read_text())
+    assert metrics["free_coverage"] is not None and metrics["recall_in_view"] is not None
+    for attempt in ("computed", "rebuilt from the saved observations"):
+        if attempt != "computed":
+            shutil.rmtree(tmp_path / "batch" / ds.name / "map")
+        assert entry(["batch", str(ds), "-o", str(tmp_path / "batch"), "--quiet"]) == 0, attempt
+        assert np.array_equal(np.load(tmp_path / "batch" / ds.name / "map" / "log_odds.npy"), log_odds,
+                              equal_nan=True), attempt
+        assert json.loads((tmp_path / "batch" / ds.name / "map" / "metrics.json").read_text()) == metrics, attempt
+    for obs in run.observations:                                   # the saved observations keep the boundary rows
+        with np.load(frame_outputs(tmp_path / "batch" / ds.name / "frames", obs.index)["observation"]) as saved:
+            assert int(saved["boundary_points"]) == obs.boundary_points
+            assert np.array_equal(saved["obstacle_points_world"], obs.obstacle_points_world)
+    capsys.readouterr()
 
 
 def test_bad_batch_input(datasets, tmp_path, capsys):

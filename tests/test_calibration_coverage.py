@@ -82,6 +82,7 @@ def test_grid_poses_reach_every_image_corner_and_stay_inside(grid_views):
     assert np.all(centre.min(axis=0) < [W / 2, H / 2]) and np.all(centre.max(axis=0) > [W / 2, H / 2])
 
 
+@pytest.mark.slow
 def test_grid_renders_of_the_dense_board_are_found_by_opencv():
     """One pass over the nine regions (smallest and most tilted boards), through cv2.findChessboardCorners."""
     rendered = render_calibration_views(TRUE, n_views=9, seed=1, supersample=2, coverage="grid", **DENSE)
@@ -93,6 +94,7 @@ def test_grid_renders_of_the_dense_board_are_found_by_opencv():
         assert err < 1.0          # sub-pixel corners of the right board, not a neighbour (squares >= 8 px)
 
 
+@pytest.mark.slow
 def test_grid_coverage_ga_lm_recovers_the_camera(grid_views):
     views = noisy(grid_views, 0)
     res = calibrate_camera(views, width=640, height=480, method="ga+lm", rng=0,
@@ -109,6 +111,7 @@ def test_grid_coverage_ga_lm_recovers_the_camera(grid_views):
     assert field_error_px(cv_camera(noisy(random_views, 0))).max() > 2 * err.max()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("noise_seed", [0, 1])
 def test_dense_board_grid_capture_meets_the_target(dense_views, noise_seed):
     """25x18 board (10 mm), 54 grid views: f within 0.5 %, principal point within 1 px, distortion within 0.05 px

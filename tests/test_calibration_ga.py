@@ -149,6 +149,7 @@ def test_paper_camera_roundtrip_used_by_ga():
         assert getattr(back, k) == pytest.approx(getattr(TRUE, k))
 
 
+@pytest.mark.slow
 def test_paper_ga_on_the_rendered_paper_dot_target():
     import mrstereo.world as world
     cam = world.default_stereo(320, 240).left.camera

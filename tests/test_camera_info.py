@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import yaml
 
-from mrstereo.camera import (Camera, CameraInfo, RigMount, StereoCamera, read_camera_info, read_stereo,
+from mrstereo.camera import (Camera, CameraInfo, CameraMount, StereoCamera, read_camera_info, read_stereo,
                              write_camera_info, write_stereo)
 from mrstereo.transforms import rotation_from_rpy
 
@@ -15,9 +15,10 @@ def make_stereo():
     P_left = np.hstack([K_rect, np.zeros((3, 1))])
     P_right = P_left.copy()
     P_right[0, 3] = -200.0 * 0.12
-    return StereoCamera(left=CameraInfo(CAM, R=rotation_from_rpy(0.01, -0.005, 0.002), P=P_left, name="left"),
+    R_left = rotation_from_rpy(0.01, -0.005, 0.002)
+    return StereoCamera(left=CameraInfo(CAM, R=R_left, P=P_left, name="left"),
                         right=CameraInfo(CAM, R=rotation_from_rpy(-0.004, 0.008, -0.01), P=P_right, name="right"),
-                        rig=RigMount(height_m=0.45, tilt_rad=0.15))
+                        mount=CameraMount.from_rig(0.45, 0.15, R_rect_from_cam=R_left))
 
 
 def test_camera_info_round_trip(tmp_path):
@@ -38,7 +39,8 @@ def test_stereo_round_trip_and_baseline_sign(tmp_path):
     assert data["right"]["projection_matrix"]["data"][3] == pytest.approx(-24.0)
     back = read_stereo(tmp_path / "stereo.yaml")
     assert back.baseline_m == pytest.approx(0.12)
-    assert back.focal_px == 200.0 and back.rig == RigMount(0.45, 0.15)
+    assert back.focal_px == 200.0
+    np.testing.assert_allclose(back.mount.T_base_from_cam, stereo.mount.T_base_from_cam, atol=1e-15)
     np.testing.assert_allclose(back.right.R, stereo.right.R)
     assert not back.is_rectified
     assert StereoCamera.ideal(Camera(width=32, height=24, fx=20, fy=20, cx=16, cy=12), 0.1).is_rectified

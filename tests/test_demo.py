@@ -1,10 +1,13 @@
 """``mrstereo demo`` end to end on a short run: every stage against ground truth."""
 import json
 
+import pytest
+
 from mrstereo.cli import entry
 from mrstereo.demo import DEMO_STEPS, run_demo
 
 
+@pytest.mark.slow
 def test_demo_runs_the_whole_pipeline(tmp_path, capsys):
     result = run_demo(tmp_path / "demo", n_frames=6, n_calibration_views=6, progress=True)
     # the progress bar names the step that is running (before it finishes) and ends at 100 %

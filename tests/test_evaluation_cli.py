@@ -35,7 +35,7 @@ def test_evaluate_scenes_rows_match_direct_metrics():
 def test_cli_writes_json_and_markdown(tmp_path, capsys):
     out_json, out_md = tmp_path / "r.json", tmp_path / "sub" / "r.md"
     code = entry(["evaluate", str(TSUKUBA), str(TSUKUBA), "--methods", "StereoBM,StereoSGBM",
-                  "--json", str(out_json), "--markdown", str(out_md), "--max-disparity", "32", "--no-progress"])
+                  "--json", str(out_json), "--markdown", str(out_md), "--max-disparity", "32", "--quiet"])
     assert code == 0
     printed = capsys.readouterr().out
     assert printed == out_md.read_text()

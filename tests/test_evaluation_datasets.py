@@ -184,12 +184,9 @@ def test_middlebury_v2_bundle_with_and_without_info(tmp_path):
 # ----------------------------------------------------------------------------- mrstereo datasets
 
 @pytest.fixture(scope="module")
-def synth_dataset(tmp_path_factory):
-    """A 3-frame `mrstereo synth` dataset at 160x120 (rendered once per module)."""
-    from mrstereo.world import write_synthetic_dataset
-
-    return write_synthetic_dataset(tmp_path_factory.mktemp("synth") / "corridor", seed=1, n_frames=3,
-                                   width=160, height=120, progress=False)
+def synth_dataset(synthetic_dataset):
+    """A 3-frame `mrstereo synth` dataset at 160x120, folder ``corridor1``."""
+    return synthetic_dataset(seed=1, n_frames=3, width=160, height=120, supersample=1)
 
 
 def test_mrstereo_dataset_frames_are_scenes_with_their_pfm_ground_truth(synth_dataset):
@@ -198,7 +195,7 @@ def test_mrstereo_dataset_frames_are_scenes_with_their_pfm_ground_truth(synth_da
 
     scenes = load_scenes(synth_dataset)
     frames = read_manifest(synth_dataset).frames
-    assert [s.name for s in scenes] == ["corridor/000000", "corridor/000001", "corridor/000002"]
+    assert [s.name for s in scenes] == ["corridor1/000000", "corridor1/000001", "corridor1/000002"]
     for scene, record in zip(scenes, frames):
         assert scene.layout == "mrstereo" and scene.shape == (120, 160) and scene.nonocc_mask is None
         np.testing.assert_array_equal(scene.left, read_image(record.left_rect))
@@ -210,7 +207,7 @@ def test_mrstereo_dataset_frames_are_scenes_with_their_pfm_ground_truth(synth_da
         err = photometric_error(scene.left, scene.right, scene.gt_disparity_px)
         assert err < 0.5 * photometric_error(scene.left, scene.right, 0.5 * scene.gt_disparity_px)
         assert err < 0.5 * photometric_error(scene.left, scene.right, -scene.gt_disparity_px)
-    assert load_scene(synth_dataset, frame="000001").name == "corridor/000001"
+    assert load_scene(synth_dataset, frame="000001").name == "corridor1/000001"
     with pytest.raises(ValueError, match="3 frames with ground truth .*pass frame="):
         load_scene(synth_dataset)
     with pytest.raises(ValueError, match="no frame '000009'"):

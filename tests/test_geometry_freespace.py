@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mrstereo.camera import Camera, RigMount, StereoCamera
+from mrstereo.camera import Camera, CameraMount, StereoCamera
 from mrstereo.geometry import ObstacleConfig, detect_obstacles
 from mrstereo.geometry.freespace import FreeSpaceConfig, free_space_boundary
 from mrstereo.transforms import T_robot_from_cam
@@ -21,7 +21,7 @@ WALL_X = 2.0
 
 def _stereo():
     return StereoCamera.ideal(Camera(width=W, height=H, fx=F, fy=F, cx=CX, cy=CY), B,
-                              rig=RigMount(height_m=HEIGHT, tilt_rad=TILT))
+                              mount=CameraMount.from_rig(HEIGHT, TILT))
 
 
 def _frame(*, wall_x=WALL_X, floor_gray=None, measured_share=0.05, measured_below=200, skirting_m=0.0, seed=0):
@@ -149,6 +149,7 @@ def test_bad_input():
 def test_boundary_points_join_the_observation_marked_and_map_the_plain_wall():
     from mrstereo.mapping import OccupancyGrid
     from mrstereo.mapping.fusion import add_observation
+    from mrstereo.matching import DisparityResult, make_plan
     from mrstereo.pipeline.frame import PairObstacles
     from mrstereo.pipeline.run import PipelineConfig, observation_from_pair
     from mrstereo.recordings.manifest import FrameRecord
@@ -159,7 +160,10 @@ def test_boundary_points_join_the_observation_marked_and_map_the_plain_wall():
     stereo = _stereo()
     obstacles = detect_obstacles(disparity, stereo, config=ObstacleConfig(max_range_m=4.0))
     boundary = free_space_boundary(image, obstacles, disparity, stereo, max_range_m=4.0)
-    frame = PairObstacles(left_rect=image, raw_disparity_px=disparity, rejection=reject_uniform(disparity, image),
+    matching = DisparityResult(disparity_px=disparity, confidence=np.isfinite(disparity).astype(np.float32),
+                               plan=make_plan(stereo.size, max_disparity_px=64), levels=(disparity,),
+                               too_near=np.zeros(disparity.shape, bool))
+    frame = PairObstacles(left_rect=image, matching=matching, rejection=reject_uniform(disparity, image),
                           obstacles=obstacles, boundary=boundary)
     record = FrameRecord(pose=(1.0, 0.5, 0.3))
     config = PipelineConfig()

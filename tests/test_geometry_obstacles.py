@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from mrstereo.camera import Camera, CameraInfo, RigMount, StereoCamera
-from mrstereo.geometry import (GroundPlane, ObstacleConfig, T_robot_from_cam_ground, detect_obstacles,
-                               fit_ground_plane, fit_ground_v_disparity, height_above_ground_m,
+from mrstereo.camera import Camera, CameraInfo, CameraMount, StereoCamera
+from mrstereo.geometry import (GroundPlane, ObstacleConfig, T_robot_from_cam_ground, detect_obstacles, estimate_ground,
+                               fit_ground_plane, fit_ground_v_disparity, ground_from_mount, height_above_ground_m,
                                points_cam_from_disparity, v_disparity)
 from mrstereo.transforms import T_robot_from_cam
 
@@ -20,8 +20,8 @@ HEIGHT, TILT = 0.62, 0.21
 BOX = ((1.6, 2.0), (-0.35, 0.15), (0.0, 0.45))      # x, y, z ranges in the robot frame
 
 
-def _stereo(rig=None):
-    return StereoCamera.ideal(Camera(width=W, height=H, fx=F, fy=F, cx=CX, cy=CY), B, rig=rig)
+def _stereo(mount=None):
+    return StereoCamera.ideal(Camera(width=W, height=H, fx=F, fy=F, cx=CX, cy=CY), B, mount=mount)
 
 
 def _render(height=HEIGHT, tilt=TILT, pan=0.0, box=BOX):
@@ -111,8 +111,8 @@ def _box_truth(labels, d, config):
 def test_detect_obstacles_with_known_mount():
     d, labels = _render()
     cfg = ObstacleConfig()
-    res = detect_obstacles(d, _stereo(), rig=RigMount(height_m=HEIGHT, tilt_rad=TILT), config=cfg)
-    assert res.success and res.ground.method == "rig"
+    res = detect_obstacles(d, _stereo(), mount=CameraMount.from_rig(HEIGHT, TILT), config=cfg)
+    assert res.success and res.ground.method == "mount"
     expected, _ = _box_truth(labels, d, cfg)
     np.testing.assert_array_equal(res.obstacle_mask, expected)
     floor_in_range = (labels == 1) & (np.hypot(*res.points_robot_image[..., :2].transpose(2, 0, 1)) <= cfg.max_range_m)
@@ -139,22 +139,29 @@ def test_detect_obstacles_estimates_the_floor_when_no_mount_is_known(method):
     recall = (res.obstacle_mask & expected).sum() / expected.sum()
     false_floor = (res.obstacle_mask & (labels == 1)).sum() / (labels == 1).sum()
     assert recall > 0.97 and false_floor < 0.001
-    # The stereo YAML's rig is used when no rig argument is given.
-    from_yaml = detect_obstacles(d, _stereo(rig=RigMount(height_m=HEIGHT, tilt_rad=TILT)))
-    assert from_yaml.ground.method == "rig"
+    # The stereo YAML's mount is used when no mount argument is given.
+    from_yaml = detect_obstacles(d, _stereo(mount=CameraMount.from_rig(HEIGHT, TILT)))
+    assert from_yaml.ground.method == "mount"
 
 
 def test_rough_mount_is_refined_and_kept_when_the_estimate_fails():
     d, _ = _render()
-    rough = RigMount(height_m=HEIGHT + 0.1, tilt_rad=TILT - 0.06)
-    res = detect_obstacles(d, _stereo(), rig=rough, config=ObstacleConfig(estimate_ground=True))
+    rough = CameraMount.from_rig(HEIGHT + 0.1, TILT - 0.06)
+    res = detect_obstacles(d, _stereo(), mount=rough, config=ObstacleConfig(estimate_ground=True))
     assert res.ground.method == "plane"
     assert (res.ground.height_m, res.ground.tilt_rad) == pytest.approx((HEIGHT, TILT), abs=1e-3)
     # Searched only near the mount: a floor 0.3 m away from it is not accepted, the mount is used.
-    far = RigMount(height_m=HEIGHT + 0.4, tilt_rad=TILT)
-    res = detect_obstacles(d, _stereo(), rig=far, config=ObstacleConfig(estimate_ground=True))
-    assert res.ground.method == "rig" and "mount used" in res.ground.message
-    assert res.ground.height_m == far.height_m
+    far = CameraMount.from_rig(HEIGHT + 0.4, TILT)
+    res = detect_obstacles(d, _stereo(), mount=far, config=ObstacleConfig(estimate_ground=True))
+    assert res.ground.method == "mount" and "mount used" in res.ground.message
+    assert res.ground.height_m == HEIGHT + 0.4
+    # the prior of estimate_ground: a mount or the floor it implies, the same search either way
+    for prior in (rough, ground_from_mount(rough)):
+        g = estimate_ground(d, _stereo(), method="plane", prior=prior)
+        assert g.success and g.height_m == pytest.approx(HEIGHT, abs=1e-3)
+    assert not estimate_ground(d, _stereo(), method="plane", prior=far).success
+    with pytest.raises(TypeError, match="prior"):
+        estimate_ground(d, _stereo(), prior=(HEIGHT, TILT))
 
 
 def test_pan_rotates_the_obstacles_to_the_left():
@@ -162,11 +169,11 @@ def test_pan_rotates_the_obstacles_to_the_left():
     # The box placed along the panned view direction appears where the pan says.
     c, s = math.cos(pan), math.sin(pan)
     d, labels = _render(pan=pan, box=((1.6, 2.0), (-0.35, 0.15), (0.0, 0.45)))
-    res = detect_obstacles(d, _stereo(), rig=RigMount(height_m=HEIGHT, tilt_rad=TILT), pan_rad=pan)
+    res = detect_obstacles(d, _stereo(), mount=CameraMount.from_rig(HEIGHT, TILT), pan_rad=pan)
     obs = res.obstacle_points_robot
     assert obs.shape[0] > 0
     assert obs[:, 0].min() == pytest.approx(1.6, abs=1e-6)
-    unpanned = detect_obstacles(d, _stereo(), rig=RigMount(height_m=HEIGHT, tilt_rad=TILT))
+    unpanned = detect_obstacles(d, _stereo(), mount=CameraMount.from_rig(HEIGHT, TILT))
     rotated = unpanned.obstacle_points_robot[:, :2] @ np.array([[c, -s], [s, c]]).T
     np.testing.assert_allclose(rotated, obs[:, :2], atol=1e-9)
 

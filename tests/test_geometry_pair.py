@@ -8,11 +8,10 @@ from scipy.spatial import cKDTree
 
 from mrstereo.camera import write_stereo
 from mrstereo.cli import entry
-from mrstereo.geometry import (ObstacleConfig, laser_scan_from_points, points_robot_from_disparity, read_ply,
-                               read_scan_json)
+from mrstereo.geometry import (ObstacleConfig, ground_from_mount, laser_scan_from_points, points_robot_from_disparity,
+                               read_ply, read_scan_json)
 from mrstereo.io import write_image
 from mrstereo.pipeline.frame import obstacles_from_pair, scan_from_pair
-from mrstereo.transforms import T_robot_from_cam
 from mrstereo.world import LABEL_FLOOR, default_scene, default_stereo, is_obstacle_label, render_stereo_frame
 
 POSE, PAN = (1.2, -0.3, 0.0), 0.35
@@ -27,7 +26,7 @@ def frame():
 
 def _gt_band_points(stereo, fr):
     cfg = ObstacleConfig()
-    T = T_robot_from_cam(height_m=stereo.rig.height_m, tilt_rad=stereo.rig.tilt_rad, pan_rad=PAN)
+    T = stereo.mount.T_base_from_rectified(stereo.left.R, PAN)
     gt = points_robot_from_disparity(fr.disparity_px, stereo, T).reshape(-1, 3)
     return gt[(gt[:, 2] > cfg.min_obstacle_height_m) & (gt[:, 2] <= cfg.max_obstacle_height_m)]
 
@@ -36,7 +35,7 @@ def test_obstacles_from_rectified_pair_match_ground_truth(frame):
     stereo, fr = frame
     out = obstacles_from_pair(fr.left_rect, fr.right_rect, stereo, rectified=True, pan_rad=PAN)
     obs = out.obstacles
-    assert obs.success and obs.ground.method == "rig"
+    assert obs.success and obs.ground.method == "mount"
     labels = fr.labels
     obstacle_px = obs.obstacle_mask
     assert obstacle_px.sum() > 5000
@@ -53,12 +52,13 @@ def test_obstacles_from_rectified_pair_match_ground_truth(frame):
 
 def test_raw_pair_is_rectified_first_and_floor_can_be_estimated(frame):
     stereo, fr = frame
-    no_rig = type(stereo)(left=stereo.left, right=stereo.right, rig=None)
-    out = obstacles_from_pair(fr.raw_left, fr.raw_right, no_rig, pan_rad=PAN)
+    no_mount = type(stereo)(left=stereo.left, right=stereo.right, mount=None)
+    out = obstacles_from_pair(fr.raw_left, fr.raw_right, no_mount, pan_rad=PAN)
     g = out.obstacles.ground
     assert out.obstacles.success and g.method == "plane", g.message
-    assert g.height_m == pytest.approx(stereo.rig.height_m, abs=0.03)
-    assert g.tilt_rad == pytest.approx(stereo.rig.tilt_rad, abs=math.radians(3))
+    rig = ground_from_mount(stereo.mount, R_rect_from_cam=stereo.left.R)     # the truth
+    assert g.height_m == pytest.approx(rig.height_m, abs=0.03)
+    assert g.tilt_rad == pytest.approx(rig.tilt_rad, abs=math.radians(3))
     hits = out.obstacles.obstacle_mask
     assert (hits & (fr.labels != LABEL_FLOOR)).sum() > 0.93 * hits.sum()
 
@@ -108,6 +108,27 @@ def test_cli_points_and_scan(tmp_path, frame, capsys):
     assert entry(["scan", left, right, "--calib", calib, "-o", str(tmp_path / "s.csv"), "--height", "0.45",
                   "--tilt", "0.15"]) == 0
     assert (tmp_path / "s.csv").read_text().startswith("angle_rad,range_m,intensity\n")
+
+
+def test_cli_points_color_takes_the_colour_left_image_and_refuses_a_gray_one(tmp_path, frame, capsys):
+    import cv2
+
+    stereo, fr = frame
+    left, right, calib = _files(tmp_path, stereo, fr)
+    colour = []
+    for path in (left, right):                  # blue = green = the gray level, red its negative
+        gray = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+        colour.append(path.replace(".png", "_bgr.png"))
+        cv2.imwrite(colour[-1], cv2.merge([gray, gray, 255 - gray]))
+    assert entry(["points", *colour, "--calib", calib, "-o", str(tmp_path / "c.ply"), "--color"]) == 0
+    rgb = read_ply(tmp_path / "c.ply").colors_rgb.astype(int)
+    assert len(rgb) > 200 and (rgb[:, 1] == rgb[:, 2]).all()
+    assert (np.abs(rgb[:, 0] + rgb[:, 1] - 255) <= 1).all() and rgb[:, 1].std() > 10     # rectified per channel
+    capsys.readouterr()
+    assert entry(["points", left, right, "--calib", calib, "-o", str(tmp_path / "g.ply"), "--color"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"mrstereo: error: --color needs a colour left image, {left} is gray\n"
+    assert not (tmp_path / "g.ply").exists()
 
 
 def test_cli_bad_input_is_one_line(tmp_path, frame, capsys):

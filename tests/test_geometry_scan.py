@@ -85,15 +85,15 @@ def test_json_and_csv_round_trip(tmp_path):
     np.testing.assert_array_equal(table[:, 1], scan.ranges_m)
 
 
-def test_old_null_ranges_and_bad_values():
-    old = {"angle_min": 0.0, "angle_max": 0.5, "angle_increment": 0.25, "range_min": 0.1, "range_max": 5.0,
-           "ranges": [1.0, None, 2.0]}
-    scan = LaserScan.from_dict(old)
+def test_null_ranges_and_bad_values():
+    with_null = {"angle_min": 0.0, "angle_max": 0.5, "angle_increment": 0.25, "range_min": 0.1, "range_max": 5.0,
+                 "ranges": [1.0, None, 2.0]}
+    scan = LaserScan.from_dict(with_null)
     assert np.isnan(scan.ranges_m[1]) and scan.frame_id == "base_link" and scan.intensities.size == 0
     with pytest.raises(ValueError, match="'Infinity' or '-Infinity'"):
-        LaserScan.from_dict({**old, "ranges": [1.0, "inf", 2.0]})
+        LaserScan.from_dict({**with_null, "ranges": [1.0, "inf", 2.0]})
     with pytest.raises(ValueError, match="3 ranges but 2 intensities"):
-        LaserScan.from_dict({**old, "intensities": [1.0, 2.0]})
+        LaserScan.from_dict({**with_null, "intensities": [1.0, 2.0]})
 
 
 def test_seen_clear_to_range_max_is_inf_unseen_is_nan():

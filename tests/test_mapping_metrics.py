@@ -23,7 +23,7 @@ def corridor(shift_rows: int = 0, *, grid: GridSpec | None = None) -> RosMap:
 def test_ground_truth_against_itself_is_perfect():
     m = map_metrics(corridor(), corridor())
     assert m.precision == 1.0 and m.recall == 1.0 and m.mean_distance_m == 0.0
-    assert m.free_accuracy == 1.0 and m.known_fraction == pytest.approx(61 / 120)
+    assert m.free_recall == 1.0 and m.known_fraction == pytest.approx(61 / 120)
     assert m.true_occupied_cells == 2 * 240 and m.estimated_occupied_cells == 2 * 240
 
 
@@ -35,7 +35,7 @@ def test_shift_by_two_cells_gives_a_tenth_of_a_metre():
     assert one.precision == 1.0 and one.recall == 1.0 and one.mean_distance_m == pytest.approx(0.05)
     strict = map_metrics(corridor(1), corridor(), tolerance_cells=0)
     assert strict.precision == 0.0
-    assert 0.9 < m.free_accuracy < 1.0                  # 2 true free rows are now walls/unknown
+    assert 0.9 < m.free_recall < 1.0                  # 2 true free rows are now walls/unknown
 
 
 def test_path_band_restricts_the_evaluated_cells():

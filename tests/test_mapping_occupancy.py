@@ -1,6 +1,8 @@
 """Occupancy grid: ray clearing, log-odds closed form, clamping, union fusion, ROS map files."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -9,6 +11,13 @@ from mrstereo.mapping import GridSpec, MappingConfig, OccupancyGrid, plot_map, r
 from mrstereo.mapping.occupancy import log_odds_from_probability, probability_from_log_odds, view_cells
 
 RES = 0.05
+PLAIN = MappingConfig(p_miss=0.4, min_points_per_cell=1, disparity_sigma_px=None, occlusion_gap_m=None,
+                      see_through_ratio=None, overhang_shadow=False, map_occlusion_p=None, clear_below_m=None)
+"""OctoMap's plain ray model: the stereo rules of the default config off; a test turns on the rule it checks."""
+
+
+def with_rules(**rules) -> MappingConfig:
+    return replace(PLAIN, **rules)
 
 
 def centre(row: int, col: int, grid: GridSpec | None = None) -> tuple[float, float]:
@@ -17,7 +26,7 @@ def centre(row: int, col: int, grid: GridSpec | None = None) -> tuple[float, flo
 
 
 def test_single_obstacle_clears_the_cells_before_it_and_nothing_behind():
-    grid = OccupancyGrid()
+    grid = OccupancyGrid(config=PLAIN)
     sensor = centre(60, 20)
     stats = grid.update(np.array([[*centre(60, 40), 0.7]]), None, sensor)
     p = grid.probability()
@@ -31,7 +40,7 @@ def test_single_obstacle_clears_the_cells_before_it_and_nothing_behind():
 
 
 def test_oblique_ray_clears_every_cell_it_crosses():
-    grid = OccupancyGrid()
+    grid = OccupancyGrid(config=PLAIN)
     sensor = np.array([0.512, -0.733])
     target = np.array([2.71, 1.388])
     grid.update(target[None], np.empty((0, 3)), sensor)
@@ -48,13 +57,13 @@ def test_oblique_ray_clears_every_cell_it_crosses():
 
 
 def test_floor_points_clear_their_own_cell():
-    grid = OccupancyGrid()
+    grid = OccupancyGrid(config=PLAIN)
     grid.update(None, np.array([[*centre(70, 30), 0.0]]), centre(60, 20))
     assert grid.free[70, 30] and grid.free[60, 20] and not grid.occupied.any()
 
 
 def test_hits_are_counted_once_per_update_and_win_over_misses():
-    grid = OccupancyGrid()
+    grid = OccupancyGrid(config=PLAIN)
     x, y = centre(60, 40)
     pts = np.c_[x + np.linspace(-0.02, 0.02, 500), np.full(500, y), np.zeros(500)]
     far = np.array([[*centre(60, 50), 0.0]])           # its ray crosses cell (60, 40)
@@ -66,7 +75,7 @@ def test_hits_are_counted_once_per_update_and_win_over_misses():
 
 @pytest.mark.parametrize("k_hits, m_misses", [(1, 0), (3, 2), (4, 1), (0, 3)])
 def test_log_odds_match_closed_form(k_hits, m_misses):
-    config = MappingConfig()
+    config = PLAIN
     grid = OccupancyGrid(config=config)
     sensor = centre(60, 20)
     for _ in range(k_hits):
@@ -79,7 +88,7 @@ def test_log_odds_match_closed_form(k_hits, m_misses):
 
 
 def test_clamping_limits_are_reached_and_kept():
-    grid = OccupancyGrid()
+    grid = OccupancyGrid(config=PLAIN)
     sensor = centre(60, 20)
     for _ in range(15):
         grid.update([centre(60, 40)], None, sensor)
@@ -93,7 +102,7 @@ def test_clamping_limits_are_reached_and_kept():
 
 def test_moved_obstacle_is_cleared_by_log_odds_but_not_by_union():
     sensor = centre(60, 20)
-    grids = {f: OccupancyGrid(config=MappingConfig(fusion=f)) for f in ("log_odds", "union")}
+    grids = {f: OccupancyGrid(config=with_rules(fusion=f)) for f in ("log_odds", "union")}
     for grid in grids.values():
         for _ in range(2):
             grid.update([centre(60, 40)], None, sensor)          # a person stands here
@@ -106,31 +115,31 @@ def test_moved_obstacle_is_cleared_by_log_odds_but_not_by_union():
 
 
 def test_points_outside_the_grid_are_clipped_along_their_ray():
-    grid = OccupancyGrid()
+    grid = OccupancyGrid(config=PLAIN)
     stats = grid.update([[25.0, centre(60, 0)[1], 0.5]], None, centre(60, 200))
     assert stats.points_outside == 1
     assert grid.free[60, 200:].all() and not grid.occupied.any()
     assert (~grid.unknown).sum() == 40
-    outside_sensor = OccupancyGrid()
+    outside_sensor = OccupancyGrid(config=PLAIN)
     outside_sensor.update([centre(60, 10)], None, (-1.0, centre(60, 0)[1]))
     assert outside_sensor.free[60, :10].all() and outside_sensor.occupied[60, 10]
 
 
 def test_max_range_cuts_the_ray_without_a_hit():
-    grid = OccupancyGrid(config=MappingConfig(max_range_m=1.0))
+    grid = OccupancyGrid(config=with_rules(max_range_m=1.0))
     grid.update([centre(60, 60)], None, centre(60, 20))          # 2 m away
     assert not grid.occupied.any()
     assert grid.free[60, 20:40].all() and grid.unknown[60, 41:].all()
 
 
 def test_nan_points_are_ignored_and_2d_points_accepted():
-    grid = OccupancyGrid()
+    grid = OccupancyGrid(config=PLAIN)
     stats = grid.update(np.array([[np.nan, 1.0], [*centre(60, 40)]]), None, centre(60, 20))
     assert stats.hit_cells == 1 and grid.occupied[60, 40]
 
 
 def test_map_orientation_left_of_robot_is_upper_half_of_pgm(tmp_path):
-    grid = OccupancyGrid()
+    grid = OccupancyGrid(config=PLAIN)
     grid.update([[1.0, 2.0, 0.3]], None, (0.0, 0.0))
     write_ros_map(tmp_path / "map.yaml", grid.to_ros_map())
     image = cv2.imread(str(tmp_path / "map.pgm"), cv2.IMREAD_UNCHANGED)
@@ -142,7 +151,7 @@ def test_map_orientation_left_of_robot_is_upper_half_of_pgm(tmp_path):
 
 
 def test_ros_map_round_trip_keeps_free_occupied_unknown(tmp_path):
-    grid = OccupancyGrid(GridSpec(width_m=3.0, height_m=2.0, origin_x_m=-0.5, origin_y_m=-1.2))
+    grid = OccupancyGrid(GridSpec(width_m=3.0, height_m=2.0, origin_x_m=-0.5, origin_y_m=-1.2), config=PLAIN)
     rng = np.random.default_rng(3)
     grid.update(rng.uniform([0.5, -1.0], [2.4, 0.7], (50, 2)), rng.uniform([0, -1], [2, 0.5], (50, 2)),
                 (0.0, 0.0))
@@ -156,7 +165,7 @@ def test_ros_map_round_trip_keeps_free_occupied_unknown(tmp_path):
 
 
 def test_log_odds_npy_round_trip(tmp_path):
-    grid = OccupancyGrid()
+    grid = OccupancyGrid(config=PLAIN)
     grid.update([centre(60, 40)], None, centre(60, 20))
     grid.save_log_odds(tmp_path / "lo.npy")
     back = OccupancyGrid.load_log_odds(tmp_path / "lo.npy")
@@ -173,7 +182,7 @@ def test_probability_helpers_are_inverse():
 
 
 def test_bad_inputs_raise():
-    grid = OccupancyGrid()
+    grid = OccupancyGrid(config=PLAIN)
     with pytest.raises(ValueError, match="points_obstacle_world"):
         grid.update(np.zeros((3, 4)), None, (0, 0))
     with pytest.raises(ValueError, match="sensor_origin_world"):
@@ -189,7 +198,7 @@ def test_bad_inputs_raise():
 
 
 def test_plot_map_writes_an_image(tmp_path):
-    grid = OccupancyGrid()
+    grid = OccupancyGrid(config=PLAIN)
     grid.update([centre(60, 40), centre(80, 60)], [centre(65, 30)], centre(60, 20))
     out = tmp_path / "map.png"
     plot_map(grid, out, robot_path=np.array([[1.0, 0.0, 0.0], [2.0, 0.2, 0.4]]),
@@ -203,7 +212,7 @@ def test_plot_map_writes_an_image(tmp_path):
 
 
 def test_min_points_per_cell_drops_isolated_hits():
-    grid = OccupancyGrid(config=MappingConfig(min_points_per_cell=3))
+    grid = OccupancyGrid(config=with_rules(min_points_per_cell=3))
     sensor = centre(60, 20)
     wall = np.repeat(np.array([[*centre(60, 40), 0.5]]), 3, axis=0)   # three points: supported
     stray = np.array([[*centre(80, 30), 0.5]])                         # one point: not a hit
@@ -218,7 +227,7 @@ def test_min_points_per_cell_drops_isolated_hits():
 def test_view_cells_of_one_ray_and_their_ordered_application():
     from mrstereo.mapping import ViewCells, view_cells
     spec = GridSpec()
-    cells = view_cells(np.array([[*centre(60, 40), 0.7]]), None, centre(60, 20))
+    cells = view_cells(np.array([[*centre(60, 40), 0.7]]), None, centre(60, 20), config=PLAIN)
     assert isinstance(cells, ViewCells)
     np.testing.assert_array_equal(cells.hit, [np.ravel_multi_index((60, 40), spec.shape)])
     np.testing.assert_array_equal(cells.miss, np.ravel_multi_index((np.full(20, 60), np.arange(20, 40)), spec.shape))
@@ -226,7 +235,7 @@ def test_view_cells_of_one_ray_and_their_ordered_application():
     rng = np.random.default_rng(3)
     views = [(rng.uniform([0.5, -2.5], [6.0, 2.5], (200, 2)), rng.uniform([0.5, -2.5], [6.0, 2.5], (300, 2)),
               rng.uniform([0.0, -1.0], [1.0, 1.0])) for _ in range(6)]
-    config = MappingConfig(min_points_per_cell=1, max_range_m=4.0)
+    config = with_rules(min_points_per_cell=1, max_range_m=4.0)
     precomputed = [view_cells(*v, config=config) for v in reversed(views)][::-1]
     a, b = OccupancyGrid(config=config), OccupancyGrid(config=config)
     for v, c in zip(views, precomputed):
@@ -238,16 +247,16 @@ def test_view_cells_of_one_ray_and_their_ordered_application():
 
 def test_apply_refuses_cells_of_another_config():
     from mrstereo.mapping import view_cells
-    cells = view_cells(np.array([[1.0, 0.0]]), None, (0.0, 0.0), config=MappingConfig(max_range_m=4.0))
+    cells = view_cells(np.array([[1.0, 0.0]]), None, (0.0, 0.0), config=with_rules(max_range_m=4.0))
     with pytest.raises(ValueError, match="max_range_m"):
-        OccupancyGrid(config=MappingConfig()).apply(cells)
+        OccupancyGrid(config=PLAIN).apply(cells)
     with pytest.raises(TypeError, match="cells must be ViewCells"):
-        OccupancyGrid().apply([1, 2])
+        OccupancyGrid(config=PLAIN).apply([1, 2])
 
 
 def test_range_uncertainty_keeps_the_cells_just_before_a_far_return_unchanged():
     """sigma_r = r^2 sigma_d / (b f): 3 m, 0.25 px, b f = 24 m px -> 9.4 cm; k = 2 -> 18.75 cm (3.75 cells)."""
-    config = MappingConfig(disparity_sigma_px=0.25, clear_margin_sigmas=2.0)
+    config = with_rules(disparity_sigma_px=0.25, clear_margin_sigmas=2.0)
     grid = OccupancyGrid(config=config)
     sensor = centre(60, 20)
     target = np.array([[sensor[0] + 3.0, sensor[1]]])          # 60 cells ahead, centre of cell (60, 80)
@@ -257,7 +266,7 @@ def test_range_uncertainty_keeps_the_cells_just_before_a_far_return_unchanged():
     near = OccupancyGrid(config=config)
     near.update(np.array([[sensor[0] + 0.5, sensor[1]]]), None, sensor, baseline_focal_m_px=24.0)
     assert near.free[60, 20:30].all() and near.occupied[60, 30]    # 0.5 m: margin 0.5 mm, all cleared
-    plain = OccupancyGrid(config=MappingConfig())
+    plain = OccupancyGrid(config=PLAIN)
     plain.update(target, None, sensor, baseline_focal_m_px=24.0)   # no sigma: up to the point
     assert plain.free[60, 20:80].all()
     with pytest.raises(ValueError, match="baseline_focal_m_px"):
@@ -271,7 +280,7 @@ def test_a_point_seen_through_a_wall_of_the_same_view_is_dropped():
     wall = np.array([[centre(r, 60)[0], centre(r, 60)[1]] for r in range(40, 81) for _ in range(6)])
     phantom = np.array([[centre(61, 100)[0], centre(61, 100)[1]]] * 6)       # 2 m behind the wall
     points = np.vstack([wall, phantom])
-    tested = MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5)
+    tested = with_rules(occlusion_gap_m=0.25, min_points_per_cell=5)
     cells = view_cells(points, None, sensor, config=tested)
     hit = np.zeros(GridSpec().shape, bool).ravel()
     hit[cells.hit] = True
@@ -281,7 +290,7 @@ def test_a_point_seen_through_a_wall_of_the_same_view_is_dropped():
     missed[cells.miss] = True
     missed = missed.reshape(hit.shape)
     assert not missed[55:66, 61:101].any()                        # nothing cleared behind the wall
-    plain = view_cells(points, None, sensor, config=MappingConfig(min_points_per_cell=5))
+    plain = view_cells(points, None, sensor, config=with_rules(min_points_per_cell=5))
     assert np.ravel_multi_index((61, 100), hit.shape) in plain.hit and plain.occluded == 0
     # a floor point behind the wall clears nothing behind it either
     floor = view_cells(wall, np.array([[*centre(60, 90), 0.0]]), sensor, config=tested)
@@ -293,9 +302,9 @@ def test_grazing_wall_is_not_occluded_by_itself():
     sensor = (0.5, 0.0)
     xs = np.arange(1.0, 4.5, 0.01)
     wall = np.c_[xs, np.full(xs.size, 1.02)]
-    cells = view_cells(wall, None, sensor, config=MappingConfig(occlusion_gap_m=0.25))
+    cells = view_cells(wall, None, sensor, config=with_rules(occlusion_gap_m=0.25))
     assert cells.occluded == 0
-    plain = view_cells(wall, None, sensor, config=MappingConfig())
+    plain = view_cells(wall, None, sensor, config=PLAIN)
     np.testing.assert_array_equal(cells.hit, plain.hit)
 
 
@@ -309,7 +318,7 @@ def test_occlusion_is_three_dimensional_a_table_top_hides_nothing_below_it():
     sensor_xy = centre(60, 20)
     table = np.array([[*centre(60, 40), z] for z in np.linspace(0.68, 0.72, 8)])     # a table-top edge, 1 m
     wall = np.array([[*centre(60, 80), z] for z in np.linspace(0.1, 0.45, 8)])        # 3 m, seen below it
-    config = MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5)
+    config = with_rules(occlusion_gap_m=0.25, min_points_per_cell=5)
     with_height = view_cells(np.vstack([table, wall]), None, (*sensor_xy, 0.5), config=config)
     assert _hit_mask(with_height)[60, 40] and _hit_mask(with_height)[60, 80] and with_height.occluded == 0
     flat = view_cells(np.vstack([table, wall]), None, sensor_xy, config=config)      # 2-D: the top hides the wall
@@ -325,11 +334,11 @@ def test_a_floating_mismatch_with_the_floor_seen_through_it_is_cleared():
     sensor = (*centre(60, 20), 0.5)
     ghost = np.array([[*centre(60, 40), 0.3]] * 6)
     floor = np.array([[*centre(60, c), 0.0] for c in range(56, 71) for _ in range(10)])
-    config = MappingConfig(occlusion_gap_m=0.25, see_through_ratio=1.0, min_points_per_cell=5)
+    config = with_rules(occlusion_gap_m=0.25, see_through_ratio=1.0, min_points_per_cell=5)
     cells = view_cells(ghost, floor, sensor, config=config)
     flat = np.ravel_multi_index((60, 40), GridSpec().shape)
     assert flat not in cells.hit and flat in cells.miss and cells.occluded == 1
-    kept = view_cells(ghost, floor, sensor, config=MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5))
+    kept = view_cells(ghost, floor, sensor, config=with_rules(occlusion_gap_m=0.25, min_points_per_cell=5))
     assert flat in kept.hit                        # without the test the ghost hides the floor instead
     table = np.array([[*centre(60, 40), 0.7]] * 6)  # the floor seen *below* a table top is no evidence against it
     under = view_cells(table, floor, sensor, config=config)
@@ -349,9 +358,9 @@ def test_no_clearing_beyond_an_overhang_but_the_wall_under_it_is_hit():
     table = np.array([[*centre(60, 40), z] for z in np.linspace(0.68, 0.72, 8)])
     wall = np.array([[*centre(60, 80), z] for z in np.linspace(0.05, 0.2, 8)])
     floor = np.array([[*centre(60, c), 0.0] for c in range(45, 71)])
-    base = MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5)
+    base = with_rules(occlusion_gap_m=0.25, min_points_per_cell=5)
     plain = view_cells(np.vstack([table, wall]), floor, sensor, config=base)
-    shadow = view_cells(np.vstack([table, wall]), floor, sensor, config=MappingConfig(
+    shadow = view_cells(np.vstack([table, wall]), floor, sensor, config=with_rules(
         occlusion_gap_m=0.25, min_points_per_cell=5, overhang_shadow=True))
     assert _mask(plain.miss)[60, 41:80].all()                 # plain: everything under the table cleared
     missed, hit = _mask(shadow.miss), _mask(shadow.hit)
@@ -360,7 +369,7 @@ def test_no_clearing_beyond_an_overhang_but_the_wall_under_it_is_hit():
     # the floor 2 m ahead seen over a low box (0.15 m, 1 m ahead; the line is 0.25 m high there): the
     # line is not under the box, clearing goes on behind it
     box = np.array([[*centre(60, 40), z] for z in np.linspace(0.05, 0.15, 8)])
-    over = view_cells(box, np.array([[*centre(60, 60), 0.0]]), sensor, config=MappingConfig(
+    over = view_cells(box, np.array([[*centre(60, 60), 0.0]]), sensor, config=with_rules(
         occlusion_gap_m=0.25, min_points_per_cell=5, overhang_shadow=True))
     assert _mask(over.miss)[60, 41:61].all() and over.occluded == 0
 
@@ -370,11 +379,11 @@ def test_clearing_only_where_the_sight_line_is_low_enough():
     0.8 m from d = 1 m on (cells whose whole crossing is below 0.8 m: entered at d >= 1.0 m)."""
     sensor_xy = centre(60, 20)                            # x at the centre of column 20
     floor = np.array([[sensor_xy[0] + 3.0, sensor_xy[1], 0.0]])
-    config = MappingConfig(clear_below_m=0.8)
+    config = with_rules(clear_below_m=0.8)
     missed = _mask(view_cells(None, floor, (*sensor_xy, 1.2), config=config).miss)
     # column c is entered at d = (c - 20 - 0.5) * 0.05 m: column 41 at 1.025 m is the first cleared
     assert not missed[60, 20:41].any() and missed[60, 41:81].all()
-    everywhere = _mask(view_cells(None, floor, (*sensor_xy, 1.2), config=MappingConfig()).miss)
+    everywhere = _mask(view_cells(None, floor, (*sensor_xy, 1.2), config=PLAIN).miss)
     assert everywhere[60, 20:81].all()
     flat = _mask(view_cells(None, floor[:, :2], sensor_xy, config=config).miss)     # no heights: no limit
     assert flat[60, 20:81].all()
@@ -390,9 +399,9 @@ def test_map_occlusion_stops_rays_at_cells_the_map_holds_occupied():
     wall = np.array([[*centre(r, 60), z] for r in range(40, 81) for z in np.linspace(0.1, 1.0, 6)])
     phantom = np.array([[*centre(62, 100), 0.3]] * 6)
     floor_behind = np.array([[*centre(58, c), 0.0] for c in range(70, 90)])
-    config = MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5, map_occlusion_p=0.8)
+    config = with_rules(occlusion_gap_m=0.25, min_points_per_cell=5, map_occlusion_p=0.8)
     results = {}
-    for name, cfg in (("map", config), ("plain", MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5))):
+    for name, cfg in (("map", config), ("plain", with_rules(occlusion_gap_m=0.25, min_points_per_cell=5))):
         grid = OccupancyGrid(config=cfg)
         grid.update(wall, None, sensor)
         grid.update(wall, None, sensor)                     # two hits: P = 0.845 >= 0.8
@@ -421,7 +430,7 @@ def test_map_occlusion_keeps_a_wall_seen_under_a_known_table_top():
     sensor = (*centre(60, 20), 0.5)
     table = np.array([[*centre(60, 40), z] for z in np.linspace(0.68, 0.72, 8)])
     wall = np.array([[*centre(60, 80), z] for z in np.linspace(0.05, 0.2, 8)])
-    config = MappingConfig(occlusion_gap_m=0.25, min_points_per_cell=5, map_occlusion_p=0.8)
+    config = with_rules(occlusion_gap_m=0.25, min_points_per_cell=5, map_occlusion_p=0.8)
     grid = OccupancyGrid(config=config)
     grid.update(table, None, sensor)
     grid.update(table, None, sensor)
@@ -445,4 +454,4 @@ def test_map_occlusion_bad_input():
     with pytest.raises(TypeError, match="known_occupied"):
         view_cells(None, None, sensor, known_occupied=np.zeros(GridSpec().shape, bool))
     with pytest.raises(ValueError, match="p_min"):
-        OccupancyGrid().known_occupied(1.5)
+        OccupancyGrid(config=PLAIN).known_occupied(1.5)

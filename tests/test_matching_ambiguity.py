@@ -5,7 +5,6 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from test_matching_realdata import _scene
 
 from mrstereo.matching import AmbiguityConfig, MatchingConfig, compute_disparity, preset_config
 from mrstereo.matching.cost import match_checked, prepare
@@ -94,11 +93,11 @@ def test_ambiguity_margin_bad_value():
 
 
 @pytest.mark.parametrize("name", ["tsukuba", "teddy"])
-def test_real_scenes_keep_their_density_and_accuracy(sample_data, name):
+def test_real_scenes_keep_their_density_and_accuracy(middlebury_scene, name):
     """On Middlebury scenes (no repeated pattern spanning bands) the test costs little: at
     least 97 % of the density without it (measured: Tsukuba 85.9 -> 85.0 %, Teddy 80.2 -> 79.1 %),
     errors among the estimated pixels at most 0.1 point higher (2.32 -> 2.35 %, 4.18 -> 3.64 %)."""
-    left, right, truth, max_d = _scene(sample_data, name)
+    left, right, truth, max_d = middlebury_scene(name)
     mapping = preset_config("mapping")
     known = np.isfinite(truth)
 

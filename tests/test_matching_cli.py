@@ -23,7 +23,7 @@ def test_disparity_command_writes_pfm_png_and_explains(tmp_path, capsys):
     left, right = _pair(tmp_path)
     out = tmp_path / "d.pfm"
     assert entry(["disparity", left, right, "--max-disparity", "16", "--explain", "-o", str(out),
-                  "--color", str(tmp_path / "c.png")]) == 0
+                  "--plot", str(tmp_path / "c.png")]) == 0
     assert "single-range" in capsys.readouterr().out
     d = read_disparity(out)
     assert d.shape == (40, 100)

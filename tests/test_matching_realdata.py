@@ -6,27 +6,6 @@ import numpy as np
 
 from mrstereo.matching import MatchingConfig, PostFilterConfig, SearchConfig, compute_disparity
 
-# (sample data, left, right, ground truth, gt divisor, search range)
-SCENES = {
-    "tsukuba": ("tsukuba", "scene1.row3.col3.ppm", "scene1.row3.col4.ppm", "truedisp.row3.col3.pgm",
-                16.0, 16),
-    "teddy": ("teddy", "im2.ppm", "im6.ppm", "disp2.pgm", 4.0, 64),
-}
-
-
-def _scene(sample_data, name):
-    sample, left, right, gt, divisor, max_d = SCENES[name]
-    folder = sample_data(sample)
-    paths = [folder / f for f in (left, right, gt)]
-    read = lambda p: cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
-    truth = read(paths[2]).astype(np.float32) / divisor        # 0 = unknown
-    truth[truth == 0] = np.nan
-    nonocc = folder / "nonocc.png"                         # evaluate the non-occluded pixels
-    if nonocc.is_file():
-        truth[read(nonocc) != 255] = np.nan
-    return read(paths[0]), read(paths[1]), truth, max_d
-
-
 def _bad2(d, truth):
     """bad-2 % dense (missing counts as bad), among estimated pixels, and density %."""
     known = np.isfinite(truth)
@@ -47,8 +26,8 @@ def _stereo_bm(left, right, max_d):
     return np.where(raw >= 0, raw, np.nan)
 
 
-def test_teddy_robust_is_denser_and_as_accurate_as_stereobm(sample_data):
-    left, right, truth, max_d = _scene(sample_data, "teddy")
+def test_teddy_robust_is_denser_and_as_accurate_as_stereobm(middlebury_scene):
+    left, right, truth, max_d = middlebury_scene("teddy")
     dense, est, density = _bad2(compute_disparity(left, right, max_disparity_px=max_d).disparity_px, truth)
     bm_dense, bm_est, _ = _bad2(_stereo_bm(left, right, max_d), truth)
     assert dense < bm_dense          # missing counts as bad: more right answers than StereoBM
@@ -56,8 +35,8 @@ def test_teddy_robust_is_denser_and_as_accurate_as_stereobm(sample_data):
     assert density > 70.0
 
 
-def test_tsukuba_robust_accurate_where_it_answers_and_paper_answers_everywhere(sample_data):
-    left, right, truth, max_d = _scene(sample_data, "tsukuba")
+def test_tsukuba_robust_accurate_where_it_answers_and_paper_answers_everywhere(middlebury_scene):
+    left, right, truth, max_d = middlebury_scene("tsukuba")
     dense, est, density = _bad2(compute_disparity(left, right, max_disparity_px=max_d).disparity_px, truth)
     assert density > 70.0
     assert est < 4.0                 # wrong in-band winners or lost coarse-level precision exceed this
@@ -66,8 +45,8 @@ def test_tsukuba_robust_accurate_where_it_answers_and_paper_answers_everywhere(s
     assert p_density > 95.0 and p_est < 20.0
 
 
-def test_tsukuba_refinement_recovers_the_coarse_level_precision(sample_data):
-    left, right, truth, max_d = _scene(sample_data, "tsukuba")
+def test_tsukuba_refinement_recovers_the_coarse_level_precision(middlebury_scene):
+    left, right, truth, max_d = middlebury_scene("tsukuba")
     cfg = MatchingConfig(search=SearchConfig(decimations=(4, 2, 1)))      # D = 16 alone would plan no k = 4 level
     _, est_refined, _ = _bad2(compute_disparity(left, right, max_disparity_px=max_d, config=cfg).disparity_px, truth)
     _, est_coarse, _ = _bad2(compute_disparity(left, right, max_disparity_px=max_d,
@@ -75,8 +54,8 @@ def test_tsukuba_refinement_recovers_the_coarse_level_precision(sample_data):
     assert est_refined < 0.8 * est_coarse
 
 
-def test_tsukuba_gap_filling_answers_more_than_stereobm_and_stays_accurate(sample_data):
-    left, right, truth, max_d = _scene(sample_data, "tsukuba")
+def test_tsukuba_gap_filling_answers_more_than_stereobm_and_stays_accurate(middlebury_scene):
+    left, right, truth, max_d = middlebury_scene("tsukuba")
     dense, est, density = _bad2(compute_disparity(left, right, max_disparity_px=max_d).disparity_px, truth)
     holes = MatchingConfig(postfilter=PostFilterConfig(gap_fill_px=0))
     dense0, est0, density0 = _bad2(compute_disparity(left, right, max_disparity_px=max_d,

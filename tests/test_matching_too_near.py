@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.camera import Camera, RigMount, StereoCamera, write_stereo
+from mrstereo.camera import Camera, CameraMount, StereoCamera, write_stereo
 from mrstereo.cli import entry
 from mrstereo.geometry import detect_obstacles
 from mrstereo.io import read_disparity
@@ -168,7 +168,7 @@ def test_real_chessboard_at_0_4_m_is_never_placed_farther_than_0_5_m():
 
 def _rig(width=240, height=96, f=200.0, height_m=0.6):
     cam = Camera(width=width, height=height, fx=f, fy=f, cx=(width - 1) / 2, cy=(height - 1) / 2)
-    return StereoCamera.ideal(cam, 0.1, rig=RigMount(height_m=height_m, tilt_rad=0.0))
+    return StereoCamera.ideal(cam, 0.1, mount=CameraMount.from_rig(height_m, 0.0))
 
 
 def test_too_near_pixels_become_obstacles_at_the_near_limit_never_floor():
@@ -231,7 +231,7 @@ def test_disparity_command_explains_and_colours_too_near(tmp_path, capsys):
     cv2.imwrite(str(tmp_path / "r.png"), right)
     out, color = tmp_path / "d.pfm", tmp_path / "c.png"
     assert entry(["disparity", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--max-disparity", "24",
-                  "--explain", "-o", str(out), "--color", str(color)]) == 0
+                  "--explain", "-o", str(out), "--plot", str(color)]) == 0
     captured = capsys.readouterr()
     share = float(captured.out.split("no value) ")[1].split("%")[0])
     assert 70 < share <= 100

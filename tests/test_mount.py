@@ -1,5 +1,5 @@
-"""Camera mount (6-DoF T_base_from_cam, REP 103) and the floor of a run: known answers, the paper's rig as
-the special case, YAML entries, --mount on the CLI, floor confidence and the warning on scenes without floor."""
+"""Camera mount (6-DoF T_base_from_cam, REP 103) and the floor of a run: known answers, the paper's rig read
+into it, YAML entries, --mount on the CLI, floor confidence and the warning on scenes without floor."""
 from __future__ import annotations
 
 import dataclasses
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from mrstereo.camera import Camera, RigMount, StereoCamera, read_stereo, write_stereo
+from mrstereo.camera import Camera, CameraInfo, StereoCamera, read_stereo, write_stereo
 from mrstereo.camera.mount import CameraMount, read_mount_entry
 from mrstereo.cli import entry
 from mrstereo.geometry import detect_obstacles
@@ -21,13 +21,24 @@ from mrstereo.recordings.manifest import read_manifest, write_manifest
 from mrstereo.transforms import T_robot_from_cam, rotation_from_rpy
 
 
-def test_the_paper_rig_is_the_special_case_bit_for_bit():
-    rig = RigMount(height_m=0.45, tilt_rad=0.15)
+def test_the_paper_rig_is_the_rectified_camera():
+    # rectification identity: the rig is the special case xyz = (0, 0, h), rpy = (0, tilt, 0), bit for bit
     a = CameraMount.from_xyz_rpy((0.0, 0.0, 0.45), (0.0, 0.15, 0.0)).T_base_from_cam
     assert np.array_equal(a, T_robot_from_cam(height_m=0.45, tilt_rad=0.15))
-    assert CameraMount.from_rig(rig) == CameraMount(a)
-    m = CameraMount(a)
-    assert m.height_m == 0.45 and m.tilt_rad == pytest.approx(0.15, abs=1e-15)
+    assert CameraMount.from_rig(0.45, 0.15) == CameraMount(a)
+    # a misaligned raw camera (p_rect = R p_raw): the mount is the raw camera's, the rig its rectified frame's
+    R = rotation_from_rpy(0.004, -0.006, 0.003)
+    m = CameraMount.from_rig(0.45, 0.15, R_rect_from_cam=R)
+    np.testing.assert_array_equal(m.T_base_from_cam[:3, :3], a[:3, :3] @ R)
+    np.testing.assert_array_equal(m.T_base_from_cam[:3, 3], [0.0, 0.0, 0.45])
+    np.testing.assert_allclose(m.T_base_from_rectified(R), a, atol=1e-15)
+    g = ground_from_mount(m, R_rect_from_cam=R)
+    assert g.method == "mount" and g.height_m == 0.45 and g.tilt_rad == pytest.approx(0.15, abs=1e-15)
+    assert g.roll_rad == pytest.approx(0.0, abs=1e-15)
+    with pytest.raises(ValueError, match="height_m"):
+        CameraMount.from_rig(0.0, 0.1)
+    with pytest.raises(ValueError, match="tilt_rad"):
+        CameraMount.from_rig(0.5, 2.0)
 
 
 def test_mount_known_answers_rep103():
@@ -46,8 +57,11 @@ def test_mount_known_answers_rep103():
     assert g.rpy == pytest.approx((0.05, 0.2, -0.7), abs=1e-12) and g.xyz == pytest.approx((0.3, -0.2, 0.9))
     np.testing.assert_allclose(CameraMount.from_dict(g.to_dict()).T_base_from_cam, g.T_base_from_cam, atol=1e-15)
     # pan turns the head about the base z axis
-    np.testing.assert_allclose(g.T_base_from_cam_panned(0.4)[:3, :3],
+    np.testing.assert_allclose(g.T_base_from_rectified(pan_rad=0.4)[:3, :3],
                                rotation_from_rpy(0, 0, 0.4) @ g.T_base_from_cam[:3, :3])
+    R = rotation_from_rpy(0.01, 0.02, -0.03)
+    np.testing.assert_allclose(g.T_base_from_rectified(R, 0.4)[:3, :3],
+                               rotation_from_rpy(0, 0, 0.4) @ g.T_base_from_cam[:3, :3] @ R.T, atol=1e-15)
 
 
 def test_floor_of_a_mount_and_obstacle_split_with_a_rolled_offset_camera():
@@ -69,7 +83,7 @@ def test_floor_of_a_mount_and_obstacle_split_with_a_rolled_offset_camera():
     depth = ground.height_m / (rays @ n)
     depth[(rays @ n) <= 0.05] = np.nan
     d = disparity_px_from_depth_m(depth, focal_px=100.0, baseline_m=0.1)
-    result = detect_obstacles(d.astype(np.float32), stereo, rig=mount)
+    result = detect_obstacles(d.astype(np.float32), stereo, mount=mount)
     z = result.points_robot_image[..., 2]
     assert np.nanmax(np.abs(z)) < 1e-5 and result.obstacle_mask.sum() == 0 and result.floor_mask.sum() > 1000
 
@@ -77,24 +91,51 @@ def test_floor_of_a_mount_and_obstacle_split_with_a_rolled_offset_camera():
 def test_mount_entries_in_stereo_yaml_and_manifest(tmp_path):
     cam = Camera(width=64, height=48, fx=50.0, fy=50.0, cx=32.0, cy=24.0)
     mount = CameraMount.from_xyz_rpy((0.1, 0.0, 0.7), (0.0, 0.2, 0.1))
-    write_stereo(tmp_path / "s.yaml", StereoCamera.ideal(cam, 0.1, rig=mount))
+    write_stereo(tmp_path / "s.yaml", StereoCamera.ideal(cam, 0.1, mount=mount))
     data = yaml.safe_load((tmp_path / "s.yaml").read_text())
     assert set(data["mount"]) == {"xyz", "rpy"} and "rig" not in data
-    back = read_stereo(tmp_path / "s.yaml").rig
+    back = read_stereo(tmp_path / "s.yaml").mount
     np.testing.assert_allclose(back.T_base_from_cam, mount.T_base_from_cam, atol=1e-15)
     # the manifest's mount overrides the calibration's; rig and mount together are refused
     import cv2
     cv2.imwrite(str(tmp_path / "a.png"), np.zeros((48, 64), np.uint8))
     frames = [{"left_rect": "a.png", "right_rect": "a.png", "pose": [0, 0, 0]}]
     other = CameraMount.from_xyz_rpy((0, 0, 0.5), (0, 0, 0))
-    write_manifest(tmp_path / "m.yaml", calibration="s.yaml", rig=other, frames=frames)
-    assert read_manifest(tmp_path / "m.yaml").rig == CameraMount(other.T_base_from_cam)
+    write_manifest(tmp_path / "m.yaml", calibration="s.yaml", mount=other, frames=frames)
+    assert read_manifest(tmp_path / "m.yaml").mount == CameraMount(other.T_base_from_cam)
     with pytest.raises(ValueError, match="'mount:' or 'rig:', not both"):
         read_mount_entry({"mount": {"xyz": [0, 0, 1]}, "rig": {"height_m": 1}}, where="x")
     with pytest.raises(ValueError, match="rpy must be 3 finite numbers"):
         read_mount_entry({"mount": {"xyz": [0, 0, 1], "rpy": [0, "a", 0]}}, where="x")
-    write_manifest(tmp_path / "n.yaml", calibration="s.yaml", rig=None, frames=frames)
+    write_manifest(tmp_path / "n.yaml", calibration="s.yaml", mount=None, frames=frames)
     assert "mount" not in yaml.safe_load((tmp_path / "n.yaml").read_text())
+
+
+def test_a_rig_entry_is_read_as_the_mount_of_the_rectified_camera(tmp_path):
+    # rig: {height_m, tilt_rad} in a stereo YAML and in a manifest: the raw camera's mount is T_rig @ R_left
+    R = rotation_from_rpy(0.01, -0.005, 0.002)
+    cam = Camera(width=64, height=48, fx=50.0, fy=50.0, cx=32.0, cy=24.0, k1=-0.05)
+    P_left = np.hstack([np.array([[50.0, 0, 32.0], [0, 50.0, 24.0], [0, 0, 1]]), np.zeros((3, 1))])
+    P_right = P_left.copy()
+    P_right[0, 3] = -5.0
+    stereo = StereoCamera(left=CameraInfo(cam, R=R, P=P_left, name="left"),
+                          right=CameraInfo(cam, R=R, P=P_right, name="right"))
+    write_stereo(tmp_path / "s.yaml", stereo)
+    data = yaml.safe_load((tmp_path / "s.yaml").read_text())
+    data["rig"] = {"height_m": 0.6, "tilt_rad": 0.2}
+    (tmp_path / "r.yaml").write_text(yaml.safe_dump(data))
+    expected = CameraMount.from_rig(0.6, 0.2, R_rect_from_cam=read_stereo(tmp_path / "s.yaml").left.R)
+    assert read_stereo(tmp_path / "r.yaml").mount == expected
+    import cv2
+    cv2.imwrite(str(tmp_path / "a.png"), np.zeros((48, 64), np.uint8))
+    manifest = {"calibration": "s.yaml", "rig": {"height_m": 0.6, "tilt_rad": 0.2},
+                "frames": [{"left": "a.png", "right": "a.png", "pose": [0, 0, 0]}]}
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(manifest))
+    assert read_manifest(tmp_path / "m.yaml").mount == expected
+    np.testing.assert_allclose(expected.T_base_from_rectified(R), T_robot_from_cam(height_m=0.6, tilt_rad=0.2),
+                               atol=1e-15)
+    with pytest.raises(ValueError, match="'rig' needs height_m"):
+        read_mount_entry({"rig": {"tilt_rad": 0.1}}, where="x")
 
 
 def _ideal_yaml(path: Path, left: Path) -> Path:
@@ -121,16 +162,15 @@ def test_points_warns_on_a_scene_without_floor(tmp_path, capsys, sample_data):
 
 
 @pytest.fixture(scope="module")
-def corridor(tmp_path_factory):
-    from mrstereo.world.dataset import write_synthetic_dataset
-    out = tmp_path_factory.mktemp("mount") / "c"
-    return read_manifest(write_synthetic_dataset(out, seed=3, n_frames=4, supersample=1, progress=False))
+def corridor(synthetic_dataset):
+    return read_manifest(synthetic_dataset(seed=3, n_frames=4, supersample=1))
 
 
 def test_points_with_mount_equals_height_and_tilt(corridor, tmp_path, capsys):
     from mrstereo.geometry import read_ply
 
-    rec, rig, cal = corridor.frames[0], corridor.rig, corridor.calibration
+    rec, cal = corridor.frames[0], corridor.calibration
+    rig = ground_from_mount(corridor.mount, R_rect_from_cam=cal.left.R)
     common = [str(rec.left), str(rec.right), "--calib", str(corridor.calibration_path)]
     assert entry(["points", *common, "-o", str(tmp_path / "a.ply"), "--height", str(rig.height_m),
                   "--tilt", str(rig.tilt_rad)]) == 0
@@ -151,17 +191,17 @@ def test_points_with_mount_equals_height_and_tilt(corridor, tmp_path, capsys):
 
 def test_map_without_mount_estimates_and_reports_the_floor(corridor, tmp_path, capsys):
     # the same dataset without any mount: calibration and manifest both lack it
-    cal = dataclasses.replace(corridor.calibration, rig=None)
+    cal = dataclasses.replace(corridor.calibration, mount=None)
     write_stereo(tmp_path / "cal.yaml", cal)
     frames = [{"left": str(f.left), "right": str(f.right), "pose": list(f.pose), "pan_rad": f.pan_rad}
               for f in corridor.frames]
-    write_manifest(tmp_path / "manifest.yaml", calibration="cal.yaml", rig=None, frames=frames)
-    assert read_manifest(tmp_path).rig is None
+    write_manifest(tmp_path / "manifest.yaml", calibration="cal.yaml", mount=None, frames=frames)
+    assert read_manifest(tmp_path).mount is None
     assert entry(["map", str(tmp_path), "-o", str(tmp_path / "out"), "--quiet"]) == 0
     out = capsys.readouterr()
     assert "floor estimated: median of 3 floor fit(s)" in out.out and "warning" not in out.err
     floor = json.loads((tmp_path / "out" / "metrics.json").read_text())["floor"]
     assert floor["confident"] and floor["method"] == "plane"
-    assert floor["height_m"] == pytest.approx(corridor.rig.height_m, abs=0.02)     # truth 0.45 m
-    assert floor["tilt_rad"] == pytest.approx(corridor.rig.tilt_rad, abs=0.02)     # truth 0.15 rad
+    assert floor["height_m"] == pytest.approx(0.45, abs=0.02)     # the synthetic head's truth
+    assert floor["tilt_rad"] == pytest.approx(0.15, abs=0.02)
     assert abs(floor["roll_rad"]) < 0.01 and floor["inlier_share"] > 0.12 and floor["residual_m"] < 0.03

@@ -8,17 +8,18 @@ import numpy as np
 import pytest
 
 from mrstereo.cli import entry
+from mrstereo.geometry.ground import ground_from_mount
 from mrstereo.odometry.trajectory import read_tum, trajectory_metrics, umeyama_alignment, write_tum
 from mrstereo.recordings.manifest import read_manifest
 from mrstereo.transforms import T_from_planar
-from mrstereo.world.dataset import write_synthetic_dataset
+
+from _bags import DT_NS, T0_NS, TOPICS, write_bag
 
 
 @pytest.fixture(scope="module")
-def sequence(tmp_path_factory):
-    out = tmp_path_factory.mktemp("odo") / "seq"
-    return write_synthetic_dataset(out, n_frames=6, supersample=1, path="s-curve", step_m=0.1,
-                                   odometry_noise=(0.03, math.radians(2)), progress=False)
+def sequence(synthetic_dataset):
+    return synthetic_dataset(n_frames=6, supersample=1, path="s-curve", step_m=0.1,
+                             odometry_noise=(0.03, math.radians(2)))
 
 
 def test_tum_round_trip_and_bad_files(tmp_path):
@@ -29,6 +30,17 @@ def test_tum_round_trip_and_bad_files(tmp_path):
     stamps, back = read_tum(tmp_path / "t.txt")
     np.testing.assert_allclose(stamps, np.arange(5) * 0.1)
     np.testing.assert_allclose(back, T, atol=1e-8)
+    # real stamps (a bag's header stamps, seconds since 1970) and full 3-D poses survive the file
+    from mrstereo.transforms import rotation_from_rpy
+
+    T3 = np.stack([np.eye(4)] * 3)
+    T3[:, :3, :3] = rotation_from_rpy([0.1, -0.2, 0.05], [0.02, 0.3, -0.1], [1.0, -2.5, 3.0])
+    T3[:, :3, 3] = [[1.0, 2.0, 0.5], [-3.0, 0.25, 1.75], [10.0, -20.0, -0.125]]
+    real = 1317384506.402581 + np.array([0.0, 0.1037, 0.2071])
+    write_tum(tmp_path / "real.txt", real, T3)
+    stamps3, back3 = read_tum(tmp_path / "real.txt")
+    np.testing.assert_allclose(stamps3, real, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(back3, T3, atol=1e-8)
     (tmp_path / "bad.txt").write_text("0 1 2 3 0 0 0\n")
     with pytest.raises(ValueError, match="line 1: expected 8"):
         read_tum(tmp_path / "bad.txt")
@@ -71,7 +83,7 @@ def test_odometry_command(sequence, tmp_path, capsys):
     assert code == 0, text
     assert "vs true poses" in text
     stamps, T = read_tum(out)
-    np.testing.assert_array_equal(stamps, np.arange(6))            # no stamps: frame index
+    np.testing.assert_allclose(stamps, 0.1 * np.arange(6), atol=1e-9)   # the sequence's stamps (10 Hz)
     manifest = read_manifest(sequence)
     true = np.array([f.true_pose for f in manifest.frames])
     np.testing.assert_allclose(T[:, :2, 3], true[:, :2], atol=0.01)  # the visual odometry, not the drifted poses
@@ -95,91 +107,44 @@ def test_odometry_command_bad_input(sequence, tmp_path, capsys):
     assert not (tmp_path / "t.txt").exists()
 
 
-def test_align_points_recovers_a_known_offset():
-    from mrstereo.mapping import GridSpec
-    from mrstereo.odometry.alignment import AlignConfig, align_points, likelihood_field
-
-    grid = GridSpec(width_m=6.0, height_m=4.0, origin_x_m=-1.0, origin_y_m=-2.0)
-    # an L of walls and a box: a wall along x at y = 1.0, one along y at x = 3.0, a box corner
-    occupied = np.zeros(grid.shape, bool)
-    xy = grid.cell_centres()
-    occupied |= np.abs(xy[..., 1] - 1.0) < 0.03
-    occupied |= (np.abs(xy[..., 0] - 3.0) < 0.03) & (xy[..., 1] < 1.0)
-    occupied |= (np.abs(xy[..., 0] - 1.5) < 0.03) & (np.abs(xy[..., 1] + 0.8) < 0.3)
-    field = likelihood_field(occupied, grid, sigma_m=0.05)
-    # points on those walls in the robot frame of the true pose
-    rng = np.random.default_rng(2)
-    world = np.concatenate([np.column_stack([rng.uniform(0, 2.9, 300), np.full(300, 1.0)]),
-                            np.column_stack([np.full(200, 3.0), rng.uniform(-1.5, 1.0, 200)]),
-                            np.column_stack([np.full(100, 1.5), rng.uniform(-1.1, -0.5, 100)])])
-    world = world + rng.normal(scale=0.01, size=world.shape)
-    true = (0.2, -0.1, 0.05)
-    c, s = math.cos(true[2]), math.sin(true[2])
-    d = world - true[:2]
-    robot = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
-    prior = (0.26, -0.05, 0.05 + math.radians(1.2))                   # odometry 8 cm and 1.2 degrees off
-    loose = np.diag([0.1 ** 2, 0.1 ** 2, math.radians(3.0) ** 2])
-    config = AlignConfig(min_cell_points=1, effective_points=300)
-    result = align_points(robot, prior, field, grid, prior_covariance=loose, config=config)
-    assert result.applied and result.score > result.prior_score
-    assert math.hypot(result.pose[0] - true[0], result.pose[1] - true[1]) < 0.01
-    assert abs(result.pose[2] - true[2]) < math.radians(0.2)
-    assert result.correction_m == pytest.approx(math.hypot(result.pose[0] - prior[0], result.pose[1] - prior[1]))
-    sd = np.sqrt(np.diag(result.covariance))
-    assert (sd < np.sqrt(np.diag(loose)) / 3).all()                  # the scan is worth more than the prior
-    # a tight prior (odometry trusted) keeps the pose near it: the posterior weighs both
-    tight = align_points(robot, prior, field, grid, prior_covariance=loose / 400, config=config)
-    assert tight.correction_m < 0.5 * result.correction_m
-    # nothing to align to: the prior is kept
-    empty = likelihood_field(np.zeros(grid.shape, bool), grid, sigma_m=0.05)
-    kept = align_points(robot, prior, empty, grid)
-    assert not kept.applied and kept.pose == prior
-    with pytest.raises(ValueError, match="points_robot_xy"):
-        align_points(np.zeros(5), prior, field, grid)
-    with pytest.raises(ValueError, match="prior_covariance"):
-        align_points(robot, prior, field, grid, prior_covariance=np.eye(2))
-
-
-def test_align_points_leaves_a_corridor_axis_to_the_odometry():
-    """Two parallel walls say nothing along their axis: the correction there is the prior's."""
-    from mrstereo.mapping import GridSpec
-    from mrstereo.odometry.alignment import AlignConfig, align_points, likelihood_field
-
-    grid = GridSpec(width_m=8.0, height_m=4.0, origin_x_m=-1.0, origin_y_m=-2.0)
-    xy = grid.cell_centres()
-    occupied = (np.abs(xy[..., 1] - 0.8) < 0.03) | (np.abs(xy[..., 1] + 1.1) < 0.03)
-    field = likelihood_field(occupied, grid, sigma_m=0.05)
-    rng = np.random.default_rng(5)
-    wall_x = rng.uniform(0.5, 4.0, 400)
-    world = np.column_stack([wall_x, np.where(np.arange(400) % 2, 0.8, -1.1)]) + rng.normal(scale=0.01, size=(400, 2))
-    true = (1.0, 0.1, 0.0)
-    robot = world - true[:2]
-    prior = (1.06, 0.14, math.radians(0.8))                           # 6 cm along, 4 cm across, 0.8 degrees
-    P = np.diag([0.05 ** 2, 0.05 ** 2, math.radians(2.0) ** 2])
-    result = align_points(robot, prior, field, grid, prior_covariance=P,
-                          config=AlignConfig(min_cell_points=1, effective_points=300))
-    assert abs(result.pose[1] - true[1]) < 0.01 and abs(result.pose[2] - true[2]) < math.radians(0.2)
-    assert abs(result.pose[0] - prior[0]) < 0.01                      # not moved along the corridor
-    sd = np.sqrt(np.diag(result.covariance))
-    assert sd[0] > 0.8 * 0.05 and sd[1] < 0.3 * sd[0]                 # the posterior knows it
-
-
-def test_odometry_errors_are_estimated_from_the_corrections():
-    """A path whose corrections undo a 3 % scale error and 2 deg/m of heading drift tells both."""
-    from mrstereo.odometry.alignment import AlignConfig, _odometry_errors
+def test_fusion_of_given_and_visual_odometry():
+    """Drifted wheel odometry (3 %, 2 deg/m) with good visual steps: the truth back; lost frames and a
+    wrong visual step fall back to the wheels."""
+    from mrstereo.odometry.fusion import FusionConfig, fuse_odometry
     from mrstereo.world.paths import drifted_poses, sequence_path
 
-    true = sequence_path("s-curve", 61, step_m=0.1)
+    rng = np.random.default_rng(3)
+    true = sequence_path("s-curve", 91, step_m=0.1)
     given = drifted_poses(true, scale_error=0.03, heading_drift_rad_per_m=math.radians(2.0))
-    path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(given[:, :2], axis=0).T))])
-    scale, drift = _odometry_errors(given, true, path, AlignConfig(calibration_window_m=6.0),
-                                    variance_m2=1e-6, variance_rad2=1e-8)
-    assert scale == pytest.approx(0.03, abs=0.003)
-    assert drift == pytest.approx(math.radians(2.0), rel=0.05)
-    # no corrections: no error found; too short a window: none either
-    assert _odometry_errors(given, given, path, AlignConfig(), variance_m2=1e-6, variance_rad2=1e-8) == (0.0, 0.0)
-    assert _odometry_errors(given[:2], true[:2], path[:2], AlignConfig(), variance_m2=1e-6,
-                            variance_rad2=1e-8) == (0.0, 0.0)
+    visual = true + rng.normal(scale=[0.0003, 0.0003, math.radians(0.01)], size=true.shape)
+    visual = np.stack([T_from_planar(*p) for p in visual])
+    visual = np.array([[T[0, 3], T[1, 3], math.atan2(T[1, 0], T[0, 0])]
+                       for T in T_from_planar(0.5, -2.0, 1.0) @ visual])      # another world frame: steps only
+    tracked = np.ones(len(true), bool)
+    fused = fuse_odometry(given, visual, tracked)
+    assert fused.visual_used[1:].all() and not fused.visual_rejected.any()
+    assert math.hypot(*(given[-1, :2] - true[-1, :2])) > 0.3                      # the wheels' end error
+    assert np.hypot(*(fused.poses[:, :2] - true[:, :2]).T).max() < 0.02
+    np.testing.assert_array_equal(fused.poses[0], given[0])
+    # lost frames: the wheels bridge them (their steps, with their drift over 1 m)
+    tracked[30:40] = False
+    bridged = fuse_odometry(given, visual, tracked)
+    assert not bridged.visual_used[30:41].any() and bridged.visual_used[41:].all()
+    assert math.hypot(*(bridged.poses[40, :2] - true[40, :2])) < 0.05            # 1 m of wheels: 3 % + 1 deg
+    heading_after = np.degrees(bridged.poses[41:, 2] - true[41:, 2])              # the gap's 2 deg stay
+    assert np.abs(heading_after - 2.0).max() < 0.4
+    # a visual step 0.5 m off is outside the wheels' drift: rejected
+    wrong = visual.copy()
+    wrong[60:, 0] += 0.5
+    gated = fuse_odometry(given, wrong, np.ones(len(true), bool))
+    assert gated.visual_rejected[60] and gated.visual_rejected.sum() == 1
+    assert np.hypot(*(gated.poses[:, :2] - true[:, :2]).T).max() < 0.03
+    moved, turned = gated.corrections(given)
+    assert moved[0] == 0.0 and moved[-1] > 0.3 and turned.shape == (len(true),)
+    with pytest.raises(ValueError, match="visual_poses"):
+        fuse_odometry(given, visual[:5], tracked)
+    with pytest.raises(ValueError, match="gate_sigmas"):
+        FusionConfig(gate_sigmas=0.0)
 
 
 def test_map_with_visual_odometry_and_alignment(sequence, tmp_path, capsys):
@@ -198,8 +163,12 @@ def test_map_with_visual_odometry_and_alignment(sequence, tmp_path, capsys):
             assert data["poses_vs_truth"]["end_point_error_m"] < 0.01
             assert data["poses_vs_truth"]["ate_rmse_unaligned_m"] < 0.01
         else:
-            assert "scan-to-map alignment" in text
+            assert "given odometry fused with visual odometry: 5 of 5 steps measured visually" in text
+            assert data["alignment"]["visual_steps"] == 5 and data["alignment"]["rejected_visual_steps"] == 0
             assert 0 <= data["alignment"]["mean_correction_m"] <= data["alignment"]["max_correction_m"] < 0.2
+            assert data["poses_vs_truth"]["end_point_error_m"] < 0.01
+    assert entry(["map", str(sequence), "-o", str(tmp_path / "both"), "--odometry", "visual", "--align"]) == 2
+    assert "not with --odometry visual" in capsys.readouterr().err
     # with --workers the visual-odometry map is the same
     code = entry(["map", str(sequence), "-o", str(tmp_path / "w2"), "--quiet", "--odometry", "visual",
                   "--workers", "2"])
@@ -210,13 +179,12 @@ def test_map_with_visual_odometry_and_alignment(sequence, tmp_path, capsys):
 
 def test_a_bag_without_odometry(sequence, tmp_path, capsys):
     """Camera topics only: the odometry command and map --odometry visual work from the images."""
-    from test_bag_io import DT_NS, T0_NS, TOPICS, write_bag
-
     manifest = read_manifest(sequence)
+    rig = ground_from_mount(manifest.mount, R_rect_from_cam=manifest.calibration.left.R)
     bag = write_bag(tmp_path / "cams.bag", manifest, ros1=True, odom=False)
     common = ["--bag", str(bag), "--left-topic", TOPICS["left_topic"], "--right-topic", TOPICS["right_topic"],
               "--camera-info-topics", ",".join(TOPICS["camera_info_topics"]), "--height",
-              str(manifest.rig.height_m), "--tilt", str(manifest.rig.tilt_rad), "--quiet"]
+              str(rig.height_m), "--tilt", str(rig.tilt_rad), "--quiet"]
     assert entry(["odometry", *common, "-o", str(tmp_path / "t.txt")]) == 0
     stamps, T = read_tum(tmp_path / "t.txt")
     np.testing.assert_allclose(stamps, (T0_NS + np.arange(6) * DT_NS) / 1e9)      # the image stamps
@@ -226,54 +194,3 @@ def test_a_bag_without_odometry(sequence, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "visual odometry: tracked all 6 frames" in out
     assert (tmp_path / "m" / "map.pgm").is_file()
-
-
-def test_fuse_aligned_undoes_odometry_drift_on_synthetic_scans():
-    """Scans of a corridor with boxes, seen from the true poses, fused at drifted odometry poses:
-    the aligned trajectory stays near the truth (the drifted one ends 1 m off)."""
-    from mrstereo.mapping import GridSpec
-    from mrstereo.mapping.fusion import FrameObservation
-    from mrstereo.odometry.alignment import AlignConfig, fuse_aligned
-    from mrstereo.world.paths import drifted_poses, sequence_path
-
-    rng = np.random.default_rng(7)
-    # walls at y = +-1 m with door recesses, and boxes: outlines sampled every 2 cm
-    outline = [np.column_stack([x, np.full_like(x, y)]) for y in (1.0, -1.0)
-               for x in [np.arange(0.0, 12.0, 0.02)]]
-    for x0, y0, y1 in ((2.0, 1.0, 0.6), (4.5, -1.0, -0.5), (7.0, 1.0, 0.7), (9.5, -1.0, -0.6)):
-        outline += [np.column_stack([np.linspace(x0, x0 + 0.4, 20), np.full(20, y1)]),
-                    np.column_stack([np.full(20, x0), np.linspace(y0, y1, 20)]),
-                    np.column_stack([np.full(20, x0 + 0.4), np.linspace(y0, y1, 20)])]
-    world = np.concatenate(outline)
-    true = sequence_path("s-curve", 81, step_m=0.1)
-    true[:, 1] *= 0.5                                         # keep the weave inside the 2 m corridor
-    given = drifted_poses(true, scale_error=0.03, heading_drift_rad_per_m=math.radians(2.0))
-    observations = []
-    for k, (t, g) in enumerate(zip(true, given)):
-        c, s = math.cos(t[2]), math.sin(t[2])
-        d = world - t[:2]
-        robot = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
-        seen = (robot[:, 0] > 0.3) & (robot[:, 0] < 4.0) & (np.abs(robot[:, 1]) < 0.8 * robot[:, 0])
-        robot = robot[seen] + rng.normal(scale=0.015, size=(seen.sum(), 2))
-        robot = np.repeat(robot, 3, axis=0) + rng.normal(scale=0.003, size=(3 * len(robot), 2))
-        c, s = math.cos(g[2]), math.sin(g[2])
-        at_given = np.column_stack([g[0] + c * robot[:, 0] - s * robot[:, 1], g[1] + s * robot[:, 0] + c * robot[:, 1],
-                                    np.full(len(robot), 0.5)]).astype(np.float32)
-        observations.append(FrameObservation(index=k, pose=tuple(g), pan_rad=0.0, obstacle_points_world=at_given,
-                                             floor_points_world=np.empty((0, 3), np.float32), n_valid_disparity=0,
-                                             ground_message=""))
-    grid = GridSpec(width_m=12.5, height_m=3.0, origin_x_m=-0.25, origin_y_m=-1.5)
-    _, corrected, alignments = fuse_aligned(observations, grid=grid, align=AlignConfig())
-    est = np.array([o.pose for o in corrected])
-    drifted_end = math.hypot(*(given[-1, :2] - true[-1, :2]))
-    assert drifted_end > 0.5
-    err = np.hypot(*(est[:, :2] - true[:, :2]).T)
-    yaw_err = np.degrees(np.abs(np.remainder(est[:, 2] - true[:, 2] + math.pi, math.tau) - math.pi))
-    assert err.max() < 0.05 and err[-1] < 0.04 and yaw_err.max() < 0.3, (err.max(), err[-1], yaw_err.max())   # 2.3 cm, 1.1 cm, 0.08 deg
-    assert sum(a.applied for a in alignments) == len(alignments) - 1            # all but the first frame
-    # without estimating the odometry's scale and heading drift, the per-frame matches alone lag behind
-    _, lagging, _ = fuse_aligned(observations, grid=grid, align=AlignConfig(calibrate_odometry=False))
-    assert math.hypot(*(np.array(lagging[-1].pose[:2]) - true[-1, :2])) > 2 * err[-1]
-    # without the scans' information (a huge likelihood width) the drift stays
-    _, kept, _ = fuse_aligned(observations, grid=grid, align=AlignConfig(effective_points=1e-6))
-    assert math.hypot(*(np.array(kept[-1].pose[:2]) - true[-1, :2])) > 0.5

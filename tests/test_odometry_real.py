@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from mrstereo.camera.formats import import_calibration
-from mrstereo.camera.mount import CameraMount, T_base_from_cam_of
+from mrstereo.camera.mount import CameraMount
 from mrstereo.odometry import visual_odometry
 from mrstereo.transforms import T_from_position_quaternion, rotation_angle_rad
 
@@ -46,7 +46,7 @@ def loris():
     trans = {(e["parent_frame"], e["child_frame"]): e["matrix"]
              for e in _opencv_yaml(DATA / "trans_matrix.yaml")["trans_matrix"]}
     mount = CameraMount(trans[("base_link", "t265_fisheye1_optical_frame")])
-    T_base_from_cam = T_base_from_cam_of(mount, stereo=stereo)           # of the rectified left camera
+    T_base_from_cam = mount.T_base_from_rectified(stereo.left.R)           # of the rectified left camera
     stamps, pairs = [], []
     for l1, l2 in zip((DATA / "fisheye1.txt").read_text().split("\n"), (DATA / "fisheye2.txt").read_text().split("\n")):
         if not l1.strip():

@@ -2,6 +2,7 @@
 input order, failures named or returned, one thread per worker, the same map bit for bit."""
 from __future__ import annotations
 
+import json
 import time
 from functools import partial
 
@@ -12,7 +13,6 @@ import pytest
 from mrstereo.pipeline.parallel import ItemError, ItemFailure, map_ordered
 from mrstereo.pipeline.run import build_map
 from mrstereo.recordings.manifest import read_manifest
-from mrstereo.world.dataset import write_synthetic_dataset
 
 
 def _slow_square(x: int, *, n: int) -> int:
@@ -41,10 +41,8 @@ def threaded_cluster():
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory):
-    out = tmp_path_factory.mktemp("par") / "synth"
-    return read_manifest(write_synthetic_dataset(out, seed=1, n_frames=4, width=160, height=120, supersample=1,
-                                                 progress=False))
+def dataset(synthetic_dataset):
+    return read_manifest(synthetic_dataset(seed=1, n_frames=4, width=160, height=120, supersample=1))
 
 
 def test_in_process_keeps_order_and_reports_failures():
@@ -93,6 +91,7 @@ def test_build_map_on_a_thread_cluster_is_bit_identical(dataset, threaded_cluste
     assert local.grid.n_updates == remote.grid.n_updates == 4
 
 
+@pytest.mark.slow
 def test_two_worker_processes_single_threaded_and_bit_identical(dataset):
     """A LocalCluster of 2 processes (workers=2, processes=True): one numba and OpenCV thread each; the same map."""
     from mrstereo.pipeline.parallel import dask_client
@@ -143,6 +142,12 @@ def test_cli_map_on_a_scheduler_matches_in_process(dataset, threaded_cluster, tm
 
     cluster, _ = threaded_cluster
     assert entry(["map", str(dataset.root), "-o", str(tmp_path / "a"), "--quiet"]) == 0
+    # what map prints under each name is the metrics.json value of that name (docs/glossary.md)
+    printed = capsys.readouterr().out
+    metrics = json.loads((tmp_path / "a" / "metrics.json").read_text())
+    for name, key in (("precision", "precision"), ("free correct", "free_precision"),
+                      ("free coverage", "free_coverage")):
+        assert f"{name} {metrics[key]:.3f}" in printed, (name, printed)
     assert entry(["map", str(dataset.root), "-o", str(tmp_path / "b"), "--quiet",
                   "--scheduler", cluster.scheduler_address]) == 0
     assert np.array_equal(np.load(tmp_path / "a" / "log_odds.npy"), np.load(tmp_path / "b" / "log_odds.npy"),

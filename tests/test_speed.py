@@ -5,9 +5,8 @@ import pickle
 
 import cv2
 import numpy as np
-import pytest
 
-from mrstereo.camera import Camera, CameraInfo, RigMount, StereoCamera
+from mrstereo.camera import Camera, CameraInfo, CameraMount, StereoCamera
 from mrstereo.camera import camera_info as camera_info_module
 from mrstereo.cli import entry
 from mrstereo.profiling import Profile, active, profiling, stage
@@ -21,10 +20,11 @@ def _stereo(baseline_m=0.12):
     P_left = np.hstack([K_rect, np.zeros((3, 1))])
     P_right = P_left.copy()
     P_right[0, 3] = -100.0 * baseline_m
-    return StereoCamera(left=CameraInfo(CAM, R=rotation_from_rpy(0.01, -0.005, 0.002), P=P_left, name="left"),
+    R_left = rotation_from_rpy(0.01, -0.005, 0.002)
+    return StereoCamera(left=CameraInfo(CAM, R=R_left, P=P_left, name="left"),
                         right=CameraInfo(CAM, R=rotation_from_rpy(-0.004, 0.008, -0.01), P=P_right,
                                          name="right"),
-                        rig=RigMount(height_m=0.45, tilt_rad=0.15))
+                        mount=CameraMount.from_rig(0.45, 0.15, R_rect_from_cam=R_left))
 
 
 def _images():
@@ -172,22 +172,6 @@ def test_cli_commands_load_on_demand_and_the_table_lists_every_command():
     assert not {"mrstereo.cli._calibration", "mrstereo.cli._evaluation", "mrstereo.cli._odometry"} & set(loaded)
 
 
-def test_prestarted_call_returns_the_result_or_raises_the_error():
-    from mrstereo.pipeline.parallel import PrestartedCall
-
-    with PrestartedCall("math:hypot") as call:
-        assert call(3.0, 4.0) == 5.0
-    with PrestartedCall("math:sqrt") as call, pytest.raises(ValueError, match="math domain error"):
-        call(-1.0)
-    with PrestartedCall("mrstereo.no_such_module:f") as call, pytest.raises(ModuleNotFoundError):
-        call()
-    with PrestartedCall("math:sqrt") as call:       # closed without a call: the process ends
-        pass
-    assert call._proc.poll() is not None
-    with pytest.raises(ValueError, match="module:function"):
-        PrestartedCall("math.sqrt")
-
-
 def test_texture_rejection_of_a_uint8_image_equals_that_of_the_float_image():
     """Eq. (13) on a uint8 image (integer window sums): the same disparity, rejected and uniform masks,
     bit for bit, as on the float image (float64 filters), for thresholds at which many patches have sigma
@@ -223,37 +207,3 @@ def test_profile_clock_is_a_parameter():
             pass
     assert prof.seconds == {"match": 2.0} and prof.calls == {"match": 2}
     assert Profile().clock is time.perf_counter
-
-
-def test_map_figure_in_a_second_process_only_on_a_free_core(monkeypatch, tmp_path):
-    """`mrstereo map` draws map.png in a process started at the beginning only when the run leaves a core
-    free; that process draws the same PNG, byte for byte, as this one."""
-    import contextlib
-    import os
-
-    from mrstereo.cli import _pipeline
-    from mrstereo.mapping import GridSpec, OccupancyGrid
-    from mrstereo.mapping.figures import plot_map
-    from mrstereo.pipeline.parallel import PrestartedCall
-
-    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
-    monkeypatch.setattr(os, "getloadavg", lambda: (0.2, 0.2, 0.2))
-    chosen = {}
-    for name, kw in {"one worker": dict(workers=1, scheduler=None), "two workers": dict(workers=2, scheduler=None),
-                     "in-process": dict(workers=None, scheduler=None),
-                     "cluster": dict(workers=None, scheduler="tcp://127.0.0.1:8786")}.items():
-        with _pipeline._figure_process(**kw) as figures:
-            chosen[name] = figures is not None
-    assert chosen == {"one worker": True, "two workers": False, "in-process": False, "cluster": True}
-    monkeypatch.setattr(os, "getloadavg", lambda: (0.9, 0.9, 0.9))       # another program keeps a core busy
-    with _pipeline._figure_process(workers=1, scheduler=None) as figures:
-        assert figures is None
-    assert isinstance(_pipeline._figure_process(workers=1, scheduler=None), contextlib.nullcontext)
-
-    grid = OccupancyGrid(GridSpec(width_m=3.0, height_m=2.0, resolution_m=0.1, origin_x_m=0.0, origin_y_m=-1.0))
-    grid.update(np.array([[1.0, 0.2, 0.3], [2.0, -0.5, 0.4]]), np.array([[0.5, 0.0, 0.0]]), (0.0, 0.0))
-    kwargs = {"robot_path": np.array([[0.0, 0.0, 0.1], [0.5, 0.1, 0.2]]), "title": "t"}
-    plot_map(grid, tmp_path / "here.png", **kwargs)
-    with PrestartedCall("mrstereo.mapping.figures:plot_map", preload=_pipeline.FIGURE_MODULES) as call:
-        call(grid, tmp_path / "there.png", **kwargs)
-    assert (tmp_path / "there.png").read_bytes() == (tmp_path / "here.png").read_bytes()

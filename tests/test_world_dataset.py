@@ -1,6 +1,7 @@
 """Dataset manifest: synthetic dataset round trip and validation of bad manifests."""
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 
@@ -16,10 +17,8 @@ from mrstereo.world.dataset import corridor_path, write_synthetic_dataset
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory):
-    out = tmp_path_factory.mktemp("ds") / "corridor"
-    write_synthetic_dataset(out, seed=2, n_frames=4, width=96, height=72, progress=False)
-    return out
+def dataset(synthetic_dataset):
+    return synthetic_dataset(seed=2, n_frames=4, width=96, height=72)
 
 
 def test_round_trip(dataset):
@@ -29,7 +28,7 @@ def test_round_trip(dataset):
     stereo = default_stereo(96, 72)
     assert m.calibration.baseline_m == pytest.approx(stereo.baseline_m)
     np.testing.assert_allclose(m.calibration.left.R, stereo.left.R, atol=1e-12)
-    assert m.rig == stereo.rig
+    np.testing.assert_allclose(m.mount.T_base_from_cam, stereo.mount.T_base_from_cam, atol=1e-15)
     assert [f.pan_rad for f in m.frames] == pytest.approx([0.0, math.pi / 4, -math.pi / 4, 0.0])
     assert m.frames[0].pose == m.frames[2].pose != m.frames[3].pose
     # Files hold exactly what the renderer gives for that frame.
@@ -89,7 +88,8 @@ def test_rectified_only_frame_is_fine(copy):
     (lambda d: d["frames"][3].update(left="left/missing.png"), FileNotFoundError, "frame 3: left not found"),
     (lambda d: d.update(calibration="nope.yaml"), FileNotFoundError, "calibration not found"),
     (lambda d: d.pop("calibration"), ValueError, "missing 'calibration"),
-    (lambda d: d.update(rig={"tilt_rad": 0.1}), ValueError, "rig"),
+    (lambda d: (d.pop("mount"), d.update(rig={"tilt_rad": 0.1})), ValueError, "'rig' needs height_m"),
+    (lambda d: d.update(rig={"height_m": 0.45}), ValueError, "'mount:' or 'rig:', not both"),
     (lambda d: d["frames"][0].update(colour="red"), ValueError, "unknown field"),
 ])
 def test_bad_manifests(copy, mutate, error, match):
@@ -106,3 +106,34 @@ def test_missing_and_corrupt_manifest(tmp_path):
         read_manifest(_write(tmp_path, "frames: [\n  - {left: a.png\n"))
     with pytest.raises(ValueError, match="expected a mapping"):
         read_manifest(_write(tmp_path, "- just\n- a list\n"))
+
+
+def test_staged_dataset_writes_a_whole_dataset_or_nothing(tmp_path):
+    from mrstereo.io import read_disparity
+    from mrstereo.recordings.manifest import staged_dataset
+
+    stereo, image = default_stereo(64, 48), np.arange(48 * 64, dtype=np.uint8).reshape(48, 64)
+    with pytest.raises(RuntimeError, match="killed"):
+        with staged_dataset(tmp_path / "bad", calibration=stereo, mount=stereo.mount) as dataset:
+            dataset.write("left", 0, image)
+            raise RuntimeError("killed")
+    assert list(tmp_path.iterdir()) == []                      # no dataset, no temporary folder
+    stereo = dataclasses.replace(stereo, mount=None)
+    with staged_dataset(tmp_path / "ok", calibration=stereo, mount=None, extra={"note": "x"}) as dataset:
+        for k in range(2):
+            dataset.write("left_rect", k, image)
+            dataset.write("right_rect", k, image[:, ::-1])
+            dataset.write("gt_disparity", k, np.full((48, 64), 2.5 + k, np.float32))
+            dataset.add_frame(k, pose=(0.5 * k, 0.0, 0.1), pan_rad=0.2)
+        with pytest.raises(ValueError, match="key must be one of"):
+            dataset.write("depth", 0, image)
+    m = read_manifest(tmp_path / "ok")
+    assert m.mount is None and [f.pose for f in m.frames] == [(0.0, 0.0, 0.1), (0.5, 0.0, 0.1)]
+    assert m.frames[1].pan_rad == 0.2 and m.frames[1].left is None
+    np.testing.assert_array_equal(read_image(m.frames[1].right_rect), image[:, ::-1])
+    assert np.all(read_disparity(m.frames[1].gt_disparity) == 3.5)
+    assert m.calibration.left.R.tolist() == stereo.left.R.tolist()
+    assert yaml.safe_load((tmp_path / "ok" / "manifest.yaml").read_text())["note"] == "x"
+    with pytest.raises(ValueError, match="not empty"):
+        with staged_dataset(tmp_path / "ok", calibration=stereo, mount=None):
+            pass

@@ -9,6 +9,7 @@ import yaml
 from click.testing import CliRunner
 
 from mrstereo.cli import main
+from mrstereo.geometry.ground import ground_from_mount
 from mrstereo.mapping import GridSpec
 from mrstereo.recordings.manifest import read_manifest
 from mrstereo.world import (LABEL_FLOOR, LABEL_OBSTACLE, LABEL_WALL, Scene, SensorModel, ground_truth_map,
@@ -36,7 +37,8 @@ def test_same_seed_same_world_other_seed_other_world(worlds):
 
 def test_drawn_quantities_stay_in_their_ranges_and_cover_the_bank(worlds):
     for w in worlds.values():
-        rig, st = w.stereo.rig, w.stereo
+        st = w.stereo
+        rig = ground_from_mount(st.mount, R_rect_from_cam=st.left.R)      # the rectified camera's height and tilt
         assert RANGES["camera_height_m"][0] <= rig.height_m <= RANGES["camera_height_m"][1]
         assert RANGES["tilt_rad"][0] <= rig.tilt_rad <= RANGES["tilt_rad"][1]
         assert RANGES["baseline_m"][0] <= st.baseline_m <= RANGES["baseline_m"][1]
@@ -170,7 +172,7 @@ def test_randomized_dataset_is_reproducible_file_for_file(tmp_path):
         assert (a / rel).read_bytes() == (b / rel).read_bytes(), rel
     m = read_manifest(a)
     w = random_world(5, width=64, height=48)
-    assert m.rig == w.stereo.rig
+    np.testing.assert_allclose(m.mount.T_base_from_cam, w.stereo.mount.T_base_from_cam, atol=1e-15)
     assert m.calibration.baseline_m == pytest.approx(w.stereo.baseline_m, rel=1e-12)
     data = yaml.safe_load((a / "manifest.yaml").read_text())
     assert data["generator"]["randomized"]["seed"] == 5
@@ -197,7 +199,8 @@ def test_synth_randomize_cli(tmp_path):
                                        "48", "--seed", "3", "--randomize", "--quiet"])
     assert result.exit_code == 0, result.output
     m = read_manifest(out)
-    assert m.rig == random_world(3, width=64, height=48).stereo.rig
+    truth = random_world(3, width=64, height=48).stereo.mount
+    np.testing.assert_allclose(m.mount.T_base_from_cam, truth.T_base_from_cam, atol=1e-15)
 
 
 def test_wall_texture_variant_changes_the_walls_only():

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.camera import RigMount
+from mrstereo.camera import CameraMount
 from mrstereo.geometry import points_cam_from_disparity
 from mrstereo.transforms import transform_points
 from mrstereo.world import LABEL_FLOOR, LABEL_OBSTACLE, LABEL_WALL, default_scene, default_stereo, render_stereo_frame
@@ -133,7 +133,8 @@ def test_bad_inputs(scene, stereo):
     with pytest.raises(ValueError, match="pose"):
         render_stereo_frame(scene, stereo, pose=(1.0, np.nan, 0.0))
     with pytest.raises(ValueError, match="inside a solid object"):
-        render_stereo_frame(scene, stereo, pose=(6.2, 0.0, 0.0), rig=RigMount(0.3, 0.0))
+        low = CameraMount.from_rig(0.3, 0.0, R_rect_from_cam=stereo.left.R)
+        render_stereo_frame(scene, stereo, pose=(6.2, 0.0, 0.0), mount=low)
     with pytest.raises(ValueError, match="supersample"):
         render_stereo_frame(scene, stereo, supersample=0)
     with pytest.raises(TypeError, match="scene"):

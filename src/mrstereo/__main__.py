@@ -1,4 +1,7 @@
-"""``python -m mrstereo`` runs the command-line interface."""
+"""``python -m mrstereo`` runs the command-line interface.
+
+Conventions: docs/conventions.md.
+"""
 import sys
 
 from .cli import entry

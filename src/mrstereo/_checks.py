@@ -2,6 +2,8 @@
 
 Bad input raises ``ValueError`` or ``TypeError`` naming the argument, what was
 expected and what arrived. The CLI turns these into one readable line.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -58,23 +60,15 @@ def image_dtype(name: str, value: np.ndarray, allowed=(np.uint8, np.uint16, np.f
     return value
 
 
-def gray_float32(name: str, value, *, empty=None) -> np.ndarray:
-    """Return an image as float32 gray (BGR colour, OpenCV order, with BT.601 weights).
-
-    ``empty(shape, dtype)``, if given, supplies the output buffer of a conversion (a
-    recycled one: fresh pages cost a fault each on first touch).
-    """
+def gray_float32(name: str, value) -> np.ndarray:
+    """Return an image as float32 gray (BGR colour, OpenCV order, with BT.601 weights)."""
     value = image(name, value)
     if value.ndim == 3:
         if value.shape[2] == 1:
             value = value[:, :, 0]
         else:
             value = value.astype(np.float32) @ np.array([0.114, 0.587, 0.299], np.float32)
-    if empty is None or (value.dtype == np.float32 and value.flags.c_contiguous):
-        out = np.ascontiguousarray(value, dtype=np.float32)
-    else:
-        out = empty(value.shape, np.float32)
-        np.copyto(out, value, casting="unsafe")
+    out = np.ascontiguousarray(value, dtype=np.float32)
     if not np.issubdtype(value.dtype, np.integer) and not np.isfinite(out).all():
         raise ValueError(f"{name} contains NaN or inf values")
     return out

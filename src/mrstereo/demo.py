@@ -11,6 +11,8 @@
 6. planning: A* through the map.
 
 Everything lands in one report directory (report.md, metrics.json, PNG figures).
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -18,7 +20,8 @@ import json
 import math
 import os
 import time
-from dataclasses import dataclass
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -75,6 +78,28 @@ def _disparity_errors(estimate: np.ndarray, truth: np.ndarray) -> dict:
             "mean_abs_error_px": float(err.mean()) if err.size else float("nan")}
 
 
+class _Steps:
+    """The demo's progress bar (``demo: world 0/6``: the step that is running now) and the time of each step."""
+
+    def __init__(self, timing_s: dict, progress: bool):
+        from tqdm.auto import tqdm
+
+        self.timing_s = timing_s
+        self.bar = tqdm(total=len(DEMO_STEPS), desc="demo", unit="step", disable=not progress)
+
+    @contextmanager
+    def __call__(self, name: str):
+        self.bar.set_description_str(f"demo: {name}")
+        t0 = time.perf_counter()
+        yield
+        self.timing_s[name] = round(time.perf_counter() - t0, 2)
+        self.bar.update()
+
+    def close(self) -> None:
+        self.bar.set_description_str("demo: done")
+        self.bar.close()
+
+
 def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_frames: int = 30,
              n_calibration_views: int = 12, progress: bool = True, randomize: bool = False) -> DemoResult:
     """Run the whole pipeline on the built-in world and write a report directory.
@@ -89,87 +114,90 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
         Frames of the corridor sequence (front, +45 and -45 degree views per stop).
     n_calibration_views : int
         Chessboard poses rendered for the stereo calibration.
+    progress : bool
+        A progress bar naming the step that runs.
     randomize : bool
         A randomized world drawn from ``seed`` (:func:`mrstereo.world.randomize.random_world`:
         corridor, textures, lights, rig, sensors, obstacles) instead of the built-in corridor.
     """
-    from tqdm.auto import tqdm
-
-    from .calibration import CalibrationView, calibrate_stereo, chessboard_views, ga_calibrate_single
-    from .calibration.report import residual_figure
-    from .camera import write_stereo
-    from .geometry.obstacles import detect_obstacles
-    from .geometry.scan import laser_scan_from_points, near_limit_range_m, plot_top_view, scan_angles_of_camera
-    from .mapping import plan_path, read_ros_map
-    from .mapping.figures import plot_map
-    from .mapping.fusion import fuse
-    from .mapping.metrics import map_metrics
-    from .matching import compute_disparity
-    from .pipeline.run import PipelineConfig, build_map, write_map_outputs
-    from .rejection import reject_uniform
-    from .world import read_manifest, render_calibration_views, render_paper_dot_target, write_synthetic_dataset
-    from .world.figures import save_stereo_figure
-
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()):
         raise ValueError(f"output directory {out} already exists and is not empty")
     out.mkdir(parents=True, exist_ok=True)
     metrics: dict = {"seed": seed, "randomize": bool(randomize), "timing_s": {}}
-    steps = tqdm(total=len(DEMO_STEPS), desc="demo", unit="step", disable=not progress)
+    steps = _Steps(metrics["timing_s"], progress)
+    with steps("world"):
+        manifest = _world(out, seed=seed, n_frames=n_frames, randomize=randomize)
+    with steps("calibration"):
+        estimated, metrics["calibration"] = _calibration(out / "calibration", manifest, seed=seed,
+                                                         n_views=n_calibration_views)
+    with steps("matching"):
+        metrics["frame0"] = _first_frame(out, manifest, estimated, metrics["calibration"])
+    with steps("mapping"):
+        run, union = _maps(manifest, estimated, metrics)
+    with steps("planning"):
+        files = _plan(out, run, union, metrics)
+    with steps("report"):
+        report = out / "report.md"
+        with atomic_write(report) as tmp:
+            tmp.write_text(_report_markdown(metrics, files))
+    with atomic_write(out / "metrics.json") as tmp:
+        tmp.write_text(json.dumps(metrics, indent=2, default=float))
+    steps.close()
+    return DemoResult(out_dir=out, report=report, metrics=metrics)
 
-    def begin(name: str) -> float:
-        """Show the step that is running now (``demo: world 0/6``); return its start time."""
-        steps.set_description_str(f"demo: {name}")
-        return time.perf_counter()
 
-    def done(name: str, t0: float) -> None:
-        metrics["timing_s"][name] = round(time.perf_counter() - t0, 2)
-        steps.update()
+def _world(out: Path, *, seed: int, n_frames: int, randomize: bool):
+    """1. Render the corridor sequence (raw and ideally rectified pairs, GT disparity, GT map); its figures."""
+    from .mapping import read_ros_map
+    from .mapping.figures import plot_map
+    from .world import read_manifest, write_synthetic_dataset
+    from .world.figures import save_stereo_figure
 
-    # 1. world ------------------------------------------------------------------------------
-    t0 = begin("world")
-    data_dir = write_synthetic_dataset(out / "data", seed=seed, n_frames=n_frames, progress=False,
-                                       randomize=randomize)
-    manifest = read_manifest(data_dir)
-    truth = manifest.calibration
+    manifest = read_manifest(write_synthetic_dataset(out / "data", seed=seed, n_frames=n_frames, progress=False,
+                                                     randomize=randomize))
     first = manifest.frames[0]
     save_stereo_figure(out / "world_frame0.png", {
         "raw left (distorted, misaligned)": read_image(first.left), "raw right": read_image(first.right),
         "ideally rectified left": read_image(first.left_rect), "ideally rectified right": read_image(first.right_rect)},
         title="built-in corridor, frame 0")
-    gt_map = read_ros_map(manifest.ground_truth_map)
-    path_xy = np.array([f.pose for f in manifest.frames])
-    plot_map(gt_map, out / "world_gt_map.png", robot_path=path_xy,
+    plot_map(read_ros_map(manifest.ground_truth_map), out / "world_gt_map.png",
+             robot_path=np.array([f.pose for f in manifest.frames]),
              title="ground-truth map (12 m x 6 m, 5 cm cells) and robot path")
-    done("world", t0)
+    return manifest
 
-    # 2. calibration: chessboard images -> corners -> GA + LM -> Fusiello ------------------------
-    t0 = begin("calibration")
-    calib_dir = out / "calibration"
-    views = render_calibration_views(truth, target="chessboard", board=(9, 6),
-                                     spacing_m=0.03, n_views=n_calibration_views, seed=seed)
-    paths_l, paths_r = [], []
-    for k, v in enumerate(views):
-        paths_l.append(calib_dir / "images" / f"left_{k:02d}.png")
-        paths_r.append(calib_dir / "images" / f"right_{k:02d}.png")
-        write_image(paths_l[-1], v.image)
-        write_image(paths_r[-1], v.image_right)
+
+def _calibration(calib_dir: Path, manifest, *, seed: int, n_views: int):
+    """2. Chessboard images -> corners -> GA + LM (eq. 4-8) -> Fusiello; and the paper's GA alone on its dot
+    target (Figs 2-3). Returns the estimated rig and its errors against the true one."""
+    from .calibration import CalibrationView, calibrate_stereo, chessboard_views, ga_calibrate_single
+    from .calibration.report import residual_figure
+    from .camera import write_stereo
+    from .world import render_calibration_views, render_paper_dot_target
+
+    truth = manifest.calibration
+    views = render_calibration_views(truth, target="chessboard", board=(9, 6), spacing_m=0.03, n_views=n_views,
+                                     seed=seed)
+    paths_l = [calib_dir / "images" / f"left_{k:02d}.png" for k in range(len(views))]
+    paths_r = [calib_dir / "images" / f"right_{k:02d}.png" for k in range(len(views))]
+    for v, left, right in zip(views, paths_l, paths_r):
+        write_image(left, v.image)
+        write_image(right, v.image_right)
     left_views, size = chessboard_views(paths_l, (9, 6), 0.03)
     right_views, _ = chessboard_views(paths_r, (9, 6), 0.03)
     pairs = [(a, b) for a, b in zip(left_views, right_views) if a is not None and b is not None]
     cal = calibrate_stereo([a for a, _ in pairs], [b for _, b in pairs], width=size[0], height=size[1],
-                           method="ga+lm", rig=manifest.rig, rng=seed)
-    estimated = cal.stereo
+                           method="ga+lm", rng=seed)
+    estimated = replace(cal.stereo, mount=manifest.mount)
     write_stereo(calib_dir / "stereo.yaml", estimated)
     residual_figure(calib_dir / "residuals_left.png", estimated.left.camera, [a for a, _ in pairs])
-    # the paper's single-view dot target and GA alone (Figs 2-3)
     dots = render_paper_dot_target(truth, seed=seed)
     dot_view = CalibrationView(dots.points_target, dots.points_px, name="paper dot target")
     ga = ga_calibrate_single(dot_view, width=size[0], height=size[1], rng=seed)
     residual_figure(calib_dir / "paper_dot_target_ga.png", ga.camera, [dot_view])
     write_image(calib_dir / "paper_dot_target.png", dots.image)
     true_l, est_l = truth.left.camera, estimated.left.camera
-    metrics["calibration"] = {
+    return estimated, {
         "pairs_used": len(pairs), "pairs_rendered": len(views),
         "rms_px": cal.rms_px, "rectified_vertical_error_px": cal.vertical_error_px,
         "focal_error_pct": 100 * (est_l.fx / true_l.fx - 1),
@@ -177,28 +205,32 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
         "baseline_m": estimated.baseline_m, "true_baseline_m": truth.baseline_m,
         "paper_ga_single_view_rms_px": ga.rms_px,
     }
-    done("calibration", t0)
 
-    # 3.-4. one frame through matching, rejection and 3D (figures) --------------------------------
-    t0 = begin("matching")
+
+def _first_frame(out: Path, manifest, estimated, calibration: dict) -> dict:
+    """3.-4. Frame 0 through the chain of ``mrstereo scan`` with the estimated calibration: rectification
+    against the ideal one (into ``calibration``), the disparity of each range and after eq. (13) against the
+    ground truth, the top view. Returns the frame's metrics."""
+    from .geometry.scan import plot_top_view
+    from .pipeline.frame import scan_from_pair
+    from .pipeline.run import PipelineConfig
+
     record = manifest.frames[0]
-    raw_l, raw_r = read_image(record.left), read_image(record.right)
-    left, right = estimated.rectify(raw_l, raw_r)
-    ideal_l = read_image(record.left_rect)
+    pair = scan_from_pair(read_image(record.left), read_image(record.right), estimated, pan_rad=record.pan_rad,
+                          preset=PipelineConfig.preset)
+    frame, result = pair.frame, pair.frame.matching
+    left, ideal_l = frame.left_rect, read_image(record.left_rect)
     valid = (left > 0) & (ideal_l > 0)
-    metrics["calibration"]["rectification_mean_abs_diff_gray"] = float(
+    calibration["rectification_mean_abs_diff_gray"] = float(
         np.abs(left.astype(float) - ideal_l.astype(float))[valid].mean())
     # geometric difference: where each rectified pixel samples the raw image, estimate vs truth
     shift = [np.hypot(e[0] - t[0], e[1] - t[1]) for e, t in zip(estimated.rectification_maps(),
-                                                                   truth.rectification_maps())]
-    metrics["calibration"]["rectification_map_difference_px"] = {
+                                                                   manifest.calibration.rectification_maps())]
+    calibration["rectification_map_difference_px"] = {
         "left_mean": float(shift[0].mean()), "left_max": float(shift[0].max()),
         "right_mean": float(shift[1].mean()), "right_max": float(shift[1].max())}
-    metrics["calibration"]["rectified_focal_px"] = estimated.focal_px
-    metrics["calibration"]["true_rectified_focal_px"] = truth.focal_px
-    result = compute_disparity(left, right, calibration=estimated, preset=PipelineConfig().preset)
-    rejected = reject_uniform(result.disparity_px, left)
-    obstacles = detect_obstacles(rejected.disparity_px, estimated, rig=manifest.rig, pan_rad=record.pan_rad)
+    calibration["rectified_focal_px"] = estimated.focal_px
+    calibration["true_rectified_focal_px"] = manifest.calibration.focal_px
     panels = {"rectified left (estimated calibration)": left}
     names = {1: "III (full resolution)", 2: "II (1/2 horizontal)", 4: "I (1/4 horizontal)"}
     for level, d in zip(result.plan.levels, result.levels):
@@ -206,63 +238,58 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
         panels[f"range {names.get(level.decimation, level.decimation)}\n"
                f"{level.band_px[0]:.0f}-{level.band_px[1]:.0f} px{depth}"] = d
     panels["combined (eq. 12)"] = result.disparity_px
-    panels["after ground suppression (eq. 13)"] = rejected.disparity_px
+    panels["after ground suppression (eq. 13)"] = frame.disparity_px
     gt = read_disparity(record.gt_disparity)
     panels["ground truth"] = gt
     _disparity_panels(out / "disparity.png", panels, range_px=disparity_range_px(gt, result.disparity_px),
                       background=left)
-    lo, hi = scan_angles_of_camera(estimated, pan_rad=record.pan_rad)
-    near_m = near_limit_range_m(estimated, obstacles.T_robot_from_cam,
-                                max(level.band_px[1] for level in result.plan.levels))
-    scan = laser_scan_from_points(obstacles.obstacle_points_robot, angle_min_rad=lo, angle_max_rad=hi,
-                                  angle_increment_rad=math.radians(0.5), range_min_m=max(0.1, near_m),
-                                  range_max_m=8.0, observed_points_robot=obstacles.points_robot)
+    obstacles = frame.obstacles
     plot_top_view(out / "top_view.png", obstacle_points_robot=obstacles.obstacle_points_robot,
-                  floor_points_robot=obstacles.floor_points_robot, scan=scan,
+                  floor_points_robot=obstacles.floor_points_robot, scan=pair.scan,
                   title="top view of frame 0 (robot frame)")
-    metrics["frame0"] = {"plan": result.plan.describe(),
-                         "ghost_points_removed": int(rejected.n_rejected) if hasattr(rejected, "n_rejected") else None,
-                         "matching_vs_gt": _disparity_errors(result.disparity_px, gt),
-                         "after_rejection_vs_gt": _disparity_errors(rejected.disparity_px, gt)}
-    done("matching", t0)
+    return {"plan": result.plan.describe(), "ghost_points_removed": int(frame.rejection.n_rejected),
+            "matching_vs_gt": _disparity_errors(result.disparity_px, gt),
+            "after_rejection_vs_gt": _disparity_errors(frame.disparity_px, gt)}
 
-    # 5. map along the path (estimated calibration, raw images), union and single range -----------
-    t0 = begin("mapping")
+
+def _maps(manifest, estimated, metrics: dict):
+    """5. The map along the path with the estimated calibration (raw images), with the paper's union fusion,
+    and with a single-range search of the same work; their metrics into ``metrics``."""
+    from .mapping import read_ros_map
+    from .mapping.metrics import map_metrics
+    from .pipeline.run import PipelineConfig, build_map, map_from_observations
+
     config = PipelineConfig()
     run = build_map(manifest, config=config, calibration=estimated, progress=False)
-    union = fuse(run.observations, grid=config.grid, config=config.with_fusion("union").mapping)
+    union = map_from_observations(manifest, run.observations, config=config.with_fusion("union"), stereo=estimated)
     metrics["map"] = run.metrics.to_dict() if run.metrics is not None else None
-    metrics["map_union"] = map_metrics(union, gt_map, path_xy=path_xy).to_dict()
+    metrics["map_union"] = union.metrics.to_dict() if union.metrics is not None else None
     single = config.single_range_equal_work(estimated)
     single_run = build_map(manifest, config=single, calibration=estimated, progress=False)
     metrics["map_single_range"] = single_run.metrics.to_dict() if single_run.metrics is not None else None
     metrics["map_single_range"]["max_disparity_px"] = single.max_disparity_px
-    near = {"multi-range": run.grid, "single range": single_run.grid}
-    metrics["near_recall_within_1m"] = {k: map_metrics(g, gt_map, path_xy=path_xy, within_m=1.0).recall
-                                        for k, g in near.items()}
-    done("mapping", t0)
+    gt_map, path_xy = read_ros_map(manifest.ground_truth_map), np.array([f.pose for f in manifest.frames])
+    metrics["near_recall_within_1m"] = {
+        name: map_metrics(grid, gt_map, path_xy=path_xy, within_m=1.0).recall
+        for name, grid in (("multi-range", run.grid), ("single range", single_run.grid))}
+    return run, union
 
-    # 6. plan through the map ---------------------------------------------------------------------
-    t0 = begin("planning")
+
+def _plan(out: Path, run, union, metrics: dict) -> dict:
+    """6. A* from the first to the last pose through the map; the map outputs and figures with the path."""
+    from .mapping import plan_path
+    from .mapping.figures import plot_map
+    from .pipeline.run import write_map_outputs
+
+    path_xy = np.array([f.pose for f in run.manifest.frames])
     start, goal = tuple(path_xy[0, :2]), tuple(path_xy[-1, :2])
     plan = plan_path(run.grid.to_ros_map(), start, goal, robot_radius_m=0.2, unknown_is_obstacle=False)
     metrics["plan"] = {"success": plan.success, "message": plan.message, "length_m": plan.length_m,
                        "start": list(start), "goal": list(goal), "robot_radius_m": 0.2, "unknown": "free"}
     files = write_map_outputs(run, out / "map", planned_path=plan.path_xy if plan.success else None)
-    plot_map(union, out / "map" / "map_union.png", robot_path=path_xy, ground_truth=gt_map,
+    plot_map(union.grid, out / "map" / "map_union.png", robot_path=path_xy, ground_truth=union.ground_truth_map,
              title="occupancy grid (paper's union)")
-    done("planning", t0)
-
-    t0 = begin("report")
-    report = out / "report.md"
-    with atomic_write(report) as tmp:
-        tmp.write_text(_report_markdown(metrics, files))
-    done("report", t0)
-    with atomic_write(out / "metrics.json") as tmp:
-        tmp.write_text(json.dumps(metrics, indent=2, default=float))
-    steps.set_description_str("demo: done")
-    steps.close()
-    return DemoResult(out_dir=out, report=report, metrics=metrics)
+    return files
 
 
 def _report_markdown(m: dict, files: dict) -> str:
@@ -299,7 +326,7 @@ def _report_markdown(m: dict, files: dict) -> str:
     lines += ["", "![disparity](disparity.png)", "", "![top view](top_view.png)", "",
               "## Occupancy grid along the path", "",
               "| fusion | occupied precision | occupied recall | wall profile error [cm] | free correct | "
-              "true free mapped free |",
+              "free recall |",
               "|---|---|---|---|---|---|"]
     single = m.get("map_single_range") or {}
     for key, name in (("map", "multi-range, log-odds"), ("map_union", "multi-range, paper's union"),
@@ -309,7 +336,7 @@ def _report_markdown(m: dict, files: dict) -> str:
         if g:
             lines.append(f"| {name} | {g['precision']:.3f} | {g['recall']:.3f} | "
                          f"{100 * g['mean_distance_m']:.1f} | {g['free_precision']:.3f} | "
-                         f"{g['free_accuracy']:.3f} |")
+                         f"{g['free_recall']:.3f} |")
     near = m["near_recall_within_1m"]
     lines += ["", f"Occupied recall within 1 m of the path (near obstacles): multi-range "
                   f"{near['multi-range']:.3f}, single range of equal work {near['single range']:.3f}."]

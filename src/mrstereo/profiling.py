@@ -13,6 +13,8 @@ profile (Dask worker threads included; worker *processes* are not seen).
 Stages used by the library: ``read`` (image decode), ``rectify``, ``match`` (eq. 9-12),
 ``reject`` (eq. 13), ``3-D`` (floor, eq. 14-16, obstacle/floor split), ``grid`` (world
 transform, grid cells, fusion), ``scan`` (the virtual laser scan).
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -17,6 +17,7 @@ from . import _checks
 
 __all__ = ["R_ROBOT_FROM_CAM_LEVEL", "R_BODY_FROM_OPTICAL", "rotation_from_rpy", "rpy_from_rotation",
            "T_robot_from_cam", "transform_points", "T_from_rvec_t", "rvec_t_from_T", "rotation_angle_rad",
+           "rotations_from_rvecs", "rotated_points_jacobian", "scale_motion",
            "quaternion_from_rotation", "rotation_from_quaternion", "slerp", "T_from_position_quaternion",
            "T_from_planar", "planar_from_T", "compose_planar", "relative_planar", "wrap_angle"]
 
@@ -103,6 +104,60 @@ def rvec_t_from_T(T) -> tuple[np.ndarray, np.ndarray]:
     """OpenCV ``(rvec, tvec)`` (3x1 each) of a 4x4 transform."""
     T = np.asarray(T, dtype=np.float64)
     return cv2.Rodrigues(T[:3, :3])[0].reshape(3, 1), T[:3, 3].reshape(3, 1).copy()
+
+
+def rotations_from_rvecs(rvecs) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) of rotation vectors (N, 3) (Rodrigues' formula, as ``cv2.Rodrigues``)."""
+    r = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
+    theta = np.linalg.norm(r, axis=1)
+    small = theta < 1e-8
+    # series for tiny angles: sin(t)/t -> 1 - t^2/6, (1 - cos t)/t^2 -> 1/2 - t^2/24
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - theta ** 2 / 6.0, np.sin(t) / t)
+    b = np.where(small, 0.5 - theta ** 2 / 24.0, (1.0 - np.cos(t)) / t ** 2)
+    K = _skew(r)
+    return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrices (N, 3, 3) of vectors (N, 3): ``_skew(v) @ p = v x p``."""
+    K = np.zeros(v.shape[:-1] + (3, 3))
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    K[..., 1, 0], K[..., 2, 0], K[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return K
+
+
+def rotated_points_jacobian(rvecs, points) -> np.ndarray:
+    """``d(R(r) p) / dr`` (N, 3, 3) of rotation vectors ``r`` (N, 3) applied to points ``p`` (N, 3).
+
+    Gallego and Yezzi's closed form, ``-R [p]x (r r^T + (R^T - I) [r]x) / |r|^2``, and ``-[p]x``
+    at ``r = 0``.
+
+    References
+    ----------
+    G. Gallego, A. Yezzi. A compact formula for the derivative of a 3-D rotation in exponential
+    coordinates. J. Math. Imaging Vis. 51, 2015.
+    """
+    r = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    R = rotations_from_rvecs(r)
+    n2 = np.einsum("ij,ij->i", r, r)
+    small = n2 < 1e-16
+    inner = r[:, :, None] * r[:, None, :] + (np.swapaxes(R, 1, 2) - np.eye(3)) @ _skew(r)
+    J = -(R @ _skew(p)) @ (inner / np.where(small, 1.0, n2)[:, None, None])
+    J[small] = -_skew(p[small])
+    return J
+
+
+def scale_motion(T, fraction: float) -> np.ndarray:
+    """A rigid motion ``T`` (4x4) scaled in time: its rotation vector and translation times ``fraction``.
+
+    The constant-velocity motion model's prediction over another time step (exact for a
+    rotation about an axis through the origin, first order otherwise).
+    """
+    T = np.asarray(T, dtype=np.float64)
+    rvec = cv2.Rodrigues(T[:3, :3])[0].ravel()
+    return T_from_rvec_t(rvec * fraction, T[:3, 3] * fraction)
 
 
 def rotation_angle_rad(R) -> float:

@@ -1,4 +1,7 @@
-"""Fit reports (JSON + markdown), the reprojection residual plot and the distortion figure (paper Figs. 2-3)."""
+"""Fit reports (JSON + markdown), the reprojection residual plot and the distortion figure (paper Figs. 2-3).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import json

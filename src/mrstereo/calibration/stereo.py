@@ -17,12 +17,13 @@ from typing import Sequence
 import numpy as np
 
 from .. import _checks
-from ..camera import (MIN_BASELINE_M, RigMount, StereoCamera, check_not_swapped, rectified_px_from_raw_px,
+from ..camera import (MIN_BASELINE_M, StereoCamera, check_not_swapped, rectified_px_from_raw_px,
                       rectify_fusiello)
 from ..transforms import rotation_from_rpy
 from .calibrate import CalibrationResult, _rms, calibrate_camera, reprojection_residuals, zhang_init
 from .ga import GABounds, GAConfig
-from .refine import calibration_model, fit_statistics, grouped_jacobian, pose_matrix, pose_vector, project_views
+from .refine import (CalibrationModel, calibration_model, fit_statistics, grouped_jacobian, pose_matrix, pose_vector,
+                     project_views)
 from .targets import CalibrationView
 
 __all__ = ["StereoCalibrationResult", "calibrate_stereo", "rectified_points", "rectified_vertical_error_px"]
@@ -150,11 +151,114 @@ def _check_baseline(T: np.ndarray, poses_left: Sequence[np.ndarray]) -> None:
                          "images given as --left and --right?")
 
 
+def _check_view_pairs(left_views: list, right_views: list) -> None:
+    if len(left_views) != len(right_views):
+        raise ValueError(f"left and right need the same number of views, got {len(left_views)} and "
+                         f"{len(right_views)}")
+    if len(left_views) < 2:
+        raise ValueError(f"stereo calibration needs at least 2 view pairs, got {len(left_views)}")
+    for i, (a, b) in enumerate(zip(left_views, right_views)):
+        if a.points_target.shape != b.points_target.shape or not np.allclose(a.points_target, b.points_target):
+            raise ValueError(f"pair {i}: left and right views must hold the same target points")
+
+
+def _check_swapped_early(left_views: list, right_views: list, *, width: int, height: int) -> None:
+    """Before the (slow) GA: the closed-form poses of a planar target already tell a swapped or zero baseline."""
+    if not all(v.is_planar for v in left_views):
+        return
+    poses = [zhang_init(views, width=width, height=height)[1] for views in (left_views, right_views)]
+    R, T = _relative_pose(*poses)
+    _check_baseline(T, poses[0])
+    try:
+        check_not_swapped(R, T, where="stereo-calibrate")
+    except ValueError:      # confirm (and measure) with LM poses: the closed form ignores distortion
+        poses = [calibrate_camera(views, width=width, height=height, method="lm").poses
+                 for views in (left_views, right_views)]
+        R, T = _relative_pose(*poses)
+        check_not_swapped(R, T, where="stereo-calibrate")
+
+
+@dataclass(frozen=True)
+class _JointFit:
+    """The joint refinement's parameter vector: both cameras' intrinsics (``n`` each), the left poses
+    (6 per view pair) and the relative pose (6); residuals of all left views, then all right views."""
+
+    spec: CalibrationModel
+    left_views: tuple
+    right_views: tuple
+
+    @property
+    def n(self) -> int:
+        return 4 + self.spec.n_free                 # fx, fy, cx, cy and the model's coefficients
+
+    def pack(self, cam_l, cam_r, poses_l, R, T) -> np.ndarray:
+        Trel = np.eye(4)
+        Trel[:3, :3], Trel[:3, 3] = R, T
+        return np.concatenate([[c.fx, c.fy, c.cx, c.cy, *self.spec.seed(c)] for c in (cam_l, cam_r)]
+                              + [pose_vector(P) for P in poses_l] + [pose_vector(Trel)])
+
+    def unpack(self, x) -> tuple:
+        n, V = self.n, len(self.left_views)
+        poses = [x[2 * n + 6 * i: 2 * n + 6 + 6 * i] for i in range(V)]
+        return x[:n], x[n:2 * n], poses, pose_matrix(x[2 * n + 6 * V:])
+
+    def residuals(self, x) -> np.ndarray:
+        il, ir, pl, relT = self.unpack(x)
+        pl = np.asarray(pl)
+        Rl, tl = rotation_from_rpy(pl[:, 0], pl[:, 1], pl[:, 2]), pl[:, 3:6]
+        Rr, tr = relT[:3, :3] @ Rl, tl @ relT[:3, :3].T + relT[:3, 3]
+        return np.concatenate([project_views(views, R_, t_, fx=intr[0], fy=intr[1], cx=intr[2], cy=intr[3],
+                                             distortion_model=self.spec.distortion_model,
+                                             D=self.spec.full_coefficients(intr[4:]))
+                               for intr, R_, t_, views in ((il, Rl, tl, self.left_views),
+                                                           (ir, Rr, tr, self.right_views))])
+
+    def jacobian(self, x) -> np.ndarray:
+        """Central differences, perturbing the columns of different view pairs together."""
+        V, n = len(self.left_views), self.n
+        col_block = np.concatenate([np.full(2 * n, -1), np.repeat(np.arange(V), 6), np.full(6, -1)])
+        col_local = np.concatenate([np.arange(2 * n), np.tile(np.arange(6), V), np.arange(6)])
+        row_block = np.concatenate([np.repeat(np.arange(V), [2 * len(v.uv) for v in views])
+                                    for views in (self.left_views, self.right_views)])
+        return grouped_jacobian(self.residuals, x, col_block, col_local, row_block)
+
+
+def _refine_jointly(fit: _JointFit, cam_l, cam_r, poses_l, R, T, *, width: int, height: int) -> tuple:
+    """Levenberg-Marquardt over both intrinsics, the left poses and the relative pose.
+
+    Returns ``(cam_l, cam_r, poses_l, R, T, sigmas, success, message)``; the inputs unchanged
+    (``success`` False) when the fit fails or increases the error.
+    """
+    from scipy.optimize import least_squares  # lazy: 0.4 s to import, every CLI start paid it
+
+    x0 = fit.pack(cam_l, cam_r, poses_l, R, T)
+    sol = least_squares(fit.residuals, x0, jac=fit.jacobian, method="lm", max_nfev=200)
+    try:
+        il, ir, pl, relT = fit.unpack(sol.x)
+        new_l = fit.spec.camera(width, height, *il[:4], il[4:])
+        new_r = fit.spec.camera(width, height, *ir[:4], ir[4:])
+        start = fit.residuals(x0)
+        if sol.fun @ sol.fun > start @ start + 1e-9:
+            raise ValueError("joint fit increased the error")
+    except ValueError as exc:
+        return cam_l, cam_r, poses_l, R, T, {}, False, f" | joint LM failed: {exc}"
+    refined = (new_l, new_r, [pose_matrix(p) for p in pl], relT[:3, :3], relT[:3, 3])
+    try:
+        sig = fit_statistics(sol.fun, fit.jacobian(sol.x))
+    except ValueError as exc:           # LinAlgError: the fit stands, its uncertainty is unknown
+        return (*refined, {}, False, f" | joint LM failed: {exc}")
+    n = fit.n
+    names = ("fx", "fy", "cx", "cy") + fit.spec.coefficient_names
+    sigmas = {f"{side}_{name}": float(s) for side, block in (("left", sig[:n]), ("right", sig[n:2 * n]))
+              for name, s in zip(names, block)}
+    sigmas.update({f"T{a}": float(s) for a, s in zip("xyz", sig[-3:])})
+    return (*refined, sigmas, bool(sol.success), f" | joint LM: {sol.message}")
+
+
 def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequence[CalibrationView], *,
                      width: int, height: int, method: str = "ga+lm", ga_config: GAConfig | None = None,
                      bounds: GABounds | None = None, pixel_density_px_per_mm: float | None = None,
-                     alpha: float = 0.0, rig: RigMount | None = None, rng=None, progress=None,
-                     model: str = "k1k2") -> StereoCalibrationResult:
+                     alpha: float = 0.0, rng=None, progress=None, model: str = "k1k2") -> StereoCalibrationResult:
     """Calibrate a stereo pair from views of the same target poses, and rectify it.
 
     Parameters
@@ -167,11 +271,15 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
         Image size (both cameras).
     method : {"ga", "ga+lm", "lm"}
         Per-camera method; anything but "ga" also refines the pair jointly.
+    ga_config, bounds, pixel_density_px_per_mm
+        GA options of the per-camera calibrations (:func:`calibrate_camera`).
     alpha : float
         Rectified field of view, 0 = valid pixels only, 1 = every raw pixel
         (:func:`mrstereo.camera.rectify_fusiello`).
     rng : numpy Generator, int or None
         Seed of both GAs.
+    progress : callable, optional
+        GA progress callback (:func:`calibrate_camera`).
     model : {"k1k2", "plumb_bob", "rational", "fisheye"}
         Distortion model of both cameras (:func:`calibrate_camera`).
 
@@ -184,92 +292,28 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
     """
     spec = calibration_model(model)
     left_views, right_views = list(left_views), list(right_views)
-    if len(left_views) != len(right_views):
-        raise ValueError(f"left and right need the same number of views, got {len(left_views)} and "
-                         f"{len(right_views)}")
-    if len(left_views) < 2:
-        raise ValueError(f"stereo calibration needs at least 2 view pairs, got {len(left_views)}")
-    for i, (a, b) in enumerate(zip(left_views, right_views)):
-        if a.points_target.shape != b.points_target.shape or not np.allclose(a.points_target, b.points_target):
-            raise ValueError(f"pair {i}: left and right views must hold the same target points")
+    _check_view_pairs(left_views, right_views)
     width = _checks.positive_int("width", width)
     height = _checks.positive_int("height", height)
     right_views = [_agree_with_left(a, b) for a, b in zip(left_views, right_views)]
-    gen = _checks.rng(rng)
     kw = dict(width=width, height=height, method=method, ga_config=ga_config, bounds=bounds,
-              pixel_density_px_per_mm=pixel_density_px_per_mm, rng=gen, progress=progress, model=spec.name)
-    if all(v.is_planar for v in left_views):
-        # before the (slow) GA: the closed-form poses already tell a swapped or zero baseline
-        poses = [zhang_init(views, width=width, height=height)[1] for views in (left_views, right_views)]
-        R, T = _relative_pose(*poses)
-        _check_baseline(T, poses[0])
-        try:
-            check_not_swapped(R, T, where="stereo-calibrate")
-        except ValueError:      # confirm (and measure) with LM poses: the closed form ignores distortion
-            poses = [calibrate_camera(views, width=width, height=height, method="lm").poses
-                     for views in (left_views, right_views)]
-            R, T = _relative_pose(*poses)
-            check_not_swapped(R, T, where="stereo-calibrate")
+              pixel_density_px_per_mm=pixel_density_px_per_mm, rng=_checks.rng(rng), progress=progress,
+              model=spec.name)
+    _check_swapped_early(left_views, right_views, width=width, height=height)
     left = calibrate_camera(left_views, **kw)
     right = calibrate_camera(right_views, **kw)
     R, T = _relative_pose(left.poses, right.poses)
     _check_baseline(T, left.poses)
     check_not_swapped(R, T, where="stereo-calibrate")
-    cam_l, cam_r = left.camera, right.camera
-    poses_l = list(left.poses)
+    cam_l, cam_r, poses_l = left.camera, right.camera, list(left.poses)
     success = left.success and right.success
     message = f"left: {left.message} | right: {right.message}"
     sigmas: dict = {}
-    V = len(left_views)
-    n = 4 + spec.n_free                 # fx, fy, cx, cy and the model's coefficients, per camera
-
-    def unpack(x):
-        rel_T = pose_matrix(x[2 * n + 6 * V:])
-        return x[:n], x[n:2 * n], [x[2 * n + 6 * i: 2 * n + 6 + 6 * i] for i in range(V)], rel_T
-
-    def residuals(x):
-        il, ir, pl, relT = unpack(x)
-        pl = np.asarray(pl)
-        Rl, tl = rotation_from_rpy(pl[:, 0], pl[:, 1], pl[:, 2]), pl[:, 3:6]
-        Rr, tr = relT[:3, :3] @ Rl, tl @ relT[:3, :3].T + relT[:3, 3]
-        return np.concatenate([project_views(views, R_, t_, fx=intr[0], fy=intr[1], cx=intr[2], cy=intr[3],
-                                             distortion_model=spec.distortion_model,
-                                             D=spec.full_coefficients(intr[4:]))
-                               for intr, R_, t_, views in ((il, Rl, tl, left_views), (ir, Rr, tr, right_views))])
-
-    Trel = np.eye(4)
-    Trel[:3, :3], Trel[:3, 3] = R, T
-    x0 = np.concatenate([[c.fx, c.fy, c.cx, c.cy, *spec.seed(c)] for c in (cam_l, cam_r)]
-                        + [pose_vector(P) for P in poses_l] + [pose_vector(Trel)])
     if method != "ga":
-        row_block = np.concatenate([np.repeat(np.arange(V), [2 * len(v.uv) for v in views])
-                                    for views in (left_views, right_views)])     # residuals: all left, all right
-        col_block = np.concatenate([np.full(2 * n, -1), np.repeat(np.arange(V), 6), np.full(6, -1)])
-        col_local = np.concatenate([np.arange(2 * n), np.tile(np.arange(6), V), np.arange(6)])
-
-        def jac(x):
-            return grouped_jacobian(residuals, x, col_block, col_local, row_block)
-
-        from scipy.optimize import least_squares  # lazy: 0.4 s to import, every CLI start paid it
-        sol = least_squares(residuals, x0, jac=jac, method="lm", max_nfev=200)
-        try:
-            il, ir, pl, relT = unpack(sol.x)
-            new_l = spec.camera(width, height, *il[:4], il[4:])
-            new_r = spec.camera(width, height, *ir[:4], ir[4:])
-            if sol.fun @ sol.fun > residuals(x0) @ residuals(x0) + 1e-9:
-                raise ValueError("joint fit increased the error")
-            cam_l, cam_r, poses_l = new_l, new_r, [pose_matrix(p) for p in pl]
-            R, T = relT[:3, :3], relT[:3, 3]
-            sig = fit_statistics(sol.fun, jac(sol.x))
-            names = ("fx", "fy", "cx", "cy") + spec.coefficient_names
-            sigmas = {f"{side}_{name}": float(s) for side, block in (("left", sig[:n]), ("right", sig[n:2 * n]))
-                      for name, s in zip(names, block)}
-            sigmas.update({f"T{a}": float(s) for a, s in zip("xyz", sig[-3:])})
-            success = success and bool(sol.success)
-            message += f" | joint LM: {sol.message}"
-        except ValueError as exc:
-            success = False
-            message += f" | joint LM failed: {exc}"
+        cam_l, cam_r, poses_l, R, T, sigmas, ok, note = _refine_jointly(
+            _JointFit(spec, tuple(left_views), tuple(right_views)), cam_l, cam_r, poses_l, R, T,
+            width=width, height=height)
+        success, message = success and ok, message + note
     Trel = np.eye(4)
     Trel[:3, :3], Trel[:3, 3] = R, T
     check_not_swapped(R, T, where="stereo-calibrate")
@@ -278,14 +322,12 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
     res_r = reprojection_residuals(right_views, cam_r, poses_r)
     rms = _rms(res_l + res_r)[0]
     per_view = np.stack([_rms(res_l)[1], _rms(res_r)[1]], axis=1)
-    rect = rectify_fusiello(cam_l, cam_r, R, T, alpha=alpha, rig=rig)
+    rect = rectify_fusiello(cam_l, cam_r, R, T, alpha=alpha)
     vert = rectified_vertical_error_px(rect.stereo, [v.uv for v in left_views], [v.uv for v in right_views])
     worst = per_view.max(axis=1)
-    outliers = tuple(int(i) for i in np.flatnonzero(worst > 3.0 * np.median(worst))) if V > 2 else ()
-    if not math.isfinite(rms):
-        success = False
+    outliers = tuple(int(i) for i in np.flatnonzero(worst > 3.0 * np.median(worst))) if len(left_views) > 2 else ()
     return StereoCalibrationResult(
         stereo=rect.stereo, R=R, T=np.asarray(T, dtype=np.float64), left=left, right=right, rms_px=rms,
         per_view_rms_px=per_view, sigmas=sigmas, vertical_error_px=float(np.mean(vert)),
-        per_view_vertical_error_px=vert, outlier_views=outliers, success=success, message=message,
-        view_names=tuple(v.name for v in left_views), left_poses=tuple(poses_l))
+        per_view_vertical_error_px=vert, outlier_views=outliers, success=success and math.isfinite(rms),
+        message=message, view_names=tuple(v.name for v in left_views), left_poses=tuple(poses_l))

@@ -1,8 +1,9 @@
 """ROS camera_info YAML and the stereo calibration file every command reads.
 
 A stereo file holds ``left:`` and ``right:``, each with the ROS camera_info
-fields (camera_calibration_parsers layout), plus an optional
-``rig: {height_m, tilt_rad}`` mount of the left camera above the floor.
+fields (camera_calibration_parsers layout), plus an optional camera mount: ``mount: {xyz, rpy}``
+of the raw left camera, or the paper's ``rig: {height_m, tilt_rad}`` of the rectified one
+(:mod:`mrstereo.camera.mount`).
 ``K``/``D`` describe the raw camera, ``R`` rotates the raw camera frame into the
 rectified frame and ``P`` is the rectified projection; for the right camera
 ``P[0, 3] = -fx * baseline_m``. Conventions: docs/conventions.md.
@@ -28,7 +29,7 @@ import yaml
 from .. import _checks
 from ..io import atomic_write, parse_yaml
 from .model import Camera, get_distortion_model
-from .mount import RigMount, mount_entry, read_mount_entry
+from .mount import CameraMount, mount_entry, read_mount_entry
 
 __all__ = ["CameraInfo", "StereoCamera", "read_camera_info", "write_camera_info",
            "write_stereo", "camera_from_ros", "check_stereo", "overlap_share"]
@@ -216,11 +217,13 @@ class StereoCamera:
 
     left: CameraInfo
     right: CameraInfo
-    rig: RigMount | None = None
+    mount: CameraMount | None = None
 
     def __post_init__(self) -> None:
         if self.left.camera.size != self.right.camera.size:
             raise ValueError("left and right cameras must have the same image size")
+        if self.mount is not None and not isinstance(self.mount, CameraMount):
+            raise TypeError(f"mount must be a CameraMount, got {type(self.mount).__name__}")
         _check_projections(self.left, self.right)
 
     @property
@@ -284,30 +287,30 @@ class StereoCamera:
                 cv2.remap(right, rx, ry, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
 
     def to_dict(self) -> dict:
-        return {"left": self.left.to_dict(), "right": self.right.to_dict(), **mount_entry(self.rig)}
+        return {"left": self.left.to_dict(), "right": self.right.to_dict(), **mount_entry(self.mount)}
 
     @classmethod
     def from_dict(cls, data, *, where: str = "stereo calibration") -> StereoCamera:
         if not isinstance(data, dict) or "left" not in data or "right" not in data:
             raise ValueError(f"{where}: expected 'left:' and 'right:' camera_info sections")
-        rig = read_mount_entry(data, where=where)         # rig: (RigMount) or mount: (CameraMount)
         left = CameraInfo.from_dict(data["left"], where=f"{where}: left")
         right = CameraInfo.from_dict(data["right"], where=f"{where}: right")
+        mount = read_mount_entry(data, where=where, R_rect_from_cam=left.R)
         try:
-            stereo = cls(left=left, right=right, rig=rig)
+            stereo = cls(left=left, right=right, mount=mount)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{where}: {exc}") from None
         return check_stereo(stereo, where=where)
 
     @classmethod
-    def ideal(cls, camera: Camera, baseline_m: float, *, rig: RigMount | None = None) -> StereoCamera:
+    def ideal(cls, camera: Camera, baseline_m: float, *, mount: CameraMount | None = None) -> StereoCamera:
         """An already rectified pair of identical distortion-free cameras."""
         baseline_m = _checks.finite_number("baseline_m", baseline_m, positive=True)
         P_left = np.hstack([camera.K, np.zeros((3, 1))])
         P_right = P_left.copy()
         P_right[0, 3] = -camera.fx * baseline_m
         return cls(left=CameraInfo(camera, P=P_left, name="left"),
-                   right=CameraInfo(camera, P=P_right, name="right"), rig=rig)
+                   right=CameraInfo(camera, P=P_right, name="right"), mount=mount)
 
 
 def _check_projections(left: CameraInfo, right: CameraInfo) -> None:

@@ -89,7 +89,7 @@ def read_calibration(paths, *, image_size: tuple[int, int] | None = None, alpha:
 def read_stereo(path) -> StereoCamera:
     """Read a stereo calibration in any supported format (see :mod:`mrstereo.camera.formats`).
 
-    ``path`` is the stereo YAML (``left:``, ``right:``, optional ``rig:``), a
+    ``path`` is the stereo YAML (``left:``, ``right:``, optional ``mount:``/``rig:``), a
     file of another tool (Kalibr camchain, OpenCV FileStorage, OpenLORIS
     sensors.yaml), or two per-camera files as ``"left.yaml,right.yaml"`` or a
     sequence of two paths. Raw (unrectified) calibrations are rectified.

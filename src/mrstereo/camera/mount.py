@@ -1,49 +1,27 @@
-"""The camera mount: the pose of the left optical frame in the robot base frame.
+"""The camera mount: the pose of the left camera in the robot base frame.
 
-The stereo head carries the left camera's optical centre at ``height_m`` above the floor on the
-robot's vertical axis; the head pans by ``pan_rad`` about that axis (positive to the left) and the
-camera is tilted down by ``tilt_rad``. That is the paper's rig, the special case of a general
-:class:`CameraMount`: the 6-DoF pose ``T_base_from_cam`` of the left optical frame in the robot
-base frame (whose x-y plane is the floor). Conventions: docs/conventions.md (Frames).
+:class:`CameraMount` is the 6-DoF pose ``T_base_from_cam`` of the physical (raw) left optical
+frame in the robot base frame (whose x-y plane is the floor), as TF publishes it. The paper's
+rig -- the *rectified* left camera at ``height_m`` above the floor on the robot's vertical axis,
+tilted down by ``tilt_rad`` -- is read into one with :meth:`CameraMount.from_rig`. The head
+pans by ``pan_rad`` about the base z axis (positive to the left). Conventions:
+docs/conventions.md (Frames).
 """
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from .. import _checks
 from ..transforms import R_BODY_FROM_OPTICAL, T_robot_from_cam, _rot_z, rotation_from_rpy, rpy_from_rotation
 
-__all__ = ["RigMount", "CameraMount", "read_mount_entry", "mount_entry", "T_base_from_cam_of"]
-
-
-@dataclass(frozen=True)
-class RigMount:
-    """Mount of the left camera on the robot: height above the floor and downward tilt.
-
-    ``height_m`` is the optical centre above the floor; ``tilt_rad`` > 0 tilts
-    the optical axis down toward the floor.
-    """
-
-    height_m: float
-    tilt_rad: float = 0.0
-
-    def __post_init__(self) -> None:
-        _checks.finite_number("height_m", self.height_m, positive=True)
-        _checks.finite_number("tilt_rad", self.tilt_rad)
-        if abs(self.tilt_rad) >= math.pi / 2:
-            raise ValueError(f"tilt_rad must be within (-pi/2, pi/2), got {self.tilt_rad}")
+__all__ = ["CameraMount", "read_mount_entry", "mount_entry"]
 
 
 class CameraMount:
-    """Pose of the left camera's optical frame in the robot base frame: ``T_base_from_cam`` (4, 4).
-
-    The physical (raw) left camera, as TF publishes it; points triangulated in the rectified
-    frame are turned back by the calibration's rectification ``R`` first
-    (:func:`mrstereo.geometry.ground.ground_from_mount`).
+    """Pose of the left camera's raw optical frame in the robot base frame: ``T_base_from_cam`` (4, 4).
 
     The base frame is REP 103 (x forward, y left, z up) with its x-y plane on
     the floor (ROS ``base_footprint``; ``base_link`` of most wheeled robots).
@@ -54,12 +32,11 @@ class CameraMount:
       (``R = Rz(yaw) Ry(pitch) Rx(roll)``; positive pitch looks down); the
       optical frame is the body frame turned by :data:`R_BODY_FROM_OPTICAL`.
       All zeros: a level camera on the floor looking along the robot's x axis;
-    * :meth:`from_rig`: the paper's rig ``(height_m, tilt_rad)`` = ``xyz = (0, 0,
-      height_m)``, ``rpy = (0, tilt_rad, 0)``;
+    * :meth:`from_rig`: the paper's rig ``(height_m, tilt_rad)`` of the rectified camera;
     * a TF lookup (:mod:`mrstereo.recordings.bag`) or a 4x4 matrix.
 
-    Head pan (positive left) turns the mount about the base z axis:
-    :meth:`T_base_from_cam_panned`.
+    Points are triangulated in the rectified left frame (``p_rect = R p_raw`` with the
+    calibration's ``R``): :meth:`T_base_from_rectified` is the pose the mapping chain uses.
     """
 
     __slots__ = ("_T",)
@@ -91,13 +68,26 @@ class CameraMount:
         return cls(T)
 
     @classmethod
-    def from_rig(cls, rig) -> CameraMount:
-        """The paper's rig (``RigMount(height_m, tilt_rad)``) as a mount: exactly :func:`T_robot_from_cam`."""
-        return cls(T_robot_from_cam(height_m=rig.height_m, tilt_rad=rig.tilt_rad))
+    def from_rectified(cls, T_base_from_rect, R_rect_from_cam=None) -> CameraMount:
+        """The mount of a camera whose rectified frame (``p_rect = R p_raw``) has the pose ``T_base_from_rect``."""
+        T = _checks.matrix("T_base_from_rect", T_base_from_rect, (4, 4)).astype(np.float64, copy=True)
+        if R_rect_from_cam is not None:
+            T[:3, :3] = T[:3, :3] @ _checks.matrix("R_rect_from_cam", R_rect_from_cam, (3, 3))
+        return cls(T)
+
+    @classmethod
+    def from_rig(cls, height_m: float, tilt_rad: float = 0.0, *, R_rect_from_cam=None) -> CameraMount:
+        """The paper's rig: the rectified left camera ``height_m`` above the floor on the base's z axis,
+        looking along x, tilted down by ``tilt_rad``; ``R_rect_from_cam`` is the calibration's left ``R``."""
+        h = _checks.finite_number("height_m", height_m, positive=True)
+        tilt = _checks.finite_number("tilt_rad", tilt_rad)
+        if abs(tilt) >= math.pi / 2:
+            raise ValueError(f"tilt_rad must be within (-pi/2, pi/2), got {tilt}")
+        return cls.from_rectified(T_robot_from_cam(height_m=h, tilt_rad=tilt), R_rect_from_cam)
 
     @property
     def T_base_from_cam(self) -> np.ndarray:
-        """4x4 transform taking left optical-frame points into the base frame (read-only)."""
+        """4x4 transform taking raw left optical-frame points into the base frame (read-only)."""
         return self._T
 
     @property
@@ -110,24 +100,22 @@ class CameraMount:
         """Roll, pitch, yaw [rad] of the camera body frame (inverse of :meth:`from_xyz_rpy`)."""
         return tuple(float(v) for v in rpy_from_rotation(self._T[:3, :3] @ R_BODY_FROM_OPTICAL.T))
 
-    @property
-    def height_m(self) -> float:
-        """Height of the optical centre above the floor."""
-        return float(self._T[2, 3])
+    def T_base_from_rectified(self, R_rect_from_cam=None, pan_rad: float = 0.0) -> np.ndarray:
+        """The rectified left camera's pose with the head's pan: ``Rz(pan) @ T_base_from_cam @ R^T``.
 
-    @property
-    def tilt_rad(self) -> float:
-        """Downward angle of the optical axis below the horizontal (positive = looking down)."""
-        return math.asin(float(np.clip(-self._T[2, 2], -1.0, 1.0)))
-
-    def T_base_from_cam_panned(self, pan_rad: float = 0.0) -> np.ndarray:
-        """``Rz(pan) @ T_base_from_cam``: the head turned by ``pan_rad`` about the base z axis."""
+        ``R_rect_from_cam`` is the calibration's left ``R`` (``p_rect = R p_raw``; None: the raw frame).
+        """
         pan = _checks.finite_number("pan_rad", pan_rad)
+        T = self._T.copy()
+        if R_rect_from_cam is not None:
+            R = _checks.matrix("R_rect_from_cam", R_rect_from_cam, (3, 3))
+            if not np.array_equal(R, np.eye(3)):
+                T[:3, :3] = T[:3, :3] @ R.T
         if pan == 0.0:
-            return self._T.copy()
+            return T
         Rz = np.eye(4)
         Rz[:3, :3] = _rot_z(pan)
-        return Rz @ self._T
+        return Rz @ T
 
     def to_dict(self) -> dict:
         """``{"xyz": [...], "rpy": [...]}`` (the ``mount:`` entry of a stereo YAML or manifest)."""
@@ -164,12 +152,12 @@ class CameraMount:
         return f"CameraMount(xyz=({x:.3f}, {y:.3f}, {z:.3f}) m, rpy=({r:.4f}, {p:.4f}, {w:.4f}) rad)"
 
 
-def read_mount_entry(data: dict, *, where: str):
-    """The camera mount of a stereo YAML or manifest mapping: its ``mount:`` or ``rig:`` entry.
+def read_mount_entry(data: dict, *, where: str, R_rect_from_cam=None) -> CameraMount | None:
+    """The camera mount of a stereo YAML or manifest mapping: its ``mount:`` or ``rig:`` entry, or None.
 
-    ``mount: {xyz: [x, y, z], rpy: [roll, pitch, yaw]}`` gives a :class:`CameraMount`;
-    the paper's ``rig: {height_m, tilt_rad}`` a :class:`mrstereo.camera.RigMount`; neither
-    None. Both at once is an error.
+    ``mount: {xyz: [x, y, z], rpy: [roll, pitch, yaw]}`` is the raw camera's pose; the paper's
+    ``rig: {height_m, tilt_rad}`` that of the rectified camera, turned into the raw camera's with
+    the calibration's left ``R_rect_from_cam`` (:meth:`CameraMount.from_rig`). Both at once is an error.
     """
     if data.get("mount") is not None and data.get("rig") is not None:
         raise ValueError(f"{where}: give 'mount:' or 'rig:', not both")
@@ -184,36 +172,12 @@ def read_mount_entry(data: dict, *, where: str):
         if not isinstance(r, dict) or "height_m" not in r:
             raise ValueError(f"{where}: 'rig' needs height_m (and optional tilt_rad)")
         try:
-            return RigMount(height_m=r["height_m"], tilt_rad=r.get("tilt_rad", 0.0))
+            return CameraMount.from_rig(r["height_m"], r.get("tilt_rad", 0.0), R_rect_from_cam=R_rect_from_cam)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{where}: rig: {exc}") from None
     return None
 
 
-def mount_entry(mount) -> dict:
-    """The YAML entry of a mount: ``{"mount": {...}}``, ``{"rig": {...}}`` or ``{}`` for None."""
-    if mount is None:
-        return {}
-    if isinstance(mount, CameraMount):
-        return {"mount": mount.to_dict()}
-    return {"rig": {"height_m": float(mount.height_m), "tilt_rad": float(mount.tilt_rad)}}
-
-
-def T_base_from_cam_of(rig, pan_rad: float = 0.0, *, stereo=None) -> np.ndarray:
-    """The left *rectified* camera's mount on the base, with the head's pan.
-
-    ``rig``: the paper's ``RigMount`` (height, tilt: the rectified frame, as the mapping chain
-    uses it), a 6-DoF ``CameraMount`` of the raw camera (turned into the rectified frame with
-    ``stereo.left.R``), or None (a level camera on the floor: the base is the camera's REP 103
-    body frame).
-    """
-    if rig is None:
-        rig = CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-    if isinstance(rig, CameraMount):
-        T = rig.T_base_from_cam_panned(pan_rad)
-        if stereo is not None:
-            T_cam_from_rect = np.eye(4)
-            T_cam_from_rect[:3, :3] = np.asarray(stereo.left.R, dtype=np.float64).T
-            T = T @ T_cam_from_rect
-        return T
-    return T_robot_from_cam(height_m=rig.height_m, tilt_rad=rig.tilt_rad, pan_rad=pan_rad)
+def mount_entry(mount: CameraMount | None) -> dict:
+    """The YAML entry of a mount: ``{"mount": {xyz, rpy}}``, or ``{}`` for None."""
+    return {} if mount is None else {"mount": mount.to_dict()}

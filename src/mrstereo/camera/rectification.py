@@ -72,7 +72,6 @@ import numpy as np
 from .. import _checks
 from .camera_info import CameraInfo, StereoCamera
 from .model import Camera
-from .mount import RigMount
 
 __all__ = ["FusielloRectification", "rectify_fusiello", "fusiello_rotation", "check_not_swapped",
            "check_baseline", "rectified_px_from_raw_px", "raw_px_from_rectified_px"]
@@ -226,8 +225,7 @@ def raw_px_from_rectified_px(info: CameraInfo, uv_rect) -> np.ndarray:
     return info.camera.project(q @ info.R)          # R^T q: rectified frame -> raw frame
 
 
-def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0,
-                     rig: RigMount | None = None) -> FusielloRectification:
+def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0) -> FusielloRectification:
     """Rectify a calibrated stereo pair (Fusiello, Trucco & Verri 2000).
 
     Parameters
@@ -241,8 +239,6 @@ def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0,
     alpha : float, optional
         0 = only valid pixels (zoom in), 1 = all raw pixels visible; see Notes of
         the module.
-    rig : RigMount, optional
-        Stored with the result.
 
     Returns
     -------
@@ -301,5 +297,5 @@ def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0,
     P_right = P_left.copy()
     P_right[0, 3] = -focal * baseline_m
     stereo = StereoCamera(left=CameraInfo(left, R=R_new, P=P_left, name="left"),
-                          right=CameraInfo(right, R=R_right, P=P_right, name="right"), rig=rig)
+                          right=CameraInfo(right, R=R_right, P=P_right, name="right"))
     return FusielloRectification(stereo=stereo, R_new=R_new, A=A, baseline_m=baseline_m)

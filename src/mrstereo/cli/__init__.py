@@ -8,6 +8,8 @@ Every failure ends as one line on stderr and a non-zero exit code, never a trace
   few seconds whatever runs (a Dask cluster starting or stopping included);
 - ``mrstereo: error: internal error ...`` and exit code 1 for a bug, with a request to
   report it. ``MRSTEREO_DEBUG=1`` shows the traceback instead (docs/errors.md).
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

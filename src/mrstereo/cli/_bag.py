@@ -2,6 +2,8 @@
 ``mrstereo batch`` (many datasets: per-frame disparity, cloud and scan, and a map each, on Dask).
 
 :func:`bag_options` is shared with ``mrstereo map --bag`` (cli/_pipeline.py). docs/scale-out.md.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -11,9 +13,12 @@ from pathlib import Path
 
 import click
 
-from ._options import CALIB_HELP, check_workers, echo_run_floor, mount_option, parse_mount, worker_options
+from ..mapping import MappingConfig
+from ..pipeline.run import PipelineConfig
+from ._options import (CALIB_HELP, check_mount_options, check_workers, echo_run_floor, mount_from_options,
+                       mount_option, parse_mount, worker_options)
 
-__all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "rig_from_options", "opened_dataset"]
+__all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset"]
 
 
 def bag_options(func):
@@ -37,7 +42,7 @@ def bag_options(func):
                      help="Largest left/right stamp difference of a stereo pair [s]."),
         click.option("--rectified-images", is_flag=True, help="The bag's images are already rectified."),
         click.option("--height", "height_m", type=float, default=None,
-                     help="Camera height above the floor [m] (else the stereo YAML rig:, else estimated)."),
+                     help="Camera height above the floor [m] (else the stereo YAML mount:/rig:, else estimated)."),
         click.option("--tilt", "tilt_rad", type=float, default=None,
                      help="Downward camera tilt [rad] (with --height)."),
     ]
@@ -46,30 +51,15 @@ def bag_options(func):
     return mount_option(func)
 
 
-def rig_from_options(height_m, tilt_rad, mount=None):
-    """A CameraMount from ``--mount``, or a RigMount from ``--height``/``--tilt`` (None when none is given)."""
-    from ..camera import RigMount
-
-    if mount is not None:
-        if height_m is not None or tilt_rad is not None:
-            raise click.UsageError("give --mount or --height/--tilt, not both")
-        return parse_mount(mount)
-
-    for name, value in (("--height", height_m), ("--tilt", tilt_rad)):
-        if value is not None and not math.isfinite(value):
-            raise click.BadParameter(f"must be finite, got {value}", param_hint=name)
-    if height_m is None and tilt_rad is None:
-        return None
-    if height_m is None:
-        raise click.UsageError("--tilt needs --height")
-    return RigMount(height_m=height_m, tilt_rad=0.0 if tilt_rad is None else tilt_rad)
-
-
-def bag_export_kwargs(*, calib, left_topic, right_topic, camera_info_topics, odom_topic, use_tf, world_frame,
+def bag_export_kwargs(*, bag, calib, left_topic, right_topic, camera_info_topics, odom_topic, use_tf, world_frame,
                       base_frame, camera_frame, sync_tolerance_s, rectified_images, height_m, tilt_rad,
                       mount, quiet) -> dict:
-    """Validate the bag options and turn them into :func:`mrstereo.recordings.bag.export_bag` keywords."""
+    """Validate the bag options and turn them into :func:`mrstereo.recordings.bag.export_bag` keywords.
+
+    ``--height``/``--tilt`` describe the rectified camera: without ``--calib`` the bag's camera_info is read first.
+    """
     from ..camera import read_stereo
+    from ..recordings.bag import stereo_from_bag
 
     if not left_topic or not right_topic:
         raise click.UsageError("--bag needs --left-topic and --right-topic")
@@ -84,11 +74,15 @@ def bag_export_kwargs(*, calib, left_topic, right_topic, camera_info_topics, odo
         if len(info) != 2 or not all(info):
             raise click.BadParameter(f"expected 'LEFT,RIGHT', got {camera_info_topics!r}",
                                      param_hint="--camera-info-topics")
-    return dict(left_topic=left_topic, right_topic=right_topic, camera_info_topics=info,
-                calibration=read_stereo(calib) if calib is not None else None, odom_topic=odom_topic,
-                use_tf=use_tf, world_frame=world_frame, base_frame=base_frame, camera_frame=camera_frame,
-                sync_tolerance_s=sync_tolerance_s, rig=rig_from_options(height_m, tilt_rad, mount),
-                rectified=rectified_images, progress=not quiet)
+    check_mount_options(height_m, tilt_rad, mount)
+    calibration = read_stereo(calib) if calib is not None else None
+    if calibration is None and height_m is not None:
+        calibration = stereo_from_bag(bag, left_topic=left_topic, right_topic=right_topic, camera_info_topics=info)
+    return dict(left_topic=left_topic, right_topic=right_topic, camera_info_topics=info, calibration=calibration,
+                odom_topic=odom_topic, use_tf=use_tf, world_frame=world_frame, base_frame=base_frame,
+                camera_frame=camera_frame, sync_tolerance_s=sync_tolerance_s,
+                mount=mount_from_options(height_m, tilt_rad, mount, calibration), rectified=rectified_images,
+                progress=not quiet)
 
 
 @contextlib.contextmanager
@@ -105,13 +99,15 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
     import numpy as np
 
     from ..camera import read_stereo
+    from ..recordings.layouts import read_recording
     from ..recordings.manifest import Manifest, read_manifest
 
     with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
         if bag is not None:
             from ..recordings.bag import export_bag
 
-            result = export_bag(bag, Path(tmp) / "dataset", **bag_export_kwargs(calib=calib, quiet=quiet, **bag_kw))
+            result = export_bag(bag, Path(tmp) / "dataset",
+                                **bag_export_kwargs(bag=bag, calib=calib, quiet=quiet, **bag_kw))
             echo_export(result)
             yield read_manifest(result.out_dir), None, np.asarray(result.stamps_ns, dtype=np.float64) / 1e9
             return
@@ -120,16 +116,22 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
                                                          "sync_tolerance_s")]
         if used:
             raise click.UsageError(f"{', '.join(used)} only with --bag")
-        dataset = manifest if isinstance(manifest, Manifest) else read_manifest(manifest)
-        rig = rig_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"))
-        if rig is not None:
-            dataset = dataclasses.replace(dataset, rig=rig)
-        yield dataset, (read_stereo(calib) if calib is not None else None), None
+        dataset = manifest if isinstance(manifest, Manifest) else read_recording(manifest)
+        stereo = read_stereo(calib) if calib is not None else None
+        mount = mount_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"),
+                                   dataset.calibration if stereo is None else stereo)
+        if mount is not None:
+            dataset = dataclasses.replace(dataset, mount=mount)
+        yield dataset, stereo, None
 
 
 def echo_export(result) -> None:
-    mount = ("none (the floor is estimated when mapping)" if result.rig is None else
-             f"height {result.rig.height_m:.3f} m, tilt {result.rig.tilt_rad:.3f} rad ({result.rig_source})")
+    from ..geometry.ground import ground_from_mount
+
+    mount = "none (the floor is estimated when mapping)"
+    if result.mount is not None:
+        floor = ground_from_mount(result.mount, R_rect_from_cam=result.calibration.left.R)
+        mount = f"height {floor.height_m:.3f} m, tilt {floor.tilt_rad:.3f} rad ({result.mount_source})"
     click.echo(f"bag: {result.n_frames} stereo pairs from {result.n_left} left / {result.n_right} right images; "
                f"pose: {result.pose_source}; mount: {mount}", err=True)
 
@@ -144,7 +146,9 @@ def echo_export(result) -> None:
               help="New dataset directory (manifest.yaml, stereo.yaml, left/, right/).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
-    """Write the stereo pairs of a ROS bag as a dataset directory (docs/dataset.md).
+    """Write the stereo pairs of a ROS bag as a dataset.
+
+    The dataset folder given by -o is laid out as docs/dataset.md describes.
 
     Left and right images are paired by header stamp, the calibration comes
     from camera_info (or --calib), the robot pose from --odom-topic or --tf.
@@ -155,7 +159,7 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 
     check_output_dir("--out", out_dir, inputs=[bag, options.get("calib")], input_dirs=[bag] if bag.is_dir() else [],
                      must_be_empty=True)
-    kwargs = bag_export_kwargs(quiet=quiet, **options)
+    kwargs = bag_export_kwargs(bag=bag, quiet=quiet, **options)
     result = export_bag(bag, out_dir, **kwargs)
     echo_export(result)
     click.echo(f"wrote {result.n_frames} frames to {out_dir} (manifest: {out_dir / 'manifest.yaml'})")
@@ -166,17 +170,20 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output directory: one folder per dataset and summary.json.")
 @worker_options
-@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default="mapping", show_default=True,
-              help="Matching preset.")
-@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default="log_odds", show_default=True,
+@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default=PipelineConfig.preset,
+              show_default=True, help="Matching preset.")
+@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default=MappingConfig.fusion, show_default=True,
               help="Map fusion.")
 @click.option("--no-maps", is_flag=True, help="Only the per-frame outputs, no map per dataset.")
 @mount_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool, preset: str, fusion: str,
                   no_maps: bool, mount, quiet: bool) -> None:
-    """Process many datasets: per frame a disparity (PFM), a point cloud (PLY) and a laser scan (JSON);
-    per dataset a map. Resumable: finished outputs are kept on a re-run, failed frames are retried.
+    """Process many datasets: per-frame outputs and a map each.
+
+    Per frame a disparity (PFM), a point cloud (PLY) and a laser scan (JSON);
+    per dataset a map, as `mrstereo map` makes it. Resumable: finished outputs
+    are kept on a re-run, failed frames are retried.
 
     Failures of single frames are listed in OUT/summary.json and the rest goes on;
     the command then ends with an error line naming how many failed. A dataset
@@ -187,15 +194,14 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool,
 
     from ..io import check_output_dir
     from ..pipeline.batch import run_batch
-    from ..pipeline.run import PipelineConfig
     from ..recordings.manifest import read_manifest
 
     check_workers(workers, scheduler, processes)
     check_output_dir("--out", out_dir)
     config = PipelineConfig(preset=preset).with_fusion(fusion)
-    rig = parse_mount(mount)
-    if rig is not None:
-        manifests = [dataclasses.replace(read_manifest(m), rig=rig) for m in manifests]
+    camera_mount = parse_mount(mount)
+    if camera_mount is not None:
+        manifests = [dataclasses.replace(read_manifest(m), mount=camera_mount) for m in manifests]
     summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
                         scheduler=scheduler, processes=processes, progress=not quiet)
     for d in summary.datasets:

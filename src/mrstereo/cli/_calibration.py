@@ -1,4 +1,7 @@
-"""CLI: ``calibrate``, ``stereo-calibrate`` and ``rectify`` (see docs/calibration.md)."""
+"""CLI: ``calibrate``, ``stereo-calibrate`` and ``rectify`` (see docs/calibration.md).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import dataclasses
@@ -41,9 +44,16 @@ def _residuals_path(output: Path) -> Path:
 
 def _check_report_outputs(output: Path, stem_suffix: str, inputs, extra=None) -> None:
     """The calibration file, its report files (and ``extra``) must be new names apart from the inputs."""
-    outputs = {"--output": output, **{f"report {k}": p for k, p in _siblings(output, stem_suffix).items()},
+    outputs = {"--out": output, **{f"report {k}": p for k, p in _siblings(output, stem_suffix).items()},
                **(extra or {})}
-    check_outputs(outputs, inputs, suffixes={"--output": (".yaml", ".yml")})
+    check_outputs(outputs, inputs, suffixes={"--out": (".yaml", ".yml")})
+
+
+def _method_option():
+    return click.option("--method", type=click.Choice(METHODS), default="ga+lm", show_default=True,
+                        help="ga: the paper's genetic algorithm alone (k1k2 only); ga+lm: the GA's result polished "
+                             "by Levenberg-Marquardt; lm: Levenberg-Marquardt from Zhang's closed form (planar "
+                             "targets only).")
 
 
 def _model_option():
@@ -66,19 +76,22 @@ def _siblings(output: Path, stem_suffix: str) -> dict[str, Path]:
 @click.option("--images", "images_glob", help="Glob of chessboard images, e.g. 'left*.jpg'.")
 @click.option("--board", default="9x6", show_default=True, help="Inner corners, columns x rows.")
 @click.option("--square", type=float, default=0.025, show_default=True, help="Square size [m].")
-@click.option("--method", type=click.Choice(METHODS), default="ga+lm", show_default=True)
+@_method_option()
 @_model_option()
-@click.option("--seed", type=int, default=0, show_default=True, help="GA seed.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the GA's random numbers.")
 @click.option("--generations", type=int, default=None, help="GA generation limit (default 2000 for one "
               "view, 200 for several).")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="camera_info YAML.")
+@click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False),
+              help="camera_info YAML to write (.yaml or .yml).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def calibrate_cmd(points, image_size, units, images_glob, board, square, method, model, seed, generations, output,
                   quiet):
-    """Calibrate one camera (GA of paper sec. 2.2, GA + LM, or LM).
+    """Calibrate one camera from chessboards or control points.
 
-    Writes OUTPUT (ROS camera_info YAML) and, next to it, OUTPUT_report.json,
-    OUTPUT_report.md and OUTPUT_residuals.png (paper Figs. 2-3).
+    Fits the camera with the paper's genetic algorithm (section 2.2), its result
+    polished by Levenberg-Marquardt (--method ga+lm), and writes the ROS
+    camera_info YAML given by -o; beside it NAME_report.json, NAME_report.md and
+    NAME_residuals.png, the reprojection residuals (paper Figs. 2-3).
     """
     if (points is None) == (images_glob is None):
         raise click.UsageError("give exactly one of --points FILE or --images GLOB")
@@ -138,18 +151,22 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
 @click.option("--right", "right_glob", required=True, help="Glob of right chessboard images.")
 @click.option("--board", default="9x6", show_default=True, help="Inner corners, columns x rows.")
 @click.option("--square", type=float, default=0.025, show_default=True, help="Square size [m].")
-@click.option("--method", type=click.Choice(METHODS), default="ga+lm", show_default=True)
+@_method_option()
 @_model_option()
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the GA's random numbers.")
 @click.option("--alpha", type=float, default=0.0, show_default=True,
               help="Rectified view: 0 = valid pixels only, 1 = all raw pixels.")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Stereo YAML.")
+@click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False),
+              help="Stereo YAML to write (.yaml or .yml).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, seed, alpha, output, quiet):
-    """Calibrate and rectify (Fusiello) a stereo pair from chessboard image pairs.
+    """Calibrate a stereo rig from chessboard image pairs.
 
+    Calibrates both cameras and their relative pose, rectifies the pair
+    (Fusiello et al. 2000) and writes the stereo YAML given by -o (every
+    --calib reads it) and, beside it, NAME_report.json and NAME_report.md.
     Pairs are matched by sorted file order; a pair where either board is not
-    found is skipped and reported. Writes OUTPUT and OUTPUT_report.{json,md}.
+    found is skipped and reported.
     """
     output = Path(output)
     if method == "ga" and model != "k1k2":
@@ -199,17 +216,21 @@ def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, se
 @click.option("--calib", required=True, type=click.Path(dir_okay=False), help=CALIB_HELP)
 @click.argument("left", type=click.Path(dir_okay=False))
 @click.argument("right", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", required=True, type=click.Path(file_okay=False), help="Output directory.")
+@click.option("-o", "--out", "output", required=True, type=click.Path(file_okay=False), help="Output folder.")
 def rectify_cmd(calib, left, right, output):
-    """Undistort and rectify a raw stereo pair; writes DIR/<left name> and DIR/<right name>."""
+    """Undistort and rectify a raw stereo pair.
+
+    Writes the rectified images into the folder given by -o under the names
+    of LEFT and RIGHT.
+    """
     out_dir = Path(output)
     names = [Path(left).name, Path(right).name]
     if names[0] == names[1]:
         names = ["left_" + names[0], "right_" + names[1]]
     targets = [out_dir / n for n in names]
-    check_output_dir("--output", out_dir)
-    check_outputs({f"--output {t}": t for t in targets}, [left, right, calib],
-                  suffixes={f"--output {t}": IMAGE_SUFFIXES for t in targets})
+    check_output_dir("--out", out_dir)
+    check_outputs({f"--out {t}": t for t in targets}, [left, right, calib],
+                  suffixes={f"--out {t}": IMAGE_SUFFIXES for t in targets})
     stereo = read_stereo(calib)
     img_l, img_r = read_image(left), read_image(right)
     rect_l, rect_r = stereo.rectify(img_l, img_r)

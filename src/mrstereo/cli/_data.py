@@ -1,4 +1,7 @@
-"""CLI of the sample data: ``mrstereo data fetch|path|list`` (mrstereo.recordings.samples)."""
+"""CLI of the sample data: ``mrstereo data fetch|path|list`` (mrstereo.recordings.samples).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import click
@@ -8,7 +11,9 @@ __all__ = ["COMMANDS"]
 
 @click.group("data")
 def data_group() -> None:
-    """Public sample scenes (Middlebury, KITTI, OpenCV chessboards, OpenLORIS).
+    """Fetch and locate the public sample scenes.
+
+    Middlebury, KITTI, OpenCV's chessboards and an OpenLORIS-Scene sample.
 
     Files are read from $MRSTEREO_DATA when it is set (a local copy, used as is),
     else from pooch's cache folder, where `mrstereo data fetch` downloads them and
@@ -28,7 +33,10 @@ def _names(names: tuple[str, ...]) -> tuple[str, ...]:
 @click.argument("names", nargs=-1, metavar="[NAME...]")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def fetch_command(names: tuple[str, ...], quiet: bool) -> None:
-    """Download the scenes NAME... (default: all) unless they are already there; print their folders."""
+    """Download sample scenes and print their folders.
+
+    Downloads the scenes NAME... (default: all) unless they are there already.
+    """
     from ..recordings.samples import fetch
 
     for name in _names(names):
@@ -38,7 +46,11 @@ def fetch_command(names: tuple[str, ...], quiet: bool) -> None:
 @data_group.command("path")
 @click.argument("name", required=False)
 def path_command(name: str | None) -> None:
-    """Print the data root (or the folder of the scene NAME), whether or not it was fetched."""
+    """Print the folder of a sample scene, or the data root.
+
+    The folder of the scene NAME (or the data root without NAME), whether or
+    not it was fetched.
+    """
     from ..recordings.samples import data_root, local_path
 
     click.echo(local_path(_names((name,))[0]) if name else data_root())
@@ -47,7 +59,7 @@ def path_command(name: str | None) -> None:
 @data_group.command("list")
 @click.option("--verify", "check", is_flag=True, help="Also check every local file's SHA-256.")
 def list_command(check: bool) -> None:
-    """List the scenes, whether each is present locally, and where it comes from."""
+    """List the sample scenes, their sources and presence."""
     from ..recordings.samples import is_available, scene, verify
 
     problems = 0

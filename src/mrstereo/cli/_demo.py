@@ -1,33 +1,41 @@
-"""CLI of the main job: ``mrstereo demo``."""
+"""CLI of the main job: ``mrstereo demo``.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 from pathlib import Path
 
 import click
 
+from ..demo import run_demo
+from ._options import library_default
+
 __all__ = ["COMMANDS"]
 
 
 @click.command("demo")
-@click.option("--out", "out_dir", default="mrstereo-demo", show_default=True, type=click.Path(path_type=Path),
+@click.option("-o", "--out", "out_dir", default=library_default(run_demo, "out_dir"), show_default=True,
+              type=click.Path(path_type=Path),
               help="Report directory (must not exist or be empty).")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
+@click.option("--seed", default=library_default(run_demo, "seed"), show_default=True, type=click.IntRange(min=0),
               help="Seed of the world's textures and noise and of the GA.")
-@click.option("--frames", "n_frames", default=30, show_default=True, type=click.IntRange(min=1),
+@click.option("--frames", "n_frames", default=library_default(run_demo, "n_frames"), show_default=True,
+              type=click.IntRange(min=1),
               help="Frames of the corridor sequence (front, +45 and -45 degree views per stop).")
 @click.option("--randomize", is_flag=True,
               help="A randomized world drawn from --seed instead of the built-in corridor (docs/world.md).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def demo_command(out_dir: Path, seed: int, n_frames: int, randomize: bool, quiet: bool) -> None:
-    """Run the whole pipeline on the built-in synthetic corridor and write a report.
+    """Run the whole pipeline on the built-in corridor.
 
     Renders the corridor, calibrates the rig from rendered chessboards (GA + LM),
     rectifies, matches multi-range, suppresses the ground, maps along the path,
-    plans a path through the map, and compares every stage with ground truth.
+    plans a path through the map, and compares every stage with ground truth
+    in report.md and metrics.json, with its figures.
     """
     import os
 
-    from ..demo import run_demo
     from ..io import check_output_dir, temporary_dir
 
     check_output_dir("--out", out_dir, must_be_empty=True)

@@ -1,4 +1,7 @@
-"""``mrstereo evaluate``: disparity accuracy on Middlebury / KITTI scenes, side by side with OpenCV."""
+"""``mrstereo evaluate``: disparity accuracy on Middlebury / KITTI scenes, side by side with OpenCV.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -7,7 +10,7 @@ import click
 
 from ..evaluation.report import METHODS, evaluate_scenes
 from ..io import atomic_write, check_outputs
-from ._options import check_workers, worker_options
+from ._options import check_workers, library_default, worker_options
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -17,7 +20,8 @@ def _write_text(path: Path, text: str) -> None:
 
 @click.command("evaluate")
 @click.argument("dirs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--methods", "-m", "methods", default=",".join(METHODS), show_default=True,
+@click.option("--methods", "-m", "methods", default=",".join(library_default(evaluate_scenes, "methods")),
+              show_default=True,
               help=f"Comma-separated methods to run, some of: {', '.join(METHODS)}.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write the full report as JSON here.")
@@ -27,11 +31,11 @@ def _write_text(path: Path, text: str) -> None:
               help="Disparity search range in pixels for every scene (default: each scene's ndisp or "
                    "ground-truth maximum rounded up to 16).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-@click.option("--no-progress", is_flag=True, hidden=True, help="Old spelling of --quiet.")
 @worker_options
-def evaluate(dirs, methods, json_out, markdown_out, max_disparity, quiet, no_progress, workers, scheduler,
-             processes):
-    """Score matchers on scene folders DIRS... and print a markdown table.
+def evaluate(dirs, methods, json_out, markdown_out, max_disparity, quiet, workers, scheduler, processes):
+    """Score stereo matchers against ground-truth disparity.
+
+    Prints a markdown table of every method on every scene folder of DIRS.
 
     Each DIR is one scene -- Middlebury 2001/2003/2005/2006/2014 or KITTI 2012/2015, detected from
     its files -- or an mrstereo dataset (manifest.yaml, e.g. from `mrstereo synth`), whose frames
@@ -55,7 +59,7 @@ def evaluate(dirs, methods, json_out, markdown_out, max_disparity, quiet, no_pro
         if not d.is_dir():
             raise ValueError(f"scene must be a directory, got the file {d}")
     check_outputs({"--json": json_out, "--markdown": markdown_out}, input_dirs=dirs)
-    report = evaluate_scenes(dirs, methods=names, max_disparity_px=max_disparity, progress=not (quiet or no_progress),
+    report = evaluate_scenes(dirs, methods=names, max_disparity_px=max_disparity, progress=not quiet,
                              workers=workers, scheduler=scheduler, processes=processes)
     markdown = report.to_markdown()
     if json_out is not None:

@@ -2,6 +2,8 @@
 
 Both run one stereo pair through rectification, multi-range matching,
 eq. (13) rejection and the 3D stage (:mod:`mrstereo.pipeline.frame`).
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -12,7 +14,8 @@ import click
 import numpy as np
 
 from ..io import check_outputs
-from ._options import CALIB_HELP, echo_floor, mount_option, parse_mount, profile_option
+from ..pipeline.frame import obstacles_from_pair, scan_from_pair
+from ._options import CALIB_HELP, echo_floor, library_default, mount_from_options, mount_option, profile_option
 
 __all__ = ["COMMANDS"]
 
@@ -22,17 +25,17 @@ def _common(func):
         click.argument("left", type=click.Path(dir_okay=False)),
         click.argument("right", type=click.Path(dir_okay=False)),
         click.option("--calib", "calib", required=True, type=click.Path(dir_okay=False),
-                     help=CALIB_HELP + " A stereo YAML may hold the mount (rig:)."),
-        click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output file."),
+                     help=CALIB_HELP + " A stereo YAML may hold the mount (mount: or rig:)."),
+        click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False), help="Output file."),
         click.option("--rectified", is_flag=True, help="The images are already rectified."),
         click.option("--height", "height_m", type=float, default=None,
-                     help="Camera height above the floor [m] (overrides the YAML rig)."),
+                     help="Camera height above the floor [m] (overrides the YAML mount)."),
         click.option("--tilt", "tilt_rad", type=float, default=None,
-                     help="Downward camera tilt [rad] (overrides the YAML rig; needs --height or a rig)."),
-        click.option("--pan", "pan_rad", type=float, default=0.0, show_default=True,
-                     help="Head pan about the robot's z axis [rad], positive to the left."),
-        click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default="mapping",
-                     show_default=True, help="Matcher preset."),
+                     help="Downward camera tilt [rad] (overrides the YAML mount; needs --height or a YAML mount)."),
+        click.option("--pan", "pan_rad", type=float, default=library_default(obstacles_from_pair, "pan_rad"),
+                     show_default=True, help="Head pan about the robot's z axis [rad], positive to the left."),
+        click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]),
+                     default=library_default(obstacles_from_pair, "preset"), show_default=True, help="Matcher preset."),
         click.option("--max-disparity", "max_disparity_px", type=float, default=None,
                      help="Largest disparity to search [px] (default: the matcher's)."),
         click.option("--texture-threshold", type=float, default=None,
@@ -60,10 +63,9 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
          texture_threshold, min_height_m, max_height_m, max_range_m, ground_method, mount, scan: bool, **scan_kw):
     from dataclasses import replace
 
-    from ..camera import RigMount, read_stereo
-    from ..geometry import ObstacleConfig
+    from ..camera import read_stereo
+    from ..geometry import ObstacleConfig, ground_from_mount
     from ..io import read_image
-    from ..pipeline.frame import obstacles_from_pair, scan_from_pair
     from ..profiling import stage
     from ..rejection import RejectionConfig
 
@@ -73,15 +75,12 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
                         ("--max-range", max_range_m)):
         _finite(name, value)
     stereo = read_stereo(calib)
-    rig = parse_mount(mount)
-    if rig is not None and (height_m is not None or tilt_rad is not None):
-        raise click.UsageError("give --mount or --height/--tilt, not both")
-    if height_m is not None or tilt_rad is not None:
-        base = stereo.rig
-        if height_m is None and base is None:
-            raise ValueError("--tilt needs --height (or a rig: entry in the calibration YAML)")
-        rig = RigMount(height_m=height_m if height_m is not None else base.height_m,
-                       tilt_rad=tilt_rad if tilt_rad is not None else (base.tilt_rad if base else 0.0))
+    if mount is None and stereo.mount is not None and (height_m is not None or tilt_rad is not None):
+        # one of --height/--tilt: the other is the calibration YAML's (of its rectified left camera)
+        given = ground_from_mount(stereo.mount, R_rect_from_cam=stereo.left.R)
+        height_m = given.height_m if height_m is None else height_m
+        tilt_rad = given.tilt_rad if tilt_rad is None else tilt_rad
+    camera_mount = mount_from_options(height_m, tilt_rad, mount, stereo)
     from ..io import matching_image
 
     with stage("read"):
@@ -95,7 +94,7 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     updates = {k: v for k, v in (("min_obstacle_height_m", min_height_m), ("max_obstacle_height_m", max_height_m),
                                  ("max_range_m", max_range_m), ("ground_method", ground_method)) if v is not None}
     config = replace(config, **updates)
-    options = dict(rectified=rectified, rig=rig, pan_rad=pan_rad, preset=preset,
+    options = dict(rectified=rectified, mount=camera_mount, pan_rad=pan_rad, preset=preset,
                    max_disparity_px=max_disparity_px, rejection=rejection, config=config)
     if scan:
         return stereo, scan_from_pair(left_img, right_img, stereo, **scan_kw, **options)
@@ -107,32 +106,35 @@ def _report_ground(obstacles) -> None:
 
 
 @click.command("points")
-@profile_option
+@profile_option("read, rectify, match, reject, 3-D")
 @_common
 @click.option("--which", type=click.Choice(["all", "obstacles", "floor"]), default="all", show_default=True,
               help="Which points to write.")
-@click.option("--color", is_flag=True, help="Write red/green/blue from a colour left image (else intensity).")
+@click.option("--color", is_flag=True, help="Write red/green/blue from the colour left image (else its gray level).")
 def points_command(left, right, calib, output, which, color, **kw):
-    """Write the robot-frame point cloud of a stereo pair as binary PLY.
+    """Write a stereo pair's robot-frame point cloud as PLY.
 
     LEFT and RIGHT are a raw pair (rectified with --calib first) or a rectified
-    pair (--rectified). The mount comes from --height/--tilt, else the YAML's
-    rig:, else the floor is estimated from the disparity.
+    pair (--rectified). The points are in the robot base frame (REP 103,
+    metres), in a binary PLY with the pixel's gray level (or colour, --color).
+    The camera mount comes from --mount or --height/--tilt, else the
+    calibration's mount:/rig: entry, else the floor is estimated from the
+    disparity (docs/conventions.md).
     """
     from ..geometry import write_ply
 
-    check_outputs({"--output": output}, [left, right, calib], suffixes={"--output": (".ply",)})
+    check_outputs({"--out": output}, [left, right, calib], suffixes={"--out": (".ply",)})
     _, frame = _run(left, right, calib, output, scan=False, **kw)
     obs = frame.obstacles
     if not obs.success:
-        raise RuntimeError(f"{obs.message}; give --height and --tilt (or a rig: entry in the calibration)")
+        raise RuntimeError(f"{obs.message}; give --mount or --height and --tilt (or a mount: entry in the calibration)")
     valid = np.isfinite(obs.points_robot_image).all(axis=-1)
     mask = {"all": valid, "obstacles": obs.obstacle_mask, "floor": obs.floor_mask}[which]
     pts = obs.points_robot_image[mask]
     img = frame.left_rect
     if color:
         if img.ndim != 3:
-            raise ValueError("--color needs a colour left image")
+            raise ValueError(f"--color needs a colour left image, {left} is gray")
         n = write_ply(output, pts, colors_rgb=img[mask][:, ::-1], comment="mrstereo robot frame, metres")
     else:
         gray = img if img.ndim == 2 else np.asarray(img, np.float32) @ np.float32([0.114, 0.587, 0.299])
@@ -143,26 +145,33 @@ def points_command(left, right, calib, output, which, color, **kw):
 
 
 @click.command("scan")
-@profile_option
+@profile_option("read, rectify, match, reject, 3-D, scan")
 @_common
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Also write a top-view PNG (obstacle points, floor points, scan).")
-@click.option("--angle-increment", "angle_increment_deg", type=float, default=0.5, show_default=True,
+@click.option("--angle-increment", "angle_increment_deg", type=float,
+              default=math.degrees(library_default(scan_from_pair, "angle_increment_rad")), show_default=True,
               help="Angular step of the scan [deg].")
-@click.option("--range-min", "range_min_m", type=float, default=0.1, show_default=True, help="[m]")
+@click.option("--range-min", "range_min_m", type=float, default=library_default(scan_from_pair, "range_min_m"),
+              show_default=True, help="Smallest range [m] (raised to the matcher's near limit).")
 def scan_command(left, right, calib, output, plot_path, angle_increment_deg, range_min_m, **kw):
-    """Write a virtual laser scan (nearest obstacle per bearing) as JSON or CSV.
+    """Write a stereo pair's virtual laser scan (JSON or CSV).
 
-    JSON uses the ROS LaserScan field names (angle_min, angle_max,
-    angle_increment, range_min, range_max, ranges; no return = null); an
-    output ending in .csv is written as angle_rad,range_m rows.
+    Each bearing holds its nearest obstacle in the robot base frame. JSON uses
+    the fields of ROS sensor_msgs/LaserScan (angle_min, angle_max,
+    angle_increment, range_min, range_max, ranges, intensities, header); a
+    range that is not a number is the string "Infinity" (seen clear past
+    range_max), "NaN" (no measurement) or "-Infinity" (nearer than range_min),
+    the REP 117 values. An output ending in .csv is written as
+    angle_rad,range_m,intensity rows with inf, nan, -inf (docs/obstacles.md).
+    The camera mount is found as for `mrstereo points`.
     """
     from .. import _checks
     from ..geometry import plot_top_view, write_scan_csv, write_scan_json
 
     suffix = Path(output).suffix.lower()
-    check_outputs({"--output": output, "--plot": plot_path}, [left, right, calib],
-                  suffixes={"--output": (".json", ".csv"), "--plot": (".png",)})
+    check_outputs({"--out": output, "--plot": plot_path}, [left, right, calib],
+                  suffixes={"--out": (".json", ".csv"), "--plot": (".png",)})
     _finite("--angle-increment", angle_increment_deg)
     if angle_increment_deg <= 0:
         raise ValueError(f"--angle-increment must be > 0, got {angle_increment_deg}")
@@ -172,7 +181,7 @@ def scan_command(left, right, calib, output, plot_path, angle_increment_deg, ran
                      range_min_m=_finite("--range-min", range_min_m), **kw)
     obs = result.frame.obstacles
     if not obs.success:
-        raise RuntimeError(f"{obs.message}; give --height and --tilt (or a rig: entry in the calibration)")
+        raise RuntimeError(f"{obs.message}; give --mount or --height and --tilt (or a mount: entry in the calibration)")
     (write_scan_csv if suffix == ".csv" else write_scan_json)(output, result.scan)
     if plot_path is not None:
         plot_top_view(plot_path, obstacle_points_robot=obs.obstacle_points_robot,

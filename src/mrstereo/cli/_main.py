@@ -2,6 +2,8 @@
 
 A command's module is imported when the command runs (or is listed by ``--help``), not before:
 ``mrstereo map`` does not import what ``calibrate``, ``evaluate`` or ``export`` need.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

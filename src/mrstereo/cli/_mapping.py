@@ -1,4 +1,7 @@
-"""CLI of the mapping stage: ``mrstereo plan`` (A* on a ROS map)."""
+"""CLI of the mapping stage: ``mrstereo plan`` (A* on a ROS map).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import json
@@ -8,7 +11,9 @@ from pathlib import Path
 import click
 
 from ..io import atomic_write, check_outputs
+from ..mapping.planning import plan_path
 from ..mapping.rosmap import ros_map_files
+from ._options import library_default
 
 
 def _xy(ctx, param, value):
@@ -26,26 +31,29 @@ def _xy(ctx, param, value):
 @click.argument("map_yaml", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--start", required=True, callback=_xy, metavar="X,Y", help="Start (x, y) in metres.")
 @click.option("--goal", required=True, callback=_xy, metavar="X,Y", help="Goal (x, y) in metres.")
-@click.option("--radius", "radius_m", type=float, default=0.25, show_default=True,
-              help="Robot radius [m]: obstacles are inflated by it.")
-@click.option("--unknown", type=click.Choice(["blocked", "free"]), default="blocked",
-              show_default=True, help="How to treat unknown cells.")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--radius", "radius_m", type=float, default=library_default(plan_path, "robot_radius_m"),
+              show_default=True, help="Robot radius [m]: obstacles are inflated by it.")
+@click.option("--unknown", type=click.Choice(["blocked", "free"]),
+              default="blocked" if library_default(plan_path, "unknown_is_obstacle") else "free",
+              show_default=True, help="Cells the map never observed: blocked (safe) or free.")
+@click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Path JSON to write.")
 @click.option("--plot", "plot_png", type=click.Path(dir_okay=False, path_type=Path),
               help="Also draw the map and the path to this image.")
 def plan_command(map_yaml: Path, start, goal, radius_m: float, unknown: str, output: Path,
                  plot_png: Path | None) -> None:
-    """Plan a collision-free path on MAP_YAML (ROS map_server YAML + PGM) with A*.
+    """Plan a collision-free path on a ROS map with A*.
 
-    Writes OUTPUT as JSON: path_xy (cell centres, metres), length_m, start, goal,
-    robot_radius_m, unknown, expanded_cells. Exits with an error if there is no path.
+    MAP_YAML is a ROS map_server map (YAML + PGM, e.g. map.yaml of `mrstereo
+    map`). Writes the JSON given by -o: path_xy (cell centres, metres),
+    length_m, start, goal, robot_radius_m, unknown, expanded_cells. Exits with
+    an error if there is no path.
     """
-    from ..mapping import plan_path, plot_map, read_ros_map
+    from ..mapping import plot_map, read_ros_map
 
     if not (math.isfinite(radius_m) and radius_m >= 0):
         raise click.BadParameter(f"must be a finite number >= 0, got {radius_m}", param_hint="--radius")
-    check_outputs({"--output": output, "--plot": plot_png}, ros_map_files(map_yaml),
+    check_outputs({"--out": output, "--plot": plot_png}, ros_map_files(map_yaml),
                   suffixes={"--plot": (".png", ".pdf", ".svg")})
     ros_map = read_ros_map(map_yaml)
     result = plan_path(ros_map, start, goal, robot_radius_m=radius_m,

@@ -1,4 +1,7 @@
-"""CLI: ``mrstereo disparity`` (multi-range matching, docs/matching.md)."""
+"""CLI: ``mrstereo disparity`` (multi-range matching, docs/matching.md).
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import math
@@ -33,10 +36,10 @@ def _bands(text: str) -> list[tuple[float, float]]:
 
 
 @click.command("disparity")
-@profile_option
+@profile_option("read, rectify, match")
 @click.argument("left", type=click.Path(dir_okay=False))
 @click.argument("right", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+@click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False),
               help="Disparity output: .pfm (Middlebury, inf invalid) or .png (KITTI uint16 x256).")
 @click.option("--max-disparity", type=float,
               help="Search 0..N px (split into ranges N/4, N/2, N at decimations 4, 2, 1; fewer levels "
@@ -45,7 +48,9 @@ def _bands(text: str) -> list[tuple[float, float]]:
 @click.option("--calib", type=click.Path(dir_okay=False), help=CALIB_HELP)
 @click.option("--depth-bands", help="Depth band edges in metres, e.g. 0.5,1,2.5,15 (needs --calib).")
 @click.option("--rectified", is_flag=True, help="With --calib: the images are already rectified.")
-@click.option("--preset", type=click.Choice(["robust", "mapping", "paper"]), default="robust", show_default=True)
+@click.option("--preset", type=click.Choice(["robust", "mapping", "paper"]), default="robust", show_default=True,
+              help="Matcher preset (docs/glossary.md): robust for dense disparity, mapping as map/points/scan "
+                   "use it, paper for eq. 9-12 exactly.")
 @click.option("--single-range", is_flag=True, help="One full-resolution search instead of three ranges.")
 @click.option("--no-fill", is_flag=True, help="Leave holes as holes: no gap filling (robust preset).")
 @click.option("--aoi", help="Area of interest row0:row1,col0:col1 (half-open).")
@@ -54,18 +59,20 @@ def _bands(text: str) -> list[tuple[float, float]]:
 @click.option("--plot", "color_path", type=click.Path(dir_okay=False),
               help="Also write a colour preview PNG with a colour bar in pixels (black: no value; "
                    "magenta: too near).")
-@click.option("--color", "color_alias", type=click.Path(dir_okay=False), hidden=True, help="Old spelling of --plot.")
 def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rectified, preset,
-              single_range, no_fill, aoi, explain, color_path, color_alias):
-    """Multi-range disparity of a stereo pair (paper section 3)."""
+              single_range, no_fill, aoi, explain, color_path):
+    """Compute the multi-range disparity of a stereo pair.
+
+    Matches on three horizontal resolutions (paper section 3). LEFT and RIGHT
+    are a raw pair rectified with --calib, or a rectified pair
+    (--rectified, or without --calib). The search is --max-disparity, --bands,
+    --depth-bands or, with --calib alone, the depth bands 0.5-1, 1-2.5 and
+    2.5-15 m (docs/matching.md). Writes a Middlebury PFM or a KITTI 16-bit PNG.
+    """
     from .. import io
     from ..matching import compute_disparity, preset_config
     from ..profiling import stage
 
-    if color_alias is not None:
-        if color_path is not None:
-            raise click.UsageError("give --plot (or its old spelling --color), not both")
-        color_path = color_alias
     if max_disparity is not None and not (math.isfinite(max_disparity) and max_disparity > 0):
         raise ValueError(f"--max-disparity must be a finite number > 0, got {max_disparity}")
     if bands is not None and max_disparity is not None:
@@ -76,8 +83,8 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
         raise ValueError("--depth-bands needs --calib")
     if depth_bands is not None and (max_disparity is not None or bands is not None):
         raise ValueError("give --depth-bands or a disparity search, not both")
-    io.check_outputs({"--output": output, "--plot": color_path}, [left, right, calib],
-                     suffixes={"--output": (".pfm", ".png"), "--plot": (".png",)})
+    io.check_outputs({"--out": output, "--plot": color_path}, [left, right, calib],
+                     suffixes={"--out": (".pfm", ".png"), "--plot": (".png",)})
     aoi_box = None
     if aoi is not None:
         try:

@@ -1,12 +1,22 @@
-"""Options shared by several commands."""
+"""Options shared by several commands.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import functools
+import inspect
+import math
 
 import click
 
 CALIB_HELP = ("Calibration file in any supported format (mrstereo/ROS stereo YAML, Kalibr camchain, OpenCV "
               "FileStorage, OpenLORIS), or two per-camera files as LEFT,RIGHT; see `mrstereo calib convert --help`.")
+
+
+def library_default(func, name: str):
+    """The default of the keyword ``name`` of the library function ``func``: an option's default is the library's."""
+    return inspect.signature(func).parameters[name].default
 
 
 def worker_options(func):
@@ -41,8 +51,6 @@ def mount_option(func):
 
 def parse_mount(text):
     """A :class:`~mrstereo.camera.mount.CameraMount` from ``--mount`` text (None stays None)."""
-    import math
-
     from ..camera.mount import CameraMount
 
     if text is None:
@@ -57,10 +65,32 @@ def parse_mount(text):
     return CameraMount.from_xyz_rpy(values[:3], values[3:])
 
 
+def check_mount_options(height_m, tilt_rad, mount) -> None:
+    """``--mount`` or ``--height``/``--tilt``: not both, finite, no ``--tilt`` without ``--height``."""
+    if mount is not None and (height_m is not None or tilt_rad is not None):
+        raise click.UsageError("give --mount or --height/--tilt, not both")
+    for name, value in (("--height", height_m), ("--tilt", tilt_rad)):
+        if value is not None and not math.isfinite(value):
+            raise click.BadParameter(f"must be finite, got {value}", param_hint=name)
+    if height_m is None and tilt_rad is not None:
+        raise click.UsageError("--tilt needs --height")
+
+
+def mount_from_options(height_m, tilt_rad, mount, stereo):
+    """The CameraMount of ``--mount``, or of the paper's rig ``--height``/``--tilt`` (the rectified left
+    camera of the calibration ``stereo``); None when none is given."""
+    from ..camera import CameraMount
+
+    check_mount_options(height_m, tilt_rad, mount)
+    if mount is not None:
+        return parse_mount(mount)
+    if height_m is None:
+        return None
+    return CameraMount.from_rig(height_m, 0.0 if tilt_rad is None else tilt_rad, R_rect_from_cam=stereo.left.R)
+
+
 def echo_floor(ground, *, prefix: str = "floor") -> None:
     """One stderr line for the floor a command used; a warning line when a fit is not confident."""
-    import math
-
     if ground is None:
         return
     if not ground.success:
@@ -73,7 +103,7 @@ def echo_floor(ground, *, prefix: str = "floor") -> None:
 
 def echo_run_floor(ground, *, prefix: str = "floor") -> None:
     """For a whole run (map, batch): the floor on stdout when it was estimated, and a warning if weak."""
-    if ground is None or ground.method in ("rig", "mount"):
+    if ground is None or ground.method == "mount":
         return
     click.echo(f"{prefix} {ground.message}: height {ground.height_m:.3f} m, tilt {ground.tilt_rad:.4f} rad, "
                f"roll {ground.roll_rad:.4f} rad; {ground.confidence_text}")
@@ -91,23 +121,26 @@ def warn_floor(ground) -> None:
                    "(--mount or --height/--tilt)", err=True)
 
 
-def profile_option(func):
-    """``--profile``: time every stage (:mod:`mrstereo.profiling`) and print a per-frame table at the end.
+def profile_option(stages: str):
+    """``--profile``: time the command's ``stages`` (:mod:`mrstereo.profiling`) and print a per-frame table.
 
-    Put it right under ``@click.command``. Off, the command runs unchanged. Worker processes
-    (``--processes``, ``--scheduler``) are not seen: their stages are missing from the table.
+    ``stages`` names them for the help, e.g. ``"read, rectify, match"``. Put the decorator right
+    under ``@click.command``. Off, the command runs unchanged. Worker processes (``--processes``,
+    ``--scheduler``) are not seen: their stages are missing from the table.
     """
-    @functools.wraps(func)
-    def wrapper(*args, profile: bool = False, **kwargs):
-        if not profile:
-            return func(*args, **kwargs)
-        from ..profiling import profiling
+    def decorate(func):
+        @functools.wraps(func)
+        def wrapper(*args, profile: bool = False, **kwargs):
+            if not profile:
+                return func(*args, **kwargs)
+            from ..profiling import profiling
 
-        with profiling() as prof:
-            result = func(*args, **kwargs)
-        click.echo(prof.table(), err=True)
-        return result
+            with profiling() as prof:
+                result = func(*args, **kwargs)
+            click.echo(prof.table(), err=True)
+            return result
 
-    return click.option("--profile", is_flag=True,
-                        help="Print the time of every stage (read, rectify, match, reject, 3-D, grid) "
-                             "per frame at the end (stderr).")(wrapper)
+        return click.option("--profile", is_flag=True,
+                            help=f"Print the time per frame of every stage ({stages}) at the end "
+                                 "(stderr).")(wrapper)
+    return decorate

@@ -1,22 +1,33 @@
-"""CLI of the synthetic world: ``mrstereo synth``."""
+"""CLI of the synthetic world: ``mrstereo synth``.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import click
+
+from ..world.dataset import write_synthetic_dataset
+from ._options import library_default
 
 __all__ = ["COMMANDS"]
 
 
 @click.command("synth")
-@click.option("--out", "out_dir", required=True, type=click.Path(path_type=Path),
+@click.option("-o", "--out", "out_dir", required=True, type=click.Path(path_type=Path),
               help="New (or empty) dataset directory.")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
+@click.option("--seed", default=library_default(write_synthetic_dataset, "seed"), show_default=True,
+              type=click.IntRange(min=0),
               help="Texture and sensor-noise seed (with --randomize: the whole world).")
-@click.option("--frames", "n_frames", default=30, show_default=True, type=click.IntRange(min=1),
+@click.option("--frames", "n_frames", default=library_default(write_synthetic_dataset, "n_frames"), show_default=True,
+              type=click.IntRange(min=1),
               help="Number of frames (with --path stops: front, +45 and -45 degree views at each stop).")
-@click.option("--width", default=320, show_default=True, type=click.IntRange(min=16), help="Image width.")
-@click.option("--height", default=240, show_default=True, type=click.IntRange(min=16), help="Image height.")
+@click.option("--width", default=library_default(write_synthetic_dataset, "width"), show_default=True,
+              type=click.IntRange(min=16), help="Image width.")
+@click.option("--height", default=library_default(write_synthetic_dataset, "height"), show_default=True,
+              type=click.IntRange(min=16), help="Image height.")
 @click.option("--randomize", is_flag=True,
               help="A randomized world drawn from --seed (corridor, textures, lights, rig, sensors, "
                    "obstacles, path) instead of the built-in corridor.")
@@ -24,32 +35,41 @@ __all__ = ["COMMANDS"]
               default=None,
               help="With --randomize: give the walls this material instead of the drawn one; everything else "
                    "stays the seed's world (e.g. stripes: a repetitive-texture variant).")
-@click.option("--path", "path_kind", type=click.Choice(["stops", "front", "s-curve"]), default="stops",
-              show_default=True,
+@click.option("--path", "path_kind", type=click.Choice(["stops", "front", "s-curve", "street"]),
+              default=library_default(write_synthetic_dataset, "path"), show_default=True,
               help="stops: front/left/right views at each stop (mapping); front, s-curve: one front view every "
-                   "--step metres (odometry sequences; with --randomize: front, along the world's own path).")
-@click.option("--step", "step_m", type=float, default=0.1, show_default=True,
-              help="Path length between frames of a front or s-curve sequence [m].")
+                   "--step metres (odometry sequences; with --randomize: front, along the world's own path); "
+                   "street: a long street world (drawn from --seed) driven from a standstill up to --step metres "
+                   "per frame, turning up to --turn degrees per frame.")
+@click.option("--step", "step_m", type=float, default=library_default(write_synthetic_dataset, "step_m"),
+              show_default=True,
+              help="Path length between frames of a front or s-curve sequence [m] (street: at full speed).")
+@click.option("--turn", "turn_deg", type=float,
+              default=round(math.degrees(library_default(write_synthetic_dataset, "turn_rad_per_frame")), 9),
+              show_default=True, help="--path street: the largest heading change per frame at full speed [deg].")
+@click.option("--rate", "rate_hz", type=float, default=library_default(write_synthetic_dataset, "frame_rate_hz"),
+              show_default=True, help="Frames per second of a sequence (the frames' time stamps).")
 @click.option("--odometry-noise", "odometry_noise", metavar="SCALE,DEG_PER_M", default=None,
               help="Store drifted odometry as each frame's pose (scale error, heading drift in degrees per "
                    "metre, e.g. 0.03,2) and the truth as true_pose.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, randomize: bool,
-          wall_texture: str | None, path_kind: str, step_m: float, odometry_noise: str | None, quiet: bool) -> None:
-    """Render the synthetic office corridor into a dataset directory (docs/dataset.md).
+          wall_texture: str | None, path_kind: str, step_m: float, turn_deg: float, rate_hz: float,
+          odometry_noise: str | None, quiet: bool) -> None:
+    """Render the synthetic corridor as a dataset.
+
+    The dataset folder given by -o is laid out as docs/dataset.md describes; --path street
+    renders a long street instead, driven at car speed (docs/world.md).
 
     Writes raw and rectified stereo pairs, ground-truth disparity (PFM) and
     labels, the true calibration, the ground-truth map and manifest.yaml.
     With --randomize the world itself is drawn from the seed (docs/world.md).
     """
     from ..io import check_output_dir
-    from ..world.dataset import write_synthetic_dataset
 
     if wall_texture is not None and not randomize:
         raise click.UsageError("--wall-texture needs --randomize")
     check_output_dir("--out", out_dir, must_be_empty=True)
-    import math
-
     noise = None
     if odometry_noise is not None:
         try:
@@ -60,11 +80,17 @@ def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, rand
         if not (math.isfinite(scale) and math.isfinite(deg_per_m)):
             raise click.BadParameter(f"must be finite, got {odometry_noise!r}", param_hint="--odometry-noise")
         noise = (scale, math.radians(deg_per_m))
-    if not (math.isfinite(step_m) and step_m > 0):
-        raise click.BadParameter(f"must be a positive number, got {step_m}", param_hint="--step")
+    for name, value in (("--step", step_m), ("--rate", rate_hz)):
+        if not (math.isfinite(value) and value > 0):
+            raise click.BadParameter(f"must be a positive number, got {value}", param_hint=name)
+    if not (math.isfinite(turn_deg) and 0 <= turn_deg < 90):
+        raise click.BadParameter(f"must be a number in [0, 90), got {turn_deg}", param_hint="--turn")
+    if randomize and path_kind == "street":
+        raise click.UsageError("--path street has its own world: not with --randomize")
     path = write_synthetic_dataset(out_dir, seed=seed, n_frames=n_frames, width=width, height=height,
                                    path=path_kind, step_m=step_m, odometry_noise=noise, progress=not quiet,
-                                   randomize=randomize, wall_texture=wall_texture)
+                                   randomize=randomize, wall_texture=wall_texture,
+                                   turn_rad_per_frame=math.radians(turn_deg), frame_rate_hz=rate_hz)
     click.echo(f"wrote {n_frames} frames to {path} (manifest: {path / 'manifest.yaml'})")
 
 

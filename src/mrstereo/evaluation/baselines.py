@@ -1,7 +1,8 @@
 """OpenCV StereoBM and StereoSGBM as reference matchers, set up as users run them.
 
-Settings follow ROS ``stereo_image_proc`` and OpenCV's own guidance
-(/work/shared/FIELD.md):
+Settings follow the disparity node of ROS ``stereo_image_proc``
+(http://wiki.ros.org/stereo_image_proc) and OpenCV's documentation of ``StereoBM`` and
+``StereoSGBM`` (https://docs.opencv.org/4.x/d2/d85/classcv_1_1StereoSGBM.html):
 
 * StereoBM: x-Sobel pre-filter, size 9, cap 31; SAD window 15 (9 on images
   narrower than 640 px, where a 15 px window spans whole objects); texture

@@ -15,6 +15,8 @@ Methods:
 Each method runs once on a 64-row strip of the first scene before timing, so
 that one-off costs (numba compilation, OpenCV thread start) are not charged
 to a scene.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -68,6 +68,7 @@ of the 3D-World", DAGM 2009.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -76,7 +77,8 @@ import numpy as np
 from .. import _checks
 from ..camera import StereoCamera
 from . import _freespace_kernels as _kernels
-from .obstacles import ObstacleResult, _disparity_image, _rectified_intrinsics, _rigid
+from .obstacles import (MAPPING_MAX_RANGE_M, ObstacleConfig, ObstacleResult, _disparity_image, _rectified_intrinsics,
+                        _rigid)
 
 __all__ = ["FreeSpaceConfig", "FreeSpaceBoundary", "free_space_boundary"]
 
@@ -202,8 +204,9 @@ def _runs(rows: np.ndarray, min_run: int, max_step: float) -> np.ndarray:
 
 
 def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, stereo: StereoCamera, *,
-                        config: FreeSpaceConfig = FreeSpaceConfig(), max_range_m: float = 4.0,
-                        min_height_m: float = 0.08, max_height_m: float = 1.5) -> FreeSpaceBoundary:
+                        config: FreeSpaceConfig = FreeSpaceConfig(), max_range_m: float = MAPPING_MAX_RANGE_M,
+                        min_height_m: float = ObstacleConfig.min_obstacle_height_m,
+                        max_height_m: float = ObstacleConfig.max_obstacle_height_m) -> FreeSpaceBoundary:
     """Where the floor ends in each column of the rectified left image, and the obstacle standing there.
 
     Parameters
@@ -247,31 +250,12 @@ def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, ster
         return empty
     if np.count_nonzero(obstacles.floor_mask) < config.min_floor_pixels:
         return empty                # no floor measured: nothing says the image's bottom is floor
-    gray = np.asarray(left_rect, dtype=np.float32)
-    if gray.ndim == 3:
-        gray = gray.mean(axis=2, dtype=np.float32)
-    floor, obstacle = obstacles.floor_mask, obstacles.obstacle_mask
-    intr = _rectified_intrinsics(stereo)
-    doffs = float(stereo.doffs_px)
-    # the rules see the image at about 320x240: a larger one is reduced by an integer factor
-    # (gray levels averaged, a block measured when any of its pixels is, disparities sampled)
-    n = max(1, int(min(w / 320.0, h / 240.0) + 0.25))
-    if n > 1:
-        hs, ws = h // n, w // n
-        gray = cv2.resize(gray[:hs * n, :ws * n], (ws, hs), interpolation=cv2.INTER_AREA)
-        # any pixel of a block: its mean (INTER_AREA) of 0 / 255 is at least 255 / n^2 > 0
-        floor, obstacle = (cv2.resize(m[:hs * n, :ws * n].view(np.uint8) * np.uint8(255), (ws, hs),
-                                      interpolation=cv2.INTER_AREA) > 0 for m in (floor, obstacle))
-        d = d[n // 2::n, n // 2::n][:hs, :ws] / np.float32(n)
-        off = (n - 1) / 2.0                          # a reduced pixel's centre in the full image
-        intr = {"bf": intr["bf"] / n, "focal_px": intr["focal_px"] / n, "cx_px": (intr["cx_px"] - off) / n,
-                "cy_px": (intr["cy_px"] - off) / n, "fy_px": intr["fy_px"] / n}
-        doffs /= n
+    n, gray, floor, obstacle, d, intr, doffs = _reduced(left_rect, obstacles, d, stereo)
     hh, ww = gray.shape
     sy = hh / 240.0
     sigma = config.smooth_sigma_px * sy
     smooth = cv2.GaussianBlur(gray, (0, 0), sigma) if sigma > 0 else np.ascontiguousarray(gray)
-    rows = lambda k: max(1, int(round(k * sy)))      # noqa: E731 -- sizes given at 240 rows
+    rows = functools.partial(_rows, rows_per_240=sy)
     # texture the matcher did not measure: the smoothed image's local standard deviation
     win = (2 * rows(2) + 1,) * 2
     mean = cv2.boxFilter(smooth, cv2.CV_32F, win)
@@ -303,6 +287,49 @@ def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, ster
                                  config.max_row_step * sy))
     if small.size == 0:
         return empty
+    return _boundary(small, base, top, base_xy, n=n, width=w, stereo=stereo,
+                     T_robot_from_cam=obstacles.T_robot_from_cam, point_spacing_m=config.point_spacing_m,
+                     min_height_m=min_height_m, max_height_m=max_height_m)
+
+
+def _rows(k: int, *, rows_per_240: float) -> int:
+    """A size of ``k`` rows at 240 rows, at the image's height."""
+    return max(1, int(round(k * rows_per_240)))
+
+
+def _reduced(left_rect, obstacles: ObstacleResult, d: np.ndarray, stereo: StereoCamera) -> tuple:
+    """``(n, gray, floor, obstacle, disparity, intrinsics, doffs)`` of the image reduced by the integer factor
+    ``n`` that brings it to about 320x240, where the rules' sizes hold (``n = 1``: as it is): gray levels
+    averaged, a block measured when any of its pixels is, disparities sampled."""
+    gray = np.asarray(left_rect, dtype=np.float32)
+    if gray.ndim == 3:
+        gray = gray.mean(axis=2, dtype=np.float32)
+    floor, obstacle = obstacles.floor_mask, obstacles.obstacle_mask
+    intr = _rectified_intrinsics(stereo)
+    doffs = float(stereo.doffs_px)
+    h, w = floor.shape
+    n = max(1, int(min(w / 320.0, h / 240.0) + 0.25))
+    if n > 1:
+        hs, ws = h // n, w // n
+        gray = cv2.resize(gray[:hs * n, :ws * n], (ws, hs), interpolation=cv2.INTER_AREA)
+        # any pixel of a block: its mean (INTER_AREA) of 0 / 255 is at least 255 / n^2 > 0
+        floor, obstacle = (cv2.resize(m[:hs * n, :ws * n].view(np.uint8) * np.uint8(255), (ws, hs),
+                                      interpolation=cv2.INTER_AREA) > 0 for m in (floor, obstacle))
+        d = d[n // 2::n, n // 2::n][:hs, :ws] / np.float32(n)
+        off = (n - 1) / 2.0                          # a reduced pixel's centre in the full image
+        intr = {"bf": intr["bf"] / n, "focal_px": intr["focal_px"] / n, "cx_px": (intr["cx_px"] - off) / n,
+                "cy_px": (intr["cy_px"] - off) / n, "fy_px": intr["fy_px"] / n}
+        doffs /= n
+    return n, gray, floor, obstacle, d, intr, doffs
+
+
+def _boundary(small: np.ndarray, base: np.ndarray, top: np.ndarray, base_xy: np.ndarray, *, n: int, width: int,
+              stereo: StereoCamera, T_robot_from_cam: np.ndarray, point_spacing_m: float, min_height_m: float,
+              max_height_m: float) -> FreeSpaceBoundary:
+    """The boundary of the kept columns ``small`` of the reduced image (factor ``n``) in the full image, and
+    the obstacle points on the vertical lines over its bases."""
+    R, t = _rigid(T_robot_from_cam)
+    w = width
     # back to the full image: a reduced pixel's centre
     cols = small * n + n // 2
     base_row = np.full(w, np.nan)
@@ -317,7 +344,7 @@ def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, ster
     base_points = np.column_stack([base_xy, np.zeros(cols.size)])
     reach = np.hypot(*(base_xy - t[:2]).T) / np.maximum(np.hypot(ray_top[:, 0], ray_top[:, 1]), 1e-12)
     z_top = np.minimum(t[2] + ray_top[:, 2] * reach, max_height_m)
-    heights = np.arange(min_height_m + 0.5 * config.point_spacing_m, max_height_m, config.point_spacing_m)
+    heights = np.arange(min_height_m + 0.5 * point_spacing_m, max_height_m, point_spacing_m)
     k, j = np.nonzero(heights[None, :] <= z_top[:, None])
     points = np.column_stack([base_xy[k], heights[j]])
     return FreeSpaceBoundary(base_row=base_row, top_row=top_row, base_points_robot=base_points,

@@ -38,20 +38,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import _checks
-from ..camera import RigMount, StereoCamera
-from ..camera.mount import CameraMount
+from ..camera import CameraMount, StereoCamera
 from ..transforms import T_robot_from_cam
 
-# Below / above these a floor fit is reported as weak (docs/obstacles.md, "Floor confidence").
-# Measured (mapping preset, 4 m range): synthetic corridor 320x240, 12 frames, plane fit: share
-# 0.14-0.70, residual 0.013-0.014 m (V-disparity: 0.12-0.70, 0.012-0.031 m); Middlebury Teddy and
-# Tsukuba with an ideal calibration (no floor in view): share 0.03-0.07.
+# Below / above these a floor fit is reported as weak: a floor in view supports at least this share of the
+# valid points within a few centimetres, a scene without one (a wall, a desk) a few percent
+# (docs/obstacles.md, "Floor confidence", has the measurements).
 MIN_FLOOR_SHARE = 0.12
 MAX_FLOOR_RESIDUAL_M = 0.03
 from .triangulation import points_cam_from_disparity
 
 __all__ = [
-    "GroundPlane", "ground_from_rig", "ground_from_mount", "MIN_FLOOR_SHARE", "MAX_FLOOR_RESIDUAL_M", "v_disparity",
+    "GroundPlane", "ground_from_mount", "MIN_FLOOR_SHARE", "MAX_FLOOR_RESIDUAL_M", "v_disparity",
     "fit_ground_v_disparity", "fit_ground_plane",
     "estimate_ground", "T_robot_from_cam_ground", "height_above_ground_m",
 ]
@@ -74,9 +72,9 @@ class GroundPlane:
     message : str
         What was fitted or why it failed.
     method : str
-        ``"rig"``, ``"v_disparity"`` or ``"plane"``.
+        ``"mount"`` (a given mount), ``"v_disparity"`` or ``"plane"``.
     n_inliers : int
-        Pixels / points supporting the fit (0 for ``"rig"``).
+        Pixels / points supporting the fit (0 for ``"mount"``).
     line_px : (float, float)
         V-disparity line ``d = a (v - cy) + c`` as ``(a, c)`` (NaN if not fitted).
     inlier_share : float
@@ -86,9 +84,9 @@ class GroundPlane:
         Confidence of a fit: RMS distance of the supporting points to the
         floor [m] (NaN for a given mount).
     T_base_from_cam : tuple of 16 floats, optional
-        Row-major 4x4 pose of the camera in the base frame when the floor comes
-        from a full 6-DoF mount (:func:`ground_from_mount`); it then replaces
-        the height / tilt / roll parametrization in :func:`T_robot_from_cam_ground`.
+        Row-major 4x4 pose of the rectified left camera in the base frame when the
+        floor comes from a mount (:func:`ground_from_mount`); it then replaces the
+        height / tilt / roll parametrization in :func:`T_robot_from_cam_ground`.
     """
 
     height_m: float
@@ -96,7 +94,7 @@ class GroundPlane:
     roll_rad: float = 0.0
     success: bool = True
     message: str = ""
-    method: str = "rig"
+    method: str = "mount"
     n_inliers: int = 0
     line_px: tuple[float, float] = field(default=(math.nan, math.nan))
     inlier_share: float = math.nan
@@ -110,14 +108,14 @@ class GroundPlane:
         A given mount is always confident."""
         if not self.success:
             return False
-        if self.method in ("rig", "mount"):
+        if self.method == "mount":
             return True
         return bool(self.inlier_share >= MIN_FLOOR_SHARE and self.residual_m <= MAX_FLOOR_RESIDUAL_M)
 
     @property
     def confidence_text(self) -> str:
         """``"inliers 34.1 %, residual 0.012 m"`` (or ``"given"`` for a mount)."""
-        if self.method in ("rig", "mount"):
+        if self.method == "mount":
             return "given"
         return f"inliers {100 * self.inlier_share:.1f} %, residual {self.residual_m:.3f} m"
 
@@ -136,36 +134,17 @@ class GroundPlane:
         t, r = self.tilt_rad, self.roll_rad
         return np.array([math.sin(r) * math.cos(t), math.cos(r) * math.cos(t), math.sin(t)])
 
-    @property
-    def rig(self) -> RigMount:
-        """The fitted mount as a :class:`mrstereo.camera.RigMount` (roll dropped)."""
-        return RigMount(height_m=self.height_m, tilt_rad=self.tilt_rad)
-
-
-def ground_from_rig(rig: RigMount) -> GroundPlane:
-    """The floor implied by a known mount (flat floor, no roll)."""
-    if not isinstance(rig, RigMount):
-        raise TypeError(f"rig must be a RigMount, got {type(rig).__name__}")
-    return GroundPlane(height_m=float(rig.height_m), tilt_rad=float(rig.tilt_rad), method="rig",
-                       message="mount given")
-
 
 def ground_from_mount(mount: CameraMount, *, R_rect_from_cam=None) -> GroundPlane:
-    """The floor (base ``z = 0``) seen from a full 6-DoF mount; keeps the mount's transform.
+    """The floor (base ``z = 0``) seen from a camera mount, in the rectified left frame; keeps its transform.
 
     The mount is the pose of the physical (raw) left camera; points are triangulated in the
-    rectified left frame, turned by ``R_rect_from_cam`` (camera_info ``R`` of the left
-    camera, default identity): the floor is returned in that rectified frame,
-    ``T_base_from_rect = T_base_from_cam @ R^T``.
+    rectified left frame, turned by ``R_rect_from_cam`` (camera_info ``R`` of the left camera,
+    default identity): ``T_base_from_rect = T_base_from_cam @ R^T``.
     """
     if not isinstance(mount, CameraMount):
         raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
-    T = mount.T_base_from_cam
-    if R_rect_from_cam is not None:
-        R = _checks.matrix("R_rect_from_cam", R_rect_from_cam, (3, 3))
-        if not np.array_equal(R, np.eye(3)):
-            T = T.copy()
-            T[:3, :3] = T[:3, :3] @ R.T
+    T = mount.T_base_from_rectified(R_rect_from_cam)
     n = -T[2, :3]                       # the base's down axis in the camera frame
     return GroundPlane(height_m=float(T[2, 3]), tilt_rad=math.asin(float(np.clip(n[2], -1.0, 1.0))),
                        roll_rad=math.atan2(float(n[0]), float(n[1])), method="mount", message="mount given",
@@ -193,7 +172,7 @@ def T_robot_from_cam_ground(ground: GroundPlane, *, pan_rad: float = 0.0) -> np.
     if not ground.success:
         raise ValueError(f"ground plane was not found: {ground.message}")
     if ground.T_base_from_cam is not None:
-        return CameraMount(np.reshape(ground.T_base_from_cam, (4, 4))).T_base_from_cam_panned(pan_rad)
+        return CameraMount(np.reshape(ground.T_base_from_cam, (4, 4))).T_base_from_rectified(pan_rad=pan_rad)
     T = T_robot_from_cam(height_m=ground.height_m, tilt_rad=ground.tilt_rad, pan_rad=pan_rad)
     roll = np.eye(4)
     roll[:3, :3] = _rotation_roll_cam(ground.roll_rad)
@@ -243,6 +222,36 @@ def v_disparity(disparity_px, *, max_disparity_px: float | None = None,
 
 def _subsample(n: int, max_samples: int, rng: np.random.Generator) -> np.ndarray:
     return np.arange(n) if n <= max_samples else rng.choice(n, size=max_samples, replace=False)
+
+
+def _line_scores(a, c, v, dd, tol: float, below_penalty: float) -> np.ndarray:
+    """RANSAC score of each line ``d = a v + c``: pixels within ``tol``, minus ``below_penalty`` per pixel
+    farther than the line under its horizon (impossible for a floor)."""
+    scores = np.zeros(a.size, dtype=np.float64)
+    for start in range(0, a.size, 32):        # blocks keep the (hypotheses x samples) array small
+        line = a[start:start + 32, None] * v[None, :] + c[start:start + 32, None]
+        res = dd[None, :] - line
+        below = (res < -tol) & (line > 0)
+        scores[start:start + 32] = (np.abs(res) <= tol).sum(axis=1) - below_penalty * below.sum(axis=1)
+    return scores
+
+
+def _refine_line(a: float, c: float, v, dd, tol: float, *, bf: float, fy: float, height_range_m,
+                 tilt_range_rad) -> tuple[float, float]:
+    """Least squares on the inliers of ``d = a v + c``, three times, keeping the last line whose height
+    ``bf cos(tilt) / (a fy)`` and tilt ``atan2(c, a fy)`` are plausible."""
+    (h_lo, h_hi), (t_lo, t_hi) = height_range_m, tilt_range_rad
+    for _ in range(3):
+        inl = np.abs(dd - (a * v + c)) <= tol
+        if inl.sum() < 2:
+            break
+        a_new, c_new = np.polyfit(v[inl], dd[inl], 1)
+        t_new = math.atan2(c_new, a_new * fy)
+        h_new = bf * math.cos(t_new) / (a_new * fy) if a_new > 0 else math.inf
+        if not (h_lo <= h_new <= h_hi and t_lo <= t_new <= t_hi):
+            break
+        a, c = a_new, c_new
+    return a, c
 
 
 def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: float = 1.0,
@@ -324,24 +333,9 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
     if not ok.any():
         return _failed("v_disparity", "no line with a floor-like slope (positive, plausible height and tilt)", 0)
     a, c = a[ok], c[ok]
-    scores = np.zeros(a.size, dtype=np.float64)
-    for start in range(0, a.size, 32):        # blocks keep the (hypotheses x samples) array small
-        line = a[start:start + 32, None] * v[None, :] + c[start:start + 32, None]
-        res = dd[None, :] - line
-        below = (res < -tol) & (line > 0)      # farther than the floor under the horizon: impossible
-        scores[start:start + 32] = (np.abs(res) <= tol).sum(axis=1) - below_penalty * below.sum(axis=1)
-    best = int(np.argmax(scores))
-    a_best, c_best = a[best], c[best]
-    for _ in range(3):                        # least-squares refinement on the inliers
-        inl = np.abs(dd - (a_best * v + c_best)) <= tol
-        if inl.sum() < 2:
-            break
-        a_new, c_new = np.polyfit(v[inl], dd[inl], 1)
-        t_new = math.atan2(c_new, a_new * fy)
-        h_new = stereo.baseline_m * fx * math.cos(t_new) / (a_new * fy) if a_new > 0 else math.inf
-        if not (h_lo <= h_new <= h_hi and t_lo <= t_new <= t_hi):
-            break                              # keep the last plausible line
-        a_best, c_best = a_new, c_new
+    best = int(np.argmax(_line_scores(a, c, v, dd, tol, below_penalty)))
+    a_best, c_best = _refine_line(a[best], c[best], v, dd, tol, bf=stereo.baseline_m * fx, fy=fy,
+                                  height_range_m=(h_lo, h_hi), tilt_range_rad=(t_lo, t_hi))
     inl = np.abs(dd - (a_best * v + c_best)) <= tol
     n_inl = int(round(inl.sum() * v_all.size / v.size))
     if n_inl < min_inliers or a_best <= 0:
@@ -455,7 +449,7 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
 
 
 def estimate_ground(disparity_px, stereo: StereoCamera, *, method: str = "v_disparity",
-                    prior: RigMount | None = None, prior_height_tolerance_m: float = 0.15,
+                    prior: CameraMount | GroundPlane | None = None, prior_height_tolerance_m: float = 0.15,
                     prior_tilt_tolerance_rad: float = 0.1, rng=0, **options) -> GroundPlane:
     """Estimate the floor from a disparity map by ``"v_disparity"`` or ``"plane"``.
 
@@ -467,17 +461,26 @@ def estimate_ground(disparity_px, stereo: StereoCamera, *, method: str = "v_disp
         The calibration.
     method : {"v_disparity", "plane"}
         :func:`fit_ground_v_disparity` or :func:`fit_ground_plane` (with roll).
-    prior : RigMount, optional
-        A roughly known mount: only floors within ``prior_height_tolerance_m``
-        and ``prior_tilt_tolerance_rad`` of it are considered.
+    prior : CameraMount or GroundPlane, optional
+        A roughly known mount, or the floor it implies: only floors within
+        ``prior_height_tolerance_m`` and ``prior_tilt_tolerance_rad`` of its
+        height and tilt are considered.
+    prior_height_tolerance_m, prior_tilt_tolerance_rad : float
+        Half-widths of the height and tilt ranges around ``prior``.
     rng : numpy.random.Generator, int or None
         RANSAC randomness.
     **options
         Passed to the fitting function.
     """
     if prior is not None:
-        if not isinstance(prior, RigMount):
-            raise TypeError(f"prior must be a RigMount, got {type(prior).__name__}")
+        if isinstance(prior, CameraMount):
+            if not isinstance(stereo, StereoCamera):
+                raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+            prior = ground_from_mount(prior, R_rect_from_cam=stereo.left.R)
+        if not isinstance(prior, GroundPlane):
+            raise TypeError(f"prior must be a CameraMount or a GroundPlane, got {type(prior).__name__}")
+        if not prior.success:
+            raise ValueError(f"prior must be a found floor, got one that failed: {prior.message}")
         dh = _checks.finite_number("prior_height_tolerance_m", prior_height_tolerance_m, positive=True)
         dt = _checks.finite_number("prior_tilt_tolerance_rad", prior_tilt_tolerance_rad, positive=True)
         options["height_range_m"] = (max(prior.height_m - dh, 1e-3), prior.height_m + dh)

@@ -1,7 +1,7 @@
 """Obstacle and floor points in the robot frame from one disparity map.
 
 Eq. (14)-(16) give camera-frame points (:func:`points_cam_from_disparity`);
-:func:`T_robot_from_cam` (or the fitted floor, :mod:`.ground`) takes them into
+the camera mount's pose (or the fitted floor, :mod:`.ground`) takes them into
 the robot frame (x forward, y left, z up, origin on the floor under the
 camera). A point is
 
@@ -25,18 +25,22 @@ Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
 
 from .. import _checks
-from ..camera import RigMount, StereoCamera
-from ..camera.mount import CameraMount
+from ..camera import CameraMount, StereoCamera
 from . import _kernels
-from .ground import GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_mount, ground_from_rig
+from .ground import GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_mount
 
-__all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity"]
+__all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity",
+           "MAPPING_MAX_RANGE_M"]
+
+MAPPING_MAX_RANGE_M = 4.0
+"""``ObstacleConfig.max_range_m`` of a map (:class:`mrstereo.pipeline.PipelineConfig`): the paper tells floor and
+objects apart up to about 4 m; beyond, one pixel of disparity error is more than half a metre at 320x240."""
 
 
 @dataclass(frozen=True)
@@ -191,41 +195,32 @@ def points_robot_from_disparity(disparity_px, stereo: StereoCamera, T_robot_from
     return out
 
 
-def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: RigMount | CameraMount | None,
+def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: CameraMount | None,
                      config: ObstacleConfig = ObstacleConfig()) -> GroundPlane:
-    """The floor to use for a frame: the mount, or an estimate (around the mount if given).
+    """The floor to use for a frame: the mount's, or an estimate (around the mount's if given).
 
     No mount: estimated with ``config.ground_method`` within
     ``config.ground_height_range_m``. A mount and ``config.estimate_ground``:
-    estimated near the mount (its height and tilt), falling back to the mount.
-    Otherwise the mount: a :class:`RigMount` (height, tilt) or a full
-    :class:`~mrstereo.camera.mount.CameraMount`.
+    estimated near the mount's floor (its height and tilt), falling back to it.
+    Otherwise the mount's floor (:func:`~mrstereo.geometry.ground.ground_from_mount`).
     """
-    if mount is not None and not isinstance(mount, (RigMount, CameraMount)):
-        raise TypeError(f"mount must be a RigMount or CameraMount, got {type(mount).__name__}")
-    if isinstance(mount, CameraMount):
-        # the mount is the raw left camera's pose; the points are in its rectified frame
-        full = ground_from_mount(mount, R_rect_from_cam=stereo.left.R)
-        if not config.estimate_ground:
-            return full
-        ground = ground_for_frame(disparity_px, stereo, config=config,
-                                  mount=RigMount(height_m=full.height_m, tilt_rad=full.tilt_rad))
-        return ground if ground.method != "rig" else full
-    if mount is not None and not config.estimate_ground:
-        return ground_from_rig(mount)
     if mount is None:
         return estimate_ground(disparity_px, stereo, method=config.ground_method, rng=config.seed,
                                height_range_m=config.ground_height_range_m)
-    ground = estimate_ground(disparity_px, stereo, method=config.ground_method, rng=config.seed, prior=mount,
+    if not isinstance(mount, CameraMount):
+        raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
+    given = ground_from_mount(mount, R_rect_from_cam=stereo.left.R)
+    if not config.estimate_ground:
+        return given
+    ground = estimate_ground(disparity_px, stereo, method=config.ground_method, rng=config.seed, prior=given,
                              prior_height_tolerance_m=config.prior_height_tolerance_m,
                              prior_tilt_tolerance_rad=config.prior_tilt_tolerance_rad)
     if ground.success:
         return ground
-    return GroundPlane(height_m=float(mount.height_m), tilt_rad=float(mount.tilt_rad), method="rig",
-                       message=f"floor estimate failed ({ground.message}); mount used")
+    return replace(given, message=f"floor estimate failed ({ground.message}); mount used")
 
 
-def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None = None,
+def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount | None = None,
                      ground: GroundPlane | None = None, pan_rad: float = 0.0,
                      config: ObstacleConfig = ObstacleConfig(), too_near=None,
                      near_limit_px: float | None = None) -> ObstacleResult:
@@ -236,14 +231,13 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
     disparity_px : ndarray of shape (H, W)
         Disparity of the rectified left image (after rejection, eq. 13), NaN invalid.
     stereo : StereoCamera
-        The calibration (rectified ``P``); its ``rig`` is used when ``rig`` is None.
-    rig : RigMount or CameraMount, optional
-        Camera height and tilt, or the full mount. When neither ``rig``, ``ground`` nor
-        ``stereo.rig`` is given, the floor is estimated from the disparity
-        (``config.ground_method``).
+        The calibration (rectified ``P``); its ``mount`` is used when ``mount`` is None.
+    mount : CameraMount, optional
+        The camera mount. When neither ``mount``, ``ground`` nor ``stereo.mount``
+        is given, the floor is estimated from the disparity (``config.ground_method``).
     ground : GroundPlane, optional
         A floor estimated beforehand (e.g. on the disparity before rejection);
-        takes precedence over ``rig``.
+        takes precedence over ``mount``.
     pan_rad : float
         Pan of the stereo head about the robot's z axis (positive left).
     config : ObstacleConfig
@@ -263,8 +257,6 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
         raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
     if not isinstance(config, ObstacleConfig):
         raise TypeError(f"config must be an ObstacleConfig, got {type(config).__name__}")
-    if rig is not None and not isinstance(rig, (RigMount, CameraMount)):
-        raise TypeError(f"rig must be a RigMount or CameraMount, got {type(rig).__name__}")
     if ground is not None and not isinstance(ground, GroundPlane):
         raise TypeError(f"ground must be a GroundPlane, got {type(ground).__name__}")
     d = _disparity_image(disparity_px)
@@ -284,12 +276,11 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, rig: RigMount | None
         limit = _checks.finite_number("near_limit_px", near_limit_px, positive=True)
         if not near.any():
             near = None
-    mount = rig if rig is not None else stereo.rig
     if ground is None:
         # fail-safe: something at the near limit along the ray of a too-near pixel
         d64 = np.asarray(d, dtype=np.float64)
-        ground = ground_for_frame(d64 if near is None else np.where(near, limit, d64), stereo, mount=mount,
-                                  config=config)
+        ground = ground_for_frame(d64 if near is None else np.where(near, limit, d64), stereo,
+                                  mount=stereo.mount if mount is None else mount, config=config)
     h, w = d.shape
     if not ground.success:
         empty = np.zeros((h, w), dtype=bool)

@@ -46,7 +46,7 @@ def _json_float(value: float):
 
 
 def _from_json_float(value, what: str) -> float:
-    if value is None:                       # files written before the strings: null = no measurement
+    if value is None:                       # how other JSON writers store NaN: no measurement
         return math.nan
     if isinstance(value, str):
         if value not in _SPECIAL_JSON:

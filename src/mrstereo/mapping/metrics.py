@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .. import _checks
+from ..geometry.obstacles import MAPPING_MAX_RANGE_M
 from .grid import dilate_cells, distance_cells
 from .rosmap import RosMap
 
@@ -22,7 +23,7 @@ __all__ = ["MapMetrics", "map_metrics", "cells_near_path", "cells_in_view"]
 
 @dataclass(frozen=True)
 class MapMetrics:
-    """Occupied-cell precision/recall (with tolerance), profile error and free-space accuracy.
+    """Occupied-cell precision/recall (with tolerance), profile error, free-cell precision/recall/coverage.
 
     Ratios are NaN when their denominator is empty (``to_dict`` turns NaN into None for JSON).
     """
@@ -30,7 +31,7 @@ class MapMetrics:
     precision: float
     recall: float
     mean_distance_m: float
-    free_accuracy: float
+    free_recall: float
     known_fraction: float
     estimated_occupied_cells: int
     true_occupied_cells: int
@@ -88,7 +89,7 @@ def cells_in_view(ground_truth, views, *, angle_step_rad: float = math.radians(0
         Occupied cells block the sight; unknown cells (behind walls) are never in view.
     views : sequence of (x_m, y_m, heading_rad, half_fov_rad, range_m)
         The sensor's world position, viewing direction (robot yaw + head pan), half the horizontal
-        field of view and the mapping range (as :func:`mrstereo.pipeline.fov_views` gives them).
+        field of view and the mapping range (as :func:`mrstereo.pipeline.run.fov_views` gives them).
     angle_step_rad : float
         Angular spacing of the sight rays (each ray is marched in quarter-cell steps).
     """
@@ -120,7 +121,7 @@ def cells_in_view(ground_truth, views, *, angle_step_rad: float = math.radians(0
     return seen
 
 
-def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
+def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = MAPPING_MAX_RANGE_M,
                 tolerance_cells: int = 1, views=None) -> MapMetrics:
     """Compare an estimated map with a ground-truth map of the same grid.
 
@@ -131,7 +132,7 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
     path_xy : ndarray of shape (K, 2) or (K, 3), optional
         Robot path (poses' x, y used); when given, only cells within ``within_m`` of it count.
     within_m : float
-        Radius of the evaluated band around the path (default 4 m, the paper's reliable range).
+        Radius of the evaluated band around the path (default: the range a map uses, 4 m).
     tolerance_cells : int
         An estimated occupied cell is correct when a true occupied cell lies within this many
         cells (Chebyshev distance), and conversely for recall.
@@ -145,7 +146,7 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
         occupied cells (touching true free space: wall faces, obstacle outlines) with an estimated
         occupied cell within tolerance / visible true occupied cells;
         ``mean_distance_m`` = mean Euclidean distance of estimated occupied cells to the nearest
-        true occupied cell; ``free_accuracy`` = true free cells mapped free / true free cells;
+        true occupied cell; ``free_recall`` = true free cells mapped free / true free cells;
         ``known_fraction`` = evaluated cells the estimate knows (not unknown);
         ``free_precision`` = estimated free cells that are truly free / estimated free cells (a
         cell mapped free on a wall, an obstacle or behind a wall is wrong);
@@ -192,7 +193,7 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
         mean_distance = math.nan
     near_est = dilate_cells(est.occupied, tol)
     recall = ratio((gt_occ & near_est).sum(), gt_occ.sum())
-    free_accuracy = ratio((gt_free & est.free).sum(), gt_free.sum())
+    free_recall = ratio((gt_free & est.free).sum(), gt_free.sum())
     known_fraction = ratio((region & ~est.unknown).sum(), region.sum())
     est_free = est.free & region
     free_precision = ratio((est_free & gt.free).sum(), est_free.sum())
@@ -203,7 +204,7 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = 4.0,
         seen_surface = gt_occ & dilate_cells(in_view, 1)
         recall_in_view = ratio((seen_surface & near_est).sum(), seen_surface.sum())
     return MapMetrics(precision=precision, recall=recall, mean_distance_m=mean_distance,
-                      free_accuracy=free_accuracy, known_fraction=known_fraction,
+                      free_recall=free_recall, known_fraction=known_fraction,
                       estimated_occupied_cells=int(est_occ.sum()),
                       true_occupied_cells=int(gt_occ.sum()), true_free_cells=int(gt_free.sum()),
                       evaluated_cells=int(region.sum()), tolerance_cells=tol, within_m=within,

@@ -57,10 +57,18 @@ def probability_from_log_odds(log_odds) -> np.ndarray:
 class MappingConfig:
     """Sensor model and fusion of the occupancy grid.
 
+    The defaults are the stereo sensor model of ``mrstereo map`` (docs/mapping.md): a stereo point is
+    not a laser return -- its range error grows with the square of the range and a mismatch can put it
+    anywhere along its pixel's ray -- so the rules below keep such points from drawing obstacles and
+    from clearing space that was never seen (``benchmarks/bench_map.py --variants`` maps with each
+    rule added in turn). OctoMap's plain ray model: ``p_miss=0.4``, ``min_points_per_cell=1`` and the
+    optional rules None / False.
+
     Parameters
     ----------
     p_hit, p_miss : float
-        Probability that a cell is occupied given a hit / a miss (OctoMap: 0.7 / 0.4).
+        Probability that a cell is occupied given a hit / a miss (OctoMap: 0.7 / 0.4; a stereo
+        miss, which clears a whole ray, counts for less).
     p_clamp_min, p_clamp_max : float
         Log-odds clamping bounds as probabilities (OctoMap: 0.1192 / 0.971); they keep the map
         able to change when the world changes.
@@ -125,21 +133,21 @@ class MappingConfig:
     """
 
     p_hit: float = 0.7
-    p_miss: float = 0.4
+    p_miss: float = 0.35
     p_clamp_min: float = 0.1192
     p_clamp_max: float = 0.971
     occupied_thresh: float = 0.5
     max_range_m: float | None = None
     fusion: str = "log_odds"
-    min_points_per_cell: int = 1
-    disparity_sigma_px: float | None = None
+    min_points_per_cell: int = 5
+    disparity_sigma_px: float | None = 0.25
     clear_margin_sigmas: float = 2.0
-    occlusion_gap_m: float | None = None
-    see_through_ratio: float | None = None
+    occlusion_gap_m: float | None = 0.25
+    see_through_ratio: float | None = 1.0
     height_tolerance_m: float = 0.05
-    overhang_shadow: bool = False
-    map_occlusion_p: float | None = None
-    clear_below_m: float | None = None
+    overhang_shadow: bool = True
+    map_occlusion_p: float | None = 0.8
+    clear_below_m: float | None = 0.8
 
     def __post_init__(self) -> None:
         _checks.positive_int("min_points_per_cell", self.min_points_per_cell)
@@ -316,24 +324,14 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
         # sigma_r [cells] = (r res)^2 sigma_d / (b f) / res = r^2 res sigma_d / (b f)
         margin_per_cell2 = config.clear_margin_sigmas * grid.resolution_m * config.disparity_sigma_px / bf
     gap_cells = -1.0 if config.occlusion_gap_m is None else config.occlusion_gap_m / grid.resolution_m
-    flags = np.zeros(grid.shape, np.uint8)
-    miss = np.zeros(grid.shape, np.uint8)
-    occluded = np.zeros(grid.shape, np.uint8)
-    ends = np.empty(grid.shape + (4,), np.float64)
-    n_points = np.zeros(grid.shape, np.float64)
-    z_range = np.empty(grid.shape + (2,), np.float64)
-    z_range[..., 0] = np.inf
-    z_range[..., 1] = -np.inf
-    sz = float(origin[2]) if origin.shape == (3,) else np.nan
-    z_tol = float(config.height_tolerance_m)
     if config.min_points_per_cell > 1 and len(obstacles):
         obstacles = _supported(obstacles, grid, config.min_points_per_cell)
-    outside = 0
-    for points, is_obstacle in ((obstacles, True), (floor, False)):
-        if len(points):
-            outside += _kernels.mark_endpoints(points, sx, sy, grid.origin_x_m, grid.origin_y_m,
-                                               grid.resolution_m, max_range_cells, is_obstacle, margin_per_cell2,
-                                               flags, ends, n_points, z_range)
+    flags, ends, n_points, z_range, outside = _ray_ends(obstacles, floor, sx, sy, grid, max_range_cells,
+                                                        margin_per_cell2)
+    miss = np.zeros(grid.shape, np.uint8)
+    occluded = np.zeros(grid.shape, np.uint8)
+    sz = float(origin[2]) if origin.shape == (3,) else np.nan
+    z_tol = float(config.height_tolerance_m)
     n_occluded = 0
     if config.see_through_ratio is not None:
         through = np.zeros(grid.shape, np.float64)
@@ -353,6 +351,26 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
                      grid=grid, max_range_m=config.max_range_m, min_points_per_cell=config.min_points_per_cell,
                      sensor_model=_sensor_model(config), occluded=int(n_occluded),
                      hit_z_m=z_range.reshape(-1, 2)[hit_index].astype(np.float32))
+
+
+def _ray_ends(obstacles: np.ndarray, floor: np.ndarray, sx: float, sy: float, grid: GridSpec,
+              max_range_cells: float, margin_per_cell2: float) -> tuple:
+    """``(flags, ends, n_points, z_range, points_outside)``: the end cell of every ray of a view marked
+    (:func:`_kernels.mark_endpoints`; ``flags`` a bit set per cell, ``ends`` each end cell's representative
+    point and clearing margin, ``z_range`` the lowest and highest obstacle point in each cell)."""
+    flags = np.zeros(grid.shape, np.uint8)
+    ends = np.empty(grid.shape + (4,), np.float64)
+    n_points = np.zeros(grid.shape, np.float64)
+    z_range = np.empty(grid.shape + (2,), np.float64)
+    z_range[..., 0] = np.inf
+    z_range[..., 1] = -np.inf
+    outside = 0
+    for points, is_obstacle in ((obstacles, True), (floor, False)):
+        if len(points):
+            outside += _kernels.mark_endpoints(points, sx, sy, grid.origin_x_m, grid.origin_y_m,
+                                               grid.resolution_m, max_range_cells, is_obstacle, margin_per_cell2,
+                                               flags, ends, n_points, z_range)
+    return flags, ends, n_points, z_range, outside
 
 
 def _known_occupied(value, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
@@ -399,7 +417,7 @@ def _supported(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarra
         n = n_per_key[inverse]
         n[key == -1] += np.count_nonzero(cell == -1)    # cell (0, -1) shares key -1 with the non-finite points
         keep[idx] = n >= min_points
-    return np.compress(keep, points, axis=0)       # points[keep], 4x faster for (N, 3) rows
+    return np.compress(keep, points, axis=0)       # points[keep], copying whole rows
 
 
 def _supported_by_keys(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:
@@ -421,7 +439,7 @@ class OccupancyGrid:
     grid : GridSpec, optional
         Geometry (default: the paper's 12 m x 6 m region in 5 cm cells, origin (0, -3)).
     config : MappingConfig, optional
-        Sensor model and fusion (default: OctoMap's log-odds parameters).
+        Sensor model and fusion (default: the stereo sensor model of ``mrstereo map``).
     log_odds : ndarray of shape grid.shape, optional
         Initial state (NaN = unknown), e.g. from :meth:`load_log_odds`; copied.
 

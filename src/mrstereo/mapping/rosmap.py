@@ -3,6 +3,8 @@
 PGM values: 254 free, 0 occupied, 205 unknown; the top image row is max y.
 YAML: image, resolution, origin [x, y, yaw] (pose of the lower-left pixel),
 negate, occupied_thresh, free_thresh, mode trinary.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

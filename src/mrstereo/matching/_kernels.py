@@ -1,10 +1,9 @@
 """Numba kernels of the area matcher: window cost + winner-take-all, and full-resolution refinement.
 
 Private: no validation, no defaults; the caller (:mod:`mrstereo.matching.cost`)
-pads, precomputes and allocates, with :func:`recycled_empty` for the large arrays (fresh
-pages cost a fault each on first touch). An image arrives prepared as a tuple
-``(padded, a, b)``: padded by the window radius ``r`` on every side, and its per-pixel window
-terms. Conventions: docs/conventions.md.
+pads, precomputes and allocates. An image arrives prepared as a tuple ``(padded, a, b)``:
+padded by the window radius ``r`` on every side, and its per-pixel window terms.
+Conventions: docs/conventions.md.
 
 :func:`band_winners` and :func:`band_checked` search one disparity band ``[d_lo, d_hi]`` on
 one image pair. Rows are split into strips, one per thread (``prange``). Inside a strip the
@@ -30,10 +29,6 @@ running sums; where ``c`` is constant over the window this is exactly ``S_LR(x, 
 same window sums up pixel by pixel, for scattered pixels.
 """
 from __future__ import annotations
-
-import sys
-import threading
-from collections import OrderedDict
 
 import numpy as np
 from numba import njit, prange
@@ -1358,56 +1353,3 @@ def map_labels(labels, table, out):
     for y in range(height):
         for x in range(width):
             out[y, x] = table[labels[y, x]]
-
-
-# Recycled buffers. A 640x480 frame allocates and frees about 40 arrays of 0.3-1.3 MB;
-# glibc serves them from fresh pages (mmap, or a heap trimmed after each frame), and the
-# page faults cost about as much as the post-filters (3200 faults, ~5 ms per frame).
-_POOL: OrderedDict[tuple, list[np.ndarray]] = OrderedDict()
-_POOL_LOCK = threading.Lock()
-_POOL_MAX_BYTES = 128 * 2 ** 20
-_POOL_MAX_PER_SHAPE = 32
-_POOL_MIN_BYTES = 64 * 2 ** 10          # smaller arrays come from malloc's free lists anyway
-_pool_bytes = 0
-
-
-def _refs_in_loop(bufs: list) -> int:
-    for buf in bufs:
-        return sys.getrefcount(buf)
-    return 0
-
-
-# reference count of a buffer held only by its pool list, seen from the loop below (the
-# list, the loop variable, getrefcount's argument: 3 on CPython 3.11; measured, not assumed)
-_FREE_REFS = _refs_in_loop([np.empty(1)])
-
-
-def recycled_empty(shape, dtype) -> np.ndarray:
-    """``np.empty(shape, dtype)`` that reuses a buffer of an earlier call when nothing
-    references it any more (only this pool does: its reference count says so).
-
-    The buffer is a plain array, safe to return to callers and to keep: while anyone
-    holds it or a view of it, it is not handed out again. Thread-safe (a lock around
-    the look-up). Buffers of the most recently used shapes are kept, up to 128 MB.
-    """
-    global _pool_bytes
-    key = (tuple(shape), dtype)
-    with _POOL_LOCK:
-        bufs = _POOL.get(key)
-        if bufs is not None:
-            _POOL.move_to_end(key)
-            for buf in bufs:
-                if sys.getrefcount(buf) == _FREE_REFS:
-                    return buf
-        buf = np.empty(shape, dtype)
-        if buf.nbytes < _POOL_MIN_BYTES:
-            return buf
-        if bufs is None:
-            bufs = _POOL[key] = []
-        if len(bufs) < _POOL_MAX_PER_SHAPE:
-            bufs.append(buf)
-            _pool_bytes += buf.nbytes
-            while _pool_bytes > _POOL_MAX_BYTES and len(_POOL) > 1:
-                _, old = _POOL.popitem(last=False)
-                _pool_bytes -= sum(b.nbytes for b in old)
-        return buf

@@ -144,8 +144,7 @@ def prepare(image: np.ndarray, *, window: int, cost: str, dtype=np.float32) -> P
         raise ValueError(f"cost must be one of {COSTS}, got {cost!r}")
     r = window // 2
     image = np.ascontiguousarray(image, dtype=dtype)
-    padded = cv2.copyMakeBorder(image, r, r, r, r, cv2.BORDER_REPLICATE,
-                                dst=_kernels.recycled_empty((image.shape[0] + 2 * r, image.shape[1] + 2 * r), dtype))
+    padded = cv2.copyMakeBorder(image, r, r, r, r, cv2.BORDER_REPLICATE)
     return _with_terms(padded, window, cost == "zncc")
 
 
@@ -167,7 +166,7 @@ def prepare_gray(gray: np.ndarray, *, kind: str, cap: int, window: int, cost: st
         return prepare(filtered, window=window, cost=cost, dtype=_accumulator_dtype(filtered, filtered, window))
     r = window // 2
     h, w = gray.shape
-    padded = _kernels.recycled_empty((h + 2 * r, w + 2 * r), np.float32)
+    padded = np.empty((h + 2 * r, w + 2 * r), np.float32)
     _kernels.xsobel_padded(np.ascontiguousarray(gray, dtype=np.float32), r, np.float32(cap), padded)
     return _with_terms(padded, window, cost == "zncc")
 
@@ -175,8 +174,8 @@ def prepare_gray(gray: np.ndarray, *, kind: str, cap: int, window: int, cost: st
 def _with_terms(padded: np.ndarray, window: int, zncc: bool) -> PreparedImage:
     r = window // 2
     shape = (padded.shape[0] - 2 * r, padded.shape[1] - 2 * r)
-    a = _kernels.recycled_empty(shape, padded.dtype)
-    b = _kernels.recycled_empty(shape, np.float32)
+    a = np.empty(shape, padded.dtype)
+    b = np.empty(shape, np.float32)
     _kernels.window_terms(padded, r, zncc, a, b)
     return PreparedImage(padded, a, b, window, zncc)
 
@@ -258,8 +257,8 @@ def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi:
         :func:`mrstereo.matching.disparity.compute_disparity`).
     """
     h, w = left.shape
-    disparity = _kernels.recycled_empty((h, w), np.float32)
-    confidence = _kernels.recycled_empty((h, w), np.float32)
+    disparity = np.empty((h, w), np.float32)
+    confidence = np.empty((h, w), np.float32)
     disparity[:rows[0]] = np.nan
     disparity[rows[1]:] = np.nan
     confidence[:rows[0]] = 0.0
@@ -374,11 +373,11 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     h, w = coarse_px.shape
     r = left.window // 2
     rows = (0, h) if rows is None else rows
-    center_pad = _kernels.recycled_empty((h + 2 * r, w + 2 * r), np.int32)
+    center_pad = np.empty((h + 2 * r, w + 2 * r), np.int32)
     _kernels.fill_center(np.ascontiguousarray(coarse_px, dtype=np.float32), r, center_pad)
-    out = _kernels.recycled_empty((h, w), np.float32)
+    out = np.empty((h, w), np.float32)
     out.fill(np.nan)
-    cost = _kernels.recycled_empty((h, w), np.float32)
+    cost = np.empty((h, w), np.float32)
     cost.fill(np.inf)
     want = np.ascontiguousarray(want)
     max_cost = -1.0 if max_cost is None else float(max_cost)

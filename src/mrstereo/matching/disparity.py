@@ -338,8 +338,8 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
     _checks.image("left", left)
     _checks.image("right", right)
     _checks.same_shape("left", left, "right", right)
-    left_gray = _checks.gray_float32("left", left, empty=_kernels.recycled_empty)
-    right_gray = _checks.gray_float32("right", right, empty=_kernels.recycled_empty)
+    left_gray = _checks.gray_float32("left", left)
+    right_gray = _checks.gray_float32("right", right)
     height, width = left_gray.shape
     config = preset_config(preset) if config is None else config
     plan = make_plan((width, height), max_disparity_px=max_disparity_px,

@@ -247,8 +247,7 @@ def decimate_horizontally(image: np.ndarray, width: int) -> np.ndarray:
     """Reduce the width only, anti-aliased (area average, ``cv2.INTER_AREA``)."""
     if width == image.shape[1]:
         return image
-    return cv2.resize(image, (width, image.shape[0]), interpolation=cv2.INTER_AREA,
-                      dst=_kernels.recycled_empty((image.shape[0], width) + image.shape[2:], image.dtype))
+    return cv2.resize(image, (width, image.shape[0]), interpolation=cv2.INTER_AREA)
 
 
 def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, float]], *,
@@ -418,8 +417,8 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
         lo, hi = level.band_px
         refining = refine is not None and refine_min_scale is not None and level.scale >= refine_min_scale
         slack = level.scale if refining else 0.0
-        d_full = _kernels.recycled_empty((height, width), np.float32)     # (no page faults)
-        c_full = _kernels.recycled_empty((height, width), np.float32)
+        d_full = np.empty((height, width), np.float32)
+        c_full = np.empty((height, width), np.float32)
         source_cols = np.minimum(((np.arange(width) + 0.5) / level.scale).astype(np.intp), w_level - 1)
         _kernels.upsample_gate(out.disparity_px, out.confidence, source_cols, np.float32(level.scale),
                                np.float32(lo - slack), np.float32(hi + slack), top, row0, row1, col0, col1,
@@ -436,7 +435,7 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
 def _union(maps: list[np.ndarray], confs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Eq. (12): unite gated level maps (finest first); where several levels keep a value, the
     more confident one wins."""
-    disparity, confidence = (_kernels.recycled_empty(maps[0].shape, np.float32) for _ in range(2))
+    disparity, confidence = (np.empty(maps[0].shape, np.float32) for _ in range(2))
     for i, (d, c) in enumerate(zip(maps, confs)):
         _kernels.unite(d, c, i == 0, disparity, confidence)
     return disparity, confidence

@@ -208,8 +208,8 @@ def _confirmed_clusters(search: _GuardSearch, config: MatchingConfig) -> _Cluste
     if not labels_level.any():
         return None
     # every winner beyond D shapes the re-scoring's windows; only the candidates are re-scored
-    field = _kernels.recycled_empty((height, width), np.float32)
-    want = _kernels.recycled_empty((height, width), np.bool_)
+    field = np.empty((height, width), np.float32)
+    want = np.empty((height, width), np.bool_)
     first_col, end_col = _level_spans(search.source, col0, w_level)
     _kernels.guard_upsample(search.beyond, search.d_level, labels_level, first_col, end_col, float(guard.scale),
                             field, want)

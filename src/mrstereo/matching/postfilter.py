@@ -35,10 +35,10 @@ def median_filter(disparity_px: np.ndarray, *, size: int, max_px: float | None =
         out = cv2.medianBlur(np.where(valid, disparity_px, -1.0).astype(np.float32), size)
         out[(out < 0) | ~valid] = np.nan
         return out
-    coded = _kernels.recycled_empty(disparity_px.shape, np.uint16)
+    coded = np.empty(disparity_px.shape, np.uint16)
     _kernels.encode_fixed(disparity_px, _MEDIAN_SCALE, 1, 1, 65535, 0, coded)
-    median = cv2.medianBlur(coded, size, dst=_kernels.recycled_empty(disparity_px.shape, np.uint16))
-    out = _kernels.recycled_empty(disparity_px.shape, np.float32)
+    median = cv2.medianBlur(coded, size)
+    out = np.empty(disparity_px.shape, np.float32)
     _kernels.decode_median(median, disparity_px, _MEDIAN_SCALE, out)
     return out
 
@@ -53,11 +53,11 @@ def remove_speckles(disparity_px: np.ndarray, *, max_size_px: int, max_diff_px: 
     if disparity_px.ndim != 2:
         raise ValueError(f"disparity_px must be a 2-D map (H, W), got shape {disparity_px.shape}")
     h, w = disparity_px.shape
-    out = _kernels.recycled_empty((h, w), np.float32)
+    out = np.empty((h, w), np.float32)
     _kernels.drop_speckles(disparity_px, np.float32(_SPECKLE_SCALE), 2047 * _SPECKLE_SCALE,
                            int(round(max_diff_px * _SPECKLE_SCALE)), int(max_size_px),
-                           _kernels.recycled_empty((h, w), np.int32), _kernels.recycled_empty((h, w), np.int32),
-                           _kernels.recycled_empty((h * w,), np.int32), _kernels.recycled_empty((h * w,), np.int32),
+                           np.empty((h, w), np.int32), np.empty((h, w), np.int32),
+                           np.empty((h * w,), np.int32), np.empty((h * w,), np.int32),
                            out)
     return out
 
@@ -78,11 +78,10 @@ def guard_depth_edges(disparity_px: np.ndarray, *, guard_px: int, jump_px: float
     if guard_px <= 0:
         return disparity_px
     disparity_px = np.ascontiguousarray(disparity_px, dtype=np.float32)
-    filled = _kernels.recycled_empty(disparity_px.shape, np.float32)
+    filled = np.empty(disparity_px.shape, np.float32)
     _kernels.fill_invalid(disparity_px, np.float32(1e9), filled)
-    lowest = cv2.erode(filled, np.ones((3, 2 * guard_px + 1), np.uint8), borderType=cv2.BORDER_REPLICATE,
-                       dst=_kernels.recycled_empty(disparity_px.shape, np.float32))
-    out = _kernels.recycled_empty(disparity_px.shape, np.float32)
+    lowest = cv2.erode(filled, np.ones((3, 2 * guard_px + 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    out = np.empty(disparity_px.shape, np.float32)
     _kernels.drop_above(disparity_px, lowest, np.float32(jump_px), out)     # NaN stays NaN
     return out
 
@@ -123,7 +122,7 @@ def fill_gaps(disparity_px: np.ndarray, confidence: np.ndarray, *, max_gap_px: i
     if disparity_px.shape != confidence.shape:
         raise ValueError(f"confidence must have the disparity's shape {disparity_px.shape}, got {confidence.shape}")
     h, w = disparity_px.shape
-    out_d, out_c = (_kernels.recycled_empty((h, w), np.float32) for _ in range(2))
+    out_d, out_c = (np.empty((h, w), np.float32) for _ in range(2))
     np.copyto(out_d, disparity_px)
     np.copyto(out_c, confidence)
     args = int(max_gap_px), np.float32(max_diff_px), max(int(support_px), 1)
@@ -132,7 +131,7 @@ def fill_gaps(disparity_px: np.ndarray, confidence: np.ndarray, *, max_gap_px: i
     _kernels.fill_gap_rows(out_d, out_c, np.flatnonzero(valid[1:] > valid[:-1]) + 1, *args)
     valid = np.isfinite(out_d).ravel()
     _kernels.fill_gap_columns(out_d, out_c, np.flatnonzero(valid[w:] > valid[:-w]) + w,
-                              _kernels.recycled_empty((w,), np.int32), *args)
+                              np.empty((w,), np.int32), *args)
     return out_d, out_c
 
 
@@ -152,5 +151,5 @@ def near_side(too_near: np.ndarray, *, margin_px: int) -> np.ndarray | None:
     if margin_px <= 0:
         return too_near
     kernel = np.ones((2 * margin_px + 1, 2 * margin_px + 1), np.uint8)
-    grown = cv2.dilate(too_near.view(np.uint8), kernel, dst=_kernels.recycled_empty(too_near.shape, np.uint8))
+    grown = cv2.dilate(too_near.view(np.uint8), kernel)
     return grown.view(np.bool_)

@@ -24,7 +24,8 @@ class OdometryResult:
     Attributes
     ----------
     T_world_from_base : ndarray (N, 4, 4)
-        Base pose of every frame (REP 103); a lost frame holds the last tracked pose.
+        Base pose of every frame (REP 103) after the windowed refinement: each frame on its
+        reference keyframe's final pose; a lost frame has the motion model's prediction.
     status : tuple of str
         ``"keyframe"``, ``"tracked"`` or ``"lost"`` per frame.
     n_tracked, n_inliers : ndarray (N,) int
@@ -33,6 +34,9 @@ class OdometryResult:
         Time the odometry took per frame (the stage alone, no image reading).
     stamps_s : ndarray (N,) or None
         Frame stamps when the input had them.
+    T_world_from_base_online : ndarray (N, 4, 4) or None
+        Each frame's pose as the tracker knew it at that frame (what a live system uses; the
+        refinement of later keyframes not yet in it).
     """
 
     T_world_from_base: np.ndarray
@@ -41,6 +45,7 @@ class OdometryResult:
     n_inliers: np.ndarray
     time_s: np.ndarray
     stamps_s: np.ndarray | None = None
+    T_world_from_base_online: np.ndarray | None = None
 
     @property
     def poses(self) -> np.ndarray:
@@ -66,7 +71,8 @@ class OdometryResult:
         if not len(lost):
             return f"tracked all {len(self.status)} frames"
         shown = ", ".join(str(k) for k in lost[:10]) + (", ..." if len(lost) > 10 else "")
-        return f"lost tracking on {len(lost)} of {len(self.status)} frames ({shown}); their poses hold the last one"
+        return (f"lost tracking on {len(lost)} of {len(self.status)} frames ({shown}); their poses are the motion "
+                f"model's prediction")
 
 
 def visual_odometry(pairs: Iterable, stereo: StereoCamera, *, T_base_from_cam,
@@ -85,6 +91,9 @@ def visual_odometry(pairs: Iterable, stereo: StereoCamera, *, T_base_from_cam,
         First pose (identity).
     disparities : iterable of ndarray, optional
         Each frame's disparity (keyframe depth from it instead of a stereo search).
+    stamps_s : sequence of float, optional
+        Each frame's time stamp (seconds, increasing): the time steps of the motion model and
+        of the plausibility limits (without: ``config.frame_interval_s`` apart).
     progress : callable, optional
         Wraps the iteration (e.g. ``tqdm``).
     """
@@ -94,24 +103,31 @@ def visual_odometry(pairs: Iterable, stereo: StereoCamera, *, T_base_from_cam,
     if mounts.shape[-2:] != (4, 4) or mounts.ndim not in (2, 3):
         raise ValueError(f"T_base_from_cam must be (4, 4) or (N, 4, 4), got {mounts.shape}")
     disp_iter = iter(disparities) if disparities is not None else None
+    stamps = None if stamps_s is None else np.asarray(stamps_s, dtype=np.float64).ravel()
+    if stamps is not None and (not np.isfinite(stamps).all() or (np.diff(stamps) <= 0).any()):
+        raise ValueError("stamps_s must be finite and increasing")
     items = progress(pairs) if progress is not None else pairs
     estimates = []
     for k, pair in enumerate(items):
         if per_frame and k >= len(mounts):
             raise ValueError(f"T_base_from_cam has {len(mounts)} mounts but there are more frames")
+        if stamps is not None and k >= len(stamps):
+            raise ValueError(f"stamps_s has {len(stamps)} stamps but there are more frames")
         left, right = pair
         disparity = next(disp_iter) if disp_iter is not None else None
         with stage("odometry"):
             estimates.append(tracker.step(left, right, T_base_from_cam=mounts[k] if per_frame else mounts,
-                                          disparity_px=disparity))
+                                          disparity_px=disparity, stamp_s=None if stamps is None else stamps[k]))
     if not estimates:
         raise ValueError("pairs is empty: visual odometry needs at least one frame")
-    stamps = None if stamps_s is None else np.asarray(stamps_s, dtype=np.float64)
     if stamps is not None and stamps.shape != (len(estimates),):
         raise ValueError(f"stamps_s must have one stamp per frame ({len(estimates)}), got {stamps.shape}")
-    T = np.stack([e.T_world_from_base for e in estimates])
-    T.setflags(write=False)
+    online = np.stack([e.T_world_from_base for e in estimates])
+    T = tracker.trajectory()
+    for a in (T, online):
+        a.setflags(write=False)
     return OdometryResult(T_world_from_base=T, status=tuple(e.status for e in estimates),
                           n_tracked=np.array([e.n_tracked for e in estimates]),
                           n_inliers=np.array([e.n_inliers for e in estimates]),
-                          time_s=np.array([e.time_s for e in estimates]), stamps_s=stamps)
+                          time_s=np.array([e.time_s for e in estimates]), stamps_s=stamps,
+                          T_world_from_base_online=online)

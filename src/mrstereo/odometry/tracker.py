@@ -1,29 +1,41 @@
-"""Stereo visual odometry: KLT tracks against a keyframe, 3-D from stereo, PnP-RANSAC + LM.
+"""Stereo visual odometry: KLT tracks against a keyframe, PnP-RANSAC, a window of keyframes refined.
 
-Per frame (rectified pair):
+Per frame (rectified pair, with its time stamp):
 
-1. *Keyframe* (first frame, after tracking thinned out, or after a loss): corners
-   (Shi-Tomasi, spread over a grid of cells) of the left image are found in the right image
-   (brought to the left one's gain and offset) with pyramidal Lucas-Kanade along the row (or
-   read from a given disparity map), kept when the right-to-left track returns within ``max_fb_error_px``
-   and ``|y_left - y_right| <= max_row_error_px``, and triangulated with eq. (14)-(16):
-   ``Z = b f / (d + doffs)``, ``X = (u - cx) Z / f``, ``Y = (v - cy) Z / f_y``.
-2. *Tracking*: the keyframe's corners are tracked into the current left image by
-   Lucas-Kanade started at their projection under the motion prior (the previous step
-   repeated: constant velocity), with the same forward-backward check. Tracking against
-   the keyframe, not frame to frame, means a robot standing still gets the same pose for
-   every frame (no random walk).
-3. *Pose*: ``cv2.solvePnPRansac`` (reprojection threshold ``ransac_threshold_px``,
-   started at the prior) gives ``T_cam_from_keycam``; ``cv2.solvePnPRefineLM`` polishes it
-   on the inliers, the inliers are re-selected under the polished pose and polished again.
-4. *Failure*: fewer than ``min_inliers`` inliers, or a step larger than ``max_step_m`` /
-   ``max_step_rad`` from the previous frame, marks the frame ``lost``: its pose is the last
-   good one (never a jump), and after ``max_lost_streak`` lost frames in a row a new
-   keyframe starts at that pose.
+1. *Motion model*: the pose is predicted by repeating the last motion scaled to this frame's time
+   step (constant velocity in time, :func:`mrstereo.transforms.scale_motion`).
+2. *Tracking*: the reference keyframe's features are tracked into the current left image by
+   pyramidal Lucas-Kanade started where the prediction projects their landmarks, kept when the
+   track back returns within ``max_fb_error_px``. Tracking against the keyframe, not frame to
+   frame, means a robot standing still gets the same pose every frame (no random walk).
+3. *Pose*: ``cv2.solvePnPRansac`` (reprojection threshold ``ransac_threshold_px``, started at the
+   prediction) on the landmarks in the keyframe's camera frame; ``cv2.solvePnPRefineLM`` polishes
+   it on the inliers, the inliers are re-selected and it is polished again.
+4. *Plausibility from time*: with ``dt`` the stamp difference to the previous frame, the step
+   must stay under ``max_speed_mps * dt`` and ``max_turn_rate_radps * dt``, and (once the motion
+   is known) within ``max_acceleration_mps2 * dt^2`` and ``max_angular_acceleration_radps2 *
+   dt^2`` of the prediction. Otherwise, or with fewer than ``min_inliers`` inliers, the frame is
+   *lost*: its pose is the prediction, and after ``max_lost_streak`` lost frames in a row tracking
+   restarts from a new keyframe there.
+5. *Keyframes*: when the inliers fall below ``keyframe_inlier_fraction`` of the keyframe's
+   features, or the camera moved ``keyframe_depth_fraction`` of the keyframe's median landmark
+   depth or turned ``keyframe_angle_rad``, the frame becomes a keyframe: its tracked features
+   keep their landmarks, new Shi-Tomasi corners (spread over a grid of cells, away from the
+   tracked ones) fill up to ``max_features``, and every feature is found in the right image (brought
+   to the left one's gain and offset) by Lucas-Kanade along the row, kept when the track back
+   returns and ``|y_left - y_right| <= max_row_error_px``; a new feature's landmark is triangulated
+   with eq. (14)-(16): ``Z = b f / (d + doffs)``, ``X = (u - cx) Z / f``, ``Y = (v - cy) Z / f_y``.
+6. *Windowed refinement*: the last ``window_keyframes`` keyframes' poses and the landmarks two of
+   them see are bundle-adjusted over their left and right image observations
+   (:mod:`mrstereo.odometry.window`; the oldest ``window_fixed`` fixed), and observations that
+   stay farther than ``outlier_px`` from their landmark are dropped.
 
-Poses are of the robot base in the world (REP 103), ``T_world_from_base = T_world_from_cam @
-inv(T_base_from_cam)`` with the camera mount of each frame; the first frame's pose is given
-(identity by default). Conventions: docs/conventions.md; user guide: docs/odometry.md.
+A frame's pose is kept relative to its reference keyframe, so the trajectory
+(:meth:`StereoOdometry.trajectory`) follows the keyframes' refined poses; :meth:`StereoOdometry.step`
+returns the pose as known at that frame (what a live system uses). Poses are of the robot base in
+the world (REP 103), ``T_world_from_base = T_world_from_cam @ inv(T_base_from_cam)`` with the
+camera mount of each frame; the first frame's pose is given (identity by default).
+Conventions: docs/conventions.md; user guide: docs/odometry.md.
 
 References
 ----------
@@ -31,7 +43,8 @@ D. Nister, O. Naroditsky, J. Bergen. Visual odometry. CVPR 2004 (stereo VO with 
 points and RANSAC). B. Kitt, A. Geiger, H. Lategahn. Visual odometry based on stereo image
 sequences with RANSAC-based outlier rejection scheme. IV 2010. J.-Y. Bouguet. Pyramidal
 implementation of the Lucas Kanade feature tracker. Intel, 2000. J. Shi, C. Tomasi. Good
-features to track. CVPR 1994.
+features to track. CVPR 1994. R. Mur-Artal, J. D. Tardos. ORB-SLAM2. IEEE T-RO 33(5), 2017
+(keyframes and local bundle adjustment of a stereo odometry).
 """
 from __future__ import annotations
 
@@ -45,7 +58,8 @@ import numpy as np
 from .. import _checks
 from ..camera import StereoCamera
 from ..geometry.triangulation import depth_m_from_disparity_px
-from ..transforms import T_from_rvec_t, rotation_angle_rad, rvec_t_from_T
+from ..transforms import T_from_rvec_t, rotation_angle_rad, rvec_t_from_T, scale_motion, transform_points
+from .window import Keyframe, LocalMap
 
 __all__ = ["OdometryConfig", "FrameEstimate", "StereoOdometry", "TRACKED", "KEYFRAME", "LOST"]
 
@@ -54,12 +68,12 @@ TRACKED, KEYFRAME, LOST = "tracked", "keyframe", "lost"
 
 @dataclass(frozen=True)
 class OdometryConfig:
-    """Visual odometry settings (defaults measured on the synthetic corridor, docs/odometry.md).
+    """Visual odometry settings (docs/odometry.md).
 
     Attributes
     ----------
     max_features : int
-        Corners per keyframe (spread over ``grid_cells`` cells, rows x columns).
+        Features per keyframe (new corners spread over ``grid_cells`` cells, rows x columns).
     corner_quality : float
         Weakest Shi-Tomasi corner kept, as a fraction of the strongest (``qualityLevel`` of
         ``cv2.goodFeaturesToTrack``).
@@ -72,29 +86,51 @@ class OdometryConfig:
         approaching a surface magnifies it, which a translating window follows with a bias toward
         too little motion, so a larger window underestimates the distance travelled).
     stereo_window_px : int
-        Lucas-Kanade window of the left-right search of keyframe corners (``klt_levels + 1``
+        Lucas-Kanade window of the left-right search of keyframe features (``stereo_levels``
         levels; the two views differ by the baseline only, and a larger window matches weak
         texture more reliably).
+    stereo_levels : int
+        Pyramid levels of that search (a wide baseline seen from near needs disparities of a
+        hundred pixels and more).
     max_fb_error_px : float
         Forward-backward track error above which a track is dropped.
     max_row_error_px : float
         Largest ``|y_left - y_right|`` of a stereo match (rectified images); with a given
         disparity map, the largest spread of the four disparities around a corner.
     min_disparity_px : float
-        Closest to infinity a point may be (its depth is ``b f / d``).
+        Closest to infinity a new landmark may be (its depth is ``b f / d``).
     ransac_threshold_px : float
         Reprojection error of a PnP inlier.
     ransac_iterations : int
     min_inliers : int
         Fewer inliers: the frame is lost.
     keyframe_inlier_fraction : float
-        A new keyframe when the inliers fall below this fraction of the keyframe's points.
-    keyframe_distance_m, keyframe_angle_rad : float
-        A new keyframe after this motion from the keyframe.
-    max_step_m, max_step_rad : float
-        A larger step from the previous frame is a failure, not a motion.
+        A new keyframe when the inliers fall below this fraction of the keyframe's features.
+    keyframe_depth_fraction : float
+        A new keyframe after moving this fraction of the keyframe's median landmark depth (the
+        same parallax in a corridor and on a road).
+    keyframe_angle_rad : float
+        A new keyframe after turning this far from the keyframe.
+    max_speed_mps, max_turn_rate_radps : float
+        A step faster than this over the frame's time step is a failure, not a motion.
+    max_acceleration_mps2, max_angular_acceleration_radps2 : float
+        A step that leaves the motion model's prediction by more than this acceleration over
+        the time step is a failure (checked once the motion is known).
+    frame_interval_s : float
+        Time step assumed between frames when the recording has no stamps.
     max_lost_streak : int
         Lost frames in a row before tracking restarts from a new keyframe.
+    window_keyframes : int
+        Keyframes in the refined window (1: no refinement, the keyframe tracker alone).
+    window_fixed : int
+        Oldest keyframes of the window held fixed (the gauge).
+    huber_px : float
+        Huber threshold of the refinement's loss.
+    refine_iterations : int
+        Levenberg-Marquardt steps of a refinement at most.
+    outlier_px : float
+        An observation farther than this from its landmark's projection after a refinement is
+        dropped.
     """
 
     max_features: int = 300
@@ -105,6 +141,7 @@ class OdometryConfig:
     klt_window_px: int = 11
     stereo_window_px: int = 21
     klt_levels: int = 3
+    stereo_levels: int = 5
     max_fb_error_px: float = 0.5
     max_row_error_px: float = 1.0
     min_disparity_px: float = 1.0
@@ -112,19 +149,29 @@ class OdometryConfig:
     ransac_iterations: int = 100
     min_inliers: int = 12
     keyframe_inlier_fraction: float = 0.5
-    keyframe_distance_m: float = 1.0
-    keyframe_angle_rad: float = math.radians(20.0)
-    max_step_m: float = 1.0
-    max_step_rad: float = math.radians(30.0)
+    keyframe_depth_fraction: float = 0.1
+    keyframe_angle_rad: float = math.radians(10.0)
+    max_speed_mps: float = 40.0
+    max_turn_rate_radps: float = 3.0
+    max_acceleration_mps2: float = 30.0
+    max_angular_acceleration_radps2: float = 30.0
+    frame_interval_s: float = 0.1
     max_lost_streak: int = 2
+    window_keyframes: int = 7
+    window_fixed: int = 1
+    huber_px: float = 1.0
+    refine_iterations: int = 10
+    outlier_px: float = 3.0
 
     def __post_init__(self) -> None:
-        for name in ("max_features", "klt_window_px", "stereo_window_px", "klt_levels", "ransac_iterations", "min_inliers",
-                     "corner_block_px", "max_lost_streak"):
+        for name in ("max_features", "klt_window_px", "stereo_window_px", "klt_levels", "stereo_levels",
+                     "ransac_iterations", "min_inliers", "corner_block_px", "max_lost_streak", "window_keyframes",
+                     "window_fixed", "refine_iterations"):
             _checks.positive_int(name, getattr(self, name), minimum=4 if name == "min_inliers" else 1)
         for name in ("min_corner_distance_px", "max_fb_error_px", "max_row_error_px",
-                     "min_disparity_px", "ransac_threshold_px", "keyframe_distance_m", "keyframe_angle_rad",
-                     "max_step_m", "max_step_rad"):
+                     "min_disparity_px", "ransac_threshold_px", "keyframe_depth_fraction", "keyframe_angle_rad",
+                     "max_speed_mps", "max_turn_rate_radps", "max_acceleration_mps2",
+                     "max_angular_acceleration_radps2", "frame_interval_s", "huber_px", "outlier_px"):
             _checks.finite_number(name, getattr(self, name), positive=True)
         if not 0.0 < self.corner_quality < 1.0:
             raise ValueError(f"corner_quality must be in (0, 1), got {self.corner_quality}")
@@ -136,7 +183,7 @@ class OdometryConfig:
 
 @dataclass(frozen=True)
 class FrameEstimate:
-    """One frame's result: the base pose and how it was obtained."""
+    """One frame's result: the base pose as known at that frame and how it was obtained."""
 
     T_world_from_base: np.ndarray
     status: str
@@ -146,11 +193,10 @@ class FrameEstimate:
 
 
 @dataclass
-class _Keyframe:
-    image: np.ndarray              # left image (uint8)
-    uv: np.ndarray                 # (N, 2) float32, left image
-    points_cam: np.ndarray         # (N, 3) float64, keyframe camera
-    T_world_from_cam: np.ndarray
+class _FrameLink:
+    keyframe: Keyframe             # reference keyframe (its pose is refined later)
+    T_key_from_cam: np.ndarray
+    T_base_from_cam: np.ndarray
 
 
 @dataclass
@@ -179,15 +225,23 @@ class StereoOdometry:
         self.T_world_from_base0 = _checks.matrix("T_world_from_base0", T0, (4, 4)).copy()
         P = self.stereo.left.P
         self._K = np.array([[P[0, 0], 0.0, P[0, 2]], [0.0, P[1, 1], P[1, 2]], [0.0, 0.0, 1.0]])
-        self._keyframe: _Keyframe | None = None
-        self._T_world_from_cam: np.ndarray | None = None      # last good camera pose
-        self._velocity = np.eye(4)                             # T_prevcam_from_cam of the last step
-        self._lost_streak = 0
         c = self.config
-        self._criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 0.03)
+        self._map = LocalMap(self._K, self.stereo.baseline_m, float(self.stereo.right.P[0, 2]),
+                             size=c.window_keyframes, fixed=c.window_fixed, huber_px=c.huber_px,
+                             iterations=c.refine_iterations, outlier_px=c.outlier_px)
+        self._keyframe: Keyframe | None = None
+        self._T_world_from_cam: np.ndarray | None = None      # the last frame's camera pose
+        self._velocity = np.eye(4)                             # T_prevcam_from_cam of the last step
+        self._velocity_dt = c.frame_interval_s
+        self._velocity_known = False
+        self._stamp: float | None = None
+        self._lost_streak = 0
+        self._links: list[_FrameLink] = []
+        self._criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.003)
 
     # -- public -----------------------------------------------------------------------------
-    def step(self, left_rect, right_rect, *, T_base_from_cam, disparity_px=None) -> FrameEstimate:
+    def step(self, left_rect, right_rect, *, T_base_from_cam, disparity_px=None, stamp_s: float | None = None
+             ) -> FrameEstimate:
         """Estimate the pose of the next frame.
 
         Parameters
@@ -197,8 +251,10 @@ class StereoOdometry:
         T_base_from_cam : ndarray (4, 4)
             The left camera's mount on the base for this frame (e.g. with the head's pan).
         disparity_px : ndarray (H, W), optional
-            This frame's disparity (NaN invalid); when given, keyframe points take their
+            This frame's disparity (NaN invalid); when given, keyframe features take their
             depth from it instead of a stereo Lucas-Kanade search.
+        stamp_s : float, optional
+            The frame's time stamp; without, frames are ``config.frame_interval_s`` apart.
         """
         start = time.thread_time()
         T_base_from_cam = _checks.matrix("T_base_from_cam", T_base_from_cam, (4, 4))
@@ -210,44 +266,71 @@ class StereoOdometry:
                              f"{self.stereo.size[0]}x{self.stereo.size[1]}")
         if disparity_px is not None and np.shape(disparity_px) != left.shape:
             raise ValueError(f"disparity_px must have shape {left.shape}, got {np.shape(disparity_px)}")
+        dt = self._time_step(stamp_s)
         if self._keyframe is None:
             T_world_from_cam = self.T_world_from_base0 @ T_base_from_cam
-            return self._finish(start, T_world_from_cam, T_base_from_cam, KEYFRAME,
-                                *self._new_keyframe(left, right, disparity_px, T_world_from_cam))
-        status, T_world_from_cam, n_tracked, n_inliers = self._track(left)
+            self._new_keyframe(left, right, disparity_px, T_world_from_cam, None)
+            n = int(self._keyframe.valid.sum())
+            return self._finish(start, T_world_from_cam, T_base_from_cam, KEYFRAME, n, n, dt)
+        # the motion model: the last step again, scaled to this frame's time step
+        T_pred = self._T_world_from_cam @ scale_motion(self._velocity, dt / self._velocity_dt)
+        status, T_world_from_cam, n_tracked, n_inliers, tracked = self._track(left, T_pred, dt)
         if status == LOST:
             self._lost_streak += 1
-            T_world_from_cam = self._T_world_from_cam
             if self._lost_streak >= self.config.max_lost_streak:
-                self._keyframe = None          # restart at the held pose (the base keeps its pose)
-                held = T_world_from_cam @ np.linalg.inv(self._last_T_base_from_cam) @ T_base_from_cam
-                self._new_keyframe(left, right, disparity_px, held)
-                self._velocity = np.eye(4)
+                self._map.clear()                # restart at the predicted pose
+                self._new_keyframe(left, right, disparity_px, T_pred, None)
+                self._velocity_known = False
                 self._lost_streak = 0
-                self._T_world_from_cam = held
-            held_base = T_world_from_cam @ np.linalg.inv(self._last_T_base_from_cam)
-            return FrameEstimate(T_world_from_base=_readonly(held_base), status=LOST, n_tracked=n_tracked,
-                                 n_inliers=n_inliers, time_s=time.thread_time() - start)
+            return self._finish(start, T_pred, T_base_from_cam, LOST, n_tracked, n_inliers, dt)
         self._lost_streak = 0
-        kf = self._keyframe
+        kf, c = self._keyframe, self.config
         T_key_from_cam = np.linalg.inv(kf.T_world_from_cam) @ T_world_from_cam
-        if (n_inliers < self.config.keyframe_inlier_fraction * len(kf.uv)
-                or np.linalg.norm(T_key_from_cam[:3, 3]) > self.config.keyframe_distance_m
-                or rotation_angle_rad(T_key_from_cam[:3, :3]) > self.config.keyframe_angle_rad):
-            n_points, _ = self._new_keyframe(left, right, disparity_px, T_world_from_cam)
-            if n_points >= self.config.min_inliers:
-                status = KEYFRAME
-        return self._finish(start, T_world_from_cam, T_base_from_cam, status, n_tracked, n_inliers)
+        depth = self._median_depth(kf)
+        if (n_inliers < c.keyframe_inlier_fraction * int(kf.valid.sum())
+                or np.linalg.norm(T_key_from_cam[:3, 3]) > c.keyframe_depth_fraction * depth
+                or rotation_angle_rad(T_key_from_cam[:3, :3]) > c.keyframe_angle_rad):
+            T_world_from_cam = self._new_keyframe(left, right, disparity_px, T_world_from_cam, tracked)
+            status = KEYFRAME
+        return self._finish(start, T_world_from_cam, T_base_from_cam, status, n_tracked, n_inliers, dt)
+
+    def trajectory(self) -> np.ndarray:
+        """``T_world_from_base`` (N, 4, 4) of every frame so far, on its keyframe's refined pose."""
+        return np.stack([link.keyframe.T_world_from_cam @ link.T_key_from_cam @ np.linalg.inv(link.T_base_from_cam)
+                         for link in self._links]) if self._links else np.empty((0, 4, 4))
 
     # -- internals --------------------------------------------------------------------------
-    def _finish(self, start, T_world_from_cam, T_base_from_cam, status, n_tracked, n_inliers) -> FrameEstimate:
+    def _time_step(self, stamp_s) -> float:
+        if stamp_s is None:
+            self._stamp = None
+            return self.config.frame_interval_s
+        stamp = _checks.finite_number("stamp_s", stamp_s)
+        previous, self._stamp = self._stamp, stamp
+        if previous is None:
+            return self.config.frame_interval_s
+        if stamp <= previous:
+            raise ValueError(f"stamp_s must increase from frame to frame, got {stamp!r} after {previous!r}")
+        return stamp - previous
+
+    def _finish(self, start, T_world_from_cam, T_base_from_cam, status, n_tracked, n_inliers, dt) -> FrameEstimate:
         if self._T_world_from_cam is not None:
             self._velocity = np.linalg.inv(self._T_world_from_cam) @ T_world_from_cam
+            self._velocity_dt = dt
+            # a lost frame's motion is a guess: the next frame is held to the absolute limits only
+            self._velocity_known = status != LOST
         self._T_world_from_cam = T_world_from_cam
-        self._last_T_base_from_cam = T_base_from_cam
+        kf = self._keyframe
+        self._links.append(_FrameLink(kf, np.linalg.inv(kf.T_world_from_cam) @ T_world_from_cam, T_base_from_cam))
         T_world_from_base = T_world_from_cam @ np.linalg.inv(T_base_from_cam)
         return FrameEstimate(T_world_from_base=_readonly(T_world_from_base), status=status,
                              n_tracked=int(n_tracked), n_inliers=int(n_inliers), time_s=time.thread_time() - start)
+
+    def _median_depth(self, kf: Keyframe) -> float:
+        ids = kf.landmark[kf.valid]
+        if not len(ids):
+            return math.inf
+        points = transform_points(np.linalg.inv(kf.T_world_from_cam), self._map.points(ids))
+        return float(np.median(points[:, 2]))
 
     def _klt(self, image_a, image_b, pts: np.ndarray, guess: np.ndarray, levels: int,
              window_px: int) -> tuple[np.ndarray, np.ndarray]:
@@ -270,8 +353,9 @@ class StereoOdometry:
         ok = (st1.ravel() == 1) & (st2.ravel() == 1) & (fb < self.config.max_fb_error_px) & inside
         return p1, ok
 
-    def _corners(self, left: np.ndarray) -> np.ndarray:
-        """Shi-Tomasi corners spread over a grid of cells (``max_features`` in all), (N, 2) float32.
+    def _corners(self, left: np.ndarray, wanted: int, taken: np.ndarray) -> np.ndarray:
+        """Shi-Tomasi corners spread over a grid of cells (``wanted`` in all), (N, 2) float32, at least
+        ``min_corner_distance_px`` from the features ``taken`` (N, 2).
 
         ``cv2.goodFeaturesToTrack`` (the minimum eigenvalue of the gradient matrix, the corner
         that Lucas-Kanade tracks well; Shi and Tomasi 1994) keeps corners at least
@@ -284,11 +368,17 @@ class StereoOdometry:
         h, w = left.shape
         rows, cols = c.grid_cells
         margin = c.klt_window_px // 2 + 1
-        if h <= 2 * margin or w <= 2 * margin:
+        if h <= 2 * margin or w <= 2 * margin or wanted <= 0:
             return np.empty((0, 2), np.float32)
+        mask = None
+        if len(taken):
+            mask = np.full((h - 2 * margin, w - 2 * margin), 255, np.uint8)
+            radius = max(1, int(round(c.min_corner_distance_px)))
+            for u, v in np.rint(taken - margin).astype(int):
+                cv2.circle(mask, (int(u), int(v)), radius, 0, -1)
         inner = left[margin:h - margin, margin:w - margin]
-        found = cv2.goodFeaturesToTrack(inner, 2 * c.max_features, c.corner_quality, c.min_corner_distance_px,
-                                        blockSize=c.corner_block_px)
+        found = cv2.goodFeaturesToTrack(inner, 2 * wanted, c.corner_quality, c.min_corner_distance_px,
+                                        blockSize=c.corner_block_px, mask=mask)
         if found is None:
             return np.empty((0, 2), np.float32)
         uv = found.reshape(-1, 2) + margin                       # strongest first
@@ -297,59 +387,105 @@ class StereoOdometry:
         sorted_cells = cell[order]
         rank = np.empty(len(uv), np.int64)
         rank[order] = np.arange(len(order)) - np.searchsorted(sorted_cells, sorted_cells, side="left")
-        per_cell = max(1, c.max_features // (rows * cols))
+        per_cell = max(1, wanted // (rows * cols))
         first = np.flatnonzero(rank < per_cell)
-        rest = np.flatnonzero(rank >= per_cell)[:max(0, c.max_features - len(first))]
-        keep = np.sort(np.concatenate([first, rest]))[:c.max_features]
+        rest = np.flatnonzero(rank >= per_cell)[:max(0, wanted - len(first))]
+        keep = np.sort(np.concatenate([first, rest]))[:wanted]
         return np.ascontiguousarray(uv[keep], dtype=np.float32)
 
-    def _new_keyframe(self, left, right, disparity_px, T_world_from_cam) -> tuple[int, int]:
-        """Corners of ``left`` with their 3-D points; becomes the keyframe. Returns (points, points)."""
+    def _right_columns(self, left, right, disparity_px, uv, guess_d) -> np.ndarray:
+        """Right image column of each feature ``uv`` (NaN: no reliable match).
+
+        Lucas-Kanade finds the match in 2-D; in a rectified pair it lies on the feature's row, so
+        the result is moved back onto the row along the patch's gradients: the 1-D Lucas-Kanade
+        solution ``x_1d = x_2d + (sum Ix Iy / sum Ix^2) dy`` (from ``G d = b`` with ``dy = 0``). On an
+        oblique edge the 2-D solution slides along the edge with the noise; on the row it cannot.
+        """
+        c = self.config
+        if not len(uv):
+            return np.empty(0)
+        if disparity_px is not None:
+            d = _sample_smooth(np.asarray(disparity_px, dtype=np.float64), uv, max_spread=c.max_row_error_px)
+        else:
+            guess = uv.astype(np.float64).copy()
+            guess[:, 0] -= np.nan_to_num(guess_d, nan=0.0)
+            uv_right, ok = self._klt(left, _photometry_like(right, left), uv, guess, c.stereo_levels - 1,
+                                     c.stereo_window_px)
+            dy = uv_right[:, 1] - uv[:, 1]
+            ok &= np.abs(dy) <= c.max_row_error_px
+            d = np.where(ok, uv[:, 0] - uv_right[:, 0] - _row_slope(left, uv, c.stereo_window_px) * dy, np.nan)
+        d = np.where(np.isfinite(d) & (d >= c.min_disparity_px), d, np.nan)
+        return uv[:, 0] - d
+
+    def _new_keyframe(self, left, right, disparity_px, T_world_from_cam, tracked) -> np.ndarray:
+        """Make the frame a keyframe: tracked features keep their landmarks, new corners get new ones;
+        the window is refined. Returns the frame's (refined) camera pose."""
         c, s = self.config, self.stereo
-        uv = self._corners(left)
-        d = np.full(len(uv), np.nan)
-        if len(uv):
-            if disparity_px is not None:
-                d = _sample_smooth(np.asarray(disparity_px, dtype=np.float64), uv, max_spread=c.max_row_error_px)
-            else:
-                uv_right, ok = self._klt(left, _photometry_like(right, left), uv, uv, c.klt_levels + 1,
-                                         c.stereo_window_px)
-                ok &= np.abs(uv_right[:, 1] - uv[:, 1]) <= c.max_row_error_px
-                d = np.where(ok, uv[:, 0] - uv_right[:, 0], np.nan)
-        keep = np.isfinite(d) & (d >= c.min_disparity_px)
-        uv, d = uv[keep], d[keep]
+        if tracked is None:
+            ids, uv = np.empty(0, np.int64), np.empty((0, 2), np.float32)
+        else:
+            ids, uv = tracked
+        T_cam_from_world = np.linalg.inv(T_world_from_cam)
+        guess_d = np.full(len(uv), np.nan)
+        if len(ids):
+            z = transform_points(T_cam_from_world, self._map.points(ids))[:, 2]
+            guess_d = s.focal_px * s.baseline_m / np.maximum(z, 1e-3) - s.doffs_px
+        new_uv = self._corners(left, c.max_features - len(uv), uv)
+        all_uv = np.concatenate([uv, new_uv]).astype(np.float32)
+        u_right = self._right_columns(left, right, disparity_px, all_uv,
+                                      np.concatenate([guess_d, np.full(len(new_uv), np.nan)]))
+        # new landmarks: the new corners with a stereo match (eq. 14-16)
+        fresh = np.isfinite(u_right[len(uv):])
+        nuv = new_uv[fresh]
+        d = nuv[:, 0] - u_right[len(uv):][fresh]
         z = depth_m_from_disparity_px(d, focal_px=s.focal_px, baseline_m=s.baseline_m, doffs_px=s.doffs_px)
         K = self._K
-        points = np.column_stack([(uv[:, 0] - K[0, 2]) * z / K[0, 0], (uv[:, 1] - K[1, 2]) * z / K[1, 1], z])
-        self._keyframe = _Keyframe(image=left, uv=uv, points_cam=points,
-                                   T_world_from_cam=np.array(T_world_from_cam, dtype=np.float64))
-        return len(uv), len(uv)
+        points_cam = np.column_stack([(nuv[:, 0] - K[0, 2]) * z / K[0, 0], (nuv[:, 1] - K[1, 2]) * z / K[1, 1], z])
+        new_ids = self._map.add_landmarks(transform_points(T_world_from_cam, points_cam))
+        kf = Keyframe(frame=len(self._links), T_world_from_cam=np.array(T_world_from_cam, dtype=np.float64),
+                      image=left, landmark=np.concatenate([ids, new_ids]),
+                      uv=np.concatenate([uv, nuv]).astype(np.float32),
+                      u_right=np.concatenate([u_right[:len(uv)], u_right[len(uv):][fresh]]))
+        self._map.add_keyframe(kf)
+        self._keyframe = kf
+        self._map.refine()
+        return kf.T_world_from_cam
 
-    def _track(self, left) -> tuple[str, np.ndarray | None, int, int]:
+    def _track(self, left, T_pred, dt):
+        """Track the keyframe into ``left`` from the motion model's prediction; when that loses most
+        features (a sudden stop, a wrong prediction after a lost frame), again from the last pose."""
         c, kf = self.config, self._keyframe
-        if len(kf.uv) < c.min_inliers:
-            return LOST, None, 0, 0
-        # motion prior: the last step again (constant velocity); predicted projections start KLT
-        T_world_from_pred = self._T_world_from_cam @ self._velocity
-        T_pred_from_key = np.linalg.inv(T_world_from_pred) @ kf.T_world_from_cam
-        X = kf.points_cam @ T_pred_from_key[:3, :3].T + T_pred_from_key[:3, 3]
-        guess = kf.uv.astype(np.float64).copy()
+        valid = np.flatnonzero(kf.valid)
+        if len(valid) < c.min_inliers:
+            return LOST, None, 0, 0, None
+        points_key = transform_points(np.linalg.inv(kf.T_world_from_cam), self._map.points(kf.landmark[valid]))
+        result = self._track_from(left, T_pred, dt, valid, points_key)
+        if result[3] < c.keyframe_inlier_fraction * len(valid):
+            retry = self._track_from(left, self._T_world_from_cam, dt, valid, points_key)
+            if retry[3] > result[3]:
+                result = retry
+        return result
+
+    def _track_from(self, left, T_guess, dt, valid, points_key):
+        c, kf = self.config, self._keyframe
+        T_guess_from_key = np.linalg.inv(T_guess) @ kf.T_world_from_cam
+        X = transform_points(T_guess_from_key, points_key)
+        guess = kf.uv[valid].astype(np.float64).copy()
         front = X[:, 2] > 0.05
-        proj = (X[front, :2] / X[front, 2:3]) * [self._K[0, 0], self._K[1, 1]] + self._K[:2, 2]
-        guess[front] = proj
-        uv, ok = self._klt(kf.image, left, kf.uv, guess, c.klt_levels, c.klt_window_px)
+        guess[front] = (X[front, :2] / X[front, 2:3]) * [self._K[0, 0], self._K[1, 1]] + self._K[:2, 2]
+        uv, ok = self._klt(kf.image, left, kf.uv[valid], guess, c.klt_levels, c.klt_window_px)
         n_tracked = int(ok.sum())
         if n_tracked < c.min_inliers:
-            return LOST, None, n_tracked, 0
-        obj = kf.points_cam[ok]
+            return LOST, None, n_tracked, 0, None
+        obj = points_key[ok]
         img = uv[ok].astype(np.float64)
-        rvec, tvec = rvec_t_from_T(T_pred_from_key)
+        rvec, tvec = rvec_t_from_T(T_guess_from_key)
         found, rvec, tvec, inliers = cv2.solvePnPRansac(
             obj, img, self._K, None, rvec.copy(), tvec.copy(), useExtrinsicGuess=True,
             iterationsCount=c.ransac_iterations, reprojectionError=c.ransac_threshold_px, confidence=0.999,
             flags=cv2.SOLVEPNP_ITERATIVE)
         if not found or inliers is None or len(inliers) < c.min_inliers:
-            return LOST, None, n_tracked, 0 if inliers is None else len(inliers)
+            return LOST, None, n_tracked, 0 if inliers is None else len(inliers), None
         inl = inliers.ravel()
         for _ in range(2):             # LM on the inliers, re-select under the polished pose
             rvec, tvec = cv2.solvePnPRefineLM(obj[inl], img[inl], self._K, None, rvec, tvec)
@@ -357,14 +493,41 @@ class StereoOdometry:
             err = np.linalg.norm(proj.reshape(-1, 2) - img, axis=1)
             inl = np.flatnonzero(err < c.ransac_threshold_px)
             if len(inl) < c.min_inliers:
-                return LOST, None, n_tracked, len(inl)
-        T_cam_from_key = T_from_rvec_t(rvec, tvec)
-        T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_cam_from_key)
+                return LOST, None, n_tracked, len(inl), None
+        T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_from_rvec_t(rvec, tvec))
+        T_pred = self._T_world_from_cam @ scale_motion(self._velocity, dt / self._velocity_dt)
+        if not (np.isfinite(T_world_from_cam).all() and self._plausible(T_world_from_cam, T_pred, dt)):
+            return LOST, None, n_tracked, len(inl), None
+        tracked = (kf.landmark[valid][ok][inl], img[inl].astype(np.float32))
+        return TRACKED, T_world_from_cam, n_tracked, len(inl), tracked
+
+    def _plausible(self, T_world_from_cam, T_pred, dt) -> bool:
+        """The step from the last frame within the speed and turn-rate limits, and (once the motion is
+        known) within the acceleration limits of the motion model's prediction."""
+        c = self.config
         step = np.linalg.inv(self._T_world_from_cam) @ T_world_from_cam
-        if (not np.isfinite(T_world_from_cam).all() or np.linalg.norm(step[:3, 3]) > c.max_step_m
-                or rotation_angle_rad(step[:3, :3]) > c.max_step_rad):
-            return LOST, None, n_tracked, len(inl)
-        return TRACKED, T_world_from_cam, n_tracked, len(inl)
+        if (np.linalg.norm(step[:3, 3]) > c.max_speed_mps * dt
+                or rotation_angle_rad(step[:3, :3]) > c.max_turn_rate_radps * dt):
+            return False
+        if not self._velocity_known:
+            return True
+        off = np.linalg.inv(T_pred) @ T_world_from_cam
+        return (np.linalg.norm(off[:3, 3]) <= c.max_acceleration_mps2 * dt * dt
+                and rotation_angle_rad(off[:3, :3]) <= c.max_angular_acceleration_radps2 * dt * dt)
+
+
+def _row_slope(image: np.ndarray, uv: np.ndarray, window_px: int) -> np.ndarray:
+    """``sum Ix Iy / sum Ix^2`` over the ``window_px`` square around each point ``uv`` (N, 2): how far a
+    patch's best match moves along x per pixel it is moved along y."""
+    f = image.astype(np.float32)
+    ix = cv2.Sobel(f, cv2.CV_32F, 1, 0, ksize=3)
+    iy = cv2.Sobel(f, cv2.CV_32F, 0, 1, ksize=3)
+    xx = cv2.boxFilter(ix * ix, -1, (window_px, window_px), normalize=False)
+    xy = cv2.boxFilter(ix * iy, -1, (window_px, window_px), normalize=False)
+    h, w = image.shape
+    r = np.clip(np.rint(uv[:, 1]).astype(np.int64), 0, h - 1)
+    col = np.clip(np.rint(uv[:, 0]).astype(np.int64), 0, w - 1)
+    return xy[r, col] / np.maximum(xx[r, col], 1e-6)
 
 
 def _sample_smooth(image: np.ndarray, uv: np.ndarray, *, max_spread: float) -> np.ndarray:

@@ -170,10 +170,18 @@ class TrajectoryMetrics:
         return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
 
     def describe(self) -> str:
-        return (f"ATE RMSE {100 * self.ate_rmse_m:.1f} cm ({self.ate_percent:.2f} % of {self.path_length_m:.2f} m, "
-                f"{self.alignment} aligned; {100 * self.ate_rmse_unaligned_m:.1f} cm unaligned), "
-                f"RPE {100 * self.rpe_translation_per_m:.2f} % / {self.rpe_rotation_deg_per_m:.2f} deg per m, "
-                f"end point {100 * self.end_point_error_m:.1f} cm ({self.end_point_percent:.2f} %)")
+        """One line of the errors; what a too short path cannot give is "n/a" with the reason."""
+        if self.path_length_m > 0:
+            ate = f"{100 * self.ate_rmse_m:.1f} cm ({self.ate_percent:.2f} % of {self.path_length_m:.2f} m"
+            end = f"{100 * self.end_point_error_m:.1f} cm ({self.end_point_percent:.2f} %)"
+        else:
+            ate = f"{100 * self.ate_rmse_m:.1f} cm (no motion"
+            end = f"{100 * self.end_point_error_m:.1f} cm"
+        rpe = (f"RPE {100 * self.rpe_translation_per_m:.2f} % / {self.rpe_rotation_deg_per_m:.2f} deg per m"
+               if math.isfinite(self.rpe_translation_per_m) else
+               f"RPE n/a (the path is shorter than {self.delta_m:g} m)")
+        return (f"ATE RMSE {ate}, {self.alignment} aligned; {100 * self.ate_rmse_unaligned_m:.1f} cm unaligned), "
+                f"{rpe}, end point {end}")
 
 
 def trajectory_metrics(T_estimated, T_true, *, delta_m: float = 1.0, alignment: str = "se3") -> TrajectoryMetrics:

@@ -21,6 +21,8 @@ files exist (their points are read back from ``.obs.npz``) and datasets whose
 map was completed without failures. A frame that raises is listed in
 ``summary.json`` (and the map's ``batch.json``), the others go on, and the map
 is built from the frames that succeeded; the next run retries it.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -31,18 +33,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import RigMount, StereoCamera
-from ..camera.mount import CameraMount
-from ..geometry.ply import write_ply
+from ..camera import CameraMount, StereoCamera
+from ..geometry.ply import read_ply, write_ply
 from ..geometry.scan import write_scan_json
 from ..io import (atomic_write, check_output_dir, check_outputs, read_pfm, remove_stale_temporaries, temporary_dir,
                   write_disparity)
-from ..mapping.fusion import FrameObservation, fuse
+from ..mapping.fusion import FrameObservation
 from ..mapping.rosmap import ros_map_files
 from ..recordings.manifest import FrameRecord, Manifest, frame_pair, read_manifest
 from .frame import scan_from_pair
 from .parallel import ItemFailure, map_ordered
-from .run import MapRun, PipelineConfig, floor_for_run, observation_from_pair, pair_options, write_map_outputs
+from .run import (MapRun, PipelineConfig, floor_for_run, map_from_observations, observation_from_pair, pair_options,
+                  write_map_outputs)
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
            "dataset_files", "SUMMARY_NAME"]
@@ -76,7 +78,7 @@ class FrameTask:
     record: FrameRecord
     index: int
     stereo: StereoCamera
-    rig: RigMount | CameraMount | None
+    mount: CameraMount | None
     config: PipelineConfig
     frames_dir: Path
     dataset: str
@@ -102,7 +104,7 @@ def process_frame(task: FrameTask | tuple[FrameTask, tuple]) -> FrameObservation
     """
     task, pair = task if isinstance(task, tuple) else (task, None)
     left, right, rectified = frame_pair(task.record, prefer_raw=task.prefer_raw) if pair is None else pair
-    result = scan_from_pair(left, right, task.stereo, rectified=rectified, rig=task.rig,
+    result = scan_from_pair(left, right, task.stereo, rectified=rectified, mount=task.mount,
                             pan_rad=task.record.pan_rad, **pair_options(task.config))
     frame = result.frame
     obs = frame.obstacles
@@ -122,7 +124,8 @@ def _save_observation(path: Path, obs: FrameObservation) -> None:
                  obstacle_points_world=obs.obstacle_points_world, floor_points_world=obs.floor_points_world,
                  n_valid_disparity=obs.n_valid_disparity, ground_message=np.array(obs.ground_message),
                  baseline_focal_m_px=np.nan if obs.baseline_focal_m_px is None else obs.baseline_focal_m_px,
-                 sensor_height_m=np.nan if obs.sensor_height_m is None else obs.sensor_height_m)
+                 sensor_height_m=np.nan if obs.sensor_height_m is None else obs.sensor_height_m,
+                 boundary_points=obs.boundary_points)
 
 
 def _resume(files: dict[str, Path]) -> FrameObservation | None:
@@ -133,30 +136,10 @@ def _resume(files: dict[str, Path]) -> FrameObservation | None:
     try:
         read_pfm(files["disparity"])
         json.loads(files["scan"].read_text(encoding="utf-8"))
-        _check_ply(files["cloud"])
+        read_ply(files["cloud"])
         return _load_observation(files["observation"])
     except Exception:                  # any damage: recompute (the files are rewritten atomically)
         return None
-
-
-def _check_ply(path: Path) -> None:
-    """Raise ValueError unless ``path`` is a complete binary PLY (header and as many bytes as it declares)."""
-    with open(path, "rb") as fh:
-        header = fh.read(4096)
-    end = header.find(b"end_header\n")
-    if not header.startswith(b"ply\n") or end < 0:
-        raise ValueError(f"{path}: not a PLY file")
-    sizes = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
-             "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
-    count, stride = 0, 0
-    for line in header[:end].decode("ascii", "replace").splitlines():
-        words = line.split()
-        if words[:2] == ["element", "vertex"]:
-            count = int(words[2])
-        elif words[:1] == ["property"] and len(words) == 3:
-            stride += sizes[words[1]]
-    if path.stat().st_size < end + len(b"end_header\n") + count * stride:
-        raise ValueError(f"{path}: truncated")
 
 
 def _load_observation(path: Path) -> FrameObservation:
@@ -166,15 +149,14 @@ def _load_observation(path: Path) -> FrameObservation:
                                 floor_points_world=z["floor_points_world"],
                                 n_valid_disparity=int(z["n_valid_disparity"]),
                                 ground_message=str(z["ground_message"]),
-                                baseline_focal_m_px=_optional_float(z, "baseline_focal_m_px"),
-                                sensor_height_m=_optional_float(z, "sensor_height_m"))
+                                baseline_focal_m_px=_optional_float(z["baseline_focal_m_px"]),
+                                sensor_height_m=_optional_float(z["sensor_height_m"]),
+                                boundary_points=int(z["boundary_points"]))
 
 
-def _optional_float(z, key: str) -> float | None:
-    """A scalar saved by :func:`_save_observation` (NaN or absent in older files: None)."""
-    if key not in z.files:
-        return None
-    value = float(z[key])
+def _optional_float(value) -> float | None:
+    """A scalar saved by :func:`_save_observation` (NaN: None)."""
+    value = float(value)
     return None if np.isnan(value) else value
 
 
@@ -244,22 +226,6 @@ def _write_map(run: MapRun, map_dir: Path, record: dict) -> None:
         os.replace(tmp, map_dir)
 
 
-def _map_run(manifest: Manifest, observations: list[FrameObservation], config: PipelineConfig,
-             floor=None, mount=None) -> MapRun:
-    """Fuse in frame order and compare with the ground-truth map, as :func:`mrstereo.pipeline.build_map`."""
-    from ..mapping import read_ros_map
-    from ..mapping.metrics import map_metrics
-
-    occupancy = fuse(observations, grid=config.grid, config=config.mapping)
-    metrics, gt = None, None
-    if manifest.ground_truth_map is not None:
-        gt = read_ros_map(manifest.ground_truth_map)
-        if gt.grid.shape == occupancy.grid.shape and observations:
-            metrics = map_metrics(occupancy, gt, path_xy=np.array([o.pose for o in observations]))
-    return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
-                  ground_truth_map=gt, floor=floor, mount=mount)
-
-
 def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
               maps: bool = True, workers: int | None = None, scheduler=None, processes: bool = False,
               progress: bool = True) -> BatchSummary:
@@ -319,8 +285,8 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
                 if maps and name not in done_maps:
                     observations[(name, k)] = loaded[k]
             else:
-                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, rig=floors[name][0], config=config,
-                                       frames_dir=frames_dir, dataset=name))
+                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, mount=floors[name][0],
+                                       config=config, frames_dir=frames_dir, dataset=name))
 
     results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, processes=processes,
                           progress=progress,
@@ -343,7 +309,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
                 status = "kept"
             else:
                 obs = [observations[(name, k)] for k in range(len(m.frames)) if (name, k) in observations]
-                run = _map_run(m, obs, config, floor=floors[name][1], mount=floors[name][0])
+                run = map_from_observations(m, obs, config=config, floor=floors[name][1], mount=floors[name][0])
                 _write_map(run, out / name / "map", {"frames": len(m.frames), "fused": len(obs), "failed": failed})
                 status = "written" if not failed else f"written from {len(obs)} of {len(m.frames)} frames"
         summaries.append(DatasetSummary(name=name, manifest=m.root / "manifest.yaml", out_dir=out / name,

@@ -18,10 +18,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
-from ..camera import RigMount, StereoCamera
+from ..camera import CameraMount, StereoCamera
 from ..geometry.freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
 from ..geometry.obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
 from ..geometry.scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
+from ..matching import DisparityResult, compute_disparity
 from ..profiling import stage
 from ..rejection import FloorModel, RejectionConfig, RejectionResult, reject_uniform
 
@@ -36,30 +37,38 @@ class PairObstacles:
     ----------
     left_rect : ndarray of shape (H, W) or (H, W, 3)
         The rectified left image.
-    raw_disparity_px : ndarray of shape (H, W), float32
-        The matcher's disparity before rejection.
+    matching : DisparityResult
+        The matcher's result (eq. 9-12): the disparity before rejection, each range's map, the plan.
     rejection : RejectionResult
         Eq. (13) applied to it (``rejection.disparity_px`` is what was triangulated).
     obstacles : ObstacleResult
         Robot-frame points, obstacle and floor masks, the floor used; the matcher's
         too-near pixels as fail-safe obstacle points at the near limit
         (``obstacles.too_near_mask``).
-    max_disparity_px : float
-        The largest disparity the matcher searched (its near limit).
     boundary : FreeSpaceBoundary, optional
         Where the floor ends in each column and the obstacle points standing there
         (:mod:`mrstereo.geometry.freespace`), when asked for (``free_space``).
     """
 
     left_rect: np.ndarray
-    raw_disparity_px: np.ndarray
+    matching: DisparityResult
     rejection: RejectionResult
     obstacles: ObstacleResult
-    max_disparity_px: float = math.inf
     boundary: FreeSpaceBoundary | None = None
 
     @property
+    def raw_disparity_px(self) -> np.ndarray:
+        """The matcher's disparity before rejection, float32 (H, W)."""
+        return self.matching.disparity_px
+
+    @property
+    def max_disparity_px(self) -> float:
+        """The largest disparity the matcher searched (its near limit)."""
+        return self.matching.near_limit_px
+
+    @property
     def disparity_px(self) -> np.ndarray:
+        """The disparity after rejection: what was triangulated."""
         return self.rejection.disparity_px
 
 
@@ -71,7 +80,8 @@ class PairScan:
     frame: PairObstacles
 
 
-def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = False, rig: RigMount | None = None,
+def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = False,
+                        mount: CameraMount | None = None,
                         pan_rad: float = 0.0, preset: str = "mapping", max_disparity_px: float | None = None,
                         matching=None,
                         rejection: RejectionConfig = RejectionConfig(), floor_model: FloorModel | None = None,
@@ -84,11 +94,11 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
     left, right : ndarray of shape (H, W) or (H, W, 3)
         The pair; raw images are rectified with ``stereo`` first unless ``rectified``.
     stereo : StereoCamera
-        Calibration (and optionally the ``rig`` mount).
+        Calibration (and optionally the camera ``mount``).
     rectified : bool
         The images are already rectified.
-    rig : RigMount, optional
-        Camera height and tilt; default ``stereo.rig``; with neither the floor
+    mount : CameraMount, optional
+        The camera mount; default ``stereo.mount``; with neither the floor
         is estimated (on the disparity before rejection, which has the most
         floor pixels; RANSAC ignores the ghosts).
     pan_rad : float
@@ -107,7 +117,6 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
         Also find where the floor ends in each column (:func:`~mrstereo.geometry.freespace.free_space_boundary`):
         ``PairObstacles.boundary``. None: not computed.
     """
-    from ..matching import compute_disparity  # lazy: numba kernels compile on first use
 
     if not isinstance(stereo, StereoCamera):
         raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
@@ -125,13 +134,12 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
         kwargs["max_disparity_px"] = max_disparity_px
     with stage("match"):
         result = compute_disparity(left, right, **kwargs)
-        raw = np.asarray(result.disparity_px, dtype=np.float32)
     with stage("reject"):
-        rej = reject_uniform(raw, left, config=rejection, floor_model=floor_model)
-    mount = rig if rig is not None else stereo.rig
+        rej = reject_uniform(result.disparity_px, left, config=rejection, floor_model=floor_model)
     with stage("3-D"):
-        ground = ground_for_frame(raw, stereo, mount=mount, config=config)
-        obstacles = detect_obstacles(rej.disparity_px, stereo, rig=mount, ground=ground, pan_rad=pan_rad,
+        ground = ground_for_frame(result.disparity_px, stereo, mount=stereo.mount if mount is None else mount,
+                                  config=config)
+        obstacles = detect_obstacles(rej.disparity_px, stereo, ground=ground, pan_rad=pan_rad,
                                      config=config, too_near=result.too_near, near_limit_px=result.near_limit_px)
     boundary = None
     if free_space is not None:
@@ -139,8 +147,7 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
             boundary = free_space_boundary(left, obstacles, rej.disparity_px, stereo, config=free_space,
                                            max_range_m=config.max_range_m, min_height_m=config.min_obstacle_height_m,
                                            max_height_m=config.max_obstacle_height_m)
-    return PairObstacles(left_rect=left, raw_disparity_px=raw, rejection=rej, obstacles=obstacles,
-                         max_disparity_px=float(result.near_limit_px), boundary=boundary)
+    return PairObstacles(left_rect=left, matching=result, rejection=rej, obstacles=obstacles, boundary=boundary)
 
 
 def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: float = math.radians(0.5),

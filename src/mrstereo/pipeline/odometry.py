@@ -8,22 +8,22 @@ import os
 
 import numpy as np
 
-from ..camera import StereoCamera
-from ..camera.mount import T_base_from_cam_of
+from ..camera import CameraMount, StereoCamera
 from ..odometry import OdometryConfig, OdometryResult, visual_odometry
-from ..recordings.manifest import Manifest, frame_pair, read_manifest
-from ..transforms import T_from_planar
+from ..recordings.layouts import read_recording
+from ..recordings.manifest import Manifest, frame_pair
 
 __all__ = ["odometry_from_manifest"]
 
 
 def odometry_from_manifest(manifest, *, config: OdometryConfig | None = None, calibration: StereoCamera | None = None,
                            initial_pose: str = "given", progress: bool = False) -> OdometryResult:
-    """Visual odometry of a dataset (docs/dataset.md): rectified pairs, or raw ones rectified.
+    """Visual odometry of a recording (docs/dataset.md): rectified pairs, or raw ones rectified; its stamps.
 
     Parameters
     ----------
     manifest : Manifest or path
+        A recording (a dataset folder, its manifest.yaml or a KITTI odometry folder).
     calibration : StereoCamera, optional
         Overrides the manifest's (the raw images are then rectified with it).
     initial_pose : {"given", "identity"}
@@ -32,7 +32,7 @@ def odometry_from_manifest(manifest, *, config: OdometryConfig | None = None, ca
     if not isinstance(manifest, Manifest):
         if not isinstance(manifest, (str, os.PathLike)):
             raise TypeError(f"manifest must be a Manifest or a path, got {type(manifest).__name__}")
-        manifest = read_manifest(manifest)
+        manifest = read_recording(manifest)
     if initial_pose not in ("given", "identity"):
         raise ValueError(f"initial_pose must be 'given' or 'identity', got {initial_pose!r}")
     stereo = manifest.calibration if calibration is None else calibration
@@ -45,15 +45,15 @@ def odometry_from_manifest(manifest, *, config: OdometryConfig | None = None, ca
                 left, right = stereo.rectify(left, right)
             yield left, right
 
-    mounts = np.stack([T_base_from_cam_of(manifest.rig, r.pan_rad, stereo=stereo) for r in manifest.frames])
-    T0 = T_from_planar(*manifest.frames[0].pose) if initial_pose == "given" else np.eye(4)
+    # no mount: a level camera on the floor (the base is the camera's REP 103 body frame)
+    mount = manifest.mount or CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    mounts = np.stack([mount.T_base_from_rectified(stereo.left.R, r.pan_rad) for r in manifest.frames])
+    T0 = manifest.frames[0].T_world_from_base if initial_pose == "given" else np.eye(4)
     wrap = None
     if progress:
         from tqdm import tqdm
 
         def wrap(it):
             return tqdm(it, total=len(manifest.frames), desc="odometry", unit="frame")
-    stamps = [getattr(r, "stamp_s", None) for r in manifest.frames]
-    stamps = None if any(s is None for s in stamps) else stamps
     return visual_odometry(pairs(), stereo, T_base_from_cam=mounts, T_world_from_base0=T0, config=config,
-                           stamps_s=stamps, progress=wrap)
+                           stamps_s=manifest.stamps_s, progress=wrap)

@@ -22,6 +22,8 @@ workers, numba and OpenCV run on one thread each (``numba.set_num_threads(1)``
 per task, ``cv2.setNumThreads(1)`` while worker threads run; worker processes
 also get ``NUMBA_NUM_THREADS=1``) so that N workers on N cores do not
 oversubscribe them. See docs/scale-out.md.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -39,8 +41,7 @@ from typing import Any
 
 from .. import _checks
 
-__all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory",
-           "PrestartedCall"]
+__all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory"]
 
 _WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
@@ -109,13 +110,13 @@ _malloc_tuned = False
 def keep_freed_memory() -> bool:
     """Let glibc's malloc keep freed memory for reuse instead of returning it to the system.
 
-    One 640x480 frame of the chain allocates and frees about 15 MB of image-sized arrays.
-    With glibc's defaults these are fresh pages every frame (mmap for large blocks, and the
-    heap top trimmed after each frame): about 3,600 page faults, a quarter of the frame's time
-    (49 -> 38 ms per frame, measured). This raises the trim threshold to 256 MB and the mmap
-    threshold and top pad to 64 MB, process-wide, so it is called only in processes
-    mrstereo owns: the ``mrstereo`` command and its Dask worker processes, never on import.
-    Returns False (and changes nothing) without glibc.
+    Every frame of the chain allocates and frees many image-sized arrays. With glibc's defaults
+    these are fresh pages, a page fault each on first touch, every frame: large blocks are
+    mmapped and unmapped, and the heap top is trimmed after each frame. Raising the trim threshold
+    to 256 MB and the mmap threshold and top pad to 64 MB keeps them in the heap for the next
+    frame. The setting is process-wide, so it is made only in processes mrstereo owns: the
+    ``mrstereo`` command and its Dask worker processes, never on import. Returns False (and
+    changes nothing) without glibc.
     """
     global _malloc_tuned
     if _malloc_tuned:
@@ -218,8 +219,8 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
         return
     env = dict(_WORKER_ENV, MRSTEREO_WORKER_PROCESS="1")
     # distributed's nannies set MALLOC_TRIM_THRESHOLD_=65536 in their workers, which also fixes
-    # glibc's mmap threshold: every image-sized temporary then costs fresh page faults and a frame
-    # takes 2.3 times as long (measured). Leave glibc's adaptive defaults alone.
+    # glibc's mmap threshold: every image-sized temporary would cost fresh page faults. The workers
+    # tune malloc themselves (limit_threads -> keep_freed_memory).
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
             _quiet_children():
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
@@ -258,8 +259,8 @@ def numba_thread_safe() -> bool:
     """Whether numba's threading layer runs parallel kernels from several threads at once.
 
     The tbb and omp layers do; workqueue aborts the process on concurrent launches. The layer is
-    chosen when numba first starts its thread pool: this starts it (loading the layer's library,
-    about 10 ms) without compiling or loading any kernel. Should numba's internal start-up function
+    chosen when numba first starts its thread pool: this starts it (loading the layer's library)
+    without compiling or loading any kernel. Should numba's internal start-up function
     be missing, a tiny parallel kernel is launched instead.
     """
     import numba
@@ -277,7 +278,7 @@ def numba_thread_safe() -> bool:
 
 @functools.cache
 def _probe_kernel():
-    """A tiny parallel kernel (built on first use: importing numba costs 0.3 s)."""
+    """A tiny parallel kernel (built on first use, not on import)."""
     import numba
 
     @numba.njit(parallel=True, nogil=True, cache=True)
@@ -293,8 +294,7 @@ def _single_threaded_kernels() -> Iterator[None]:
     """OpenCV and the BLAS behind numpy's matmul on one thread for the block (both restored after).
 
     For worker threads of this process: OpenBLAS's own thread pool, whose idle threads spin, and
-    OpenCV's (process-wide) would oversubscribe the cores. With BLAS threads left on, two worker
-    threads ran 1.45x as fast as one; without, 1.75x.
+    OpenCV's (process-wide) would oversubscribe the cores the worker threads already fill.
     """
     import cv2
     from threadpoolctl import threadpool_limits
@@ -415,8 +415,12 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
         return _map_dask(client, func, items, bar, return_exceptions, label, desc)
 
 
-def _failure(k: int, item, label, exc: BaseException, tb: str) -> ItemFailure:
-    return ItemFailure(index=k, item=_label(item, label), error=f"{type(exc).__name__}: {exc}", traceback=tb)
+def _failure(k: int, items: Sequence, label, exc: BaseException, tb: str, return_exceptions: bool) -> ItemFailure:
+    """Item ``k``'s failure for its slot (``return_exceptions``), else raise :class:`ItemError` naming it."""
+    failure = ItemFailure(index=k, item=_label(items[k], label), error=f"{type(exc).__name__}: {exc}", traceback=tb)
+    if not return_exceptions:
+        raise ItemError(failure) from exc
+    return failure
 
 
 def _prefetched(items: Sequence, prefetch, depth: int) -> Iterator[tuple[bool, Any]]:
@@ -470,10 +474,7 @@ def _map_local(func, items: Sequence, bar, return_exceptions: bool, label, prefe
                 error, tb = exc, _traceback.format_exc()
         else:
             error, tb = value
-        failure = _failure(k, items[k], label, error, tb)
-        if not return_exceptions:
-            raise ItemError(failure) from error
-        results.append(failure)
+        results.append(_failure(k, items, label, error, tb, return_exceptions))
         bar.update(1)
     return results
 
@@ -481,8 +482,8 @@ def _map_local(func, items: Sequence, bar, return_exceptions: bool, label, prefe
 def _map_threads(func, items: Sequence, workers: int, bar, return_exceptions: bool, label, prefetch=None) -> list:
     """:func:`map_ordered` on a pool of ``workers`` single-threaded worker threads of this process.
 
-    No Dask: a thread pool starts in microseconds (a local Dask cluster costs about a second of
-    imports and start-up per run). At most ``2 * workers`` items are in flight.
+    No Dask: a thread pool starts at once, a local Dask cluster only after its imports and
+    start-up. At most ``2 * workers`` items are in flight.
     """
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
@@ -490,22 +491,13 @@ def _map_threads(func, items: Sequence, workers: int, bar, return_exceptions: bo
     results: list = [None] * len(items)
     pending: dict = {}
 
-    def failed(k: int, exc: BaseException, tb: str) -> None:
-        failure = _failure(k, items[k], label, exc, tb)
-        if not return_exceptions:
-            raise ItemError(failure) from exc
-        results[k] = failure
-
     def collect(block_until: int) -> None:
         while len(pending) > block_until:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in done:
                 k = pending.pop(future)
                 ok, value = future.result()[0]
-                if ok:
-                    results[k] = value
-                else:
-                    failed(k, *value)
+                results[k] = value if ok else _failure(k, items, label, *value, return_exceptions)
                 bar.update(1)
 
     with _single_threaded_kernels(), ThreadPoolExecutor(workers, thread_name_prefix="mrstereo-worker") as pool:
@@ -514,7 +506,7 @@ def _map_threads(func, items: Sequence, workers: int, bar, return_exceptions: bo
                 if ok:
                     pending[pool.submit(task, [value])] = k
                 else:
-                    failed(k, *value)
+                    results[k] = _failure(k, items, label, *value, return_exceptions)
                     bar.update(1)
                 collect(2 * workers - 1)
             collect(0)
@@ -528,7 +520,8 @@ def _map_threads(func, items: Sequence, workers: int, bar, return_exceptions: bo
 def _chunk_size(client, n_items: int) -> int:
     """Items per Dask task: about 8 tasks per worker thread, at most 8 items each.
 
-    A Dask task costs 2-4 ms of scheduling in the client's interpreter; a frame 30 ms.
+    A Dask task costs milliseconds of scheduling in the client's interpreter, a sizeable share of a
+    frame's work: a few frames per task amortize it, enough tasks per thread keep the workers busy.
     """
     try:
         threads = max(1, sum(client.nthreads().values()))
@@ -548,148 +541,20 @@ def _map_dask(client, func, items: Sequence, bar, return_exceptions: bool, label
                          key=[f"{desc}-{a}-{token}" for a in starts])
     first = {f.key: a for a, f in zip(starts, futures)}
     results: list = [None] * len(items)
-
-    def failed(k: int, exc: BaseException, tb: str) -> None:
-        failure = ItemFailure(index=k, item=_label(items[k], label), error=f"{type(exc).__name__}: {exc}",
-                              traceback=tb)
-        if not return_exceptions:
-            raise ItemError(failure) from exc
-        results[k] = failure
-
     try:
         for future in as_completed(futures):
             a = first[future.key]
             n = min(size, len(items) - a)
             if future.status == "error":            # the chunk itself failed (e.g. a result that cannot be sent)
                 exc, tb = future.exception(), future.traceback()
+                text = "".join(_traceback.format_tb(tb)) if tb is not None else ""
                 for k in range(a, a + n):
-                    failed(k, exc, "".join(_traceback.format_tb(tb)) if tb is not None else "")
+                    results[k] = _failure(k, items, label, exc, text, return_exceptions)
             else:
                 for k, (ok, value) in enumerate(future.result(), start=a):
-                    if ok:
-                        results[k] = value
-                    else:
-                        failed(k, *value)
+                    results[k] = value if ok else _failure(k, items, label, *value, return_exceptions)
             future.release()
             bar.update(n)
     finally:
         client.cancel([f for f in futures if not f.done()])
     return results
-
-
-class PrestartedCall:
-    """One call of ``module.function`` in a fresh Python process that is started now.
-
-    The process imports ``module`` (and ``preload``) at once, on another core, while this
-    process works -- matplotlib's import costs about half a second of CPU, a figure a third
-    more -- and then waits for its arguments: :meth:`submit` sends them (pickled),
-    :meth:`result` waits for the return value or raises the function's exception. ``mrstereo
-    map`` draws its figure this way. Closing (or leaving the ``with`` block) ends a process
-    that was not called. The process ignores Ctrl-C (this process handles it) and ends when
-    this one does.
-
-    Parameters
-    ----------
-    target : str
-        ``"package.module:function"``.
-    preload : sequence of str
-        Further modules to import ahead (e.g. those the function imports when called).
-    """
-
-    def __init__(self, target: str, *, preload: Sequence[str] = ()):
-        import subprocess
-        from pathlib import Path
-
-        module, _, name = str(target).partition(":")
-        if not module or not name:
-            raise ValueError(f"target must be 'module:function', got {target!r}")
-        env = dict(os.environ)
-        root = str(Path(__file__).resolve().parents[2])          # this mrstereo, whatever sys.path says
-        env["PYTHONPATH"] = os.pathsep.join([root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
-        self._submitted = False
-        self._proc = subprocess.Popen(
-            [sys.executable, "-c", "import sys; from mrstereo.pipeline.parallel import _serve_call; _serve_call(sys.argv[1:])",
-             target, *preload], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env)
-
-    def submit(self, *args, **kwargs) -> None:
-        """Send the arguments; the call runs in the other process."""
-        import pickle
-
-        if self._submitted:
-            raise RuntimeError("a PrestartedCall is called once")
-        self._submitted = True
-        try:
-            self._proc.stdin.write(pickle.dumps((args, kwargs), protocol=pickle.HIGHEST_PROTOCOL))
-            self._proc.stdin.close()
-        except (BrokenPipeError, OSError):
-            pass                            # the process is gone: result() says so
-
-    def result(self):
-        """Wait for the call's return value (or raise its exception)."""
-        import pickle
-
-        if not self._submitted:
-            raise RuntimeError("submit() the arguments first")
-        try:
-            out = self._proc.stdout.read()
-            code = self._proc.wait()
-        finally:
-            self.close()
-        if not out:
-            raise RuntimeError(f"the worker process ended without a result (exit code {code})")
-        ok, value = pickle.loads(out)
-        if ok:
-            return value
-        raise value
-
-    def __call__(self, *args, **kwargs):
-        self.submit(*args, **kwargs)
-        return self.result()
-
-    def close(self) -> None:
-        """End the process if it still runs (it was not called, or the caller gave up)."""
-        if self._proc.poll() is None:
-            self._proc.kill()
-            self._proc.wait()
-        for stream in (self._proc.stdin, self._proc.stdout):
-            if stream is not None and not stream.closed:
-                stream.close()
-
-    def __enter__(self) -> "PrestartedCall":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-
-def _serve_call(argv: Sequence[str]) -> None:
-    """The other side of :class:`PrestartedCall`: import, read ``(args, kwargs)`` from stdin, call, reply."""
-    import importlib
-    import pickle
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    target, *preload = argv
-    module, _, name = target.partition(":")
-    try:
-        function = getattr(importlib.import_module(module), name)
-        for extra in preload:
-            importlib.import_module(extra)
-    except Exception as exc:                 # reported when the call comes
-        function, failure = None, exc
-    data = sys.stdin.buffer.read()
-    if not data:
-        return                               # closed without a call
-    try:
-        args, kwargs = pickle.loads(data)
-        if function is None:
-            raise failure
-        reply = (True, function(*args, **kwargs))
-    except Exception as exc:
-        reply = (False, exc)
-    try:
-        out = pickle.dumps(reply, protocol=pickle.HIGHEST_PROTOCOL)
-    except Exception as exc:                 # an exception (or result) that does not pickle
-        out = pickle.dumps((False, RuntimeError(f"{type(reply[1]).__name__}: {reply[1]} ({exc})")))
-    sys.stdout.buffer.write(out)
-    sys.stdout.buffer.flush()

@@ -3,6 +3,8 @@
 Generated from the per-file provenance table of the sample data (repository, commit, path;
 files are byte-identical to the source blobs). One row per file:
 ``(path under the data root, GitHub repository, commit, path in the repository, SHA-256)``.
+
+Conventions: docs/conventions.md.
 """
 
 SCENES = {

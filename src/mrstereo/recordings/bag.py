@@ -15,17 +15,18 @@ manifest reads a recording too:
    or from TF (``base_link`` in ``map`` or ``odom``, chained through ``/tf``
    and ``/tf_static`` in 3-D), interpolated linearly (slerp for rotations)
    between the two nearest messages and held constant outside their time
-   span, then projected onto the floor plane for the 2-D map: ``(x, y, yaw)``
-   of the base frame's x axis;
+   span; the manifest keeps the 3-D pose (``[x, y, z, qx, qy, qz, qw]``), whose projection on
+   the floor plane, ``(x, y, yaw)`` of the base frame's x axis, the 2-D map uses; every frame keeps
+   its left image's header stamp (``stamp_s``);
 4. the camera mount (``T_base_from_cam``, :class:`~mrstereo.camera.mount.CameraMount`)
-   is the one given (``rig``: a CameraMount or the paper's RigMount), else
-   the stereo YAML's ``mount:``/``rig:``, else the TF pose of ``camera_frame``
+   is the one given, else the stereo YAML's ``mount:``/``rig:``, else the TF pose of ``camera_frame``
    in ``base_frame`` at the first frame (an ``*optical*`` frame as it is, any
    other frame as the camera body, x forward, REP 103), else none: the
    manifest then has no mount and ``map``/``batch`` estimate the floor;
 5. the head pan of a frame is the change of heading of ``camera_frame``'s
-   optical axis in the base frame relative to the mount (0 without a
-   ``camera_frame``).
+   optical axis in the base frame: relative to the given mount's rectified
+   optical axis, or to ``camera_frame`` at the first frame when the mount comes
+   from TF (0 without a ``camera_frame``).
 
 Conventions: docs/conventions.md; user guide: docs/scale-out.md.
 """
@@ -34,7 +35,6 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import shutil
 import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -44,13 +44,13 @@ import cv2
 import numpy as np
 
 from .. import _checks
-from ..camera import CameraInfo, RigMount, StereoCamera, write_stereo
-from ..camera.mount import CameraMount
-from ..io import write_image
-from ..transforms import R_BODY_FROM_OPTICAL, planar_from_T, rotation_from_quaternion, slerp, wrap_angle
+from ..camera import CameraInfo, CameraMount, StereoCamera
+from ..io import check_output_dir
+from ..transforms import R_BODY_FROM_OPTICAL, rotation_from_quaternion, slerp, wrap_angle
+from .manifest import pose_3d_of, staged_dataset
 
 __all__ = ["BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message", "SUPPORTED_ENCODINGS",
-           "camera_info_from_message", "stereo_from_camera_info", "pair_by_stamp",
+           "camera_info_from_message", "stereo_from_camera_info", "stereo_from_bag", "pair_by_stamp",
            "export_bag", "exported_bag"]
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -182,10 +182,10 @@ def camera_info_from_message(msg, *, name: str = "camera") -> CameraInfo:
     return CameraInfo.from_dict(data, where=f"camera_info of {name}")
 
 
-def stereo_from_camera_info(left_msg, right_msg, *, rig: RigMount | None = None) -> StereoCamera:
+def stereo_from_camera_info(left_msg, right_msg) -> StereoCamera:
     """A :class:`StereoCamera` from the left and right ``CameraInfo`` messages of a stereo head."""
     return StereoCamera(left=camera_info_from_message(left_msg, name="left"),
-                        right=camera_info_from_message(right_msg, name="right"), rig=rig)
+                        right=camera_info_from_message(right_msg, name="right"))
 
 
 def pair_by_stamp(left_ns: Sequence[int], right_ns: Sequence[int], *, tolerance_ns: int) -> list[tuple[int, int]]:
@@ -320,9 +320,11 @@ class BagExport:
         Image messages on the two topics.
     stamps_ns : tuple of int
         Left image stamp of every frame.
-    rig : RigMount, CameraMount or None
+    calibration : StereoCamera
+        The calibration written as ``stereo.yaml``.
+    mount : CameraMount or None
         The mount written to the manifest (None: none known, estimated when mapping).
-    rig_source : str
+    mount_source : str
         ``"calibration"``, ``"options"``, ``"tf <base> <- <camera>"`` or ``"none (...)"``.
     pose_source : str
         ``"odometry <topic>"``, ``"tf <world> <- <base>"`` or ``"none (origin)"``.
@@ -333,9 +335,19 @@ class BagExport:
     n_left: int
     n_right: int
     stamps_ns: tuple[int, ...]
-    rig: RigMount | CameraMount | None
-    rig_source: str
+    calibration: StereoCamera
+    mount: CameraMount | None
+    mount_source: str
     pose_source: str
+
+
+@dataclass
+class _BagStream:
+    """What the first pass over a bag collects: image stamps per topic, odometry samples and TF."""
+
+    stamps: dict[str, list[int]]
+    odom_samples: list = field(default_factory=list)
+    tf: TfTree = field(default_factory=TfTree)
 
 
 def _require_topic(topics: dict[str, str], topic: str, option: str, types: Sequence[str]) -> str:
@@ -353,11 +365,151 @@ def _round_pose(values) -> tuple[float, ...]:
     return tuple(round(float(v), 9) + 0.0 for v in values)
 
 
+def _camera_info_topics(topics: dict[str, str], left_topic: str, right_topic: str,
+                        camera_info_topics: tuple[str, str] | None) -> tuple[str, str]:
+    """The left and right CameraInfo topics: given, or ``<image topic namespace>/camera_info``."""
+    if camera_info_topics is None:
+        guess = tuple(t.rsplit("/", 1)[0] + "/camera_info" for t in (left_topic, right_topic))
+        if not all(t in topics for t in guess):
+            raise ValueError("no calibration: give the camera_info topics (left,right) or a stereo YAML "
+                             f"(looked for {guess[0]} and {guess[1]})")
+        camera_info_topics = guess
+    if len(camera_info_topics) != 2:
+        raise ValueError(f"camera_info_topics must be (left, right), got {camera_info_topics!r}")
+    for t, side in zip(camera_info_topics, ("left", "right")):
+        _require_topic(topics, t, f"{side} camera_info topic", (CAMERA_INFO_TYPE,))
+    return tuple(camera_info_topics)
+
+
+def _stereo_of_reader(reader, camera_info_topics: tuple[str, str]) -> StereoCamera:
+    """The calibration of the first left and right CameraInfo messages."""
+    infos: dict[str, object] = {}
+    for conn, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic in camera_info_topics]):
+        if conn.topic not in infos:
+            infos[conn.topic] = reader.deserialize(raw, conn.msgtype)
+            if len(infos) == 2:
+                break
+    missing = [t for t in camera_info_topics if t not in infos]
+    if missing:
+        raise ValueError(f"camera_info topic {missing[0]} has no messages")
+    return stereo_from_camera_info(infos[camera_info_topics[0]], infos[camera_info_topics[1]])
+
+
+def stereo_from_bag(bag: str | os.PathLike, *, left_topic: str, right_topic: str,
+                    camera_info_topics: tuple[str, str] | None = None) -> StereoCamera:
+    """The calibration of a bag's stereo head: its first left and right ``CameraInfo`` messages.
+
+    ``camera_info_topics`` default to ``<image topic namespace>/camera_info``.
+    """
+    with _open_bag(bag) as reader:
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        return _stereo_of_reader(reader, _camera_info_topics(topics, left_topic, right_topic, camera_info_topics))
+
+
+def _read_stream(reader, *, left_topic: str, right_topic: str, odom_topic: str | None,
+                 tf_topics: Sequence[str]) -> _BagStream:
+    """First pass: the header stamps of the images, the odometry samples and the TF tree."""
+    stream = _BagStream(stamps={left_topic: [], right_topic: []})
+    wanted = {left_topic, right_topic, odom_topic, *tf_topics}
+    for conn, bag_ns, raw in reader.messages(connections=[c for c in reader.connections if c.topic in wanted]):
+        if conn.topic in (left_topic, right_topic):
+            stream.stamps[conn.topic].append(_stamp_ns(reader.deserialize(raw, conn.msgtype), bag_ns))
+        elif conn.topic == odom_topic:
+            msg = reader.deserialize(raw, conn.msgtype)
+            p, q = msg.pose.pose.position, msg.pose.pose.orientation
+            stream.odom_samples.append((_stamp_ns(msg, bag_ns), (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)))
+        else:
+            stream.tf.add_message(reader.deserialize(raw, conn.msgtype), static=conn.topic == "/tf_static")
+    return stream
+
+
+def _stereo_pairs(stamps: dict[str, list[int]], left_topic: str, right_topic: str,
+                  tolerance_s: float) -> list[tuple[int, int]]:
+    """Left and right images paired by stamp; a named error when there are none."""
+    n_left, n_right = len(stamps[left_topic]), len(stamps[right_topic])
+    if n_left == 0 or n_right == 0:
+        raise ValueError(f"no images: {n_left} messages on {left_topic}, {n_right} on {right_topic}")
+    pairs = pair_by_stamp(stamps[left_topic], stamps[right_topic], tolerance_ns=int(round(tolerance_s * 1e9)))
+    if not pairs:
+        gaps = [abs(a - b) for a in stamps[left_topic][:50] for b in stamps[right_topic][:50]]
+        raise ValueError(f"no left/right image pairs within {tolerance_s} s ({n_left} left, {n_right} right "
+                         f"images; smallest stamp difference {min(gaps) / 1e9:.4f} s): raise --sync-tolerance")
+    return pairs
+
+
+def _robot_poses(stream: _BagStream, frame_stamps: list[int], *, odom_topic: str | None, use_tf: bool,
+                 world_frame: str | None, base_frame: str) -> tuple[list, str]:
+    """The robot pose at each frame stamp, from odometry or TF (else the origin), and where it came from."""
+    if odom_topic is not None:
+        if not stream.odom_samples:
+            raise ValueError(f"odometry topic {odom_topic} has no messages")
+        track = TransformTrack.from_samples(stream.odom_samples)
+        return [_pose_of(track.at(t)) for t in frame_stamps], f"odometry {odom_topic}"
+    if use_tf:
+        if world_frame is None:
+            world_frame = "map"
+            try:
+                stream.tf.chain("map", base_frame)
+            except ValueError:
+                world_frame = "odom"
+        stream.tf.chain(world_frame, base_frame)
+        return ([_pose_of(stream.tf.lookup(world_frame, base_frame, t)) for t in frame_stamps],
+                f"tf {world_frame} <- {base_frame}")
+    return [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)] * len(frame_stamps), "none (every frame at the origin)"
+
+
+def _mount_and_pans(tf: TfTree, frame_stamps: list[int], *, mount: CameraMount | None, calibration: StereoCamera,
+                    base_frame: str, camera_frame: str | None) -> tuple[CameraMount | None, str, list[float]]:
+    """The mount (given, the calibration's, else TF's), where it came from, and the head pan of every frame.
+
+    A pan is the change of heading of ``camera_frame``'s optical axis: relative to the given mount's
+    rectified optical axis, or to ``camera_frame`` at the first frame when the mount comes from TF.
+    """
+    source = "options" if mount is not None else "calibration"
+    if mount is None:
+        mount = calibration.mount
+    pans = [0.0] * len(frame_stamps)
+    if camera_frame is not None:
+        T_cams = [_optical_in_base(tf.lookup(base_frame, camera_frame, t), camera_frame) for t in frame_stamps]
+        if mount is None:
+            mount, source = CameraMount(T_cams[0]), f"tf {base_frame} <- {camera_frame}"
+            ref = _heading(T_cams[0], 2)
+        else:
+            ref = _heading(mount.T_base_from_rectified(calibration.left.R), 2)
+        pans = [_round_pose([wrap_angle(_heading(T, 2) - ref)])[0] for T in T_cams]
+    if mount is None:
+        source = "none (the floor is estimated when mapping)"
+    return mount, source, pans
+
+
+def _write_pairs(reader, dataset, pairs: list[tuple[int, int]], *, topics: tuple[str, str], keys: tuple[str, str],
+                 calibration: StereoCamera, progress: bool) -> None:
+    """Second pass: decode the paired images and write them as frames ``0 .. len(pairs) - 1``."""
+    from tqdm.auto import tqdm
+
+    slot = {topics[0]: {i: k for k, (i, _) in enumerate(pairs)}, topics[1]: {j: k for k, (_, j) in enumerate(pairs)}}
+    key_of = dict(zip(topics, keys))
+    count = dict.fromkeys(topics, 0)
+    with tqdm(total=2 * len(pairs), desc="exporting", unit="image", disable=not progress) as bar:
+        for conn, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic in topics]):
+            n = count[conn.topic]
+            count[conn.topic] += 1
+            k = slot[conn.topic].get(n)
+            if k is None:
+                continue
+            image = image_from_message(reader.deserialize(raw, conn.msgtype), conn.msgtype)
+            if (image.shape[1], image.shape[0]) != tuple(calibration.size):
+                raise ValueError(f"{conn.topic}: images are {image.shape[1]}x{image.shape[0]} but the "
+                                 f"calibration is {calibration.size[0]}x{calibration.size[1]}")
+            dataset.write(key_of[conn.topic], k, image)
+            bar.update(1)
+
+
 def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic: str, right_topic: str,
                camera_info_topics: tuple[str, str] | None = None, calibration: StereoCamera | None = None,
                odom_topic: str | None = None, use_tf: bool = False, world_frame: str | None = None,
                base_frame: str = "base_link", camera_frame: str | None = None, sync_tolerance_s: float = 0.02,
-               rig: RigMount | None = None, rectified: bool = False, progress: bool = True) -> BagExport:
+               mount: CameraMount | None = None, rectified: bool = False, progress: bool = True) -> BagExport:
     """Write the stereo pairs of a bag as a dataset directory (manifest format, PNG images).
 
     Parameters
@@ -389,7 +541,7 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
         the head pan (default: pan 0).
     sync_tolerance_s : float
         Largest left/right stamp difference of a pair.
-    rig : CameraMount or RigMount, optional
+    mount : CameraMount, optional
         Camera mount; default the calibration's, else from TF (``camera_frame``),
         else none (the floor is estimated when mapping).
     rectified : bool
@@ -397,11 +549,6 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
     progress : bool
         tqdm progress bar on stderr.
     """
-    from tqdm.auto import tqdm
-
-    from .manifest import MANIFEST_NAME, write_manifest
-
-    out_dir = Path(out_dir)
     tolerance = _checks.finite_number("sync_tolerance_s", sync_tolerance_s, nonnegative=True)
     if odom_topic is not None and use_tf:
         raise ValueError("give an odometry topic or use TF for the pose, not both")
@@ -409,165 +556,50 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
         raise ValueError(f"left and right topics must differ, both are {left_topic!r}")
     if calibration is not None and not isinstance(calibration, StereoCamera):
         raise TypeError(f"calibration must be a StereoCamera, got {type(calibration).__name__}")
-    if rig is not None and not isinstance(rig, (RigMount, CameraMount)):
-        raise TypeError(f"rig must be a RigMount or CameraMount, got {type(rig).__name__}")
-    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
-        raise ValueError(f"output directory {out_dir} already exists and is not empty; choose a new directory")
+    if mount is not None and not isinstance(mount, CameraMount):
+        raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
+    check_output_dir("out_dir", out_dir, must_be_empty=True)
     with _open_bag(bag) as reader:
         topics = {c.topic: c.msgtype for c in reader.connections}
-        left_type = _require_topic(topics, left_topic, "left topic", IMAGE_TYPES)
-        right_type = _require_topic(topics, right_topic, "right topic", IMAGE_TYPES)
-        if calibration is None and camera_info_topics is None:
-            guess = tuple(t.rsplit("/", 1)[0] + "/camera_info" for t in (left_topic, right_topic))
-            if not all(t in topics for t in guess):
-                raise ValueError("no calibration: give the camera_info topics (left,right) or a stereo YAML "
-                                 f"(looked for {guess[0]} and {guess[1]})")
-            camera_info_topics = guess
-        if camera_info_topics is not None and calibration is None:
-            if len(camera_info_topics) != 2:
-                raise ValueError(f"camera_info_topics must be (left, right), got {camera_info_topics!r}")
-            for t, side in zip(camera_info_topics, ("left", "right")):
-                _require_topic(topics, t, f"{side} camera_info topic", (CAMERA_INFO_TYPE,))
+        for topic, side in ((left_topic, "left"), (right_topic, "right")):
+            _require_topic(topics, topic, f"{side} topic", IMAGE_TYPES)
+        if calibration is None:
+            camera_info_topics = _camera_info_topics(topics, left_topic, right_topic, camera_info_topics)
         if odom_topic is not None:
             _require_topic(topics, odom_topic, "odometry topic", (ODOMETRY_TYPE,))
         tf_topics = [t for t in TF_TOPICS if topics.get(t) in TF_TYPES]
         if (use_tf or camera_frame is not None) and not tf_topics:
             raise ValueError("TF requested but the bag has no /tf or /tf_static topic of type tf2_msgs/msg/TFMessage")
-
-        # pass 1: stamps of the images; calibration, odometry, TF
-        wanted = {left_topic, right_topic}
+        stream = _read_stream(reader, left_topic=left_topic, right_topic=right_topic, odom_topic=odom_topic,
+                              tf_topics=tf_topics if use_tf or camera_frame is not None else ())
+        pairs = _stereo_pairs(stream.stamps, left_topic, right_topic, tolerance)
         if calibration is None:
-            wanted |= set(camera_info_topics)
-        if odom_topic is not None:
-            wanted.add(odom_topic)
-        if use_tf or camera_frame is not None:
-            wanted |= set(tf_topics)
-        connections = [c for c in reader.connections if c.topic in wanted]
-        stamps: dict[str, list[int]] = {left_topic: [], right_topic: []}
-        infos: dict[str, object] = {}
-        odom_samples, odom_frames = [], set()
-        tf = TfTree()
-        for conn, bag_ns, raw in reader.messages(connections=connections):
-            if conn.topic in (left_topic, right_topic):
-                msg = reader.deserialize(raw, conn.msgtype)
-                stamps[conn.topic].append(_stamp_ns(msg, bag_ns))
-            elif camera_info_topics is not None and conn.topic in camera_info_topics:
-                if conn.topic not in infos:
-                    infos[conn.topic] = reader.deserialize(raw, conn.msgtype)
-            elif conn.topic == odom_topic:
-                msg = reader.deserialize(raw, conn.msgtype)
-                p, q = msg.pose.pose.position, msg.pose.pose.orientation
-                odom_samples.append((_stamp_ns(msg, bag_ns), (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)))
-                odom_frames.add((msg.header.frame_id, msg.child_frame_id))
-            elif conn.topic in tf_topics:
-                tf.add_message(reader.deserialize(raw, conn.msgtype), static=conn.topic == "/tf_static")
-        n_left, n_right = len(stamps[left_topic]), len(stamps[right_topic])
-        if n_left == 0 or n_right == 0:
-            raise ValueError(f"no images: {n_left} messages on {left_topic}, {n_right} on {right_topic}")
-        pairs = pair_by_stamp(stamps[left_topic], stamps[right_topic], tolerance_ns=int(round(tolerance * 1e9)))
-        if not pairs:
-            gaps = [abs(a - b) for a in stamps[left_topic][:50] for b in stamps[right_topic][:50]]
-            raise ValueError(f"no left/right image pairs within {tolerance} s ({n_left} left, {n_right} right "
-                             f"images; smallest stamp difference {min(gaps) / 1e9:.4f} s): "
-                             "raise --sync-tolerance")
-
-        if calibration is None:
-            missing = [t for t in camera_info_topics if t not in infos]
-            if missing:
-                raise ValueError(f"camera_info topic {missing[0]} has no messages")
-            calibration = stereo_from_camera_info(infos[camera_info_topics[0]], infos[camera_info_topics[1]])
-
-        # poses and pans at the left stamps
-        frame_stamps = [stamps[left_topic][i] for i, _ in pairs]
-        if odom_topic is not None:
-            if not odom_samples:
-                raise ValueError(f"odometry topic {odom_topic} has no messages")
-            track = TransformTrack.from_samples(odom_samples)
-            poses = [_pose_of(track.at(t)) for t in frame_stamps]
-            pose_source = f"odometry {odom_topic}"
-        elif use_tf:
-            if world_frame is None:
-                world_frame = "map"
-                try:
-                    tf.chain("map", base_frame)
-                except ValueError:
-                    world_frame = "odom"
-            tf.chain(world_frame, base_frame)
-            poses = [_pose_of(tf.lookup(world_frame, base_frame, t)) for t in frame_stamps]
-            pose_source = f"tf {world_frame} <- {base_frame}"
-        else:
-            poses = [(0.0, 0.0, 0.0)] * len(frame_stamps)
-            pose_source = "none (every frame at the origin)"
-        pans = [0.0] * len(frame_stamps)
-        rig_source = "options" if rig is not None else "calibration"
-        if rig is None:
-            rig = calibration.rig
-        if camera_frame is not None:
-            T_cams = [_optical_in_base(tf.lookup(base_frame, camera_frame, t), camera_frame) for t in frame_stamps]
-            if rig is None:
-                rig = CameraMount(T_cams[0])
-                rig_source = f"tf {base_frame} <- {camera_frame}"
-            ref = _heading(_mount_matrix(rig), 2)
-            pans = [_round_pose([wrap_angle(_heading(T, 2) - ref)])[0] for T in T_cams]
-        if rig is None:
-            rig_source = "none (the floor is estimated when mapping)"
-
-        # pass 2: decode and write the paired images
-        out_dir.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
-        try:
-            keys = ("left_rect", "right_rect") if rectified else ("left", "right")
-            slot = {left_topic: {i: k for k, (i, _) in enumerate(pairs)},
-                    right_topic: {j: k for k, (_, j) in enumerate(pairs)}}
-            key_of = {left_topic: keys[0], right_topic: keys[1]}
-            type_of = {left_topic: left_type, right_topic: right_type}
-            count = {left_topic: 0, right_topic: 0}
-            image_conns = [c for c in reader.connections if c.topic in (left_topic, right_topic)]
-            bar = tqdm(total=2 * len(pairs), desc="exporting", unit="image", disable=not progress)
-            for conn, _, raw in reader.messages(connections=image_conns):
-                n = count[conn.topic]
-                count[conn.topic] += 1
-                k = slot[conn.topic].get(n)
-                if k is None:
-                    continue
-                image = image_from_message(reader.deserialize(raw, conn.msgtype), type_of[conn.topic])
-                if (image.shape[1], image.shape[0]) != tuple(calibration.size):
-                    raise ValueError(f"{conn.topic}: images are {image.shape[1]}x{image.shape[0]} but the "
-                                     f"calibration is {calibration.size[0]}x{calibration.size[1]}")
-                write_image(tmp / key_of[conn.topic] / f"{k:06d}.png", image)
-                bar.update(1)
-            bar.close()
-            write_stereo(tmp / CALIBRATION_NAME, calibration)
-            frames = []
+            calibration = _stereo_of_reader(reader, camera_info_topics)
+        frame_stamps = [stream.stamps[left_topic][i] for i, _ in pairs]
+        poses, pose_source = _robot_poses(stream, frame_stamps, odom_topic=odom_topic, use_tf=use_tf,
+                                          world_frame=world_frame, base_frame=base_frame)
+        mount, mount_source, pans = _mount_and_pans(stream.tf, frame_stamps, mount=mount, calibration=calibration,
+                                                    base_frame=base_frame, camera_frame=camera_frame)
+        source = {"bag": str(Path(bag).resolve()), "left_topic": left_topic, "right_topic": right_topic,
+                  "pose_source": pose_source, "mount_source": mount_source, "stamps_ns": frame_stamps}
+        with staged_dataset(out_dir, calibration=calibration, mount=mount, calibration_name=CALIBRATION_NAME,
+                            extra={"source": source}) as dataset:
+            _write_pairs(reader, dataset, pairs, topics=(left_topic, right_topic), calibration=calibration,
+                         keys=("left_rect", "right_rect") if rectified else ("left", "right"), progress=progress)
             for k in range(len(pairs)):
-                entry = {keys[0]: f"{keys[0]}/{k:06d}.png", keys[1]: f"{keys[1]}/{k:06d}.png",
-                         "pose": [float(v) for v in poses[k]], "pan_rad": float(pans[k])}
-                frames.append(entry)
-            source = {"bag": str(Path(bag).resolve()), "left_topic": left_topic, "right_topic": right_topic,
-                      "pose_source": pose_source, "rig_source": rig_source, "stamps_ns": frame_stamps}
-            write_manifest(tmp / MANIFEST_NAME, calibration=CALIBRATION_NAME, rig=rig, frames=frames,
-                           extra={"source": source})
-            if out_dir.exists():
-                out_dir.rmdir()
-            os.replace(tmp, out_dir)
-        finally:
-            if tmp.exists():
-                shutil.rmtree(tmp, ignore_errors=True)
-    return BagExport(out_dir=out_dir, n_frames=len(pairs), n_left=n_left, n_right=n_right,
-                     stamps_ns=tuple(frame_stamps), rig=rig, rig_source=rig_source, pose_source=pose_source)
+                dataset.add_frame(k, pose=poses[k], pan_rad=pans[k], stamp_s=frame_stamps[k] / 1e9)
+    return BagExport(out_dir=Path(out_dir), n_frames=len(pairs), n_left=len(stream.stamps[left_topic]),
+                     n_right=len(stream.stamps[right_topic]), stamps_ns=tuple(frame_stamps), calibration=calibration,
+                     mount=mount, mount_source=mount_source, pose_source=pose_source)
 
 
-def _pose_of(T: np.ndarray) -> tuple[float, float, float]:
-    return _round_pose(tuple(planar_from_T(T)))
+def _pose_of(T: np.ndarray) -> tuple[float, ...]:
+    """The manifest's 3-D pose ``(x, y, z, qx, qy, qz, qw)`` of a 4x4 transform."""
+    return _round_pose(pose_3d_of(T))
 
 
 def _heading(T: np.ndarray, axis: int) -> float:
     return math.atan2(T[1, axis], T[0, axis])
-
-
-def _mount_matrix(mount) -> np.ndarray:
-    """``T_base_from_cam`` of a CameraMount or of the paper's RigMount."""
-    return mount.T_base_from_cam if isinstance(mount, CameraMount) else CameraMount.from_rig(mount).T_base_from_cam
 
 
 def _optical_in_base(T_base_from_frame: np.ndarray, frame: str) -> np.ndarray:

@@ -2,34 +2,36 @@
 
 Layout (docs/dataset.md)::
 
-    DIR/manifest.yaml        calibration, rig, ground_truth_map, frames
+    DIR/manifest.yaml        calibration, mount, ground_truth_map, frames
     DIR/calibration.yaml     stereo calibration (mrstereo.camera.write_stereo)
     DIR/gt_map.yaml, .pgm    ROS map_server ground-truth map (optional)
     DIR/left/000000.png ...  raw images; left_rect/, right_rect/ rectified;
     DIR/gt_disparity/*.pfm   ground-truth disparity (optional); gt_labels/*.png
 
-Paths in the manifest are relative to DIR. ``mrstereo bag export`` and the
-synthetic world (:mod:`mrstereo.world.dataset`) write it; ``map``, ``batch``
-and the pipeline read it. A frame may give only raw or only rectified images,
+Paths in the manifest are relative to DIR. ``mrstereo export`` (a ROS bag) and the
+synthetic world (:mod:`mrstereo.world.dataset`) write it with :func:`staged_dataset`;
+``map``, ``batch`` and the pipeline read it. A frame may give only raw or only rectified images,
 and every ground-truth entry is optional. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from ..camera import RigMount, StereoCamera, read_stereo
-from ..camera.mount import CameraMount, mount_entry, read_mount_entry
-from ..io import matching_image, read_image, read_yaml
+from ..camera import CameraMount, StereoCamera, mount_entry, read_mount_entry, read_stereo, write_stereo
+from ..io import check_output_dir, matching_image, read_image, read_yaml, temporary_dir, write_image, write_pfm
 from ..profiling import stage
+from ..transforms import T_from_planar, T_from_position_quaternion, planar_from_T, quaternion_from_rotation
 
-__all__ = ["FrameRecord", "Manifest", "read_manifest", "write_manifest", "frame_pair", "MANIFEST_NAME",
-           "IMAGE_KEYS", "GT_KEYS"]
+__all__ = ["FrameRecord", "Manifest", "read_manifest", "write_manifest", "frame_pair", "pose_3d_of", "staged_dataset",
+           "DatasetWriter", "MANIFEST_NAME", "IMAGE_KEYS", "GT_KEYS"]
 
 MANIFEST_NAME = "manifest.yaml"
 IMAGE_KEYS = ("left", "right", "left_rect", "right_rect")
@@ -38,13 +40,17 @@ GT_KEYS = ("gt_disparity", "gt_labels")
 
 @dataclass(frozen=True)
 class FrameRecord:
-    """One frame of a dataset: absolute image paths (None when absent), pose and head pan.
+    """One frame of a dataset: absolute image paths (None when absent), stamp, poses and head pan.
 
-    ``pose`` is the pose the robot reported (its odometry); ``true_pose``, when the dataset
-    has it (a synthetic sequence with drifted odometry), the ground truth.
+    ``pose`` is the planar pose ``(x_m, y_m, yaw_rad)`` the robot reported (its odometry);
+    ``true_pose``, when the dataset has it (a synthetic sequence with drifted odometry, a
+    benchmark's ground truth), the truth. ``pose_3d`` / ``true_pose_3d``, when the recording
+    knows them, are the same poses in 3-D, ``(x, y, z, qx, qy, qz, qw)`` (TUM order); the planar
+    pose is then their projection on the floor (:func:`mrstereo.transforms.planar_from_T`) and
+    may be left out (None). ``stamp_s``: the frame's time stamp in seconds (None: unknown).
     """
 
-    pose: tuple[float, float, float]
+    pose: tuple[float, float, float] | None
     pan_rad: float = 0.0
     left: Path | None = None
     right: Path | None = None
@@ -53,6 +59,25 @@ class FrameRecord:
     gt_disparity: Path | None = None
     gt_labels: Path | None = None
     true_pose: tuple[float, float, float] | None = None
+    stamp_s: float | None = None
+    pose_3d: tuple[float, ...] | None = None
+    true_pose_3d: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        for planar, full in (("pose", "pose_3d"), ("true_pose", "true_pose_3d")):
+            T = getattr(self, full)
+            if T is None:
+                if planar == "pose" and self.pose is None:
+                    raise ValueError("a frame needs pose (x_m, y_m, yaw_rad) or pose_3d")
+                continue
+            projected = tuple(float(v) for v in planar_from_T(_T_of_3d(full, T)))
+            given = getattr(self, planar)
+            if given is None:
+                object.__setattr__(self, planar, projected)
+            elif not np.allclose(given[:2], projected[:2], atol=1e-6) or \
+                    abs(math.remainder(given[2] - projected[2], math.tau)) > 1e-6:
+                raise ValueError(f"{planar} {tuple(given)} is not the floor projection {projected} of {full}: "
+                                 f"give both from the same pose (or {full}=None)")
 
     @property
     def has_raw(self) -> bool:
@@ -61,6 +86,31 @@ class FrameRecord:
     @property
     def has_rectified(self) -> bool:
         return self.left_rect is not None and self.right_rect is not None
+
+    @property
+    def T_world_from_base(self) -> np.ndarray:
+        """The given pose as a 4x4 transform: ``pose_3d`` when known, else the planar ``pose``."""
+        return _T_of_3d("pose_3d", self.pose_3d) if self.pose_3d is not None else T_from_planar(*self.pose)
+
+    @property
+    def T_world_from_base_true(self) -> np.ndarray | None:
+        """The true pose as a 4x4 transform (3-D when known), None without one."""
+        if self.true_pose_3d is not None:
+            return _T_of_3d("true_pose_3d", self.true_pose_3d)
+        return None if self.true_pose is None else T_from_planar(*self.true_pose)
+
+
+def pose_3d_of(T_world_from_base) -> tuple[float, ...]:
+    """``(x, y, z, qx, qy, qz, qw)`` of a 4x4 pose (the manifest's and TUM's order)."""
+    T = np.asarray(T_world_from_base, dtype=np.float64)
+    return tuple(float(v) for v in (*T[:3, 3], *quaternion_from_rotation(T[:3, :3])))
+
+
+def _T_of_3d(name: str, pose) -> np.ndarray:
+    values = tuple(pose) if isinstance(pose, (list, tuple, np.ndarray)) else ()
+    if len(values) != 7 or not all(isinstance(v, (int, float, np.floating)) and math.isfinite(v) for v in values):
+        raise ValueError(f"{name} must be 7 finite numbers (x, y, z, qx, qy, qz, qw), got {pose!r}")
+    return T_from_position_quaternion(values[:3], values[3:])
 
 
 @dataclass(frozen=True)
@@ -74,10 +124,10 @@ class Manifest:
     calibration : StereoCamera
         Stereo calibration read from ``calibration_path``.
     calibration_path : Path
-    rig : RigMount, CameraMount or None
-        Camera mount: the manifest's ``mount:`` (6-DoF, a CameraMount) or ``rig:``
-        (height and tilt, a RigMount), else the calibration's; None when no mount
-        is known (the floor is then estimated, :func:`mrstereo.pipeline.build_map`).
+    mount : CameraMount or None
+        Camera mount: the manifest's ``mount:`` (6-DoF) or ``rig:`` (the paper's height and
+        tilt of the rectified camera), else the calibration's; None when no mount is known
+        (the floor is then estimated, :func:`mrstereo.pipeline.build_map`).
     ground_truth_map : Path or None
         ROS map YAML of the true map.
     frames : tuple of FrameRecord
@@ -86,9 +136,15 @@ class Manifest:
     root: Path
     calibration: StereoCamera
     calibration_path: Path
-    rig: RigMount | CameraMount | None
+    mount: CameraMount | None
     ground_truth_map: Path | None
     frames: tuple[FrameRecord, ...]
+
+    @property
+    def stamps_s(self) -> np.ndarray | None:
+        """Every frame's stamp (seconds), or None when a frame has none."""
+        stamps = [f.stamp_s for f in self.frames]
+        return None if any(s is None for s in stamps) else np.array(stamps, dtype=np.float64)
 
 
 def _fail(path: Path, message: str) -> ValueError:
@@ -113,7 +169,7 @@ def read_manifest(path_or_dir: str | os.PathLike) -> Manifest:
         The manifest, the calibration or a referenced image is missing.
     ValueError
         Corrupt YAML, no frames, a frame without a raw or rectified image pair,
-        a bad pose or pan, or a bad rig -- naming the frame and field.
+        a bad pose or pan, or a bad mount -- naming the frame and field.
     """
     path = Path(path_or_dir)
     if path.is_dir():
@@ -128,9 +184,9 @@ def read_manifest(path_or_dir: str | os.PathLike) -> Manifest:
         raise _fail(path, "missing 'calibration: <stereo YAML path>'")
     calib_path = _existing_file(root, data["calibration"], "calibration", path)
     calibration = read_stereo(calib_path)
-    rig = read_mount_entry(data, where=f"manifest {path}")
-    if rig is None:
-        rig = calibration.rig
+    mount = read_mount_entry(data, where=f"manifest {path}", R_rect_from_cam=calibration.left.R)
+    if mount is None:
+        mount = calibration.mount
     gt_map = None
     if data.get("ground_truth_map") is not None:
         gt_map = _existing_file(root, data["ground_truth_map"], "ground_truth_map", path)
@@ -138,7 +194,7 @@ def read_manifest(path_or_dir: str | os.PathLike) -> Manifest:
     if not isinstance(frames_data, list) or not frames_data:
         raise _fail(path, "'frames' must be a non-empty list")
     frames = tuple(_frame(root, path, k, item) for k, item in enumerate(frames_data))
-    return Manifest(root=root, calibration=calibration, calibration_path=calib_path, rig=rig,
+    return Manifest(root=root, calibration=calibration, calibration_path=calib_path, mount=mount,
                     ground_truth_map=gt_map, frames=frames)
 
 
@@ -146,19 +202,23 @@ def _frame(root: Path, manifest: Path, k: int, item) -> FrameRecord:
     where = f"frame {k}"
     if not isinstance(item, dict):
         raise _fail(manifest, f"{where} must be a mapping")
-    unknown = set(item) - set(IMAGE_KEYS) - set(GT_KEYS) - {"pose", "pan_rad", "true_pose"}
+    unknown = set(item) - set(IMAGE_KEYS) - set(GT_KEYS) - {"pose", "pan_rad", "true_pose", "stamp_s"}
     if unknown:
         raise _fail(manifest, f"{where}: unknown field(s) {sorted(unknown)}")
-    pose = _planar_pose(manifest, where, "pose", item.get("pose"))
-    true_pose = None
-    if item.get("true_pose") is not None:
-        true_pose = _planar_pose(manifest, where, "true_pose", item["true_pose"])
+    poses = {}
+    for key in ("pose", "true_pose"):
+        if key == "pose" or item.get(key) is not None:
+            poses[key], poses[f"{key}_3d"] = _pose_entry(manifest, where, key, item.get(key))
     pan = item.get("pan_rad", 0.0)
     if isinstance(pan, bool) or not isinstance(pan, (int, float)) or not math.isfinite(pan):
         raise _fail(manifest, f"{where}: pan_rad must be a finite number, got {pan!r}")
+    stamp = item.get("stamp_s")
+    if stamp is not None and (isinstance(stamp, bool) or not isinstance(stamp, (int, float))
+                              or not math.isfinite(stamp)):
+        raise _fail(manifest, f"{where}: stamp_s must be a finite number (seconds), got {stamp!r}")
     files = {key: _existing_file(root, item[key], f"{where}: {key}", manifest)
              for key in (*IMAGE_KEYS, *GT_KEYS) if item.get(key) is not None}
-    record = FrameRecord(pose=pose, pan_rad=float(pan), true_pose=true_pose, **files)
+    record = FrameRecord(pan_rad=float(pan), stamp_s=None if stamp is None else float(stamp), **poses, **files)
     for a, b in (("left", "right"), ("left_rect", "right_rect")):
         if (a in files) != (b in files):
             raise _fail(manifest, f"{where}: '{a}' and '{b}' must be given together")
@@ -168,27 +228,108 @@ def _frame(root: Path, manifest: Path, k: int, item) -> FrameRecord:
     return record
 
 
-def _planar_pose(manifest: Path, where: str, key: str, pose) -> tuple[float, float, float]:
-    if (not isinstance(pose, (list, tuple)) or len(pose) != 3
+def _pose_entry(manifest: Path, where: str, key: str, pose):
+    """``(planar, 3-D or None)`` of a pose entry: ``[x_m, y_m, yaw_rad]`` or ``[x, y, z, qx, qy, qz, qw]``."""
+    if (not isinstance(pose, (list, tuple)) or len(pose) not in (3, 7)
             or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in pose)
             or not all(math.isfinite(v) for v in pose)):
-        raise _fail(manifest, f"{where}: {key} must be [x_m, y_m, yaw_rad] (3 finite numbers), got {pose!r}")
-    return tuple(float(v) for v in pose)
+        raise _fail(manifest, f"{where}: {key} must be [x_m, y_m, yaw_rad] or [x, y, z, qx, qy, qz, qw] "
+                              f"(finite numbers), got {pose!r}")
+    if len(pose) == 3:
+        return tuple(float(v) for v in pose), None
+    if sum(v * v for v in pose[3:]) < 1e-12:
+        raise _fail(manifest, f"{where}: {key} has a zero quaternion")
+    full = tuple(float(v) for v in pose)
+    return tuple(float(v) for v in planar_from_T(_T_of_3d(key, full))), full
 
 
-def write_manifest(path: str | os.PathLike, *, calibration: str, rig: RigMount | CameraMount | None,
+def write_manifest(path: str | os.PathLike, *, calibration: str, mount: CameraMount | None,
                    frames: list[dict], ground_truth_map: str | None = None, extra: dict | None = None) -> None:
-    """Write ``manifest.yaml``; ``frames`` are dicts of relative paths, ``pose``, ``pan_rad``.
+    """Write ``manifest.yaml``; ``frames`` are dicts of relative paths, ``pose``, ``pan_rad`` (and optional
+    ``true_pose``, ``stamp_s``; a pose is ``[x_m, y_m, yaw_rad]`` or 3-D ``[x, y, z, qx, qy, qz, qw]``).
 
-    ``rig`` is written as ``rig:`` (a RigMount), ``mount:`` (a CameraMount) or not at all (None).
+    ``mount`` is written as ``mount: {xyz, rpy}``, or not at all (None).
     """
-    data = {"calibration": calibration, **mount_entry(rig)}
+    data = {"calibration": calibration, **mount_entry(mount)}
     if ground_truth_map is not None:
         data["ground_truth_map"] = ground_truth_map
     if extra:
         data.update(extra)
     data["frames"] = frames
     Path(path).write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
+
+
+class DatasetWriter:
+    """The files of a dataset being written by :func:`staged_dataset`: images, ground truth and frames."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.frames: list[dict] = []
+        self.ground_truth_map: str | None = None
+        self._files: dict[int, dict[str, str]] = {}
+
+    def write(self, key: str, index: int, array: np.ndarray) -> None:
+        """Frame ``index``'s file ``key``: an image (:data:`IMAGE_KEYS`, ``gt_labels``) or ``gt_disparity`` (PFM)."""
+        if key not in (*IMAGE_KEYS, *GT_KEYS):
+            raise ValueError(f"key must be one of {', '.join((*IMAGE_KEYS, *GT_KEYS))}, got {key!r}")
+        relative = f"{key}/{index:06d}.{'pfm' if key == 'gt_disparity' else 'png'}"
+        (write_pfm if key == "gt_disparity" else write_image)(self.root / relative, array)
+        self._files.setdefault(index, {})[key] = relative
+
+    def write_ground_truth_map(self, ros_map) -> None:
+        """The ground-truth map (a :class:`mrstereo.mapping.rosmap.RosMap`) as ``gt_map.yaml`` + ``.pgm``."""
+        from ..mapping.rosmap import write_ros_map
+
+        write_ros_map(self.root / "gt_map.yaml", ros_map)
+        self.ground_truth_map = "gt_map.yaml"
+
+    def add_frame(self, index: int, *, pose, pan_rad: float = 0.0, true_pose=None, stamp_s: float | None = None
+                  ) -> None:
+        """The manifest entry of frame ``index``: the files written for it, its stamp, pose (planar or 3-D)
+        and head pan."""
+        files = self._files.pop(index, {})
+        entry = {key: files[key] for key in (*IMAGE_KEYS, *GT_KEYS) if key in files}
+        if stamp_s is not None:
+            entry["stamp_s"] = float(stamp_s)
+        entry["pose"] = [float(v) for v in pose]
+        if true_pose is not None:
+            entry["true_pose"] = [float(v) for v in true_pose]
+        entry["pan_rad"] = float(pan_rad)
+        self.frames.append(entry)
+
+
+@contextlib.contextmanager
+def staged_dataset(out_dir: str | os.PathLike, *, calibration: StereoCamera, mount: CameraMount | None,
+                   calibration_name: str = "calibration.yaml", extra: dict | None = None) -> Iterator[DatasetWriter]:
+    """Write a new dataset folder: the block adds frames, the end writes calibration and manifest.
+
+    The folder is built in a hidden temporary folder beside ``out_dir`` and renamed into place when
+    the block ends without an error, so a failed or killed run leaves no half-written dataset.
+
+    Parameters
+    ----------
+    out_dir : path
+        New (or empty) folder.
+    calibration : StereoCamera
+        Written as ``calibration_name`` (:func:`mrstereo.camera.write_stereo`).
+    mount : CameraMount or None
+        The manifest's ``mount:`` (None: none known).
+    calibration_name : str
+        File name of the calibration in the folder.
+    extra : dict, optional
+        Further top-level manifest entries (e.g. ``generator:``, ``source:``).
+    """
+    out_dir = Path(out_dir)
+    check_output_dir("out_dir", out_dir, must_be_empty=True)
+    with temporary_dir(out_dir.parent, prefix=out_dir.name) as tmp:
+        dataset = DatasetWriter(tmp)
+        yield dataset
+        write_stereo(tmp / calibration_name, calibration)
+        write_manifest(tmp / MANIFEST_NAME, calibration=calibration_name, mount=mount, frames=dataset.frames,
+                       ground_truth_map=dataset.ground_truth_map, extra=extra)
+        if out_dir.exists():
+            out_dir.rmdir()          # empty, checked above
+        os.replace(tmp, out_dir)
 
 
 def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.ndarray, np.ndarray, bool]:

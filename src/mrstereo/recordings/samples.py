@@ -18,6 +18,8 @@ Licences: Middlebury scenes may be used and published when their papers are cite
 Szeliski, IJCV 2002 and CVPR 2003); KITTI is CC BY-NC-SA 3.0 (Geiger et al., CVPR 2012; Menze &
 Geiger, CVPR 2015); the OpenCV chessboards come with OpenCV's licence; OpenLORIS-Scene (Shi et al.,
 ICRA 2020) is for research use.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

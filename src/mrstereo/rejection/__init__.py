@@ -1,4 +1,7 @@
-"""Rejection of disparity on uniform floor and walls: texture / ground suppression, paper eq. (13)."""
+"""Rejection of disparity on uniform floor and walls: texture / ground suppression, paper eq. (13).
+
+Conventions: docs/conventions.md.
+"""
 from .texture import (FloorModel, PatchStatistics, RejectionConfig, RejectionResult, learn_floor_model,
                       patch_statistics, reject_uniform)
 

@@ -3,6 +3,8 @@
 Each kernel does per element exactly the arithmetic of the numpy expression it stands for, in
 the same order and dtype (no fastmath), so that its results do not depend on which image
 type supplied the window sums; ``nogil`` lets the per-frame chain run on worker threads.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

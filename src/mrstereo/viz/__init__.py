@@ -1,1 +1,4 @@
-"""Figures: matplotlib plumbing and the disparity colours every figure shares."""
+"""Figures: matplotlib plumbing and the disparity colours every figure shares.
+
+Conventions: docs/conventions.md.
+"""

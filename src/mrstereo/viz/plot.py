@@ -1,4 +1,7 @@
-"""Figure plumbing: an Agg figure without pyplot state, saved atomically as PNG; disparity colours."""
+"""Figure plumbing: an Agg figure without pyplot state, saved atomically as PNG; disparity colours.
+
+Conventions: docs/conventions.md.
+"""
 from __future__ import annotations
 
 import os

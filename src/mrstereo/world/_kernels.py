@@ -2,6 +2,8 @@
 
 Private: no validation, preallocated outputs. Scene arrays come from
 ``Scene.packed()``; see world/scene.py for their layout.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -6,22 +6,18 @@ from __future__ import annotations
 
 import math
 import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .. import _checks
-from ..camera import write_stereo
-from ..io import write_image, write_pfm
-from ..mapping.rosmap import write_ros_map
-from ..recordings.manifest import IMAGE_KEYS, MANIFEST_NAME, write_manifest
+from ..recordings.manifest import staged_dataset
 from .groundtruth import ground_truth_map
-from .paths import PATH_KINDS, drifted_poses, sequence_path, waypoint_path
+from .paths import PATH_KINDS, drifted_poses, sequence_path, speed_path, waypoint_path
 from .randomize import random_world
 from .render import SensorModel, default_stereo, render_stereo_frame
 from .scene import default_scene
+from .street import street_world
 
 __all__ = ["write_synthetic_dataset", "corridor_path", "poses_along"]
 
@@ -60,12 +56,42 @@ def poses_along(waypoints_xy, n_stops: int) -> np.ndarray:
 _PANS = (0.0, math.pi / 4, -math.pi / 4)   # front, left and right views (paper Sec. 5.2)
 
 
+def _check_world_options(path: str, randomize: bool, wall_texture, odometry_noise) -> None:
+    if path not in PATH_KINDS:
+        raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
+    if randomize and path in ("s-curve", "street"):
+        raise ValueError(f"path={path!r} has its own world; a randomized corridor's odometry sequence is "
+                         "path='front' (along the world's own waypoints)")
+    if wall_texture is not None and not randomize:
+        raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
+    if odometry_noise is not None and len(odometry_noise) != 2:
+        raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
+
+
+def _frame_poses(path: str, n_frames: int, waypoints_xy, step_m: float,
+                 turn_rad_per_frame: float) -> tuple[np.ndarray, list[float]]:
+    """Robot poses (n_frames, 3) and head pans of the frames along ``path`` (``waypoints_xy``: a randomized
+    world's path, None: the built-in corridor's), rounded to the numbers the manifest stores."""
+    if path == "stops":
+        n_stops = -(-n_frames // len(_PANS))
+        stops = corridor_path(n_stops) if waypoints_xy is None else poses_along(waypoints_xy, n_stops)
+        poses = np.repeat(stops, len(_PANS), axis=0)[:n_frames]
+        pans = [round(_PANS[k % len(_PANS)], 9) for k in range(n_frames)]
+    else:
+        poses = (speed_path(n_frames, step_m=step_m, turn_rad_per_frame=turn_rad_per_frame) if path == "street"
+                 else sequence_path(path, n_frames, step_m=step_m) if waypoints_xy is None
+                 else waypoint_path(waypoints_xy, n_frames, step_m=step_m))
+        pans = [0.0] * n_frames
+    return np.round(poses, 6), pans
+
+
 def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_frames: int = 30,
                             width: int = 320, height: int = 240, supersample: int = 2,
                             path: str = "stops", step_m: float = 0.1,
                             odometry_noise: tuple[float, float] | None = None,
                             progress: bool = True, randomize: bool = False,
-                            wall_texture: str | None = None) -> Path:
+                            wall_texture: str | None = None, turn_rad_per_frame: float = math.radians(3.0),
+                            frame_rate_hz: float = 10.0) -> Path:
     """Render the default corridor (or a randomized world) along its path and write a dataset directory.
 
     ``path="stops"`` (the paper's run): at each stop along :func:`corridor_path` (a randomized
@@ -73,10 +99,14 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     11-13); frames cycle through these views. ``"front"`` and ``"s-curve"``: sequences for
     visual odometry, one front view every ``step_m`` (:func:`mrstereo.world.paths.sequence_path`;
     a randomized world: ``"front"`` only, along its own waypoints,
-    :func:`mrstereo.world.paths.waypoint_path`).
+    :func:`mrstereo.world.paths.waypoint_path`). ``"street"``: the street world of ``seed``
+    (:func:`mrstereo.world.street.street_world`) driven from a standstill up to ``step_m`` per
+    frame, turning by up to ``turn_rad_per_frame`` (:func:`mrstereo.world.paths.speed_path`).
+    The frames of a sequence (not ``"stops"``) are stamped ``frame_rate_hz`` apart.
     Written: raw and rectified images, GT disparity (PFM), GT labels (PNG),
-    the true calibration, the GT map and ``manifest.yaml``. The directory is
-    built beside ``out_dir`` and renamed into place when complete.
+    the true calibration, the GT map and ``manifest.yaml``
+    (:func:`mrstereo.recordings.manifest.staged_dataset`: built beside ``out_dir`` and renamed
+    into place when complete).
 
     Parameters
     ----------
@@ -90,10 +120,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         Image size (320x240 or 640x480 rigs of :func:`default_stereo`).
     supersample : int
         Anti-aliasing rays per pixel along each axis.
-    path : {"stops", "front", "s-curve"}
+    path : {"stops", "front", "s-curve", "street"}
         The robot's path (:data:`mrstereo.world.paths.PATH_KINDS`).
     step_m : float
-        Path length between frames of a ``front`` or ``s-curve`` sequence.
+        Path length between frames of a ``front`` or ``s-curve`` sequence (``street``: at full speed).
     odometry_noise : (scale_error, heading_drift_rad_per_m), optional
         Store drifted poses (:func:`mrstereo.world.paths.drifted_poses`) as each frame's
         ``pose`` (the odometry a robot would report) and the true ones as ``true_pose``;
@@ -108,6 +138,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         With ``randomize=True``: the walls get this kind of material instead of the drawn one
         (``random_world(..., wall_texture=...)``; one of
         :data:`mrstereo.world.randomize.WALL_TEXTURES`), everything else stays the seed's world.
+    turn_rad_per_frame : float
+        ``street``: the largest heading change per frame at full speed.
+    frame_rate_hz : float
+        Frames per second of a sequence (its ``stamp_s``).
 
     Returns
     -------
@@ -116,84 +150,45 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     """
     from tqdm import tqdm
 
-    out_dir = Path(out_dir)
     seed = _checks.positive_int("seed", seed, minimum=0)
     n_frames = _checks.positive_int("n_frames", n_frames)
     width, height = _checks.positive_int("width", width, minimum=16), _checks.positive_int("height", height, minimum=16)
     supersample = _checks.positive_int("supersample", supersample)
     _checks.fits_in_memory("width and height", 64.0 * width * height * supersample ** 2,
                            f"rendering {width}x{height} images")
-    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
-        raise ValueError(f"output directory {out_dir} already exists and is not empty; "
-                         "choose a new directory")
-    if path not in PATH_KINDS:
-        raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
-    if randomize and path == "s-curve":
-        raise ValueError("path='s-curve' is a path of the built-in corridor; a randomized world's odometry "
-                         "sequence is path='front' (along the world's own waypoints)")
-    if wall_texture is not None and not randomize:
-        raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
-    n_stops = -(-n_frames // len(_PANS))
+    _check_world_options(path, randomize, wall_texture, odometry_noise)
+    rate = _checks.finite_number("frame_rate_hz", frame_rate_hz, positive=True)
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
-    if randomize:
-        world = random_world(seed, width=width, height=height, wall_texture=wall_texture)
-        stereo, scene, sensors = world.stereo, world.scene, world.sensors
-        stops = poses_along(world.waypoints_xy, n_stops)
-        generator["randomized"] = world.summary
+    if randomize or path == "street":
+        world = (street_world(seed, width=width, height=height) if path == "street" else
+                 random_world(seed, width=width, height=height, wall_texture=wall_texture))
+        stereo, scene, sensors, waypoints = world.stereo, world.scene, world.sensors, world.waypoints_xy
+        generator["street" if path == "street" else "randomized"] = world.summary
     else:
         stereo, scene, sensors = default_stereo(width, height), default_scene(seed), (SensorModel(), SensorModel())
-        stops = corridor_path(n_stops)
-    if path == "stops":
-        pans = [_PANS[k % len(_PANS)] for k in range(n_frames)]
-        poses = np.repeat(stops, len(_PANS), axis=0)[:n_frames]
-    else:
-        pans = [0.0] * n_frames
-        poses = (waypoint_path(world.waypoints_xy, n_frames, step_m=step_m) if randomize
-                 else sequence_path(path, n_frames, step_m=step_m))
-    poses = np.round(poses, 6)         # render with exactly the numbers the manifest stores
+        waypoints = None
+    poses, pans = _frame_poses(path, n_frames, waypoints, step_m, turn_rad_per_frame)
+    if path != "stops":
+        generator["step_m"] = float(step_m)
+        generator["frame_rate_hz"] = rate
+    if path == "street":
+        generator["turn_rad_per_frame"] = float(turn_rad_per_frame)
     given = poses
     if odometry_noise is not None:
-        if len(odometry_noise) != 2:
-            raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
         given = np.round(drifted_poses(poses, scale_error=odometry_noise[0],
                                        heading_drift_rad_per_m=odometry_noise[1]), 6)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
-    try:
-        write_stereo(tmp / "calibration.yaml", stereo)
-        write_ros_map(tmp / "gt_map.yaml", ground_truth_map(scene))
-        frames = []
+        generator["odometry_noise"] = {"scale_error": float(odometry_noise[0]),
+                                       "heading_drift_rad_per_m": float(odometry_noise[1])}
+    with staged_dataset(out_dir, calibration=stereo, mount=stereo.mount, extra={"generator": generator}) as dataset:
+        dataset.write_ground_truth_map(ground_truth_map(scene))
         for k in tqdm(range(n_frames), desc="rendering", unit="frame", disable=not progress):
             pose = tuple(float(v) for v in poses[k])
-            pan = round(pans[k], 9)
-            frame = render_stereo_frame(scene, stereo, pose=pose, pan_rad=pan, seed=seed * 100003 + k,
+            frame = render_stereo_frame(scene, stereo, pose=pose, pan_rad=pans[k], seed=seed * 100003 + k,
                                         supersample=supersample, sensors=sensors)
-            name = f"{k:06d}"
-            entry = {}
-            for key, image in (("left", frame.raw_left), ("right", frame.raw_right),
-                               ("left_rect", frame.left_rect), ("right_rect", frame.right_rect),
-                               ("gt_labels", frame.labels)):
-                write_image(tmp / key / f"{name}.png", image)
-                entry[key] = f"{key}/{name}.png"
-            write_pfm(tmp / "gt_disparity" / f"{name}.pfm", frame.disparity_px)
-            entry["gt_disparity"] = f"gt_disparity/{name}.pfm"
-            entry["pose"] = [float(v) for v in given[k]]
-            entry["pan_rad"] = pan
-            if odometry_noise is not None:
-                entry["true_pose"] = list(pose)
-            frames.append({key: entry[key] for key in (*IMAGE_KEYS, "gt_disparity", "gt_labels", "pose",
-                                                        "true_pose", "pan_rad") if key in entry})
-        if path != "stops":
-            generator["step_m"] = float(step_m)
-        if odometry_noise is not None:
-            generator["odometry_noise"] = {"scale_error": float(odometry_noise[0]),
-                                           "heading_drift_rad_per_m": float(odometry_noise[1])}
-        write_manifest(tmp / MANIFEST_NAME, calibration="calibration.yaml", rig=stereo.rig, frames=frames,
-                       ground_truth_map="gt_map.yaml", extra={"generator": generator})
-        if out_dir.exists():
-            out_dir.rmdir()          # empty, checked above
-        os.replace(tmp, out_dir)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
-    return out_dir
+            for key, array in (("left", frame.raw_left), ("right", frame.raw_right), ("left_rect", frame.left_rect),
+                               ("right_rect", frame.right_rect), ("gt_labels", frame.labels),
+                               ("gt_disparity", frame.disparity_px)):
+                dataset.write(key, k, array)
+            dataset.add_frame(k, pose=given[k], pan_rad=pans[k], true_pose=pose if odometry_noise is not None else None,
+                              stamp_s=None if path == "stops" else round(k / rate, 9))
+    return Path(out_dir)

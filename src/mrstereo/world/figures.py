@@ -3,6 +3,8 @@
 Reusable by every command that shows results (``mrstereo demo``). Each function
 writes one PNG atomically and returns its path. Disparity colours come from
 ``mrstereo.viz.plot`` (turbo over robust percentiles, invalid black), as everywhere.
+
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -6,7 +6,9 @@ visual odometry, one front view every ``step_m`` metres of path: ``front`` follo
 centre and passes the box at 6 m on its right with a smooth S-bend; ``s-curve`` adds a gentle
 weave (0 to 0.3 m to the left, 3 m period) to it, so the heading changes all the time. Both start at the
 origin looking along +x. A randomized world's ``front`` sequence follows its own waypoints
-(:func:`waypoint_path`). :func:`drifted_poses` corrupts a path as wheel odometry would (scale
+(:func:`waypoint_path`). ``street``: a drive down the street world (:mod:`mrstereo.world.street`)
+from a standstill up to car speed, weaving so that the heading turns by up to a given angle per
+frame (:func:`speed_path`). :func:`drifted_poses` corrupts a path as wheel odometry would (scale
 error, heading drift per metre). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -18,9 +20,9 @@ import numpy as np
 from .. import _checks
 from ..transforms import relative_planar, wrap_angle
 
-__all__ = ["PATH_KINDS", "sequence_path", "waypoint_path", "drifted_poses"]
+__all__ = ["PATH_KINDS", "sequence_path", "waypoint_path", "speed_path", "drifted_poses"]
 
-PATH_KINDS = ("stops", "front", "s-curve")
+PATH_KINDS = ("stops", "front", "s-curve", "street")
 
 _BEND_X_M = (4.4, 5.8, 6.6, 8.0)    # the S-bend around the box at x = 6.0..6.4 m: down, hold, up
 _BEND_Y_M = -0.7
@@ -111,6 +113,54 @@ def waypoint_path(waypoints_xy, n_frames: int, *, step_m: float = 0.1) -> np.nda
     t_k = np.interp(np.arange(n_frames) * step, s, t)
     tangent = curve(t_k, 1)
     return np.column_stack([curve(t_k), np.arctan2(tangent[:, 1], tangent[:, 0])])
+
+
+def speed_path(n_frames: int, *, step_m: float, turn_rad_per_frame: float = math.radians(3.0),
+               standstill_frames: int = 3, accel_frames: int = 10, max_offset_m: float = 2.0) -> np.ndarray:
+    """Robot poses ``(n_frames, 3)`` of a drive from a standstill up to ``step_m`` per frame, weaving.
+
+    The first ``standstill_frames`` frames stand at the origin; the step then grows linearly to
+    ``step_m`` over ``accel_frames`` frames and stays there. The heading is a sine of the path
+    length, ``psi(s) = Psi sin(2 pi s / P)``, with the period ``P`` chosen so that at full speed the
+    heading turns by ``turn_rad_per_frame`` per frame at most and the path stays between the x axis
+    and ``y = max_offset_m``: ``P = pi sqrt(2 max_offset_m step_m / turn)``, ``Psi = turn P /
+    (2 pi step_m)``. Starts at the origin looking along +x.
+
+    Parameters
+    ----------
+    n_frames : int
+    step_m : float
+        Path length per frame at full speed (1.0 m per frame at 10 Hz is 36 km/h).
+    turn_rad_per_frame : float
+        Largest heading change per frame at full speed (0: straight).
+    standstill_frames, accel_frames : int
+        Frames standing still at the start, then frames of acceleration.
+    max_offset_m : float
+        Largest distance from the x axis (to the left).
+    """
+    n_frames = _checks.positive_int("n_frames", n_frames)
+    step = _checks.finite_number("step_m", step_m, positive=True)
+    turn = _checks.finite_number("turn_rad_per_frame", turn_rad_per_frame, nonnegative=True)
+    still = _checks.positive_int("standstill_frames", standstill_frames, minimum=0)
+    accel = _checks.positive_int("accel_frames", accel_frames, minimum=0)
+    offset = _checks.finite_number("max_offset_m", max_offset_m, positive=True)
+    k = np.arange(1, n_frames)
+    steps = step * np.clip((k - still + 1) / (accel + 1), 0.0, 1.0)
+    s = np.concatenate([[0.0], np.cumsum(steps)])
+    if turn > 0:
+        period = math.pi * math.sqrt(2.0 * offset * step / turn)
+        amplitude = turn * period / (2.0 * math.pi * step)
+    else:
+        period, amplitude = 1.0, 0.0
+    # the heading as a function of path length, integrated finely into positions
+    fine = np.linspace(0.0, max(s[-1], 1e-9), max(2, int(s[-1] / 0.01) + 2))
+    psi = amplitude * np.sin(2.0 * math.pi * fine / period)
+    ds = np.diff(fine)
+    mid = 0.5 * (psi[1:] + psi[:-1])
+    x = np.concatenate([[0.0], np.cumsum(ds * np.cos(mid))])
+    y = np.concatenate([[0.0], np.cumsum(ds * np.sin(mid))])
+    return np.column_stack([np.interp(s, fine, x), np.interp(s, fine, y),
+                            amplitude * np.sin(2.0 * math.pi * s / period)])
 
 
 def drifted_poses(poses, *, scale_error: float, heading_drift_rad_per_m: float) -> np.ndarray:

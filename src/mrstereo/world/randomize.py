@@ -21,11 +21,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from .. import _checks
-from ..camera import Camera, CameraInfo, RigMount, StereoCamera
+from ..camera import Camera, CameraInfo, CameraMount, StereoCamera
+from ..geometry.ground import ground_from_mount
 from ..transforms import rotation_from_rpy
 from .render import SensorModel
 from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, LABEL_POSTER, LABEL_WALL, TEXTURE_BLOTCH,
@@ -64,7 +66,7 @@ class RandomWorld:
     seed : int
     scene : Scene
     stereo : StereoCamera
-        The exact calibration and mount (``stereo.rig``).
+        The exact calibration and mount (``stereo.mount``).
     sensors : (SensorModel, SensorModel)
         Left and right camera exposure, gain, black level and noise.
     waypoints_xy : ndarray of shape (K, 2)
@@ -99,7 +101,7 @@ def random_stereo(rng, width: int = 320, height: int = 240) -> StereoCamera:
     fov = math.radians(_u(rng, RANGES["horizontal_fov_deg"]))
     f = (width / 2.0) / math.tan(fov / 2.0)
     baseline = _u(rng, RANGES["baseline_m"])
-    rig = RigMount(height_m=_u(rng, RANGES["camera_height_m"]), tilt_rad=_u(rng, RANGES["tilt_rad"]))
+    height_m, tilt_rad = _u(rng, RANGES["camera_height_m"]), _u(rng, RANGES["tilt_rad"])
     s = width / 320.0
     cx = (width - 1) / 2.0 + rng.uniform(-3, 3) * s
     cy = (height - 1) / 2.0 + rng.uniform(-3, 3) * s
@@ -114,7 +116,8 @@ def random_stereo(rng, width: int = 320, height: int = 240) -> StereoCamera:
     P_right = P_left.copy()
     P_right[0, 3] = -f * baseline
     return StereoCamera(left=CameraInfo(raws[0], R=Rs[0], P=P_left, name="left"),
-                        right=CameraInfo(raws[1], R=Rs[1], P=P_right, name="right"), rig=rig)
+                        right=CameraInfo(raws[1], R=Rs[1], P=P_right, name="right"),
+                        mount=CameraMount.from_rig(height_m, tilt_rad, R_rect_from_cam=Rs[0]))
 
 
 # --------------------------------------------------------------------------- texture bank
@@ -260,6 +263,205 @@ def _labelled(boxes: list[Box], cyls: list[Cylinder], label: int) -> tuple[list[
 
 
 # --------------------------------------------------------------------------- the world
+class _MaterialBank:
+    """The materials of one world in the order they are drawn; :meth:`add` gives a material's index."""
+
+    def __init__(self) -> None:
+        self.names: list[str] = []
+        self.materials: list[Material] = []
+
+    def add(self, pair: tuple[str, Material]) -> int:
+        self.names.append(str(pair[0]))
+        self.materials.append(pair[1])
+        return len(self.materials) - 1
+
+
+class _Corridor(NamedTuple):
+    """The drawn corridor: side walls at ``y = +-half_m``, end walls at ``x0_m`` and ``x1_m``."""
+
+    width_m: float
+    half_m: float
+    ceiling_m: float
+    x0_m: float
+    x1_m: float
+
+
+def _draw_corridor(rng) -> _Corridor:
+    width_m = _u(rng, RANGES["corridor_width_m"])
+    ceiling_m = _u(rng, RANGES["ceiling_m"])
+    x0 = -rng.uniform(0.6, 1.5)
+    return _Corridor(width_m, width_m / 2.0, ceiling_m, x0, x0 + _u(rng, RANGES["corridor_length_m"]))
+
+
+def _draw_path(rng, corridor: _Corridor) -> np.ndarray:
+    """Waypoints (K, 2) every ~2.5 m with lateral offsets inside the corridor."""
+    n_way = int(rng.integers(3, 6))
+    xs = np.linspace(0.0, min(10.5, corridor.x1_m - 1.2), n_way)
+    lateral = max(corridor.half_m - 0.55, 0.0)
+    ys = rng.uniform(-lateral, lateral, n_way) * rng.uniform(0.0, 1.0)
+    ys[0] = rng.uniform(-0.3, 0.3) * lateral
+    return np.round(np.stack([xs, ys], 1), 3)
+
+
+def _draw_wall_gaps(rng, corridor: _Corridor) -> tuple[list, list, dict[int, list]]:
+    """Side openings ``(side, xa, xb, top, depth)`` into small rooms, recessed doors ``(side, xa, xb)``,
+    and the x intervals they take on each wall (``+1`` left, ``-1`` right)."""
+    openings: list[tuple[int, float, float, float, float]] = []
+    doors: list[tuple[int, float, float]] = []
+    taken: dict[int, list] = {+1: [], -1: []}
+    x1, h = corridor.x1_m, corridor.ceiling_m
+    max_depth = _GRID_HALF_M - corridor.half_m - _WALL_THICK_M
+    for _ in range(int(rng.integers(0, 3))):
+        side = int(rng.choice([-1, 1]))
+        w = rng.uniform(0.8, 1.8)
+        xa = rng.uniform(0.5, x1 - w - 0.5)
+        depth = rng.uniform(0.6, 1.4)
+        if depth <= max_depth - 0.05 and _intervals_free(xa - 0.3, xa + w + 0.3, taken[side], 0.3):
+            top = float(rng.choice([2.1, h]))
+            openings.append((side, float(xa), float(xa + w), top, float(min(depth, max_depth - 0.05))))
+            taken[side].append((xa - 0.3, xa + w + 0.3))
+    for _ in range(int(rng.integers(0, 5))):
+        side = int(rng.choice([-1, 1]))
+        xa = rng.uniform(0.0, x1 - 1.2)
+        if _intervals_free(xa, xa + 0.9, taken[side], 0.2):
+            doors.append((side, float(xa), float(xa + 0.9)))
+            taken[side].append((xa, xa + 0.9))
+    return openings, doors, taken
+
+
+def _structure(corridor: _Corridor, openings: list, doors: list, ids: dict[str, int]) -> tuple[list[Box], list]:
+    """Floor, ceiling, walls (with their gaps), door recesses and the rooms behind openings; the rooms'
+    floor rectangles ``(xa, xb, ya, yb)``."""
+    x0, x1, half, h = corridor.x0_m, corridor.x1_m, corridor.half_m, corridor.ceiling_m
+    wall = ids["wall"]
+    boxes: list[Box] = [
+        Box((x0 - 1.0, -_GRID_HALF_M - 1.0, -0.2), (x1 + 1.0, _GRID_HALF_M + 1.0, 0.0), ids["floor"], LABEL_FLOOR),
+        Box((x0 - 1.0, -_GRID_HALF_M - 1.0, h), (x1 + 1.0, _GRID_HALF_M + 1.0, h + 0.2), ids["ceiling"],
+            LABEL_CEILING),
+        Box((x0 - _WALL_THICK_M, -half, 0.0), (x0, half, h), wall, LABEL_WALL),
+        Box((x1, -half, 0.0), (x1 + _WALL_THICK_M, half, h), wall, LABEL_WALL),
+    ]
+    free_regions = []
+    recess = 0.1
+    for side in (+1, -1):
+        gaps = ([(xa, xb, 2.1) for s, xa, xb in doors if s == side]
+                + [(xa, xb, top) for s, xa, xb, top, _ in openings if s == side])
+        boxes += _wall_boxes(side, x0, x1, half, _WALL_THICK_M, h, gaps, wall)
+        for s, xa, xb in doors:
+            if s == side:
+                ya, yb = sorted((side * (half + recess), side * (half + _WALL_THICK_M)))
+                boxes.append(Box((xa, ya, 0.0), (xb, yb, 2.1), ids["door"], LABEL_DOOR))
+        for s, xa, xb, top, depth in openings:
+            if s != side:
+                continue
+            # a small room behind the opening: back wall and two side walls
+            y_in, y_back = side * half, side * (half + depth)
+            ya, yb = sorted((y_back, y_back + side * _WALL_THICK_M))
+            boxes.append(Box((xa - _WALL_THICK_M, ya, 0.0), (xb + _WALL_THICK_M, yb, h), wall, LABEL_WALL))
+            ya, yb = sorted((y_in, y_back))
+            boxes.append(Box((xa - _WALL_THICK_M, ya, 0.0), (xa, yb, h), wall, LABEL_WALL))
+            boxes.append(Box((xb, ya, 0.0), (xb + _WALL_THICK_M, yb, h), wall, LABEL_WALL))
+            free_regions.append((xa, xb, ya, yb))
+    return boxes, free_regions
+
+
+def _draw_decals(rng, corridor: _Corridor, bank: _MaterialBank, taken: dict[int, list]) -> list[Decal]:
+    """Posters and flat door panels painted on the walls, clear of the openings and doors."""
+    x1, half, h = corridor.x1_m, corridor.half_m, corridor.ceiling_m
+    decals = []
+    for _ in range(int(rng.integers(2, 7))):
+        side = int(rng.choice([-1, 1]))
+        w = rng.uniform(0.4, 1.2)
+        xa = rng.uniform(0.0, x1 - w)
+        if not _intervals_free(xa, xa + w, taken[side], 0.1):
+            continue
+        z0 = rng.uniform(0.3, 1.2)
+        zh = rng.uniform(0.4, 1.0)
+        mat = bank.add(_poster_material(rng))
+        decals.append(Decal(-side, side * half, xa, xa + w, z0, min(z0 + zh, h - 0.1), mat, LABEL_POSTER))
+        taken[side].append((xa, xa + w))
+    for _ in range(int(rng.integers(0, 3))):
+        side = int(rng.choice([-1, 1]))
+        xa = rng.uniform(0.0, x1 - 0.9)
+        if not _intervals_free(xa, xa + 0.9, taken[side], 0.1):
+            continue
+        mat = bank.add(("panel", Material(TEXTURE_WOOD, rng.uniform(0.2, 0.5), rng.uniform(0.15, 0.3), 0.04,
+                                          rng.uniform(0.06, 0.12))))
+        decals.append(Decal(-side, side * half, xa, xa + 0.9, 0.0, 2.1, mat, LABEL_DOOR))
+        taken[side].append((xa, xa + 0.9))
+    return decals
+
+
+def _place_obstacle(rng, kind: str, mat: int, corridor: _Corridor, path_pts: np.ndarray,
+                    placed: list) -> tuple | None:
+    """Up to 40 draws of where an obstacle stands: ``(boxes, cylinders, footprint)`` of the first one
+    inside the corridor and clear of the path and of ``placed``, else None."""
+    x0, x1, half = corridor.x0_m, corridor.x1_m, corridor.half_m
+    for _attempt in range(40):
+        x = rng.uniform(0.4, min(x1, 12.0) - 0.4)
+        y = rng.uniform(-half, half)
+        if rng.uniform() < 0.3:           # against a wall
+            y = np.sign(y) * half
+        b, c, rect = _obstacle(rng, kind, x, y, mat)
+        # shift into the corridor if it pokes through a wall
+        shift = min(0.0, half - rect[3]) + max(0.0, -half - rect[2])
+        if shift:
+            b = [Box((p.min_m[0], p.min_m[1] + shift, p.min_m[2]), (p.max_m[0], p.max_m[1] + shift, p.max_m[2]),
+                     p.material, 0) for p in b]
+            c = [Cylinder((p.centre_m[0], p.centre_m[1] + shift), p.radius_m, p.height_m, p.material, 0)
+                 for p in c]
+            rect = (rect[0], rect[1], rect[2] + shift, rect[3] + shift)
+        if rect[1] < x1 - 0.05 and rect[0] > x0 + 0.05 and _rect_clear(rect, path_pts, placed, 0.15):
+            return b, c, rect
+    return None
+
+
+def _draw_obstacles(rng, corridor: _Corridor, bank: _MaterialBank,
+                    path_pts: np.ndarray) -> tuple[list[Box], list[Cylinder], list[str]]:
+    """Obstacles placed by rejection sampling, clear of the path and of each other; labelled
+    ``LABEL_OBSTACLE + k`` in the order of their footprint's x. Returns boxes, cylinders and kinds."""
+    placed: list[tuple] = []
+    parts: list[tuple] = []
+    kinds = ["box", "box", "cylinder", "low", "pole", "table", "chair"]
+    n_obstacles = int(rng.integers(RANGES["obstacles"][0], RANGES["obstacles"][1] + 1))
+    for _ in range(n_obstacles):
+        kind = str(rng.choice(kinds))
+        mat = bank.add(_obstacle_material(rng))
+        found = _place_obstacle(rng, kind, mat, corridor, path_pts, placed)
+        if found is not None:
+            b, c, rect = found
+            placed.append(rect)
+            parts.append((rect[0], kind, b, c))
+    boxes, cylinders, obstacle_kinds = [], [], []
+    for k, (_, kind, b, c) in enumerate(sorted(parts, key=lambda p: p[0])):
+        b, c = _labelled(b, c, LABEL_OBSTACLE + k)
+        boxes += b
+        cylinders += c
+        obstacle_kinds.append(kind)
+    return boxes, cylinders, obstacle_kinds
+
+
+def _draw_lights(rng, corridor: _Corridor) -> tuple[tuple[Light, ...], float]:
+    """Lamps along the ceiling (one row or two) and the ambient light."""
+    half, h = corridor.half_m, corridor.ceiling_m
+    spacing = rng.uniform(1.5, 3.5)
+    power = rng.uniform(1.2, 3.5)
+    rows = [0.0] if rng.uniform() < 0.7 else [-half / 2, half / 2]
+    lights = tuple(Light((float(x), float(y), h - 0.1), power * (1.0 if len(rows) == 1 else 0.6))
+                   for x in np.arange(corridor.x0_m + rng.uniform(0.3, spacing), corridor.x1_m, spacing)
+                   for y in rows)
+    return lights, rng.uniform(0.15, 0.5)
+
+
+def _draw_sensors(rng) -> tuple[SensorModel, SensorModel]:
+    """Left and right exposure, gain, black level and noise (the right gain near the left one)."""
+    gain = _u(rng, RANGES["gain"])
+    noise = _u(rng, RANGES["noise_sigma"])
+    return (SensorModel(gain=gain, black_level=_u(rng, RANGES["black_level"]), noise_sigma=noise),
+            SensorModel(gain=gain * _u(rng, RANGES["right_gain_ratio"]), black_level=_u(rng, RANGES["black_level"]),
+                        noise_sigma=noise * rng.uniform(0.8, 1.25)))
+
+
 def random_world(seed: int, *, width: int = 320, height: int = 240,
                  wall_texture: str | None = None) -> RandomWorld:
     """Draw a corridor world, its stereo rig, sensors and robot path from ``seed``.
@@ -292,173 +494,44 @@ def random_world(seed: int, *, width: int = 320, height: int = 240,
     seed = _checks.positive_int("seed", seed, minimum=0)
     if wall_texture is not None and wall_texture not in WALL_TEXTURES:
         raise ValueError(f"wall_texture must be one of {', '.join(WALL_TEXTURES)} or None, got {wall_texture!r}")
+    # every draw comes from this one stream in a fixed order: a seed is always the same world
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0xC0441D0]))
     stereo = random_stereo(rng, width, height)
-    width_m = _u(rng, RANGES["corridor_width_m"])
-    half = width_m / 2.0
-    h = _u(rng, RANGES["ceiling_m"])
-    x0 = -rng.uniform(0.6, 1.5)
-    x1 = x0 + _u(rng, RANGES["corridor_length_m"])
-    x_end = min(10.5, x1 - 1.2)
-
-    # materials: the bank is drawn per world
-    names, mats = [], []
-
-    def add(pair) -> int:
-        names.append(str(pair[0]))
-        mats.append(pair[1])
-        return len(mats) - 1
-
-    WALL = add(_wall_material(rng))
-    FLOOR = add(_floor_material(rng))
-    CEIL = add(_ceiling_material(rng))
-    SKIRT = add(("skirting", Material(TEXTURE_WEAK, rng.uniform(0.15, 0.6), 0.04, 0.05)))
-    DOOR = add(("door", Material(TEXTURE_WOOD, rng.uniform(0.3, 0.55), rng.uniform(0.15, 0.3), 0.05,
-                                 rng.uniform(0.08, 0.13))))
+    corridor = _draw_corridor(rng)
+    bank = _MaterialBank()
+    ids = {"wall": bank.add(_wall_material(rng)), "floor": bank.add(_floor_material(rng)),
+           "ceiling": bank.add(_ceiling_material(rng)),
+           "skirting": bank.add(("skirting", Material(TEXTURE_WEAK, rng.uniform(0.15, 0.6), 0.04, 0.05))),
+           "door": bank.add(("door", Material(TEXTURE_WOOD, rng.uniform(0.3, 0.55), rng.uniform(0.15, 0.3), 0.05,
+                                              rng.uniform(0.08, 0.13))))}
     skirting_m = float(rng.choice([0.0, 0.06, 0.1, 0.15]))
-
-    # path: waypoints every ~2.5 m with lateral offsets inside the corridor
-    n_way = int(rng.integers(3, 6))
-    xs = np.linspace(0.0, x_end, n_way)
-    lateral = max(half - 0.55, 0.0)
-    ys = rng.uniform(-lateral, lateral, n_way) * rng.uniform(0.0, 1.0)
-    ys[0] = rng.uniform(-0.3, 0.3) * lateral
-    waypoints = np.round(np.stack([xs, ys], 1), 3)
-    path_pts = _path_points(waypoints)
-
-    # side openings (into small rooms) and recessed doors along both walls
-    openings: list[tuple[int, float, float, float, float]] = []   # side, xa, xb, top, depth
-    doors: list[tuple[int, float, float]] = []
-    taken: dict[int, list] = {+1: [], -1: []}
-    max_depth = _GRID_HALF_M - half - _WALL_THICK_M
-    for _ in range(int(rng.integers(0, 3))):
-        side = int(rng.choice([-1, 1]))
-        w = rng.uniform(0.8, 1.8)
-        xa = rng.uniform(0.5, x1 - w - 0.5)
-        depth = rng.uniform(0.6, 1.4)
-        if depth <= max_depth - 0.05 and _intervals_free(xa - 0.3, xa + w + 0.3, taken[side], 0.3):
-            top = float(rng.choice([2.1, h]))
-            openings.append((side, float(xa), float(xa + w), top, float(min(depth, max_depth - 0.05))))
-            taken[side].append((xa - 0.3, xa + w + 0.3))
-    for _ in range(int(rng.integers(0, 5))):
-        side = int(rng.choice([-1, 1]))
-        xa = rng.uniform(0.0, x1 - 1.2)
-        if _intervals_free(xa, xa + 0.9, taken[side], 0.2):
-            doors.append((side, float(xa), float(xa + 0.9)))
-            taken[side].append((xa, xa + 0.9))
-
-    boxes: list[Box] = [
-        Box((x0 - 1.0, -_GRID_HALF_M - 1.0, -0.2), (x1 + 1.0, _GRID_HALF_M + 1.0, 0.0), FLOOR, LABEL_FLOOR),
-        Box((x0 - 1.0, -_GRID_HALF_M - 1.0, h), (x1 + 1.0, _GRID_HALF_M + 1.0, h + 0.2), CEIL, LABEL_CEILING),
-        Box((x0 - _WALL_THICK_M, -half, 0.0), (x0, half, h), WALL, LABEL_WALL),
-        Box((x1, -half, 0.0), (x1 + _WALL_THICK_M, half, h), WALL, LABEL_WALL),
-    ]
-    free_regions = []
-    recess = 0.1
-    for side in (+1, -1):
-        gaps = ([(xa, xb, 2.1) for s, xa, xb in doors if s == side]
-                + [(xa, xb, top) for s, xa, xb, top, _ in openings if s == side])
-        boxes += _wall_boxes(side, x0, x1, half, _WALL_THICK_M, h, gaps, WALL)
-        for s, xa, xb in doors:
-            if s == side:
-                ya, yb = sorted((side * (half + recess), side * (half + _WALL_THICK_M)))
-                boxes.append(Box((xa, ya, 0.0), (xb, yb, 2.1), DOOR, LABEL_DOOR))
-        for s, xa, xb, top, depth in openings:
-            if s != side:
-                continue
-            # a small room behind the opening: back wall and two side walls
-            y_in, y_back = side * half, side * (half + depth)
-            ya, yb = sorted((y_back, y_back + side * _WALL_THICK_M))
-            boxes.append(Box((xa - _WALL_THICK_M, ya, 0.0), (xb + _WALL_THICK_M, yb, h), WALL, LABEL_WALL))
-            ya, yb = sorted((y_in, y_back))
-            boxes.append(Box((xa - _WALL_THICK_M, ya, 0.0), (xa, yb, h), WALL, LABEL_WALL))
-            boxes.append(Box((xb, ya, 0.0), (xb + _WALL_THICK_M, yb, h), WALL, LABEL_WALL))
-            free_regions.append((xa, xb, ya, yb))
-
-    # posters and flat door panels painted on the walls
-    decals = []
-    for _ in range(int(rng.integers(2, 7))):
-        side = int(rng.choice([-1, 1]))
-        w = rng.uniform(0.4, 1.2)
-        xa = rng.uniform(0.0, x1 - w)
-        if not _intervals_free(xa, xa + w, taken[side], 0.1):
-            continue
-        z0 = rng.uniform(0.3, 1.2)
-        zh = rng.uniform(0.4, 1.0)
-        mat = add(_poster_material(rng))
-        decals.append(Decal(-side, side * half, xa, xa + w, z0, min(z0 + zh, h - 0.1), mat, LABEL_POSTER))
-        taken[side].append((xa, xa + w))
-    for _ in range(int(rng.integers(0, 3))):
-        side = int(rng.choice([-1, 1]))
-        xa = rng.uniform(0.0, x1 - 0.9)
-        if not _intervals_free(xa, xa + 0.9, taken[side], 0.1):
-            continue
-        mat = add(("panel", Material(TEXTURE_WOOD, rng.uniform(0.2, 0.5), rng.uniform(0.15, 0.3), 0.04,
-                                     rng.uniform(0.06, 0.12))))
-        decals.append(Decal(-side, side * half, xa, xa + 0.9, 0.0, 2.1, mat, LABEL_DOOR))
-        taken[side].append((xa, xa + 0.9))
-
-    # obstacles: shapes placed by rejection sampling, clear of the path and of each other
-    placed: list[tuple] = []
-    parts: list[tuple] = []
-    kinds = ["box", "box", "cylinder", "low", "pole", "table", "chair"]
-    n_obstacles = int(rng.integers(RANGES["obstacles"][0], RANGES["obstacles"][1] + 1))
-    for _ in range(n_obstacles):
-        kind = str(rng.choice(kinds))
-        mat = add(_obstacle_material(rng))
-        for _attempt in range(40):
-            x = rng.uniform(0.4, min(x1, 12.0) - 0.4)
-            y = rng.uniform(-half, half)
-            if rng.uniform() < 0.3:           # against a wall
-                y = np.sign(y) * half
-            b, c, rect = _obstacle(rng, kind, x, y, mat)
-            # shift into the corridor if it pokes through a wall
-            shift = min(0.0, half - rect[3]) + max(0.0, -half - rect[2])
-            if shift:
-                b = [Box((p.min_m[0], p.min_m[1] + shift, p.min_m[2]), (p.max_m[0], p.max_m[1] + shift, p.max_m[2]),
-                         p.material, 0) for p in b]
-                c = [Cylinder((p.centre_m[0], p.centre_m[1] + shift), p.radius_m, p.height_m, p.material, 0)
-                     for p in c]
-                rect = (rect[0], rect[1], rect[2] + shift, rect[3] + shift)
-            if rect[1] < x1 - 0.05 and rect[0] > x0 + 0.05 and _rect_clear(rect, path_pts, placed, 0.15):
-                placed.append(rect)
-                parts.append((rect[0], kind, b, c))
-                break
-    obstacle_kinds, cylinders = [], []
-    for k, (_, kind, b, c) in enumerate(sorted(parts, key=lambda p: p[0])):
-        b, c = _labelled(b, c, LABEL_OBSTACLE + k)
-        boxes += b
-        cylinders += c
-        obstacle_kinds.append(kind)
-
-    # lamps along the ceiling, ambient light
-    spacing = rng.uniform(1.5, 3.5)
-    power = rng.uniform(1.2, 3.5)
-    rows = [0.0] if rng.uniform() < 0.7 else [-half / 2, half / 2]
-    lights = tuple(Light((float(x), float(y), h - 0.1), power * (1.0 if len(rows) == 1 else 0.6))
-                   for x in np.arange(x0 + rng.uniform(0.3, spacing), x1, spacing) for y in rows)
-    ambient = rng.uniform(0.15, 0.5)
-
-    gain = _u(rng, RANGES["gain"])
-    noise = _u(rng, RANGES["noise_sigma"])
-    sensors = (SensorModel(gain=gain, black_level=_u(rng, RANGES["black_level"]), noise_sigma=noise),
-               SensorModel(gain=gain * _u(rng, RANGES["right_gain_ratio"]), black_level=_u(rng, RANGES["black_level"]),
-                           noise_sigma=noise * rng.uniform(0.8, 1.25)))
-    if wall_texture is not None and wall_texture != names[WALL]:
+    waypoints = _draw_path(rng, corridor)
+    openings, doors, taken = _draw_wall_gaps(rng, corridor)
+    boxes, free_regions = _structure(corridor, openings, doors, ids)
+    decals = _draw_decals(rng, corridor, bank, taken)
+    obstacle_boxes, cylinders, obstacle_kinds = _draw_obstacles(rng, corridor, bank, _path_points(waypoints))
+    lights, ambient = _draw_lights(rng, corridor)
+    sensors = _draw_sensors(rng)
+    wall = ids["wall"]
+    if wall_texture is not None and wall_texture != bank.names[wall]:
         # after every other draw, from a stream of its own: the rest of the world stays the seed's
-        names[WALL], mats[WALL] = _wall_material(np.random.default_rng(
+        bank.names[wall], bank.materials[wall] = _wall_material(np.random.default_rng(
             np.random.SeedSequence([seed, 0xC0441D0, 1])), wall_texture)
-    scene = Scene(boxes=tuple(boxes), cylinders=tuple(cylinders), decals=tuple(decals), lights=lights,
-                  materials=tuple(mats), skirting_m=skirting_m, skirting_material=SKIRT, ambient=ambient,
-                  x_range_m=(x0, x1), half_width_m=half, height_m=h, seed=seed,
+    scene = Scene(boxes=tuple(boxes + obstacle_boxes), cylinders=tuple(cylinders), decals=tuple(decals),
+                  lights=lights, materials=tuple(bank.materials), skirting_m=skirting_m,
+                  skirting_material=ids["skirting"], ambient=ambient, x_range_m=(corridor.x0_m, corridor.x1_m),
+                  half_width_m=corridor.half_m, height_m=corridor.ceiling_m, seed=seed,
                   free_regions_m=tuple(free_regions))
+    floor = ground_from_mount(stereo.mount, R_rect_from_cam=stereo.left.R)      # the rig's height and tilt
     summary = {
-        "seed": seed, "corridor_width_m": round(width_m, 3), "corridor_x_range_m": [round(x0, 3), round(x1, 3)],
-        "ceiling_m": round(h, 3), "camera_height_m": round(stereo.rig.height_m, 3),
-        "tilt_rad": round(stereo.rig.tilt_rad, 3), "baseline_m": round(stereo.baseline_m, 4),
+        "seed": seed, "corridor_width_m": round(corridor.width_m, 3),
+        "corridor_x_range_m": [round(corridor.x0_m, 3), round(corridor.x1_m, 3)],
+        "ceiling_m": round(corridor.ceiling_m, 3), "camera_height_m": round(floor.height_m, 3),
+        "tilt_rad": round(floor.tilt_rad, 3), "baseline_m": round(stereo.baseline_m, 4),
         "focal_px": round(stereo.focal_px, 1),
-        "textures": {"wall": names[WALL], "floor": names[FLOOR], "ceiling": names[CEIL],
-                     "posters": [names[d.material] for d in decals if d.label == LABEL_POSTER]},
+        "textures": {"wall": bank.names[wall], "floor": bank.names[ids["floor"]],
+                     "ceiling": bank.names[ids["ceiling"]],
+                     "posters": [bank.names[d.material] for d in decals if d.label == LABEL_POSTER]},
         "obstacles": obstacle_kinds, "side_openings": len(openings), "doors": len(doors),
         "lamps": len(lights), "ambient": round(ambient, 3),
         "sensors": [{"gain": round(s.gain, 3), "black_level": round(s.black_level, 2),

@@ -10,9 +10,9 @@ distortion model, paper eq. 1-3, then ``R``), the ideally rectified pair, and th
 ground truth of the rectified left camera: disparity ``d = b f / Z`` (eq. 14),
 depth and a surface label image.
 
-The rectified left camera frame is the one placed on the robot by
-:func:`mrstereo.transforms.T_robot_from_cam`; the right rectified camera
-sits ``baseline_m`` along its +x axis. Conventions: docs/conventions.md; user
+The rectified left camera frame is placed on the robot by the calibration's
+mount (:meth:`mrstereo.camera.CameraMount.T_base_from_rectified`); the right
+rectified camera sits ``baseline_m`` along its +x axis. Conventions: docs/conventions.md; user
 guide: docs/world.md.
 """
 from __future__ import annotations
@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
-from ..camera import Camera, CameraInfo, RigMount, StereoCamera
-from ..transforms import T_from_planar, T_robot_from_cam, rotation_from_rpy
+from ..camera import Camera, CameraInfo, CameraMount, StereoCamera
+from ..transforms import T_from_planar, rotation_from_rpy
 from . import _kernels
 from .scene import Scene
 
@@ -124,11 +124,11 @@ def default_stereo(width: int = 320, height: int = 240, *, height_m: float = 0.4
     height_m : float
         Height of the left optical centre above the floor.
     tilt_rad : float
-        Downward tilt of the head (positive looks down).
+        Downward tilt of the rectified left camera (positive looks down): the paper's rig
+        (:meth:`mrstereo.camera.CameraMount.from_rig`).
     """
     width = _checks.positive_int("width", width, minimum=16)
     height = _checks.positive_int("height", height, minimum=16)
-    rig = RigMount(height_m=height_m, tilt_rad=tilt_rad)
     if (width, height) == (640, 480):
         f, baseline = 451.0, 0.075
     else:
@@ -145,17 +145,21 @@ def default_stereo(width: int = 320, height: int = 240, *, height_m: float = 0.4
     P_left = np.hstack([rect.K, np.zeros((3, 1))])
     P_right = P_left.copy()
     P_right[0, 3] = -f * baseline
+    mount = CameraMount.from_rig(height_m, tilt_rad, R_rect_from_cam=R_left)
     return StereoCamera(left=CameraInfo(raw_left, R=R_left, P=P_left, name="left"),
-                        right=CameraInfo(raw_right, R=R_right, P=P_right, name="right"), rig=rig)
+                        right=CameraInfo(raw_right, R=R_right, P=P_right, name="right"), mount=mount)
 
 
 def camera_poses(stereo: StereoCamera, *, pose, pan_rad: float = 0.0,
-                 rig: RigMount | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 mount: CameraMount | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``T_world_from_cam`` (4x4) of the rectified left and right cameras for a robot pose."""
-    rig = _rig(stereo, rig)
+    if not isinstance(stereo, StereoCamera):
+        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    mount = stereo.mount if mount is None else mount
+    if mount is None:
+        raise ValueError("stereo has no camera mount; pass mount=CameraMount(...)")
     x, y, yaw = _pose(pose)
-    T_left = T_from_planar(x, y, yaw) @ T_robot_from_cam(
-        height_m=rig.height_m, tilt_rad=rig.tilt_rad, pan_rad=_checks.finite_number("pan_rad", pan_rad))
+    T_left = T_from_planar(x, y, yaw) @ mount.T_base_from_rectified(stereo.left.R, pan_rad)
     T_right = T_left.copy()
     T_right[:3, 3] = T_left[:3, 3] + T_left[:3, 0] * stereo.baseline_m
     return T_left, T_right
@@ -169,15 +173,6 @@ def _pose(pose) -> tuple[float, float, float]:
     if len(values) != 3 or not np.all(np.isfinite(values)):
         raise ValueError(f"pose must be 3 finite numbers (x_m, y_m, yaw_rad), got {pose!r}")
     return values[0], values[1], values[2]
-
-
-def _rig(stereo: StereoCamera, rig: RigMount | None) -> RigMount:
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
-    rig = stereo.rig if rig is None else rig
-    if rig is None:
-        raise ValueError("stereo has no rig mount (height_m, tilt_rad); pass rig=RigMount(...)")
-    return rig
 
 
 _RAY_CACHE: OrderedDict = OrderedDict()
@@ -260,7 +255,7 @@ def _check_free(scene: Scene, point: np.ndarray, what: str) -> None:
 
 
 def render_stereo_frame(scene: Scene, stereo: StereoCamera, *, pose=(0.0, 0.0, 0.0), pan_rad: float = 0.0,
-                        seed: int = 0, supersample: int = 2, rig: RigMount | None = None,
+                        seed: int = 0, supersample: int = 2, mount: CameraMount | None = None,
                         sensors: tuple[SensorModel, SensorModel] = (SensorModel(), SensorModel())) -> StereoFrame:
     """Render raw and rectified stereo images of ``scene`` with ground truth.
 
@@ -269,8 +264,8 @@ def render_stereo_frame(scene: Scene, stereo: StereoCamera, *, pose=(0.0, 0.0, 0
     scene : Scene
         The world, e.g. :func:`mrstereo.world.default_scene`.
     stereo : StereoCamera
-        True calibration of the rig (e.g. :func:`default_stereo`); its ``rig``
-        mount places the head unless ``rig`` is given.
+        True calibration of the rig (e.g. :func:`default_stereo`); its ``mount``
+        places the head unless ``mount`` is given.
     pose : (x_m, y_m, yaw_rad)
         Robot pose in the world.
     pan_rad : float
@@ -280,8 +275,8 @@ def render_stereo_frame(scene: Scene, stereo: StereoCamera, *, pose=(0.0, 0.0, 0
         Seed of the sensor noise.
     supersample : int
         Anti-aliasing: ``supersample x supersample`` rays per pixel.
-    rig : RigMount, optional
-        Overrides ``stereo.rig``.
+    mount : CameraMount, optional
+        Overrides ``stereo.mount``.
     sensors : (SensorModel, SensorModel)
         Gain, black level and noise of the left and right camera (default: equal cameras with
         :data:`sensor_noise_sigma` grey levels of noise).
@@ -301,7 +296,7 @@ def render_stereo_frame(scene: Scene, stereo: StereoCamera, *, pose=(0.0, 0.0, 0
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
-    T_left, T_right = camera_poses(stereo, pose=pose, pan_rad=pan_rad, rig=rig)
+    T_left, T_right = camera_poses(stereo, pose=pose, pan_rad=pan_rad, mount=mount)
     supersample = _checks.positive_int("supersample", supersample)
     if supersample > 8:
         raise ValueError(f"supersample must be <= 8, got {supersample}")

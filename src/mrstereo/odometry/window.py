@@ -1,0 +1,362 @@
+"""Windowed refinement: bundle adjustment of the last keyframes' poses and the points they see.
+
+The problem (Triggs et al. 2000; the local bundle adjustment of ORB-SLAM2's and S-PTAM's stereo
+odometry): keyframe poses ``T_cam_from_world`` (each a 6-vector: rotation vector and
+translation) and landmarks ``X`` in the world (3-vectors) minimize the robust sum of the
+reprojection errors of every observation,
+
+    r_left  = (fx X_c / Z_c + cx - u,  fy Y_c / Z_c + cy - v)
+    r_right = fx (X_c - b) / Z_c + cx_right - u_right          (a stereo observation)
+
+with ``X_c = R X + t`` the landmark in the keyframe's rectified left camera and ``b`` the
+baseline. The right image's column makes the depth, hence the scale, observable in every
+keyframe. The loss is Huber's (``huber_px``: residuals beyond it count linearly, so a wrong
+track pulls with a bounded force); the oldest keyframes stay fixed (they fix the gauge: the
+window's position, orientation and, with stereo, nothing else is free).
+
+``scipy.optimize.least_squares`` (trust-region reflective) solves it with an analytic sparse
+Jacobian: each residual depends on one pose (6 columns) and one landmark (3 columns), so the
+Jacobian has at most 9 non-zeros per row; the rotation's derivative is Gallego and Yezzi's
+closed form (:func:`mrstereo.transforms.rotated_points_jacobian`). Conventions:
+docs/conventions.md; user guide: docs/odometry.md.
+
+References
+----------
+B. Triggs, P. McLauchlan, R. Hartley, A. Fitzgibbon. Bundle adjustment -- a modern synthesis.
+Vision Algorithms: Theory and Practice, 2000. R. Mur-Artal, J. D. Tardos. ORB-SLAM2: an
+open-source SLAM system for monocular, stereo and RGB-D cameras. IEEE T-RO 33(5), 2017.
+SciPy Cookbook: Large-scale bundle adjustment in scipy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .. import _checks
+from ..transforms import T_from_rvec_t, rotations_from_rvecs
+from ._kernels import window_back_substitute, window_normal_equations, window_residuals, window_schur
+
+__all__ = ["WindowResult", "refine_window"]
+
+
+@dataclass(frozen=True)
+class WindowResult:
+    """Result of :func:`refine_window`.
+
+    Attributes
+    ----------
+    T_cam_from_world : ndarray (K, 4, 4)
+        Refined keyframe poses (the fixed ones unchanged).
+    points_world : ndarray (M, 3)
+        Refined landmarks.
+    error_px : ndarray (n,)
+        Each observation's reprojection error after the refinement (the largest of its left
+        and right image errors).
+    success : bool
+    message : str
+    cost_before, cost_after : float
+        Robust cost (half the sum of Huber-weighted squared residuals, px^2).
+    evaluations : int
+    """
+
+    T_cam_from_world: np.ndarray
+    points_world: np.ndarray
+    error_px: np.ndarray
+    success: bool
+    message: str
+    cost_before: float
+    cost_after: float
+    evaluations: int
+
+
+def refine_window(T_cam_from_world, points_world, *, obs_keyframe, obs_point, obs_uv, obs_u_right, fixed,
+                  K, baseline_m: float, cx_right_px: float | None = None, huber_px: float = 1.0,
+                  max_iterations: int = 10) -> WindowResult:
+    """Bundle adjustment of keyframe poses and landmarks over stereo (and mono) observations.
+
+    Parameters
+    ----------
+    T_cam_from_world : ndarray (K, 4, 4)
+        Keyframe poses (rectified left camera), the starting point.
+    points_world : ndarray (M, 3)
+        Landmarks, the starting point.
+    obs_keyframe, obs_point : ndarray (n,) int
+        Keyframe and landmark of each observation.
+    obs_uv : ndarray (n, 2)
+        Left image position ``(u, v)`` of each observation [px].
+    obs_u_right : ndarray (n,)
+        Right image column of each observation; NaN where the right image did not see it.
+    fixed : ndarray (K,) bool
+        Keyframes held fixed (at least one: the gauge).
+    K : ndarray (3, 3)
+        Rectified intrinsics.
+    baseline_m : float
+    cx_right_px : float, optional
+        The right camera's principal point column (default ``cx``).
+    huber_px : float
+        Huber threshold of the loss [px], on each observation's error (the norm of its residuals).
+    max_iterations : int
+        Levenberg-Marquardt steps at most.
+    """
+    T = np.asarray(T_cam_from_world, dtype=np.float64)
+    X = np.asarray(points_world, dtype=np.float64)
+    if T.ndim != 3 or T.shape[1:] != (4, 4) or not np.isfinite(T).all():
+        raise ValueError(f"T_cam_from_world must be finite with shape (K, 4, 4), got {T.shape}")
+    if X.ndim != 2 or X.shape[1] != 3 or not np.isfinite(X).all():
+        raise ValueError(f"points_world must be finite with shape (M, 3), got {X.shape}")
+    kf = np.asarray(obs_keyframe, dtype=np.int64).ravel()
+    pt = np.asarray(obs_point, dtype=np.int64).ravel()
+    uv = np.asarray(obs_uv, dtype=np.float64).reshape(-1, 2)
+    ur_obs = np.asarray(obs_u_right, dtype=np.float64).ravel()
+    fixed = np.asarray(fixed, dtype=bool).ravel()
+    n = len(kf)
+    if not (len(pt) == len(uv) == len(ur_obs) == n) or n == 0:
+        raise ValueError(f"the observations must be n >= 1 long each, got {len(kf)}, {len(pt)}, {len(uv)}, "
+                         f"{len(ur_obs)}")
+    if len(fixed) != len(T) or not fixed.any():
+        raise ValueError(f"fixed must be {len(T)} booleans with at least one True (the gauge)")
+    if kf.min() < 0 or kf.max() >= len(T) or pt.min() < 0 or pt.max() >= len(X):
+        raise ValueError("obs_keyframe / obs_point index outside the keyframes / landmarks")
+    if not np.isfinite(uv).all():
+        raise ValueError("obs_uv must be finite")
+    _checks.finite_number("baseline_m", baseline_m, positive=True)
+    huber_px = _checks.finite_number("huber_px", huber_px, positive=True)
+    max_iterations = _checks.positive_int("max_iterations", max_iterations)
+    K = _checks.matrix("K", K, (3, 3))
+    problem = _Problem(kf, pt, uv, ur_obs, fixed, K, float(baseline_m),
+                       K[0, 2] if cx_right_px is None else float(cx_right_px), huber_px, len(X))
+    rvecs = np.array([cv2.Rodrigues(Tk[:3, :3])[0].ravel() for Tk in T])
+    state = (rvecs, T[:, :3, 3].copy(), X.copy())
+    res, cost = problem.residuals(*state)
+    cost0, lam, message, iterations = cost, 1e-3, "converged", 0
+    for iterations in range(1, max_iterations + 1):
+        step = problem.step(*state, res, lam)
+        if step is None:
+            message = "singular normal equations"
+            break
+        trial = problem.apply(*state, *step)
+        trial_res, trial_cost = problem.residuals(*trial)
+        if trial_cost < cost:
+            gain = (cost - trial_cost) / max(cost, 1e-12)
+            state, res, cost = trial, trial_res, trial_cost
+            lam = max(lam / 10.0, 1e-9)
+            if gain < 1e-6:
+                break
+        else:
+            lam *= 10.0
+            if lam > 1e6:
+                message = "no step lowers the cost"
+                break
+    else:
+        message = "iteration limit"
+    rvecs, tvecs, P = state
+    T_out = np.stack([T_from_rvec_t(ri, ti) for ri, ti in zip(rvecs, tvecs)])
+    T_out[fixed] = T[fixed]
+    return WindowResult(T_cam_from_world=T_out, points_world=P, error_px=np.sqrt(np.sum(res ** 2, axis=1)),
+                        success=bool(cost <= cost0), message=message, cost_before=cost0, cost_after=cost,
+                        evaluations=iterations)
+
+
+class _Problem:
+    """Residuals and the Schur-complement step of one window (index arrays fixed at build; kernels)."""
+
+    def __init__(self, kf, pt, uv, ur_obs, fixed, K, baseline_m, cx_right, huber_px, n_points):
+        self.kf, self.pt, self.uv = kf, pt, np.ascontiguousarray(uv)
+        self.stereo = np.isfinite(ur_obs)
+        self.ur = np.where(self.stereo, ur_obs, 0.0)
+        self.intrinsics = (float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]))
+        self.b, self.cxr, self.delta = baseline_m, cx_right, huber_px
+        self.free = np.flatnonzero(~fixed)
+        slot = np.full(len(fixed), -1, dtype=np.int64)
+        slot[self.free] = np.arange(len(self.free))
+        self.slot, self.obs_slot = slot, slot[kf]
+        order = np.argsort(pt, kind="stable")                    # observations grouped by landmark
+        self.point_obs = order
+        self.point_start = np.searchsorted(pt[order], np.arange(n_points + 1))
+        F, n = len(self.free), len(kf)
+        self.Hpp, self.gp = np.empty((F, 6, 6)), np.empty((F, 6))
+        self.Hll, self.gl = np.empty((n_points, 3, 3)), np.empty((n_points, 3))
+        self.Hpl, self.Hll_inv = np.empty((n, 6, 3)), np.empty((n_points, 3, 3))
+
+    def residuals(self, rvecs, tvecs, P):
+        """Residuals (n, 3) (the right column 0 for mono observations) and the robust cost."""
+        res = np.empty((len(self.kf), 3))
+        fx, fy, cx, cy = self.intrinsics
+        cost = window_residuals(rotations_from_rvecs(rvecs), tvecs, P, self.kf, self.pt, self.uv, self.ur,
+                                self.stereo, fx, fy, cx, cy, self.cxr, self.b, self.delta, res)
+        return res, cost
+
+    def step(self, rvecs, tvecs, P, res, lam):
+        """The damped Gauss-Newton step (IRLS Huber weights), landmarks eliminated (Schur complement)."""
+        R = rotations_from_rvecs(rvecs)
+        fx, fy, _, _ = self.intrinsics
+        window_normal_equations(R, _rotation_factor(rvecs, R), tvecs, P, self.kf, self.pt, self.slot,
+                                self.stereo, res, fx, fy, self.b, self.delta, self.Hpp, self.gp, self.Hll, self.gl,
+                                self.Hpl)
+        F = len(self.free)
+        S = np.zeros((F, F, 6, 6))
+        d6, f = np.arange(6), np.arange(F)
+        damped = self.Hpp.copy()
+        damped[:, d6, d6] += lam * self.Hpp[:, d6, d6] + 1e-9       # Marquardt: the diagonal times 1 + lam
+        S[f, f] = damped
+        bs = self.gp.copy()
+        if not window_schur(self.Hll, self.gl, self.Hpl, self.obs_slot, self.point_start, self.point_obs, lam, S, bs,
+                            self.Hll_inv):
+            return None
+        try:
+            dp = np.linalg.solve(S.swapaxes(1, 2).reshape(6 * F, 6 * F), -bs.ravel()).reshape(F, 6)
+        except np.linalg.LinAlgError:
+            return None
+        dl = np.empty_like(P)
+        window_back_substitute(self.Hll_inv, self.gl, self.Hpl, self.obs_slot, self.pt, dp, dl)
+        return dp, dl
+
+    def apply(self, rvecs, tvecs, P, dp, dl):
+        r, t = rvecs.copy(), tvecs.copy()
+        r[self.free] += dp[:, :3]
+        t[self.free] += dp[:, 3:]
+        return r, t, P + dl
+
+
+def _rotation_factor(rvecs: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """``M`` of ``d(R(r) p)/dr = -R [p]x M`` per rotation vector (Gallego and Yezzi 2015); I at r = 0."""
+    n2 = np.einsum("ij,ij->i", rvecs, rvecs)
+    K = np.zeros((len(rvecs), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -rvecs[:, 2], rvecs[:, 1], -rvecs[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = rvecs[:, 2], -rvecs[:, 1], rvecs[:, 0]
+    M = (rvecs[:, :, None] * rvecs[:, None, :] + (np.swapaxes(R, 1, 2) - np.eye(3)) @ K) / \
+        np.where(n2 < 1e-16, 1.0, n2)[:, None, None]
+    M[n2 < 1e-16] = np.eye(3)
+    return M
+
+
+@dataclass
+class Keyframe:
+    """A keyframe of the window: its pose, left image and the landmarks it observes.
+
+    Attributes
+    ----------
+    frame : int
+        Index of the frame in the sequence.
+    T_world_from_cam : ndarray (4, 4)
+        The rectified left camera's pose (refined while the keyframe is in the window).
+    image : ndarray or None
+        The left image (uint8; dropped when the keyframe leaves the window).
+    landmark : ndarray (N,) int64
+        Landmark id of each feature (-1: dropped as an outlier).
+    uv : ndarray (N, 2) float32
+        Left image position of each feature.
+    u_right : ndarray (N,)
+        Right image column (NaN: no stereo match).
+    """
+
+    frame: int
+    T_world_from_cam: np.ndarray
+    image: np.ndarray | None
+    landmark: np.ndarray
+    uv: np.ndarray
+    u_right: np.ndarray
+
+    @property
+    def valid(self) -> np.ndarray:
+        return self.landmark >= 0
+
+
+class LocalMap:
+    """The sliding window: the last keyframes, the landmarks they observe and their refinement.
+
+    Landmarks have global integer ids (``ids`` sorted, positions ``xyz`` in the world); those no
+    keyframe of the window observes any more are dropped when a keyframe leaves.
+
+    Parameters
+    ----------
+    K : ndarray (3, 3)
+        Rectified intrinsics of the left camera.
+    baseline_m, cx_right_px : float
+        The stereo rig (right principal point column).
+    size : int
+        Keyframes in the window.
+    fixed : int
+        Oldest keyframes held fixed in the refinement (the gauge).
+    huber_px, iterations : float, int
+        Of :func:`refine_window`.
+    outlier_px : float
+        Observations farther than this from their landmark's projection after a refinement are
+        dropped.
+    """
+
+    def __init__(self, K, baseline_m: float, cx_right_px: float, *, size: int, fixed: int, huber_px: float,
+                 iterations: int, outlier_px: float) -> None:
+        self.K, self.baseline_m, self.cx_right_px = np.asarray(K, dtype=np.float64), float(baseline_m), cx_right_px
+        self.size, self.fixed, self.huber_px = size, fixed, huber_px
+        self.iterations, self.outlier_px = iterations, outlier_px
+        self.keyframes: list[Keyframe] = []
+        self.ids = np.empty(0, np.int64)
+        self.xyz = np.empty((0, 3))
+        self._next_id = 0
+
+    def clear(self) -> None:
+        self.keyframes = []
+        self.ids = np.empty(0, np.int64)
+        self.xyz = np.empty((0, 3))
+
+    def add_landmarks(self, points_world: np.ndarray) -> np.ndarray:
+        """New landmarks; returns their ids."""
+        ids = np.arange(self._next_id, self._next_id + len(points_world), dtype=np.int64)
+        self._next_id += len(points_world)
+        self.ids = np.concatenate([self.ids, ids])
+        self.xyz = np.concatenate([self.xyz, np.asarray(points_world, dtype=np.float64).reshape(-1, 3)])
+        return ids
+
+    def points(self, ids: np.ndarray) -> np.ndarray:
+        """World positions (N, 3) of landmark ids (all must exist)."""
+        return self.xyz[np.searchsorted(self.ids, ids)]
+
+    def add_keyframe(self, keyframe: Keyframe) -> list[Keyframe]:
+        """Append a keyframe; returns the keyframes that left the window (their images dropped)."""
+        self.keyframes.append(keyframe)
+        gone = self.keyframes[:-self.size] if len(self.keyframes) > self.size else []
+        if gone:
+            self.keyframes = self.keyframes[-self.size:]
+            for kf in gone:
+                kf.image = None
+            seen = np.unique(np.concatenate([kf.landmark[kf.valid] for kf in self.keyframes]))
+            keep = np.isin(self.ids, seen)
+            self.ids, self.xyz = self.ids[keep], self.xyz[keep]
+        return gone
+
+    def refine(self) -> WindowResult | None:
+        """Bundle-adjust the window (landmarks seen by two keyframes or more); None with fewer than two
+        keyframes or nothing shared. Poses, landmarks and outlier observations are updated in place."""
+        if len(self.keyframes) < 2:
+            return None
+        kf_idx = np.concatenate([np.full(int(kf.valid.sum()), k) for k, kf in enumerate(self.keyframes)])
+        lm = np.concatenate([kf.landmark[kf.valid] for kf in self.keyframes])
+        uv = np.concatenate([kf.uv[kf.valid] for kf in self.keyframes]).astype(np.float64)
+        ur = np.concatenate([kf.u_right[kf.valid] for kf in self.keyframes])
+        shared, count = np.unique(lm, return_counts=True)
+        shared = shared[count >= 2]
+        use = np.isin(lm, shared)
+        if not use.any():
+            return None
+        kf_idx, lm, uv, ur = kf_idx[use], lm[use], uv[use], ur[use]
+        point = np.searchsorted(shared, lm)
+        fixed = np.arange(len(self.keyframes)) < min(self.fixed, len(self.keyframes) - 1)
+        T = np.stack([np.linalg.inv(kf.T_world_from_cam) for kf in self.keyframes])
+        result = refine_window(T, self.points(shared), obs_keyframe=kf_idx, obs_point=point, obs_uv=uv,
+                               obs_u_right=ur, fixed=fixed, K=self.K, baseline_m=self.baseline_m,
+                               cx_right_px=self.cx_right_px, huber_px=self.huber_px,
+                               max_iterations=self.iterations)
+        if not result.success:
+            return result
+        for kf, T_cam_from_world in zip(self.keyframes, result.T_cam_from_world):
+            kf.T_world_from_cam = np.linalg.inv(T_cam_from_world)
+        self.xyz[np.searchsorted(self.ids, shared)] = result.points_world
+        bad = result.error_px > self.outlier_px
+        for k, kf in enumerate(self.keyframes):
+            drop = lm[bad & (kf_idx == k)]
+            if len(drop):
+                kf.landmark[np.isin(kf.landmark, drop)] = -1
+        return result

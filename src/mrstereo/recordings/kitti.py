@@ -1,0 +1,190 @@
+"""The KITTI odometry layout as a recording: rectified pairs, stamps, calibration and 3-D truth.
+
+Layout (the KITTI odometry benchmark's files, http://www.cvlibs.net/datasets/kitti/eval_odometry.php)::
+
+    ROOT/sequences/NN/image_0/000000.png ...   left rectified gray images
+    ROOT/sequences/NN/image_1/000000.png ...   right rectified gray images
+    ROOT/sequences/NN/calib.txt                P0: ... P1: ... (3x4 rectified projections, row-major)
+    ROOT/sequences/NN/times.txt                one stamp per frame [s]
+    ROOT/poses/NN.txt                          ground truth (optional; sequences 00-10 have it)
+
+:func:`read_kitti_odometry` returns the same :class:`~mrstereo.recordings.manifest.Manifest` the
+pipeline reads from a dataset directory: frames with both rectified images and their stamps, the
+calibration as a pre-rectified :class:`~mrstereo.camera.StereoCamera` (``P0`` left, ``P1`` right:
+``P1[0, 3] = -fx * baseline_m``), and the truth converted to the REP 103 base frame.
+
+KITTI's poses are ``T_cam0_from_camk``: the left camera of frame ``k`` in the left camera of frame 0
+(x right, y down, z forward). With the camera mount ``M = T_base_from_cam`` (default: the left
+camera 1.65 m above the road, level, looking forward, as the KITTI car carries it), the base pose
+is ``T_world_from_base_k = M T_cam0_from_camk inv(M)``: the world is the base frame of frame 0
+(x forward, y left, z up, on the road). Without a poses file every frame's given pose is the
+origin (use visual odometry). Conventions: docs/conventions.md; the format: docs/dataset.md.
+
+References
+----------
+A. Geiger, P. Lenz, R. Urtasun. Are we ready for autonomous driving? The KITTI vision benchmark
+suite. CVPR 2012.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..camera import Camera, CameraInfo, StereoCamera
+from ..camera.mount import CameraMount
+from .manifest import FrameRecord, Manifest, pose_3d_of
+
+__all__ = ["read_kitti_odometry", "is_kitti_odometry", "KITTI_MOUNT"]
+
+KITTI_MOUNT = CameraMount.from_xyz_rpy((0.0, 0.0, 1.65), (0.0, 0.0, 0.0))
+"""The left camera of the KITTI car: 1.65 m above the road, level, looking forward (Geiger et al. 2012)."""
+
+
+def _sequence_dir(path: Path, sequence: str | None) -> Path:
+    """``sequences/NN`` of a KITTI root, or ``path`` itself when it is a sequence folder."""
+    if (path / "image_0").is_dir():
+        return path
+    seqs = path / "sequences"
+    if not seqs.is_dir():
+        raise ValueError(f"{path} is not a KITTI odometry folder: no image_0/ and no sequences/")
+    if sequence is not None:
+        folder = seqs / sequence
+        if not (folder / "image_0").is_dir():
+            raise FileNotFoundError(f"KITTI sequence {sequence!r} not found: {folder}/image_0")
+        return folder
+    found = sorted(p for p in seqs.iterdir() if (p / "image_0").is_dir())
+    if len(found) != 1:
+        names = ", ".join(p.name for p in found) or "none"
+        raise ValueError(f"{seqs} holds {len(found)} sequences ({names}): name one (sequence='NN')")
+    return found[0]
+
+
+def is_kitti_odometry(path: str | os.PathLike) -> bool:
+    """True when ``path`` is a KITTI odometry root (``sequences/NN/``) or a sequence folder (``image_0/``,
+    ``image_1/``, ``calib.txt``)."""
+    path = Path(path)
+    if not path.is_dir():
+        return False
+    folders = [path] if (path / "image_0").is_dir() else \
+        [p for p in (path / "sequences").glob("*") if p.is_dir()] if (path / "sequences").is_dir() else []
+    return any((f / "image_0").is_dir() and (f / "image_1").is_dir() and (f / "calib.txt").is_file()
+               for f in folders)
+
+
+def _calibration(path: Path, size: tuple[int, int]) -> StereoCamera:
+    """P0 (left) and P1 (right) of ``calib.txt`` as a pre-rectified pair."""
+    rows = {}
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        if ":" not in line:
+            continue
+        key, values = line.split(":", 1)
+        try:
+            rows[key.strip()] = np.array([float(v) for v in values.split()], dtype=np.float64)
+        except ValueError:
+            raise ValueError(f"{path} line {n}: {key.strip()} must be numbers") from None
+    for key in ("P0", "P1"):
+        if key not in rows or rows[key].size != 12:
+            raise ValueError(f"{path}: needs '{key}:' with 12 numbers (a row-major 3x4 projection), "
+                             f"got {0 if key not in rows else rows[key].size}")
+    P0, P1 = rows["P0"].reshape(3, 4), rows["P1"].reshape(3, 4)
+    width, height = size
+    try:
+        camera = Camera(width=width, height=height, fx=P0[0, 0], fy=P0[1, 1], cx=P0[0, 2], cy=P0[1, 2])
+        right = Camera(width=width, height=height, fx=P1[0, 0], fy=P1[1, 1], cx=P1[0, 2], cy=P1[1, 2])
+        return StereoCamera(left=CameraInfo(camera, P=P0, name="left"), right=CameraInfo(right, P=P1, name="right"))
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
+def _numbers_file(path: Path, columns: int, what: str) -> np.ndarray:
+    try:
+        values = np.loadtxt(path, dtype=np.float64, ndmin=2)
+    except ValueError as exc:
+        raise ValueError(f"{what} {path}: {exc}") from None
+    if values.shape[1] != columns or not np.isfinite(values).all():
+        raise ValueError(f"{what} {path}: expected {columns} finite numbers per line, got {values.shape[1]}")
+    return values
+
+
+def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
+                        mount: CameraMount | None = None) -> Manifest:
+    """Read a KITTI odometry sequence as a recording (a :class:`Manifest`).
+
+    KITTI's rotations hold 7 digits; as unit quaternions they agree with the file to 1e-8.
+
+    Parameters
+    ----------
+    path : path
+        The KITTI root (``sequences/NN/``, ``poses/NN.txt``) or one sequence folder
+        (``image_0/``, ``image_1/``, ``calib.txt``, ``times.txt``; its poses are looked for in
+        ``../../poses/NN.txt``).
+    sequence : str, optional
+        ``"06"`` etc.; needed when the root holds several sequences.
+    mount : CameraMount, optional
+        The left camera on the base (default :data:`KITTI_MOUNT`).
+
+    Returns
+    -------
+    Manifest
+        Frames (``left_rect``/``right_rect``, ``stamp_s`` from times.txt, ``pose_3d`` and
+        ``true_pose_3d`` from the poses file, else the origin and no truth), the calibration
+        (``calibration_path``: calib.txt) and the mount.
+
+    Raises
+    ------
+    FileNotFoundError
+        A missing calib.txt or image.
+    ValueError
+        Not a KITTI layout, unreadable numbers, stamps or poses that do not match the images.
+    """
+    root = Path(path)
+    if not root.is_dir():
+        raise FileNotFoundError(f"KITTI odometry folder not found: {root}")
+    mount = KITTI_MOUNT if mount is None else mount
+    if not isinstance(mount, CameraMount):
+        raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
+    seq = _sequence_dir(root, sequence)
+    lefts = sorted((seq / "image_0").glob("*.png"))
+    if not lefts:
+        raise ValueError(f"{seq / 'image_0'} has no PNG images")
+    rights = [seq / "image_1" / p.name for p in lefts]
+    missing = [p for p in rights if not p.is_file()]
+    if missing:
+        raise FileNotFoundError(f"right image not found: {missing[0]} (image_1 must match image_0)")
+    calib_path = seq / "calib.txt"
+    if not calib_path.is_file():
+        raise FileNotFoundError(f"KITTI calibration not found: {calib_path}")
+    first = cv2.imread(str(lefts[0]), cv2.IMREAD_UNCHANGED)
+    if first is None:
+        raise ValueError(f"cannot read image {lefts[0]}")
+    stereo = _calibration(calib_path, (first.shape[1], first.shape[0]))
+    indices = [int(p.stem) for p in lefts]
+    stamps = None
+    if (seq / "times.txt").is_file():
+        times = _numbers_file(seq / "times.txt", 1, "KITTI times").ravel()
+        if max(indices) >= len(times):
+            raise ValueError(f"{seq / 'times.txt'} has {len(times)} stamps but image_0 has frame {max(indices)}")
+        stamps = times[indices]
+    truth = None
+    poses_path = seq.parent.parent / "poses" / f"{seq.name}.txt"
+    if poses_path.is_file():
+        rows = _numbers_file(poses_path, 12, "KITTI poses")
+        if max(indices) >= len(rows):
+            raise ValueError(f"{poses_path} has {len(rows)} poses but image_0 has frame {max(indices)}")
+        M = mount.T_base_from_cam
+        M_inv = np.linalg.inv(M)
+        truth = []
+        for k in indices:
+            T_cam0_from_camk = np.vstack([rows[k].reshape(3, 4), [0.0, 0.0, 0.0, 1.0]])
+            truth.append(pose_3d_of(M @ T_cam0_from_camk @ M_inv))
+    origin = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    frames = tuple(FrameRecord(pose=None, left_rect=left.resolve(), right_rect=right.resolve(),
+                               stamp_s=None if stamps is None else float(stamps[i]),
+                               pose_3d=origin if truth is None else truth[i],
+                               true_pose_3d=None if truth is None else truth[i])
+                   for i, (left, right) in enumerate(zip(lefts, rights)))
+    return Manifest(root=seq.resolve(), calibration=stereo, calibration_path=calib_path.resolve(), mount=mount,
+                    ground_truth_map=None, frames=frames)
