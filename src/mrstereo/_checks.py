@@ -45,6 +45,13 @@ def instance(name: str, value, types, what: str | None = None):
     return value
 
 
+def instances(name: str, values, types):
+    """``values`` when each is one of ``types``, else ``TypeError`` naming ``name[k]``."""
+    for k, value in enumerate(values):
+        instance(f"{name}[{k}]", value, types)
+    return values
+
+
 def image(name: str, value) -> np.ndarray:
     """Check an image: HxW or HxWx3, uint8 or floating, non-empty, finite."""
     if not isinstance(value, np.ndarray):

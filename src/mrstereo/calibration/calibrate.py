@@ -110,8 +110,7 @@ def _num(v: float):
 
 def _views_and_camera(views, camera) -> None:
     """Views must be CalibrationViews and the camera a Camera (before any field of theirs is read)."""
-    for k, view in enumerate(views):
-        _checks.instance(f"views[{k}]", view, CalibrationView)
+    _checks.instances("views", views, CalibrationView)
     if camera is not None:
         _checks.instance("camera", camera, Camera)
 

@@ -203,8 +203,7 @@ def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequen
         The distortion model fitted (:data:`CALIBRATION_MODELS`).
     """
     _checks.instance("camera", camera, Camera)
-    for k, view in enumerate(views):
-        _checks.instance(f"views[{k}]", view, CalibrationView)
+    _checks.instances("views", views, CalibrationView)
     spec = calibration_model(model)
     n_int = (4 if fix_aspect is None else 3) + spec.n_free
     lin = [camera.fx, camera.fy, camera.cx, camera.cy] if fix_aspect is None else [camera.fx, camera.cx, camera.cy]
