@@ -10,7 +10,7 @@ import click
 
 from ..mapping import GridSpec, MappingConfig
 from ..pipeline.run import PipelineConfig, build_map
-from ._bag import bag_options, opened_dataset
+from ._bag import opened_dataset, recording_of, recording_options
 from ._options import check_workers, echo_run_floor, library_default, profile_option, worker_options
 
 __all__ = ["COMMANDS"]
@@ -22,7 +22,7 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
 @click.command("map")
 @profile_option("read, rectify, match, reject, 3-D, free space, grid; with --odometry visual: odometry; "
                 "with --align: align")
-@click.argument("manifest", required=False, metavar="[DATASET]", type=click.Path(path_type=Path))
+@click.argument("manifest", required=False, metavar="[RECORDING]", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (map.pgm, map.yaml, map.png, log_odds.npy, metrics.json).")
 @click.option("--calib", "calib", type=click.Path(dir_okay=False, path_type=Path),
@@ -47,17 +47,18 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
                    "with the visual one by their expected errors (docs/odometry.md); the corrections go to "
                    "metrics.json.")
 @worker_options
-@click.option("--bag", "bag", type=click.Path(path_type=Path),
-              help="Map a ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
-@bag_options
+@recording_options
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
                 resolution_m: float, size_m: str, origin_m: str, odometry: str, align: bool, workers: int | None,
-                scheduler: str | None, processes: bool, bag: Path | None, quiet: bool, **bag_kw) -> None:
+                scheduler: str | None, processes: bool, bag: Path | None, rate_hz: float | None, quiet: bool,
+                **bag_kw) -> None:
     """Build an occupancy grid map from a recording or a ROS bag.
 
-    DATASET is a dataset folder or its manifest.yaml (docs/dataset.md) or a KITTI odometry
-    folder; --bag maps a ROS bag instead (docs/scale-out.md).
+    RECORDING is a dataset folder (docs/dataset.md), a KITTI odometry or
+    EuRoC/ASL folder, a folder of left/right image folders (with --calib), or
+    a ROS bag (docs/scale-out.md; its stereo topics are picked when it has one
+    pair). `mrstereo info RECORDING` shows what is read.
 
     Every frame is rectified, matched (multi-range), ground-suppressed (eq. 13),
     triangulated and fused along the robot path. Writes a ROS map_server map
@@ -69,25 +70,24 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
     from ..pipeline.batch import dataset_files
     from ..pipeline.run import write_map_outputs
-    from ..recordings.layouts import read_recording
 
     check_workers(workers, scheduler, processes)
     if align and odometry == "visual":
         raise click.UsageError("--align corrects the given poses with visual odometry: not with --odometry visual")
-    if (manifest is None) == (bag is None):
-        raise click.UsageError("give a DATASET or --bag FILE (one of them)")
+    source, is_bag = recording_of(manifest, bag)
     (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
     grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
     config = PipelineConfig(preset=preset, grid=grid).with_fusion(fusion)
     check_output_dir("--out", out_dir)
     outputs = {f"--out {out_dir / name}": out_dir / name for name in MAP_FILES}     # (names the file)
-    if bag is not None:
-        check_outputs(outputs, [bag, calib], input_dirs=[bag] if bag.is_dir() else [])
+    if is_bag:
+        check_outputs(outputs, [source, calib], input_dirs=[source] if source.is_dir() else [])
+        manifest, bag = None, source
     else:
-        dataset = read_recording(manifest)           # read once: checked here, mapped below
-        check_outputs(outputs, [manifest, calib] + dataset_files(dataset))
+        with opened_dataset(manifest, None, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, _, _):
+            check_outputs(outputs, [manifest, calib] + dataset_files(dataset))   # read once: checked here
         manifest = dataset
-    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, _):
+    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes, odometry=odometry, align=align or None)
         remove_stale_temporaries(out_dir)

@@ -55,7 +55,7 @@ _MAP_RECORD = "batch.json"
 
 def dataset_files(manifest: Manifest) -> list[Path]:
     """Every file a run over ``manifest`` reads: the manifest, calibration, ground-truth map, images."""
-    files = [manifest.root / "manifest.yaml", manifest.calibration_path]
+    files = [p for p in (manifest.root / "manifest.yaml", manifest.calibration_path) if p.is_file()]
     if manifest.ground_truth_map is not None:
         files += ros_map_files(manifest.ground_truth_map)
     for r in manifest.frames:
