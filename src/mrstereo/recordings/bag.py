@@ -131,6 +131,31 @@ def pick_stereo_topics(topics: dict[str, str], *, need_camera_info: bool = True)
                      "give --left-topic and --right-topic" + (" (or --calib)" if need_camera_info and not pairs else ""))
 
 
+def describe_bag(bag: str | os.PathLike) -> list[tuple[str, str]]:
+    """``(what, value)`` lines of a bag without exporting it: topics with message counts, the stereo pair."""
+    with _open_bag(bag) as reader:
+        counts: dict[str, int] = {}
+        for c in reader.connections:
+            counts[c.topic] = counts.get(c.topic, 0) + int(c.msgcount)
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        duration = (reader.end_time - reader.start_time) / 1e9 if reader.end_time > reader.start_time else 0.0
+    lines = [("layout", f"ROS bag: {bag}"), ("duration", f"{duration:.1f} s")]
+    lines += [("topic", f"{t} ({m}, {counts[t]} messages)") for t, m in sorted(topics.items())]
+    for need_info in (True, False):
+        try:
+            left, right = pick_stereo_topics(topics, need_camera_info=need_info)
+        except ValueError as exc:
+            if not need_info:
+                lines.append(("stereo pair", str(exc)))
+            continue
+        lines.append(("stereo pair", f"{left}, {right}" + ("" if need_info else " (no camera_info: give --calib)")))
+        break
+    odometry = [t for t, m in topics.items() if m == ODOMETRY_TYPE]
+    lines.append(("odometry", ", ".join(odometry) if odometry else "none (poses from /tf with --tf, or visual odometry)"))
+    lines.append(("tf", ", ".join(t for t in TF_TOPICS if t in topics) or "none"))
+    return lines
+
+
 def with_picked_topics(bag: str | os.PathLike, options: dict) -> dict:
     """``options`` of :func:`export_bag` with the left and right topics picked when not given
     (:func:`pick_stereo_topics`), and the bag's one odometry topic when neither it nor TF is named."""

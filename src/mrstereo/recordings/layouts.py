@@ -25,7 +25,7 @@ from .folders import FOLDER_PAIRS, is_image_folders, read_image_folders
 from .kitti import is_kitti_odometry, read_kitti_odometry
 from .manifest import MANIFEST_NAME, Manifest, read_manifest
 
-__all__ = ["LAYOUTS", "read_recording", "opened_recording", "is_bag", "layout_of"]
+__all__ = ["LAYOUTS", "read_recording", "opened_recording", "is_bag", "layout_of", "describe_recording"]
 
 
 def _is_manifest(path: Path) -> bool:
@@ -126,3 +126,42 @@ def opened_recording(path: str | os.PathLike, *, calibration=None, rate_hz: floa
     with exported_bag(path, **options) as manifest:
         yield dataclasses.replace(manifest, layout="ROS bag",
                                   has_poses=bool(options.get("odom_topic") or options.get("use_tf")))
+
+
+def describe_recording(manifest: Manifest) -> list[tuple[str, str]]:
+    """``(what, value)`` lines of what a recording holds: frames, rate, images, calibration, mount, truth, poses."""
+    import numpy as np
+
+    from ..geometry.ground import ground_from_mount
+
+    frames, s = manifest.frames, manifest.calibration
+    stamps = manifest.stamps_s
+    if stamps is not None and len(stamps) > 1:
+        rate = f"{1.0 / float(np.median(np.diff(stamps))):.3g} Hz over {stamps[-1] - stamps[0]:.1f} s"
+    else:
+        rate = "unknown (no stamps)" if stamps is None else "one frame"
+    kind = "rectified" if frames[0].has_rectified else "raw (rectified with the calibration)"
+    where = f" ({manifest.calibration_path})" if manifest.calibration_path.is_file() else ""
+    lines = [("layout", f"{manifest.layout}: {manifest.root}"), ("frames", f"{len(frames)}, {kind}"),
+             ("rate", rate), ("images", f"{s.size[0]}x{s.size[1]}"),
+             ("calibration", f"focal {s.focal_px:.1f} px, baseline {s.baseline_m:.4f} m, b f {s.baseline_m * s.focal_px:.1f}"
+                             f" m px{where}")]
+    if manifest.mount is not None:
+        floor = ground_from_mount(manifest.mount, R_rect_from_cam=s.left.R)
+        lines.append(("mount", f"camera {floor.height_m:.3f} m above the floor, tilted down {np.degrees(floor.tilt_rad):.1f}"
+                               f" deg (checked against the floor seen when mapping)"))
+    else:
+        lines.append(("mount", "none: the floor is found in the first frames when mapping"))
+    truth = [f.T_world_from_base_true for f in frames]
+    if all(T is not None for T in truth):
+        length = float(np.sum(np.linalg.norm(np.diff([T[:3, 3] for T in truth], axis=0), axis=1))) if len(truth) > 1 else 0.0
+        lines.append(("truth", f"poses of every frame, path {length:.1f} m"))
+    else:
+        lines.append(("truth", "none"))
+    if manifest.has_poses:
+        lines.append(("odometry", "given poses (map and odometry use them; --odometry visual to replace them)"))
+    else:
+        lines.append(("odometry", "none: map and odometry take the poses from stereo visual odometry"))
+    lines.append(("ground-truth map", str(manifest.ground_truth_map) if manifest.ground_truth_map else "none"))
+    lines += [("note", n) for n in manifest.notes]
+    return lines
