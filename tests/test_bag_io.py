@@ -107,7 +107,7 @@ def test_mount_is_estimated_when_not_given(synthetic_dataset, tmp_path):
     assert result.mount is None and result.mount_source.startswith("none")
     manifest = read_manifest(tmp_path / "out")
     assert manifest.mount is None
-    mount, floor = floor_for_run(manifest)
+    mount, floor, _ = floor_for_run(manifest)
     assert floor.confident and floor.method == "plane"
     assert floor.height_m == pytest.approx(_rig(data).height_m, abs=0.02)
     assert floor.tilt_rad == pytest.approx(_rig(data).tilt_rad, abs=0.02)

@@ -18,8 +18,13 @@ from ..pipeline.run import PipelineConfig
 from ._options import (CALIB_HELP, check_mount_options, check_workers, echo_run_floor, mount_from_options,
                        mount_option, parse_mount, worker_options)
 
-__all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset", "recording_options",
+__all__ = ["COMMANDS", "BAG_KEYS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset", "recording_options",
            "recording_of"]
+
+
+BAG_KEYS = ("left_topic", "right_topic", "camera_info_topics", "odom_topic", "use_tf", "world_frame", "base_frame",
+            "camera_frame", "sync_tolerance_s", "rectified_images", "height_m", "tilt_rad", "mount")
+"""The parameter names of :func:`bag_options`."""
 
 
 def bag_options(func):

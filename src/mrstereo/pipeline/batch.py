@@ -40,7 +40,8 @@ from ..io import (atomic_write, check_output_dir, check_outputs, read_pfm, remov
                   write_disparity)
 from ..mapping.fusion import FrameObservation
 from ..mapping.rosmap import ros_map_files
-from ..recordings.manifest import FrameRecord, Manifest, frame_pair, read_manifest
+from ..recordings.layouts import read_recording
+from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
 from .frame import scan_from_pair
 from .parallel import ItemFailure, map_ordered
 from .run import (MapRun, PipelineConfig, floor_for_run, map_from_observations, observation_from_pair, pair_options,
@@ -174,6 +175,8 @@ class DatasetSummary:
     map_status: str = ""
     floor: object | None = None
     """The floor the frames used (:class:`mrstereo.geometry.GroundPlane`); None when all was kept."""
+    mount_warning: str | None = None
+    """Why the dataset's mount was not used (:func:`mrstereo.pipeline.floor_for_run`)."""
 
     def to_dict(self) -> dict:
         out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
@@ -181,6 +184,8 @@ class DatasetSummary:
                "failed": self.n_failed, "map": self.map_status}
         if self.floor is not None:
             out["floor"] = self.floor.summary()
+        if self.mount_warning is not None:
+            out["mount_warning"] = self.mount_warning
         return out
 
 
@@ -254,7 +259,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
     if isinstance(manifests, (str, os.PathLike, Manifest)):
         manifests = [manifests]
-    datasets = [m if isinstance(m, Manifest) else read_manifest(m) for m in manifests]
+    datasets = [m if isinstance(m, Manifest) else read_recording(m) for m in manifests]
     if not datasets:
         raise ValueError("no datasets given")
     out = Path(out_dir)
@@ -268,7 +273,8 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
                          input_dirs=[m.root for m in datasets], inputs=[f for files in inputs for f in files])
 
     tasks, observations, skipped, done_maps, floors = [], {}, {}, set(), {}
-    for name, m in zip(names, datasets):
+    configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
+    for i, (name, m) in enumerate(zip(names, datasets)):
         frames_dir = out / name / "frames"
         frames_dir.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(frames_dir)
@@ -279,14 +285,15 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
             done_maps.add(name)
         skipped[name] = sum(complete)
         if not all(complete) or (maps and name not in done_maps):
-            floors[name] = floor_for_run(m, config=config)       # the mount, or the floor estimated once
+            floors[name] = floor_for_run(m, config=configs[name])   # the mount (checked), or the floor estimated once
+            datasets[i] = m = rebased(m, floors[name].mount)
         for k, record in enumerate(m.frames):
             if complete[k]:
                 if maps and name not in done_maps:
                     observations[(name, k)] = loaded[k]
             else:
-                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, mount=floors[name][0],
-                                       config=config, frames_dir=frames_dir, dataset=name))
+                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, mount=floors[name].mount,
+                                       config=configs[name], frames_dir=frames_dir, dataset=name))
 
     results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, processes=processes,
                           progress=progress,
@@ -309,13 +316,16 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
                 status = "kept"
             else:
                 obs = [observations[(name, k)] for k in range(len(m.frames)) if (name, k) in observations]
-                run = map_from_observations(m, obs, config=config, floor=floors[name][1], mount=floors[name][0])
+                run = map_from_observations(m, obs, config=configs[name], floor=floors[name].floor,
+                                            mount=floors[name].mount)
                 _write_map(run, out / name / "map", {"frames": len(m.frames), "fused": len(obs), "failed": failed})
                 status = "written" if not failed else f"written from {len(obs)} of {len(m.frames)} frames"
-        summaries.append(DatasetSummary(name=name, manifest=m.root / "manifest.yaml", out_dir=out / name,
+        summaries.append(DatasetSummary(name=name, manifest=m.root / "manifest.yaml" if m.layout == "dataset" else m.root,
+                                        out_dir=out / name,
                                         n_frames=len(m.frames), n_computed=computed, n_skipped=skipped[name],
                                         n_failed=len(failed), map_status=status,
-                                        floor=floors[name][1] if name in floors else None))
+                                        floor=floors[name].floor if name in floors else None,
+                                        mount_warning=floors[name].warning if name in floors else None))
     path = out / SUMMARY_NAME
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps({"datasets": [s.to_dict() for s in summaries], "failures": failures,
