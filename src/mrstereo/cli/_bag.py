@@ -13,10 +13,8 @@ from pathlib import Path
 
 import click
 
-from ..mapping import MappingConfig
-from ..pipeline.run import PipelineConfig
-from ._options import (CALIB_HELP, check_mount_options, check_workers, echo_run_floor, mount_from_options,
-                       mount_option, parse_mount, worker_options)
+from ._options import (CALIB_HELP, check_mount_options, check_workers, echo_run_floor, map_config, map_options,
+                       mount_from_options, mount_option, parse_mount, warn, worker_options)
 
 __all__ = ["COMMANDS", "BAG_KEYS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset", "recording_options",
            "recording_of"]
@@ -210,48 +208,50 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 
 
 @click.command("batch")
-@click.argument("manifests", nargs=-1, required=True, metavar="DATASETS...", type=click.Path(path_type=Path))
+@click.argument("manifests", nargs=-1, required=True, metavar="RECORDINGS...", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory: one folder per dataset and summary.json.")
+              help="Output directory: one folder per recording and summary.json.")
 @worker_options
-@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default=PipelineConfig.preset,
-              show_default=True, help="Matching preset.")
-@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default=MappingConfig.fusion, show_default=True,
-              help="Map fusion.")
+@map_options
 @click.option("--no-maps", is_flag=True, help="Only the per-frame outputs, no map per dataset.")
 @mount_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool, preset: str, fusion: str,
-                  no_maps: bool, mount, quiet: bool) -> None:
-    """Process many datasets: per-frame outputs and a map each.
+def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool, no_maps: bool, mount, quiet: bool,
+                  no_mount_check: bool, **options) -> None:
+    """Process many recordings: per-frame outputs and a map each.
 
-    Per frame a disparity (PFM), a point cloud (PLY) and a laser scan (JSON);
-    per dataset a map, as `mrstereo map` makes it. Resumable: finished outputs
+    RECORDINGS are dataset folders, KITTI odometry or EuRoC/ASL folders
+    (`mrstereo info` shows what is read). Per frame a disparity (PFM), a point
+    cloud (PLY) and a laser scan (JSON); per recording a map, as `mrstereo
+    map` makes it, with the same map options. Resumable: finished outputs
     are kept on a re-run, failed frames are retried.
 
     Failures of single frames are listed in OUT/summary.json and the rest goes on;
     the command then ends with an error line naming how many failed. A dataset
     without a camera mount (and no --mount) uses the floor estimated from its
-    first frames (reported per dataset, with its confidence).
+    first frames (reported per dataset, with its confidence); a given mount
+    that disagrees with that floor is replaced by it, with a warning.
     """
     import dataclasses
 
     from ..io import check_output_dir
     from ..pipeline.batch import run_batch
-    from ..recordings.manifest import read_manifest
+    from ..recordings.layouts import read_recording
 
     check_workers(workers, scheduler, processes)
     check_output_dir("--out", out_dir)
-    config = PipelineConfig(preset=preset).with_fusion(fusion)
+    config = map_config(**options)
     camera_mount = parse_mount(mount)
     if camera_mount is not None:
-        manifests = [dataclasses.replace(read_manifest(m), mount=camera_mount) for m in manifests]
+        manifests = [dataclasses.replace(read_recording(m), mount=camera_mount) for m in manifests]
     summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
-                        scheduler=scheduler, processes=processes, progress=not quiet)
+                        scheduler=scheduler, processes=processes, progress=not quiet, check_mount=not no_mount_check)
     for d in summary.datasets:
         click.echo(f"{d.name}: {d.n_frames} frames ({d.n_computed} computed, {d.n_skipped} already done, "
                    f"{d.n_failed} failed){'; map ' + d.map_status if d.map_status else ''}")
         echo_run_floor(d.floor, prefix=f"{d.name}: floor")
+        if d.mount_warning:
+            warn(f"{d.name}: {d.mount_warning}")
     click.echo(f"wrote {out_dir} (summary: {summary.path})")
     if summary.failures:
         first = summary.failures[0]

@@ -133,8 +133,9 @@ class MappingConfig:
     footprint_radius_m : float or None
         The robot's radius: the cells its footprint touches along the path -- a disc at every pose,
         swept between consecutive poses -- are free (:meth:`OccupancyGrid.clear_disc`), since the
-        robot stood there; the cameras never see them. A planner started at the robot's pose with
-        at most this radius finds free cells around it. None or 0: off.
+        robot stood there; the cameras never see them. The default is the radius of ``mrstereo plan``
+        (0.25 m) and a cell: a robot planned from its own pose can move off it into the space its cameras
+        saw. None or 0: off.
     """
 
     p_hit: float = 0.7
@@ -153,7 +154,7 @@ class MappingConfig:
     overhang_shadow: bool = True
     map_occlusion_p: float | None = 0.8
     clear_below_m: float | None = 0.8
-    footprint_radius_m: float | None = 0.25
+    footprint_radius_m: float | None = 0.3
 
     def __post_init__(self) -> None:
         if self.footprint_radius_m is not None:

@@ -58,7 +58,8 @@ class TiledOccupancyGrid:
     def spec(self, row0: int, col0: int, rows: int, cols: int) -> GridSpec:
         """The :class:`GridSpec` of the lattice window with lower-left cell ``[row0, col0]``."""
         r = self.resolution_m
-        return GridSpec(width_m=cols * r, height_m=rows * r, resolution_m=r, origin_x_m=col0 * r, origin_y_m=row0 * r)
+        return GridSpec(width_m=round(cols * r, 9), height_m=round(rows * r, 9), resolution_m=r,
+                        origin_x_m=round(col0 * r, 9), origin_y_m=round(row0 * r, 9))
 
     def _cells_of(self, spec: GridSpec) -> tuple[int, int, int, int]:
         """``(row0, col0, rows, cols)`` of a grid on the lattice (same resolution, origin on a cell corner)."""

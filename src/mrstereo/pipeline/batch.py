@@ -233,13 +233,14 @@ def _write_map(run: MapRun, map_dir: Path, record: dict) -> None:
 
 def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
               maps: bool = True, workers: int | None = None, scheduler=None, processes: bool = False,
-              progress: bool = True) -> BatchSummary:
+              progress: bool = True, check_mount: bool = True) -> BatchSummary:
     """Process many datasets: per-frame files and one map per dataset (see the module docstring).
 
     Parameters
     ----------
     manifests : sequence of path or Manifest
-        The datasets; all are read (and validated) before any work starts.
+        The recordings (:func:`mrstereo.recordings.read_recording`: dataset, KITTI, EuRoC/ASL folders);
+        all are read (and validated) before any work starts.
     out_dir : path
         Output root; created if needed, reused by a re-run.
     config : PipelineConfig
@@ -250,6 +251,9 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         Where the frames run (:func:`mrstereo.pipeline.parallel.map_ordered`).
     progress : bool
         A tqdm bar over all frames to compute.
+    check_mount : bool
+        Check each dataset's mount against the floor seen in its first frames
+        (:func:`mrstereo.pipeline.floor_for_run`; ``DatasetSummary.mount_warning``).
 
     Returns
     -------
@@ -285,7 +289,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
             done_maps.add(name)
         skipped[name] = sum(complete)
         if not all(complete) or (maps and name not in done_maps):
-            floors[name] = floor_for_run(m, config=configs[name])   # the mount (checked), or the floor estimated once
+            floors[name] = floor_for_run(m, config=configs[name], check_mount=check_mount)   # the mount (checked), or the floor estimated once
             datasets[i] = m = rebased(m, floors[name].mount)
         for k, record in enumerate(m.frames):
             if complete[k]:

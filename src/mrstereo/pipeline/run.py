@@ -278,13 +278,17 @@ class RunFloor(NamedTuple):
 
 
 def _seen_floor(manifest: Manifest, stereo: StereoCamera, config: PipelineConfig, prefer_raw: bool,
-                max_frames: int, n_frames: int) -> GroundPlane | None:
+                max_frames: int, n_frames: int) -> tuple[GroundPlane | None, int]:
     """The floor fitted in the first ``max_frames`` frames: the median of the first ``n_frames`` confident
-    fits, else the fit with the largest inlier share (not confident), else None."""
+    fits, else the fit with the largest inlier share (not confident), else None; and the number of
+    confident fits."""
     stereo = replace(stereo, mount=None)
     fits, best = [], None
     for k, record in enumerate(manifest.frames[:max(1, int(max_frames))]):
-        left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
+        try:
+            left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
+        except (OSError, ValueError):
+            continue                       # an unreadable frame: the run reports it when it gets there
         ground = obstacles_from_pair(left, right, stereo, rectified=rectified, mount=None,
                                      **pair_options(replace(config, free_space=None))).obstacles.ground
         if ground.success and (best is None or ground.inlier_share > best[1].inlier_share):
@@ -294,7 +298,7 @@ def _seen_floor(manifest: Manifest, stereo: StereoCamera, config: PipelineConfig
             if len(fits) >= n_frames:
                 break
     if best is None:
-        return None
+        return None, 0
     used = fits or [best]
     med = {name: float(np.median([getattr(g, name) for _, g in used]))
            for name in ("height_m", "tilt_rad", "roll_rad", "inlier_share", "residual_m")}
@@ -302,7 +306,7 @@ def _seen_floor(manifest: Manifest, stereo: StereoCamera, config: PipelineConfig
     return GroundPlane(**med, success=True, method=used[0][1].method,
                        n_inliers=int(np.median([g.n_inliers for _, g in used])),
                        message=f"estimated: median of {len(used)} floor fit(s), frame(s) {frames}"
-                               + ("" if fits else " (none confident)"))
+                               + ("" if fits else " (none confident)")), len(fits)
 
 
 def _disagreement(given: GroundPlane, seen: GroundPlane | None) -> str | None:
@@ -335,10 +339,10 @@ def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
     confident fit, the fit with the largest inlier share is used and reported as not confident.
 
     Without a mount in the manifest (``mount:``, ``rig:``, the calibration's) the seen floor is the
-    mount of the run. With one (and ``check_mount``), the mount is used when it agrees with a
-    confident seen floor: camera height within :data:`MOUNT_HEIGHT_TOLERANCE_M` and tilt within
-    :data:`MOUNT_TILT_TOLERANCE_RAD`, and the camera at least :data:`MIN_CAMERA_HEIGHT_M` above the
-    floor. Otherwise the seen floor is used and ``warning`` says so with both values (a mount in a
+    mount of the run. With one (and ``check_mount``), the mount is used when the camera is at least
+    :data:`MIN_CAMERA_HEIGHT_M` above its floor and the seen floor, if confident in at least two frames
+    (one fit can be a wall's base), agrees with it: camera height within :data:`MOUNT_HEIGHT_TOLERANCE_M`
+    and tilt within :data:`MOUNT_TILT_TOLERANCE_RAD`. Otherwise the seen floor is used and ``warning`` says so with both values (a mount in a
     base frame that is not on the floor, such as a drone's body frame, puts the camera centimetres
     "above the floor" and the map would be empty).
 
@@ -359,14 +363,16 @@ def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
     given = None if manifest.mount is None else ground_from_mount(manifest.mount, R_rect_from_cam=stereo.left.R)
     if given is not None and not check_mount:
         return RunFloor(manifest.mount, given)
-    seen = _seen_floor(manifest, stereo, config, prefer_raw, max_frames, n_frames)
+    seen, n_confident = _seen_floor(manifest, stereo, config, prefer_raw, max_frames, n_frames)
     if given is None:
         if seen is None:
             raise ValueError(f"no floor found in the first {min(len(manifest.frames), max_frames)} frames of "
                              f"{manifest.root}; give the camera mount (--mount x,y,z,roll,pitch,yaw or "
                              "--height/--tilt, or mount:/rig: in the manifest or stereo YAML)")
         return RunFloor(_mount_of_floor(seen, stereo), seen)
-    reason = _disagreement(given, seen if seen is not None and seen.confident else None)
+    # one confident fit can be a wall's base or a ramp: a plausible mount is replaced on repeated evidence only
+    repeated = n_confident >= min(2, len(manifest.frames))
+    reason = _disagreement(given, seen if seen is not None and seen.confident and repeated else None)
     if reason is None:
         return RunFloor(manifest.mount, given)
     advice = ("give the mount of a base frame on the floor (--base-frame of a bag, --mount x,y,z,roll,pitch,yaw, "
