@@ -218,7 +218,7 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool, no_maps: bool, mount, quiet: bool,
                   no_mount_check: bool, **options) -> None:
-    """Process many recordings: per-frame outputs and a map each.
+    """Process many recordings into per-frame outputs and maps.
 
     RECORDINGS are dataset folders, KITTI odometry or EuRoC/ASL folders
     (`mrstereo info` shows what is read). Per frame a disparity (PFM), a point

@@ -18,8 +18,9 @@ __all__ = ["COMMANDS"]
 @click.option("--rate", "rate_hz", type=float, default=None,
               help="Frame rate [Hz] of image folders whose file names are not time stamps.")
 def info_command(path: Path, calib: Path | None, rate_hz: float | None) -> None:
-    """Show what a recording holds: frames, rate, image size, calibration, mount, truth, odometry.
+    """Show what a recording holds and how it will be read.
 
+    Frames, rate, image size, calibration, mount, truth and odometry.
     PATH is anything `mrstereo map` and `mrstereo odometry` read: a dataset
     folder, a KITTI odometry or EuRoC/ASL folder, a folder of left/right image
     folders, or a ROS bag (its topics, and the stereo pair picked). A folder of

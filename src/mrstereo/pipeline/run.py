@@ -68,7 +68,8 @@ class PipelineConfig:
         Sensor model and fusion (log-odds or the paper's union).
     grid : GridSpec or None
         A fixed map window (extent and resolution); points outside it are counted
-        (``MapRun.points_outside``). None: a map that grows with the path
+        (``MapRun.points_outside``). None: the window of the recording's ground-truth map when it
+        has one (maps compared cell by cell), else a map that grows with the path
         (:class:`~mrstereo.mapping.tiles.TiledOccupancyGrid`), written over the cells seen.
     resolution_m : float
         Cell size of a map that grows (``grid`` None).
@@ -453,7 +454,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         raise ValueError("align corrects the given odometry with visual odometry: use it with odometry='given'")
     stereo = manifest.calibration if calibration is None else calibration
     prefer_raw = prefer_raw or calibration is not None
-    config = config.for_rig(stereo)
+    config = _on_true_map(manifest, config.for_rig(stereo))
     mount, floor, warning = floor_for_run(manifest, stereo, config=config, prefer_raw=prefer_raw,
                                           check_mount=check_mount)
     manifest = rebased(manifest, mount)
@@ -484,6 +485,13 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     return run
 
 
+def _on_true_map(manifest: Manifest, config: PipelineConfig) -> PipelineConfig:
+    """``config`` with the window of the recording's ground-truth map when it has one and no window is given."""
+    if config.grid is not None or manifest.ground_truth_map is None:
+        return config
+    return replace(config, grid=read_ros_map(manifest.ground_truth_map).grid)
+
+
 def map_from_observations(manifest: Manifest, observations: list[FrameObservation], *,
                           config: PipelineConfig = PipelineConfig(), stereo: StereoCamera | None = None,
                           floor: GroundPlane | None = None, mount=None, odometry=None, fusion=None) -> MapRun:
@@ -506,6 +514,7 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
         Carried into the :class:`MapRun` (see there).
     """
     stereo = manifest.calibration if stereo is None else stereo
+    config = _on_true_map(manifest, config)
     range_m = config.obstacle_config.max_range_m
     fused = fuse(observations, grid=config.grid, config=config.mapping, resolution_m=config.resolution_m,
                  view_reach_m=range_m + 2.0)
