@@ -124,7 +124,7 @@ def test_map_command_build_map_fuse_and_batch_give_one_map_and_one_set_of_metric
     log_odds = np.load(tmp_path / "map" / "log_odds.npy")
     run = build_map(ds, progress=False)
     assert np.array_equal(run.grid.log_odds, log_odds, equal_nan=True)
-    assert np.array_equal(fuse(run.observations, grid=None).to_grid().log_odds, log_odds, equal_nan=True)
+    assert np.array_equal(fuse(run.observations, grid=run.grid.grid).log_odds, log_odds, equal_nan=True)
     assert any(o.boundary_points for o in run.observations)
     metrics = json.loads((tmp_path / "map" / "metrics.json").read_text())
     assert metrics["free_coverage"] is not None and metrics["recall_in_view"] is not None

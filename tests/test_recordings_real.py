@@ -50,8 +50,13 @@ def test_euroc_folder_maps_and_tracks_with_one_command(euroc, euroc_map, tmp_pat
     assert metrics["visual_odometry"]["lost"] == 0
     assert _occupied(euroc_map) > 300                        # the room's wall 2-3 m ahead of the camera
     assert entry(["odometry", str(euroc / "mav0"), "-o", str(tmp_path / "vo.txt"), "--quiet"]) == 0
-    assert "tracked all 5 frames" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "tracked all 5 frames" in out and "no true or given poses to compare with" in out   # no truth: no ATE
     assert len(np.loadtxt(tmp_path / "vo.txt", ndmin=2)) == 5
+    # batch names it after the sequence folder and maps it as `map` does: visual odometry, floor estimated
+    assert entry(["batch", str(euroc / "mav0"), "-o", str(tmp_path / "batch"), "--quiet"]) == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "batch" / euroc.name / "map" / "log_odds.npy"),
+                                  np.load(euroc_map / "log_odds.npy"))
 
 
 def test_info_names_the_layout_and_an_unknown_folder_what_was_looked_for(euroc, kitti_seq, tmp_path, capsys):
@@ -81,6 +86,8 @@ def test_euroc_truth_is_read_when_present(euroc, tmp_path, capsys):
     out = capsys.readouterr().out
     path_m = 0.5 * (stamps[-1] - stamps[0]) / 1e9
     assert f"path {path_m:.1f} m" in out
+    assert entry(["odometry", str(root), "-o", str(tmp_path / "vo.txt"), "--quiet"]) == 0
+    assert "vs true poses" in capsys.readouterr().out
 
 
 def test_a_wrong_mount_is_warned_about_and_the_room_still_mapped(euroc, euroc_map, tmp_path, capsys):

@@ -81,15 +81,19 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     has_truth = all(f.true_pose is not None for f in dataset.frames)
     truth = np.stack([f.T_world_from_base_true for f in dataset.frames]) if has_truth else None
     reference, ref_name = (truth, "true poses") if has_truth else (given, "given poses")
-    if start == "origin":       # compare from the common start
+    if not has_truth and not dataset.has_poses:
+        reference, ref_name = None, "none"      # (the given poses are placeholders: nothing to compare with)
+    elif start == "origin":       # compare from the common start
         reference = np.linalg.inv(reference[0]) @ reference
-    metrics = trajectory_metrics(run.T_world_from_base, reference)
+    metrics = None if reference is None else trajectory_metrics(run.T_world_from_base, reference)
     click.echo(f"odometry of {len(run.status)} frames: {run.message}; "
                f"{run.status.count('keyframe')} keyframes, median {np.median(run.n_inliers[1:]) if len(run.status) > 1 else 0:.0f} "
                f"inliers, {1000 * np.median(run.time_s):.1f} ms per frame (CPU)")
-    click.echo(f"vs {ref_name}: {metrics.describe()}")
+    click.echo(f"vs {ref_name}: {metrics.describe()}" if metrics is not None else
+               "the recording has no true or given poses to compare with")
     if metrics_path is not None:
-        data = {"reference": ref_name, **metrics.to_dict(), "frames": len(run.status), "lost": run.n_lost,
+        data = {"reference": ref_name, **({} if metrics is None else metrics.to_dict()), "frames": len(run.status),
+                "lost": run.n_lost,
                 "keyframes": run.status.count("keyframe"), "status": list(run.status),
                 "n_inliers": run.n_inliers.tolist(), "time_s_median": float(np.median(run.time_s))}
         from ..io import atomic_write
@@ -99,7 +103,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     if plot_path is not None:
         curves = {"visual odometry": run.poses}
         shift = np.linalg.inv(given[0]) if start == "origin" else np.eye(4)
-        if truth is None or not np.allclose(given, truth):        # (a benchmark's poses are its truth)
+        if dataset.has_poses and (truth is None or not np.allclose(given, truth)):   # (a benchmark's are its truth)
             curves["given odometry"] = (shift @ given)[:, :3, 3]
         if truth is not None:
             curves["ground truth"] = ((np.linalg.inv(truth[0]) if start == "origin" else np.eye(4)) @ truth)[:, :3, 3]

@@ -45,7 +45,7 @@ from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
 from .frame import scan_from_pair
 from .parallel import ItemFailure, map_ordered
 from .run import (MapRun, PipelineConfig, floor_for_run, map_from_observations, observation_from_pair, pair_options,
-                  write_map_outputs)
+                  with_visual_odometry, write_map_outputs)
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
            "dataset_files", "SUMMARY_NAME"]
@@ -201,7 +201,7 @@ class BatchSummary:
 def _names(manifests: list[Manifest]) -> list[str]:
     names, seen = [], {}
     for m in manifests:
-        base = m.root.name or "dataset"
+        base = (m.root.parent.name if m.root.name == "mav0" else m.root.name) or "dataset"   # EuRoC: the sequence
         seen[base] = seen.get(base, 0) + 1
         names.append(base if seen[base] == 1 else f"{base}_{seen[base]}")
     return names
@@ -229,6 +229,27 @@ def _write_map(run: MapRun, map_dir: Path, record: dict) -> None:
             old = staging / "old"
             os.replace(map_dir, old)
         os.replace(tmp, map_dir)
+
+
+def _mounted(manifest: Manifest, config: PipelineConfig, check_mount: bool) -> tuple:
+    """``(RunFloor, recording)``: the mount (checked) or the floor estimated once, the poses on that base,
+    and the poses of visual odometry for a recording without any (as ``mrstereo map`` takes them)."""
+    floor = floor_for_run(manifest, config=config, check_mount=check_mount)
+    manifest = rebased(manifest, floor.mount)
+    if not manifest.has_poses:
+        manifest, _ = with_visual_odometry(manifest)
+    return floor, manifest
+
+
+def _check_outputs(out: Path, datasets: list[Manifest], names: list[str]) -> None:
+    """Refuse an output root or dataset folder that would write over an input (before any work)."""
+    inputs = [f for m in datasets for f in dataset_files(m)]
+    check_output_dir("out_dir", out, input_dirs=[m.root for m in datasets if out.resolve().is_relative_to(m.root.resolve())],
+                     input_kind="dataset")
+    check_outputs({"summary": out / SUMMARY_NAME}, inputs)
+    for name in names:
+        check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, input_kind="dataset",
+                         input_dirs=[m.root for m in datasets], inputs=inputs)
 
 
 def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
@@ -268,13 +289,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         raise ValueError("no datasets given")
     out = Path(out_dir)
     names = _names(datasets)
-    inputs = [dataset_files(m) for m in datasets]
-    check_output_dir("out_dir", out, input_dirs=[m.root for m in datasets if out.resolve().is_relative_to(m.root.resolve())],
-                     input_kind="dataset")
-    check_outputs({"summary": out / SUMMARY_NAME}, [f for files in inputs for f in files])
-    for name in names:
-        check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, input_kind="dataset",
-                         input_dirs=[m.root for m in datasets], inputs=[f for files in inputs for f in files])
+    _check_outputs(out, datasets, names)
 
     tasks, observations, skipped, done_maps, floors = [], {}, {}, set(), {}
     configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
@@ -289,8 +304,8 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
             done_maps.add(name)
         skipped[name] = sum(complete)
         if not all(complete) or (maps and name not in done_maps):
-            floors[name] = floor_for_run(m, config=configs[name], check_mount=check_mount)   # the mount (checked), or the floor estimated once
-            datasets[i] = m = rebased(m, floors[name].mount)
+            floors[name], datasets[i] = _mounted(m, configs[name], check_mount)
+            m = datasets[i]
         for k, record in enumerate(m.frames):
             if complete[k]:
                 if maps and name not in done_maps:

@@ -461,12 +461,9 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     items = list(enumerate(manifest.frames))
     vo = fused = None
     if odometry == "visual" or align is not None:
-        from .odometry import odometry_from_manifest
-
-        vo = odometry_from_manifest(manifest, calibration=calibration, progress=progress)
+        visual, vo = with_visual_odometry(manifest, calibration=calibration, progress=progress)
     if odometry == "visual":
-        items = [(k, replace(record, pose=None, pose_3d=pose_3d_of(T)))
-                 for (k, record), T, ok in zip(items, vo.T_world_from_base, vo.tracked) if ok]
+        items = [(k, record) for k, record, ok in zip(range(len(items)), visual.frames, vo.tracked) if ok]
     elif align is not None:
         from ..odometry.fusion import FusionConfig, fuse_odometry
 
@@ -485,11 +482,23 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     return run
 
 
+def with_visual_odometry(manifest: Manifest, *, calibration: StereoCamera | None = None, progress: bool = False):
+    """``(recording, run)``: the recording with every frame's pose from stereo visual odometry
+    (:func:`mrstereo.pipeline.odometry.odometry_from_manifest`; a lost frame gets the motion model's
+    prediction, ``run.tracked`` says which), for a recording without poses."""
+    from .odometry import odometry_from_manifest
+
+    vo = odometry_from_manifest(manifest, calibration=calibration, progress=progress)
+    frames = tuple(replace(f, pose=None, pose_3d=pose_3d_of(T)) for f, T in zip(manifest.frames, vo.T_world_from_base))
+    return replace(manifest, frames=frames, has_poses=True), vo
+
+
 def _on_true_map(manifest: Manifest, config: PipelineConfig) -> PipelineConfig:
-    """``config`` with the window of the recording's ground-truth map when it has one and no window is given."""
+    """``config`` with the window of the recording's ground-truth map (at ``config.resolution_m``) when it has
+    one and no window is given."""
     if config.grid is not None or manifest.ground_truth_map is None:
         return config
-    return replace(config, grid=read_ros_map(manifest.ground_truth_map).grid)
+    return replace(config, grid=replace(read_ros_map(manifest.ground_truth_map).grid, resolution_m=config.resolution_m))
 
 
 def map_from_observations(manifest: Manifest, observations: list[FrameObservation], *,
