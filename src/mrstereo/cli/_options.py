@@ -229,7 +229,11 @@ def echo_map_warnings(run, *, prefix: str = "") -> None:
         warn(prefix + run.mount_warning)
     n = run.grid.points_outside
     if n:
-        g = run.grid.grid
+        g, truth = run.grid.grid, run.ground_truth_map
+        on_truth = truth is not None and (truth.grid.origin_x_m, truth.grid.origin_y_m, truth.grid.width_m,
+                                          truth.grid.height_m) == (g.origin_x_m, g.origin_y_m, g.width_m, g.height_m)
+        advice = ("the window of the recording's ground-truth map; --size/--origin set another" if on_truth else
+                  "leave out --size/--origin for a map that grows")
         warn(f"{prefix}{n} points fell outside the map window x {g.origin_x_m:g}..{g.origin_x_m + g.width_m:g} m, "
              f"y {g.origin_y_m:g}..{g.origin_y_m + g.height_m:g} m (their rays were cut at its border; counted in "
-             "metrics.json): leave out --size/--origin for a map that grows")
+             f"metrics.json): {advice}")
