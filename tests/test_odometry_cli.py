@@ -108,7 +108,7 @@ def test_odometry_command_bad_input(sequence, tmp_path, capsys):
                   str(sequence / "calibration.yaml")]) == 2
     assert "--metrics must end in .json" in capsys.readouterr().err
     assert entry(["odometry", "-o", str(tmp_path / "t.txt")]) == 2
-    assert "DATASET or --bag" in capsys.readouterr().err
+    assert "RECORDING or --bag" in capsys.readouterr().err
     assert not (tmp_path / "t.txt").exists()
 
 

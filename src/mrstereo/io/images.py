@@ -12,7 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .. import _checks, _limits
+from .. import _limits
 from ._headers import image_size
 from .files import _existing, atomic_write
 

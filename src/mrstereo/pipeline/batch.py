@@ -53,12 +53,13 @@ from ..io import (Inputs, atomic_write, check_output_dir, check_outputs, read_pf
                   replace_dir, temporary_dir, write_disparity)
 from ..mapping.fusion import FrameObservation
 from ..mapping.rosmap import ros_map_files
-from ..recordings.manifest import FrameRecord, Manifest, frame_pair, read_manifest
+from ..recordings.layouts import read_recording
+from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
 from .sanity import check_pair_streams
 from .frame import scan_from_pair
 from .parallel import ItemFailure, map_ordered
 from .run import (MapRun, PipelineConfig, floor_for_run, map_from_observations, observation_from_pair, pair_options,
-                  write_map_outputs)
+                  with_visual_odometry, write_map_outputs)
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
            "SUMMARY_NAME"]
@@ -234,6 +235,8 @@ class DatasetSummary:
     """The floor the frames used (:class:`mrstereo.geometry.GroundPlane`); None when all was kept."""
     fingerprint: str = ""
     """The map's fingerprint (what it was computed from)."""
+    mount_warning: str | None = None
+    """Why the dataset's mount was not used (:func:`mrstereo.pipeline.floor_for_run`)."""
 
     def to_dict(self) -> dict:
         out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
@@ -241,6 +244,8 @@ class DatasetSummary:
                "failed": self.n_failed, "map": self.map_status, "fingerprint": self.fingerprint}
         if self.floor is not None:
             out["floor"] = self.floor.summary()
+        if self.mount_warning is not None:
+            out["mount_warning"] = self.mount_warning
         return out
 
 
@@ -267,7 +272,8 @@ def _names(manifests: list[Manifest], out: Path) -> list[str]:
     """One output folder name per dataset, never shared: the dataset folder's name, or with a hash of its
     path (``ds-1a2b3c4d``) when another dataset of the run has that name or the folder already holds
     something else (another dataset's results, or anything not written by a batch)."""
-    bases = [m.root.name or "dataset" for m in manifests]
+    bases = [(m.root.parent.name if m.root.name == "mav0" else m.root.name) or "dataset"    # EuRoC: the sequence
+             for m in manifests]
     count = Counter(bases)
     names = []
     for m, base in zip(manifests, bases):
@@ -341,15 +347,26 @@ def _plan(m: Manifest, name: str, out: Path, config: PipelineConfig, maps: bool)
     return plan
 
 
+def _mounted(manifest: Manifest, config: PipelineConfig, check_mount: bool) -> tuple:
+    """``(RunFloor, recording)``: the mount (checked) or the floor estimated once, the poses on that base,
+    and the poses of visual odometry for a recording without any (as ``mrstereo map`` takes them)."""
+    floor = floor_for_run(manifest, config=config, check_mount=check_mount)
+    manifest = rebased(manifest, floor.mount)
+    if not manifest.has_poses:
+        manifest, _ = with_visual_odometry(manifest)
+    return floor, manifest
+
+
 def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
               maps: bool = True, workers: int | None = None, scheduler=None, processes: bool = False,
-              progress: bool = True) -> BatchSummary:
+              progress: bool = True, check_mount: bool = True) -> BatchSummary:
     """Process many datasets: per-frame files and one map per dataset (see the module docstring).
 
     Parameters
     ----------
     manifests : sequence of path or Manifest
-        The datasets; all are read (and validated) before any work starts.
+        The recordings (:func:`mrstereo.recordings.read_recording`: dataset, KITTI, EuRoC/ASL folders);
+        all are read (and validated) before any work starts.
     out_dir : path
         Output root; created if needed, reused by a re-run.
     config : PipelineConfig
@@ -360,6 +377,9 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         Where the frames run (:func:`mrstereo.pipeline.parallel.map_ordered`).
     progress : bool
         A tqdm bar over all frames to compute.
+    check_mount : bool
+        Check each dataset's mount against the floor seen in its first frames
+        (:func:`mrstereo.pipeline.floor_for_run`; ``DatasetSummary.mount_warning``).
 
     Returns
     -------
@@ -369,7 +389,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
     if isinstance(manifests, (str, os.PathLike, Manifest)):
         manifests = [manifests]
-    datasets = [m if isinstance(m, Manifest) else read_manifest(m) for m in manifests]
+    datasets = [m if isinstance(m, Manifest) else read_recording(m) for m in manifests]
     if not datasets:
         raise ValueError("no datasets given")
     out = Path(out_dir)
@@ -384,14 +404,15 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     check_pair_streams(datasets)
 
     remove_stale_temporaries(out)
-    plans = [_plan(m, name, out, config, maps) for m, name in zip(datasets, names)]
+    configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
+    plans = [_plan(m, name, out, configs[name], maps) for m, name in zip(datasets, names)]
     tasks, floors = [], {}
     for p in plans:
         complete = [p.loaded[k] is not None for k in range(len(p.manifest.frames))]
         if not all(complete) or (maps and not p.map_kept):
-            floors[p.name] = floor_for_run(p.manifest, config=config)     # the mount, or the floor estimated once
-        tasks += [FrameTask(record=record, index=k, stereo=p.manifest.calibration, mount=floors[p.name][0],
-                            config=config, frames_dir=p.folder / "frames", dataset=p.name,
+            floors[p.name], p.manifest = _mounted(p.manifest, configs[p.name], check_mount)
+        tasks += [FrameTask(record=record, index=k, stereo=p.manifest.calibration, mount=floors[p.name].mount,
+                            config=configs[p.name], frames_dir=p.folder / "frames", dataset=p.name,
                             fingerprint=p.fingerprints[k])
                   for k, record in enumerate(p.manifest.frames) if not complete[k]]
 
@@ -406,7 +427,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         else:
             next(p for p in plans if p.name == task.dataset).loaded[task.index] = result
 
-    summaries = [_finish(p, tasks, failures, config, maps, floors) for p in plans]
+    summaries = [_finish(p, tasks, failures, configs[p.name], maps, floors) for p in plans]
     path = out / SUMMARY_NAME
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps({"datasets": [s.to_dict() for s in summaries], "failures": failures,
@@ -428,11 +449,14 @@ def _finish(p: _Dataset, tasks: list, failures: list, config: PipelineConfig, ma
             status = "kept"
         else:
             obs = [p.loaded[k] for k in range(len(m.frames)) if p.loaded[k] is not None]
-            run = map_from_observations(m, obs, config=config, floor=floors[p.name][1], mount=floors[p.name][0])
+            run = map_from_observations(m, obs, config=config, floor=floors[p.name].floor,
+                                        mount=floors[p.name].mount)
             _write_map(run, p.folder / "map", {"frames": len(m.frames), "fused": len(obs), "failed": failed,
                                                "fingerprint": p.map_fingerprint})
             status = "written" if not failed else f"written from {len(obs)} of {len(m.frames)} frames"
-    return DatasetSummary(name=p.name, manifest=m.root / "manifest.yaml", out_dir=p.folder, n_frames=len(m.frames),
-                          n_computed=n_tasks - len(failed), n_skipped=len(m.frames) - n_tasks, n_failed=len(failed),
-                          map_status=status, floor=floors[p.name][1] if p.name in floors else None,
+    floor = floors.get(p.name)
+    return DatasetSummary(name=p.name, manifest=m.root / "manifest.yaml" if m.layout == "dataset" else m.root,
+                          out_dir=p.folder, n_frames=len(m.frames), n_computed=n_tasks - len(failed),
+                          n_skipped=len(m.frames) - n_tasks, n_failed=len(failed), map_status=status,
+                          floor=floor.floor if floor else None, mount_warning=floor.warning if floor else None,
                           fingerprint=p.map_fingerprint)
