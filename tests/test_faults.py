@@ -182,7 +182,8 @@ BAD_ARGS = {
     "synth 8192 x 8192 x 1e5 frames": (["synth", "--out", "{T}/S", "--width", "8192", "--height", "8192", "--frames",
                                         "100000"], "of disk"),
     "map resolution 0.0001": (["map", "{DS}", "-o", "{T}/m", "--resolution", "0.0001", "--quiet"], "--resolution"),
-    "map size 1e5 x 1e5": (["map", "{DS}", "-o", "{T}/m", "--size", "100000,100000", "--quiet"], "would need"),
+    "map size 1e5 x 1e5": (["map", "{DS}", "-o", "{T}/m", "--size", "100000,100000", "--origin", "0,0", "--quiet"],
+                           "would need"),
     "plan bad start": (["plan", "{DS}/gt_map.yaml", "--start", "a", "--goal", "1,1", "-o", "{T}/p.json"], "--start"),
     "plan missing goal": (["plan", "{DS}/gt_map.yaml", "--start", "1,1", "-o", "{T}/p.json"], "Missing option"),
     "plan overwrites its map": (["plan", "{DS}/gt_map.yaml", "--start", "1,0", "--goal", "2,0", "-o", "{T}/p.json",
@@ -874,7 +875,7 @@ def test_a_nan_pose_in_a_bag_is_refused_with_its_message_index(ds, tmp_path, cap
 
 
 def test_frames_outside_the_map_are_named(ds, tmp_path, capsys):
-    assert entry(["map", str(ds), "-o", str(tmp_path / "m"), "--origin", "100,100", "--quiet"]) == 0
+    assert entry(["map", str(ds), "-o", str(tmp_path / "m"), "--origin", "100,100", "--size", "12,6", "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "mrstereo: warning: 3 of 3 frames were taken outside the map [100, 112] x [100, 106] m" in err
     assert "the map observed no cell" in err
@@ -901,8 +902,8 @@ ABSURD = {
     "--height -1": ["points", "{L}", "{R}", "--calib", "{DS}/calibration.yaml", "--rectified", "--height", "-1",
                     "-o", "{T}/p.ply"],
     "--mount 1e9": ["map", "{DS}", "-o", "{T}/m", "--mount", "1e9,0,0,0,0,0"],
-    "--size -1": ["map", "{DS}", "-o", "{T}/m", "--size", "-1,5"],
-    "--origin inf": ["map", "{DS}", "-o", "{T}/m", "--origin", "inf,0"],
+    "--size -1": ["map", "{DS}", "-o", "{T}/m", "--size", "-1,5", "--origin", "0,0"],
+    "--origin inf": ["map", "{DS}", "-o", "{T}/m", "--origin", "inf,0", "--size", "5,5"],
     "--radius 1e9": ["plan", "{DS}/gt_map.yaml", "--start", "1,0", "--goal", "2,0", "--radius", "1e9", "-o",
                      "{T}/p.json"],
     "--start 1e300": ["plan", "{DS}/gt_map.yaml", "--start", "1e300,0", "--goal", "2,0", "-o", "{T}/p.json"],

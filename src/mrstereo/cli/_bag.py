@@ -120,7 +120,7 @@ def read_inputs(manifest, bag: Path | None, calib: Path | None, *, rate_hz: floa
 def recording_options(func):
     """The options of a command reading a RECORDING: ``--bag`` and the bag's topic options, ``--rate``."""
     func = bag_options(func)
-    func = click.option("--rate", "rate_hz", type=float, default=None,
+    func = click.option("--rate", "rate_hz", type=Number(0.0, 1000.0, unit="Hz", open_low=True), default=None,
                         help="Frame rate [Hz] of image folders whose file names are not time stamps.")(func)
     return click.option("--bag", "bag", type=click.Path(path_type=Path),
                         help="A ROS 1 .bag / ROS 2 bag directory (also accepted as RECORDING).")(func)
