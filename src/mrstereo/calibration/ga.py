@@ -339,8 +339,7 @@ def ga_calibrate_single(view: CalibrationView, *, width: int, height: int, bound
     progress : callable(generation, best_fitness), optional
         Called after every generation.
     """
-    if not isinstance(view, CalibrationView):
-        raise TypeError(f"view must be a CalibrationView, got {type(view).__name__}")
+    _checks.instance("view", view, CalibrationView)
     width, height, density, aspect = _check_common(width, height, pixel_density_px_per_mm, aspect)
     bounds = default_bounds(view, width=width, height=height, pixel_density_px_per_mm=density) \
         if bounds is None else bounds

@@ -231,12 +231,9 @@ def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, ster
     -------
     FreeSpaceBoundary
     """
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
-    if not isinstance(obstacles, ObstacleResult):
-        raise TypeError(f"obstacles must be an ObstacleResult, got {type(obstacles).__name__}")
-    if not isinstance(config, FreeSpaceConfig):
-        raise TypeError(f"config must be a FreeSpaceConfig, got {type(config).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
+    _checks.instance("obstacles", obstacles, ObstacleResult)
+    _checks.instance("config", config, FreeSpaceConfig)
     _checks.image("left_rect", left_rect)
     d = _disparity_image(disparity_px)
     h, w = obstacles.obstacle_mask.shape

@@ -142,8 +142,7 @@ def ground_from_mount(mount: CameraMount, *, R_rect_from_cam=None) -> GroundPlan
     rectified left frame, turned by ``R_rect_from_cam`` (camera_info ``R`` of the left camera,
     default identity): ``T_base_from_rect = T_base_from_cam @ R^T``.
     """
-    if not isinstance(mount, CameraMount):
-        raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
+    _checks.instance("mount", mount, CameraMount)
     T = mount.T_base_from_rectified(R_rect_from_cam)
     n = -T[2, :3]                       # the base's down axis in the camera frame
     return GroundPlane(height_m=float(T[2, 3]), tilt_rad=math.asin(float(np.clip(n[2], -1.0, 1.0))),
@@ -167,8 +166,7 @@ def T_robot_from_cam_ground(ground: GroundPlane, *, pan_rad: float = 0.0) -> np.
     ``T_robot_from_cam(height_m, tilt_rad, pan_rad) @ Rz_cam(roll_rad)``; the
     floor maps to the robot plane ``z = 0``.
     """
-    if not isinstance(ground, GroundPlane):
-        raise TypeError(f"ground must be a GroundPlane, got {type(ground).__name__}")
+    _checks.instance("ground", ground, GroundPlane)
     if not ground.success:
         raise ValueError(f"ground plane was not found: {ground.message}")
     if ground.T_base_from_cam is not None:
@@ -303,8 +301,7 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
     d = np.asarray(disparity_px, dtype=np.float64)
     if d.ndim != 2:
         raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
     tol = _checks.finite_number("tolerance_px", tolerance_px, positive=True)
     iterations = _checks.positive_int("iterations", iterations)
     min_inliers = _checks.positive_int("min_inliers", min_inliers)
@@ -474,8 +471,7 @@ def estimate_ground(disparity_px, stereo: StereoCamera, *, method: str = "v_disp
     """
     if prior is not None:
         if isinstance(prior, CameraMount):
-            if not isinstance(stereo, StereoCamera):
-                raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+            _checks.instance("stereo", stereo, StereoCamera)
             prior = ground_from_mount(prior, R_rect_from_cam=stereo.left.R)
         if not isinstance(prior, GroundPlane):
             raise TypeError(f"prior must be a CameraMount or a GroundPlane, got {type(prior).__name__}")
@@ -488,8 +484,7 @@ def estimate_ground(disparity_px, stereo: StereoCamera, *, method: str = "v_disp
     if method == "v_disparity":
         return fit_ground_v_disparity(disparity_px, stereo, rng=rng, **options)
     if method == "plane":
-        if not isinstance(stereo, StereoCamera):
-            raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+        _checks.instance("stereo", stereo, StereoCamera)
         pts = points_cam_from_disparity(disparity_px, focal_px=stereo.focal_px, baseline_m=stereo.baseline_m,
                                         cx_px=stereo.cx_px, cy_px=stereo.cy_px,
                                         fy_px=float(stereo.left.P[1, 1]), doffs_px=stereo.doffs_px)

@@ -183,8 +183,7 @@ def points_robot_from_disparity(disparity_px, stereo: StereoCamera, T_robot_from
     the transform is computed per point as :func:`detect_obstacles` does, so its points equal
     these bit for bit.
     """
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
     T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
     d = _disparity_image(disparity_px)
     if d.ndim != 2:
@@ -207,8 +206,7 @@ def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     if mount is None:
         return estimate_ground(disparity_px, stereo, method=config.ground_method, rng=config.seed,
                                height_range_m=config.ground_height_range_m)
-    if not isinstance(mount, CameraMount):
-        raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
+    _checks.instance("mount", mount, CameraMount)
     given = ground_from_mount(mount, R_rect_from_cam=stereo.left.R)
     if not config.estimate_ground:
         return given
@@ -253,10 +251,8 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     -------
     ObstacleResult
     """
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
-    if not isinstance(config, ObstacleConfig):
-        raise TypeError(f"config must be an ObstacleConfig, got {type(config).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
+    _checks.instance("config", config, ObstacleConfig)
     if ground is not None and not isinstance(ground, GroundPlane):
         raise TypeError(f"ground must be a GroundPlane, got {type(ground).__name__}")
     d = _disparity_image(disparity_px)

@@ -154,8 +154,7 @@ def scan_angles_of_camera(stereo: StereoCamera, *, pan_rad: float = 0.0) -> tupl
     The right image edge (``u = W - 1``) looks to the right (negative angle),
     the left edge (``u = 0``) to the left; the pan turns both.
     """
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
     pan = _checks.finite_number("pan_rad", pan_rad)
     f, cx, w = stereo.focal_px, stereo.cx_px, stereo.size[0]
     return pan - math.atan2(w - 1 - cx, f), pan + math.atan2(cx, f)
@@ -281,8 +280,7 @@ def near_limit_range_m(stereo: StereoCamera, T_robot_from_cam, max_disparity_px:
     ``range_min``). Evaluated on a grid of rectified pixels back-projected to depth ``Z`` and
     moved into the robot frame with ``T_robot_from_cam``.
     """
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
     d_max = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
     T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
     depth_m = stereo.focal_px * stereo.baseline_m / d_max

@@ -10,6 +10,7 @@ import os
 
 import numpy as np
 
+from .. import _checks
 from ..io import atomic_write
 from .rosmap import RosMap
 
@@ -71,8 +72,7 @@ def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fo
     ax.imshow(np.ma.masked_invalid(1.0 - probability), cmap=cmap, vmin=0.0, vmax=1.0,
               origin="lower", extent=extent, interpolation="nearest")
     if ground_truth is not None:
-        if not isinstance(ground_truth, RosMap):
-            raise TypeError(f"ground_truth must be a RosMap, got {type(ground_truth).__name__}")
+        _checks.instance("ground_truth", ground_truth, RosMap)
         g = ground_truth.grid
         gt_extent = (g.origin_x_m, g.origin_x_m + g.shape[1] * g.resolution_m,
                      g.origin_y_m, g.origin_y_m + g.shape[0] * g.resolution_m)

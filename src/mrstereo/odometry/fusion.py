@@ -140,8 +140,7 @@ def fuse_odometry(given_poses, visual_poses, visual_tracked, *, config: FusionCo
                          f"got {visual.shape}")
     if tracked.shape != (len(given),):
         raise ValueError(f"visual_tracked must be {len(given)} booleans, got shape {tracked.shape}")
-    if not isinstance(config, FusionConfig):
-        raise TypeError(f"config must be a FusionConfig, got {type(config).__name__}")
+    _checks.instance("config", config, FusionConfig)
     out = np.empty_like(given)
     out[0] = given[0]
     used = np.zeros(len(given), bool)

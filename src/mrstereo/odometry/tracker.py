@@ -217,10 +217,8 @@ class StereoOdometry:
     config: OdometryConfig = field(default_factory=OdometryConfig)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.stereo, StereoCamera):
-            raise TypeError(f"stereo must be a StereoCamera, got {type(self.stereo).__name__}")
-        if not isinstance(self.config, OdometryConfig):
-            raise TypeError(f"config must be an OdometryConfig, got {type(self.config).__name__}")
+        _checks.instance("stereo", self.stereo, StereoCamera)
+        _checks.instance("config", self.config, OdometryConfig)
         T0 = np.eye(4) if self.T_world_from_base0 is None else self.T_world_from_base0
         self.T_world_from_base0 = _checks.matrix("T_world_from_base0", T0, (4, 4)).copy()
         P = self.stereo.left.P

@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .. import _checks
 from ..mapping.grid import GridSpec
 from ..mapping.rosmap import RosMap
 from .scene import LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, Scene
@@ -92,11 +93,9 @@ def ground_truth_map(scene: Scene, grid: GridSpec | None = None, *,
     RosMap
         ``occupancy`` 1.0 occupied, 0.0 free, NaN unknown; row 0 = min y.
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+    _checks.instance("scene", scene, Scene)
     grid = GridSpec() if grid is None else grid
-    if not isinstance(grid, GridSpec):
-        raise TypeError(f"grid must be a GridSpec, got {type(grid).__name__}")
+    _checks.instance("grid", grid, GridSpec)
     occ = occupied_footprint(scene, grid, height_band_m=height_band_m)
     centres = grid.cell_centres()
     x, y = centres[..., 0], centres[..., 1]

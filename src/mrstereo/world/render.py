@@ -153,8 +153,7 @@ def default_stereo(width: int = 320, height: int = 240, *, height_m: float = 0.4
 def camera_poses(stereo: StereoCamera, *, pose, pan_rad: float = 0.0,
                  mount: CameraMount | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``T_world_from_cam`` (4x4) of the rectified left and right cameras for a robot pose."""
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
     mount = stereo.mount if mount is None else mount
     if mount is None:
         raise ValueError("stereo has no camera mount; pass mount=CameraMount(...)")
@@ -294,8 +293,7 @@ def render_stereo_frame(scene: Scene, stereo: StereoCamera, *, pose=(0.0, 0.0, 0
     up to interpolation and noise. Ground truth is sampled at pixel centres of the
     rectified left camera: ``Z`` is the depth and ``d = b f / Z - doffs`` (eq. 14).
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+    _checks.instance("scene", scene, Scene)
     T_left, T_right = camera_poses(stereo, pose=pose, pan_rad=pan_rad, mount=mount)
     supersample = _checks.positive_int("supersample", supersample)
     if supersample > 8:
