@@ -1,18 +1,9 @@
 """Calibrate one camera from control points: GA (paper sec. 2.2), GA + LM, or LM.
 
-``method="ga"`` is the paper's genetic algorithm alone (eq. 4-8; one view: the
-11-gene chromosome of eq. 4; several planar views: intrinsic genes with
-homography poses, see :mod:`mrstereo.calibration.ga`). ``"ga+lm"`` polishes the
-GA's best chromosome by Levenberg-Marquardt over all parameters. ``"lm"``
-starts LM from Zhang's closed form (``cv2.initCameraMatrix2D`` with the
-principal point at the image centre, no distortion, poses by ``cv2.solvePnP``)
-and needs planar views. Conventions: docs/conventions.md.
-
-``model`` chooses the distortion model (:data:`CALIBRATION_MODELS`): the
-paper's ``k1k2`` is what the GA searches and the default; ``plumb_bob``,
-``rational`` and ``fisheye`` are fitted by a further LM started from the
-``k1k2`` fit (its intrinsics and poses; its k1, k2 seed the pinhole models, a
-fisheye starts from zero distortion).
+``"ga"`` is the paper's genetic algorithm alone (:mod:`mrstereo.calibration.ga`), ``"ga+lm"``
+polishes its best chromosome by Levenberg-Marquardt, ``"lm"`` starts LM from Zhang's closed form
+(planar views only). A ``model`` other than the paper's ``k1k2`` (what the GA searches) is fitted
+by a further LM started from the ``k1k2`` fit. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -25,6 +16,7 @@ import numpy as np
 
 from .. import _checks
 from ..camera import Camera
+from ..transforms import T_from_rvec_t
 from .ga import MULTIVIEW_GA, GABounds, GAConfig, GAResult, ga_calibrate_intrinsics, ga_calibrate_single
 from .refine import CALIBRATION_MODELS, calibration_model, refine_views
 from .targets import CalibrationView
@@ -127,10 +119,8 @@ def _rms(residuals: Sequence[np.ndarray]) -> tuple[float, np.ndarray]:
 def check_view_geometry(view: CalibrationView) -> None:
     """Refuse control points that cannot determine a camera: collinear or coincident.
 
-    The target points (and their pixels) must span a plane: the second
-    singular value of the centred points must exceed 1e-6 of the first (and
-    the first must not vanish). Collinear points or one point repeated would
-    otherwise "fit" with an RMS of zero.
+    The target points and their pixels must span a plane (second singular value of the centred
+    points above 1e-6 of the first); such points would otherwise "fit" with an RMS of zero.
     """
     for what, pts in (("target points", view.points_target), ("pixels", view.uv)):
         centred = pts - pts.mean(axis=0)
@@ -158,11 +148,8 @@ def zhang_init(views: Sequence[CalibrationView], *, width: int, height: int,
                  cy=float(K[1, 2]))
     poses = []
     for o, i in zip(obj, img):
-        ok, rvec, tvec = cv2.solvePnP(o, i, cam.K, None, flags=cv2.SOLVEPNP_ITERATIVE)
-        T = np.eye(4)
-        T[:3, :3] = cv2.Rodrigues(rvec)[0]
-        T[:3, 3] = tvec.ravel()
-        poses.append(T)
+        _, rvec, tvec = cv2.solvePnP(o, i, cam.K, None, flags=cv2.SOLVEPNP_ITERATIVE)
+        poses.append(T_from_rvec_t(rvec, tvec))
     return cam, poses
 
 
@@ -178,7 +165,7 @@ def calibrate_camera(views: Sequence[CalibrationView], *, width: int, height: in
     width, height : int
         Image size in pixels.
     method : {"ga", "ga+lm", "lm"}
-        See the module docstring.
+        GA, GA polished by LM, or LM from Zhang's closed form.
     model : {"k1k2", "plumb_bob", "rational", "fisheye"}
         Distortion model; anything but ``k1k2`` needs LM (``method`` "ga+lm" or "lm").
     ga_config, bounds, pixel_density_px_per_mm :

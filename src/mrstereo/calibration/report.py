@@ -71,15 +71,10 @@ def residual_figure(path: str | os.PathLike, camera: Camera, views: Sequence[Cal
                     residuals: Sequence[np.ndarray] | None = None, max_views: int = 4) -> None:
     """PNG: reprojection residuals per corner, and the distortion correction (paper Figs. 2-3).
 
-    Left panel (with ``residuals``, projected minus detected pixels per view):
-    every control point's reprojection error as an arrow at the detected
-    position, magnified so that the largest spans about 6 % of the image width,
-    coloured by its length in pixels (colour bar), with a quiver key giving the
-    arrow length of a round number of pixels. Without ``residuals``: detected
-    (+) vs distortion-corrected (o) points of the first ``max_views`` views.
-    The other two panels show the correction ``undistorted - raw`` in x and y
-    over the whole image (the lens distortion the model removes). All axes in
-    pixels.
+    Left: each control point's error (``residuals``, projected minus detected, per view) as a
+    magnified arrow coloured by its length, or without ``residuals`` detected (+) vs corrected (o)
+    points of the first ``max_views`` views. Right: the correction ``undistorted - raw`` in x and
+    y over the image. Axes in pixels.
     """
     import matplotlib
     matplotlib.use("Agg")

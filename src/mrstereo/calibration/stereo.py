@@ -1,12 +1,10 @@
 """Stereo calibration: two cameras against the same target poses, then rectification.
 
-Each camera is calibrated alone first (:func:`calibrate_camera`, GA, GA + LM or
-LM); the relative pose ``x_right = R x_left + T`` is initialised from the
-per-view poses (chordal mean of ``R_r R_l^T``, median of ``t_r - R t_l``) and
-then refined jointly by Levenberg-Marquardt over both intrinsics, the left
-poses and the relative pose (``method != "ga"``). The pair is rectified by
-Fusiello, Trucco & Verri (:func:`mrstereo.camera.rectify_fusiello`).
-Conventions: docs/conventions.md.
+Each camera is calibrated alone (:func:`calibrate_camera`); the relative pose ``x_right = R x_left
++ T`` starts at the chordal mean of ``R_r R_l^T`` and the median of ``t_r - R t_l`` over the views
+and is refined jointly with both intrinsics and the left poses by Levenberg-Marquardt (``method !=
+"ga"``); the pair is rectified by :func:`mrstereo.camera.rectify_fusiello`. Conventions:
+docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -19,12 +17,12 @@ import numpy as np
 from .. import _checks
 from ..camera import (MIN_BASELINE_M, StereoCamera, check_not_swapped, rectified_px_from_raw_px,
                       rectify_fusiello)
-from ..transforms import rotation_from_rpy
+from ..transforms import T_from_R_t, rotation_from_rpy
 from .calibrate import CalibrationResult, _rms, calibrate_camera, reprojection_residuals, zhang_init
 from .ga import GABounds, GAConfig
 from .refine import (CalibrationModel, calibration_model, fit_statistics, grouped_jacobian, pose_matrix, pose_vector,
                      project_views)
-from .targets import CalibrationView
+from .targets import CalibrationView, agree_with_left
 
 __all__ = ["StereoCalibrationResult", "calibrate_stereo", "rectified_points", "rectified_vertical_error_px"]
 
@@ -110,21 +108,6 @@ def rectified_vertical_error_px(stereo: StereoCamera, left_uv: Sequence[np.ndarr
     return np.asarray(out)
 
 
-def _agree_with_left(left: CalibrationView, right: CalibrationView) -> CalibrationView:
-    """Undo a half-turn renumbering of a point-symmetric target (a chessboard) in the right view.
-
-    Reversing the point order of a grid is the same as turning it by 180 degrees
-    about its centre, so detectors may number the two images of one pair from
-    opposite corners. When the target is symmetric that way and the right
-    first-to-last direction opposes the left one, the right order is reversed.
-    """
-    p = left.points_target
-    symmetric = np.allclose(p[::-1], 2.0 * p.mean(axis=0) - p, atol=1e-9)
-    if symmetric and float(np.dot(left.uv[-1] - left.uv[0], right.uv[-1] - right.uv[0])) < 0:
-        return CalibrationView(right.points_target, right.uv[::-1].copy(), name=right.name)
-    return right
-
-
 def _mean_rotation(Rs: Sequence[np.ndarray]) -> np.ndarray:
     U, _, Vt = np.linalg.svd(np.sum(Rs, axis=0))
     R = U @ Vt
@@ -192,10 +175,8 @@ class _JointFit:
         return 4 + self.spec.n_free                 # fx, fy, cx, cy and the model's coefficients
 
     def pack(self, cam_l, cam_r, poses_l, R, T) -> np.ndarray:
-        Trel = np.eye(4)
-        Trel[:3, :3], Trel[:3, 3] = R, T
         return np.concatenate([[c.fx, c.fy, c.cx, c.cy, *self.spec.seed(c)] for c in (cam_l, cam_r)]
-                              + [pose_vector(P) for P in poses_l] + [pose_vector(Trel)])
+                              + [pose_vector(P) for P in poses_l] + [pose_vector(T_from_R_t(R, T))])
 
     def unpack(self, x) -> tuple:
         n, V = self.n, len(self.left_views)
@@ -229,7 +210,7 @@ def _refine_jointly(fit: _JointFit, cam_l, cam_r, poses_l, R, T, *, width: int, 
     Returns ``(cam_l, cam_r, poses_l, R, T, sigmas, success, message)``; the inputs unchanged
     (``success`` False) when the fit fails or increases the error.
     """
-    from scipy.optimize import least_squares  # lazy: 0.4 s to import, every CLI start paid it
+    from scipy.optimize import least_squares  # lazy: slow to import, most commands never calibrate
 
     x0 = fit.pack(cam_l, cam_r, poses_l, R, T)
     sol = least_squares(fit.residuals, x0, jac=fit.jacobian, method="lm", max_nfev=200)
@@ -264,9 +245,8 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
     Parameters
     ----------
     left_views, right_views : sequence of CalibrationView
-        Pair ``i`` shows the same target pose in both cameras (same target points).
-        For a point-symmetric target (a chessboard) a right view numbered from the
-        opposite corner (first-to-last direction opposing the left one) is reversed.
+        Pair ``i`` shows the same target pose in both cameras (same target points); a right view
+        numbered from the opposite corner is reversed (:func:`agree_with_left`).
     width, height : int
         Image size (both cameras).
     method : {"ga", "ga+lm", "lm"}
@@ -295,7 +275,7 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
     _check_view_pairs(left_views, right_views)
     width = _checks.positive_int("width", width)
     height = _checks.positive_int("height", height)
-    right_views = [_agree_with_left(a, b) for a, b in zip(left_views, right_views)]
+    right_views = [agree_with_left(a, b) for a, b in zip(left_views, right_views)]
     kw = dict(width=width, height=height, method=method, ga_config=ga_config, bounds=bounds,
               pixel_density_px_per_mm=pixel_density_px_per_mm, rng=_checks.rng(rng), progress=progress,
               model=spec.name)
@@ -314,10 +294,8 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
             _JointFit(spec, tuple(left_views), tuple(right_views)), cam_l, cam_r, poses_l, R, T,
             width=width, height=height)
         success, message = success and ok, message + note
-    Trel = np.eye(4)
-    Trel[:3, :3], Trel[:3, 3] = R, T
     check_not_swapped(R, T, where="stereo-calibrate")
-    poses_r = [Trel @ P for P in poses_l]
+    poses_r = [T_from_R_t(R, T) @ P for P in poses_l]
     res_l = reprojection_residuals(left_views, cam_l, poses_l)
     res_r = reprojection_residuals(right_views, cam_r, poses_r)
     rms = _rms(res_l + res_r)[0]
