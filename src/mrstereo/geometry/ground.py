@@ -1,28 +1,16 @@
-"""Ground plane of the floor seen by the stereo head: V-disparity and 3D RANSAC.
+"""The floor seen by the stereo head, from the disparity itself: V-disparity and 3D RANSAC.
 
-Beyond the paper, which assumes the mount of the camera is known: the floor is
-found in the disparity itself, so that obstacles can be separated from the
-floor when the camera height and tilt are not known exactly.
+Beyond the paper, which assumes a known mount: obstacles and floor can be told apart when the
+camera height and tilt are not known exactly. A camera at height ``h`` tilted down by ``theta``
+(no roll) sees the floor plane ``n . P = h``, ``n = (0, cos theta, sin theta)``; with eq. (14)-(16)
+every floor pixel obeys
 
-Floor geometry (camera frame x right, y down, z forward; no roll). A camera at
-height ``h`` tilted down by ``theta`` sees the floor as the plane
-``n . P = h`` with the downward normal ``n = (0, cos theta, sin theta)``.
-With eq. (14)-(16) (``Z = b f / d``, ``Y = (v - cy) Z / f_y``) every floor
-pixel obeys
+    d(v) = a (v - cy) + c,   a = b f cos(theta) / (h f_y),   c = b f sin(theta) / h,
 
-    d(v) = a (v - cy) + c,   a = b f cos(theta) / (h f_y),   c = b f sin(theta) / h
-
-i.e. a straight line in the row-by-disparity histogram, the "V-disparity"
-image of Labayrade et al. (2002); obstacles (fronto-parallel surfaces) are
-vertical segments standing on it, the ceiling a line of negative slope. From
-the line: ``tan(theta) = c / (a f_y)`` and ``h = b f cos(theta) / (a f_y)``.
-
-A 3D plane fit (:func:`fit_ground_plane`) also recovers the roll about the
-optical axis: ``n = (sin(roll) cos(tilt), cos(roll) cos(tilt), sin(tilt))``, i.e.
-the camera frame is rolled by ``roll`` about its z axis before the tilt of
-:func:`mrstereo.transforms.T_robot_from_cam`.
-
-Conventions: docs/conventions.md.
+a line in the row-by-disparity histogram (the "V-disparity" image of Labayrade et al.), on which
+obstacles stand as vertical segments. Hence ``tan(theta) = c / (a f_y)``, ``h = b f cos(theta) /
+(a f_y)``. A 3D plane fit also recovers the roll about the optical axis: ``n = (sin(roll)
+cos(tilt), cos(roll) cos(tilt), sin(tilt))``. Conventions: docs/conventions.md.
 
 References
 ----------
@@ -39,13 +27,7 @@ import numpy as np
 
 from .. import _checks
 from ..camera import CameraMount, StereoCamera
-from ..transforms import T_robot_from_cam
-
-# Below / above these a floor fit is reported as weak: a floor in view supports at least this share of the
-# valid points within a few centimetres, a scene without one (a wall, a desk) a few percent
-# (docs/obstacles.md, "Floor confidence", has the measurements).
-MIN_FLOOR_SHARE = 0.12
-MAX_FLOOR_RESIDUAL_M = 0.03
+from ..transforms import T_from_R_t, T_robot_from_cam
 from .triangulation import points_cam_from_disparity
 
 __all__ = [
@@ -53,6 +35,12 @@ __all__ = [
     "fit_ground_v_disparity", "fit_ground_plane",
     "estimate_ground", "T_robot_from_cam_ground", "height_above_ground_m",
 ]
+
+# Below / above these a floor fit is weak: a floor in view supports at least this share of the valid
+# points within a few centimetres, a scene without one (a wall, a desk) a few percent (docs/obstacles.md,
+# Floor confidence).
+MIN_FLOOR_SHARE = 0.12
+MAX_FLOOR_RESIDUAL_M = 0.03
 
 
 @dataclass(frozen=True)
@@ -172,9 +160,7 @@ def T_robot_from_cam_ground(ground: GroundPlane, *, pan_rad: float = 0.0) -> np.
     if ground.T_base_from_cam is not None:
         return CameraMount(np.reshape(ground.T_base_from_cam, (4, 4))).T_base_from_rectified(pan_rad=pan_rad)
     T = T_robot_from_cam(height_m=ground.height_m, tilt_rad=ground.tilt_rad, pan_rad=pan_rad)
-    roll = np.eye(4)
-    roll[:3, :3] = _rotation_roll_cam(ground.roll_rad)
-    return T @ roll
+    return T @ T_from_R_t(_rotation_roll_cam(ground.roll_rad), np.zeros(3))
 
 
 def height_above_ground_m(points_cam, ground: GroundPlane) -> np.ndarray:
@@ -259,14 +245,10 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
                            rng=0) -> GroundPlane:
     """Fit the floor line ``d = a (v - cy) + c`` of the V-disparity by RANSAC + least squares.
 
-    RANSAC draws pairs of valid pixels, keeps lines with a positive slope (the
-    floor's disparity grows toward the bottom of the image; the ceiling's
-    shrinks) whose implied camera height and tilt lie in ``height_range_m`` and
-    ``tilt_range_rad`` (this excludes the nearly vertical V-disparity segments
-    of walls facing the camera), and scores the number of pixels within
-    ``tolerance_px`` of the line; the best line is refined by least squares on
-    its inliers (Labayrade et al. use a Hough transform of the histogram; RANSAC on
-    the pixels is the same fit without choosing accumulator bins).
+    RANSAC draws pairs of valid pixels and keeps lines with a positive slope (the ceiling's is
+    negative) whose camera height and tilt are plausible (not the nearly vertical segments of
+    walls), scored by the pixels within ``tolerance_px``; the best is refined by least squares
+    on its inliers (Labayrade et al. use a Hough transform; RANSAC needs no accumulator bins).
 
     Parameters
     ----------

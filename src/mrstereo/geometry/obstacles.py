@@ -1,27 +1,15 @@
 """Obstacle and floor points in the robot frame from one disparity map.
 
-Eq. (14)-(16) give camera-frame points (:func:`points_cam_from_disparity`);
-the camera mount's pose (or the fitted floor, :mod:`.ground`) takes them into
-the robot frame (x forward, y left, z up, origin on the floor under the
-camera). A point is
+Eq. (14)-(16) give camera-frame points; the camera mount (or the fitted floor,
+:mod:`.ground`) takes them into the robot frame. A point is an **obstacle** when
+``min_obstacle_height_m < z <= max_obstacle_height_m`` (like costmap_2d's min/max obstacle
+height), **floor** when ``|z| <= floor_tolerance_m`` (free-space evidence), else ignored (below
+the floor: a mismatch; above the robot: the ceiling).
 
-* an **obstacle** point when ``min_obstacle_height_m < z <= max_obstacle_height_m``
-  (above the floor, below the robot's own height, like costmap_2d's
-  min/max obstacle height),
-* a **floor** point when ``|z| <= floor_tolerance_m`` (free-space evidence for
-  the occupancy grid),
-* ignored otherwise (below the floor: a mismatch; above the robot: the ceiling).
-
-**Too near (fail-safe).** A pixel the matcher reports too near (its match lies beyond the
-largest searched disparity, ``DisparityResult.too_near``) has no disparity, but something
-is nearer than the near limit along its ray. It is placed at the near-limit depth along
-its ray (the disparity ``near_limit_px``) and classified by the same height rules: above
-the floor it is an obstacle at the near limit in that direction (a robot stops rather
-than drives on); never floor (no free-space evidence); a ray that meets the floor before
-the near limit (the floor itself nearer than the near limit) lands below the floor and is
-ignored. Rule and limits: docs/obstacles.md.
-
-Conventions: docs/conventions.md.
+**Too near (fail-safe).** A pixel whose match lies beyond the largest searched disparity
+(``DisparityResult.too_near``) is placed at the near-limit depth along its ray and classified by
+the same rules: above the floor it is an obstacle (a robot stops rather than drives on), never
+floor. Rule and limits: docs/obstacles.md (Too near). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -126,8 +114,8 @@ class ObstacleResult:
     message : str
         How the floor was obtained, or why it failed.
     too_near_mask : ndarray of shape (H, W), bool
-        Too-near pixels placed at the near limit (module docstring); those of them in the
-        obstacle band are in ``obstacle_mask`` too. All False when none were given.
+        Too-near pixels placed at the near limit; those of them in the obstacle band are in
+        ``obstacle_mask`` too. All False when none were given.
     """
 
     points_robot: np.ndarray
@@ -170,9 +158,12 @@ def _rectified_intrinsics(stereo: StereoCamera) -> dict:
 
 
 def _disparity_image(disparity_px) -> np.ndarray:
+    """``disparity_px`` as a float32 or float64 (H, W) array."""
     d = np.asarray(disparity_px)
     if d.dtype not in (np.float32, np.float64):
         d = d.astype(np.float64)
+    if d.ndim != 2:
+        raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
     return d
 
 
@@ -186,8 +177,6 @@ def points_robot_from_disparity(disparity_px, stereo: StereoCamera, T_robot_from
     _checks.instance("stereo", stereo, StereoCamera)
     T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
     d = _disparity_image(disparity_px)
-    if d.ndim != 2:
-        raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
     R, t = _rigid(T)
     out = np.empty(d.shape + (3,), dtype=np.float64)
     _kernels.points_robot_image(d, float(stereo.doffs_px), **_rectified_intrinsics(stereo), R=R, t=t, out=out)
@@ -242,7 +231,7 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
         Height band, floor tolerance, range limit, ground method.
     too_near : ndarray of shape (H, W), bool, optional
         Pixels nearer than the search covers (``DisparityResult.too_near``): placed at
-        ``near_limit_px`` along their rays, fail-safe (module docstring).
+        ``near_limit_px`` along their rays, fail-safe.
     near_limit_px : float, optional
         The largest searched disparity (``DisparityResult.near_limit_px``); needed with
         ``too_near``.
@@ -256,8 +245,6 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     if ground is not None and not isinstance(ground, GroundPlane):
         raise TypeError(f"ground must be a GroundPlane, got {type(ground).__name__}")
     d = _disparity_image(disparity_px)
-    if d.ndim != 2:
-        raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
     if (d.shape[1], d.shape[0]) != tuple(stereo.size):
         raise ValueError(f"disparity_px is {d.shape[1]}x{d.shape[0]} but the calibration is "
                          f"{stereo.size[0]}x{stereo.size[1]}")

@@ -1,20 +1,7 @@
-"""Point clouds as PLY files (binary little-endian), readable by Open3D, MeshLab, CloudCompare.
+"""Point clouds as binary little-endian PLY files (Open3D, MeshLab, CloudCompare read them).
 
-Layout written by :func:`write_ply`::
-
-    ply
-    format binary_little_endian 1.0
-    comment mrstereo point cloud (frame: robot, metres)
-    element vertex N
-    property float x
-    property float y
-    property float z
-    [property uchar intensity]                       (with intensity)
-    [property uchar red / green / blue]             (with colours)
-    end_header
-    N records of 12 (+1 or +3) bytes, packed, little-endian
-
-Non-finite points are dropped. Conventions: docs/conventions.md.
+``x y z`` float32 per vertex, then ``intensity`` or ``red green blue`` uchar; non-finite points
+are dropped. Layout: docs/obstacles.md (PLY). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

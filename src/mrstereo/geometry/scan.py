@@ -1,17 +1,9 @@
 """Top view (paper Figs 8b-10b) and a virtual laser scan of the obstacle points.
 
-* :func:`top_view` bins robot-frame points into a 2D histogram laid out like a
-  ``GridSpec`` of the mapping stage (x forward = depth, y lateral): the
-  paper's "top view of the depth-by-column projection".
-* :func:`laser_scan_from_points` keeps, for each bearing, the nearest obstacle
-  in the robot frame, like ROS ``depthimage_to_laserscan`` /
-  ``pointcloud_to_laserscan``: angle 0 straight ahead, positive to the left
-  (REP 103), ``ranges[i]`` at ``angle_min + i * angle_increment``; REP 117 values:
-  ``+inf`` = seen clear to ``range_max``, ``nan`` = no measurement, ``-inf`` = too
-  close. JSON writes those as the strings ``"Infinity"``, ``"NaN"``, ``"-Infinity"``
-  (proto3 JSON mapping), CSV as ``inf``, ``nan``, ``-inf`` (docs/obstacles.md).
-
-Conventions: docs/conventions.md.
+:func:`top_view` bins robot-frame points on a grid laid out like the mapping stage's ``GridSpec``;
+:func:`laser_scan_from_points` keeps the nearest obstacle per bearing, like ROS
+``depthimage_to_laserscan``, with the values of REP 117 (:class:`LaserScan`). Files:
+docs/obstacles.md (Laser scan files). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -98,15 +90,9 @@ class LaserScan:
         return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
 
     def to_dict(self) -> dict:
-        """The message as JSON-ready data (docs/obstacles.md, "Laser scan files").
-
-        Field names are those of ``sensor_msgs/LaserScan`` (ROS 2 header: ``stamp`` with ``sec``
-        and ``nanosec``). JSON has no NaN or infinity, so ``ranges`` and ``intensities`` hold
-        numbers and, for the other values, the strings of the proto3 JSON mapping: ``"NaN"``
-        (no measurement), ``"Infinity"`` (nothing within ``range_max``), ``"-Infinity"`` (too
-        close). ``float(s)`` in Python, ``Number(s)`` in JavaScript and
-        ``np.array(ranges, dtype=float)`` read them back as the true values.
-        """
+        """The message as JSON-ready data: ``sensor_msgs/LaserScan`` field names (ROS 2 header),
+        non-finite values as the proto3 JSON strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"``
+        (``float(s)`` reads them back)."""
         sec = math.floor(self.stamp_s)
         nanosec = min(int(round((self.stamp_s - sec) * 1e9)), 999_999_999)
         return {
