@@ -1,22 +1,13 @@
 """The given odometry fused with visual odometry: a small pose filter on the floor plane.
 
-Wheel odometry drifts (a wheel radius error is a scale error, a track width error a heading drift
-per metre) but never loses track; visual odometry hardly drifts but can lose track (a dark frame,
-a blank wall) or, rarely, track something else (a repeated pattern). Each step between
-consecutive frames is measured by both, in the robot frame of the step's start, ``(dx, dy,
-dyaw)``, each with the covariance of its expected error over the step's length ``d``:
-
-    sigma_along = a d + a0,   sigma_across = c d + c0,   sigma_yaw = h d + h0
-
-(``FusionConfig``: a few percent for the given odometry, a fraction of a percent for the visual).
-The fused step is the information-weighted mean of the two, ``(P_g^-1 + P_v^-1)^-1 (P_g^-1 g +
-P_v^-1 v)``; the poses are the fused steps composed from the first given pose. A visual step
-counts only between two tracked frames, and only when it lies within ``gate_sigmas`` of the given
-step under their joint covariance (Mahalanobis distance): otherwise the given step is used. On a
-chain of steps this *is* the least-squares pose graph of both odometries (each edge has its own
-two measurements and nothing links non-neighbours).
-
-Conventions: docs/conventions.md; user guide: docs/odometry.md.
+Wheel odometry drifts but never loses track; visual odometry hardly drifts but can lose track.
+Each step between consecutive frames, ``(dx, dy, dyaw)`` in the robot frame of its start, is
+measured by both, each with the covariance of its expected error over the step's length ``d``
+(``sigma = a d + a0`` along, across and in heading; :class:`FusionConfig`). The fused step is
+the information-weighted mean ``(P_g^-1 + P_v^-1)^-1 (P_g^-1 g + P_v^-1 v)``; a visual step
+counts only between two tracked frames and within ``gate_sigmas`` (Mahalanobis distance) of the
+given one. On a chain of steps this is the least-squares pose graph of both odometries. User
+guide: docs/odometry.md.
 
 References
 ----------
@@ -118,7 +109,7 @@ class FusedOdometry:
 
 def fuse_odometry(given_poses, visual_poses, visual_tracked, *, config: FusionConfig = FusionConfig()
                   ) -> FusedOdometry:
-    """Fuse the given odometry's steps with visual odometry's (see the module docstring).
+    """Fuse the given odometry's steps with visual odometry's (information-weighted, gated).
 
     Parameters
     ----------

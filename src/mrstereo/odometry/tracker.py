@@ -1,41 +1,20 @@
 """Stereo visual odometry: KLT tracks against a keyframe, PnP-RANSAC, a window of keyframes refined.
 
-Per frame (rectified pair, with its time stamp):
+Per rectified pair: predict the pose by the last motion scaled to the frame's time step; track
+the reference keyframe's features into the left image by pyramidal Lucas-Kanade (forward-backward
+checked; against the keyframe, so that a robot standing still gets the same pose every frame);
+``cv2.solvePnPRansac`` then ``cv2.solvePnPRefineLM`` on the landmarks; refuse a step beyond the
+speed, turn-rate and acceleration limits over the time step (the frame is *lost*: its pose is the
+prediction, and tracking restarts after ``max_lost_streak`` lost frames); make a new keyframe when
+too few inliers remain or the camera moved or turned far enough, with new Shi-Tomasi corners
+matched into the right image along the row and triangulated by eq. (14)-(16); bundle-adjust the
+last ``window_keyframes`` keyframes (:mod:`mrstereo.odometry.window`). Each step and why:
+docs/odometry.md.
 
-1. *Motion model*: the pose is predicted by repeating the last motion scaled to this frame's time
-   step (constant velocity in time, :func:`mrstereo.transforms.scale_motion`).
-2. *Tracking*: the reference keyframe's features are tracked into the current left image by
-   pyramidal Lucas-Kanade started where the prediction projects their landmarks, kept when the
-   track back returns within ``max_fb_error_px``. Tracking against the keyframe, not frame to
-   frame, means a robot standing still gets the same pose every frame (no random walk).
-3. *Pose*: ``cv2.solvePnPRansac`` (reprojection threshold ``ransac_threshold_px``, started at the
-   prediction) on the landmarks in the keyframe's camera frame; ``cv2.solvePnPRefineLM`` polishes
-   it on the inliers, the inliers are re-selected and it is polished again.
-4. *Plausibility from time*: with ``dt`` the stamp difference to the previous frame, the step
-   must stay under ``max_speed_mps * dt`` and ``max_turn_rate_radps * dt``, and (once the motion
-   is known) within ``max_acceleration_mps2 * dt^2`` and ``max_angular_acceleration_radps2 *
-   dt^2`` of the prediction. Otherwise, or with fewer than ``min_inliers`` inliers, the frame is
-   *lost*: its pose is the prediction, and after ``max_lost_streak`` lost frames in a row tracking
-   restarts from a new keyframe there.
-5. *Keyframes*: when the inliers fall below ``keyframe_inlier_fraction`` of the keyframe's
-   features, or the camera moved ``keyframe_depth_fraction`` of the keyframe's median landmark
-   depth or turned ``keyframe_angle_rad``, the frame becomes a keyframe: its tracked features
-   keep their landmarks, new Shi-Tomasi corners (spread over a grid of cells, away from the
-   tracked ones) fill up to ``max_features``, and every feature is found in the right image (brought
-   to the left one's gain and offset) by Lucas-Kanade along the row, kept when the track back
-   returns and ``|y_left - y_right| <= max_row_error_px``; a new feature's landmark is triangulated
-   with eq. (14)-(16): ``Z = b f / (d + doffs)``, ``X = (u - cx) Z / f``, ``Y = (v - cy) Z / f_y``.
-6. *Windowed refinement*: the last ``window_keyframes`` keyframes' poses and the landmarks two of
-   them see are bundle-adjusted over their left and right image observations
-   (:mod:`mrstereo.odometry.window`; the oldest ``window_fixed`` fixed), and observations that
-   stay farther than ``outlier_px`` from their landmark are dropped.
-
-A frame's pose is kept relative to its reference keyframe, so the trajectory
-(:meth:`StereoOdometry.trajectory`) follows the keyframes' refined poses; :meth:`StereoOdometry.step`
-returns the pose as known at that frame (what a live system uses). Poses are of the robot base in
-the world (REP 103), ``T_world_from_base = T_world_from_cam @ inv(T_base_from_cam)`` with the
-camera mount of each frame; the first frame's pose is given (identity by default).
-Conventions: docs/conventions.md; user guide: docs/odometry.md.
+Poses are of the robot base in the world, ``T_world_from_base = T_world_from_cam @
+inv(T_base_from_cam)`` with each frame's camera mount; a frame's pose is kept relative to its
+keyframe, so :meth:`StereoOdometry.trajectory` follows the refined keyframes, while
+:meth:`StereoOdometry.step` returns the pose as known at that frame.
 
 References
 ----------
@@ -82,16 +61,10 @@ class OdometryConfig:
     min_corner_distance_px : float
         At most one corner per square of this size.
     klt_window_px, klt_levels : int
-        Lucas-Kanade window and pyramid levels of the tracking from the keyframe (a small window:
-        approaching a surface magnifies it, which a translating window follows with a bias toward
-        too little motion, so a larger window underestimates the distance travelled).
-    stereo_window_px : int
-        Lucas-Kanade window of the left-right search of keyframe features (``stereo_levels``
-        levels; the two views differ by the baseline only, and a larger window matches weak
-        texture more reliably).
-    stereo_levels : int
-        Pyramid levels of that search (a wide baseline seen from near needs disparities of a
-        hundred pixels and more).
+        Lucas-Kanade window and pyramid levels of the tracking from the keyframe (small: a larger
+        window underestimates the motion toward a surface, which magnifies it).
+    stereo_window_px, stereo_levels : int
+        Lucas-Kanade window and pyramid levels of the left-right search of keyframe features.
     max_fb_error_px : float
         Forward-backward track error above which a track is dropped.
     max_row_error_px : float
@@ -352,15 +325,12 @@ class StereoOdometry:
         return p1, ok
 
     def _corners(self, left: np.ndarray, wanted: int, taken: np.ndarray) -> np.ndarray:
-        """Shi-Tomasi corners spread over a grid of cells (``wanted`` in all), (N, 2) float32, at least
-        ``min_corner_distance_px`` from the features ``taken`` (N, 2).
+        """Shi-Tomasi corners (``cv2.goodFeaturesToTrack``), ``wanted`` in all, (N, 2) float32, at least
+        ``min_corner_distance_px`` from the features ``taken`` (N, 2) and from each other.
 
-        ``cv2.goodFeaturesToTrack`` (the minimum eigenvalue of the gradient matrix, the corner
-        that Lucas-Kanade tracks well; Shi and Tomasi 1994) keeps corners at least
-        ``min_corner_distance_px`` apart whose strength is ``corner_quality`` of the strongest or
-        more; each of the ``grid_cells`` keeps its strongest ones first, and the places left are
-        filled with the strongest of the rest, so corners cover the image where it has texture
-        and weakly textured images (plain walls) still give their best corners.
+        Each of the ``grid_cells`` keeps its strongest corners first and the strongest of the rest
+        fill the places left: corners cover the textured image, and a plain wall still gives its
+        best ones.
         """
         c = self.config
         h, w = left.shape
@@ -546,10 +516,8 @@ def _sample_smooth(image: np.ndarray, uv: np.ndarray, *, max_spread: float) -> n
 def _photometry_like(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """``image`` mapped linearly to the mean and spread of ``reference`` (uint8).
 
-    The two cameras of a rig differ in gain and black level; Lucas-Kanade assumes equal
-    brightness, and on an intensity ramp a gain difference shifts the match (a disparity bias,
-    hence a scale error of the odometry). The cameras' differences are global, so one gain and
-    one offset from the images' means and standard deviations remove them.
+    Lucas-Kanade assumes equal brightness; a gain difference between the cameras would shift
+    the stereo match on an intensity ramp (a scale error of the odometry).
     """
     mean_i, sd_i = cv2.meanStdDev(image)
     mean_r, sd_r = cv2.meanStdDev(reference)

@@ -1,31 +1,23 @@
 """Windowed refinement: bundle adjustment of the last keyframes' poses and the points they see.
 
-The problem (Triggs et al. 2000; the local bundle adjustment of ORB-SLAM2's and S-PTAM's stereo
-odometry): keyframe poses ``T_cam_from_world`` (each a 6-vector: rotation vector and
-translation) and landmarks ``X`` in the world (3-vectors) minimize the robust sum of the
-reprojection errors of every observation,
+Keyframe poses ``T_cam_from_world`` (rotation vector and translation) and world landmarks ``X``
+minimize the Huber-robust sum of the reprojection errors of every observation (Triggs et al.;
+the local bundle adjustment of ORB-SLAM2's stereo odometry),
 
     r_left  = (fx X_c / Z_c + cx - u,  fy Y_c / Z_c + cy - v)
     r_right = fx (X_c - b) / Z_c + cx_right - u_right          (a stereo observation)
 
-with ``X_c = R X + t`` the landmark in the keyframe's rectified left camera and ``b`` the
-baseline. The right image's column makes the depth, hence the scale, observable in every
-keyframe. The loss is Huber's (``huber_px``: residuals beyond it count linearly, so a wrong
-track pulls with a bounded force); the oldest keyframes stay fixed (they fix the gauge: the
-window's position, orientation and, with stereo, nothing else is free).
-
-``scipy.optimize.least_squares`` (trust-region reflective) solves it with an analytic sparse
-Jacobian: each residual depends on one pose (6 columns) and one landmark (3 columns), so the
-Jacobian has at most 9 non-zeros per row; the rotation's derivative is Gallego and Yezzi's
-closed form (:func:`mrstereo.transforms.rotated_points_jacobian`). Conventions:
-docs/conventions.md; user guide: docs/odometry.md.
+with ``X_c = R X + t`` in the keyframe's rectified left camera. The right column makes the scale
+observable in every keyframe; the oldest keyframes stay fixed (the gauge). Levenberg-Marquardt
+on the normal equations with the landmarks eliminated (Schur complement; numba kernels), the
+rotation's derivative in Gallego and Yezzi's closed form
+(:func:`mrstereo.transforms.rotation_jacobian_factor`). User guide: docs/odometry.md.
 
 References
 ----------
 B. Triggs, P. McLauchlan, R. Hartley, A. Fitzgibbon. Bundle adjustment -- a modern synthesis.
 Vision Algorithms: Theory and Practice, 2000. R. Mur-Artal, J. D. Tardos. ORB-SLAM2: an
 open-source SLAM system for monocular, stereo and RGB-D cameras. IEEE T-RO 33(5), 2017.
-SciPy Cookbook: Large-scale bundle adjustment in scipy.
 """
 from __future__ import annotations
 
@@ -35,7 +27,7 @@ import cv2
 import numpy as np
 
 from .. import _checks
-from ..transforms import T_from_rvec_t, rotations_from_rvecs
+from ..transforms import T_from_rvec_t, rotation_jacobian_factor, rotations_from_rvecs
 from ._kernels import window_back_substitute, window_normal_equations, window_residuals, window_schur
 
 __all__ = ["WindowResult", "refine_window"]
@@ -192,7 +184,7 @@ class _Problem:
         """The damped Gauss-Newton step (IRLS Huber weights), landmarks eliminated (Schur complement)."""
         R = rotations_from_rvecs(rvecs)
         fx, fy, _, _ = self.intrinsics
-        window_normal_equations(R, _rotation_factor(rvecs, R), tvecs, P, self.kf, self.pt, self.slot,
+        window_normal_equations(R, rotation_jacobian_factor(rvecs, R), tvecs, P, self.kf, self.pt, self.slot,
                                 self.stereo, res, fx, fy, self.b, self.delta, self.Hpp, self.gp, self.Hll, self.gl,
                                 self.Hpl)
         F = len(self.free)
@@ -218,18 +210,6 @@ class _Problem:
         r[self.free] += dp[:, :3]
         t[self.free] += dp[:, 3:]
         return r, t, P + dl
-
-
-def _rotation_factor(rvecs: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """``M`` of ``d(R(r) p)/dr = -R [p]x M`` per rotation vector (Gallego and Yezzi 2015); I at r = 0."""
-    n2 = np.einsum("ij,ij->i", rvecs, rvecs)
-    K = np.zeros((len(rvecs), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -rvecs[:, 2], rvecs[:, 1], -rvecs[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = rvecs[:, 2], -rvecs[:, 1], rvecs[:, 0]
-    M = (rvecs[:, :, None] * rvecs[:, None, :] + (np.swapaxes(R, 1, 2) - np.eye(3)) @ K) / \
-        np.where(n2 < 1e-16, 1.0, n2)[:, None, None]
-    M[n2 < 1e-16] = np.eye(3)
-    return M
 
 
 @dataclass
