@@ -22,7 +22,7 @@ import numpy as np
 from .. import _checks
 from . import _kernels
 from .grid import distance_cells
-from .rosmap import RosMap
+from .rosmap import RosMap, as_ros_map
 
 __all__ = ["PlanResult", "plan_path", "inflate_obstacles"]
 
@@ -96,10 +96,7 @@ def plan_path(ros_map, start_xy, goal_xy, *, robot_radius_m: float = 0.25,
         ``success`` False with a one-line ``message`` when the start or goal is outside the map
         or blocked, or when no path exists; ``expanded_cells`` counts A* expansions.
     """
-    if hasattr(ros_map, "to_ros_map") and not isinstance(ros_map, RosMap):
-        ros_map = ros_map.to_ros_map()
-    if not isinstance(ros_map, RosMap):
-        raise TypeError(f"ros_map must be a RosMap or OccupancyGrid, got {type(ros_map).__name__}")
+    ros_map = as_ros_map("ros_map", ros_map)
     start = _point("start_xy", start_xy)
     goal = _point("goal_xy", goal_xy)
     grid = ros_map.grid

@@ -45,6 +45,15 @@ class RosMap:
         return ~(self.occupied | self.free)
 
 
+def as_ros_map(name: str, value) -> RosMap:
+    """``value`` as a RosMap (an OccupancyGrid converted), else TypeError naming ``name``."""
+    if hasattr(value, "to_ros_map") and not isinstance(value, RosMap):
+        value = value.to_ros_map()
+    if not isinstance(value, RosMap):
+        raise TypeError(f"{name} must be a RosMap or OccupancyGrid, got {type(value).__name__}")
+    return value
+
+
 def write_ros_map(yaml_path: str | os.PathLike, ros_map: RosMap) -> None:
     """Write ``NAME.yaml`` and ``NAME.pgm`` beside it (atomically)."""
     yaml_path = Path(yaml_path)
