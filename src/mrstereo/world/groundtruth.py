@@ -78,20 +78,8 @@ def ground_truth_map(scene: Scene, grid: GridSpec | None = None, *,
                      height_band_m=(0.02, 2.0)) -> RosMap:
     """The true 2D map of ``scene`` on ``grid`` (default: 12 m x 6 m at 5 cm, origin (0, -3)).
 
-    Parameters
-    ----------
-    scene : Scene
-        The world, e.g. :func:`mrstereo.world.default_scene`.
-    grid : GridSpec, optional
-        Map geometry.
-    height_band_m : (float, float)
-        Only solids reaching into this band of heights above the floor are
-        obstacles (the robot passes under a door lintel).
-
-    Returns
-    -------
-    RosMap
-        ``occupancy`` 1.0 occupied, 0.0 free, NaN unknown; row 0 = min y.
+    Only solids reaching into ``height_band_m`` above the floor are obstacles (the robot passes
+    under a door lintel). Returns a RosMap: ``occupancy`` 1.0 occupied, 0.0 free, NaN unknown.
     """
     _checks.instance("scene", scene, Scene)
     grid = GridSpec() if grid is None else grid

@@ -1,20 +1,9 @@
-"""The synthetic office corridor: geometry, materials and lights.
+"""The synthetic office corridor: geometry, materials and lights (paper Sec. 5, Figs. 7 and 11-14).
 
-The corridor runs along world +x (REP 103: x forward, y left, z up), centred
-on ``y = 0``: a floor at ``z = 0``, a ceiling at ``height_m``, two walls at
-``y = +-width_m / 2`` with recessed doors (gaps with a panel set back into the
-wall), coloured door panels, posters and skirting boards, and box and vertical
-cylinder obstacles standing on the floor, as in the test corridor of the
-paper's experiments (Sec. 5, Figs. 7 and 11-14).
-
-Every surface is an axis-aligned box or a vertical cylinder; posters and
-coloured door panels are *decals* (rectangles painted on a wall face); the
-skirting board is the band ``z < skirting_m`` of every wall face. Textures
-are deterministic functions of world surface coordinates keyed by
-``Scene.seed``, so every camera sees the same surface. Floor, walls and
-ceiling are weakly textured (low contrast, the uniform patches that the
-ground suppression of eq. (13) rejects); obstacles, posters and doors are
-strongly textured. Conventions: docs/conventions.md; user guide: docs/world.md.
+Axis-aligned boxes, vertical cylinders and decals painted on walls; textures are deterministic
+functions of world surface coordinates keyed by ``Scene.seed``, so every camera sees the same
+surface. Floor, walls and ceiling are weakly textured (what eq. (13) rejects). The corridor:
+docs/world.md.
 """
 from __future__ import annotations
 
@@ -53,13 +42,10 @@ def is_obstacle_label(labels) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Material:
-    """A procedural texture: albedo ``albedo +- contrast`` at feature size ``scale_m``.
+    """A procedural texture (``TEXTURE_*`` ``kind``): albedo ``albedo +- contrast`` at feature size ``scale_m``.
 
-    ``kind`` is one of the ``TEXTURE_*`` constants; ``period_m`` is the tile
-    size (tiles), the checker square (checker), the plank width (wood) or the
-    stripe period (stripes). Surface coordinates ``(u, v)``: ``(y, z)`` on faces
-    normal to x, ``(x, z)`` on faces normal to y, ``(x, y)`` on floors and tops,
-    (arc length, z) on cylinders.
+    ``period_m`` is the tile, checker square, plank or stripe period. Surface coordinates ``(u, v)``:
+    ``(y, z)`` on faces normal to x, ``(x, z)`` normal to y, ``(x, y)`` on floors, (arc, z) on cylinders.
     """
 
     kind: int
@@ -119,26 +105,11 @@ class Light:
 
 @dataclass(frozen=True)
 class Scene:
-    """A static scene of boxes, cylinders, decals and lights.
+    """A static scene of boxes, cylinders, decals and lights (``material`` fields index ``materials``).
 
-    Attributes
-    ----------
-    boxes, cylinders, decals, lights, materials : tuple
-        The primitives; ``material`` fields index ``materials``.
-    skirting_m : float
-        Height of the skirting board drawn at the bottom of every wall face.
-    skirting_material : int
-        Material of the skirting board.
-    ambient : float
-        Ambient light level added to the lamps.
-    x_range_m, half_width_m, height_m : float
-        Free corridor space: ``x_range_m[0] < x < x_range_m[1]``,
-        ``|y| < half_width_m``, ``0 < z < height_m``.
-    seed : int
-        Key of all procedural textures.
-    free_regions_m : tuple of (x0, x1, y0, y1)
-        Free floor space outside the corridor rectangle (side rooms behind wall
-        openings), for the ground-truth map.
+    The skirting board is the band ``z < skirting_m`` of every wall face; ``ambient`` adds to the
+    lamps; the free corridor space is ``x_range_m``, ``|y| < half_width_m``, ``0 < z < height_m``
+    plus ``free_regions_m`` (side rooms); ``seed`` keys all textures.
     """
 
     boxes: tuple[Box, ...]
@@ -209,21 +180,9 @@ def _wall_boxes(side: int, x0: float, x1: float, y_in: float, thickness: float, 
 
 
 def default_scene(seed: int = 0) -> Scene:
-    """The default office corridor (about 15.5 m x 2.4 m x 2.5 m) with six obstacles.
+    """The default office corridor (about 15.5 m x 2.4 m x 2.5 m) with six obstacles (docs/world.md).
 
-    Corridor free space: ``-1 < x < 14.5``, ``|y| < 1.2``, ``0 < z < 2.5``; the
-    robot path starts at the origin looking along +x. Obstacles (distance of
-    their near face from the start): a box at 0.6 m right of centre, a
-    cylinder at 1.65 m left, a box at 2.6 m against the left wall, a cylinder
-    at 3.7 m right, a box straight ahead in the middle of the corridor at
-    6.0 m (a 0.95 m gap on its right), and a tall box at 9.0 m against the
-    right wall. ``seed`` keys the textures only; the geometry is fixed so that
-    ground-truth maps of different seeds coincide.
-
-    Parameters
-    ----------
-    seed : int
-        Texture seed (non-negative).
+    ``seed`` (non-negative) keys the textures only: ground-truth maps of different seeds coincide.
     """
     seed = _checks.positive_int("seed", seed, minimum=0)
     materials = (

@@ -1,15 +1,8 @@
 """A long street world for odometry at car speed: building fronts, parked cars, poles, a wide rig.
 
-The corridor worlds are 8-15 m long, made for a robot at walking pace. Real odometry also has to
-hold at 0.5-1.5 m per frame (a car at 10 Hz), which needs a long scene with structure at 3-50 m.
-:func:`street_world` draws one from a seed: a road along +x (REP 103, centred on ``y = 0``,
-``width_m`` between the building fronts), rows of buildings on both sides (random lengths,
-set-backs, heights and facade materials, with bands of windows painted on them), gaps between
-them (side streets that open the view), parked cars along both kerbs, poles and trees, no
-ceiling (the sky is black), sunlight as a few high lamps plus ambient light; and a KITTI-like
-stereo rig (0.5 m baseline, level, 1.65 m above the road, ideal rectified cameras). The robot
-path is :func:`mrstereo.world.paths.speed_path`. Conventions: docs/conventions.md; user guide:
-docs/world.md.
+:func:`street_world` draws a road along +x between rows of buildings, side streets, parked
+cars, poles and trees, and a KITTI-like rig (0.5 m baseline, level, 1.65 m up); the path is
+:func:`mrstereo.world.paths.speed_path`. User guide: docs/world.md.
 """
 from __future__ import annotations
 
@@ -48,23 +41,11 @@ def _facade_material(rng: np.random.Generator) -> Material:
 
 def street_world(seed: int, *, width: int = 320, height: int = 240, length_m: float = 160.0,
                  width_m: float = 12.0) -> RandomWorld:
-    """Draw a street world from ``seed`` (the same seed gives the same world).
+    """Draw a street world from ``seed`` (non-negative; the same seed gives the same world).
 
-    Parameters
-    ----------
-    seed : int
-        Non-negative.
-    width, height : int
-        Image size of the rig (horizontal field of view 77 degrees).
-    length_m : float
-        Length of the street (the path starts near ``x = 0`` and runs along +x).
-    width_m : float
-        Distance between the building fronts on the two sides.
-
-    Returns
-    -------
-    RandomWorld
-        ``waypoints_xy`` is the street's centre line (``(0, 0)`` to ``(length_m, 0)``).
+    ``width, height`` is the rig's image size (77 degree field of view); the street is ``length_m``
+    long and ``width_m`` between building fronts; ``waypoints_xy`` runs from ``(0, 0)`` to
+    ``(length_m, 0)``.
     """
     seed = _checks.positive_int("seed", seed, minimum=0)
     width = _checks.positive_int("width", width, minimum=16)
