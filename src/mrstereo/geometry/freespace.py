@@ -1,18 +1,12 @@
 """Free-space boundary: where the floor ends in each image column (beyond the paper).
 
-Stereo cannot match a wall without texture, and the line where such a wall meets the floor is,
-seen face on, a horizontal edge without disparity either: the wall would be missing from the map
-although the image shows it. The floor can be followed instead: in each column of the rectified
-left image it runs up from the bottom to where something that is not floor begins (the free
-space of the stixel world, Badino et al. 2009). The floor point of that row is the base of an
-obstacle: an occupied cell, and a ray that clears only up to it. The obstacle is returned as
-points on the vertical line over the base, every ``point_spacing_m``, so that the occupancy
-grid treats it like a measured surface.
-
-The rules, one :class:`FreeSpaceConfig` field each, are applied per column by the numba kernel
-``_freespace_kernels.column_boundaries`` and listed in docs/mapping.md (Free-space boundary).
-Sizes in rows and columns are given for a 320x240 image; a larger image is first reduced by an
-integer factor (:func:`_reduced`) so that the rules see the same sizes.
+A wall without texture has no disparity, nor has its face-on edge with the floor; the floor can
+be followed instead, up each column of the rectified left image to where something that is not
+floor begins (the free space of the stixel world, Badino et al. 2009). That base becomes
+obstacle points on the vertical line over it, which the occupancy grid treats like a measured
+surface. The rules (one :class:`FreeSpaceConfig` field each, applied by the numba kernel
+``_freespace_kernels.column_boundaries``): docs/mapping.md, "Free-space boundary". Sizes are for
+a 320x240 image; a larger one is first reduced by an integer factor (:func:`_reduced`).
 
 References
 ----------
@@ -38,41 +32,16 @@ __all__ = ["FreeSpaceConfig", "FreeSpaceBoundary", "free_space_boundary"]
 
 @dataclass(frozen=True)
 class FreeSpaceConfig:
-    """Options of :func:`free_space_boundary` (the rules: docs/mapping.md, Free-space boundary).
+    """Options of :func:`free_space_boundary`; each rule: docs/mapping.md, "Free-space boundary".
 
-    Attributes
-    ----------
-    edge_threshold : float
-        Step of the mean gray level across the boundary (0-255 scale).
-    appearance_threshold : float
-        Difference from the floor's appearance that counts as "not floor" (0-255 scale).
-    edge_rows, persist_rows, check_rows : int
-        Rows (at 240 rows) of the edge means, of the changed appearance above the edge, and
-        of the check for floor or farther points above it.
-    min_run_columns : int
-        Shortest run of neighbouring boundary columns kept (at 320 columns).
-    max_row_step : int
-        Largest row difference between neighbouring columns of a run (at 240 rows).
-    adapt : float
-        Rate at which the floor's appearance follows the rows accepted as floor.
-    smooth_sigma_px : float
-        Gaussian smoothing of the image before the tests (at 240 rows).
-    far_margin_m : float
-        A measured point above the edge farther than the base by more than this vetoes it.
-    min_range_m, max_range_m : float
-        Floor ranges (horizontal, robot frame) where a boundary may lie; ``max_range_m`` None:
-        the obstacle config's range.
-    point_spacing_m : float
-        Vertical spacing of the points returned for each boundary column.
-    gap_rows : int
-        Measured floor this close below an edge (rows at 240) supports it.
-    texture_threshold : float
-        Local standard deviation (smoothed image, 0-255 scale) above which an unmeasured pixel
-        is texture the matcher did not measure.
-    min_floor_pixels : int
-        Measured floor pixels a frame needs for its floor's look.
-    pattern_threshold : float
-        Interquartile range of the floor's gray levels above which the floor is patterned.
+    Gray levels on the 0-255 scale, rows and columns at 320x240: the boundary's gray step
+    (``edge_threshold``) and change of floor appearance (``appearance_threshold``) over
+    ``edge_rows`` / ``persist_rows``, the check for floor or farther points above it
+    (``check_rows``, ``far_margin_m``, ``gap_rows``), runs of ``min_run_columns`` columns with steps
+    of at most ``max_row_step``, the floor's appearance model (``adapt``, ``min_floor_pixels``,
+    ``pattern_threshold``), unmeasured texture (``texture_threshold``), smoothing
+    (``smooth_sigma_px``), the floor ranges of a boundary (``min_range_m``, ``max_range_m``; None:
+    the obstacle config's) and the spacing of the returned points (``point_spacing_m``).
     """
 
     edge_threshold: float = 6.0
@@ -122,19 +91,10 @@ class FreeSpaceConfig:
 class FreeSpaceBoundary:
     """Output of :func:`free_space_boundary`.
 
-    Attributes
-    ----------
-    base_row : ndarray of shape (W,), float64
-        Per column the image row of the obstacle base (the edge between two rows: ``v - 0.5``),
-        NaN where the column has no kept boundary.
-    top_row : ndarray of shape (W,), float64
-        The highest row of the obstacle's evidence above the base (NaN as ``base_row``).
-    base_points_robot : ndarray of shape (K, 3), float64
-        The floor point of each kept column's base (``z = 0``), robot frame, column order.
-    points_robot : ndarray of shape (N, 3), float64
-        Obstacle points on the vertical lines over the bases, robot frame.
-    columns : ndarray of shape (K,), int64
-        The image column of each base point.
+    ``base_row`` (W,): per column the row of the obstacle base (the edge between two rows, ``v -
+    0.5``), NaN without a kept boundary; ``top_row`` the highest row of its evidence;
+    ``base_points_robot`` (K, 3) the floor point of each kept column's base and ``columns`` (K,) its
+    column; ``points_robot`` (N, 3) the obstacle points over the bases (robot frame).
     """
 
     base_row: np.ndarray
@@ -165,16 +125,12 @@ def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, ster
     Parameters
     ----------
     left_rect : ndarray of shape (H, W) or (H, W, 3)
-        The rectified left image.
     obstacles : ObstacleResult
-        The frame's floor / obstacle split (:func:`mrstereo.geometry.obstacles.detect_obstacles`):
-        its masks, floor and transform.
+        The frame's floor / obstacle split (its masks, floor and transform).
     disparity_px : ndarray of shape (H, W)
         The disparity the obstacles were computed from (NaN invalid).
     stereo : StereoCamera
-        The calibration (rectified intrinsics).
     config : FreeSpaceConfig
-        The rules' thresholds.
     max_range_m : float
         Farthest floor range of a boundary when ``config.max_range_m`` is None.
     min_height_m, max_height_m : float

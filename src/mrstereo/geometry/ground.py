@@ -1,16 +1,12 @@
 """The floor seen by the stereo head, from the disparity itself: V-disparity and 3D RANSAC.
 
-Beyond the paper, which assumes a known mount: obstacles and floor can be told apart when the
-camera height and tilt are not known exactly. A camera at height ``h`` tilted down by ``theta``
-(no roll) sees the floor plane ``n . P = h``, ``n = (0, cos theta, sin theta)``; with eq. (14)-(16)
-every floor pixel obeys
-
-    d(v) = a (v - cy) + c,   a = b f cos(theta) / (h f_y),   c = b f sin(theta) / h,
-
-a line in the row-by-disparity histogram (the "V-disparity" image of Labayrade et al.), on which
-obstacles stand as vertical segments. Hence ``tan(theta) = c / (a f_y)``, ``h = b f cos(theta) /
-(a f_y)``. A 3D plane fit also recovers the roll about the optical axis: ``n = (sin(roll)
-cos(tilt), cos(roll) cos(tilt), sin(tilt))``. Conventions: docs/conventions.md.
+Beyond the paper, which assumes a known mount. With eq. (14)-(16) a camera at height ``h``
+tilted down by ``theta`` sees the floor as the line ``d(v) = a (v - cy) + c``, ``a = b f
+cos(theta) / (h f_y)``, ``c = b f sin(theta) / h``, of the row-by-disparity histogram (the
+"V-disparity" of Labayrade et al.), on which obstacles stand as vertical segments; hence
+``tan(theta) = c / (a f_y)``, ``h = b f cos(theta) / (a f_y)``. A 3D plane fit also recovers the
+roll: ``n = (sin(roll) cos(tilt), cos(roll) cos(tilt), sin(tilt))``. User guide:
+docs/obstacles.md.
 
 References
 ----------
@@ -47,34 +43,12 @@ MAX_FLOOR_RESIDUAL_M = 0.03
 class GroundPlane:
     """The floor in the left camera frame: ``normal_cam . P = height_m``.
 
-    Attributes
-    ----------
-    height_m : float
-        Height of the left camera's optical centre above the floor.
-    tilt_rad : float
-        Downward tilt of the optical axis (positive = looking down).
-    roll_rad : float
-        Roll about the optical axis (0 for a V-disparity fit).
-    success : bool
-        False when no plausible floor was found (then the other fields are NaN).
-    message : str
-        What was fitted or why it failed.
-    method : str
-        ``"mount"`` (a given mount), ``"v_disparity"`` or ``"plane"``.
-    n_inliers : int
-        Pixels / points supporting the fit (0 for ``"mount"``).
-    line_px : (float, float)
-        V-disparity line ``d = a (v - cy) + c`` as ``(a, c)`` (NaN if not fitted).
-    inlier_share : float
-        Confidence of a fit: the share of the valid pixels / points (within the
-        fit's range) that support the floor, 0..1 (NaN for a given mount).
-    residual_m : float
-        Confidence of a fit: RMS distance of the supporting points to the
-        floor [m] (NaN for a given mount).
-    T_base_from_cam : tuple of 16 floats, optional
-        Row-major 4x4 pose of the rectified left camera in the base frame when the
-        floor comes from a mount (:func:`ground_from_mount`); it then replaces the
-        height / tilt / roll parametrization in :func:`T_robot_from_cam_ground`.
+    ``height_m`` of the optical centre, downward ``tilt_rad``, ``roll_rad`` about the optical axis;
+    ``success`` False (fields NaN) when no plausible floor was found, ``message`` why; ``method``
+    ``"mount"``, ``"v_disparity"`` or ``"plane"``; ``n_inliers``; ``line_px`` the V-disparity line
+    ``(a, c)``; the fit's confidence, ``inlier_share`` (0..1) and RMS ``residual_m`` (NaN for a
+    mount); ``T_base_from_cam`` (row-major 4x4) when the floor comes from a mount, which then
+    replaces height / tilt / roll in :func:`T_robot_from_cam_ground`.
     """
 
     height_m: float
@@ -171,21 +145,9 @@ def height_above_ground_m(points_cam, ground: GroundPlane) -> np.ndarray:
 
 def v_disparity(disparity_px, *, max_disparity_px: float | None = None,
                 bin_px: float = 1.0) -> np.ndarray:
-    """Row-by-disparity histogram (Labayrade et al. 2002).
-
-    Parameters
-    ----------
-    disparity_px : ndarray of shape (H, W)
-        Disparity, NaN invalid.
-    max_disparity_px : float, optional
-        Upper edge of the last bin (default: the largest valid disparity).
-    bin_px : float
-        Bin width; bin ``k`` covers ``[k bin_px, (k + 1) bin_px)``.
-
-    Returns
-    -------
-    ndarray of shape (H, n_bins), int32
-        ``hist[v, k]`` = number of pixels of row ``v`` with disparity in bin ``k``.
+    """Row-by-disparity histogram (Labayrade et al. 2002): ``hist[v, k]`` (H, n_bins) int32 counts the
+    pixels of row ``v`` with disparity in ``[k bin_px, (k + 1) bin_px)``, up to ``max_disparity_px``
+    (default: the largest valid disparity).
     """
     d = np.asarray(disparity_px, dtype=np.float64)
     if d.ndim != 2:
@@ -245,35 +207,27 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
                            rng=0) -> GroundPlane:
     """Fit the floor line ``d = a (v - cy) + c`` of the V-disparity by RANSAC + least squares.
 
-    RANSAC draws pairs of valid pixels and keeps lines with a positive slope (the ceiling's is
-    negative) whose camera height and tilt are plausible (not the nearly vertical segments of
-    walls), scored by the pixels within ``tolerance_px``; the best is refined by least squares
-    on its inliers (Labayrade et al. use a Hough transform; RANSAC needs no accumulator bins).
+    RANSAC (Labayrade et al. use a Hough transform) draws pairs of valid pixels, keeps lines with a
+    positive slope and a plausible height and tilt, scores them by the pixels within
+    ``tolerance_px`` and refines the best on its inliers.
 
     Parameters
     ----------
     disparity_px : ndarray of shape (H, W)
-        Disparity of the rectified left image, NaN invalid.
     stereo : StereoCamera
-        Supplies ``f``, ``f_y``, ``cy``, baseline and ``doffs``.
     tolerance_px : float
         Inlier band around the line (pixels of disparity).
     height_range_m, tilt_range_rad : (float, float)
         Plausible camera height above the floor and downward tilt.
     below_penalty : float
-        Score of a line = inliers - ``below_penalty`` x pixels farther than the
-        line under its horizon. Every true surface seen below the horizon is
-        nearer than the floor on its ray (it stands on the floor), so a line
-        through a wall at the end of the corridor, which leaves the real floor
-        "below" it, scores low.
+        Score = inliers - ``below_penalty`` x pixels farther than the line under its horizon: every
+        true surface stands on the floor, so a line through the end wall scores low.
     iterations : int
-        RANSAC hypotheses.
     min_inliers : int
-        Fewer inliers than this is a failure (``success=False``).
+        Fewer inliers is a failure (``success=False``).
     max_samples : int
         Valid pixels are subsampled to at most this many.
     rng : numpy.random.Generator, int or None
-        Randomness of RANSAC (deterministic for a fixed seed).
 
     Returns
     -------
@@ -336,28 +290,21 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
                      min_inliers: int = 200, max_samples: int = 20000, rng=0) -> GroundPlane:
     """Fit the floor plane to camera-frame points by RANSAC (3 points) + least squares.
 
-    Only planes below the camera with a plausible height, tilt and roll are
-    considered (this excludes walls and the ceiling); the three points of a
-    hypothesis are drawn among the points below the optical centre
-    (camera ``y > 0``), where the floor is. Hypotheses are scored on at most
-    4000 points, the winner is refined on all. Recovers height, tilt and roll.
+    Only planes below the camera with a plausible height, tilt and roll are considered (not walls or
+    the ceiling); hypotheses are drawn among the points below the optical centre, scored on at most
+    4000 points and the winner refined on all.
 
     Parameters
     ----------
     points_cam : ndarray of shape (N, 3) or (H, W, 3)
         Camera-frame points; NaN rows are ignored.
     distance_threshold_m : float
-        Inlier distance to the plane.
     height_range_m, tilt_range_rad : (float, float)
-        Plausible camera height above the floor and downward tilt.
     max_roll_rad : float
-        Largest roll about the optical axis.
     below_penalty : float
-        Score = inliers - ``below_penalty`` x points beyond the plane (below the
-        floor), as in :func:`fit_ground_v_disparity`.
+        As in :func:`fit_ground_v_disparity`, for points below the plane.
     max_range_m : float
-        Points farther than this (depth) are not used: their triangulation
-        error exceeds the threshold.
+        Farther points (depth) are not used: their triangulation error exceeds the threshold.
     iterations, min_inliers, max_samples, rng
         As in :func:`fit_ground_v_disparity`.
 
@@ -430,26 +377,20 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
 def estimate_ground(disparity_px, stereo: StereoCamera, *, method: str = "v_disparity",
                     prior: CameraMount | GroundPlane | None = None, prior_height_tolerance_m: float = 0.15,
                     prior_tilt_tolerance_rad: float = 0.1, rng=0, **options) -> GroundPlane:
-    """Estimate the floor from a disparity map by ``"v_disparity"`` or ``"plane"``.
+    """Estimate the floor from a disparity map by ``"v_disparity"`` or ``"plane"`` (with roll).
 
     Parameters
     ----------
     disparity_px : ndarray of shape (H, W)
-        Disparity of the rectified left image, NaN invalid.
     stereo : StereoCamera
-        The calibration.
     method : {"v_disparity", "plane"}
-        :func:`fit_ground_v_disparity` or :func:`fit_ground_plane` (with roll).
     prior : CameraMount or GroundPlane, optional
-        A roughly known mount, or the floor it implies: only floors within
-        ``prior_height_tolerance_m`` and ``prior_tilt_tolerance_rad`` of its
-        height and tilt are considered.
+        A roughly known mount (or its floor): only floors within the tolerances of its height and
+        tilt are considered.
     prior_height_tolerance_m, prior_tilt_tolerance_rad : float
-        Half-widths of the height and tilt ranges around ``prior``.
     rng : numpy.random.Generator, int or None
-        RANSAC randomness.
     **options
-        Passed to the fitting function.
+        Passed to :func:`fit_ground_v_disparity` or :func:`fit_ground_plane`.
     """
     if prior is not None:
         if isinstance(prior, CameraMount):

@@ -1,15 +1,10 @@
 """Obstacle and floor points in the robot frame from one disparity map.
 
-Eq. (14)-(16) give camera-frame points; the camera mount (or the fitted floor,
-:mod:`.ground`) takes them into the robot frame. A point is an **obstacle** when
-``min_obstacle_height_m < z <= max_obstacle_height_m`` (like costmap_2d's min/max obstacle
-height), **floor** when ``|z| <= floor_tolerance_m`` (free-space evidence), else ignored (below
-the floor: a mismatch; above the robot: the ceiling).
-
-**Too near (fail-safe).** A pixel whose match lies beyond the largest searched disparity
-(``DisparityResult.too_near``) is placed at the near-limit depth along its ray and classified by
-the same rules: above the floor it is an obstacle (a robot stops rather than drives on), never
-floor. Rule and limits: docs/obstacles.md (Too near). Conventions: docs/conventions.md.
+Eq. (14)-(16) give camera-frame points; the mount (or the fitted floor, :mod:`.ground`) takes them
+into the robot frame. A point is an **obstacle** when ``min_obstacle_height_m < z <=
+max_obstacle_height_m`` (as costmap_2d), **floor** when ``|z| <= floor_tolerance_m``, else
+ignored. A too-near pixel (``DisparityResult.too_near``) is placed at the near-limit depth and
+classified by the same rules, never as floor (fail-safe). User guide: docs/obstacles.md.
 """
 from __future__ import annotations
 
@@ -33,33 +28,14 @@ objects apart up to about 4 m; beyond, one pixel of disparity error is more than
 
 @dataclass(frozen=True)
 class ObstacleConfig:
-    """Options of :func:`detect_obstacles`.
+    """Options of :func:`detect_obstacles` (docs/obstacles.md).
 
-    Attributes
-    ----------
-    min_obstacle_height_m : float
-        Points higher than this above the floor are obstacles.
-    max_obstacle_height_m : float
-        Points higher than this (above the robot) are ignored.
-    floor_tolerance_m : float
-        Points within this of the floor are floor (free space).
-    max_range_m : float
-        Points farther than this (horizontal distance from the robot) are
-        dropped: their depth error (``dZ = Z^2 / (b f) dd``) is too large.
-    ground_method : str
-        ``"v_disparity"`` or ``"plane"``: how the floor is estimated when no
-        mount is given (or ``estimate_ground`` is true).
-    estimate_ground : bool
-        Estimate the floor even when a mount is given (a mount that is only
-        roughly known): the estimate is searched within
-        ``prior_height_tolerance_m`` / ``prior_tilt_tolerance_rad`` of the
-        mount, and the mount is used if the estimate fails.
-    ground_height_range_m : (float, float)
-        Plausible camera heights when no mount is known at all.
-    prior_height_tolerance_m, prior_tilt_tolerance_rad : float
-        Search window around a roughly known mount.
-    seed : int
-        Seed of the ground-plane RANSAC.
+    The obstacle height band (``min_obstacle_height_m``, ``max_obstacle_height_m``), the floor band
+    (``floor_tolerance_m``) and the horizontal range (``max_range_m``: farther depth errors, ``dZ =
+    Z^2 / (b f) dd``, are too large). Without a mount, or with ``estimate_ground`` around a roughly
+    known one (within ``prior_height_tolerance_m`` / ``prior_tilt_tolerance_rad``, falling back to it),
+    the floor is estimated by ``ground_method`` within ``ground_height_range_m``, RANSAC seeded by
+    ``seed``.
     """
 
     min_obstacle_height_m: float = 0.08
@@ -95,27 +71,11 @@ class ObstacleConfig:
 class ObstacleResult:
     """Output of :func:`detect_obstacles`.
 
-    Attributes
-    ----------
-    points_robot : ndarray of shape (N, 3), float64
-        Robot-frame points of the pixels with a disparity (and the too-near placements), raster order.
-    pixels : ndarray of shape (N,), int64
-        Flat index (``v * W + u``) of the pixel of each of ``points_robot``.
-    obstacle_points_robot, floor_points_robot : ndarray of shape (M, 3), float64
-        The obstacle / floor points among them, raster order.
-    obstacle_mask, floor_mask : ndarray of shape (H, W), bool
-        Pixels classified as obstacle / floor (disjoint, within ``max_range_m``).
-    ground : GroundPlane
-        The floor used (given mount or estimate).
-    T_robot_from_cam : ndarray of shape (4, 4)
-        The transform used.
-    success : bool
-        False when no floor was available (then the masks are empty).
-    message : str
-        How the floor was obtained, or why it failed.
-    too_near_mask : ndarray of shape (H, W), bool
-        Too-near pixels placed at the near limit; those of them in the obstacle band are in
-        ``obstacle_mask`` too. All False when none were given.
+    ``points_robot`` (N, 3): the robot-frame points of the pixels with a disparity (and the too-near
+    placements), raster order, with their flat pixel indices ``pixels``; ``obstacle_points_robot`` /
+    ``floor_points_robot`` among them and the disjoint (H, W) ``obstacle_mask`` / ``floor_mask``;
+    ``ground`` and ``T_robot_from_cam`` used; ``success`` False (empty masks) without a floor,
+    ``message`` how it was obtained; ``too_near_mask`` the too-near pixels placed at the near limit.
     """
 
     points_robot: np.ndarray
@@ -218,23 +178,18 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     disparity_px : ndarray of shape (H, W)
         Disparity of the rectified left image (after rejection, eq. 13), NaN invalid.
     stereo : StereoCamera
-        The calibration (rectified ``P``); its ``mount`` is used when ``mount`` is None.
+        The calibration; its ``mount`` is used when ``mount`` is None.
     mount : CameraMount, optional
-        The camera mount. When neither ``mount``, ``ground`` nor ``stereo.mount``
-        is given, the floor is estimated from the disparity (``config.ground_method``).
+        Without ``mount``, ``ground`` or ``stereo.mount`` the floor is estimated from the disparity.
     ground : GroundPlane, optional
-        A floor estimated beforehand (e.g. on the disparity before rejection);
-        takes precedence over ``mount``.
+        A floor estimated beforehand; takes precedence over ``mount``.
     pan_rad : float
         Pan of the stereo head about the robot's z axis (positive left).
     config : ObstacleConfig
-        Height band, floor tolerance, range limit, ground method.
     too_near : ndarray of shape (H, W), bool, optional
-        Pixels nearer than the search covers (``DisparityResult.too_near``): placed at
-        ``near_limit_px`` along their rays, fail-safe.
+        ``DisparityResult.too_near``: placed at ``near_limit_px`` along their rays, fail-safe.
     near_limit_px : float, optional
-        The largest searched disparity (``DisparityResult.near_limit_px``); needed with
-        ``too_near``.
+        ``DisparityResult.near_limit_px``; needed with ``too_near``.
 
     Returns
     -------

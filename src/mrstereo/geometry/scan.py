@@ -53,18 +53,10 @@ def _from_json_float(value, what: str) -> float:
 class LaserScan:
     """A planar scan in the robot frame: the fields of ROS ``sensor_msgs/LaserScan``.
 
-    ``ranges_m[i]`` is the range at ``angle_min_rad + i * angle_increment_rad``
-    (``angle_max_rad`` is the angle of the last ray), with the values of REP 117:
-
-    * a finite range: the nearest obstacle on that bearing;
-    * ``+inf``: the bearing was seen clear up to ``range_max_m`` -- nothing within range;
-    * ``nan``: no measurement on that bearing (nothing seen far enough to tell);
-    * ``-inf``: something nearer than ``range_min_m`` (REP 117's "too close").
-
-    ``intensities`` is empty or one value per ray (the gray level of the image pixel the
-    range came from). ``frame_id``, ``stamp_s``, ``time_increment_s`` and ``scan_time_s``
-    fill the message header and timing fields (a stereo scan is instantaneous:
-    ``time_increment_s = 0``).
+    ``ranges_m[i]`` at ``angle_min_rad + i * angle_increment_rad``, with REP 117's values: a finite
+    range, ``+inf`` seen clear up to ``range_max_m``, ``nan`` no measurement, ``-inf`` nearer than
+    ``range_min_m``. ``intensities`` is empty or one gray level per ray; a stereo scan is
+    instantaneous (``time_increment_s = 0``).
     """
 
     angle_min_rad: float
@@ -157,36 +149,26 @@ def laser_scan_from_points(points_robot, *, angle_min_rad: float = -math.pi / 4,
     Parameters
     ----------
     points_robot : ndarray of shape (N, 3) or (N, 2)
-        Obstacle points in the robot frame (only x and y are used; the caller
-        selects the height band, e.g. :attr:`ObstacleResult.obstacle_points_robot`).
+        Obstacle points in the robot frame (x and y used; the caller selects the height band).
     angle_min_rad, angle_max_rad : float
         First and last bearing (0 straight ahead, positive left).
     angle_increment_rad : float
-        Bearing step; the last ray is at ``angle_min + (n - 1) * increment <= angle_max``.
     range_min_m, range_max_m : float
         Returns outside ``[range_min, range_max]`` are ignored.
     min_points : int
-        The range of a ray is that of its ``min_points``-th nearest point (1 =
-        the nearest, as ``depthimage_to_laserscan``); a larger value ignores up
-        to ``min_points - 1`` stray points in front of the obstacle, and rays
-        with fewer points report no return.
+        A ray's range is that of its ``min_points``-th nearest point (1: the nearest), ignoring up
+        to ``min_points - 1`` stray points; rays with fewer points report no return.
     intensities : ndarray of shape (N,), optional
-        One value per obstacle point (e.g. its gray level); the scan's intensity of a
-        ray is that of the point its range came from (NaN for rays without a return).
+        One value per point; a ray's intensity is that of its range's point (NaN without return).
     observed_points_robot : ndarray of shape (M, 3) or (M, 2), optional
-        Everything seen in this frame (floor, obstacles, points beyond range). A ray
-        without a return whose farthest seen point is at ``>= range_max_m`` was seen
-        clear to ``range_max``: ``+inf`` (REP 117), else ``nan``. The obstacle points
-        count as seen too.
+        Everything seen in this frame: a ray without return whose farthest seen point is at
+        ``>= range_max_m`` is ``+inf`` (REP 117), else ``nan``.
     frame_id, stamp_s : str, float
         Header of the scan.
 
     Returns
     -------
     LaserScan
-        ``ranges_m``: the range of the return; ``+inf`` where the ray was seen clear to
-        ``range_max``; ``nan`` where no point tells (bin = nearest ray, half an increment
-        each side).
     """
     p = np.asarray(points_robot, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] not in (2, 3):
