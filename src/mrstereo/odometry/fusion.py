@@ -29,22 +29,12 @@ __all__ = ["FusionConfig", "FusedOdometry", "fuse_odometry"]
 
 @dataclass(frozen=True)
 class FusionConfig:
-    """Expected step errors of the two odometries and the gate (standard deviations).
+    """Expected step errors (standard deviations) of the two odometries and the gate.
 
-    Attributes
-    ----------
-    given_along, given_across : float
-        Given odometry: error per metre travelled along and across the step.
-    given_yaw_rad_per_m : float
-        Given odometry: heading error per metre.
-    given_floor_m, given_floor_rad : float
-        Given odometry: error of any step however short (wheel slip, backlash).
-    visual_along, visual_across, visual_yaw_rad_per_m, visual_floor_m, visual_floor_rad : float
-        The same for visual odometry (its steps jitter by a fraction of a millimetre around a
-        keyframe and drift by a few tenths of a percent).
-    gate_sigmas : float
-        A visual step farther than this from the given one (Mahalanobis distance under both
-        covariances) is not used.
+    ``given_along``, ``given_across`` (per metre travelled), ``given_yaw_rad_per_m`` and the error of
+    any step however short, ``given_floor_m``, ``given_floor_rad`` (wheel slip, backlash); the same
+    ``visual_*`` for visual odometry; a visual step farther than ``gate_sigmas`` (Mahalanobis distance
+    under both covariances) from the given one is not used.
     """
 
     given_along: float = 0.05
@@ -83,16 +73,9 @@ class FusionConfig:
 
 @dataclass(frozen=True)
 class FusedOdometry:
-    """Result of :func:`fuse_odometry`.
-
-    Attributes
-    ----------
-    poses : ndarray (N, 3)
-        Fused planar poses ``(x_m, y_m, yaw_rad)``; the first is the given one.
-    visual_used : ndarray (N,) bool
-        True where the step into the frame used the visual odometry.
-    visual_rejected : ndarray (N,) bool
-        True where a visual step was measured but lay outside the gate.
+    """Result of :func:`fuse_odometry`: the fused planar ``poses`` (N, 3) (the first is the given one),
+    ``visual_used`` where the step into the frame used visual odometry and ``visual_rejected`` where
+    a visual step lay outside the gate.
     """
 
     poses: np.ndarray

@@ -47,63 +47,41 @@ TRACKED, KEYFRAME, LOST = "tracked", "keyframe", "lost"
 
 @dataclass(frozen=True)
 class OdometryConfig:
-    """Visual odometry settings (docs/odometry.md).
+    """Visual odometry settings (what each step does: docs/odometry.md).
 
     Attributes
     ----------
-    max_features : int
-        Features per keyframe (new corners spread over ``grid_cells`` cells, rows x columns).
-    corner_quality : float
-        Weakest Shi-Tomasi corner kept, as a fraction of the strongest (``qualityLevel`` of
-        ``cv2.goodFeaturesToTrack``).
-    corner_block_px : int
-        Window of the corners' gradient matrix.
-    min_corner_distance_px : float
-        At most one corner per square of this size.
+    max_features, grid_cells : int, (int, int)
+        Features per keyframe; new corners are spread over ``grid_cells`` (rows, columns).
+    corner_quality, corner_block_px, min_corner_distance_px : float, int, float
+        ``cv2.goodFeaturesToTrack``'s ``qualityLevel``, gradient window and minimum distance.
     klt_window_px, klt_levels : int
         Lucas-Kanade window and pyramid levels of the tracking from the keyframe (small: a larger
         window underestimates the motion toward a surface, which magnifies it).
     stereo_window_px, stereo_levels : int
-        Lucas-Kanade window and pyramid levels of the left-right search of keyframe features.
-    max_fb_error_px : float
-        Forward-backward track error above which a track is dropped.
-    max_row_error_px : float
-        Largest ``|y_left - y_right|`` of a stereo match (rectified images); with a given
-        disparity map, the largest spread of the four disparities around a corner.
+        The same for the left-right search of keyframe features.
+    max_fb_error_px, max_row_error_px : float
+        Largest forward-backward track error, and ``|y_left - y_right|`` of a stereo match (with a
+        given disparity map: the spread of the four disparities around a corner).
     min_disparity_px : float
         Closest to infinity a new landmark may be (its depth is ``b f / d``).
-    ransac_threshold_px : float
-        Reprojection error of a PnP inlier.
-    ransac_iterations : int
-    min_inliers : int
-        Fewer inliers: the frame is lost.
-    keyframe_inlier_fraction : float
-        A new keyframe when the inliers fall below this fraction of the keyframe's features.
-    keyframe_depth_fraction : float
-        A new keyframe after moving this fraction of the keyframe's median landmark depth (the
-        same parallax in a corridor and on a road).
-    keyframe_angle_rad : float
-        A new keyframe after turning this far from the keyframe.
-    max_speed_mps, max_turn_rate_radps : float
-        A step faster than this over the frame's time step is a failure, not a motion.
-    max_acceleration_mps2, max_angular_acceleration_radps2 : float
-        A step that leaves the motion model's prediction by more than this acceleration over
-        the time step is a failure (checked once the motion is known).
+    ransac_threshold_px, ransac_iterations, min_inliers : float, int, int
+        PnP-RANSAC; with fewer inliers the frame is lost.
+    keyframe_inlier_fraction, keyframe_depth_fraction, keyframe_angle_rad : float
+        A new keyframe when the inliers fall below this fraction of its features, or after moving
+        this fraction of its median landmark depth, or turning this far.
+    max_speed_mps, max_turn_rate_radps, max_acceleration_mps2, max_angular_acceleration_radps2 : float
+        A step beyond these over the frame's time step (the accelerations: away from the motion
+        model's prediction) is a failure, not a motion.
     frame_interval_s : float
-        Time step assumed between frames when the recording has no stamps.
+        Time step assumed between frames without stamps.
     max_lost_streak : int
         Lost frames in a row before tracking restarts from a new keyframe.
-    window_keyframes : int
-        Keyframes in the refined window (1: no refinement, the keyframe tracker alone).
-    window_fixed : int
-        Oldest keyframes of the window held fixed (the gauge).
-    huber_px : float
-        Huber threshold of the refinement's loss.
-    refine_iterations : int
-        Levenberg-Marquardt steps of a refinement at most.
-    outlier_px : float
-        An observation farther than this from its landmark's projection after a refinement is
-        dropped.
+    window_keyframes, window_fixed : int
+        Keyframes in the refined window (1: none) and the oldest of them held fixed (the gauge).
+    huber_px, refine_iterations, outlier_px : float, int, float
+        The refinement's Huber threshold and steps, and the distance from its landmark's projection
+        beyond which an observation is dropped after it.
     """
 
     max_features: int = 300
@@ -220,10 +198,9 @@ class StereoOdometry:
         left_rect, right_rect : ndarray (H, W) or (H, W, 3)
             The rectified pair (uint8 or float).
         T_base_from_cam : ndarray (4, 4)
-            The left camera's mount on the base for this frame (e.g. with the head's pan).
+            The left camera's mount on the base for this frame.
         disparity_px : ndarray (H, W), optional
-            This frame's disparity (NaN invalid); when given, keyframe features take their
-            depth from it instead of a stereo Lucas-Kanade search.
+            This frame's disparity: keyframe features take their depth from it instead of a stereo search.
         stamp_s : float, optional
             The frame's time stamp; without, frames are ``config.frame_interval_s`` apart.
         """

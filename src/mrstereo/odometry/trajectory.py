@@ -113,22 +113,11 @@ def path_length_m(T) -> float:
 
 @dataclass(frozen=True)
 class TrajectoryMetrics:
-    """Errors of an estimated trajectory against the truth (metres, degrees).
+    """Errors of an estimated trajectory against the truth (metres, degrees; docs/odometry.md).
 
-    Attributes
-    ----------
-    ate_rmse_m : float
-        Absolute trajectory error after the ``alignment`` (SE(3) or SE(2), no scale).
-    ate_rmse_unaligned_m : float
-        The same from the common first pose, without alignment.
-    rpe_translation_per_m, rpe_rotation_deg_per_m : float
-        Relative pose error RMSE over ``delta_m`` segments, per metre (NaN if the path is shorter).
-    end_point_error_m : float
-    path_length_m : float
-        Length of the true path.
-    n_poses : int
-    alignment : str
-    delta_m : float
+    ``ate_rmse_m`` after the ``alignment`` (no scale) and ``ate_rmse_unaligned_m`` from the common
+    first pose; ``rpe_translation_per_m`` and ``rpe_rotation_deg_per_m`` over ``delta_m`` segments
+    (NaN if the path is shorter); ``end_point_error_m``; ``path_length_m`` of the true path; ``n_poses``.
     """
 
     ate_rmse_m: float

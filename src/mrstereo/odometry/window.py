@@ -35,22 +35,10 @@ __all__ = ["WindowResult", "refine_window"]
 
 @dataclass(frozen=True)
 class WindowResult:
-    """Result of :func:`refine_window`.
-
-    Attributes
-    ----------
-    T_cam_from_world : ndarray (K, 4, 4)
-        Refined keyframe poses (the fixed ones unchanged).
-    points_world : ndarray (M, 3)
-        Refined landmarks.
-    error_px : ndarray (n,)
-        Each observation's reprojection error after the refinement (the largest of its left
-        and right image errors).
-    success : bool
-    message : str
-    cost_before, cost_after : float
-        Robust cost (half the sum of Huber-weighted squared residuals, px^2).
-    evaluations : int
+    """Result of :func:`refine_window`: refined ``T_cam_from_world`` (K, 4, 4) and ``points_world``
+    (M, 3); ``error_px`` of each observation after it (the larger of its left and right errors);
+    ``success``, ``message``; the robust cost (half the Huber-weighted squared residuals, px^2)
+    ``cost_before`` and ``cost_after``; ``evaluations``.
     """
 
     T_cam_from_world: np.ndarray
@@ -214,22 +202,9 @@ class _Problem:
 
 @dataclass
 class Keyframe:
-    """A keyframe of the window: its pose, left image and the landmarks it observes.
-
-    Attributes
-    ----------
-    frame : int
-        Index of the frame in the sequence.
-    T_world_from_cam : ndarray (4, 4)
-        The rectified left camera's pose (refined while the keyframe is in the window).
-    image : ndarray or None
-        The left image (uint8; dropped when the keyframe leaves the window).
-    landmark : ndarray (N,) int64
-        Landmark id of each feature (-1: dropped as an outlier).
-    uv : ndarray (N, 2) float32
-        Left image position of each feature.
-    u_right : ndarray (N,)
-        Right image column (NaN: no stereo match).
+    """A keyframe of the window: its ``frame`` index, ``T_world_from_cam`` (refined while in the
+    window), left ``image`` (dropped when it leaves), and per feature its ``landmark`` id (-1:
+    dropped as an outlier), left ``uv`` and right column ``u_right`` (NaN: no stereo match).
     """
 
     frame: int
@@ -245,26 +220,12 @@ class Keyframe:
 
 
 class LocalMap:
-    """The sliding window: the last keyframes, the landmarks they observe and their refinement.
+    """The sliding window: the last ``size`` keyframes, the landmarks they observe and their refinement.
 
-    Landmarks have global integer ids (``ids`` sorted, positions ``xyz`` in the world); those no
-    keyframe of the window observes any more are dropped when a keyframe leaves.
-
-    Parameters
-    ----------
-    K : ndarray (3, 3)
-        Rectified intrinsics of the left camera.
-    baseline_m, cx_right_px : float
-        The stereo rig (right principal point column).
-    size : int
-        Keyframes in the window.
-    fixed : int
-        Oldest keyframes held fixed in the refinement (the gauge).
-    huber_px, iterations : float, int
-        Of :func:`refine_window`.
-    outlier_px : float
-        Observations farther than this from their landmark's projection after a refinement are
-        dropped.
+    Landmarks have global integer ids (``ids`` sorted, positions ``xyz``); those no keyframe of the
+    window observes are dropped when a keyframe leaves. ``K``, ``baseline_m`` and ``cx_right_px``
+    are the rig; ``fixed``, ``huber_px`` and ``iterations`` go to :func:`refine_window`;
+    observations farther than ``outlier_px`` from their landmark's projection after it are dropped.
     """
 
     def __init__(self, K, baseline_m: float, cx_right_px: float, *, size: int, fixed: int, huber_px: float,
