@@ -34,32 +34,12 @@ OUTLIER_FACTOR = 3.0
 class CalibrationResult:
     """A calibrated camera and how well it fits.
 
-    Attributes
-    ----------
-    camera : Camera
-        Intrinsics (OpenCV/ROS parameterization).
-    poses : tuple of ndarray (4, 4)
-        ``T_cam_from_target`` per view.
-    rms_px : float
-        ``sqrt(sum |e|^2 / n_points)`` over all views (as ``cv2.calibrateCamera``).
-    per_view_rms_px : ndarray of shape (V,)
-    sigmas : dict
-        Standard deviation of every intrinsic parameter (``s^2 (J^T J)^-1``);
-        empty for ``method="ga"``.
-    outlier_views : tuple of int
-        Views whose RMS exceeds 3x the median view RMS.
-    success : bool
-    message : str
-    method : str
-    ga_rms_px, lm_rms_px : float
-        RMS after the GA and after the k1k2 LM (NaN where that stage did not run).
-    model : str
-        The fitted model (``k1k2``, ``plumb_bob``, ``rational``, ``fisheye``).
-    generations : int
-        GA generations run (0 without GA).
-    ga : GAResult or None
-        The GA's full result (history of the best fitness per generation).
-    view_names : tuple of str
+    ``camera`` (OpenCV/ROS parameterization) and ``T_cam_from_target`` ``poses`` per view; ``rms_px``
+    ``sqrt(sum |e|^2 / n_points)`` (as ``cv2.calibrateCamera``) and ``per_view_rms_px``; ``sigmas`` of
+    the intrinsics, ``s^2 (J^T J)^-1`` (empty for ``method="ga"``); ``outlier_views`` with an RMS over
+    3x the median; ``success``, ``message``, ``method``; ``ga_rms_px`` and ``lm_rms_px`` after each
+    stage (NaN where it did not run); the fitted ``model``; ``generations`` and the GA's full result
+    ``ga`` (or None); ``view_names``.
     """
 
     camera: Camera

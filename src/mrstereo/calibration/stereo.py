@@ -31,29 +31,12 @@ __all__ = ["StereoCalibrationResult", "calibrate_stereo", "rectified_points", "r
 class StereoCalibrationResult:
     """A calibrated and rectified stereo pair.
 
-    Attributes
-    ----------
-    stereo : StereoCamera
-        What ``write_stereo`` stores (raw K, D; R raw -> rectified; rectified P).
-    R, T : ndarray
-        Relative pose, ``x_right = R x_left + T`` (T in metres).
-    left, right : CalibrationResult
-        The single-camera calibrations (before the joint refinement).
-    rms_px : float
-        Joint RMS reprojection error over both cameras.
-    per_view_rms_px : ndarray of shape (V, 2)
-        Left and right RMS per pair after the joint fit.
-    sigmas : dict
-        Standard deviations of the jointly refined intrinsics (``left_fx``, ...,
-        ``right_k2``) and of ``T`` (``Tx``, ``Ty``, ``Tz``).
-    vertical_error_px : float
-        Mean ``|y_left - y_right|`` of matching corners after rectification.
-    per_view_vertical_error_px : ndarray of shape (V,)
-    outlier_views : tuple of int
-        Pairs whose RMS exceeds 3x the median.
-    success, message :
-        Convergence of the joint fit.
-    view_names : tuple of str
+    ``stereo`` (what ``write_stereo`` stores); ``x_right = R x_left + T`` (metres); the single-camera
+    ``left`` and ``right`` results (before the joint refinement); the joint ``rms_px`` and
+    ``per_view_rms_px`` (V, 2); ``sigmas`` of the jointly refined intrinsics (``left_fx``, ...) and of
+    ``T`` (``Tx``, ...); ``vertical_error_px`` (mean ``|y_left - y_right|`` after rectification) and
+    its ``per_view_vertical_error_px``; ``outlier_views`` over 3x the median RMS; ``success``,
+    ``message`` of the joint fit; ``view_names``.
     """
 
     stereo: StereoCamera

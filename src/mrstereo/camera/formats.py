@@ -35,16 +35,8 @@ FORMATS = ("mrstereo/ROS stereo YAML", "two ROS camera_info YAMLs", "Kalibr camc
 
 @dataclass(frozen=True)
 class ImportedCalibration:
-    """Result of :func:`import_calibration`.
-
-    Attributes
-    ----------
-    stereo : StereoCamera
-        The calibration every command reads.
-    format : str
-        The format detected (one of :data:`FORMATS`).
-    rectified_here : bool
-        True when the file held a raw pair that mrstereo rectified (Fusiello).
+    """Result of :func:`import_calibration`: the ``stereo`` every command reads, the ``format`` detected
+    (one of :data:`FORMATS`) and ``rectified_here``, True when mrstereo rectified a raw pair (Fusiello).
     """
 
     stereo: StereoCamera
@@ -75,26 +67,12 @@ def import_calibration(paths, *, image_size: tuple[int, int] | None = None,
                        alpha: float = 0.0) -> ImportedCalibration:
     """Read one calibration file, or two per-camera files, detecting the format from the content.
 
-    Parameters
-    ----------
-    paths : str, path or sequence of them
-        One file, two files as a sequence, or ``"left.yaml,right.yaml"``.
-    image_size : (int, int), optional
-        ``(width, height)`` for formats that may not store it (OpenCV
-        FileStorage); a size stored in the file must agree.
-    alpha : float, optional
-        Free scaling of the rectification mrstereo computes for raw pairs
-        (0 = only valid pixels, 1 = all raw pixels).
-
-    Raises
-    ------
-    FileNotFoundError
-        A file does not exist.
-    ValueError
-        The content fits no format (the message names the file and the formats
-        tried), or a field is missing, not numeric, out of range, the views look
-        swapped or the rectified views do not overlap (the message names the
-        file and the field).
+    ``paths``: one file, two files as a sequence, or ``"left.yaml,right.yaml"``; ``image_size``
+    ``(width, height)`` for formats that may not store it (OpenCV FileStorage; a stored size must
+    agree); ``alpha`` the free scaling of a rectification mrstereo computes (0: only valid pixels, 1:
+    all raw pixels). FileNotFoundError for a missing file; ValueError naming the file (and the
+    field) when the content fits no format, a field is missing or out of range, the views look
+    swapped or the rectified views do not overlap.
     """
     files = _split(paths)
     where = ",".join(str(p) for p in files)

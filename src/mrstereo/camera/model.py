@@ -82,19 +82,9 @@ def normalized_from_pixels(uv, fx, fy, cx, cy) -> np.ndarray:
 class DistortionModel:
     """One lens distortion model on normalized image coordinates (COLMAP-style unit).
 
-    Attributes
-    ----------
-    name : str
-        The ROS ``distortion_model`` name.
-    aliases : tuple of str
-        Other names it answers to (Kalibr, OpenCV, short CLI names).
-    params_info : tuple of str
-        Coefficient names in ROS/OpenCV order (the longest form).
-    sizes : tuple of int
-        Accepted numbers of coefficients; a vector shorter than the first is
-        zero-padded to it.
-    is_fisheye : bool
-        True for models that need ``cv2.fisheye`` (angle-based projection).
+    ``name`` the ROS ``distortion_model``, ``aliases`` (Kalibr, OpenCV, short CLI names),
+    ``params_info`` the coefficient names in ROS/OpenCV order, ``sizes`` the accepted numbers of
+    coefficients (shorter vectors are zero-padded to the first), ``is_fisheye`` for ``cv2.fisheye``.
     """
 
     name = ""
@@ -333,24 +323,11 @@ def project_points(points_world, *, fx, fy, cx, cy, k1=0.0, k2=0.0, R=None, t=No
 class Camera:
     """Intrinsics in the OpenCV/ROS parameterization (pixels, distortion on normalized coordinates).
 
-    ``Camera(width=, height=, fx=, fy=, cx=, cy=, k1=, k2=)`` is the paper's model
-    (eq. 1-3, ROS ``plumb_bob`` with p1 = p2 = k3 = 0). Any ROS model:
-    :meth:`from_ros` or ``distortion_model=`` with ``coefficients=`` (ROS order).
-
-    Attributes
-    ----------
-    width, height : int
-        Image size in pixels.
-    fx, fy, cx, cy : float
-        Focal lengths and principal point in pixels.
-    k1, k2 : float
-        The first two distortion coefficients (radial, eq. 3; for ``equidistant``
-        the fisheye's theta^3 and theta^5 terms). Always equal to ``D[0], D[1]``.
-    distortion_model : str
-        ROS name: ``plumb_bob``, ``rational_polynomial`` or ``equidistant``
-        (aliases such as ``radtan``, ``fisheye`` are accepted and normalized).
-    coefficients : tuple of float
-        All coefficients in ROS order, zero-padded (5, 8/12/14 or 4).
+    ``Camera(width=, height=, fx=, fy=, cx=, cy=, k1=, k2=)`` is the paper's model (eq. 1-3, ROS
+    ``plumb_bob`` with p1 = p2 = k3 = 0); any ROS model by :meth:`from_ros` or ``distortion_model=``
+    (``plumb_bob``, ``rational_polynomial``, ``equidistant`` or an alias) with ``coefficients=`` (ROS
+    order, zero-padded). ``k1, k2`` always equal ``D[0], D[1]`` (radial, eq. 3; for ``equidistant``
+    the theta^3 and theta^5 terms).
     """
 
     width: int

@@ -35,18 +35,9 @@ MAX_RAY_ANGLE_RAD = np.radians(80.0)
 
 @dataclass(frozen=True)
 class FusielloRectification:
-    """Result of :func:`rectify_fusiello`.
-
-    Attributes
-    ----------
-    stereo : StereoCamera
-        Raw ``K``, ``D`` per camera, ``R`` (raw -> rectified) and rectified ``P``.
-    R_new : ndarray of shape (3, 3)
-        Common rectified orientation in left-camera coordinates (rows = new axes).
-    A : ndarray of shape (3, 3)
-        Shared rectified intrinsics.
-    baseline_m : float
-        Distance between the optical centres.
+    """Result of :func:`rectify_fusiello`: the ``stereo`` (raw ``K``, ``D``, ``R`` raw -> rectified,
+    rectified ``P``), the common orientation ``R_new`` (rows = new axes, left-camera coordinates),
+    the shared intrinsics ``A`` and ``baseline_m``.
     """
 
     stereo: StereoCamera
@@ -163,21 +154,8 @@ def raw_px_from_rectified_px(info: CameraInfo, uv_rect) -> np.ndarray:
 def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0) -> FusielloRectification:
     """Rectify a calibrated stereo pair (Fusiello, Trucco & Verri 2000).
 
-    Parameters
-    ----------
-    left, right : Camera
-        Raw intrinsics of both cameras (any distortion model), same image size.
-    R : ndarray of shape (3, 3)
-        Rotation from the left to the right camera frame.
-    T : ndarray of shape (3,)
-        Translation in metres, ``x_right = R x_left + T``.
-    alpha : float, optional
-        0 = only valid pixels (zoom in), 1 = all raw pixels visible.
-
-    Returns
-    -------
-    FusielloRectification
-        Holds the :class:`StereoCamera` every other command reads.
+    ``left``, ``right``: raw intrinsics (any distortion model, same size); ``x_right = R x_left + T``
+    (metres); ``alpha`` 0 = only valid pixels (zoom in), 1 = all raw pixels visible.
     """
     if not isinstance(left, Camera) or not isinstance(right, Camera):
         raise TypeError(f"left and right must be Camera instances, got {type(left).__name__} and "
