@@ -1,12 +1,10 @@
 """Levenberg-Marquardt refinement of camera parameters (beyond the paper).
 
 Minimizes the GA's objective, eq. (6), locally (``scipy.optimize.least_squares``) over the
-intrinsics ``[fx, fy, cx, cy]`` (or ``[f, cx, cy]`` with a fixed aspect), the free coefficients of
-the fitted model (:data:`CALIBRATION_MODELS`) and six pose parameters ``(alpha, beta, gamma, tx,
-ty, tz)`` per view. The Jacobian is central differences grouped by the block structure (the
-poses of different views touch different residuals): about 24 residual evaluations whatever the
-number of views. Standard deviations: ``cov = s^2 (J^T J)^-1``, ``s^2 = |r|^2 / (m - n)``.
-Conventions: docs/conventions.md.
+intrinsics, the free coefficients of the fitted model (:data:`CALIBRATION_MODELS`) and six pose
+parameters per view, with central differences grouped by the block structure (about 24
+residual evaluations whatever the number of views). Standard deviations: ``cov = s^2 (J^T
+J)^-1``, ``s^2 = |r|^2 / (m - n)``.
 """
 from __future__ import annotations
 
@@ -168,7 +166,7 @@ def project_views(views: Sequence[CalibrationView], R: np.ndarray, t: np.ndarray
 
 
 def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequence[np.ndarray], *,
-                 fix_aspect: float | None = None, max_evaluations: int = 200, model="k1k2") -> LMFit:
+                 fix_aspect: float | None = None, model="k1k2") -> LMFit:
     """Levenberg-Marquardt over shared intrinsics and one pose per view.
 
     Parameters
@@ -182,8 +180,6 @@ def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequen
     fix_aspect : float, optional
         Estimate one focal length with ``fy = fix_aspect * fx`` (needed for a
         single planar view, where ``fx`` and ``fy`` are not separable).
-    max_evaluations : int
-        Residual evaluations of ``scipy.optimize.least_squares`` at most.
     model : {"k1k2", "plumb_bob", "rational", "fisheye"} or CalibrationModel
         The distortion model fitted (:data:`CALIBRATION_MODELS`).
     """
@@ -206,7 +202,7 @@ def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequen
         return grouped_jacobian(residuals, x, col_block, col_local, row_block)
 
     from scipy.optimize import least_squares  # lazy: slow to import, most commands never calibrate
-    sol = least_squares(residuals, x0, jac=jac, method="lm", max_nfev=max_evaluations)
+    sol = least_squares(residuals, x0, jac=jac, method="lm", max_nfev=200)
     x = sol.x
     try:
         cam = spec.camera(camera.width, camera.height, *_intrinsics(x[:n_int], fix_aspect))

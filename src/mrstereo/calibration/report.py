@@ -68,12 +68,12 @@ def markdown_report(result: CalibrationResult, *, title: str = "Camera calibrati
 
 
 def residual_figure(path: str | os.PathLike, camera: Camera, views: Sequence[CalibrationView], *,
-                    residuals: Sequence[np.ndarray] | None = None, max_views: int = 4) -> None:
+                    residuals: Sequence[np.ndarray] | None = None) -> None:
     """PNG: reprojection residuals per corner, and the distortion correction (paper Figs. 2-3).
 
     Left: each control point's error (``residuals``, projected minus detected, per view) as a
     magnified arrow coloured by its length, or without ``residuals`` detected (+) vs corrected (o)
-    points of the first ``max_views`` views. Right: the correction ``undistorted - raw`` in x and
+    points of the first four views. Right: the correction ``undistorted - raw`` in x and
     y over the image. Axes in pixels.
     """
     import matplotlib
@@ -100,7 +100,7 @@ def residual_figure(path: str | os.PathLike, camera: Camera, views: Sequence[Cal
         rms = float(np.sqrt(np.mean(mag ** 2))) if mag.size else float("nan")
         ax.set_title(f"reprojection error ({len(mag)} points, RMS {rms:.3f} px)", pad=22)
     else:
-        for view in list(views)[:max_views]:
+        for view in list(views)[:4]:
             ax.plot(view.uv[:, 0], view.uv[:, 1], "+", color="tab:red", ms=5, label="detected")
             und = camera.undistort_pixels(view.uv)
             ax.plot(und[:, 0], und[:, 1], "o", mfc="none", color="tab:blue", ms=4, label="corrected")

@@ -338,8 +338,8 @@ def _check_projections(left: CameraInfo, right: CameraInfo) -> None:
                          "(P[0,3] = -fx * baseline_m, in metres)")
 
 
-def overlap_share(stereo: StereoCamera, *, grid_px: int = 160) -> float:
-    """Share of the rectified image that both raw images really see (on a coarse grid).
+def overlap_share(stereo: StereoCamera) -> float:
+    """Share of the rectified image that both raw images really see (on a grid of 160 px at most).
 
     A rectified pixel counts for a camera when its rectification map lands in
     the raw image *and* the raw pixel's viewing ray maps back to it: far outside
@@ -347,7 +347,7 @@ def overlap_share(stereo: StereoCamera, *, grid_px: int = 160) -> float:
     points into the image although the camera cannot see that direction.
     """
     width, height = stereo.size
-    scale = min(1.0, grid_px / max(width, height))
+    scale = min(1.0, 160 / max(width, height))
     size = (max(2, round(width * scale)), max(2, round(height * scale)))
     A_small = np.diag([scale, scale, 1.0])
     grid = np.stack(np.meshgrid(np.arange(size[0], dtype=float), np.arange(size[1], dtype=float)), -1)

@@ -37,6 +37,12 @@ __all__ = [
 # Floor confidence).
 MIN_FLOOR_SHARE = 0.12
 MAX_FLOOR_RESIDUAL_M = 0.03
+# RANSAC of both fits: valid points used at most, the score's penalty per point beyond the floor
+# (below a plane, farther than a line under its horizon); the plane fit's inlier distance and roll
+_MAX_SAMPLES = 20000
+_BELOW_PENALTY = 1.0
+_PLANE_THRESHOLD_M = 0.03
+_MAX_ROLL_RAD = 0.35
 
 
 @dataclass(frozen=True)
@@ -202,14 +208,14 @@ def _refine_line(a: float, c: float, v, dd, tol: float, *, bf: float, fy: float,
 
 def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: float = 1.0,
                            height_range_m: tuple[float, float] = (0.1, 2.0),
-                           tilt_range_rad: tuple[float, float] = (-0.35, 1.2), below_penalty: float = 1.0,
-                           iterations: int = 500, min_inliers: int = 200, max_samples: int = 20000,
-                           rng=0) -> GroundPlane:
+                           tilt_range_rad: tuple[float, float] = (-0.35, 1.2), iterations: int = 500,
+                           min_inliers: int = 200, rng=0) -> GroundPlane:
     """Fit the floor line ``d = a (v - cy) + c`` of the V-disparity by RANSAC + least squares.
 
-    RANSAC (Labayrade et al. use a Hough transform) draws pairs of valid pixels, keeps lines with a
-    positive slope and a plausible height and tilt, scores them by the pixels within
-    ``tolerance_px`` and refines the best on its inliers.
+    RANSAC (Labayrade et al. use a Hough transform) draws pairs of at most ``_MAX_SAMPLES`` valid
+    pixels, keeps lines with a positive slope and a plausible height and tilt, scores them by the
+    pixels within ``tolerance_px`` minus those farther than the line under its horizon (every true
+    surface stands on the floor, so a line through the end wall scores low) and refines the best.
 
     Parameters
     ----------
@@ -219,14 +225,9 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
         Inlier band around the line (pixels of disparity).
     height_range_m, tilt_range_rad : (float, float)
         Plausible camera height above the floor and downward tilt.
-    below_penalty : float
-        Score = inliers - ``below_penalty`` x pixels farther than the line under its horizon: every
-        true surface stands on the floor, so a line through the end wall scores low.
     iterations : int
     min_inliers : int
         Fewer inliers is a failure (``success=False``).
-    max_samples : int
-        Valid pixels are subsampled to at most this many.
     rng : numpy.random.Generator, int or None
 
     Returns
@@ -247,7 +248,7 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
     v_all, _ = np.nonzero(valid)
     if v_all.size < max(min_inliers, 2):
         return _failed("v_disparity", f"only {v_all.size} valid disparities", v_all.size)
-    pick = _subsample(v_all.size, _checks.positive_int("max_samples", max_samples, minimum=2), rng)
+    pick = _subsample(v_all.size, _MAX_SAMPLES, rng)
     v = v_all[pick].astype(np.float64) - stereo.cy_px
     dd = d[valid][pick]
     i = rng.integers(0, v.size, size=(iterations, 2))
@@ -266,7 +267,7 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
     if not ok.any():
         return _failed("v_disparity", "no line with a floor-like slope (positive, plausible height and tilt)", 0)
     a, c = a[ok], c[ok]
-    best = int(np.argmax(_line_scores(a, c, v, dd, tol, below_penalty)))
+    best = int(np.argmax(_line_scores(a, c, v, dd, tol, _BELOW_PENALTY)))
     a_best, c_best = _refine_line(a[best], c[best], v, dd, tol, bf=stereo.baseline_m * fx, fy=fy,
                                   height_range_m=(h_lo, h_hi), tilt_range_rad=(t_lo, t_hi))
     inl = np.abs(dd - (a_best * v + c_best)) <= tol
@@ -283,29 +284,23 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
                        inlier_share=float(inl.mean()), residual_m=float(np.sqrt(np.mean(off ** 2))))
 
 
-def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
-                     height_range_m: tuple[float, float] = (0.1, 2.0),
-                     tilt_range_rad: tuple[float, float] = (-0.35, 1.2), max_roll_rad: float = 0.35,
-                     below_penalty: float = 1.0, max_range_m: float = 6.0, iterations: int = 1500,
-                     min_inliers: int = 200, max_samples: int = 20000, rng=0) -> GroundPlane:
+def fit_ground_plane(points_cam, *, height_range_m: tuple[float, float] = (0.1, 2.0),
+                     tilt_range_rad: tuple[float, float] = (-0.35, 1.2), max_range_m: float = 6.0,
+                     iterations: int = 1500, min_inliers: int = 200, rng=0) -> GroundPlane:
     """Fit the floor plane to camera-frame points by RANSAC (3 points) + least squares.
 
-    Only planes below the camera with a plausible height, tilt and roll are considered (not walls or
+    Only planes below the camera with a plausible height, tilt and roll (``_MAX_ROLL_RAD``) count (not walls or
     the ceiling); hypotheses are drawn among the points below the optical centre, scored on at most
-    4000 points and the winner refined on all.
+    4000 points (inliers within ``_PLANE_THRESHOLD_M``) and the winner refined on all.
 
     Parameters
     ----------
     points_cam : ndarray of shape (N, 3) or (H, W, 3)
         Camera-frame points; NaN rows are ignored.
-    distance_threshold_m : float
     height_range_m, tilt_range_rad : (float, float)
-    max_roll_rad : float
-    below_penalty : float
-        As in :func:`fit_ground_v_disparity`, for points below the plane.
     max_range_m : float
         Farther points (depth) are not used: their triangulation error exceeds the threshold.
-    iterations, min_inliers, max_samples, rng
+    iterations, min_inliers, rng
         As in :func:`fit_ground_v_disparity`.
 
     Returns
@@ -314,8 +309,7 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
         ``method="plane"``.
     """
     p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
-    thr = _checks.finite_number("distance_threshold_m", distance_threshold_m, positive=True)
-    max_roll = _checks.finite_number("max_roll_rad", max_roll_rad, positive=True)
+    thr, max_roll = _PLANE_THRESHOLD_M, _MAX_ROLL_RAD
     t_lo, t_hi = _checks.ordered_pair("tilt_range_rad", tilt_range_rad)
     max_range = _checks.finite_number("max_range_m", max_range_m, positive=True)
     iterations = _checks.positive_int("iterations", iterations)
@@ -325,7 +319,7 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
     if p.shape[0] < max(min_inliers, 3):
         return _failed("plane", f"only {p.shape[0]} valid points", p.shape[0])
     n_all = p.shape[0]
-    p = p[_subsample(n_all, _checks.positive_int("max_samples", max_samples, minimum=3), rng)]
+    p = p[_subsample(n_all, _MAX_SAMPLES, rng)]
     below_centre = p[p[:, 1] > 0]
     pool = below_centre if below_centre.shape[0] >= max(min_inliers, 3) else p
     tri = pool[rng.integers(0, pool.shape[0], size=(iterations, 3))]
@@ -346,7 +340,7 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
     scores = np.zeros(n.shape[0], dtype=np.float64)
     for start in range(0, n.shape[0], 32):
         res = score_pts @ n[start:start + 32].T - dist[start:start + 32]
-        scores[start:start + 32] = (np.abs(res) <= thr).sum(axis=0) - below_penalty * (res > thr).sum(axis=0)
+        scores[start:start + 32] = (np.abs(res) <= thr).sum(axis=0) - _BELOW_PENALTY * (res > thr).sum(axis=0)
     best = int(np.argmax(scores))
     normal, h = n[best], dist[best]
     for _ in range(3):                                        # total least squares on the inliers

@@ -69,9 +69,10 @@ def cells_near_path(grid, path_xy, *, within_m: float) -> np.ndarray:
     return distance_cells(on_path) * grid.resolution_m <= within + 1e-9
 
 
-def cells_in_view(ground_truth, views, *, angle_step_rad: float = math.radians(0.25)) -> np.ndarray:
+def cells_in_view(ground_truth, views) -> np.ndarray:
     """Bool mask of the true free cells some view can see: inside its field of view and range, with a
-    clear line of sight through the ground-truth map.
+    clear line of sight through the ground-truth map (sight rays every 0.25 degrees, marched in
+    quarter cells).
 
     Parameters
     ----------
@@ -80,12 +81,10 @@ def cells_in_view(ground_truth, views, *, angle_step_rad: float = math.radians(0
     views : sequence of (x_m, y_m, heading_rad, half_fov_rad, range_m)
         The sensor's world position, viewing direction (robot yaw + head pan), half the horizontal
         field of view and the mapping range (as :func:`mrstereo.pipeline.run.fov_views` gives them).
-    angle_step_rad : float
-        Angular spacing of the sight rays (each ray is marched in quarter-cell steps).
     """
     gt = as_ros_map("ground_truth", ground_truth)
     grid = gt.grid
-    step = _checks.finite_number("angle_step_rad", angle_step_rad, positive=True)
+    step = math.radians(0.25)
     free = gt.free
     rows, cols = grid.shape
     seen = np.zeros(grid.shape, bool)

@@ -22,15 +22,14 @@ from .street import street_world
 __all__ = ["write_synthetic_dataset", "corridor_path", "poses_along"]
 
 
-def corridor_path(n_stops: int, *, x_end_m: float = 10.5) -> np.ndarray:
+def corridor_path(n_stops: int) -> np.ndarray:
     """Robot poses (n_stops, 3) along the default corridor, detouring right of the 6 m obstacle.
 
     The path follows ``y = 0`` from ``x = 0``, swerves to ``y = -0.7`` between
     x = 5.7 and 6.8 m to pass the box in the middle of the corridor, and
     returns to the centre; the yaw follows the path direction.
     """
-    n_stops = _checks.positive_int("n_stops", n_stops)
-    way = np.array([[0.0, 0.0], [5.0, 0.0], [5.7, -0.7], [6.8, -0.7], [7.5, 0.0], [x_end_m, 0.0]])
+    way = np.array([[0.0, 0.0], [5.0, 0.0], [5.7, -0.7], [6.8, -0.7], [7.5, 0.0], [10.5, 0.0]])
     return poses_along(way, n_stops)
 
 
