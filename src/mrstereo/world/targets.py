@@ -172,31 +172,37 @@ _GRID_QUIET_ZONE = 0.25
 _GRID_BORDER_PX = 3.0
 
 
+def _rect_outline(x0: float, x1: float, y0: float, y1: float) -> np.ndarray:
+    """Corners and edge midpoints (8, 3) of a target-frame rectangle."""
+    xm, ym = (x0 + x1) / 2, (y0 + y1) / 2
+    return np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0], [xm, y0, 0], [xm, y1, 0], [x0, ym, 0],
+                     [x1, ym, 0]])
+
+
 def _outline(target, board, s) -> tuple[np.ndarray, np.ndarray]:
-    """Paper outline points (corners and edge midpoints) and the paper centre, target frame."""
+    """Paper outline points and the paper centre, target frame."""
     x0, x1, y0, y1 = _board_extent(target, board, s)
-    outline = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0],
-                        [(x0 + x1) / 2, y0, 0], [(x0 + x1) / 2, y1, 0], [x0, (y0 + y1) / 2, 0],
-                        [x1, (y0 + y1) / 2, 0]])
-    return outline, np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
+    return _rect_outline(x0, x1, y0, y1), np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
 
 
 def _grid_outline(target, board, s) -> np.ndarray:
     """What must stay inside the image for "grid": the pattern plus its quiet zone (chessboard), the paper (dots)."""
     if target != "chessboard":
         return _outline(target, board, s)[0]
-    nx, ny = board
     m = (1.0 + _GRID_QUIET_ZONE) * s
-    x0, x1, y0, y1 = -m, (nx - 1) * s + m, -m, (ny - 1) * s + m
-    return np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0], [(x0 + x1) / 2, y0, 0],
-                     [(x0 + x1) / 2, y1, 0], [x0, (y0 + y1) / 2, 0], [x1, (y0 + y1) / 2, 0]])
+    return _rect_outline(-m, (board[0] - 1) * s + m, -m, (board[1] - 1) * s + m)
+
+
+def _projections(cams, pts: np.ndarray) -> list[np.ndarray]:
+    """Pixels of the left-raw-frame points ``pts`` in the left (and right) image."""
+    if cams[1] is None:
+        return [cams[0].project(pts)]
+    return [cams[0].project(pts), cams[1].project(pts @ cams[2].T + cams[3])]
 
 
 def _fits(cams, pts: np.ndarray, margin: float) -> bool:
     """Whether the left-raw-frame points ``pts`` project inside the left (and right) image."""
-    if not _inside(cams[0], cams[0].project(pts), margin):
-        return False
-    return cams[1] is None or _inside(cams[1], cams[1].project(pts @ cams[2].T + cams[3]), margin)
+    return all(_inside(cam, uv, margin) for cam, uv in zip(cams, _projections(cams, pts)))
 
 
 def _random_pose(cams, outline, centre, rng) -> tuple[np.ndarray, np.ndarray] | None:
@@ -220,11 +226,8 @@ def _random_pose(cams, outline, centre, rng) -> tuple[np.ndarray, np.ndarray] | 
 def _min_square_px(cams, points: np.ndarray, board) -> float:
     """Smallest projected distance between neighbouring pattern points, left (and right) image."""
     nx, ny = board
-    views = [cams[0].project(points)]
-    if cams[1] is not None:
-        views.append(cams[1].project(points @ cams[2].T + cams[3]))
     smallest = np.inf
-    for uv in views:
+    for uv in _projections(cams, points):
         grid = uv.reshape(ny, nx, 2)
         smallest = min(smallest, np.linalg.norm(np.diff(grid, axis=0), axis=-1).min(),
                        np.linalg.norm(np.diff(grid, axis=1), axis=-1).min())
@@ -264,9 +267,7 @@ def _grid_pose(cams, outline, centre, pattern, board, k, rng) -> tuple[np.ndarra
         t = np.array([_right_offset_m(cams) / 2, 0.0, z]) - R @ centre
         for _ in range(30):              # shift the board (Newton-like, in pixels) against the border(s)
             pts = outline @ R.T + t
-            uv = left.project(pts)
-            if cams[1] is not None:
-                uv = np.concatenate([uv, cams[1].project(pts @ cams[2].T + cams[3])])
+            uv = np.concatenate(_projections(cams, pts))
             if not np.all(np.isfinite(uv)):
                 break
             shift = np.zeros(2)
