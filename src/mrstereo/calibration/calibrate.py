@@ -141,24 +141,22 @@ def calibrate_camera(views: Sequence[CalibrationView], *, width: int, height: in
     Parameters
     ----------
     views : sequence of CalibrationView (or one CalibrationView)
-        Control points per image (chessboard corners, dot centres, CSV points).
     width, height : int
         Image size in pixels.
     method : {"ga", "ga+lm", "lm"}
         GA, GA polished by LM, or LM from Zhang's closed form.
     model : {"k1k2", "plumb_bob", "rational", "fisheye"}
-        Distortion model; anything but ``k1k2`` needs LM (``method`` "ga+lm" or "lm").
+        Distortion model; anything but ``k1k2`` needs LM.
     ga_config, bounds, pixel_density_px_per_mm :
         GA settings (:class:`GAConfig`, :class:`GABounds`, pixel density of eq. 2).
     rng : numpy Generator, int or None
         Seed of the GA.
     progress : callable(generation, best_fitness), optional
-        GA progress callback.
 
     Returns
     -------
     CalibrationResult
-        ``success`` is False (with a ``message``) when the fit did not converge.
+        ``success`` False (with a ``message``) when the fit did not converge.
     """
     if isinstance(views, CalibrationView):
         views = [views]

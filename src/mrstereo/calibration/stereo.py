@@ -228,30 +228,24 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
     Parameters
     ----------
     left_views, right_views : sequence of CalibrationView
-        Pair ``i`` shows the same target pose in both cameras (same target points); a right view
-        numbered from the opposite corner is reversed (:func:`agree_with_left`).
+        Pair ``i`` shows the same target pose in both cameras; a right view numbered from the opposite
+        corner is reversed (:func:`agree_with_left`).
     width, height : int
-        Image size (both cameras).
     method : {"ga", "ga+lm", "lm"}
         Per-camera method; anything but "ga" also refines the pair jointly.
     ga_config, bounds, pixel_density_px_per_mm
-        GA options of the per-camera calibrations (:func:`calibrate_camera`).
+        As :func:`calibrate_camera`.
     alpha : float
-        Rectified field of view, 0 = valid pixels only, 1 = every raw pixel
-        (:func:`mrstereo.camera.rectify_fusiello`).
+        Rectified field of view, 0 = valid pixels only, 1 = every raw pixel.
     rng : numpy Generator, int or None
-        Seed of both GAs.
     progress : callable, optional
-        GA progress callback (:func:`calibrate_camera`).
     model : {"k1k2", "plumb_bob", "rational", "fisheye"}
-        Distortion model of both cameras (:func:`calibrate_camera`).
 
     Raises
     ------
     ValueError
-        Also when the baseline is (near) zero (the same images given twice)
-        or the views look swapped (the right camera sits on the left,
-        :func:`mrstereo.camera.check_not_swapped`).
+        Also for a (near) zero baseline (the same images twice) or swapped views
+        (:func:`mrstereo.camera.check_not_swapped`).
     """
     spec = calibration_model(model)
     left_views, right_views = list(left_views), list(right_views)

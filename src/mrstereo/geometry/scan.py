@@ -263,17 +263,10 @@ def near_limit_range_m(stereo: StereoCamera, T_robot_from_cam, max_disparity_px:
 
 def top_view(points_robot, *, x_range_m: tuple[float, float] = (0.0, 8.0),
              y_range_m: tuple[float, float] = (-3.0, 3.0), resolution_m: float = 0.05) -> np.ndarray:
-    """Histogram of points over a robot-frame grid (the paper's top view, Figs 8b-10b).
+    """Histogram (rows, cols) int32 of points over a robot-frame grid (the paper's top view, Figs 8b-10b).
 
-    The cells follow :class:`mrstereo.mapping.grid.GridSpec` (row 0 at the
-    lowest y, column 0 at the lowest x, lower-left corner at
-    ``(x_range_m[0], y_range_m[0])``), so the result can be laid on a map.
-
-    Returns
-    -------
-    ndarray of shape (rows, cols), int32
-        ``counts[row, col]``: row along y (lateral, row 0 = rightmost),
-        column along x (forward / depth).
+    Cells as :class:`mrstereo.mapping.grid.GridSpec` (row 0 at the lowest y, column 0 at the lowest x,
+    lower-left corner at ``(x_range_m[0], y_range_m[0])``), so the result can be laid on a map.
     """
     p = _checks.points3("points_robot", points_robot)
     res = _checks.finite_number("resolution_m", resolution_m, positive=True)
