@@ -1,11 +1,8 @@
 """A* path planning on an occupancy map with obstacles inflated by the robot radius.
 
-The paper builds its grid "for navigation"; this stage closes the loop: plan a collision-free
-path for a disc-shaped robot on the map. 8-connected A* with the octile heuristic (admissible
-and consistent for unit / sqrt(2) step costs) and no corner cutting: a diagonal step needs
-both orthogonal neighbours free. Obstacles are inflated like the lethal zone of Nav2's
-inflation layer: every cell whose centre lies within ``robot_radius_m`` of an occupied cell
-centre is blocked. Conventions: docs/conventions.md.
+8-connected A* with the octile heuristic (admissible and consistent) and no corner cutting;
+every cell within ``robot_radius_m`` of an occupied cell is blocked (the lethal zone of Nav2's
+inflation layer). User guide: docs/mapping.md, "Planning".
 
 References
 ----------

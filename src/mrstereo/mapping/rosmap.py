@@ -1,9 +1,5 @@
-"""ROS map_server / Nav2 maps: a PGM image and a YAML description.
-
-PGM values: 254 free, 0 occupied, 205 unknown; the top image row is max y.
-YAML: image, resolution, origin [x, y, yaw] (pose of the lower-left pixel),
-negate, occupied_thresh, free_thresh, mode trinary.
-
+"""ROS map_server / Nav2 maps: a PGM image (254 free, 0 occupied, 205 unknown; top row max y) and a
+YAML description (image, resolution, origin of the lower-left pixel, thresholds, trinary mode).
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
