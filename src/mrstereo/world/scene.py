@@ -214,27 +214,13 @@ def default_scene(seed: int = 0) -> Scene:
         for xa, xb, top in gaps:
             ya, yb = sorted((side * (half + recess), side * (half + thick)))
             boxes.append(Box((xa, ya, 0.0), (xb, yb, top), DOOR, LABEL_DOOR))
-    obstacles_box = [
-        Box((0.6, -0.55, 0.0), (0.9, -0.25, 0.4), OBST_A, 0),
-        Box((2.6, 0.75, 0.0), (3.0, 1.2, 0.8), OBST_B, 0),
-        Box((6.0, -0.25, 0.0), (6.4, 0.25, 0.6), OBST_C, 0),
-        Box((9.0, -1.2, 0.0), (9.5, -0.7, 1.2), OBST_A, 0),
-    ]
-    obstacles_cyl = [
-        Cylinder((1.8, 0.55), 0.15, 0.7, OBST_B, 0),
-        Cylinder((3.9, -0.6), 0.2, 0.5, OBST_C, 0),
-    ]
-    # Obstacle labels in order of distance from the start.
-    order = sorted([(b.min_m[0], "b", i) for i, b in enumerate(obstacles_box)]
-                   + [(c.centre_m[0] - c.radius_m, "c", i) for i, c in enumerate(obstacles_cyl)])
-    obst_boxes, obst_cyls = [], []
-    for k, (_, kind, i) in enumerate(order):
-        if kind == "b":
-            b = obstacles_box[i]
-            obst_boxes.append(Box(b.min_m, b.max_m, b.material, LABEL_OBSTACLE + k))
-        else:
-            c = obstacles_cyl[i]
-            obst_cyls.append(Cylinder(c.centre_m, c.radius_m, c.height_m, c.material, LABEL_OBSTACLE + k))
+    # obstacles labelled in the order of their near face's distance from the start
+    obst_boxes = [Box((0.6, -0.55, 0.0), (0.9, -0.25, 0.4), OBST_A, LABEL_OBSTACLE),
+                  Box((2.6, 0.75, 0.0), (3.0, 1.2, 0.8), OBST_B, LABEL_OBSTACLE + 2),
+                  Box((6.0, -0.25, 0.0), (6.4, 0.25, 0.6), OBST_C, LABEL_OBSTACLE + 4),
+                  Box((9.0, -1.2, 0.0), (9.5, -0.7, 1.2), OBST_A, LABEL_OBSTACLE + 5)]
+    obst_cyls = [Cylinder((1.8, 0.55), 0.15, 0.7, OBST_B, LABEL_OBSTACLE + 1),
+                 Cylinder((3.9, -0.6), 0.2, 0.5, OBST_C, LABEL_OBSTACLE + 3)]
     boxes += obst_boxes
     decals = (
         # The left wall (y = +half) faces -y, the right wall (y = -half) faces +y.
