@@ -14,7 +14,7 @@ from . import _checks
 
 __all__ = ["R_BODY_FROM_OPTICAL", "rotation_from_rpy", "rpy_from_rotation",
            "T_robot_from_cam", "transform_points", "T_from_R_t", "T_from_rvec_t", "rvec_t_from_T", "rotation_angle_rad",
-           "rotations_from_rvecs", "rotation_jacobian_factor", "rotated_points_jacobian", "scale_motion",
+           "rotations_from_rvecs", "rotation_jacobian_factor", "scale_motion",
            "quaternion_from_rotation", "rotation_from_quaternion", "slerp", "T_from_position_quaternion",
            "T_from_planar", "planar_from_T", "compose_planar", "relative_planar", "wrap_angle"]
 
@@ -143,13 +143,6 @@ def rotation_jacobian_factor(rvecs, R) -> np.ndarray:
         np.where(n2 < 1e-16, 1.0, n2)[:, None, None]
     M[n2 < 1e-16] = np.eye(3)
     return M
-
-
-def rotated_points_jacobian(rvecs, points) -> np.ndarray:
-    """``d(R(r) p) / dr`` (N, 3, 3) of rotation vectors ``r`` (N, 3) applied to points ``p`` (N, 3)."""
-    r = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
-    R = rotations_from_rvecs(r)
-    return -(R @ _skew(np.asarray(points, dtype=np.float64).reshape(-1, 3))) @ rotation_jacobian_factor(r, R)
 
 
 def scale_motion(T, fraction: float) -> np.ndarray:
