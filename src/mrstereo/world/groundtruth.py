@@ -25,7 +25,7 @@ def occupied_footprint(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.0
     The floor and ceiling slabs are not footprints; parts entirely above or
     below ``height_band_m`` (e.g. the lintel over a door) are ignored.
     """
-    z_lo, z_hi = _band(height_band_m)
+    z_lo, z_hi = _checks.ordered_pair("height_band_m", height_band_m)
     rows, cols = grid.shape
     res = grid.resolution_m
     x_lo = grid.origin_x_m + np.arange(cols) * res
@@ -62,16 +62,6 @@ def obstacle_footprints(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.
         if cells.any():
             footprints[label] = cells
     return footprints
-
-
-def _band(height_band_m) -> tuple[float, float]:
-    try:
-        z_lo, z_hi = (float(v) for v in height_band_m)
-    except (TypeError, ValueError):
-        raise ValueError(f"height_band_m must be (low_m, high_m), got {height_band_m!r}") from None
-    if not (np.isfinite(z_lo) and np.isfinite(z_hi) and z_lo < z_hi):
-        raise ValueError(f"height_band_m must be finite with low < high, got {height_band_m!r}")
-    return z_lo, z_hi
 
 
 def ground_truth_map(scene: Scene, grid: GridSpec | None = None, *,

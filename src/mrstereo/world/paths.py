@@ -93,10 +93,21 @@ def speed_path(n_frames: int, *, step_m: float, turn_rad_per_frame: float = math
                standstill_frames: int = 3, accel_frames: int = 10, max_offset_m: float = 2.0) -> np.ndarray:
     """Robot poses ``(n_frames, 3)`` of a drive from a standstill up to ``step_m`` per frame, weaving.
 
-    After ``standstill_frames`` at the origin the step grows linearly over ``accel_frames``. The
-    heading is ``psi(s) = Psi sin(2 pi s / P)`` with ``P = pi sqrt(2 max_offset_m step_m / turn)``
-    and ``Psi = turn P / (2 pi step_m)``: at full speed it turns by ``turn_rad_per_frame`` per frame
-    at most and stays between the x axis and ``y = max_offset_m``.
+    The heading is ``psi(s) = Psi sin(2 pi s / P)`` with ``P = pi sqrt(2 max_offset_m step_m / turn)``
+    and ``Psi = turn P / (2 pi step_m)``: at full speed it turns by ``turn_rad_per_frame`` per frame at
+    most and stays between the x axis and ``y = max_offset_m``.
+
+    Parameters
+    ----------
+    n_frames : int
+    step_m : float
+        Path length per frame at full speed.
+    turn_rad_per_frame : float
+        Largest heading change per frame at full speed (0: straight).
+    standstill_frames, accel_frames : int
+        Frames standing at the origin, then frames of linear acceleration.
+    max_offset_m : float
+        Largest distance from the x axis (to the left).
     """
     n_frames = _checks.positive_int("n_frames", n_frames)
     step = _checks.finite_number("step_m", step_m, positive=True)

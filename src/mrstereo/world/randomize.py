@@ -18,9 +18,9 @@ from ..camera import Camera, CameraInfo, CameraMount, StereoCamera
 from ..geometry.ground import ground_from_mount
 from ..transforms import rotation_from_rpy
 from .render import SensorModel
-from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, LABEL_POSTER, LABEL_WALL, TEXTURE_BLOTCH,
-                    TEXTURE_CHECKER, TEXTURE_POSTER, TEXTURE_STRIPES_U, TEXTURE_STRIPES_V, TEXTURE_TILES,
-                    TEXTURE_WEAK, TEXTURE_WOOD, Box, Cylinder, Decal, Light, Material, Scene, _wall_boxes)
+from .scene import (LABEL_DOOR, LABEL_OBSTACLE, LABEL_POSTER, TEXTURE_BLOTCH, TEXTURE_CHECKER, TEXTURE_POSTER,
+                    TEXTURE_STRIPES_U, TEXTURE_STRIPES_V, TEXTURE_TILES, TEXTURE_WEAK, TEXTURE_WOOD, WALL_THICK_M, Box,
+                    Cylinder, Decal, Light, Material, Scene, _corridor_boxes)
 
 __all__ = ["RandomWorld", "random_world", "random_stereo", "RANGES", "WALL_TEXTURES"]
 
@@ -41,7 +41,6 @@ RANGES = {
 """Ranges of the randomized quantities (uniform draws)."""
 
 _CLEARANCE_M = 0.4      # obstacles keep this far from the robot path (robot radius + margin)
-_WALL_THICK_M = 0.2
 _GRID_HALF_M = 2.95     # everything the map should show stays within |y| < 3 m (the default grid)
 
 
@@ -246,7 +245,7 @@ def _draw_wall_gaps(rng, corridor: _Corridor) -> tuple[list, list, dict[int, lis
     doors: list[tuple[int, float, float]] = []
     taken: dict[int, list] = {+1: [], -1: []}
     x1, h = corridor.x1_m, corridor.ceiling_m
-    max_depth = _GRID_HALF_M - corridor.half_m - _WALL_THICK_M
+    max_depth = _GRID_HALF_M - corridor.half_m - WALL_THICK_M
     for _ in range(int(rng.integers(0, 3))):
         side = int(rng.choice([-1, 1]))
         w = rng.uniform(0.8, 1.8)
@@ -263,42 +262,6 @@ def _draw_wall_gaps(rng, corridor: _Corridor) -> tuple[list, list, dict[int, lis
             doors.append((side, float(xa), float(xa + 0.9)))
             taken[side].append((xa, xa + 0.9))
     return openings, doors, taken
-
-
-def _structure(corridor: _Corridor, openings: list, doors: list, ids: dict[str, int]) -> tuple[list[Box], list]:
-    """Floor, ceiling, walls (with their gaps), door recesses and the rooms behind openings; the rooms'
-    floor rectangles ``(xa, xb, ya, yb)``."""
-    x0, x1, half, h = corridor.x0_m, corridor.x1_m, corridor.half_m, corridor.ceiling_m
-    wall = ids["wall"]
-    boxes: list[Box] = [
-        Box((x0 - 1.0, -_GRID_HALF_M - 1.0, -0.2), (x1 + 1.0, _GRID_HALF_M + 1.0, 0.0), ids["floor"], LABEL_FLOOR),
-        Box((x0 - 1.0, -_GRID_HALF_M - 1.0, h), (x1 + 1.0, _GRID_HALF_M + 1.0, h + 0.2), ids["ceiling"],
-            LABEL_CEILING),
-        Box((x0 - _WALL_THICK_M, -half, 0.0), (x0, half, h), wall, LABEL_WALL),
-        Box((x1, -half, 0.0), (x1 + _WALL_THICK_M, half, h), wall, LABEL_WALL),
-    ]
-    free_regions = []
-    recess = 0.1
-    for side in (+1, -1):
-        gaps = ([(xa, xb, 2.1) for s, xa, xb in doors if s == side]
-                + [(xa, xb, top) for s, xa, xb, top, _ in openings if s == side])
-        boxes += _wall_boxes(side, x0, x1, half, _WALL_THICK_M, h, gaps, wall)
-        for s, xa, xb in doors:
-            if s == side:
-                ya, yb = sorted((side * (half + recess), side * (half + _WALL_THICK_M)))
-                boxes.append(Box((xa, ya, 0.0), (xb, yb, 2.1), ids["door"], LABEL_DOOR))
-        for s, xa, xb, top, depth in openings:
-            if s != side:
-                continue
-            # a small room behind the opening: back wall and two side walls
-            y_in, y_back = side * half, side * (half + depth)
-            ya, yb = sorted((y_back, y_back + side * _WALL_THICK_M))
-            boxes.append(Box((xa - _WALL_THICK_M, ya, 0.0), (xb + _WALL_THICK_M, yb, h), wall, LABEL_WALL))
-            ya, yb = sorted((y_in, y_back))
-            boxes.append(Box((xa - _WALL_THICK_M, ya, 0.0), (xa, yb, h), wall, LABEL_WALL))
-            boxes.append(Box((xb, ya, 0.0), (xb + _WALL_THICK_M, yb, h), wall, LABEL_WALL))
-            free_regions.append((xa, xb, ya, yb))
-    return boxes, free_regions
 
 
 def _draw_decals(rng, corridor: _Corridor, bank: _MaterialBank, taken: dict[int, list]) -> list[Decal]:
@@ -400,13 +363,20 @@ def _draw_sensors(rng) -> tuple[SensorModel, SensorModel]:
 
 def random_world(seed: int, *, width: int = 320, height: int = 240,
                  wall_texture: str | None = None) -> RandomWorld:
-    """Draw a corridor world, its stereo rig, sensors and robot path from ``seed`` (non-negative).
+    """Draw a corridor world, its stereo rig, sensors and robot path from ``seed``.
 
-    ``width, height`` is the rig's image size (the field of view is drawn independently).
-    ``wall_texture`` (one of :data:`WALL_TEXTURES`) replaces the walls' material, drawn from a stream
-    of its own after all other draws, so the rest stays the world of ``seed``. World frame as in
-    :func:`mrstereo.world.default_scene`; everything the default map shows lies within
-    ``|y| < 3 m``; obstacle labels ``LABEL_OBSTACLE + k`` are numbered by the x of their footprint.
+    World frame as in :func:`mrstereo.world.default_scene`; everything the default map shows lies
+    within ``|y| < 3 m``; obstacle labels ``LABEL_OBSTACLE + k`` are numbered by the x of their footprint.
+
+    Parameters
+    ----------
+    seed : int
+        Non-negative; the same seed gives the same world.
+    width, height : int
+        Image size of the rig (the field of view is drawn independently).
+    wall_texture : {"paint", "tiles", "stripes", "blotch", "wood"}, optional
+        The walls' material kind, drawn from a stream of its own after all other draws, so the rest
+        stays the world of ``seed``.
     """
     seed = _checks.positive_int("seed", seed, minimum=0)
     if wall_texture is not None and wall_texture not in WALL_TEXTURES:
@@ -425,7 +395,8 @@ def random_world(seed: int, *, width: int = 320, height: int = 240,
     skirting_m = float(rng.choice([0.0, 0.06, 0.1, 0.15]))
     waypoints = _draw_path(rng, corridor)
     openings, doors, taken = _draw_wall_gaps(rng, corridor)
-    boxes, free_regions = _structure(corridor, openings, doors, ids)
+    boxes, free_regions = _corridor_boxes(corridor.x0_m, corridor.x1_m, corridor.half_m, corridor.ceiling_m,
+                                          doors=doors, openings=openings, outer_half_m=_GRID_HALF_M, ids=ids)
     decals = _draw_decals(rng, corridor, bank, taken)
     obstacle_boxes, cylinders, obstacle_kinds = _draw_obstacles(rng, corridor, bank, _path_points(waypoints))
     lights, ambient = _draw_lights(rng, corridor)

@@ -69,10 +69,14 @@ def default_stereo(width: int = 320, height: int = 240, *, height_m: float = 0.4
                    tilt_rad: float = 0.15) -> StereoCamera:
     """The simulated stereo head: its exact calibration and mount (docs/world.md, "The stereo rig").
 
-    320x240 (the paper's cameras, Sec. 3, Fig. 4): ``fx = 200 px``, baseline 0.12 m; 640x480:
-    ``fx = 451 px``, baseline 0.075 m; other sizes scale 200 px with the width. The raw cameras are
-    distorted and rotated slightly, so rectification is not the identity. ``height_m`` and
-    ``tilt_rad`` place the rig (:meth:`mrstereo.camera.CameraMount.from_rig`).
+    Parameters
+    ----------
+    width, height : int
+        320x240 (the paper's cameras, Sec. 3, Fig. 4): ``fx = 200 px``, baseline 0.12 m; 640x480:
+        ``fx = 451 px``, baseline 0.075 m; other sizes scale 200 px with the width. The raw cameras
+        are distorted and rotated slightly, so rectification is not the identity.
+    height_m, tilt_rad : float
+        The rig's mount (:meth:`mrstereo.camera.CameraMount.from_rig`).
     """
     width = _checks.positive_int("width", width, minimum=16)
     height = _checks.positive_int("height", height, minimum=16)

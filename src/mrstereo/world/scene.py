@@ -165,6 +165,10 @@ def _pack(scene: Scene) -> dict[str, np.ndarray]:
     return out
 
 
+WALL_THICK_M = 0.2
+DOOR_TOP_M = 2.1
+
+
 def _wall_boxes(side: int, x0: float, x1: float, y_in: float, thickness: float, height: float,
                 gaps: list[tuple[float, float, float]], wall_mat: int) -> list[Box]:
     """Wall on one side with door openings ``(xa, xb, top_z)``: segments plus lintels."""
@@ -177,6 +181,43 @@ def _wall_boxes(side: int, x0: float, x1: float, y_in: float, thickness: float, 
         x = xb
     out.append(Box((x, y_a, 0.0), (x1, y_b, height), wall_mat, LABEL_WALL))
     return out
+
+
+def _corridor_boxes(x0: float, x1: float, half: float, h: float, *, doors, openings=(), outer_half_m: float,
+                    ids: dict[str, int]) -> tuple[list[Box], list]:
+    """Floor and ceiling (to ``|y| = outer_half_m + 1``), end walls, side walls at ``y = +-half`` with
+    their gaps, door recesses ``(side, xa, xb)`` and the small rooms behind openings ``(side, xa, xb,
+    top, depth)``; returns the boxes and the rooms' floor rectangles ``(xa, xb, ya, yb)``.
+    ``ids``: the materials of wall, floor, ceiling and door."""
+    t, wall = WALL_THICK_M, ids["wall"]
+    boxes: list[Box] = [
+        Box((x0 - 1.0, -outer_half_m - 1.0, -0.2), (x1 + 1.0, outer_half_m + 1.0, 0.0), ids["floor"], LABEL_FLOOR),
+        Box((x0 - 1.0, -outer_half_m - 1.0, h), (x1 + 1.0, outer_half_m + 1.0, h + 0.2), ids["ceiling"],
+            LABEL_CEILING),
+        Box((x0 - t, -half, 0.0), (x0, half, h), wall, LABEL_WALL),
+        Box((x1, -half, 0.0), (x1 + t, half, h), wall, LABEL_WALL),
+    ]
+    free_regions = []
+    for side in (+1, -1):
+        gaps = ([(xa, xb, DOOR_TOP_M) for s, xa, xb in doors if s == side]
+                + [(xa, xb, top) for s, xa, xb, top, _ in openings if s == side])
+        boxes += _wall_boxes(side, x0, x1, half, t, h, gaps, wall)
+        for s, xa, xb in doors:
+            if s == side:
+                ya, yb = sorted((side * (half + 0.1), side * (half + t)))        # the door 0.1 m back
+                boxes.append(Box((xa, ya, 0.0), (xb, yb, DOOR_TOP_M), ids["door"], LABEL_DOOR))
+        for s, xa, xb, top, depth in openings:
+            if s != side:
+                continue
+            # a small room behind the opening: back wall and two side walls
+            y_in, y_back = side * half, side * (half + depth)
+            ya, yb = sorted((y_back, y_back + side * t))
+            boxes.append(Box((xa - t, ya, 0.0), (xb + t, yb, h), wall, LABEL_WALL))
+            ya, yb = sorted((y_in, y_back))
+            boxes.append(Box((xa - t, ya, 0.0), (xa, yb, h), wall, LABEL_WALL))
+            boxes.append(Box((xb, ya, 0.0), (xb + t, yb, h), wall, LABEL_WALL))
+            free_regions.append((xa, xb, ya, yb))
+    return boxes, free_regions
 
 
 def default_scene(seed: int = 0) -> Scene:
@@ -198,22 +239,10 @@ def default_scene(seed: int = 0) -> Scene:
         Material(TEXTURE_BLOTCH, 0.60, 0.40, 0.03),           # 9 obstacle, fine blotches
     )
     WALL, FLOOR, CEIL, DOOR, SKIRT, POSTER, OBST_A, OBST_B, PANEL, OBST_C = range(10)
-    x0, x1, half, h, thick = -1.0, 14.5, 1.2, 2.5, 0.2
-    door_top, recess = 2.1, 0.1
-    # Recessed doors: (side, x start); 0.9 m wide.
-    recessed = [(+1, 3.0), (+1, 8.4), (-1, 5.2), (-1, 11.0)]
-    boxes: list[Box] = [
-        Box((x0 - 1.0, -half - 1.0, -0.2), (x1 + 1.0, half + 1.0, 0.0), FLOOR, LABEL_FLOOR),
-        Box((x0 - 1.0, -half - 1.0, h), (x1 + 1.0, half + 1.0, h + 0.2), CEIL, LABEL_CEILING),
-        Box((x0 - 0.2, -half, 0.0), (x0, half, h), WALL, LABEL_WALL),
-        Box((x1, -half, 0.0), (x1 + 0.2, half, h), WALL, LABEL_WALL),
-    ]
-    for side in (+1, -1):
-        gaps = [(xs, xs + 0.9, door_top) for s, xs in recessed if s == side]
-        boxes += _wall_boxes(side, x0, x1, half, thick, h, gaps, WALL)
-        for xa, xb, top in gaps:
-            ya, yb = sorted((side * (half + recess), side * (half + thick)))
-            boxes.append(Box((xa, ya, 0.0), (xb, yb, top), DOOR, LABEL_DOOR))
+    x0, x1, half, h = -1.0, 14.5, 1.2, 2.5
+    doors = [(side, xa, xa + 0.9) for side, xa in ((+1, 3.0), (+1, 8.4), (-1, 5.2), (-1, 11.0))]   # recessed
+    boxes, _ = _corridor_boxes(x0, x1, half, h, doors=doors, outer_half_m=half,
+                               ids={"wall": WALL, "floor": FLOOR, "ceiling": CEIL, "door": DOOR})
     # obstacles labelled in the order of their near face's distance from the start
     obst_boxes = [Box((0.6, -0.55, 0.0), (0.9, -0.25, 0.4), OBST_A, LABEL_OBSTACLE),
                   Box((2.6, 0.75, 0.0), (3.0, 1.2, 0.8), OBST_B, LABEL_OBSTACLE + 2),
@@ -229,8 +258,8 @@ def default_scene(seed: int = 0) -> Scene:
         Decal(+1, -half, 2.5, 3.2, 1.0, 1.7, POSTER, LABEL_POSTER),
         Decal(+1, -half, 7.9, 8.9, 1.1, 1.9, POSTER, LABEL_POSTER),
         Decal(+1, -half, 12.6, 13.2, 1.2, 1.8, POSTER, LABEL_POSTER),
-        Decal(-1, half, 12.0, 12.9, 0.0, door_top, PANEL, LABEL_DOOR),
-        Decal(+1, -half, 1.0, 1.9, 0.0, door_top, PANEL, LABEL_DOOR),
+        Decal(-1, half, 12.0, 12.9, 0.0, DOOR_TOP_M, PANEL, LABEL_DOOR),
+        Decal(+1, -half, 1.0, 1.9, 0.0, DOOR_TOP_M, PANEL, LABEL_DOOR),
     )
     lights = tuple(Light((float(x), 0.0, h - 0.1), 2.4) for x in np.arange(0.5, 14.0, 2.5))
     return Scene(boxes=tuple(boxes), cylinders=tuple(obst_cyls), decals=decals, lights=lights,

@@ -152,15 +152,10 @@ def _check_common(target, board, spacing_m, seed, supersample):
 
 
 _COVERAGES = ("random", "grid")
-# "grid" coverage: aim regions as (x, y) in {-1, 0, 1}, corners first, then edges, then the centre, so
-# that every 9 consecutive views cover the whole image. The distortion far out in the image corners is
-# extrapolated from the corner points nearest to them, so the corner views push the pattern as deep into
-# the corners as a detector allows: the board is small (no square below _GRID_MIN_SQUARE_PX in the image),
-# tilted with its corner at the image corner approaching the camera (an acute vertex that fits into the
-# image corner), and the paper may be cut by the image border as long as the pattern and a quiet zone of
-# _GRID_QUIET_ZONE squares of white around it stay _GRID_BORDER_PX inside. Large, strongly tilted boards
-# elsewhere pin down focal length and the distortion across the image. Measured in
-# benchmarks/bench_calibration.py [2].
+# "grid" coverage: aim regions (x, y) in {-1, 0, 1}, corners first, then edges, then the centre, so
+# that every 9 consecutive views cover the image. The corner distortion is extrapolated from the
+# points nearest to it, so corner views push a small, tilted board as deep into the corner as a
+# detector allows; large, strongly tilted boards elsewhere pin down the focal length.
 _GRID_AIMS = ((-1, -1), (1, 1), (1, -1), (-1, 1), (0, -1), (0, 1), (-1, 0), (1, 0), (0, 0))
 _GRID_CORNER_FILLS = (0.3, 0.25)      # quiet-zone outline width / image width, per pass over the regions
 _GRID_MIN_SQUARE_PX = 8.0             # smallest projected square side (or dot pitch) anywhere on the board
@@ -349,8 +344,17 @@ def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", bo
 def render_paper_dot_target(camera_or_stereo, *, grid=(15, 11), distance_m: float = 1.0, seed: int = 0,
                             supersample: int = 4, noise_sigma: float = sensor_noise_sigma) -> RenderedTarget:
     """One fronto-parallel view of a dot grid filling most of the image (paper Fig. 2), whose
-    corners show the radial distortion (eq. 3) most: ``grid`` dots per row and column at
-    ``distance_m``; the other arguments as in :func:`render_calibration_views`.
+    corners show the radial distortion (eq. 3) most.
+
+    Parameters
+    ----------
+    camera_or_stereo : Camera, CameraInfo or StereoCamera
+    grid : (int, int)
+        Dots per row and column.
+    distance_m : float
+        Distance of the target plane from the left camera.
+    seed, supersample, noise_sigma
+        As in :func:`render_calibration_views`.
     """
     board, _, seed, supersample = _check_common("dots", grid, 1.0, seed, supersample)
     z = _checks.finite_number("distance_m", distance_m, positive=True)
