@@ -1,20 +1,13 @@
 """Camera calibration by a real-coded genetic algorithm, paper section 2.2 (eq. 4-8).
 
 The chromosome of eq. (4) is ``C = [f, u0, v0, k1, k2, alpha, beta, gamma, X, Y, Z]`` in the
-paper's parameterization (:class:`mrstereo.camera.PaperCamera`), with ``points_cam = R
-points_target + t``. Operators (Table 2: N = 100, pc = 0.8, pm = 0.1, elitism, real coding):
-uniform initialisation within the bounds (eq. 5); fitness eq. (6), the sum of squared
-reprojection errors in px^2 (``inf`` when a point falls behind the camera); tournaments fill the
-mating pool; consecutive pool members cross with probability ``pc`` into ``(1 - w) C_i + w C_i+1``
-and ``(1 - w) C_i+1 + w C_i`` with ``w = pc`` (eq. 7-8 as printed); the "reciprocal" mutation is
-read as Michalewicz's bound-directed non-uniform mutation, a move of ``1 - r^((1 - g/G)^b)`` of
-the distance toward one bound; the run stops after ``generations``, or ``stall_generations``
-without improvement. The whole population is evaluated at once (broadcasting camera model).
-
-Several planar views (beyond the paper): the chromosome keeps the intrinsic genes
-``[f, u0, v0, k1, k2]``; each candidate's pose per view comes in closed form from the homography
-of its undistorted points (Zhang), a 5-dimensional search instead of ``5 + 6 V``. Why each
-choice, bounds and measurements: docs/calibration.md.
+paper's parameterization (:class:`mrstereo.camera.PaperCamera`). Table 2: N = 100, pc = 0.8,
+pm = 0.1, elitism; uniform initialisation within the bounds (eq. 5); fitness eq. (6), the sum of
+squared reprojection errors in px^2; tournament selection; crossover ``(1 - w) C_i + w C_i+1``
+with ``w = pc`` (eq. 7-8 as printed); the "reciprocal" mutation read as Michalewicz's non-uniform
+mutation toward one bound. With several planar views the search keeps the intrinsic genes
+``[f, u0, v0, k1, k2]`` and each view's pose comes in closed form from a homography (Zhang). Each
+choice and its measurements: docs/calibration.md, "The paper's GA (eq. 4-8)".
 
 References
 ----------
@@ -62,14 +55,8 @@ class GABounds:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            pair = getattr(self, f.name)
-            try:
-                lo, hi = (float(v) for v in pair)
-            except (TypeError, ValueError):
-                raise ValueError(f"bound {f.name} must be a pair (lo, hi), got {pair!r}") from None
-            if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
-                raise ValueError(f"bound {f.name} must be finite with lo <= hi, got {pair!r}")
-            object.__setattr__(self, f.name, (lo, hi))
+            pair = _checks.ordered_pair(f"bound {f.name}", getattr(self, f.name), strict=False)
+            object.__setattr__(self, f.name, pair)
         if self.f_mm[0] <= 0:
             raise ValueError(f"bound f_mm must be positive, got {self.f_mm}")
 
