@@ -91,9 +91,17 @@ def _search(max_disparity_px, exact_max: bool) -> tuple[int, int]:
 
 def stereo_bm(left, right, *, max_disparity_px, settings: BMSettings = BMSettings(),
               exact_max: bool = False) -> np.ndarray:
-    """Disparity (float32 px, NaN invalid) of OpenCV StereoBM with :class:`BMSettings` on rectified
-    views (BGR converted to gray), searching ``max_disparity_px`` rounded up to 16, or exactly
-    ``ceil(max_disparity_px)`` with ``exact_max`` (a negative ``minDisparity`` fills the multiple).
+    """Disparity (float32 px, NaN invalid) of OpenCV StereoBM with :class:`BMSettings`.
+
+    Parameters
+    ----------
+    left, right : ndarray of shape (H, W) or (H, W, 3)
+        Rectified views (BGR converted to gray).
+    max_disparity_px : float
+        Largest disparity to search; rounded up to a multiple of 16.
+    exact_max : bool
+        Search up to ``ceil(max_disparity_px)`` exactly (a negative ``minDisparity`` fills the multiple).
+    settings : BMSettings
     """
     gl, gr = _inputs(left, right)
     window = settings.window_px or (15 if gl.shape[1] >= 640 else 9)
@@ -113,8 +121,13 @@ def stereo_bm(left, right, *, max_disparity_px, settings: BMSettings = BMSetting
 
 def stereo_sgbm(left, right, *, max_disparity_px, settings: SGBMSettings = SGBMSettings(),
                 exact_max: bool = False) -> np.ndarray:
-    """Disparity (float32 px, NaN invalid) of OpenCV StereoSGBM with :class:`SGBMSettings`; the
-    arguments as :func:`stereo_bm`.
+    """Disparity (float32 px, NaN invalid) of OpenCV StereoSGBM with :class:`SGBMSettings`.
+
+    Parameters
+    ----------
+    left, right, max_disparity_px, exact_max :
+        As :func:`stereo_bm`.
+    settings : SGBMSettings
     """
     gl, gr = _inputs(left, right)
     block = settings.block_size

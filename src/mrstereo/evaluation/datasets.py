@@ -106,8 +106,7 @@ def load_scene(directory, *, frame: str | None = None) -> Scene:
                    _read_middlebury_im2_im6, _read_middlebury_v2_bundle):
         scene = reader(path, frame)
         if scene is not None:
-            _check_sizes(scene)
-            return scene
+            return _check_sizes(scene)
     raise ValueError(f"{path} matches no known stereo dataset layout; expected {_EXPECTED}")
 
 
@@ -179,15 +178,10 @@ def _dataset_scene(path: Path, manifest, record) -> Scene:
     if gt.ndim != 2:
         raise ValueError(f"{record.gt_disparity}: expected a single-channel PFM disparity map, got shape {gt.shape}")
     gt = np.where(np.isfinite(gt), gt, np.nan).astype(np.float32)
-    return _checked(Scene(name=f"{path.name}/{record.gt_disparity.stem}", left=left, right=right,
+    return _check_sizes(Scene(name=f"{path.name}/{record.gt_disparity.stem}", left=left, right=right,
                           gt_disparity_px=gt, nonocc_mask=None, max_disparity_px=search_range_px(gt),
                           layout="mrstereo", directory=path,
                           gt_description=f"{record.gt_disparity.relative_to(manifest.root)} (pixels); {how}"))
-
-
-def _checked(scene: Scene) -> Scene:
-    _check_sizes(scene)
-    return scene
 
 
 # --------------------------------------------------------------------------- helpers
@@ -235,7 +229,7 @@ def _mask_255(path: Path | None) -> np.ndarray | None:
     return read_image(path, gray=True) == 255
 
 
-def _check_sizes(scene: Scene) -> None:
+def _check_sizes(scene: Scene) -> Scene:
     shapes = {"left": scene.left.shape[:2], "right": scene.right.shape[:2],
               "ground truth": scene.gt_disparity_px.shape}
     if scene.nonocc_mask is not None:
@@ -243,6 +237,7 @@ def _check_sizes(scene: Scene) -> None:
     if len(set(shapes.values())) != 1:
         sizes = ", ".join(f"{k} {v[1]}x{v[0]}" for k, v in shapes.items())
         raise ValueError(f"{scene.directory}: views and ground truth differ in size ({sizes})")
+    return scene
 
 
 def _best_scale(left, right, raw: np.ndarray, candidates: dict[float, str]) -> float:

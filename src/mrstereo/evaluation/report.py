@@ -29,10 +29,7 @@ METHODS = ("mrstereo", "mrstereo-paper", "StereoBM", "StereoSGBM")
 
 def _mrstereo(preset: str) -> Callable[..., np.ndarray]:
     def run(left, right, *, max_disparity_px):
-        try:
-            from ..matching import compute_disparity
-        except ImportError as exc:  # the matcher is another stage; say what is missing
-            raise RuntimeError(f"method mrstereo needs mrstereo.matching.compute_disparity: {exc}") from exc
+        from ..matching import compute_disparity
         return compute_disparity(left, right, max_disparity_px=max_disparity_px, preset=preset).disparity_px
     return run
 

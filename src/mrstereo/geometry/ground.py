@@ -386,9 +386,9 @@ def estimate_ground(disparity_px, stereo: StereoCamera, *, method: str = "v_disp
     **options
         Passed to :func:`fit_ground_v_disparity` or :func:`fit_ground_plane`.
     """
+    _checks.instance("stereo", stereo, StereoCamera)
     if prior is not None:
         if isinstance(prior, CameraMount):
-            _checks.instance("stereo", stereo, StereoCamera)
             prior = ground_from_mount(prior, R_rect_from_cam=stereo.left.R)
         if not isinstance(prior, GroundPlane):
             raise TypeError(f"prior must be a CameraMount or a GroundPlane, got {type(prior).__name__}")
@@ -401,7 +401,6 @@ def estimate_ground(disparity_px, stereo: StereoCamera, *, method: str = "v_disp
     if method == "v_disparity":
         return fit_ground_v_disparity(disparity_px, stereo, rng=rng, **options)
     if method == "plane":
-        _checks.instance("stereo", stereo, StereoCamera)
         pts = points_cam_from_disparity(disparity_px, focal_px=stereo.focal_px, baseline_m=stereo.baseline_m,
                                         cx_px=stereo.cx_px, cy_px=stereo.cy_px,
                                         fy_px=float(stereo.left.P[1, 1]), doffs_px=stereo.doffs_px)
