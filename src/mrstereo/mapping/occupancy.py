@@ -181,26 +181,23 @@ def _points_xy(name: str, value) -> np.ndarray:
 class ViewCells(NamedTuple):
     """The cells one view hits and clears, ready to be added to a grid in order.
 
-    Computing them is the per-frame part of mapping (independent between frames, so it runs
-    on parallel workers); :meth:`OccupancyGrid.apply` is the cheap ordered part.
+    Computing them is the per-frame part of mapping (independent between frames, so it runs on
+    parallel workers); :meth:`OccupancyGrid.apply` is the cheap ordered part. ``hit`` and ``miss``
+    are ascending flat indices into ``grid.shape`` (int64); ``points_outside`` counts the rays cut
+    at the grid border, ``occluded`` the hit cells dropped by the occlusion and see-through tests;
+    ``hit_z_m`` (len(hit), 2) float32 is the lowest and highest obstacle point of each hit cell
+    (inf, -inf without heights); ``sensor_model`` the config's fields of :func:`_sensor_model`.
     """
 
     hit: np.ndarray
-    """Flat indices (into ``grid.shape``) of the cells hit, ascending, int64."""
     miss: np.ndarray
-    """Flat indices of the cells a ray crossed and no obstacle point hit, ascending, int64."""
     points_outside: int
-    """Points whose ray was cut at the grid border."""
     grid: GridSpec
     max_range_m: float | None
     min_points_per_cell: int
     sensor_model: tuple = ()
-    """The sensor-model fields of the config used (:func:`_sensor_model`)."""
     occluded: int = 0
-    """Hit cells dropped by the occlusion and see-through tests."""
     hit_z_m: np.ndarray | None = None
-    """(len(hit), 2) float32: lowest and highest obstacle point of each hit cell (metres; inf, -inf
-    without heights)."""
 
     def fits(self, grid: GridSpec, config: MappingConfig) -> bool:
         """True when these cells are what ``grid`` and ``config`` would compute."""
@@ -416,17 +413,9 @@ class OccupancyGrid:
     # ---------------------------------------------------------------- update
     def update(self, points_obstacle_world, points_free_world, sensor_origin_world, *,
                baseline_focal_m_px: float | None = None) -> GridUpdate:
-        """Add one view: obstacle points hit their cells, rays to all points clear cells.
-
-        The same as ``apply(view_cells(..., grid=self.grid, config=self.config,
-        known_occupied=self.known_occupied()))`` (``known_occupied`` only with
-        ``config.map_occlusion_p``); see :func:`view_cells` for the parameters and the ray model.
-
-        Returns
-        -------
-        GridUpdate
-            Distinct cells hit and missed in this update, points ending outside the grid.
-        """
+        """Add one view: ``apply(view_cells(..., known_occupied=self.known_occupied()))`` with this
+        grid and config (``known_occupied`` only with ``config.map_occlusion_p``); the parameters as
+        :func:`view_cells`. Returns the :class:`GridUpdate`."""
         known = self.known_occupied() if self.config.map_occlusion_p is not None else None
         return self.apply(view_cells(points_obstacle_world, points_free_world, sensor_origin_world,
                                      grid=self.grid, config=self.config, baseline_focal_m_px=baseline_focal_m_px,
