@@ -154,8 +154,14 @@ def raw_px_from_rectified_px(info: CameraInfo, uv_rect) -> np.ndarray:
 def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0) -> FusielloRectification:
     """Rectify a calibrated stereo pair (Fusiello, Trucco & Verri 2000).
 
-    ``left``, ``right``: raw intrinsics (any distortion model, same size); ``x_right = R x_left + T``
-    (metres); ``alpha`` 0 = only valid pixels (zoom in), 1 = all raw pixels visible.
+    Parameters
+    ----------
+    left, right : Camera
+        Raw intrinsics (any distortion model, same image size).
+    R, T : ndarray of shape (3, 3) and (3,)
+        ``x_right = R x_left + T`` (metres).
+    alpha : float, optional
+        0 = only valid pixels (zoom in), 1 = all raw pixels visible.
     """
     if not isinstance(left, Camera) or not isinstance(right, Camera):
         raise TypeError(f"left and right must be Camera instances, got {type(left).__name__} and "

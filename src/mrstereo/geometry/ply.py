@@ -35,9 +35,22 @@ def write_ply(path: str | os.PathLike, points, *, intensity=None, colors_rgb=Non
               comment: str = "mrstereo point cloud") -> int:
     """Write a binary little-endian PLY of ``x y z`` float32 (+ intensity or red green blue uchar), atomically.
 
-    ``points`` (N, 3): rows with NaN/inf are dropped with their attributes; ``intensity`` (N,) gray
-    0-255, or ``colors_rgb`` (N, 3) in **RGB** order (OpenCV BGR: ``bgr[..., ::-1]``); ``comment`` one
-    header line. Returns the number of points written.
+    Parameters
+    ----------
+    path : path-like
+    points : ndarray of shape (N, 3)
+        Rows with NaN/inf are dropped with their attributes.
+    intensity : ndarray of shape (N,), optional
+        Gray value 0-255 per point.
+    colors_rgb : ndarray of shape (N, 3), optional
+        Colour per point in **RGB** order (OpenCV BGR: ``bgr[..., ::-1]``).
+    comment : str
+        One header line.
+
+    Returns
+    -------
+    int
+        The number of points written.
     """
     p = _checks.points3("points", points)
     if intensity is not None and colors_rgb is not None:
