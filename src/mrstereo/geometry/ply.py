@@ -56,29 +56,23 @@ def write_ply(path: str | os.PathLike, points, *, intensity=None, colors_rgb=Non
     if intensity is not None and colors_rgb is not None:
         raise ValueError("give intensity or colors_rgb, not both")
     fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
-    extra = None
+    extra = np.empty((p.shape[0], 0), np.uint8)
     if intensity is not None:
-        extra = _uint8("intensity", intensity, (p.shape[0],))
+        extra = _uint8("intensity", intensity, (p.shape[0],))[:, None]
         fields.append(("intensity", "u1"))
-        props = ["property uchar intensity"]
     elif colors_rgb is not None:
         extra = _uint8("colors_rgb", colors_rgb, (p.shape[0], 3))
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
-        props = ["property uchar red", "property uchar green", "property uchar blue"]
-    else:
-        props = []
     if "\n" in comment:
         raise ValueError("comment must be one line")
     keep = np.isfinite(p).all(axis=1)
     records = np.empty(int(keep.sum()), dtype=np.dtype(fields))
-    records["x"], records["y"], records["z"] = p[keep, 0], p[keep, 1], p[keep, 2]
-    if intensity is not None:
-        records["intensity"] = extra[keep]
-    elif colors_rgb is not None:
-        records["red"], records["green"], records["blue"] = extra[keep, 0], extra[keep, 1], extra[keep, 2]
+    for j, (name, _) in enumerate(fields):
+        records[name] = p[keep, j] if j < 3 else extra[keep, j - 3]
     header = "\n".join(["ply", "format binary_little_endian 1.0", f"comment {comment}",
-                        f"element vertex {records.size}", "property float x", "property float y",
-                        "property float z", *props, "end_header"]) + "\n"
+                        f"element vertex {records.size}",
+                        *(f"property {'float' if kind == '<f4' else 'uchar'} {name}" for name, kind in fields),
+                        "end_header"]) + "\n"
     with atomic_write(path) as tmp, open(tmp, "wb") as fh:
         fh.write(header.encode("ascii"))
         fh.write(records.tobytes())
