@@ -99,8 +99,7 @@ def plan_path(ros_map, start_xy, goal_xy, *, robot_radius_m: float = 0.25,
     grid = ros_map.grid
     blocked = inflate_obstacles(ros_map, robot_radius_m=robot_radius_m,
                                 unknown_is_obstacle=unknown_is_obstacle)
-    x0, y0 = grid.origin_x_m, grid.origin_y_m
-    x1, y1 = x0 + grid.shape[1] * grid.resolution_m, y0 + grid.shape[0] * grid.resolution_m
+    x0, x1, y0, y1 = grid.extent_m
     cells = []
     for name, xy in (("start", start), ("goal", goal)):
         r, c = (int(v) for v in grid.cells_from_xy(xy))
