@@ -8,6 +8,7 @@ with ``w = pc`` (eq. 7-8 as printed); the "reciprocal" mutation read as Michalew
 mutation toward one bound. With several planar views the search keeps the intrinsic genes
 ``[f, u0, v0, k1, k2]`` and each view's pose comes in closed form from a homography (Zhang). Each
 choice and its measurements: docs/calibration.md, "The paper's GA (eq. 4-8)".
+Conventions: docs/conventions.md.
 
 References
 ----------

@@ -4,7 +4,7 @@ Minimizes the GA's objective, eq. (6), locally (``scipy.optimize.least_squares``
 intrinsics, the free coefficients of the fitted model (:data:`CALIBRATION_MODELS`) and six pose
 parameters per view, with central differences grouped by the block structure (about 24
 residual evaluations whatever the number of views). Standard deviations: ``cov = s^2 (J^T
-J)^-1``, ``s^2 = |r|^2 / (m - n)``.
+J)^-1``, ``s^2 = |r|^2 / (m - n)``. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

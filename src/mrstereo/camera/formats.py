@@ -5,7 +5,7 @@ pair, the extrinsics ``x_right = R x_left + T`` (metres); a raw pair is rectifie
 :func:`~mrstereo.camera.rectification.rectify_fusiello`, a pair with rectified ``P`` is used as
 it is. The formats (mrstereo/ROS stereo YAML, two ROS camera_info files, Kalibr camchain, OpenCV
 FileStorage, ASL/EuRoC sensor.yaml, OpenLORIS sensors.yaml), detection rules and field
-mappings: docs/calibration-formats.md.
+mappings: docs/calibration-formats.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -3,6 +3,7 @@
 Scene readers (:mod:`~mrstereo.evaluation.datasets`), disparity metrics
 (:mod:`~mrstereo.evaluation.metrics`), StereoBM / StereoSGBM (:mod:`~mrstereo.evaluation.baselines`)
 and :func:`evaluate_scenes` (:mod:`~mrstereo.evaluation.report`). User guide: docs/evaluation.md.
+Conventions: docs/conventions.md.
 """
 from .baselines import BMSettings, SGBMSettings, disparity_from_opencv, stereo_bm, stereo_sgbm
 from .datasets import LAYOUTS, Scene, load_scene, load_scenes, photometric_error

@@ -3,6 +3,7 @@
 Both match the gray image with ``minDisparity = 0`` and ``numDisparities`` the range rounded up to
 16; :func:`disparity_from_opencv` turns OpenCV's int16 x16 output into float32 pixels, NaN invalid.
 The settings and why SGBM runs ``MODE_SGBM_3WAY``: docs/evaluation.md, "Baselines".
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -213,8 +213,7 @@ def _uint8_view(path: Path) -> np.ndarray:
 
 
 def _eight_bit_gt(path: Path) -> np.ndarray:
-    raw = read_image(path, gray=True)
-    return raw.astype(np.float32)
+    return read_image(path, gray=True).astype(np.float32)
 
 
 def _scaled(raw: np.ndarray, scale: float, offset: float = 0.0) -> np.ndarray:

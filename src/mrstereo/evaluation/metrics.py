@@ -4,6 +4,7 @@ On the evaluated region (finite ground truth, inside the non-occluded mask when 
 pixel is bad at threshold ``t`` when ``|d - d_gt| > t`` (Scharstein & Szeliski 2002). ``dense``
 counts every evaluated pixel, an invalid estimate as bad and as ``d = 0`` in the errors;
 ``estimated`` only the pixels with an estimate. Definitions: docs/evaluation.md, "Metrics".
+Conventions: docs/conventions.md.
 
 References
 ----------

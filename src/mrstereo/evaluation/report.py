@@ -4,7 +4,7 @@
 search range (``"mrstereo"``: the ``"robust"`` preset; ``"mrstereo-paper"``: NSSD + WTA as eq. 9-10;
 the OpenCV baselines), scores and times it. Each method first runs once on a 64-row strip, so
 one-off costs (numba compilation, OpenCV threads) are not charged to a scene. User guide:
-docs/evaluation.md.
+docs/evaluation.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -7,6 +7,7 @@ obstacle points on the vertical line over it, which the occupancy grid treats li
 surface. The rules (one :class:`FreeSpaceConfig` field each, applied by the numba kernel
 ``_freespace_kernels.column_boundaries``): docs/mapping.md, "Free-space boundary". Sizes are for
 a 320x240 image; a larger one is first reduced by an integer factor (:func:`_reduced`).
+Conventions: docs/conventions.md.
 
 References
 ----------

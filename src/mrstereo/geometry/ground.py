@@ -6,7 +6,7 @@ cos(theta) / (h f_y)``, ``c = b f sin(theta) / h``, of the row-by-disparity hist
 "V-disparity" of Labayrade et al.), on which obstacles stand as vertical segments; hence
 ``tan(theta) = c / (a f_y)``, ``h = b f cos(theta) / (a f_y)``. A 3D plane fit also recovers the
 roll: ``n = (sin(roll) cos(tilt), cos(roll) cos(tilt), sin(tilt))``. User guide:
-docs/obstacles.md.
+docs/obstacles.md. Conventions: docs/conventions.md.
 
 References
 ----------
@@ -104,11 +104,9 @@ class GroundPlane:
 
 
 def ground_from_mount(mount: CameraMount, *, R_rect_from_cam=None) -> GroundPlane:
-    """The floor (base ``z = 0``) seen from a camera mount, in the rectified left frame; keeps its transform.
-
-    The mount is the pose of the physical (raw) left camera; points are triangulated in the
-    rectified left frame, turned by ``R_rect_from_cam`` (camera_info ``R`` of the left camera,
-    default identity): ``T_base_from_rect = T_base_from_cam @ R^T``.
+    """The floor (base ``z = 0``) of a camera mount in the rectified left frame (``T_base_from_rect =
+    T_base_from_cam @ R^T`` with the left camera_info ``R_rect_from_cam``, default identity); keeps
+    the transform.
     """
     _checks.instance("mount", mount, CameraMount)
     T = mount.T_base_from_rectified(R_rect_from_cam)

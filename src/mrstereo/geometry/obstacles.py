@@ -5,6 +5,7 @@ into the robot frame. A point is an **obstacle** when ``min_obstacle_height_m < 
 max_obstacle_height_m`` (as costmap_2d), **floor** when ``|z| <= floor_tolerance_m``, else
 ignored. A too-near pixel (``DisparityResult.too_near``) is placed at the near-limit depth and
 classified by the same rules, never as floor (fail-safe). User guide: docs/obstacles.md.
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -197,8 +198,8 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     """
     _checks.instance("stereo", stereo, StereoCamera)
     _checks.instance("config", config, ObstacleConfig)
-    if ground is not None and not isinstance(ground, GroundPlane):
-        raise TypeError(f"ground must be a GroundPlane, got {type(ground).__name__}")
+    if ground is not None:
+        _checks.instance("ground", ground, GroundPlane)
     d = _disparity_image(disparity_px)
     if (d.shape[1], d.shape[0]) != tuple(stereo.size):
         raise ValueError(f"disparity_px is {d.shape[1]}x{d.shape[0]} but the calibration is "

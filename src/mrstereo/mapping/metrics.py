@@ -2,7 +2,7 @@
 
 The paper judges its map by eye against the true corridor walls; :func:`map_metrics` measures
 occupied-cell precision and recall, the profile error (metres) and the free space mapped free.
-Definitions: docs/mapping.md.
+Definitions: docs/mapping.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

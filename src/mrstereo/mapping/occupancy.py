@@ -314,9 +314,8 @@ def _ray_ends(obstacles: np.ndarray, floor: np.ndarray, sx: float, sy: float, gr
 
 
 def _known_occupied(value, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
-    """``(mask, z_range_m)`` of :meth:`OccupancyGrid.known_occupied`, checked against ``grid``.
-
-    Cells without heights (never hit by 3-D points) reach from -inf to inf: every sight line meets them.
+    """``(mask, z_range_m)`` of :meth:`OccupancyGrid.known_occupied` checked against ``grid``; cells
+    without heights reach from -inf to inf (every sight line meets them).
     """
     try:
         mask, z = value
@@ -335,10 +334,8 @@ def _known_occupied(value, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _supported(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:
-    """Obstacle points whose cell holds at least ``min_points`` of them (others dropped).
-
-    Points inside the grid are counted per cell by a kernel; the few outside it are grouped by
-    their (row, col) keys with ``np.unique`` (cells outside the grid never equal cells inside).
+    """Obstacle points whose cell holds at least ``min_points`` of them: counted per cell by a kernel
+    inside the grid, grouped by ``(row, col)`` keys with ``np.unique`` outside it.
     """
     counts = np.zeros(grid.shape, np.int64)
     cell = np.empty(len(points), np.int64)
@@ -422,15 +419,9 @@ class OccupancyGrid:
                                      known_occupied=known))
 
     def known_occupied(self, p_min: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Cells held occupied with probability at least ``p_min`` (default ``config.map_occlusion_p``,
-        else ``occupied_thresh``) and the height range of the obstacle points seen in each cell.
-
-        Returns
-        -------
-        mask : ndarray of bool, shape grid.shape
-        z_range_m : ndarray of shape grid.shape + (2,)
-            Lowest and highest obstacle point (metres above the floor) over the views that hit the
-            cell; (inf, -inf) where no point had a height.
+        """``(mask, z_range_m)``: the cells held occupied with probability at least ``p_min`` (default
+        ``config.map_occlusion_p``, else ``occupied_thresh``), and the lowest and highest obstacle point
+        (metres above the floor) over the views that hit each cell ((inf, -inf) without heights).
         """
         if p_min is None:
             p_min = self.config.map_occlusion_p if self.config.map_occlusion_p is not None else self.config.occupied_thresh

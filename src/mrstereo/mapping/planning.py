@@ -2,7 +2,7 @@
 
 8-connected A* with the octile heuristic (admissible and consistent) and no corner cutting;
 every cell within ``robot_radius_m`` of an occupied cell is blocked (the lethal zone of Nav2's
-inflation layer). User guide: docs/mapping.md, "Planning".
+inflation layer). User guide: docs/mapping.md, "Planning". Conventions: docs/conventions.md.
 
 References
 ----------

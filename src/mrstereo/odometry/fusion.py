@@ -7,7 +7,7 @@ measured by both, each with the covariance of its expected error over the step's
 the information-weighted mean ``(P_g^-1 + P_v^-1)^-1 (P_g^-1 g + P_v^-1 v)``; a visual step
 counts only between two tracked frames and within ``gate_sigmas`` (Mahalanobis distance) of the
 given one. On a chain of steps this is the least-squares pose graph of both odometries. User
-guide: docs/odometry.md.
+guide: docs/odometry.md. Conventions: docs/conventions.md.
 
 References
 ----------

@@ -14,7 +14,7 @@ docs/odometry.md.
 Poses are of the robot base in the world, ``T_world_from_base = T_world_from_cam @
 inv(T_base_from_cam)`` with each frame's camera mount; a frame's pose is kept relative to its
 keyframe, so :meth:`StereoOdometry.trajectory` follows the refined keyframes, while
-:meth:`StereoOdometry.step` returns the pose as known at that frame.
+:meth:`StereoOdometry.step` returns the pose as known at that frame. Conventions: docs/conventions.md.
 
 References
 ----------

@@ -3,7 +3,7 @@
 TUM format: one line ``t tx ty tz qx qy qz qw`` per pose (the base in the world), ``#`` comments.
 Metrics (:func:`trajectory_metrics`; definitions in docs/odometry.md, Metrics): ATE after a
 rigid Umeyama alignment (``evo_ape -a``) and unaligned, RPE per metre over consecutive segments
-(``evo_rpe --delta 1 --delta_unit m``), end-point error.
+(``evo_rpe --delta 1 --delta_unit m``), end-point error. Conventions: docs/conventions.md.
 
 References
 ----------

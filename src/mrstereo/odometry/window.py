@@ -12,6 +12,7 @@ observable in every keyframe; the oldest keyframes stay fixed (the gauge). Leven
 on the normal equations with the landmarks eliminated (Schur complement; numba kernels), the
 rotation's derivative in Gallego and Yezzi's closed form
 (:func:`mrstereo.transforms.rotation_jacobian_factor`). User guide: docs/odometry.md.
+Conventions: docs/conventions.md.
 
 References
 ----------

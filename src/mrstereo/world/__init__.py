@@ -2,6 +2,7 @@
 
 The built-in default data of mrstereo (paper Sec. 5, Figs. 7 and 11-14) and randomized worlds
 drawn from a seed. User guide: docs/world.md; dataset layout: docs/dataset.md.
+Conventions: docs/conventions.md.
 """
 from ..recordings.manifest import FrameRecord, Manifest, read_manifest, write_manifest
 from .dataset import corridor_path, poses_along, write_synthetic_dataset

@@ -1,6 +1,6 @@
 """PNG figures of stereo frames and disparity maps (matplotlib Agg), written atomically.
 
-Disparity colours come from ``mrstereo.viz.plot``, as everywhere.
+Disparity colours come from ``mrstereo.viz.plot``, as everywhere. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 
 ``stops`` (paper Sec. 5.2), ``front``, ``s-curve``, a randomized world's waypoints and the
 ``street`` drive; :func:`drifted_poses` corrupts a path as wheel odometry would. Each path:
-docs/world.md and docs/odometry.md.
+docs/world.md and docs/odometry.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 :func:`random_world` draws the corridor, its textures, lights, obstacles, side rooms, doors, the
 stereo head, the cameras' sensors and a robot path from ``numpy.random.default_rng`` in a fixed
 order, so a seed always gives the same world. What is drawn from which range, and which seeds
-choose the defaults: docs/world.md.
+choose the defaults: docs/world.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -96,7 +96,6 @@ def random_stereo(rng, width: int = 320, height: int = 240) -> StereoCamera:
                         mount=CameraMount.from_rig(height_m, tilt_rad, R_rect_from_cam=Rs[0]))
 
 
-# --------------------------------------------------------------------------- texture bank
 # Material banks: kind -> (texture, albedo, contrast, scale_m[, period_m]), each number drawn
 # uniformly from a (lo, hi) pair, in this order, or constant; (lo, hi, k) is a draw scaled by k.
 _WALL = {"paint": (TEXTURE_WEAK, (0.45, 0.85), (0.01, 0.05), (0.1, 0.5)),     # a few grey levels

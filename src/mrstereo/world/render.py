@@ -3,7 +3,7 @@
 :func:`default_stereo` is the *true* calibration of the simulated rig; :func:`render_stereo_frame`
 renders the raw cameras (rays through the distortion model, paper eq. 1-3, then ``R``), the ideally
 rectified pair and the ground truth of the rectified left camera: disparity ``d = b f / Z``
-(eq. 14), depth and labels. User guide: docs/world.md.
+(eq. 14), depth and labels. User guide: docs/world.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

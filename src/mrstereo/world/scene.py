@@ -3,7 +3,7 @@
 Axis-aligned boxes, vertical cylinders and decals painted on walls; textures are deterministic
 functions of world surface coordinates keyed by ``Scene.seed``, so every camera sees the same
 surface. Floor, walls and ceiling are weakly textured (what eq. (13) rejects). The corridor:
-docs/world.md.
+docs/world.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 
 :func:`street_world` draws a road along +x between rows of buildings, side streets, parked
 cars, poles and trees, and a KITTI-like rig (0.5 m baseline, level, 1.65 m up); the path is
-:func:`mrstereo.world.paths.speed_path`. User guide: docs/world.md.
+:func:`mrstereo.world.paths.speed_path`. User guide: docs/world.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

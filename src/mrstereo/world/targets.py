@@ -3,6 +3,7 @@
 A planar target (``z = 0`` of its frame) placed at ``points_cam = R p + t`` in the raw left
 camera, rendered with the true lens distortion (eq. 1-3), anti-aliasing and noise; ``points_px``
 are the exact control points the calibration (eq. 4-8) fits. User guide: docs/world.md.
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
