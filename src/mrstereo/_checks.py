@@ -14,6 +14,16 @@ from numbers import Real
 import numpy as np
 
 
+def instance(name: str, value, types, what: str | None = None):
+    """Return ``value``, raising ``TypeError`` naming the argument unless it is one of ``types`` (a type or a
+    tuple of types; ``what`` names them in the message)."""
+    if not isinstance(value, types):
+        names = what or " or ".join(t.__name__ for t in (types if isinstance(types, tuple) else (types,)))
+        article = "an" if names[0] in "AEIOU" else "a"
+        raise TypeError(f"{name} must be {article} {names}, got {type(value).__name__}")
+    return value
+
+
 def finite_number(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
     """Return ``value`` as a float, raising if it is not a finite real number."""
     if isinstance(value, bool) or not isinstance(value, (Real, np.floating, np.integer)):
@@ -35,14 +45,6 @@ def positive_int(name: str, value, *, minimum: int = 1) -> int:
     if value < minimum:
         raise ValueError(f"{name} must be >= {minimum}, got {value}")
     return int(value)
-
-
-def instance(name: str, value, types, what: str | None = None):
-    """``value`` when it is one of ``types``, else ``TypeError`` naming the argument and what arrived."""
-    if not isinstance(value, types):
-        names = what or " or ".join(t.__name__ for t in (types if isinstance(types, tuple) else (types,)))
-        raise TypeError(f"{name} must be a {names}, got {type(value).__name__}")
-    return value
 
 
 def instances(name: str, values, types):
