@@ -517,8 +517,8 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
     live : LiveConfig
         Rate, saving, workers, odometry.
     sinks : sequence
-        Objects with ``frame(LiveFrame)`` and ``close()`` (viewers, a ROS bag), called for every mapped
-        frame in order.
+        Objects with ``frame(LiveFrame)``, ``close()`` and ``discard()`` (viewers, a ROS bag):
+        ``frame`` for every mapped frame in order, ``close`` at the end, ``discard`` after an error.
     stop : threading.Event, optional
         Set it (from a signal handler, another thread) to end the run: the frames in flight are
         finished and the outputs written. KeyboardInterrupt does the same and is raised again after.
@@ -642,7 +642,7 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
                 t.join(timeout=5.0)
             writer.close()
             for sink in sinks:
-                _close_quietly(sink)
+                _discard_quietly(sink)
             raise
         finally:
             requested = stop.is_set()
@@ -663,9 +663,9 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
     return run
 
 
-def _close_quietly(sink) -> None:
+def _discard_quietly(sink) -> None:
     try:
-        sink.close()
+        sink.discard()
     except Exception:
         pass
 
