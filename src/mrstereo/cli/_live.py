@@ -15,7 +15,7 @@ from ..pipeline.live import LIVE_FILES, LIVE_GRID, LiveConfig
 from ..pipeline.run import PipelineConfig
 from ._options import CALIB_HELP, mount_from_options, mount_option, profile_option
 
-__all__ = ["COMMANDS", "viewer_option", "record_bag_option"]
+__all__ = ["COMMANDS", "viewer_option", "record_bag_option", "check_sink_options", "replayed_to_sinks"]
 
 VIEWERS = ("none", "rerun", "foxglove")
 
@@ -33,6 +33,55 @@ def record_bag_option(func):
     return click.option("--record-bag", "record_bag", type=click.Path(file_okay=False, path_type=Path),
                         help="Also write a ROS 2 bag (MCAP) to this new folder: /scan, /points, /map, /odom, "
                              "/tf (docs/live.md).")(func)
+
+
+VIEW_SUFFIXES = {"rerun": ".rrd", "foxglove": ".mcap"}
+"""The file each viewer's stream is saved to: the view stem (OUT/view for live and map) with this suffix."""
+
+
+def check_sink_options(viewers, record_bag: Path | None, view_stem: Path, inputs, *,
+                       output_dirs=()) -> tuple[str, ...]:
+    """Check ``--viewer`` (its package installed, its file ``view_stem`` + .rrd/.mcap) and ``--record-bag``
+    (a new folder apart from the inputs and the ``output_dirs``) before any work; the viewers asked for."""
+    from ..io import check_output_dir, check_outputs
+
+    viewers = tuple(dict.fromkeys(v for v in viewers if v != "none"))
+    if viewers:
+        from ..viz.live import require_viewers
+
+        require_viewers(viewers)
+        files = [view_stem.with_suffix(VIEW_SUFFIXES[v]) for v in viewers]
+        check_outputs({f"--viewer {v} (writes {f})": f for v, f in zip(viewers, files)}, inputs)
+    if record_bag is not None:
+        folders = [Path(p) for p in inputs if p is not None and Path(p).is_dir()]
+        check_output_dir("--record-bag", record_bag, inputs=[p for p in inputs if p is not None],
+                         input_dirs=folders + list(output_dirs), must_be_empty=True,
+                         input_kind="input or output folder")
+        if record_bag.exists():
+            raise click.BadParameter(f"{record_bag} exists; give a new folder (a bag is a folder of its own)",
+                                     param_hint="--record-bag")
+    return viewers
+
+
+def replayed_to_sinks(replay, stereo, view_stem: Path, viewers, record_bag: Path | None) -> None:
+    """Open the sinks of ``--viewer``/``--record-bag`` of a finished run (the viewers' files only: the run is
+    over), call ``replay(sinks)``, close them (discard on error) and say what was written."""
+    from ..pipeline.sinks import open_sinks
+
+    sinks = open_sinks(stereo, view_stem, viewers=viewers, record_bag=record_bag, rerun_mode="none",
+                       foxglove_port=None)
+    try:
+        replay(sinks)
+    except BaseException:
+        for sink in sinks:
+            sink.discard()
+        raise
+    for sink in sinks:
+        sink.close()
+    for viewer in viewers:
+        click.echo(f"wrote {view_stem.with_suffix(VIEW_SUFFIXES[viewer])} ({viewer})")
+    if record_bag is not None:
+        click.echo(f"wrote the ROS 2 bag {record_bag}")
 
 
 def _pair(text: str, option: str, kind=float, sep: str = ","):
@@ -115,25 +164,12 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
     (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
     grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
     size = _pair(camera_size, "--camera-size", int, "x") if camera_size else None
-    viewers = tuple(v for v in viewers if v != "none")
-    sinks_needed = bool(viewers) or record_bag is not None
-    if viewers:
-        from ..viz.live import require_viewers
-
-        require_viewers(viewers)
     file_inputs = [Path(s) for s in sources if not is_camera(s)] + ([calib] if calib is not None else [])
     check_output_dir("--out", out_dir, inputs=file_inputs,
                      input_dirs=[p for p in file_inputs if p.is_dir()])
-    outputs = {f"--out {out_dir / name}": out_dir / name for name in LIVE_FILES}
-    if "rerun" in viewers:
-        outputs[f"--out {out_dir / 'view.rrd'}"] = out_dir / "view.rrd"
-    if "foxglove" in viewers:
-        outputs[f"--out {out_dir / 'view.mcap'}"] = out_dir / "view.mcap"
-    check_outputs(outputs, file_inputs)
-    if record_bag is not None:
-        check_output_dir("--record-bag", record_bag, inputs=file_inputs + [out_dir],
-                         input_dirs=[p for p in file_inputs if p.is_dir()] + [out_dir], must_be_empty=True,
-                         input_kind="input or output folder")
+    check_outputs({f"--out {out_dir / name}": out_dir / name for name in LIVE_FILES}, file_inputs)
+    viewers = check_sink_options(viewers, record_bag, out_dir / "view", file_inputs, output_dirs=[out_dir])
+    sinks_needed = bool(viewers) or record_bag is not None
     stereo = read_stereo(calib) if calib is not None else None
     with open_source(sources, side_by_side=side_by_side, prefer_raw=calib is not None, size=size,
                      rate_hz=camera_fps) as source:
@@ -149,7 +185,7 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
             if sinks_needed:
                 from ..pipeline.sinks import open_sinks
 
-                sinks = open_sinks(stereo, out_dir, viewers=viewers, record_bag=record_bag, echo=click.echo)
+                sinks = open_sinks(stereo, out_dir / "view", viewers=viewers, record_bag=record_bag, echo=click.echo)
             stop = threading.Event()
             with _stop_on_signals(stop, quiet):
                 run = run_live(source, out_dir, calibration=stereo, mount=camera_mount, config=config, live=live,

@@ -11,6 +11,7 @@ import click
 
 from ..pipeline.odometry import odometry_from_manifest
 from ._bag import bag_options, opened_dataset
+from ._live import check_sink_options, record_bag_option, replayed_to_sinks, viewer_option
 from ._options import library_default, profile_option
 
 __all__ = ["COMMANDS"]
@@ -34,9 +35,12 @@ __all__ = ["COMMANDS"]
 @click.option("--bag", "bag", type=click.Path(path_type=Path),
               help="A ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
 @bag_options
+@viewer_option
+@record_bag_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | None, metrics_path: Path | None,
-                     calib: Path | None, start: str, bag: Path | None, quiet: bool, **bag_kw) -> None:
+                     calib: Path | None, start: str, bag: Path | None, viewers: tuple[str, ...],
+                     record_bag: Path | None, quiet: bool, **bag_kw) -> None:
     """Stereo visual odometry of a recording or a ROS bag.
 
     DATASET is a dataset folder or its manifest.yaml (docs/dataset.md) or a KITTI odometry
@@ -61,6 +65,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     inputs = [p for p in (manifest, bag, calib) if p is not None]
     for p in outputs:
         refuse_overwrite_input(p, inputs)
+    viewers = check_sink_options(viewers, record_bag, out_path.with_suffix(""), inputs)
     with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, stamps):
         if bag is None:
             for p in outputs:
@@ -102,6 +107,13 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
             curves["ground truth"] = ((np.linalg.inv(truth[0]) if start == "origin" else np.eye(4)) @ truth)[:, :3, 3]
         plot_trajectories(plot_path, curves, lost=~run.tracked, title=f"visual odometry, {len(run.status)} frames")
     click.echo(f"wrote {', '.join(str(p) for p in outputs)}")
+    if viewers or record_bag is not None:
+        from ..pipeline.sinks import replay_odometry
+
+        mount = dataset.mount.T_base_from_rectified((stereo or dataset.calibration).left.R) \
+            if dataset.mount is not None else None
+        replayed_to_sinks(lambda sinks: replay_odometry(stamps, run.T_world_from_base, sinks, T_base_from_cam=mount),
+                          stereo or dataset.calibration, out_path.with_suffix(""), viewers, record_bag)
 
 
 COMMANDS = [odometry_command]

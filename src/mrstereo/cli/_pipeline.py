@@ -11,6 +11,7 @@ import click
 from ..mapping import GridSpec, MappingConfig
 from ..pipeline.run import PipelineConfig, build_map
 from ._bag import bag_options, opened_dataset
+from ._live import check_sink_options, record_bag_option, replayed_to_sinks, viewer_option
 from ._options import check_workers, echo_run_floor, library_default, profile_option, worker_options
 
 __all__ = ["COMMANDS"]
@@ -50,10 +51,13 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
 @click.option("--bag", "bag", type=click.Path(path_type=Path),
               help="Map a ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
 @bag_options
+@viewer_option
+@record_bag_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
                 resolution_m: float, size_m: str, origin_m: str, odometry: str, align: bool, workers: int | None,
-                scheduler: str | None, processes: bool, bag: Path | None, quiet: bool, **bag_kw) -> None:
+                scheduler: str | None, processes: bool, bag: Path | None, viewers: tuple[str, ...],
+                record_bag: Path | None, quiet: bool, **bag_kw) -> None:
     """Build an occupancy grid map from a recording or a ROS bag.
 
     DATASET is a dataset folder or its manifest.yaml (docs/dataset.md) or a KITTI odometry
@@ -82,11 +86,14 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
     check_output_dir("--out", out_dir)
     outputs = {f"--out {out_dir / name}": out_dir / name for name in MAP_FILES}     # (names the file)
     if bag is not None:
-        check_outputs(outputs, [bag, calib], input_dirs=[bag] if bag.is_dir() else [])
+        inputs = [bag, calib]
+        check_outputs(outputs, inputs, input_dirs=[bag] if bag.is_dir() else [])
     else:
         dataset = read_recording(manifest)           # read once: checked here, mapped below
-        check_outputs(outputs, [manifest, calib] + dataset_files(dataset))
+        inputs = [manifest, calib] + dataset_files(dataset)
+        check_outputs(outputs, inputs)
         manifest = dataset
+    viewers = check_sink_options(viewers, record_bag, out_dir / "view", inputs, output_dirs=[out_dir])
     with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes, odometry=odometry, align=align or None)
@@ -110,6 +117,11 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
                    f"measured visually ({a['rejected_visual_steps']} rejected), the poses moved by "
                    f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg on average")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
+    if viewers or record_bag is not None:
+        from ..pipeline.sinks import replay_map_run
+
+        replayed_to_sinks(lambda sinks: replay_map_run(run, sinks, config=config), run.manifest.calibration,
+                          out_dir / "view", viewers, record_bag)
 
 
 def _pair(text: str, option: str) -> tuple[float, float]:

@@ -145,28 +145,29 @@ class BagSink:
         self.writer.discard()
 
 
-def open_sinks(stereo: StereoCamera, out_dir: str | os.PathLike, *, viewers: Sequence[str] = (),
-               record_bag: str | os.PathLike | None = None, foxglove_port: int | None = 8765, rerun_mode: str | None = None,
-               echo: Callable[[str], None] | None = None) -> list:
-    """The sinks a run's options ask for: ``viewers`` (``"rerun"``: OUT/view.rrd, and a viewer spawned
-    with a display or served on localhost; ``"foxglove"``: OUT/view.mcap and a websocket server on
-    ``foxglove_port``), and a ROS 2 bag at ``record_bag``. ``echo`` is told where to look."""
+def open_sinks(stereo: StereoCamera, view_stem: str | os.PathLike, *, viewers: Sequence[str] = (),
+               record_bag: str | os.PathLike | None = None, foxglove_port: int | None = 8765,
+               rerun_mode: str | None = None, echo: Callable[[str], None] | None = None) -> list:
+    """The sinks a run's options ask for: ``viewers`` (``"rerun"``: ``view_stem``.rrd, and a viewer spawned
+    with a display or served on localhost, or neither with ``rerun_mode="none"``; ``"foxglove"``:
+    ``view_stem``.mcap and a websocket server on ``foxglove_port``, None: none), and a ROS 2 bag at
+    ``record_bag``. ``echo`` is told where to look."""
     from ..viz.live import FoxgloveLogger, RerunLogger, require_viewers
 
     require_viewers(viewers)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    stem = Path(view_stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
     sinks = []
     try:
         for viewer in viewers:
             if viewer == "rerun":
                 mode = rerun_mode or ("spawn" if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
                                       else "serve")
-                logger = RerunLogger(rrd_path=out / "view.rrd", mode=mode)
+                logger = RerunLogger(rrd_path=stem.with_suffix(".rrd"), mode=mode)
                 if echo is not None and logger.url:
                     echo(f"rerun: open {logger.url} in a browser (or `rerun {logger.url.split('url=')[-1]}`)")
             else:
-                logger = FoxgloveLogger(mcap_path=out / "view.mcap", port=foxglove_port)
+                logger = FoxgloveLogger(mcap_path=stem.with_suffix(".mcap"), port=foxglove_port)
                 if echo is not None and logger.url:
                     echo(f"foxglove: connect the Foxglove app to {logger.url}")
             sinks.append(ViewerSink(logger, stereo))
