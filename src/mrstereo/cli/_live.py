@@ -105,6 +105,8 @@ def _pair(text: str, option: str, kind=float, sep: str = ","):
 @click.option("--realtime", is_flag=True,
               help="Replay a video file or recording at its recorded rate: the newest frame wins, the others are "
                    "dropped and counted (a camera always runs in real time).")
+@click.option("--speed", type=float, default=LiveConfig.speed, show_default=True,
+              help="With --realtime: replay this many times faster than recorded (0.5: half speed).")
 @click.option("--max-frames", type=click.IntRange(min=1), default=None, help="Stop after N frames from the source.")
 @click.option("--save-every", "save_every_s", type=float, default=LiveConfig.save_every_s, show_default=True,
               help="Write the outputs every S seconds (and at the end).")
@@ -134,8 +136,8 @@ def _pair(text: str, option: str, kind=float, sep: str = ","):
 @mount_option
 @click.option("--quiet", is_flag=True, help="No progress line.")
 def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, side_by_side: bool, realtime: bool,
-                 max_frames: int | None, save_every_s: float, odometry: str | None, viewers: tuple[str, ...],
-                 record_bag: Path | None, preset: str, fusion: str, resolution_m: float, size_m: str, origin_m: str,
+                 speed: float, max_frames: int | None, save_every_s: float, odometry: str | None,
+                 viewers: tuple[str, ...], record_bag: Path | None, preset: str, fusion: str, resolution_m: float, size_m: str, origin_m: str,
                  workers: int, camera_size: str | None, camera_fps: float | None, height_m: float | None,
                  tilt_rad: float | None, mount, quiet: bool) -> None:
     """Map while the robot drives: stereo cameras, video files or a recording in, a map out as it grows.
@@ -159,8 +161,9 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
 
     if len(sources) > 2:
         raise click.UsageError(f"give one or two SOURCEs (left and right), got {len(sources)}")
-    if not (save_every_s > 0 and save_every_s < float("inf")):
-        raise click.BadParameter(f"must be a number > 0, got {save_every_s}", param_hint="--save-every")
+    for value, option in ((save_every_s, "--save-every"), (speed, "--speed")):
+        if not (value > 0 and value < float("inf")):
+            raise click.BadParameter(f"must be a number > 0, got {value}", param_hint=option)
     (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
     grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
     size = _pair(camera_size, "--camera-size", int, "x") if camera_size else None
@@ -178,8 +181,8 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
             raise click.UsageError("cameras and video files need --calib (a stereo calibration)")
         camera_mount = mount_from_options(height_m, tilt_rad, mount, stereo)
         config = PipelineConfig(preset=preset, grid=grid).with_fusion(fusion)
-        live = LiveConfig(save_every_s=save_every_s, max_frames=max_frames, realtime=realtime, workers=workers,
-                          odometry=odometry)
+        live = LiveConfig(save_every_s=save_every_s, max_frames=max_frames, realtime=realtime, speed=speed,
+                          workers=workers, odometry=odometry)
         sinks = []
         try:
             if sinks_needed:

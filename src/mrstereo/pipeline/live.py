@@ -375,7 +375,8 @@ def write_live_outputs(out_dir: Path, snapshot: dict) -> dict[str, Path]:
     path = planar_from_T(T) if len(T) else None
     plot_map(_known_region(ros_map), files["map_png"], robot_path=path,
              title=f"live map, {len(T)} frames ({snapshot['metrics']['rate_hz']:.1f} Hz)")
-    write_tum(files["trajectory"], snapshot["stamps_s"], T, comment=snapshot["comment"])
+    if len(T):                  # (no pose yet: the floor is being estimated)
+        write_tum(files["trajectory"], snapshot["stamps_s"], T, comment=snapshot["comment"])
     with atomic_write(files["metrics"]) as tmp:
         tmp.write_text(json.dumps(snapshot["metrics"], indent=2))
     return files

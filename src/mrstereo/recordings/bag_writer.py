@@ -27,13 +27,28 @@ import numpy as np
 
 from ..transforms import quaternion_from_rotation
 
-__all__ = ["BagWriter", "BAG_TOPICS", "MAP_FRAME", "ODOM_FRAME", "BASE_FRAME", "CAMERA_FRAME"]
+__all__ = ["BagWriter", "BAG_TOPICS", "LATCHED_TOPICS", "MAP_FRAME", "ODOM_FRAME", "BASE_FRAME", "CAMERA_FRAME"]
 
 MAP_FRAME, ODOM_FRAME, BASE_FRAME, CAMERA_FRAME = "map", "odom", "base_link", "camera_left_optical_frame"
 BAG_TOPICS = {"/scan": "sensor_msgs/msg/LaserScan", "/points": "sensor_msgs/msg/PointCloud2",
               "/map": "nav_msgs/msg/OccupancyGrid", "/odom": "nav_msgs/msg/Odometry",
               "/tf": "tf2_msgs/msg/TFMessage", "/tf_static": "tf2_msgs/msg/TFMessage"}
 """Every topic the writer creates and its message type."""
+
+LATCHED_TOPICS = ("/tf_static", "/map")
+"""Offered as transient local (latched), as robot_state_publisher and map_server offer them: a node that
+subscribes after ``ros2 bag play`` sent them still gets the last message."""
+
+
+def _qos(latched: bool) -> list:
+    """The QoS profile recorded for a topic: reliable, keep last 1 (latched) or 10."""
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    never = QosTime(sec=0, nsec=0)
+    return [Qos(history=QosHistory.KEEP_LAST, depth=1 if latched else 10, reliability=QosReliability.RELIABLE,
+                durability=QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE, deadline=never,
+                lifespan=never, liveliness=QosLiveliness.AUTOMATIC, liveliness_lease_duration=never,
+                avoid_ros_namespace_conventions=False)]
 
 
 class BagWriter:
@@ -60,7 +75,8 @@ class BagWriter:
         self.T = self.ts.types
         self._writer = Writer(self._tmp / self.path.name, version=9, storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
-        self._conn = {topic: self._writer.add_connection(topic, msgtype, typestore=self.ts)
+        self._conn = {topic: self._writer.add_connection(topic, msgtype, typestore=self.ts,
+                                                         offered_qos_profiles=_qos(topic in LATCHED_TOPICS))
                       for topic, msgtype in BAG_TOPICS.items()}
         self.counts = dict.fromkeys(BAG_TOPICS, 0)
 
