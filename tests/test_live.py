@@ -333,10 +333,9 @@ def test_live_command_errors_are_one_line(sequence, tmp_path):
         assert len(lines) == 1 and lines[0].startswith("mrstereo: error:") and words in lines[0], result.stderr
 
 
-def test_ctrl_c_stops_the_run_and_keeps_whole_outputs(sequence, tmp_path):
-    dataset, _, _ = sequence
-    out = tmp_path / "out"
-    # the recording replayed at a tenth of its rate: 12 s, stopped with Ctrl-C after the first save
+def _interrupted(dataset, out, *, twice: bool):
+    """``live`` on the recording replayed at a tenth of its rate (12 s), Ctrl-C once the first outputs are
+    written (and again half a second later): ``(returncode, stdout, stderr)``."""
     proc = subprocess.Popen([sys.executable, "-m", "mrstereo", "live", str(dataset), "-o", str(out), "--realtime",
                              "--speed", "0.1", "--save-every", "0.5", "--size", "12,6", "--origin", "0,-3", "--quiet"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -347,11 +346,20 @@ def test_ctrl_c_stops_the_run_and_keeps_whole_outputs(sequence, tmp_path):
         assert proc.poll() is None, proc.communicate()
         time.sleep(0.5)
         proc.send_signal(signal.SIGINT)
+        if twice:
+            time.sleep(0.5)                 # (two signals at once reach Python's handler as one)
+            proc.send_signal(signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == 0, stderr
+    return proc.returncode, stdout, stderr
+
+
+def test_ctrl_c_stops_the_run_and_keeps_whole_outputs(sequence, tmp_path):
+    out = tmp_path / "out"
+    code, stdout, stderr = _interrupted(sequence[0], out, twice=False)
+    assert code == 0, stderr
     assert "stopping" in stderr and "live (stopped)" in stdout
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["stopped"] == "stopped" and 0 < metrics["frames_in"] < 12
@@ -362,23 +370,9 @@ def test_ctrl_c_stops_the_run_and_keeps_whole_outputs(sequence, tmp_path):
 
 
 def test_a_second_ctrl_c_aborts(sequence, tmp_path):
-    dataset, _, _ = sequence
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "mrstereo", "live", str(dataset), "-o", str(out), "--realtime",
-                             "--speed", "0.1", "--save-every", "0.5", "--size", "12,6", "--origin", "0,-3", "--quiet"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.time() + 300
-        while not (out / "metrics.json").is_file() and time.time() < deadline and proc.poll() is None:
-            time.sleep(0.1)
-        proc.send_signal(signal.SIGINT)
-        time.sleep(0.5)                 # (two signals at once reach Python's handler as one)
-        proc.send_signal(signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 130, stderr
+    code, _, stderr = _interrupted(sequence[0], out, twice=True)
+    assert code == 130, stderr
     assert "mrstereo: interrupted" in stderr
     assert json.loads((out / "metrics.json").read_text())["frames_in"] >= 1
 

@@ -140,7 +140,9 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
                  viewers: tuple[str, ...], record_bag: Path | None, preset: str, fusion: str, resolution_m: float, size_m: str, origin_m: str,
                  workers: int, camera_size: str | None, camera_fps: float | None, height_m: float | None,
                  tilt_rad: float | None, mount, quiet: bool) -> None:
-    """Map while the robot drives: stereo cameras, video files or a recording in, a map out as it grows.
+    """Map live from stereo cameras, video files or a recording.
+
+    Cameras, video files or a recording in, a map out as it grows.
 
     SOURCE is a camera (an index such as 0, or a device path such as /dev/video0), a video
     file, or a recording (whatever `mrstereo map` reads). Two SOURCEs are the left and right

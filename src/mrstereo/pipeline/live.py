@@ -291,7 +291,7 @@ def _rss_mb() -> float:
 
 
 def _peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0      # Linux: kilobytes
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e6      # Linux: kibibytes
 
 
 class _Growing:
@@ -496,6 +496,86 @@ def _match(item: _Matched, stereo: StereoCamera, mount: CameraMount | None, conf
     item.right_rect, item.pair, item.scan = right, result.frame, replace(result.scan, stamp_s=frame.stamp_s)
 
 
+class _Threads:
+    """Capture and matchers of a run and what they share: the slot, the matched frames in order, the
+    bound on frames in flight, errors, counts and CPU times."""
+
+    def __init__(self, source: FrameSource, stereo: StereoCamera, config: PipelineConfig, live: LiveConfig,
+                 fuser: _Fuser, stop: threading.Event) -> None:
+        self.source, self.stereo, self.config, self.live, self.fuser, self.stop = \
+            source, stereo, config, live, fuser, stop
+        self.slot = LatestFrame(lossless=not (source.realtime or live.realtime))
+        self.ordered = _Ordered()
+        self.in_flight = threading.Semaphore(live.workers)
+        self.errors: list[BaseException] = []
+        self.cpu: dict[str, float] = {}
+        self.counts = {"in": 0}
+        self.threads = [threading.Thread(target=self._capture, name="mrstereo-live-capture", daemon=True)]
+        self.threads += [threading.Thread(target=self._matcher, args=(k,), name=f"mrstereo-live-match-{k}",
+                                          daemon=True) for k in range(live.workers)]
+
+    def start(self) -> None:
+        for t in self.threads:
+            t.start()
+
+    def join(self) -> None:
+        self.stop.set()
+        for t in self.threads:
+            t.join(timeout=5.0)
+
+    def matching(self) -> bool:
+        """A matcher still runs."""
+        return any(t.is_alive() for t in self.threads[1:])
+
+    def _capture(self) -> None:
+        start, live, slot, stop = time.thread_time(), self.live, self.slot, self.stop
+        try:
+            frames = paced(self.source, speed=live.speed) if live.realtime and not self.source.realtime \
+                else self.source
+            for frame in frames:
+                if stop.is_set():
+                    break
+                self.counts["in"] += 1
+                if not slot.put(_Matched(frame=frame, arrival_s=time.perf_counter()), stop):
+                    self.counts["in"] -= 1
+                    break
+                if live.max_frames is not None and self.counts["in"] >= live.max_frames:
+                    self.counts["end"] = "max frames"
+                    break
+        except BaseException as exc:
+            self.errors.append(exc)
+            stop.set()
+        finally:
+            slot.close()
+            self.cpu["capture"] = time.thread_time() - start
+
+    def _matcher(self, k: int) -> None:
+        start = time.thread_time()
+        import numba
+
+        numba.set_num_threads(1)            # one core per matcher: the matchers are the parallelism
+        try:
+            while True:
+                while not self.in_flight.acquire(timeout=0.1):
+                    if self.stop.is_set():
+                        return
+                try:
+                    ticket, item = self.slot.take()
+                except StopIteration:
+                    self.in_flight.release()
+                    return
+                if item is None:
+                    self.in_flight.release()
+                    continue
+                try:
+                    _match(item, self.stereo, self.fuser.mount, self.config)
+                except BaseException as exc:
+                    item.error = exc
+                self.ordered.put(ticket, item)
+        finally:
+            self.cpu[f"matcher {k}"] = time.thread_time() - start
+
+
 def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: StereoCamera | None = None,
              mount: CameraMount | None = None, config: PipelineConfig | None = None,
              live: LiveConfig = LiveConfig(), sinks: Sequence = (), stop: threading.Event | None = None,
@@ -532,128 +612,34 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
     if not isinstance(live, LiveConfig):
         raise TypeError(f"live must be a LiveConfig, got {type(live).__name__}")
     config = PipelineConfig(grid=LIVE_GRID) if config is None else config
-    mount = mount or source.mount or stereo.mount
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    stop = stop or threading.Event()
     grid = OccupancyGrid(config.grid, config=config.mapping)
     run = LiveRun(grid=grid, stamps_s=np.empty(0), T_world_from_base=np.empty((0, 4, 4)), source=source.name)
-    fuser = _Fuser(stereo, source, config, live, mount, sinks, run)
-    lossless = not (source.realtime or live.realtime)
-    slot = LatestFrame(lossless=lossless)
-    ordered = _Ordered()
-    in_flight = threading.Semaphore(live.workers)
-    errors: list[BaseException] = []
-    cpu: dict[str, float] = {}
-    counts = {"in": 0}
-
-    def capture() -> None:
-        start = time.thread_time()
-        try:
-            frames = paced(source, speed=live.speed) if live.realtime and not source.realtime else source
-            for frame in frames:
-                if stop.is_set():
-                    break
-                counts["in"] += 1
-                if not slot.put(_Matched(frame=frame, arrival_s=time.perf_counter()), stop):
-                    counts["in"] -= 1
-                    break
-                if live.max_frames is not None and counts["in"] >= live.max_frames:
-                    counts["end"] = "max frames"
-                    break
-        except BaseException as exc:
-            errors.append(exc)
-            stop.set()
-        finally:
-            slot.close()
-            cpu["capture"] = time.thread_time() - start
-
-    def matcher(k: int) -> None:
-        start = time.thread_time()
-        import numba
-
-        numba.set_num_threads(1)            # one core per matcher: the matchers are the parallelism
-        try:
-            while True:
-                while not in_flight.acquire(timeout=0.1):
-                    if stop.is_set():
-                        return
-                try:
-                    ticket, item = slot.take()
-                except StopIteration:
-                    in_flight.release()
-                    return
-                if item is None:
-                    in_flight.release()
-                    continue
-                try:
-                    _match(item, stereo, fuser.mount, config)
-                except BaseException as exc:
-                    item.error = exc
-                ordered.put(ticket, item)
-        finally:
-            cpu[f"matcher {k}"] = time.thread_time() - start
-
-    profile = active() or Profile()
-    t_start = time.perf_counter()
-    cpu_start = time.process_time()
+    fuser = _Fuser(stereo, source, config, live, mount or source.mount or stereo.mount, sinks, run)
+    threads = _Threads(source, stereo, config, live, fuser, stop or threading.Event())
+    clock = _Clock(profile=active() or Profile())
     writer = _Writer(lambda snapshot: run.files.update(write_live_outputs(out, snapshot)))
-    threads = [threading.Thread(target=capture, name="mrstereo-live-capture", daemon=True)]
-    threads += [threading.Thread(target=matcher, args=(k,), name=f"mrstereo-live-match-{k}", daemon=True)
-                for k in range(live.workers)]
     interrupted = None
-    fuse_cpu = 0.0
-    with profiling(profile):
-        for t in threads:
-            t.start()
-        next_ticket, last_save = 0, time.perf_counter()
+    with profiling(clock.profile):
+        threads.start()
         try:
-            while True:
-                item = ordered.get(next_ticket, 0.1)
-                if item is None:
-                    if stop.is_set():
-                        slot.discard()
-                    if not any(t.is_alive() for t in threads[1:]) and next_ticket >= slot.tickets:
-                        break
-                else:
-                    next_ticket += 1
-                    in_flight.release()
-                    if item.error is not None:
-                        raise item.error
-                    t0 = time.thread_time()
-                    fuser.fuse(item, grid)
-                    fuse_cpu += time.thread_time() - t0
-                if writer.error is not None:
-                    raise writer.error
-                if errors:
-                    raise errors[0]
-                now = time.perf_counter()
-                if now - last_save >= live.save_every_s:
-                    last_save = now
-                    writer.submit(_snapshot(run, fuser, grid, slot, counts, t_start, cpu, cpu_start, profile,
-                                            fuse_cpu))
-                    if on_save is not None:
-                        on_save(run)
+            _fuse_in_order(threads, fuser, grid, writer, clock, on_save)
         except KeyboardInterrupt as exc:
             interrupted = exc
             run.stopped = "interrupted"
         except BaseException:
-            stop.set()
-            for t in threads:
-                t.join(timeout=5.0)
+            threads.join()
             writer.close()
             for sink in sinks:
                 _discard_quietly(sink)
             raise
         finally:
-            requested = stop.is_set()
-            stop.set()
-            for t in threads:
-                t.join(timeout=5.0)
+            requested = threads.stop.is_set()
+            threads.join()
     if run.stopped == "end of source":
-        run.stopped = counts.get("end", "stopped" if requested else "end of source")
-    final = _snapshot(run, fuser, grid, slot, counts, t_start, cpu, cpu_start, profile, fuse_cpu)
-    writer.submit(final)
+        run.stopped = threads.counts.get("end", "stopped" if requested else "end of source")
+    writer.submit(_snapshot(run, fuser, grid, threads, clock))
     writer.close()
     for sink in sinks:
         sink.close()
@@ -664,6 +650,47 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
     return run
 
 
+@dataclass
+class _Clock:
+    """When the run started (wall and CPU), the fuser's CPU time, the stage profile."""
+
+    profile: Profile
+    start_s: float = field(default_factory=time.perf_counter)
+    cpu_start_s: float = field(default_factory=time.process_time)
+    fuse_cpu_s: float = 0.0
+
+
+def _fuse_in_order(threads: _Threads, fuser: _Fuser, grid: OccupancyGrid, writer: _Writer, clock: _Clock,
+                   on_save: Callable[[LiveRun], None] | None) -> None:
+    """The fuser: the matched frames in the order taken into the map; a snapshot every ``save_every_s``."""
+    next_ticket, last_save = 0, time.perf_counter()
+    while True:
+        item = threads.ordered.get(next_ticket, 0.1)
+        if item is None:
+            if threads.stop.is_set():
+                threads.slot.discard()
+            if not threads.matching() and next_ticket >= threads.slot.tickets:
+                return
+        else:
+            next_ticket += 1
+            threads.in_flight.release()
+            if item.error is not None:
+                raise item.error
+            t0 = time.thread_time()
+            fuser.fuse(item, grid)
+            clock.fuse_cpu_s += time.thread_time() - t0
+        if writer.error is not None:
+            raise writer.error
+        if threads.errors:
+            raise threads.errors[0]
+        now = time.perf_counter()
+        if now - last_save >= fuser.live.save_every_s:
+            last_save = now
+            writer.submit(_snapshot(fuser.run, fuser, grid, threads, clock))
+            if on_save is not None:
+                on_save(fuser.run)
+
+
 def _discard_quietly(sink) -> None:
     try:
         sink.discard()
@@ -671,17 +698,16 @@ def _discard_quietly(sink) -> None:
         pass
 
 
-def _snapshot(run: LiveRun, fuser: _Fuser, grid: OccupancyGrid, slot: LatestFrame, counts: dict, t_start: float,
-              cpu: dict, cpu_start: float, profile: Profile, fuse_cpu: float) -> dict:
+def _snapshot(run: LiveRun, fuser: _Fuser, grid: OccupancyGrid, threads: _Threads, clock: _Clock) -> dict:
     """Bring the run's counts up to date and copy what the writer needs."""
-    run.frames_in = counts["in"]
-    run.frames_dropped = slot.dropped
-    run.duration_s = time.perf_counter() - t_start
+    run.frames_in = threads.counts["in"]
+    run.frames_dropped = threads.slot.dropped
+    run.duration_s = time.perf_counter() - clock.start_s
     run.latency_ms = fuser.latencies.view().copy()
     run.stamps_s = fuser.trajectory_t.view().copy()
     run.T_world_from_base = fuser.trajectory_T.view().copy()
-    run.cpu_s = {"process": time.process_time() - cpu_start, "fuser": fuse_cpu, **cpu}
-    run.stage_ms = profile.per_frame_ms(max(run.frames_processed, 1))
+    run.cpu_s = {"process": time.process_time() - clock.cpu_start_s, "fuser": clock.fuse_cpu_s, **threads.cpu}
+    run.stage_ms = clock.profile.per_frame_ms(max(run.frames_processed, 1))
     run.memory_mb, run.peak_memory_mb = _rss_mb(), _peak_rss_mb()
     metrics = run.metrics()
     comment = (f"mrstereo live: {run.source}; odometry {run.odometry}; {run.frames_mapped} frames mapped of "
