@@ -13,9 +13,9 @@ Topics and types (frame ids per REP 105):
                                             ``base_link`` -> the left camera's optical frame
 ============== ============================ =====================================================
 
-The bag is written into a hidden folder beside its destination and renamed into place when
-closed: a killed run leaves no half bag under the name. Conventions: docs/conventions.md;
-user guide: docs/live.md.
+``/map`` and ``/tf_static`` are offered latched (transient local). The bag is written into a hidden
+folder beside its destination and renamed into place when closed: a killed run leaves no half bag
+under the name. Conventions: docs/conventions.md; user guide: docs/live.md.
 """
 from __future__ import annotations
 
