@@ -265,9 +265,10 @@ def scenes(repeats: int, near_guard: float | None = None) -> None:
 
     config = preset_config("robust")
     if near_guard is not None:
-        config = config.replace(near_guard=near_guard)
+        config = config.replace(near_guard={"reach": near_guard} if near_guard > 0 else None)
     clock = "CPU time of the calling thread" if CLOCK is not time.perf_counter else "wall-clock"
-    print(f"matcher alone (robust preset, near_guard={config.near_guard:g}) vs StereoBM 9x9 over the same search, "
+    reach = 0 if config.near_guard is None else config.near_guard.reach
+    print(f"matcher alone (robust preset, near guard reach {reach:g}) vs StereoBM 9x9 over the same search, "
           f"640x480; {repeats} repeats, {clock}; load average {os.getloadavg()}")
     pairs = real_scenes()
     for threads in thread_counts():
@@ -302,7 +303,7 @@ def main() -> None:
                         help="stage times (scenes: run times) as CPU time of the calling thread, one thread only "
                              "(robust to other processes on a busy machine; wall-clock by default)")
     parser.add_argument("--near-guard", type=float, default=None,
-                        help="scenes: the matcher's near_guard (0 = without its too-near guard; default the preset's)")
+                        help="scenes: the reach of the matcher's too-near guard (0 = without the guard; default the preset's)")
     args = parser.parse_args()
     keep_freed_memory()          # as the mrstereo command does (for both chains of this process)
     if args.cpu:

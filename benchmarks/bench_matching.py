@@ -89,10 +89,10 @@ def speed(repeats: int) -> None:
 
     runs = {
         "mrstereo robust multi-range": run(robust),
-        "robust without gap filling": run(robust.replace(gap_fill_px=0)),
+        "robust without gap filling": run(robust.replace(postfilter={"gap_fill_px": 0})),
         "mrstereo paper multi-range": run(paper),
-        "mrstereo robust single-range": run(robust.replace(multi_range=False)),
-        "mrstereo paper single-range": run(paper.replace(multi_range=False)),
+        "mrstereo robust single-range": run(robust.replace(search={"multi_range": False})),
+        "mrstereo paper single-range": run(paper.replace(search={"multi_range": False})),
     }
     plan = compute_disparity(left, right, calibration=rig).plan
     print(f"pair: {what}\n{plan.describe()}\nload average: {os.getloadavg()}\n")
@@ -133,7 +133,7 @@ def near_sweep(repeats: int) -> None:
             multi_ms, single_ms, ratio = paired(
                 lambda: compute_disparity(left, right, calibration=rig, depth_bands_m=edges, config=config),
                 lambda: compute_disparity(left, right, calibration=rig, depth_bands_m=(near, 15.0),
-                                          config=config.replace(multi_range=False)), repeats)
+                                          config=config.replace(search={"multi_range": False})), repeats)
             print(f"| {near:g} m | {plan.levels[-1].band_px[1]:.0f} px | {work:.2f} | {1 / work:.1f}x | {name} | "
                   f"{multi_ms:.1f} ms | {single_ms:.1f} ms | {1 / ratio:.2f}x |", flush=True)
 
@@ -186,7 +186,7 @@ def accuracy(scale: float = 1.0) -> None:
         work = compute_disparity(s.left[:32], s.right[:32], max_disparity_px=s.max_disparity_px).plan.work / 32
         d_eq = max(1, int(work / w) - 1)
         return compute_disparity(s.left, s.right, disparity_bands_px=[(0, d_eq)],
-                                 config=robust.replace(multi_range=False)).disparity_px
+                                 config=robust.replace(search={"multi_range": False})).disparity_px
 
     methods = {
         "OpenCV StereoBM": lambda s: stereo_bm(s.left, s.right, max_disparity_px=s.max_disparity_px),
@@ -194,10 +194,10 @@ def accuracy(scale: float = 1.0) -> None:
         "mrstereo robust (default)": mr(),
         "mrstereo mapping (the mapping chain's)": mr(preset="mapping"),
         "mrstereo paper": mr(preset="paper"),
-        "robust without the near guard": mr(robust.replace(near_guard=0.0)),
-        "robust without gap filling": mr(robust.replace(gap_fill_px=0)),
-        "robust, gap filling from the ends alone (support 1)": mr(robust.replace(gap_fill_support_px=1)),
-        "robust, single range": mr(robust.replace(multi_range=False)),
+        "robust without the near guard": mr(robust.replace(near_guard=None)),
+        "robust without gap filling": mr(robust.replace(postfilter={"gap_fill_px": 0})),
+        "robust, gap filling from the ends alone (support 1)": mr(robust.replace(postfilter={"gap_fill_support_px": 1})),
+        "robust, single range": mr(robust.replace(search={"multi_range": False})),
         "robust, single range, equal work": equal_work,
     }
     scenes = [load_scene(sample_data.fetch(name)) for name in SCENES]
@@ -216,8 +216,8 @@ def accuracy(scale: float = 1.0) -> None:
         print(f"| {name} | {first[:, 0].mean():.1f} | {first[:, 1].mean():.1f} | "
               + " | ".join(f"{a:.1f}/{b:.1f}" for a, b in cells) + " |", flush=True)
     corridor({"robust (default)": robust, "mapping": preset_config("mapping"),
-              "robust without gap filling": robust.replace(gap_fill_px=0),
-              "robust, gap filling from the ends alone": robust.replace(gap_fill_support_px=1)})
+              "robust without gap filling": robust.replace(postfilter={"gap_fill_px": 0}),
+              "robust, gap filling from the ends alone": robust.replace(postfilter={"gap_fill_support_px": 1})})
 
 
 def corridor(configs: dict) -> None:

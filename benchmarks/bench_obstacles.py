@@ -206,7 +206,7 @@ def main(argv=None) -> int:
         truth = frame_truth(frame, stereo, config, min_depth_m=min_depth)
         r0, r1, c0, c1 = plan.aoi
         n_eq = int(round(plan.work / ((r1 - r0) * (c1 - c0))))
-        single = compute_disparity(L, R, max_disparity_px=n_eq, config=robust.replace(multi_range=False),
+        single = compute_disparity(L, R, max_disparity_px=n_eq, config=robust.replace(search={"multi_range": False}),
                                    aoi=plan.aoi)
         paper = compute_disparity(L, R, calibration=stereo, preset="paper")
         for name, raw in (("mapping", multi.disparity_px), ("paper", paper.disparity_px)):

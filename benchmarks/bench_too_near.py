@@ -11,7 +11,7 @@ each scene's true range, ``D = round(max true disparity / 2)``. For each matcher
 
 OpenCV StereoBM and StereoSGBM (mrstereo.evaluation.baselines settings) search up to exactly
 ``D`` too (``exact_max``: a negative minDisparity fills the multiple of 16). mrstereo runs the
-robust and mapping presets, and the robust preset without the near guard (``near_guard=0``,
+robust and mapping presets, and the robust preset without the near guard (``near_guard=None``,
 the matcher before too-near detection). The guard's settings (a search of its own from ``D``
 to 2 D at twice the nearest band's decimation when ``D`` spans 8 pixels there, winners above
 ``D`` + half a level pixel, beating the bands' value by the uniqueness ratio, margin of half a
@@ -46,7 +46,7 @@ def matchers():
     return {
         "StereoBM": lambda l, r, d: (stereo_bm(l, r, max_disparity_px=d, exact_max=True), None),
         "StereoSGBM": lambda l, r, d: (stereo_sgbm(l, r, max_disparity_px=d, exact_max=True), None),
-        "mrstereo robust, no guard": lambda l, r, d: _mr(l, r, d, robust.replace(near_guard=0.0)),
+        "mrstereo robust, no guard": lambda l, r, d: _mr(l, r, d, robust.replace(near_guard=None)),
         "mrstereo robust": lambda l, r, d: _mr(l, r, d, robust),
         "mrstereo mapping": lambda l, r, d: _mr(l, r, d, preset_config("mapping")),
     }
@@ -83,7 +83,7 @@ def chessboard() -> None:
           f"bands 0.5-15 m; board = the 9x6 corners' grid grown by one square: {int(mask.sum())} px")
     print("| matcher | board px with a value | farthest board value [m] | board px too near |")
     print("|---|---|---|---|")
-    for name, config in (("mrstereo robust, no guard", preset_config("robust").replace(near_guard=0.0)),
+    for name, config in (("mrstereo robust, no guard", preset_config("robust").replace(near_guard=None)),
                          ("mrstereo robust", preset_config("robust")), ("mrstereo mapping", preset_config("mapping"))):
         result = compute_disparity(left, right, calibration=stereo, config=config)
         d = result.disparity_px[mask]

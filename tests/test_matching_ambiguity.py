@@ -1,4 +1,4 @@
-"""Cross-band ambiguity test of the union (``MatchingConfig.ambiguity_margin``): a repeated
+"""Cross-band ambiguity test of the union (``MatchingConfig.ambiguity``): a repeated
 pattern whose period spans more than a band gives no confident value one period off."""
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.matching import MatchingConfig, compute_disparity, preset_config
+from mrstereo.matching import AmbiguityConfig, MatchingConfig, compute_disparity, preset_config
 from mrstereo.matching.cost import match_checked, prepare
 
 TRUE_D = 26          # band [16, 32] of a search up to 64 px (decimation 2)
@@ -41,8 +41,8 @@ def _wrong_and_density(disparity):
 def test_repeated_pattern_one_period_off_is_rejected_not_confident():
     left, right = _pair(PERIOD)
     mapping = preset_config("mapping")
-    assert mapping.ambiguity_margin is not None
-    old = compute_disparity(left, right, max_disparity_px=64, config=mapping.replace(ambiguity_margin=None))
+    assert mapping.ambiguity is not None
+    old = compute_disparity(left, right, max_disparity_px=64, config=mapping.replace(ambiguity=None))
     new = compute_disparity(left, right, max_disparity_px=64, config=mapping)
     wrong_old, _ = _wrong_and_density(old.disparity_px)
     wrong_new, _ = _wrong_and_density(new.disparity_px)
@@ -58,7 +58,7 @@ def test_repeated_pattern_one_period_off_is_rejected_not_confident():
 def test_unrepeated_texture_keeps_its_values():
     left, right = _pair(None)
     mapping = preset_config("mapping")
-    old = compute_disparity(left, right, max_disparity_px=64, config=mapping.replace(ambiguity_margin=None))
+    old = compute_disparity(left, right, max_disparity_px=64, config=mapping.replace(ambiguity=None))
     new = compute_disparity(left, right, max_disparity_px=64, config=mapping)
     wrong_old, density_old = _wrong_and_density(old.disparity_px)
     wrong_new, density_new = _wrong_and_density(new.disparity_px)
@@ -84,10 +84,12 @@ def test_band_minimum_of_the_kernel_is_the_lowest_local_minimum_in_the_band():
 
 
 def test_ambiguity_margin_bad_value():
-    with pytest.raises(ValueError, match="ambiguity_margin"):
-        MatchingConfig(ambiguity_margin=-0.1)
-    with pytest.raises(ValueError, match="ambiguity_margin"):
-        MatchingConfig(ambiguity_margin=float("nan"))
+    with pytest.raises(ValueError, match="ambiguity margin"):
+        AmbiguityConfig(margin=-0.1)
+    with pytest.raises(ValueError, match="ambiguity margin"):
+        AmbiguityConfig(margin=float("nan"))
+    with pytest.raises(TypeError, match="ambiguity must be a AmbiguityConfig or None"):
+        MatchingConfig(ambiguity=0.15)
 
 
 @pytest.mark.parametrize("name", ["tsukuba", "teddy"])
@@ -104,7 +106,7 @@ def test_real_scenes_keep_their_density_and_accuracy(middlebury_scene, name):
         est = known & np.isfinite(d)
         return est.sum() / known.sum(), np.sum(est & ~(np.abs(d - truth) <= 2.0)) / est.sum()
 
-    density_old, bad_old = density_and_bad(mapping.replace(ambiguity_margin=None))
+    density_old, bad_old = density_and_bad(mapping.replace(ambiguity=None))
     density_new, bad_new = density_and_bad(mapping)
     assert density_new >= 0.97 * density_old
     assert density_new < density_old                       # the test is on and removes something

@@ -90,7 +90,7 @@ def test_gain_and_offset_change_leaves_zncc_winner_unchanged():
 
 @pytest.mark.parametrize("share", [0.01, 0.3])
 def test_refinement_of_scattered_pixels_equals_the_running_sums(share):
-    """refine_sparse (direct window sums) and refine_warped (running sums) re-score the same
+    """refine_pixels (direct window sums) and refine_strips (running sums) re-score the same
     scattered pixels of a piecewise-constant coarse field to the same disparities and costs
     (float32 rounding of the cost formula aside), including windows clamped at the left edge."""
     from mrstereo.matching import cost as C
@@ -126,8 +126,8 @@ def test_refinement_of_scattered_pixels_equals_the_running_sums(share):
 @pytest.mark.parametrize("kind", ["zncc", "nssd"])
 def test_refinement_in_boxes_equals_the_running_sums_bit_for_bit(kind):
     """refine_candidates(boxes=...) (running sums per box, products gathered pixel by pixel)
-    gives refine_warped's disparities and costs exactly, on a coarse field that changes at
-    almost every pixel (with NaNs, negative and too large shifts at the borders) and on
+    gives the disparities and costs of the dense path (running sums over row strips, products
+    gathered along runs of constant shift) exactly, on a coarse field that changes at almost every pixel (with NaNs, negative and too large shifts at the borders) and on
     overlapping boxes that hold the wanted pixels; pixels outside them stay untouched (NaN)."""
     from mrstereo.matching import cost as C
 

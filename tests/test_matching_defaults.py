@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from mrstereo.matching import MatchingConfig, make_plan, preset_config
+from mrstereo.matching import MatchingConfig, SearchConfig, make_plan, preset_config
 from mrstereo.matching.multirange import default_level_count
 
 
@@ -36,9 +36,9 @@ def test_plan_from_max_disparity_follows_the_rule():
     assert levels(10) == [(1, (0.0, 10.0))]
     assert levels(64) == [(1, (0.0, 16.0)), (2, (16.0, 32.0)), (4, (32.0, 64.0))]
     # explicit decimations set the number of bands; the paper preset keeps its three ranges
-    assert [d for d, _ in levels(16, config=MatchingConfig(decimations=(4, 2, 1)))] == [1, 2, 4]
+    assert [d for d, _ in levels(16, config=MatchingConfig(search=SearchConfig(decimations=(4, 2, 1))))] == [1, 2, 4]
     assert [d for d, _ in levels(16, preset="paper")] == [1, 2, 4]
-    assert [d for d, _ in levels(16, config=MatchingConfig(min_band_level_px=0))] == [1, 2, 4]
+    assert [d for d, _ in levels(16, config=MatchingConfig(search=SearchConfig(min_band_level_px=0)))] == [1, 2, 4]
     # explicit bands are never merged
     assert len(make_plan((384, 288), disparity_bands_px=[(0, 4), (4, 8), (8, 16)]).levels) == 3
 
@@ -51,7 +51,7 @@ def test_speed_case_plan_is_unchanged():
     # pixel x disparity evaluations (docs/matching.md, Speed): the near guard searches 68-136 px
     # apart from the bands, at decimation 8 (level disparities 7-17 on 80 columns)
     assert plan.work == 8_409_600
-    unguarded = make_plan((640, 480), calibration=rig, config=MatchingConfig(near_guard=0.0))
+    unguarded = make_plan((640, 480), calibration=rig, config=MatchingConfig(near_guard=None))
     assert unguarded.work == 7_987_200
     assert plan.levels == unguarded.levels and plan.levels[2].search_px == (6, 17)
     assert plan.guard.decimation == 8 and plan.guard.search_px == (7, 17)
@@ -59,11 +59,13 @@ def test_speed_case_plan_is_unchanged():
 
 def test_paper_preset_is_exactly_the_paper():
     paper = preset_config("paper")
-    assert (paper.cost, paper.prefilter, paper.lr_max_diff_px, paper.uniqueness_ratio, paper.max_cost,
-            paper.subpixel, paper.speckle_size_px, paper.refine, paper.edge_guard_px,
-            paper.min_band_level_px) == ("nssd", "none", None, 0.0, None, False, 0, False, 0, 0.0)
+    checks, post = paper.acceptance, paper.postfilter
+    assert (paper.cost.kind, paper.cost.prefilter, checks.lr_max_diff_px, checks.uniqueness_ratio, checks.max_cost,
+            paper.subpixel.parabola, post.speckle_size_px, paper.subpixel.refine, post.edge_guard_px,
+            paper.search.min_band_level_px, paper.near_guard, paper.ambiguity, post.gap_fill_px
+            ) == ("nssd", "none", None, 0.0, None, False, 0, False, 0, 0.0, None, None, 0)
 
 
 def test_bad_min_band_level():
     with pytest.raises(ValueError, match="min_band_level_px"):
-        MatchingConfig(min_band_level_px=float("nan"))
+        SearchConfig(min_band_level_px=float("nan"))

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrstereo.matching import MatchingConfig, preset_config
+from mrstereo.matching import MatchingConfig, PostFilterConfig, preset_config
 from mrstereo.matching.postfilter import fill_gaps
 
 
@@ -95,13 +95,17 @@ def test_kernel_equals_the_plain_rule_on_random_maps():
 
 
 def test_presets_and_validation():
-    assert preset_config("robust").gap_fill_px == 12 and preset_config("robust").gap_support == 5
-    assert preset_config("paper").gap_fill_px == 0 and preset_config("mapping").gap_fill_px == 0
+    assert preset_config("robust").postfilter.gap_fill_px == 12 and preset_config("robust").gap_support == 5
+    assert preset_config("paper").postfilter.gap_fill_px == 0 and preset_config("mapping").postfilter.gap_fill_px == 0
     d = np.full((4, 4), np.nan, np.float32)
     assert fill_gaps(d, d, max_gap_px=0, max_diff_px=1.0, support_px=5)[0] is d
     with pytest.raises(ValueError, match="gap_fill_px"):
-        MatchingConfig(gap_fill_px=-1)
-    with pytest.raises(ValueError, match="gap_fill_diff_px"):
-        MatchingConfig(gap_fill_diff_px=float("nan"))
+        PostFilterConfig(gap_fill_px=-1)
+    with pytest.raises(ValueError, match="gap_fill_support_px"):
+        PostFilterConfig(gap_fill_support_px=0)
+    with pytest.raises(TypeError, match="postfilter must be a PostFilterConfig"):
+        MatchingConfig(postfilter={"gap_fill_px": 0})
+    with pytest.raises(TypeError, match="unexpected keyword"):
+        preset_config("robust").replace(postfilter={"gap_fill_diff_px": 2.0})
     with pytest.raises(ValueError, match="confidence"):
         fill_gaps(d, np.zeros((3, 4), np.float32), max_gap_px=4, max_diff_px=1.0, support_px=5)

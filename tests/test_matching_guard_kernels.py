@@ -7,10 +7,31 @@ import numpy as np
 import pytest
 
 from mrstereo.matching import _kernels, preset_config
-from mrstereo.matching.disparity import (_finite_in_clusters, _guard_candidates, _in_large_clusters, _large_clusters,
+from mrstereo.matching.near_guard import (_finite_in_clusters, _guard_candidates, _in_large_clusters, _large_clusters,
                                          _level_spans)
 from mrstereo.matching.multirange import RangeLevel
-from mrstereo.matching.postfilter import left_right_consistent, unique
+
+
+# the numpy expressions of the checks (left-right, uniqueness) the kernel replaces
+def left_right_consistent(disparity_int: np.ndarray, right_disparity_int: np.ndarray, *,
+                          max_diff_px: float) -> np.ndarray:
+    """Mask of pixels whose right-image winner points back: ``|d_L(x) - d_R(x - d_L(x))| <= tol``.
+
+    Both inputs are integer winner maps (-1 = none) of the same band search.
+    """
+    h, w = disparity_int.shape
+    valid = disparity_int >= 0
+    xr = np.arange(w)[None, :] - np.where(valid, disparity_int, 0)
+    inside = valid & (xr >= 0)
+    rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
+    back = right_disparity_int[rows, np.clip(xr, 0, w - 1)]
+    return inside & (back >= 0) & (np.abs(disparity_int - back) <= max_diff_px)
+
+
+def unique(best_cost: np.ndarray, second_cost: np.ndarray, *, ratio: float) -> np.ndarray:
+    """Mask of winners whose second-best cost is clearly worse: ``c1 <= (1 - ratio) c2``."""
+    with np.errstate(invalid="ignore"):
+        return ~(best_cost > (1.0 - ratio) * second_cost)
 
 
 def _winners(seed: int, shape=(60, 90)):
@@ -27,13 +48,14 @@ def _winners(seed: int, shape=(60, 90)):
 
 def _numpy_candidates(d_int, sub, c1, c2, d_right, guard, config):
     """Step 1 of the near guard as numpy expressions (its code before the kernel)."""
-    d_level = (d_int + sub if config.subpixel else d_int).astype(np.float32)
+    checks = config.acceptance
+    d_level = (d_int + sub if config.subpixel.parabola else d_int).astype(np.float32)
     beyond = (d_int >= 0) & (d_level * guard.scale > guard.too_near_above_px)
-    candidate = beyond if config.max_cost is None else beyond & (c1 <= config.max_cost)
-    if config.lr_max_diff_px is not None:
-        candidate &= left_right_consistent(d_int, d_right, max_diff_px=config.lr_max_diff_px)
-    if config.uniqueness_ratio > 0:
-        candidate &= unique(c1, c2, ratio=config.uniqueness_ratio)
+    candidate = beyond if checks.max_cost is None else beyond & (c1 <= checks.max_cost)
+    if checks.lr_max_diff_px is not None:
+        candidate &= left_right_consistent(d_int, d_right, max_diff_px=checks.lr_max_diff_px)
+    if checks.uniqueness_ratio > 0:
+        candidate &= unique(c1, c2, ratio=checks.uniqueness_ratio)
     return d_level, beyond, candidate
 
 
@@ -44,9 +66,10 @@ def _guard(scale, above):
 
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("settings", [
-    dict(), dict(subpixel=False), dict(max_cost=None, lr_max_diff_px=None, uniqueness_ratio=0.0),
-    dict(max_cost=0.7, lr_max_diff_px=1.0, uniqueness_ratio=0.15),
-    dict(max_cost=np.float64(0.3), uniqueness_ratio=np.float64(0.1)),     # float64 settings: float64 numpy
+    dict(), dict(subpixel={"parabola": False}),
+    dict(acceptance={"max_cost": None, "lr_max_diff_px": None, "uniqueness_ratio": 0.0}),
+    dict(acceptance={"max_cost": 0.7, "lr_max_diff_px": 1.0, "uniqueness_ratio": 0.15}),
+    dict(acceptance={"max_cost": np.float64(0.3), "uniqueness_ratio": np.float64(0.1)}),   # float64: float64 numpy
 ])
 @pytest.mark.parametrize("scale, above", [(4.0, 41.9), (3.3, 40.1), (np.float64(4.0), 42.0),
                                           (4.0, np.float64(41.9))])

@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 
 from mrstereo.camera import Camera, StereoCamera
-from mrstereo.matching import MatchingConfig, compute_disparity, make_plan
+from mrstereo.matching import (AcceptanceConfig, CostConfig, MatchingConfig, PostFilterConfig, SearchConfig,
+                               compute_disparity, make_plan)
+
+SINGLE = SearchConfig(multi_range=False)
 
 H, W = 48, 160
 
@@ -51,13 +54,13 @@ def test_multi_range_recovers_near_and_far_single_range_with_same_work_misses_ne
     d_equal = int(work / (H * W)) - 1
     assert d_equal < 36
     single = compute_disparity(left, right, disparity_bands_px=[(0, d_equal)],
-                               config=MatchingConfig(multi_range=False, near_guard=0.0))
+                               config=MatchingConfig(search=SINGLE, near_guard=None))
     assert single.plan.work <= work * 1.1
     assert _good(single, truth, far_cols) > 0.9
     assert _good(single, truth, near_cols, tol=2.0) < 0.05
     # with its near guard the single range reports the near plane as too near, not farther
     guarded = compute_disparity(left, right, disparity_bands_px=[(0, d_equal)],
-                                config=MatchingConfig(multi_range=False))
+                                config=MatchingConfig(search=SINGLE))
     assert guarded.too_near[8:-8, near_cols].mean() > 0.9
     assert not np.isfinite(guarded.disparity_px[8:-8, near_cols]).any()
     assert _good(guarded, truth, far_cols) > 0.9
@@ -78,10 +81,10 @@ def test_left_right_check_removes_occlusion_errors():
     left, right, truth = _two_plane_pair(4, 14, seed=2)
     # left pixels just left of the near plane (x in [half - (14-4), half)) are occluded in right
     occluded = slice(W // 2 - 10, W // 2 - 1)
-    base = MatchingConfig(multi_range=False, uniqueness_ratio=0.0, median_size=0, speckle_size_px=0,
-                          max_cost=None, texture_threshold=0.0, edge_guard_px=0, near_guard=0.0)
-    without = compute_disparity(left, right, max_disparity_px=20, config=base.replace(lr_max_diff_px=None))
-    with_lr = compute_disparity(left, right, max_disparity_px=20, config=base.replace(lr_max_diff_px=1.0))
+    base = MatchingConfig(search=SINGLE, acceptance=AcceptanceConfig(uniqueness_ratio=0.0, median_size=0, max_cost=None),
+                          postfilter=PostFilterConfig(speckle_size_px=0, edge_guard_px=0), near_guard=None)
+    without = compute_disparity(left, right, max_disparity_px=20, config=base.replace(acceptance={"lr_max_diff_px": None}))
+    with_lr = compute_disparity(left, right, max_disparity_px=20, config=base.replace(acceptance={"lr_max_diff_px": 1.0}))
     wrong = lambda r: np.mean(np.isfinite(r.disparity_px[8:-8, occluded])
                               & (np.abs(r.disparity_px[8:-8, occluded] - 4) > 1))
     assert wrong(without) > 0.5
@@ -97,10 +100,10 @@ def test_subpixel_refinement_reduces_error_on_fractional_shift():
     wide_right = np.roll(scene, -shift, axis=1)
     left = cv2.resize(wide_left, (W + 32, H), interpolation=cv2.INTER_AREA)[:, :W]
     right = cv2.resize(wide_right, (W + 32, H), interpolation=cv2.INTER_AREA)[:, :W]
-    cfg = MatchingConfig(multi_range=False)
+    cfg = MatchingConfig(search=SINGLE)
     err = {}
     for sub in (False, True):
-        d = compute_disparity(left, right, max_disparity_px=12, config=cfg.replace(subpixel=sub)).disparity_px
+        d = compute_disparity(left, right, max_disparity_px=12, config=cfg.replace(subpixel={"parabola": sub})).disparity_px
         err[sub] = np.nanmean(np.abs(d[8:-8, 20:-8] - 6.5))
     assert err[True] < 0.2
     assert err[True] < 0.6 * err[False]
@@ -169,4 +172,4 @@ def test_bad_images():
     with pytest.raises(ValueError, match="NaN"):
         compute_disparity(np.full((20, 30), np.nan, np.float32), img, max_disparity_px=8)
     with pytest.raises(ValueError, match="window_px must be odd"):
-        MatchingConfig(window_px=8)
+        CostConfig(window_px=8)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from mrstereo.matching import MatchingConfig, compute_disparity
+from mrstereo.matching import MatchingConfig, PostFilterConfig, SearchConfig, compute_disparity
 
 def _bad2(d, truth):
     """bad-2 % dense (missing counts as bad), among estimated pixels, and density %."""
@@ -47,17 +47,17 @@ def test_tsukuba_robust_accurate_where_it_answers_and_paper_answers_everywhere(m
 
 def test_tsukuba_refinement_recovers_the_coarse_level_precision(middlebury_scene):
     left, right, truth, max_d = middlebury_scene("tsukuba")
-    cfg = MatchingConfig(decimations=(4, 2, 1))      # D = 16 alone would plan no k = 4 level
+    cfg = MatchingConfig(search=SearchConfig(decimations=(4, 2, 1)))      # D = 16 alone would plan no k = 4 level
     _, est_refined, _ = _bad2(compute_disparity(left, right, max_disparity_px=max_d, config=cfg).disparity_px, truth)
     _, est_coarse, _ = _bad2(compute_disparity(left, right, max_disparity_px=max_d,
-                                               config=cfg.replace(refine=False)).disparity_px, truth)
+                                               config=cfg.replace(subpixel={"refine": False})).disparity_px, truth)
     assert est_refined < 0.8 * est_coarse
 
 
 def test_tsukuba_gap_filling_answers_more_than_stereobm_and_stays_accurate(middlebury_scene):
     left, right, truth, max_d = middlebury_scene("tsukuba")
     dense, est, density = _bad2(compute_disparity(left, right, max_disparity_px=max_d).disparity_px, truth)
-    holes = MatchingConfig(gap_fill_px=0)
+    holes = MatchingConfig(postfilter=PostFilterConfig(gap_fill_px=0))
     dense0, est0, density0 = _bad2(compute_disparity(left, right, max_disparity_px=max_d,
                                                      config=holes).disparity_px, truth)
     bm_dense, bm_est, _ = _bad2(_stereo_bm(left, right, max_d), truth)

@@ -54,7 +54,7 @@ def test_speckles_equal_opencv_on_a_matcher_output():
     stereo = default_stereo()
     frame = render_stereo_frame(default_scene(0), stereo, pose=(0.5, 0.0, 0.0), supersample=1)
     raw = compute_disparity(frame.left_rect, frame.right_rect, calibration=stereo,
-                            config=preset_config("robust").replace(speckle_size_px=0, gap_fill_px=0)).disparity_px
+                            config=preset_config("robust").replace(postfilter={"speckle_size_px": 0, "gap_fill_px": 0})).disparity_px
     for size, diff in ((300, 1.0), (50, 2.0)):
         want = opencv_speckles(raw, size, diff)
         assert 0 < np.isnan(want).sum() - np.isnan(raw).sum()       # it removes something

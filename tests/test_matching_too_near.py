@@ -13,7 +13,7 @@ from mrstereo.camera import Camera, CameraMount, StereoCamera, write_stereo
 from mrstereo.cli import entry
 from mrstereo.geometry import detect_obstacles
 from mrstereo.io import read_disparity
-from mrstereo.matching import MatchingConfig, compute_disparity, make_plan
+from mrstereo.matching import MatchingConfig, NearGuardConfig, compute_disparity, make_plan
 from mrstereo.pipeline.frame import scan_from_pair
 from mrstereo.recordings.samples import local_path
 from mrstereo.viz.plot import colorize_disparity
@@ -46,7 +46,7 @@ def test_plane_beyond_the_search_is_all_too_near_and_never_valued():
     assert not inside.too_near.any()
     assert np.nanmedian(inside.disparity_px) == pytest.approx(40, abs=0.2)
     # without the guard (the paper) the plane gets wrong, smaller disparities: what the guard prevents
-    paper = compute_disparity(left, right, max_disparity_px=24, config=MatchingConfig(near_guard=0.0))
+    paper = compute_disparity(left, right, max_disparity_px=24, config=MatchingConfig(near_guard=None))
     assert not paper.too_near.any()
 
 
@@ -63,7 +63,7 @@ def test_a_plane_just_beyond_the_limit_is_too_near_not_a_value_at_the_band_edge(
 
 def test_the_guard_is_in_the_plan_and_counted():
     plan = make_plan((640, 480), max_disparity_px=64)
-    off = make_plan((640, 480), max_disparity_px=64, config=MatchingConfig(near_guard=0.0))
+    off = make_plan((640, 480), max_disparity_px=64, config=MatchingConfig(near_guard=None))
     assert plan.levels == off.levels                          # the bands' searches are untouched
     guard = plan.guard
     # D = 64 spans 8 pixels at twice the nearest band's decimation (4): the guard searches at 8,
@@ -77,11 +77,13 @@ def test_the_guard_is_in_the_plan_and_counted():
     small = make_plan((384, 288), max_disparity_px=9)
     assert small.guard.decimation == 1 and small.guard.search_px == (8, 18)
     assert make_plan((640, 480), max_disparity_px=64,
-                     config=MatchingConfig(near_guard_decimation=4)).guard.search_px == (15, 32)
-    with pytest.raises(ValueError, match="near_guard"):
-        MatchingConfig(near_guard=0.5)
-    with pytest.raises(ValueError, match="near_guard_decimation"):
-        MatchingConfig(near_guard_decimation=0)
+                     config=MatchingConfig(near_guard=NearGuardConfig(decimation=4))).guard.search_px == (15, 32)
+    with pytest.raises(ValueError, match="near_guard reach"):
+        NearGuardConfig(reach=0.5)
+    with pytest.raises(ValueError, match="near_guard decimation"):
+        NearGuardConfig(decimation=0)
+    with pytest.raises(TypeError, match="near_guard must be a NearGuardConfig or None"):
+        MatchingConfig(near_guard=0.0)
 
 
 def _tsukuba():
@@ -101,7 +103,7 @@ def test_tsukuba_cut_to_9_px_gives_no_value_to_nearer_pixels():
     assert result.too_near[beyond].mean() > 0.6
     assert valued[inside].mean() >= 0.5
     assert result.too_near[inside].mean() < 0.03
-    before = compute_disparity(scene.left, scene.right, max_disparity_px=9, config=MatchingConfig(near_guard=0.0))
+    before = compute_disparity(scene.left, scene.right, max_disparity_px=9, config=MatchingConfig(near_guard=None))
     assert np.isfinite(before.disparity_px)[beyond].mean() > 0.1
 
 
@@ -114,7 +116,7 @@ def test_a_search_covering_the_scene_gives_the_unguarded_values_bit_for_bit(name
     scene = load_scene(local_path(name))
     guarded = compute_disparity(scene.left, scene.right, max_disparity_px=scene.max_disparity_px)
     unguarded = compute_disparity(scene.left, scene.right, max_disparity_px=scene.max_disparity_px,
-                                  config=MatchingConfig(near_guard=0.0))
+                                  config=MatchingConfig(near_guard=None))
     assert guarded.plan.guard is not None and not guarded.too_near.any()
     assert np.array_equal(guarded.disparity_px, unguarded.disparity_px, equal_nan=True)
     assert np.array_equal(guarded.confidence, unguarded.confidence)
@@ -128,10 +130,10 @@ def test_kitti_car_nearer_than_the_search_is_flagged_and_only_its_surroundings_c
     from mrstereo.evaluation.datasets import load_scene
     scene = load_scene(local_path("kitti2015-000000"))
     result = compute_disparity(scene.left, scene.right, max_disparity_px=80)
-    unguarded = compute_disparity(scene.left, scene.right, max_disparity_px=80, config=MatchingConfig(near_guard=0.0))
+    unguarded = compute_disparity(scene.left, scene.right, max_disparity_px=80, config=MatchingConfig(near_guard=None))
     rows, cols = np.nonzero(result.too_near)
     assert rows.size > 3000 and cols.min() > 1000                   # the car's door, nothing else
-    wide = compute_disparity(scene.left, scene.right, max_disparity_px=192, config=MatchingConfig(near_guard=0.0))
+    wide = compute_disparity(scene.left, scene.right, max_disparity_px=192, config=MatchingConfig(near_guard=None))
     assert np.nanmedian(wide.disparity_px[result.too_near]) > 85       # truly beyond 80 px
     changed = ~((result.disparity_px == unguarded.disparity_px)
                 | (np.isnan(result.disparity_px) & np.isnan(unguarded.disparity_px)))
@@ -158,7 +160,7 @@ def test_real_chessboard_at_0_4_m_is_never_placed_farther_than_0_5_m():
     depth = stereo.baseline_m * stereo.focal_px / (d[np.isfinite(d)] + stereo.doffs_px)
     assert (depth <= 0.5).all(), np.sort(depth)[-5:]                   # was 10.7 % valid at 0.86 m
     assert result.too_near[board].mean() > 0.15
-    unguarded = compute_disparity(left, right, calibration=stereo, config=MatchingConfig(near_guard=0.0))
+    unguarded = compute_disparity(left, right, calibration=stereo, config=MatchingConfig(near_guard=None))
     assert np.isfinite(unguarded.disparity_px[board]).mean() > 0.02
 
 

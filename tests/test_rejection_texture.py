@@ -2,8 +2,7 @@
 import numpy as np
 import pytest
 
-from mrstereo.rejection import (FloorModel, RejectionConfig, learn_floor_model, patch_statistics, reject_uniform,
-                                uniform_mask)
+from mrstereo.rejection import FloorModel, RejectionConfig, learn_floor_model, patch_statistics, reject_uniform
 
 
 def _scene(seed=0, h=60, w=90):
@@ -74,12 +73,18 @@ def test_learned_floor_model_rejects_floor_like_patches():
     assert not res.rejected[:, 50:].any()                  # textured
 
 
-def test_uniform_mask_combines_floor_model_and_texture_test():
-    st = patch_statistics(_scene(), window_px=5)
-    model = FloorModel(mu_mean=0.0, mu_std=1.0, sigma_mean=0.0, sigma_std=0.1, window_px=5, n_patches=10)
-    only_texture = uniform_mask(st, config=RejectionConfig(window_px=5, texture_threshold=3.0))
-    both = uniform_mask(st, config=RejectionConfig(window_px=5, texture_threshold=3.0), floor_model=model)
-    np.testing.assert_array_equal(only_texture, both)   # the model matches nothing here
+def test_floor_model_adds_to_the_texture_test():
+    img = _scene()
+    d = np.ones(img.shape, np.float32)
+    config = RejectionConfig(window_px=5, texture_threshold=3.0)
+    only_texture = reject_uniform(d, img, config=config).uniform
+    dark = FloorModel(mu_mean=0.0, mu_std=1.0, sigma_mean=0.0, sigma_std=0.1, window_px=5, n_patches=10)
+    np.testing.assert_array_equal(only_texture, reject_uniform(d, img, config=config, floor_model=dark).uniform)
+    textured = FloorModel(mu_mean=127.0, mu_std=20.0, sigma_mean=70.0, sigma_std=5.0, window_px=5, n_patches=10)
+    both = reject_uniform(d, img, config=config, floor_model=textured)
+    w = img.shape[1]
+    assert both.uniform[:, : w // 2 - 3].all() and both.uniform[:, w // 2 + 3:].mean() > 0.5
+    assert (both.uniform >= only_texture).all() and not only_texture[:, w // 2 + 3:].any()
 
 
 def test_bad_input():

@@ -172,10 +172,10 @@ def test_cli_commands_load_on_demand_and_the_table_lists_every_command():
     assert not {"mrstereo.cli._calibration", "mrstereo.cli._evaluation", "mrstereo.cli._odometry"} & set(loaded)
 
 
-def test_fused_texture_rejection_equals_the_statistics_path():
-    """Eq. (13) on a uint8 image in one pass from the integer window sums: the same disparity, rejected and
-    uniform masks, bit for bit, as the float64-statistics path (taken for a float image), for thresholds
-    at which many patches have sigma within float32 rounding of T; the statistics on demand are the same."""
+def test_texture_rejection_of_a_uint8_image_equals_that_of_the_float_image():
+    """Eq. (13) on a uint8 image (integer window sums): the same disparity, rejected and uniform masks,
+    bit for bit, as on the float image (float64 filters), for thresholds at which many patches have sigma
+    within float32 rounding of T; the statistics are the same."""
     from mrstereo.rejection import RejectionConfig, reject_uniform
 
     rng = np.random.default_rng(5)

@@ -110,9 +110,9 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
                 left_img, right_img = stereo.rectify(left_img, right_img)
     config = preset_config(preset)
     if single_range:
-        config = config.replace(multi_range=False)
+        config = config.replace(search={"multi_range": False})
     if no_fill:
-        config = config.replace(gap_fill_px=0)
+        config = config.replace(postfilter={"gap_fill_px": 0})
     with stage("match"):
         result = compute_disparity(left_img, right_img, max_disparity_px=max_disparity, disparity_bands_px=band_list,
                                    calibration=stereo, depth_bands_m=depth_list, config=config, aoi=aoi_box)

@@ -1,11 +1,13 @@
 """Numba kernels of the area matcher: window cost + winner-take-all, and full-resolution refinement.
 
 Private: no validation, no defaults; the caller (:mod:`mrstereo.matching.cost`)
-pads, precomputes and allocates. Conventions: docs/conventions.md.
+pads, precomputes and allocates. An image arrives prepared as a tuple ``(padded, a, b)``:
+padded by the window radius ``r`` on every side, and its per-pixel window terms.
+Conventions: docs/conventions.md.
 
-:func:`match_band` searches one disparity band ``[d_lo, d_hi]`` on one image pair.
-Rows are split into strips, one per thread (``prange``). Inside a strip the rows are
-visited in order; for every disparity ``d`` a row of running column sums
+:func:`band_winners` and :func:`band_checked` search one disparity band ``[d_lo, d_hi]`` on
+one image pair. Rows are split into strips, one per thread (``prange``). Inside a strip the
+rows are visited in order; for every disparity ``d`` a row of running column sums
 ``sum_j I_L(y + j, c) I_R(y + j, c - d)`` is updated by adding the row entering the
 window and subtracting the row leaving it, and a row of window sums is the sum of
 ``W`` shifted column-sum rows (in few passes, :func:`_box`). Every inner loop runs along the image row over
@@ -19,10 +21,12 @@ pixel and disparity is O(1) in the window size. The window sums of ``I^2`` (and
 A strip holds the costs of one image row (all disparities of the band), never a cost
 volume. Integer-valued images (the x-Sobel pre-filter) are summed exactly in float32.
 
-:func:`refine_warped` re-scores a coarse disparity field at full resolution: for each
+:func:`refine_boxes` re-scores a coarse disparity field at full resolution: for each
 offset ``o`` in ``[-half, half]`` the window sum ``sum I_L(p) I_R(p - c(p) - o)`` over the
 window's pixels ``p`` (``c`` = the coarse disparity of ``p``) is computed with the same
 running sums; where ``c`` is constant over the window this is exactly ``S_LR(x, c + o)``.
+:func:`refine_strips` does so along runs of constant ``c``, and :func:`refine_pixels` adds the
+same window sums up pixel by pixel, for scattered pixels.
 """
 from __future__ import annotations
 
@@ -42,54 +46,59 @@ TWO = np.float32(2.0)
 def _blend(m, a, b):
     """``a`` where the float32 mask ``m`` is 1, ``b`` where it is 0; exact for finite values.
     Arithmetic on purpose: numba lowers ``a if c else b`` to branches that LLVM turns into
-    predicated scalar stores, which stops a loop from vectorizing (about 10x slower)."""
+    predicated scalar stores, which stops a loop from vectorizing."""
     return a * m + b * (ONE - m)
 
 
+# The cost of one pixel and disparity from the window sum S_LR and the two pixels' window
+# terms (module docstring). The part that depends on S_LR is rounded to float32 first, so
+# float64 sums (non-integer images) still cost float32 arithmetic. The parameters come in the
+# order the formula reads them: under fast-math the compiler may reassociate the products, and
+# it orders the operands by where they were loaded, so that order decides the rounding.
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _winners(cost, rows, n, bc, bk, cm_, cp_):
-    """Eq. (10) per column of ``cost[:rows, :n]``: the first minimum ``bc`` and its row ``bk``
-    (float32, -1 where no row is below BIG), then the costs of the rows beside it for the
-    parabola, ``cm_`` (row ``bk - 1``) and ``cp_`` (row ``bk + 1``), BIG where none."""
+def _zncc_cost(window_sum, a_l, a_r, b_l, b_r):
+    """ZNCC: ``1 - (S_LR - a_L a_R) b_L b_R``."""
+    return ONE - np.float32(window_sum - a_l * a_r) * b_l * b_r
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _nssd_cost(a_l, a_r, window_sum, b_l, b_r):
+    """NSSD, eq. (9): ``(a_L + a_R - 2 S_LR) b_L b_R``."""
+    return np.float32(a_l + a_r - TWO * window_sum) * b_l * b_r
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _costs(out, window_sums, a_l, b_l, a_r, b_r, n, zncc):
+    """The costs of ``n`` pixels in a row (contiguous slices; the test of ``zncc`` outside the
+    loops keeps them vectorized)."""
+    if zncc:
+        for i in range(n):
+            out[i] = _zncc_cost(window_sums[i], a_l[i], a_r[i], b_l[i], b_r[i])
+    else:
+        for i in range(n):
+            out[i] = _nssd_cost(a_l[i], a_r[i], window_sums[i], b_l[i], b_r[i])
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _winners(cost, rows, n, best_cost, best_k, cost_before, cost_after):
+    """Eq. (10) per column of ``cost[:rows, :n]``: the first minimum ``best_cost`` and its row
+    ``best_k`` (float32, -1 where no row is below BIG), then the costs of the rows beside it
+    for the parabola, ``cost_before`` (row ``best_k - 1``) and ``cost_after`` (row
+    ``best_k + 1``), BIG where none."""
     for i in range(n):
-        bc[i] = BIG
-        bk[i] = -1.0
+        best_cost[i] = BIG
+        best_k[i] = -1.0
     for k in range(rows):
         crow = cost[k]
         kf = np.float32(k)
         for i in range(n):
-            m = np.float32(crow[i] < bc[i])
-            bk[i] = _blend(m, kf, bk[i])
-            bc[i] = _blend(m, crow[i], bc[i])
+            m = np.float32(crow[i] < best_cost[i])
+            best_k[i] = _blend(m, kf, best_k[i])
+            best_cost[i] = _blend(m, crow[i], best_cost[i])
     for i in range(n):
-        b = np.int64(bk[i])
-        cm_[i] = cost[b - 1, i] if b > 0 else BIG
-        cp_[i] = cost[b + 1, i] if 0 <= b < rows - 1 else BIG
-
-
-@njit(nogil=True, cache=True, inline="always")
-def _wanted_span(want_row, xa, xb):
-    """``(first, last + 1)`` of the wanted columns of ``want_row`` in ``xa .. xb - 1``; empty:
-    ``(xb, xa)``."""
-    wa = xb
-    wb = xa
-    for x in range(xa, xb):
-        if want_row[x]:
-            wa = min(wa, x)
-            wb = x + 1
-    return wa, wb
-
-
-@njit(nogil=True, cache=True, inline="always")
-def _runs(values, n, out_starts):
-    """Starts of the runs of equal ``values[:n]`` into ``out_starts`` (then ``n``); their count."""
-    count = 0
-    for i in range(n):
-        if i == 0 or values[i] != values[i - 1]:
-            out_starts[count] = i
-            count += 1
-    out_starts[count] = n
-    return count
+        b = np.int64(best_k[i])
+        cost_before[i] = cost[b - 1, i] if b > 0 else BIG
+        cost_after[i] = cost[b + 1, i] if 0 <= b < rows - 1 else BIG
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
@@ -103,67 +112,74 @@ def _parabola(cb, cm, cp):
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _box(col, out, t2, t4, t8, t16, m, win):
+def _box(col, out, partial, m, win):
     """``out[i] = sum_{j < win} col[i + j]`` for ``i < m`` (``win < 32``), in few vector passes:
     for a multiple of 3 (9, the default) sums of 3 neighbours then ``win / 3`` of those;
     otherwise a binary decomposition of ``win`` into sums of 1, 2, 4, 8, 16 neighbours.
+    ``partial`` (4, len(col)) is scratch: row ``j`` holds the sums of ``2^(j + 1)``
+    neighbours (row 0 those of 3 for the 3-split).
     The 3-split is used only for float32 (``col.itemsize == 4``): the matcher's float32
     inputs are integer-valued and their sums exact in any grouping; float64 (non-integer
     images) keeps the binary grouping, so results do not depend on the split."""
     length = m + win - 1
     if win % 3 == 0 and col.itemsize == 4:
+        sum3 = partial[0]
         for i in range(length - 2):
-            t2[i] = col[i] + col[i + 1] + col[i + 2]
+            sum3[i] = col[i] + col[i + 1] + col[i + 2]
         if win == 3:
             for i in range(m):
-                out[i] = t2[i]
+                out[i] = sum3[i]
         elif win == 9:
-            s0 = t2[0:m]
-            s1 = t2[3:3 + m]
-            s2 = t2[6:6 + m]
+            s0 = sum3[0:m]
+            s1 = sum3[3:3 + m]
+            s2 = sum3[6:6 + m]
             for i in range(m):
                 out[i] = s0[i] + s1[i] + s2[i]
         else:
             for i in range(m):
-                out[i] = t2[i] + t2[i + 3]
+                out[i] = sum3[i] + sum3[i + 3]
             for j in range(6, win, 3):
-                seg = t2[j:j + m]
+                seg = sum3[j:j + m]
                 for i in range(m):
                     out[i] += seg[i]
         return
+    sum2 = partial[0]
+    sum4 = partial[1]
+    sum8 = partial[2]
+    sum16 = partial[3]
     if win >= 2:
         for i in range(length - 1):
-            t2[i] = col[i] + col[i + 1]
+            sum2[i] = col[i] + col[i + 1]
     if win >= 4:
         for i in range(length - 3):
-            t4[i] = t2[i] + t2[i + 2]
+            sum4[i] = sum2[i] + sum2[i + 2]
     if win >= 8:
         for i in range(length - 7):
-            t8[i] = t4[i] + t4[i + 4]
+            sum8[i] = sum4[i] + sum4[i + 4]
     if win >= 16:
         for i in range(length - 15):
-            t16[i] = t8[i] + t8[i + 8]
+            sum16[i] = sum8[i] + sum8[i + 8]
     # win is odd: the first term is col itself
     for i in range(m):
         out[i] = col[i]
     off = 1
     if win & 2:
-        seg = t2[off:off + m]
+        seg = sum2[off:off + m]
         for i in range(m):
             out[i] += seg[i]
         off += 2
     if win & 4:
-        seg = t4[off:off + m]
+        seg = sum4[off:off + m]
         for i in range(m):
             out[i] += seg[i]
         off += 4
     if win & 8:
-        seg = t8[off:off + m]
+        seg = sum8[off:off + m]
         for i in range(m):
             out[i] += seg[i]
         off += 8
     if win & 16:
-        seg = t16[off:off + m]
+        seg = sum16[off:off + m]
         for i in range(m):
             out[i] += seg[i]
 
@@ -171,66 +187,62 @@ def _box(col, out, t2, t4, t8, t16, m, win):
 @njit(nogil=True, cache=True, fastmath=_FASTMATH)
 def window_terms(padded, radius, zncc, out_a, out_b):
     """Per-pixel terms ``a``, ``b`` (module docstring) of the ``W x W`` windows of an image
-    padded by ``radius``: running column sums of ``I`` and ``I^2`` down each strip plus
+    padded by ``radius``: running column sums of ``I`` and ``I^2`` down the image plus
     :func:`_box` along the row."""
     height, width = out_a.shape
     wp = width + 2 * radius
     win = 2 * radius + 1
     n = np.float32(win * win)
     inv_sqrt_n = np.float32(1.0 / np.sqrt(win * win))
-    for _ in range(1):
-        y_start = 0
-        y_end = height
-        col1 = np.zeros(wp, padded.dtype)
-        col2 = np.zeros(wp, padded.dtype)
-        box1 = np.empty(width, padded.dtype)
-        box2 = np.empty(width, padded.dtype)
-        t2 = np.empty(wp, padded.dtype)
-        t4 = np.empty(wp, padded.dtype)
-        t8 = np.empty(wp, padded.dtype)
-        t16 = np.empty(wp, padded.dtype)
-        for yy in range(y_start, y_start + 2 * radius):
-            row = padded[yy]
+    col1 = np.zeros(wp, padded.dtype)
+    col2 = np.zeros(wp, padded.dtype)
+    box1 = np.empty(width, padded.dtype)
+    box2 = np.empty(width, padded.dtype)
+    partial = np.empty((4, wp), padded.dtype)
+    for yy in range(2 * radius):
+        row = padded[yy]
+        for c in range(wp):
+            col1[c] += row[c]
+            col2[c] += row[c] * row[c]
+    for y in range(height):
+        add = padded[y + 2 * radius]
+        if y > 0:
+            sub = padded[y - 1]
             for c in range(wp):
-                col1[c] += row[c]
-                col2[c] += row[c] * row[c]
-        for y in range(y_start, y_end):
-            add = padded[y + 2 * radius]
-            if y > y_start:
-                sub = padded[y - 1]
-                for c in range(wp):
-                    col1[c] += add[c] - sub[c]
-                    col2[c] += add[c] * add[c] - sub[c] * sub[c]
-            else:
-                for c in range(wp):
-                    col1[c] += add[c]
-                    col2[c] += add[c] * add[c]
-            oa = out_a[y]
-            ob = out_b[y]
-            if zncc and win == 9 and col1.itemsize == 4:
-                # the default window on exact (integer-valued float32) sums: both boxes as
-                # 3 x 3 neighbours inside the per-pixel loop (2 passes instead of 6)
-                for i in range(width + 6):
-                    t2[i] = col1[i] + col1[i + 1] + col1[i + 2]
-                    t4[i] = col2[i] + col2[i + 1] + col2[i + 2]
-                for x in range(width):
-                    b1 = t2[x] + t2[x + 3] + t2[x + 6]
-                    b2 = t4[x] + t4[x + 3] + t4[x + 6]
-                    var_n = max(np.float32(b2 - b1 * b1 / n), np.float32(1e-6))
-                    oa[x] = b1 * inv_sqrt_n
-                    ob[x] = np.float32(1.0) / np.sqrt(np.float32(var_n))
-                continue
-            _box(col2, box2, t2, t4, t8, t16, width, win)
-            if zncc:
-                _box(col1, box1, t2, t4, t8, t16, width, win)
-                for x in range(width):
-                    var_n = max(np.float32(box2[x] - box1[x] * box1[x] / n), np.float32(1e-6))
-                    oa[x] = box1[x] * inv_sqrt_n
-                    ob[x] = np.float32(1.0) / np.sqrt(np.float32(var_n))
-            else:
-                for x in range(width):
-                    oa[x] = box2[x]
-                    ob[x] = np.float32(1.0) / np.sqrt(max(np.float32(box2[x]), np.float32(1e-6)))
+                col1[c] += add[c] - sub[c]
+                col2[c] += add[c] * add[c] - sub[c] * sub[c]
+        else:
+            for c in range(wp):
+                col1[c] += add[c]
+                col2[c] += add[c] * add[c]
+        oa = out_a[y]
+        ob = out_b[y]
+        if zncc and win == 9 and col1.itemsize == 4:
+            # the default window on exact (integer-valued float32) sums: both boxes as
+            # 3 x 3 neighbours inside the per-pixel loop (2 passes instead of 6)
+            sum3_1 = partial[0]
+            sum3_2 = partial[1]
+            for i in range(width + 6):
+                sum3_1[i] = col1[i] + col1[i + 1] + col1[i + 2]
+                sum3_2[i] = col2[i] + col2[i + 1] + col2[i + 2]
+            for x in range(width):
+                b1 = sum3_1[x] + sum3_1[x + 3] + sum3_1[x + 6]
+                b2 = sum3_2[x] + sum3_2[x + 3] + sum3_2[x + 6]
+                var_n = max(np.float32(b2 - b1 * b1 / n), np.float32(1e-6))
+                oa[x] = b1 * inv_sqrt_n
+                ob[x] = np.float32(1.0) / np.sqrt(np.float32(var_n))
+            continue
+        _box(col2, box2, partial, width, win)
+        if zncc:
+            _box(col1, box1, partial, width, win)
+            for x in range(width):
+                var_n = max(np.float32(box2[x] - box1[x] * box1[x] / n), np.float32(1e-6))
+                oa[x] = box1[x] * inv_sqrt_n
+                ob[x] = np.float32(1.0) / np.sqrt(np.float32(var_n))
+        else:
+            for x in range(width):
+                oa[x] = box2[x]
+                ob[x] = np.float32(1.0) / np.sqrt(max(np.float32(box2[x]), np.float32(1e-6)))
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH)
@@ -268,237 +280,324 @@ def xsobel_padded(gray, radius, cap, out_pad):
         out_pad[height + radius + y] = out_pad[height + radius - 1]
 
 
+# ----------------------------------------------------------------------------- band search
+@njit(nogil=True, cache=True, inline="always")
+def _strip_rows(s, n_strips, row0, row1):
+    """Rows ``start .. end - 1`` of strip ``s`` of ``n_strips`` over ``row0 .. row1 - 1``."""
+    n_rows = row1 - row0
+    return row0 + (s * n_rows) // n_strips, row0 + ((s + 1) * n_rows) // n_strips
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _band_scratch(like, nd, width, radius):
+    """A strip's buffers: running column sums (one row per disparity, padded width), the
+    window sums of a row, :func:`_box`'s partial sums, and the costs of an image row."""
+    wp = width + 2 * radius
+    return (np.zeros((nd, wp), like.dtype), np.empty(width, like.dtype), np.empty((4, wp), like.dtype),
+            np.empty((nd, width), np.float32))
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _winner_scratch(n):
+    """Per column: best cost, its row, the costs of the rows before and after it (:func:`_winners`),
+    the second best (:func:`_second_best`)."""
+    return (np.empty(n, np.float32), np.empty(n, np.float32), np.empty(n, np.float32), np.empty(n, np.float32),
+            np.empty(n, np.float32))
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _add_row_products(left_pad, right_pad, colsum, yy, d_lo, cols, radius):
+    """``colsum[k] +=`` the products of padded row ``yy`` at disparity ``d_lo + k``, from column
+    ``max(col0, d)`` on (a strip's first window rows)."""
+    col0, col1 = cols
+    c_end = col1 + 2 * radius
+    for k in range(colsum.shape[0]):
+        d = d_lo + k
+        x0 = max(col0, d)
+        col = colsum[k, x0:c_end]
+        lrow = left_pad[yy, x0:c_end]
+        rrow = right_pad[yy, x0 - d:c_end - d]
+        for i in range(c_end - x0):
+            col[i] += lrow[i] * rrow[i]
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _row_costs(left, right, radius, zncc, d_lo, cols, y, first, scratch):
+    """Slide the column sums down to image row ``y`` (its window covers padded rows ``y .. y +
+    2r``; the strip's ``first`` row only gains a row) and write the costs of columns ``col0 ..
+    col1 - 1`` at disparity ``d_lo + k`` into ``cost[k]``, BIG where ``x < d`` (no match inside
+    the right image). Loops run over 0-based ranges of slices: their indices are provably
+    >= 0 and the loops vectorize."""
+    left_pad, a_left, b_left = left
+    right_pad, a_right, b_right = right
+    colsum, box, partial, cost = scratch
+    col0, col1 = cols
+    c_end = col1 + 2 * radius
+    add = y + 2 * radius
+    if first:
+        _add_row_products(left_pad, right_pad, colsum, add, d_lo, cols, radius)
+    for k in range(colsum.shape[0]):
+        d = d_lo + k
+        x0 = max(col0, d)
+        col = colsum[k, x0:c_end]
+        if not first:
+            la = left_pad[add, x0:c_end]
+            ra = right_pad[add, x0 - d:c_end - d]
+            ls = left_pad[y - 1, x0:c_end]
+            rs = right_pad[y - 1, x0 - d:c_end - d]
+            for i in range(c_end - x0):
+                col[i] += la[i] * ra[i] - ls[i] * rs[i]
+        crow = cost[k, col0:col1]
+        for i in range(min(x0, col1) - col0):
+            crow[i] = BIG
+        m = col1 - x0
+        if m <= 0:
+            continue
+        _box(col, box, partial, m, 2 * radius + 1)
+        al = a_left[y, x0:col1]
+        bl = b_left[y, x0:col1]
+        ar = a_right[y, x0 - d:col1 - d]
+        br = b_right[y, x0 - d:col1 - d]
+        cr = cost[k, x0:col1]
+        if zncc:
+            for i in range(m):
+                cr[i] = _zncc_cost(box[i], al[i], ar[i], bl[i], br[i])
+        else:
+            for i in range(m):
+                cr[i] = _nssd_cost(al[i], ar[i], box[i], bl[i], br[i])
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _second_best(cost, cols, best_k, out):
+    """Per column the lowest cost at least 2 disparities from the winner (uniqueness), BIG if none."""
+    col0, col1 = cols
+    for i in range(col1 - col0):
+        out[i] = BIG
+    for k in range(cost.shape[0]):
+        crow = cost[k, col0:col1]
+        kf = np.float32(k)
+        for i in range(col1 - col0):
+            far = np.float32(abs(kf - best_k[i]) > ONE)
+            out[i] = np.fmin(out[i], _blend(far, crow[i], BIG))
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _right_winners(cost, d_lo, cols, right_cost, right_d):
+    """Eq. (10) for each pixel ``x_r`` of the right image from the same costs: the lowest
+    ``c(x_r + d, d)`` and its ``d`` (float32, -1 where none)."""
+    col0, col1 = cols
+    for x in range(right_cost.size):
+        right_cost[x] = BIG
+        right_d[x] = -1.0
+    for k in range(cost.shape[0]):
+        d = d_lo + k
+        x0 = max(col0, d)
+        m = col1 - x0
+        if m <= 0:
+            continue
+        df = np.float32(d)
+        crow = cost[k, x0:col1]
+        rc = right_cost[x0 - d:col1 - d]
+        rd = right_d[x0 - d:col1 - d]
+        for i in range(m):
+            better = np.float32(crow[i] < rc[i])
+            rd[i] = _blend(better, df, rd[i])
+            rc[i] = _blend(better, crow[i], rc[i])
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _band_minimum(cost, k_lo, k_hi, cols, min_k, min_cost):
+    """Per column the lowest strict local minimum (``c(k - 1) >= c(k) < c(k + 1)``) among the
+    rows ``k_lo .. k_hi``: its row (-1: none) and cost (BIG: none)."""
+    col0, col1 = cols
+    nx = col1 - col0
+    for i in range(nx):
+        min_cost[i] = BIG
+        min_k[i] = -1.0
+    for k in range(max(k_lo, 1), min(k_hi, cost.shape[0] - 2) + 1):
+        c0 = cost[k, col0:col1]
+        cm = cost[k - 1, col0:col1]
+        cp = cost[k + 1, col0:col1]
+        kf = np.float32(k)
+        for i in range(nx):
+            m = np.float32(c0[i] <= cm[i]) * np.float32(c0[i] < cp[i]) * np.float32(c0[i] < min_cost[i])
+            min_k[i] = _blend(m, kf, min_k[i])
+            min_cost[i] = _blend(m, c0[i], min_cost[i])
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _row_winners(left, right, radius, zncc, d_lo, cols, y, first, scratch, winners):
+    """Image row ``y``'s costs (:func:`_row_costs`), winners (eq. 10) with the costs beside them,
+    and second best, into ``winners`` (:func:`_winner_scratch`)."""
+    _row_costs(left, right, radius, zncc, d_lo, cols, y, first, scratch)
+    cost = scratch[3]
+    col0, col1 = cols
+    best_cost, best_k, cost_before, cost_after, second = winners
+    _winners(cost[:, col0:col1], cost.shape[0], col1 - col0, best_cost, best_k, cost_before, cost_after)
+    _second_best(cost, cols, best_k, second)
+
+
 @njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
-def match_band(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, d_lo, d_hi,
-               zncc, row0, row1, col0, col1, n_strips, want_right, raw, lr_tol, ratio, max_cost, use_sub,
-               out_disp, out_sub, out_c1, out_c2, out_right, out_disparity, out_confidence,
-               alt_lo, alt_hi, out_alt, out_alt_cost, out_best_cost):
-    """Winner-take-all over ``d in [d_lo, d_hi]`` (eq. 10) for rows/cols of the AOI.
+def band_winners(left, right, radius, zncc, band, aoi, n_strips, right_check, out):
+    """Winner-take-all (eq. 10) over ``d in [d_lo, d_hi]`` for the rows/cols of the AOI, raw.
 
     Parameters
     ----------
-    left_pad, right_pad : ndarray (H + 2r, W + 2r)
-        Images padded by ``radius`` on every side (replicated border); their dtype is
-        the accumulator's (float32 when exact, else float64).
-    a_left, b_left, a_right, b_right : ndarray (H, W)
-        Per-pixel window terms (module docstring); ``a`` in the accumulator's dtype.
+    left, right : tuple (padded, a, b)
+        Prepared images (module docstring); ``padded`` (H + 2r, W + 2r) in the accumulator's
+        dtype (float32 when exact, else float64), ``a`` in that dtype, ``b`` float32 (H, W).
     zncc : bool
         Cost formula: False NSSD (eq. 9), True ZNCC.
-    raw : bool
-        True: write the raw outputs ``out_disp`` .. ``out_right`` (rows ``row0:row1``, cols
-        ``col0:col1``). False: write only ``out_disparity`` / ``out_confidence`` after the
-        checks below (rows ``row0:row1``, all columns).
-    lr_tol, ratio, max_cost, use_sub
-        Checks of the non-raw mode: left-right tolerance (< 0 off; needs ``want_right``),
-        uniqueness ``c1 <= (1 - ratio) c2`` (0 off), ``c1 <= max_cost`` (< 0 off), and
-        whether the parabola offset is added.
-    out_disp : ndarray int32 (H, W)
-        Integer winner ``d`` (eq. 10), -1 where no candidate exists (``x < d_lo``).
-    out_sub : ndarray float32 (H, W)
-        Parabola vertex offset in [-0.5, 0.5] around the winner (0 at band edges).
-    out_c1, out_c2 : ndarray float32 (H, W)
-        Best cost and best cost outside ``winner +- 1`` (uniqueness), BIG if none.
-    out_right : ndarray int32 (H, W)
-        Winner of the right image (min over d of c(x_r + d, d)), written when ``want_right``.
-    out_disparity, out_confidence : ndarray float32 (H, W)
-        Checked ``d + sub`` (NaN rejected) and ``clip(1 - c1 / c2, 0, 1)`` (0 rejected,
-        1 without a second candidate).
-    alt_lo, alt_hi : int
-        Non-raw mode, when ``alt_lo <= alt_hi``: also find the band's own best minimum, the
-        lowest cost among the strict local minima (``c(d - 1) >= c(d) < c(d + 1)``) at
-        disparities ``alt_lo .. alt_hi`` (whatever the winner and the checks), for the
-        cross-band ambiguity test of the union (:mod:`mrstereo.matching.disparity`).
-    out_alt, out_alt_cost, out_best_cost : ndarray float32 (H, W)
+    band : (int, int)
+        ``(d_lo, d_hi)``.
+    aoi : (int, int, int, int)
+        ``(row0, row1, col0, col1)``, half-open; the outputs elsewhere are left untouched.
+    right_check : bool
+        Also write the right image's winners.
+    out : tuple of ndarray (H, W)
+        ``disparity_int`` (int32: the winner ``d``, -1 where no candidate exists, ``x < d_lo``),
+        ``subpixel`` (float32: the parabola's vertex offset in [-0.5, 0.5], 0 at band edges),
+        ``best_cost``, ``second_cost`` (float32: the winner's cost and the best cost outside
+        ``winner +- 1``, BIG if none), ``right_disparity_int`` (int32: the winner of each
+        right-image pixel, -1 if none).
+    """
+    out_disp, out_sub, out_best, out_second, out_right = out
+    d_lo, d_hi = band
+    row0, row1, col0, col1 = aoi
+    cols = (col0, col1)
+    nd = d_hi - d_lo + 1
+    width = left[1].shape[1]
+    nx = col1 - col0
+    for s in prange(n_strips):
+        y_start, y_end = _strip_rows(s, n_strips, row0, row1)
+        if y_start >= y_end:
+            continue
+        scratch = _band_scratch(left[0], nd, width, radius)
+        winners = _winner_scratch(nx)
+        best_cost, best_k, cost_before, cost_after, second = winners
+        right_cost = np.empty(width, np.float32)
+        right_d = np.empty(width, np.float32)
+        for yy in range(y_start, y_start + 2 * radius):
+            _add_row_products(left[0], right[0], scratch[0], yy, d_lo, cols, radius)
+        for y in range(y_start, y_end):
+            _row_winners(left, right, radius, zncc, d_lo, cols, y, y == y_start, scratch, winners)
+            for i in range(nx):
+                x = col0 + i
+                kb = np.int32(best_k[i])
+                out_disp[y, x] = d_lo + kb if kb >= 0 else -1
+                out_sub[y, x] = _parabola(best_cost[i], cost_before[i], cost_after[i])
+                out_best[y, x] = best_cost[i]
+                out_second[y, x] = second[i]
+            if right_check:
+                _right_winners(scratch[3], d_lo, cols, right_cost, right_d)
+                for x in range(width):
+                    out_right[y, x] = np.int32(right_d[x])
+
+
+@njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
+def band_checked(left, right, radius, zncc, band, aoi, n_strips, checks, out, minimum_band, out_minimum):
+    """:func:`band_winners` with the checks: the disparity of the winners that pass them.
+
+    Parameters
+    ----------
+    left, right, zncc, band, aoi, n_strips
+        As :func:`band_winners`.
+    checks : (float, float, float, bool)
+        ``(lr_max_diff, uniqueness_ratio, max_cost, parabola)``: the left-right tolerance
+        (< 0 off), the uniqueness test ``c1 <= (1 - ratio) c2`` (0 off), ``c1 <= max_cost``
+        (< 0 off), and whether the parabola offset is added.
+    out : tuple of ndarray float32 (H, W)
+        ``(disparity, confidence)``: ``d + sub`` (NaN rejected) and ``clip(1 - c1 / c2, 0, 1)``
+        (0 rejected, 1 without a second candidate), rows ``row0:row1``, all columns.
+    minimum_band : (int, int)
+        When ``lo <= hi``: also find the band's own best minimum, the lowest cost among the
+        strict local minima at disparities ``lo .. hi`` (whatever the winner and the checks),
+        for the cross-band ambiguity test of the union (:mod:`mrstereo.matching.disparity`).
+    out_minimum : tuple of ndarray float32 (H, W)
         That minimum's integer disparity (NaN: none) and cost (BIG: none), and the winner's
         cost ``c1``, rows ``row0:row1``, cols ``col0:col1``.
     """
+    out_disparity, out_confidence = out
+    lr_tol, ratio, max_cost, parabola = checks
+    d_lo, d_hi = band
+    row0, row1, col0, col1 = aoi
+    cols = (col0, col1)
     nd = d_hi - d_lo + 1
-    width = a_left.shape[1]
-    n_rows = row1 - row0
-    win = 2 * radius + 1
-    c_end = col1 + 2 * radius
-    wp = width + 2 * radius
+    width = left[1].shape[1]
     nx = col1 - col0
     keep = np.float32(1.0 - ratio)
     max_c = np.float32(max_cost)
     lr_int = int(np.floor(lr_tol)) if lr_tol >= 0 else -1
     for s in prange(n_strips):
-        y_start = row0 + (s * n_rows) // n_strips
-        y_end = row0 + ((s + 1) * n_rows) // n_strips
+        y_start, y_end = _strip_rows(s, n_strips, row0, row1)
         if y_start >= y_end:
             continue
-        colsum = np.zeros((nd, wp), left_pad.dtype)
-        box = np.empty(width, left_pad.dtype)
-        t2 = np.empty(wp, left_pad.dtype)
-        t4 = np.empty(wp, left_pad.dtype)
-        t8 = np.empty(wp, left_pad.dtype)
-        t16 = np.empty(wp, left_pad.dtype)
-        cost = np.empty((nd, width), np.float32)
-        bc = np.empty(nx, np.float32)
-        bk = np.empty(nx, np.float32)
-        sc = np.empty(nx, np.float32)
-        cm_ = np.empty(nx, np.float32)
-        cp_ = np.empty(nx, np.float32)
-        sub_ = np.empty(nx, np.float32)
-        ak = np.empty(nx, np.float32)
-        ac = np.empty(nx, np.float32)
-        right_c = np.empty(width, np.float32)
+        scratch = _band_scratch(left[0], nd, width, radius)
+        cost = scratch[3]
+        winners = _winner_scratch(nx)
+        best_cost, best_k, cost_before, cost_after, second = winners
+        min_k = np.empty(nx, np.float32)
+        min_cost = np.empty(nx, np.float32)
+        right_cost = np.empty(width, np.float32)
         right_d = np.empty(width, np.float32)
         lr_ok = np.empty(nx, np.bool_)
-        # the window of image row y covers padded rows y .. y + 2r. Loops run over
-        # 0-based ranges of slices: the indices are provably >= 0 and the loops vectorize.
-        for k in range(nd):
-            d = d_lo + k
-            x0 = max(col0, d)
-            n = c_end - x0
-            col = colsum[k, x0:c_end]
-            for yy in range(y_start, y_start + 2 * radius):
-                lrow = left_pad[yy, x0:c_end]
-                rrow = right_pad[yy, x0 - d:c_end - d]
-                for i in range(n):
-                    col[i] += lrow[i] * rrow[i]
+        sub = np.empty(nx, np.float32)
+        for yy in range(y_start, y_start + 2 * radius):
+            _add_row_products(left[0], right[0], scratch[0], yy, d_lo, cols, radius)
         for y in range(y_start, y_end):
-            sub_on = y > y_start
-            ys = y - 1 if sub_on else y + 2 * radius
-            for k in range(nd):
-                d = d_lo + k
-                x0 = max(col0, d)
-                n = c_end - x0
-                col = colsum[k, x0:c_end]
-                la = left_pad[y + 2 * radius, x0:c_end]
-                ra = right_pad[y + 2 * radius, x0 - d:c_end - d]
-                if sub_on:
-                    ls = left_pad[ys, x0:c_end]
-                    rs = right_pad[ys, x0 - d:c_end - d]
-                    for i in range(n):
-                        col[i] += la[i] * ra[i] - ls[i] * rs[i]
-                else:
-                    for i in range(n):
-                        col[i] += la[i] * ra[i]
-                crow = cost[k, col0:col1]
-                for i in range(min(x0, col1) - col0):
-                    crow[i] = BIG
-                m = col1 - x0
-                if m <= 0:
-                    continue
-                _box(col, box, t2, t4, t8, t16, m, win)
-                al = a_left[y, x0:col1]
-                bl = b_left[y, x0:col1]
-                ar = a_right[y, x0 - d:col1 - d]
-                br = b_right[y, x0 - d:col1 - d]
-                cr = cost[k, x0:col1]
-                if zncc:
-                    for i in range(m):
-                        cr[i] = ONE - np.float32(box[i] - al[i] * ar[i]) * bl[i] * br[i]
-                else:
-                    for i in range(m):
-                        cr[i] = np.float32(al[i] + ar[i] - TWO * box[i]) * bl[i] * br[i]
-            # winner-take-all (eq. 10), first index on ties, and the costs next to the winner
-            _winners(cost[:, col0:col1], nd, nx, bc, bk, cm_, cp_)
-            # second best at least 2 disparities away (uniqueness)
-            for i in range(nx):
-                sc[i] = BIG
-            for k in range(nd):
-                crow = cost[k, col0:col1]
-                kf = np.float32(k)
+            _row_winners(left, right, radius, zncc, d_lo, cols, y, y == y_start, scratch, winners)
+            if minimum_band[0] <= minimum_band[1]:
+                _band_minimum(cost, minimum_band[0] - d_lo, minimum_band[1] - d_lo, cols, min_k, min_cost)
+                om, omc, obc = out_minimum[0][y, col0:col1], out_minimum[1][y, col0:col1], out_minimum[2][y, col0:col1]
                 for i in range(nx):
-                    far = np.float32(abs(kf - bk[i]) > ONE)
-                    sc[i] = np.fmin(sc[i], _blend(far, crow[i], BIG))
-            if not raw and alt_lo <= alt_hi:
-                # the band's own best strict local minimum (one more pass over the row's costs)
+                    om[i] = np.float32(d_lo) + min_k[i] if min_k[i] >= 0 else np.float32(np.nan)
+                    omc[i] = min_cost[i]
+                    obc[i] = best_cost[i]
+            if lr_tol >= 0:
+                _right_winners(cost, d_lo, cols, right_cost, right_d)
+            for i in range(nx):         # apart: the loop below then vectorizes
+                sub[i] = _parabola(best_cost[i], cost_before[i], cost_after[i])
+            od = out_disparity[y]
+            oc = out_confidence[y]
+            for x in range(col0):
+                od[x] = np.nan
+                oc[x] = 0.0
+            for x in range(col1, width):
+                od[x] = np.nan
+                oc[x] = 0.0
+            od = out_disparity[y, col0:col1]
+            oc = out_confidence[y, col0:col1]
+            # the left-right check's gather apart, so that the loop below vectorizes
+            if lr_tol >= 0:
                 for i in range(nx):
-                    ac[i] = BIG
-                    ak[i] = -1.0
-                for k in range(max(alt_lo - d_lo, 1), min(alt_hi - d_lo, nd - 2) + 1):
-                    c0 = cost[k, col0:col1]
-                    cm = cost[k - 1, col0:col1]
-                    cp = cost[k + 1, col0:col1]
-                    kf = np.float32(k)
-                    for i in range(nx):
-                        m = np.float32(c0[i] <= cm[i]) * np.float32(c0[i] < cp[i]) * np.float32(c0[i] < ac[i])
-                        ak[i] = _blend(m, kf, ak[i])
-                        ac[i] = _blend(m, c0[i], ac[i])
-                oa = out_alt[y, col0:col1]
-                oac = out_alt_cost[y, col0:col1]
-                obc = out_best_cost[y, col0:col1]
-                for i in range(nx):
-                    oa[i] = np.float32(d_lo) + ak[i] if ak[i] >= 0 else np.float32(np.nan)
-                    oac[i] = ac[i]
-                    obc[i] = bc[i]
-            if want_right:
-                for x in range(width):
-                    right_c[x] = BIG
-                    right_d[x] = -1.0
-                for k in range(nd):
-                    d = d_lo + k
-                    x0 = max(col0, d)
-                    m = col1 - x0
-                    if m <= 0:
-                        continue
-                    df = np.float32(d)
-                    crow = cost[k, x0:col1]
-                    rc = right_c[x0 - d:col1 - d]
-                    rd = right_d[x0 - d:col1 - d]
-                    for i in range(m):
-                        better = np.float32(crow[i] < rc[i])
-                        rd[i] = _blend(better, df, rd[i])
-                        rc[i] = _blend(better, crow[i], rc[i])
-            # parabola through (d - 1, d, d + 1), clipped to +-0.5; 0 at band edges
-            for i in range(nx):
-                sub_[i] = _parabola(bc[i], cm_[i], cp_[i])
-            if raw:
-                for i in range(nx):
-                    x = col0 + i
-                    kb = np.int32(bk[i])
-                    out_disp[y, x] = d_lo + kb if kb >= 0 else -1
-                    out_sub[y, x] = sub_[i]
-                    out_c1[y, x] = bc[i]
-                    out_c2[y, x] = sc[i]
+                    d = d_lo + np.int64(best_k[i])
+                    back = np.int64(right_d[min(max(col0 + i - d, 0), width - 1)])
+                    lr_ok[i] = (back >= 0) & (abs(d - back) <= lr_int)
             else:
-                od = out_disparity[y]
-                oc = out_confidence[y]
-                for x in range(col0):
-                    od[x] = np.nan
-                    oc[x] = 0.0
-                for x in range(col1, width):
-                    od[x] = np.nan
-                    oc[x] = 0.0
-                od = out_disparity[y, col0:col1]
-                oc = out_confidence[y, col0:col1]
-                # the left-right check's gather apart, so that the loop below vectorizes
-                if want_right and lr_tol >= 0:
-                    for i in range(nx):
-                        d = d_lo + np.int64(bk[i])
-                        back = np.int64(right_d[min(max(col0 + i - d, 0), width - 1)])
-                        lr_ok[i] = (back >= 0) & (abs(d - back) <= lr_int)
-                else:
-                    for i in range(nx):
-                        lr_ok[i] = True
                 for i in range(nx):
-                    kb = np.int64(bk[i])
-                    cb = bc[i]
-                    second = sc[i]
-                    d = d_lo + kb
-                    ok = kb >= 0 and lr_ok[i]
-                    ok = ok and (ratio <= 0 or cb <= keep * second)
-                    ok = ok and (max_cost < 0 or cb <= max_c)
-                    value = np.float32(d) + (sub_[i] if use_sub else np.float32(0.0))
-                    conf = np.float32(1.0) - cb / (second if second > 0 else np.float32(1.0))
-                    conf = min(max(conf, np.float32(0.0)), np.float32(1.0))
-                    conf = np.float32(1.0) if second >= BIG else conf
-                    conf = np.float32(0.0) if second <= 0 else conf
-                    od[i] = value if ok else np.float32(np.nan)
-                    oc[i] = conf if ok else np.float32(0.0)
-            if raw and want_right:
-                for x in range(width):
-                    out_right[y, x] = np.int32(right_d[x])
+                    lr_ok[i] = True
+            for i in range(nx):
+                kb = np.int64(best_k[i])
+                cb = best_cost[i]
+                c2 = second[i]
+                ok = kb >= 0 and lr_ok[i]
+                ok = ok and (ratio <= 0 or cb <= keep * c2)
+                ok = ok and (max_cost < 0 or cb <= max_c)
+                conf = np.float32(1.0) - cb / (c2 if c2 > 0 else np.float32(1.0))
+                conf = min(max(conf, np.float32(0.0)), np.float32(1.0))
+                conf = np.float32(1.0) if c2 >= BIG else conf
+                conf = np.float32(0.0) if c2 <= 0 else conf
+                value = np.float32(d_lo + kb) + (sub[i] if parabola else np.float32(0.0))
+                od[i] = value if ok else np.float32(np.nan)
+                oc[i] = conf if ok else np.float32(0.0)
 
 
+# ----------------------------------------------------------------------------- refinement
 @njit(nogil=True, cache=True)
 def fill_center(disparity_px, radius, out_center_pad):
-    """Integer coarse field for :func:`refine_warped`: ``round(d)``, NaNs filled with the
-    nearest valid value to the left in the row (else to the right, else 0), padded by
-    ``radius`` with replicated borders."""
+    """Integer coarse field for the refinement: ``round(d)``, NaNs filled with the nearest
+    valid value to the left in the row (else to the right, else 0), padded by ``radius`` with
+    replicated borders."""
     height, width = disparity_px.shape
     for y in range(height):
         first = -1
@@ -521,83 +620,102 @@ def fill_center(disparity_px, radius, out_center_pad):
         out_center_pad[height + radius + y] = out_center_pad[height + radius - 1]
 
 
-@njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
-def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, center_pad, want, half,
-                  zncc, max_cost, row0, row1, n_strips, out_disp, out_cost):
-    """Full-resolution re-scoring of a coarse disparity field over ``c + o``, ``|o| <= half``.
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _refined(center, best_k, best_cost, cost_before, cost_after, half, max_cost):
+    """A re-scored pixel's ``(disparity, cost)``: ``center + o* +`` the parabola offset, where
+    the best offset ``o*`` is not on the edge of ``[-half, half]`` (else the true minimum may
+    lie outside) and its cost is at most ``max_cost`` (< 0: off); else ``(NaN, inf)``."""
+    inside = ((best_k > 0) and (best_k < 2 * half) and (best_cost < BIG)
+              and (max_cost < 0 or best_cost <= np.float32(max_cost)))
+    value = np.float32(center + best_k - half) + _parabola(best_cost, cost_before, cost_after)
+    return (value if inside else np.float32(np.nan)), (best_cost if inside else np.float32(np.inf))
 
-    Parameters
-    ----------
-    left_pad, right_pad : ndarray float32 (H + 2r, W + 2r)
-        Pre-filtered full-resolution images padded by ``radius`` (replicated border).
-    a_left, b_left, a_right, b_right : ndarray float32 (H, W)
-        Per-pixel window terms (module docstring).
-    center_pad : ndarray int32 (H + 2r, W + 2r)
-        Coarse integer disparity ``c`` of every padded pixel (see :func:`fill_center`).
-    want : ndarray bool (H, W)
-        Pixels to refine; the others are left untouched.
-    max_cost : float
-        Winners costing more are rejected (< 0: off).
-    out_disp : ndarray float32 (H, W)
-        ``c + o* +`` parabola offset; NaN where ``o*`` is on the edge of ``[-half, half]``
-        (the true minimum may lie outside) or its cost is above ``max_cost``.
-    out_cost : ndarray float32 (H, W)
-        Cost of the winner (inf where NaN).
 
-    Each strip only touches the columns spanned by its wanted pixels; the products
-    ``I_L(p) I_R(p - c(p) - o)`` of the rows inside the window are kept in a ring buffer,
-    so each is gathered once.
-    """
-    width = a_left.shape[1]
+@njit(nogil=True, cache=True, inline="always")
+def _wanted_span(want_row, xa, xb):
+    """``(first, last + 1)`` of the wanted columns of ``want_row`` in ``xa .. xb - 1``; empty:
+    ``(xb, xa)``."""
+    wa = xb
+    wb = xa
+    for x in range(xa, xb):
+        if want_row[x]:
+            wa = min(wa, x)
+            wb = x + 1
+    return wa, wb
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _runs(values, n, out_starts):
+    """Starts of the runs of equal ``values[:n]`` into ``out_starts`` (then ``n``); their count."""
+    count = 0
+    for i in range(n):
+        if i == 0 or values[i] != values[i - 1]:
+            out_starts[count] = i
+            count += 1
+    out_starts[count] = n
+    return count
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _wanted_columns(want, box):
+    """The columns ``(first, last + 1)`` spanned by the wanted pixels of ``box = (row0, row1,
+    col0, col1)``; the running sums need no other (each column's sums are its own)."""
+    xa, xb = box[3], box[2]
+    for y in range(box[0], box[1]):
+        wa, wb = _wanted_span(want[y], box[2], box[3])
+        xa = min(xa, wa)
+        xb = max(xb, wb)
+    return xa, xb
+
+
+# One body: the product and cost gathers as inlined helpers measured 3-6 % slower (numba counts
+# the references of an inlined call's array arguments at every call, here per run and offset).
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _refine_box(left, right, radius, zncc, center_pad, want, box, half, max_cost, by_runs, out):
+    """Re-score the wanted pixels of one box (:func:`refine_boxes`). ``by_runs`` (a constant of
+    each kernel) gathers the products ``I_L(p) I_R(p - c(p) - o)`` and the right terms along runs
+    of constant ``c`` (contiguous reads) or pixel by pixel (the right column clamped to the
+    padded row; no bookkeeping). The products of the rows inside the window are kept in a ring
+    buffer, so each is gathered once."""
+    left_pad, a_left, b_left = left
+    right_pad, a_right, b_right = right
+    out_disp, out_cost = out
     nc = 2 * half + 1
     win = 2 * radius + 1
-    n_rows = row1 - row0
-    max_c = np.float32(max_cost)
-    for s in prange(n_strips):
-        y_start = row0 + (s * n_rows) // n_strips
-        y_end = row0 + ((s + 1) * n_rows) // n_strips
-        xa = width
-        xb = 0
-        for y in range(y_start, y_end):
-            wy = want[y]
-            for x in range(width):
-                if wy[x]:
-                    xa = min(xa, x)
-                    xb = max(xb, x + 1)
-        if y_start >= y_end or xb <= xa:
-            continue
-        nx = xb - xa                    # pixels xa .. xb - 1
-        ncol = nx + 2 * radius          # padded columns xa .. xb - 1 + 2r
-        wp = right_pad.shape[1]
-        colsum = np.zeros((nc, ncol), np.float32)
-        ring = np.zeros((nc, win, ncol), np.float32)
-        fresh = np.empty(ncol, np.float32)
-        box = np.empty(nx, np.float32)
-        t2 = np.empty(ncol, np.float32)
-        t4 = np.empty(ncol, np.float32)
-        t8 = np.empty(ncol, np.float32)
-        t16 = np.empty(ncol, np.float32)
-        cost = np.empty((nc, nx), np.float32)
-        bc = np.empty(nx, np.float32)
-        bk = np.empty(nx, np.float32)
-        cm_ = np.empty(nx, np.float32)
-        cp_ = np.empty(nx, np.float32)
-        run_at = np.empty(ncol + 1, np.int64)
-        for yy in range(y_start, y_end + 2 * radius):
-            slot = (yy - y_start) % win
-            lrow = left_pad[yy, xa:xa + ncol]
-            rrow = right_pad[yy]
-            crow = center_pad[yy, xa:xa + ncol]
-            n_runs = _runs(crow, ncol, run_at)
-            for o in range(nc):
-                off = o - half
-                col = colsum[o]
-                old = ring[o, slot]
-                # runs of constant coarse disparity read the right row contiguously
-                for r in range(n_runs):
+    wp = right_pad.shape[1]
+    y_start, y_end = box[0], box[1]
+    xa, xb = _wanted_columns(want, box)
+    if y_end <= y_start or xb <= xa:
+        return
+    nx = xb - xa                    # pixels xa .. xb - 1
+    ncol = nx + 2 * radius          # padded columns xa .. xb - 1 + 2r
+    colsum = np.zeros((nc, ncol), np.float32)
+    ring = np.zeros((nc, win, ncol), np.float32)
+    fresh = np.empty(ncol, np.float32)
+    box_sums = np.empty(nx, np.float32)
+    partial = np.empty((4, ncol), np.float32)
+    cost = np.empty((nc, nx), np.float32)
+    best_cost, best_k, cost_before, cost_after, _ = _winner_scratch(nx)
+    run_at = np.empty(ncol + 1, np.int64)
+    q0 = np.empty(ncol, np.int64)
+    ar_at = np.empty(nx, a_right.dtype)
+    br_at = np.empty(nx, np.float32)
+    for yy in range(y_start, y_end + 2 * radius):
+        slot = (yy - y_start) % win
+        lrow = left_pad[yy, xa:xa + ncol]
+        rrow = right_pad[yy]
+        crow = center_pad[yy, xa:xa + ncol]
+        n_runs = _runs(crow, ncol, run_at) if by_runs else 0
+        if not by_runs:
+            for i in range(ncol):
+                q0[i] = xa + i - crow[i]
+        for o in range(nc):
+            off = o - half
+            if by_runs:
+                for r in range(n_runs):         # q = base + i along a run, clamped to the padded row
                     i0 = run_at[r]
                     i1 = run_at[r + 1]
-                    base = xa - crow[i0] - off          # q = base + i, clamped to the padded row
+                    base = xa - crow[i0] - off
                     lo = min(max(i0, -base), i1)
                     hi = max(min(i1, wp - base), lo)
                     for i in range(i0, lo):
@@ -609,79 +727,130 @@ def refine_warped(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
                         seg_f[i] = seg_l[i] * seg_r[i]
                     for i in range(hi, i1):
                         fresh[i] = lrow[i] * rrow[wp - 1]
+            else:
                 for i in range(ncol):
-                    col[i] += fresh[i] - old[i]
-                    old[i] = fresh[i]
-            y = yy - 2 * radius
-            if y < y_start:
-                continue
-            # window sums of row y are complete: costs for every offset
-            # costs only over the columns wa .. wb - 1 of this row's wanted pixels
-            wa, wb = _wanted_span(want[y], xa, xb)
-            if wb <= wa:
-                continue
-            nw = wb - wa
-            cy = center_pad[y + radius, radius + wa:radius + wb]
-            al = a_left[y, wa:wb]
-            bl = b_left[y, wa:wb]
-            ar = a_right[y]
-            br = b_right[y]
-            n_runs = _runs(cy, nw, run_at)
-            for o in range(nc):
-                off = o - half
-                _box(colsum[o, wa - xa:], box, t2, t4, t8, t16, nw, win)
-                crow = cost[o]
-                for r in range(n_runs):     # x_right = wa + i - d, contiguous within a run
+                    fresh[i] = lrow[i] * rrow[min(max(q0[i] - off, 0), wp - 1)]
+            col = colsum[o]
+            old = ring[o, slot]
+            for i in range(ncol):
+                col[i] += fresh[i] - old[i]
+                old[i] = fresh[i]
+        y = yy - 2 * radius
+        if y < y_start:
+            continue
+        # window sums of row y are complete: costs over the columns of its wanted pixels
+        wa, wb = _wanted_span(want[y], xa, xb)
+        if wb <= wa:
+            continue
+        nw = wb - wa
+        cy = center_pad[y + radius, radius + wa:radius + wb]
+        al = a_left[y, wa:wb]
+        bl = b_left[y, wa:wb]
+        ar = a_right[y]
+        br = b_right[y]
+        n_runs = _runs(cy, nw, run_at) if by_runs else 0
+        for o in range(nc):
+            off = o - half
+            _box(colsum[o, wa - xa:], box_sums, partial, nw, win)
+            crow_c = cost[o]
+            if by_runs:
+                for r in range(n_runs):         # x_right = base + i along a run
                     i0 = run_at[r]
                     i1 = run_at[r + 1]
                     d = cy[i0] + off
                     k0 = min(max(i0, d - wa), i1) if d >= 0 else i1
                     for i in range(i0, k0):
-                        crow[i] = BIG           # x_right < 0 or d < 0: no candidate
+                        crow_c[i] = BIG         # x_right < 0 or d < 0: no candidate
                     base = wa - d
                     seg_ar = ar[base + k0:base + i1]
                     seg_br = br[base + k0:base + i1]
-                    seg_box = box[k0:i1]
+                    seg_box = box_sums[k0:i1]
                     seg_al = al[k0:i1]
                     seg_bl = bl[k0:i1]
-                    seg_c = crow[k0:i1]
+                    seg_c = crow_c[k0:i1]
                     if zncc:
                         for i in range(i1 - k0):
-                            seg_c[i] = ONE - (seg_box[i] - seg_al[i] * seg_ar[i]) * seg_bl[i] * seg_br[i]
+                            seg_c[i] = _zncc_cost(seg_box[i], seg_al[i], seg_ar[i], seg_bl[i], seg_br[i])
                     else:
                         for i in range(i1 - k0):
-                            seg_c[i] = (seg_al[i] + seg_ar[i] - TWO * seg_box[i]) * seg_bl[i] * seg_br[i]
-            # winner over the offsets and its neighbours (as in match_band)
-            _winners(cost, nc, nw, bc, bk, cm_, cp_)
-            od = out_disp[y, wa:wb]
-            oc = out_cost[y, wa:wb]
-            wy = want[y, wa:wb]
+                            seg_c[i] = _nssd_cost(seg_al[i], seg_ar[i], seg_box[i], seg_bl[i], seg_br[i])
+                continue
             for i in range(nw):
-                kb = np.int64(bk[i])
-                cb = bc[i]
-                sub = _parabola(cb, cm_[i], cp_[i])
-                inside = (kb > 0) and (kb < nc - 1) and (cb < BIG) and (max_cost < 0 or cb <= max_c)
-                value = np.float32(cy[i] + kb - half) + sub
-                od[i] = (value if inside else np.float32(np.nan)) if wy[i] else od[i]
-                oc[i] = (cb if inside else np.float32(np.inf)) if wy[i] else oc[i]
+                xr = min(max(wa + i - cy[i] - off, 0), wa + i)
+                ar_at[i] = ar[xr]
+                br_at[i] = br[xr]
+            _costs(crow_c, box_sums, al, bl, ar_at, br_at, nw, zncc)
+            for i in range(nw):
+                d = cy[i] + off
+                crow_c[i] = crow_c[i] if (d >= 0 and wa + i >= d) else BIG     # x_right < 0 or d < 0: none
+        _winners(cost, nc, nw, best_cost, best_k, cost_before, cost_after)
+        od = out_disp[y, wa:wb]
+        oc = out_cost[y, wa:wb]
+        wy = want[y, wa:wb]
+        for i in range(nw):             # branch-free: vectorizes
+            value, c = _refined(cy[i], np.int64(best_k[i]), best_cost[i], cost_before[i], cost_after[i], half,
+                                max_cost)
+            od[i] = value if wy[i] else od[i]
+            oc[i] = c if wy[i] else oc[i]
 
 
 @njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
-def refine_sparse(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, center_pad, ys, xs, half,
-                  zncc, max_cost, n_strips, out_disp, out_cost):
-    """:func:`refine_warped` for scattered pixels ``(ys[j], xs[j])`` (same arguments and
-    outputs): each window sum ``sum I_L(p) I_R(p - c(p) - o)`` is added up directly, so the
-    work is per wanted pixel rather than per pixel of the rows spanned. The sums are the
-    same float32 sums (exact, so the results identical, for integer-valued images)."""
+def refine_boxes(left, right, radius, zncc, center_pad, want, boxes, half, max_cost, out):
+    """Full-resolution re-scoring of a coarse disparity field over ``c + o``, ``|o| <= half``,
+    box by box in parallel, the products gathered pixel by pixel (the right column clamped to
+    the padded row): the cost does not grow where ``c`` changes every few pixels (the near
+    guard's fields).
+
+    Parameters
+    ----------
+    left, right : tuple (padded, a, b)
+        Pre-filtered full-resolution images (module docstring).
+    center_pad : ndarray int32 (H + 2r, W + 2r)
+        Coarse integer disparity ``c`` of every padded pixel (see :func:`fill_center`).
+    want : ndarray bool (H, W)
+        Pixels to refine; the others are left untouched.
+    boxes : ndarray int64 (n, 4)
+        ``(row0, row1, col0, col1)`` (half-open) that hold the wanted pixels; the running sums
+        cover each box's wanted columns, from its first row on.
+    max_cost : float
+        Winners costing more are rejected (< 0: off).
+    out : tuple of ndarray float32 (H, W)
+        ``(disparity, cost)``: ``c + o* +`` parabola offset and its cost where the winner
+        ``o*`` passes :func:`_refined`, else NaN and inf.
+
+    The products of the rows inside the window are kept in a ring buffer, so each is
+    gathered once.
+    """
+    for j in prange(boxes.shape[0]):
+        _refine_box(left, right, radius, zncc, center_pad, want, boxes[j], half, max_cost, False, out)
+
+
+@njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
+def refine_strips(left, right, radius, zncc, center_pad, want, strips, half, max_cost, out):
+    """:func:`refine_boxes` over row strips (``strips`` as ``boxes``), the products and costs
+    gathered along runs of constant ``c`` (contiguous reads: fastest where ``c`` is constant over
+    many pixels, a level's up-sampled field). Same sums, same results."""
+    for j in prange(strips.shape[0]):
+        _refine_box(left, right, radius, zncc, center_pad, want, strips[j], half, max_cost, True, out)
+
+
+@njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
+def refine_pixels(left, right, radius, zncc, center_pad, pixels, half, max_cost, n_strips, out):
+    """:func:`refine_boxes` for scattered pixels ``pixels = (ys, xs)`` (same arguments and
+    outputs otherwise): each window sum ``sum I_L(p) I_R(p - c(p) - o)`` is added up directly,
+    so the work is per wanted pixel rather than per pixel of the rows spanned. The sums are
+    the same float32 sums (exact, so the results identical, for integer-valued images)."""
+    left_pad, a_left, b_left = left
+    right_pad, a_right, b_right = right
+    ys, xs = pixels
+    out_disp, out_cost = out
     nc = 2 * half + 1
     win = 2 * radius + 1
     n = win * win
     wp = right_pad.shape[1]
-    max_c = np.float32(max_cost)
     rflat = right_pad.reshape(right_pad.size)
     for s in prange(n_strips):
-        j0 = (s * ys.size) // n_strips
-        j1 = ((s + 1) * ys.size) // n_strips
+        j0, j1 = _strip_rows(s, n_strips, 0, ys.size)
         lv = np.empty(n, np.float32)
         qs = np.empty(n, np.int64)
         cj = np.empty(nc, np.float32)
@@ -709,7 +878,7 @@ def refine_sparse(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
                 if q_lo - off >= 0 and q_hi - off < wp:
                     for t in range(n):
                         acc += lv[t] * np.float32(rflat[qs[t] - off])
-                else:                       # clamped to the padded row, as refine_warped
+                else:                       # clamped to the padded row, as refine_boxes
                     for t in range(n):
                         yy = y + t // win
                         q = min(max(qs[t] - yy * wp - off, 0), wp - 1)
@@ -724,113 +893,16 @@ def refine_sparse(left_pad, right_pad, a_left, b_left, a_right, b_right, radius,
                 if d < 0 or x < d:
                     c = BIG                 # x_right < 0 or d < 0: no candidate
                 elif zncc:
-                    c = ONE - (cj[o] - al * a_right[y, x - d]) * bl * b_right[y, x - d]
+                    c = _zncc_cost(cj[o], al, a_right[y, x - d], bl, b_right[y, x - d])
                 else:
-                    c = (al + a_right[y, x - d] - TWO * cj[o]) * bl * b_right[y, x - d]
+                    c = _nssd_cost(al, a_right[y, x - d], cj[o], bl, b_right[y, x - d])
                 cj[o] = c
                 if c < cb:
                     cb = c
                     kb = o
             cm = cj[kb - 1] if kb > 0 else BIG
             cp = cj[kb + 1] if 0 <= kb < nc - 1 else BIG
-            inside = (kb > 0) and (kb < nc - 1) and (cb < BIG) and (max_cost < 0 or cb <= max_c)
-            value = np.float32(cy + kb - half) + _parabola(cb, cm, cp)
-            out_disp[y, x] = value if inside else np.float32(np.nan)
-            out_cost[y, x] = cb if inside else np.float32(np.inf)
-
-
-@njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
-def refine_boxes(left_pad, right_pad, a_left, b_left, a_right, b_right, radius, center_pad, want, boxes, half,
-                 zncc, max_cost, out_disp, out_cost):
-    """:func:`refine_warped` box by box: ``boxes[j] = (row0, row1, col0, col1)`` (half-open, image
-    coordinates) hold the wanted pixels; the running sums cover each box only, boxes run in
-    parallel. Same arguments and outputs otherwise, and the same sums bit for bit.
-
-    The products ``I_L(p) I_R(p - c(p) - o)`` are gathered pixel by pixel (the right column
-    clamped to the padded row, as there) instead of along runs of constant ``c``: the cost
-    does not grow when ``c`` changes every few pixels (the near guard's up-sampled fields
-    change every ``k`` pixels, the bands' values at almost every pixel), where the runs'
-    bookkeeping costs several times the products.
-    """
-    nc = 2 * half + 1
-    win = 2 * radius + 1
-    wp = right_pad.shape[1]
-    max_c = np.float32(max_cost)
-    for j in prange(boxes.shape[0]):
-        y_start = boxes[j, 0]
-        y_end = boxes[j, 1]
-        xa = boxes[j, 2]
-        xb = boxes[j, 3]
-        if y_end <= y_start or xb <= xa:
-            continue
-        nx = xb - xa                    # pixels xa .. xb - 1
-        ncol = nx + 2 * radius          # padded columns xa .. xb - 1 + 2r
-        colsum = np.zeros((nc, ncol), np.float32)
-        ring = np.zeros((nc, win, ncol), np.float32)
-        fresh = np.empty(ncol, np.float32)
-        q0 = np.empty(ncol, np.int64)
-        box = np.empty(nx, np.float32)
-        t2 = np.empty(ncol, np.float32)
-        t4 = np.empty(ncol, np.float32)
-        t8 = np.empty(ncol, np.float32)
-        t16 = np.empty(ncol, np.float32)
-        cost = np.empty((nc, nx), np.float32)
-        bc = np.empty(nx, np.float32)
-        bk = np.empty(nx, np.float32)
-        cm_ = np.empty(nx, np.float32)
-        cp_ = np.empty(nx, np.float32)
-        for yy in range(y_start, y_end + 2 * radius):
-            slot = (yy - y_start) % win
-            lrow = left_pad[yy, xa:xa + ncol]
-            rrow = right_pad[yy]
-            crow = center_pad[yy, xa:xa + ncol]
-            for i in range(ncol):
-                q0[i] = xa + i - crow[i]
-            for o in range(nc):
-                off = o - half
-                for i in range(ncol):
-                    fresh[i] = lrow[i] * rrow[min(max(q0[i] - off, 0), wp - 1)]
-                col = colsum[o]
-                old = ring[o, slot]
-                for i in range(ncol):
-                    col[i] += fresh[i] - old[i]
-                    old[i] = fresh[i]
-            y = yy - 2 * radius
-            if y < y_start:
-                continue
-            wa, wb = _wanted_span(want[y], xa, xb)
-            if wb <= wa:
-                continue
-            nw = wb - wa
-            cy = center_pad[y + radius, radius + wa:radius + wb]
-            al = a_left[y, wa:wb]
-            bl = b_left[y, wa:wb]
-            ar = a_right[y]
-            br = b_right[y]
-            for o in range(nc):
-                off = o - half
-                _box(colsum[o, wa - xa:], box, t2, t4, t8, t16, nw, win)
-                crow_c = cost[o]
-                for i in range(nw):
-                    d = cy[i] + off
-                    xr = min(max(wa + i - d, 0), wa + i)
-                    if zncc:
-                        c = ONE - (box[i] - al[i] * ar[xr]) * bl[i] * br[xr]
-                    else:
-                        c = (al[i] + ar[xr] - TWO * box[i]) * bl[i] * br[xr]
-                    crow_c[i] = c if (d >= 0 and wa + i >= d) else BIG     # x_right < 0 or d < 0: none
-            _winners(cost, nc, nw, bc, bk, cm_, cp_)
-            od = out_disp[y, wa:wb]
-            oc = out_cost[y, wa:wb]
-            wy = want[y, wa:wb]
-            for i in range(nw):
-                kb = np.int64(bk[i])
-                cb = bc[i]
-                sub = _parabola(cb, cm_[i], cp_[i])
-                inside = (kb > 0) and (kb < nc - 1) and (cb < BIG) and (max_cost < 0 or cb <= max_c)
-                value = np.float32(cy[i] + kb - half) + sub
-                od[i] = (value if inside else np.float32(np.nan)) if wy[i] else od[i]
-                oc[i] = (cb if inside else np.float32(np.inf)) if wy[i] else oc[i]
+            out_disp[y, x], out_cost[y, x] = _refined(cy, kb, cb, cm, cp, half, max_cost)
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH)
@@ -1050,12 +1122,10 @@ def gate(disparity, confidence, lo, hi):
 
 
 @njit(nogil=True, cache=True)
-def unite(disparity, confidence, rule, index, out_d, out_c, out_source, poisoned):
-    """Eq. (12), one level at a time (finest first): rule 0 = the more confident value
-    wins, 1 = the first (finer) value wins, 2 = as 1 but pixels where two levels differ
-    by more than 1 px are marked in ``poisoned``. ``out_source`` gets ``index`` where
-    this level's value is taken. ``index == 0`` initializes the outputs (no prior value).
-    Branch-free per pixel (the loops vectorize)."""
+def unite(disparity, confidence, first, out_d, out_c):
+    """Eq. (12), one level at a time: the more confident value wins (a tie keeps the earlier,
+    finer level's). ``first`` initializes the outputs (no prior value). Branch-free per pixel
+    (the loops vectorize)."""
     height, width = disparity.shape
     nan = np.float32(np.nan)
     for y in range(height):
@@ -1063,33 +1133,17 @@ def unite(disparity, confidence, rule, index, out_d, out_c, out_source, poisoned
         cr = confidence[y]
         od = out_d[y]
         oc = out_c[y]
-        os_ = out_source[y]
-        po = poisoned[y]
-        if index == 0:
+        if first:
             for x in range(width):
                 valid = np.isfinite(dr[x])
                 od[x] = dr[x] if valid else nan
                 oc[x] = cr[x] if valid else np.float32(0.0)
-                os_[x] = np.int8(0) if valid else np.int8(-1)
-                po[x] = False
-        elif rule == 0:
-            for x in range(width):
-                take = np.isfinite(dr[x]) and not (np.isfinite(od[x]) and cr[x] <= oc[x])
-                od[x] = dr[x] if take else od[x]
-                oc[x] = cr[x] if take else oc[x]
-                os_[x] = np.int8(index) if take else os_[x]
         else:
-            for x in range(width):
-                d = dr[x]
-                if not np.isfinite(d):
-                    continue
-                cur = od[x]
-                if np.isfinite(cur):
-                    po[x] = po[x] or (rule == 2 and abs(d - cur) > 1.0)
-                    continue
-                od[x] = d
-                oc[x] = cr[x]
-                os_[x] = index
+            for x in range(width):      # & and ~, not the branches of `and`: the loop vectorizes
+                d, c, kept_d, kept_c = dr[x], cr[x], od[x], oc[x]
+                take = np.isfinite(d) & ~(np.isfinite(kept_d) & (c <= kept_c))
+                od[x] = d if take else kept_d
+                oc[x] = c if take else kept_c
 
 
 @njit(nogil=True, cache=True)
@@ -1187,15 +1241,21 @@ def zero_where_invalid(disparity, confidence):
 
 # ----------------------------------------------------------------------------- near guard
 @njit(nogil=True, cache=True)
-def guard_candidates(d_int, sub, c1, c2, d_right, subpixel, scale, above, wide, max_cost, wide_cost,
-                     lr_max_diff, keep, wide_keep, out_d, out_beyond, out_candidate):
-    """Step 1 of the near guard in one pass (:func:`.disparity._near_guard`): the level
-    disparity ``d_int (+ sub)``; ``beyond`` = a winner with ``d scale > above``; a candidate =
-    beyond and ``c1 <= max_cost`` (``max_cost`` < 0: off), left-right consistent within
-    ``lr_max_diff`` (< 0: off) and unique (``c1 <= keep c2``, ``keep`` < 0: off). ``wide`` (0, 1:
-    the comparison, 2: also the product) and the ``wide_*`` flags evaluate in float64 where
-    numpy's promotion of the settings' types would (float32 otherwise): the verdicts equal
-    the numpy expressions (tests/test_matching_too_near.py)."""
+def guard_candidates(winners, subpixel, scale, above, wide, checks, out):
+    """Step 1 of the near guard in one pass (:mod:`.near_guard`).
+
+    ``winners = (d_int, sub, c1, c2, d_right)``: the guard search's raw winners
+    (:func:`band_winners`). ``out = (d_level, beyond, candidate)``: the level disparity ``d_int
+    (+ sub)``; a winner with ``d scale > above``; and those that pass ``checks = (max_cost,
+    wide_cost, lr_max_diff, keep, wide_keep)``: ``c1 <= max_cost`` (< 0: off), left-right
+    consistent within ``lr_max_diff`` (< 0: off) and unique (``c1 <= keep c2``, ``keep`` < 0:
+    off). ``wide`` (0, 1: the comparison, 2: also the product) and the ``wide_*`` flags evaluate
+    in float64 where numpy's promotion of the settings' types would (float32 otherwise): the
+    verdicts equal the numpy expressions of the checks (tests/test_matching_guard_kernels.py).
+    """
+    d_int, sub, c1, c2, d_right = winners
+    max_cost, wide_cost, lr_max_diff, keep, wide_keep = checks
+    out_d, out_beyond, out_candidate = out
     height, width = d_int.shape
     for y in range(height):
         for x in range(width):

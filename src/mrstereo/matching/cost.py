@@ -23,12 +23,10 @@ import cv2
 import numpy as np
 
 from . import _kernels
+from .config import COSTS, PREFILTERS
 
 __all__ = ["BandMatch", "PreparedImage", "prefilter", "prepare", "match_band", "match_prepared",
            "match_checked", "CheckedMatch", "prepare_gray", "refine_candidates", "PREFILTERS", "COSTS"]
-
-PREFILTERS = ("none", "xsobel", "mean")
-COSTS = ("nssd", "zncc")
 
 
 @dataclass(frozen=True)
@@ -58,22 +56,19 @@ class BandMatch:
     d_hi: int
 
 
-def prefilter(image: np.ndarray, kind: str, *, cap: int = 31, size: int = 9) -> np.ndarray:
+def prefilter(image: np.ndarray, kind: str, *, cap: int = 31) -> np.ndarray:
     """Pre-filter a gray image before the cost.
 
     Parameters
     ----------
     image : ndarray float32 (H, W)
         Gray image.
-    kind : {"none", "xsobel", "mean"}
-        ``"xsobel"``: horizontal 3x3 Sobel derivative clipped to ``[-cap, cap]`` (OpenCV
-        StereoBM's default pre-filter); ``"mean"``: the image minus its ``size x size``
-        local mean, clipped to ``[-cap, cap]``; ``"none"``: the raw intensities (eq. 9).
-        Both filters remove the gain/offset differences of the two cameras.
+    kind : {"none", "xsobel"}
+        ``"xsobel"``: horizontal 3x3 Sobel derivative / 4, rounded and clipped to ``[-cap, cap]``
+        (OpenCV StereoBM's default pre-filter; it removes the gain/offset differences of the two
+        cameras); ``"none"``: the raw intensities (eq. 9).
     cap : int
         Clipping bound (grey levels).
-    size : int
-        Window of the local mean (``"mean"`` only).
 
     Returns
     -------
@@ -86,9 +81,6 @@ def prefilter(image: np.ndarray, kind: str, *, cap: int = 31, size: int = 9) -> 
     elif kind == "xsobel":
         out = np.clip(np.rint(cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3,
                                         borderType=cv2.BORDER_REPLICATE) / 4.0), -cap, cap)
-    elif kind == "mean":
-        mean = cv2.blur(image, (size, size), borderType=cv2.BORDER_REPLICATE)
-        out = np.clip(np.rint(image - mean), -cap, cap)
     else:
         raise ValueError(f"prefilter must be one of {PREFILTERS}, got {kind!r}")
     if np.array_equal(out, np.rint(out)) and np.abs(out).max(initial=0) < 2 ** 12:
@@ -128,9 +120,26 @@ class PreparedImage:
     def shape(self) -> tuple[int, int]:
         return self.a.shape
 
+    @property
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(padded, a, b)``, as the kernels take a prepared image."""
+        return self.padded, self.a, self.b
+
 
 def prepare(image: np.ndarray, *, window: int, cost: str, dtype=np.float32) -> PreparedImage:
-    """Pad a pre-filtered ``image`` and compute its window terms for :func:`match_prepared`."""
+    """Pad a pre-filtered ``image`` and compute its window terms for :func:`match_prepared`.
+
+    Parameters
+    ----------
+    image : ndarray (H, W)
+        Pre-filtered image (:func:`prefilter`).
+    window : int
+        Odd window size.
+    cost : {"nssd", "zncc"}
+        The cost the terms are for.
+    dtype : numpy dtype
+        Accumulator type: float32 when the window sums are exact integers, else float64.
+    """
     if cost not in COSTS:
         raise ValueError(f"cost must be one of {COSTS}, got {cost!r}")
     r = window // 2
@@ -141,7 +150,17 @@ def prepare(image: np.ndarray, *, window: int, cost: str, dtype=np.float32) -> P
 
 def prepare_gray(gray: np.ndarray, *, kind: str, cap: int, window: int, cost: str) -> PreparedImage:
     """Pre-filter (:func:`prefilter`) a float32 gray image and prepare it, fused for
-    ``"xsobel"`` (its values are integers in ``[-cap, cap]``: float32 sums are exact)."""
+    ``"xsobel"`` (its values are integers in ``[-cap, cap]``: float32 sums are exact).
+
+    Parameters
+    ----------
+    gray : ndarray float32 (H, W)
+        Gray image.
+    kind, cap
+        Pre-filter and its clip bound (:func:`prefilter`).
+    window, cost
+        As :func:`prepare`.
+    """
     if kind != "xsobel" or window * window * cap * cap * 2 >= 2 ** 24:
         filtered = prefilter(gray, kind, cap=cap)
         return prepare(filtered, window=window, cost=cost, dtype=_accumulator_dtype(filtered, filtered, window))
@@ -164,25 +183,37 @@ def _with_terms(padded: np.ndarray, window: int, zncc: bool) -> PreparedImage:
 def match_prepared(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi: int,
                    rows: tuple[int, int], cols: tuple[int, int], right_check: bool,
                    n_strips: int | None = None) -> tuple[np.ndarray, ...]:
-    """Run the band kernel on prepared images; raw outputs (costs BIG, not inf, when absent):
-    ``(disparity_int, subpixel_px, best_cost, second_cost, right_disparity_int)``."""
+    """Winner-take-all (eq. 10) over ``[d_lo, d_hi]`` on prepared images, raw.
+
+    Parameters
+    ----------
+    left, right : PreparedImage
+        The pair (:func:`prepare`).
+    d_lo, d_hi : int
+        The band searched (pixels of these images).
+    rows, cols : (int, int)
+        Half-open rows and columns to evaluate.
+    right_check : bool
+        Also find the right image's winners.
+    n_strips : int, optional
+        Row strips run in parallel (default: numba's thread count).
+
+    Returns
+    -------
+    tuple of ndarray (H, W)
+        ``(disparity_int, subpixel_px, best_cost, second_cost, right_disparity_int)`` as
+        :class:`BandMatch`, with BIG (not inf) where a cost is absent.
+    """
     h, w = left.shape
-    disp = np.full((h, w), -1, np.int32)
-    sub = np.zeros((h, w), np.float32)
-    c1 = np.full((h, w), _kernels.BIG, np.float32)
-    c2 = np.full((h, w), _kernels.BIG, np.float32)
-    disp_right = np.full((h, w), -1, np.int32)
+    out = (np.full((h, w), -1, np.int32), np.zeros((h, w), np.float32), np.full((h, w), _kernels.BIG, np.float32),
+           np.full((h, w), _kernels.BIG, np.float32), np.full((h, w), -1, np.int32))
     if rows[1] > rows[0] and cols[1] > cols[0]:
-        _kernels.match_band(left.padded, right.padded, left.a, left.b, right.a, right.b, left.window // 2,
-                            int(d_lo), int(d_hi), left.zncc, rows[0], rows[1], cols[0], cols[1],
-                            _strips(n_strips, rows[1] - rows[0]), bool(right_check), True, -1.0, 0.0, -1.0,
-                            False, disp, sub, c1, c2, disp_right, _DUMMY_F, _DUMMY_F, 1, 0, _DUMMY_F, _DUMMY_F,
-                            _DUMMY_F)
-    return disp, sub, c1, c2, disp_right
+        _kernels.band_winners(left.arrays, right.arrays, left.window // 2, left.zncc, (int(d_lo), int(d_hi)),
+                              (*rows, *cols), _strips(n_strips, rows[1] - rows[0]), bool(right_check), out)
+    return out
 
 
-_DUMMY_F = np.zeros((1, 1), np.float32)
-_DUMMY_I = np.zeros((1, 1), np.int32)
+_NONE = np.zeros((1, 1), np.float32)      # an output the kernel is told not to write
 
 
 class CheckedMatch(NamedTuple):
@@ -209,10 +240,21 @@ def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi:
     Returns the winner (+ parabola offset when ``subpixel``) where it passes the left-right
     check (``|d_L - d_R| <= lr_max_diff_px``), the uniqueness ratio and the maximum cost
     (each off when None / 0), else NaN; the confidence ``clip(1 - c1 / c2, 0, 1)`` (0 where
-    NaN). Outside ``rows`` NaN. ``alt_band = (lo, hi)``: also the lowest strict local minimum
-    of the cost at disparities ``lo .. hi`` (the band without its search margins), whatever
-    the winner and the checks, with its cost, and the winner's cost (the cross-band
-    ambiguity test, :func:`mrstereo.matching.disparity.compute_disparity`).
+    NaN). Outside ``rows`` NaN.
+
+    Parameters
+    ----------
+    left, right, d_lo, d_hi, rows, cols, n_strips
+        As :func:`match_prepared`.
+    lr_max_diff_px, uniqueness_ratio, max_cost : float or None
+        The checks (:class:`.config.AcceptanceConfig`).
+    subpixel : bool
+        Add the parabola offset.
+    alt_band : (int, int), optional
+        ``(lo, hi)``: also the lowest strict local minimum of the cost at disparities ``lo ..
+        hi`` (the band without its search margins), whatever the winner and the checks, with
+        its cost, and the winner's cost (the cross-band ambiguity test,
+        :func:`mrstereo.matching.disparity.compute_disparity`).
     """
     h, w = left.shape
     disparity = np.empty((h, w), np.float32)
@@ -221,21 +263,18 @@ def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi:
     disparity[rows[1]:] = np.nan
     confidence[:rows[0]] = 0.0
     confidence[rows[1]:] = 0.0
-    alt_lo, alt_hi = (1, 0) if alt_band is None else (int(alt_band[0]), int(alt_band[1]))
     alt_px = alt_cost = best_cost = None
     if alt_band is not None:
         alt_px = np.full((h, w), np.nan, np.float32)
         alt_cost = np.full((h, w), _kernels.BIG, np.float32)
         best_cost = np.full((h, w), _kernels.BIG, np.float32)
     if rows[1] > rows[0] and cols[1] > cols[0]:
-        _kernels.match_band(left.padded, right.padded, left.a, left.b, right.a, right.b, left.window // 2,
-                            int(d_lo), int(d_hi), left.zncc, rows[0], rows[1], cols[0], cols[1],
-                            _strips(n_strips, rows[1] - rows[0]), lr_max_diff_px is not None, False,
-                            -1.0 if lr_max_diff_px is None else float(lr_max_diff_px), float(uniqueness_ratio),
-                            -1.0 if max_cost is None else float(max_cost), bool(subpixel),
-                            _DUMMY_I, _DUMMY_F, _DUMMY_F, _DUMMY_F, _DUMMY_I, disparity, confidence,
-                            alt_lo, alt_hi, _DUMMY_F if alt_px is None else alt_px,
-                            _DUMMY_F if alt_cost is None else alt_cost, _DUMMY_F if best_cost is None else best_cost)
+        checks = (-1.0 if lr_max_diff_px is None else float(lr_max_diff_px), float(uniqueness_ratio),
+                  -1.0 if max_cost is None else float(max_cost), bool(subpixel))
+        _kernels.band_checked(left.arrays, right.arrays, left.window // 2, left.zncc, (int(d_lo), int(d_hi)),
+                              (*rows, *cols), _strips(n_strips, rows[1] - rows[0]), checks, (disparity, confidence),
+                              (1, 0) if alt_band is None else (int(alt_band[0]), int(alt_band[1])),
+                              (_NONE, _NONE, _NONE) if alt_band is None else (alt_px, alt_cost, best_cost))
     else:
         disparity[rows[0]:rows[1]] = np.nan
         confidence[rows[0]:rows[1]] = 0.0
@@ -286,11 +325,12 @@ def match_band(left: np.ndarray, right: np.ndarray, *, d_lo: int, d_hi: int, win
                      d_hi=int(d_hi))
 
 
-# refine_candidates adds up the windows of single pixels (refine_sparse) when fewer than 1 in
+# refine_candidates adds up the windows of single pixels (refine_pixels) when fewer than 1 in
 # SPARSE_REFINE_SHARE pixels of the rows spanned are wanted (the near guard's scattered
-# candidates), else running sums over those rows (refine_warped): on the refinements of the
-# shared real scenes at 640x480 the direct sums cost less below about 2.5 % (6-9 ms against
-# 9.6-10.7 ms at 1.5-2.7 %) and more above (32 ms against 17 ms at 10 %).
+# candidates), else keeps running sums over those rows (refine_strips): the direct sums cost
+# 81 products per pixel and offset, the running sums a few per pixel of the rows spanned, so
+# the direct sums are cheaper while the wanted pixels are few (about 2.5 % on the shared
+# real scenes at 640x480).
 SPARSE_REFINE_SHARE = 40
 
 
@@ -339,6 +379,8 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     out.fill(np.nan)
     cost = np.empty((h, w), np.float32)
     cost.fill(np.inf)
+    want = np.ascontiguousarray(want)
+    max_cost = -1.0 if max_cost is None else float(max_cost)
     if boxes is not None:
         boxes = np.array(boxes, np.int64).reshape(-1, 4)
         boxes[:, 0] = np.maximum(boxes[:, 0], rows[0])
@@ -350,23 +392,23 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
             edges = [boxes[:, 0] + (boxes[:, 1] - boxes[:, 0]) * s // threads for s in range(threads + 1)]
             boxes = np.concatenate([np.stack([edges[s], edges[s + 1], boxes[:, 2], boxes[:, 3]], axis=1)
                                     for s in range(threads)])
-        _kernels.refine_boxes(left.padded, right.padded, left.a, left.b, right.a, right.b, r, center_pad,
-                              np.ascontiguousarray(want), boxes, int(half_px), left.zncc,
-                              -1.0 if max_cost is None else float(max_cost), out, cost)
+        # the near guard's fields change every few pixels: products gathered pixel by pixel
+        _kernels.refine_boxes(left.arrays, right.arrays, r, left.zncc, center_pad, want, boxes, int(half_px),
+                              max_cost, (out, cost))
         return out, cost
     hit = np.flatnonzero(want[rows[0]:rows[1]].any(axis=1))
-    if hit.size:      # only the rows holding pixels to refine
-        rows = (rows[0] + int(hit[0]), rows[0] + int(hit[-1]) + 1)
-        if np.count_nonzero(want[rows[0]:rows[1]]) * SPARSE_REFINE_SHARE < (rows[1] - rows[0]) * w:
-            ys, xs = np.nonzero(want[rows[0]:rows[1]])
-            _kernels.refine_sparse(left.padded, right.padded, left.a, left.b, right.a, right.b, r, center_pad,
-                                   ys + rows[0], xs, int(half_px), left.zncc,
-                                   -1.0 if max_cost is None else float(max_cost), _strips(n_strips, ys.size),
-                                   out, cost)
-            return out, cost
-        _kernels.refine_warped(left.padded, right.padded, left.a, left.b, right.a, right.b, r, center_pad,
-                               np.ascontiguousarray(want), int(half_px), left.zncc,
-                               -1.0 if max_cost is None else float(max_cost),
-                               rows[0], rows[1], _strips(n_strips, rows[1] - rows[0]), out, cost)
+    if not hit.size:
+        return out, cost
+    rows = (rows[0] + int(hit[0]), rows[0] + int(hit[-1]) + 1)      # only the rows holding pixels to refine
+    if np.count_nonzero(want[rows[0]:rows[1]]) * SPARSE_REFINE_SHARE < (rows[1] - rows[0]) * w:
+        ys, xs = np.nonzero(want[rows[0]:rows[1]])
+        _kernels.refine_pixels(left.arrays, right.arrays, r, left.zncc, center_pad, (ys + rows[0], xs), int(half_px),
+                               max_cost, _strips(n_strips, ys.size), (out, cost))
+        return out, cost
+    # a level's up-sampled field is constant over runs of pixels: products gathered along them
+    n = _strips(n_strips, rows[1] - rows[0])
+    edges = [rows[0] + (s * (rows[1] - rows[0])) // n for s in range(n + 1)]
+    strips = np.array([(edges[s], edges[s + 1], 0, w) for s in range(n)], np.int64)
+    _kernels.refine_strips(left.arrays, right.arrays, r, left.zncc, center_pad, want, strips, int(half_px), max_cost,
+                           (out, cost))
     return out, cost
-

@@ -10,19 +10,18 @@ Conventions: docs/conventions.md.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from .. import _checks
 from . import _kernels
-from .config import MatchingConfig, preset_config
-from .cost import match_checked, match_prepared, prepare, prepare_gray, refine_candidates
-from .multirange import (DEFAULT_DEPTH_EDGES_M, LevelOutput, MultiRangePlan, RangeLevel, _level_cols,
-                         bands_px_from_depth_m, decimate_horizontally, default_bands_px, default_level_count,
-                         plan_levels, run_levels)
-from .postfilter import fill_gaps, guard_depth_edges, median_filter, near_side, remove_speckles, textured
+from .config import EDGE_JUMP_PX, GAP_FILL_DIFF_PX, MatchingConfig, preset_config
+from .cost import match_checked, prepare, prepare_gray, refine_candidates
+from .multirange import (DEFAULT_DEPTH_EDGES_M, LevelOutput, MultiRangePlan, RangeLevel, bands_px_from_depth_m,
+                         decimate_horizontally, default_bands_px, default_level_count, plan_levels, run_levels)
+from .near_guard import drop_cut_off, too_near
+from .postfilter import fill_gaps, guard_depth_edges, median_filter, remove_speckles
 
 __all__ = ["DisparityResult", "compute_disparity", "make_plan", "solve_level"]
 
@@ -38,10 +37,11 @@ class DisparityResult:
     too_near : ndarray bool (H, W)
         Pixels whose match lies beyond the largest searched disparity (nearer than the near
         limit): detected by the near guard (``config.near_guard``, ``plan.guard``; see
-        ``_near_guard``), NaN in ``disparity_px``. Robot code treats them as an obstacle at
+        :mod:`.near_guard`), NaN in ``disparity_px``. Robot code treats them as an obstacle at
         the near limit (docs/obstacles.md).
     confidence : ndarray float32 (H, W)
-        In [0, 1]; 0 where invalid (see :func:`.postfilter.confidence_from_costs`).
+        In [0, 1]: the winner's margin ``1 - c1 / c2`` over the best cost at least 2 px away (1
+        without one); 0 where invalid.
     plan : MultiRangePlan
         The levels searched and their work (``plan.describe()``).
     levels : tuple of ndarray float32 (H, W)
@@ -81,6 +81,13 @@ def make_plan(image_size: tuple[int, int], *, max_disparity_px=None, disparity_b
     Exactly one of ``max_disparity_px``, ``disparity_bands_px``, ``depth_bands_m`` (with
     ``calibration``) or ``calibration`` alone (default depth bands
     ``0.5-1, 1-2.5, 2.5-15 m``) determines the search.
+
+    Parameters
+    ----------
+    image_size : (int, int)
+        ``(width, height)`` of the images.
+    max_disparity_px, disparity_bands_px, calibration, depth_bands_m, config, preset, aoi
+        As :func:`compute_disparity`.
     """
     config = preset_config(preset) if config is None else config
     if not isinstance(config, MatchingConfig):
@@ -97,6 +104,7 @@ def make_plan(image_size: tuple[int, int], *, max_disparity_px=None, disparity_b
     if not given and calibration is None:
         raise ValueError("the search is undetermined: give max_disparity_px, disparity_bands_px, "
                          "or calibration (with optional depth_bands_m)")
+    search = config.search
     focal = baseline = None
     doffs = 0.0
     if calibration is not None:
@@ -108,9 +116,9 @@ def make_plan(image_size: tuple[int, int], *, max_disparity_px=None, disparity_b
     depth_bands = None
     if max_disparity_px is not None:
         d_max = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
-        n = (len(config.decimations) if config.decimations is not None
-             else default_level_count(d_max, min_band_level_px=config.min_band_level_px))
-        bands = default_bands_px(d_max, n) if config.multi_range else ((0.0, d_max),)
+        n = (len(search.decimations) if search.decimations is not None
+             else default_level_count(d_max, min_band_level_px=search.min_band_level_px))
+        bands = default_bands_px(d_max, n) if search.multi_range else ((0.0, d_max),)
     elif disparity_bands_px is not None:
         bands = tuple(tuple(band) for band in disparity_bands_px)
     else:
@@ -121,17 +129,18 @@ def make_plan(image_size: tuple[int, int], *, max_disparity_px=None, disparity_b
     if depth_bands is None and focal is not None:
         depth_bands = tuple((_depth(band[1], focal, baseline, doffs), _depth(band[0], focal, baseline, doffs))
                             for band in bands)
-    decimations = config.decimations
-    if not config.multi_range and len(bands) > 1:
+    decimations = search.decimations
+    if not search.multi_range and len(bands) > 1:
         bands = ((min(b[0] for b in bands), max(b[1] for b in bands)),)
         near = min(z[0] for z in depth_bands) if depth_bands else None
         depth_bands = None if depth_bands is None else ((near, max(z[1] for z in depth_bands)),)
-    if not config.multi_range:
+    if not search.multi_range:
         decimations = (1,)
     return plan_levels((width, height), bands, decimations=decimations,
-                       band_margin_px=config.band_margin_px, aoi=_aoi(aoi, width, height),
+                       band_margin_px=search.band_margin_px, aoi=_aoi(aoi, width, height),
                        depth_bands_m=depth_bands, focal_px=focal, baseline_m=baseline,
-                       near_guard=config.near_guard, near_guard_decimation=config.near_guard_decimation)
+                       near_guard_reach=None if config.near_guard is None else config.near_guard.reach,
+                       near_guard_decimation=None if config.near_guard is None else config.near_guard.decimation)
 
 
 def _depth(d: float, focal: float, baseline: float, doffs: float) -> float:
@@ -145,34 +154,34 @@ def _check_search_memory(plan, config: MatchingConfig, *, given: str) -> None:
     threads = numba.get_num_threads()
     widest = max(plan.levels, key=lambda lv: (lv.search_px[1] - lv.search_px[0] + 1) * lv.size[0])
     n_disp = widest.search_px[1] - widest.search_px[0] + 1
-    nbytes = threads * n_disp * (widest.size[0] + config.window_px) * 12.0
+    nbytes = threads * n_disp * (widest.size[0] + config.cost.window_px) * 12.0
     _checks.fits_in_memory(given, nbytes, f"the matching cost buffers ({n_disp:.4g} disparities x "
                                           f"{widest.size[0]} columns x {threads} threads)")
 
 
 def _prepare_pair(left: np.ndarray, right: np.ndarray, config: MatchingConfig):
     """Pre-filter both images and prepare them for the kernels."""
-    pair = tuple(prepare_gray(img, kind=config.prefilter, cap=config.prefilter_cap, window=config.window_px,
-                              cost=config.cost) for img in (left, right))
+    cost = config.cost
+    pair = tuple(prepare_gray(img, kind=cost.prefilter, cap=cost.prefilter_cap, window=cost.window_px, cost=cost.kind)
+                 for img in (left, right))
     if pair[0].padded.dtype != pair[1].padded.dtype:      # one exact, the other not: both float64
         pair = tuple(prepare(p.padded[p.window // 2:-(p.window // 2), p.window // 2:-(p.window // 2)],
-                             window=config.window_px, cost=config.cost, dtype=np.float64) for p in pair)
+                             window=cost.window_px, cost=cost.kind, dtype=np.float64) for p in pair)
     return pair
 
 
-def _solve_prepared(pair, left: np.ndarray, level: RangeLevel, rows: tuple[int, int], cols: tuple[int, int],
+def _solve_prepared(pair, level: RangeLevel, rows: tuple[int, int], cols: tuple[int, int],
                     config: MatchingConfig) -> LevelOutput:
+    checks = config.acceptance
     # the band without its search margins, in level pixels, for the cross-band ambiguity test
-    alt_band = None if config.ambiguity_margin is None else (math.ceil(level.band_px[0] / level.scale),
-                                                             math.floor(level.band_px[1] / level.scale))
+    alt_band = None if config.ambiguity is None else (math.ceil(level.band_px[0] / level.scale),
+                                                      math.floor(level.band_px[1] / level.scale))
     disparity, confidence, alt_px, alt_cost, best_cost = match_checked(
         *pair, d_lo=level.search_px[0], d_hi=level.search_px[1], rows=rows, cols=cols,
-        lr_max_diff_px=config.lr_max_diff_px, uniqueness_ratio=config.uniqueness_ratio, max_cost=config.max_cost,
-        subpixel=config.subpixel, alt_band=alt_band)
-    if config.texture_threshold > 0:
-        disparity[~textured(left, window_px=config.window_px, threshold=config.texture_threshold)] = np.nan
-    if config.median_size:
-        disparity = median_filter(disparity, size=config.median_size,
+        lr_max_diff_px=checks.lr_max_diff_px, uniqueness_ratio=checks.uniqueness_ratio, max_cost=checks.max_cost,
+        subpixel=config.subpixel.parabola, alt_band=alt_band)
+    if checks.median_size:
+        disparity = median_filter(disparity, size=checks.median_size,
                                   max_px=level.search_px[1] + 0.5)      # (+ the parabola offset)
         _kernels.zero_where_invalid(disparity, confidence)
     return LevelOutput(disparity_px=disparity, confidence=confidence, alt_px=alt_px, alt_cost=alt_cost,
@@ -184,10 +193,63 @@ def solve_level(left: np.ndarray, right: np.ndarray, level: RangeLevel, rows: tu
     """The per-level solver: pre-filter, eq. (9)-(10) over ``level.search_px``, checks, median.
 
     Checks (each off when its setting is): left-right consistency, uniqueness ratio,
-    maximum cost, texture. Disparities are in level pixels; the driver gates and
-    up-samples them.
+    maximum cost. Disparities are in level pixels; the driver gates and up-samples them.
+
+    Parameters
+    ----------
+    left, right : ndarray float32 (h, w_level)
+        The level's images.
+    level : RangeLevel
+        The level (its search).
+    rows, cols : (int, int)
+        Half-open rows and columns to evaluate (level coordinates).
+    config : MatchingConfig
+        The matcher's settings.
     """
-    return _solve_prepared(_prepare_pair(left, right, config), left, level, rows, cols, config)
+    return _solve_prepared(_prepare_pair(left, right, config), level, rows, cols, config)
+
+
+@dataclass
+class _Levels:
+    """What the levels of one :func:`compute_disparity` call share: the prepared (pre-filtered,
+    padded, window terms) whole-image pairs by level width, made on first use (the finest
+    level's pair also serves the refinement of the coarser ones and the near guard), the
+    decimated images (shared with :func:`.multirange.run_levels`) and, for the cross-band
+    ambiguity test, each whole-height level's output."""
+
+    left: np.ndarray
+    right: np.ndarray
+    config: MatchingConfig
+    rows: tuple[int, int]
+    decimated: dict = field(default_factory=dict)
+    pairs: dict = field(default_factory=dict)
+    outputs: dict = field(default_factory=dict)
+
+    def pair_at(self, w_level: int):
+        if w_level not in self.pairs:
+            if w_level not in self.decimated:
+                self.decimated[w_level] = (decimate_horizontally(self.left, w_level),
+                                           decimate_horizontally(self.right, w_level))
+            self.pairs[w_level] = _prepare_pair(*self.decimated[w_level], self.config)
+        return self.pairs[w_level]
+
+    def solve(self, left: np.ndarray, right: np.ndarray, level: RangeLevel, rows, cols) -> LevelOutput:
+        """:func:`solve_level`, on the shared pair when the level's images have the whole height."""
+        whole = left.shape[0] == self.left.shape[0]
+        if whole:
+            out = _solve_prepared(self.pair_at(left.shape[1]), level, rows, cols, self.config)
+        else:
+            out = solve_level(left, right, level, rows, cols, config=self.config)
+        if self.config.ambiguity is not None and whole:
+            self.outputs[level] = out
+        return out
+
+    def refine(self, level: RangeLevel, coarse_px: np.ndarray, want: np.ndarray) -> np.ndarray:
+        """Full-resolution re-scoring of a coarse level (beyond the paper)."""
+        refined, _ = refine_candidates(*self.pair_at(self.left.shape[1]), coarse_px, want, rows=self.rows,
+                                       half_px=int(math.ceil(level.scale / 2)) + self.config.subpixel.refine_margin_px,
+                                       max_cost=self.config.acceptance.max_cost)
+        return refined
 
 
 def _ambiguous_across_bands(plan: MultiRangePlan, outputs: dict, disparity: np.ndarray,
@@ -201,10 +263,10 @@ def _ambiguous_across_bands(plan: MultiRangePlan, outputs: dict, disparity: np.n
     (``LevelOutput.alt_px``: the lowest strict local minimum of its cost inside the band,
     whatever the checks) is a rival of the pixel's value when the value lies in another band,
     at least 2 level pixels of that band away, and the rival is a confident match (cost at
-    most ``config.ambiguity_max_cost``: the minima of a repeated high-contrast pattern, not the
+    most ``config.ambiguity.rival_max_cost``: the minima of a repeated high-contrast pattern, not the
     shallow ones of weak texture). The value is ambiguous when a rival costs less than the
     value's own winner cost (``LevelOutput.best_cost`` of the level whose band holds it) plus
-    ``config.ambiguity_margin``: the uniqueness test of eq. (10) applied across the bands, with
+    ``config.ambiguity.margin``: the uniqueness test of eq. (10) applied across the bands, with
     an absolute margin (ZNCC costs of a repeated pattern are near 0, where the ratio test is
     lenient), each cost at its own level's resolution. Returns a bool mask (H, W).
     """
@@ -223,286 +285,9 @@ def _ambiguous_across_bands(plan: MultiRangePlan, outputs: dict, disparity: np.n
     for (level, out), source in zip(levels, sources):
         _kernels.band_rivals(disparity, out.alt_px, out.alt_cost, source, np.float32(level.scale),
                              np.float32(level.band_px[0]), np.float32(level.band_px[1]),
-                             np.float32(2.0 * level.scale), np.float32(config.ambiguity_max_cost),
-                             np.float32(config.ambiguity_margin), value_cost, ambiguous)
+                             np.float32(2.0 * level.scale), np.float32(config.ambiguity.rival_max_cost),
+                             np.float32(config.ambiguity.margin), value_cost, ambiguous)
     return ambiguous
-
-
-def _beats(cost: np.ndarray, d_px: np.ndarray, value_cost: np.ndarray, value_px: np.ndarray,
-           ratio: float, value_beyond: np.ndarray) -> np.ndarray:
-    """Where a match past the near limit beats the bands' value: by the uniqueness margin
-    (``cost < (1 - ratio) value_cost``) when the two lie at least 2 px apart (two minima), by a
-    lower cost when nearer; and always when the value's own re-scored minimum lies past the
-    near limit (``value_beyond``: one minimum, cut by the band's edge, which eq. (10) over both
-    searches would place beyond it). A value without a cost (inf: no minimum near it) loses."""
-    with np.errstate(invalid="ignore"):
-        apart = ~(np.abs(d_px - value_px) < 2.0)
-        return value_beyond | np.where(apart, ~(value_cost * (1.0 - ratio) <= cost), ~(value_cost <= cost))
-
-
-def _near_guard(plan: MultiRangePlan, pair_at, disparity: np.ndarray, config: MatchingConfig
-                ) -> tuple[np.ndarray, np.ndarray | None]:
-    """The near guard's verdict (beyond the paper): ``(too_near, beside)``.
-
-    1. The guard's search (``plan.guard``: decimated images, disparities from the near limit
-       ``D`` to ``near_guard * D``) runs apart from the bands, whose winners and checks stay
-       exactly those of the plan without a guard. A winner above ``D`` plus half a level pixel
-       that passes the maximum cost, the left-right and the uniqueness checks is a candidate.
-    2. Where the bands gave the pixel a value, the candidate must beat it (:func:`_beats`),
-       first on the guard's images (the value re-scored over ``+-1`` level px), then at full
-       resolution (step 3; the value re-scored over ``+-2`` px): its cost below
-       ``(1 - uniqueness_ratio)`` times the value's when the two lie 2 px apart or more (the
-       uniqueness test's distance), else below the value's; and always when the value's own
-       re-scored minimum lies past the near limit (one minimum, cut by the band's edge).
-       (The first test is cheap and removes most stray candidates before step 3.)
-    3. Each candidate is re-scored at full resolution as the refinement does (offsets
-       ``+-(ceil(k / 2) + refine_margin_px)``, the maximum cost; a minimum on the edge fails).
-    4. Too near: the confirmed candidates without a value or whose value lost, in regions
-       larger than a speckle (``speckle_size_px``, connected within ``speckle_range_px`` level
-       pixels).
-    5. ``beside``: the candidates clustered with a too-near region (within
-       ``too_near_margin_px`` of each other) and that margin around them; they lose their
-       values (:func:`.postfilter.near_side`: silhouettes, thin parts, a repeated pattern's
-       wrong matches on the near object). None without a too-near region: a candidate
-       elsewhere (a repeated pattern, plain paint) changes nothing, so a search that covers
-       the scene gives the values of the matcher without a guard.
-
-    The order of the work keeps its cost low without changing the verdict: a too-near region
-    lies inside one 8-connected cluster of more than ``speckle_size_px`` confirmed candidates,
-    which comes from a cluster of more than ``speckle_size_px / ceil(k)`` candidates at the
-    guard's level (each level pixel spans at most ``ceil(k)`` columns). Steps 2-4 run on those
-    clusters only, each in its own box (:func:`.cost.refine_candidates`); the other candidates
-    matter only for step 5, when a too-near region is found.
-    """
-    guard = plan.guard
-    height, width = disparity.shape
-    row0, row1, col0, col1 = plan.aoi
-    rows = (row0, row1)
-    w_level = guard.size[0]
-    level_pair = pair_at(w_level)
-    d_int, sub, c1, c2, d_right = match_prepared(*level_pair, d_lo=guard.search_px[0], d_hi=guard.search_px[1],
-                                                 rows=rows, cols=_level_cols(col0, col1, guard.scale, w_level),
-                                                 right_check=True)
-    d_level, beyond, candidate = _guard_candidates(d_int, sub, c1, c2, d_right, guard, config)
-    # the bands' value where they have one, at the guard's level (its centre column): a
-    # candidate that does not beat it there (as eq. 10 with the uniqueness test over both
-    # searches would decide) is no candidate
-    centre = np.minimum(((np.arange(w_level) + 0.5) * guard.scale).astype(np.intp), width - 1)
-    value_level = disparity[:, centre] / np.float32(guard.scale)
-    ratio = config.uniqueness_ratio
-
-    def level_contest(among):
-        """Step 2 on the guard's images: the candidates among ``among`` that beat the value."""
-        contest = among & np.isfinite(value_level)
-        ys, xs = np.flatnonzero(contest.any(axis=1)), np.flatnonzero(contest.any(axis=0))
-        if not ys.size:
-            return among
-        value_min, value_cost = refine_candidates(*level_pair, value_level, contest, rows=rows, half_px=1,
-                                                  boxes=[(ys[0], ys[-1] + 1, xs[0], xs[-1] + 1)])
-        # (whole level images: pixel by pixel the same verdict as on the contest's pixels)
-        beats = _beats(c1, d_level, value_cost, value_level, ratio,
-                       value_min > guard.too_near_above_px / guard.scale)
-        return among & (beats | ~contest)
-
-    min_level = config.speckle_size_px // math.ceil(guard.scale)
-    # clusters of candidates before step 2 hold those after it (a subset's clusters are parts of them)
-    large = _in_large_clusters(candidate, min_level)
-    labels_level, level_boxes = _large_clusters(level_contest(large), min_level)
-    if not labels_level.any():
-        return np.zeros((height, width), bool), None
-    # Step 2 up-sampling (nearest neighbour along x, disparities times the scale), AOI columns;
-    # distinct clusters stay apart (a level column between them spans a column at least)
-    source = np.minimum(((np.arange(col0, col1) + 0.5) / guard.scale).astype(np.intp), w_level - 1)
-    # (every winner beyond D shapes the re-scoring's windows; only the candidates are re-scored)
-    field = np.empty((height, width), np.float32)
-    want = np.empty((height, width), np.bool_)
-    first_col, end_col = _level_spans(source, col0, w_level)
-    _kernels.guard_upsample(beyond, d_level, labels_level, first_col, end_col, float(guard.scale), field, want)
-    n_labels = int(labels_level.max()) + 1
-    full = pair_at(width)
-    half_px = int(math.ceil(guard.scale / 2)) + config.refine_margin_px
-    boxes = _full_boxes(level_boxes, guard.scale, col0, col1)
-    confirmed_px, confirmed_cost = refine_candidates(*full, field, want, rows=rows, max_cost=config.max_cost,
-                                                     half_px=half_px, boxes=boxes)
-    # Steps 2 (full resolution) and 4 on the confirmed candidates of the clusters holding more
-    # than speckle_size_px of them (a too-near region lies in one), as pixel lists: those of
-    # the clusters' level pixels (the only ones re-scored), each level column spanning the
-    # full-resolution columns that up-sample from it
-    ys, xs, cluster = _finite_in_clusters(confirmed_px, labels_level, first_col, end_col)
-    crowd = np.bincount(cluster, minlength=n_labels) > config.speckle_size_px
-    crowd[0] = False
-    keep = crowd[cluster]
-    ys, xs, cluster = ys[keep], xs[keep], cluster[keep]
-    px, cost, value = confirmed_px[ys, xs], confirmed_cost[ys, xs], disparity[ys, xs]
-    # the winners are a subset of these pixels, and a subset's regions are parts of theirs:
-    # without a region larger than a speckle among them there is none among the winners
-    if not ys.size or _regions(ys, xs, px, (height, width), config, guard.scale) is None:
-        return np.zeros((height, width), bool), None
-    wins = ~np.isfinite(value)
-    contest = ~wins
-    if contest.any():
-        wanted = np.zeros((height, width), bool)
-        wanted[ys[contest], xs[contest]] = True
-        value_min, value_cost = refine_candidates(*full, disparity, wanted, rows=rows, half_px=2,
-                                                  boxes=None if boxes is None else boxes[crowd[1:]])
-        yc, xc = ys[contest], xs[contest]
-        wins[contest] = _beats(cost[contest], px[contest], value_cost[yc, xc], value[contest], ratio,
-                               value_min[yc, xc] > guard.band_px[0] + 0.5)
-    crowd = np.bincount(cluster[wins], minlength=n_labels) > config.speckle_size_px
-    crowd[0] = False
-    if not crowd.any():
-        return np.zeros((height, width), bool), None
-    too_near = _regions(ys[wins], xs[wins], px[wins], (height, width), config, guard.scale)
-    if too_near is None:
-        return np.zeros((height, width), bool), None
-    # step 5 needs every candidate that wins: also the confirmed ones of the other clusters, and
-    # the candidates outside the clusters of step 3 (after step 2 on the guard's images)
-    candidates = np.zeros((height, width), bool)
-    candidates[ys[wins], xs[wins]] = True
-    valued = np.isfinite(disparity)
-
-    def winners(confirmed_px, confirmed_cost, among):
-        contest = among & valued
-        wins = among & ~valued
-        if contest.any():
-            value_min, value_cost = refine_candidates(*full, disparity, contest, rows=rows, half_px=2)
-            wins |= contest & _beats(confirmed_cost, confirmed_px, value_cost, disparity, ratio,
-                                     value_min > guard.band_px[0] + 0.5)
-        return wins
-
-    others = np.isfinite(confirmed_px)
-    others[ys, xs] = False
-    if others.any():
-        candidates |= winners(confirmed_px, confirmed_cost, others)
-    rest_level = level_contest(candidate & ~large) | (level_contest(large) & (labels_level == 0))
-    rest = np.zeros((height, width), bool)
-    rest[:, col0:col1] = rest_level[:, source]
-    if rest.any():
-        rest_px, rest_cost = refine_candidates(*full, field, rest, rows=rows, max_cost=config.max_cost,
-                                               half_px=half_px)
-        candidates |= winners(rest_px, rest_cost, np.isfinite(rest_px))
-    grown = near_side(candidates, margin_px=config.too_near_margin)
-    _, labels = cv2.connectedComponents(grown.view(np.uint8), connectivity=8)
-    keep = np.unique(labels[too_near])
-    return too_near, np.isin(labels, keep[keep > 0])
-
-
-def _regions(ys: np.ndarray, xs: np.ndarray, px: np.ndarray, shape, config: MatchingConfig, scale: float):
-    """Step 4's speckle filter on the pixels ``(ys, xs)`` of disparities ``px`` (not empty):
-    the mask (``shape``) of those in regions larger than a speckle (``speckle_size_px``,
-    connected within ``speckle_range_px`` level pixels), or None without any. Runs on their
-    bounding box (its regions are those of the image)."""
-    top, left = int(ys.min()), int(xs.min())
-    box = np.full((int(ys.max()) + 1 - top, int(xs.max()) + 1 - left), np.nan, np.float32)
-    box[ys - top, xs - left] = px
-    if config.speckle_size_px > 0:
-        box = remove_speckles(box, max_size_px=config.speckle_size_px, max_diff_px=config.speckle_range_px * scale)
-    box = np.isfinite(box)
-    if not box.any():
-        return None
-    mask = np.zeros(shape, bool)
-    mask[top:top + box.shape[0], left:left + box.shape[1]] = box
-    return mask
-
-
-def _guard_candidates(d_int, sub, c1, c2, d_right, guard: RangeLevel, config: MatchingConfig):
-    """Step 1 of :func:`_near_guard` in one kernel (:func:`._kernels.guard_candidates`):
-    ``(d_level, beyond, candidate)``, the level disparity ``d_int (+ sub)`` in float32, the
-    winners above ``guard.too_near_above_px`` and those that pass the maximum cost, the
-    left-right (:func:`.postfilter.left_right_consistent`) and the uniqueness
-    (:func:`.postfilter.unique`) checks; each in the float type numpy gives the expression."""
-    f32 = np.float32
-    product = np.result_type(f32, guard.scale)
-    wide = 2 if product == np.float64 else int(np.result_type(product, guard.too_near_above_px) == np.float64)
-    max_cost = -1.0 if config.max_cost is None else float(config.max_cost)
-    wide_cost = config.max_cost is not None and np.result_type(f32, config.max_cost) == np.float64
-    lr = -1.0 if config.lr_max_diff_px is None else float(config.lr_max_diff_px)
-    keep = 1.0 - config.uniqueness_ratio
-    wide_keep = np.result_type(f32, keep) == np.float64
-    shape = d_int.shape
-    d_level, beyond, candidate = np.empty(shape, f32), np.empty(shape, bool), np.empty(shape, bool)
-    _kernels.guard_candidates(d_int, sub, c1, c2, d_right, bool(config.subpixel), float(guard.scale),
-                              float(guard.too_near_above_px), wide, max_cost, bool(wide_cost), lr,
-                              float(keep) if config.uniqueness_ratio > 0 else -1.0, bool(wide_keep),
-                              d_level, beyond, candidate)
-    return d_level, beyond, candidate
-
-
-def _level_spans(source: np.ndarray, col0: int, w_level: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(first_col, end_col)``: the full-resolution columns ``first_col[c] .. end_col[c] - 1`` that
-    up-sample from level column ``c`` (column ``col0 + i`` from ``source[i]``, non-decreasing)."""
-    levels = np.arange(w_level)
-    return (col0 + np.searchsorted(source, levels, side="left"),
-            col0 + np.searchsorted(source, levels, side="right"))
-
-
-def _finite_in_clusters(values: np.ndarray, labels_level: np.ndarray, first_col: np.ndarray,
-                        end_col: np.ndarray):
-    """``(ys, xs, cluster)``: the pixels where ``values`` is finite among the full-resolution
-    pixels of the labelled level pixels (level column ``c`` spanning ``first_col[c] ..
-    end_col[c] - 1``), in row-major order, and their level labels."""
-    n_max = np.count_nonzero(labels_level) * int((end_col - first_col).max(initial=0))
-    ys, xs, cluster = np.empty(n_max, np.intp), np.empty(n_max, np.intp), np.empty(n_max, labels_level.dtype)
-    n = _kernels.guard_finite(values, labels_level, first_col, end_col, ys, xs, cluster)
-    return ys[:n], xs[:n], cluster[:n]
-
-
-def _label_type(shape) -> int:
-    """The label type of cv2's connected components: 16 bit where every label fits (much faster
-    with statistics), else 32 bit."""
-    return cv2.CV_16U if ((shape[0] + 1) // 2) * ((shape[1] + 1) // 2) < 2 ** 16 - 1 else cv2.CV_32S
-
-
-def _in_large_clusters(mask: np.ndarray, size_px: int) -> np.ndarray:
-    """``mask`` where its 8-connected cluster has more than ``size_px`` pixels (all of it for 0)."""
-    if size_px <= 0 or not mask.any():
-        return mask
-    n_labels, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8, ltype=_label_type(mask.shape))
-    out = np.empty(mask.shape, bool)
-    _kernels.in_large_labels(labels, n_labels, size_px, out)
-    return out
-
-
-def _large_clusters(mask: np.ndarray, size_px: int) -> tuple[np.ndarray, np.ndarray | None]:
-    """``(labels, boxes)``: the 8-connected clusters of ``mask`` with more than ``size_px``
-    pixels numbered from 1 (0 elsewhere) and their bounding boxes ``(row0, row1, col0, col1)``
-    in that order; for ``size_px`` 0 every cluster, and boxes None."""
-    if size_px <= 0:
-        return cv2.connectedComponents(mask.view(np.uint8), connectivity=8, ltype=_label_type(mask.shape))[1], None
-    _, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8,
-                                                           ltype=_label_type(mask.shape))
-    large = stats[:, cv2.CC_STAT_AREA] > size_px
-    large[0] = False
-    number = np.zeros(len(large), labels.dtype)
-    number[large] = np.arange(1, np.count_nonzero(large) + 1)
-    x, y, w, h = (stats[large, i] for i in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH,
-                                             cv2.CC_STAT_HEIGHT))
-    numbered = np.empty(labels.shape, labels.dtype)
-    _kernels.map_labels(labels, number, numbered)
-    return numbered, np.stack([y, y + h, x, x + w], axis=1)
-
-
-def _full_boxes(level_boxes, scale: float, col0: int, col1: int):
-    """Boxes of the guard's level as full-resolution boxes (the columns their pixels up-sample to)."""
-    if level_boxes is None:
-        return None
-    out = level_boxes.astype(np.float64)
-    out[:, 2] = np.maximum(np.floor(out[:, 2] * scale) - 1, col0)
-    out[:, 3] = np.minimum(np.ceil(out[:, 3] * scale) + 1, col1)
-    return out.astype(np.intp)
-
-
-def _drop_cut_off(disparity: np.ndarray, beside: np.ndarray, config: MatchingConfig) -> None:
-    """In place: NaN on the regions that the too-near margins ``beside`` cut down to speckles
-    (speckle regions touching the margins; the rest of the map was filtered before)."""
-    kept = remove_speckles(disparity, max_size_px=config.speckle_size_px, max_diff_px=config.speckle_range_px)
-    dropped = np.isfinite(disparity) & ~np.isfinite(kept)
-    if not dropped.any():
-        return
-    _, labels = cv2.connectedComponents(dropped.view(np.uint8), connectivity=4)
-    ring = cv2.dilate(beside.view(np.uint8), np.ones((3, 3), np.uint8)).view(np.bool_)
-    touching = np.unique(labels[ring & dropped])
-    disparity[np.isin(labels, touching[touching > 0])] = np.nan
 
 
 def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=None, calibration=None,
@@ -548,7 +333,7 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
     is evaluated as ``I_R(x + i - d)`` with ``d >= 0`` (see :mod:`.cost`). A level of
     decimation ``k`` matches images of width ``W / k``; its disparity ``d_k`` becomes
     ``k d_k`` at full resolution before gating to its band (eq. 11). Where several
-    levels keep a value, ``config.union`` decides (eq. 12; default: the more confident).
+    levels keep a value, the more confident one wins (eq. 12).
     """
     _checks.image("left", left)
     _checks.image("right", right)
@@ -563,66 +348,41 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
     if calibration is not None and hasattr(calibration, "size") and tuple(calibration.size) != (width, height):
         raise ValueError(f"images are {width}x{height} but the calibration is "
                          f"{calibration.size[0]}x{calibration.size[1]}")
-    if config.window_px > min(width, height):
-        raise ValueError(f"window_px {config.window_px} is larger than the image ({width}x{height})")
+    if config.cost.window_px > min(width, height):
+        raise ValueError(f"window_px {config.cost.window_px} is larger than the image ({width}x{height})")
     _check_search_memory(plan, config, given=next(
         (name for name, value in (("max_disparity_px", max_disparity_px), ("disparity_bands_px", disparity_bands_px),
                                   ("depth_bands_m", depth_bands_m)) if value is not None), "calibration"))
 
-    # prepared (pre-filtered, padded, window terms) whole-image pairs by level width: the
-    # finest level's pair also serves the refinement of the coarser ones
-    pairs: dict[int, tuple] = {}
-    decimated: dict[int, tuple] = {}      # whole-image decimated pairs, shared with run_levels
-
-    def pair_at(w_level: int):
-        if w_level not in pairs:
-            if w_level not in decimated:
-                decimated[w_level] = (decimate_horizontally(left_gray, w_level),
-                                      decimate_horizontally(right_gray, w_level))
-            pairs[w_level] = _prepare_pair(*decimated[w_level], config)
-        return pairs[w_level]
-
-    outputs: dict[RangeLevel, LevelOutput] = {}     # for the cross-band ambiguity test
-
-    def solve(lv, rv, level, rows, cols):
-        if lv.shape[0] == height:          # whole-height images: share the prepared pair
-            out = _solve_prepared(pair_at(lv.shape[1]), lv, level, rows, cols, config)
-        else:
-            out = solve_level(lv, rv, level, rows, cols, config=config)
-        if config.ambiguity_margin is not None and lv.shape[0] == height:     # (whole-height levels)
-            outputs[level] = out
-        return out
-
-    def refine(level, coarse_px, want):
-        """Full-resolution re-scoring of a coarse level (beyond the paper)."""
-        refined, _ = refine_candidates(*pair_at(width), coarse_px, want, rows=plan.aoi[:2],
-                                       half_px=int(math.ceil(level.scale / 2)) + config.refine_margin_px,
-                                       max_cost=config.max_cost)
-        return refined
-
+    shared = _Levels(left_gray, right_gray, config, rows=plan.aoi[:2])
+    sub = config.subpixel
     disparity, confidence, levels = run_levels(
-        left_gray, right_gray, plan, solve, row_pad_px=config.window_px // 2 + 2, union=config.union,
-        refine=refine if config.refine else None, refine_min_scale=config.refine_min_decimation - 0.5,
-        decimated=decimated)
-    too_near = np.zeros((height, width), bool)
-    beside = None
+        left_gray, right_gray, plan, shared.solve, row_pad_px=config.cost.window_px // 2 + 2,
+        refine=shared.refine if sub.refine else None, refine_min_scale=sub.refine_min_decimation - 0.5,
+        decimated=shared.decimated)
+    near, beside = np.zeros((height, width), bool), None
     if plan.guard is not None:     # (contests the bands' values before the ambiguity test drops any)
-        too_near, beside = _near_guard(plan, pair_at, disparity, config)
-    if outputs and len(plan.levels) > 1:
-        _kernels.invalidate(disparity, confidence,
-                            _ambiguous_across_bands(plan, outputs, disparity, config))
-    disparity = remove_speckles(disparity, max_size_px=config.speckle_size_px,
-                                max_diff_px=config.speckle_range_px)
-    disparity = guard_depth_edges(disparity, guard_px=config.edge_guard, jump_px=config.edge_jump_px)
+        near, beside = too_near(plan, shared.pair_at, disparity, config)
+    if shared.outputs and len(plan.levels) > 1:
+        _kernels.invalidate(disparity, confidence, _ambiguous_across_bands(plan, shared.outputs, disparity, config))
+    disparity, confidence = _post_filter(disparity, confidence, beside, config)
+    return DisparityResult(disparity_px=disparity, confidence=confidence, plan=plan, levels=levels, too_near=near)
+
+
+def _post_filter(disparity: np.ndarray, confidence: np.ndarray, beside: np.ndarray | None,
+                 config: MatchingConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Speckles, depth-edge guard, gap filling; the near guard's margins ``beside`` (None: no
+    too-near region) lose their values before the gaps are filled and again after (gap filling
+    may have bridged them), and values left between too-near regions are speckles again."""
+    post = config.postfilter
+    disparity = remove_speckles(disparity, max_size_px=post.speckle_size_px, max_diff_px=post.speckle_range_px)
+    disparity = guard_depth_edges(disparity, guard_px=config.edge_guard, jump_px=EDGE_JUMP_PX)
     if beside is not None:
         _kernels.invalidate(disparity, confidence, beside)
-    disparity, confidence = fill_gaps(disparity, confidence, max_gap_px=config.gap_fill_px,
-                                      max_diff_px=config.gap_fill_diff_px, support_px=config.gap_support)
+    disparity, confidence = fill_gaps(disparity, confidence, max_gap_px=post.gap_fill_px,
+                                      max_diff_px=GAP_FILL_DIFF_PX, support_px=config.gap_support)
     if beside is not None:
-        # gap filling may have bridged them; cut off from their surroundings, values left
-        # between too-near regions are speckles again
         _kernels.invalidate(disparity, confidence, beside)
-        _drop_cut_off(disparity, beside, config)
+        drop_cut_off(disparity, beside, config)
     _kernels.zero_where_invalid(disparity, confidence)
-    return DisparityResult(disparity_px=disparity, confidence=confidence, plan=plan, levels=levels,
-                           too_near=too_near)
+    return disparity, confidence

@@ -255,7 +255,7 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
                 aoi: tuple[int, int, int, int] | None = None,
                 depth_bands_m: Sequence[tuple[float, float]] | None = None,
                 focal_px: float | None = None, baseline_m: float | None = None,
-                near_guard: float = 0.0, near_guard_decimation: int | None = None) -> MultiRangePlan:
+                near_guard_reach: float | None = None, near_guard_decimation: int | None = None) -> MultiRangePlan:
     """Build the multi-range plan: one level per disparity band.
 
     Parameters
@@ -273,20 +273,21 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
         Area of interest (section 3.1); default the whole image.
     depth_bands_m : sequence of (near, far), optional
         The bands as depths (same order as ``bands_px``), for the description.
-    near_guard : float
+    near_guard_reach : float or None
         Too-near detection (beyond the paper): a search of its own (:attr:`MultiRangePlan.guard`)
-        covers ``D .. near_guard * D`` past the largest disparity ``D`` of the bands, and its
-        winners above ``D`` plus half a level pixel are too-near candidates
-        (:attr:`RangeLevel.too_near_above_px`). 0 = off; else at least 1.
+        covers ``D .. near_guard_reach * D`` past the largest disparity ``D`` of the bands, and
+        its winners above ``D`` plus half a level pixel are too-near candidates
+        (:attr:`RangeLevel.too_near_above_px`). None = off; else at least 1.
     near_guard_decimation : int or None
         Decimation of the guard's search; None: twice the nearest band's ``k`` when ``D``
         spans at least ``GUARD_MIN_LEVEL_PX`` (8) pixels of those images (``D >= 16 k``),
         else ``k`` (a too-near object is large in the image and its disparities are large).
     """
     width, height = image_size
-    guard = _checks.finite_number("near_guard", near_guard, nonnegative=True)
-    if 0 < guard < 1:
-        raise ValueError(f"near_guard must be 0 (off) or >= 1, got {near_guard}")
+    if near_guard_reach is not None:
+        reach = _checks.finite_number("near_guard_reach", near_guard_reach, positive=True)
+        if reach < 1:
+            raise ValueError(f"near_guard_reach must be >= 1, got {reach}")
     bands = []
     for i, band in enumerate(bands_px):
         if np.ndim(band) != 1 or len(band) != 2:
@@ -323,7 +324,7 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
     levels.sort(key=lambda lvl: lvl.scale)        # finest first
     single = (row1 - row0) * (col1 - col0) * (math.ceil(global_hi) - math.floor(global_lo) + 1)
     near_guard_level = None
-    if guard > 0:
+    if near_guard_reach is not None:
         nearest = max(levels, key=lambda lvl: lvl.band_px[1]).decimation
         if near_guard_decimation is not None:
             k = _checks.positive_int("near_guard_decimation", near_guard_decimation)
@@ -331,12 +332,12 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
             k = 2 * nearest if global_hi / (2 * nearest) >= GUARD_MIN_LEVEL_PX else nearest
         w_level = max(1, int(round(width / k)))
         scale = width / w_level
-        # from one level pixel below D (a winner at D is no candidate) to near_guard * D
+        # from one level pixel below D (a winner at D is no candidate) to reach * D
         s_lo = max(0, math.floor(global_hi / scale) - 1)
-        s_hi = max(s_lo + 2, math.ceil(guard * global_hi / scale))
+        s_hi = max(s_lo + 2, math.ceil(reach * global_hi / scale))
         cols = _level_cols(col0, col1, scale, w_level)
         near_guard_level = RangeLevel(
-            decimation=k, scale=scale, size=(w_level, height), band_px=(global_hi, guard * global_hi),
+            decimation=k, scale=scale, size=(w_level, height), band_px=(global_hi, reach * global_hi),
             search_px=(s_lo, s_hi), depth_band_m=None, too_near_above_px=global_hi + 0.5 * scale,
             work=int((row1 - row0) * (cols[1] - cols[0]) * (s_hi - s_lo + 1)))
     return MultiRangePlan(levels=tuple(levels), image_size=(width, height), aoi=(row0, row1, col0, col1),
@@ -354,7 +355,7 @@ Refiner = Callable[[RangeLevel, np.ndarray, np.ndarray], tuple[np.ndarray, np.nd
 
 
 def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve: Solver, *,
-               row_pad_px: int = 0, union: str = "finer", refine: Refiner | None = None,
+               row_pad_px: int = 0, refine: Refiner | None = None,
                refine_min_scale: float | None = 2.0, decimated: dict | None = None
                ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
     """Run a per-level solver on every level and unite the results (eq. 11-12).
@@ -371,9 +372,6 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
         ``cols`` (half-open, level coordinates) and leaving the rest invalid.
     row_pad_px : int
         Rows above/below the area of interest that the solver needs (window radius).
-    union : {"finer", "confidence", "reject"}
-        Eq. (12) where several gated levels report a value: the finest level wins;
-        the most confident wins; or the pixel is dropped unless they agree within 1 px.
     refine : callable, optional
         ``refine(level, disparity_px, want) -> disparity_px``: re-score at full resolution
         the up-sampled map of a decimated level (``scale >= refine_min_scale``) at the pixels ``want`` (its
@@ -430,22 +428,14 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
             _kernels.gate(d_full, c_full, float(lo), float(hi))
         maps.append(d_full)
         confs.append(c_full)
-    disparity, confidence, _ = _union(maps, confs, union)
+    disparity, confidence = _union(maps, confs)
     return disparity, confidence, tuple(maps)
 
 
-def _union(maps: list[np.ndarray], confs: list[np.ndarray], rule: str
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Eq. (12): unite gated level maps (finest first) under a precedence rule; also
-    returns the index of the level each pixel's value came from (-1 none)."""
+def _union(maps: list[np.ndarray], confs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. (12): unite gated level maps (finest first); where several levels keep a value, the
+    more confident one wins."""
     disparity, confidence = (np.empty(maps[0].shape, np.float32) for _ in range(2))
-    source = np.empty(maps[0].shape, np.int8)
-    poisoned = np.empty(maps[0].shape, bool)      # (the first level initializes all four)
-    code = {"confidence": 0, "finer": 1, "reject": 2}[rule]
     for i, (d, c) in enumerate(zip(maps, confs)):
-        _kernels.unite(d, c, code, i, disparity, confidence, source, poisoned)
-    if code == 2:
-        disparity[poisoned] = np.nan
-        confidence[poisoned] = 0.0
-        source[poisoned] = -1
-    return disparity, confidence, source
+        _kernels.unite(d, c, i == 0, disparity, confidence)
+    return disparity, confidence

@@ -1,5 +1,5 @@
-"""Post-filters of a disparity map: the paper's median (section 3.4) and the
-usual checks of robot stereo (left-right, uniqueness, texture, speckles).
+"""Post-filters of a disparity map: the paper's median (section 3.4), speckle removal, the
+depth-edge guard, gap filling and the margin around too-near regions.
 
 Disparity maps are float32 ``(H, W)`` in pixels, NaN invalid. Conventions:
 docs/conventions.md.
@@ -11,37 +11,7 @@ import numpy as np
 
 from . import _kernels
 
-__all__ = ["left_right_consistent", "unique", "textured", "median_filter", "remove_speckles",
-           "confidence_from_costs", "guard_depth_edges", "fill_gaps", "near_side"]
-
-
-def left_right_consistent(disparity_int: np.ndarray, right_disparity_int: np.ndarray, *,
-                          max_diff_px: float) -> np.ndarray:
-    """Mask of pixels whose right-image winner points back: ``|d_L(x) - d_R(x - d_L(x))| <= tol``.
-
-    Both inputs are integer winner maps (-1 = none) of the same band search.
-    """
-    h, w = disparity_int.shape
-    valid = disparity_int >= 0
-    xr = np.arange(w)[None, :] - np.where(valid, disparity_int, 0)
-    inside = valid & (xr >= 0)
-    rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
-    back = right_disparity_int[rows, np.clip(xr, 0, w - 1)]
-    return inside & (back >= 0) & (np.abs(disparity_int - back) <= max_diff_px)
-
-
-def unique(best_cost: np.ndarray, second_cost: np.ndarray, *, ratio: float) -> np.ndarray:
-    """Mask of winners whose second-best cost is clearly worse: ``c1 <= (1 - ratio) c2``."""
-    with np.errstate(invalid="ignore"):
-        return ~(best_cost > (1.0 - ratio) * second_cost)
-
-
-def textured(gray: np.ndarray, *, window_px: int, threshold: float) -> np.ndarray:
-    """Mask of pixels whose window standard deviation (grey levels) is at least ``threshold``."""
-    g = gray.astype(np.float32)
-    mean = cv2.blur(g, (window_px, window_px), borderType=cv2.BORDER_REPLICATE)
-    mean_sq = cv2.blur(g * g, (window_px, window_px), borderType=cv2.BORDER_REPLICATE)
-    return mean_sq - mean * mean >= threshold * threshold
+__all__ = ["median_filter", "remove_speckles", "guard_depth_edges", "fill_gaps", "near_side"]
 
 
 _MEDIAN_SCALE = 64.0          # median in 1/64 px fixed point (uint16: up to 1023 px)
@@ -76,7 +46,7 @@ def median_filter(disparity_px: np.ndarray, *, size: int, max_px: float | None =
 def remove_speckles(disparity_px: np.ndarray, *, max_size_px: int, max_diff_px: float) -> np.ndarray:
     """Invalidate connected regions (4-neighbours within ``max_diff_px``) of at most
     ``max_size_px`` pixels: exactly ``cv2.filterSpeckles`` on a 1/16-pixel fixed-point
-    copy, by union-find over row runs (about 3x faster than its flood fill)."""
+    copy, by union-find over row runs (each pixel visited a fixed number of times, no flood fill)."""
     if max_size_px <= 0:
         return disparity_px
     disparity_px = np.ascontiguousarray(disparity_px, dtype=np.float32)
@@ -93,15 +63,6 @@ def remove_speckles(disparity_px: np.ndarray, *, max_size_px: int, max_diff_px: 
 
 
 _SPECKLE_SCALE = 16           # the speckle filter's fixed point: 1/16 px, as StereoBM's output
-
-
-def confidence_from_costs(best_cost: np.ndarray, second_cost: np.ndarray) -> np.ndarray:
-    """Per-pixel confidence in [0, 1]: the relative margin ``1 - c1 / c2`` of the winner
-    over the best cost at least 2 px away (1 when there is no other candidate)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        conf = 1.0 - best_cost / second_cost
-    conf = np.where(np.isinf(second_cost) & np.isfinite(best_cost), 1.0, conf)
-    return np.clip(np.nan_to_num(conf, nan=0.0), 0.0, 1.0).astype(np.float32)
 
 
 def guard_depth_edges(disparity_px: np.ndarray, *, guard_px: int, jump_px: float) -> np.ndarray:
@@ -136,8 +97,23 @@ def fill_gaps(disparity_px: np.ndarray, confidence: np.ndarray, *, max_gap_px: i
     of it: the ends are on one surface patch, not lone survivors of the checks. Gaps
     at depth edges (ends on different surfaces), at the image border and longer gaps
     stay invalid. Filled pixels get the lower confidence of the two ends. The same
-    idea as ELAS's gap interpolation (Geiger et al. 2010), stricter. Returns new
-    ``(disparity_px, confidence)``; ``max_gap_px = 0`` returns the inputs.
+    idea as ELAS's gap interpolation (Geiger et al. 2010), stricter.
+
+    Parameters
+    ----------
+    disparity_px, confidence : ndarray float32 (H, W)
+        The map (NaN invalid) and its confidence.
+    max_gap_px : int
+        Longest run filled; 0 returns the inputs.
+    max_diff_px : float
+        Largest difference between the two ends, and between an end and its support.
+    support_px : int
+        Consecutive valid pixels (the end included) that must back each end.
+
+    Returns
+    -------
+    disparity_px, confidence : ndarray float32 (H, W)
+        New arrays, the filled pixels with the lower confidence of their two ends.
     """
     if max_gap_px <= 0:
         return disparity_px, confidence

@@ -93,7 +93,7 @@ class PipelineConfig:
         plan = make_plan(stereo.size, calibration=stereo)
         n = max(1, round(plan.work / (stereo.size[0] * stereo.size[1])))
         base = self.matching or preset_config(self.preset)
-        return replace(self, matching=base.replace(multi_range=False), max_disparity_px=float(n))
+        return replace(self, matching=base.replace(search={"multi_range": False}), max_disparity_px=float(n))
 
     def with_fusion(self, fusion: str) -> PipelineConfig:
         """The same configuration with another grid fusion (``"log_odds"`` or ``"union"``)."""

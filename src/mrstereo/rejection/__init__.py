@@ -3,6 +3,7 @@
 Conventions: docs/conventions.md.
 """
 from .texture import (FloorModel, PatchStatistics, RejectionConfig, RejectionResult, learn_floor_model,
-                      patch_statistics, reject_uniform, uniform_mask)
+                      patch_statistics, reject_uniform)
 
-__all__ = ["RejectionConfig", "PatchStatistics", "FloorModel", "RejectionResult", "patch_statistics", "uniform_mask", "learn_floor_model", "reject_uniform"]
+__all__ = ["RejectionConfig", "PatchStatistics", "FloorModel", "RejectionResult", "patch_statistics",
+           "learn_floor_model", "reject_uniform"]

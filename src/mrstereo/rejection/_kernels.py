@@ -1,8 +1,8 @@
 """Numba kernels of the eq. (13) rejection (:mod:`mrstereo.rejection`; no validation, preallocated outputs).
 
-Each kernel does per element exactly the arithmetic of the numpy expression it replaces, in
-the same order and dtype (no fastmath), so the results are bit-identical; ``nogil`` lets the
-per-frame chain run on worker threads.
+Each kernel does per element exactly the arithmetic of the numpy expression it stands for, in
+the same order and dtype (no fastmath), so that its results do not depend on which image
+type supplied the window sums; ``nogil`` lets the per-frame chain run on worker threads.
 
 Conventions: docs/conventions.md.
 """
@@ -14,78 +14,48 @@ import numpy as np
 from numba import njit
 
 
-@njit(nogil=True, cache=True)
-def square(image, out):
-    """``out = image * image`` for (H, W) float64 images."""
-    h, w = image.shape
-    for v in range(h):
-        for u in range(w):
-            out[v, u] = image[v, u] * image[v, u]
+@njit(nogil=True, cache=True, inline="always")
+def _moments(sum1, sum2, scale):
+    """``(mu, sigma)`` as float32 from the window sums of ``I`` and ``I^2``: ``E[.] = sum * scale``
+    and ``sigma = sqrt(max(E[I^2] - mu^2, 0))`` in float64 (a NaN stays NaN, as ``np.maximum``)."""
+    m = np.float64(sum1) * scale
+    var = np.float64(sum2) * scale - m * m
+    var = 0.0 if var < 0.0 else var
+    return np.float32(m), np.float32(math.sqrt(var))
 
 
 @njit(nogil=True, cache=True)
-def mean_std(mean, mean_sq, mean_out, std_out):
-    """``mu = E[I]``, ``sigma = sqrt(max(E[I^2] - mu^2, 0))`` in float64, stored as float32."""
-    h, w = mean.shape
-    for v in range(h):
-        for u in range(w):
-            m = mean[v, u]
-            var = mean_sq[v, u] - m * m
-            if var < 0.0:              # max(var, 0); a NaN stays NaN like np.maximum
-                var = 0.0
-            mean_out[v, u] = np.float32(m)
-            std_out[v, u] = np.float32(math.sqrt(var))
-
-
-@njit(nogil=True, cache=True)
-def mean_std_from_sums(sum1, sum2, scale, mean_out, std_out):
-    """As :func:`mean_std` from exact window sums of ``I`` and ``I^2``: ``E[.] = sum * scale`` in float64.
-
-    With integer sums held exactly (float32 below 2**24), ``sum * scale`` is what OpenCV's
-    normalized float64 box filter computes (an exact running sum times ``1 / (w * w)``), so the
-    results are bit-identical to :func:`square` + ``cv2.boxFilter(CV_64F)`` + :func:`mean_std`.
-    """
+def moments_from_sums(sum1, sum2, scale, mean_out, std_out):
+    """``mu_patch`` and ``sigma_patch`` of every pixel (:func:`_moments`)."""
     h, w = sum1.shape
     for v in range(h):
         for u in range(w):
-            m = np.float64(sum1[v, u]) * scale
-            var = np.float64(sum2[v, u]) * scale - m * m
-            if var < 0.0:
-                var = 0.0
-            mean_out[v, u] = np.float32(m)
-            std_out[v, u] = np.float32(math.sqrt(var))
+            mean_out[v, u], std_out[v, u] = _moments(sum1[v, u], sum2[v, u], scale)
 
 
 @njit(nogil=True, cache=True)
-def reject(disparity, uniform, rejected):
-    """Eq. (13) in place: NaN where ``uniform`` and the float32 disparity is finite (marked in ``rejected``)."""
-    h, w = disparity.shape
-    for v in range(h):
-        for u in range(w):
-            r = uniform[v, u] and math.isfinite(disparity[v, u])
-            rejected[v, u] = r
-            if r:
-                disparity[v, u] = np.nan
+def reject_uniform(sum1, sum2, scale, threshold, mean_lo, mean_hi, floor, disparity, out, rejected, uniform):
+    """Eq. (13) in one pass over the window sums.
 
-
-@njit(nogil=True, cache=True)
-def reject_texture_from_sums(sum1, sum2, scale, max_variance, disparity, out, rejected, uniform):
-    """Eq. (13), texture test, in one branch-free pass from exact window sums.
-
-    The variance ``E[I^2] - mu^2`` as :func:`mean_std_from_sums` computes it (float64); a patch
-    is uniform where it is at most ``max_variance``: the largest float64 ``v`` with
-    ``float32(sqrt(v)) <= T`` (:func:`mrstereo.rejection.texture._max_uniform_variance`), so the test is
-    ``float32(sigma) <= T`` bit for bit without the square root. ``out`` is ``disparity`` as
-    float32 with NaN where uniform and finite (:func:`reject`).
+    ``uniform``: the texture reading, ``sigma <= T`` (all False for ``T <= 0``) with ``mean_lo <=
+    mu <= mean_hi``, compared in float32 as numpy compares the float32 statistics with Python
+    floats; or ``floor`` (a learned floor model's mask; None: none). ``out``: the disparity as
+    float32 with NaN where uniform and finite, those pixels marked in ``rejected``.
     """
     h, w = sum1.shape
+    t = np.float32(threshold)
+    lo = np.float32(mean_lo)
+    hi = np.float32(mean_hi)
+    on = threshold > 0
     nan = np.float32(np.nan)
     for v in range(h):
         for u in range(w):
-            m = np.float64(sum1[v, u]) * scale
-            flat = np.float64(sum2[v, u]) * scale - m * m <= max_variance
+            mu, sigma = _moments(sum1[v, u], sum2[v, u], scale)
+            flat = on & (sigma <= t) & (mu >= lo) & (mu <= hi)      # branch-free: vectorizes
+            if floor is not None:
+                flat = flat | floor[v, u]
             d = np.float32(disparity[v, u])
-            r = flat and d == d and abs(d) != np.inf
+            r = flat & math.isfinite(d)
             uniform[v, u] = flat
             rejected[v, u] = r
             out[v, u] = nan if r else d

@@ -36,7 +36,6 @@ Environments, section 3.5, eq. (13).
 """
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -48,7 +47,7 @@ from . import _kernels
 
 __all__ = [
     "RejectionConfig", "PatchStatistics", "FloorModel", "RejectionResult", "patch_statistics",
-    "uniform_mask", "learn_floor_model", "reject_uniform",
+    "learn_floor_model", "reject_uniform",
 ]
 
 
@@ -92,11 +91,34 @@ class RejectionConfig:
 
 @dataclass(frozen=True)
 class PatchStatistics:
-    """Local mean and standard deviation of an image, both (H, W) float32."""
+    """Patch statistics of an image over ``window_px`` x ``window_px`` patches.
 
-    mean: np.ndarray
-    std: np.ndarray
+    ``sum1 * scale`` and ``sum2 * scale`` are the patch means of ``I`` and ``I^2`` (float64
+    products; ``sum1``, ``sum2`` (H, W) float32 or float64): the exact integer window sums of a
+    uint8 gray image with ``scale = 1 / window_px^2``, or the float64 means themselves with
+    ``scale = 1``. ``mean`` (``mu_patch``) and ``std`` (``sigma_patch``) are formed from them on
+    first use, float32 (H, W).
+    """
+
+    sum1: np.ndarray
+    sum2: np.ndarray
+    scale: float
     window_px: int
+
+    @cached_property
+    def _moments(self) -> tuple[np.ndarray, np.ndarray]:
+        mean = np.empty(self.sum1.shape, dtype=np.float32)
+        std = np.empty(self.sum1.shape, dtype=np.float32)
+        _kernels.moments_from_sums(self.sum1, self.sum2, self.scale, mean, std)
+        return mean, std
+
+    @property
+    def mean(self) -> np.ndarray:
+        return self._moments[0]
+
+    @property
+    def std(self) -> np.ndarray:
+        return self._moments[1]
 
 
 @dataclass(frozen=True)
@@ -135,23 +157,14 @@ class RejectionResult:
         Pixels that had a valid disparity and were rejected.
     uniform : ndarray of shape (H, W), bool
         Pixels whose patch failed the eq. (13) test (whether or not they had a disparity).
-    left : ndarray of shape (H, W) or (H, W, 3)
-        The image the patch statistics are of.
-    window_px : int
-        Their patch side.
+    stats : PatchStatistics
+        ``mu_patch`` and ``sigma_patch`` of the left image.
     """
 
     disparity_px: np.ndarray
     rejected: np.ndarray
     uniform: np.ndarray
-    left: np.ndarray
-    window_px: int
-
-    @cached_property
-    def stats(self) -> PatchStatistics:
-        """``mu_patch`` and ``sigma_patch`` of the left image (computed on first use when the test did not
-        need the images)."""
-        return patch_statistics(self.left, window_px=self.window_px)
+    stats: PatchStatistics
 
     @property
     def n_rejected(self) -> int:
@@ -161,13 +174,13 @@ class RejectionResult:
 def patch_statistics(image, *, window_px: int = 9) -> PatchStatistics:
     """Local mean and standard deviation over ``window_px`` x ``window_px`` patches.
 
-    Box filters on ``I`` and ``I^2`` (``cv2.boxFilter``, borders reflected):
-    ``mu = E[I]``, ``sigma = sqrt(max(E[I^2] - mu^2, 0))``. Computed in float64
-    so that the difference of large squares does not lose precision. For a uint8
-    gray image the window sums are integers that OpenCV's SIMD box filters
-    (``cv2.boxFilter`` / ``cv2.sqrBoxFilter`` of the uint8 image) give exactly, in
-    float32 while ``255^2 w^2 < 2^24`` (windows up to 15 px) and in float64 beyond;
-    the result is bit for bit that of the float64 filters, at less than half the cost.
+    Box filters on ``I`` and ``I^2`` (borders reflected): ``mu = E[I]``,
+    ``sigma = sqrt(max(E[I^2] - mu^2, 0))``, formed in float64 so that the difference of large
+    squares does not lose precision, stored as float32. A uint8 gray image (the usual rectified
+    frame) takes OpenCV's SIMD box filters of the uint8 image, whose integer window sums are
+    exact (float32 while ``255^2 w^2 < 2^24``, i.e. windows up to 15 px, float64 beyond):
+    ``E[.] = sum / w^2`` is then bit for bit what the float64 filters of the float image give,
+    at less than half the cost. Colour and float images take the float64 filters.
 
     Parameters
     ----------
@@ -181,75 +194,15 @@ def patch_statistics(image, *, window_px: int = 9) -> PatchStatistics:
     if w % 2 == 0:
         raise ValueError(f"window_px must be odd, got {w}")
     if image.dtype == np.uint8 and (image.ndim == 2 or image.shape[2] == 1):
-        return _patch_statistics_uint8(image.reshape(image.shape[:2]), w)
+        gray = np.ascontiguousarray(image.reshape(image.shape[:2]))
+        depth = cv2.CV_32F if 255 * 255 * w * w < 2 ** 24 else cv2.CV_64F
+        sum1 = cv2.boxFilter(gray, depth, (w, w), normalize=False, borderType=cv2.BORDER_REFLECT_101)
+        sum2 = cv2.sqrBoxFilter(gray, depth, (w, w), normalize=False, borderType=cv2.BORDER_REFLECT_101)
+        return PatchStatistics(sum1=sum1, sum2=sum2, scale=1.0 / (w * w), window_px=w)
     gray = _checks.gray_float32("image", image).astype(np.float64)
     mean = cv2.boxFilter(gray, cv2.CV_64F, (w, w), normalize=True, borderType=cv2.BORDER_REFLECT_101)
-    gray_sq = np.empty_like(gray)
-    _kernels.square(gray, gray_sq)
-    mean_sq = cv2.boxFilter(gray_sq, cv2.CV_64F, (w, w), normalize=True, borderType=cv2.BORDER_REFLECT_101)
-    mean32 = np.empty(mean.shape, dtype=np.float32)
-    std32 = np.empty(mean.shape, dtype=np.float32)
-    _kernels.mean_std(mean, mean_sq, mean32, std32)      # sigma = sqrt(max(E[I^2] - mu^2, 0))
-    return PatchStatistics(mean=mean32, std=std32, window_px=w)
-
-
-def _window_sums_uint8(gray: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """Exact window sums of ``I`` and ``I^2`` of a uint8 gray image (OpenCV's SIMD box filters) and ``1 / w^2``.
-
-    Float32 holds the integer sums exactly while ``255^2 w^2 < 2^24`` (windows up to 15 px), float64 beyond.
-    """
-    depth = cv2.CV_32F if 255 * 255 * w * w < 2 ** 24 else cv2.CV_64F
-    sum1 = cv2.boxFilter(gray, depth, (w, w), normalize=False, borderType=cv2.BORDER_REFLECT_101)
-    sum2 = cv2.sqrBoxFilter(gray, depth, (w, w), normalize=False, borderType=cv2.BORDER_REFLECT_101)
-    return sum1, sum2, 1.0 / (w * w)
-
-
-@functools.lru_cache(maxsize=64)
-def _max_uniform_variance(threshold: float) -> float:
-    """The largest float64 variance ``v`` with ``float32(sqrt(v)) <= float32(threshold)`` (``threshold > 0``).
-
-    ``sigma <= T`` of eq. (13), with ``sigma`` stored as float32 and compared in float32 (as numpy
-    compares a float32 array with a Python float), is ``variance <= v``: both roundings are
-    monotonic. Found by bisection over the ordered bit patterns of positive doubles.
-    """
-    t = np.float32(threshold)
-    lo, hi = 0, int(np.float64(4.0 * float(t) ** 2 + 1.0).view(np.int64))     # uniform at lo, not at hi
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if np.float32(np.sqrt(np.int64(mid).view(np.float64))) <= t:
-            lo = mid
-        else:
-            hi = mid
-    return float(np.int64(lo).view(np.float64))
-
-
-def _patch_statistics_uint8(gray: np.ndarray, w: int) -> PatchStatistics:
-    """:func:`patch_statistics` of a uint8 gray image from exact integer window sums (same bits)."""
-    sum1, sum2, scale = _window_sums_uint8(np.ascontiguousarray(gray), w)
-    mean32 = np.empty(gray.shape, dtype=np.float32)
-    std32 = np.empty(gray.shape, dtype=np.float32)
-    _kernels.mean_std_from_sums(sum1, sum2, scale, mean32, std32)
-    return PatchStatistics(mean=mean32, std=std32, window_px=w)
-
-
-def uniform_mask(stats: PatchStatistics, *, config: RejectionConfig = RejectionConfig(),
-                 floor_model: FloorModel | None = None) -> np.ndarray:
-    """Eq. (13) test: True where the patch is uniform and its disparity must be rejected.
-
-    Without a floor model: ``sigma <= texture_threshold`` (and ``mu`` inside
-    ``mean_range`` when given). With a floor model, its k-sigma region is used
-    in addition (a patch is uniform if either test says so).
-    """
-    if not isinstance(stats, PatchStatistics):
-        raise TypeError(f"stats must be a PatchStatistics, got {type(stats).__name__}")
-    mask = stats.std <= config.texture_threshold if config.texture_threshold > 0 else \
-        np.zeros(stats.std.shape, dtype=bool)
-    if config.mean_range is not None:
-        lo, hi = config.mean_range
-        mask &= (stats.mean >= lo) & (stats.mean <= hi)
-    if floor_model is not None:
-        mask |= floor_model.uniform_mask(stats, k_sigma=config.k_sigma)
-    return mask
+    mean_sq = cv2.boxFilter(gray * gray, cv2.CV_64F, (w, w), normalize=True, borderType=cv2.BORDER_REFLECT_101)
+    return PatchStatistics(sum1=mean, sum2=mean_sq, scale=1.0, window_px=w)
 
 
 def learn_floor_model(reference_image, *, floor_mask=None, window_px: int = 9) -> FloorModel:
@@ -324,21 +277,12 @@ def reject_uniform(disparity_px, left, *, config: RejectionConfig = RejectionCon
     image = _checks.image("left", left)
     _checks.same_shape("disparity_px", d, "left", image)
     window = floor_model.window_px if floor_model is not None else config.window_px
-    out = np.empty(d.shape, dtype=np.float32)
-    rejected = np.empty(out.shape, dtype=bool)
-    if (floor_model is None and config.mean_range is None and config.texture_threshold > 0
-            and image.dtype == np.uint8 and (image.ndim == 2 or image.shape[2] == 1)):
-        # the texture test alone on a uint8 image: exact integer window sums, then one fused pass
-        gray = np.ascontiguousarray(image.reshape(image.shape[:2]))
-        sum1, sum2, scale = _window_sums_uint8(gray, window)
-        uniform = np.empty(out.shape, dtype=bool)
-        _kernels.reject_texture_from_sums(sum1, sum2, scale, _max_uniform_variance(config.texture_threshold), d,
-                                          out, rejected, uniform)
-        return RejectionResult(disparity_px=out, rejected=rejected, uniform=uniform, left=left, window_px=window)
     stats = patch_statistics(left, window_px=window)
-    uniform = uniform_mask(stats, config=config, floor_model=floor_model)
-    out[...] = d
-    _kernels.reject(out, uniform, rejected)          # eq. (13): NaN where uniform and valid
-    result = RejectionResult(disparity_px=out, rejected=rejected, uniform=uniform, left=left, window_px=window)
-    result.__dict__["stats"] = stats                 # already computed: the cached property's value
-    return result
+    floor = None if floor_model is None else floor_model.uniform_mask(stats, k_sigma=config.k_sigma)
+    lo, hi = (-np.inf, np.inf) if config.mean_range is None else config.mean_range
+    out = np.empty(d.shape, dtype=np.float32)
+    rejected = np.empty(d.shape, dtype=bool)
+    uniform = np.empty(d.shape, dtype=bool)
+    _kernels.reject_uniform(stats.sum1, stats.sum2, stats.scale, config.texture_threshold, lo, hi, floor, d, out,
+                            rejected, uniform)
+    return RejectionResult(disparity_px=out, rejected=rejected, uniform=uniform, stats=stats)
