@@ -370,12 +370,19 @@ def test_foxglove_streams_the_scan_to_a_client_on_localhost():
         scan = channels["/scan"]
         assert (scan["schemaName"], scan["encoding"]) == ("foxglove.LaserScan", "protobuf")
         client.send_text(json.dumps({"op": "subscribe", "subscriptions": [{"id": 7, "channelId": scan["id"]}]}))
-        logger.frame(stamp_s=2.6, index=1, T_world_from_base=np.eye(4), T_base_from_cam=np.eye(4),
-                     scan=(-0.5, 0.5, ranges))
-        while True:
-            op, payload = client.receive()
-            if op == 2 and payload[0] == 1 and struct.unpack("<I", payload[1:5])[0] == 7:    # messageData
+        client.sock.settimeout(0.5)
+        payload = None
+        for _ in range(60):             # the server takes the subscription in its own time: frames until one comes
+            logger.frame(stamp_s=2.6, index=1, T_world_from_base=np.eye(4), T_base_from_cam=np.eye(4),
+                         scan=(-0.5, 0.5, ranges))
+            try:
+                op, data = client.receive()
+            except TimeoutError:
+                continue
+            if op == 2 and data[0] == 1 and struct.unpack("<I", data[1:5])[0] == 7:    # messageData
+                payload = data
                 break
+        assert payload is not None, "no /scan message reached the subscribed client"
         files = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(scan["schema"]))
         pool = descriptor_pool.DescriptorPool()
         for f in files.file:
