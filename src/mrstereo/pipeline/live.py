@@ -27,6 +27,7 @@ Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
+import gc
 import json
 import math
 import os
@@ -379,6 +380,9 @@ def write_live_outputs(out_dir: Path, snapshot: dict) -> dict[str, Path]:
         write_tum(files["trajectory"], snapshot["stamps_s"], T, comment=snapshot["comment"])
     with atomic_write(files["metrics"]) as tmp:
         tmp.write_text(json.dumps(snapshot["metrics"], indent=2))
+    # a matplotlib figure is a web of reference cycles: only the cycle collector frees it, and a long run
+    # would otherwise hold every figure since the last full collection
+    gc.collect()
     return files
 
 
