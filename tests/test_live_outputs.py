@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from mrstereo.cli import entry
-from mrstereo.mapping import read_ros_map
+from mrstereo.mapping import GridSpec, read_ros_map
 from mrstereo.mapping.rosmap import occupancy_values
 from mrstereo.odometry.trajectory import read_tum
 from mrstereo.pipeline.live import LiveConfig, run_live
@@ -24,7 +24,7 @@ from mrstereo.recordings import read_recording
 from mrstereo.recordings.bag_writer import BAG_TOPICS, LATCHED_TOPICS
 from mrstereo.recordings.sources import RecordingSource
 
-CONFIG = PipelineConfig()        # the map on the paper's 12 m x 6 m corridor region
+CONFIG = PipelineConfig(grid=GridSpec())        # the map on the paper's 12 m x 6 m corridor region
 VIZ = "the viewer packages are the optional extra: pip install \"mrstereo[viz]\""
 
 
@@ -251,7 +251,7 @@ def test_map_and_odometry_send_their_runs_to_the_same_outputs(dataset, tmp_path,
     final = occupancy_values(probability_from_log_odds(np.load(out / "log_odds.npy")))
     same_map(final, read_ros_map(out / "map.yaml"))
     bag = read_bag(tmp_path / "map_bag")
-    check_bag(bag, stamps, T_given, (final, CONFIG.grid))
+    check_bag(bag, stamps, T_given, (final, read_ros_map(out / "map.yaml").grid))
     assert len(bag["/scan"]) == len(bag["/points"]) == 10
     rows = rrd_rows(out / "view.rrd")
     frames, translations = rrd_column(rows, "/world/robot", "Transform3D:translation")

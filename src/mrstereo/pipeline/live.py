@@ -616,6 +616,9 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
     if not isinstance(live, LiveConfig):
         raise TypeError(f"live must be a LiveConfig, got {type(live).__name__}")
     config = PipelineConfig(grid=LIVE_GRID) if config is None else config
+    if config.grid is None:                 # (a live map has a fixed window: its files are rewritten while it runs)
+        config = replace(config, grid=replace(LIVE_GRID, resolution_m=config.resolution_m))
+    config = config.for_rig(stereo)        # the rig's mapping range, as a map run takes it
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     grid = OccupancyGrid(config.grid, config=config.mapping)

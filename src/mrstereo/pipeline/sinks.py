@@ -185,13 +185,14 @@ def open_sinks(stereo: StereoCamera, view_stem: str | os.PathLike, *, viewers: S
 def replay_map_run(run, sinks: Sequence, *, config) -> None:
     """Send a finished map run (:class:`mrstereo.pipeline.run.MapRun`) to ``sinks`` frame by frame: the
     pose, the obstacle points back in the robot frame, the scan they make, the map as fused up to the
-    frame (the frames' images are not kept by a map run)."""
+    frame and, with the last frame, the run's map as written (the frames' images are not kept by a map run)."""
     stereo = run.manifest.calibration
     frames = run.manifest.frames
-    grid = OccupancyGrid(config.grid, config=config.mapping)
-    range_max = config.obstacles.max_range_m
+    grid = OccupancyGrid(run.grid.grid, config=config.mapping)        # the map's final window
+    range_max = config.for_rig(stereo).obstacles.max_range_m
     mount = run.mount
-    for obs in run.observations:
+    last = len(run.observations) - 1
+    for k, obs in enumerate(run.observations):
         add_observation(grid, obs)
         record = frames[obs.index]
         T = T_from_planar(*obs.pose)
@@ -203,7 +204,7 @@ def replay_map_run(run, sinks: Sequence, *, config) -> None:
         T_base_from_cam = np.eye(4) if mount is None else mount.T_base_from_rectified(stereo.left.R, obs.pan_rad)
         frame = LiveFrame(index=obs.index, stamp_s=stamp, T_world_from_base=T, T_base_from_cam=T_base_from_cam,
                           left_rect=None, disparity_px=None, obstacle_points_robot=points.astype(np.float32),
-                          scan=scan, grid=grid)
+                          scan=scan, grid=run.grid if k == last else grid)     # the end: the map as written
         for sink in sinks:
             sink.frame(frame)
 
