@@ -226,6 +226,27 @@ def test_realtime_replay_drops_the_frames_it_cannot_keep_up_with(sequence, tmp_p
     assert kept.sum() == run.frames_mapped == run.frames_processed     # the frames mapped are the recording's
 
 
+def test_a_ros_bag_is_a_recording_source(sequence, tmp_path):
+    from _bags import write_bag
+
+    _, manifest, _ = sequence
+    bag = write_bag(tmp_path / "run", manifest, ros1=False)
+    source = open_source([str(bag)])
+    try:
+        assert isinstance(source, RecordingSource) and source.has_poses
+        exported = source.manifest.root
+        assert exported.is_dir() and len(source.manifest.frames) == 12
+        run = run_live(source, tmp_path / "out", config=SMALL, live=LiveConfig(floor_frames=2))
+    finally:
+        source.close()
+    assert not exported.exists()                        # the temporary dataset goes with the source
+    assert run.odometry == "given" and run.frames_processed == 12
+    assert run.frames_mapped == 12 - run.frames_before_floor
+    _, T = read_tum(tmp_path / "out" / "trajectory.txt")
+    truth = np.stack([f.T_world_from_base for f in manifest.frames])[run.frames_before_floor:]
+    np.testing.assert_allclose(T[:, :2, 3], truth[:, :2, 3], atol=1e-6)      # the bag's planar odometry
+
+
 def test_the_floor_is_estimated_from_the_first_frames_without_a_mount(sequence, tmp_path):
     _, manifest, videos = sequence
     from dataclasses import replace

@@ -251,6 +251,12 @@ class RecordingSource(FrameSource):
         self.prefer_raw = prefer_raw
         self.rate_hz = float(rate_hz)
         self.n_frames = len(manifest.frames)
+        self._opened = None             # the exported bag's temporary dataset, removed on close
+
+    def close(self) -> None:
+        opened, self._opened = self._opened, None
+        if opened is not None:
+            opened.__exit__(None, None, None)
 
     def __iter__(self) -> Iterator[StereoFrame]:
         last = None
@@ -292,7 +298,8 @@ def open_source(sources: Sequence[str | os.PathLike], *, side_by_side: bool = Fa
         One or two entries. Two: the left and right camera or video file. One: a side-by-side
         camera or video (``side_by_side``), or a recording (a dataset folder or its manifest, a
         KITTI odometry folder: whatever :func:`~mrstereo.recordings.read_recording` reads).
-        A camera is an index (``0``) or a device path (``/dev/video0``).
+        A camera is an index (``0``) or a device path (``/dev/video0``); a ROS bag with one stereo
+        pair is exported to a temporary dataset first (:func:`~mrstereo.recordings.opened_recording`).
     side_by_side : bool
         The one camera or video holds both images side by side.
     prefer_raw : bool
@@ -300,7 +307,7 @@ def open_source(sources: Sequence[str | os.PathLike], *, side_by_side: bool = Fa
     size, rate_hz
         Asked of cameras (see :class:`VideoSource`).
     """
-    from .layouts import read_recording
+    from .layouts import opened_recording
 
     specs = [str(s) for s in sources]
     if len(specs) not in (1, 2):
@@ -318,4 +325,8 @@ def open_source(sources: Sequence[str | os.PathLike], *, side_by_side: bool = Fa
         return VideoSource(spec, side_by_side=True, size=size, rate_hz=rate_hz)
     if side_by_side:
         raise ValueError(f"side_by_side is for a camera or a video file, not a recording ({spec})")
-    return RecordingSource(read_recording(spec), prefer_raw=prefer_raw)
+    # a ROS bag is exported to a temporary dataset that lives until the source is closed
+    opened = opened_recording(spec)
+    source = RecordingSource(opened.__enter__(), prefer_raw=prefer_raw)
+    source._opened = opened
+    return source
