@@ -55,7 +55,7 @@ from ..recordings.manifest import FrameRecord, pose_3d_of
 from ..recordings.sources import FrameSource, StereoFrame, paced
 from ..transforms import planar_from_T
 from .frame import PairObstacles, scan_from_pair
-from .run import PipelineConfig, observation_from_pair, pair_options
+from .run import PipelineConfig, median_floor, observation_from_pair, pair_options
 
 __all__ = ["LIVE_GRID", "LiveConfig", "LiveFrame", "LiveRun", "LatestFrame", "run_live", "LIVE_FILES"]
 
@@ -424,7 +424,7 @@ class _Fuser:
         if len(self.floor_fits) >= self.live.floor_frames or \
                 (self.floor_seen >= self.live.max_floor_frames and self.best_fit is not None):
             used = self.floor_fits or [self.best_fit]
-            floor = _median_floor(used, confident=bool(self.floor_fits))
+            floor = median_floor(used, confident=bool(self.floor_fits))
             # the fits are of the rectified left frame; the mount is of the raw camera (p_rect = R p_raw)
             self._fix_mount(CameraMount.from_rectified(T_robot_from_cam_ground(floor), self.stereo.left.R), floor)
         elif self.floor_seen >= self.live.max_floor_frames:
@@ -473,17 +473,6 @@ class _Fuser:
             with stage("sinks"):
                 for sink in self.sinks:
                     sink.frame(out)
-
-
-def _median_floor(fits: list[tuple[int, GroundPlane]], *, confident: bool) -> GroundPlane:
-    """The median height, tilt and roll of floor fits ``(frame index, GroundPlane)``."""
-    med = {name: float(np.median([getattr(g, name) for _, g in fits]))
-           for name in ("height_m", "tilt_rad", "roll_rad", "inlier_share", "residual_m")}
-    frames = ", ".join(str(k) for k, _ in fits)
-    return GroundPlane(**med, success=True, method=fits[0][1].method,
-                       n_inliers=int(np.median([g.n_inliers for _, g in fits])),
-                       message=f"estimated: median of {len(fits)} floor fit(s), frame(s) {frames}"
-                               + ("" if confident else " (none confident)"))
 
 
 def _match(item: _Matched, stereo: StereoCamera, mount: CameraMount | None, config: PipelineConfig) -> None:
