@@ -367,7 +367,8 @@ def _interrupted(dataset, out, *, twice: bool):
         time.sleep(0.5)
         proc.send_signal(signal.SIGINT)
         if twice:
-            time.sleep(0.5)                 # (two signals at once reach Python's handler as one)
+            time.sleep(0.05)                # (two signals at once reach Python's handler as one; the run's
+                                            # stop, writing its outputs, takes longer)
             proc.send_signal(signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=120)
     finally:
