@@ -11,6 +11,7 @@ import click
 
 from ..pipeline.odometry import odometry_from_manifest
 from ._bag import opened_dataset, read_inputs, recording_of, recording_options
+from ._live import check_sink_options, record_bag_option, replayed_to_sinks, viewer_option
 from ._options import library_default, profile_option
 
 __all__ = ["COMMANDS", "OUTPUT_SUFFIXES"]
@@ -35,10 +36,12 @@ OUTPUT_SUFFIXES = {"--out": (".txt", ".tum"), "--plot": (".png", ".pdf", ".svg")
               default="given" if library_default(odometry_from_manifest, "initial_pose") == "given" else "origin",
               help="Start at the first frame's given pose, or at the origin.")
 @recording_options
+@viewer_option
+@record_bag_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | None, metrics_path: Path | None,
-                     calib: Path | None, start: str, bag: Path | None, rate_hz: float | None, quiet: bool,
-                     **bag_kw) -> None:
+                     calib: Path | None, start: str, bag: Path | None, rate_hz: float | None,
+                     viewers: tuple[str, ...], record_bag: Path | None, quiet: bool, **bag_kw) -> None:
     """Stereo visual odometry of a recording or a ROS bag.
 
     RECORDING is a dataset folder (docs/dataset.md), a KITTI odometry or
@@ -61,6 +64,8 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     dataset, bag = read_inputs(manifest, bag, calib, rate_hz=rate_hz)
     outputs = {"--out": out_path, "--plot": plot_path, "--metrics": metrics_path}
     check_outputs(outputs, suffixes=OUTPUT_SUFFIXES)
+    inputs = [p for p in (bag if dataset is None else dataset.root, calib) if p is not None]
+    viewers = check_sink_options(viewers, record_bag, out_path.with_suffix(""), inputs)
     with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, stamps):
         check_pair_streams(dataset)
         run = odometry_from_manifest(dataset, calibration=stereo, progress=not quiet,
@@ -104,6 +109,13 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
             curves["ground truth"] = ((np.linalg.inv(truth[0]) if start == "origin" else np.eye(4)) @ truth)[:, :3, 3]
         plot_trajectories(plot_path, curves, lost=~run.tracked, title=f"visual odometry, {len(run.status)} frames")
     click.echo(f"wrote {', '.join(str(p) for p in outputs.values() if p is not None)}")
+    if viewers or record_bag is not None:
+        from ..pipeline.sinks import replay_odometry
+
+        mount = dataset.mount.T_base_from_rectified((stereo or dataset.calibration).left.R) \
+            if dataset.mount is not None else None
+        replayed_to_sinks(lambda sinks: replay_odometry(stamps, run.T_world_from_base, sinks, T_base_from_cam=mount),
+                          stereo or dataset.calibration, out_path.with_suffix(""), viewers, record_bag)
 
 
 COMMANDS = [odometry_command]
