@@ -26,7 +26,7 @@ from .. import _checks
 __all__ = ["MatchingConfig", "CostConfig", "SearchConfig", "AcceptanceConfig", "SubpixelConfig", "NearGuardConfig",
            "AmbiguityConfig", "PostFilterConfig", "PRESETS", "preset_config", "COSTS", "PREFILTERS"]
 
-COSTS = ("nssd", "zncc")
+COSTS = ("nssd", "zncc", "nsad")
 PREFILTERS = ("none", "xsobel")
 
 
