@@ -87,8 +87,11 @@ def speed(repeats: int) -> None:
     def run(config):
         return lambda: compute_disparity(left, right, calibration=rig, config=config)
 
+    nsad = robust.replace(cost={"kind": "nsad"})
     runs = {
         "mrstereo robust multi-range": run(robust),
+        "mrstereo nsad multi-range": run(nsad),
+        "mrstereo nsad single-range": run(nsad.replace(search={"multi_range": False})),
         "robust without gap filling": run(robust.replace(postfilter={"gap_fill_px": 0})),
         "mrstereo paper multi-range": run(paper),
         "mrstereo robust single-range": run(robust.replace(search={"multi_range": False})),
@@ -103,7 +106,7 @@ def speed(repeats: int) -> None:
             ms, base_ms, ratio = paired(fn, lambda: bm.compute(left, right), repeats)
             print(f"threads={threads}  {name:30s} median {ms:6.1f} ms  StereoBM 80 disp 9x9 {base_ms:5.1f} ms"
                   f"  ratio {ratio:4.2f}")
-        for name in ("robust", "paper"):     # the same matcher over the same depths, alternating
+        for name in ("robust", "nsad", "paper"):     # the same matcher over the same depths, alternating
             multi_ms, single_ms, ratio = paired(runs[f"mrstereo {name} multi-range"],
                                                 runs[f"mrstereo {name} single-range"], repeats)
             print(f"threads={threads}  {name} multi-range {multi_ms:.1f} ms vs single range {single_ms:.1f} ms: "
@@ -192,7 +195,9 @@ def accuracy(scale: float = 1.0) -> None:
         "OpenCV StereoBM": lambda s: stereo_bm(s.left, s.right, max_disparity_px=s.max_disparity_px),
         "OpenCV StereoSGBM": lambda s: stereo_sgbm(s.left, s.right, max_disparity_px=s.max_disparity_px),
         "mrstereo robust (default)": mr(),
+        "mrstereo robust, nsad cost": mr(robust.replace(cost={"kind": "nsad"})),
         "mrstereo mapping (the mapping chain's)": mr(preset="mapping"),
+        "mrstereo mapping, nsad cost": mr(preset_config("mapping").replace(cost={"kind": "nsad"})),
         "mrstereo paper": mr(preset="paper"),
         "robust without the near guard": mr(robust.replace(near_guard=None)),
         "robust without gap filling": mr(robust.replace(postfilter={"gap_fill_px": 0})),
@@ -216,6 +221,8 @@ def accuracy(scale: float = 1.0) -> None:
         print(f"| {name} | {first[:, 0].mean():.1f} | {first[:, 1].mean():.1f} | "
               + " | ".join(f"{a:.1f}/{b:.1f}" for a, b in cells) + " |", flush=True)
     corridor({"robust (default)": robust, "mapping": preset_config("mapping"),
+              "robust, nsad cost": robust.replace(cost={"kind": "nsad"}),
+              "mapping, nsad cost": preset_config("mapping").replace(cost={"kind": "nsad"}),
               "robust without gap filling": robust.replace(postfilter={"gap_fill_px": 0}),
               "robust, gap filling from the ends alone": robust.replace(postfilter={"gap_fill_support_px": 1})})
 

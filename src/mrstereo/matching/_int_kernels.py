@@ -292,16 +292,28 @@ def check_winners(winners, d_lo, aoi, checks, out):
     keep = np.float32(1.0 - ratio)
     max_c = np.float32(max_cost)
     lr_int = int(np.floor(lr_tol)) if lr_tol >= 0 else -1
+    lr_ok = np.empty(width, np.bool_)
+    nan = np.float32(np.nan)
     for y in range(row0, row1):
         od = out_disparity[y]
         oc = out_confidence[y]
-        dr = d_int[y]
+        for x in range(col0):
+            od[x] = nan
+            oc[x] = 0.0
+        for x in range(col1, width):
+            od[x] = nan
+            oc[x] = 0.0
+        dr = d_int[y, col0:col1]
         rr = d_right[y]
-        for x in range(width):
-            d = np.int64(dr[x])
-            found = (d >= 0) & (x >= col0) & (x < col1)
-            if lr_tol >= 0:
-                back = np.int64(rr[min(max(x - d, 0), width - 1)])
-                found = found & (back >= 0) & (abs(d - back) <= lr_int)
-            od[x], oc[x] = verdict(found, np.float32(d), sub[y, x], best[y, x], second[y, x], ratio, keep, max_cost,
-                                   max_c, parabola)
+        for i in range(col1 - col0):        # the left-right gather apart: the loop below vectorizes
+            d = np.int64(dr[i])
+            back = np.int64(rr[min(max(col0 + i - d, 0), width - 1)])
+            lr_ok[i] = (d >= 0) & ((lr_tol < 0) | ((back >= 0) & (abs(d - back) <= lr_int)))
+        sr = sub[y, col0:col1]
+        br = best[y, col0:col1]
+        s2 = second[y, col0:col1]
+        od = out_disparity[y, col0:col1]
+        oc = out_confidence[y, col0:col1]
+        for i in range(col1 - col0):
+            od[i], oc[i] = verdict(lr_ok[i], np.float32(dr[i]), sr[i], br[i], s2[i], ratio, keep, max_cost, max_c,
+                                   parabola)

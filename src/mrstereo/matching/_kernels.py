@@ -92,7 +92,7 @@ def _sad_cost(window_sum, unit):
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
 def _term(left, right, kind):
     """A window term of pixel values ``left``, ``right``: ``|l - r|`` for SAD, else ``l r``."""
-    return np.float32(abs(left - right)) if kind == SAD else left * right
+    return np.float32(abs(left - right)) if kind == SAD else np.float32(left * right)
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
