@@ -1,7 +1,8 @@
 """Area correlation on one image pair and one disparity band (paper section 3.3).
 
 The per-level solver of the multi-range matcher: image pre-filters, the NSSD
-cost of eq. (9) (or ZNCC), and winner-take-all, eq. (10). Conventions:
+cost of eq. (9) (or ZNCC, or the integer engine's normalized SAD), and winner-take-all,
+eq. (10). Conventions:
 docs/conventions.md (disparity ``d = x_left - x_right >= 0``).
 
 Sign convention. The paper writes eq. (9) as
@@ -334,9 +335,11 @@ def match_band(left: np.ndarray, right: np.ndarray, *, d_lo: int, d_hi: int, win
         ``d <= x`` (its match must lie inside the right image).
     window : int
         Odd window size ``W = 2 w + 1``.
-    cost : {"nssd", "zncc"}
+    cost : {"nssd", "zncc", "nsad"}
         ``"nssd"`` is eq. (9); ``"zncc"`` is ``1 - `` zero-mean normalized
-        cross-correlation, invariant to gain and offset.
+        cross-correlation, invariant to gain and offset; ``"nsad"`` the integer engine's sum
+        of absolute differences of the normalized images (:mod:`._int_kernels`), in the
+        units of ``1 - `` correlation.
     rows, cols : (int, int), optional
         Half-open row and column ranges to evaluate (area of interest, section 3.1);
         the rest of the output is invalid.
