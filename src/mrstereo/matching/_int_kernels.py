@@ -1,6 +1,7 @@
 """Numba kernels of the integer cost engine: eq. (9)-(10) on 16-bit integers.
 
 Private: no validation, no defaults (:mod:`mrstereo.matching.cost` prepares and allocates).
+Conventions: docs/conventions.md.
 
 The normalization of ZNCC moves out of the disparity loop. Each pre-filtered pixel is
 normalized once per level by the mean and standard deviation of its own ``W x W`` window and
@@ -13,7 +14,7 @@ added up on 16-bit lanes (``|diff| <= 2Q``, so a 31 x 31 window stays below 2**1
 band search keeps per pixel what the checks need: the winner of eq. (10), its cost and its
 neighbours' (parabola), the second best 2+ disparities away (uniqueness), the winner of
 every right-image pixel (left-right check) and, on request, the band's lowest strict local
-minimum (cross-band test). The costs leave the kernel in the units of the ZNCC cost ``1 -
+minimum (cross-band test), and applies the checks row by row. The costs leave the kernel in the units of the ZNCC cost ``1 -
 rho``: for normalized values the difference ``e = q_L - q_R`` has variance ``2 s^2 (1 - rho)``
 and, Laplace-distributed as differences of image derivatives are, mean absolute value
 ``sqrt(var / 2)``, so ``1 - rho = (SAD / (n s))^2`` with ``n = W^2`` (:func:`cost_of_sad`;
@@ -28,7 +29,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._kernels import _FASTMATH, BIG, Q_MAX, STEPS_PER_SIGMA, _box, _parabola, _sad_cost, _strip_rows, verdict
+from ._kernels import (_FASTMATH, BIG, Q_MAX, STEPS_PER_SIGMA, _box, _parabola, _sad_cost, _strip_rows,
+                       SAD, add_row_terms, check_constants, replicate_border, verdict)
 
 # A window SAD that cannot occur (2 Q_MAX 31^2 < 2^16 - 1): "no candidate" (x < d, flat window).
 SAD_NONE = np.uint16(65535)
@@ -65,13 +67,7 @@ def normalize_quantize(padded, a, b, radius, out_q, out_flat):
             v = (np.float32(p[x]) - ar[x] * inv_sqrt_n) * br[x] * gain
             q[x] = np.int16(min(max(np.rint(v), -lim), lim))
             flat[x] = br[x] > b_flat
-        row = out_q[y + radius]
-        for x in range(radius):
-            row[x] = row[radius]
-            row[width + radius + x] = row[width + radius - 1]
-    for y in range(radius):
-        out_q[y] = out_q[radius]
-        out_q[height + radius + y] = out_q[height + radius - 1]
+    replicate_border(out_q, radius)
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -85,16 +81,15 @@ def _sad_row(left_q, right_q, flat, colsum, partial, cost, d_lo, cols, radius, y
     c_end = col1 + 2 * radius
     add = y + 2 * radius
     win = 2 * radius + 1
+    if first:
+        add_row_terms(left_q, right_q, colsum, add, d_lo, cols, radius, SAD)
     for k in range(colsum.shape[0]):
         d = d_lo + k
         x0 = max(col0, d)
         col = colsum[k, x0:c_end]
-        la = left_q[add, x0:c_end]
-        ra = right_q[add, x0 - d:c_end - d]
-        if first:
-            for i in range(c_end - x0):
-                col[i] += np.uint16(abs(np.int16(la[i] - ra[i])))
-        else:
+        if not first:
+            la = left_q[add, x0:c_end]
+            ra = right_q[add, x0 - d:c_end - d]
             ls = left_q[y - 1, x0:c_end]
             rs = right_q[y - 1, x0 - d:c_end - d]
             for i in range(c_end - x0):
@@ -179,11 +174,13 @@ def _sad_band_minimum(cost, k_lo, k_hi, cols, min_k, min_sad):
             min_sad[i] = c0[i] if m else min_sad[i]
 
 
-# One body for the whole row: the band search is the matcher's hot loop and splitting the
-# per-row write-out from the searches adds a pass over the winners' buffers per row.
+# One body for the whole row: the band search is the matcher's hot loop; the row's winners, checks
+# and write-out run while its costs are in cache (a separate check pass over full-size maps of
+# the winners cost 2 ms per 640x480 level more).
 @njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
-def band_sad(left_q, right_q, flat_left, radius, band, aoi, n_strips, unit, minimum_band, out, out_minimum):
-    """Winner-take-all (eq. 10) of the SAD of normalized images over ``d in [d_lo, d_hi]``.
+def band_sad(left_q, right_q, flat_left, radius, band, aoi, n_strips, unit, checks, minimum_band, out, out_minimum):
+    """Winner-take-all (eq. 10) of the SAD of normalized images over ``d in [d_lo, d_hi]``,
+    raw or checked.
 
     Parameters
     ----------
@@ -194,29 +191,33 @@ def band_sad(left_q, right_q, flat_left, radius, band, aoi, n_strips, unit, mini
     band : (int, int)
         ``(d_lo, d_hi)``.
     aoi : (int, int, int, int)
-        ``(row0, row1, col0, col1)``, half-open; the outputs elsewhere are left untouched.
+        ``(row0, row1, col0, col1)``, half-open; rows outside are left untouched.
     unit : float32
-        :func:`sad_unit` of the window.
+        ``_kernels.sad_unit`` of the window.
+    checks : (float, float, float, bool, bool)
+        ``(lr_max_diff, uniqueness_ratio, max_cost, parabola, checked)``: with ``checked`` the
+        checks of :func:`._kernels.band_checked` from the costs kept per pixel (the winner, the
+        costs beside it, the second best 2+ disparities away, the right image's winners of the
+        row), written as ``out = (disparity, confidence)`` float32 (H, W) (NaN / 0 rejected and
+        outside ``col0:col1``); else ``out`` holds the raw winners: ``disparity_int`` (int32, -1
+        where no candidate), ``subpixel`` (float32 parabola offset), ``best_cost``,
+        ``second_cost`` (float32 ZNCC-equivalent costs, BIG if none), ``right_disparity_int``
+        (int32, -1 if none), columns ``col0:col1`` (the right winners: whole rows).
     minimum_band : (int, int)
         When ``lo <= hi``: also the band's lowest strict local minimum at disparities ``lo ..
-        hi`` (the cross-band ambiguity test).
-    out : tuple of ndarray (H, W)
-        ``disparity_int`` (int32, -1 where no candidate), ``subpixel`` (float32 parabola
-        offset), ``best_cost``, ``second_cost`` (float32 ZNCC-equivalent costs, BIG if none),
-        ``right_disparity_int`` (int32, -1 if none).
-    out_minimum : tuple of ndarray float32 (H, W)
-        The band minimum's disparity (NaN: none) and cost (BIG: none); written with
-        ``minimum_band`` only.
+        hi`` (the cross-band ambiguity test) into ``out_minimum`` = (its disparity, NaN none;
+        its cost, BIG none; the winner's cost), float32 (H, W), columns ``col0:col1``.
     """
-    out_disp, out_sub, out_best, out_second, out_right = out
+    lr_tol, ratio, max_cost, parabola, checked = checks
     d_lo, d_hi = band
     row0, row1, col0, col1 = aoi
     cols = (col0, col1)
     nd = d_hi - d_lo + 1
-    width = out_disp.shape[1]
+    width = flat_left.shape[1]
     wp = width + 2 * radius
     nx = col1 - col0
     with_minimum = minimum_band[0] <= minimum_band[1]
+    lr_int, keep, max_c = check_constants(lr_tol, ratio, max_cost)
     for s in prange(n_strips):
         y_start, y_end = _strip_rows(s, n_strips, row0, row1)
         if y_start >= y_end:
@@ -232,15 +233,13 @@ def band_sad(left_q, right_q, flat_left, radius, band, aoi, n_strips, unit, mini
         min_k = np.empty(nx, np.int16)
         min_sad = np.empty(nx, np.uint16)
         flat = np.empty(width, np.uint16)
+        row_d = np.empty(nx, np.int64)
+        row_sub = np.empty(nx, np.float32)
+        row_c1 = np.empty(nx, np.float32)
+        row_c2 = np.empty(nx, np.float32)
+        lr_ok = np.empty(nx, np.bool_)
         for yy in range(y_start, y_start + 2 * radius):       # the strip's first window rows
-            for k in range(nd):
-                d = d_lo + k
-                x0 = max(col0, d)
-                col = colsum[k, x0:col1 + 2 * radius]
-                la = left_q[yy, x0:col1 + 2 * radius]
-                ra = right_q[yy, x0 - d:col1 + 2 * radius - d]
-                for i in range(col.size):
-                    col[i] += np.uint16(abs(np.int16(la[i] - ra[i])))
+            add_row_terms(left_q, right_q, colsum, yy, d_lo, cols, radius, SAD)
         for y in range(y_start, y_end):
             fy = flat_left[y]
             for x in range(width):
@@ -248,23 +247,27 @@ def band_sad(left_q, right_q, flat_left, radius, band, aoi, n_strips, unit, mini
             _sad_row(left_q, right_q, flat, colsum, partial, cost, d_lo, cols, radius, y, y == y_start)
             _sad_winners(cost, cols, best, best_k, second)
             _sad_right_winners(cost, d_lo, cols, right_best, right_k)
-            od = out_disp[y, col0:col1]
-            osub = out_sub[y, col0:col1]
-            ob = out_best[y, col0:col1]
-            os2 = out_second[y, col0:col1]
             for i in range(nx):
                 k = np.int64(best_k[i])
                 found = best[i] != SAD_NONE
                 cb = cost_of_sad(best[i], unit)
                 cm = cost_of_sad(cost[k - 1, col0 + i], unit) if found and k > 0 else BIG
                 cp = cost_of_sad(cost[k + 1, col0 + i], unit) if found and k < nd - 1 else BIG
-                od[i] = d_lo + k if found else -1
-                osub[i] = _parabola(cb, cm, cp) if found else np.float32(0.0)
-                ob[i] = cb
-                os2[i] = cost_of_sad(second[i], unit)
-            orr = out_right[y]
-            for x in range(width):
-                orr[x] = d_lo + right_k[x] if right_k[x] >= 0 else -1
+                row_d[i] = d_lo + k if found else -1
+                row_sub[i] = _parabola(cb, cm, cp) if found else np.float32(0.0)
+                row_c1[i] = cb
+                row_c2[i] = cost_of_sad(second[i], unit)
+            if checked:
+                _checked_row(row_d, row_sub, row_c1, row_c2, right_k, d_lo, cols, (lr_tol, lr_int, ratio, keep,
+                             max_cost, max_c, parabola), lr_ok, out[0][y], out[1][y])
+            else:
+                out[0][y, col0:col1] = row_d
+                out[1][y, col0:col1] = row_sub
+                out[2][y, col0:col1] = row_c1
+                out[3][y, col0:col1] = row_c2
+                orr = out[4][y]
+                for x in range(width):
+                    orr[x] = d_lo + right_k[x] if right_k[x] >= 0 else -1
             if with_minimum:
                 _sad_band_minimum(cost, minimum_band[0] - d_lo, minimum_band[1] - d_lo, cols, min_k, min_sad)
                 om = out_minimum[0][y, col0:col1]
@@ -272,48 +275,29 @@ def band_sad(left_q, right_q, flat_left, radius, band, aoi, n_strips, unit, mini
                 for i in range(nx):
                     om[i] = np.float32(d_lo + min_k[i]) if min_k[i] >= 0 else np.float32(np.nan)
                     omc[i] = cost_of_sad(min_sad[i], unit)
+                out_minimum[2][y, col0:col1] = row_c1
 
 
-@njit(nogil=True, cache=True, fastmath=_FASTMATH)
-def check_winners(winners, d_lo, aoi, checks, out):
-    """The checks of a band's winners (:func:`band_sad`'s ``out``), pixel by pixel from the
-    costs the search kept: left-right consistency (the right image's winner at ``x - d``
-    within ``lr_max_diff``), uniqueness and maximum cost (:func:`._kernels.verdict`).
-
-    ``checks = (lr_max_diff, uniqueness_ratio, max_cost, parabola)`` as
-    :func:`._kernels.band_checked`'s; ``out = (disparity, confidence)`` float32 (H, W), written
-    on rows ``row0:row1`` (NaN / 0 outside columns ``col0:col1``).
-    """
-    d_int, sub, best, second, d_right = winners
-    out_disparity, out_confidence = out
-    lr_tol, ratio, max_cost, parabola = checks
-    row0, row1, col0, col1 = aoi
-    width = d_int.shape[1]
-    keep = np.float32(1.0 - ratio)
-    max_c = np.float32(max_cost)
-    lr_int = int(np.floor(lr_tol)) if lr_tol >= 0 else -1
-    lr_ok = np.empty(width, np.bool_)
-    nan = np.float32(np.nan)
-    for y in range(row0, row1):
-        od = out_disparity[y]
-        oc = out_confidence[y]
-        for x in range(col0):
-            od[x] = nan
-            oc[x] = 0.0
-        for x in range(col1, width):
-            od[x] = nan
-            oc[x] = 0.0
-        dr = d_int[y, col0:col1]
-        rr = d_right[y]
-        for i in range(col1 - col0):        # the left-right gather apart: the loop below vectorizes
-            d = np.int64(dr[i])
-            back = np.int64(rr[min(max(col0 + i - d, 0), width - 1)])
-            lr_ok[i] = (d >= 0) & ((lr_tol < 0) | ((back >= 0) & (abs(d - back) <= lr_int)))
-        sr = sub[y, col0:col1]
-        br = best[y, col0:col1]
-        s2 = second[y, col0:col1]
-        od = out_disparity[y, col0:col1]
-        oc = out_confidence[y, col0:col1]
-        for i in range(col1 - col0):
-            od[i], oc[i] = verdict(lr_ok[i], np.float32(dr[i]), sr[i], br[i], s2[i], ratio, keep, max_cost, max_c,
-                                   parabola)
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _checked_row(row_d, row_sub, row_c1, row_c2, right_k, d_lo, cols, checks, lr_ok, od, oc):
+    """One row's winners through the checks (:func:`._kernels.verdict`): left-right consistency
+    with the right image's winner at ``x - d`` (row ``right_k``), uniqueness, maximum cost; into
+    the row's ``od``, ``oc`` (NaN / 0 outside ``cols``)."""
+    lr_tol, lr_int, ratio, keep, max_cost, max_c, parabola = checks
+    col0, col1 = cols
+    width = od.size
+    for x in range(col0):
+        od[x] = np.nan
+        oc[x] = 0.0
+    for x in range(col1, width):
+        od[x] = np.nan
+        oc[x] = 0.0
+    for i in range(col1 - col0):        # the left-right gather apart: the loop below vectorizes
+        d = row_d[i]
+        kr = np.int64(right_k[min(max(col0 + i - d, 0), width - 1)])
+        lr_ok[i] = (d >= 0) & ((lr_tol < 0) | ((kr >= 0) & (abs(d - d_lo - kr) <= lr_int)))
+    odc = od[col0:col1]
+    occ = oc[col0:col1]
+    for i in range(col1 - col0):
+        odc[i], occ[i] = verdict(lr_ok[i], np.float32(row_d[i]), row_sub[i], row_c1[i], row_c2[i], ratio, keep,
+                                 max_cost, max_c, parabola)

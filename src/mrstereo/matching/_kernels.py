@@ -277,6 +277,21 @@ def window_terms(padded, radius, zncc, out_a, out_b):
                 ob[x] = np.float32(1.0) / np.sqrt(max(np.float32(box2[x]), np.float32(1e-6)))
 
 
+@njit(nogil=True, cache=True, inline="always")
+def replicate_border(padded, radius):
+    """Fill the ``radius``-wide border of ``padded`` with copies of its inner edge pixels."""
+    height = padded.shape[0] - 2 * radius
+    width = padded.shape[1] - 2 * radius
+    for y in range(radius, radius + height):
+        row = padded[y]
+        for x in range(radius):
+            row[x] = row[radius]
+            row[width + radius + x] = row[width + radius - 1]
+    for y in range(radius):
+        padded[y] = padded[radius]
+        padded[height + radius + y] = padded[height + radius - 1]
+
+
 @njit(nogil=True, cache=True, fastmath=_FASTMATH)
 def xsobel_padded(gray, radius, cap, out_pad):
     """OpenCV StereoBM's pre-filter, ``clip(rint(Sobel_x(gray) / 4), -cap, cap)`` (3x3,
@@ -304,12 +319,14 @@ def xsobel_padded(gray, radius, cap, out_pad):
             xp = min(x + 1, width - 1)
             v = np.float32(0.25) * ((up[xp] - up[xm]) + np.float32(2.0) * (mid[xp] - mid[xm]) + (down[xp] - down[xm]))
             row[radius + x] = min(max(np.rint(v), -cap), cap)
-        for x in range(radius):
-            row[x] = row[radius]
-            row[width + radius + x] = row[width + radius - 1]
-    for y in range(radius):
-        out_pad[y] = out_pad[radius]
-        out_pad[height + radius + y] = out_pad[height + radius - 1]
+    replicate_border(out_pad, radius)
+
+
+@njit(nogil=True, cache=True, inline="always")
+def check_constants(lr_tol, ratio, max_cost):
+    """``(lr_int, keep, max_c)`` of the checks ``(lr_max_diff, uniqueness_ratio, max_cost)``: the
+    left-right tolerance in whole pixels (-1: off) and the float32 factors of :func:`verdict`."""
+    return (int(np.floor(lr_tol)) if lr_tol >= 0 else -1), np.float32(1.0 - ratio), np.float32(max_cost)
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
@@ -354,9 +371,10 @@ def _winner_scratch(n):
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _add_row_products(left_pad, right_pad, colsum, yy, d_lo, cols, radius):
-    """``colsum[k] +=`` the products of padded row ``yy`` at disparity ``d_lo + k``, from column
-    ``max(col0, d)`` on (a strip's first window rows)."""
+def add_row_terms(left_pad, right_pad, colsum, yy, d_lo, cols, radius, kind):
+    """``colsum[k] +=`` the window terms of padded row ``yy`` at disparity ``d_lo + k`` (products;
+    for SAD 16-bit absolute differences), from column ``max(col0, d)`` on (a strip's first window
+    rows)."""
     col0, col1 = cols
     c_end = col1 + 2 * radius
     for k in range(colsum.shape[0]):
@@ -365,8 +383,12 @@ def _add_row_products(left_pad, right_pad, colsum, yy, d_lo, cols, radius):
         col = colsum[k, x0:c_end]
         lrow = left_pad[yy, x0:c_end]
         rrow = right_pad[yy, x0 - d:c_end - d]
-        for i in range(c_end - x0):
-            col[i] += lrow[i] * rrow[i]
+        if kind == SAD:
+            for i in range(c_end - x0):
+                col[i] += np.uint16(abs(np.int16(lrow[i] - rrow[i])))
+        else:
+            for i in range(c_end - x0):
+                col[i] += lrow[i] * rrow[i]
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
@@ -383,7 +405,7 @@ def _row_costs(left, right, radius, zncc, d_lo, cols, y, first, scratch):
     c_end = col1 + 2 * radius
     add = y + 2 * radius
     if first:
-        _add_row_products(left_pad, right_pad, colsum, add, d_lo, cols, radius)
+        add_row_terms(left_pad, right_pad, colsum, add, d_lo, cols, radius, NSSD)
     for k in range(colsum.shape[0]):
         d = d_lo + k
         x0 = max(col0, d)
@@ -526,7 +548,7 @@ def band_winners(left, right, radius, zncc, band, aoi, n_strips, right_check, ou
         right_cost = np.empty(width, np.float32)
         right_d = np.empty(width, np.float32)
         for yy in range(y_start, y_start + 2 * radius):
-            _add_row_products(left[0], right[0], scratch[0], yy, d_lo, cols, radius)
+            add_row_terms(left[0], right[0], scratch[0], yy, d_lo, cols, radius, NSSD)
         for y in range(y_start, y_end):
             _row_winners(left, right, radius, zncc, d_lo, cols, y, y == y_start, scratch, winners)
             for i in range(nx):
@@ -573,9 +595,7 @@ def band_checked(left, right, radius, zncc, band, aoi, n_strips, checks, out, mi
     nd = d_hi - d_lo + 1
     width = left[1].shape[1]
     nx = col1 - col0
-    keep = np.float32(1.0 - ratio)
-    max_c = np.float32(max_cost)
-    lr_int = int(np.floor(lr_tol)) if lr_tol >= 0 else -1
+    lr_int, keep, max_c = check_constants(lr_tol, ratio, max_cost)
     for s in prange(n_strips):
         y_start, y_end = _strip_rows(s, n_strips, row0, row1)
         if y_start >= y_end:
@@ -591,7 +611,7 @@ def band_checked(left, right, radius, zncc, band, aoi, n_strips, checks, out, mi
         lr_ok = np.empty(nx, np.bool_)
         sub = np.empty(nx, np.float32)
         for yy in range(y_start, y_start + 2 * radius):
-            _add_row_products(left[0], right[0], scratch[0], yy, d_lo, cols, radius)
+            add_row_terms(left[0], right[0], scratch[0], yy, d_lo, cols, radius, NSSD)
         for y in range(y_start, y_end):
             _row_winners(left, right, radius, zncc, d_lo, cols, y, y == y_start, scratch, winners)
             if minimum_band[0] <= minimum_band[1]:
@@ -650,12 +670,7 @@ def fill_center(disparity_px, radius, out_center_pad):
             if np.isfinite(v):
                 last = np.int32(np.rint(v))
             row[x + radius] = last
-        for x in range(radius):
-            row[x] = row[radius]
-            row[width + radius + x] = row[width + radius - 1]
-    for y in range(radius):
-        out_center_pad[y] = out_center_pad[radius]
-        out_center_pad[height + radius + y] = out_center_pad[height + radius - 1]
+    replicate_border(out_center_pad, radius)
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")

@@ -228,14 +228,13 @@ def match_prepared(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi
     return out
 
 
-def _search(left: PreparedImage, right: PreparedImage, band, aoi, n_strips, right_check: bool, out,
-            minimum_band=(1, 0), out_minimum=None) -> None:
+def _search(left: PreparedImage, right: PreparedImage, band, aoi, n_strips, right_check: bool, out) -> None:
     """The band search of the pair's cost into ``out`` (:func:`match_prepared`'s outputs)."""
     strips = _strips(n_strips, aoi[1] - aoi[0])
     if left.cost == "nsad":
         _int_kernels.band_sad(left.padded, right.padded, left.flat, left.window // 2, band, aoi, strips,
-                              _kernels.sad_unit(left.window // 2), minimum_band, out,
-                              (_NONE, _NONE) if out_minimum is None else out_minimum)
+                              _kernels.sad_unit(left.window // 2), (-1.0, 0.0, -1.0, False, False), (1, 0), out,
+                              (_NONE, _NONE, _NONE))
     else:
         _kernels.band_winners(left.arrays, right.arrays, left.window // 2, left.kind == _kernels.ZNCC, band, aoi,
                               strips, right_check, out)
@@ -299,15 +298,12 @@ def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi:
     checks = (-1.0 if lr_max_diff_px is None else float(lr_max_diff_px), float(uniqueness_ratio),
               -1.0 if max_cost is None else float(max_cost), bool(subpixel))
     if rows[1] > rows[0] and cols[1] > cols[0] and left.cost == "nsad":
-        # the checks from the costs the search kept per pixel
-        winners = (np.empty((h, w), np.int32), np.empty((h, w), np.float32), np.empty((h, w), np.float32),
-                   np.empty((h, w), np.float32), np.empty((h, w), np.int32))
-        _search(left, right, (int(d_lo), int(d_hi)), (*rows, *cols), n_strips, True, winners,
-                (1, 0) if alt_band is None else (int(alt_band[0]), int(alt_band[1])),
-                None if alt_band is None else (alt_px, alt_cost))
-        _int_kernels.check_winners(winners, int(d_lo), (*rows, *cols), checks, (disparity, confidence))
-        if alt_band is not None:
-            best_cost[rows[0]:rows[1], cols[0]:cols[1]] = winners[2][rows[0]:rows[1], cols[0]:cols[1]]
+        # the checks from the costs the search kept per pixel, row by row inside the search
+        _int_kernels.band_sad(left.padded, right.padded, left.flat, left.window // 2, (int(d_lo), int(d_hi)),
+                              (*rows, *cols), _strips(n_strips, rows[1] - rows[0]), _kernels.sad_unit(left.window // 2),
+                              (*checks, True), (1, 0) if alt_band is None else (int(alt_band[0]), int(alt_band[1])),
+                              (disparity, confidence, _NONE, _NONE, _NONE),
+                              (_NONE, _NONE, _NONE) if alt_band is None else (alt_px, alt_cost, best_cost))
     elif rows[1] > rows[0] and cols[1] > cols[0]:
         _kernels.band_checked(left.arrays, right.arrays, left.window // 2, left.kind == _kernels.ZNCC, (int(d_lo), int(d_hi)),
                               (*rows, *cols), _strips(n_strips, rows[1] - rows[0]), checks, (disparity, confidence),
