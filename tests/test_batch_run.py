@@ -37,7 +37,7 @@ def test_batch_writes_frames_and_maps_equal_to_the_single_commands(datasets, tmp
     files = frame_outputs(out / "corridor1" / "frames", 1)
     rec = m.frames[1]
     ref = scan_from_pair(read_image(rec.left_rect), read_image(rec.right_rect), m.calibration, rectified=True,
-                         mount=m.mount, pan_rad=rec.pan_rad, config=PipelineConfig().obstacles)
+                         mount=m.mount, pan_rad=rec.pan_rad, config=PipelineConfig().for_rig(m.calibration).obstacles)
     assert np.array_equal(read_disparity(files["disparity"]), ref.frame.disparity_px, equal_nan=True)
     assert np.allclose(read_scan_json(files["scan"]).ranges_m, ref.scan.ranges_m, equal_nan=True)
     cloud = read_ply(files["cloud"])
@@ -124,7 +124,7 @@ def test_map_command_build_map_fuse_and_batch_give_one_map_and_one_set_of_metric
     log_odds = np.load(tmp_path / "map" / "log_odds.npy")
     run = build_map(ds, progress=False)
     assert np.array_equal(run.grid.log_odds, log_odds, equal_nan=True)
-    assert np.array_equal(fuse(run.observations).log_odds, log_odds, equal_nan=True)
+    assert np.array_equal(fuse(run.observations, grid=run.grid.grid).log_odds, log_odds, equal_nan=True)
     assert any(o.boundary_points for o in run.observations)
     metrics = json.loads((tmp_path / "map" / "metrics.json").read_text())
     assert metrics["free_coverage"] is not None and metrics["recall_in_view"] is not None
@@ -143,7 +143,7 @@ def test_map_command_build_map_fuse_and_batch_give_one_map_and_one_set_of_metric
 
 
 def test_bad_batch_input(datasets, tmp_path, capsys):
-    with pytest.raises(FileNotFoundError, match="dataset manifest not found"):
+    with pytest.raises(FileNotFoundError, match="recording not found"):
         run_batch([datasets[0], tmp_path / "nothing"], tmp_path / "o", progress=False)
     assert not (tmp_path / "o").exists()                    # validated before any work
     with pytest.raises(ValueError, match="is the dataset"):

@@ -529,4 +529,4 @@ def test_calib_convert_writes_stereo_yaml(tmp_path, capsys):
     assert entry(["calib", "convert", str(out), "-o", str(out)]) == 2          # never over its input
     assert "would overwrite the input" in capsys.readouterr().err
     assert entry(["calib", "convert", str(path), "--image-size", "752", "-o", str(tmp_path / "x.yaml")]) == 2
-    assert "--image-size must be WIDTHxHEIGHT" in capsys.readouterr().err
+    assert "--image-size/--size must be WIDTHxHEIGHT" in capsys.readouterr().err

@@ -12,6 +12,7 @@ import pytest
 from mrstereo.camera import Camera, CameraMount, StereoCamera
 from mrstereo.geometry import ObstacleConfig, detect_obstacles
 from mrstereo.geometry.freespace import FreeSpaceConfig, free_space_boundary
+from mrstereo.mapping import GridSpec
 from mrstereo.transforms import T_robot_from_cam
 
 W, H, F, CX, CY, B = 320, 240, 200.0, 161.0, 118.5, 0.1
@@ -172,11 +173,12 @@ def test_boundary_points_join_the_observation_marked_and_map_the_plain_wall():
     assert n > 0 and obs.boundary_points == n
     np.testing.assert_allclose(obs.obstacle_points_world[-n:],
                                transform_points(T_from_planar(*record.pose), boundary.points_robot), atol=1e-5)
-    grid = OccupancyGrid(config.grid, config=config.mapping)
+    window = GridSpec()                              # the corridor's 12 x 6 m
+    grid = OccupancyGrid(window, config=config.mapping)
     add_observation(grid, obs)
     occupied = grid.to_ros_map().occupied
     wall_xy = transform_points(T_from_planar(*record.pose), boundary.base_points_robot)[:, :2]
-    r, c = config.grid.cells_from_xy(wall_xy)
+    r, c = window.cells_from_xy(wall_xy)
     assert occupied[r, c].mean() > 0.8               # the plain wall is in the map
     without = replace(frame, boundary=None)
     bare = observation_from_pair(without, record, index=0, config=config, stereo=stereo)

@@ -103,7 +103,7 @@ def test_odometry_command_bad_input(sequence, tmp_path, capsys):
     assert entry(["odometry", str(sequence), "-o", str(sequence / "manifest.yaml")]) == 2
     assert "would overwrite" in capsys.readouterr().err
     assert entry(["odometry", "-o", str(tmp_path / "t.txt")]) == 2
-    assert "DATASET or --bag" in capsys.readouterr().err
+    assert "RECORDING or --bag" in capsys.readouterr().err
     assert not (tmp_path / "t.txt").exists()
 
 

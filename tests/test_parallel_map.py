@@ -164,7 +164,9 @@ def test_fuse_uses_the_frames_cells_only_when_they_fit(dataset):
     from mrstereo.mapping.fusion import fuse
     from mrstereo.pipeline.run import PipelineConfig
 
-    config = PipelineConfig()
+    from mrstereo.mapping import GridSpec
+
+    config = PipelineConfig(grid=GridSpec())            # a fixed window: frames can carry their cells
     config = replace(config, mapping=replace(config.mapping, map_occlusion_p=None))   # cells per frame
     run = build_map(dataset, progress=False, config=config)
     assert all(o.cells is not None and o.cells.fits(config.grid, config.mapping) for o in run.observations)
@@ -174,7 +176,7 @@ def test_fuse_uses_the_frames_cells_only_when_they_fit(dataset):
     fused_other = fuse(run.observations, grid=config.grid, config=other).log_odds
     np.testing.assert_array_equal(fused_other, fuse(bare, grid=config.grid, config=other).log_odds)
     # the default map occludes: frames carry no cells, each view is traced in order against the map so far
-    default = build_map(dataset, progress=False)
+    default = build_map(dataset, progress=False, config=PipelineConfig(grid=GridSpec()))
     assert all(o.cells is None for o in default.observations)
     np.testing.assert_array_equal(fuse(default.observations, grid=config.grid, config=PipelineConfig().mapping).log_odds,
                                   default.grid.log_odds)

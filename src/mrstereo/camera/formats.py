@@ -415,6 +415,15 @@ def _kalibr(data: dict, where: str) -> _Raw:
     return _Raw(cams[0], cams[1], T[:3, :3], T[:3, 3])          # x_cam1 = T x_cam0
 
 
+def euroc_body_from_camera(path) -> np.ndarray:
+    """``T_BS`` of one ASL/EuRoC ``sensor.yaml``: the camera's pose in the body frame (4, 4)."""
+    path = Path(path)
+    data = _load(path)
+    if _kind(data) != "euroc":
+        raise ValueError(f"{path} is not an ASL/EuRoC sensor.yaml (needs intrinsics and T_BS)")
+    return _pose(data["T_BS"], where=str(path), field="T_BS")
+
+
 def _euroc(docs: list[dict], paths: list[str]) -> _Raw:
     cams, poses = [], []
     for data, where in zip(docs, paths):

@@ -13,12 +13,16 @@ from pathlib import Path
 
 import click
 
-from ..mapping import MappingConfig
-from ..pipeline.run import PipelineConfig
-from ._options import (CALIB_HELP, check_mount_options, check_workers, echo_run_floor, mount_from_options,
-                       mount_option, parse_mount, worker_options)
+from ._options import (CALIB_HELP, check_mount_options, check_workers, echo_run_floor, map_config, map_options,
+                       mount_from_options, mount_option, parse_mount, warn, worker_options)
 
-__all__ = ["COMMANDS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset"]
+__all__ = ["COMMANDS", "BAG_KEYS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset", "recording_options",
+           "recording_of"]
+
+
+BAG_KEYS = ("left_topic", "right_topic", "camera_info_topics", "odom_topic", "use_tf", "world_frame", "base_frame",
+            "camera_frame", "sync_tolerance_s", "rectified_images", "height_m", "tilt_rad", "mount")
+"""The parameter names of :func:`bag_options`."""
 
 
 def bag_options(func):
@@ -56,13 +60,13 @@ def bag_export_kwargs(*, bag, calib, left_topic, right_topic, camera_info_topics
                       mount, quiet) -> dict:
     """Validate the bag options and turn them into :func:`mrstereo.recordings.bag.export_bag` keywords.
 
-    ``--height``/``--tilt`` describe the rectified camera: without ``--calib`` the bag's camera_info is read first.
+    Without ``--left-topic``/``--right-topic`` the bag's one stereo pair is picked (and its one odometry
+    topic). ``--height``/``--tilt`` describe the rectified camera: without ``--calib`` the bag's camera_info
+    is read first.
     """
     from ..camera import read_stereo
-    from ..recordings.bag import stereo_from_bag
+    from ..recordings.bag import stereo_from_bag, with_picked_topics
 
-    if not left_topic or not right_topic:
-        raise click.UsageError("--bag needs --left-topic and --right-topic")
     if odom_topic and use_tf:
         raise click.UsageError("give --odom-topic or --tf, not both")
     if not math.isfinite(sync_tolerance_s) or sync_tolerance_s < 0:
@@ -76,22 +80,46 @@ def bag_export_kwargs(*, bag, calib, left_topic, right_topic, camera_info_topics
                                      param_hint="--camera-info-topics")
     check_mount_options(height_m, tilt_rad, mount)
     calibration = read_stereo(calib) if calib is not None else None
+    topics = with_picked_topics(bag, dict(left_topic=left_topic, right_topic=right_topic, odom_topic=odom_topic,
+                                          use_tf=use_tf, calibration=calibration, camera_info_topics=info))
     if calibration is None and height_m is not None:
-        calibration = stereo_from_bag(bag, left_topic=left_topic, right_topic=right_topic, camera_info_topics=info)
-    return dict(left_topic=left_topic, right_topic=right_topic, camera_info_topics=info, calibration=calibration,
-                odom_topic=odom_topic, use_tf=use_tf, world_frame=world_frame, base_frame=base_frame,
-                camera_frame=camera_frame, sync_tolerance_s=sync_tolerance_s,
+        calibration = stereo_from_bag(bag, left_topic=topics["left_topic"], right_topic=topics["right_topic"],
+                                      camera_info_topics=info)
+    return dict(left_topic=topics["left_topic"], right_topic=topics["right_topic"], camera_info_topics=info,
+                calibration=calibration, odom_topic=topics["odom_topic"], use_tf=use_tf, world_frame=world_frame,
+                base_frame=base_frame, camera_frame=camera_frame, sync_tolerance_s=sync_tolerance_s,
                 mount=mount_from_options(height_m, tilt_rad, mount, calibration), rectified=rectified_images,
                 progress=not quiet)
 
 
+def recording_options(func):
+    """The options of a command reading a RECORDING: ``--bag`` and the bag's topic options, ``--rate``."""
+    func = bag_options(func)
+    func = click.option("--rate", "rate_hz", type=float, default=None,
+                        help="Frame rate [Hz] of image folders whose file names are not time stamps.")(func)
+    return click.option("--bag", "bag", type=click.Path(path_type=Path),
+                        help="A ROS 1 .bag / ROS 2 bag directory (also accepted as RECORDING).")(func)
+
+
+def recording_of(path: Path | None, bag: Path | None) -> tuple[Path, bool]:
+    """The path a command reads and whether it is a bag: RECORDING or ``--bag`` (one of them)."""
+    from ..recordings.layouts import is_bag
+
+    if (path is None) == (bag is None):
+        raise click.UsageError("give a RECORDING or --bag FILE (one of them)")
+    return (bag, True) if bag is not None else (path, is_bag(path))
+
+
 @contextlib.contextmanager
-def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, *, quiet: bool, bag_kw: dict):
+def opened_dataset(manifest, bag: Path | None, calib: Path | None, *, quiet: bool, bag_kw: dict,
+                   rate_hz: float | None = None):
     """The recording a command works on: ``(dataset, stereo, stamps_s)``.
 
-    A ROS bag (``--bag`` with the topic options) is exported into a temporary dataset that lives as
-    long as the ``with`` block, its stamps in seconds; a MANIFEST (path, or already read) gets ``--height``/``--tilt``/``--mount``
-    applied and ``--calib`` read (``stereo`` None: the manifest's own calibration; stamps None).
+    A ROS bag (``--bag``, or a RECORDING that is one; topics picked when not given) is exported into a
+    temporary dataset that lives as long as the ``with`` block, its stamps in seconds. Any other
+    RECORDING (a path, or a Manifest already read) gets ``--height``/``--tilt``/``--mount`` applied and
+    ``--calib`` read (``stereo`` None: the recording's own calibration; stamps None). Image folders
+    take ``--calib`` as their calibration and ``--rate`` as their frame rate.
     """
     import dataclasses
     import tempfile
@@ -99,24 +127,38 @@ def opened_dataset(manifest: Path | None, bag: Path | None, calib: Path | None, 
     import numpy as np
 
     from ..camera import read_stereo
-    from ..recordings.layouts import read_recording
+    from ..recordings.layouts import layout_of, read_recording
     from ..recordings.manifest import Manifest, read_manifest
 
+    if bag is None and not isinstance(manifest, Manifest):
+        manifest, is_bag = recording_of(manifest, None)
+        if is_bag:
+            manifest, bag = None, manifest
     with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
         if bag is not None:
             from ..recordings.bag import export_bag
 
+            if rate_hz is not None:
+                raise click.UsageError("--rate only with image folders")
             result = export_bag(bag, Path(tmp) / "dataset",
                                 **bag_export_kwargs(bag=bag, calib=calib, quiet=quiet, **bag_kw))
             echo_export(result)
-            yield read_manifest(result.out_dir), None, np.asarray(result.stamps_ns, dtype=np.float64) / 1e9
+            dataset = dataclasses.replace(read_manifest(result.out_dir), layout="ROS bag",
+                                          has_poses=not result.pose_source.startswith("none"))
+            yield dataset, None, np.asarray(result.stamps_ns, dtype=np.float64) / 1e9
             return
         used = [f"--{k.replace('_', '-')}" for k, v in bag_kw.items()
                 if v not in (None, False) and k not in ("height_m", "tilt_rad", "mount", "base_frame",
                                                          "sync_tolerance_s")]
         if used:
-            raise click.UsageError(f"{', '.join(used)} only with --bag")
-        dataset = manifest if isinstance(manifest, Manifest) else read_recording(manifest)
+            raise click.UsageError(f"{', '.join(used)} only with a ROS bag")
+        if isinstance(manifest, Manifest):
+            dataset = manifest
+        else:
+            folders = layout_of(manifest) == "image folders"
+            if rate_hz is not None and not folders:
+                raise click.UsageError("--rate only with image folders")
+            dataset = read_recording(manifest, calibration=calib if folders else None, rate_hz=rate_hz)
         stereo = read_stereo(calib) if calib is not None else None
         mount = mount_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"),
                                    dataset.calibration if stereo is None else stereo)
@@ -166,48 +208,50 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 
 
 @click.command("batch")
-@click.argument("manifests", nargs=-1, required=True, metavar="DATASETS...", type=click.Path(path_type=Path))
+@click.argument("manifests", nargs=-1, required=True, metavar="RECORDINGS...", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory: one folder per dataset and summary.json.")
+              help="Output directory: one folder per recording and summary.json.")
 @worker_options
-@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default=PipelineConfig.preset,
-              show_default=True, help="Matching preset.")
-@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default=MappingConfig.fusion, show_default=True,
-              help="Map fusion.")
+@map_options
 @click.option("--no-maps", is_flag=True, help="Only the per-frame outputs, no map per dataset.")
 @mount_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool, preset: str, fusion: str,
-                  no_maps: bool, mount, quiet: bool) -> None:
-    """Process many datasets: per-frame outputs and a map each.
+def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool, no_maps: bool, mount, quiet: bool,
+                  no_mount_check: bool, **options) -> None:
+    """Process many recordings into per-frame outputs and maps.
 
-    Per frame a disparity (PFM), a point cloud (PLY) and a laser scan (JSON);
-    per dataset a map, as `mrstereo map` makes it. Resumable: finished outputs
+    RECORDINGS are dataset folders, KITTI odometry or EuRoC/ASL folders
+    (`mrstereo info` shows what is read). Per frame a disparity (PFM), a point
+    cloud (PLY) and a laser scan (JSON); per recording a map, as `mrstereo
+    map` makes it, with the same map options. Resumable: finished outputs
     are kept on a re-run, failed frames are retried.
 
     Failures of single frames are listed in OUT/summary.json and the rest goes on;
     the command then ends with an error line naming how many failed. A dataset
     without a camera mount (and no --mount) uses the floor estimated from its
-    first frames (reported per dataset, with its confidence).
+    first frames (reported per dataset, with its confidence); a given mount
+    that disagrees with that floor is replaced by it, with a warning.
     """
     import dataclasses
 
     from ..io import check_output_dir
     from ..pipeline.batch import run_batch
-    from ..recordings.manifest import read_manifest
+    from ..recordings.layouts import read_recording
 
     check_workers(workers, scheduler, processes)
     check_output_dir("--out", out_dir)
-    config = PipelineConfig(preset=preset).with_fusion(fusion)
+    config = map_config(**options)
     camera_mount = parse_mount(mount)
     if camera_mount is not None:
-        manifests = [dataclasses.replace(read_manifest(m), mount=camera_mount) for m in manifests]
+        manifests = [dataclasses.replace(read_recording(m), mount=camera_mount) for m in manifests]
     summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
-                        scheduler=scheduler, processes=processes, progress=not quiet)
+                        scheduler=scheduler, processes=processes, progress=not quiet, check_mount=not no_mount_check)
     for d in summary.datasets:
         click.echo(f"{d.name}: {d.n_frames} frames ({d.n_computed} computed, {d.n_skipped} already done, "
                    f"{d.n_failed} failed){'; map ' + d.map_status if d.map_status else ''}")
         echo_run_floor(d.floor, prefix=f"{d.name}: floor")
+        if d.mount_warning:
+            warn(f"{d.name}: {d.mount_warning}")
     click.echo(f"wrote {out_dir} (summary: {summary.path})")
     if summary.failures:
         first = summary.failures[0]

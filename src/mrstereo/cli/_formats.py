@@ -20,7 +20,7 @@ def _image_size(text: str | None) -> tuple[int, int] | None:
         return None
     parts = text.lower().split("x")
     if len(parts) != 2 or not all(p.strip().isdigit() and int(p) > 0 for p in parts):
-        raise ValueError(f"--image-size must be WIDTHxHEIGHT in pixels, like 640x480, got {text!r}")
+        raise ValueError(f"--image-size/--size must be WIDTHxHEIGHT in pixels, like 640x480, got {text!r}")
     return int(parts[0]), int(parts[1])
 
 
@@ -30,13 +30,20 @@ def calib_group() -> None:
 
 
 @calib_group.command("convert")
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("inputs", nargs=-1, type=click.Path(dir_okay=False))
 @click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Stereo YAML to write (.yaml or .yml).")
-@click.option("--image-size", help="WIDTHxHEIGHT, for OpenCV files that do not store the image size.")
+@click.option("--image-size", "--size", "image_size", metavar="WxH",
+              help="Image size in pixels: of a pre-rectified camera (--fx ...), or of OpenCV files that do not "
+                   "store it.")
 @click.option("--alpha", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True,
               help="Rectification of raw pairs: 0 keeps only valid pixels, 1 keeps every raw pixel.")
-def convert_cmd(inputs, output: Path, image_size, alpha: float) -> None:
+@click.option("--fx", type=float, help="Pre-rectified camera (no INPUTS): focal length [px] of the rectified images.")
+@click.option("--fy", type=float, help="Pre-rectified camera: vertical focal length [px] (default: --fx).")
+@click.option("--cx", type=float, help="Pre-rectified camera: principal point x [px].")
+@click.option("--cy", type=float, help="Pre-rectified camera: principal point y [px].")
+@click.option("--baseline", "baseline_m", type=float, help="Pre-rectified camera: baseline [m] (OAK-D 0.075).")
+def convert_cmd(inputs, output: Path, image_size, alpha: float, **numbers) -> None:
     """Write another tool's calibration as a stereo YAML.
 
     INPUTS is one file, or one file per camera (also written LEFT,RIGHT). The
@@ -44,12 +51,28 @@ def convert_cmd(inputs, output: Path, image_size, alpha: float) -> None:
     camera_info YAMLs, Kalibr camchain.yaml, OpenCV FileStorage (YAML/XML) of
     cv2.stereoCalibrate, two ASL/EuRoC sensor.yaml, OpenLORIS sensors.yaml
     (docs/calibration-formats.md). Raw pairs are rectified (Fusiello et al.
-    2000). Example:
+    2000). Examples:
 
     mrstereo calib convert cam0/sensor.yaml cam1/sensor.yaml -o stereo.yaml
+
+    A camera that delivers rectified pairs (OAK-D/DepthAI, ZED, RealSense)
+    needs no file, only the rectified focal length, principal point, baseline
+    and image size:
+
+    mrstereo calib convert --fx 798.3 --cx 640.1 --cy 360.4 --baseline 0.075 --size 1280x720 -o stereo.yaml
     """
     if output.suffix.lower() not in (".yaml", ".yml"):
         raise ValueError(f"--out must end in .yaml or .yml, got {output}")
+    if inputs and any(v is not None for v in numbers.values()):
+        raise click.UsageError("give calibration files (INPUTS) or the numbers of a pre-rectified camera (--fx, "
+                               "--cx, --cy, --baseline, --size), not both")
+    if not inputs:
+        stereo = _prerectified(image_size=_image_size(image_size), **numbers)
+        write_stereo(output, stereo)
+        click.echo(f"pre-rectified pair: {stereo.size[0]}x{stereo.size[1]}, focal {stereo.focal_px:.2f} px, baseline "
+                   f"{stereo.baseline_m:.4f} m (P_right[0,3] = -fx baseline = {stereo.right.P[0, 3]:.3f})")
+        click.echo(f"wrote {output}")
+        return
     files = [part for item in inputs for part in (item.split(",") if not Path(item).exists() else [item])]
     refuse_overwrite_input(output, files)
     result = import_calibration(files, image_size=_image_size(image_size), alpha=alpha)
@@ -59,6 +82,23 @@ def convert_cmd(inputs, output: Path, image_size, alpha: float) -> None:
     click.echo(f"{', '.join(files)}: {result.format}; {s.size[0]}x{s.size[1]}, baseline {s.baseline_m:.4f} m, "
                f"rectified focal {s.focal_px:.2f} px, {how}")
     click.echo(f"wrote {output}")
+
+
+def _prerectified(*, image_size, fx, fy, cx, cy, baseline_m):
+    """The :meth:`~mrstereo.camera.StereoCamera.ideal` pair of the numbers of a pre-rectified camera."""
+    from ..camera import Camera, StereoCamera
+
+    given = {"--fx": fx, "--cx": cx, "--cy": cy, "--baseline": baseline_m, "--size": image_size}
+    missing = [name for name, value in given.items() if value is None]
+    if missing:
+        raise click.UsageError(f"a pre-rectified camera needs --fx, --cx, --cy, --baseline and --size (missing "
+                               f"{', '.join(missing)}), or give calibration files")
+    if baseline_m > 5.0:        # factory files give millimetres (ZED) or centimetres (DepthAI)
+        raise click.BadParameter(f"is in metres, got {baseline_m:g} (millimetres or centimetres?)",
+                                 param_hint="--baseline")
+    width, height = image_size
+    camera = Camera(width=width, height=height, fx=fx, fy=fx if fy is None else fy, cx=cx, cy=cy)
+    return StereoCamera.ideal(camera, baseline_m)
 
 
 COMMANDS = [calib_group]

@@ -10,7 +10,7 @@ from pathlib import Path
 import click
 
 from ..pipeline.odometry import odometry_from_manifest
-from ._bag import bag_options, opened_dataset
+from ._bag import opened_dataset, recording_of, recording_options
 from ._options import library_default, profile_option
 
 __all__ = ["COMMANDS"]
@@ -18,7 +18,7 @@ __all__ = ["COMMANDS"]
 
 @click.command("odometry")
 @profile_option("read, odometry")
-@click.argument("manifest", required=False, metavar="[DATASET]", type=click.Path(path_type=Path))
+@click.argument("manifest", required=False, metavar="[RECORDING]", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Trajectory file (TUM: 't tx ty tz qx qy qz qw' per frame, the robot base in the world).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
@@ -31,16 +31,16 @@ __all__ = ["COMMANDS"]
 @click.option("--start", type=click.Choice(["given", "origin"]), show_default=True,
               default="given" if library_default(odometry_from_manifest, "initial_pose") == "given" else "origin",
               help="Start at the first frame's given pose, or at the origin.")
-@click.option("--bag", "bag", type=click.Path(path_type=Path),
-              help="A ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
-@bag_options
+@recording_options
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | None, metrics_path: Path | None,
-                     calib: Path | None, start: str, bag: Path | None, quiet: bool, **bag_kw) -> None:
+                     calib: Path | None, start: str, bag: Path | None, rate_hz: float | None, quiet: bool,
+                     **bag_kw) -> None:
     """Stereo visual odometry of a recording or a ROS bag.
 
-    DATASET is a dataset folder or its manifest.yaml (docs/dataset.md) or a KITTI odometry
-    folder; --bag reads a ROS bag instead.
+    RECORDING is a dataset folder (docs/dataset.md), a KITTI odometry or
+    EuRoC/ASL folder, a folder of left/right image folders (with --calib), or
+    a ROS bag.
     Tracks corners of each rectified left image against a keyframe, takes their depth from
     the stereo pair, solves the camera motion with PnP-RANSAC and Levenberg-Marquardt, and
     refines the last keyframes' poses and landmarks by bundle adjustment (docs/odometry.md).
@@ -53,18 +53,21 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     from ..io import refuse_overwrite_input
     from ..odometry.trajectory import plot_trajectories, trajectory_metrics, write_tum
 
-    if (manifest is None) == (bag is None):
-        raise click.UsageError("give a DATASET or --bag FILE (one of them)")
+    source, is_bag = recording_of(manifest, bag)
+    if is_bag:
+        manifest, bag = None, source
     outputs = [p for p in (out_path, plot_path, metrics_path) if p is not None]
     if len(set(p.resolve() for p in outputs)) != len(outputs):
         raise click.UsageError("-o, --plot and --metrics must be different files")
     inputs = [p for p in (manifest, bag, calib) if p is not None]
     for p in outputs:
         refuse_overwrite_input(p, inputs)
-    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, stamps):
+    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, stamps):
         if bag is None:
+            from ..pipeline.batch import dataset_files
+
             for p in outputs:
-                refuse_overwrite_input(p, [dataset.root / "manifest.yaml"])
+                refuse_overwrite_input(p, dataset_files(dataset))
         run = odometry_from_manifest(dataset, calibration=stereo, progress=not quiet,
                                      initial_pose="given" if start == "given" else "identity")
     if stamps is None:
@@ -78,15 +81,19 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     has_truth = all(f.true_pose is not None for f in dataset.frames)
     truth = np.stack([f.T_world_from_base_true for f in dataset.frames]) if has_truth else None
     reference, ref_name = (truth, "true poses") if has_truth else (given, "given poses")
-    if start == "origin":       # compare from the common start
+    if not has_truth and not dataset.has_poses:
+        reference, ref_name = None, "none"      # (the given poses are placeholders: nothing to compare with)
+    elif start == "origin":       # compare from the common start
         reference = np.linalg.inv(reference[0]) @ reference
-    metrics = trajectory_metrics(run.T_world_from_base, reference)
+    metrics = None if reference is None else trajectory_metrics(run.T_world_from_base, reference)
     click.echo(f"odometry of {len(run.status)} frames: {run.message}; "
                f"{run.status.count('keyframe')} keyframes, median {np.median(run.n_inliers[1:]) if len(run.status) > 1 else 0:.0f} "
                f"inliers, {1000 * np.median(run.time_s):.1f} ms per frame (CPU)")
-    click.echo(f"vs {ref_name}: {metrics.describe()}")
+    click.echo(f"vs {ref_name}: {metrics.describe()}" if metrics is not None else
+               "the recording has no true or given poses to compare with")
     if metrics_path is not None:
-        data = {"reference": ref_name, **metrics.to_dict(), "frames": len(run.status), "lost": run.n_lost,
+        data = {"reference": ref_name, **({} if metrics is None else metrics.to_dict()), "frames": len(run.status),
+                "lost": run.n_lost,
                 "keyframes": run.status.count("keyframe"), "status": list(run.status),
                 "n_inliers": run.n_inliers.tolist(), "time_s_median": float(np.median(run.time_s))}
         from ..io import atomic_write
@@ -96,7 +103,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     if plot_path is not None:
         curves = {"visual odometry": run.poses}
         shift = np.linalg.inv(given[0]) if start == "origin" else np.eye(4)
-        if truth is None or not np.allclose(given, truth):        # (a benchmark's poses are its truth)
+        if dataset.has_poses and (truth is None or not np.allclose(given, truth)):   # (a benchmark's are its truth)
             curves["given odometry"] = (shift @ given)[:, :3, 3]
         if truth is not None:
             curves["ground truth"] = ((np.linalg.inv(truth[0]) if start == "origin" else np.eye(4)) @ truth)[:, :3, 3]

@@ -144,3 +144,96 @@ def profile_option(stages: str):
                             help=f"Print the time per frame of every stage ({stages}) at the end "
                                  "(stderr).")(wrapper)
     return decorate
+
+
+def map_options(func):
+    """The options of a map shared by ``map`` and ``batch``: preset, fusion, window or growth, range, footprint,
+    mount check (:func:`map_config`)."""
+    from ..mapping import GridSpec, MappingConfig
+    from ..pipeline.run import PipelineConfig
+
+    options = [
+        click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default=PipelineConfig.preset,
+                     show_default=True, help="Matching preset."),
+        click.option("--fusion", type=click.Choice(["log_odds", "union"]), default=MappingConfig.fusion,
+                     show_default=True, help="Log-odds fusion (OctoMap) or the paper's union of occupied cells."),
+        click.option("--resolution", "resolution_m", type=float, default=GridSpec.resolution_m, show_default=True,
+                     help="Cell size [m]."),
+        click.option("--size", "size_m", default=None, metavar="W,H",
+                     help="A fixed map window: width (x) and height (y) [m], with --origin; points outside are "
+                          "counted and warned about. Default: the map grows to cover the path and what was seen."),
+        click.option("--origin", "origin_m", default=None, metavar="X,Y",
+                     help="World position of the lower-left corner of a fixed map window [m] (with --size)."),
+        click.option("--max-range", "max_range_m", type=float, default=None,
+                     help="Mapping range [m]: points farther from the robot are dropped. Default: where the rig's "
+                          "depth error reaches that of the paper's rig at 4 m (4 m or more; `mrstereo info`)."),
+        click.option("--footprint", "footprint_m", type=float, default=MappingConfig.footprint_radius_m,
+                     show_default=True,
+                     help="Robot radius [m]: the cells its footprint sweeps along the path are free (0: off)."),
+        click.option("--no-mount-check", is_flag=True,
+                     help="Use the given camera mount even when the floor seen in the first frames disagrees."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def _pair(text: str, option: str) -> tuple[float, float]:
+    try:
+        a, b = (float(v) for v in text.split(","))
+    except ValueError:
+        raise click.BadParameter(f"expected two numbers 'a,b', got {text!r}", param_hint=option) from None
+    if not (math.isfinite(a) and math.isfinite(b)):
+        raise click.BadParameter(f"expected two finite numbers, got {text!r}", param_hint=option)
+    return a, b
+
+
+def map_config(*, preset: str, fusion: str, resolution_m: float, size_m: str | None, origin_m: str | None,
+               max_range_m: float | None, footprint_m: float, **_):
+    """The :class:`~mrstereo.pipeline.PipelineConfig` of the :func:`map_options`."""
+    import dataclasses
+
+    from ..geometry.obstacles import ObstacleConfig
+    from ..mapping import GridSpec
+    from ..pipeline.run import PipelineConfig
+
+    if not (math.isfinite(resolution_m) and resolution_m > 0):
+        raise click.BadParameter(f"must be a number > 0, got {resolution_m}", param_hint="--resolution")
+    if (size_m is None) != (origin_m is None):
+        raise click.UsageError("a fixed map window needs both --size W,H and --origin X,Y")
+    grid = None
+    if size_m is not None:
+        (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
+        grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
+    obstacles = None
+    if max_range_m is not None:
+        if not (math.isfinite(max_range_m) and max_range_m > 0):
+            raise click.BadParameter(f"must be a number > 0, got {max_range_m}", param_hint="--max-range")
+        obstacles = ObstacleConfig(max_range_m=max_range_m)
+    if not (math.isfinite(footprint_m) and footprint_m >= 0):
+        raise click.BadParameter(f"must be a number >= 0, got {footprint_m}", param_hint="--footprint")
+    config = PipelineConfig(preset=preset, grid=grid, resolution_m=resolution_m, obstacles=obstacles)
+    return dataclasses.replace(config.with_fusion(fusion),
+                               mapping=dataclasses.replace(config.with_fusion(fusion).mapping,
+                                                           footprint_radius_m=footprint_m or None))
+
+
+def warn(message: str) -> None:
+    """One ``mrstereo: warning: ...`` line on stderr."""
+    click.echo(f"mrstereo: warning: {message}", err=True)
+
+
+def echo_map_warnings(run, *, prefix: str = "") -> None:
+    """The warnings of a map run: a mount not used, points outside a fixed window."""
+    if run.mount_warning:
+        warn(prefix + run.mount_warning)
+    n = run.grid.points_outside
+    if n:
+        g, truth = run.grid.grid, run.ground_truth_map
+        on_truth = truth is not None and (truth.grid.origin_x_m, truth.grid.origin_y_m, truth.grid.width_m,
+                                          truth.grid.height_m) == (g.origin_x_m, g.origin_y_m, g.width_m, g.height_m)
+        advice = ("the window of the recording's ground-truth map; --size/--origin set another" if on_truth else
+                  "leave out --size/--origin for a map that grows")
+        warn(f"{prefix}{n} points fell outside the map window x {g.origin_x_m:g}..{g.origin_x_m + g.width_m:g} m, "
+             f"y {g.origin_y_m:g}..{g.origin_y_m + g.height_m:g} m (their rays were cut at its border; counted in "
+             f"metrics.json): {advice}")

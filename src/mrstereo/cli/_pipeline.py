@@ -8,10 +8,10 @@ from pathlib import Path
 
 import click
 
-from ..mapping import GridSpec, MappingConfig
-from ..pipeline.run import PipelineConfig, build_map
-from ._bag import bag_options, opened_dataset
-from ._options import check_workers, echo_run_floor, library_default, profile_option, worker_options
+from ..pipeline.run import build_map
+from ._bag import BAG_KEYS, opened_dataset, recording_of, recording_options
+from ._options import (check_workers, echo_map_warnings, echo_run_floor, library_default, map_config, map_options,
+                       profile_option, worker_options)
 
 __all__ = ["COMMANDS"]
 
@@ -22,74 +22,69 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
 @click.command("map")
 @profile_option("read, rectify, match, reject, 3-D, free space, grid; with --odometry visual: odometry; "
                 "with --align: align")
-@click.argument("manifest", required=False, metavar="[DATASET]", type=click.Path(path_type=Path))
+@click.argument("manifest", required=False, metavar="[RECORDING]", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (map.pgm, map.yaml, map.png, log_odds.npy, metrics.json).")
 @click.option("--calib", "calib", type=click.Path(dir_okay=False, path_type=Path),
-              help="Use this stereo calibration (and the raw images) instead of the manifest's; "
-                   "with --bag, instead of the camera_info topics.")
-@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default=MappingConfig.fusion, show_default=True,
-              help="Log-odds fusion (OctoMap) or the paper's union of occupied cells.")
-@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default=PipelineConfig.preset,
-              show_default=True, help="Matching preset.")
-@click.option("--resolution", "resolution_m", type=float, default=GridSpec.resolution_m, show_default=True,
-              help="Cell size [m].")
-@click.option("--size", "size_m", default=f"{GridSpec.width_m:g},{GridSpec.height_m:g}", show_default=True,
-              metavar="W,H", help="Map width (x) and height (y) [m].")
-@click.option("--origin", "origin_m", default=f"{GridSpec.origin_x_m:g},{GridSpec.origin_y_m:g}", show_default=True,
-              metavar="X,Y", help="World position of the lower-left map corner [m].")
-@click.option("--odometry", type=click.Choice(["given", "visual"]), default=library_default(build_map, "odometry"),
-              show_default=True,
-              help="Robot poses: the dataset's (or the bag's odometry), or stereo visual odometry from the "
-                   "first frame's pose (docs/odometry.md).")
+              help="Use this stereo calibration (and the raw images) instead of the recording's; the calibration "
+                   "of image folders; with a bag, instead of the camera_info topics.")
+@map_options
+@click.option("--odometry", type=click.Choice(["auto", "given", "visual"]),
+              default=library_default(build_map, "odometry"), show_default=True,
+              help="Robot poses: the recording's (or the bag's odometry), or stereo visual odometry from the "
+                   "first frame's pose (docs/odometry.md); auto: the recording's when it has some.")
 @click.option("--align", is_flag=True,
               help="Correct the given poses with stereo visual odometry: each step of the given odometry fused "
                    "with the visual one by their expected errors (docs/odometry.md); the corrections go to "
                    "metrics.json.")
 @worker_options
-@click.option("--bag", "bag", type=click.Path(path_type=Path),
-              help="Map a ROS 1 .bag / ROS 2 bag directory instead of a DATASET (see the topic options).")
-@bag_options
+@recording_options
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion: str, preset: str,
-                resolution_m: float, size_m: str, origin_m: str, odometry: str, align: bool, workers: int | None,
-                scheduler: str | None, processes: bool, bag: Path | None, quiet: bool, **bag_kw) -> None:
-    """Build an occupancy grid map from a recording or a ROS bag.
+def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odometry: str, align: bool,
+                workers: int | None, scheduler: str | None, processes: bool, bag: Path | None, rate_hz: float | None,
+                quiet: bool, no_mount_check: bool, **options) -> None:
+    """Build an occupancy grid map from a recording.
 
-    DATASET is a dataset folder or its manifest.yaml (docs/dataset.md) or a KITTI odometry
-    folder; --bag maps a ROS bag instead (docs/scale-out.md).
+    RECORDING is a dataset folder (docs/dataset.md), a KITTI odometry or
+    EuRoC/ASL folder, a folder of left/right image folders (with --calib), or
+    a ROS bag (docs/scale-out.md; its stereo topics are picked when it has one
+    pair). `mrstereo info RECORDING` shows what is read.
 
     Every frame is rectified, matched (multi-range), ground-suppressed (eq. 13),
     triangulated and fused along the robot path. Writes a ROS map_server map
     (map.pgm + map.yaml), map.png with the path and fields of view, the
-    log-odds array and, when the manifest has a ground-truth map, metrics.json.
+    log-odds array and metrics.json (floor, mount, points outside the map, and
+    the comparison with a ground-truth map). The map grows to cover the path
+    and what was seen, unless --size/--origin fix its window. A given camera
+    mount is checked against the floor seen in the first frames.
     --workers N (threads, or processes with --processes) and --scheduler
     ADDRESS (a Dask cluster) spread the frames; the map is the same bit for bit.
     """
     from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
     from ..pipeline.batch import dataset_files
-    from ..pipeline.run import write_map_outputs
-    from ..recordings.layouts import read_recording
+    from ..pipeline.run import check_map, write_map_outputs
 
     check_workers(workers, scheduler, processes)
     if align and odometry == "visual":
         raise click.UsageError("--align corrects the given poses with visual odometry: not with --odometry visual")
-    if (manifest is None) == (bag is None):
-        raise click.UsageError("give a DATASET or --bag FILE (one of them)")
-    (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
-    grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
-    config = PipelineConfig(preset=preset, grid=grid).with_fusion(fusion)
+    source, is_bag = recording_of(manifest, bag)
+    bag_kw = {k: options.pop(k) for k in list(options) if k in BAG_KEYS}
+    config = map_config(**options)
     check_output_dir("--out", out_dir)
     outputs = {f"--out {out_dir / name}": out_dir / name for name in MAP_FILES}     # (names the file)
-    if bag is not None:
-        check_outputs(outputs, [bag, calib], input_dirs=[bag] if bag.is_dir() else [])
+    if is_bag:
+        check_outputs(outputs, [source, calib], input_dirs=[source] if source.is_dir() else [])
+        manifest, bag = None, source
     else:
-        dataset = read_recording(manifest)           # read once: checked here, mapped below
-        check_outputs(outputs, [manifest, calib] + dataset_files(dataset))
+        with opened_dataset(manifest, None, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, _, _):
+            check_outputs(outputs, [manifest, calib] + dataset_files(dataset))   # read once: checked here
         manifest = dataset
-    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw) as (dataset, stereo, _):
+    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
-                        scheduler=scheduler, processes=processes, odometry=odometry, align=align or None)
+                        scheduler=scheduler, processes=processes, odometry=odometry, align=align or None,
+                        check_mount=not no_mount_check)
+        echo_map_warnings(run)
+        check_map(run)
         remove_stale_temporaries(out_dir)
         with staged_dir(out_dir, prefix="map") as staging:      # all files or none: a kill leaves the old set
             files = {key: out_dir / path.name for key, path in write_map_outputs(run, staging).items()}
@@ -110,14 +105,6 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, fusion
                    f"measured visually ({a['rejected_visual_steps']} rejected), the poses moved by "
                    f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg on average")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
-
-
-def _pair(text: str, option: str) -> tuple[float, float]:
-    try:
-        a, b = (float(v) for v in text.split(","))
-    except ValueError:
-        raise click.BadParameter(f"expected two numbers 'a,b', got {text!r}", param_hint=option) from None
-    return a, b
 
 
 COMMANDS = [map_command]

@@ -51,8 +51,12 @@ from .triangulation import points_cam_from_disparity
 __all__ = [
     "GroundPlane", "ground_from_mount", "MIN_FLOOR_SHARE", "MAX_FLOOR_RESIDUAL_M", "v_disparity",
     "fit_ground_v_disparity", "fit_ground_plane",
-    "estimate_ground", "T_robot_from_cam_ground", "height_above_ground_m",
+    "estimate_ground", "T_robot_from_cam_ground", "height_above_ground_m", "FLOOR_FIT_RANGE_M",
 ]
+
+
+FLOOR_FIT_RANGE_M = 6.0
+"""Default range of a floor-plane fit [m] (:func:`fit_ground_plane`); farther when a rig maps farther."""
 
 
 @dataclass(frozen=True)
@@ -353,7 +357,7 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
 def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
                      height_range_m: tuple[float, float] = (0.1, 2.0),
                      tilt_range_rad: tuple[float, float] = (-0.35, 1.2), max_roll_rad: float = 0.35,
-                     below_penalty: float = 1.0, max_range_m: float = 6.0, iterations: int = 1500,
+                     below_penalty: float = 1.0, max_range_m: float = FLOOR_FIT_RANGE_M, iterations: int = 1500,
                      min_inliers: int = 200, max_samples: int = 20000, rng=0) -> GroundPlane:
     """Fit the floor plane to camera-frame points by RANSAC (3 points) + least squares.
 

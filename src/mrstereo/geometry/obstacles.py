@@ -25,6 +25,8 @@ Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, replace
 from functools import cached_property
 
@@ -33,14 +35,31 @@ import numpy as np
 from .. import _checks
 from ..camera import CameraMount, StereoCamera
 from . import _kernels
-from .ground import GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_mount
+from .ground import FLOOR_FIT_RANGE_M, GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_mount
 
 __all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity",
-           "MAPPING_MAX_RANGE_M"]
+           "MAPPING_MAX_RANGE_M", "MAPPING_RANGE_SIGMA_M", "mapping_range_m"]
 
 MAPPING_MAX_RANGE_M = 4.0
-"""``ObstacleConfig.max_range_m`` of a map (:class:`mrstereo.pipeline.PipelineConfig`): the paper tells floor and
-objects apart up to about 4 m; beyond, one pixel of disparity error is more than half a metre at 320x240."""
+"""The shortest mapping range (``ObstacleConfig.max_range_m`` of a map, :func:`mapping_range_m`): the paper tells floor
+and objects apart up to about 4 m; beyond, one pixel of disparity error is more than half a metre at 320x240."""
+
+MAPPING_RANGE_SIGMA_M = MAPPING_MAX_RANGE_M ** 2 * 0.25 / 24.0
+"""Depth uncertainty [m] at the end of the mapping range: that of the paper's rig (``b f = 24 m px``) at 4 m for a
+quarter-pixel disparity error (``sigma_Z = Z^2 sigma_d / (b f)``, eq. 14 differentiated)."""
+
+
+def mapping_range_m(stereo: StereoCamera, *, disparity_sigma_px: float = 0.25) -> float:
+    """The mapping range of a rig: where its depth uncertainty reaches :data:`MAPPING_RANGE_SIGMA_M`, at least 4 m.
+
+    ``Z_max = sqrt(sigma_Z b f / sigma_d)``: 4 m for the paper's rig (``b f = 24 m px``), about 16 m for
+    KITTI's (``b f = 380 m px``), whose cameras 1.65 m above the road see it from 6 m on.
+    """
+    if not isinstance(stereo, StereoCamera):
+        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    sigma = _checks.finite_number("disparity_sigma_px", disparity_sigma_px, positive=True)
+    bf = float(stereo.baseline_m * stereo.focal_px)
+    return max(MAPPING_MAX_RANGE_M, math.sqrt(MAPPING_RANGE_SIGMA_M * bf / sigma))
 
 
 @dataclass(frozen=True)
@@ -205,8 +224,9 @@ def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     Otherwise the mount's floor (:func:`~mrstereo.geometry.ground.ground_from_mount`).
     """
     if mount is None:
+        reach = {"max_range_m": max(FLOOR_FIT_RANGE_M, config.max_range_m)} if config.ground_method == "plane" else {}
         return estimate_ground(disparity_px, stereo, method=config.ground_method, rng=config.seed,
-                               height_range_m=config.ground_height_range_m)
+                               height_range_m=config.ground_height_range_m, **reach)
     if not isinstance(mount, CameraMount):
         raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
     given = ground_from_mount(mount, R_rect_from_cam=stereo.left.R)

@@ -7,6 +7,7 @@ observations. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -15,8 +16,12 @@ import numpy as np
 from ..profiling import stage
 from .grid import GridSpec
 from .occupancy import MappingConfig, OccupancyGrid, ViewCells
+from .tiles import TiledOccupancyGrid
 
-__all__ = ["FrameObservation", "fuse", "add_observation"]
+__all__ = ["FrameObservation", "fuse", "add_observation", "sweep_footprint", "MAX_SWEEP_M"]
+
+MAX_SWEEP_M = 2.0
+"""Consecutive frames at most this far apart are joined by a straight sweep of the robot's footprint."""
 
 
 @dataclass(frozen=True)
@@ -47,27 +52,53 @@ class FrameObservation:
         return (self.pose[0], self.pose[1], self.sensor_height_m)
 
 
-def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec = GridSpec(),
-         config: MappingConfig = MappingConfig()) -> OccupancyGrid:
+def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec | None = GridSpec(),
+         config: MappingConfig = MappingConfig(), resolution_m: float = GridSpec.resolution_m,
+         view_reach_m: float = 20.0) -> OccupancyGrid | TiledOccupancyGrid:
     """Ordered reduction: add each frame's cells to one occupancy grid (paper section 5.2).
 
     A frame's precomputed ``cells`` are used when they fit ``grid`` and ``config``; otherwise
     they are computed from its points (the result is the same). With ``config.map_occlusion_p``
-    the cells depend on the map so far and are always computed here, in order.
+    the cells depend on the map so far and are always computed here, in order. Before each frame,
+    the robot's footprint along the path from the previous frame is cleared
+    (``config.footprint_radius_m``, :func:`sweep_footprint`; frames more than :data:`MAX_SWEEP_M`
+    apart clear only their own footprint: the robot need not have driven straight between them).
+
+    ``grid`` None: a map that grows (:class:`~mrstereo.mapping.tiles.TiledOccupancyGrid` of cells of
+    ``resolution_m``; each view fused within ``view_reach_m`` of its sensor).
     """
-    occupancy = OccupancyGrid(grid, config=config)
+    if grid is None:
+        occupancy = TiledOccupancyGrid(resolution_m, config=config, view_reach_m=view_reach_m)
+    else:
+        occupancy = OccupancyGrid(grid, config=config)
+    previous = None
     for obs in observations:
+        if config.footprint_radius_m:
+            near = previous is not None and math.dist(previous[:2], obs.pose[:2]) <= MAX_SWEEP_M
+            sweep_footprint(occupancy, previous if near else obs.pose, obs.pose, config.footprint_radius_m)
         add_observation(occupancy, obs)
+        previous = obs.pose
     return occupancy
 
 
-def add_observation(occupancy: OccupancyGrid, obs: FrameObservation) -> None:
+def sweep_footprint(occupancy, start_xy, end_xy, radius_m: float) -> None:
+    """Clear the cells a disc of ``radius_m`` touches on its way from ``start_xy`` to ``end_xy`` (discs at
+    most a cell apart along the segment, :meth:`OccupancyGrid.clear_disc`)."""
+    a, b = np.asarray(start_xy[:2], dtype=np.float64), np.asarray(end_xy[:2], dtype=np.float64)
+    resolution = occupancy.grid.resolution_m if isinstance(occupancy, OccupancyGrid) else occupancy.resolution_m
+    steps = max(1, int(np.ceil(np.linalg.norm(b - a) / resolution)))
+    for t in (np.linspace(0.0, 1.0, steps + 1) if np.any(a != b) else (1.0,)):
+        occupancy.clear_disc(a + t * (b - a), radius_m)
+
+
+def add_observation(occupancy: OccupancyGrid | TiledOccupancyGrid, obs: FrameObservation) -> None:
     """One frame into the map, in order: its precomputed cells when they fit the map's grid and
     config and the map does not occlude (``map_occlusion_p`` None), else its cells traced
     against the map so far."""
-    grid, config = occupancy.grid, occupancy.config
+    config = occupancy.config
     with stage("grid"):
-        if obs.cells is not None and obs.cells.fits(grid, config) and config.map_occlusion_p is None:
+        if (isinstance(occupancy, OccupancyGrid) and obs.cells is not None and obs.cells.fits(occupancy.grid, config)
+                and config.map_occlusion_p is None):
             occupancy.apply(obs.cells)
         else:
             occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world,

@@ -130,6 +130,12 @@ class MappingConfig:
         the 2-D map needs the whole height band free. Cells near a high camera are cleared by
         the views that saw them from farther away, with lower sight lines. None: no limit
         (needs heights: the sensor's and the points').
+    footprint_radius_m : float or None
+        The robot's radius: the cells its footprint touches along the path -- a disc at every pose,
+        swept between consecutive poses -- are free (:meth:`OccupancyGrid.clear_disc`), since the
+        robot stood there; the cameras never see them. The default is the radius of ``mrstereo plan``
+        (0.25 m) and a cell: a robot planned from its own pose can move off it into the space its cameras
+        saw. None or 0: off.
     """
 
     p_hit: float = 0.7
@@ -148,8 +154,11 @@ class MappingConfig:
     overhang_shadow: bool = True
     map_occlusion_p: float | None = 0.8
     clear_below_m: float | None = 0.8
+    footprint_radius_m: float | None = 0.3
 
     def __post_init__(self) -> None:
+        if self.footprint_radius_m is not None:
+            _checks.finite_number("footprint_radius_m", self.footprint_radius_m, nonnegative=True)
         _checks.positive_int("min_points_per_cell", self.min_points_per_cell)
         if self.disparity_sigma_px is not None:
             _checks.finite_number("disparity_sigma_px", self.disparity_sigma_px, positive=True)
@@ -475,6 +484,8 @@ class OccupancyGrid:
         self._z_range_m[..., 0] = np.inf
         self._z_range_m[..., 1] = -np.inf
         self.n_updates = 0
+        self.points_outside = 0
+        """Points of all updates so far whose ray was cut at the grid's border (they fell outside it)."""
 
     # ---------------------------------------------------------------- update
     def update(self, points_obstacle_world, points_free_world, sensor_origin_world, *,
@@ -534,7 +545,34 @@ class OccupancyGrid:
             z[cells.hit, 0] = np.minimum(z[cells.hit, 0], cells.hit_z_m[:, 0])
             z[cells.hit, 1] = np.maximum(z[cells.hit, 1], cells.hit_z_m[:, 1])
         self.n_updates += 1
+        self.points_outside += int(cells.points_outside)
         return GridUpdate(len(cells.hit), len(cells.miss), cells.points_outside)
+
+    def clear_disc(self, xy_m, radius_m: float) -> int:
+        """Mark free every cell a disc of ``radius_m`` at ``xy_m`` touches: the robot's footprint.
+
+        The robot stood there, so the cells are observed free with certainty: their log-odds become
+        ``l_min`` (later views may still hit them, a moved obstacle). A cell is touched when its square
+        comes within ``radius_m`` of the centre; then every cell whose centre lies within ``radius_m`` of
+        the centre of the robot's own cell is free too, so a planner inflating obstacles by the robot's
+        radius can start there. Returns the number of cells cleared (inside the grid).
+        """
+        xy = np.asarray(xy_m, dtype=np.float64).ravel()
+        if xy.shape != (2,) and xy.shape != (3,) or not np.isfinite(xy[:2]).all():
+            raise ValueError(f"xy_m must be two finite numbers (x, y) in metres, got {xy_m!r}")
+        radius = _checks.finite_number("radius_m", radius_m, nonnegative=True)
+        g, half = self.grid, 0.5 * self.grid.resolution_m
+        (r0, c0), (r1, c1) = (g.cells_from_xy(xy[:2] + d) for d in (-radius - half, radius + half))
+        rows, cols = g.shape
+        r0, c0, r1, c1 = max(int(r0), 0), max(int(c0), 0), min(int(r1), rows - 1), min(int(c1), cols - 1)
+        if r0 > r1 or c0 > c1:
+            return 0
+        rr, cc = np.mgrid[r0:r1 + 1, c0:c1 + 1]
+        centres = g.xy_from_cells(rr, cc)
+        gap = np.maximum(np.abs(centres - xy[:2]) - half, 0.0)
+        touched = (gap ** 2).sum(axis=-1) <= radius * radius + 1e-12
+        self._log_odds[rr[touched], cc[touched]] = self.config.l_min
+        return int(touched.sum())
 
     # ---------------------------------------------------------------- outputs
     @property
@@ -592,6 +630,7 @@ class OccupancyGrid:
         out = OccupancyGrid(self.grid, config=self.config, log_odds=self._log_odds)
         out._z_range_m[...] = self._z_range_m
         out.n_updates = self.n_updates
+        out.points_outside = self.points_outside
         return out
 
     def __repr__(self) -> str:

@@ -40,11 +40,12 @@ from ..io import (atomic_write, check_output_dir, check_outputs, read_pfm, remov
                   write_disparity)
 from ..mapping.fusion import FrameObservation
 from ..mapping.rosmap import ros_map_files
-from ..recordings.manifest import FrameRecord, Manifest, frame_pair, read_manifest
+from ..recordings.layouts import read_recording
+from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
 from .frame import scan_from_pair
 from .parallel import ItemFailure, map_ordered
 from .run import (MapRun, PipelineConfig, floor_for_run, map_from_observations, observation_from_pair, pair_options,
-                  write_map_outputs)
+                  with_visual_odometry, write_map_outputs)
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
            "dataset_files", "SUMMARY_NAME"]
@@ -55,7 +56,7 @@ _MAP_RECORD = "batch.json"
 
 def dataset_files(manifest: Manifest) -> list[Path]:
     """Every file a run over ``manifest`` reads: the manifest, calibration, ground-truth map, images."""
-    files = [manifest.root / "manifest.yaml", manifest.calibration_path]
+    files = [p for p in (manifest.root / "manifest.yaml", manifest.calibration_path) if p.is_file()]
     if manifest.ground_truth_map is not None:
         files += ros_map_files(manifest.ground_truth_map)
     for r in manifest.frames:
@@ -174,6 +175,8 @@ class DatasetSummary:
     map_status: str = ""
     floor: object | None = None
     """The floor the frames used (:class:`mrstereo.geometry.GroundPlane`); None when all was kept."""
+    mount_warning: str | None = None
+    """Why the dataset's mount was not used (:func:`mrstereo.pipeline.floor_for_run`)."""
 
     def to_dict(self) -> dict:
         out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
@@ -181,6 +184,8 @@ class DatasetSummary:
                "failed": self.n_failed, "map": self.map_status}
         if self.floor is not None:
             out["floor"] = self.floor.summary()
+        if self.mount_warning is not None:
+            out["mount_warning"] = self.mount_warning
         return out
 
 
@@ -196,7 +201,7 @@ class BatchSummary:
 def _names(manifests: list[Manifest]) -> list[str]:
     names, seen = [], {}
     for m in manifests:
-        base = m.root.name or "dataset"
+        base = (m.root.parent.name if m.root.name == "mav0" else m.root.name) or "dataset"   # EuRoC: the sequence
         seen[base] = seen.get(base, 0) + 1
         names.append(base if seen[base] == 1 else f"{base}_{seen[base]}")
     return names
@@ -226,15 +231,37 @@ def _write_map(run: MapRun, map_dir: Path, record: dict) -> None:
         os.replace(tmp, map_dir)
 
 
+def _mounted(manifest: Manifest, config: PipelineConfig, check_mount: bool) -> tuple:
+    """``(RunFloor, recording)``: the mount (checked) or the floor estimated once, the poses on that base,
+    and the poses of visual odometry for a recording without any (as ``mrstereo map`` takes them)."""
+    floor = floor_for_run(manifest, config=config, check_mount=check_mount)
+    manifest = rebased(manifest, floor.mount)
+    if not manifest.has_poses:
+        manifest, _ = with_visual_odometry(manifest)
+    return floor, manifest
+
+
+def _check_outputs(out: Path, datasets: list[Manifest], names: list[str]) -> None:
+    """Refuse an output root or dataset folder that would write over an input (before any work)."""
+    inputs = [f for m in datasets for f in dataset_files(m)]
+    check_output_dir("out_dir", out, input_dirs=[m.root for m in datasets if out.resolve().is_relative_to(m.root.resolve())],
+                     input_kind="dataset")
+    check_outputs({"summary": out / SUMMARY_NAME}, inputs)
+    for name in names:
+        check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, input_kind="dataset",
+                         input_dirs=[m.root for m in datasets], inputs=inputs)
+
+
 def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
               maps: bool = True, workers: int | None = None, scheduler=None, processes: bool = False,
-              progress: bool = True) -> BatchSummary:
+              progress: bool = True, check_mount: bool = True) -> BatchSummary:
     """Process many datasets: per-frame files and one map per dataset (see the module docstring).
 
     Parameters
     ----------
     manifests : sequence of path or Manifest
-        The datasets; all are read (and validated) before any work starts.
+        The recordings (:func:`mrstereo.recordings.read_recording`: dataset, KITTI, EuRoC/ASL folders);
+        all are read (and validated) before any work starts.
     out_dir : path
         Output root; created if needed, reused by a re-run.
     config : PipelineConfig
@@ -245,6 +272,9 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         Where the frames run (:func:`mrstereo.pipeline.parallel.map_ordered`).
     progress : bool
         A tqdm bar over all frames to compute.
+    check_mount : bool
+        Check each dataset's mount against the floor seen in its first frames
+        (:func:`mrstereo.pipeline.floor_for_run`; ``DatasetSummary.mount_warning``).
 
     Returns
     -------
@@ -254,21 +284,16 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
     if isinstance(manifests, (str, os.PathLike, Manifest)):
         manifests = [manifests]
-    datasets = [m if isinstance(m, Manifest) else read_manifest(m) for m in manifests]
+    datasets = [m if isinstance(m, Manifest) else read_recording(m) for m in manifests]
     if not datasets:
         raise ValueError("no datasets given")
     out = Path(out_dir)
     names = _names(datasets)
-    inputs = [dataset_files(m) for m in datasets]
-    check_output_dir("out_dir", out, input_dirs=[m.root for m in datasets if out.resolve().is_relative_to(m.root.resolve())],
-                     input_kind="dataset")
-    check_outputs({"summary": out / SUMMARY_NAME}, [f for files in inputs for f in files])
-    for name in names:
-        check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, input_kind="dataset",
-                         input_dirs=[m.root for m in datasets], inputs=[f for files in inputs for f in files])
+    _check_outputs(out, datasets, names)
 
     tasks, observations, skipped, done_maps, floors = [], {}, {}, set(), {}
-    for name, m in zip(names, datasets):
+    configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
+    for i, (name, m) in enumerate(zip(names, datasets)):
         frames_dir = out / name / "frames"
         frames_dir.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(frames_dir)
@@ -279,14 +304,15 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
             done_maps.add(name)
         skipped[name] = sum(complete)
         if not all(complete) or (maps and name not in done_maps):
-            floors[name] = floor_for_run(m, config=config)       # the mount, or the floor estimated once
+            floors[name], datasets[i] = _mounted(m, configs[name], check_mount)
+            m = datasets[i]
         for k, record in enumerate(m.frames):
             if complete[k]:
                 if maps and name not in done_maps:
                     observations[(name, k)] = loaded[k]
             else:
-                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, mount=floors[name][0],
-                                       config=config, frames_dir=frames_dir, dataset=name))
+                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, mount=floors[name].mount,
+                                       config=configs[name], frames_dir=frames_dir, dataset=name))
 
     results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, processes=processes,
                           progress=progress,
@@ -309,13 +335,16 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
                 status = "kept"
             else:
                 obs = [observations[(name, k)] for k in range(len(m.frames)) if (name, k) in observations]
-                run = map_from_observations(m, obs, config=config, floor=floors[name][1], mount=floors[name][0])
+                run = map_from_observations(m, obs, config=configs[name], floor=floors[name].floor,
+                                            mount=floors[name].mount)
                 _write_map(run, out / name / "map", {"frames": len(m.frames), "fused": len(obs), "failed": failed})
                 status = "written" if not failed else f"written from {len(obs)} of {len(m.frames)} frames"
-        summaries.append(DatasetSummary(name=name, manifest=m.root / "manifest.yaml", out_dir=out / name,
+        summaries.append(DatasetSummary(name=name, manifest=m.root / "manifest.yaml" if m.layout == "dataset" else m.root,
+                                        out_dir=out / name,
                                         n_frames=len(m.frames), n_computed=computed, n_skipped=skipped[name],
                                         n_failed=len(failed), map_status=status,
-                                        floor=floors[name][1] if name in floors else None))
+                                        floor=floors[name].floor if name in floors else None,
+                                        mount_warning=floors[name].warning if name in floors else None))
     path = out / SUMMARY_NAME
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps({"datasets": [s.to_dict() for s in summaries], "failures": failures,

@@ -18,29 +18,31 @@ import math
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from ..camera import CameraMount, StereoCamera, mount_entry
 from ..geometry.freespace import FreeSpaceConfig
 from ..geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount
-from ..geometry.obstacles import MAPPING_MAX_RANGE_M, ObstacleConfig
+from ..geometry.obstacles import MAPPING_MAX_RANGE_M, ObstacleConfig, mapping_range_m
 from ..io import atomic_write
 from ..mapping import GridSpec, read_ros_map, write_ros_map
 from ..mapping.figures import plot_map
 from ..mapping.fusion import FrameObservation, fuse
+from ..mapping.tiles import TiledOccupancyGrid
 from ..mapping.metrics import MapMetrics, map_metrics
 from ..mapping.occupancy import MappingConfig, OccupancyGrid, view_cells
 from ..matching.config import MatchingConfig
 from ..profiling import stage
 from ..recordings.layouts import read_recording
-from ..recordings.manifest import FrameRecord, Manifest, frame_pair, pose_3d_of
+from ..recordings.manifest import FrameRecord, Manifest, frame_pair, pose_3d_of, rebased
 from ..rejection import RejectionConfig
 from ..transforms import T_from_planar, transform_points
 from .frame import PairObstacles, obstacles_from_pair
 
 __all__ = ["PipelineConfig", "MapRun", "observe_frame", "build_map", "map_from_observations", "floor_for_run",
-           "write_map_outputs", "views_of_frames"]
+           "write_map_outputs", "views_of_frames", "check_map", "RunFloor"]
 
 
 @dataclass(frozen=True)
@@ -58,13 +60,19 @@ class PipelineConfig:
         Full matcher configuration (overrides ``preset``).
     rejection : RejectionConfig
         Eq. (13) texture / ground suppression.
-    obstacles : ObstacleConfig
-        Height band, range limit and floor estimation; a map keeps points within
-        :data:`~mrstereo.geometry.obstacles.MAPPING_MAX_RANGE_M`.
+    obstacles : ObstacleConfig or None
+        Height band, range limit and floor estimation. None: the defaults with the rig's mapping
+        range (:func:`~mrstereo.geometry.obstacles.mapping_range_m`: 4 m for the paper's rig, farther
+        for a rig that measures depth well farther), filled in by :meth:`for_rig`.
     mapping : MappingConfig
         Sensor model and fusion (log-odds or the paper's union).
-    grid : GridSpec
-        Map extent and resolution.
+    grid : GridSpec or None
+        A fixed map window (extent and resolution); points outside it are counted
+        (``MapRun.points_outside``). None: the window of the recording's ground-truth map when it
+        has one (maps compared cell by cell), else a map that grows with the path
+        (:class:`~mrstereo.mapping.tiles.TiledOccupancyGrid`), written over the cells seen.
+    resolution_m : float
+        Cell size of a map that grows (``grid`` None).
     free_space : FreeSpaceConfig or None
         The free-space boundary (:mod:`mrstereo.geometry.freespace`): where the floor ends in
         each image column, an obstacle base that the matcher cannot measure (a wall without
@@ -75,9 +83,10 @@ class PipelineConfig:
     max_disparity_px: float | None = None
     matching: MatchingConfig | None = None
     rejection: RejectionConfig = field(default_factory=RejectionConfig)
-    obstacles: ObstacleConfig = field(default_factory=lambda: ObstacleConfig(max_range_m=MAPPING_MAX_RANGE_M))
+    obstacles: ObstacleConfig | None = None
     mapping: MappingConfig = field(default_factory=MappingConfig)
-    grid: GridSpec = field(default_factory=GridSpec)
+    grid: GridSpec | None = None
+    resolution_m: float = GridSpec.resolution_m
     free_space: FreeSpaceConfig | None = field(default_factory=FreeSpaceConfig)
 
     def single_range_equal_work(self, stereo: StereoCamera) -> PipelineConfig:
@@ -94,6 +103,18 @@ class PipelineConfig:
         n = max(1, round(plan.work / (stereo.size[0] * stereo.size[1])))
         base = self.matching or preset_config(self.preset)
         return replace(self, matching=base.replace(search={"multi_range": False}), max_disparity_px=float(n))
+
+    def for_rig(self, stereo: StereoCamera) -> PipelineConfig:
+        """The configuration a run with the calibration ``stereo`` uses: ``obstacles`` filled in with the
+        rig's mapping range when it is None."""
+        if self.obstacles is not None:
+            return self
+        return replace(self, obstacles=ObstacleConfig(max_range_m=mapping_range_m(stereo)))
+
+    @property
+    def obstacle_config(self) -> ObstacleConfig:
+        """``obstacles``, or the defaults with the shortest mapping range when not filled in (:meth:`for_rig`)."""
+        return self.obstacles if self.obstacles is not None else ObstacleConfig(max_range_m=MAPPING_MAX_RANGE_M)
 
     def with_fusion(self, fusion: str) -> PipelineConfig:
         """The same configuration with another grid fusion (``"log_odds"`` or ``"union"``)."""
@@ -117,6 +138,10 @@ class MapRun:
     """The :class:`mrstereo.odometry.OdometryResult` when the poses came from visual odometry."""
     fusion: object | None = None
     """The :class:`mrstereo.odometry.fusion.FusedOdometry` when the given poses were fused with visual odometry."""
+    range_m: float = MAPPING_MAX_RANGE_M
+    """The mapping range of the run (its obstacle configuration's ``max_range_m``)."""
+    mount_warning: str | None = None
+    """Why the given mount was not used (:func:`floor_for_run`), None when it was (or none was given)."""
 
     def pose_metrics(self) -> dict:
         """Odometry and alignment figures for metrics.json (empty when the given poses were used)."""
@@ -151,7 +176,7 @@ class MapRun:
 def pair_options(config: PipelineConfig) -> dict:
     """Keyword options of :func:`mrstereo.pipeline.frame.obstacles_from_pair` for a config."""
     return {"preset": config.preset, "max_disparity_px": config.max_disparity_px, "matching": config.matching,
-            "rejection": config.rejection, "config": config.obstacles, "free_space": config.free_space}
+            "rejection": config.rejection, "config": config.obstacle_config, "free_space": config.free_space}
 
 
 def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: int,
@@ -183,7 +208,7 @@ def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: i
         height = float(obs.ground.height_m) if obs.success else None
         origin = tuple(record.pose[:2]) + (() if height is None else (height,))
         # (a map that occludes traces every view against the map so far, in order: add_observation)
-        cells = None if config.mapping.map_occlusion_p is not None else \
+        cells = None if config.mapping.map_occlusion_p is not None or config.grid is None else \
             view_cells(obstacles, floor, origin, grid=config.grid, config=config.mapping, baseline_focal_m_px=bf)
     return FrameObservation(index=index, pose=tuple(float(v) for v in record.pose), pan_rad=float(record.pan_rad),
                             obstacle_points_world=obstacles, floor_points_world=floor,
@@ -236,40 +261,35 @@ def _read_indexed(indexed: tuple[int, FrameRecord], *, prefer_raw: bool) -> tupl
     return k, record, frame_pair(record, prefer_raw=prefer_raw)
 
 
-def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
-                  config: PipelineConfig = PipelineConfig(), prefer_raw: bool = False, max_frames: int = 10,
-                  n_frames: int = 3) -> tuple[CameraMount, GroundPlane]:
-    """The camera mount of a run and the floor it implies: given, or estimated from the first frames.
+MOUNT_HEIGHT_TOLERANCE_M = 0.10
+"""A given mount whose camera height differs more than this from the floor seen in the images is not used."""
+MOUNT_TILT_TOLERANCE_RAD = math.radians(5.0)
+"""A given mount whose tilt differs more than this from the floor seen in the images is not used."""
+MIN_CAMERA_HEIGHT_M = 0.05
+"""A given mount with the camera lower than this above the floor is taken for a base frame that is not on the floor."""
 
-    With a mount in the manifest (``mount:`` or ``rig:``) that mount. Without,
-    the floor is fitted (``config.obstacles.ground_method``, RANSAC) in the
-    first ``max_frames`` frames until ``n_frames`` fits are confident
-    (:attr:`GroundPlane.confident`); the median height, tilt and roll of those
-    is the mount of the whole run (the camera is assumed to look along the
-    robot's x axis, on its vertical axis: a floor says nothing about yaw or
-    the horizontal offset). With no confident fit, the fit with the largest
-    inlier share is used and reported as not confident.
 
-    Returns
-    -------
-    (CameraMount, GroundPlane)
-        The mount, and the floor with its confidence (``inlier_share``,
-        ``residual_m``) and in ``message`` which frames it came from.
+class RunFloor(NamedTuple):
+    """The camera mount of a run and the floor it implies (:func:`floor_for_run`)."""
 
-    Raises
-    ------
-    ValueError
-        No floor in any of the first ``max_frames`` frames.
-    """
-    if not isinstance(manifest, Manifest):
-        raise TypeError(f"manifest must be a Manifest, got {type(manifest).__name__}")
-    stereo = manifest.calibration if stereo is None else stereo
-    if manifest.mount is not None:
-        return manifest.mount, ground_from_mount(manifest.mount, R_rect_from_cam=stereo.left.R)
+    mount: CameraMount
+    floor: GroundPlane
+    warning: str | None = None
+    """Why the given mount was not used, or looks wrong: one line for the user (None: nothing to say)."""
+
+
+def _seen_floor(manifest: Manifest, stereo: StereoCamera, config: PipelineConfig, prefer_raw: bool,
+                max_frames: int, n_frames: int) -> tuple[GroundPlane | None, int]:
+    """The floor fitted in the first ``max_frames`` frames: the median of the first ``n_frames`` confident
+    fits, else the fit with the largest inlier share (not confident), else None; and the number of
+    confident fits."""
     stereo = replace(stereo, mount=None)
     fits, best = [], None
     for k, record in enumerate(manifest.frames[:max(1, int(max_frames))]):
-        left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
+        try:
+            left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
+        except (OSError, ValueError):
+            continue                       # an unreadable frame: the run reports it when it gets there
         ground = obstacles_from_pair(left, right, stereo, rectified=rectified, mount=None,
                                      **pair_options(replace(config, free_space=None))).obstacles.ground
         if ground.success and (best is None or ground.inlier_share > best[1].inlier_share):
@@ -279,25 +299,104 @@ def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
             if len(fits) >= n_frames:
                 break
     if best is None:
-        raise ValueError(f"no floor found in the first {min(len(manifest.frames), max_frames)} frames of "
-                         f"{manifest.root}; give the camera mount (--mount x,y,z,roll,pitch,yaw or --height/--tilt, "
-                         "or mount:/rig: in the manifest or stereo YAML)")
+        return None, 0
     used = fits or [best]
     med = {name: float(np.median([getattr(g, name) for _, g in used]))
            for name in ("height_m", "tilt_rad", "roll_rad", "inlier_share", "residual_m")}
     frames = ", ".join(str(k) for k, _ in used)
-    ground = GroundPlane(**med, success=True, method=used[0][1].method,
-                         n_inliers=int(np.median([g.n_inliers for _, g in used])),
-                         message=f"estimated: median of {len(used)} floor fit(s), frame(s) {frames}"
-                                 + ("" if fits else " (none confident)"))
+    return GroundPlane(**med, success=True, method=used[0][1].method,
+                       n_inliers=int(np.median([g.n_inliers for _, g in used])),
+                       message=f"estimated: median of {len(used)} floor fit(s), frame(s) {frames}"
+                               + ("" if fits else " (none confident)")), len(fits)
+
+
+def _disagreement(given: GroundPlane, seen: GroundPlane | None) -> str | None:
+    """Why a given mount's floor disagrees with the seen one (None: it agrees, or nothing to compare)."""
+    if given.height_m < MIN_CAMERA_HEIGHT_M:
+        return f"a camera {given.height_m:.3f} m above the floor is below {MIN_CAMERA_HEIGHT_M:.2f} m"
+    if seen is None:
+        return None
+    dh, dt = abs(given.height_m - seen.height_m), abs(given.tilt_rad - seen.tilt_rad)
+    if dh > MOUNT_HEIGHT_TOLERANCE_M:
+        return f"the height is off by {dh:.3f} m (more than {MOUNT_HEIGHT_TOLERANCE_M:.2f} m)"
+    if dt > MOUNT_TILT_TOLERANCE_RAD:
+        return f"the tilt is off by {math.degrees(dt):.1f} deg (more than {math.degrees(MOUNT_TILT_TOLERANCE_RAD):.0f} deg)"
+    return None
+
+
+def _floor_text(floor: GroundPlane) -> str:
+    return f"height {floor.height_m:.3f} m, tilt {math.degrees(floor.tilt_rad):.1f} deg"
+
+
+def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
+                  config: PipelineConfig = PipelineConfig(), prefer_raw: bool = False, max_frames: int = 10,
+                  n_frames: int = 3, check_mount: bool = True) -> RunFloor:
+    """The camera mount of a run and the floor it implies: given and checked, or estimated from the first frames.
+
+    The floor is fitted (``config.obstacles.ground_method``, RANSAC) in the first ``max_frames``
+    frames until ``n_frames`` fits are confident (:attr:`GroundPlane.confident`); the median height,
+    tilt and roll of those is the seen floor (the camera is assumed to look along the robot's x
+    axis, on its vertical axis: a floor says nothing about yaw or the horizontal offset). With no
+    confident fit, the fit with the largest inlier share is used and reported as not confident.
+
+    Without a mount in the manifest (``mount:``, ``rig:``, the calibration's) the seen floor is the
+    mount of the run. With one (and ``check_mount``), the mount is used when the camera is at least
+    :data:`MIN_CAMERA_HEIGHT_M` above its floor and the seen floor, if confident in at least two frames
+    (one fit can be a wall's base), agrees with it: camera height within :data:`MOUNT_HEIGHT_TOLERANCE_M`
+    and tilt within :data:`MOUNT_TILT_TOLERANCE_RAD`. Otherwise the seen floor is used and ``warning`` says so with both values (a mount in a
+    base frame that is not on the floor, such as a drone's body frame, puts the camera centimetres
+    "above the floor" and the map would be empty).
+
+    Returns
+    -------
+    RunFloor
+        The mount, the floor with its confidence (``inlier_share``, ``residual_m``; in ``message``
+        which frames it came from), and the warning (None when there is nothing to say).
+
+    Raises
+    ------
+    ValueError
+        No mount and no floor in any of the first ``max_frames`` frames.
+    """
+    if not isinstance(manifest, Manifest):
+        raise TypeError(f"manifest must be a Manifest, got {type(manifest).__name__}")
+    stereo = manifest.calibration if stereo is None else stereo
+    given = None if manifest.mount is None else ground_from_mount(manifest.mount, R_rect_from_cam=stereo.left.R)
+    if given is not None and not check_mount:
+        return RunFloor(manifest.mount, given)
+    seen, n_confident = _seen_floor(manifest, stereo, config, prefer_raw, max_frames, n_frames)
+    if given is None:
+        if seen is None:
+            raise ValueError(f"no floor found in the first {min(len(manifest.frames), max_frames)} frames of "
+                             f"{manifest.root}; give the camera mount (--mount x,y,z,roll,pitch,yaw or "
+                             "--height/--tilt, or mount:/rig: in the manifest or stereo YAML)")
+        return RunFloor(_mount_of_floor(seen, stereo), seen)
+    # one confident fit can be a wall's base or a ramp: a plausible mount is replaced on repeated evidence only
+    repeated = n_confident >= min(2, len(manifest.frames))
+    reason = _disagreement(given, seen if seen is not None and seen.confident and repeated else None)
+    if reason is None:
+        return RunFloor(manifest.mount, given)
+    advice = ("give the mount of a base frame on the floor (--base-frame of a bag, --mount x,y,z,roll,pitch,yaw, "
+              "--height/--tilt), or no mount to have the floor estimated")
+    if seen is None:
+        return RunFloor(manifest.mount, given, f"the camera mount looks wrong ({reason}: {_floor_text(given)}) and no "
+                                               f"floor was seen in the first frames to replace it; {advice}")
+    used = replace(seen, message=f"{seen.message}; used instead of the given mount ({_floor_text(given)})")
+    return RunFloor(_mount_of_floor(seen, stereo), used,
+                    f"the camera mount disagrees with the floor seen in the images ({reason}): given "
+                    f"{_floor_text(given)}, seen {_floor_text(seen)}; the seen floor is used; {advice}; "
+                    "--no-mount-check keeps the given mount")
+
+
+def _mount_of_floor(floor: GroundPlane, stereo: StereoCamera) -> CameraMount:
     # the estimate is of the rectified left frame; the mount is of the raw camera (p_rect = R p_raw)
-    return CameraMount.from_rectified(T_robot_from_cam_ground(ground), stereo.left.R), ground
+    return CameraMount.from_rectified(T_robot_from_cam_ground(floor), stereo.left.R)
 
 
 def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
               calibration: StereoCamera | None = None, prefer_raw: bool = False,
               progress: bool = True, workers: int | None = None, scheduler=None,
-              processes: bool = False, odometry: str = "given", align=None) -> MapRun:
+              processes: bool = False, odometry: str = "auto", align=None, check_mount: bool = True) -> MapRun:
     """Map a whole dataset: observe every frame, fuse in order, compare with the GT map if any.
 
     Parameters
@@ -323,8 +422,9 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         (:func:`mrstereo.pipeline.parallel.map_ordered` keeps the frame order).
     processes : bool
         With ``workers``: worker processes instead of threads.
-    odometry : {"given", "visual"}
-        ``"visual"``: the poses come from stereo visual odometry
+    odometry : {"auto", "given", "visual"}
+        ``"auto"``: the recording's poses when it has some (``Manifest.has_poses``), else visual
+        odometry. ``"visual"``: the poses come from stereo visual odometry
         (:func:`mrstereo.pipeline.odometry_from_manifest`, run in order before the
         matching), starting at the first frame's given pose; frames where tracking is
         lost are left out of the map.
@@ -332,6 +432,10 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         Correct the given poses with visual odometry (with ``odometry="given"``): each step of
         the given odometry fused with the visual odometry's (:func:`mrstereo.odometry.fusion.
         fuse_odometry`); every frame is mapped, those visual odometry lost on the given steps.
+    check_mount : bool
+        Check a given mount against the floor seen in the first frames and use the seen floor when they
+        disagree (:func:`floor_for_run`; ``MapRun.mount_warning`` says so). The poses are moved with the
+        mount so that the camera stays where the recording put it (:func:`~mrstereo.recordings.manifest.rebased`).
     """
     from functools import partial
 
@@ -341,24 +445,25 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         manifest = read_recording(manifest)
     if not isinstance(config, PipelineConfig):
         raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
-    if odometry not in ("given", "visual"):
-        raise ValueError(f"odometry must be 'given' or 'visual', got {odometry!r}")
+    if odometry not in ("auto", "given", "visual"):
+        raise ValueError(f"odometry must be 'auto', 'given' or 'visual', got {odometry!r}")
+    if odometry == "auto":
+        odometry = "given" if manifest.has_poses else "visual"
     align = None if align is False else align
     if align is not None and odometry != "given":
         raise ValueError("align corrects the given odometry with visual odometry: use it with odometry='given'")
     stereo = manifest.calibration if calibration is None else calibration
     prefer_raw = prefer_raw or calibration is not None
-    mount, floor = floor_for_run(manifest, stereo, config=config, prefer_raw=prefer_raw)
+    config = _on_true_map(manifest, config.for_rig(stereo))
+    mount, floor, warning = floor_for_run(manifest, stereo, config=config, prefer_raw=prefer_raw,
+                                          check_mount=check_mount)
+    manifest = rebased(manifest, mount)
     items = list(enumerate(manifest.frames))
     vo = fused = None
     if odometry == "visual" or align is not None:
-        from .odometry import odometry_from_manifest
-
-        run_mount = replace(manifest, mount=mount)     # the floor the map uses
-        vo = odometry_from_manifest(run_mount, calibration=calibration, progress=progress)
+        visual, vo = with_visual_odometry(manifest, calibration=calibration, progress=progress)
     if odometry == "visual":
-        items = [(k, replace(record, pose=None, pose_3d=pose_3d_of(T)))
-                 for (k, record), T, ok in zip(items, vo.T_world_from_base, vo.tracked) if ok]
+        items = [(k, record) for k, record, ok in zip(range(len(items)), visual.frames, vo.tracked) if ok]
     elif align is not None:
         from ..odometry.fusion import FusionConfig, fuse_odometry
 
@@ -371,8 +476,29 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
                                processes=processes, progress=progress, desc="mapping", unit="frame",
                                prefetch=partial(_read_indexed, prefer_raw=prefer_raw),
                                label=lambda item: f"frame {item[0]} ({(item[1].left_rect or item[1].left).name})")
-    return map_from_observations(manifest, observations, config=config, stereo=stereo, floor=floor, mount=mount,
-                                 odometry=vo, fusion=fused)
+    run = map_from_observations(manifest, observations, config=config, stereo=stereo, floor=floor, mount=mount,
+                                odometry=vo, fusion=fused)
+    run.mount_warning = warning
+    return run
+
+
+def with_visual_odometry(manifest: Manifest, *, calibration: StereoCamera | None = None, progress: bool = False):
+    """``(recording, run)``: the recording with every frame's pose from stereo visual odometry
+    (:func:`mrstereo.pipeline.odometry.odometry_from_manifest`; a lost frame gets the motion model's
+    prediction, ``run.tracked`` says which), for a recording without poses."""
+    from .odometry import odometry_from_manifest
+
+    vo = odometry_from_manifest(manifest, calibration=calibration, progress=progress)
+    frames = tuple(replace(f, pose=None, pose_3d=pose_3d_of(T)) for f, T in zip(manifest.frames, vo.T_world_from_base))
+    return replace(manifest, frames=frames, has_poses=True), vo
+
+
+def _on_true_map(manifest: Manifest, config: PipelineConfig) -> PipelineConfig:
+    """``config`` with the window of the recording's ground-truth map (at ``config.resolution_m``) when it has
+    one and no window is given."""
+    if config.grid is not None or manifest.ground_truth_map is None:
+        return config
+    return replace(config, grid=replace(read_ros_map(manifest.ground_truth_map).grid, resolution_m=config.resolution_m))
 
 
 def map_from_observations(manifest: Manifest, observations: list[FrameObservation], *,
@@ -397,23 +523,61 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
         Carried into the :class:`MapRun` (see there).
     """
     stereo = manifest.calibration if stereo is None else stereo
-    occupancy = fuse(observations, grid=config.grid, config=config.mapping)
+    config = _on_true_map(manifest, config)
+    range_m = config.obstacle_config.max_range_m
+    fused = fuse(observations, grid=config.grid, config=config.mapping, resolution_m=config.resolution_m,
+                 view_reach_m=range_m + 2.0)
+    occupancy = fused.to_grid() if isinstance(fused, TiledOccupancyGrid) else fused
     metrics, gt = None, None
     if manifest.ground_truth_map is not None:
         gt = read_ros_map(manifest.ground_truth_map)
-        if gt.grid.shape == occupancy.grid.shape:
+        compared = occupancy
+        if isinstance(fused, TiledOccupancyGrid):
+            try:
+                compared = fused.to_grid(gt.grid)           # the map on the ground truth's window
+            except ValueError:
+                compared = None                             # not on the map's lattice: no metrics
+        if compared is not None and gt.grid.shape == compared.grid.shape:
             true_frames = [replace(f, pose=f.true_pose, pose_3d=f.true_pose_3d) if f.true_pose is not None else f
                            for f in manifest.frames]
-            views = views_of_frames(true_frames, stereo, range_m=config.obstacles.max_range_m)
-            metrics = map_metrics(occupancy, gt, path_xy=np.array([f.pose for f in true_frames]), views=views)
+            views = views_of_frames(true_frames, stereo, range_m=config.obstacle_config.max_range_m, mount=mount)
+            metrics = map_metrics(compared, gt, path_xy=np.array([f.pose for f in true_frames]), views=views)
     return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
-                  ground_truth_map=gt, floor=floor, mount=mount, odometry=odometry, fusion=fusion)
+                  ground_truth_map=gt, floor=floor, mount=mount, odometry=odometry, fusion=fusion,
+                  range_m=range_m)
 
 
-def views_of_frames(frames, stereo: StereoCamera, *, range_m: float = MAPPING_MAX_RANGE_M) -> list[tuple]:
-    """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of frames (anything with ``pose``, ``pan_rad``)."""
+def check_map(run: MapRun) -> None:
+    """Raise when a run saw nothing: no frame put a single point into the map (an empty map is no result).
+
+    Raises
+    ------
+    ValueError
+        With the likely causes: the mapping range, the camera mount, the images.
+    """
+    seen = sum(len(o.obstacle_points_world) + len(o.floor_points_world) for o in run.observations)
+    if seen:
+        return
+    height = f"{run.floor.height_m:.2f} m" if run.floor is not None and run.floor.success else "unknown"
+    raise ValueError(f"the map of {len(run.observations)} frames is empty: no frame saw a floor or obstacle point "
+                     f"within the mapping range of {run.range_m:.1f} m (camera height {height}). A camera high above "
+                     "the floor sees it only farther away: raise --max-range; check the camera mount (mrstereo info) "
+                     "or leave it out to have the floor estimated")
+
+
+def views_of_frames(frames, stereo: StereoCamera, *, range_m: float = MAPPING_MAX_RANGE_M,
+                    mount: CameraMount | None = None) -> list[tuple]:
+    """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of frames (anything with ``pose``, ``pan_rad``).
+
+    The heading is the robot's plus the head pan plus the camera's heading on the robot (the optical axis of
+    ``mount``'s rectified camera, projected on the floor; 0 without a mount).
+    """
     half = math.atan2(stereo.size[0] / 2.0, stereo.focal_px)
-    return [(f.pose[0], f.pose[1], f.pose[2] + f.pan_rad, half, range_m) for f in frames]
+    offset = 0.0
+    if mount is not None:
+        T = mount.T_base_from_rectified(stereo.left.R)
+        offset = math.atan2(T[1, 2], T[0, 2]) if abs(T[1, 2]) > 1e-12 else 0.0
+    return [(f.pose[0], f.pose[1], f.pose[2] + f.pan_rad + offset, half, range_m) for f in frames]
 
 
 def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
@@ -433,14 +597,20 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
         report["floor"] = run.floor.summary()
     if run.mount is not None:
         report["mount"] = mount_entry(run.mount)
+    if run.mount_warning:
+        report["mount_warning"] = run.mount_warning
+    g = run.grid.grid
+    report["map_window"] = {"origin_m": [g.origin_x_m, g.origin_y_m], "size_m": [g.width_m, g.height_m],
+                            "resolution_m": g.resolution_m, "range_m": run.range_m,
+                            "points_outside": int(run.grid.points_outside)}
     report.update(run.pose_metrics())
     if report:
         with atomic_write(out / "metrics.json") as tmp:
             tmp.write_text(json.dumps(report, indent=2))
         files["metrics"] = out / "metrics.json"
     path = np.array([o.pose for o in run.observations]) if run.observations else None
-    plot_map(run.grid, out / "map.png", robot_path=path, fov_views=views_of_frames(run.observations,
-                                                                                   run.manifest.calibration),
+    views = views_of_frames(run.observations, run.manifest.calibration, range_m=run.range_m, mount=run.mount)
+    plot_map(run.grid, out / "map.png", robot_path=path, fov_views=views,
              planned_path=planned_path, ground_truth=run.ground_truth_map,
              title=f"occupancy grid ({run.grid.config.fusion})")
     return files

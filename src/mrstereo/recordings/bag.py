@@ -102,6 +102,77 @@ def bag_topics(path: str | os.PathLike) -> dict[str, str]:
         return {c.topic: c.msgtype for c in reader.connections}
 
 
+def pick_stereo_topics(topics: dict[str, str], *, need_camera_info: bool = True) -> tuple[str, str]:
+    """The left and right image topics of a bag's one stereo pair.
+
+    Candidates are the image topics (with a ``<namespace>/camera_info`` beside them when
+    ``need_camera_info``). Two candidates whose names differ only in ``left``/``right`` or in a number
+    (``cam0``/``cam1``, ``infra1``/``infra2``) form a pair, the left the one that sorts first;
+    exactly one pair is picked.
+
+    Raises
+    ------
+    ValueError
+        No pair or several, naming the candidates.
+    """
+    import re
+
+    images = sorted(t for t, m in topics.items() if m in IMAGE_TYPES and
+                    (not need_camera_info or topics.get(t.rsplit("/", 1)[0] + "/camera_info") == CAMERA_INFO_TYPE))
+    groups: dict[str, list[str]] = {}
+    for t in images:
+        groups.setdefault(re.sub(r"\d+", "#", re.sub(r"left|right", "*", t)), []).append(t)
+    pairs = [tuple(sorted(g)) for g in groups.values() if len(g) == 2]
+    if len(pairs) == 1:
+        return pairs[0]
+    what = "image topics with a camera_info beside them" if need_camera_info else "image topics"
+    listed = ", ".join(images) or "none"
+    raise ValueError(f"cannot pick the stereo pair: {len(pairs) or 'no'} pair(s) among the {what} ({listed}); "
+                     "give --left-topic and --right-topic" + (" (or --calib)" if need_camera_info and not pairs else ""))
+
+
+def describe_bag(bag: str | os.PathLike) -> list[tuple[str, str]]:
+    """``(what, value)`` lines of a bag without exporting it: topics with message counts, the stereo pair."""
+    with _open_bag(bag) as reader:
+        counts: dict[str, int] = {}
+        for c in reader.connections:
+            counts[c.topic] = counts.get(c.topic, 0) + int(c.msgcount)
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        duration = (reader.end_time - reader.start_time) / 1e9 if reader.end_time > reader.start_time else 0.0
+    lines = [("layout", f"ROS bag: {bag}"), ("duration", f"{duration:.1f} s")]
+    lines += [("topic", f"{t} ({m}, {counts[t]} messages)") for t, m in sorted(topics.items())]
+    for need_info in (True, False):
+        try:
+            left, right = pick_stereo_topics(topics, need_camera_info=need_info)
+        except ValueError as exc:
+            if not need_info:
+                lines.append(("stereo pair", str(exc)))
+            continue
+        lines.append(("stereo pair", f"{left}, {right}" + ("" if need_info else " (no camera_info: give --calib)")))
+        break
+    odometry = [t for t, m in topics.items() if m == ODOMETRY_TYPE]
+    lines.append(("odometry", ", ".join(odometry) if odometry else "none (poses from /tf with --tf, or visual odometry)"))
+    lines.append(("tf", ", ".join(t for t in TF_TOPICS if t in topics) or "none"))
+    return lines
+
+
+def with_picked_topics(bag: str | os.PathLike, options: dict) -> dict:
+    """``options`` of :func:`export_bag` with the left and right topics picked when not given
+    (:func:`pick_stereo_topics`), and the bag's one odometry topic when neither it nor TF is named."""
+    options = dict(options)
+    if options.get("left_topic") and options.get("right_topic"):
+        return options
+    if options.get("left_topic") or options.get("right_topic"):
+        raise ValueError("give both --left-topic and --right-topic, or neither (the bag's stereo pair is picked)")
+    topics = bag_topics(bag)
+    options["left_topic"], options["right_topic"] = pick_stereo_topics(
+        topics, need_camera_info=options.get("calibration") is None and not options.get("camera_info_topics"))
+    odometry = [t for t, m in topics.items() if m == ODOMETRY_TYPE]
+    if not options.get("odom_topic") and not options.get("use_tf") and len(odometry) == 1:
+        options["odom_topic"] = odometry[0]
+    return options
+
+
 def _stamp_ns(msg, fallback_ns: int) -> int:
     header = getattr(msg, "header", None)
     if header is None:

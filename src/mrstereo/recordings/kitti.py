@@ -187,4 +187,5 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
                                true_pose_3d=None if truth is None else truth[i])
                    for i, (left, right) in enumerate(zip(lefts, rights)))
     return Manifest(root=seq.resolve(), calibration=stereo, calibration_path=calib_path.resolve(), mount=mount,
-                    ground_truth_map=None, frames=frames)
+                    ground_truth_map=None, frames=frames, layout="KITTI odometry", has_poses=truth is not None,
+                    notes=() if truth is not None else (f"no ground truth ({poses_path}): poses from visual odometry",))

@@ -31,7 +31,7 @@ from ..profiling import stage
 from ..transforms import T_from_planar, T_from_position_quaternion, planar_from_T, quaternion_from_rotation
 
 __all__ = ["FrameRecord", "Manifest", "read_manifest", "write_manifest", "frame_pair", "pose_3d_of", "staged_dataset",
-           "DatasetWriter", "MANIFEST_NAME", "IMAGE_KEYS", "GT_KEYS"]
+           "DatasetWriter", "MANIFEST_NAME", "IMAGE_KEYS", "GT_KEYS", "rebased"]
 
 MANIFEST_NAME = "manifest.yaml"
 IMAGE_KEYS = ("left", "right", "left_rect", "right_rect")
@@ -131,6 +131,18 @@ class Manifest:
     ground_truth_map : Path or None
         ROS map YAML of the true map.
     frames : tuple of FrameRecord
+    layout : str
+        What was read: ``"dataset"`` (this format), ``"KITTI odometry"``, ``"EuRoC/ASL"``,
+        ``"image folders"``, ``"ROS bag"`` (:mod:`mrstereo.recordings.layouts`).
+    has_poses : bool
+        False when the recording knows no pose: every frame's ``pose`` is then the origin and a map
+        takes its poses from visual odometry.
+    pose_frame_mount : CameraMount or None
+        The left camera in the frame the poses are of, when that frame is not a base on the floor
+        (EuRoC's body frame, a drone's IMU): the run moves the poses to the floor frame it finds
+        under the camera (:func:`rebased`). None: the poses are of the base of ``mount``.
+    notes : tuple of str
+        What the reader left out or assumed, one line each (printed by ``mrstereo info``).
     """
 
     root: Path
@@ -139,12 +151,38 @@ class Manifest:
     mount: CameraMount | None
     ground_truth_map: Path | None
     frames: tuple[FrameRecord, ...]
+    layout: str = "dataset"
+    has_poses: bool = True
+    pose_frame_mount: CameraMount | None = None
+    notes: tuple[str, ...] = ()
 
     @property
     def stamps_s(self) -> np.ndarray | None:
         """Every frame's stamp (seconds), or None when a frame has none."""
         stamps = [f.stamp_s for f in self.frames]
         return None if any(s is None for s in stamps) else np.array(stamps, dtype=np.float64)
+
+
+def rebased(manifest: Manifest, mount: CameraMount) -> Manifest:
+    """The recording with its poses moved to the base of ``mount``, the camera staying where it is.
+
+    The poses are of the frame the recording's camera sits in (``pose_frame_mount``, else ``mount``);
+    with the camera at ``P = T_posed_from_cam`` there and at ``M = T_base_from_cam`` on the new base,
+    every pose (and true pose) becomes ``T_world_from_base = T_world_from_posed P M^-1``. Without poses,
+    or when the two mounts are the same, the recording is returned as it is, with ``mount`` set.
+    """
+    from dataclasses import replace
+
+    posed = manifest.pose_frame_mount if manifest.pose_frame_mount is not None else manifest.mount
+    if not manifest.has_poses or posed is None or posed == mount:
+        return replace(manifest, mount=mount, pose_frame_mount=None)
+    shift = posed.T_base_from_cam @ np.linalg.inv(mount.T_base_from_cam)
+    frames = []
+    for f in manifest.frames:
+        true = None if f.T_world_from_base_true is None else pose_3d_of(f.T_world_from_base_true @ shift)
+        frames.append(replace(f, pose=None, pose_3d=pose_3d_of(f.T_world_from_base @ shift),
+                              true_pose=None, true_pose_3d=true))
+    return replace(manifest, mount=mount, pose_frame_mount=None, frames=tuple(frames))
 
 
 def _fail(path: Path, message: str) -> ValueError:

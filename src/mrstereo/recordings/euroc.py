@@ -1,0 +1,164 @@
+"""The EuRoC MAV / ASL folder layout as a recording: stereo frames, stamps, calibration and truth.
+
+Layout (Burri et al. 2016; the ASL dataset format)::
+
+    ROOT/mav0/cam0/data.csv            #timestamp [ns],filename   (left camera)
+    ROOT/mav0/cam0/data/<ns>.png
+    ROOT/mav0/cam0/sensor.yaml         intrinsics [fu, fv, cu, cv], distortion, T_BS (body from camera)
+    ROOT/mav0/cam1/...                 the right camera, the same files
+    ROOT/mav0/state_groundtruth_estimate0/data.csv   optional truth: t [ns], p_RS_R xyz [m], q_RS wxyz
+    ROOT/mav0/body.yaml                the body (IMU) frame's comment
+
+``ROOT`` may be the folder holding ``mav0/`` or ``mav0/`` itself. Left and right images are paired
+by stamp. The calibration is the two ``sensor.yaml`` (a raw pair, rectified by mrstereo). The truth
+is the pose of the body frame -- the IMU of a drone, not a frame on the floor -- interpolated to
+each frame's stamp (slerp); frames outside the truth's time span are left out (said in
+``Manifest.notes``). The recording has no mount: the floor is found in the images when mapping,
+and the poses are moved onto the floor under the camera then (``Manifest.pose_frame_mount``:
+cam0's ``T_BS``). Without truth the recording has no poses (visual odometry gives them).
+Conventions: docs/conventions.md; the formats: docs/dataset.md.
+
+References
+----------
+M. Burri, J. Nikolic, P. Gohl, T. Schneider, J. Rehder, S. Omari, M. W. Achtelik, R. Siegwart.
+The EuRoC micro aerial vehicle datasets. IJRR 35(10), 2016.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..camera import CameraMount
+from ..camera.formats import euroc_body_from_camera, import_calibration
+from ..io import read_text
+from .bag import TransformTrack, pair_by_stamp
+from .manifest import FrameRecord, Manifest, pose_3d_of
+
+__all__ = ["read_euroc", "is_euroc", "GROUND_TRUTH_CSV"]
+
+GROUND_TRUTH_CSV = Path("state_groundtruth_estimate0") / "data.csv"
+_PAIR_TOLERANCE_NS = 1_000_000          # 1 ms: the two cameras of a EuRoC rig are triggered together
+_TRUTH_EDGE_NS = 10_000_000             # a frame up to 10 ms outside the truth's span still gets its end pose
+
+
+def _mav_dir(path: Path) -> Path | None:
+    for folder in (path, path / "mav0"):
+        if (folder / "cam0" / "data.csv").is_file() and (folder / "cam1" / "data.csv").is_file():
+            return folder
+    return None
+
+
+def is_euroc(path: str | os.PathLike) -> bool:
+    """True when ``path`` is a EuRoC/ASL folder (``mav0/`` or its parent) with cam0 and cam1."""
+    path = Path(path)
+    return path.is_dir() and _mav_dir(path) is not None
+
+
+def _csv_rows(path: Path, what: str) -> list[list[str]]:
+    rows = []
+    for line in read_text(path, what).splitlines():
+        line = line.strip()
+        if line and not line.startswith("#"):
+            rows.append([v.strip() for v in line.split(",")])
+    return rows
+
+
+def _camera_list(cam: Path) -> tuple[np.ndarray, list[Path]]:
+    """Stamps [ns] and image paths of ``cam/data.csv``."""
+    csv = cam / "data.csv"
+    stamps, files = [], []
+    for n, row in enumerate(_csv_rows(csv, "EuRoC camera list"), 1):
+        if len(row) < 2 or not row[0].isdigit():
+            raise ValueError(f"EuRoC camera list {csv}: row {n} must be 'timestamp_ns,filename', got {','.join(row)!r}")
+        stamps.append(int(row[0]))
+        files.append(cam / "data" / row[1])
+    if not stamps:
+        raise ValueError(f"EuRoC camera list {csv} lists no image")
+    return np.array(stamps, dtype=np.int64), files
+
+
+def _truth_track(path: Path) -> TransformTrack:
+    """The body poses of ``state_groundtruth_estimate0/data.csv`` (t, p xyz, q wxyz, ...)."""
+    rows = _csv_rows(path, "EuRoC ground truth")
+    samples = []
+    for n, row in enumerate(rows, 1):
+        try:
+            t, values = int(row[0]), [float(v) for v in row[1:8]]
+        except (ValueError, IndexError):
+            raise ValueError(f"EuRoC ground truth {path}: row {n} must start with 'timestamp_ns, px, py, pz, qw, qx, "
+                             "qy, qz'") from None
+        if len(values) != 7 or not np.isfinite(values).all() or sum(v * v for v in values[3:]) < 1e-12:
+            raise ValueError(f"EuRoC ground truth {path}: row {n} needs 7 finite numbers and a non-zero quaternion")
+        qw, qx, qy, qz = values[3:]
+        samples.append((t, values[:3], (qx, qy, qz, qw)))
+    if not samples:
+        raise ValueError(f"EuRoC ground truth {path} holds no pose")
+    return TransformTrack.from_samples(samples)
+
+
+def read_euroc(path: str | os.PathLike) -> Manifest:
+    """Read a EuRoC/ASL folder as a recording (a :class:`Manifest`).
+
+    Parameters
+    ----------
+    path : path
+        ``mav0/`` or the folder holding it.
+
+    Returns
+    -------
+    Manifest
+        Frames (raw ``left``/``right`` of cam0/cam1, ``stamp_s``; with truth ``pose_3d`` =
+        ``true_pose_3d`` = the body pose), the calibration of the two ``sensor.yaml``, no mount,
+        ``pose_frame_mount`` = cam0's ``T_BS`` (with truth), ``layout="EuRoC/ASL"``.
+
+    Raises
+    ------
+    FileNotFoundError
+        A listed image or a sensor.yaml is missing.
+    ValueError
+        Not a EuRoC folder, unreadable lists or truth, no pair of left/right stamps.
+    """
+    root = Path(path)
+    mav = _mav_dir(root) if root.is_dir() else None
+    if mav is None:
+        raise ValueError(f"{root} is not a EuRoC/ASL folder: no mav0/cam0/data.csv and mav0/cam1/data.csv")
+    sensors = [mav / cam / "sensor.yaml" for cam in ("cam0", "cam1")]
+    for sensor in sensors:
+        if not sensor.is_file():
+            raise FileNotFoundError(f"EuRoC camera calibration not found: {sensor}")
+    calibration = import_calibration(sensors).stereo
+    T_body_from_cam0 = euroc_body_from_camera(sensors[0])
+    (left_ns, left_files), (right_ns, right_files) = _camera_list(mav / "cam0"), _camera_list(mav / "cam1")
+    pairs = pair_by_stamp(left_ns, right_ns, tolerance_ns=_PAIR_TOLERANCE_NS)
+    if not pairs:
+        raise ValueError(f"{mav}: no cam0 and cam1 images within {_PAIR_TOLERANCE_NS / 1e6:g} ms of each other")
+    notes = []
+    if len(pairs) < max(len(left_ns), len(right_ns)):
+        notes.append(f"{len(left_ns) - len(pairs)} cam0 and {len(right_ns) - len(pairs)} cam1 images without a "
+                     "partner image left out")
+    truth_csv = mav / GROUND_TRUTH_CSV
+    track = _truth_track(truth_csv) if truth_csv.is_file() else None
+    if track is not None:
+        lo, hi = int(track.stamps_ns[0]) - _TRUTH_EDGE_NS, int(track.stamps_ns[-1]) + _TRUTH_EDGE_NS
+        inside = [(i, j) for i, j in pairs if lo <= left_ns[i] <= hi]
+        if not inside:
+            raise ValueError(f"{truth_csv}: no image lies within the ground truth's time span")
+        if len(inside) < len(pairs):
+            notes.append(f"{len(pairs) - len(inside)} frames outside the ground truth's time span left out")
+        pairs = inside
+    else:
+        notes.append(f"no ground truth ({GROUND_TRUTH_CSV}): poses from visual odometry")
+    frames = []
+    for i, j in pairs:
+        for image in (left_files[i], right_files[j]):
+            if not image.is_file():
+                raise FileNotFoundError(f"EuRoC image not found: {image}")
+        pose = None if track is None else pose_3d_of(track.at(int(left_ns[i])))
+        frames.append(FrameRecord(pose=(0.0, 0.0, 0.0) if pose is None else None, pose_3d=pose, true_pose_3d=pose,
+                                  left=left_files[i].resolve(), right=right_files[j].resolve(),
+                                  stamp_s=int(left_ns[i]) / 1e9))
+    return Manifest(root=mav.resolve(), calibration=calibration, calibration_path=sensors[0].resolve(), mount=None,
+                    ground_truth_map=None, frames=tuple(frames), layout="EuRoC/ASL", has_poses=track is not None,
+                    pose_frame_mount=CameraMount(T_body_from_cam0) if track is not None else None, notes=tuple(notes))
