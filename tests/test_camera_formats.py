@@ -6,7 +6,7 @@ import yaml
 
 from mrstereo.camera import (Camera, CameraInfo, StereoCamera, read_stereo, rectify_fusiello, write_camera_info,
                              write_stereo)
-from mrstereo.camera.formats import import_calibration, read_calibration
+from mrstereo.camera.formats import import_calibration
 from mrstereo.cli import entry
 from mrstereo.recordings.samples import local_path
 from mrstereo.transforms import rotation_from_rpy
@@ -515,7 +515,7 @@ def test_string_in_opencv_matrix_named(tmp_path):
                         "R": R_LR, "T": T_LR})
     path.write_text(path.read_text().replace("457.58699999999999", "x", 1))     # M2 fx
     with pytest.raises(ValueError, match=r"s.yml: field 'M2' is not numeric \(found 'x'\)"):
-        read_calibration(path, image_size=(640, 480))
+        read_stereo(path, image_size=(640, 480))
 
 
 def test_calib_convert_writes_stereo_yaml(tmp_path, capsys):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mrstereo.odometry.window import Keyframe, LocalMap, refine_window
-from mrstereo.transforms import T_from_rvec_t, rotated_points_jacobian, rotations_from_rvecs
+from mrstereo.transforms import T_from_rvec_t, rotation_jacobian_factor, rotations_from_rvecs
 
 K = np.array([[400.0, 0.0, 330.0], [0.0, 410.0, 235.0], [0.0, 0.0, 1.0]])     # off-centre, fx != fy
 BASELINE = 0.3
@@ -48,7 +48,8 @@ def test_rotation_helpers_match_opencv_and_finite_differences():
     for k in range(6):
         np.testing.assert_allclose(R[k], cv2.Rodrigues(r[k])[0], atol=1e-14)
     p = rng.normal(size=(6, 3))
-    J = rotated_points_jacobian(r, p)
+    p_cross = np.cross(np.eye(3)[None, :, :], p[:, None, :])      # rows e_i x p: the matrix [p]x
+    J = -(R @ p_cross) @ rotation_jacobian_factor(r, R)          # d(R(r) p)/dr = -R [p]x M
     h = 1e-6
     for a in range(3):
         d = np.zeros(3)

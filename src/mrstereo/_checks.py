@@ -14,6 +14,14 @@ from numbers import Real
 import numpy as np
 
 
+def instance(name: str, value, cls: type):
+    """Return ``value``, raising ``TypeError`` unless it is an instance of ``cls``."""
+    if not isinstance(value, cls):
+        article = "an" if cls.__name__[0] in "AEIOU" else "a"
+        raise TypeError(f"{name} must be {article} {cls.__name__}, got {type(value).__name__}")
+    return value
+
+
 def finite_number(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
     """Return ``value`` as a float, raising if it is not a finite real number."""
     if isinstance(value, bool) or not isinstance(value, (Real, np.floating, np.integer)):

@@ -1,10 +1,7 @@
 """Rigid transforms: the one place for SE(3), planar poses, roll-pitch-yaw and quaternions.
 
-4x4 homogeneous matrices ``T_b_from_a`` map frame-a points into frame b. Camera frame: x right,
-y down, z forward. Robot and world frames (REP 103): x forward, y left, z up; roll-pitch-yaw are
-REP 103 fixed axes, ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (positive pitch looks down). Planar poses
-are ``(x_m, y_m, yaw_rad)``. Quaternions are ``(qx, qy, qz, qw)`` (the TUM and ROS order).
-Conventions: docs/conventions.md (Frames).
+4x4 matrices ``T_b_from_a`` map frame-a points into frame b; quaternions are ``(qx, qy, qz, qw)``
+(the TUM and ROS order). Frames and angles: docs/conventions.md (Frames).
 """
 from __future__ import annotations
 
@@ -15,18 +12,15 @@ import numpy as np
 
 from . import _checks
 
-__all__ = ["R_ROBOT_FROM_CAM_LEVEL", "R_BODY_FROM_OPTICAL", "rotation_from_rpy", "rpy_from_rotation",
-           "T_robot_from_cam", "transform_points", "T_from_rvec_t", "rvec_t_from_T", "rotation_angle_rad",
-           "rotations_from_rvecs", "rotated_points_jacobian", "scale_motion",
+__all__ = ["R_BODY_FROM_OPTICAL", "rotation_from_rpy", "rpy_from_rotation",
+           "T_robot_from_cam", "transform_points", "T_from_R_t", "T_from_rvec_t", "rvec_t_from_T", "rotation_angle_rad",
+           "rotations_from_rvecs", "rotation_jacobian_factor", "scale_motion",
            "quaternion_from_rotation", "rotation_from_quaternion", "slerp", "T_from_position_quaternion",
            "T_from_planar", "planar_from_T", "compose_planar", "relative_planar", "wrap_angle"]
 
-# Axes of a level, forward-looking camera in the robot frame: cam x -> -y, cam y -> -z, cam z -> x.
-R_ROBOT_FROM_CAM_LEVEL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-# The same fixed rotation from a camera's optical frame (x right, y down, z forward) to its body
-# frame (REP 103: x forward, y left, z up); ROS names the two "<camera>_link" and
-# "<camera>_optical_frame" (REP 103, "Suffix Frames").
-R_BODY_FROM_OPTICAL = R_ROBOT_FROM_CAM_LEVEL
+# A camera's optical frame (x right, y down, z forward) in its body frame (x forward, y left, z up):
+# optical x -> -y, y -> -z, z -> x. ROS calls the two "<camera>_optical_frame" and "<camera>_link".
+R_BODY_FROM_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
 def _rot_z(angle: float) -> np.ndarray:
@@ -73,14 +67,14 @@ def rpy_from_rotation(R) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def T_robot_from_cam(*, height_m: float, tilt_rad: float = 0.0, pan_rad: float = 0.0) -> np.ndarray:
     """4x4 transform taking left-camera points into the robot frame (the paper's rig).
 
-    ``R = Rz(pan) @ Ry(tilt) @ R_ROBOT_FROM_CAM_LEVEL``; a positive tilt turns
+    ``R = Rz(pan) @ Ry(tilt) @ R_BODY_FROM_OPTICAL``; a positive tilt turns
     the optical axis toward the floor, a positive pan turns it to the left.
     """
     h = _checks.finite_number("height_m", height_m)
     tilt = _checks.finite_number("tilt_rad", tilt_rad)
     pan = _checks.finite_number("pan_rad", pan_rad)
     T = np.eye(4)
-    T[:3, :3] = _rot_z(pan) @ _rot_y(tilt) @ R_ROBOT_FROM_CAM_LEVEL
+    T[:3, :3] = _rot_z(pan) @ _rot_y(tilt) @ R_BODY_FROM_OPTICAL
     T[2, 3] = h
     return T
 
@@ -92,12 +86,18 @@ def transform_points(T_b_from_a: np.ndarray, points_a) -> np.ndarray:
     return p @ T[:3, :3].T + T[:3, 3]
 
 
+def T_from_R_t(R, t) -> np.ndarray:
+    """4x4 transform of a rotation matrix (3, 3) and a translation (3,)."""
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = np.ravel(t)
+    return T
+
+
 def T_from_rvec_t(rvec, tvec) -> np.ndarray:
     """4x4 transform of an OpenCV rotation vector (Rodrigues) and translation."""
-    T = np.eye(4)
-    T[:3, :3] = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))[0]
-    T[:3, 3] = np.asarray(tvec, dtype=np.float64).ravel()
-    return T
+    return T_from_R_t(cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))[0],
+                      np.asarray(tvec, dtype=np.float64))
 
 
 def rvec_t_from_T(T) -> tuple[np.ndarray, np.ndarray]:
@@ -127,11 +127,10 @@ def _skew(v: np.ndarray) -> np.ndarray:
     return K
 
 
-def rotated_points_jacobian(rvecs, points) -> np.ndarray:
-    """``d(R(r) p) / dr`` (N, 3, 3) of rotation vectors ``r`` (N, 3) applied to points ``p`` (N, 3).
+def rotation_jacobian_factor(rvecs, R) -> np.ndarray:
+    """``M`` (N, 3, 3) of ``d(R(r) p) / dr = -R [p]x M`` per rotation vector ``r`` (N, 3) with rotation ``R``.
 
-    Gallego and Yezzi's closed form, ``-R [p]x (r r^T + (R^T - I) [r]x) / |r|^2``, and ``-[p]x``
-    at ``r = 0``.
+    Gallego and Yezzi's closed form ``M = (r r^T + (R^T - I) [r]x) / |r|^2``, and ``I`` at ``r = 0``.
 
     References
     ----------
@@ -139,14 +138,11 @@ def rotated_points_jacobian(rvecs, points) -> np.ndarray:
     coordinates. J. Math. Imaging Vis. 51, 2015.
     """
     r = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    R = rotations_from_rvecs(r)
     n2 = np.einsum("ij,ij->i", r, r)
-    small = n2 < 1e-16
-    inner = r[:, :, None] * r[:, None, :] + (np.swapaxes(R, 1, 2) - np.eye(3)) @ _skew(r)
-    J = -(R @ _skew(p)) @ (inner / np.where(small, 1.0, n2)[:, None, None])
-    J[small] = -_skew(p[small])
-    return J
+    M = (r[:, :, None] * r[:, None, :] + (np.swapaxes(R, 1, 2) - np.eye(3)) @ _skew(r)) / \
+        np.where(n2 < 1e-16, 1.0, n2)[:, None, None]
+    M[n2 < 1e-16] = np.eye(3)
+    return M
 
 
 def scale_motion(T, fraction: float) -> np.ndarray:
@@ -207,14 +203,11 @@ def slerp(q0, q1, fraction: float) -> np.ndarray:
 
 def T_from_position_quaternion(position, quaternion) -> np.ndarray:
     """4x4 transform from a position and a quaternion ``(qx, qy, qz, qw)``."""
-    T = np.eye(4)
-    T[:3, :3] = rotation_from_quaternion(quaternion)
-    T[:3, 3] = np.asarray(position, dtype=np.float64).ravel()
-    return T
+    return T_from_R_t(rotation_from_quaternion(quaternion), np.asarray(position, dtype=np.float64))
 
 
 def T_from_planar(x_m: float, y_m: float, yaw_rad: float) -> np.ndarray:
-    """4x4 transform of a planar pose ``(x, y, yaw)`` (REP 103, z up), e.g. ``T_from_planar``."""
+    """4x4 transform of a planar pose ``(x, y, yaw)`` (a rotation about z)."""
     yaw = _checks.finite_number("yaw_rad", yaw_rad)
     c, s = math.cos(yaw), math.sin(yaw)
     T = np.eye(4)

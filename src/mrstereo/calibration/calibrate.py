@@ -1,18 +1,9 @@
 """Calibrate one camera from control points: GA (paper sec. 2.2), GA + LM, or LM.
 
-``method="ga"`` is the paper's genetic algorithm alone (eq. 4-8; one view: the
-11-gene chromosome of eq. 4; several planar views: intrinsic genes with
-homography poses, see :mod:`mrstereo.calibration.ga`). ``"ga+lm"`` polishes the
-GA's best chromosome by Levenberg-Marquardt over all parameters. ``"lm"``
-starts LM from Zhang's closed form (``cv2.initCameraMatrix2D`` with the
-principal point at the image centre, no distortion, poses by ``cv2.solvePnP``)
-and needs planar views. Conventions: docs/conventions.md.
-
-``model`` chooses the distortion model (:data:`CALIBRATION_MODELS`): the
-paper's ``k1k2`` is what the GA searches and the default; ``plumb_bob``,
-``rational`` and ``fisheye`` are fitted by a further LM started from the
-``k1k2`` fit (its intrinsics and poses; its k1, k2 seed the pinhole models, a
-fisheye starts from zero distortion).
+``"ga"`` is the paper's genetic algorithm alone (:mod:`mrstereo.calibration.ga`), ``"ga+lm"``
+polishes its best chromosome by Levenberg-Marquardt, ``"lm"`` starts LM from Zhang's closed form
+(planar views only). A ``model`` other than the paper's ``k1k2`` (what the GA searches) is fitted
+by a further LM started from the ``k1k2`` fit. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -25,6 +16,7 @@ import numpy as np
 
 from .. import _checks
 from ..camera import Camera
+from ..transforms import T_from_rvec_t
 from .ga import MULTIVIEW_GA, GABounds, GAConfig, GAResult, ga_calibrate_intrinsics, ga_calibrate_single
 from .refine import CALIBRATION_MODELS, calibration_model, refine_views
 from .targets import CalibrationView
@@ -42,32 +34,12 @@ OUTLIER_FACTOR = 3.0
 class CalibrationResult:
     """A calibrated camera and how well it fits.
 
-    Attributes
-    ----------
-    camera : Camera
-        Intrinsics (OpenCV/ROS parameterization).
-    poses : tuple of ndarray (4, 4)
-        ``T_cam_from_target`` per view.
-    rms_px : float
-        ``sqrt(sum |e|^2 / n_points)`` over all views (as ``cv2.calibrateCamera``).
-    per_view_rms_px : ndarray of shape (V,)
-    sigmas : dict
-        Standard deviation of every intrinsic parameter (``s^2 (J^T J)^-1``);
-        empty for ``method="ga"``.
-    outlier_views : tuple of int
-        Views whose RMS exceeds 3x the median view RMS.
-    success : bool
-    message : str
-    method : str
-    ga_rms_px, lm_rms_px : float
-        RMS after the GA and after the k1k2 LM (NaN where that stage did not run).
-    model : str
-        The fitted model (``k1k2``, ``plumb_bob``, ``rational``, ``fisheye``).
-    generations : int
-        GA generations run (0 without GA).
-    ga : GAResult or None
-        The GA's full result (history of the best fitness per generation).
-    view_names : tuple of str
+    ``camera`` (OpenCV/ROS parameterization) and ``T_cam_from_target`` ``poses`` per view; ``rms_px``
+    ``sqrt(sum |e|^2 / n_points)`` (as ``cv2.calibrateCamera``) and ``per_view_rms_px``; ``sigmas`` of
+    the intrinsics, ``s^2 (J^T J)^-1`` (empty for ``method="ga"``); ``outlier_views`` with an RMS over
+    3x the median; ``success``, ``message``, ``method``; ``ga_rms_px`` and ``lm_rms_px`` after each
+    stage (NaN where it did not run); the fitted ``model``; ``generations`` and the GA's full result
+    ``ga`` (or None); ``view_names``.
     """
 
     camera: Camera
@@ -127,10 +99,8 @@ def _rms(residuals: Sequence[np.ndarray]) -> tuple[float, np.ndarray]:
 def check_view_geometry(view: CalibrationView) -> None:
     """Refuse control points that cannot determine a camera: collinear or coincident.
 
-    The target points (and their pixels) must span a plane: the second
-    singular value of the centred points must exceed 1e-6 of the first (and
-    the first must not vanish). Collinear points or one point repeated would
-    otherwise "fit" with an RMS of zero.
+    The target points and their pixels must span a plane (second singular value of the centred
+    points above 1e-6 of the first); such points would otherwise "fit" with an RMS of zero.
     """
     for what, pts in (("target points", view.points_target), ("pixels", view.uv)):
         centred = pts - pts.mean(axis=0)
@@ -158,11 +128,8 @@ def zhang_init(views: Sequence[CalibrationView], *, width: int, height: int,
                  cy=float(K[1, 2]))
     poses = []
     for o, i in zip(obj, img):
-        ok, rvec, tvec = cv2.solvePnP(o, i, cam.K, None, flags=cv2.SOLVEPNP_ITERATIVE)
-        T = np.eye(4)
-        T[:3, :3] = cv2.Rodrigues(rvec)[0]
-        T[:3, 3] = tvec.ravel()
-        poses.append(T)
+        _, rvec, tvec = cv2.solvePnP(o, i, cam.K, None, flags=cv2.SOLVEPNP_ITERATIVE)
+        poses.append(T_from_rvec_t(rvec, tvec))
     return cam, poses
 
 
@@ -174,24 +141,22 @@ def calibrate_camera(views: Sequence[CalibrationView], *, width: int, height: in
     Parameters
     ----------
     views : sequence of CalibrationView (or one CalibrationView)
-        Control points per image (chessboard corners, dot centres, CSV points).
     width, height : int
         Image size in pixels.
     method : {"ga", "ga+lm", "lm"}
-        See the module docstring.
+        GA, GA polished by LM, or LM from Zhang's closed form.
     model : {"k1k2", "plumb_bob", "rational", "fisheye"}
-        Distortion model; anything but ``k1k2`` needs LM (``method`` "ga+lm" or "lm").
+        Distortion model; anything but ``k1k2`` needs LM.
     ga_config, bounds, pixel_density_px_per_mm :
         GA settings (:class:`GAConfig`, :class:`GABounds`, pixel density of eq. 2).
     rng : numpy Generator, int or None
         Seed of the GA.
     progress : callable(generation, best_fitness), optional
-        GA progress callback.
 
     Returns
     -------
     CalibrationResult
-        ``success`` is False (with a ``message``) when the fit did not converge.
+        ``success`` False (with a ``message``) when the fit did not converge.
     """
     if isinstance(views, CalibrationView):
         views = [views]

@@ -1,48 +1,14 @@
 """Camera calibration by a real-coded genetic algorithm, paper section 2.2 (eq. 4-8).
 
-The chromosome of eq. (4) is ``C = [f, u0, v0, k1, k2, alpha, beta, gamma, X, Y, Z]``
-in the paper's parameterization (:class:`mrstereo.camera.PaperCamera`): ``f`` in
-mm with a known pixel density ``alpha_x`` [px/mm] (``alpha_y = aspect * alpha_x``),
-``u0, v0`` in px, ``k1`` [mm^-2] and ``k2`` [mm^-4] on the metric image plane,
-Euler angles in radians and the translation ``t = (X, Y, Z)`` in metres
-(``points_cam = R points_target + t``). Conventions: docs/conventions.md.
-
-Operators (Table 2: N = 100, pc = 0.8, pm = 0.1, elitism, real coding):
-
-* initialisation: every gene uniform within its bounds (eq. 5);
-* fitness: eq. (6), the sum of squared reprojection errors in px^2 (smaller is
-  better; candidates projecting a point behind the camera get ``inf``);
-* elitism: the ``elite`` best chromosomes are copied unchanged;
-* selection: tournaments of ``tournament`` entrants (default 3) fill the mating pool (the paper selects pairs
-  "probabilistically" without naming the scheme). Measured on the synthetic
-  single-view dot target: binary tournaments stall in the focal-length/depth
-  valley at 2-4 px RMS, tournaments of 3 reach 0.2-0.8 px;
-* crossover, eq. (7)-(8): consecutive pool members ``(C_i, C_i+1)`` form a pair.
-  ``pc`` is used as the paper prints it in both roles: a pair crosses with
-  probability ``pc`` (otherwise both are copied), and when it crosses the
-  children are ``(1 - w) C_i + w C_i+1`` and ``(1 - w) C_i+1 + w C_i`` with the
-  mixing weight ``w = pc`` (``GAConfig.mixing_weight=None``). A number in
-  ``mixing_weight`` fixes another weight; ``"uniform"`` draws ``w ~ U(0, 1)``
-  per pair (standard arithmetic crossover);
-* mutation ("reciprocal mutation"): we read it, for real coding, as the
-  bound-directed non-uniform mutation of Michalewicz: each gene of a child
-  mutates with probability ``pm``; it moves toward its upper or its lower bound
-  (the reciprocal pair, chosen with probability 1/2) by the fraction
-  ``1 - r^((1 - g/G)^b)`` of the distance, ``r ~ U(0, 1)``, ``g`` the generation,
-  ``G`` the generation limit and ``b = mutation_shape``. Early mutations jump
-  anywhere in the bounds, late ones are small refinements;
-* stopping: after ``generations`` generations, or when the best fitness has not
-  improved by more than the relative ``tolerance`` for ``stall_generations``.
-
-The whole population is evaluated at once with the broadcasting primitives of
-:mod:`mrstereo.camera.model`, so one generation costs a few array operations.
-
-Multi-view planar targets (beyond the paper): the chromosome holds only the
-intrinsic genes ``[f, u0, v0, k1, k2]``; for each candidate and view the pose is
-computed in closed form from the homography between the target plane and the
-candidate's undistorted normalized image points (Zhang's decomposition, batch
-DLT with Hartley normalization), and eq. (6) is summed over all views. This
-keeps the search in 5 dimensions instead of ``5 + 6 V``.
+The chromosome of eq. (4) is ``C = [f, u0, v0, k1, k2, alpha, beta, gamma, X, Y, Z]`` in the
+paper's parameterization (:class:`mrstereo.camera.PaperCamera`). Table 2: N = 100, pc = 0.8,
+pm = 0.1, elitism; uniform initialisation within the bounds (eq. 5); fitness eq. (6), the sum of
+squared reprojection errors in px^2; tournament selection; crossover ``(1 - w) C_i + w C_i+1``
+with ``w = pc`` (eq. 7-8 as printed); the "reciprocal" mutation read as Michalewicz's non-uniform
+mutation toward one bound. With several planar views the search keeps the intrinsic genes
+``[f, u0, v0, k1, k2]`` and each view's pose comes in closed form from a homography (Zhang). Each
+choice and its measurements: docs/calibration.md, "The paper's GA (eq. 4-8)".
+Conventions: docs/conventions.md.
 
 References
 ----------
@@ -61,7 +27,7 @@ import numpy as np
 
 from .. import _checks
 from ..camera import Camera, PaperCamera, normalized_from_pixels, project_points, undistort_normalized
-from ..transforms import rotation_from_rpy
+from ..transforms import T_from_R_t, rotation_from_rpy
 from .targets import CalibrationView
 
 __all__ = ["GENES", "GABounds", "GAConfig", "GAResult", "paper_bounds", "default_bounds",
@@ -90,14 +56,8 @@ class GABounds:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            pair = getattr(self, f.name)
-            try:
-                lo, hi = (float(v) for v in pair)
-            except (TypeError, ValueError):
-                raise ValueError(f"bound {f.name} must be a pair (lo, hi), got {pair!r}") from None
-            if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
-                raise ValueError(f"bound {f.name} must be finite with lo <= hi, got {pair!r}")
-            object.__setattr__(self, f.name, (lo, hi))
+            pair = _checks.ordered_pair(f"bound {f.name}", getattr(self, f.name), strict=False)
+            object.__setattr__(self, f.name, pair)
         if self.f_mm[0] <= 0:
             raise ValueError(f"bound f_mm must be positive, got {self.f_mm}")
 
@@ -107,14 +67,8 @@ class GABounds:
 
 
 def paper_bounds() -> GABounds:
-    """Table 1 of the paper, in our units and frame.
-
-    ``f`` [6, 9] mm, ``u0, v0`` [220, 360] px, ``k1, k2`` [-0.001, 0.001]
-    (mm^-2, mm^-4), angles [-pi/4, pi/4]. The printed X, Y bounds ("[900, 500]
-    mm") are garbled; we read them as X in [-0.9, 0.9] m and Y in [-0.5, 0.5] m.
-    The paper's Z in [-2000, -1000] mm is for a camera looking along -Z; with
-    our camera frame (z forward) it is Z in [1.0, 2.0] m.
-    """
+    """Table 1 of the paper in our units and camera frame (z forward: its Z in [-2000, -1000] mm
+    is Z in [1, 2] m; the garbled X, Y bounds are read as [-0.9, 0.9] and [-0.5, 0.5] m)."""
     return GABounds(f_mm=(6.0, 9.0), u0_px=(220.0, 360.0), v0_px=(220.0, 360.0),
                     k1_mm=(-1e-3, 1e-3), k2_mm=(-1e-3, 1e-3))
 
@@ -126,21 +80,11 @@ def default_pixel_density(width: int) -> float:
 
 def default_bounds(views: Sequence[CalibrationView] | CalibrationView, *, width: int, height: int,
                    pixel_density_px_per_mm: float | None = None) -> GABounds:
-    """Bounds derived from the image size and the target (documented defaults).
+    """Bounds derived from the image size and the target (rules: docs/calibration.md).
 
-    * focal length: ``fx`` in [0.4 W, 2.5 W] px, converted to mm with the pixel density;
-    * principal point: the central 30 % of the image in each direction;
-    * distortion: ``|k1|, |k2| <= 0.5`` on normalized coordinates, converted to
-      mm^-2 / mm^-4 at the geometric mean of the focal bounds;
-    * angles: ``alpha, beta`` in [-pi/4, pi/4] (Table 1), ``gamma`` in [-pi, pi]
-      (a target may be turned in its plane). The target's Z axis must point away
-      from the camera (as ``cv2.findChessboardCorners`` numbers a board);
-    * translation: a rough depth ``d = fx * extent_m / extent_px`` from the
-      control points' extent gives ``Z`` in ``[0.5 d_min - r, 1.5 d_max + r]`` and
-      ``X, Y`` in ``[-(e + r), e + r]``, with ``e`` the target's half extent and
-      ``r`` the distance of the target centroid from the target origin. For
-      several views the ranges cover all of them (only the intrinsic bounds are
-      used by the multi-view GA).
+    ``fx`` in [0.4 W, 2.5 W], the principal point in the central 30 %, ``|k1|, |k2| <= 0.5`` on
+    normalized coordinates, ``gamma`` in [-pi, pi] (the target's Z axis points away from the
+    camera), the translation from a rough depth ``fx * extent_m / extent_px`` of every view.
     """
     views = [views] if isinstance(views, CalibrationView) else list(views)
     width = _checks.positive_int("width", width)
@@ -170,16 +114,11 @@ def default_bounds(views: Sequence[CalibrationView] | CalibrationView, *, width:
 class GAConfig:
     """Genetic algorithm settings (Table 2 defaults: N = 100, pc = 0.8, pm = 0.1, elitism).
 
-:func:`mrstereo.calibration.calibrate_camera` uses ``MULTIVIEW_GA`` (200
-generations, stall 50, at most 60 points per view) for several views, where the
-search is only 5-dimensional.
-
-    ``mixing_weight``: None = ``pc`` (eq. 7-8 as printed), a number in [0, 1],
-    or ``"uniform"`` (a random weight per pair). See the module notes.
-    ``max_points_per_view`` (multi-view GA only): the fitness of the search uses at
-    most this many evenly spread points of each view (None: all; ``history`` is
-    over those points); the result's fitness, RMS and poses use all points. The GA seeds LM, which uses every point:
-    a dense board (450 corners) need not make every generation 8x as expensive.
+    ``mixing_weight``: None = ``pc`` (eq. 7-8 as printed), a number in [0, 1], or ``"uniform"``
+    (a random weight per pair). ``max_points_per_view`` (multi-view GA only): the search's fitness
+    uses at most this many evenly spread points of each view (None: all; ``history`` is over
+    those); the result's fitness, RMS and poses use all points (LM, seeded by the GA, uses every
+    point anyway). Several views use ``MULTIVIEW_GA``.
     """
 
     population: int = 100
@@ -259,7 +198,7 @@ def _evolve(fitness: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
     for gen in range(1, config.generations + 1):
         order = np.argsort(fit, kind="stable")
         elites = pop[order[:config.elite]]
-        # binary tournaments fill the mating pool
+        # tournaments fill the mating pool
         entrants = rng.integers(0, n_pop, size=(config.tournament, 2 * n_pairs))
         winners = entrants[np.argmin(fit[entrants], axis=0), np.arange(2 * n_pairs)]
         p1, p2 = pop[winners[0::2]], pop[winners[1::2]]
@@ -306,13 +245,29 @@ def _sum_sq(uv_hat: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(err), err, np.inf)
 
 
-def _check_common(width, height, density, aspect):
+def _check_common(views, width, height, density, aspect, bounds):
+    """Checked ``(width, height, density, aspect, bounds)``; default bounds from ``views``."""
     width = _checks.positive_int("width", width)
     height = _checks.positive_int("height", height)
     density = (default_pixel_density(width) if density is None
                else _checks.finite_number("pixel_density_px_per_mm", density, positive=True))
     aspect = _checks.finite_number("aspect", aspect, positive=True)
-    return width, height, density, aspect
+    if bounds is None:
+        bounds = default_bounds(views, width=width, height=height, pixel_density_px_per_mm=density)
+    if not isinstance(bounds, GABounds):
+        raise TypeError(f"bounds must be GABounds, got {type(bounds).__name__}")
+    return width, height, density, aspect, bounds
+
+
+def _result(evolved: tuple, poses, n_points: int, width: int, height: int, density: float,
+            aspect: float) -> GAResult:
+    """The :class:`GAResult` of ``_evolve``'s ``(genes, fitness, generations, history, stop)``."""
+    genes, fit, gens, history, stop = evolved
+    paper = PaperCamera(width=width, height=height, f_mm=genes[0], alpha_x=density, alpha_y=density * aspect,
+                        u0=genes[1], v0=genes[2], k1_mm=genes[3], k2_mm=genes[4])
+    return GAResult(genes=genes, fitness=fit, rms_px=math.sqrt(fit / n_points), generations=gens,
+                    history=history, stop_reason=stop, camera=paper.to_camera(), poses=tuple(poses),
+                    paper_camera=paper)
 
 
 def ga_calibrate_single(view: CalibrationView, *, width: int, height: int, bounds: GABounds | None = None,
@@ -339,13 +294,9 @@ def ga_calibrate_single(view: CalibrationView, *, width: int, height: int, bound
     progress : callable(generation, best_fitness), optional
         Called after every generation.
     """
-    if not isinstance(view, CalibrationView):
-        raise TypeError(f"view must be a CalibrationView, got {type(view).__name__}")
-    width, height, density, aspect = _check_common(width, height, pixel_density_px_per_mm, aspect)
-    bounds = default_bounds(view, width=width, height=height, pixel_density_px_per_mm=density) \
-        if bounds is None else bounds
-    if not isinstance(bounds, GABounds):
-        raise TypeError(f"bounds must be GABounds, got {type(bounds).__name__}")
+    _checks.instance("view", view, CalibrationView)
+    width, height, density, aspect, bounds = _check_common(view, width, height, pixel_density_px_per_mm,
+                                                           aspect, bounds)
     config = GAConfig() if config is None else config
     lo, hi = bounds.array()
     pts, uv = view.points_target, view.uv
@@ -357,15 +308,10 @@ def ga_calibrate_single(view: CalibrationView, *, width: int, height: int, bound
         uv_hat = project_points(points_cam, fx=fx, fy=fy, cx=cx, cy=cy, k1=k1, k2=k2)
         return _sum_sq(uv_hat, uv)
 
-    genes, fit, gens, history, stop = _evolve(fitness, lo, hi, config, _checks.rng(rng), progress)
-    paper = PaperCamera(width=width, height=height, f_mm=genes[0], alpha_x=density, alpha_y=density * aspect,
-                        u0=genes[1], v0=genes[2], k1_mm=genes[3], k2_mm=genes[4])
-    T = np.eye(4)
-    T[:3, :3] = rotation_from_rpy(*genes[5:8])
-    T[:3, 3] = genes[8:11]
-    return GAResult(genes=genes, fitness=fit, rms_px=math.sqrt(fit / len(pts)), generations=gens,
-                    history=history, stop_reason=stop, camera=paper.to_camera(), poses=(T,),
-                    paper_camera=paper)
+    evolved = _evolve(fitness, lo, hi, config, _checks.rng(rng), progress)
+    genes = evolved[0]
+    return _result(evolved, [T_from_R_t(rotation_from_rpy(*genes[5:8]), genes[8:11])], len(pts), width, height,
+                   density, aspect)
 
 
 def _hartley(points_xy: np.ndarray) -> np.ndarray:
@@ -431,11 +377,8 @@ def ga_calibrate_intrinsics(views: Sequence[CalibrationView], *, width: int, hei
         raise TypeError("views must be a non-empty sequence of CalibrationView")
     if not all(v.is_planar for v in views):
         raise ValueError("the multi-view GA needs planar targets with Z = 0 in every view")
-    width, height, density, aspect = _check_common(width, height, pixel_density_px_per_mm, aspect)
-    bounds = default_bounds(views, width=width, height=height, pixel_density_px_per_mm=density) \
-        if bounds is None else bounds
-    if not isinstance(bounds, GABounds):
-        raise TypeError(f"bounds must be GABounds, got {type(bounds).__name__}")
+    width, height, density, aspect, bounds = _check_common(views, width, height, pixel_density_px_per_mm,
+                                                           aspect, bounds)
     config = MULTIVIEW_GA if config is None else config
     lo, hi = bounds.array()[:, :5]
     # views sharing the same target points (a chessboard) are evaluated as one batch
@@ -471,15 +414,9 @@ def ga_calibrate_intrinsics(views: Sequence[CalibrationView], *, width: int, hei
     genes, fit, gens, history, stop = _evolve(fitness, lo, hi, config, _checks.rng(rng), progress)
     if any(len(sub[0]) < len(full[0]) for sub, full in zip(searched, groups)):
         fit = float(fitness(genes[None, :], groups)[0])                # eq. (6) over all points
-    paper = PaperCamera(width=width, height=height, f_mm=genes[0], alpha_x=density, alpha_y=density * aspect,
-                        u0=genes[1], v0=genes[2], k1_mm=genes[3], k2_mm=genes[4])
     poses: list = [None] * len(views)
     for _, _, members, R, t in poses_of(genes[None, :], groups):
         for j, i in enumerate(members):
-            T = np.eye(4)
-            T[:3, :3], T[:3, 3] = R[0, j], t[0, j]
-            poses[i] = T
-    n_points = sum(len(v.uv) for v in views)
-    return GAResult(genes=genes, fitness=fit, rms_px=math.sqrt(fit / n_points), generations=gens,
-                    history=history, stop_reason=stop, camera=paper.to_camera(), poses=tuple(poses),
-                    paper_camera=paper)
+            poses[i] = T_from_R_t(R[0, j], t[0, j])
+    return _result((genes, fit, gens, history, stop), poses, sum(len(v.uv) for v in views), width, height,
+                   density, aspect)

@@ -1,19 +1,10 @@
 """Levenberg-Marquardt refinement of camera parameters (beyond the paper).
 
-Minimizes the same objective as the GA, eq. (6) -- the sum of squared
-reprojection errors -- but with a local, gradient-based method
-(``scipy.optimize.least_squares``), from a GA result or from a closed-form
-initialisation. Parameters are the intrinsics ``[fx, fy, cx, cy]`` (or
-``[f, cx, cy]`` with ``fy = aspect * fx`` fixed) and the distortion
-coefficients of the fitted model (:data:`CALIBRATION_MODELS`: the paper's
-``k1, k2``; ``plumb_bob`` k1, k2, p1, p2, k3; ``rational`` k1, k2, p1, p2,
-k3, k4, k5, k6; ``fisheye`` k1..k4), followed by six pose parameters
-``(alpha, beta, gamma, tx, ty, tz)`` per view (conventions:
-docs/conventions.md). The Jacobian is computed by central differences grouped by
-the block structure (the poses of different views touch different residuals), so
-one Jacobian costs about 24 residual evaluations whatever the number of views.
-
-Standard deviations: ``cov = s^2 (J^T J)^-1`` with ``s^2 = |r|^2 / (m - n)``.
+Minimizes the GA's objective, eq. (6), locally (``scipy.optimize.least_squares``) over the
+intrinsics, the free coefficients of the fitted model (:data:`CALIBRATION_MODELS`) and six pose
+parameters per view, with central differences grouped by the block structure (about 24
+residual evaluations whatever the number of views). Standard deviations: ``cov = s^2 (J^T
+J)^-1``, ``s^2 = |r|^2 / (m - n)``. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -24,14 +15,11 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..camera import Camera, get_distortion_model, project_points
-from ..transforms import rotation_from_rpy, rpy_from_rotation
+from ..transforms import T_from_R_t, rotation_from_rpy, rpy_from_rotation
 from .targets import CalibrationView
 
-__all__ = ["INTRINSIC_NAMES", "CALIBRATION_MODELS", "CalibrationModel", "calibration_model", "LMFit",
+__all__ = ["CALIBRATION_MODELS", "CalibrationModel", "calibration_model", "LMFit",
            "refine_views", "project_views", "grouped_jacobian", "pose_vector", "pose_matrix", "fit_statistics"]
-
-INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2")
-POSE_NAMES = ("alpha", "beta", "gamma", "tx", "ty", "tz")
 
 
 @dataclass(frozen=True)
@@ -99,10 +87,7 @@ def pose_vector(T: np.ndarray) -> np.ndarray:
 
 def pose_matrix(x: np.ndarray) -> np.ndarray:
     """4x4 ``T_cam_from_target`` of a pose vector."""
-    T = np.eye(4)
-    T[:3, :3] = rotation_from_rpy(x[0], x[1], x[2])
-    T[:3, 3] = x[3:6]
-    return T
+    return T_from_R_t(rotation_from_rpy(x[0], x[1], x[2]), x[3:6])
 
 
 def grouped_jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, col_block: np.ndarray,
@@ -181,8 +166,7 @@ def project_views(views: Sequence[CalibrationView], R: np.ndarray, t: np.ndarray
 
 
 def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequence[np.ndarray], *,
-                 fix_aspect: float | None = None, method: str = "lm", max_evaluations: int = 200,
-                 model="k1k2") -> LMFit:
+                 fix_aspect: float | None = None, model="k1k2") -> LMFit:
     """Levenberg-Marquardt over shared intrinsics and one pose per view.
 
     Parameters
@@ -196,8 +180,6 @@ def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequen
     fix_aspect : float, optional
         Estimate one focal length with ``fy = fix_aspect * fx`` (needed for a
         single planar view, where ``fx`` and ``fy`` are not separable).
-    method : {"lm", "trf"}
-        ``scipy.optimize.least_squares`` method ("trf" uses ``x_scale="jac"``).
     model : {"k1k2", "plumb_bob", "rational", "fisheye"} or CalibrationModel
         The distortion model fitted (:data:`CALIBRATION_MODELS`).
     """
@@ -219,9 +201,8 @@ def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequen
     def jac(x: np.ndarray) -> np.ndarray:
         return grouped_jacobian(residuals, x, col_block, col_local, row_block)
 
-    kwargs = {"x_scale": "jac"} if method == "trf" else {}
-    from scipy.optimize import least_squares  # lazy: 0.4 s to import, every CLI start paid it
-    sol = least_squares(residuals, x0, jac=jac, method=method, max_nfev=max_evaluations, **kwargs)
+    from scipy.optimize import least_squares  # lazy: slow to import, most commands never calibrate
+    sol = least_squares(residuals, x0, jac=jac, method="lm", max_nfev=200)
     x = sol.x
     try:
         cam = spec.camera(camera.width, camera.height, *_intrinsics(x[:n_int], fix_aspect))

@@ -68,18 +68,13 @@ def markdown_report(result: CalibrationResult, *, title: str = "Camera calibrati
 
 
 def residual_figure(path: str | os.PathLike, camera: Camera, views: Sequence[CalibrationView], *,
-                    residuals: Sequence[np.ndarray] | None = None, max_views: int = 4) -> None:
+                    residuals: Sequence[np.ndarray] | None = None) -> None:
     """PNG: reprojection residuals per corner, and the distortion correction (paper Figs. 2-3).
 
-    Left panel (with ``residuals``, projected minus detected pixels per view):
-    every control point's reprojection error as an arrow at the detected
-    position, magnified so that the largest spans about 6 % of the image width,
-    coloured by its length in pixels (colour bar), with a quiver key giving the
-    arrow length of a round number of pixels. Without ``residuals``: detected
-    (+) vs distortion-corrected (o) points of the first ``max_views`` views.
-    The other two panels show the correction ``undistorted - raw`` in x and y
-    over the whole image (the lens distortion the model removes). All axes in
-    pixels.
+    Left: each control point's error (``residuals``, projected minus detected, per view) as a
+    magnified arrow coloured by its length, or without ``residuals`` detected (+) vs corrected (o)
+    points of the first four views. Right: the correction ``undistorted - raw`` in x and
+    y over the image. Axes in pixels.
     """
     import matplotlib
     matplotlib.use("Agg")
@@ -105,7 +100,7 @@ def residual_figure(path: str | os.PathLike, camera: Camera, views: Sequence[Cal
         rms = float(np.sqrt(np.mean(mag ** 2))) if mag.size else float("nan")
         ax.set_title(f"reprojection error ({len(mag)} points, RMS {rms:.3f} px)", pad=22)
     else:
-        for view in list(views)[:max_views]:
+        for view in list(views)[:4]:
             ax.plot(view.uv[:, 0], view.uv[:, 1], "+", color="tab:red", ms=5, label="detected")
             und = camera.undistort_pixels(view.uv)
             ax.plot(und[:, 0], und[:, 1], "o", mfc="none", color="tab:blue", ms=4, label="corrected")

@@ -1,12 +1,10 @@
 """Stereo calibration: two cameras against the same target poses, then rectification.
 
-Each camera is calibrated alone first (:func:`calibrate_camera`, GA, GA + LM or
-LM); the relative pose ``x_right = R x_left + T`` is initialised from the
-per-view poses (chordal mean of ``R_r R_l^T``, median of ``t_r - R t_l``) and
-then refined jointly by Levenberg-Marquardt over both intrinsics, the left
-poses and the relative pose (``method != "ga"``). The pair is rectified by
-Fusiello, Trucco & Verri (:func:`mrstereo.camera.rectify_fusiello`).
-Conventions: docs/conventions.md.
+Each camera is calibrated alone (:func:`calibrate_camera`); the relative pose ``x_right = R x_left
++ T`` starts at the chordal mean of ``R_r R_l^T`` and the median of ``t_r - R t_l`` over the views
+and is refined jointly with both intrinsics and the left poses by Levenberg-Marquardt (``method !=
+"ga"``); the pair is rectified by :func:`mrstereo.camera.rectify_fusiello`. Conventions:
+docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -19,12 +17,12 @@ import numpy as np
 from .. import _checks
 from ..camera import (MIN_BASELINE_M, StereoCamera, check_not_swapped, rectified_px_from_raw_px,
                       rectify_fusiello)
-from ..transforms import rotation_from_rpy
+from ..transforms import T_from_R_t, rotation_from_rpy
 from .calibrate import CalibrationResult, _rms, calibrate_camera, reprojection_residuals, zhang_init
 from .ga import GABounds, GAConfig
 from .refine import (CalibrationModel, calibration_model, fit_statistics, grouped_jacobian, pose_matrix, pose_vector,
                      project_views)
-from .targets import CalibrationView
+from .targets import CalibrationView, agree_with_left
 
 __all__ = ["StereoCalibrationResult", "calibrate_stereo", "rectified_points", "rectified_vertical_error_px"]
 
@@ -33,29 +31,12 @@ __all__ = ["StereoCalibrationResult", "calibrate_stereo", "rectified_points", "r
 class StereoCalibrationResult:
     """A calibrated and rectified stereo pair.
 
-    Attributes
-    ----------
-    stereo : StereoCamera
-        What ``write_stereo`` stores (raw K, D; R raw -> rectified; rectified P).
-    R, T : ndarray
-        Relative pose, ``x_right = R x_left + T`` (T in metres).
-    left, right : CalibrationResult
-        The single-camera calibrations (before the joint refinement).
-    rms_px : float
-        Joint RMS reprojection error over both cameras.
-    per_view_rms_px : ndarray of shape (V, 2)
-        Left and right RMS per pair after the joint fit.
-    sigmas : dict
-        Standard deviations of the jointly refined intrinsics (``left_fx``, ...,
-        ``right_k2``) and of ``T`` (``Tx``, ``Ty``, ``Tz``).
-    vertical_error_px : float
-        Mean ``|y_left - y_right|`` of matching corners after rectification.
-    per_view_vertical_error_px : ndarray of shape (V,)
-    outlier_views : tuple of int
-        Pairs whose RMS exceeds 3x the median.
-    success, message :
-        Convergence of the joint fit.
-    view_names : tuple of str
+    ``stereo`` (what ``write_stereo`` stores); ``x_right = R x_left + T`` (metres); the single-camera
+    ``left`` and ``right`` results (before the joint refinement); the joint ``rms_px`` and
+    ``per_view_rms_px`` (V, 2); ``sigmas`` of the jointly refined intrinsics (``left_fx``, ...) and of
+    ``T`` (``Tx``, ...); ``vertical_error_px`` (mean ``|y_left - y_right|`` after rectification) and
+    its ``per_view_vertical_error_px``; ``outlier_views`` over 3x the median RMS; ``success``,
+    ``message`` of the joint fit; ``view_names``.
     """
 
     stereo: StereoCamera
@@ -108,21 +89,6 @@ def rectified_vertical_error_px(stereo: StereoCamera, left_uv: Sequence[np.ndarr
         yb = rectified_points(stereo, b, side="right")[:, 1]
         out.append(float(np.mean(np.abs(ya - yb))))
     return np.asarray(out)
-
-
-def _agree_with_left(left: CalibrationView, right: CalibrationView) -> CalibrationView:
-    """Undo a half-turn renumbering of a point-symmetric target (a chessboard) in the right view.
-
-    Reversing the point order of a grid is the same as turning it by 180 degrees
-    about its centre, so detectors may number the two images of one pair from
-    opposite corners. When the target is symmetric that way and the right
-    first-to-last direction opposes the left one, the right order is reversed.
-    """
-    p = left.points_target
-    symmetric = np.allclose(p[::-1], 2.0 * p.mean(axis=0) - p, atol=1e-9)
-    if symmetric and float(np.dot(left.uv[-1] - left.uv[0], right.uv[-1] - right.uv[0])) < 0:
-        return CalibrationView(right.points_target, right.uv[::-1].copy(), name=right.name)
-    return right
 
 
 def _mean_rotation(Rs: Sequence[np.ndarray]) -> np.ndarray:
@@ -192,10 +158,8 @@ class _JointFit:
         return 4 + self.spec.n_free                 # fx, fy, cx, cy and the model's coefficients
 
     def pack(self, cam_l, cam_r, poses_l, R, T) -> np.ndarray:
-        Trel = np.eye(4)
-        Trel[:3, :3], Trel[:3, 3] = R, T
         return np.concatenate([[c.fx, c.fy, c.cx, c.cy, *self.spec.seed(c)] for c in (cam_l, cam_r)]
-                              + [pose_vector(P) for P in poses_l] + [pose_vector(Trel)])
+                              + [pose_vector(P) for P in poses_l] + [pose_vector(T_from_R_t(R, T))])
 
     def unpack(self, x) -> tuple:
         n, V = self.n, len(self.left_views)
@@ -229,7 +193,7 @@ def _refine_jointly(fit: _JointFit, cam_l, cam_r, poses_l, R, T, *, width: int, 
     Returns ``(cam_l, cam_r, poses_l, R, T, sigmas, success, message)``; the inputs unchanged
     (``success`` False) when the fit fails or increases the error.
     """
-    from scipy.optimize import least_squares  # lazy: 0.4 s to import, every CLI start paid it
+    from scipy.optimize import least_squares  # lazy: slow to import, most commands never calibrate
 
     x0 = fit.pack(cam_l, cam_r, poses_l, R, T)
     sol = least_squares(fit.residuals, x0, jac=fit.jacobian, method="lm", max_nfev=200)
@@ -264,38 +228,31 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
     Parameters
     ----------
     left_views, right_views : sequence of CalibrationView
-        Pair ``i`` shows the same target pose in both cameras (same target points).
-        For a point-symmetric target (a chessboard) a right view numbered from the
-        opposite corner (first-to-last direction opposing the left one) is reversed.
+        Pair ``i`` shows the same target pose in both cameras; a right view numbered from the opposite
+        corner is reversed (:func:`agree_with_left`).
     width, height : int
-        Image size (both cameras).
     method : {"ga", "ga+lm", "lm"}
         Per-camera method; anything but "ga" also refines the pair jointly.
     ga_config, bounds, pixel_density_px_per_mm
-        GA options of the per-camera calibrations (:func:`calibrate_camera`).
+        As :func:`calibrate_camera`.
     alpha : float
-        Rectified field of view, 0 = valid pixels only, 1 = every raw pixel
-        (:func:`mrstereo.camera.rectify_fusiello`).
+        Rectified field of view, 0 = valid pixels only, 1 = every raw pixel.
     rng : numpy Generator, int or None
-        Seed of both GAs.
     progress : callable, optional
-        GA progress callback (:func:`calibrate_camera`).
     model : {"k1k2", "plumb_bob", "rational", "fisheye"}
-        Distortion model of both cameras (:func:`calibrate_camera`).
 
     Raises
     ------
     ValueError
-        Also when the baseline is (near) zero (the same images given twice)
-        or the views look swapped (the right camera sits on the left,
-        :func:`mrstereo.camera.check_not_swapped`).
+        Also for a (near) zero baseline (the same images twice) or swapped views
+        (:func:`mrstereo.camera.check_not_swapped`).
     """
     spec = calibration_model(model)
     left_views, right_views = list(left_views), list(right_views)
     _check_view_pairs(left_views, right_views)
     width = _checks.positive_int("width", width)
     height = _checks.positive_int("height", height)
-    right_views = [_agree_with_left(a, b) for a, b in zip(left_views, right_views)]
+    right_views = [agree_with_left(a, b) for a, b in zip(left_views, right_views)]
     kw = dict(width=width, height=height, method=method, ga_config=ga_config, bounds=bounds,
               pixel_density_px_per_mm=pixel_density_px_per_mm, rng=_checks.rng(rng), progress=progress,
               model=spec.name)
@@ -314,10 +271,8 @@ def calibrate_stereo(left_views: Sequence[CalibrationView], right_views: Sequenc
             _JointFit(spec, tuple(left_views), tuple(right_views)), cam_l, cam_r, poses_l, R, T,
             width=width, height=height)
         success, message = success and ok, message + note
-    Trel = np.eye(4)
-    Trel[:3, :3], Trel[:3, 3] = R, T
     check_not_swapped(R, T, where="stereo-calibrate")
-    poses_r = [Trel @ P for P in poses_l]
+    poses_r = [T_from_R_t(R, T) @ P for P in poses_l]
     res_l = reprojection_residuals(left_views, cam_l, poses_l)
     res_r = reprojection_residuals(right_views, cam_r, poses_r)
     rms = _rms(res_l + res_r)[0]

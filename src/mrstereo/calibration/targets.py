@@ -18,10 +18,11 @@ import numpy as np
 
 from .. import _checks
 from ..io import read_image, read_text
+from ..transforms import T_from_R_t, rotation_from_rpy
 
 __all__ = ["CalibrationView", "planar_grid", "parse_board", "detect_chessboard", "chessboard_views",
            "read_control_points", "expand_glob", "synthetic_view", "pose_looking_at", "ChessboardPairs",
-           "chessboard_pairs"]
+           "chessboard_pairs", "agree_with_left"]
 
 _UNITS_M = {"m": 1.0, "mm": 1e-3}
 
@@ -148,6 +149,21 @@ def chessboard_views(paths, board: tuple[int, int], square_m: float
     return views, size
 
 
+def agree_with_left(left: CalibrationView, right: CalibrationView) -> CalibrationView:
+    """Undo a half-turn renumbering of a point-symmetric target (a chessboard) in the right view.
+
+    Reversing the point order of a grid turns it by 180 degrees about its centre, so detectors may
+    number the two images of one pair from opposite corners (a board near 45 degrees). When the
+    target is symmetric that way and the right first-to-last direction opposes the left one, the
+    right order is reversed.
+    """
+    p = left.points_target
+    symmetric = np.allclose(p[::-1], 2.0 * p.mean(axis=0) - p, atol=1e-9)
+    if symmetric and float(np.dot(left.uv[-1] - left.uv[0], right.uv[-1] - right.uv[0])) < 0:
+        return CalibrationView(right.points_target, right.uv[::-1].copy(), name=right.name)
+    return right
+
+
 @dataclass(frozen=True)
 class ChessboardPairs:
     """Chessboard views of a stereo image set, matched by sorted order.
@@ -163,13 +179,8 @@ class ChessboardPairs:
 
 
 def chessboard_pairs(left_paths, right_paths, board: tuple[int, int], square_m: float) -> ChessboardPairs:
-    """Detect the board in both images of every pair (paths matched by position).
-
-    A board is symmetric under a half turn, so the two detections of one pair
-    may be numbered from opposite corners when the board is near 45 degrees;
-    the right corners are reversed when their first-to-last direction opposes
-    the left one.
-    """
+    """Detect the board in both images of every pair (paths matched by position), numbered alike
+    (:func:`agree_with_left`)."""
     left_paths, right_paths = list(left_paths), list(right_paths)
     if len(left_paths) != len(right_paths):
         raise ValueError(f"{len(left_paths)} left images but {len(right_paths)} right images; pairs are "
@@ -183,10 +194,8 @@ def chessboard_pairs(left_paths, right_paths, board: tuple[int, int], square_m: 
         if a is None or b is None:
             skipped.append(f"{Path(pa).name}/{Path(pb).name}")
             continue
-        if float(np.dot(a.uv[-1] - a.uv[0], b.uv[-1] - b.uv[0])) < 0:
-            b = CalibrationView(b.points_target, b.uv[::-1].copy(), name=b.name)
         left.append(a)
-        right.append(b)
+        right.append(agree_with_left(a, b))
     return ChessboardPairs(left=left, right=right, skipped=skipped, size=size_l)
 
 
@@ -241,14 +250,10 @@ def pose_looking_at(centre_target, *, distance_m: float, tilt_x_rad: float = 0.0
     axes and rolled about the optical axis; ``offset_px`` shifts the target
     point off the image centre (in pixels for ``focal_px``).
     """
-    from ..transforms import rotation_from_rpy
     R = rotation_from_rpy(tilt_x_rad, tilt_y_rad, roll_rad)
     c = np.asarray(centre_target, dtype=np.float64)
     pos = np.array([offset_px[0] / focal_px * distance_m, offset_px[1] / focal_px * distance_m, distance_m])
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = pos - R @ c
-    return T
+    return T_from_R_t(R, pos - R @ c)
 
 
 def synthetic_view(camera, points_target, T_cam_from_target, *, noise_px: float = 0.0, rng=None,

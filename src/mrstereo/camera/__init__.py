@@ -2,7 +2,7 @@
 
 Conventions: docs/conventions.md.
 """
-from .camera_info import CameraInfo, StereoCamera, read_camera_info, write_camera_info, write_stereo
+from .camera_info import CameraInfo, StereoCamera, read_camera_info, stereo_projections, write_camera_info, write_stereo
 from .formats import read_stereo
 from .model import (DISTORTION_MODELS, Camera, DistortionModel, PaperCamera, distort_normalized, get_distortion_model,
                     normalized_from_pixels, pixels_from_normalized, project_points, undistort_normalized)
@@ -12,8 +12,8 @@ from .rectification import (MIN_BASELINE_M, FusielloRectification, check_baselin
 
 __all__ = [
     "Camera", "PaperCamera", "CameraInfo", "CameraMount", "StereoCamera", "read_camera_info",
-    "write_camera_info", "read_stereo", "write_stereo", "distort_normalized", "undistort_normalized",
-    "project_points", "pixels_from_normalized", "normalized_from_pixels", 
+    "write_camera_info", "read_stereo", "write_stereo", "stereo_projections", "distort_normalized",
+    "undistort_normalized", "project_points", "pixels_from_normalized", "normalized_from_pixels",
     "DistortionModel", "DISTORTION_MODELS", "get_distortion_model", "MIN_BASELINE_M",
     "mount_entry", "read_mount_entry",
     "FusielloRectification", "fusiello_rotation", "rectify_fusiello", "check_not_swapped",

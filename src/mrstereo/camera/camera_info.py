@@ -1,19 +1,11 @@
 """ROS camera_info YAML and the stereo calibration file every command reads.
 
-A stereo file holds ``left:`` and ``right:``, each with the ROS camera_info
-fields (camera_calibration_parsers layout), plus an optional camera mount: ``mount: {xyz, rpy}``
-of the raw left camera, or the paper's ``rig: {height_m, tilt_rad}`` of the rectified one
-(:mod:`mrstereo.camera.mount`).
-``K``/``D`` describe the raw camera, ``R`` rotates the raw camera frame into the
-rectified frame and ``P`` is the rectified projection; for the right camera
-``P[0, 3] = -fx * baseline_m``. Conventions: docs/conventions.md.
-
-Files from other tools (Kalibr, OpenCV FileStorage, EuRoC, two camera_info
-files, ...) are read by :mod:`mrstereo.camera.formats`; :func:`read_stereo`
-delegates to it. Every calibration read from a file is checked for what would
-otherwise fail silently later: ``R`` must be a rotation, the baseline and the
-projection matrices within plausible ranges, and the two rectified views must
-overlap (:func:`check_stereo`, bounds in docs/calibration-formats.md).
+A stereo file holds ``left:`` and ``right:`` with the ROS camera_info fields (camera_calibration_parsers
+layout) and an optional camera mount (:mod:`mrstereo.camera.mount`); fields and signs:
+docs/conventions.md (Stereo and disparity). Other tools' files are read by
+:mod:`mrstereo.camera.formats`. Every calibration read from a file is checked for what would
+otherwise fail silently later (a non-rotation ``R``, implausible baseline or projections, rectified
+views that do not overlap; bounds in docs/calibration-formats.md).
 """
 from __future__ import annotations
 
@@ -32,7 +24,7 @@ from .model import Camera, get_distortion_model
 from .mount import CameraMount, mount_entry, read_mount_entry
 
 __all__ = ["CameraInfo", "StereoCamera", "read_camera_info", "write_camera_info",
-           "write_stereo", "camera_from_ros", "check_stereo", "overlap_share"]
+           "write_stereo", "camera_from_ros", "check_stereo", "overlap_share", "stereo_projections"]
 
 #: Plausible baseline [m]: shorter is one viewpoint twice, longer is almost always millimetres read as metres.
 BASELINE_RANGE_M = (1e-4, 20.0)
@@ -177,9 +169,9 @@ class CameraInfo:
             if _rotation_error(R) > ROTATION_TOL:
                 raise ValueError(f"{where}: field 'rectification_matrix' is not a rotation (orthonormal "
                                  f"with det +1; its det is {np.linalg.det(R):.4g})")
-        P = np.hstack([camera.K, np.zeros((3, 1))])
-        if data.get("projection_matrix") is not None:
-            P = numbers(data["projection_matrix"], where=where, field="projection_matrix", shape=(3, 4))
+        P = data.get("projection_matrix")
+        if P is not None:
+            P = numbers(P, where=where, field="projection_matrix", shape=(3, 4))
         return cls(camera=camera, R=R, P=P, name=str(data.get("camera_name", "camera")))
 
 
@@ -254,12 +246,6 @@ class StereoCamera:
         return self.left.camera.size
 
     @property
-    def rectified_camera(self) -> Camera:
-        """The rectified left camera (no distortion)."""
-        P = self.left.P
-        return Camera(width=self.size[0], height=self.size[1], fx=P[0, 0], fy=P[1, 1], cx=P[0, 2], cy=P[1, 2])
-
-    @property
     def is_rectified(self) -> bool:
         """True when the raw images already are the rectified ones (identity maps)."""
         return all(np.allclose(info.R, np.eye(3)) and not info.camera.has_distortion
@@ -306,11 +292,18 @@ class StereoCamera:
     def ideal(cls, camera: Camera, baseline_m: float, *, mount: CameraMount | None = None) -> StereoCamera:
         """An already rectified pair of identical distortion-free cameras."""
         baseline_m = _checks.finite_number("baseline_m", baseline_m, positive=True)
-        P_left = np.hstack([camera.K, np.zeros((3, 1))])
-        P_right = P_left.copy()
-        P_right[0, 3] = -camera.fx * baseline_m
+        P_left, P_right = stereo_projections(camera.K, baseline_m)
         return cls(left=CameraInfo(camera, P=P_left, name="left"),
                    right=CameraInfo(camera, P=P_right, name="right"), mount=mount)
+
+
+def stereo_projections(A, baseline_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rectified projections of a pair with intrinsics ``A`` (3, 3): ``A [I | 0]`` and
+    ``A [I | (-b, 0, 0)]`` (the right ``P[0, 3] = -fx * baseline_m``)."""
+    P_left = np.hstack([A, np.zeros((3, 1))])
+    P_right = P_left.copy()
+    P_right[0, 3] = -A[0, 0] * baseline_m
+    return P_left, P_right
 
 
 def _check_projections(left: CameraInfo, right: CameraInfo) -> None:
@@ -345,8 +338,8 @@ def _check_projections(left: CameraInfo, right: CameraInfo) -> None:
                          "(P[0,3] = -fx * baseline_m, in metres)")
 
 
-def overlap_share(stereo: StereoCamera, *, grid_px: int = 160) -> float:
-    """Share of the rectified image that both raw images really see (on a coarse grid).
+def overlap_share(stereo: StereoCamera) -> float:
+    """Share of the rectified image that both raw images really see (on a grid of 160 px at most).
 
     A rectified pixel counts for a camera when its rectification map lands in
     the raw image *and* the raw pixel's viewing ray maps back to it: far outside
@@ -354,7 +347,7 @@ def overlap_share(stereo: StereoCamera, *, grid_px: int = 160) -> float:
     points into the image although the camera cannot see that direction.
     """
     width, height = stereo.size
-    scale = min(1.0, grid_px / max(width, height))
+    scale = min(1.0, 160 / max(width, height))
     size = (max(2, round(width * scale)), max(2, round(height * scale)))
     A_small = np.diag([scale, scale, 1.0])
     grid = np.stack(np.meshgrid(np.arange(size[0], dtype=float), np.arange(size[1], dtype=float)), -1)

@@ -1,30 +1,11 @@
 """Calibration files of other tools, detected from their content (not their names).
 
-Every reader produces what a ROS ``sensor_msgs/CameraInfo`` holds per camera
-(image size, ``K``, ``distortion_model``, ``D``; ``R`` and ``P`` when the file
-carries a rectification) and, for a raw pair, the extrinsics
-``x_right = R x_left + T`` (metres). A raw pair is rectified with Fusiello's
-method (:func:`~mrstereo.camera.rectification.rectify_fusiello`); a pair with
-rectified ``P`` is used as it is. The result is the :class:`StereoCamera`
-every command reads. Formats, detection rules and field mappings:
-docs/calibration-formats.md; conventions: docs/conventions.md.
-
-Formats
--------
-* mrstereo / ROS stereo YAML: ``left:`` and ``right:`` with camera_info fields.
-* Two ROS camera_info YAMLs (``left.yaml,right.yaml``) with the rectified ``P``
-  of a stereo calibration (right ``P[0,3] = -fx * baseline_m``).
-* Kalibr ``camchain.yaml``: ``cam0``/``cam1``, pinhole with radtan or
-  equidistant distortion, ``T_cn_cnm1`` of cam1 (``x_cam1 = T x_cam0``).
-* OpenCV FileStorage (YAML or XML) as written after ``cv2.stereoCalibrate``:
-  ``M1 D1 M2 D2 R T`` and common spellings (``K1``, ``cameraMatrix1``,
-  ``distCoeffs1``, ...), optionally ``R1 R2 P1 P2`` of ``cv2.stereoRectify``;
-  OpenCV's sample pair ``intrinsics.yml,extrinsics.yml`` as two files.
-* ASL/EuRoC ``sensor.yaml``, one per camera (``cam0/sensor.yaml,cam1/sensor.yaml``):
-  ``intrinsics [fu, fv, cu, cv]``, ``T_BS`` (body from sensor).
-* OpenLORIS ``sensors.yaml`` (OpenCV FileStorage; ``intrinsics [fx, cx, fy, cy]``)
-  with the camera poses of ``trans_matrix.yaml`` (given as a second file or
-  found next to it).
+Every reader produces what a ROS ``sensor_msgs/CameraInfo`` holds per camera and, for a raw
+pair, the extrinsics ``x_right = R x_left + T`` (metres); a raw pair is rectified with
+:func:`~mrstereo.camera.rectification.rectify_fusiello`, a pair with rectified ``P`` is used as
+it is. The formats (mrstereo/ROS stereo YAML, two ROS camera_info files, Kalibr camchain, OpenCV
+FileStorage, ASL/EuRoC sensor.yaml, OpenLORIS sensors.yaml), detection rules and field
+mappings: docs/calibration-formats.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -44,7 +25,7 @@ from .camera_info import (BASELINE_RANGE_M, ROTATION_TOL, CameraInfo, StereoCame
 from .model import Camera
 from .rectification import check_not_swapped, rectify_fusiello
 
-__all__ = ["FORMATS", "ImportedCalibration", "import_calibration", "read_calibration", "read_stereo"]
+__all__ = ["FORMATS", "ImportedCalibration", "import_calibration", "read_stereo"]
 
 #: The formats tried, in the words of the error message.
 FORMATS = ("mrstereo/ROS stereo YAML", "two ROS camera_info YAMLs", "Kalibr camchain.yaml",
@@ -54,16 +35,8 @@ FORMATS = ("mrstereo/ROS stereo YAML", "two ROS camera_info YAMLs", "Kalibr camc
 
 @dataclass(frozen=True)
 class ImportedCalibration:
-    """Result of :func:`import_calibration`.
-
-    Attributes
-    ----------
-    stereo : StereoCamera
-        The calibration every command reads.
-    format : str
-        The format detected (one of :data:`FORMATS`).
-    rectified_here : bool
-        True when the file held a raw pair that mrstereo rectified (Fusiello).
+    """Result of :func:`import_calibration`: the ``stereo`` every command reads, the ``format`` detected
+    (one of :data:`FORMATS`) and ``rectified_here``, True when mrstereo rectified a raw pair (Fusiello).
     """
 
     stereo: StereoCamera
@@ -81,46 +54,25 @@ class _Raw:
     T: np.ndarray
 
 
-def read_calibration(paths, *, image_size: tuple[int, int] | None = None, alpha: float = 0.0) -> StereoCamera:
-    """Read a stereo calibration in any supported format; see :func:`import_calibration`."""
-    return import_calibration(paths, image_size=image_size, alpha=alpha).stereo
+def read_stereo(paths, *, image_size: tuple[int, int] | None = None, alpha: float = 0.0) -> StereoCamera:
+    """The :class:`StereoCamera` of a calibration in any supported format (:func:`import_calibration`).
 
-
-def read_stereo(path) -> StereoCamera:
-    """Read a stereo calibration in any supported format (see :mod:`mrstereo.camera.formats`).
-
-    ``path`` is the stereo YAML (``left:``, ``right:``, optional ``mount:``/``rig:``), a
-    file of another tool (Kalibr camchain, OpenCV FileStorage, OpenLORIS
-    sensors.yaml), or two per-camera files as ``"left.yaml,right.yaml"`` or a
-    sequence of two paths. Raw (unrectified) calibrations are rectified.
+    ``paths`` is the stereo YAML, a file of another tool, or two per-camera files as
+    ``"left.yaml,right.yaml"`` or a sequence of two paths. Raw calibrations are rectified.
     """
-    return read_calibration(path)
+    return import_calibration(paths, image_size=image_size, alpha=alpha).stereo
 
 
 def import_calibration(paths, *, image_size: tuple[int, int] | None = None,
                        alpha: float = 0.0) -> ImportedCalibration:
     """Read one calibration file, or two per-camera files, detecting the format from the content.
 
-    Parameters
-    ----------
-    paths : str, path or sequence of them
-        One file, two files as a sequence, or ``"left.yaml,right.yaml"``.
-    image_size : (int, int), optional
-        ``(width, height)`` for formats that may not store it (OpenCV
-        FileStorage); a size stored in the file must agree.
-    alpha : float, optional
-        Free scaling of the rectification mrstereo computes for raw pairs
-        (0 = only valid pixels, 1 = all raw pixels).
-
-    Raises
-    ------
-    FileNotFoundError
-        A file does not exist.
-    ValueError
-        The content fits no format (the message names the file and the formats
-        tried), or a field is missing, not numeric, out of range, the views look
-        swapped or the rectified views do not overlap (the message names the
-        file and the field).
+    ``paths``: one file, two files as a sequence, or ``"left.yaml,right.yaml"``; ``image_size``
+    ``(width, height)`` for formats that may not store it (OpenCV FileStorage; a stored size must
+    agree); ``alpha`` the free scaling of a rectification mrstereo computes (0: only valid pixels, 1:
+    all raw pixels). FileNotFoundError for a missing file; ValueError naming the file (and the
+    field) when the content fits no format, a field is missing or out of range, the views look
+    swapped or the rectified views do not overlap.
     """
     files = _split(paths)
     where = ",".join(str(p) for p in files)
@@ -401,9 +353,7 @@ def _kalibr(data: dict, where: str) -> _Raw:
         width, height = _size(_field(cam, "resolution", here), where=here, field="resolution")
         dist = str(_field(cam, "distortion_model", here))
         D = numbers(cam.get("distortion_coeffs", []), where=here, field="distortion_coeffs")
-        if dist == "radtan":
-            D = numbers(D, where=here, field="distortion_coeffs", sizes=[4])
-        elif dist == "equidistant":
+        if dist in ("radtan", "equidistant"):
             D = numbers(D, where=here, field="distortion_coeffs", sizes=[4])
         elif dist == "none":
             dist, D = "plumb_bob", np.zeros(5)

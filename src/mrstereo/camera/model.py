@@ -1,36 +1,11 @@
 """Camera models: pinhole with lens distortion, paper eq. (1)-(3), and the ROS/OpenCV models.
 
-Two parameterizations of the paper's model, converted exactly
-(conventions: docs/conventions.md):
-
-* :class:`Camera` -- OpenCV/ROS: ``fx, fy, cx, cy`` in pixels, distortion on
-  normalized image coordinates ``(X/Z, Y/Z)``. The paper's model is ``k1, k2``
-  (ROS ``plumb_bob`` with p1 = p2 = k3 = 0, the default); the other ROS
-  ``distortion_model`` values are available through the same class:
-  ``plumb_bob`` (k1, k2, p1, p2, k3), ``rational_polynomial`` (k1, k2, p1, p2,
-  k3, k4, k5, k6 and optionally OpenCV's thin-prism s1..s4 and tilt tauX, tauY:
-  8, 12 or 14 coefficients) and ``equidistant`` (OpenCV fisheye /
-  Kannala-Brandt, k1..k4).
-* :class:`PaperCamera` -- the paper's: focal length ``f`` in mm, pixel densities
-  ``alpha_x, alpha_y`` in px/mm, principal point ``(u0, v0)`` in px and ``k1, k2``
-  on metric image-plane coordinates ``x = f X/Z`` in mm (eq. 1-3).
-
-With ``x_mm = f_mm * x_n``: ``fx = f_mm * alpha_x``, ``k1_n = k1_mm * f_mm**2`` and
-``k2_n = k2_mm * f_mm**4``.
-
-Each distortion model is one small unit (:class:`DistortionModel`): its ROS name
-and aliases, its coefficient names in ROS order, ``distort`` (undistorted ->
-distorted normalized coordinates, numpy, broadcasting over a batch of
-coefficient vectors) and ``undistort`` (its inverse), and the OpenCV map
-primitive. ``DISTORTION_MODELS`` maps names to units; callers only ever call
-the :class:`Camera`.
-
-Extrinsics are Euler angles ``(alpha, beta, gamma)`` and a translation ``t``:
-``points_cam = R @ points_world + t`` with ``R = Rz(gamma) @ Ry(beta) @ Rx(alpha)``
-(rotation about x first, then y, then z, all about fixed axes).
-
-All functions broadcast: parameters may carry leading batch dimensions (a GA
-population) and points are ``(..., N, 3)`` or ``(..., N, 2)``.
+:class:`Camera` is the OpenCV/ROS parameterization (pixels, distortion on normalized
+coordinates), :class:`PaperCamera` the paper's (focal length in mm, pixel densities in px/mm);
+they convert exactly. Each distortion model is one small unit (:class:`DistortionModel`: names,
+coefficients, ``distort`` and its inverse, OpenCV's map primitive) that only :class:`Camera`
+calls. The functions broadcast over leading batch dimensions (a GA population); points are
+``(..., N, 3)`` or ``(..., N, 2)``. Models, formulas and frames: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -86,21 +61,19 @@ def undistort_normalized(xy_d, k1, k2, *, iterations: int = 30) -> np.ndarray:
     return xy_d * scale[..., None]
 
 
+def _pairs(a, b) -> np.ndarray:
+    """``(a, b)`` broadcast and stacked as (..., 1, 2), to scale (..., N, 2) coordinates."""
+    return np.stack(np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float)), -1)[..., None, :]
+
+
 def pixels_from_normalized(xy_n, fx, fy, cx, cy) -> np.ndarray:
     """Eq. (2): ``u = fx x + cx``, ``v = fy y + cy`` on (..., N, 2)."""
-    xy_n = np.asarray(xy_n, dtype=np.float64)
-    f = np.stack(np.broadcast_arrays(np.asarray(fx, float), np.asarray(fy, float)), -1)[..., None, :]
-    c = np.stack(np.broadcast_arrays(np.asarray(cx, float), np.asarray(cy, float)), -1)[..., None, :]
-    return xy_n * f + c
+    return np.asarray(xy_n, dtype=np.float64) * _pairs(fx, fy) + _pairs(cx, cy)
 
 
 def normalized_from_pixels(uv, fx, fy, cx, cy) -> np.ndarray:
     """Inverse of :func:`pixels_from_normalized`."""
-    uv = np.asarray(uv, dtype=np.float64)
-    f = np.stack(np.broadcast_arrays(np.asarray(fx, float), np.asarray(fy, float)), -1)[..., None, :]
-    c = np.stack(np.broadcast_arrays(np.asarray(cx, float), np.asarray(cy, float)), -1)[..., None, :]
-    return (uv - c) / f
-
+    return (np.asarray(uv, dtype=np.float64) - _pairs(cx, cy)) / _pairs(fx, fy)
 
 
 # -- distortion models ------------------------------------------------------------------------------
@@ -109,19 +82,9 @@ def normalized_from_pixels(uv, fx, fy, cx, cy) -> np.ndarray:
 class DistortionModel:
     """One lens distortion model on normalized image coordinates (COLMAP-style unit).
 
-    Attributes
-    ----------
-    name : str
-        The ROS ``distortion_model`` name.
-    aliases : tuple of str
-        Other names it answers to (Kalibr, OpenCV, short CLI names).
-    params_info : tuple of str
-        Coefficient names in ROS/OpenCV order (the longest form).
-    sizes : tuple of int
-        Accepted numbers of coefficients; a vector shorter than the first is
-        zero-padded to it.
-    is_fisheye : bool
-        True for models that need ``cv2.fisheye`` (angle-based projection).
+    ``name`` the ROS ``distortion_model``, ``aliases`` (Kalibr, OpenCV, short CLI names),
+    ``params_info`` the coefficient names in ROS/OpenCV order, ``sizes`` the accepted numbers of
+    coefficients (shorter vectors are zero-padded to the first), ``is_fisheye`` for ``cv2.fisheye``.
     """
 
     name = ""
@@ -360,24 +323,11 @@ def project_points(points_world, *, fx, fy, cx, cy, k1=0.0, k2=0.0, R=None, t=No
 class Camera:
     """Intrinsics in the OpenCV/ROS parameterization (pixels, distortion on normalized coordinates).
 
-    ``Camera(width=, height=, fx=, fy=, cx=, cy=, k1=, k2=)`` is the paper's model
-    (eq. 1-3, ROS ``plumb_bob`` with p1 = p2 = k3 = 0). Any ROS model:
-    :meth:`from_ros` or ``distortion_model=`` with ``coefficients=`` (ROS order).
-
-    Attributes
-    ----------
-    width, height : int
-        Image size in pixels.
-    fx, fy, cx, cy : float
-        Focal lengths and principal point in pixels.
-    k1, k2 : float
-        The first two distortion coefficients (radial, eq. 3; for ``equidistant``
-        the fisheye's theta^3 and theta^5 terms). Always equal to ``D[0], D[1]``.
-    distortion_model : str
-        ROS name: ``plumb_bob``, ``rational_polynomial`` or ``equidistant``
-        (aliases such as ``radtan``, ``fisheye`` are accepted and normalized).
-    coefficients : tuple of float
-        All coefficients in ROS order, zero-padded (5, 8/12/14 or 4).
+    ``Camera(width=, height=, fx=, fy=, cx=, cy=, k1=, k2=)`` is the paper's model (eq. 1-3, ROS
+    ``plumb_bob`` with p1 = p2 = k3 = 0); any ROS model by :meth:`from_ros` or ``distortion_model=``
+    (``plumb_bob``, ``rational_polynomial``, ``equidistant`` or an alias) with ``coefficients=`` (ROS
+    order, zero-padded). ``k1, k2`` always equal ``D[0], D[1]`` (radial, eq. 3; for ``equidistant``
+    the theta^3 and theta^5 terms).
     """
 
     width: int
@@ -447,10 +397,8 @@ class Camera:
         """Distortion coefficients in ROS order (what camera_info's ``D`` holds)."""
         return np.array(self.coefficients, dtype=np.float64)
 
-    @property
-    def dist_coeffs(self) -> np.ndarray:
-        """Coefficients as OpenCV takes them (``cv2.*`` for pinhole models, ``cv2.fisheye.*`` for fisheye)."""
-        return np.array(self.coefficients, dtype=np.float64)
+    dist_coeffs = D
+    """OpenCV's name of :attr:`D` (``cv2.*`` for pinhole models, ``cv2.fisheye.*`` for a fisheye)."""
 
     @property
     def has_distortion(self) -> bool:

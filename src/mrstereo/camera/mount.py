@@ -1,10 +1,6 @@
-"""The camera mount: the pose of the left camera in the robot base frame.
+"""The camera mount: ``T_base_from_cam``, the pose of the raw left optical frame in the robot base frame.
 
-:class:`CameraMount` is the 6-DoF pose ``T_base_from_cam`` of the physical (raw) left optical
-frame in the robot base frame (whose x-y plane is the floor), as TF publishes it. The paper's
-rig -- the *rectified* left camera at ``height_m`` above the floor on the robot's vertical axis,
-tilted down by ``tilt_rad`` -- is read into one with :meth:`CameraMount.from_rig`. The head
-pans by ``pan_rad`` about the base z axis (positive to the left). Conventions:
+Frames, the ``mount:`` entry and the paper's rig (height and tilt of the *rectified* camera):
 docs/conventions.md (Frames).
 """
 from __future__ import annotations
@@ -15,7 +11,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from .. import _checks
-from ..transforms import R_BODY_FROM_OPTICAL, T_robot_from_cam, _rot_z, rotation_from_rpy, rpy_from_rotation
+from ..transforms import (R_BODY_FROM_OPTICAL, T_from_R_t, T_robot_from_cam, _rot_z, rotation_from_rpy,
+                          rpy_from_rotation)
 
 __all__ = ["CameraMount", "read_mount_entry", "mount_entry"]
 
@@ -23,20 +20,9 @@ __all__ = ["CameraMount", "read_mount_entry", "mount_entry"]
 class CameraMount:
     """Pose of the left camera's raw optical frame in the robot base frame: ``T_base_from_cam`` (4, 4).
 
-    The base frame is REP 103 (x forward, y left, z up) with its x-y plane on
-    the floor (ROS ``base_footprint``; ``base_link`` of most wheeled robots).
-    The optical frame is x right, y down, z forward. Built from
-
-    * :meth:`from_xyz_rpy`: ``xyz`` [m] and ``rpy`` [rad] of the camera *body*
-      frame (x forward, y left, z up) in the base frame, REP 103 fixed axes
-      (``R = Rz(yaw) Ry(pitch) Rx(roll)``; positive pitch looks down); the
-      optical frame is the body frame turned by :data:`R_BODY_FROM_OPTICAL`.
-      All zeros: a level camera on the floor looking along the robot's x axis;
-    * :meth:`from_rig`: the paper's rig ``(height_m, tilt_rad)`` of the rectified camera;
-    * a TF lookup (:mod:`mrstereo.recordings.bag`) or a 4x4 matrix.
-
-    Points are triangulated in the rectified left frame (``p_rect = R p_raw`` with the
-    calibration's ``R``): :meth:`T_base_from_rectified` is the pose the mapping chain uses.
+    Built from a 4x4 matrix (e.g. a TF lookup), :meth:`from_xyz_rpy` (the camera body's pose)
+    or :meth:`from_rig` (the paper's rig). Points are triangulated in the rectified left frame:
+    :meth:`T_base_from_rectified` is the pose the mapping chain uses.
     """
 
     __slots__ = ("_T",)
@@ -62,10 +48,7 @@ class CameraMount:
             raise ValueError(f"xyz and rpy must be 3 numbers each, got {xyz!r}, {rpy!r}") from None
         if xyz.size != 3 or rpy.size != 3 or not (np.isfinite(xyz).all() and np.isfinite(rpy).all()):
             raise ValueError(f"xyz and rpy must be 3 finite numbers each, got {xyz.tolist()}, {rpy.tolist()}")
-        T = np.eye(4)
-        T[:3, :3] = rotation_from_rpy(*rpy) @ R_BODY_FROM_OPTICAL
-        T[:3, 3] = xyz
-        return cls(T)
+        return cls(T_from_R_t(rotation_from_rpy(*rpy) @ R_BODY_FROM_OPTICAL, xyz))
 
     @classmethod
     def from_rectified(cls, T_base_from_rect, R_rect_from_cam=None) -> CameraMount:
@@ -111,11 +94,7 @@ class CameraMount:
             R = _checks.matrix("R_rect_from_cam", R_rect_from_cam, (3, 3))
             if not np.array_equal(R, np.eye(3)):
                 T[:3, :3] = T[:3, :3] @ R.T
-        if pan == 0.0:
-            return T
-        Rz = np.eye(4)
-        Rz[:3, :3] = _rot_z(pan)
-        return Rz @ T
+        return T if pan == 0.0 else T_from_R_t(_rot_z(pan), np.zeros(3)) @ T
 
     def to_dict(self) -> dict:
         """``{"xyz": [...], "rpy": [...]}`` (the ``mount:`` entry of a stereo YAML or manifest)."""
@@ -155,9 +134,8 @@ class CameraMount:
 def read_mount_entry(data: dict, *, where: str, R_rect_from_cam=None) -> CameraMount | None:
     """The camera mount of a stereo YAML or manifest mapping: its ``mount:`` or ``rig:`` entry, or None.
 
-    ``mount: {xyz: [x, y, z], rpy: [roll, pitch, yaw]}`` is the raw camera's pose; the paper's
-    ``rig: {height_m, tilt_rad}`` that of the rectified camera, turned into the raw camera's with
-    the calibration's left ``R_rect_from_cam`` (:meth:`CameraMount.from_rig`). Both at once is an error.
+    A ``rig:`` is read with the calibration's left ``R_rect_from_cam`` (:meth:`CameraMount.from_rig`);
+    both entries at once are an error.
     """
     if data.get("mount") is not None and data.get("rig") is not None:
         raise ValueError(f"{where}: give 'mount:' or 'rig:', not both")

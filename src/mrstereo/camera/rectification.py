@@ -1,67 +1,18 @@
-"""Stereo rectification by Fusiello, Trucco & Verri (2000).
+"""Stereo rectification by Fusiello, Trucco & Verri (2000), for every camera model.
 
-Given two calibrated cameras, both are rotated about their optical centres into
-one common orientation whose x axis is parallel to the baseline; both get the
-same new intrinsics ``A``. Corresponding points then lie on the same image row.
-Conventions (frames, ``P[0, 3] = -fx * baseline_m``): docs/conventions.md.
-
-Notes
------
-With the left camera frame as the world frame, the right camera maps
-``x_right = R x_left + T`` and its optical centre is ``c2 = -R^T T`` (``c1 = 0``).
-The new orientation ``R_n`` (rows = new axes in left-camera coordinates) is
-
-* new x along the baseline, ``e1 = (c2 - c1) / |c2 - c1|``. Fusiello et al. write
-  ``c1 - c2`` for their image axes; we orient it from the left to the right
-  centre so that for the usual rig (right camera on the +x side) the new frame
-  is close to the old one rather than rotated by 180 degrees;
-* new y ``e2 = z_old x e1`` (``z_old`` the left camera's optical axis),
-  normalized;
-* new z ``e3 = e1 x e2``.
-
-The new projection matrices are ``A [R_n | -R_n c_i]``; expressed in the
-rectified left frame that is ``P_left = A [I | 0]`` and
-``P_right = A [I | (-b, 0, 0)]`` with ``b = |c2 - c1|``, so the right
-``P[0, 3] = -fx b``. The rotation from each raw camera frame into the rectified
-one is ``R_n`` (left) and ``R_n R^T`` (right). Images are resampled by inverse
-warping through ``cv2.initUndistortRectifyMap``, which also removes the radial
-distortion.
-
-Every camera model of :mod:`mrstereo.camera.model` is accepted: the raw
-border is undistorted through ``Camera.rays`` and the maps come from
-``Camera.undistort_rectify_maps`` (``cv2.fisheye`` for a fisheye); the
-rectified view is always a pinhole.
-
-Choice of ``A``: the raw image border of each camera (where a border ray lies more
-than 80 degrees off the optical axis, beyond a fisheye's 90 degrees or beyond
-the fold of a distortion polynomial, the outermost usable point on the line
-toward the principal point) is undistorted and rotated
-into the rectified frame. The inner box (every pixel inside it is seen by both
-cameras) and the outer box (every raw pixel kept) are computed;
-``alpha = 0`` chooses the focal length and principal point so that the inner
-box exactly fills the image (no invalid pixels, like ``cv2.stereoRectify``
-with ``alpha=0``), ``alpha = 1`` so that the outer box fits in the image, and
-values in between interpolate. Square pixels (``fx = fy``) and one shared
-principal point (``doffs = 0``).
-
-A fisheye (``equidistant``) sees up to 90 degrees and more off its axis, where a
-pinhole image would need an unbounded focal plane: the box rule would pick a
-tiny focal length and waste the centre of the image. For a fisheye pair the
-rectified focal length is therefore never below the smaller raw focal length
-(the raw pixels per radian at the image centre: the centre keeps its
-resolution) and the principal point is the mean of the two raw optical axes
-in the rectified image; the rectified view then spans ``2 atan(W / 2 f)``
-horizontally (about 112 degrees for a 848x800 T265 with f = 286 px) and shows
-what both cameras see there.
-
-Swapped cameras: the right camera must sit on the +x side of the left one
-(OpenCV's ``T[0] < 0``); :func:`check_not_swapped` refuses the other order
-with a message that says to exchange left and right.
+Both cameras turn about their optical centres into one orientation ``R_n`` and share new
+intrinsics ``A``, so that corresponding points lie on the same row. With ``x_right = R x_left + T``
+the right centre is ``c2 = -R^T T`` in the left frame; the rows of ``R_n`` are ``e1 = c2 / |c2|``
+(left to right, not the paper's ``c1 - c2``: the usual rig then hardly turns), ``e2 = z x e1``
+(normalized) and ``e3 = e1 x e2``. The raw frames turn into the rectified one by ``R_n`` (left)
+and ``R_n R^T`` (right); ``P_left = A [I | 0]``, ``P_right = A [I | (-b, 0, 0)]``. How ``A``
+follows from ``alpha`` and the raw borders, and a fisheye's focal length: docs/calibration.md
+(Rectification). Conventions: docs/conventions.md.
 
 References
 ----------
-A. Fusiello, E. Trucco, A. Verri, "A compact algorithm for rectification of
-stereo pairs", Machine Vision and Applications 12:16-22, 2000.
+A. Fusiello, E. Trucco, A. Verri, "A compact algorithm for rectification of stereo pairs",
+Machine Vision and Applications 12:16-22, 2000.
 """
 from __future__ import annotations
 
@@ -70,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
-from .camera_info import CameraInfo, StereoCamera
+from .camera_info import CameraInfo, StereoCamera, stereo_projections
 from .model import Camera
 
 __all__ = ["FusielloRectification", "rectify_fusiello", "fusiello_rotation", "check_not_swapped",
@@ -84,18 +35,9 @@ MAX_RAY_ANGLE_RAD = np.radians(80.0)
 
 @dataclass(frozen=True)
 class FusielloRectification:
-    """Result of :func:`rectify_fusiello`.
-
-    Attributes
-    ----------
-    stereo : StereoCamera
-        Raw ``K``, ``D`` per camera, ``R`` (raw -> rectified) and rectified ``P``.
-    R_new : ndarray of shape (3, 3)
-        Common rectified orientation in left-camera coordinates (rows = new axes).
-    A : ndarray of shape (3, 3)
-        Shared rectified intrinsics.
-    baseline_m : float
-        Distance between the optical centres.
+    """Result of :func:`rectify_fusiello`: the ``stereo`` (raw ``K``, ``D``, ``R`` raw -> rectified,
+    rectified ``P``), the common orientation ``R_new`` (rows = new axes, left-camera coordinates),
+    the shared intrinsics ``A`` and ``baseline_m``.
     """
 
     stereo: StereoCamera
@@ -136,12 +78,7 @@ def _border_pixels(width: int, height: int, n: int = 64) -> dict[str, np.ndarray
 
 
 def check_baseline(R, T, *, where: str = "stereo calibration") -> float:
-    """Baseline ``|c2 - c1|`` in metres; ``ValueError`` when it is (near) zero.
-
-    A baseline below ``MIN_BASELINE_M`` (0.1 mm) means both views were taken
-    from one place -- typically the same images or topic given as left and
-    right.
-    """
+    """Baseline ``|c2 - c1|`` in metres; ``ValueError`` below ``MIN_BASELINE_M`` (one view given twice)."""
     R = _checks.matrix("R", R, (3, 3))
     T = _checks.matrix("T", np.ravel(T), (3,))
     baseline_m = float(np.linalg.norm(T))
@@ -152,18 +89,10 @@ def check_baseline(R, T, *, where: str = "stereo calibration") -> float:
 
 
 def check_not_swapped(R, T, *, where: str = "stereo calibration") -> None:
-    """Refuse a pair whose right camera sits on the left of the left camera.
+    """Refuse a pair (``x_right = R x_left + T``) whose right camera sits on the left of the left one.
 
-    ``R``, ``T`` map left-camera points to the right camera (``x_right = R
-    x_left + T``, OpenCV's convention). The right optical centre in the left
-    frame is ``c2 = -R^T T``; for the usual rig it lies at +x (OpenCV's
-    ``T[0] < 0``). ``c2[0] < 0`` means the views were given the wrong way
-    round, and the rectified pair would be mirrored (negative disparities).
-
-    Raises
-    ------
-    ValueError
-        One sentence that says the views look swapped and how to fix it.
+    The right centre ``c2 = -R^T T`` must lie at +x; otherwise the rectified pair would be
+    mirrored (negative disparities). The ``ValueError`` says to exchange left and right.
     """
     R = _checks.matrix("R", R, (3, 3))
     T = _checks.matrix("T", np.ravel(T), (3,))
@@ -177,11 +106,9 @@ def check_not_swapped(R, T, *, where: str = "stereo calibration") -> None:
 def _border_rays(camera: Camera, uv: np.ndarray, *, steps: int = 64) -> np.ndarray:
     """Rays (N, 3) of border pixels, or of the outermost usable pixel on the line to the principal point.
 
-    A pixel is usable when its ray exists (inside a fisheye's 90 degrees),
-    lies at most ``MAX_RAY_ANGLE_RAD`` off the optical axis on the pixel's side
-    of it, and every pixel between it and the principal point is usable with
-    the ray's angle growing outward -- a polynomial fitted to the image centre may fold back beyond
-    the calibrated area, where its inverse jumps to another branch.
+    Usable: the ray exists, lies at most ``MAX_RAY_ANGLE_RAD`` off the axis on the pixel's side, and
+    the angle grows outward all the way from the centre (a distortion polynomial may fold back
+    beyond the calibrated area, where its inverse jumps to another branch).
     """
     centre = np.array([camera.cx, camera.cy])
     frac = np.linspace(0.0, 1.0, steps)[:, None, None]                     # centre -> border
@@ -216,8 +143,7 @@ def rectified_px_from_raw_px(info: CameraInfo, uv) -> np.ndarray:
 
 
 def raw_px_from_rectified_px(info: CameraInfo, uv_rect) -> np.ndarray:
-    """Rectified pixels (N, 2) -> raw (distorted) pixels of the same camera; inverse of
-    :func:`rectified_px_from_raw_px` (NaN where the ray is behind the raw camera)."""
+    """Inverse of :func:`rectified_px_from_raw_px` (NaN where the ray is behind the raw camera)."""
     uv_rect = np.asarray(uv_rect, dtype=np.float64)
     if uv_rect.ndim != 2 or uv_rect.shape[1] != 2:
         raise ValueError(f"uv_rect must have shape (N, 2), got {uv_rect.shape}")
@@ -231,19 +157,11 @@ def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0) -
     Parameters
     ----------
     left, right : Camera
-        Raw intrinsics of both cameras (any distortion model), same image size.
-    R : ndarray of shape (3, 3)
-        Rotation from the left to the right camera frame.
-    T : ndarray of shape (3,)
-        Translation in metres, ``x_right = R x_left + T``.
+        Raw intrinsics (any distortion model, same image size).
+    R, T : ndarray of shape (3, 3) and (3,)
+        ``x_right = R x_left + T`` (metres).
     alpha : float, optional
-        0 = only valid pixels (zoom in), 1 = all raw pixels visible; see Notes of
-        the module.
-
-    Returns
-    -------
-    FusielloRectification
-        Holds the :class:`StereoCamera` every other command reads.
+        0 = only valid pixels (zoom in), 1 = all raw pixels visible.
     """
     if not isinstance(left, Camera) or not isinstance(right, Camera):
         raise TypeError(f"left and right must be Camera instances, got {type(left).__name__} and "
@@ -286,16 +204,14 @@ def rectify_fusiello(left: Camera, right: Camera, R, T, *, alpha: float = 0.0) -
               (1.0 - alpha) * 0.5 * (inner[2] + inner[3]) + alpha * 0.5 * (outer[2] + outer[3])]
     fisheyes = [c for c in (left, right) if c.is_fisheye]
     f_fisheye = min(min(c.fx, c.fy) for c in fisheyes) if fisheyes else 0.0
-    if focal < f_fisheye:             # a fisheye: keep the centre's resolution (module Notes)
+    if focal < f_fisheye:             # a fisheye: keep the centre's resolution
         focal = f_fisheye
         axes = np.stack([R_new[:, 2], R_right[:, 2]])          # raw optical axes, rectified frame
         centre = list(np.mean(axes[:, :2] / axes[:, 2:3], axis=0))
     cx = (width - 1.0) / 2.0 - focal * centre[0]
     cy = (height - 1.0) / 2.0 - focal * centre[1]
     A = np.array([[focal, 0.0, cx], [0.0, focal, cy], [0.0, 0.0, 1.0]])
-    P_left = np.hstack([A, np.zeros((3, 1))])
-    P_right = P_left.copy()
-    P_right[0, 3] = -focal * baseline_m
+    P_left, P_right = stereo_projections(A, baseline_m)
     stereo = StereoCamera(left=CameraInfo(left, R=R_new, P=P_left, name="left"),
                           right=CameraInfo(right, R=R_right, P=P_right, name="right"))
     return FusielloRectification(stereo=stereo, R_new=R_new, A=A, baseline_m=baseline_m)

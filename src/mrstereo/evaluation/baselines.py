@@ -1,26 +1,9 @@
-"""OpenCV StereoBM and StereoSGBM as reference matchers, set up as users run them.
+"""OpenCV StereoBM and StereoSGBM as reference matchers, set up as ROS ``stereo_image_proc`` runs them.
 
-Settings follow the disparity node of ROS ``stereo_image_proc``
-(http://wiki.ros.org/stereo_image_proc) and OpenCV's documentation of ``StereoBM`` and
-``StereoSGBM`` (https://docs.opencv.org/4.x/d2/d85/classcv_1_1StereoSGBM.html):
-
-* StereoBM: x-Sobel pre-filter, size 9, cap 31; SAD window 15 (9 on images
-  narrower than 640 px, where a 15 px window spans whole objects); texture
-  threshold 10; uniqueness ratio 15; speckle window 100, range 4; left-right
-  check ``disp12MaxDiff = 1``.
-* StereoSGBM: block 5, ``P1 = 8 * ch * block^2``, ``P2 = 32 * ch * block^2``
-  (ch = 1: both matchers get the gray image, as stereo_image_proc feeds them
-  ``image_rect``), uniqueness ratio 10, speckle window 100, range 2,
-  ``disp12MaxDiff = 1``, pre-filter cap 63, ``MODE_SGBM_3WAY``. 3-way mode
-  aggregates the same 5 paths as ``MODE_SGBM`` on the same cost: within a
-  fraction of a percent of its accuracy on these scenes and 2-3x faster on
-  two cores, which makes it the mode a robot would run; ``MODE_HH`` (8 paths)
-  costs O(W * D) memory per row band for a small gain.
-
-Both search ``numDisparities`` = the requested range rounded up to a multiple
-of 16, ``minDisparity = 0``. OpenCV returns int16 disparities times 16 with
-invalid pixels at ``(minDisparity - 1) * 16``; :func:`disparity_from_opencv`
-turns that into float32 pixels with NaN invalid (docs/conventions.md).
+Both match the gray image with ``minDisparity = 0`` and ``numDisparities`` the range rounded up to
+16; :func:`disparity_from_opencv` turns OpenCV's int16 x16 output into float32 pixels, NaN invalid.
+The settings and why SGBM runs ``MODE_SGBM_3WAY``: docs/evaluation.md, "Baselines".
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -114,12 +97,12 @@ def stereo_bm(left, right, *, max_disparity_px, settings: BMSettings = BMSetting
     Parameters
     ----------
     left, right : ndarray of shape (H, W) or (H, W, 3)
-        Rectified views (colour is BGR and converted to gray).
+        Rectified views (BGR converted to gray).
     max_disparity_px : float
         Largest disparity to search; rounded up to a multiple of 16.
     exact_max : bool
-        Search up to ``ceil(max_disparity_px)`` exactly (a negative ``minDisparity`` fills
-        the multiple of 16), e.g. to compare what matchers do beyond a given near limit.
+        Search up to ``ceil(max_disparity_px)`` exactly (a negative ``minDisparity`` fills the multiple).
+    settings : BMSettings
     """
     gl, gr = _inputs(left, right)
     window = settings.window_px or (15 if gl.shape[1] >= 640 else 9)
@@ -143,12 +126,9 @@ def stereo_sgbm(left, right, *, max_disparity_px, settings: SGBMSettings = SGBMS
 
     Parameters
     ----------
-    left, right : ndarray of shape (H, W) or (H, W, 3)
-        Rectified views (colour is BGR and converted to gray, so ``ch = 1``).
-    max_disparity_px : float
-        Largest disparity to search; rounded up to a multiple of 16.
-    exact_max : bool
+    left, right, max_disparity_px, exact_max :
         As :func:`stereo_bm`.
+    settings : SGBMSettings
     """
     gl, gr = _inputs(left, right)
     block = settings.block_size

@@ -1,49 +1,11 @@
 """Readers for stereo scenes with ground truth (Middlebury, KITTI, mrstereo datasets).
 
-:func:`load_scene` takes one scene directory as the benchmarks distribute it,
-recognizes its layout from the file names, and returns a :class:`Scene` with
-the rectified pair, the ground-truth disparity in pixels (NaN = unknown), the
-non-occluded mask when the dataset has one, and the disparity search range.
-:func:`load_scenes` returns every scene of a directory: one for a benchmark
-folder, one per frame with ground-truth disparity for an mrstereo dataset
-(``manifest.yaml``, docs/dataset.md; what ``mrstereo synth`` writes).
-
-Layouts and ground-truth encodings (the sample data's provenance table,
-:mod:`mrstereo.recordings.samples`, and the benchmarks' own pages):
-
-===================  =========================================  ===========================================
-layout               files                                      ground truth
-===================  =========================================  ===========================================
-middlebury2001       ``scene1.row3.col3.ppm`` / ``col4`` +      Tsukuba: ``value / 16``, 0 = unknown
-(Tsukuba)            ``truedisp.row3.col3.pgm``
-middlebury2001       ``im2`` / ``im6`` + ``disp2`` (pgm / png)  ``value / 8`` (Venus, Sawtooth, ...)
-middlebury2003       ``im2`` / ``im6`` + ``disp2`` (pgm / png)  quarter size ``value / 4``, half ``/ 2``
-middlebury2005       ``view1.png`` / ``view5.png`` +            third size ``/ 3``, half ``/ 2``, full ``/ 1``
-(and 2006)           ``disp1.png``                              (full size: ``+ dmin`` from ``dmin.txt``)
-middlebury2014       ``im0.png`` / ``im1.png`` + ``disp0.pfm``  PFM in pixels, ``inf`` = unknown;
-                     (or ``disp0GT.pfm``) + ``calib.txt``       ``ndisp`` from ``calib.txt``
-kitti2012            ``image_0`` / ``image_1`` (or              uint16 PNG ``value / 256``, 0 = unknown;
-                     ``colored_0`` / ``colored_1``) +           evaluated on ``disp_noc`` pixels
-                     ``disp_noc`` and / or ``disp_occ``
-kitti2015            ``image_2`` / ``image_3`` +                as KITTI 2012
-                     ``disp_noc_0`` and / or ``disp_occ_0``
-middlebury2001/2003  ``imL.png`` / ``imR.png`` +                ``value / scale``, scale and max disparity
-(v2 bundle)          ``groundtruth.png`` + ``info.txt``          from ``info.txt`` (as LocalExpStereo ships)
-mrstereo             ``manifest.yaml`` with ``left_rect`` /      ``gt_disparity`` PFM in pixels of the
-                     ``right_rect`` (or raw pairs, rectified     rectified left image, ``inf`` = unknown
-                     with the dataset's calibration) and
-                     ``gt_disparity`` per frame
-===================  =========================================  ===========================================
-
-Middlebury 2001 and 2003 scenes share the file names ``im2``/``im6``/``disp2``
-but not the scale (8 vs 4). The scale is read from the image size where it is
-unambiguous (2003: 450x375 quarter, 900x750 half) and otherwise chosen by
-warping the right view with each candidate scale and keeping the one with the
-lowest photometric error -- the same check SOURCES.md used to verify every
-scale (the true scale wins by a factor of 3 to 5). Middlebury masks
-(``nonocc.png``, ``mask0nocc.png``) mark the evaluated region with 255.
-
-Disparity convention: ``d = x_left - x_right`` (docs/conventions.md).
+:func:`load_scene` recognizes a scene folder's layout from its file names and returns a
+:class:`Scene` (rectified pair, ground-truth disparity in pixels with NaN unknown, the
+non-occluded mask when there is one, the search range); :func:`load_scenes` returns one scene per
+frame of an mrstereo dataset. The layouts, their ground-truth encodings and how the Middlebury
+2001/2003 scale is decided: docs/evaluation.md, "Scene folders". Disparity ``d = x_left -
+x_right`` (docs/conventions.md).
 """
 from __future__ import annotations
 
@@ -75,27 +37,11 @@ _EXPECTED = (
 class Scene:
     """One rectified stereo pair with ground truth.
 
-    Attributes
-    ----------
-    name : str
-        Scene name: the directory name (Middlebury) or the frame (KITTI, e.g. ``000070_10``).
-    left, right : ndarray of shape (H, W) or (H, W, 3), uint8
-        Rectified views as stored (colour is BGR).
-    gt_disparity_px : ndarray of shape (H, W), float32
-        Ground-truth disparity of the left view in pixels, NaN where unknown.
-    nonocc_mask : ndarray of shape (H, W), bool, or None
-        True on non-occluded pixels (the region evaluated); None when the
-        dataset has no mask (then every ground-truth pixel is evaluated).
-    max_disparity_px : int
-        Disparity search range for the matchers: the dataset's ``ndisp`` when
-        it has one, else the smallest multiple of 16 above the largest
-        ground-truth disparity.
-    layout : str
-        One of :data:`LAYOUTS`.
-    directory : Path
-        Where the scene was read from.
-    gt_description : str
-        Which file the ground truth came from and how it was decoded.
+    ``name`` (folder or frame), ``left``/``right`` as stored (BGR colour), ``gt_disparity_px``
+    (float32, NaN unknown), ``nonocc_mask`` (None: every ground-truth pixel is evaluated),
+    ``max_disparity_px`` (``ndisp``, else the smallest multiple of 16 above the largest true
+    disparity), ``layout`` (one of :data:`LAYOUTS`), ``directory`` and ``gt_description`` (which file
+    and how it was decoded).
     """
 
     name: str
@@ -146,30 +92,12 @@ def photometric_error(left: np.ndarray, right: np.ndarray, disparity_px: np.ndar
 
 
 def load_scene(directory, *, frame: str | None = None) -> Scene:
-    """Read one benchmark scene, detecting its layout from the file names.
+    """Read one benchmark scene, detecting its layout from the file names (docs/evaluation.md).
 
-    Parameters
-    ----------
-    directory : str or Path
-        A scene folder in one of the layouts of :data:`LAYOUTS` (see the
-        module docstring for the files each needs).
-    frame : str, optional
-        KITTI: the frame name (e.g. ``"000070_10"``) when the folder holds
-        several frames. Default: the only ``*_10.png`` frame with ground truth.
-        mrstereo dataset: the stem of the frame's ``gt_disparity`` file (e.g.
-        ``"000003"``). Default: the only frame with ground truth.
-
-    Returns
-    -------
-    Scene
-
-    Raises
-    ------
-    FileNotFoundError
-        ``directory`` does not exist.
-    ValueError
-        The folder matches no known layout (the message lists what was
-        expected) or its files disagree in size.
+    ``frame`` picks a frame of a KITTI folder (``"000070_10"``) or of an mrstereo dataset (the stem
+    of its ``gt_disparity``, ``"000003"``); default: the only frame with ground truth.
+    FileNotFoundError for a missing folder; ValueError, listing the expected files, for a folder
+    that matches no layout or whose files disagree in size.
     """
     path = _directory(directory)
     if (path / _MANIFEST).is_file():
@@ -178,8 +106,7 @@ def load_scene(directory, *, frame: str | None = None) -> Scene:
                    _read_middlebury_im2_im6, _read_middlebury_v2_bundle):
         scene = reader(path, frame)
         if scene is not None:
-            _check_sizes(scene)
-            return scene
+            return _check_sizes(scene)
     raise ValueError(f"{path} matches no known stereo dataset layout; expected {_EXPECTED}")
 
 
@@ -251,15 +178,10 @@ def _dataset_scene(path: Path, manifest, record) -> Scene:
     if gt.ndim != 2:
         raise ValueError(f"{record.gt_disparity}: expected a single-channel PFM disparity map, got shape {gt.shape}")
     gt = np.where(np.isfinite(gt), gt, np.nan).astype(np.float32)
-    return _checked(Scene(name=f"{path.name}/{record.gt_disparity.stem}", left=left, right=right,
+    return _check_sizes(Scene(name=f"{path.name}/{record.gt_disparity.stem}", left=left, right=right,
                           gt_disparity_px=gt, nonocc_mask=None, max_disparity_px=search_range_px(gt),
                           layout="mrstereo", directory=path,
                           gt_description=f"{record.gt_disparity.relative_to(manifest.root)} (pixels); {how}"))
-
-
-def _checked(scene: Scene) -> Scene:
-    _check_sizes(scene)
-    return scene
 
 
 # --------------------------------------------------------------------------- helpers
@@ -291,8 +213,7 @@ def _uint8_view(path: Path) -> np.ndarray:
 
 
 def _eight_bit_gt(path: Path) -> np.ndarray:
-    raw = read_image(path, gray=True)
-    return raw.astype(np.float32)
+    return read_image(path, gray=True).astype(np.float32)
 
 
 def _scaled(raw: np.ndarray, scale: float, offset: float = 0.0) -> np.ndarray:
@@ -307,7 +228,7 @@ def _mask_255(path: Path | None) -> np.ndarray | None:
     return read_image(path, gray=True) == 255
 
 
-def _check_sizes(scene: Scene) -> None:
+def _check_sizes(scene: Scene) -> Scene:
     shapes = {"left": scene.left.shape[:2], "right": scene.right.shape[:2],
               "ground truth": scene.gt_disparity_px.shape}
     if scene.nonocc_mask is not None:
@@ -315,6 +236,7 @@ def _check_sizes(scene: Scene) -> None:
     if len(set(shapes.values())) != 1:
         sizes = ", ".join(f"{k} {v[1]}x{v[0]}" for k, v in shapes.items())
         raise ValueError(f"{scene.directory}: views and ground truth differ in size ({sizes})")
+    return scene
 
 
 def _best_scale(left, right, raw: np.ndarray, candidates: dict[float, str]) -> float:

@@ -1,19 +1,10 @@
 """Disparity error metrics against ground truth (Middlebury / KITTI style).
 
-The evaluated region is every pixel with a known ground truth (finite), and
-inside the non-occluded mask when the dataset has one. On that region each
-metric is computed two ways:
-
-* ``dense``: every evaluated pixel counts; a pixel the matcher left invalid
-  (NaN) is a bad pixel at every threshold, and for the average and RMS error
-  it is read as disparity 0 (no match = a point at infinity, which is what a
-  depth consumer of the map sees), so its error is its ground-truth disparity.
-* ``estimated``: only the evaluated pixels the matcher gave a value.
-
-``density_pct`` is the share of evaluated pixels with an estimate. A pixel is
-bad at threshold ``t`` when ``|d - d_gt| > t`` (Scharstein & Szeliski 2002).
-
-Disparity convention: docs/conventions.md (``d = x_left - x_right``, NaN invalid).
+On the evaluated region (finite ground truth, inside the non-occluded mask when there is one), a
+pixel is bad at threshold ``t`` when ``|d - d_gt| > t`` (Scharstein & Szeliski 2002). ``dense``
+counts every evaluated pixel, an invalid estimate as bad and as ``d = 0`` in the errors;
+``estimated`` only the pixels with an estimate. Definitions: docs/evaluation.md, "Metrics".
+Conventions: docs/conventions.md.
 
 References
 ----------
@@ -54,20 +45,9 @@ class ErrorStats:
 
 @dataclass(frozen=True)
 class DisparityMetrics:
-    """Metrics of one disparity map against ground truth.
-
-    Attributes
-    ----------
-    dense : ErrorStats
-        Over all evaluated pixels, invalid estimates counted as bad (see module notes).
-    estimated : ErrorStats
-        Over the evaluated pixels that have an estimate.
-    density_pct : float
-        Percentage of evaluated pixels with an estimate.
-    evaluated_pixels, estimated_pixels : int
-        Sizes of the two pixel sets.
-    region : str
-        ``"nonocc"`` (mask given) or ``"all"`` (every ground-truth pixel).
+    """Metrics of one disparity map against ground truth: ``dense`` and ``estimated`` ErrorStats,
+    ``density_pct`` (evaluated pixels with an estimate), the sizes ``evaluated_pixels`` and
+    ``estimated_pixels``, and ``region`` (``"nonocc"`` with a mask, else ``"all"``).
     """
 
     dense: ErrorStats
@@ -94,25 +74,10 @@ def _stats(abs_error: np.ndarray, bad_error: np.ndarray) -> ErrorStats:
 
 
 def disparity_metrics(disparity_px, gt_disparity_px, *, nonocc_mask=None) -> DisparityMetrics:
-    """Compare a disparity map with ground truth.
+    """Compare a disparity map (H, W) with ground truth (NaN or inf: no estimate / unknown).
 
-    Parameters
-    ----------
-    disparity_px : ndarray of shape (H, W)
-        Estimated disparity in pixels; NaN (or inf) = no estimate.
-    gt_disparity_px : ndarray of shape (H, W)
-        Ground truth in pixels; NaN (or inf) = unknown.
-    nonocc_mask : ndarray of shape (H, W), bool, optional
-        Region to evaluate (non-occluded pixels). Default: all ground-truth pixels.
-
-    Returns
-    -------
-    DisparityMetrics
-
-    Raises
-    ------
-    ValueError
-        Shapes differ, or the region holds no ground-truth pixel.
+    ``nonocc_mask`` (bool) is the region evaluated (default: all ground-truth pixels). ValueError
+    when the shapes differ or the region holds no ground-truth pixel.
     """
     est = np.asarray(disparity_px, dtype=np.float32)
     gt = np.asarray(gt_disparity_px, dtype=np.float32)

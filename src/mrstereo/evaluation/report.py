@@ -1,22 +1,10 @@
 """Run matchers on benchmark scenes and tabulate the metrics side by side.
 
-:func:`evaluate_scenes` reads each scene (:func:`~mrstereo.evaluation.datasets.load_scene`),
-runs every method on it with the scene's search range, scores the result
-(:func:`~mrstereo.evaluation.metrics.disparity_metrics`) and times the call.
-Methods:
-
-* ``"mrstereo"``: :func:`mrstereo.matching.compute_disparity` with the
-  ``"robust"`` preset (the library default);
-* ``"mrstereo-paper"``: the same with the ``"paper"`` preset (NSSD + WTA exactly
-  as eq. 9-10 of the paper);
-* ``"StereoBM"``, ``"StereoSGBM"``: the OpenCV baselines of
-  :mod:`mrstereo.evaluation.baselines`.
-
-Each method runs once on a 64-row strip of the first scene before timing, so
-that one-off costs (numba compilation, OpenCV thread start) are not charged
-to a scene.
-
-Conventions: docs/conventions.md.
+:func:`evaluate_scenes` reads each scene, runs every method of :data:`METHODS` with the scene's
+search range (``"mrstereo"``: the ``"robust"`` preset; ``"mrstereo-paper"``: NSSD + WTA as eq. 9-10;
+the OpenCV baselines), scores and times it. Each method first runs once on a 64-row strip, so
+one-off costs (numba compilation, OpenCV threads) are not charged to a scene. User guide:
+docs/evaluation.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -41,10 +29,7 @@ METHODS = ("mrstereo", "mrstereo-paper", "StereoBM", "StereoSGBM")
 
 def _mrstereo(preset: str) -> Callable[..., np.ndarray]:
     def run(left, right, *, max_disparity_px):
-        try:
-            from ..matching import compute_disparity
-        except ImportError as exc:  # the matcher is another stage; say what is missing
-            raise RuntimeError(f"method mrstereo needs mrstereo.matching.compute_disparity: {exc}") from exc
+        from ..matching import compute_disparity
         return compute_disparity(left, right, max_disparity_px=max_disparity_px, preset=preset).disparity_px
     return run
 
@@ -101,15 +86,8 @@ def _nan_to_none(obj):
 
 @dataclass(frozen=True)
 class EvaluationReport:
-    """All rows of an evaluation, with markdown and JSON views.
-
-    Attributes
-    ----------
-    rows : tuple of EvaluationRow
-        Scene-major order (all methods of the first scene, then the next scene).
-    methods : tuple of str
-    scenes : tuple of str
-        Scene labels in the order evaluated.
+    """All rows of an evaluation (scene-major: all methods of the first scene, then the next), with
+    the ``methods`` and ``scenes`` in the order evaluated, and markdown and JSON views.
     """
 
     rows: tuple[EvaluationRow, ...]
@@ -249,8 +227,8 @@ def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_dis
     Parameters
     ----------
     dirs : iterable of str or Path
-        Scene directories in any layout :func:`~mrstereo.evaluation.datasets.load_scene` reads; an
-        mrstereo dataset (``manifest.yaml``) contributes every frame with ground-truth disparity.
+        Scene directories :func:`~mrstereo.evaluation.datasets.load_scenes` reads (an mrstereo
+        dataset contributes every frame with ground-truth disparity).
     methods : sequence of str
         Some of :data:`METHODS`.
     max_disparity_px : int, optional
@@ -258,9 +236,8 @@ def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_dis
     progress : bool
         Show a tqdm progress bar on stderr.
     workers, scheduler, processes :
-        Spread the (scene, method) runs over ``workers`` worker threads (or a local Dask cluster of
-        processes with ``processes=True``) or an existing cluster (:func:`mrstereo.pipeline.parallel.map_ordered`); default in this process. Per-run
-        times on workers include each worker's first numba compilation.
+        Spread the (scene, method) runs as :func:`mrstereo.pipeline.parallel.map_ordered` does;
+        per-run times on workers include each worker's first numba compilation.
 
     Returns
     -------

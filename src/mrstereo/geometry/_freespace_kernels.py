@@ -1,6 +1,6 @@
 """Numba kernel of the free-space boundary (no validation, preallocated outputs).
 
-Conventions: docs/conventions.md; the rules are documented in :mod:`mrstereo.geometry.freespace`.
+Conventions: docs/conventions.md; the rules: docs/mapping.md (Free-space boundary).
 """
 from __future__ import annotations
 

@@ -96,17 +96,12 @@ def obstacle_points(disparity, doffs_px, too_near, near_limit_px, bf, focal_px, 
                     points, pixels, obstacle_points, floor_points, obstacle, floor):
     """Triangulation (eq. 14-16), robot transform and height band in one pass over the valid pixels.
 
-    Per pixel with ``d + doffs > 0`` (a ``too_near`` pixel has the disparity ``near_limit_px``)
-    and a finite point, the robot point :func:`_point_robot` goes to ``points`` and its flat pixel index to
-    ``pixels`` (raster order, sized by :func:`count_points`); it is an obstacle when
-    ``hypot(x, y) <= max_range and min_height < z <= max_height`` and floor when
-    ``hypot(x, y) <= max_range and |z| <= floor_tolerance``, not an obstacle and not too near.
-    Obstacle and floor points are also copied to ``obstacle_points`` / ``floor_points``
-    (raster order) and marked in the (H, W) masks ``obstacle`` / ``floor`` (zeroed here).
-    ``too_near`` is an (H, W) bool mask, or (0, 0) for none.
-
-    Returns ``(n_points, n_obstacle, n_floor, n_floor_band, n_obstacle_too_near)``;
-    ``n_floor_band`` counts the floor band before obstacles and too-near pixels are removed.
+    Each pixel with ``d + doffs > 0`` (a ``too_near`` pixel at ``near_limit_px``; ``too_near`` (H, W)
+    or (0, 0)) and a finite point goes to ``points`` and its flat index to ``pixels`` (raster
+    order); within ``max_range`` it is an obstacle for ``min_height < z <= max_height``, else floor
+    for ``|z| <= floor_tolerance`` unless too near, copied to ``obstacle_points`` / ``floor_points``
+    and marked in the masks. Returns ``(n_points, n_obstacle, n_floor, n_floor_band,
+    n_obstacle_too_near)``, ``n_floor_band`` counted before obstacles and too-near pixels are removed.
     """
     h, w = disparity.shape
     has_near = too_near.shape[0] > 0

@@ -1,64 +1,12 @@
 """Free-space boundary: where the floor ends in each image column (beyond the paper).
 
-Stereo cannot match a wall without texture, and the line where such a wall meets the floor
-is, seen face on, a horizontal edge: it carries no disparity either. The wall is then missing
-from the map although the image shows it plainly. The floor, seen from a known (or estimated)
-plane, does: in each column of the rectified left image the floor runs up from the bottom of
-the image to where something that is not floor begins (the idea of ground-boundary obstacle
-detection and of the stixel world's free space, Badino et al. 2009). The floor point of that
-row is the base of an obstacle at that range: an occupied cell, and a ray that clears only up
-to it.
-
-Rules (per column, scanning up from the bottom row; numba kernel
-``_freespace_kernels.column_boundaries``; docs/mapping.md "Free-space boundary"):
-
-* **the floor is measured**: the frame needs at least ``min_floor_pixels`` measured floor
-  pixels (no boundary otherwise: a view that shows no floor says nothing about where it ends);
-* **the floor's look**: the gray levels of the image's bottom ``2 persist_rows`` rows (measured
-  obstacles left out), 5th-95th percentile widened by ``appearance_threshold``. A patterned
-  floor (their interquartile range above ``pattern_threshold``: chequered, striped) cannot be
-  followed by its look: there a boundary needs measured floor within ``gap_rows`` rows below it;
-* **start on the floor**: the bottom ``persist_rows`` rows of the column hold no measured
-  obstacle and their mean lies in the floor's look; it starts the column's floor appearance
-  ``mu``, which follows the rows accepted as floor with the rate ``adapt`` -- a lamp's slow
-  gradient is followed, a step is not;
-* **follow the floor without a break**: a row is floor when it is measured floor or lies within
-  ``appearance_threshold`` of ``mu``; ``persist_rows`` rows in a row that are neither, or of
-  texture the matcher did not measure (local standard deviation of the smoothed image above
-  ``texture_threshold``), end the column without a boundary: something unmeasured stands there;
-* **no gap under the edge**: an edge whose nearest measured floor pixel below lies more than
-  ``gap_rows`` but at most ``check_rows`` rows lower is not a base (the top of a skirting board
-  that looks like the floor: the floor is measured up to the board's foot, not to the edge);
-* **stop where stereo sees**: two measured obstacle pixels on top of each other end the scan
-  (the matcher measured what stands there); the scan also ends where the floor lies beyond
-  ``max_range_m`` (4 m in the pipeline);
-* **a boundary is an edge**: the mean of ``edge_rows`` rows above minus the mean of those below
-  steps by at least ``edge_threshold`` gray levels (a local maximum along the column), at a
-  floor range of at least ``min_range_m``;
-* **above it the appearance changes and stays changed**: at least 3/4 of the
-  ``persist_rows`` rows above differ from ``mu`` by more than ``appearance_threshold`` (a grout
-  line or a thin stripe is one or two rows; the floor beyond it looks like the floor again);
-* **no floor above it, nothing behind it**: no measured floor pixel in the ``check_rows`` rows
-  above (in the column and its two neighbours) -- a floor marking has floor above it, a
-  chequered floor is measured on its square edges -- and no measured point there whose range
-  differs from the base's by more than ``far_margin_m`` (farther: the edge is the top of a low
-  object or a marking with the far floor above it; nearer: the edge lies on an object's face);
-* **a run of columns**: a boundary is kept only in runs of at least ``min_run_columns``
-  neighbouring columns whose rows differ by at most ``max_row_step`` (a wall base is a line in
-  the image; an isolated column is noise).
-
-The base point is measured where possible: the mean of the obstacle points in the
-``check_rows`` rows above the edge (within ``far_margin_m`` of its range), else the measured floor
-point just below the edge (within ``gap_rows``), else the floor point of the edge's row.
-Sizes in rows and columns are given for a 240-row (320-column) image and scale with the image;
-an image of at least twice that size is first reduced by an integer factor (gray levels averaged
-over the block, a block measured floor / obstacle when any of its pixels is, disparities sampled),
-so the cost stays that of about 320x240 and the rules see the same sizes.
-The obstacle stands from the base up to the highest row above it before measured floor or a
-point farther than the base: it is returned as points on the vertical line over the base, every
-``point_spacing_m`` from ``min_height_m`` up (at most ``max_height_m``), so that the occupancy
-grid's per-cell support and height-aware occlusion treat it like a measured surface.
-
+A wall without texture has no disparity, nor has its face-on edge with the floor; the floor can
+be followed instead, up each column of the rectified left image to where something that is not
+floor begins (the free space of the stixel world, Badino et al. 2009). That base becomes
+obstacle points on the vertical line over it, which the occupancy grid treats like a measured
+surface. The rules (one :class:`FreeSpaceConfig` field each, applied by the numba kernel
+``_freespace_kernels.column_boundaries``): docs/mapping.md, "Free-space boundary". Sizes are for
+a 320x240 image; a larger one is first reduced by an integer factor (:func:`_reduced`).
 Conventions: docs/conventions.md.
 
 References
@@ -85,41 +33,16 @@ __all__ = ["FreeSpaceConfig", "FreeSpaceBoundary", "free_space_boundary"]
 
 @dataclass(frozen=True)
 class FreeSpaceConfig:
-    """Options of :func:`free_space_boundary` (rules in the module docstring).
+    """Options of :func:`free_space_boundary`; each rule: docs/mapping.md, "Free-space boundary".
 
-    Attributes
-    ----------
-    edge_threshold : float
-        Step of the mean gray level across the boundary (0-255 scale).
-    appearance_threshold : float
-        Difference from the floor's appearance that counts as "not floor" (0-255 scale).
-    edge_rows, persist_rows, check_rows : int
-        Rows (at 240 rows) of the edge means, of the changed appearance above the edge, and
-        of the check for floor or farther points above it.
-    min_run_columns : int
-        Shortest run of neighbouring boundary columns kept (at 320 columns).
-    max_row_step : int
-        Largest row difference between neighbouring columns of a run (at 240 rows).
-    adapt : float
-        Rate at which the floor's appearance follows the rows accepted as floor.
-    smooth_sigma_px : float
-        Gaussian smoothing of the image before the tests (at 240 rows).
-    far_margin_m : float
-        A measured point above the edge farther than the base by more than this vetoes it.
-    min_range_m, max_range_m : float
-        Floor ranges (horizontal, robot frame) where a boundary may lie; ``max_range_m`` None:
-        the obstacle config's range.
-    point_spacing_m : float
-        Vertical spacing of the points returned for each boundary column.
-    gap_rows : int
-        Measured floor this close below an edge (rows at 240) supports it.
-    texture_threshold : float
-        Local standard deviation (smoothed image, 0-255 scale) above which an unmeasured pixel
-        is texture the matcher did not measure.
-    min_floor_pixels : int
-        Measured floor pixels a frame needs for its floor's look.
-    pattern_threshold : float
-        Interquartile range of the floor's gray levels above which the floor is patterned.
+    Gray levels on the 0-255 scale, rows and columns at 320x240: the boundary's gray step
+    (``edge_threshold``) and change of floor appearance (``appearance_threshold``) over
+    ``edge_rows`` / ``persist_rows``, the check for floor or farther points above it
+    (``check_rows``, ``far_margin_m``, ``gap_rows``), runs of ``min_run_columns`` columns with steps
+    of at most ``max_row_step``, the floor's appearance model (``adapt``, ``min_floor_pixels``,
+    ``pattern_threshold``), unmeasured texture (``texture_threshold``), smoothing
+    (``smooth_sigma_px``), the floor ranges of a boundary (``min_range_m``, ``max_range_m``; None:
+    the obstacle config's) and the spacing of the returned points (``point_spacing_m``).
     """
 
     edge_threshold: float = 6.0
@@ -169,19 +92,10 @@ class FreeSpaceConfig:
 class FreeSpaceBoundary:
     """Output of :func:`free_space_boundary`.
 
-    Attributes
-    ----------
-    base_row : ndarray of shape (W,), float64
-        Per column the image row of the obstacle base (the edge between two rows: ``v - 0.5``),
-        NaN where the column has no kept boundary.
-    top_row : ndarray of shape (W,), float64
-        The highest row of the obstacle's evidence above the base (NaN as ``base_row``).
-    base_points_robot : ndarray of shape (K, 3), float64
-        The floor point of each kept column's base (``z = 0``), robot frame, column order.
-    points_robot : ndarray of shape (N, 3), float64
-        Obstacle points on the vertical lines over the bases (module docstring), robot frame.
-    columns : ndarray of shape (K,), int64
-        The image column of each base point.
+    ``base_row`` (W,): per column the row of the obstacle base (the edge between two rows, ``v -
+    0.5``), NaN without a kept boundary; ``top_row`` the highest row of its evidence;
+    ``base_points_robot`` (K, 3) the floor point of each kept column's base and ``columns`` (K,) its
+    column; ``points_robot`` (N, 3) the obstacle points over the bases (robot frame).
     """
 
     base_row: np.ndarray
@@ -212,16 +126,12 @@ def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, ster
     Parameters
     ----------
     left_rect : ndarray of shape (H, W) or (H, W, 3)
-        The rectified left image.
     obstacles : ObstacleResult
-        The frame's floor / obstacle split (:func:`mrstereo.geometry.obstacles.detect_obstacles`):
-        its masks, floor and transform.
+        The frame's floor / obstacle split (its masks, floor and transform).
     disparity_px : ndarray of shape (H, W)
         The disparity the obstacles were computed from (NaN invalid).
     stereo : StereoCamera
-        The calibration (rectified intrinsics).
     config : FreeSpaceConfig
-        The rules' thresholds (module docstring).
     max_range_m : float
         Farthest floor range of a boundary when ``config.max_range_m`` is None.
     min_height_m, max_height_m : float
@@ -231,12 +141,9 @@ def free_space_boundary(left_rect, obstacles: ObstacleResult, disparity_px, ster
     -------
     FreeSpaceBoundary
     """
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
-    if not isinstance(obstacles, ObstacleResult):
-        raise TypeError(f"obstacles must be an ObstacleResult, got {type(obstacles).__name__}")
-    if not isinstance(config, FreeSpaceConfig):
-        raise TypeError(f"config must be a FreeSpaceConfig, got {type(config).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
+    _checks.instance("obstacles", obstacles, ObstacleResult)
+    _checks.instance("config", config, FreeSpaceConfig)
     _checks.image("left_rect", left_rect)
     d = _disparity_image(disparity_px)
     h, w = obstacles.obstacle_mask.shape

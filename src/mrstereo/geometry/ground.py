@@ -1,28 +1,12 @@
-"""Ground plane of the floor seen by the stereo head: V-disparity and 3D RANSAC.
+"""The floor seen by the stereo head, from the disparity itself: V-disparity and 3D RANSAC.
 
-Beyond the paper, which assumes the mount of the camera is known: the floor is
-found in the disparity itself, so that obstacles can be separated from the
-floor when the camera height and tilt are not known exactly.
-
-Floor geometry (camera frame x right, y down, z forward; no roll). A camera at
-height ``h`` tilted down by ``theta`` sees the floor as the plane
-``n . P = h`` with the downward normal ``n = (0, cos theta, sin theta)``.
-With eq. (14)-(16) (``Z = b f / d``, ``Y = (v - cy) Z / f_y``) every floor
-pixel obeys
-
-    d(v) = a (v - cy) + c,   a = b f cos(theta) / (h f_y),   c = b f sin(theta) / h
-
-i.e. a straight line in the row-by-disparity histogram, the "V-disparity"
-image of Labayrade et al. (2002); obstacles (fronto-parallel surfaces) are
-vertical segments standing on it, the ceiling a line of negative slope. From
-the line: ``tan(theta) = c / (a f_y)`` and ``h = b f cos(theta) / (a f_y)``.
-
-A 3D plane fit (:func:`fit_ground_plane`) also recovers the roll about the
-optical axis: ``n = (sin(roll) cos(tilt), cos(roll) cos(tilt), sin(tilt))``, i.e.
-the camera frame is rolled by ``roll`` about its z axis before the tilt of
-:func:`mrstereo.transforms.T_robot_from_cam`.
-
-Conventions: docs/conventions.md.
+Beyond the paper, which assumes a known mount. With eq. (14)-(16) a camera at height ``h``
+tilted down by ``theta`` sees the floor as the line ``d(v) = a (v - cy) + c``, ``a = b f
+cos(theta) / (h f_y)``, ``c = b f sin(theta) / h``, of the row-by-disparity histogram (the
+"V-disparity" of Labayrade et al.), on which obstacles stand as vertical segments; hence
+``tan(theta) = c / (a f_y)``, ``h = b f cos(theta) / (a f_y)``. A 3D plane fit also recovers the
+roll: ``n = (sin(roll) cos(tilt), cos(roll) cos(tilt), sin(tilt))``. User guide:
+docs/obstacles.md. Conventions: docs/conventions.md.
 
 References
 ----------
@@ -39,13 +23,7 @@ import numpy as np
 
 from .. import _checks
 from ..camera import CameraMount, StereoCamera
-from ..transforms import T_robot_from_cam
-
-# Below / above these a floor fit is reported as weak: a floor in view supports at least this share of the
-# valid points within a few centimetres, a scene without one (a wall, a desk) a few percent
-# (docs/obstacles.md, "Floor confidence", has the measurements).
-MIN_FLOOR_SHARE = 0.12
-MAX_FLOOR_RESIDUAL_M = 0.03
+from ..transforms import T_from_R_t, T_robot_from_cam
 from .triangulation import points_cam_from_disparity
 
 __all__ = [
@@ -53,6 +31,18 @@ __all__ = [
     "fit_ground_v_disparity", "fit_ground_plane",
     "estimate_ground", "T_robot_from_cam_ground", "height_above_ground_m", "FLOOR_FIT_RANGE_M",
 ]
+
+# Below / above these a floor fit is weak: a floor in view supports at least this share of the valid
+# points within a few centimetres, a scene without one (a wall, a desk) a few percent (docs/obstacles.md,
+# Floor confidence).
+MIN_FLOOR_SHARE = 0.12
+MAX_FLOOR_RESIDUAL_M = 0.03
+# RANSAC of both fits: valid points used at most, the score's penalty per point beyond the floor
+# (below a plane, farther than a line under its horizon); the plane fit's inlier distance and roll
+_MAX_SAMPLES = 20000
+_BELOW_PENALTY = 1.0
+_PLANE_THRESHOLD_M = 0.03
+_MAX_ROLL_RAD = 0.35
 
 
 FLOOR_FIT_RANGE_M = 6.0
@@ -63,34 +53,12 @@ FLOOR_FIT_RANGE_M = 6.0
 class GroundPlane:
     """The floor in the left camera frame: ``normal_cam . P = height_m``.
 
-    Attributes
-    ----------
-    height_m : float
-        Height of the left camera's optical centre above the floor.
-    tilt_rad : float
-        Downward tilt of the optical axis (positive = looking down).
-    roll_rad : float
-        Roll about the optical axis (0 for a V-disparity fit).
-    success : bool
-        False when no plausible floor was found (then the other fields are NaN).
-    message : str
-        What was fitted or why it failed.
-    method : str
-        ``"mount"`` (a given mount), ``"v_disparity"`` or ``"plane"``.
-    n_inliers : int
-        Pixels / points supporting the fit (0 for ``"mount"``).
-    line_px : (float, float)
-        V-disparity line ``d = a (v - cy) + c`` as ``(a, c)`` (NaN if not fitted).
-    inlier_share : float
-        Confidence of a fit: the share of the valid pixels / points (within the
-        fit's range) that support the floor, 0..1 (NaN for a given mount).
-    residual_m : float
-        Confidence of a fit: RMS distance of the supporting points to the
-        floor [m] (NaN for a given mount).
-    T_base_from_cam : tuple of 16 floats, optional
-        Row-major 4x4 pose of the rectified left camera in the base frame when the
-        floor comes from a mount (:func:`ground_from_mount`); it then replaces the
-        height / tilt / roll parametrization in :func:`T_robot_from_cam_ground`.
+    ``height_m`` of the optical centre, downward ``tilt_rad``, ``roll_rad`` about the optical axis;
+    ``success`` False (fields NaN) when no plausible floor was found, ``message`` why; ``method``
+    ``"mount"``, ``"v_disparity"`` or ``"plane"``; ``n_inliers``; ``line_px`` the V-disparity line
+    ``(a, c)``; the fit's confidence, ``inlier_share`` (0..1) and RMS ``residual_m`` (NaN for a
+    mount); ``T_base_from_cam`` (row-major 4x4) when the floor comes from a mount, which then
+    replaces height / tilt / roll in :func:`T_robot_from_cam_ground`.
     """
 
     height_m: float
@@ -140,14 +108,11 @@ class GroundPlane:
 
 
 def ground_from_mount(mount: CameraMount, *, R_rect_from_cam=None) -> GroundPlane:
-    """The floor (base ``z = 0``) seen from a camera mount, in the rectified left frame; keeps its transform.
-
-    The mount is the pose of the physical (raw) left camera; points are triangulated in the
-    rectified left frame, turned by ``R_rect_from_cam`` (camera_info ``R`` of the left camera,
-    default identity): ``T_base_from_rect = T_base_from_cam @ R^T``.
+    """The floor (base ``z = 0``) of a camera mount in the rectified left frame (``T_base_from_rect =
+    T_base_from_cam @ R^T`` with the left camera_info ``R_rect_from_cam``, default identity); keeps
+    the transform.
     """
-    if not isinstance(mount, CameraMount):
-        raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
+    _checks.instance("mount", mount, CameraMount)
     T = mount.T_base_from_rectified(R_rect_from_cam)
     n = -T[2, :3]                       # the base's down axis in the camera frame
     return GroundPlane(height_m=float(T[2, 3]), tilt_rad=math.asin(float(np.clip(n[2], -1.0, 1.0))),
@@ -171,16 +136,13 @@ def T_robot_from_cam_ground(ground: GroundPlane, *, pan_rad: float = 0.0) -> np.
     ``T_robot_from_cam(height_m, tilt_rad, pan_rad) @ Rz_cam(roll_rad)``; the
     floor maps to the robot plane ``z = 0``.
     """
-    if not isinstance(ground, GroundPlane):
-        raise TypeError(f"ground must be a GroundPlane, got {type(ground).__name__}")
+    _checks.instance("ground", ground, GroundPlane)
     if not ground.success:
         raise ValueError(f"ground plane was not found: {ground.message}")
     if ground.T_base_from_cam is not None:
         return CameraMount(np.reshape(ground.T_base_from_cam, (4, 4))).T_base_from_rectified(pan_rad=pan_rad)
     T = T_robot_from_cam(height_m=ground.height_m, tilt_rad=ground.tilt_rad, pan_rad=pan_rad)
-    roll = np.eye(4)
-    roll[:3, :3] = _rotation_roll_cam(ground.roll_rad)
-    return T @ roll
+    return T @ T_from_R_t(_rotation_roll_cam(ground.roll_rad), np.zeros(3))
 
 
 def height_above_ground_m(points_cam, ground: GroundPlane) -> np.ndarray:
@@ -191,21 +153,9 @@ def height_above_ground_m(points_cam, ground: GroundPlane) -> np.ndarray:
 
 def v_disparity(disparity_px, *, max_disparity_px: float | None = None,
                 bin_px: float = 1.0) -> np.ndarray:
-    """Row-by-disparity histogram (Labayrade et al. 2002).
-
-    Parameters
-    ----------
-    disparity_px : ndarray of shape (H, W)
-        Disparity, NaN invalid.
-    max_disparity_px : float, optional
-        Upper edge of the last bin (default: the largest valid disparity).
-    bin_px : float
-        Bin width; bin ``k`` covers ``[k bin_px, (k + 1) bin_px)``.
-
-    Returns
-    -------
-    ndarray of shape (H, n_bins), int32
-        ``hist[v, k]`` = number of pixels of row ``v`` with disparity in bin ``k``.
+    """Row-by-disparity histogram (Labayrade et al. 2002): ``hist[v, k]`` (H, n_bins) int32 counts the
+    pixels of row ``v`` with disparity in ``[k bin_px, (k + 1) bin_px)``, up to ``max_disparity_px``
+    (default: the largest valid disparity).
     """
     d = np.asarray(disparity_px, dtype=np.float64)
     if d.ndim != 2:
@@ -260,44 +210,27 @@ def _refine_line(a: float, c: float, v, dd, tol: float, *, bf: float, fy: float,
 
 def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: float = 1.0,
                            height_range_m: tuple[float, float] = (0.1, 2.0),
-                           tilt_range_rad: tuple[float, float] = (-0.35, 1.2), below_penalty: float = 1.0,
-                           iterations: int = 500, min_inliers: int = 200, max_samples: int = 20000,
-                           rng=0) -> GroundPlane:
+                           tilt_range_rad: tuple[float, float] = (-0.35, 1.2), iterations: int = 500,
+                           min_inliers: int = 200, rng=0) -> GroundPlane:
     """Fit the floor line ``d = a (v - cy) + c`` of the V-disparity by RANSAC + least squares.
 
-    RANSAC draws pairs of valid pixels, keeps lines with a positive slope (the
-    floor's disparity grows toward the bottom of the image; the ceiling's
-    shrinks) whose implied camera height and tilt lie in ``height_range_m`` and
-    ``tilt_range_rad`` (this excludes the nearly vertical V-disparity segments
-    of walls facing the camera), and scores the number of pixels within
-    ``tolerance_px`` of the line; the best line is refined by least squares on
-    its inliers (Labayrade et al. use a Hough transform of the histogram; RANSAC on
-    the pixels is the same fit without choosing accumulator bins).
+    RANSAC (Labayrade et al. use a Hough transform) draws pairs of at most ``_MAX_SAMPLES`` valid
+    pixels, keeps lines with a positive slope and a plausible height and tilt, scores them by the
+    pixels within ``tolerance_px`` minus those farther than the line under its horizon (every true
+    surface stands on the floor, so a line through the end wall scores low) and refines the best.
 
     Parameters
     ----------
     disparity_px : ndarray of shape (H, W)
-        Disparity of the rectified left image, NaN invalid.
     stereo : StereoCamera
-        Supplies ``f``, ``f_y``, ``cy``, baseline and ``doffs``.
     tolerance_px : float
         Inlier band around the line (pixels of disparity).
     height_range_m, tilt_range_rad : (float, float)
         Plausible camera height above the floor and downward tilt.
-    below_penalty : float
-        Score of a line = inliers - ``below_penalty`` x pixels farther than the
-        line under its horizon. Every true surface seen below the horizon is
-        nearer than the floor on its ray (it stands on the floor), so a line
-        through a wall at the end of the corridor, which leaves the real floor
-        "below" it, scores low.
     iterations : int
-        RANSAC hypotheses.
     min_inliers : int
-        Fewer inliers than this is a failure (``success=False``).
-    max_samples : int
-        Valid pixels are subsampled to at most this many.
+        Fewer inliers is a failure (``success=False``).
     rng : numpy.random.Generator, int or None
-        Randomness of RANSAC (deterministic for a fixed seed).
 
     Returns
     -------
@@ -307,8 +240,7 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
     d = np.asarray(disparity_px, dtype=np.float64)
     if d.ndim != 2:
         raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
     tol = _checks.finite_number("tolerance_px", tolerance_px, positive=True)
     iterations = _checks.positive_int("iterations", iterations)
     min_inliers = _checks.positive_int("min_inliers", min_inliers)
@@ -318,7 +250,7 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
     v_all, _ = np.nonzero(valid)
     if v_all.size < max(min_inliers, 2):
         return _failed("v_disparity", f"only {v_all.size} valid disparities", v_all.size)
-    pick = _subsample(v_all.size, _checks.positive_int("max_samples", max_samples, minimum=2), rng)
+    pick = _subsample(v_all.size, _MAX_SAMPLES, rng)
     v = v_all[pick].astype(np.float64) - stereo.cy_px
     dd = d[valid][pick]
     i = rng.integers(0, v.size, size=(iterations, 2))
@@ -337,7 +269,7 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
     if not ok.any():
         return _failed("v_disparity", "no line with a floor-like slope (positive, plausible height and tilt)", 0)
     a, c = a[ok], c[ok]
-    best = int(np.argmax(_line_scores(a, c, v, dd, tol, below_penalty)))
+    best = int(np.argmax(_line_scores(a, c, v, dd, tol, _BELOW_PENALTY)))
     a_best, c_best = _refine_line(a[best], c[best], v, dd, tol, bf=stereo.baseline_m * fx, fy=fy,
                                   height_range_m=(h_lo, h_hi), tilt_range_rad=(t_lo, t_hi))
     inl = np.abs(dd - (a_best * v + c_best)) <= tol
@@ -354,36 +286,23 @@ def fit_ground_v_disparity(disparity_px, stereo: StereoCamera, *, tolerance_px: 
                        inlier_share=float(inl.mean()), residual_m=float(np.sqrt(np.mean(off ** 2))))
 
 
-def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
-                     height_range_m: tuple[float, float] = (0.1, 2.0),
-                     tilt_range_rad: tuple[float, float] = (-0.35, 1.2), max_roll_rad: float = 0.35,
-                     below_penalty: float = 1.0, max_range_m: float = FLOOR_FIT_RANGE_M, iterations: int = 1500,
-                     min_inliers: int = 200, max_samples: int = 20000, rng=0) -> GroundPlane:
+def fit_ground_plane(points_cam, *, height_range_m: tuple[float, float] = (0.1, 2.0),
+                     tilt_range_rad: tuple[float, float] = (-0.35, 1.2), max_range_m: float = FLOOR_FIT_RANGE_M,
+                     iterations: int = 1500, min_inliers: int = 200, rng=0) -> GroundPlane:
     """Fit the floor plane to camera-frame points by RANSAC (3 points) + least squares.
 
-    Only planes below the camera with a plausible height, tilt and roll are
-    considered (this excludes walls and the ceiling); the three points of a
-    hypothesis are drawn among the points below the optical centre
-    (camera ``y > 0``), where the floor is. Hypotheses are scored on at most
-    4000 points, the winner is refined on all. Recovers height, tilt and roll.
+    Only planes below the camera with a plausible height, tilt and roll (``_MAX_ROLL_RAD``) count (not walls or
+    the ceiling); hypotheses are drawn among the points below the optical centre, scored on at most
+    4000 points (inliers within ``_PLANE_THRESHOLD_M``) and the winner refined on all.
 
     Parameters
     ----------
     points_cam : ndarray of shape (N, 3) or (H, W, 3)
         Camera-frame points; NaN rows are ignored.
-    distance_threshold_m : float
-        Inlier distance to the plane.
     height_range_m, tilt_range_rad : (float, float)
-        Plausible camera height above the floor and downward tilt.
-    max_roll_rad : float
-        Largest roll about the optical axis.
-    below_penalty : float
-        Score = inliers - ``below_penalty`` x points beyond the plane (below the
-        floor), as in :func:`fit_ground_v_disparity`.
     max_range_m : float
-        Points farther than this (depth) are not used: their triangulation
-        error exceeds the threshold.
-    iterations, min_inliers, max_samples, rng
+        Farther points (depth) are not used: their triangulation error exceeds the threshold.
+    iterations, min_inliers, rng
         As in :func:`fit_ground_v_disparity`.
 
     Returns
@@ -392,8 +311,7 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
         ``method="plane"``.
     """
     p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
-    thr = _checks.finite_number("distance_threshold_m", distance_threshold_m, positive=True)
-    max_roll = _checks.finite_number("max_roll_rad", max_roll_rad, positive=True)
+    thr, max_roll = _PLANE_THRESHOLD_M, _MAX_ROLL_RAD
     t_lo, t_hi = _checks.ordered_pair("tilt_range_rad", tilt_range_rad)
     max_range = _checks.finite_number("max_range_m", max_range_m, positive=True)
     iterations = _checks.positive_int("iterations", iterations)
@@ -403,7 +321,7 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
     if p.shape[0] < max(min_inliers, 3):
         return _failed("plane", f"only {p.shape[0]} valid points", p.shape[0])
     n_all = p.shape[0]
-    p = p[_subsample(n_all, _checks.positive_int("max_samples", max_samples, minimum=3), rng)]
+    p = p[_subsample(n_all, _MAX_SAMPLES, rng)]
     below_centre = p[p[:, 1] > 0]
     pool = below_centre if below_centre.shape[0] >= max(min_inliers, 3) else p
     tri = pool[rng.integers(0, pool.shape[0], size=(iterations, 3))]
@@ -424,7 +342,7 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
     scores = np.zeros(n.shape[0], dtype=np.float64)
     for start in range(0, n.shape[0], 32):
         res = score_pts @ n[start:start + 32].T - dist[start:start + 32]
-        scores[start:start + 32] = (np.abs(res) <= thr).sum(axis=0) - below_penalty * (res > thr).sum(axis=0)
+        scores[start:start + 32] = (np.abs(res) <= thr).sum(axis=0) - _BELOW_PENALTY * (res > thr).sum(axis=0)
     best = int(np.argmax(scores))
     normal, h = n[best], dist[best]
     for _ in range(3):                                        # total least squares on the inliers
@@ -455,31 +373,24 @@ def fit_ground_plane(points_cam, *, distance_threshold_m: float = 0.03,
 def estimate_ground(disparity_px, stereo: StereoCamera, *, method: str = "v_disparity",
                     prior: CameraMount | GroundPlane | None = None, prior_height_tolerance_m: float = 0.15,
                     prior_tilt_tolerance_rad: float = 0.1, rng=0, **options) -> GroundPlane:
-    """Estimate the floor from a disparity map by ``"v_disparity"`` or ``"plane"``.
+    """Estimate the floor from a disparity map by ``"v_disparity"`` or ``"plane"`` (with roll).
 
     Parameters
     ----------
     disparity_px : ndarray of shape (H, W)
-        Disparity of the rectified left image, NaN invalid.
     stereo : StereoCamera
-        The calibration.
     method : {"v_disparity", "plane"}
-        :func:`fit_ground_v_disparity` or :func:`fit_ground_plane` (with roll).
     prior : CameraMount or GroundPlane, optional
-        A roughly known mount, or the floor it implies: only floors within
-        ``prior_height_tolerance_m`` and ``prior_tilt_tolerance_rad`` of its
-        height and tilt are considered.
+        A roughly known mount (or its floor): only floors within the tolerances of its height and
+        tilt are considered.
     prior_height_tolerance_m, prior_tilt_tolerance_rad : float
-        Half-widths of the height and tilt ranges around ``prior``.
     rng : numpy.random.Generator, int or None
-        RANSAC randomness.
     **options
-        Passed to the fitting function.
+        Passed to :func:`fit_ground_v_disparity` or :func:`fit_ground_plane`.
     """
+    _checks.instance("stereo", stereo, StereoCamera)
     if prior is not None:
         if isinstance(prior, CameraMount):
-            if not isinstance(stereo, StereoCamera):
-                raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
             prior = ground_from_mount(prior, R_rect_from_cam=stereo.left.R)
         if not isinstance(prior, GroundPlane):
             raise TypeError(f"prior must be a CameraMount or a GroundPlane, got {type(prior).__name__}")
@@ -492,8 +403,6 @@ def estimate_ground(disparity_px, stereo: StereoCamera, *, method: str = "v_disp
     if method == "v_disparity":
         return fit_ground_v_disparity(disparity_px, stereo, rng=rng, **options)
     if method == "plane":
-        if not isinstance(stereo, StereoCamera):
-            raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
         pts = points_cam_from_disparity(disparity_px, focal_px=stereo.focal_px, baseline_m=stereo.baseline_m,
                                         cx_px=stereo.cx_px, cy_px=stereo.cy_px,
                                         fy_px=float(stereo.left.P[1, 1]), doffs_px=stereo.doffs_px)

@@ -1,26 +1,10 @@
 """Obstacle and floor points in the robot frame from one disparity map.
 
-Eq. (14)-(16) give camera-frame points (:func:`points_cam_from_disparity`);
-the camera mount's pose (or the fitted floor, :mod:`.ground`) takes them into
-the robot frame (x forward, y left, z up, origin on the floor under the
-camera). A point is
-
-* an **obstacle** point when ``min_obstacle_height_m < z <= max_obstacle_height_m``
-  (above the floor, below the robot's own height, like costmap_2d's
-  min/max obstacle height),
-* a **floor** point when ``|z| <= floor_tolerance_m`` (free-space evidence for
-  the occupancy grid),
-* ignored otherwise (below the floor: a mismatch; above the robot: the ceiling).
-
-**Too near (fail-safe).** A pixel the matcher reports too near (its match lies beyond the
-largest searched disparity, ``DisparityResult.too_near``) has no disparity, but something
-is nearer than the near limit along its ray. It is placed at the near-limit depth along
-its ray (the disparity ``near_limit_px``) and classified by the same height rules: above
-the floor it is an obstacle at the near limit in that direction (a robot stops rather
-than drives on); never floor (no free-space evidence); a ray that meets the floor before
-the near limit (the floor itself nearer than the near limit) lands below the floor and is
-ignored. Rule and limits: docs/obstacles.md.
-
+Eq. (14)-(16) give camera-frame points; the mount (or the fitted floor, :mod:`.ground`) takes them
+into the robot frame. A point is an **obstacle** when ``min_obstacle_height_m < z <=
+max_obstacle_height_m`` (as costmap_2d), **floor** when ``|z| <= floor_tolerance_m``, else
+ignored. A too-near pixel (``DisparityResult.too_near``) is placed at the near-limit depth and
+classified by the same rules, never as floor (fail-safe). User guide: docs/obstacles.md.
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -64,33 +48,14 @@ def mapping_range_m(stereo: StereoCamera, *, disparity_sigma_px: float = 0.25) -
 
 @dataclass(frozen=True)
 class ObstacleConfig:
-    """Options of :func:`detect_obstacles`.
+    """Options of :func:`detect_obstacles` (docs/obstacles.md).
 
-    Attributes
-    ----------
-    min_obstacle_height_m : float
-        Points higher than this above the floor are obstacles.
-    max_obstacle_height_m : float
-        Points higher than this (above the robot) are ignored.
-    floor_tolerance_m : float
-        Points within this of the floor are floor (free space).
-    max_range_m : float
-        Points farther than this (horizontal distance from the robot) are
-        dropped: their depth error (``dZ = Z^2 / (b f) dd``) is too large.
-    ground_method : str
-        ``"v_disparity"`` or ``"plane"``: how the floor is estimated when no
-        mount is given (or ``estimate_ground`` is true).
-    estimate_ground : bool
-        Estimate the floor even when a mount is given (a mount that is only
-        roughly known): the estimate is searched within
-        ``prior_height_tolerance_m`` / ``prior_tilt_tolerance_rad`` of the
-        mount, and the mount is used if the estimate fails.
-    ground_height_range_m : (float, float)
-        Plausible camera heights when no mount is known at all.
-    prior_height_tolerance_m, prior_tilt_tolerance_rad : float
-        Search window around a roughly known mount.
-    seed : int
-        Seed of the ground-plane RANSAC.
+    The obstacle height band (``min_obstacle_height_m``, ``max_obstacle_height_m``), the floor band
+    (``floor_tolerance_m``) and the horizontal range (``max_range_m``: farther depth errors, ``dZ =
+    Z^2 / (b f) dd``, are too large). Without a mount, or with ``estimate_ground`` around a roughly
+    known one (within ``prior_height_tolerance_m`` / ``prior_tilt_tolerance_rad``, falling back to it),
+    the floor is estimated by ``ground_method`` within ``ground_height_range_m``, RANSAC seeded by
+    ``seed``.
     """
 
     min_obstacle_height_m: float = 0.08
@@ -126,27 +91,11 @@ class ObstacleConfig:
 class ObstacleResult:
     """Output of :func:`detect_obstacles`.
 
-    Attributes
-    ----------
-    points_robot : ndarray of shape (N, 3), float64
-        Robot-frame points of the pixels with a disparity (and the too-near placements), raster order.
-    pixels : ndarray of shape (N,), int64
-        Flat index (``v * W + u``) of the pixel of each of ``points_robot``.
-    obstacle_points_robot, floor_points_robot : ndarray of shape (M, 3), float64
-        The obstacle / floor points among them, raster order.
-    obstacle_mask, floor_mask : ndarray of shape (H, W), bool
-        Pixels classified as obstacle / floor (disjoint, within ``max_range_m``).
-    ground : GroundPlane
-        The floor used (given mount or estimate).
-    T_robot_from_cam : ndarray of shape (4, 4)
-        The transform used.
-    success : bool
-        False when no floor was available (then the masks are empty).
-    message : str
-        How the floor was obtained, or why it failed.
-    too_near_mask : ndarray of shape (H, W), bool
-        Too-near pixels placed at the near limit (module docstring); those of them in the
-        obstacle band are in ``obstacle_mask`` too. All False when none were given.
+    ``points_robot`` (N, 3): the robot-frame points of the pixels with a disparity (and the too-near
+    placements), raster order, with their flat pixel indices ``pixels``; ``obstacle_points_robot`` /
+    ``floor_points_robot`` among them and the disjoint (H, W) ``obstacle_mask`` / ``floor_mask``;
+    ``ground`` and ``T_robot_from_cam`` used; ``success`` False (empty masks) without a floor,
+    ``message`` how it was obtained; ``too_near_mask`` the too-near pixels placed at the near limit.
     """
 
     points_robot: np.ndarray
@@ -189,9 +138,12 @@ def _rectified_intrinsics(stereo: StereoCamera) -> dict:
 
 
 def _disparity_image(disparity_px) -> np.ndarray:
+    """``disparity_px`` as a float32 or float64 (H, W) array."""
     d = np.asarray(disparity_px)
     if d.dtype not in (np.float32, np.float64):
         d = d.astype(np.float64)
+    if d.ndim != 2:
+        raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
     return d
 
 
@@ -202,12 +154,9 @@ def points_robot_from_disparity(disparity_px, stereo: StereoCamera, T_robot_from
     the transform is computed per point as :func:`detect_obstacles` does, so its points equal
     these bit for bit.
     """
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
     T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
     d = _disparity_image(disparity_px)
-    if d.ndim != 2:
-        raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
     R, t = _rigid(T)
     out = np.empty(d.shape + (3,), dtype=np.float64)
     _kernels.points_robot_image(d, float(stereo.doffs_px), **_rectified_intrinsics(stereo), R=R, t=t, out=out)
@@ -227,8 +176,7 @@ def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
         reach = {"max_range_m": max(FLOOR_FIT_RANGE_M, config.max_range_m)} if config.ground_method == "plane" else {}
         return estimate_ground(disparity_px, stereo, method=config.ground_method, rng=config.seed,
                                height_range_m=config.ground_height_range_m, **reach)
-    if not isinstance(mount, CameraMount):
-        raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
+    _checks.instance("mount", mount, CameraMount)
     given = ground_from_mount(mount, R_rect_from_cam=stereo.left.R)
     if not config.estimate_ground:
         return given
@@ -251,37 +199,28 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     disparity_px : ndarray of shape (H, W)
         Disparity of the rectified left image (after rejection, eq. 13), NaN invalid.
     stereo : StereoCamera
-        The calibration (rectified ``P``); its ``mount`` is used when ``mount`` is None.
+        The calibration; its ``mount`` is used when ``mount`` is None.
     mount : CameraMount, optional
-        The camera mount. When neither ``mount``, ``ground`` nor ``stereo.mount``
-        is given, the floor is estimated from the disparity (``config.ground_method``).
+        Without ``mount``, ``ground`` or ``stereo.mount`` the floor is estimated from the disparity.
     ground : GroundPlane, optional
-        A floor estimated beforehand (e.g. on the disparity before rejection);
-        takes precedence over ``mount``.
+        A floor estimated beforehand; takes precedence over ``mount``.
     pan_rad : float
         Pan of the stereo head about the robot's z axis (positive left).
     config : ObstacleConfig
-        Height band, floor tolerance, range limit, ground method.
     too_near : ndarray of shape (H, W), bool, optional
-        Pixels nearer than the search covers (``DisparityResult.too_near``): placed at
-        ``near_limit_px`` along their rays, fail-safe (module docstring).
+        ``DisparityResult.too_near``: placed at ``near_limit_px`` along their rays, fail-safe.
     near_limit_px : float, optional
-        The largest searched disparity (``DisparityResult.near_limit_px``); needed with
-        ``too_near``.
+        ``DisparityResult.near_limit_px``; needed with ``too_near``.
 
     Returns
     -------
     ObstacleResult
     """
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
-    if not isinstance(config, ObstacleConfig):
-        raise TypeError(f"config must be an ObstacleConfig, got {type(config).__name__}")
-    if ground is not None and not isinstance(ground, GroundPlane):
-        raise TypeError(f"ground must be a GroundPlane, got {type(ground).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
+    _checks.instance("config", config, ObstacleConfig)
+    if ground is not None:
+        _checks.instance("ground", ground, GroundPlane)
     d = _disparity_image(disparity_px)
-    if d.ndim != 2:
-        raise ValueError(f"disparity_px must have shape (H, W), got {d.shape}")
     if (d.shape[1], d.shape[0]) != tuple(stereo.size):
         raise ValueError(f"disparity_px is {d.shape[1]}x{d.shape[0]} but the calibration is "
                          f"{stereo.size[0]}x{stereo.size[1]}")

@@ -1,20 +1,7 @@
-"""Point clouds as PLY files (binary little-endian), readable by Open3D, MeshLab, CloudCompare.
+"""Point clouds as binary little-endian PLY files (Open3D, MeshLab, CloudCompare read them).
 
-Layout written by :func:`write_ply`::
-
-    ply
-    format binary_little_endian 1.0
-    comment mrstereo point cloud (frame: robot, metres)
-    element vertex N
-    property float x
-    property float y
-    property float z
-    [property uchar intensity]                       (with intensity)
-    [property uchar red / green / blue]             (with colours)
-    end_header
-    N records of 12 (+1 or +3) bytes, packed, little-endian
-
-Non-finite points are dropped. Conventions: docs/conventions.md.
+``x y z`` float32 per vertex, then ``intensity`` or ``red green blue`` uchar; non-finite points
+are dropped. Layout: docs/obstacles.md (PLY). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -46,21 +33,19 @@ class PointCloud:
 
 def write_ply(path: str | os.PathLike, points, *, intensity=None, colors_rgb=None,
               comment: str = "mrstereo point cloud") -> int:
-    """Write a binary little-endian PLY of ``x y z`` float32 (+ intensity or red green blue uchar).
+    """Write a binary little-endian PLY of ``x y z`` float32 (+ intensity or red green blue uchar), atomically.
 
     Parameters
     ----------
     path : path-like
-        Output file (written atomically).
     points : ndarray of shape (N, 3)
-        Points; rows with NaN/inf are dropped (with their attributes).
+        Rows with NaN/inf are dropped with their attributes.
     intensity : ndarray of shape (N,), optional
-        Gray value 0-255 per point (``property uchar intensity``).
+        Gray value 0-255 per point.
     colors_rgb : ndarray of shape (N, 3), optional
-        Colour per point in **RGB** order (PLY's red, green, blue). Convert
-        OpenCV BGR pixels with ``bgr[..., ::-1]``.
+        Colour per point in **RGB** order (OpenCV BGR: ``bgr[..., ::-1]``).
     comment : str
-        A header comment (one line).
+        One header line.
 
     Returns
     -------
@@ -71,29 +56,23 @@ def write_ply(path: str | os.PathLike, points, *, intensity=None, colors_rgb=Non
     if intensity is not None and colors_rgb is not None:
         raise ValueError("give intensity or colors_rgb, not both")
     fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
-    extra = None
+    extra = np.empty((p.shape[0], 0), np.uint8)
     if intensity is not None:
-        extra = _uint8("intensity", intensity, (p.shape[0],))
+        extra = _uint8("intensity", intensity, (p.shape[0],))[:, None]
         fields.append(("intensity", "u1"))
-        props = ["property uchar intensity"]
     elif colors_rgb is not None:
         extra = _uint8("colors_rgb", colors_rgb, (p.shape[0], 3))
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
-        props = ["property uchar red", "property uchar green", "property uchar blue"]
-    else:
-        props = []
     if "\n" in comment:
         raise ValueError("comment must be one line")
     keep = np.isfinite(p).all(axis=1)
     records = np.empty(int(keep.sum()), dtype=np.dtype(fields))
-    records["x"], records["y"], records["z"] = p[keep, 0], p[keep, 1], p[keep, 2]
-    if intensity is not None:
-        records["intensity"] = extra[keep]
-    elif colors_rgb is not None:
-        records["red"], records["green"], records["blue"] = extra[keep, 0], extra[keep, 1], extra[keep, 2]
+    for j, (name, _) in enumerate(fields):
+        records[name] = p[keep, j] if j < 3 else extra[keep, j - 3]
     header = "\n".join(["ply", "format binary_little_endian 1.0", f"comment {comment}",
-                        f"element vertex {records.size}", "property float x", "property float y",
-                        "property float z", *props, "end_header"]) + "\n"
+                        f"element vertex {records.size}",
+                        *(f"property {'float' if kind == '<f4' else 'uchar'} {name}" for name, kind in fields),
+                        "end_header"]) + "\n"
     with atomic_write(path) as tmp, open(tmp, "wb") as fh:
         fh.write(header.encode("ascii"))
         fh.write(records.tobytes())

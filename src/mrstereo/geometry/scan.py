@@ -1,17 +1,9 @@
 """Top view (paper Figs 8b-10b) and a virtual laser scan of the obstacle points.
 
-* :func:`top_view` bins robot-frame points into a 2D histogram laid out like a
-  ``GridSpec`` of the mapping stage (x forward = depth, y lateral): the
-  paper's "top view of the depth-by-column projection".
-* :func:`laser_scan_from_points` keeps, for each bearing, the nearest obstacle
-  in the robot frame, like ROS ``depthimage_to_laserscan`` /
-  ``pointcloud_to_laserscan``: angle 0 straight ahead, positive to the left
-  (REP 103), ``ranges[i]`` at ``angle_min + i * angle_increment``; REP 117 values:
-  ``+inf`` = seen clear to ``range_max``, ``nan`` = no measurement, ``-inf`` = too
-  close. JSON writes those as the strings ``"Infinity"``, ``"NaN"``, ``"-Infinity"``
-  (proto3 JSON mapping), CSV as ``inf``, ``nan``, ``-inf`` (docs/obstacles.md).
-
-Conventions: docs/conventions.md.
+:func:`top_view` bins robot-frame points on a grid laid out like the mapping stage's ``GridSpec``;
+:func:`laser_scan_from_points` keeps the nearest obstacle per bearing, like ROS
+``depthimage_to_laserscan``, with the values of REP 117 (:class:`LaserScan`). Files:
+docs/obstacles.md (Laser scan files). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -61,18 +53,10 @@ def _from_json_float(value, what: str) -> float:
 class LaserScan:
     """A planar scan in the robot frame: the fields of ROS ``sensor_msgs/LaserScan``.
 
-    ``ranges_m[i]`` is the range at ``angle_min_rad + i * angle_increment_rad``
-    (``angle_max_rad`` is the angle of the last ray), with the values of REP 117:
-
-    * a finite range: the nearest obstacle on that bearing;
-    * ``+inf``: the bearing was seen clear up to ``range_max_m`` -- nothing within range;
-    * ``nan``: no measurement on that bearing (nothing seen far enough to tell);
-    * ``-inf``: something nearer than ``range_min_m`` (REP 117's "too close").
-
-    ``intensities`` is empty or one value per ray (the gray level of the image pixel the
-    range came from). ``frame_id``, ``stamp_s``, ``time_increment_s`` and ``scan_time_s``
-    fill the message header and timing fields (a stereo scan is instantaneous:
-    ``time_increment_s = 0``).
+    ``ranges_m[i]`` at ``angle_min_rad + i * angle_increment_rad``, with REP 117's values: a finite
+    range, ``+inf`` seen clear up to ``range_max_m``, ``nan`` no measurement, ``-inf`` nearer than
+    ``range_min_m``. ``intensities`` is empty or one gray level per ray; a stereo scan is
+    instantaneous (``time_increment_s = 0``).
     """
 
     angle_min_rad: float
@@ -98,15 +82,9 @@ class LaserScan:
         return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
 
     def to_dict(self) -> dict:
-        """The message as JSON-ready data (docs/obstacles.md, "Laser scan files").
-
-        Field names are those of ``sensor_msgs/LaserScan`` (ROS 2 header: ``stamp`` with ``sec``
-        and ``nanosec``). JSON has no NaN or infinity, so ``ranges`` and ``intensities`` hold
-        numbers and, for the other values, the strings of the proto3 JSON mapping: ``"NaN"``
-        (no measurement), ``"Infinity"`` (nothing within ``range_max``), ``"-Infinity"`` (too
-        close). ``float(s)`` in Python, ``Number(s)`` in JavaScript and
-        ``np.array(ranges, dtype=float)`` read them back as the true values.
-        """
+        """The message as JSON-ready data: ``sensor_msgs/LaserScan`` field names (ROS 2 header),
+        non-finite values as the proto3 JSON strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"``
+        (``float(s)`` reads them back)."""
         sec = math.floor(self.stamp_s)
         nanosec = min(int(round((self.stamp_s - sec) * 1e9)), 999_999_999)
         return {
@@ -154,8 +132,7 @@ def scan_angles_of_camera(stereo: StereoCamera, *, pan_rad: float = 0.0) -> tupl
     The right image edge (``u = W - 1``) looks to the right (negative angle),
     the left edge (``u = 0``) to the left; the pan turns both.
     """
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
     pan = _checks.finite_number("pan_rad", pan_rad)
     f, cx, w = stereo.focal_px, stereo.cx_px, stereo.size[0]
     return pan - math.atan2(w - 1 - cx, f), pan + math.atan2(cx, f)
@@ -172,36 +149,26 @@ def laser_scan_from_points(points_robot, *, angle_min_rad: float = -math.pi / 4,
     Parameters
     ----------
     points_robot : ndarray of shape (N, 3) or (N, 2)
-        Obstacle points in the robot frame (only x and y are used; the caller
-        selects the height band, e.g. :attr:`ObstacleResult.obstacle_points_robot`).
+        Obstacle points in the robot frame (x and y used; the caller selects the height band).
     angle_min_rad, angle_max_rad : float
         First and last bearing (0 straight ahead, positive left).
     angle_increment_rad : float
-        Bearing step; the last ray is at ``angle_min + (n - 1) * increment <= angle_max``.
     range_min_m, range_max_m : float
         Returns outside ``[range_min, range_max]`` are ignored.
     min_points : int
-        The range of a ray is that of its ``min_points``-th nearest point (1 =
-        the nearest, as ``depthimage_to_laserscan``); a larger value ignores up
-        to ``min_points - 1`` stray points in front of the obstacle, and rays
-        with fewer points report no return.
+        A ray's range is that of its ``min_points``-th nearest point (1: the nearest), ignoring up
+        to ``min_points - 1`` stray points; rays with fewer points report no return.
     intensities : ndarray of shape (N,), optional
-        One value per obstacle point (e.g. its gray level); the scan's intensity of a
-        ray is that of the point its range came from (NaN for rays without a return).
+        One value per point; a ray's intensity is that of its range's point (NaN without return).
     observed_points_robot : ndarray of shape (M, 3) or (M, 2), optional
-        Everything seen in this frame (floor, obstacles, points beyond range). A ray
-        without a return whose farthest seen point is at ``>= range_max_m`` was seen
-        clear to ``range_max``: ``+inf`` (REP 117), else ``nan``. The obstacle points
-        count as seen too.
+        Everything seen in this frame: a ray without return whose farthest seen point is at
+        ``>= range_max_m`` is ``+inf`` (REP 117), else ``nan``.
     frame_id, stamp_s : str, float
         Header of the scan.
 
     Returns
     -------
     LaserScan
-        ``ranges_m``: the range of the return; ``+inf`` where the ray was seen clear to
-        ``range_max``; ``nan`` where no point tells (bin = nearest ray, half an increment
-        each side).
     """
     p = np.asarray(points_robot, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] not in (2, 3):
@@ -281,8 +248,7 @@ def near_limit_range_m(stereo: StereoCamera, T_robot_from_cam, max_disparity_px:
     ``range_min``). Evaluated on a grid of rectified pixels back-projected to depth ``Z`` and
     moved into the robot frame with ``T_robot_from_cam``.
     """
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
     d_max = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
     T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
     depth_m = stereo.focal_px * stereo.baseline_m / d_max
@@ -297,17 +263,10 @@ def near_limit_range_m(stereo: StereoCamera, T_robot_from_cam, max_disparity_px:
 
 def top_view(points_robot, *, x_range_m: tuple[float, float] = (0.0, 8.0),
              y_range_m: tuple[float, float] = (-3.0, 3.0), resolution_m: float = 0.05) -> np.ndarray:
-    """Histogram of points over a robot-frame grid (the paper's top view, Figs 8b-10b).
+    """Histogram (rows, cols) int32 of points over a robot-frame grid (the paper's top view, Figs 8b-10b).
 
-    The cells follow :class:`mrstereo.mapping.grid.GridSpec` (row 0 at the
-    lowest y, column 0 at the lowest x, lower-left corner at
-    ``(x_range_m[0], y_range_m[0])``), so the result can be laid on a map.
-
-    Returns
-    -------
-    ndarray of shape (rows, cols), int32
-        ``counts[row, col]``: row along y (lateral, row 0 = rightmost),
-        column along x (forward / depth).
+    Cells as :class:`mrstereo.mapping.grid.GridSpec` (row 0 at the lowest y, column 0 at the lowest x,
+    lower-left corner at ``(x_range_m[0], y_range_m[0])``), so the result can be laid on a map.
     """
     p = _checks.points3("points_robot", points_robot)
     res = _checks.finite_number("resolution_m", resolution_m, positive=True)

@@ -71,25 +71,17 @@ def points_cam_from_disparity(disparity_px, *, focal_px: float, baseline_m: floa
 def points_cam_from_raw_px(stereo, uv_left, uv_right, *, frame: str = "rectified") -> np.ndarray:
     """Triangulate matching raw (distorted) pixels of a calibrated pair, eq. (14)-(16).
 
-    Each raw pixel is undistorted and rectified through its camera's model
-    (:func:`mrstereo.camera.rectified_px_from_raw_px`, any distortion model),
-    then ``Z = b f / (x_l - x_r + doffs)``, ``X = (x_l - cx) Z / f`` and
-    ``Y = (y - cy) Z / fy`` with ``y`` the mean rectified row of both pixels.
+    Each raw pixel is rectified through its camera's model
+    (:func:`mrstereo.camera.rectified_px_from_raw_px`), then ``Z = b f / (x_l - x_r + doffs)``,
+    ``X = (x_l - cx) Z / f``, ``Y = (y - cy) Z / fy`` with ``y`` the mean rectified row.
 
     Parameters
     ----------
     stereo : StereoCamera
-        The calibration (raw ``K``, ``D``; ``R``; rectified ``P``).
     uv_left, uv_right : ndarray of shape (N, 2)
-        Matching raw pixels ``(u, v)`` of the left and right images.
+        Matching raw pixels ``(u, v)``.
     frame : {"rectified", "raw_left"}
-        Return points in the rectified left camera frame (the frame of
-        :func:`points_cam_from_disparity`) or in the raw left camera frame.
-
-    Returns
-    -------
-    ndarray of shape (N, 3)
-        Metres; NaN where the rectified disparity is not positive.
+        The frame of the points returned (metres; NaN where the rectified disparity is not positive).
     """
     from ..camera import rectified_px_from_raw_px
     if frame not in ("rectified", "raw_left"):

@@ -65,18 +65,13 @@ def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cel
                    flags, ends, n_points, z_range):
     """Flag the end cell of every ray; return the number of points ending outside the grid.
 
-    ``points`` is (N, 2 or 3) in world metres (columns 0, 1 used; rows with NaN skipped);
-    ``(sx, sy)`` is the sensor in grid units. Obstacle ends inside the grid and within
-    ``max_range_cells`` (<= 0: unlimited) get ``HIT``, floor ends ``END_FREE | FLOOR``. A ray
-    whose end lies outside the grid or beyond the range is cut there and its last cell gets
-    ``END_FREE``. ``ends`` (rows, cols, 4) receives, per flagged cell, the grid coordinates of the
-    last ray end that fell in it (the target of the one ray traced to that cell), its clearing
-    margin in cells -- ``margin_per_cell2 * r^2`` for an obstacle end at ``r`` cells from the
-    sensor (the range uncertainty of a stereo point grows with the square of its range; computed
-    once per cell, for the end that stays, rather than per point), 0 otherwise -- and its height
-    z in metres (NaN for 2-column points). ``n_points`` counts the
-    points ending in each cell (not the cut ones); ``z_range`` (rows, cols, 2), initialized to
-    (inf, -inf), gets the lowest and highest obstacle point of each hit cell.
+    Obstacle ends inside the grid and range (``max_range_cells`` <= 0: unlimited) get ``HIT``, floor
+    ends ``END_FREE | FLOOR``; a ray leaving the grid or range is cut and its last cell gets
+    ``END_FREE``. ``ends`` (rows, cols, 4) receives per flagged cell the last end that fell in it (the
+    target of its one ray), its clearing margin (``margin_per_cell2 * r^2`` cells for an obstacle end
+    at ``r`` cells: a stereo point's range error grows with the square of the range) and its height
+    (NaN for 2-column points); ``n_points`` counts the ends per cell and ``z_range`` the lowest and
+    highest obstacle point of each hit cell.
     """
     rows, cols = flags.shape
     has_z = points.shape[1] > 2
@@ -172,19 +167,13 @@ def _sight(z_range, r, c, sz, tz, t_a, t_b, z_tol):
 def _trace(sx, sy, sz, tx, ty, tz, t_cut, t_occ, flags, z_range, z_tol, shadow, z_clear, through, votes, miss):
     """Amanatides-Woo traversal from the sensor ``(sx, sy)`` towards the end ``(tx, ty)`` (grid units).
 
-    The segment is parametrized by ``t`` in [0, 1] (the 3-D sight line from the sensor at height
-    ``sz`` to the end at height ``tz`` has the same parameter). *Solid* cells are those hit in
-    this view (``HIT``) or known occupied (``BLOCK``), other than the end cell. Two uses:
-
-    * ``votes == 0``: marks ``miss`` on every cell inside the grid that the ray enters before
-      ``t_cut`` (> 1: up to and including the end cell); returns True (and stops) when the ray
-      enters, at some ``0 < t < t_occ``, a solid cell whose obstacle points the sight line meets
-      (:func:`_sight`): the end lies behind a seen surface (occluded). With ``shadow``, a ray
-      whose sight line passes below a solid cell's points (an overhang) marks no more misses
-      from that cell on. A cell where the sight line runs higher than ``z_clear`` (metres; inf:
-      no limit) is not marked: an obstacle lower than the line would not have stopped it;
-    * ``votes > 0``: adds ``votes`` to ``through`` of every solid cell met before ``t_occ`` (the
-      end is seen through it) and marks nothing.
+    *Solid* cells are those hit in this view (``HIT``) or known occupied (``BLOCK``), other than the
+    end cell. With ``votes == 0``: marks ``miss`` on the cells entered before ``t_cut`` (> 1: up to the
+    end cell) and returns True when the ray enters, before ``t_occ``, a solid cell whose obstacle
+    points its sight line meets (:func:`_sight`: the end is occluded); with ``shadow`` a sight line
+    passing below a solid cell's points marks no more misses, and cells where it runs higher than
+    ``z_clear`` are not marked. With ``votes > 0``: adds ``votes`` to ``through`` of every solid cell
+    met before ``t_occ`` and marks nothing.
     """
     rows, cols = miss.shape
     t0, t1 = _clip_segment(sx, sy, tx, ty, cols, rows)
@@ -241,11 +230,9 @@ def _trace(sx, sy, sz, tx, ty, tz, t_cut, t_occ, flags, z_range, z_tol, shadow, 
 def drop_seen_through(flags, ends, n_points, z_range, sx, sy, sz, gap_cells, z_tol, ratio, through, miss, dropped):
     """Un-hit the cells through which the floor is seen more than they are seen occupied.
 
-    Every floor end cell votes its number of floor points into ``through`` of each hit cell its
-    sight line meets more than ``gap_cells`` before the end (the floor seen *behind* that cell in
-    the same view); a hit cell with ``through > ratio * n_points`` loses its ``HIT`` flag, becomes
-    a free end (its ray clears it) and is flagged in ``dropped`` (a floating mismatch, e.g. on a
-    repetitive floor). Returns the count.
+    Each floor end votes its points into ``through`` of every hit cell its sight line meets more than
+    ``gap_cells`` before it; a cell with ``through > ratio * n_points`` becomes a free end, flagged in
+    ``dropped`` (a floating mismatch). Returns the count.
     """
     rows, cols = flags.shape
     for r in range(rows):
@@ -272,16 +259,12 @@ def drop_seen_through(flags, ends, n_points, z_range, sx, sy, sz, gap_cells, z_t
 
 @njit(nogil=True, cache=True)
 def cast_rays(flags, ends, z_range, sx, sy, sz, occlusion_gap_cells, z_tol, shadow, z_clear, miss, occluded):
-    """Trace one ray from the sensor to each flagged end cell (deduplicated rays).
+    """Trace one ray from the sensor to each flagged end cell's representative point ``ends[r, c, :2]``.
 
-    The ray goes to the cell's representative end point ``ends[r, c, :2]``, a measured point.
-    An obstacle ray clears the cells it enters before ``margin = ends[r, c, 2]`` cells short of
-    its end; a free ray (floor point, cut ray) clears up to and including its end cell. With
-    ``occlusion_gap_cells >= 0`` a ray whose sight line (from the sensor at height ``sz`` to the
-    end at height ``ends[r, c, 3]``) meets the obstacle points of a cell hit in this view more
-    than ``margin + occlusion_gap_cells`` before its end stops there, and its end cell is
-    flagged in ``occluded`` (the point lies behind a seen surface: a mismatch). Returns the
-    number of occluded ends.
+    An obstacle ray clears up to its margin ``ends[r, c, 2]`` short of its end, a free ray up to and
+    including its end cell. With ``occlusion_gap_cells >= 0`` a ray whose sight line meets the points
+    of a cell hit in this view more than ``margin + occlusion_gap_cells`` before its end stops there
+    and its end is flagged ``occluded``. Returns the number of occluded ends.
     """
     rows, cols = flags.shape
     unused = np.zeros((1, 1))

@@ -10,7 +10,9 @@ import os
 
 import numpy as np
 
+from .. import _checks
 from ..io import atomic_write
+from ..viz.plot import new_figure
 from .rosmap import RosMap
 
 __all__ = ["plot_map"]
@@ -54,30 +56,22 @@ def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fo
         True map; its occupied cells are overlaid in red (the paper's solid lines).
     """
     import matplotlib
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
     from matplotlib.patches import Patch, Wedge
 
     probability, grid = _probability(grid_or_rosmap)
     rows, cols = grid.shape
-    extent = (grid.origin_x_m, grid.origin_x_m + cols * grid.resolution_m,
-              grid.origin_y_m, grid.origin_y_m + rows * grid.resolution_m)
+    extent = grid.extent_m
     width_in = 10.0
     height_in = max(3.0, width_in * rows / cols + 1.0) + 0.8     # + the legend under the map
-    fig = Figure(figsize=(width_in, height_in), dpi=100)
-    FigureCanvasAgg(fig)
+    fig = new_figure(width_in, height_in)
     ax = fig.add_subplot()
     cmap = matplotlib.colormaps["gray"].with_extremes(bad=_UNKNOWN)
     ax.imshow(np.ma.masked_invalid(1.0 - probability), cmap=cmap, vmin=0.0, vmax=1.0,
               origin="lower", extent=extent, interpolation="nearest")
     if ground_truth is not None:
-        if not isinstance(ground_truth, RosMap):
-            raise TypeError(f"ground_truth must be a RosMap, got {type(ground_truth).__name__}")
-        g = ground_truth.grid
-        gt_extent = (g.origin_x_m, g.origin_x_m + g.shape[1] * g.resolution_m,
-                     g.origin_y_m, g.origin_y_m + g.shape[0] * g.resolution_m)
+        _checks.instance("ground_truth", ground_truth, RosMap)
         ax.contour(ground_truth.occupied.astype(float), levels=[0.5], colors="tab:red", linewidths=1.0,
-                   origin="lower", extent=gt_extent)
+                   origin="lower", extent=ground_truth.grid.extent_m)
         ax.plot([], [], color="tab:red", lw=1.0, label="true walls and obstacles")
     for view in fov_views or ():
         if len(view) != 5:

@@ -43,6 +43,13 @@ class GridSpec:
         """``(rows, cols)``: rows along y, columns along x."""
         return (int(round(self.height_m / self.resolution_m)), int(round(self.width_m / self.resolution_m)))
 
+    @property
+    def extent_m(self) -> tuple[float, float, float, float]:
+        """``(x_min, x_max, y_min, y_max)`` of the cells (matplotlib's ``extent``)."""
+        rows, cols = self.shape
+        return (self.origin_x_m, self.origin_x_m + cols * self.resolution_m,
+                self.origin_y_m, self.origin_y_m + rows * self.resolution_m)
+
     def cells_from_xy(self, xy_m) -> tuple[np.ndarray, np.ndarray]:
         """Integer ``(row, col)`` of world points (N, 2); may be outside the grid."""
         xy = np.asarray(xy_m, dtype=np.float64)

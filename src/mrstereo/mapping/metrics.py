@@ -1,10 +1,8 @@
 """Map quality against a ground-truth map: the corridor-profile error of paper Fig. 14.
 
-The paper judges its map by eye: occupied cells (dark dots) against the true corridor walls
-(solid lines). :func:`map_metrics` measures that: how many estimated occupied cells lie on a
-true wall (precision), how much of the true walls was seen (recall), how far the estimated
-occupied cells are from the walls on average (the profile error, metres), and how much of the
-true free space was mapped free. Conventions: docs/conventions.md.
+The paper judges its map by eye against the true corridor walls; :func:`map_metrics` measures
+occupied-cell precision and recall, the profile error (metres) and the free space mapped free.
+Definitions: docs/mapping.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -16,7 +14,7 @@ import numpy as np
 from .. import _checks
 from ..geometry.obstacles import MAPPING_MAX_RANGE_M
 from .grid import dilate_cells, distance_cells
-from .rosmap import RosMap
+from .rosmap import as_ros_map
 
 __all__ = ["MapMetrics", "map_metrics", "cells_near_path", "cells_in_view"]
 
@@ -48,14 +46,6 @@ class MapMetrics:
                 for k, v in asdict(self).items()}
 
 
-def _as_ros_map(name: str, value) -> RosMap:
-    if hasattr(value, "to_ros_map") and not isinstance(value, RosMap):
-        value = value.to_ros_map()
-    if not isinstance(value, RosMap):
-        raise TypeError(f"{name} must be a RosMap or OccupancyGrid, got {type(value).__name__}")
-    return value
-
-
 def cells_near_path(grid, path_xy, *, within_m: float) -> np.ndarray:
     """Bool mask of the cells whose centre is within ``within_m`` of the polyline ``path_xy``."""
     within = _checks.finite_number("within_m", within_m, nonnegative=True)
@@ -79,9 +69,10 @@ def cells_near_path(grid, path_xy, *, within_m: float) -> np.ndarray:
     return distance_cells(on_path) * grid.resolution_m <= within + 1e-9
 
 
-def cells_in_view(ground_truth, views, *, angle_step_rad: float = math.radians(0.25)) -> np.ndarray:
+def cells_in_view(ground_truth, views) -> np.ndarray:
     """Bool mask of the true free cells some view can see: inside its field of view and range, with a
-    clear line of sight through the ground-truth map.
+    clear line of sight through the ground-truth map (sight rays every 0.25 degrees, marched in
+    quarter cells).
 
     Parameters
     ----------
@@ -90,12 +81,10 @@ def cells_in_view(ground_truth, views, *, angle_step_rad: float = math.radians(0
     views : sequence of (x_m, y_m, heading_rad, half_fov_rad, range_m)
         The sensor's world position, viewing direction (robot yaw + head pan), half the horizontal
         field of view and the mapping range (as :func:`mrstereo.pipeline.run.fov_views` gives them).
-    angle_step_rad : float
-        Angular spacing of the sight rays (each ray is marched in quarter-cell steps).
     """
-    gt = _as_ros_map("ground_truth", ground_truth)
+    gt = as_ros_map("ground_truth", ground_truth)
     grid = gt.grid
-    step = _checks.finite_number("angle_step_rad", angle_step_rad, positive=True)
+    step = math.radians(0.25)
     free = gt.free
     rows, cols = grid.shape
     seen = np.zeros(grid.shape, bool)
@@ -142,22 +131,11 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = MAPP
     Returns
     -------
     MapMetrics
-        ``precision`` = correct estimated occupied / estimated occupied; ``recall`` = visible true
-        occupied cells (touching true free space: wall faces, obstacle outlines) with an estimated
-        occupied cell within tolerance / visible true occupied cells;
-        ``mean_distance_m`` = mean Euclidean distance of estimated occupied cells to the nearest
-        true occupied cell; ``free_recall`` = true free cells mapped free / true free cells;
-        ``known_fraction`` = evaluated cells the estimate knows (not unknown);
-        ``free_precision`` = estimated free cells that are truly free / estimated free cells (a
-        cell mapped free on a wall, an obstacle or behind a wall is wrong);
-        ``free_coverage`` = true free cells in view of some frame (:func:`cells_in_view`) mapped
-        free / true free cells in view (NaN without ``views``);
-        ``recall_in_view`` = as ``recall``, over the true occupied surface cells that some frame
-        had in view (touching a true free cell in view: a wall no frame looked at cannot be in
-        the map; NaN without ``views``).
+        Each field's definition: docs/mapping.md, "Metrics against ground truth". Recall counts
+        the true occupied cells touching true free space (wall faces, obstacle outlines).
     """
-    est = _as_ros_map("estimated", estimated)
-    gt = _as_ros_map("ground_truth", ground_truth)
+    est = as_ros_map("estimated", estimated)
+    gt = as_ros_map("ground_truth", ground_truth)
     ge, gg = est.grid, gt.grid
     if ge.shape != gg.shape or not np.allclose(
             [ge.resolution_m, ge.origin_x_m, ge.origin_y_m],
@@ -173,9 +151,7 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = MAPP
 
     est_occ = est.occupied & region
     gt_occ_all = gt.occupied
-    # Recall counts the occupied cells a sensor can see: those touching true free space (the
-    # wall faces and obstacle outlines of the paper's corridor profile), not the inside of a
-    # wall or a box, which no camera observes.
+    # no camera observes the inside of a wall or a box
     surface = gt_occ_all & dilate_cells(gt.free, 1)
     gt_occ = surface & region
     gt_free = gt.free & region

@@ -1,16 +1,9 @@
 """Occupancy grid built along the robot path (paper section 5.2), log-odds or union fusion.
 
-The paper turns the reliable disparity of each view (front, left and right at 45 degrees)
-into obstacle points and accumulates them in a 12 m x 6 m grid; occupied cells give the
-corridor profile of its Fig. 14. The paper's fusion is a plain union of the occupied cells of
-all views. :class:`OccupancyGrid` keeps that as ``fusion="union"`` and adds the standard
-probabilistic fusion of OctoMap: every update casts a ray from the sensor to each point, the
-cells it crosses are observed free (a *miss*), the obstacle's end cell is observed occupied
-(a *hit*), and the log-odds of each cell accumulate with clamping, so that a moved obstacle
-or a stereo ghost is cleared by later views. Unknown (never observed) cells stay NaN.
-
-Conventions (REP 103 world frame, ``[row, col]`` grid with row 0 at min y, ROS map files):
-docs/conventions.md.
+The paper's fusion is the union of the occupied cells of all views (``fusion="union"``); the
+default is OctoMap's: rays from the sensor clear the cells they cross (a *miss*), their end cells
+are hit, and clamped log-odds accumulate, so later views clear a moved obstacle or a stereo ghost.
+Unknown cells stay NaN. User guide: docs/mapping.md; grid conventions: docs/conventions.md.
 
 References
 ----------
@@ -57,85 +50,47 @@ def probability_from_log_odds(log_odds) -> np.ndarray:
 class MappingConfig:
     """Sensor model and fusion of the occupancy grid.
 
-    The defaults are the stereo sensor model of ``mrstereo map`` (docs/mapping.md): a stereo point is
-    not a laser return -- its range error grows with the square of the range and a mismatch can put it
-    anywhere along its pixel's ray -- so the rules below keep such points from drawing obstacles and
-    from clearing space that was never seen (``benchmarks/bench_map.py --variants`` maps with each
-    rule added in turn). OctoMap's plain ray model: ``p_miss=0.4``, ``min_points_per_cell=1`` and the
-    optional rules None / False.
+    The defaults are the stereo sensor model of ``mrstereo map``; each rule, why a stereo point
+    needs it and its measured effect: docs/mapping.md, "The stereo sensor model". OctoMap's plain ray model is
+    ``p_miss=0.4``, ``min_points_per_cell=1`` and the optional rules None / False.
 
     Parameters
     ----------
     p_hit, p_miss : float
-        Probability that a cell is occupied given a hit / a miss (OctoMap: 0.7 / 0.4; a stereo
-        miss, which clears a whole ray, counts for less).
+        Probability that a cell is occupied given a hit / a miss (OctoMap: 0.7 / 0.4).
     p_clamp_min, p_clamp_max : float
-        Log-odds clamping bounds as probabilities (OctoMap: 0.1192 / 0.971); they keep the map
-        able to change when the world changes.
+        Log-odds clamping bounds as probabilities (OctoMap: 0.1192 / 0.971).
     occupied_thresh : float
-        A known cell is occupied when its probability is above this, free otherwise (OctoMap's
-        maximum-likelihood map: 0.5).
+        A known cell is occupied when its probability is above this, free otherwise.
     max_range_m : float or None
-        Points farther than this from the sensor do not mark a hit; their ray clears up to the
-        range (OctoMap's ``maxrange``). None: no limit.
+        Points farther than this from the sensor mark no hit; their ray clears up to the range.
     fusion : {"log_odds", "union"}
-        ``"union"`` is the paper's fusion: a cell once hit stays occupied, misses only mark
-        cells free that were never hit.
+        ``"union"`` is the paper's fusion: a cell once hit stays occupied.
     min_points_per_cell : int
-        A cell is hit only when at least this many obstacle points of one update fall in it
-        (a per-scan support test: a real surface 5 cm wide holds hundreds of stereo points,
-        an isolated mismatch a few); points of weaker cells are dropped from the update.
+        A cell is hit only when at least this many obstacle points of one update fall in it.
     disparity_sigma_px : float or None
-        Disparity uncertainty of the inverse sensor model. A stereo point at range ``r`` is
-        uncertain by ``sigma_r = r^2 sigma_d / (b f)`` (eq. 14 differentiated: 0.25 px is
-        about 1 cm at 1 m and 17 cm at 4 m for b f = 24 m px), so its ray clears only the cells
-        more than ``clear_margin_sigmas * sigma_r`` short of it: space around an uncertain
-        return stays as it was. Needs the rig's ``b f`` (``baseline_focal_m_px`` of
-        :func:`view_cells`); None: rays clear up to the point.
+        Disparity uncertainty: a point at range ``r`` clears only up to ``r - k sigma_r``,
+        ``sigma_r = r^2 sigma_d / (b f)`` (eq. 14 differentiated), ``k = clear_margin_sigmas``;
+        needs ``baseline_focal_m_px`` of :func:`view_cells`.
     clear_margin_sigmas : float
-        The margin in units of ``sigma_r``.
     occlusion_gap_m : float or None
-        Occlusion test within a view: a ray that passes through a cell hit in the same view
-        more than ``occlusion_gap_m`` (plus the point's clearing margin) before its end is a
-        point seen *through* a surface -- a mismatch: it is not a hit and its ray stops at that
-        surface. Floor rays are tested the same way. None: no test.
+        A ray entering a cell hit in the same view more than this before its end stops there and
+        its point is no hit.
     see_through_ratio : float or None
-        Floor seen through a hit cell: every floor point of a view votes for the hit cells its
-        ray passes more than ``occlusion_gap_m`` before it; a cell whose votes exceed this ratio
-        times its own obstacle points is no hit in that view (a floating mismatch such as a
-        repetitive floor matched one period off) and is cleared instead. None: no test.
+        A hit cell through which the view sees more floor points than this times its own obstacle
+        points is cleared instead.
     height_tolerance_m : float
-        Both tests are three-dimensional when the points and the sensor have heights: a hit
-        cell stands in the way of a point only where the sight line from the sensor to the
-        point passes within this of the heights of the cell's obstacle points (a table top
-        hides nothing below it).
+        Slack of the height tests of the occlusion rules.
     overhang_shadow : bool
-        A ray whose sight line passes below the obstacle points of a solid cell (hit in the same
-        view, or held occupied by the map: ``map_occlusion_p``) -- a table top, a chair seat --
-        clears nothing from that cell on. The 2-D map marks the whole footprint of an overhang
-        occupied; the floor seen under it is no evidence that the footprint is free, and the
-        overhang may reach farther than its seen edge. The ray's end is still hit (a wall seen
-        under a table).
+        A sight line that passes below a solid cell's obstacle points clears nothing from there on.
     map_occlusion_p : float or None
-        Occlusion by the map: cells the map already holds occupied with at least this
-        probability are solid for the next views like cells hit in the view itself (at the
-        heights of all the obstacle points seen in them): a ray whose sight line meets one stops
-        there and a point behind it is no hit. A mismatch seen through a wall that an earlier view
-        measured no longer clears the wall and the space behind it. The map's state enters every
-        update, so views are traced in order (:func:`view_cells` ``known_occupied``). None: off.
+        Cells the map holds occupied with at least this probability are solid for later views.
     clear_below_m : float or None
-        A ray clears only the cells where its sight line runs at most this high above the floor.
-        A sight line at height ``h`` over a cell shows that no obstacle taller than ``h`` stands
-        there -- a line over a table top (0.7-0.76 m) or a chair says nothing about the table;
-        the 2-D map needs the whole height band free. Cells near a high camera are cleared by
-        the views that saw them from farther away, with lower sight lines. None: no limit
-        (needs heights: the sensor's and the points').
+        A ray clears only cells where its sight line runs at most this high above the floor.
     footprint_radius_m : float or None
-        The robot's radius: the cells its footprint touches along the path -- a disc at every pose,
-        swept between consecutive poses -- are free (:meth:`OccupancyGrid.clear_disc`), since the
-        robot stood there; the cameras never see them. The default is the radius of ``mrstereo plan``
-        (0.25 m) and a cell: a robot planned from its own pose can move off it into the space its cameras
-        saw. None or 0: off.
+        The robot's radius: the cells its footprint touches along the path (a disc at every pose,
+        swept between poses) are free (:meth:`OccupancyGrid.clear_disc`), since the robot stood
+        there. The default is ``mrstereo plan``'s radius (0.25 m) and a cell. None or 0: off.
     """
 
     p_hit: float = 0.7
@@ -233,26 +188,23 @@ def _points_xy(name: str, value) -> np.ndarray:
 class ViewCells(NamedTuple):
     """The cells one view hits and clears, ready to be added to a grid in order.
 
-    Computing them is the per-frame part of mapping (independent between frames, so it runs
-    on parallel workers); :meth:`OccupancyGrid.apply` is the cheap ordered part.
+    Computing them is the per-frame part of mapping (independent between frames, so it runs on
+    parallel workers); :meth:`OccupancyGrid.apply` is the cheap ordered part. ``hit`` and ``miss``
+    are ascending flat indices into ``grid.shape`` (int64); ``points_outside`` counts the rays cut
+    at the grid border, ``occluded`` the hit cells dropped by the occlusion and see-through tests;
+    ``hit_z_m`` (len(hit), 2) float32 is the lowest and highest obstacle point of each hit cell
+    (inf, -inf without heights); ``sensor_model`` the config's fields of :func:`_sensor_model`.
     """
 
     hit: np.ndarray
-    """Flat indices (into ``grid.shape``) of the cells hit, ascending, int64."""
     miss: np.ndarray
-    """Flat indices of the cells a ray crossed and no obstacle point hit, ascending, int64."""
     points_outside: int
-    """Points whose ray was cut at the grid border."""
     grid: GridSpec
     max_range_m: float | None
     min_points_per_cell: int
     sensor_model: tuple = ()
-    """The sensor-model fields of the config used (:func:`_sensor_model`)."""
     occluded: int = 0
-    """Hit cells dropped by the occlusion and see-through tests."""
     hit_z_m: np.ndarray | None = None
-    """(len(hit), 2) float32: lowest and highest obstacle point of each hit cell (metres; inf, -inf
-    without heights)."""
 
     def fits(self, grid: GridSpec, config: MappingConfig) -> bool:
         """True when these cells are what ``grid`` and ``config`` would compute."""
@@ -297,27 +249,13 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
 
     Notes
     -----
-    Every cell is counted at most once per view for a hit and once for a miss, and a hit
-    cancels a miss of the same cell. One ray is traced to the representative point of each
-    distinct end cell (the last point that fell in it; Amanatides-Woo traversal [3]); the end
-    cell of an obstacle ray is not cleared. A ray to a point outside the grid (or beyond
-    ``max_range_m``) is cut at the border and clears the cells inside.
-
-    Inverse sensor model (``config.disparity_sigma_px``): an obstacle point at range ``r`` from
-    the sensor clears only up to ``r - k sigma_r``, ``sigma_r = r^2 sigma_d / (b f)``, ``k =
-    clear_margin_sigmas``. Occlusion (``config.occlusion_gap_m``): the rays of one view are
-    traced against the cells hit in that same view; a ray entering a hit cell more than the gap
-    (plus its margin) before its end stops there and its end is not hit. See-through
-    (``config.see_through_ratio``, tested first): hit cells through which the same view sees
-    more floor points than the cell holds obstacle points are cleared instead. Solid cells (hit
-    in this view, or in ``known_occupied``) that a sight line passes below stop its clearing
-    (``config.overhang_shadow``); cells where the sight line runs higher than
-    ``config.clear_below_m`` are not cleared.
+    A cell counts at most once per view for a hit and once for a miss; a hit cancels a miss. One
+    ray is traced to the representative point of each distinct end cell (Amanatides-Woo [3]); a
+    ray leaving the grid or ``max_range_m`` is cut there. The sensor-model rules of ``config``:
+    docs/mapping.md.
     """
-    if not isinstance(grid, GridSpec):
-        raise TypeError(f"grid must be a GridSpec, got {type(grid).__name__}")
-    if not isinstance(config, MappingConfig):
-        raise TypeError(f"config must be a MappingConfig, got {type(config).__name__}")
+    _checks.instance("grid", grid, GridSpec)
+    _checks.instance("config", config, MappingConfig)
     obstacles = _points_xy("points_obstacle_world", points_obstacle_world)
     floor = _points_xy("points_free_world", points_free_world)
     origin = np.asarray(sensor_origin_world, dtype=np.float64).ravel()
@@ -383,9 +321,8 @@ def _ray_ends(obstacles: np.ndarray, floor: np.ndarray, sx: float, sy: float, gr
 
 
 def _known_occupied(value, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
-    """``(mask, z_range_m)`` of :meth:`OccupancyGrid.known_occupied`, checked against ``grid``.
-
-    Cells without heights (never hit by 3-D points) reach from -inf to inf: every sight line meets them.
+    """``(mask, z_range_m)`` of :meth:`OccupancyGrid.known_occupied` checked against ``grid``; cells
+    without heights reach from -inf to inf (every sight line meets them).
     """
     try:
         mask, z = value
@@ -404,10 +341,8 @@ def _known_occupied(value, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _supported(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:
-    """Obstacle points whose cell holds at least ``min_points`` of them (others dropped).
-
-    Points inside the grid are counted per cell by a kernel; the few outside it are grouped by
-    their (row, col) keys with ``np.unique`` (cells outside the grid never equal cells inside).
+    """Obstacle points whose cell holds at least ``min_points`` of them: counted per cell by a kernel
+    inside the grid, grouped by ``(row, col)`` keys with ``np.unique`` outside it.
     """
     counts = np.zeros(grid.shape, np.int64)
     cell = np.empty(len(points), np.int64)
@@ -454,22 +389,16 @@ class OccupancyGrid:
 
     Notes
     -----
-    Log-odds update of a cell observed in a view (OctoMap [2]):
-    ``L <- clamp(L + log(p / (1 - p)), l_min, l_max)`` with ``p = p_hit`` for a hit and
-    ``p = p_miss`` for a miss; after ``k`` hits and ``m`` misses without clamping,
-    ``L = k l_hit + m l_miss`` and ``P(occupied) = 1 / (1 + exp(-L))``.
+    Log-odds update (OctoMap [2]): ``L <- clamp(L + log(p / (1 - p)), l_min, l_max)``, ``p = p_hit``
+    for a hit and ``p_miss`` for a miss; ``P(occupied) = 1 / (1 + exp(-L))``.
     """
 
     def __init__(self, grid: GridSpec | None = None, *, config: MappingConfig | None = None,
                  log_odds: np.ndarray | None = None) -> None:
         grid = GridSpec() if grid is None else grid
         config = MappingConfig() if config is None else config
-        if not isinstance(grid, GridSpec):
-            raise TypeError(f"grid must be a GridSpec, got {type(grid).__name__}")
-        if not isinstance(config, MappingConfig):
-            raise TypeError(f"config must be a MappingConfig, got {type(config).__name__}")
-        self.grid = grid
-        self.config = config
+        self.grid = _checks.instance("grid", grid, GridSpec)
+        self.config = _checks.instance("config", config, MappingConfig)
         if log_odds is None:
             self._log_odds = np.full(grid.shape, np.nan)
         else:
@@ -490,32 +419,18 @@ class OccupancyGrid:
     # ---------------------------------------------------------------- update
     def update(self, points_obstacle_world, points_free_world, sensor_origin_world, *,
                baseline_focal_m_px: float | None = None) -> GridUpdate:
-        """Add one view: obstacle points hit their cells, rays to all points clear cells.
-
-        The same as ``apply(view_cells(..., grid=self.grid, config=self.config,
-        known_occupied=self.known_occupied()))`` (``known_occupied`` only with
-        ``config.map_occlusion_p``); see :func:`view_cells` for the parameters and the ray model.
-
-        Returns
-        -------
-        GridUpdate
-            Distinct cells hit and missed in this update, points ending outside the grid.
-        """
+        """Add one view: ``apply(view_cells(..., known_occupied=self.known_occupied()))`` with this
+        grid and config (``known_occupied`` only with ``config.map_occlusion_p``); the parameters as
+        :func:`view_cells`. Returns the :class:`GridUpdate`."""
         known = self.known_occupied() if self.config.map_occlusion_p is not None else None
         return self.apply(view_cells(points_obstacle_world, points_free_world, sensor_origin_world,
                                      grid=self.grid, config=self.config, baseline_focal_m_px=baseline_focal_m_px,
                                      known_occupied=known))
 
     def known_occupied(self, p_min: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Cells held occupied with probability at least ``p_min`` (default ``config.map_occlusion_p``,
-        else ``occupied_thresh``) and the height range of the obstacle points seen in each cell.
-
-        Returns
-        -------
-        mask : ndarray of bool, shape grid.shape
-        z_range_m : ndarray of shape grid.shape + (2,)
-            Lowest and highest obstacle point (metres above the floor) over the views that hit the
-            cell; (inf, -inf) where no point had a height.
+        """``(mask, z_range_m)``: the cells held occupied with probability at least ``p_min`` (default
+        ``config.map_occlusion_p``, else ``occupied_thresh``), and the lowest and highest obstacle point
+        (metres above the floor) over the views that hit each cell ((inf, -inf) without heights).
         """
         if p_min is None:
             p_min = self.config.map_occlusion_p if self.config.map_occlusion_p is not None else self.config.occupied_thresh

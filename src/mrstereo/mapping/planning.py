@@ -1,11 +1,8 @@
 """A* path planning on an occupancy map with obstacles inflated by the robot radius.
 
-The paper builds its grid "for navigation"; this stage closes the loop: plan a collision-free
-path for a disc-shaped robot on the map. 8-connected A* with the octile heuristic (admissible
-and consistent for unit / sqrt(2) step costs) and no corner cutting: a diagonal step needs
-both orthogonal neighbours free. Obstacles are inflated like the lethal zone of Nav2's
-inflation layer: every cell whose centre lies within ``robot_radius_m`` of an occupied cell
-centre is blocked. Conventions: docs/conventions.md.
+8-connected A* with the octile heuristic (admissible and consistent) and no corner cutting;
+every cell within ``robot_radius_m`` of an occupied cell is blocked (the lethal zone of Nav2's
+inflation layer). User guide: docs/mapping.md, "Planning". Conventions: docs/conventions.md.
 
 References
 ----------
@@ -22,7 +19,7 @@ import numpy as np
 from .. import _checks
 from . import _kernels
 from .grid import distance_cells
-from .rosmap import RosMap
+from .rosmap import RosMap, as_ros_map
 
 __all__ = ["PlanResult", "plan_path", "inflate_obstacles"]
 
@@ -96,17 +93,13 @@ def plan_path(ros_map, start_xy, goal_xy, *, robot_radius_m: float = 0.25,
         ``success`` False with a one-line ``message`` when the start or goal is outside the map
         or blocked, or when no path exists; ``expanded_cells`` counts A* expansions.
     """
-    if hasattr(ros_map, "to_ros_map") and not isinstance(ros_map, RosMap):
-        ros_map = ros_map.to_ros_map()
-    if not isinstance(ros_map, RosMap):
-        raise TypeError(f"ros_map must be a RosMap or OccupancyGrid, got {type(ros_map).__name__}")
+    ros_map = as_ros_map("ros_map", ros_map)
     start = _point("start_xy", start_xy)
     goal = _point("goal_xy", goal_xy)
     grid = ros_map.grid
     blocked = inflate_obstacles(ros_map, robot_radius_m=robot_radius_m,
                                 unknown_is_obstacle=unknown_is_obstacle)
-    x0, y0 = grid.origin_x_m, grid.origin_y_m
-    x1, y1 = x0 + grid.shape[1] * grid.resolution_m, y0 + grid.shape[0] * grid.resolution_m
+    x0, x1, y0, y1 = grid.extent_m
     cells = []
     for name, xy in (("start", start), ("goal", goal)):
         r, c = (int(v) for v in grid.cells_from_xy(xy))

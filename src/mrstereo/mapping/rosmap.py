@@ -1,9 +1,5 @@
-"""ROS map_server / Nav2 maps: a PGM image and a YAML description.
-
-PGM values: 254 free, 0 occupied, 205 unknown; the top image row is max y.
-YAML: image, resolution, origin [x, y, yaw] (pose of the lower-left pixel),
-negate, occupied_thresh, free_thresh, mode trinary.
-
+"""ROS map_server / Nav2 maps: a PGM image (254 free, 0 occupied, 205 unknown; top row max y) and a
+YAML description (image, resolution, origin of the lower-left pixel, thresholds, trinary mode).
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -43,6 +39,15 @@ class RosMap:
     @property
     def unknown(self) -> np.ndarray:
         return ~(self.occupied | self.free)
+
+
+def as_ros_map(name: str, value) -> RosMap:
+    """``value`` as a RosMap (an OccupancyGrid converted), else TypeError naming ``name``."""
+    if hasattr(value, "to_ros_map") and not isinstance(value, RosMap):
+        value = value.to_ros_map()
+    if not isinstance(value, RosMap):
+        raise TypeError(f"{name} must be a RosMap or OccupancyGrid, got {type(value).__name__}")
+    return value
 
 
 def write_ros_map(yaml_path: str | os.PathLike, ros_map: RosMap) -> None:

@@ -1,22 +1,13 @@
 """The given odometry fused with visual odometry: a small pose filter on the floor plane.
 
-Wheel odometry drifts (a wheel radius error is a scale error, a track width error a heading drift
-per metre) but never loses track; visual odometry hardly drifts but can lose track (a dark frame,
-a blank wall) or, rarely, track something else (a repeated pattern). Each step between
-consecutive frames is measured by both, in the robot frame of the step's start, ``(dx, dy,
-dyaw)``, each with the covariance of its expected error over the step's length ``d``:
-
-    sigma_along = a d + a0,   sigma_across = c d + c0,   sigma_yaw = h d + h0
-
-(``FusionConfig``: a few percent for the given odometry, a fraction of a percent for the visual).
-The fused step is the information-weighted mean of the two, ``(P_g^-1 + P_v^-1)^-1 (P_g^-1 g +
-P_v^-1 v)``; the poses are the fused steps composed from the first given pose. A visual step
-counts only between two tracked frames, and only when it lies within ``gate_sigmas`` of the given
-step under their joint covariance (Mahalanobis distance): otherwise the given step is used. On a
-chain of steps this *is* the least-squares pose graph of both odometries (each edge has its own
-two measurements and nothing links non-neighbours).
-
-Conventions: docs/conventions.md; user guide: docs/odometry.md.
+Wheel odometry drifts but never loses track; visual odometry hardly drifts but can lose track.
+Each step between consecutive frames, ``(dx, dy, dyaw)`` in the robot frame of its start, is
+measured by both, each with the covariance of its expected error over the step's length ``d``
+(``sigma = a d + a0`` along, across and in heading; :class:`FusionConfig`). The fused step is
+the information-weighted mean ``(P_g^-1 + P_v^-1)^-1 (P_g^-1 g + P_v^-1 v)``; a visual step
+counts only between two tracked frames and within ``gate_sigmas`` (Mahalanobis distance) of the
+given one. On a chain of steps this is the least-squares pose graph of both odometries. User
+guide: docs/odometry.md. Conventions: docs/conventions.md.
 
 References
 ----------
@@ -38,22 +29,12 @@ __all__ = ["FusionConfig", "FusedOdometry", "fuse_odometry"]
 
 @dataclass(frozen=True)
 class FusionConfig:
-    """Expected step errors of the two odometries and the gate (standard deviations).
+    """Expected step errors (standard deviations) of the two odometries and the gate.
 
-    Attributes
-    ----------
-    given_along, given_across : float
-        Given odometry: error per metre travelled along and across the step.
-    given_yaw_rad_per_m : float
-        Given odometry: heading error per metre.
-    given_floor_m, given_floor_rad : float
-        Given odometry: error of any step however short (wheel slip, backlash).
-    visual_along, visual_across, visual_yaw_rad_per_m, visual_floor_m, visual_floor_rad : float
-        The same for visual odometry (its steps jitter by a fraction of a millimetre around a
-        keyframe and drift by a few tenths of a percent).
-    gate_sigmas : float
-        A visual step farther than this from the given one (Mahalanobis distance under both
-        covariances) is not used.
+    ``given_along``, ``given_across`` (per metre travelled), ``given_yaw_rad_per_m`` and the error of
+    any step however short, ``given_floor_m``, ``given_floor_rad`` (wheel slip, backlash); the same
+    ``visual_*`` for visual odometry; a visual step farther than ``gate_sigmas`` (Mahalanobis distance
+    under both covariances) from the given one is not used.
     """
 
     given_along: float = 0.05
@@ -92,16 +73,9 @@ class FusionConfig:
 
 @dataclass(frozen=True)
 class FusedOdometry:
-    """Result of :func:`fuse_odometry`.
-
-    Attributes
-    ----------
-    poses : ndarray (N, 3)
-        Fused planar poses ``(x_m, y_m, yaw_rad)``; the first is the given one.
-    visual_used : ndarray (N,) bool
-        True where the step into the frame used the visual odometry.
-    visual_rejected : ndarray (N,) bool
-        True where a visual step was measured but lay outside the gate.
+    """Result of :func:`fuse_odometry`: the fused planar ``poses`` (N, 3) (the first is the given one),
+    ``visual_used`` where the step into the frame used visual odometry and ``visual_rejected`` where
+    a visual step lay outside the gate.
     """
 
     poses: np.ndarray
@@ -118,7 +92,7 @@ class FusedOdometry:
 
 def fuse_odometry(given_poses, visual_poses, visual_tracked, *, config: FusionConfig = FusionConfig()
                   ) -> FusedOdometry:
-    """Fuse the given odometry's steps with visual odometry's (see the module docstring).
+    """Fuse the given odometry's steps with visual odometry's (information-weighted, gated).
 
     Parameters
     ----------
@@ -140,8 +114,7 @@ def fuse_odometry(given_poses, visual_poses, visual_tracked, *, config: FusionCo
                          f"got {visual.shape}")
     if tracked.shape != (len(given),):
         raise ValueError(f"visual_tracked must be {len(given)} booleans, got shape {tracked.shape}")
-    if not isinstance(config, FusionConfig):
-        raise TypeError(f"config must be a FusionConfig, got {type(config).__name__}")
+    _checks.instance("config", config, FusionConfig)
     out = np.empty_like(given)
     out[0] = given[0]
     used = np.zeros(len(given), bool)

@@ -21,22 +21,10 @@ __all__ = ["OdometryResult", "visual_odometry"]
 class OdometryResult:
     """Poses of a sequence from visual odometry.
 
-    Attributes
-    ----------
-    T_world_from_base : ndarray (N, 4, 4)
-        Base pose of every frame (REP 103) after the windowed refinement: each frame on its
-        reference keyframe's final pose; a lost frame has the motion model's prediction.
-    status : tuple of str
-        ``"keyframe"``, ``"tracked"`` or ``"lost"`` per frame.
-    n_tracked, n_inliers : ndarray (N,) int
-        Keyframe corners tracked into the frame, and PnP inliers among them.
-    time_s : ndarray (N,)
-        Time the odometry took per frame (the stage alone, no image reading).
-    stamps_s : ndarray (N,) or None
-        Frame stamps when the input had them.
-    T_world_from_base_online : ndarray (N, 4, 4) or None
-        Each frame's pose as the tracker knew it at that frame (what a live system uses; the
-        refinement of later keyframes not yet in it).
+    ``T_world_from_base`` (N, 4, 4) after the windowed refinement (a lost frame: the motion model's
+    prediction) and ``T_world_from_base_online`` as known at each frame (or None); ``status``
+    ``"keyframe"``, ``"tracked"`` or ``"lost"``; ``n_tracked`` and ``n_inliers`` (PnP) per frame;
+    ``time_s`` of the stage alone per frame; the input's ``stamps_s`` or None.
     """
 
     T_world_from_base: np.ndarray
@@ -92,8 +80,7 @@ def visual_odometry(pairs: Iterable, stereo: StereoCamera, *, T_base_from_cam,
     disparities : iterable of ndarray, optional
         Each frame's disparity (keyframe depth from it instead of a stereo search).
     stamps_s : sequence of float, optional
-        Each frame's time stamp (seconds, increasing): the time steps of the motion model and
-        of the plausibility limits (without: ``config.frame_interval_s`` apart).
+        Increasing time stamps (without: ``config.frame_interval_s`` apart).
     progress : callable, optional
         Wraps the iteration (e.g. ``tqdm``).
     """

@@ -1,41 +1,20 @@
 """Stereo visual odometry: KLT tracks against a keyframe, PnP-RANSAC, a window of keyframes refined.
 
-Per frame (rectified pair, with its time stamp):
+Per rectified pair: predict the pose by the last motion scaled to the frame's time step; track
+the reference keyframe's features into the left image by pyramidal Lucas-Kanade (forward-backward
+checked; against the keyframe, so that a robot standing still gets the same pose every frame);
+``cv2.solvePnPRansac`` then ``cv2.solvePnPRefineLM`` on the landmarks; refuse a step beyond the
+speed, turn-rate and acceleration limits over the time step (the frame is *lost*: its pose is the
+prediction, and tracking restarts after ``max_lost_streak`` lost frames); make a new keyframe when
+too few inliers remain or the camera moved or turned far enough, with new Shi-Tomasi corners
+matched into the right image along the row and triangulated by eq. (14)-(16); bundle-adjust the
+last ``window_keyframes`` keyframes (:mod:`mrstereo.odometry.window`). Each step and why:
+docs/odometry.md.
 
-1. *Motion model*: the pose is predicted by repeating the last motion scaled to this frame's time
-   step (constant velocity in time, :func:`mrstereo.transforms.scale_motion`).
-2. *Tracking*: the reference keyframe's features are tracked into the current left image by
-   pyramidal Lucas-Kanade started where the prediction projects their landmarks, kept when the
-   track back returns within ``max_fb_error_px``. Tracking against the keyframe, not frame to
-   frame, means a robot standing still gets the same pose every frame (no random walk).
-3. *Pose*: ``cv2.solvePnPRansac`` (reprojection threshold ``ransac_threshold_px``, started at the
-   prediction) on the landmarks in the keyframe's camera frame; ``cv2.solvePnPRefineLM`` polishes
-   it on the inliers, the inliers are re-selected and it is polished again.
-4. *Plausibility from time*: with ``dt`` the stamp difference to the previous frame, the step
-   must stay under ``max_speed_mps * dt`` and ``max_turn_rate_radps * dt``, and (once the motion
-   is known) within ``max_acceleration_mps2 * dt^2`` and ``max_angular_acceleration_radps2 *
-   dt^2`` of the prediction. Otherwise, or with fewer than ``min_inliers`` inliers, the frame is
-   *lost*: its pose is the prediction, and after ``max_lost_streak`` lost frames in a row tracking
-   restarts from a new keyframe there.
-5. *Keyframes*: when the inliers fall below ``keyframe_inlier_fraction`` of the keyframe's
-   features, or the camera moved ``keyframe_depth_fraction`` of the keyframe's median landmark
-   depth or turned ``keyframe_angle_rad``, the frame becomes a keyframe: its tracked features
-   keep their landmarks, new Shi-Tomasi corners (spread over a grid of cells, away from the
-   tracked ones) fill up to ``max_features``, and every feature is found in the right image (brought
-   to the left one's gain and offset) by Lucas-Kanade along the row, kept when the track back
-   returns and ``|y_left - y_right| <= max_row_error_px``; a new feature's landmark is triangulated
-   with eq. (14)-(16): ``Z = b f / (d + doffs)``, ``X = (u - cx) Z / f``, ``Y = (v - cy) Z / f_y``.
-6. *Windowed refinement*: the last ``window_keyframes`` keyframes' poses and the landmarks two of
-   them see are bundle-adjusted over their left and right image observations
-   (:mod:`mrstereo.odometry.window`; the oldest ``window_fixed`` fixed), and observations that
-   stay farther than ``outlier_px`` from their landmark are dropped.
-
-A frame's pose is kept relative to its reference keyframe, so the trajectory
-(:meth:`StereoOdometry.trajectory`) follows the keyframes' refined poses; :meth:`StereoOdometry.step`
-returns the pose as known at that frame (what a live system uses). Poses are of the robot base in
-the world (REP 103), ``T_world_from_base = T_world_from_cam @ inv(T_base_from_cam)`` with the
-camera mount of each frame; the first frame's pose is given (identity by default).
-Conventions: docs/conventions.md; user guide: docs/odometry.md.
+Poses are of the robot base in the world, ``T_world_from_base = T_world_from_cam @
+inv(T_base_from_cam)`` with each frame's camera mount; a frame's pose is kept relative to its
+keyframe, so :meth:`StereoOdometry.trajectory` follows the refined keyframes, while
+:meth:`StereoOdometry.step` returns the pose as known at that frame. Conventions: docs/conventions.md.
 
 References
 ----------
@@ -68,69 +47,41 @@ TRACKED, KEYFRAME, LOST = "tracked", "keyframe", "lost"
 
 @dataclass(frozen=True)
 class OdometryConfig:
-    """Visual odometry settings (docs/odometry.md).
+    """Visual odometry settings (what each step does: docs/odometry.md).
 
     Attributes
     ----------
-    max_features : int
-        Features per keyframe (new corners spread over ``grid_cells`` cells, rows x columns).
-    corner_quality : float
-        Weakest Shi-Tomasi corner kept, as a fraction of the strongest (``qualityLevel`` of
-        ``cv2.goodFeaturesToTrack``).
-    corner_block_px : int
-        Window of the corners' gradient matrix.
-    min_corner_distance_px : float
-        At most one corner per square of this size.
+    max_features, grid_cells : int, (int, int)
+        Features per keyframe; new corners are spread over ``grid_cells`` (rows, columns).
+    corner_quality, corner_block_px, min_corner_distance_px : float, int, float
+        ``cv2.goodFeaturesToTrack``'s ``qualityLevel``, gradient window and minimum distance.
     klt_window_px, klt_levels : int
-        Lucas-Kanade window and pyramid levels of the tracking from the keyframe (a small window:
-        approaching a surface magnifies it, which a translating window follows with a bias toward
-        too little motion, so a larger window underestimates the distance travelled).
-    stereo_window_px : int
-        Lucas-Kanade window of the left-right search of keyframe features (``stereo_levels``
-        levels; the two views differ by the baseline only, and a larger window matches weak
-        texture more reliably).
-    stereo_levels : int
-        Pyramid levels of that search (a wide baseline seen from near needs disparities of a
-        hundred pixels and more).
-    max_fb_error_px : float
-        Forward-backward track error above which a track is dropped.
-    max_row_error_px : float
-        Largest ``|y_left - y_right|`` of a stereo match (rectified images); with a given
-        disparity map, the largest spread of the four disparities around a corner.
+        Lucas-Kanade window and pyramid levels of the tracking from the keyframe (small: a larger
+        window underestimates the motion toward a surface, which magnifies it).
+    stereo_window_px, stereo_levels : int
+        The same for the left-right search of keyframe features.
+    max_fb_error_px, max_row_error_px : float
+        Largest forward-backward track error, and ``|y_left - y_right|`` of a stereo match (with a
+        given disparity map: the spread of the four disparities around a corner).
     min_disparity_px : float
         Closest to infinity a new landmark may be (its depth is ``b f / d``).
-    ransac_threshold_px : float
-        Reprojection error of a PnP inlier.
-    ransac_iterations : int
-    min_inliers : int
-        Fewer inliers: the frame is lost.
-    keyframe_inlier_fraction : float
-        A new keyframe when the inliers fall below this fraction of the keyframe's features.
-    keyframe_depth_fraction : float
-        A new keyframe after moving this fraction of the keyframe's median landmark depth (the
-        same parallax in a corridor and on a road).
-    keyframe_angle_rad : float
-        A new keyframe after turning this far from the keyframe.
-    max_speed_mps, max_turn_rate_radps : float
-        A step faster than this over the frame's time step is a failure, not a motion.
-    max_acceleration_mps2, max_angular_acceleration_radps2 : float
-        A step that leaves the motion model's prediction by more than this acceleration over
-        the time step is a failure (checked once the motion is known).
+    ransac_threshold_px, ransac_iterations, min_inliers : float, int, int
+        PnP-RANSAC; with fewer inliers the frame is lost.
+    keyframe_inlier_fraction, keyframe_depth_fraction, keyframe_angle_rad : float
+        A new keyframe when the inliers fall below this fraction of its features, or after moving
+        this fraction of its median landmark depth, or turning this far.
+    max_speed_mps, max_turn_rate_radps, max_acceleration_mps2, max_angular_acceleration_radps2 : float
+        A step beyond these over the frame's time step (the accelerations: away from the motion
+        model's prediction) is a failure, not a motion.
     frame_interval_s : float
-        Time step assumed between frames when the recording has no stamps.
+        Time step assumed between frames without stamps.
     max_lost_streak : int
         Lost frames in a row before tracking restarts from a new keyframe.
-    window_keyframes : int
-        Keyframes in the refined window (1: no refinement, the keyframe tracker alone).
-    window_fixed : int
-        Oldest keyframes of the window held fixed (the gauge).
-    huber_px : float
-        Huber threshold of the refinement's loss.
-    refine_iterations : int
-        Levenberg-Marquardt steps of a refinement at most.
-    outlier_px : float
-        An observation farther than this from its landmark's projection after a refinement is
-        dropped.
+    window_keyframes, window_fixed : int
+        Keyframes in the refined window (1: none) and the oldest of them held fixed (the gauge).
+    huber_px, refine_iterations, outlier_px : float, int, float
+        The refinement's Huber threshold and steps, and the distance from its landmark's projection
+        beyond which an observation is dropped after it.
     """
 
     max_features: int = 300
@@ -217,10 +168,8 @@ class StereoOdometry:
     config: OdometryConfig = field(default_factory=OdometryConfig)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.stereo, StereoCamera):
-            raise TypeError(f"stereo must be a StereoCamera, got {type(self.stereo).__name__}")
-        if not isinstance(self.config, OdometryConfig):
-            raise TypeError(f"config must be an OdometryConfig, got {type(self.config).__name__}")
+        _checks.instance("stereo", self.stereo, StereoCamera)
+        _checks.instance("config", self.config, OdometryConfig)
         T0 = np.eye(4) if self.T_world_from_base0 is None else self.T_world_from_base0
         self.T_world_from_base0 = _checks.matrix("T_world_from_base0", T0, (4, 4)).copy()
         P = self.stereo.left.P
@@ -249,10 +198,9 @@ class StereoOdometry:
         left_rect, right_rect : ndarray (H, W) or (H, W, 3)
             The rectified pair (uint8 or float).
         T_base_from_cam : ndarray (4, 4)
-            The left camera's mount on the base for this frame (e.g. with the head's pan).
+            The left camera's mount on the base for this frame.
         disparity_px : ndarray (H, W), optional
-            This frame's disparity (NaN invalid); when given, keyframe features take their
-            depth from it instead of a stereo Lucas-Kanade search.
+            This frame's disparity: keyframe features take their depth from it instead of a stereo search.
         stamp_s : float, optional
             The frame's time stamp; without, frames are ``config.frame_interval_s`` apart.
         """
@@ -354,15 +302,12 @@ class StereoOdometry:
         return p1, ok
 
     def _corners(self, left: np.ndarray, wanted: int, taken: np.ndarray) -> np.ndarray:
-        """Shi-Tomasi corners spread over a grid of cells (``wanted`` in all), (N, 2) float32, at least
-        ``min_corner_distance_px`` from the features ``taken`` (N, 2).
+        """Shi-Tomasi corners (``cv2.goodFeaturesToTrack``), ``wanted`` in all, (N, 2) float32, at least
+        ``min_corner_distance_px`` from the features ``taken`` (N, 2) and from each other.
 
-        ``cv2.goodFeaturesToTrack`` (the minimum eigenvalue of the gradient matrix, the corner
-        that Lucas-Kanade tracks well; Shi and Tomasi 1994) keeps corners at least
-        ``min_corner_distance_px`` apart whose strength is ``corner_quality`` of the strongest or
-        more; each of the ``grid_cells`` keeps its strongest ones first, and the places left are
-        filled with the strongest of the rest, so corners cover the image where it has texture
-        and weakly textured images (plain walls) still give their best corners.
+        Each of the ``grid_cells`` keeps its strongest corners first and the strongest of the rest
+        fill the places left: corners cover the textured image, and a plain wall still gives its
+        best ones.
         """
         c = self.config
         h, w = left.shape
@@ -548,10 +493,8 @@ def _sample_smooth(image: np.ndarray, uv: np.ndarray, *, max_spread: float) -> n
 def _photometry_like(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """``image`` mapped linearly to the mean and spread of ``reference`` (uint8).
 
-    The two cameras of a rig differ in gain and black level; Lucas-Kanade assumes equal
-    brightness, and on an intensity ramp a gain difference shifts the match (a disparity bias,
-    hence a scale error of the odometry). The cameras' differences are global, so one gain and
-    one offset from the images' means and standard deviations remove them.
+    Lucas-Kanade assumes equal brightness; a gain difference between the cameras would shift
+    the stereo match on an intensity ramp (a scale error of the odometry).
     """
     mean_i, sd_i = cv2.meanStdDev(image)
     mean_r, sd_r = cv2.meanStdDev(reference)

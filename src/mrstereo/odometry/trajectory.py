@@ -1,22 +1,9 @@
 """Trajectories: TUM files, alignment and error metrics (as the ``evo`` tools compute them), figures.
 
-TUM format (one line per pose): ``t tx ty tz qx qy qz qw``, the position of the base in the
-world and its orientation as a unit quaternion, ``#`` comments. ``evo_ape tum ref.txt est.txt -a``
-and ``evo_rpe tum ref.txt est.txt --delta 1 --delta_unit m`` read these files.
-
-Metrics (:func:`trajectory_metrics`):
-
-- ATE (absolute trajectory error): RMSE of the position differences after aligning the estimate
-  to the truth with the rigid motion that minimizes them (Umeyama 1991, no scale: ``evo_ape -a``;
-  ``alignment="se2"`` restricts it to a planar motion), and also without alignment, from the
-  common first pose (both trajectories start there).
-- RPE (relative pose error) per metre: for every frame ``i`` and the first frame ``j`` at least
-  ``delta_m`` of path further on, ``E = inv(inv(Q_i) Q_j) inv(P_i) P_j`` (Q true, P estimated);
-  RMSE of ``|t(E)|`` and of the angle of ``R(E)``, divided by ``delta_m`` (``evo_rpe --delta 1
-  --delta_unit m --all_pairs`` uses every such pair; this is its consecutive version).
-- End-point error: the last position's distance from the truth, unaligned.
-
-Conventions: docs/conventions.md; user guide: docs/odometry.md.
+TUM format: one line ``t tx ty tz qx qy qz qw`` per pose (the base in the world), ``#`` comments.
+Metrics (:func:`trajectory_metrics`; definitions in docs/odometry.md, Metrics): ATE after a
+rigid Umeyama alignment (``evo_ape -a``) and unaligned, RPE per metre over consecutive segments
+(``evo_rpe --delta 1 --delta_unit m``), end-point error. Conventions: docs/conventions.md.
 
 References
 ----------
@@ -35,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import atomic_write
-from ..transforms import T_from_position_quaternion, quaternion_from_rotation, rotation_angle_rad
+from ..transforms import T_from_position_quaternion, T_from_R_t, quaternion_from_rotation, rotation_angle_rad
 
 __all__ = ["write_tum", "read_tum", "umeyama_alignment", "TrajectoryMetrics", "trajectory_metrics",
            "path_length_m", "plot_trajectories"]
@@ -112,9 +99,7 @@ def umeyama_alignment(source_xyz, target_xyz, *, planar: bool = False) -> np.nda
         S[-1, -1] = -1.0
     R = np.eye(3)
     R[:dims, :dims] = U @ S @ Vt
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = mu_d - R @ mu_s
+    T = T_from_R_t(R, mu_d - R @ mu_s)
     if planar:
         T[2, 3] = 0.0
     return T
@@ -128,22 +113,11 @@ def path_length_m(T) -> float:
 
 @dataclass(frozen=True)
 class TrajectoryMetrics:
-    """Errors of an estimated trajectory against the truth (metres, degrees).
+    """Errors of an estimated trajectory against the truth (metres, degrees; docs/odometry.md).
 
-    Attributes
-    ----------
-    ate_rmse_m : float
-        Absolute trajectory error after the ``alignment`` (SE(3) or SE(2), no scale).
-    ate_rmse_unaligned_m : float
-        The same from the common first pose, without alignment.
-    rpe_translation_per_m, rpe_rotation_deg_per_m : float
-        Relative pose error RMSE over ``delta_m`` segments, per metre (NaN if the path is shorter).
-    end_point_error_m : float
-    path_length_m : float
-        Length of the true path.
-    n_poses : int
-    alignment : str
-    delta_m : float
+    ``ate_rmse_m`` after the ``alignment`` (no scale) and ``ate_rmse_unaligned_m`` from the common
+    first pose; ``rpe_translation_per_m`` and ``rpe_rotation_deg_per_m`` over ``delta_m`` segments
+    (NaN if the path is shorter); ``end_point_error_m``; ``path_length_m`` of the true path; ``n_poses``.
     """
 
     ate_rmse_m: float

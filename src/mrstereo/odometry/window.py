@@ -1,31 +1,24 @@
 """Windowed refinement: bundle adjustment of the last keyframes' poses and the points they see.
 
-The problem (Triggs et al. 2000; the local bundle adjustment of ORB-SLAM2's and S-PTAM's stereo
-odometry): keyframe poses ``T_cam_from_world`` (each a 6-vector: rotation vector and
-translation) and landmarks ``X`` in the world (3-vectors) minimize the robust sum of the
-reprojection errors of every observation,
+Keyframe poses ``T_cam_from_world`` (rotation vector and translation) and world landmarks ``X``
+minimize the Huber-robust sum of the reprojection errors of every observation (Triggs et al.;
+the local bundle adjustment of ORB-SLAM2's stereo odometry),
 
     r_left  = (fx X_c / Z_c + cx - u,  fy Y_c / Z_c + cy - v)
     r_right = fx (X_c - b) / Z_c + cx_right - u_right          (a stereo observation)
 
-with ``X_c = R X + t`` the landmark in the keyframe's rectified left camera and ``b`` the
-baseline. The right image's column makes the depth, hence the scale, observable in every
-keyframe. The loss is Huber's (``huber_px``: residuals beyond it count linearly, so a wrong
-track pulls with a bounded force); the oldest keyframes stay fixed (they fix the gauge: the
-window's position, orientation and, with stereo, nothing else is free).
-
-``scipy.optimize.least_squares`` (trust-region reflective) solves it with an analytic sparse
-Jacobian: each residual depends on one pose (6 columns) and one landmark (3 columns), so the
-Jacobian has at most 9 non-zeros per row; the rotation's derivative is Gallego and Yezzi's
-closed form (:func:`mrstereo.transforms.rotated_points_jacobian`). Conventions:
-docs/conventions.md; user guide: docs/odometry.md.
+with ``X_c = R X + t`` in the keyframe's rectified left camera. The right column makes the scale
+observable in every keyframe; the oldest keyframes stay fixed (the gauge). Levenberg-Marquardt
+on the normal equations with the landmarks eliminated (Schur complement; numba kernels), the
+rotation's derivative in Gallego and Yezzi's closed form
+(:func:`mrstereo.transforms.rotation_jacobian_factor`). User guide: docs/odometry.md.
+Conventions: docs/conventions.md.
 
 References
 ----------
 B. Triggs, P. McLauchlan, R. Hartley, A. Fitzgibbon. Bundle adjustment -- a modern synthesis.
 Vision Algorithms: Theory and Practice, 2000. R. Mur-Artal, J. D. Tardos. ORB-SLAM2: an
 open-source SLAM system for monocular, stereo and RGB-D cameras. IEEE T-RO 33(5), 2017.
-SciPy Cookbook: Large-scale bundle adjustment in scipy.
 """
 from __future__ import annotations
 
@@ -35,7 +28,7 @@ import cv2
 import numpy as np
 
 from .. import _checks
-from ..transforms import T_from_rvec_t, rotations_from_rvecs
+from ..transforms import T_from_rvec_t, rotation_jacobian_factor, rotations_from_rvecs
 from ._kernels import window_back_substitute, window_normal_equations, window_residuals, window_schur
 
 __all__ = ["WindowResult", "refine_window"]
@@ -43,22 +36,10 @@ __all__ = ["WindowResult", "refine_window"]
 
 @dataclass(frozen=True)
 class WindowResult:
-    """Result of :func:`refine_window`.
-
-    Attributes
-    ----------
-    T_cam_from_world : ndarray (K, 4, 4)
-        Refined keyframe poses (the fixed ones unchanged).
-    points_world : ndarray (M, 3)
-        Refined landmarks.
-    error_px : ndarray (n,)
-        Each observation's reprojection error after the refinement (the largest of its left
-        and right image errors).
-    success : bool
-    message : str
-    cost_before, cost_after : float
-        Robust cost (half the sum of Huber-weighted squared residuals, px^2).
-    evaluations : int
+    """Result of :func:`refine_window`: refined ``T_cam_from_world`` (K, 4, 4) and ``points_world``
+    (M, 3); ``error_px`` of each observation after it (the larger of its left and right errors);
+    ``success``, ``message``; the robust cost (half the Huber-weighted squared residuals, px^2)
+    ``cost_before`` and ``cost_after``; ``evaluations``.
     """
 
     T_cam_from_world: np.ndarray
@@ -192,7 +173,7 @@ class _Problem:
         """The damped Gauss-Newton step (IRLS Huber weights), landmarks eliminated (Schur complement)."""
         R = rotations_from_rvecs(rvecs)
         fx, fy, _, _ = self.intrinsics
-        window_normal_equations(R, _rotation_factor(rvecs, R), tvecs, P, self.kf, self.pt, self.slot,
+        window_normal_equations(R, rotation_jacobian_factor(rvecs, R), tvecs, P, self.kf, self.pt, self.slot,
                                 self.stereo, res, fx, fy, self.b, self.delta, self.Hpp, self.gp, self.Hll, self.gl,
                                 self.Hpl)
         F = len(self.free)
@@ -220,36 +201,11 @@ class _Problem:
         return r, t, P + dl
 
 
-def _rotation_factor(rvecs: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """``M`` of ``d(R(r) p)/dr = -R [p]x M`` per rotation vector (Gallego and Yezzi 2015); I at r = 0."""
-    n2 = np.einsum("ij,ij->i", rvecs, rvecs)
-    K = np.zeros((len(rvecs), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -rvecs[:, 2], rvecs[:, 1], -rvecs[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = rvecs[:, 2], -rvecs[:, 1], rvecs[:, 0]
-    M = (rvecs[:, :, None] * rvecs[:, None, :] + (np.swapaxes(R, 1, 2) - np.eye(3)) @ K) / \
-        np.where(n2 < 1e-16, 1.0, n2)[:, None, None]
-    M[n2 < 1e-16] = np.eye(3)
-    return M
-
-
 @dataclass
 class Keyframe:
-    """A keyframe of the window: its pose, left image and the landmarks it observes.
-
-    Attributes
-    ----------
-    frame : int
-        Index of the frame in the sequence.
-    T_world_from_cam : ndarray (4, 4)
-        The rectified left camera's pose (refined while the keyframe is in the window).
-    image : ndarray or None
-        The left image (uint8; dropped when the keyframe leaves the window).
-    landmark : ndarray (N,) int64
-        Landmark id of each feature (-1: dropped as an outlier).
-    uv : ndarray (N, 2) float32
-        Left image position of each feature.
-    u_right : ndarray (N,)
-        Right image column (NaN: no stereo match).
+    """A keyframe of the window: its ``frame`` index, ``T_world_from_cam`` (refined while in the
+    window), left ``image`` (dropped when it leaves), and per feature its ``landmark`` id (-1:
+    dropped as an outlier), left ``uv`` and right column ``u_right`` (NaN: no stereo match).
     """
 
     frame: int
@@ -265,26 +221,12 @@ class Keyframe:
 
 
 class LocalMap:
-    """The sliding window: the last keyframes, the landmarks they observe and their refinement.
+    """The sliding window: the last ``size`` keyframes, the landmarks they observe and their refinement.
 
-    Landmarks have global integer ids (``ids`` sorted, positions ``xyz`` in the world); those no
-    keyframe of the window observes any more are dropped when a keyframe leaves.
-
-    Parameters
-    ----------
-    K : ndarray (3, 3)
-        Rectified intrinsics of the left camera.
-    baseline_m, cx_right_px : float
-        The stereo rig (right principal point column).
-    size : int
-        Keyframes in the window.
-    fixed : int
-        Oldest keyframes held fixed in the refinement (the gauge).
-    huber_px, iterations : float, int
-        Of :func:`refine_window`.
-    outlier_px : float
-        Observations farther than this from their landmark's projection after a refinement are
-        dropped.
+    Landmarks have global integer ids (``ids`` sorted, positions ``xyz``); those no keyframe of the
+    window observes are dropped when a keyframe leaves. ``K``, ``baseline_m`` and ``cx_right_px``
+    are the rig; ``fixed``, ``huber_px`` and ``iterations`` go to :func:`refine_window`;
+    observations farther than ``outlier_px`` from their landmark's projection after it are dropped.
     """
 
     def __init__(self, K, baseline_m: float, cx_right_px: float, *, size: int, fixed: int, huber_px: float,

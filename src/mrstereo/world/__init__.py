@@ -1,10 +1,8 @@
 """Synthetic office corridor with ground truth: scene, renderer, calibration targets, datasets.
 
-The built-in default data of mrstereo (paper Sec. 5, Figs. 7 and 11-14): a
-deterministic ray-cast corridor seen by a distorted, slightly misaligned
-stereo head on a robot, with exact calibration, disparity, depth, labels and
-map; and randomized corridor worlds drawn from a seed (:func:`random_world`). User guide: docs/world.md; dataset layout: docs/dataset.md; conventions:
-docs/conventions.md.
+The built-in default data of mrstereo (paper Sec. 5, Figs. 7 and 11-14) and randomized worlds
+drawn from a seed. User guide: docs/world.md; dataset layout: docs/dataset.md.
+Conventions: docs/conventions.md.
 """
 from ..recordings.manifest import FrameRecord, Manifest, read_manifest, write_manifest
 from .dataset import corridor_path, poses_along, write_synthetic_dataset

@@ -22,15 +22,14 @@ from .street import street_world
 __all__ = ["write_synthetic_dataset", "corridor_path", "poses_along"]
 
 
-def corridor_path(n_stops: int, *, x_end_m: float = 10.5) -> np.ndarray:
+def corridor_path(n_stops: int) -> np.ndarray:
     """Robot poses (n_stops, 3) along the default corridor, detouring right of the 6 m obstacle.
 
     The path follows ``y = 0`` from ``x = 0``, swerves to ``y = -0.7`` between
     x = 5.7 and 6.8 m to pass the box in the middle of the corridor, and
     returns to the centre; the yaw follows the path direction.
     """
-    n_stops = _checks.positive_int("n_stops", n_stops)
-    way = np.array([[0.0, 0.0], [5.0, 0.0], [5.7, -0.7], [6.8, -0.7], [7.5, 0.0], [x_end_m, 0.0]])
+    way = np.array([[0.0, 0.0], [5.0, 0.0], [5.7, -0.7], [6.8, -0.7], [7.5, 0.0], [10.5, 0.0]])
     return poses_along(way, n_stops)
 
 
@@ -94,19 +93,9 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                             frame_rate_hz: float = 10.0) -> Path:
     """Render the default corridor (or a randomized world) along its path and write a dataset directory.
 
-    ``path="stops"`` (the paper's run): at each stop along :func:`corridor_path` (a randomized
-    world: its own path) the head looks front, +45 and -45 degrees (paper Sec. 5.2, Figs.
-    11-13); frames cycle through these views. ``"front"`` and ``"s-curve"``: sequences for
-    visual odometry, one front view every ``step_m`` (:func:`mrstereo.world.paths.sequence_path`;
-    a randomized world: ``"front"`` only, along its own waypoints,
-    :func:`mrstereo.world.paths.waypoint_path`). ``"street"``: the street world of ``seed``
-    (:func:`mrstereo.world.street.street_world`) driven from a standstill up to ``step_m`` per
-    frame, turning by up to ``turn_rad_per_frame`` (:func:`mrstereo.world.paths.speed_path`).
-    The frames of a sequence (not ``"stops"``) are stamped ``frame_rate_hz`` apart.
-    Written: raw and rectified images, GT disparity (PFM), GT labels (PNG),
-    the true calibration, the GT map and ``manifest.yaml``
-    (:func:`mrstereo.recordings.manifest.staged_dataset`: built beside ``out_dir`` and renamed
-    into place when complete).
+    Written: raw and rectified images, GT disparity (PFM), GT labels (PNG), the true calibration,
+    the GT map and ``manifest.yaml``, staged beside ``out_dir`` and renamed into place when complete.
+    The paths and the layout: docs/world.md and docs/dataset.md.
 
     Parameters
     ----------
@@ -121,23 +110,19 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     supersample : int
         Anti-aliasing rays per pixel along each axis.
     path : {"stops", "front", "s-curve", "street"}
-        The robot's path (:data:`mrstereo.world.paths.PATH_KINDS`).
+        The robot's path (:mod:`mrstereo.world.paths`): ``"stops"`` looks front, +45 and -45 degrees
+        at each stop (paper Sec. 5.2); the others are odometry sequences, one frame every ``step_m``.
     step_m : float
-        Path length between frames of a ``front`` or ``s-curve`` sequence (``street``: at full speed).
+        Path length between frames of a sequence (``street``: at full speed).
     odometry_noise : (scale_error, heading_drift_rad_per_m), optional
-        Store drifted poses (:func:`mrstereo.world.paths.drifted_poses`) as each frame's
-        ``pose`` (the odometry a robot would report) and the true ones as ``true_pose``;
-        images are rendered at the true poses.
+        Store drifted poses (:func:`mrstereo.world.paths.drifted_poses`) as ``pose`` and the true
+        ones as ``true_pose``.
     progress : bool
         Show a tqdm progress bar on stderr.
     randomize : bool
-        Render :func:`mrstereo.world.randomize.random_world` of ``seed`` (its corridor, rig,
-        sensors and path) instead of the built-in corridor; the drawn parameters are written
-        under ``generator:`` in the manifest. The same seed gives the same files.
+        Render :func:`mrstereo.world.randomize.random_world` of ``seed`` instead of the built-in corridor.
     wall_texture : str, optional
-        With ``randomize=True``: the walls get this kind of material instead of the drawn one
-        (``random_world(..., wall_texture=...)``; one of
-        :data:`mrstereo.world.randomize.WALL_TEXTURES`), everything else stays the seed's world.
+        With ``randomize=True``: the walls' kind of material (``random_world(..., wall_texture=...)``).
     turn_rad_per_frame : float
         ``street``: the largest heading change per frame at full speed.
     frame_rate_hz : float

@@ -1,10 +1,6 @@
-"""PNG figures of stereo frames and disparity maps (matplotlib Agg).
+"""PNG figures of stereo frames and disparity maps (matplotlib Agg), written atomically.
 
-Reusable by every command that shows results (``mrstereo demo``). Each function
-writes one PNG atomically and returns its path. Disparity colours come from
-``mrstereo.viz.plot`` (turbo over robust percentiles, invalid black), as everywhere.
-
-Conventions: docs/conventions.md.
+Disparity colours come from ``mrstereo.viz.plot``, as everywhere. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .. import _checks
 from ..mapping.grid import GridSpec
 from ..mapping.rosmap import RosMap
 from .scene import LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, Scene
@@ -24,7 +25,7 @@ def occupied_footprint(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.0
     The floor and ceiling slabs are not footprints; parts entirely above or
     below ``height_band_m`` (e.g. the lintel over a door) are ignored.
     """
-    z_lo, z_hi = _band(height_band_m)
+    z_lo, z_hi = _checks.ordered_pair("height_band_m", height_band_m)
     rows, cols = grid.shape
     res = grid.resolution_m
     x_lo = grid.origin_x_m + np.arange(cols) * res
@@ -63,40 +64,16 @@ def obstacle_footprints(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.
     return footprints
 
 
-def _band(height_band_m) -> tuple[float, float]:
-    try:
-        z_lo, z_hi = (float(v) for v in height_band_m)
-    except (TypeError, ValueError):
-        raise ValueError(f"height_band_m must be (low_m, high_m), got {height_band_m!r}") from None
-    if not (np.isfinite(z_lo) and np.isfinite(z_hi) and z_lo < z_hi):
-        raise ValueError(f"height_band_m must be finite with low < high, got {height_band_m!r}")
-    return z_lo, z_hi
-
-
 def ground_truth_map(scene: Scene, grid: GridSpec | None = None, *,
                      height_band_m=(0.02, 2.0)) -> RosMap:
     """The true 2D map of ``scene`` on ``grid`` (default: 12 m x 6 m at 5 cm, origin (0, -3)).
 
-    Parameters
-    ----------
-    scene : Scene
-        The world, e.g. :func:`mrstereo.world.default_scene`.
-    grid : GridSpec, optional
-        Map geometry.
-    height_band_m : (float, float)
-        Only solids reaching into this band of heights above the floor are
-        obstacles (the robot passes under a door lintel).
-
-    Returns
-    -------
-    RosMap
-        ``occupancy`` 1.0 occupied, 0.0 free, NaN unknown; row 0 = min y.
+    Only solids reaching into ``height_band_m`` above the floor are obstacles (the robot passes
+    under a door lintel). Returns a RosMap: ``occupancy`` 1.0 occupied, 0.0 free, NaN unknown.
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+    _checks.instance("scene", scene, Scene)
     grid = GridSpec() if grid is None else grid
-    if not isinstance(grid, GridSpec):
-        raise TypeError(f"grid must be a GridSpec, got {type(grid).__name__}")
+    _checks.instance("grid", grid, GridSpec)
     occ = occupied_footprint(scene, grid, height_band_m=height_band_m)
     centres = grid.cell_centres()
     x, y = centres[..., 0], centres[..., 1]

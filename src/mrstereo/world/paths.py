@@ -1,15 +1,8 @@
-"""Robot paths through the synthetic corridor: the mapping stops and odometry sequences.
+"""Robot paths through the synthetic worlds: the mapping stops and odometry sequences.
 
-``stops``: the paper's mapping run (Sec. 5.2), :func:`mrstereo.world.dataset.corridor_path`
-with a front, +45 and -45 degree view at every stop. ``front`` and ``s-curve``: sequences for
-visual odometry, one front view every ``step_m`` metres of path: ``front`` follows the corridor
-centre and passes the box at 6 m on its right with a smooth S-bend; ``s-curve`` adds a gentle
-weave (0 to 0.3 m to the left, 3 m period) to it, so the heading changes all the time. Both start at the
-origin looking along +x. A randomized world's ``front`` sequence follows its own waypoints
-(:func:`waypoint_path`). ``street``: a drive down the street world (:mod:`mrstereo.world.street`)
-from a standstill up to car speed, weaving so that the heading turns by up to a given angle per
-frame (:func:`speed_path`). :func:`drifted_poses` corrupts a path as wheel odometry would (scale
-error, heading drift per metre). Conventions: docs/conventions.md.
+``stops`` (paper Sec. 5.2), ``front``, ``s-curve``, a randomized world's waypoints and the
+``street`` drive; :func:`drifted_poses` corrupts a path as wheel odometry would. Each path:
+docs/world.md and docs/odometry.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -44,16 +37,8 @@ def _centre_y(x: np.ndarray, weave: bool) -> np.ndarray:
 
 
 def sequence_path(kind: str, n_frames: int, *, step_m: float = 0.1) -> np.ndarray:
-    """Robot poses ``(n_frames, 3)`` ``(x_m, y_m, yaw_rad)``, ``step_m`` apart along the path.
-
-    Parameters
-    ----------
-    kind : {"front", "s-curve"}
-        The centre line (see the module docstring); the yaw is its tangent.
-    n_frames : int
-        Number of poses; ``(n_frames - 1) * step_m`` must fit in the corridor (about 13.5 m).
-    step_m : float
-        Path length between consecutive poses.
+    """Robot poses ``(n_frames, 3)`` ``(x_m, y_m, yaw_rad)``, ``step_m`` apart along the ``"front"`` or
+    ``"s-curve"`` centre line (yaw its tangent); ``(n_frames - 1) * step_m`` must fit (about 13.5 m).
     """
     if kind not in ("front", "s-curve"):
         raise ValueError(f"kind must be 'front' or 's-curve', got {kind!r}")
@@ -76,21 +61,10 @@ def sequence_path(kind: str, n_frames: int, *, step_m: float = 0.1) -> np.ndarra
 
 
 def waypoint_path(waypoints_xy, n_frames: int, *, step_m: float = 0.1) -> np.ndarray:
-    """Robot poses ``(n_frames, 3)`` ``step_m`` apart along a smooth curve through waypoints.
+    """Robot poses ``(n_frames, 3)`` ``step_m`` apart along a smooth curve through waypoints (K, 2).
 
-    The curve interpolates the waypoints with a monotone cubic (PCHIP) in each coordinate over
-    the chord length, so it does not overshoot them sideways (a randomized world keeps its
-    obstacles clear of the polyline); the yaw is the curve's tangent, continuous from frame to
-    frame. The first pose is at the first waypoint.
-
-    Parameters
-    ----------
-    waypoints_xy : ndarray of shape (K, 2)
-        At least two distinct points (metres, world frame).
-    n_frames : int
-        Number of poses; ``(n_frames - 1) * step_m`` must fit the curve's length.
-    step_m : float
-        Path length between consecutive poses.
+    A monotone cubic (PCHIP) per coordinate over the chord length: it does not overshoot the
+    waypoints sideways, so obstacles clear of the polyline stay clear; the yaw is its tangent.
     """
     from scipy.interpolate import PchipInterpolator
 
@@ -119,22 +93,19 @@ def speed_path(n_frames: int, *, step_m: float, turn_rad_per_frame: float = math
                standstill_frames: int = 3, accel_frames: int = 10, max_offset_m: float = 2.0) -> np.ndarray:
     """Robot poses ``(n_frames, 3)`` of a drive from a standstill up to ``step_m`` per frame, weaving.
 
-    The first ``standstill_frames`` frames stand at the origin; the step then grows linearly to
-    ``step_m`` over ``accel_frames`` frames and stays there. The heading is a sine of the path
-    length, ``psi(s) = Psi sin(2 pi s / P)``, with the period ``P`` chosen so that at full speed the
-    heading turns by ``turn_rad_per_frame`` per frame at most and the path stays between the x axis
-    and ``y = max_offset_m``: ``P = pi sqrt(2 max_offset_m step_m / turn)``, ``Psi = turn P /
-    (2 pi step_m)``. Starts at the origin looking along +x.
+    The heading is ``psi(s) = Psi sin(2 pi s / P)`` with ``P = pi sqrt(2 max_offset_m step_m / turn)``
+    and ``Psi = turn P / (2 pi step_m)``: at full speed it turns by ``turn_rad_per_frame`` per frame at
+    most and stays between the x axis and ``y = max_offset_m``.
 
     Parameters
     ----------
     n_frames : int
     step_m : float
-        Path length per frame at full speed (1.0 m per frame at 10 Hz is 36 km/h).
+        Path length per frame at full speed.
     turn_rad_per_frame : float
         Largest heading change per frame at full speed (0: straight).
     standstill_frames, accel_frames : int
-        Frames standing still at the start, then frames of acceleration.
+        Frames standing at the origin, then frames of linear acceleration.
     max_offset_m : float
         Largest distance from the x axis (to the left).
     """
@@ -166,11 +137,8 @@ def speed_path(n_frames: int, *, step_m: float, turn_rad_per_frame: float = math
 def drifted_poses(poses, *, scale_error: float, heading_drift_rad_per_m: float) -> np.ndarray:
     """Dead-reckoned poses with a scale error and a heading drift, as from wheel odometry.
 
-    Each step between consecutive true poses, expressed in the robot frame of the first
-    (``dx, dy, dyaw``), is integrated again with its translation scaled by ``1 + scale_error``
-    and ``heading_drift_rad_per_m`` times its length added to its rotation, from the first
-    true pose. So a path of length L ends with a heading error ``drift * L`` and a position
-    error that grows with L squared.
+    Each step ``(dx, dy, dyaw)`` between true poses is integrated again with its translation scaled
+    by ``1 + scale_error`` and ``heading_drift_rad_per_m`` times its length added to its rotation.
     """
     p = np.asarray(poses, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3 or not np.isfinite(p).all():

@@ -1,21 +1,9 @@
 """Randomized corridor worlds: many different corridors, each fixed by one integer seed.
 
-The built-in corridor (:func:`mrstereo.world.default_scene`) is one world; defaults tuned on it
-may not carry over. :func:`random_world` draws a whole corridor world from a seed: its width,
-length and ceiling height; wall, floor and ceiling textures from a bank that holds low-texture
-paint, repetitive patterns (tiles, stripes, chessboard posters) and strongly textured posters;
-lamps and ambient light; the stereo head (height 0.3-1.2 m, tilt 0-0.4 rad, baseline 6-16 cm,
-horizontal field of view 50-80 degrees, distortion and misalignment of the raw cameras); an
-exposure, gain, black level and noise level per camera; obstacles of several kinds (boxes,
-cylinders, thin poles, tables and chairs on thin legs, low objects near the floor), side
-openings into small rooms, recessed doors; and a robot path that keeps clear of the obstacles.
-
-Everything is drawn from ``numpy.random.default_rng(seed)`` in a fixed order, so a seed always
-gives the same world (and :func:`mrstereo.world.write_synthetic_dataset` with ``randomize=True``
-the same files). The ground truth stays exact: the renderer ray-casts the same primitives the
-ground-truth map rasterizes. Seeds 0-9 are the ones mrstereo's defaults are chosen on; seeds
-100-119 are the report seeds of ``benchmarks/bench_map.py --randomized``. User guide:
-docs/world.md; conventions: docs/conventions.md.
+:func:`random_world` draws the corridor, its textures, lights, obstacles, side rooms, doors, the
+stereo head, the cameras' sensors and a robot path from ``numpy.random.default_rng`` in a fixed
+order, so a seed always gives the same world. What is drawn from which range, and which seeds
+choose the defaults: docs/world.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -30,9 +18,9 @@ from ..camera import Camera, CameraInfo, CameraMount, StereoCamera
 from ..geometry.ground import ground_from_mount
 from ..transforms import rotation_from_rpy
 from .render import SensorModel
-from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, LABEL_POSTER, LABEL_WALL, TEXTURE_BLOTCH,
-                    TEXTURE_CHECKER, TEXTURE_POSTER, TEXTURE_STRIPES_U, TEXTURE_STRIPES_V, TEXTURE_TILES,
-                    TEXTURE_WEAK, TEXTURE_WOOD, Box, Cylinder, Decal, Light, Material, Scene, _wall_boxes)
+from .scene import (LABEL_DOOR, LABEL_OBSTACLE, LABEL_POSTER, TEXTURE_BLOTCH, TEXTURE_CHECKER, TEXTURE_POSTER,
+                    TEXTURE_STRIPES_U, TEXTURE_STRIPES_V, TEXTURE_TILES, TEXTURE_WEAK, TEXTURE_WOOD, WALL_THICK_M, Box,
+                    Cylinder, Decal, Light, Material, Scene, _corridor_boxes)
 
 __all__ = ["RandomWorld", "random_world", "random_stereo", "RANGES", "WALL_TEXTURES"]
 
@@ -53,26 +41,14 @@ RANGES = {
 """Ranges of the randomized quantities (uniform draws)."""
 
 _CLEARANCE_M = 0.4      # obstacles keep this far from the robot path (robot radius + margin)
-_WALL_THICK_M = 0.2
 _GRID_HALF_M = 2.95     # everything the map should show stays within |y| < 3 m (the default grid)
 
 
 @dataclass(frozen=True)
 class RandomWorld:
-    """One randomized world: the scene, the true stereo rig, the cameras' sensors and a path.
-
-    Attributes
-    ----------
-    seed : int
-    scene : Scene
-    stereo : StereoCamera
-        The exact calibration and mount (``stereo.mount``).
-    sensors : (SensorModel, SensorModel)
-        Left and right camera exposure, gain, black level and noise.
-    waypoints_xy : ndarray of shape (K, 2)
-        The robot path (world metres) as a polyline, clear of every obstacle by 0.4 m.
-    summary : dict
-        The drawn parameters in plain numbers (written into the dataset manifest).
+    """One randomized world: the scene, the true stereo rig (``stereo.mount``), the left and right
+    sensors, the robot path ``waypoints_xy`` (K, 2) clear of every obstacle by 0.4 m, and ``summary``:
+    the drawn parameters in plain numbers (written into the dataset manifest).
     """
 
     seed: int
@@ -120,79 +96,39 @@ def random_stereo(rng, width: int = 320, height: int = 240) -> StereoCamera:
                         mount=CameraMount.from_rig(height_m, tilt_rad, R_rect_from_cam=Rs[0]))
 
 
-# --------------------------------------------------------------------------- texture bank
-WALL_TEXTURES = ("paint", "tiles", "stripes", "blotch", "wood")
+# Material banks: kind -> (texture, albedo, contrast, scale_m[, period_m]), each number drawn
+# uniformly from a (lo, hi) pair, in this order, or constant; (lo, hi, k) is a draw scaled by k.
+_WALL = {"paint": (TEXTURE_WEAK, (0.45, 0.85), (0.01, 0.05), (0.1, 0.5)),     # a few grey levels
+         "tiles": (TEXTURE_TILES, (0.45, 0.85), (0.03, 0.1), (0.1, 0.3), (0.15, 0.5)),
+         "stripes": (TEXTURE_STRIPES_U, (0.45, 0.85), (0.04, 0.2), (0.1, 0.4), (0.06, 0.4)),
+         "blotch": (TEXTURE_BLOTCH, (0.45, 0.85), (0.08, 0.3), (0.03, 0.2)),
+         "wood": (TEXTURE_WOOD, (0.45, 0.85, 0.7), (0.1, 0.25), (0.03, 0.08), (0.08, 0.2))}
+_FLOOR = {"paint": (TEXTURE_WEAK, (0.3, 0.7), (0.01, 0.04), (0.1, 0.5)),
+          "tiles": (TEXTURE_TILES, (0.3, 0.7), (0.02, 0.08), (0.1, 0.3), (0.3, 0.6)),
+          "checker": (TEXTURE_CHECKER, (0.3, 0.7), (0.1, 0.3), (0.2, 0.6), (0.2, 0.5)),
+          "wood": (TEXTURE_WOOD, (0.3, 0.7), (0.08, 0.2), (0.03, 0.08), (0.1, 0.25)),
+          "carpet": (TEXTURE_BLOTCH, (0.3, 0.7), (0.05, 0.15), (0.01, 0.04)),
+          "stripes": (TEXTURE_STRIPES_V, (0.3, 0.7), (0.03, 0.1), (0.1, 0.4), (0.2, 0.6))}
+_CEILING = {"paint": (TEXTURE_WEAK, (0.7, 0.9), (0.01, 0.04), 0.4),
+            "tiles": (TEXTURE_TILES, (0.7, 0.9), (0.02, 0.06), 0.3, (0.5, 0.7))}
+_POSTER = {"poster": (TEXTURE_POSTER, (0.4, 0.6), (0.3, 0.5), (0.02, 0.05)),
+           "chessboard": (TEXTURE_CHECKER, 0.5, (0.4, 0.55), 5.0, (0.03, 0.1)),     # perfectly repetitive
+           "stripes": (TEXTURE_STRIPES_U, 0.5, (0.3, 0.5), 1.0, (0.03, 0.12))}
+_OBSTACLE = {"blotch": (TEXTURE_BLOTCH, (0.25, 0.75), (0.2, 0.45), (0.02, 0.06)),
+             "checker": (TEXTURE_CHECKER, (0.25, 0.75), (0.2, 0.4), (0.02, 0.05), (0.04, 0.12)),
+             "wood": (TEXTURE_WOOD, (0.25, 0.75), (0.15, 0.3), (0.03, 0.06), (0.05, 0.12)),
+             "poster": (TEXTURE_POSTER, (0.25, 0.75), (0.25, 0.45), (0.02, 0.05)),
+             "plain": (TEXTURE_WEAK, (0.25, 0.75), (0.06, 0.12), (0.03, 0.08))}
+WALL_TEXTURES = tuple(_WALL)
 """Kinds of wall material in the bank (``random_world(..., wall_texture=...)`` picks one)."""
 
 
-def _wall_material(rng, kind: str | None = None) -> tuple[str, Material]:
-    if kind is None:
-        kind = str(rng.choice(["paint", "paint", "tiles", "stripes", "blotch", "wood"]))
-    a = rng.uniform(0.45, 0.85)
-    if kind == "paint":        # low-texture paint: a few grey levels, comparable to the noise
-        return kind, Material(TEXTURE_WEAK, a, rng.uniform(0.01, 0.05), rng.uniform(0.1, 0.5))
-    if kind == "tiles":        # repetitive
-        return kind, Material(TEXTURE_TILES, a, rng.uniform(0.03, 0.1), rng.uniform(0.1, 0.3),
-                              rng.uniform(0.15, 0.5))
-    if kind == "stripes":      # repetitive: vertical stripes along the wall
-        return kind, Material(TEXTURE_STRIPES_U, a, rng.uniform(0.04, 0.2), rng.uniform(0.1, 0.4),
-                              rng.uniform(0.06, 0.4))
-    if kind == "blotch":
-        return kind, Material(TEXTURE_BLOTCH, a, rng.uniform(0.08, 0.3), rng.uniform(0.03, 0.2))
-    return kind, Material(TEXTURE_WOOD, a * 0.7, rng.uniform(0.1, 0.25), rng.uniform(0.03, 0.08),
-                          rng.uniform(0.08, 0.2))
-
-
-def _floor_material(rng) -> tuple[str, Material]:
-    kind = rng.choice(["paint", "tiles", "tiles", "checker", "wood", "carpet", "stripes"])
-    a = rng.uniform(0.3, 0.7)
-    if kind == "paint":
-        return kind, Material(TEXTURE_WEAK, a, rng.uniform(0.01, 0.04), rng.uniform(0.1, 0.5))
-    if kind == "tiles":
-        return kind, Material(TEXTURE_TILES, a, rng.uniform(0.02, 0.08), rng.uniform(0.1, 0.3),
-                              rng.uniform(0.3, 0.6))
-    if kind == "checker":      # chequered tiles: strongly repetitive
-        return kind, Material(TEXTURE_CHECKER, a, rng.uniform(0.1, 0.3), rng.uniform(0.2, 0.6),
-                              rng.uniform(0.2, 0.5))
-    if kind == "wood":
-        return kind, Material(TEXTURE_WOOD, a, rng.uniform(0.08, 0.2), rng.uniform(0.03, 0.08),
-                              rng.uniform(0.1, 0.25))
-    if kind == "carpet":
-        return kind, Material(TEXTURE_BLOTCH, a, rng.uniform(0.05, 0.15), rng.uniform(0.01, 0.04))
-    return kind, Material(TEXTURE_STRIPES_V, a, rng.uniform(0.03, 0.1), rng.uniform(0.1, 0.4),
-                          rng.uniform(0.2, 0.6))
-
-
-def _ceiling_material(rng) -> tuple[str, Material]:
-    if rng.uniform() < 0.5:
-        return "paint", Material(TEXTURE_WEAK, rng.uniform(0.7, 0.9), rng.uniform(0.01, 0.04), 0.4)
-    return "tiles", Material(TEXTURE_TILES, rng.uniform(0.7, 0.9), rng.uniform(0.02, 0.06), 0.3,
-                             rng.uniform(0.5, 0.7))
-
-
-def _poster_material(rng) -> tuple[str, Material]:
-    kind = rng.choice(["poster", "poster", "chessboard", "stripes"])
-    if kind == "poster":       # strong texture
-        return kind, Material(TEXTURE_POSTER, rng.uniform(0.4, 0.6), rng.uniform(0.3, 0.5), rng.uniform(0.02, 0.05))
-    if kind == "chessboard":   # a chessboard poster: perfectly repetitive
-        return kind, Material(TEXTURE_CHECKER, 0.5, rng.uniform(0.4, 0.55), 5.0, rng.uniform(0.03, 0.1))
-    return kind, Material(TEXTURE_STRIPES_U, 0.5, rng.uniform(0.3, 0.5), 1.0, rng.uniform(0.03, 0.12))
-
-
-def _obstacle_material(rng) -> tuple[str, Material]:
-    kind = rng.choice(["blotch", "blotch", "checker", "wood", "poster", "plain"])
-    a = rng.uniform(0.25, 0.75)
-    if kind == "blotch":
-        return kind, Material(TEXTURE_BLOTCH, a, rng.uniform(0.2, 0.45), rng.uniform(0.02, 0.06))
-    if kind == "checker":
-        return kind, Material(TEXTURE_CHECKER, a, rng.uniform(0.2, 0.4), rng.uniform(0.02, 0.05),
-                              rng.uniform(0.04, 0.12))
-    if kind == "wood":
-        return kind, Material(TEXTURE_WOOD, a, rng.uniform(0.15, 0.3), rng.uniform(0.03, 0.06),
-                              rng.uniform(0.05, 0.12))
-    if kind == "poster":
-        return kind, Material(TEXTURE_POSTER, a, rng.uniform(0.25, 0.45), rng.uniform(0.02, 0.05))
-    return kind, Material(TEXTURE_WEAK, a, rng.uniform(0.06, 0.12), rng.uniform(0.03, 0.08))   # plain paint
+def _material(rng, table: dict, kind) -> tuple[str, Material]:
+    """A material of ``kind`` (a str, or a list to draw it from) from ``table`` (see above)."""
+    kind = kind if isinstance(kind, str) else str(rng.choice(kind))
+    texture, *numbers = table[kind]
+    return kind, Material(texture, *(v if not isinstance(v, tuple) else rng.uniform(v[0], v[1]) if len(v) == 2
+                                     else rng.uniform(v[0], v[1]) * v[2] for v in numbers))
 
 
 # --------------------------------------------------------------------------- layout helpers
@@ -218,26 +154,24 @@ def _intervals_free(a: float, b: float, taken: list[tuple[float, float]], gap: f
     return all(b + gap <= lo or hi + gap <= a for lo, hi in taken)
 
 
+_SOLIDS = {"box": ((0.2, 0.7), (0.2, 0.7), (0.3, 1.2)), "low": ((0.2, 0.6), (0.2, 0.6), (0.12, 0.22)),
+           "cylinder": ((0.08, 0.3), (0.3, 1.2)), "pole": ((0.02, 0.05), (0.9, 1.6))}
+
+
 def _obstacle(rng, kind: str, x: float, y: float, mat: int) -> tuple[list[Box], list[Cylinder], tuple]:
     """Primitives of one obstacle centred at (x, y) and its footprint rectangle (label set later)."""
     boxes: list[Box] = []
     cyls: list[Cylinder] = []
-    if kind == "box":
-        sx, sy, h = rng.uniform(0.2, 0.7), rng.uniform(0.2, 0.7), rng.uniform(0.3, 1.2)
-        boxes.append(Box((x - sx / 2, y - sy / 2, 0.0), (x + sx / 2, y + sy / 2, h), mat, 0))
-        rect = (x - sx / 2, x + sx / 2, y - sy / 2, y + sy / 2)
-    elif kind == "low":         # low object near the floor
-        sx, sy, h = rng.uniform(0.2, 0.6), rng.uniform(0.2, 0.6), rng.uniform(0.12, 0.22)
-        boxes.append(Box((x - sx / 2, y - sy / 2, 0.0), (x + sx / 2, y + sy / 2, h), mat, 0))
-        rect = (x - sx / 2, x + sx / 2, y - sy / 2, y + sy / 2)
-    elif kind == "cylinder":
-        r, h = rng.uniform(0.08, 0.3), rng.uniform(0.3, 1.2)
-        cyls.append(Cylinder((x, y), r, h, mat, 0))
-        rect = (x - r, x + r, y - r, y + r)
-    elif kind == "pole":        # thin pole
-        r, h = rng.uniform(0.02, 0.05), rng.uniform(0.9, 1.6)
-        cyls.append(Cylinder((x, y), r, h, mat, 0))
-        rect = (x - r, x + r, y - r, y + r)
+    if kind in _SOLIDS:         # a box (sizes x, y, height) or a cylinder (radius, height)
+        size = [rng.uniform(lo, hi) for lo, hi in _SOLIDS[kind]]
+        if len(size) == 3:
+            sx, sy, h = size
+            boxes.append(Box((x - sx / 2, y - sy / 2, 0.0), (x + sx / 2, y + sy / 2, h), mat, 0))
+            rect = (x - sx / 2, x + sx / 2, y - sy / 2, y + sy / 2)
+        else:
+            r, h = size
+            cyls.append(Cylinder((x, y), r, h, mat, 0))
+            rect = (x - r, x + r, y - r, y + r)
     else:                       # table or chair: a top on four thin legs (a chair has a backrest)
         table = kind == "table"
         sx = rng.uniform(0.6, 1.2) if table else rng.uniform(0.38, 0.48)
@@ -310,7 +244,7 @@ def _draw_wall_gaps(rng, corridor: _Corridor) -> tuple[list, list, dict[int, lis
     doors: list[tuple[int, float, float]] = []
     taken: dict[int, list] = {+1: [], -1: []}
     x1, h = corridor.x1_m, corridor.ceiling_m
-    max_depth = _GRID_HALF_M - corridor.half_m - _WALL_THICK_M
+    max_depth = _GRID_HALF_M - corridor.half_m - WALL_THICK_M
     for _ in range(int(rng.integers(0, 3))):
         side = int(rng.choice([-1, 1]))
         w = rng.uniform(0.8, 1.8)
@@ -329,42 +263,6 @@ def _draw_wall_gaps(rng, corridor: _Corridor) -> tuple[list, list, dict[int, lis
     return openings, doors, taken
 
 
-def _structure(corridor: _Corridor, openings: list, doors: list, ids: dict[str, int]) -> tuple[list[Box], list]:
-    """Floor, ceiling, walls (with their gaps), door recesses and the rooms behind openings; the rooms'
-    floor rectangles ``(xa, xb, ya, yb)``."""
-    x0, x1, half, h = corridor.x0_m, corridor.x1_m, corridor.half_m, corridor.ceiling_m
-    wall = ids["wall"]
-    boxes: list[Box] = [
-        Box((x0 - 1.0, -_GRID_HALF_M - 1.0, -0.2), (x1 + 1.0, _GRID_HALF_M + 1.0, 0.0), ids["floor"], LABEL_FLOOR),
-        Box((x0 - 1.0, -_GRID_HALF_M - 1.0, h), (x1 + 1.0, _GRID_HALF_M + 1.0, h + 0.2), ids["ceiling"],
-            LABEL_CEILING),
-        Box((x0 - _WALL_THICK_M, -half, 0.0), (x0, half, h), wall, LABEL_WALL),
-        Box((x1, -half, 0.0), (x1 + _WALL_THICK_M, half, h), wall, LABEL_WALL),
-    ]
-    free_regions = []
-    recess = 0.1
-    for side in (+1, -1):
-        gaps = ([(xa, xb, 2.1) for s, xa, xb in doors if s == side]
-                + [(xa, xb, top) for s, xa, xb, top, _ in openings if s == side])
-        boxes += _wall_boxes(side, x0, x1, half, _WALL_THICK_M, h, gaps, wall)
-        for s, xa, xb in doors:
-            if s == side:
-                ya, yb = sorted((side * (half + recess), side * (half + _WALL_THICK_M)))
-                boxes.append(Box((xa, ya, 0.0), (xb, yb, 2.1), ids["door"], LABEL_DOOR))
-        for s, xa, xb, top, depth in openings:
-            if s != side:
-                continue
-            # a small room behind the opening: back wall and two side walls
-            y_in, y_back = side * half, side * (half + depth)
-            ya, yb = sorted((y_back, y_back + side * _WALL_THICK_M))
-            boxes.append(Box((xa - _WALL_THICK_M, ya, 0.0), (xb + _WALL_THICK_M, yb, h), wall, LABEL_WALL))
-            ya, yb = sorted((y_in, y_back))
-            boxes.append(Box((xa - _WALL_THICK_M, ya, 0.0), (xa, yb, h), wall, LABEL_WALL))
-            boxes.append(Box((xb, ya, 0.0), (xb + _WALL_THICK_M, yb, h), wall, LABEL_WALL))
-            free_regions.append((xa, xb, ya, yb))
-    return boxes, free_regions
-
-
 def _draw_decals(rng, corridor: _Corridor, bank: _MaterialBank, taken: dict[int, list]) -> list[Decal]:
     """Posters and flat door panels painted on the walls, clear of the openings and doors."""
     x1, half, h = corridor.x1_m, corridor.half_m, corridor.ceiling_m
@@ -377,7 +275,7 @@ def _draw_decals(rng, corridor: _Corridor, bank: _MaterialBank, taken: dict[int,
             continue
         z0 = rng.uniform(0.3, 1.2)
         zh = rng.uniform(0.4, 1.0)
-        mat = bank.add(_poster_material(rng))
+        mat = bank.add(_material(rng, _POSTER, ["poster", "poster", "chessboard", "stripes"]))
         decals.append(Decal(-side, side * half, xa, xa + w, z0, min(z0 + zh, h - 0.1), mat, LABEL_POSTER))
         taken[side].append((xa, xa + w))
     for _ in range(int(rng.integers(0, 3))):
@@ -426,7 +324,7 @@ def _draw_obstacles(rng, corridor: _Corridor, bank: _MaterialBank,
     n_obstacles = int(rng.integers(RANGES["obstacles"][0], RANGES["obstacles"][1] + 1))
     for _ in range(n_obstacles):
         kind = str(rng.choice(kinds))
-        mat = bank.add(_obstacle_material(rng))
+        mat = bank.add(_material(rng, _OBSTACLE, ["blotch", "blotch", "checker", "wood", "poster", "plain"]))
         found = _place_obstacle(rng, kind, mat, corridor, path_pts, placed)
         if found is not None:
             b, c, rect = found
@@ -466,30 +364,18 @@ def random_world(seed: int, *, width: int = 320, height: int = 240,
                  wall_texture: str | None = None) -> RandomWorld:
     """Draw a corridor world, its stereo rig, sensors and robot path from ``seed``.
 
+    World frame as in :func:`mrstereo.world.default_scene`; everything the default map shows lies
+    within ``|y| < 3 m``; obstacle labels ``LABEL_OBSTACLE + k`` are numbered by the x of their footprint.
+
     Parameters
     ----------
     seed : int
         Non-negative; the same seed gives the same world.
     width, height : int
-        Image size of the rig (the field of view is drawn independently of it).
+        Image size of the rig (the field of view is drawn independently).
     wall_texture : {"paint", "tiles", "stripes", "blotch", "wood"}, optional
-        Give the walls this kind of material instead of the drawn one (a development variant:
-        e.g. ``"stripes"`` puts vertical stripes of period 0.06-0.4 m on every wall). The
-        replacement is drawn from a stream of its own after all other draws, so everything
-        else (rig, layout, obstacles, posters, lights, sensors, path) stays the world of
-        ``seed``; if the drawn kind already is ``wall_texture`` the world is unchanged.
-
-    Returns
-    -------
-    RandomWorld
-
-    Notes
-    -----
-    World frame as in :func:`mrstereo.world.default_scene`: the corridor runs along +x, centred
-    on ``y = 0``, the path starts near the origin looking along +x. Everything that matters for
-    the default map (12 m x 6 m from (0, -3)) lies within ``|y| < 3 m``. Obstacle labels
-    ``LABEL_OBSTACLE + k`` are numbered by the x of their footprint; all primitives of a table
-    or chair share its label.
+        The walls' material kind, drawn from a stream of its own after all other draws, so the rest
+        stays the world of ``seed``.
     """
     seed = _checks.positive_int("seed", seed, minimum=0)
     if wall_texture is not None and wall_texture not in WALL_TEXTURES:
@@ -499,15 +385,17 @@ def random_world(seed: int, *, width: int = 320, height: int = 240,
     stereo = random_stereo(rng, width, height)
     corridor = _draw_corridor(rng)
     bank = _MaterialBank()
-    ids = {"wall": bank.add(_wall_material(rng)), "floor": bank.add(_floor_material(rng)),
-           "ceiling": bank.add(_ceiling_material(rng)),
+    ids = {"wall": bank.add(_material(rng, _WALL, ["paint", "paint", "tiles", "stripes", "blotch", "wood"])),
+           "floor": bank.add(_material(rng, _FLOOR, ["paint", "tiles", "tiles", "checker", "wood", "carpet", "stripes"])),
+           "ceiling": bank.add(_material(rng, _CEILING, "paint" if rng.uniform() < 0.5 else "tiles")),
            "skirting": bank.add(("skirting", Material(TEXTURE_WEAK, rng.uniform(0.15, 0.6), 0.04, 0.05))),
            "door": bank.add(("door", Material(TEXTURE_WOOD, rng.uniform(0.3, 0.55), rng.uniform(0.15, 0.3), 0.05,
                                               rng.uniform(0.08, 0.13))))}
     skirting_m = float(rng.choice([0.0, 0.06, 0.1, 0.15]))
     waypoints = _draw_path(rng, corridor)
     openings, doors, taken = _draw_wall_gaps(rng, corridor)
-    boxes, free_regions = _structure(corridor, openings, doors, ids)
+    boxes, free_regions = _corridor_boxes(corridor.x0_m, corridor.x1_m, corridor.half_m, corridor.ceiling_m,
+                                          doors=doors, openings=openings, outer_half_m=_GRID_HALF_M, ids=ids)
     decals = _draw_decals(rng, corridor, bank, taken)
     obstacle_boxes, cylinders, obstacle_kinds = _draw_obstacles(rng, corridor, bank, _path_points(waypoints))
     lights, ambient = _draw_lights(rng, corridor)
@@ -515,8 +403,8 @@ def random_world(seed: int, *, width: int = 320, height: int = 240,
     wall = ids["wall"]
     if wall_texture is not None and wall_texture != bank.names[wall]:
         # after every other draw, from a stream of its own: the rest of the world stays the seed's
-        bank.names[wall], bank.materials[wall] = _wall_material(np.random.default_rng(
-            np.random.SeedSequence([seed, 0xC0441D0, 1])), wall_texture)
+        bank.names[wall], bank.materials[wall] = _material(np.random.default_rng(
+            np.random.SeedSequence([seed, 0xC0441D0, 1])), _WALL, wall_texture)
     scene = Scene(boxes=tuple(boxes + obstacle_boxes), cylinders=tuple(cylinders), decals=tuple(decals),
                   lights=lights, materials=tuple(bank.materials), skirting_m=skirting_m,
                   skirting_material=ids["skirting"], ambient=ambient, x_range_m=(corridor.x0_m, corridor.x1_m),

@@ -1,19 +1,9 @@
 """Stereo rendering of the synthetic corridor with exact ground truth.
 
-A :class:`~mrstereo.camera.StereoCamera` returned by :func:`default_stereo` is
-the *true* calibration of the simulated rig, in the format every command reads:
-``K``, ``D`` of the raw (distorted, slightly misaligned) cameras, ``R`` rotating
-each raw camera frame into the rectified frame, ``P`` the ideal rectified
-projections (shared intrinsics, right ``P[0, 3] = -fx * baseline_m``).
-:func:`render_stereo_frame` renders what the raw cameras see (rays through the
-distortion model, paper eq. 1-3, then ``R``), the ideally rectified pair, and the
-ground truth of the rectified left camera: disparity ``d = b f / Z`` (eq. 14),
-depth and a surface label image.
-
-The rectified left camera frame is placed on the robot by the calibration's
-mount (:meth:`mrstereo.camera.CameraMount.T_base_from_rectified`); the right
-rectified camera sits ``baseline_m`` along its +x axis. Conventions: docs/conventions.md; user
-guide: docs/world.md.
+:func:`default_stereo` is the *true* calibration of the simulated rig; :func:`render_stereo_frame`
+renders the raw cameras (rays through the distortion model, paper eq. 1-3, then ``R``), the ideally
+rectified pair and the ground truth of the rectified left camera: disparity ``d = b f / Z``
+(eq. 14), depth and labels. User guide: docs/world.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -39,20 +29,8 @@ _EXPOSURE = 255.0 * 0.95   # radiance 1.0 -> grey level
 
 @dataclass(frozen=True)
 class SensorModel:
-    """How one camera turns radiance into grey levels.
-
-    ``grey = clip(round(gain * 242.25 * radiance + black_level + N(0, noise_sigma)), 0, 255)``
-    (radiance 1.0 is 95 % of full scale at gain 1). The defaults are the built-in corridor's
-    cameras; two different models give a pair with unequal exposure, gain and noise.
-
-    Attributes
-    ----------
-    gain : float
-        Exposure times gain, relative (positive).
-    black_level : float
-        Offset added to every pixel, grey levels.
-    noise_sigma : float
-        Standard deviation of the Gaussian sensor noise, grey levels.
+    """How one camera turns radiance into grey levels (gain relative, black level and noise in grey levels):
+    ``grey = clip(round(gain * 242.25 * radiance + black_level + N(0, noise_sigma)), 0, 255)``.
     """
 
     gain: float = 1.0
@@ -69,26 +47,10 @@ class SensorModel:
 class StereoFrame:
     """One rendered stereo frame with its ground truth.
 
-    Attributes
-    ----------
-    raw_left, raw_right : ndarray of shape (H, W), uint8
-        What the real (distorted, misaligned) cameras see.
-    left_rect, right_rect : ndarray of shape (H, W), uint8
-        The ideally rectified pair.
-    disparity_px : ndarray of shape (H, W), float32
-        Ground-truth disparity ``d = x_left - x_right`` of the rectified left
-        image, NaN where no surface is hit.
-    depth_m : ndarray of shape (H, W), float32
-        ``Z`` in the rectified left camera frame.
-    labels : ndarray of shape (H, W), uint8
-        Surface class of each rectified left pixel (``LABEL_*`` in
-        :mod:`mrstereo.world.scene`; obstacle k is ``LABEL_OBSTACLE + k``).
-    pose : tuple of float
-        Robot pose ``(x_m, y_m, yaw_rad)`` in the world.
-    pan_rad : float
-        Head pan of this frame.
-    T_world_from_cam : ndarray of shape (4, 4)
-        Pose of the rectified left camera.
+    ``raw_left, raw_right`` what the distorted, misaligned cameras see; ``left_rect, right_rect`` the
+    ideally rectified pair (uint8); ``disparity_px`` (NaN where no surface), ``depth_m`` (``Z``) and
+    ``labels`` (``LABEL_*``) of the rectified left camera; the robot ``pose`` ``(x_m, y_m, yaw_rad)``,
+    the head's ``pan_rad`` and ``T_world_from_cam`` of the rectified left camera.
     """
 
     raw_left: np.ndarray
@@ -105,27 +67,16 @@ class StereoFrame:
 
 def default_stereo(width: int = 320, height: int = 240, *, height_m: float = 0.45,
                    tilt_rad: float = 0.15) -> StereoCamera:
-    """The simulated stereo head: its exact calibration and mount.
-
-    320x240 (the paper's cameras): rectified ``fx = fy = 200 px``, baseline
-    0.12 m, so 0.5 m is 48 px of disparity (paper Sec. 3, Fig. 4).
-    640x480: ``fx = fy = 451 px``, baseline 0.075 m (0.5 m -> 67.7 px).
-    Other sizes scale the 320x240 focal length with the width (baseline
-    0.12 m). Both raw cameras have barrel distortion (``k1 = -0.045,
-    k2 = 0.006`` left, ``-0.040, 0.004`` right: about 8 px at the corners of a
-    320x240 image), principal points a few pixels off-centre, focal lengths
-    within 1 % of the rectified one, and rotations of 0.2 to 0.7 degrees
-    relative to the rectified frame, so rectification is not the identity.
+    """The simulated stereo head: its exact calibration and mount (docs/world.md, "The stereo rig").
 
     Parameters
     ----------
     width, height : int
-        Image size in pixels.
-    height_m : float
-        Height of the left optical centre above the floor.
-    tilt_rad : float
-        Downward tilt of the rectified left camera (positive looks down): the paper's rig
-        (:meth:`mrstereo.camera.CameraMount.from_rig`).
+        320x240 (the paper's cameras, Sec. 3, Fig. 4): ``fx = 200 px``, baseline 0.12 m; 640x480:
+        ``fx = 451 px``, baseline 0.075 m; other sizes scale 200 px with the width. The raw cameras
+        are distorted and rotated slightly, so rectification is not the identity.
+    height_m, tilt_rad : float
+        The rig's mount (:meth:`mrstereo.camera.CameraMount.from_rig`).
     """
     width = _checks.positive_int("width", width, minimum=16)
     height = _checks.positive_int("height", height, minimum=16)
@@ -153,8 +104,7 @@ def default_stereo(width: int = 320, height: int = 240, *, height_m: float = 0.4
 def camera_poses(stereo: StereoCamera, *, pose, pan_rad: float = 0.0,
                  mount: CameraMount | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``T_world_from_cam`` (4x4) of the rectified left and right cameras for a robot pose."""
-    if not isinstance(stereo, StereoCamera):
-        raise TypeError(f"stereo must be a StereoCamera, got {type(stereo).__name__}")
+    _checks.instance("stereo", stereo, StereoCamera)
     mount = stereo.mount if mount is None else mount
     if mount is None:
         raise ValueError("stereo has no camera mount; pass mount=CameraMount(...)")
@@ -262,40 +212,27 @@ def render_stereo_frame(scene: Scene, stereo: StereoCamera, *, pose=(0.0, 0.0, 0
     Parameters
     ----------
     scene : Scene
-        The world, e.g. :func:`mrstereo.world.default_scene`.
     stereo : StereoCamera
-        True calibration of the rig (e.g. :func:`default_stereo`); its ``mount``
-        places the head unless ``mount`` is given.
+        True calibration of the rig; its ``mount`` places the head unless ``mount`` is given.
     pose : (x_m, y_m, yaw_rad)
         Robot pose in the world.
     pan_rad : float
-        Head pan about the robot's z axis (positive to the left; the paper
-        uses 0 and +-45 degrees, Sec. 5.2).
+        Head pan about the robot's z axis (positive to the left; the paper: 0 and +-45 degrees).
     seed : int
         Seed of the sensor noise.
     supersample : int
         Anti-aliasing: ``supersample x supersample`` rays per pixel.
     mount : CameraMount, optional
-        Overrides ``stereo.mount``.
     sensors : (SensorModel, SensorModel)
-        Gain, black level and noise of the left and right camera (default: equal cameras with
-        :data:`sensor_noise_sigma` grey levels of noise).
+        Left and right camera (default: equal cameras with :data:`sensor_noise_sigma`).
 
     Returns
     -------
     StereoFrame
-
-    Notes
-    -----
-    A raw pixel's ray is the undistorted ray ``d_raw`` of the raw camera
-    (``Camera.rays``, inverse of eq. 3) rotated into the rectified frame as
-    ``R d_raw`` (``R`` maps raw to rectified, as in ROS camera_info), so
-    ``stereo.rectify(raw_left, raw_right)`` reproduces ``left_rect, right_rect``
-    up to interpolation and noise. Ground truth is sampled at pixel centres of the
-    rectified left camera: ``Z`` is the depth and ``d = b f / Z - doffs`` (eq. 14).
+        A raw pixel's ray is the raw camera's undistorted ray (inverse of eq. 3) rotated by ``R``;
+        ground truth at the rectified left pixel centres, ``d = b f / Z - doffs`` (eq. 14).
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+    _checks.instance("scene", scene, Scene)
     T_left, T_right = camera_poses(stereo, pose=pose, pan_rad=pan_rad, mount=mount)
     supersample = _checks.positive_int("supersample", supersample)
     if supersample > 8:

@@ -1,20 +1,9 @@
-"""The synthetic office corridor: geometry, materials and lights.
+"""The synthetic office corridor: geometry, materials and lights (paper Sec. 5, Figs. 7 and 11-14).
 
-The corridor runs along world +x (REP 103: x forward, y left, z up), centred
-on ``y = 0``: a floor at ``z = 0``, a ceiling at ``height_m``, two walls at
-``y = +-width_m / 2`` with recessed doors (gaps with a panel set back into the
-wall), coloured door panels, posters and skirting boards, and box and vertical
-cylinder obstacles standing on the floor, as in the test corridor of the
-paper's experiments (Sec. 5, Figs. 7 and 11-14).
-
-Every surface is an axis-aligned box or a vertical cylinder; posters and
-coloured door panels are *decals* (rectangles painted on a wall face); the
-skirting board is the band ``z < skirting_m`` of every wall face. Textures
-are deterministic functions of world surface coordinates keyed by
-``Scene.seed``, so every camera sees the same surface. Floor, walls and
-ceiling are weakly textured (low contrast, the uniform patches that the
-ground suppression of eq. (13) rejects); obstacles, posters and doors are
-strongly textured. Conventions: docs/conventions.md; user guide: docs/world.md.
+Axis-aligned boxes, vertical cylinders and decals painted on walls; textures are deterministic
+functions of world surface coordinates keyed by ``Scene.seed``, so every camera sees the same
+surface. Floor, walls and ceiling are weakly textured (what eq. (13) rejects). The corridor:
+docs/world.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -53,13 +42,10 @@ def is_obstacle_label(labels) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Material:
-    """A procedural texture: albedo ``albedo +- contrast`` at feature size ``scale_m``.
+    """A procedural texture (``TEXTURE_*`` ``kind``): albedo ``albedo +- contrast`` at feature size ``scale_m``.
 
-    ``kind`` is one of the ``TEXTURE_*`` constants; ``period_m`` is the tile
-    size (tiles), the checker square (checker), the plank width (wood) or the
-    stripe period (stripes). Surface coordinates ``(u, v)``: ``(y, z)`` on faces
-    normal to x, ``(x, z)`` on faces normal to y, ``(x, y)`` on floors and tops,
-    (arc length, z) on cylinders.
+    ``period_m`` is the tile, checker square, plank or stripe period. Surface coordinates ``(u, v)``:
+    ``(y, z)`` on faces normal to x, ``(x, z)`` normal to y, ``(x, y)`` on floors, (arc, z) on cylinders.
     """
 
     kind: int
@@ -119,26 +105,11 @@ class Light:
 
 @dataclass(frozen=True)
 class Scene:
-    """A static scene of boxes, cylinders, decals and lights.
+    """A static scene of boxes, cylinders, decals and lights (``material`` fields index ``materials``).
 
-    Attributes
-    ----------
-    boxes, cylinders, decals, lights, materials : tuple
-        The primitives; ``material`` fields index ``materials``.
-    skirting_m : float
-        Height of the skirting board drawn at the bottom of every wall face.
-    skirting_material : int
-        Material of the skirting board.
-    ambient : float
-        Ambient light level added to the lamps.
-    x_range_m, half_width_m, height_m : float
-        Free corridor space: ``x_range_m[0] < x < x_range_m[1]``,
-        ``|y| < half_width_m``, ``0 < z < height_m``.
-    seed : int
-        Key of all procedural textures.
-    free_regions_m : tuple of (x0, x1, y0, y1)
-        Free floor space outside the corridor rectangle (side rooms behind wall
-        openings), for the ground-truth map.
+    The skirting board is the band ``z < skirting_m`` of every wall face; ``ambient`` adds to the
+    lamps; the free corridor space is ``x_range_m``, ``|y| < half_width_m``, ``0 < z < height_m``
+    plus ``free_regions_m`` (side rooms); ``seed`` keys all textures.
     """
 
     boxes: tuple[Box, ...]
@@ -194,6 +165,10 @@ def _pack(scene: Scene) -> dict[str, np.ndarray]:
     return out
 
 
+WALL_THICK_M = 0.2
+DOOR_TOP_M = 2.1
+
+
 def _wall_boxes(side: int, x0: float, x1: float, y_in: float, thickness: float, height: float,
                 gaps: list[tuple[float, float, float]], wall_mat: int) -> list[Box]:
     """Wall on one side with door openings ``(xa, xb, top_z)``: segments plus lintels."""
@@ -208,22 +183,47 @@ def _wall_boxes(side: int, x0: float, x1: float, y_in: float, thickness: float, 
     return out
 
 
+def _corridor_boxes(x0: float, x1: float, half: float, h: float, *, doors, openings=(), outer_half_m: float,
+                    ids: dict[str, int]) -> tuple[list[Box], list]:
+    """Floor and ceiling (to ``|y| = outer_half_m + 1``), end walls, side walls at ``y = +-half`` with
+    their gaps, door recesses ``(side, xa, xb)`` and the small rooms behind openings ``(side, xa, xb,
+    top, depth)``; returns the boxes and the rooms' floor rectangles ``(xa, xb, ya, yb)``.
+    ``ids``: the materials of wall, floor, ceiling and door."""
+    t, wall = WALL_THICK_M, ids["wall"]
+    boxes: list[Box] = [
+        Box((x0 - 1.0, -outer_half_m - 1.0, -0.2), (x1 + 1.0, outer_half_m + 1.0, 0.0), ids["floor"], LABEL_FLOOR),
+        Box((x0 - 1.0, -outer_half_m - 1.0, h), (x1 + 1.0, outer_half_m + 1.0, h + 0.2), ids["ceiling"],
+            LABEL_CEILING),
+        Box((x0 - t, -half, 0.0), (x0, half, h), wall, LABEL_WALL),
+        Box((x1, -half, 0.0), (x1 + t, half, h), wall, LABEL_WALL),
+    ]
+    free_regions = []
+    for side in (+1, -1):
+        gaps = ([(xa, xb, DOOR_TOP_M) for s, xa, xb in doors if s == side]
+                + [(xa, xb, top) for s, xa, xb, top, _ in openings if s == side])
+        boxes += _wall_boxes(side, x0, x1, half, t, h, gaps, wall)
+        for s, xa, xb in doors:
+            if s == side:
+                ya, yb = sorted((side * (half + 0.1), side * (half + t)))        # the door 0.1 m back
+                boxes.append(Box((xa, ya, 0.0), (xb, yb, DOOR_TOP_M), ids["door"], LABEL_DOOR))
+        for s, xa, xb, top, depth in openings:
+            if s != side:
+                continue
+            # a small room behind the opening: back wall and two side walls
+            y_in, y_back = side * half, side * (half + depth)
+            ya, yb = sorted((y_back, y_back + side * t))
+            boxes.append(Box((xa - t, ya, 0.0), (xb + t, yb, h), wall, LABEL_WALL))
+            ya, yb = sorted((y_in, y_back))
+            boxes.append(Box((xa - t, ya, 0.0), (xa, yb, h), wall, LABEL_WALL))
+            boxes.append(Box((xb, ya, 0.0), (xb + t, yb, h), wall, LABEL_WALL))
+            free_regions.append((xa, xb, ya, yb))
+    return boxes, free_regions
+
+
 def default_scene(seed: int = 0) -> Scene:
-    """The default office corridor (about 15.5 m x 2.4 m x 2.5 m) with six obstacles.
+    """The default office corridor (about 15.5 m x 2.4 m x 2.5 m) with six obstacles (docs/world.md).
 
-    Corridor free space: ``-1 < x < 14.5``, ``|y| < 1.2``, ``0 < z < 2.5``; the
-    robot path starts at the origin looking along +x. Obstacles (distance of
-    their near face from the start): a box at 0.6 m right of centre, a
-    cylinder at 1.65 m left, a box at 2.6 m against the left wall, a cylinder
-    at 3.7 m right, a box straight ahead in the middle of the corridor at
-    6.0 m (a 0.95 m gap on its right), and a tall box at 9.0 m against the
-    right wall. ``seed`` keys the textures only; the geometry is fixed so that
-    ground-truth maps of different seeds coincide.
-
-    Parameters
-    ----------
-    seed : int
-        Texture seed (non-negative).
+    ``seed`` (non-negative) keys the textures only: ground-truth maps of different seeds coincide.
     """
     seed = _checks.positive_int("seed", seed, minimum=0)
     materials = (
@@ -239,43 +239,17 @@ def default_scene(seed: int = 0) -> Scene:
         Material(TEXTURE_BLOTCH, 0.60, 0.40, 0.03),           # 9 obstacle, fine blotches
     )
     WALL, FLOOR, CEIL, DOOR, SKIRT, POSTER, OBST_A, OBST_B, PANEL, OBST_C = range(10)
-    x0, x1, half, h, thick = -1.0, 14.5, 1.2, 2.5, 0.2
-    door_top, recess = 2.1, 0.1
-    # Recessed doors: (side, x start); 0.9 m wide.
-    recessed = [(+1, 3.0), (+1, 8.4), (-1, 5.2), (-1, 11.0)]
-    boxes: list[Box] = [
-        Box((x0 - 1.0, -half - 1.0, -0.2), (x1 + 1.0, half + 1.0, 0.0), FLOOR, LABEL_FLOOR),
-        Box((x0 - 1.0, -half - 1.0, h), (x1 + 1.0, half + 1.0, h + 0.2), CEIL, LABEL_CEILING),
-        Box((x0 - 0.2, -half, 0.0), (x0, half, h), WALL, LABEL_WALL),
-        Box((x1, -half, 0.0), (x1 + 0.2, half, h), WALL, LABEL_WALL),
-    ]
-    for side in (+1, -1):
-        gaps = [(xs, xs + 0.9, door_top) for s, xs in recessed if s == side]
-        boxes += _wall_boxes(side, x0, x1, half, thick, h, gaps, WALL)
-        for xa, xb, top in gaps:
-            ya, yb = sorted((side * (half + recess), side * (half + thick)))
-            boxes.append(Box((xa, ya, 0.0), (xb, yb, top), DOOR, LABEL_DOOR))
-    obstacles_box = [
-        Box((0.6, -0.55, 0.0), (0.9, -0.25, 0.4), OBST_A, 0),
-        Box((2.6, 0.75, 0.0), (3.0, 1.2, 0.8), OBST_B, 0),
-        Box((6.0, -0.25, 0.0), (6.4, 0.25, 0.6), OBST_C, 0),
-        Box((9.0, -1.2, 0.0), (9.5, -0.7, 1.2), OBST_A, 0),
-    ]
-    obstacles_cyl = [
-        Cylinder((1.8, 0.55), 0.15, 0.7, OBST_B, 0),
-        Cylinder((3.9, -0.6), 0.2, 0.5, OBST_C, 0),
-    ]
-    # Obstacle labels in order of distance from the start.
-    order = sorted([(b.min_m[0], "b", i) for i, b in enumerate(obstacles_box)]
-                   + [(c.centre_m[0] - c.radius_m, "c", i) for i, c in enumerate(obstacles_cyl)])
-    obst_boxes, obst_cyls = [], []
-    for k, (_, kind, i) in enumerate(order):
-        if kind == "b":
-            b = obstacles_box[i]
-            obst_boxes.append(Box(b.min_m, b.max_m, b.material, LABEL_OBSTACLE + k))
-        else:
-            c = obstacles_cyl[i]
-            obst_cyls.append(Cylinder(c.centre_m, c.radius_m, c.height_m, c.material, LABEL_OBSTACLE + k))
+    x0, x1, half, h = -1.0, 14.5, 1.2, 2.5
+    doors = [(side, xa, xa + 0.9) for side, xa in ((+1, 3.0), (+1, 8.4), (-1, 5.2), (-1, 11.0))]   # recessed
+    boxes, _ = _corridor_boxes(x0, x1, half, h, doors=doors, outer_half_m=half,
+                               ids={"wall": WALL, "floor": FLOOR, "ceiling": CEIL, "door": DOOR})
+    # obstacles labelled in the order of their near face's distance from the start
+    obst_boxes = [Box((0.6, -0.55, 0.0), (0.9, -0.25, 0.4), OBST_A, LABEL_OBSTACLE),
+                  Box((2.6, 0.75, 0.0), (3.0, 1.2, 0.8), OBST_B, LABEL_OBSTACLE + 2),
+                  Box((6.0, -0.25, 0.0), (6.4, 0.25, 0.6), OBST_C, LABEL_OBSTACLE + 4),
+                  Box((9.0, -1.2, 0.0), (9.5, -0.7, 1.2), OBST_A, LABEL_OBSTACLE + 5)]
+    obst_cyls = [Cylinder((1.8, 0.55), 0.15, 0.7, OBST_B, LABEL_OBSTACLE + 1),
+                 Cylinder((3.9, -0.6), 0.2, 0.5, OBST_C, LABEL_OBSTACLE + 3)]
     boxes += obst_boxes
     decals = (
         # The left wall (y = +half) faces -y, the right wall (y = -half) faces +y.
@@ -284,8 +258,8 @@ def default_scene(seed: int = 0) -> Scene:
         Decal(+1, -half, 2.5, 3.2, 1.0, 1.7, POSTER, LABEL_POSTER),
         Decal(+1, -half, 7.9, 8.9, 1.1, 1.9, POSTER, LABEL_POSTER),
         Decal(+1, -half, 12.6, 13.2, 1.2, 1.8, POSTER, LABEL_POSTER),
-        Decal(-1, half, 12.0, 12.9, 0.0, door_top, PANEL, LABEL_DOOR),
-        Decal(+1, -half, 1.0, 1.9, 0.0, door_top, PANEL, LABEL_DOOR),
+        Decal(-1, half, 12.0, 12.9, 0.0, DOOR_TOP_M, PANEL, LABEL_DOOR),
+        Decal(+1, -half, 1.0, 1.9, 0.0, DOOR_TOP_M, PANEL, LABEL_DOOR),
     )
     lights = tuple(Light((float(x), 0.0, h - 0.1), 2.4) for x in np.arange(0.5, 14.0, 2.5))
     return Scene(boxes=tuple(boxes), cylinders=tuple(obst_cyls), decals=decals, lights=lights,

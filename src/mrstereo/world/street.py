@@ -1,15 +1,8 @@
 """A long street world for odometry at car speed: building fronts, parked cars, poles, a wide rig.
 
-The corridor worlds are 8-15 m long, made for a robot at walking pace. Real odometry also has to
-hold at 0.5-1.5 m per frame (a car at 10 Hz), which needs a long scene with structure at 3-50 m.
-:func:`street_world` draws one from a seed: a road along +x (REP 103, centred on ``y = 0``,
-``width_m`` between the building fronts), rows of buildings on both sides (random lengths,
-set-backs, heights and facade materials, with bands of windows painted on them), gaps between
-them (side streets that open the view), parked cars along both kerbs, poles and trees, no
-ceiling (the sky is black), sunlight as a few high lamps plus ambient light; and a KITTI-like
-stereo rig (0.5 m baseline, level, 1.65 m above the road, ideal rectified cameras). The robot
-path is :func:`mrstereo.world.paths.speed_path`. Conventions: docs/conventions.md; user guide:
-docs/world.md.
+:func:`street_world` draws a road along +x between rows of buildings, side streets, parked
+cars, poles and trees, and a KITTI-like rig (0.5 m baseline, level, 1.65 m up); the path is
+:func:`mrstereo.world.paths.speed_path`. User guide: docs/world.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -19,7 +12,7 @@ import numpy as np
 
 from .. import _checks
 from ..camera import Camera, CameraMount, StereoCamera
-from .randomize import RandomWorld
+from .randomize import RandomWorld, _material
 from .render import SensorModel
 from .scene import (LABEL_FLOOR, LABEL_OBSTACLE, LABEL_POSTER, LABEL_WALL, TEXTURE_BLOTCH, TEXTURE_CHECKER,
                     TEXTURE_POSTER, TEXTURE_TILES, TEXTURE_WEAK, TEXTURE_WOOD, Box, Cylinder, Decal, Light,
@@ -33,38 +26,33 @@ STREET_CAMERA_HEIGHT_M = 1.65
 """Height of the street rig's left camera above the road (KITTI's)."""
 
 
+_FACADES = {"tiles": (TEXTURE_TILES, (0.4, 0.7), (0.08, 0.15), (0.2, 0.5), (0.4, 1.2)),     # as randomize's banks
+            "blotch": (TEXTURE_BLOTCH, (0.35, 0.6), (0.15, 0.3), (0.3, 1.0)),
+            "wood": (TEXTURE_WOOD, (0.3, 0.55), (0.15, 0.3), (0.1, 0.3), (0.3, 0.8)),
+            "plain": (TEXTURE_WEAK, (0.5, 0.8), (0.04, 0.1), (0.5, 2.0))}
+
+
 def _facade_material(rng: np.random.Generator) -> Material:
-    kind = int(rng.integers(0, 4))
-    if kind == 0:
-        return Material(TEXTURE_TILES, rng.uniform(0.4, 0.7), rng.uniform(0.08, 0.15), rng.uniform(0.2, 0.5),
-                        rng.uniform(0.4, 1.2))
-    if kind == 1:
-        return Material(TEXTURE_BLOTCH, rng.uniform(0.35, 0.6), rng.uniform(0.15, 0.3), rng.uniform(0.3, 1.0))
-    if kind == 2:
-        return Material(TEXTURE_WOOD, rng.uniform(0.3, 0.55), rng.uniform(0.15, 0.3), rng.uniform(0.1, 0.3),
-                        rng.uniform(0.3, 0.8))
-    return Material(TEXTURE_WEAK, rng.uniform(0.5, 0.8), rng.uniform(0.04, 0.1), rng.uniform(0.5, 2.0))
+    return _material(rng, _FACADES, tuple(_FACADES)[int(rng.integers(0, 4))])[1]
 
 
 def street_world(seed: int, *, width: int = 320, height: int = 240, length_m: float = 160.0,
                  width_m: float = 12.0) -> RandomWorld:
-    """Draw a street world from ``seed`` (the same seed gives the same world).
+    """Draw a street world from ``seed``.
 
     Parameters
     ----------
     seed : int
-        Non-negative.
+        Non-negative; the same seed gives the same world.
     width, height : int
-        Image size of the rig (horizontal field of view 77 degrees).
-    length_m : float
-        Length of the street (the path starts near ``x = 0`` and runs along +x).
-    width_m : float
-        Distance between the building fronts on the two sides.
+        Image size of the rig (77 degree field of view).
+    length_m, width_m : float
+        Length of the street along +x and distance between the building fronts.
 
     Returns
     -------
     RandomWorld
-        ``waypoints_xy`` is the street's centre line (``(0, 0)`` to ``(length_m, 0)``).
+        ``waypoints_xy`` runs from ``(0, 0)`` to ``(length_m, 0)``.
     """
     seed = _checks.positive_int("seed", seed, minimum=0)
     width = _checks.positive_int("width", width, minimum=16)

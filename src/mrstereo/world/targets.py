@@ -1,12 +1,9 @@
 """Rendered calibration targets with exact correspondences (paper Sec. 2, Fig. 2).
 
-A planar target lies in the plane ``z = 0`` of its own frame; a view places it
-at ``points_cam = R p + t`` in the (raw, distorted) left camera frame and
-renders what that camera -- and, for a :class:`~mrstereo.camera.StereoCamera`,
-the right raw camera -- sees, with the true lens distortion (eq. 1-3),
-anti-aliasing and sensor noise. ``points_px`` are the exact distorted
-projections of the target points, i.e. the control points the calibration
-(eq. 4-8) fits. Conventions: docs/conventions.md; user guide: docs/world.md.
+A planar target (``z = 0`` of its frame) placed at ``points_cam = R p + t`` in the raw left
+camera, rendered with the true lens distortion (eq. 1-3), anti-aliasing and noise; ``points_px``
+are the exact control points the calibration (eq. 4-8) fits. User guide: docs/world.md.
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -26,30 +23,11 @@ _WHITE, _BLACK = 0.88, 0.07
 
 @dataclass(frozen=True)
 class RenderedTarget:
-    """One rendered view of a planar target with its exact correspondences.
+    """One rendered view of a planar target with its exact correspondences (docs/world.md).
 
-    Attributes
-    ----------
-    image : ndarray of shape (H, W), uint8
-        The (left) raw camera image.
-    image_right : ndarray of shape (H, W), uint8 or None
-        The right raw image of the same target pose (stereo only).
-    points_target : ndarray of shape (N, 3)
-        Target points (chessboard inner corners or dot centres) in the target
-        frame, ``z = 0``, row-major: ``(i * spacing, j * spacing, 0)`` with i
-        along the board's first dimension.
-    points_px : ndarray of shape (N, 2)
-        Their exact distorted pixel positions in ``image``.
-    points_px_right : ndarray of shape (N, 2) or None
-        The same in ``image_right`` (may fall outside it for the dot target).
-    R, t : ndarray of shape (3, 3) and (3,)
-        True target pose in the left raw camera frame: ``points_cam = R p + t``.
-    target : str
-        ``"chessboard"`` or ``"dots"``.
-    board : tuple of int
-        Inner corners (chessboard) or dots (dot grid) per row and column.
-    spacing_m : float
-        Square size or dot pitch.
+    ``image`` (and ``image_right`` for a stereo pair, else None); ``points_target`` (N, 3) row-major
+    ``(i * spacing, j * spacing, 0)``; ``points_px`` (and ``points_px_right``) their exact distorted
+    pixels; ``R, t`` the pose in the left raw camera; ``target``, ``board``, ``spacing_m``.
     """
 
     image: np.ndarray
@@ -175,15 +153,10 @@ def _check_common(target, board, spacing_m, seed, supersample):
 
 
 _COVERAGES = ("random", "grid")
-# "grid" coverage: aim regions as (x, y) in {-1, 0, 1}, corners first, then edges, then the centre, so
-# that every 9 consecutive views cover the whole image. The distortion far out in the image corners is
-# extrapolated from the corner points nearest to them, so the corner views push the pattern as deep into
-# the corners as a detector allows: the board is small (no square below _GRID_MIN_SQUARE_PX in the image),
-# tilted with its corner at the image corner approaching the camera (an acute vertex that fits into the
-# image corner), and the paper may be cut by the image border as long as the pattern and a quiet zone of
-# _GRID_QUIET_ZONE squares of white around it stay _GRID_BORDER_PX inside. Large, strongly tilted boards
-# elsewhere pin down focal length and the distortion across the image. Measured in
-# benchmarks/bench_calibration.py [2].
+# "grid" coverage: aim regions (x, y) in {-1, 0, 1}, corners first, then edges, then the centre, so
+# that every 9 consecutive views cover the image. The corner distortion is extrapolated from the
+# points nearest to it, so corner views push a small, tilted board as deep into the corner as a
+# detector allows; large, strongly tilted boards elsewhere pin down the focal length.
 _GRID_AIMS = ((-1, -1), (1, 1), (1, -1), (-1, 1), (0, -1), (0, 1), (-1, 0), (1, 0), (0, 0))
 _GRID_CORNER_FILLS = (0.3, 0.25)      # quiet-zone outline width / image width, per pass over the regions
 _GRID_MIN_SQUARE_PX = 8.0             # smallest projected square side (or dot pitch) anywhere on the board
@@ -195,31 +168,37 @@ _GRID_QUIET_ZONE = 0.25
 _GRID_BORDER_PX = 3.0
 
 
+def _rect_outline(x0: float, x1: float, y0: float, y1: float) -> np.ndarray:
+    """Corners and edge midpoints (8, 3) of a target-frame rectangle."""
+    xm, ym = (x0 + x1) / 2, (y0 + y1) / 2
+    return np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0], [xm, y0, 0], [xm, y1, 0], [x0, ym, 0],
+                     [x1, ym, 0]])
+
+
 def _outline(target, board, s) -> tuple[np.ndarray, np.ndarray]:
-    """Paper outline points (corners and edge midpoints) and the paper centre, target frame."""
+    """Paper outline points and the paper centre, target frame."""
     x0, x1, y0, y1 = _board_extent(target, board, s)
-    outline = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0],
-                        [(x0 + x1) / 2, y0, 0], [(x0 + x1) / 2, y1, 0], [x0, (y0 + y1) / 2, 0],
-                        [x1, (y0 + y1) / 2, 0]])
-    return outline, np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
+    return _rect_outline(x0, x1, y0, y1), np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
 
 
 def _grid_outline(target, board, s) -> np.ndarray:
     """What must stay inside the image for "grid": the pattern plus its quiet zone (chessboard), the paper (dots)."""
     if target != "chessboard":
         return _outline(target, board, s)[0]
-    nx, ny = board
     m = (1.0 + _GRID_QUIET_ZONE) * s
-    x0, x1, y0, y1 = -m, (nx - 1) * s + m, -m, (ny - 1) * s + m
-    return np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0], [(x0 + x1) / 2, y0, 0],
-                     [(x0 + x1) / 2, y1, 0], [x0, (y0 + y1) / 2, 0], [x1, (y0 + y1) / 2, 0]])
+    return _rect_outline(-m, (board[0] - 1) * s + m, -m, (board[1] - 1) * s + m)
+
+
+def _projections(cams, pts: np.ndarray) -> list[np.ndarray]:
+    """Pixels of the left-raw-frame points ``pts`` in the left (and right) image."""
+    if cams[1] is None:
+        return [cams[0].project(pts)]
+    return [cams[0].project(pts), cams[1].project(pts @ cams[2].T + cams[3])]
 
 
 def _fits(cams, pts: np.ndarray, margin: float) -> bool:
     """Whether the left-raw-frame points ``pts`` project inside the left (and right) image."""
-    if not _inside(cams[0], cams[0].project(pts), margin):
-        return False
-    return cams[1] is None or _inside(cams[1], cams[1].project(pts @ cams[2].T + cams[3]), margin)
+    return all(_inside(cam, uv, margin) for cam, uv in zip(cams, _projections(cams, pts)))
 
 
 def _random_pose(cams, outline, centre, rng) -> tuple[np.ndarray, np.ndarray] | None:
@@ -243,11 +222,8 @@ def _random_pose(cams, outline, centre, rng) -> tuple[np.ndarray, np.ndarray] | 
 def _min_square_px(cams, points: np.ndarray, board) -> float:
     """Smallest projected distance between neighbouring pattern points, left (and right) image."""
     nx, ny = board
-    views = [cams[0].project(points)]
-    if cams[1] is not None:
-        views.append(cams[1].project(points @ cams[2].T + cams[3]))
     smallest = np.inf
-    for uv in views:
+    for uv in _projections(cams, points):
         grid = uv.reshape(ny, nx, 2)
         smallest = min(smallest, np.linalg.norm(np.diff(grid, axis=0), axis=-1).min(),
                        np.linalg.norm(np.diff(grid, axis=1), axis=-1).min())
@@ -257,20 +233,10 @@ def _min_square_px(cams, points: np.ndarray, board) -> float:
 def _grid_pose(cams, outline, centre, pattern, board, k, rng) -> tuple[np.ndarray, np.ndarray] | None:
     """Pose ``k`` of the "grid" coverage: the board pushed into aim region ``k mod 9``.
 
-    ``outline`` is what must stay inside the image(s) (:func:`_grid_outline`),
-    ``pattern`` the target points on a ``board`` grid. Corner regions: the
-    board is tilted by ``_GRID_CORNER_TILT_RAD`` about the image axes so that
-    its corner at the image corner approaches the camera, and its outline
-    fills ``_GRID_CORNER_FILLS`` of the image width (alternating per pass).
-    Edges: tilted by ``_GRID_TILTS_RAD`` with the edge at the region receding
-    (even passes) or approaching (odd passes), filling ``_GRID_FILLS``;
-    centre: the same tilt in a random direction. Plus up to 0.1 rad of random
-    tilt and ``_GRID_ROLL_RAD`` of random roll; then the board is shifted until
-    its outline touches the image border(s) of the region (``_GRID_BORDER_PX``,
-    in both images of a stereo pair) or is centred along the free axis. The
-    board is moved away while its outline does not fit; while a square is
-    smaller than ``_GRID_MIN_SQUARE_PX`` (a detector must find it), a corner
-    board is brought closer and an edge or centre board tilted less.
+    Corner regions tilt the board so its corner approaches the camera (``_GRID_CORNER_TILT_RAD``,
+    ``_GRID_CORNER_FILLS``); edges and centre tilt by ``_GRID_TILTS_RAD`` (``_GRID_FILLS``); then the
+    board is shifted until its ``outline`` touches the region's image border(s), moved away while it
+    does not fit, and brought closer or tilted less while a square is under ``_GRID_MIN_SQUARE_PX``.
     """
     left = cams[0]
     width_m = outline[1, 0] - outline[0, 0]
@@ -297,9 +263,7 @@ def _grid_pose(cams, outline, centre, pattern, board, k, rng) -> tuple[np.ndarra
         t = np.array([_right_offset_m(cams) / 2, 0.0, z]) - R @ centre
         for _ in range(30):              # shift the board (Newton-like, in pixels) against the border(s)
             pts = outline @ R.T + t
-            uv = left.project(pts)
-            if cams[1] is not None:
-                uv = np.concatenate([uv, cams[1].project(pts @ cams[2].T + cams[3])])
+            uv = np.concatenate(_projections(cams, pts))
             if not np.all(np.isfinite(uv)):
                 break
             shift = np.zeros(2)
@@ -334,14 +298,11 @@ def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", bo
     camera_or_stereo : Camera, CameraInfo or StereoCamera
         True raw camera(s); a stereo pair renders left and right images of each pose.
     target : {"chessboard", "dots"}
-        Chessboard (detectable by ``cv2.findChessboardCorners``, with a white
-        margin) or a grid of black dots on white.
     board : (int, int)
         Inner corners (chessboard) or dots per row and column, e.g. (9, 6).
     spacing_m : float
         Square size or dot pitch in metres.
     n_views : int
-        Number of views.
     seed : int
         Seed of the poses and the sensor noise.
     supersample : int
@@ -349,39 +310,16 @@ def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", bo
     noise_sigma : float
         Sensor noise, grey levels.
     coverage : {"random", "grid"}
-        How the poses are placed. ``"random"`` (default): tilts up to about
-        35 degrees, the paper filling 35-65 % of the image width, anywhere in
-        the image -- the image corners are often left uncovered. ``"grid"``:
-        what calibration guides ask of a user -- view ``k`` pushes the board
-        into one of nine regions (the four image corners, the four edges, the
-        centre, in that order, repeating) until it touches the image border(s)
-        there. In a corner the board is small (its outline 30 % / 25 % of the
-        image width in alternate passes, closer when a square would be smaller
-        than 8 px) and tilted by about 35 degrees with its corner at the image
-        corner toward the camera, so that the pattern reaches deep into the
-        image corner; elsewhere it is large (95 % / 85 %) and tilted by 40
-        degrees with the edge at the region receding / 26 degrees approaching
-        (less when a square would be smaller than 8 px), with a little random
-        tilt and roll. The paper may be cut by the image border, but the
-        pattern and a quarter square of white around it stay 3 px inside, and
-        no square is smaller than 8 px: ``cv2.findChessboardCorners`` finds
-        the rendered board. Take 18 views (two passes) or more; a 0.05 px
-        distortion error over the whole image needs a dense board and many
-        views (docs/calibration.md, Measured).
+        ``"random"``: tilts up to about 35 degrees, the paper filling 35-65 % of the image width,
+        anywhere. ``"grid"``: what calibration guides ask of a user, view ``k`` pushing the board into
+        one of nine regions (corners, edges, centre) until it touches the border there, squares of
+        8 px at least; take 18 views or more (docs/calibration.md, Measured).
 
     Returns
     -------
     list of RenderedTarget
-        ``"random"``: the whole paper lies inside every image (6 px margin);
-        ``"grid"``: the pattern and its quiet zone do (3 px margin). In both
-        images of a stereo pair. Deterministic for a seed.
-
-    Raises
-    ------
-    ValueError
-        For an unknown ``target`` or ``coverage`` and bad numbers.
-    RuntimeError
-        When the board cannot be placed inside the image(s) (too large).
+        Deterministic for a seed; the paper (``"random"``, 6 px margin) or the pattern and its quiet
+        zone (``"grid"``, 3 px) inside every image. RuntimeError when the board cannot be placed.
     """
     board, s, seed, supersample = _check_common(target, board, spacing_m, seed, supersample)
     n_views = _checks.positive_int("n_views", n_views)
@@ -406,15 +344,12 @@ def render_calibration_views(camera_or_stereo, *, target: str = "chessboard", bo
 
 def render_paper_dot_target(camera_or_stereo, *, grid=(15, 11), distance_m: float = 1.0, seed: int = 0,
                             supersample: int = 4, noise_sigma: float = sensor_noise_sigma) -> RenderedTarget:
-    """One fronto-parallel view of a dot grid filling most of the image (paper Fig. 2).
-
-    The dots reach the image corners, where the radial distortion (eq. 3) bends
-    the straight rows of dots the most.
+    """One fronto-parallel view of a dot grid filling most of the image (paper Fig. 2), whose
+    corners show the radial distortion (eq. 3) most.
 
     Parameters
     ----------
     camera_or_stereo : Camera, CameraInfo or StereoCamera
-        True raw camera(s).
     grid : (int, int)
         Dots per row and column.
     distance_m : float
