@@ -11,6 +11,7 @@ import click
 
 from ..pipeline.odometry import odometry_from_manifest
 from ._bag import opened_dataset, recording_of, recording_options
+from ._live import check_sink_options, record_bag_option, replayed_to_sinks, viewer_option
 from ._options import library_default, profile_option
 
 __all__ = ["COMMANDS"]
@@ -32,10 +33,12 @@ __all__ = ["COMMANDS"]
               default="given" if library_default(odometry_from_manifest, "initial_pose") == "given" else "origin",
               help="Start at the first frame's given pose, or at the origin.")
 @recording_options
+@viewer_option
+@record_bag_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | None, metrics_path: Path | None,
-                     calib: Path | None, start: str, bag: Path | None, rate_hz: float | None, quiet: bool,
-                     **bag_kw) -> None:
+                     calib: Path | None, start: str, bag: Path | None, rate_hz: float | None,
+                     viewers: tuple[str, ...], record_bag: Path | None, quiet: bool, **bag_kw) -> None:
     """Stereo visual odometry of a recording or a ROS bag.
 
     RECORDING is a dataset folder (docs/dataset.md), a KITTI odometry or
@@ -62,6 +65,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     inputs = [p for p in (manifest, bag, calib) if p is not None]
     for p in outputs:
         refuse_overwrite_input(p, inputs)
+    viewers = check_sink_options(viewers, record_bag, out_path.with_suffix(""), inputs)
     with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, stamps):
         if bag is None:
             from ..pipeline.batch import dataset_files
@@ -109,6 +113,13 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
             curves["ground truth"] = ((np.linalg.inv(truth[0]) if start == "origin" else np.eye(4)) @ truth)[:, :3, 3]
         plot_trajectories(plot_path, curves, lost=~run.tracked, title=f"visual odometry, {len(run.status)} frames")
     click.echo(f"wrote {', '.join(str(p) for p in outputs)}")
+    if viewers or record_bag is not None:
+        from ..pipeline.sinks import replay_odometry
+
+        mount = dataset.mount.T_base_from_rectified((stereo or dataset.calibration).left.R) \
+            if dataset.mount is not None else None
+        replayed_to_sinks(lambda sinks: replay_odometry(stamps, run.T_world_from_base, sinks, T_base_from_cam=mount),
+                          stereo or dataset.calibration, out_path.with_suffix(""), viewers, record_bag)
 
 
 COMMANDS = [odometry_command]

@@ -10,6 +10,7 @@ import click
 
 from ..pipeline.run import build_map
 from ._bag import BAG_KEYS, opened_dataset, recording_of, recording_options
+from ._live import check_sink_options, record_bag_option, replayed_to_sinks, viewer_option
 from ._options import (check_workers, echo_map_warnings, echo_run_floor, library_default, map_config, map_options,
                        profile_option, worker_options)
 
@@ -39,10 +40,13 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json")
                    "metrics.json.")
 @worker_options
 @recording_options
+@viewer_option
+@record_bag_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odometry: str, align: bool,
                 workers: int | None, scheduler: str | None, processes: bool, bag: Path | None, rate_hz: float | None,
-                quiet: bool, no_mount_check: bool, **options) -> None:
+                viewers: tuple[str, ...], record_bag: Path | None, quiet: bool, no_mount_check: bool,
+                **options) -> None:
     """Build an occupancy grid map from a recording.
 
     RECORDING is a dataset folder (docs/dataset.md), a KITTI odometry or
@@ -73,12 +77,15 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
     check_output_dir("--out", out_dir)
     outputs = {f"--out {out_dir / name}": out_dir / name for name in MAP_FILES}     # (names the file)
     if is_bag:
-        check_outputs(outputs, [source, calib], input_dirs=[source] if source.is_dir() else [])
+        inputs = [source, calib]
+        check_outputs(outputs, inputs, input_dirs=[source] if source.is_dir() else [])
         manifest, bag = None, source
     else:
         with opened_dataset(manifest, None, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, _, _):
-            check_outputs(outputs, [manifest, calib] + dataset_files(dataset))   # read once: checked here
+            inputs = [manifest, calib] + dataset_files(dataset)
+            check_outputs(outputs, inputs)   # read once: checked here
         manifest = dataset
+    viewers = check_sink_options(viewers, record_bag, out_dir / "view", inputs, output_dirs=[out_dir])
     with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes, odometry=odometry, align=align or None,
@@ -105,6 +112,11 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
                    f"measured visually ({a['rejected_visual_steps']} rejected), the poses moved by "
                    f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg on average")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
+    if viewers or record_bag is not None:
+        from ..pipeline.sinks import replay_map_run
+
+        replayed_to_sinks(lambda sinks: replay_map_run(run, sinks, config=config), run.manifest.calibration,
+                          out_dir / "view", viewers, record_bag)
 
 
 COMMANDS = [map_command]

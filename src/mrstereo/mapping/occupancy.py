@@ -375,6 +375,42 @@ def _supported_by_keys(points: np.ndarray, grid: GridSpec, min_points: int) -> n
     return points[finite & (counts[inverse] >= min_points)]
 
 
+WINDOW_MIN_CELLS = 1 << 18
+"""In a grid with more cells, a view's cells are computed in its own window of the grid (each view
+allocates a few arrays of the grid's size: about 70 bytes per cell)."""
+
+
+def _view_window(grid: GridSpec, obstacles: np.ndarray, floor: np.ndarray, sensor_origin_world) -> tuple:
+    """``(r0, r1, c0, c1)``: the cells of the bounding box of a view's points and its sensor, a cell of
+    margin around, within the grid (a ray between two points of a box stays in it)."""
+    origin = np.asarray(sensor_origin_world, dtype=np.float64).ravel()[:2]
+    xy = np.concatenate([obstacles[:, :2], floor[:, :2], origin[None, :] if origin.size == 2 else np.empty((0, 2))])
+    xy = xy[np.isfinite(xy).all(axis=1)]
+    rows, cols = grid.shape
+    if not len(xy):
+        return 0, rows, 0, cols
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    c0 = int(np.clip(np.floor((lo[0] - grid.origin_x_m) / grid.resolution_m) - 1, 0, cols))
+    c1 = int(np.clip(np.floor((hi[0] - grid.origin_x_m) / grid.resolution_m) + 2, 0, cols))
+    r0 = int(np.clip(np.floor((lo[1] - grid.origin_y_m) / grid.resolution_m) - 1, 0, rows))
+    r1 = int(np.clip(np.floor((hi[1] - grid.origin_y_m) / grid.resolution_m) + 2, 0, rows))
+    if r1 <= r0 or c1 <= c0:            # the view lies wholly outside: the whole grid, rays cut at its border
+        return 0, rows, 0, cols
+    return r0, r1, c0, c1
+
+
+def _subgrid(grid: GridSpec, r0: int, r1: int, c0: int, c1: int) -> GridSpec:
+    """The cells ``[r0:r1, c0:c1]`` of ``grid`` as a grid of their own."""
+    res = grid.resolution_m
+    return GridSpec(width_m=(c1 - c0) * res, height_m=(r1 - r0) * res, resolution_m=res,
+                    origin_x_m=grid.origin_x_m + c0 * res, origin_y_m=grid.origin_y_m + r0 * res)
+
+
+def _cells_in(flat: np.ndarray, window_cols: int, r0: int, c0: int, cols: int) -> np.ndarray:
+    """Flat indices of a window's cells as flat indices of the whole grid (the order is kept)."""
+    return (flat // window_cols + r0) * cols + flat % window_cols + c0
+
+
 class OccupancyGrid:
     """A 2D occupancy grid that accumulates stereo views (paper section 5.2).
 
@@ -421,11 +457,31 @@ class OccupancyGrid:
                baseline_focal_m_px: float | None = None) -> GridUpdate:
         """Add one view: ``apply(view_cells(..., known_occupied=self.known_occupied()))`` with this
         grid and config (``known_occupied`` only with ``config.map_occlusion_p``); the parameters as
-        :func:`view_cells`. Returns the :class:`GridUpdate`."""
-        known = self.known_occupied() if self.config.map_occlusion_p is not None else None
-        return self.apply(view_cells(points_obstacle_world, points_free_world, sensor_origin_world,
-                                     grid=self.grid, config=self.config, baseline_focal_m_px=baseline_focal_m_px,
-                                     known_occupied=known))
+        :func:`view_cells`. Returns the :class:`GridUpdate`. In a grid of more than
+        :data:`WINDOW_MIN_CELLS` cells the cells are computed in the part of the grid the view can reach
+        (the bounding box of its points and the sensor: every ray lies in it), so a view costs the same
+        in a large map as in a small one.
+        """
+        obstacles = _points_xy("points_obstacle_world", points_obstacle_world)
+        floor = _points_xy("points_free_world", points_free_world)
+        rows, cols = self.grid.shape
+        # a window computes cell positions from its own corner (the same cells but for rounding at
+        # cell borders): it is used where the whole grid's per-view arrays would cost more than the view
+        whole = rows * cols <= WINDOW_MIN_CELLS
+        r0, r1, c0, c1 = (0, rows, 0, cols) if whole else _view_window(self.grid, obstacles, floor,
+                                                                       sensor_origin_world)
+        window = self.grid if whole else _subgrid(self.grid, r0, r1, c0, c1)
+        known = None
+        if self.config.map_occlusion_p is not None:
+            level = float(log_odds_from_probability(self.config.map_occlusion_p))
+            known = (np.nan_to_num(self._log_odds[r0:r1, c0:c1], nan=-np.inf) >= level,
+                     self._z_range_m[r0:r1, c0:c1].copy())
+        cells = view_cells(obstacles, floor, sensor_origin_world, grid=window, config=self.config,
+                           baseline_focal_m_px=baseline_focal_m_px, known_occupied=known)
+        if not whole:
+            cells = cells._replace(hit=_cells_in(cells.hit, c1 - c0, r0, c0, cols),
+                                   miss=_cells_in(cells.miss, c1 - c0, r0, c0, cols), grid=self.grid)
+        return self.apply(cells)
 
     def known_occupied(self, p_min: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(mask, z_range_m)``: the cells held occupied with probability at least ``p_min`` (default

@@ -14,7 +14,8 @@ import yaml
 from ..io import atomic_write, read_image, read_yaml, write_image
 from .grid import GridSpec
 
-__all__ = ["RosMap", "read_ros_map", "write_ros_map", "ros_map_files", "FREE", "OCCUPIED", "UNKNOWN"]
+__all__ = ["RosMap", "read_ros_map", "write_ros_map", "ros_map_files", "occupancy_values", "FREE", "OCCUPIED",
+           "UNKNOWN"]
 
 FREE, OCCUPIED, UNKNOWN = 254, 0, 205
 
@@ -39,6 +40,14 @@ class RosMap:
     @property
     def unknown(self) -> np.ndarray:
         return ~(self.occupied | self.free)
+
+
+def occupancy_values(probability) -> np.ndarray:
+    """``nav_msgs/OccupancyGrid`` data of occupancy probabilities (rows, cols), NaN unknown: int8, -1
+    unknown, else the probability in percent (0 free .. 100 occupied), rows in the same order (row 0 at
+    the grid's origin, the lowest y)."""
+    p = np.asarray(probability, dtype=np.float64)
+    return np.where(np.isnan(p), -1, np.rint(np.clip(np.nan_to_num(p), 0.0, 1.0) * 100.0)).astype(np.int8)
 
 
 def as_ros_map(name: str, value) -> RosMap:

@@ -161,11 +161,16 @@ class StereoOdometry:
     T_world_from_base0 : ndarray (4, 4), optional
         Pose of the first frame (identity).
     config : OdometryConfig
+    keep_history : bool
+        Keep every frame's link to its keyframe for :meth:`trajectory` (the refined poses of the
+        whole run). A live run that only needs each frame's pose as :meth:`step` returns it turns
+        this off: its memory then stays flat over any number of frames.
     """
 
     stereo: StereoCamera
     T_world_from_base0: np.ndarray | None = None
     config: OdometryConfig = field(default_factory=OdometryConfig)
+    keep_history: bool = True
 
     def __post_init__(self) -> None:
         _checks.instance("stereo", self.stereo, StereoCamera)
@@ -186,6 +191,7 @@ class StereoOdometry:
         self._stamp: float | None = None
         self._lost_streak = 0
         self._links: list[_FrameLink] = []
+        self._n_frames = 0
         self._criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.003)
 
     # -- public -----------------------------------------------------------------------------
@@ -244,6 +250,8 @@ class StereoOdometry:
 
     def trajectory(self) -> np.ndarray:
         """``T_world_from_base`` (N, 4, 4) of every frame so far, on its keyframe's refined pose."""
+        if not self.keep_history and self._n_frames:
+            raise ValueError("this tracker keeps no history (keep_history=False): use the poses step() returns")
         return np.stack([link.keyframe.T_world_from_cam @ link.T_key_from_cam @ np.linalg.inv(link.T_base_from_cam)
                          for link in self._links]) if self._links else np.empty((0, 4, 4))
 
@@ -268,7 +276,10 @@ class StereoOdometry:
             self._velocity_known = status != LOST
         self._T_world_from_cam = T_world_from_cam
         kf = self._keyframe
-        self._links.append(_FrameLink(kf, np.linalg.inv(kf.T_world_from_cam) @ T_world_from_cam, T_base_from_cam))
+        self._n_frames += 1
+        if self.keep_history:
+            self._links.append(_FrameLink(kf, np.linalg.inv(kf.T_world_from_cam) @ T_world_from_cam,
+                                          T_base_from_cam))
         T_world_from_base = T_world_from_cam @ np.linalg.inv(T_base_from_cam)
         return FrameEstimate(T_world_from_base=_readonly(T_world_from_base), status=status,
                              n_tracked=int(n_tracked), n_inliers=int(n_inliers), time_s=time.thread_time() - start)
@@ -387,7 +398,7 @@ class StereoOdometry:
         K = self._K
         points_cam = np.column_stack([(nuv[:, 0] - K[0, 2]) * z / K[0, 0], (nuv[:, 1] - K[1, 2]) * z / K[1, 1], z])
         new_ids = self._map.add_landmarks(transform_points(T_world_from_cam, points_cam))
-        kf = Keyframe(frame=len(self._links), T_world_from_cam=np.array(T_world_from_cam, dtype=np.float64),
+        kf = Keyframe(frame=self._n_frames, T_world_from_cam=np.array(T_world_from_cam, dtype=np.float64),
                       image=left, landmark=np.concatenate([ids, new_ids]),
                       uv=np.concatenate([uv, nuv]).astype(np.float32),
                       u_right=np.concatenate([u_right[:len(uv)], u_right[len(uv):][fresh]]))

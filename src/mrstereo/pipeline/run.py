@@ -300,14 +300,18 @@ def _seen_floor(manifest: Manifest, stereo: StereoCamera, config: PipelineConfig
                 break
     if best is None:
         return None, 0
-    used = fits or [best]
-    med = {name: float(np.median([getattr(g, name) for _, g in used]))
+    return median_floor(fits or [best], confident=bool(fits)), len(fits)
+
+
+def median_floor(fits: list[tuple[int, GroundPlane]], *, confident: bool) -> GroundPlane:
+    """The median height, tilt and roll of floor fits ``(frame index, GroundPlane)``."""
+    med = {name: float(np.median([getattr(g, name) for _, g in fits]))
            for name in ("height_m", "tilt_rad", "roll_rad", "inlier_share", "residual_m")}
-    frames = ", ".join(str(k) for k, _ in used)
-    return GroundPlane(**med, success=True, method=used[0][1].method,
-                       n_inliers=int(np.median([g.n_inliers for _, g in used])),
-                       message=f"estimated: median of {len(used)} floor fit(s), frame(s) {frames}"
-                               + ("" if fits else " (none confident)")), len(fits)
+    frames = ", ".join(str(k) for k, _ in fits)
+    return GroundPlane(**med, success=True, method=fits[0][1].method,
+                       n_inliers=int(np.median([g.n_inliers for _, g in fits])),
+                       message=f"estimated: median of {len(fits)} floor fit(s), frame(s) {frames}"
+                               + ("" if confident else " (none confident)"))
 
 
 def _disagreement(given: GroundPlane, seen: GroundPlane | None) -> str | None:

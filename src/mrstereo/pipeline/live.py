@@ -1,0 +1,712 @@
+"""The live loop: frames from a camera (or a file, or a recording) to a map, a trajectory and a scan, as they come.
+
+Three kinds of threads, never a growing queue between them (docs/live.md):
+
+1. **Capture** reads the source (:mod:`mrstereo.recordings.sources`) and puts each frame in a
+   one-frame slot (:class:`LatestFrame`), stamping its arrival. From a camera, or a file
+   replayed at its recorded rate, a new frame *replaces* one that no worker has taken yet: the
+   newest frame wins, the older one is dropped and counted. A file read as fast as possible
+   waits for the slot instead (nothing is dropped).
+2. **Matchers** (``workers`` threads, one per core by default) take the newest frame and run
+   the per-frame chain: rectify, match (eq. 9-12), reject (eq. 13), 3-D (eq. 14-16), the
+   obstacle/floor split and the virtual laser scan (:func:`mrstereo.pipeline.frame.scan_from_pair`).
+   The matcher's numba kernels and OpenCV release the GIL, so two frames are matched at once
+   on two cores. A matcher takes a new frame only while fewer than ``workers`` matched frames
+   wait for the fuser: everything in flight is bounded.
+3. **The fuser** (the calling thread) takes the matched frames in the order they were taken:
+   the robot's pose (visual odometry, :class:`mrstereo.odometry.StereoOdometry`, or the
+   recording's own odometry), the points into the world and into the occupancy grid
+   (:func:`mrstereo.mapping.fusion.add_observation`), then the sinks (viewers, a ROS bag).
+
+Every ``save_every_s`` seconds a writer thread writes a snapshot -- map.yaml + map.pgm (a
+map_server can reload it), map.png, trajectory.txt (TUM), metrics.json -- each file atomically,
+and once more at the end. A frame's latency is from its arrival to the update of the map.
+Without a camera mount the floor is estimated from the first frames (as
+:func:`mrstereo.pipeline.run.floor_for_run` does); frames before it is known are not mapped.
+Conventions: docs/conventions.md.
+"""
+from __future__ import annotations
+
+import gc
+import json
+import math
+import os
+import resource
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..camera import CameraMount, StereoCamera, mount_entry
+from ..geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount
+from ..geometry.scan import LaserScan
+from ..io import atomic_write
+from ..mapping import GridSpec, RosMap, write_ros_map
+from ..mapping.figures import plot_map
+from ..mapping.fusion import add_observation
+from ..mapping.occupancy import OccupancyGrid
+from ..odometry import LOST, OdometryConfig, StereoOdometry
+from ..odometry.trajectory import write_tum
+from ..profiling import Profile, active, profiling, stage
+from ..recordings.manifest import FrameRecord, pose_3d_of
+from ..recordings.sources import FrameSource, StereoFrame, paced
+from ..transforms import planar_from_T
+from .frame import PairObstacles, scan_from_pair
+from .run import PipelineConfig, median_floor, observation_from_pair, pair_options
+
+__all__ = ["LIVE_GRID", "LiveConfig", "LiveFrame", "LiveRun", "LatestFrame", "run_live", "LIVE_FILES"]
+
+LIVE_GRID = GridSpec(width_m=40.0, height_m=40.0, resolution_m=0.05, origin_x_m=-20.0, origin_y_m=-20.0)
+"""The live map's default extent: 40 m x 40 m around the start in 5 cm cells."""
+
+LIVE_FILES = ("map.yaml", "map.pgm", "map.png", "trajectory.txt", "metrics.json")
+"""What :func:`run_live` writes into its output folder."""
+
+
+@dataclass(frozen=True)
+class LiveConfig:
+    """Options of the live loop (docs/live.md).
+
+    Attributes
+    ----------
+    save_every_s : float
+        Write the outputs this often [s] (and at the end).
+    max_frames : int, optional
+        Stop after this many frames from the source.
+    realtime : bool
+        Replay a file or recording at its recorded rate (newest frame wins, as from a camera);
+        a camera is always real time. Off: every frame of a file is processed.
+    speed : float
+        With ``realtime``: replay this many times faster than recorded.
+    workers : int
+        Frames matched at once (threads; one per core).
+    odometry : {"visual", "given"} or None
+        The robot's pose: stereo visual odometry, or the recording's own odometry; None: the
+        recording's when it has one, else visual.
+    floor_frames : int
+        Without a camera mount: the floor is the median of this many confident floor fits...
+    max_floor_frames : int
+        ... among the first frames, at most this many (then the best fit is taken).
+    """
+
+    save_every_s: float = 5.0
+    max_frames: int | None = None
+    realtime: bool = False
+    speed: float = 1.0
+    workers: int = 2
+    odometry: str | None = None
+    floor_frames: int = 3
+    max_floor_frames: int = 10
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.save_every_s) and self.save_every_s > 0):
+            raise ValueError(f"save_every_s must be a finite number > 0, got {self.save_every_s!r}")
+        if self.max_frames is not None and int(self.max_frames) < 1:
+            raise ValueError(f"max_frames must be >= 1, got {self.max_frames!r}")
+        if not (math.isfinite(self.speed) and self.speed > 0):
+            raise ValueError(f"speed must be a finite number > 0, got {self.speed!r}")
+        if int(self.workers) < 1:
+            raise ValueError(f"workers must be >= 1, got {self.workers!r}")
+        if self.odometry not in (None, "visual", "given"):
+            raise ValueError(f"odometry must be 'visual', 'given' or None, got {self.odometry!r}")
+        if self.floor_frames < 1 or self.max_floor_frames < self.floor_frames:
+            raise ValueError("floor_frames must be >= 1 and max_floor_frames >= floor_frames")
+
+
+@dataclass(frozen=True)
+class LiveFrame:
+    """What one mapped frame produced: what the sinks (viewers, bags) receive.
+
+    ``grid`` is the live map itself: a sink reads it during its call and keeps no reference.
+    Points and the scan are in the robot frame (REP 103), poses are ``T_world_from_base`` and
+    the rectified left camera's mount ``T_base_from_cam`` (optical axes, docs/conventions.md).
+    """
+
+    index: int
+    stamp_s: float
+    T_world_from_base: np.ndarray
+    T_base_from_cam: np.ndarray
+    left_rect: np.ndarray
+    disparity_px: np.ndarray
+    obstacle_points_robot: np.ndarray
+    scan: LaserScan
+    grid: OccupancyGrid
+    status: str = "tracked"
+
+
+@dataclass
+class LiveRun:
+    """The counts, times and results of a live run (:func:`run_live`); ``metrics()`` is metrics.json."""
+
+    grid: OccupancyGrid
+    stamps_s: np.ndarray
+    T_world_from_base: np.ndarray
+    frames_in: int = 0
+    frames_processed: int = 0
+    frames_dropped: int = 0
+    frames_mapped: int = 0
+    frames_lost: int = 0
+    frames_before_floor: int = 0
+    latency_ms: np.ndarray = field(default_factory=lambda: np.empty(0))
+    duration_s: float = 0.0
+    odometry: str = "visual"
+    floor: GroundPlane | None = None
+    mount: CameraMount | None = None
+    source: str = ""
+    stopped: str = "end of source"
+    cpu_s: dict = field(default_factory=dict)
+    stage_ms: dict = field(default_factory=dict)
+    peak_memory_mb: float = 0.0
+    memory_mb: float = 0.0
+    files: dict = field(default_factory=dict)
+
+    @property
+    def rate_hz(self) -> float:
+        """Frames processed per second of the run."""
+        return self.frames_processed / self.duration_s if self.duration_s > 0 else 0.0
+
+    def metrics(self) -> dict:
+        lat = self.latency_ms
+        q = (lambda p: float(np.percentile(lat, p))) if len(lat) else (lambda p: float("nan"))
+        out = {"source": self.source, "stopped": self.stopped, "frames_in": self.frames_in,
+               "frames_processed": self.frames_processed, "frames_dropped": self.frames_dropped,
+               "frames_mapped": self.frames_mapped, "frames_lost": self.frames_lost,
+               "frames_before_floor": self.frames_before_floor, "duration_s": round(self.duration_s, 3),
+               "rate_hz": round(self.rate_hz, 3),
+               "latency_ms": {"median": round(q(50), 2), "p95": round(q(95), 2), "max": round(q(100), 2)},
+               "peak_memory_mb": round(self.peak_memory_mb, 1), "memory_mb": round(self.memory_mb, 1),
+               "odometry": self.odometry,
+               "cpu_s": {k: round(v, 3) for k, v in self.cpu_s.items()},
+               "stage_ms_per_frame": {k: round(v, 2) for k, v in self.stage_ms.items()}}
+        if self.duration_s > 0 and self.cpu_s:
+            out["cores_used"] = round(self.cpu_s.get("process", 0.0) / self.duration_s, 2)
+        if self.floor is not None:
+            out["floor"] = self.floor.summary()
+        if self.mount is not None:
+            out["mount"] = mount_entry(self.mount)
+        return out
+
+
+class LatestFrame:
+    """A one-frame slot between a producer and consumers; the producer never waits unless ``lossless``.
+
+    ``put`` replaces a frame nobody took yet (``dropped`` counts those); with ``lossless`` it
+    waits until the slot is empty instead. ``take`` hands out the frame with a ticket (0, 1, ...
+    in the order taken) or None once the slot is closed and empty.
+    """
+
+    def __init__(self, *, lossless: bool = False) -> None:
+        self.lossless = lossless
+        self.dropped = 0
+        self.tickets = 0
+        self._item = None
+        self._closed = False
+        self._cond = threading.Condition()
+
+    def put(self, item, stop: threading.Event) -> bool:
+        """Offer ``item``; False when stopped before it could be placed (lossless only)."""
+        with self._cond:
+            if self.lossless:
+                while self._item is not None and not stop.is_set():
+                    self._cond.wait(0.1)
+                if stop.is_set():
+                    return False
+            elif self._item is not None:
+                self.dropped += 1
+            self._item = item
+            self._cond.notify_all()
+            return True
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+    def take(self, timeout_s: float = 0.1):
+        """``(ticket, item)``; ``(None, None)`` after ``timeout_s`` with nothing; raises StopIteration when
+        closed and empty."""
+        with self._cond:
+            if self._item is None and not self._closed:
+                self._cond.wait(timeout_s)
+            if self._item is None:
+                if self._closed:
+                    raise StopIteration
+                return None, None
+            item, self._item = self._item, None
+            ticket, self.tickets = self.tickets, self.tickets + 1
+            self._cond.notify_all()
+            return ticket, item
+
+    def discard(self) -> bool:
+        """Drop a frame still in the slot (counted); True if there was one."""
+        with self._cond:
+            if self._item is None:
+                return False
+            self._item = None
+            self.dropped += 1
+            self._cond.notify_all()
+            return True
+
+
+@dataclass
+class _Matched:
+    """A frame after the matcher: the pair's chain and the rectified right image (for odometry)."""
+
+    frame: StereoFrame
+    arrival_s: float
+    right_rect: np.ndarray | None = None
+    pair: PairObstacles | None = None
+    scan: LaserScan | None = None
+    error: BaseException | None = None
+
+
+class _Ordered:
+    """Matched frames handed to the fuser by ticket, in the order the matchers took them."""
+
+    def __init__(self) -> None:
+        self._items: dict[int, _Matched] = {}
+        self._cond = threading.Condition()
+
+    def put(self, ticket: int, item: _Matched) -> None:
+        with self._cond:
+            self._items[ticket] = item
+            self._cond.notify_all()
+
+    def get(self, ticket: int, timeout_s: float) -> _Matched | None:
+        with self._cond:
+            if ticket not in self._items:
+                self._cond.wait(timeout_s)
+            return self._items.pop(ticket, None)
+
+
+def _rss_mb() -> float:
+    """Resident memory of this process now [MB] (Linux /proc; 0 elsewhere)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e6      # Linux: kibibytes
+
+
+class _Growing:
+    """An array that grows along its first axis by doubling (the trajectory)."""
+
+    def __init__(self, shape: tuple[int, ...]) -> None:
+        self._data = np.empty((64,) + shape)
+        self.n = 0
+
+    def append(self, value) -> None:
+        if self.n == len(self._data):
+            self._data = np.concatenate([self._data, np.empty_like(self._data)])
+        self._data[self.n] = value
+        self.n += 1
+
+    def view(self) -> np.ndarray:
+        return self._data[:self.n]
+
+
+class _Writer:
+    """Writes snapshots of the outputs on its own thread; a newer snapshot replaces one not yet begun."""
+
+    def __init__(self, write: Callable[[dict], None]) -> None:
+        self._write = write
+        self._pending = None
+        self._cond = threading.Condition()
+        self._closed = False
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._loop, name="mrstereo-live-writer", daemon=True)
+        self._thread.start()
+
+    def submit(self, snapshot: dict) -> None:
+        with self._cond:
+            self._pending = snapshot
+            self._cond.notify_all()
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                while self._pending is None and not self._closed:
+                    self._cond.wait()
+                snapshot, self._pending = self._pending, None
+                if snapshot is None:
+                    return
+            try:
+                self._write(snapshot)
+            except BaseException as exc:        # reported by the fuser
+                self.error = exc
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+        self._thread.join()
+
+
+def _known_region(ros_map: RosMap, margin_cells: int = 20) -> RosMap:
+    """The map cropped to its known cells and a margin (the figure of a mostly unknown live map)."""
+    known = np.flatnonzero(np.isfinite(ros_map.occupancy).any(axis=1)), \
+        np.flatnonzero(np.isfinite(ros_map.occupancy).any(axis=0))
+    if not len(known[0]):
+        return ros_map
+    g = ros_map.grid
+    r0, r1 = max(0, known[0][0] - margin_cells), min(g.shape[0], known[0][-1] + 1 + margin_cells)
+    c0, c1 = max(0, known[1][0] - margin_cells), min(g.shape[1], known[1][-1] + 1 + margin_cells)
+    grid = GridSpec(width_m=(c1 - c0) * g.resolution_m, height_m=(r1 - r0) * g.resolution_m,
+                    resolution_m=g.resolution_m, origin_x_m=g.origin_x_m + c0 * g.resolution_m,
+                    origin_y_m=g.origin_y_m + r0 * g.resolution_m)
+    return replace(ros_map, occupancy=ros_map.occupancy[r0:r1, c0:c1], grid=grid)
+
+
+def write_live_outputs(out_dir: Path, snapshot: dict) -> dict[str, Path]:
+    """Write one snapshot: map.pgm then map.yaml (a reader of the YAML finds its image), map.png,
+    trajectory.txt, metrics.json -- each atomically."""
+    out = Path(out_dir)
+    files = {"map_yaml": out / "map.yaml", "map_pgm": out / "map.pgm", "map_png": out / "map.png",
+             "trajectory": out / "trajectory.txt", "metrics": out / "metrics.json"}
+    ros_map: RosMap = snapshot["ros_map"]
+    write_ros_map(files["map_yaml"], ros_map)
+    T = snapshot["T_world_from_base"]
+    path = planar_from_T(T) if len(T) else None
+    plot_map(_known_region(ros_map), files["map_png"], robot_path=path,
+             title=f"live map, {len(T)} frames ({snapshot['metrics']['rate_hz']:.1f} Hz)")
+    if len(T):                  # (no pose yet: the floor is being estimated)
+        write_tum(files["trajectory"], snapshot["stamps_s"], T, comment=snapshot["comment"])
+    with atomic_write(files["metrics"]) as tmp:
+        tmp.write_text(json.dumps(snapshot["metrics"], indent=2))
+    # a matplotlib figure is a web of reference cycles: only the cycle collector frees it, and a long run
+    # would otherwise hold every figure since the last full collection
+    gc.collect()
+    return files
+
+
+class _Fuser:
+    """The ordered part of the loop: floor, pose, map, sinks, outputs (runs in the calling thread)."""
+
+    def __init__(self, stereo: StereoCamera, source: FrameSource, config: PipelineConfig, live: LiveConfig,
+                 mount: CameraMount | None, sinks: Sequence, run: LiveRun) -> None:
+        self.stereo, self.config, self.live, self.sinks, self.run = stereo, config, live, list(sinks), run
+        self.mount = mount
+        self.floor_fits: list[tuple[int, GroundPlane]] = []
+        self.best_fit: tuple[int, GroundPlane] | None = None
+        self.floor_seen = 0
+        self.odometry = live.odometry or ("given" if source.has_poses else "visual")
+        if self.odometry == "given" and not source.has_poses:
+            raise ValueError(f"{source.name} has no odometry of its own: use visual odometry")
+        run.odometry = self.odometry
+        self.vo: StereoOdometry | None = None
+        self.trajectory_T = _Growing((4, 4))
+        self.trajectory_t = _Growing(())
+        self.latencies = _Growing(())
+        if mount is not None:
+            self._fix_mount(mount, ground_from_mount(mount, R_rect_from_cam=stereo.left.R))
+
+    def _fix_mount(self, mount: CameraMount, floor: GroundPlane) -> None:
+        self.mount = mount
+        self.run.mount, self.run.floor = mount, floor
+
+    def _floor(self, item: _Matched) -> bool:
+        """Collect floor fits until the mount is known; True once it is."""
+        if self.mount is not None:
+            return True
+        ground = item.pair.obstacles.ground
+        self.floor_seen += 1
+        if ground.success and (self.best_fit is None or ground.inlier_share > self.best_fit[1].inlier_share):
+            self.best_fit = (item.frame.index, ground)
+        if ground.confident:
+            self.floor_fits.append((item.frame.index, ground))
+        if len(self.floor_fits) >= self.live.floor_frames or \
+                (self.floor_seen >= self.live.max_floor_frames and self.best_fit is not None):
+            used = self.floor_fits or [self.best_fit]
+            floor = median_floor(used, confident=bool(self.floor_fits))
+            # the fits are of the rectified left frame; the mount is of the raw camera (p_rect = R p_raw)
+            self._fix_mount(CameraMount.from_rectified(T_robot_from_cam_ground(floor), self.stereo.left.R), floor)
+        elif self.floor_seen >= self.live.max_floor_frames:
+            raise ValueError(f"no floor found in the first {self.floor_seen} frames of the source; give the camera "
+                             "mount (--mount x,y,z,roll,pitch,yaw or --height/--tilt, or mount:/rig: in the "
+                             "calibration)")
+        return False
+
+    def _pose(self, item: _Matched, T_base_from_cam: np.ndarray) -> tuple[np.ndarray, str]:
+        frame = item.frame
+        if self.odometry == "given":
+            return np.asarray(frame.T_world_from_base, dtype=np.float64), "given"
+        if self.vo is None:
+            T0 = frame.T_world_from_base if frame.T_world_from_base is not None else np.eye(4)
+            self.vo = StereoOdometry(self.stereo, T0, OdometryConfig(), keep_history=False)
+        with stage("odometry"):
+            estimate = self.vo.step(item.pair.left_rect, item.right_rect, T_base_from_cam=T_base_from_cam,
+                                    stamp_s=frame.stamp_s)
+        return estimate.T_world_from_base, estimate.status
+
+    def fuse(self, item: _Matched, grid: OccupancyGrid) -> None:
+        run = self.run
+        run.frames_processed += 1
+        if not self._floor(item):
+            run.frames_before_floor += 1
+            return
+        frame = item.frame
+        T_base_from_cam = self.mount.T_base_from_rectified(self.stereo.left.R, frame.pan_rad)
+        T, status = self._pose(item, T_base_from_cam)
+        if status == LOST:
+            run.frames_lost += 1
+            return
+        record = FrameRecord(pose=None, pose_3d=pose_3d_of(T), pan_rad=frame.pan_rad, stamp_s=frame.stamp_s)
+        obs = observation_from_pair(item.pair, record, index=frame.index, config=self.config, stereo=self.stereo)
+        add_observation(grid, obs)
+        self.latencies.append(1000.0 * (time.perf_counter() - item.arrival_s))
+        run.frames_mapped += 1
+        self.trajectory_T.append(T)
+        self.trajectory_t.append(frame.stamp_s)
+        if self.sinks:
+            out = LiveFrame(index=frame.index, stamp_s=frame.stamp_s, T_world_from_base=T,
+                            T_base_from_cam=T_base_from_cam, left_rect=item.pair.left_rect,
+                            disparity_px=item.pair.disparity_px,
+                            obstacle_points_robot=item.pair.obstacles.obstacle_points_robot, scan=item.scan,
+                            grid=grid, status=status)
+            with stage("sinks"):
+                for sink in self.sinks:
+                    sink.frame(out)
+
+
+def _match(item: _Matched, stereo: StereoCamera, mount: CameraMount | None, config: PipelineConfig) -> None:
+    frame = item.frame
+    left, right = frame.left, frame.right
+    if (left.shape[1], left.shape[0]) != tuple(stereo.size):
+        raise ValueError(f"frame {frame.index} is {left.shape[1]}x{left.shape[0]} but the calibration is "
+                         f"{stereo.size[0]}x{stereo.size[1]}")
+    if not frame.rectified and not stereo.is_rectified:
+        with stage("rectify"):
+            left, right = stereo.rectify(left, right)
+    result = scan_from_pair(left, right, stereo, rectified=True, mount=mount, pan_rad=frame.pan_rad,
+                            **pair_options(config))
+    item.right_rect, item.pair, item.scan = right, result.frame, replace(result.scan, stamp_s=frame.stamp_s)
+
+
+class _Threads:
+    """Capture and matchers of a run and what they share: the slot, the matched frames in order, the
+    bound on frames in flight, errors, counts and CPU times."""
+
+    def __init__(self, source: FrameSource, stereo: StereoCamera, config: PipelineConfig, live: LiveConfig,
+                 fuser: _Fuser, stop: threading.Event) -> None:
+        self.source, self.stereo, self.config, self.live, self.fuser, self.stop = \
+            source, stereo, config, live, fuser, stop
+        self.slot = LatestFrame(lossless=not (source.realtime or live.realtime))
+        self.ordered = _Ordered()
+        self.in_flight = threading.Semaphore(live.workers)
+        self.errors: list[BaseException] = []
+        self.cpu: dict[str, float] = {}
+        self.counts = {"in": 0}
+        self.threads = [threading.Thread(target=self._capture, name="mrstereo-live-capture", daemon=True)]
+        self.threads += [threading.Thread(target=self._matcher, args=(k,), name=f"mrstereo-live-match-{k}",
+                                          daemon=True) for k in range(live.workers)]
+
+    def start(self) -> None:
+        for t in self.threads:
+            t.start()
+
+    def join(self) -> None:
+        self.stop.set()
+        for t in self.threads:
+            t.join(timeout=5.0)
+
+    def matching(self) -> bool:
+        """A matcher still runs."""
+        return any(t.is_alive() for t in self.threads[1:])
+
+    def _capture(self) -> None:
+        start, live, slot, stop = time.thread_time(), self.live, self.slot, self.stop
+        try:
+            frames = paced(self.source, speed=live.speed) if live.realtime and not self.source.realtime \
+                else self.source
+            for frame in frames:
+                if stop.is_set():
+                    break
+                self.counts["in"] += 1
+                if not slot.put(_Matched(frame=frame, arrival_s=time.perf_counter()), stop):
+                    self.counts["in"] -= 1
+                    break
+                if live.max_frames is not None and self.counts["in"] >= live.max_frames:
+                    self.counts["end"] = "max frames"
+                    break
+        except BaseException as exc:
+            self.errors.append(exc)
+            stop.set()
+        finally:
+            slot.close()
+            self.cpu["capture"] = time.thread_time() - start
+
+    def _matcher(self, k: int) -> None:
+        start = time.thread_time()
+        import numba
+
+        numba.set_num_threads(1)            # one core per matcher: the matchers are the parallelism
+        try:
+            while True:
+                while not self.in_flight.acquire(timeout=0.1):
+                    if self.stop.is_set():
+                        return
+                try:
+                    ticket, item = self.slot.take()
+                except StopIteration:
+                    self.in_flight.release()
+                    return
+                if item is None:
+                    self.in_flight.release()
+                    continue
+                try:
+                    _match(item, self.stereo, self.fuser.mount, self.config)
+                except BaseException as exc:
+                    item.error = exc
+                self.ordered.put(ticket, item)
+        finally:
+            self.cpu[f"matcher {k}"] = time.thread_time() - start
+
+
+def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: StereoCamera | None = None,
+             mount: CameraMount | None = None, config: PipelineConfig | None = None,
+             live: LiveConfig = LiveConfig(), sinks: Sequence = (), stop: threading.Event | None = None,
+             on_save: Callable[[LiveRun], None] | None = None) -> LiveRun:
+    """Run the chain on a source as its frames come; write the outputs while it runs and at the end.
+
+    Parameters
+    ----------
+    source : FrameSource
+        Cameras, video files or a recording (:func:`mrstereo.recordings.sources.open_source`).
+    out_dir : path
+        Output folder (created): map.yaml, map.pgm, map.png, trajectory.txt, metrics.json.
+    calibration : StereoCamera, optional
+        The rig's calibration (default: the source's; a camera or video needs one).
+    mount : CameraMount, optional
+        The camera on the robot (default: the source's, else the calibration's; with none the floor is
+        estimated from the first frames).
+    config : PipelineConfig, optional
+        Every stage's options; default: the map's, on :data:`LIVE_GRID`.
+    live : LiveConfig
+        Rate, saving, workers, odometry.
+    sinks : sequence
+        Objects with ``frame(LiveFrame)``, ``close()`` and ``discard()`` (viewers, a ROS bag):
+        ``frame`` for every mapped frame in order, ``close`` at the end, ``discard`` after an error.
+    stop : threading.Event, optional
+        Set it (from a signal handler, another thread) to end the run: the frames in flight are
+        finished and the outputs written. KeyboardInterrupt does the same and is raised again after.
+    on_save : callable, optional
+        Called with the run after each snapshot (progress display).
+    """
+    stereo = calibration if calibration is not None else source.calibration
+    if not isinstance(stereo, StereoCamera):
+        raise ValueError(f"{source.name}: no calibration: give one (--calib)")
+    if not isinstance(live, LiveConfig):
+        raise TypeError(f"live must be a LiveConfig, got {type(live).__name__}")
+    config = PipelineConfig(grid=LIVE_GRID) if config is None else config
+    if config.grid is None:                 # (a live map has a fixed window: its files are rewritten while it runs)
+        config = replace(config, grid=replace(LIVE_GRID, resolution_m=config.resolution_m))
+    config = config.for_rig(stereo)        # the rig's mapping range, as a map run takes it
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    grid = OccupancyGrid(config.grid, config=config.mapping)
+    run = LiveRun(grid=grid, stamps_s=np.empty(0), T_world_from_base=np.empty((0, 4, 4)), source=source.name)
+    fuser = _Fuser(stereo, source, config, live, mount or source.mount or stereo.mount, sinks, run)
+    threads = _Threads(source, stereo, config, live, fuser, stop or threading.Event())
+    clock = _Clock(profile=active() or Profile())
+    writer = _Writer(lambda snapshot: run.files.update(write_live_outputs(out, snapshot)))
+    interrupted = None
+    with profiling(clock.profile):
+        threads.start()
+        try:
+            _fuse_in_order(threads, fuser, grid, writer, clock, on_save)
+        except KeyboardInterrupt as exc:
+            interrupted = exc
+            run.stopped = "interrupted"
+        except BaseException:
+            threads.join()
+            writer.close()
+            for sink in sinks:
+                _discard_quietly(sink)
+            raise
+        finally:
+            requested = threads.stop.is_set()
+            threads.join()
+    if run.stopped == "end of source":
+        run.stopped = threads.counts.get("end", "stopped" if requested else "end of source")
+    writer.submit(_snapshot(run, fuser, grid, threads, clock))
+    writer.close()
+    for sink in sinks:
+        sink.close()
+    if writer.error is not None:
+        raise writer.error
+    if interrupted is not None:
+        raise interrupted
+    return run
+
+
+@dataclass
+class _Clock:
+    """When the run started (wall and CPU), the fuser's CPU time, the stage profile."""
+
+    profile: Profile
+    start_s: float = field(default_factory=time.perf_counter)
+    cpu_start_s: float = field(default_factory=time.process_time)
+    fuse_cpu_s: float = 0.0
+
+
+def _fuse_in_order(threads: _Threads, fuser: _Fuser, grid: OccupancyGrid, writer: _Writer, clock: _Clock,
+                   on_save: Callable[[LiveRun], None] | None) -> None:
+    """The fuser: the matched frames in the order taken into the map; a snapshot every ``save_every_s``."""
+    next_ticket, last_save = 0, time.perf_counter()
+    while True:
+        item = threads.ordered.get(next_ticket, 0.1)
+        if item is None:
+            if threads.stop.is_set():
+                threads.slot.discard()
+            if not threads.matching() and next_ticket >= threads.slot.tickets:
+                return
+        else:
+            next_ticket += 1
+            threads.in_flight.release()
+            if item.error is not None:
+                raise item.error
+            t0 = time.thread_time()
+            fuser.fuse(item, grid)
+            clock.fuse_cpu_s += time.thread_time() - t0
+        if writer.error is not None:
+            raise writer.error
+        if threads.errors:
+            raise threads.errors[0]
+        now = time.perf_counter()
+        if now - last_save >= fuser.live.save_every_s:
+            last_save = now
+            writer.submit(_snapshot(fuser.run, fuser, grid, threads, clock))
+            if on_save is not None:
+                on_save(fuser.run)
+
+
+def _discard_quietly(sink) -> None:
+    try:
+        sink.discard()
+    except Exception:
+        pass
+
+
+def _snapshot(run: LiveRun, fuser: _Fuser, grid: OccupancyGrid, threads: _Threads, clock: _Clock) -> dict:
+    """Bring the run's counts up to date and copy what the writer needs."""
+    run.frames_in = threads.counts["in"]
+    run.frames_dropped = threads.slot.dropped
+    run.duration_s = time.perf_counter() - clock.start_s
+    run.latency_ms = fuser.latencies.view().copy()
+    run.stamps_s = fuser.trajectory_t.view().copy()
+    run.T_world_from_base = fuser.trajectory_T.view().copy()
+    run.cpu_s = {"process": time.process_time() - clock.cpu_start_s, "fuser": clock.fuse_cpu_s, **threads.cpu}
+    run.stage_ms = clock.profile.per_frame_ms(max(run.frames_processed, 1))
+    run.memory_mb, run.peak_memory_mb = _rss_mb(), _peak_rss_mb()
+    metrics = run.metrics()
+    comment = (f"mrstereo live: {run.source}; odometry {run.odometry}; {run.frames_mapped} frames mapped of "
+               f"{run.frames_in}\nthe robot base in the world (REP 103), each frame's pose as known at that frame")
+    return {"ros_map": grid.to_ros_map(), "T_world_from_base": run.T_world_from_base, "stamps_s": run.stamps_s,
+            "metrics": metrics, "comment": comment}

@@ -1,0 +1,220 @@
+"""Where a run's frames go besides the map files: live viewers (Rerun, Foxglove) and a ROS 2 bag.
+
+A sink has ``frame(LiveFrame)`` (called for every mapped frame, in order) and ``close()``.
+:class:`ViewerSink` turns a frame into the arrays the loggers of :mod:`mrstereo.viz.live` take;
+:class:`BagSink` into the messages of :class:`mrstereo.recordings.bag_writer.BagWriter`. The map
+and the path go out at most every ``map_every_s`` seconds of the recording's time (a map is the
+largest message) and once more at the end. :func:`open_sinks` makes the sinks the command-line
+options ask for; :func:`replay_map_run` and :func:`replay_odometry` send a finished ``map`` or
+``odometry`` run to the same sinks. Conventions: docs/conventions.md; user guide: docs/live.md.
+"""
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..camera import StereoCamera
+from ..geometry.scan import LaserScan, laser_scan_from_points, scan_angles_of_camera
+from ..mapping.fusion import add_observation
+from ..mapping.occupancy import OccupancyGrid
+from ..mapping.rosmap import occupancy_values
+from ..transforms import T_from_planar, transform_points
+from .live import LiveFrame
+
+__all__ = ["ViewerSink", "BagSink", "open_sinks", "replay_map_run", "replay_odometry"]
+
+MAX_VIEW_POINTS = 20000
+"""Obstacle points sent to a viewer per frame at most (an even subsample beyond)."""
+
+
+def _grid_message(grid: OccupancyGrid) -> tuple[np.ndarray, float, tuple[float, float]]:
+    g = grid.grid
+    return occupancy_values(grid.probability()), g.resolution_m, (g.origin_x_m, g.origin_y_m)
+
+
+class _Throttled:
+    """Map and path at most every ``map_every_s`` of stream time; the path kept for them."""
+
+    def __init__(self, map_every_s: float) -> None:
+        self.map_every_s = map_every_s
+        self._last = -math.inf
+        self._path: list[np.ndarray] = []
+        self.grid: OccupancyGrid | None = None
+        self.last_stamp_s = 0.0
+        self.last_index = 0
+        self.seen = False
+
+    def due(self, frame: LiveFrame) -> bool:
+        self._path.append(np.asarray(frame.T_world_from_base, dtype=np.float64)[:3, 3].copy())
+        self.grid, self.last_stamp_s, self.last_index = frame.grid, frame.stamp_s, frame.index
+        self.seen = True
+        if frame.stamp_s - self._last >= self.map_every_s:
+            self._last = frame.stamp_s
+            return True
+        return False
+
+    @property
+    def path_xyz(self) -> np.ndarray:
+        return np.array(self._path)
+
+
+class ViewerSink:
+    """A frame to a viewer logger (:class:`~mrstereo.viz.live.RerunLogger` or
+    :class:`~mrstereo.viz.live.FoxgloveLogger`)."""
+
+    def __init__(self, logger, stereo: StereoCamera, *, map_every_s: float = 1.0) -> None:
+        self.logger = logger
+        P = stereo.left.P
+        logger.camera(np.array([[P[0, 0], 0.0, P[0, 2]], [0.0, P[1, 1], P[1, 2]], [0.0, 0.0, 1.0]]),
+                      stereo.size[0], stereo.size[1])
+        self._throttle = _Throttled(map_every_s)
+        self._map_sent: float | None = None
+
+    def frame(self, frame: LiveFrame) -> None:
+        due = self._throttle.due(frame)
+        points = frame.obstacle_points_robot
+        if len(points) > MAX_VIEW_POINTS:
+            points = points[np.linspace(0, len(points) - 1, MAX_VIEW_POINTS).astype(np.int64)]
+        scan = frame.scan
+        self.logger.frame(stamp_s=frame.stamp_s, index=frame.index, T_world_from_base=frame.T_world_from_base,
+                          T_base_from_cam=frame.T_base_from_cam, image=frame.left_rect,
+                          disparity_px=frame.disparity_px, points_base=points,
+                          scan=None if scan is None else (scan.angle_min_rad, scan.angle_max_rad, scan.ranges_m))
+        if due:
+            self._map(frame.stamp_s, frame.index)
+
+    def _map(self, stamp_s: float, index: int) -> None:
+        t = self._throttle
+        self._map_sent = stamp_s
+        self.logger.map(stamp_s=stamp_s, index=index, grid=None if t.grid is None else _grid_message(t.grid),
+                        path_xyz=t.path_xyz)
+
+    def close(self) -> None:
+        t = self._throttle
+        if t.seen and self._map_sent != t.last_stamp_s:
+            self._map(t.last_stamp_s, t.last_index)
+        self.logger.close()
+
+    def discard(self) -> None:
+        """After an error: stop the viewer, keep no file."""
+        self.logger.discard()
+
+
+class BagSink:
+    """Frames to a ROS 2 bag: /odom, /tf, /scan, /points every frame, /map throttled and at the end."""
+
+    def __init__(self, writer, *, map_every_s: float = 1.0) -> None:
+        self.writer = writer
+        self._throttle = _Throttled(map_every_s)
+        self._map_written_at: float | None = None
+
+    def frame(self, frame: LiveFrame) -> None:
+        stamp_ns = int(round(frame.stamp_s * 1e9))
+        w = self.writer
+        if not self._throttle.seen:
+            w.static(stamp_ns, frame.T_base_from_cam)
+        w.pose(stamp_ns, frame.T_world_from_base)
+        if frame.scan is not None:
+            s: LaserScan = frame.scan
+            w.scan(stamp_ns, angle_min_rad=s.angle_min_rad, angle_max_rad=s.angle_max_rad,
+                   angle_increment_rad=s.angle_increment_rad, range_min_m=s.range_min_m, range_max_m=s.range_max_m,
+                   ranges_m=s.ranges_m, intensities=s.intensities)
+        if frame.grid is not None:
+            w.points(stamp_ns, frame.obstacle_points_robot)
+        if self._throttle.due(frame) and frame.grid is not None:
+            self._write_map(stamp_ns, frame.grid)
+
+    def _write_map(self, stamp_ns: int, grid: OccupancyGrid) -> None:
+        values, resolution_m, origin = _grid_message(grid)
+        self.writer.map(stamp_ns, values, resolution_m=resolution_m, origin_xy=origin)
+        self._map_written_at = stamp_ns
+
+    def close(self) -> None:
+        t = self._throttle
+        stamp_ns = int(round(t.last_stamp_s * 1e9))
+        if t.grid is not None and self._map_written_at != stamp_ns:
+            self._write_map(stamp_ns, t.grid)
+        self.writer.close()
+
+    def discard(self) -> None:
+        """After an error: no bag."""
+        self.writer.discard()
+
+
+def open_sinks(stereo: StereoCamera, view_stem: str | os.PathLike, *, viewers: Sequence[str] = (),
+               record_bag: str | os.PathLike | None = None, foxglove_port: int | None = 8765,
+               rerun_mode: str | None = None, echo: Callable[[str], None] | None = None) -> list:
+    """The sinks a run's options ask for: ``viewers`` (``"rerun"``: ``view_stem``.rrd, and a viewer spawned
+    with a display or served on localhost, or neither with ``rerun_mode="none"``; ``"foxglove"``:
+    ``view_stem``.mcap and a websocket server on ``foxglove_port``, None: none), and a ROS 2 bag at
+    ``record_bag``. ``echo`` is told where to look."""
+    from ..viz.live import FoxgloveLogger, RerunLogger, require_viewers
+
+    require_viewers(viewers)
+    stem = Path(view_stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    sinks = []
+    try:
+        for viewer in viewers:
+            if viewer == "rerun":
+                mode = rerun_mode or ("spawn" if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+                                      else "serve")
+                logger = RerunLogger(rrd_path=stem.with_suffix(".rrd"), mode=mode)
+                if echo is not None and logger.url:
+                    echo(f"rerun: open {logger.url} in a browser (or `rerun {logger.url.split('url=')[-1]}`)")
+            else:
+                logger = FoxgloveLogger(mcap_path=stem.with_suffix(".mcap"), port=foxglove_port)
+                if echo is not None and logger.url:
+                    echo(f"foxglove: connect the Foxglove app to {logger.url}")
+            sinks.append(ViewerSink(logger, stereo))
+        if record_bag is not None:
+            from ..recordings.bag_writer import BagWriter
+
+            sinks.append(BagSink(BagWriter(record_bag)))
+    except BaseException:
+        for sink in sinks:
+            sink.discard()
+        raise
+    return sinks
+
+
+def replay_map_run(run, sinks: Sequence, *, config) -> None:
+    """Send a finished map run (:class:`mrstereo.pipeline.run.MapRun`) to ``sinks`` frame by frame: the
+    pose, the obstacle points back in the robot frame, the scan they make, the map as fused up to the
+    frame and, with the last frame, the run's map as written (the frames' images are not kept by a map run)."""
+    stereo = run.manifest.calibration
+    frames = run.manifest.frames
+    grid = OccupancyGrid(run.grid.grid, config=config.mapping)        # the map's final window
+    range_max = config.for_rig(stereo).obstacles.max_range_m
+    mount = run.mount
+    last = len(run.observations) - 1
+    for k, obs in enumerate(run.observations):
+        add_observation(grid, obs)
+        record = frames[obs.index]
+        T = T_from_planar(*obs.pose)
+        n = len(obs.obstacle_points_world) - obs.boundary_points
+        points = transform_points(np.linalg.inv(T), obs.obstacle_points_world[:n].astype(np.float64))
+        lo, hi = scan_angles_of_camera(stereo, pan_rad=obs.pan_rad)
+        scan = laser_scan_from_points(points, angle_min_rad=lo, angle_max_rad=hi, range_max_m=range_max, min_points=3)
+        stamp = record.stamp_s if record.stamp_s is not None else float(obs.index)
+        T_base_from_cam = np.eye(4) if mount is None else mount.T_base_from_rectified(stereo.left.R, obs.pan_rad)
+        frame = LiveFrame(index=obs.index, stamp_s=stamp, T_world_from_base=T, T_base_from_cam=T_base_from_cam,
+                          left_rect=None, disparity_px=None, obstacle_points_robot=points.astype(np.float32),
+                          scan=scan, grid=run.grid if k == last else grid)     # the end: the map as written
+        for sink in sinks:
+            sink.frame(frame)
+
+
+def replay_odometry(stamps_s, T_world_from_base, sinks: Sequence, *, T_base_from_cam=None) -> None:
+    """Send a trajectory (an ``odometry`` run) to ``sinks``: poses only."""
+    mount = np.eye(4) if T_base_from_cam is None else np.asarray(T_base_from_cam, dtype=np.float64)
+    for k, (stamp, T) in enumerate(zip(stamps_s, T_world_from_base)):
+        frame = LiveFrame(index=k, stamp_s=float(stamp), T_world_from_base=np.asarray(T), T_base_from_cam=mount,
+                          left_rect=None, disparity_px=None, obstacle_points_robot=np.empty((0, 3), np.float32),
+                          scan=None, grid=None)
+        for sink in sinks:
+            sink.frame(frame)
