@@ -28,12 +28,16 @@ quote numbers measured on a quiet machine only. ``--cpu`` times the stages in CP
 calling thread instead (one thread): on a busy machine it still counts each chain's own work
 (not the time other processes took), though shared caches still slow both chains.
 
+``--cost nsad`` (or ``zncc``, ``nssd``) runs the matcher with that window cost in both modes
+(default: the preset's).
+
     python benchmarks/bench_frame.py [--repeats 3] [--frames 10] [--sizes 640x480,320x240] [--cpu] [--odometry]
-    python benchmarks/bench_frame.py --scenes [--repeats 5] [--cpu] [--near-guard 0]
+    python benchmarks/bench_frame.py --scenes [--repeats 5] [--cpu] [--near-guard 0] [--cost nsad]
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import tempfile
@@ -155,10 +159,14 @@ def load_frames(manifest) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(gray(f.left), gray(f.right)) for f in manifest.frames]
 
 
-def whole_frame(sizes, n_frames: int, repeats: int, seed: int, odometry: bool = False) -> None:
+def whole_frame(sizes, n_frames: int, repeats: int, seed: int, odometry: bool = False, cost: str | None = None
+                ) -> None:
+    from mrstereo.matching import preset_config
     from mrstereo.world.dataset import write_synthetic_dataset
 
     config = PipelineConfig()
+    if cost is not None:
+        config = dataclasses.replace(config, matching=preset_config(config.preset).replace(cost={"kind": cost}))
     print(f"whole frame, raw pair -> grid update; synthetic corridor seed {seed}, {n_frames} frames, "
           f"{repeats} repeats; {'CPU time of the thread' if CLOCK is time.thread_time else 'wall-clock'}; "
           f"load average {os.getloadavg()}")
@@ -174,7 +182,7 @@ def whole_frame(sizes, n_frames: int, repeats: int, seed: int, odometry: bool = 
         cv = OpenCVChain(manifest, config, mr.max_disparity_px)
         for k, (left, right) in enumerate(frames):
             cv(k, left, right)
-        print(f"\n{width}x{height}: mrstereo preset '{config.preset}' (search up to {mr.max_disparity_px:.0f} px) vs "
+        print(f"\n{width}x{height}: mrstereo preset '{config.preset}', cost {cost or 'of the preset'} (search up to {mr.max_disparity_px:.0f} px) vs "
               f"StereoBM {cv.n_disp} disparities 9x9")
         for threads in thread_counts():
             set_threads(threads)
@@ -260,15 +268,17 @@ def paired(fn, base, repeats: int) -> tuple[float, float, float]:
     return 1000 * float(np.median(t_fn)), 1000 * float(np.median(t_base)), float(np.median(ratios))
 
 
-def scenes(repeats: int, near_guard: float | None = None) -> None:
+def scenes(repeats: int, near_guard: float | None = None, cost: str | None = None) -> None:
     from mrstereo.matching import compute_disparity, preset_config
 
     config = preset_config("robust")
+    if cost is not None:
+        config = config.replace(cost={"kind": cost})
     if near_guard is not None:
         config = config.replace(near_guard={"reach": near_guard} if near_guard > 0 else None)
     clock = "CPU time of the calling thread" if CLOCK is not time.perf_counter else "wall-clock"
     reach = 0 if config.near_guard is None else config.near_guard.reach
-    print(f"matcher alone (robust preset, near guard reach {reach:g}) vs StereoBM 9x9 over the same search, "
+    print(f"matcher alone (robust preset, cost {config.cost.kind}, near guard reach {reach:g}) vs StereoBM 9x9 over the same search, "
           f"640x480; {repeats} repeats, {clock}; load average {os.getloadavg()}")
     pairs = real_scenes()
     for threads in thread_counts():
@@ -304,16 +314,18 @@ def main() -> None:
                              "(robust to other processes on a busy machine; wall-clock by default)")
     parser.add_argument("--near-guard", type=float, default=None,
                         help="scenes: the reach of the matcher's too-near guard (0 = without the guard; default the preset's)")
+    parser.add_argument("--cost", choices=("nssd", "zncc", "nsad"), default=None,
+                        help="the matcher's window cost (default: the preset's)")
     args = parser.parse_args()
     keep_freed_memory()          # as the mrstereo command does (for both chains of this process)
     if args.cpu:
         global CLOCK
         CLOCK = time.thread_time
     if args.scenes:
-        scenes(args.repeats, near_guard=args.near_guard)
+        scenes(args.repeats, near_guard=args.near_guard, cost=args.cost)
     else:
         sizes = [tuple(int(v) for v in s.lower().split("x")) for s in args.sizes.split(",")]
-        whole_frame(sizes, args.frames, args.repeats, args.seed, odometry=args.odometry)
+        whole_frame(sizes, args.frames, args.repeats, args.seed, odometry=args.odometry, cost=args.cost)
 
 
 if __name__ == "__main__":

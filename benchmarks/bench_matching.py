@@ -20,7 +20,12 @@ Near-limit sweep (``--near-sweep``): the same rig and pair, the default far band
 or 0.15 m to 1 m at decimation 4, against the same matcher on one full-resolution range
 over the same depths: where the paper's multi-range pays, and the work ratio's bound.
 
-    python benchmarks/bench_matching.py [--repeats 15]
+Each thread count also times one band search alone (80 disparities at full resolution, with the
+pre-filter and the preparation of each cost) against StereoBM over the same 80 disparities:
+ns per pixel x disparity for ZNCC (float32) and nsad (the integer engine). The speed, accuracy
+and corridor tables hold the robust and mapping presets with the nsad cost beside the defaults.
+
+    python benchmarks/bench_matching.py [--repeats 15] [--threads 1]
     python benchmarks/bench_matching.py --accuracy [--scale 0.5]
     python benchmarks/bench_matching.py --near-sweep [--repeats 15]
 """
@@ -78,7 +83,25 @@ def paired(fn, base, repeats: int) -> tuple[float, float, float]:
     return 1000 * float(np.median(t_fn)), 1000 * float(np.median(t_base)), float(np.median(ratios))
 
 
-def speed(repeats: int) -> None:
+def per_evaluation(left, right, bm, n_disp: int, repeats: int) -> None:
+    """One band search ``[0, n_disp - 1]`` at full resolution (raw winners, each cost's
+    pre-filter and preparation included) vs StereoBM over the same disparities: ns per pixel
+    and disparity."""
+    from mrstereo.matching.cost import match_prepared, prepare_gray
+
+    h, w = left.shape
+    evaluations = h * w * n_disp
+    for kind in ("zncc", "nsad"):
+        def search():
+            pair = [prepare_gray(im.astype(np.float32), kind="xsobel", cap=7, window=9, cost=kind)
+                    for im in (left, right)]
+            match_prepared(*pair, d_lo=0, d_hi=n_disp - 1, rows=(0, h), cols=(0, w), right_check=True)
+        ms, base_ms, ratio = paired(search, lambda: bm.compute(left, right), repeats)
+        print(f"  band search alone, {kind}: {1e6 * ms / evaluations:.3f} ns per pixel x disparity, StereoBM "
+              f"{1e6 * base_ms / evaluations:.3f}: ratio {ratio:.2f}")
+
+
+def speed(repeats: int, thread_counts=(1, 2)) -> None:
     left, right, what = load_pair()
     rig = StereoCamera.ideal(Camera(fx=451.0, fy=451.0, cx=320.0, cy=240.0, width=640, height=480), 0.075)
     bm = cv2.StereoBM.create(numDisparities=80, blockSize=9)
@@ -87,8 +110,11 @@ def speed(repeats: int) -> None:
     def run(config):
         return lambda: compute_disparity(left, right, calibration=rig, config=config)
 
+    nsad = robust.replace(cost={"kind": "nsad"})
     runs = {
         "mrstereo robust multi-range": run(robust),
+        "mrstereo nsad multi-range": run(nsad),
+        "mrstereo nsad single-range": run(nsad.replace(search={"multi_range": False})),
         "robust without gap filling": run(robust.replace(postfilter={"gap_fill_px": 0})),
         "mrstereo paper multi-range": run(paper),
         "mrstereo robust single-range": run(robust.replace(search={"multi_range": False})),
@@ -96,14 +122,15 @@ def speed(repeats: int) -> None:
     }
     plan = compute_disparity(left, right, calibration=rig).plan
     print(f"pair: {what}\n{plan.describe()}\nload average: {os.getloadavg()}\n")
-    for threads in (1, 2):
+    for threads in thread_counts:
         numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
         cv2.setNumThreads(threads)
+        per_evaluation(left, right, bm, 80, repeats)
         for name, fn in runs.items():
             ms, base_ms, ratio = paired(fn, lambda: bm.compute(left, right), repeats)
             print(f"threads={threads}  {name:30s} median {ms:6.1f} ms  StereoBM 80 disp 9x9 {base_ms:5.1f} ms"
                   f"  ratio {ratio:4.2f}")
-        for name in ("robust", "paper"):     # the same matcher over the same depths, alternating
+        for name in ("robust", "nsad", "paper"):     # the same matcher over the same depths, alternating
             multi_ms, single_ms, ratio = paired(runs[f"mrstereo {name} multi-range"],
                                                 runs[f"mrstereo {name} single-range"], repeats)
             print(f"threads={threads}  {name} multi-range {multi_ms:.1f} ms vs single range {single_ms:.1f} ms: "
@@ -192,7 +219,9 @@ def accuracy(scale: float = 1.0) -> None:
         "OpenCV StereoBM": lambda s: stereo_bm(s.left, s.right, max_disparity_px=s.max_disparity_px),
         "OpenCV StereoSGBM": lambda s: stereo_sgbm(s.left, s.right, max_disparity_px=s.max_disparity_px),
         "mrstereo robust (default)": mr(),
+        "mrstereo robust, nsad cost": mr(robust.replace(cost={"kind": "nsad"})),
         "mrstereo mapping (the mapping chain's)": mr(preset="mapping"),
+        "mrstereo mapping, nsad cost": mr(preset_config("mapping").replace(cost={"kind": "nsad"})),
         "mrstereo paper": mr(preset="paper"),
         "robust without the near guard": mr(robust.replace(near_guard=None)),
         "robust without gap filling": mr(robust.replace(postfilter={"gap_fill_px": 0})),
@@ -216,6 +245,8 @@ def accuracy(scale: float = 1.0) -> None:
         print(f"| {name} | {first[:, 0].mean():.1f} | {first[:, 1].mean():.1f} | "
               + " | ".join(f"{a:.1f}/{b:.1f}" for a, b in cells) + " |", flush=True)
     corridor({"robust (default)": robust, "mapping": preset_config("mapping"),
+              "robust, nsad cost": robust.replace(cost={"kind": "nsad"}),
+              "mapping, nsad cost": preset_config("mapping").replace(cost={"kind": "nsad"}),
               "robust without gap filling": robust.replace(postfilter={"gap_fill_px": 0}),
               "robust, gap filling from the ends alone": robust.replace(postfilter={"gap_fill_support_px": 1})})
 
@@ -247,6 +278,7 @@ def corridor(configs: dict) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument("--threads", default="1,2", help="speed: thread counts, e.g. 1")
     parser.add_argument("--accuracy", action="store_true", help="bad-2 table on the sample scenes")
     parser.add_argument("--scale", type=float, default=1.0,
                         help="with --accuracy: resize the scenes (e.g. 0.5: other search ranges)")
@@ -259,7 +291,7 @@ def main() -> None:
     elif args.near_sweep:
         near_sweep(args.repeats)
     else:
-        speed(args.repeats)
+        speed(args.repeats, tuple(int(t) for t in args.threads.split(",")))
 
 
 if __name__ == "__main__":

@@ -40,6 +40,13 @@ _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 # float32 constants: a Python float would promote float32 expressions to float64
 ONE = np.float32(1.0)
 TWO = np.float32(2.0)
+# The cost a kernel evaluates (``kind``): NSSD (eq. 9), ZNCC, or the integer engine's SAD of
+# normalized images (:mod:`._int_kernels`), whose window sums are ``sum |q_L - q_R|``.
+NSSD, ZNCC, SAD = 0, 1, 2
+# the integer engine's quantization: STEPS_PER_SIGMA steps per standard deviation, clipped at
+# +-Q_MAX (4 standard deviations; 2 Q_MAX 31^2 < 2^16: a window's SAD fits 16 bits)
+STEPS_PER_SIGMA = 8.0
+Q_MAX = 31
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
@@ -68,12 +75,36 @@ def _nssd_cost(a_l, a_r, window_sum, b_l, b_r):
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _costs(out, window_sums, a_l, b_l, a_r, b_r, n, zncc):
-    """The costs of ``n`` pixels in a row (contiguous slices; the test of ``zncc`` outside the
+def sad_unit(radius):
+    """``1 / (n s)^2`` for a window of ``n = (2 radius + 1)^2`` pixels: ``unit * SAD^2`` of
+    normalized images is in the units of ``1 - rho`` (:mod:`._int_kernels`)."""
+    ns = np.float64((2 * radius + 1) ** 2) * STEPS_PER_SIGMA
+    return np.float32(1.0 / (ns * ns))
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _sad_cost(window_sum, unit):
+    """The integer engine's cost of a window SAD: ``unit * SAD^2`` (``1 - rho`` units)."""
+    c = np.float32(window_sum)
+    return unit * c * c
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _term(left, right, kind):
+    """A window term of pixel values ``left``, ``right``: ``|l - r|`` for SAD, else ``l r``."""
+    return np.float32(abs(left - right)) if kind == SAD else np.float32(left * right)
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def _costs(out, window_sums, a_l, b_l, a_r, b_r, n, kind, unit):
+    """The costs of ``n`` pixels in a row (contiguous slices; the test of ``kind`` outside the
     loops keeps them vectorized)."""
-    if zncc:
+    if kind == ZNCC:
         for i in range(n):
             out[i] = _zncc_cost(window_sums[i], a_l[i], a_r[i], b_l[i], b_r[i])
+    elif kind == SAD:
+        for i in range(n):
+            out[i] = _sad_cost(window_sums[i], unit)
     else:
         for i in range(n):
             out[i] = _nssd_cost(a_l[i], a_r[i], window_sums[i], b_l[i], b_r[i])
@@ -118,11 +149,12 @@ def _box(col, out, partial, m, win):
     otherwise a binary decomposition of ``win`` into sums of 1, 2, 4, 8, 16 neighbours.
     ``partial`` (4, len(col)) is scratch: row ``j`` holds the sums of ``2^(j + 1)``
     neighbours (row 0 those of 3 for the 3-split).
-    The 3-split is used only for float32 (``col.itemsize == 4``): the matcher's float32
-    inputs are integer-valued and their sums exact in any grouping; float64 (non-integer
-    images) keeps the binary grouping, so results do not depend on the split."""
+    The 3-split is used only for float32 and integers (``col.itemsize <= 4``): the matcher's
+    float32 inputs are integer-valued and their sums exact in any grouping, as are integer
+    sums; float64 (non-integer images) keeps the binary grouping, so results do not depend on
+    the split."""
     length = m + win - 1
-    if win % 3 == 0 and col.itemsize == 4:
+    if win % 3 == 0 and col.itemsize <= 4:
         sum3 = partial[0]
         for i in range(length - 2):
             sum3[i] = col[i] + col[i + 1] + col[i + 2]
@@ -245,6 +277,21 @@ def window_terms(padded, radius, zncc, out_a, out_b):
                 ob[x] = np.float32(1.0) / np.sqrt(max(np.float32(box2[x]), np.float32(1e-6)))
 
 
+@njit(nogil=True, cache=True, inline="always")
+def replicate_border(padded, radius):
+    """Fill the ``radius``-wide border of ``padded`` with copies of its inner edge pixels."""
+    height = padded.shape[0] - 2 * radius
+    width = padded.shape[1] - 2 * radius
+    for y in range(radius, radius + height):
+        row = padded[y]
+        for x in range(radius):
+            row[x] = row[radius]
+            row[width + radius + x] = row[width + radius - 1]
+    for y in range(radius):
+        padded[y] = padded[radius]
+        padded[height + radius + y] = padded[height + radius - 1]
+
+
 @njit(nogil=True, cache=True, fastmath=_FASTMATH)
 def xsobel_padded(gray, radius, cap, out_pad):
     """OpenCV StereoBM's pre-filter, ``clip(rint(Sobel_x(gray) / 4), -cap, cap)`` (3x3,
@@ -272,12 +319,30 @@ def xsobel_padded(gray, radius, cap, out_pad):
             xp = min(x + 1, width - 1)
             v = np.float32(0.25) * ((up[xp] - up[xm]) + np.float32(2.0) * (mid[xp] - mid[xm]) + (down[xp] - down[xm]))
             row[radius + x] = min(max(np.rint(v), -cap), cap)
-        for x in range(radius):
-            row[x] = row[radius]
-            row[width + radius + x] = row[width + radius - 1]
-    for y in range(radius):
-        out_pad[y] = out_pad[radius]
-        out_pad[height + radius + y] = out_pad[height + radius - 1]
+    replicate_border(out_pad, radius)
+
+
+@njit(nogil=True, cache=True, inline="always")
+def check_constants(lr_tol, ratio, max_cost):
+    """``(lr_int, keep, max_c)`` of the checks ``(lr_max_diff, uniqueness_ratio, max_cost)``: the
+    left-right tolerance in whole pixels (-1: off) and the float32 factors of :func:`verdict`."""
+    return (int(np.floor(lr_tol)) if lr_tol >= 0 else -1), np.float32(1.0 - ratio), np.float32(max_cost)
+
+
+@njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
+def verdict(found, d, sub, cb, c2, ratio, keep, max_cost, max_c, parabola):
+    """One winner through the checks: ``(d + sub, clip(1 - c1 / c2, 0, 1))`` where ``found`` (a
+    winner, left-right consistent) and it passes the uniqueness test ``c1 <= keep c2`` (``ratio``
+    0: off) and ``c1 <= max_c`` (``max_cost`` < 0: off), else ``(NaN, 0)``; the confidence is 1
+    without a second candidate."""
+    ok = found and (ratio <= 0 or cb <= keep * c2)
+    ok = ok and (max_cost < 0 or cb <= max_c)
+    conf = np.float32(1.0) - cb / (c2 if c2 > 0 else np.float32(1.0))
+    conf = min(max(conf, np.float32(0.0)), np.float32(1.0))
+    conf = np.float32(1.0) if c2 >= BIG else conf
+    conf = np.float32(0.0) if c2 <= 0 else conf
+    value = d + (sub if parabola else np.float32(0.0))
+    return (value if ok else np.float32(np.nan)), (conf if ok else np.float32(0.0))
 
 
 # ----------------------------------------------------------------------------- band search
@@ -306,9 +371,10 @@ def _winner_scratch(n):
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _add_row_products(left_pad, right_pad, colsum, yy, d_lo, cols, radius):
-    """``colsum[k] +=`` the products of padded row ``yy`` at disparity ``d_lo + k``, from column
-    ``max(col0, d)`` on (a strip's first window rows)."""
+def add_row_terms(left_pad, right_pad, colsum, yy, d_lo, cols, radius, kind):
+    """``colsum[k] +=`` the window terms of padded row ``yy`` at disparity ``d_lo + k`` (products;
+    for SAD 16-bit absolute differences), from column ``max(col0, d)`` on (a strip's first window
+    rows)."""
     col0, col1 = cols
     c_end = col1 + 2 * radius
     for k in range(colsum.shape[0]):
@@ -317,8 +383,12 @@ def _add_row_products(left_pad, right_pad, colsum, yy, d_lo, cols, radius):
         col = colsum[k, x0:c_end]
         lrow = left_pad[yy, x0:c_end]
         rrow = right_pad[yy, x0 - d:c_end - d]
-        for i in range(c_end - x0):
-            col[i] += lrow[i] * rrow[i]
+        if kind == SAD:
+            for i in range(c_end - x0):
+                col[i] += np.uint16(abs(np.int16(lrow[i] - rrow[i])))
+        else:
+            for i in range(c_end - x0):
+                col[i] += lrow[i] * rrow[i]
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
@@ -335,7 +405,7 @@ def _row_costs(left, right, radius, zncc, d_lo, cols, y, first, scratch):
     c_end = col1 + 2 * radius
     add = y + 2 * radius
     if first:
-        _add_row_products(left_pad, right_pad, colsum, add, d_lo, cols, radius)
+        add_row_terms(left_pad, right_pad, colsum, add, d_lo, cols, radius, NSSD)
     for k in range(colsum.shape[0]):
         d = d_lo + k
         x0 = max(col0, d)
@@ -478,7 +548,7 @@ def band_winners(left, right, radius, zncc, band, aoi, n_strips, right_check, ou
         right_cost = np.empty(width, np.float32)
         right_d = np.empty(width, np.float32)
         for yy in range(y_start, y_start + 2 * radius):
-            _add_row_products(left[0], right[0], scratch[0], yy, d_lo, cols, radius)
+            add_row_terms(left[0], right[0], scratch[0], yy, d_lo, cols, radius, NSSD)
         for y in range(y_start, y_end):
             _row_winners(left, right, radius, zncc, d_lo, cols, y, y == y_start, scratch, winners)
             for i in range(nx):
@@ -525,9 +595,7 @@ def band_checked(left, right, radius, zncc, band, aoi, n_strips, checks, out, mi
     nd = d_hi - d_lo + 1
     width = left[1].shape[1]
     nx = col1 - col0
-    keep = np.float32(1.0 - ratio)
-    max_c = np.float32(max_cost)
-    lr_int = int(np.floor(lr_tol)) if lr_tol >= 0 else -1
+    lr_int, keep, max_c = check_constants(lr_tol, ratio, max_cost)
     for s in prange(n_strips):
         y_start, y_end = _strip_rows(s, n_strips, row0, row1)
         if y_start >= y_end:
@@ -543,7 +611,7 @@ def band_checked(left, right, radius, zncc, band, aoi, n_strips, checks, out, mi
         lr_ok = np.empty(nx, np.bool_)
         sub = np.empty(nx, np.float32)
         for yy in range(y_start, y_start + 2 * radius):
-            _add_row_products(left[0], right[0], scratch[0], yy, d_lo, cols, radius)
+            add_row_terms(left[0], right[0], scratch[0], yy, d_lo, cols, radius, NSSD)
         for y in range(y_start, y_end):
             _row_winners(left, right, radius, zncc, d_lo, cols, y, y == y_start, scratch, winners)
             if minimum_band[0] <= minimum_band[1]:
@@ -578,18 +646,8 @@ def band_checked(left, right, radius, zncc, band, aoi, n_strips, checks, out, mi
                     lr_ok[i] = True
             for i in range(nx):
                 kb = np.int64(best_k[i])
-                cb = best_cost[i]
-                c2 = second[i]
-                ok = kb >= 0 and lr_ok[i]
-                ok = ok and (ratio <= 0 or cb <= keep * c2)
-                ok = ok and (max_cost < 0 or cb <= max_c)
-                conf = np.float32(1.0) - cb / (c2 if c2 > 0 else np.float32(1.0))
-                conf = min(max(conf, np.float32(0.0)), np.float32(1.0))
-                conf = np.float32(1.0) if c2 >= BIG else conf
-                conf = np.float32(0.0) if c2 <= 0 else conf
-                value = np.float32(d_lo + kb) + (sub[i] if parabola else np.float32(0.0))
-                od[i] = value if ok else np.float32(np.nan)
-                oc[i] = conf if ok else np.float32(0.0)
+                od[i], oc[i] = verdict(kb >= 0 and lr_ok[i], np.float32(d_lo + kb), sub[i], best_cost[i], second[i],
+                                        ratio, keep, max_cost, max_c, parabola)
 
 
 # ----------------------------------------------------------------------------- refinement
@@ -612,12 +670,7 @@ def fill_center(disparity_px, radius, out_center_pad):
             if np.isfinite(v):
                 last = np.int32(np.rint(v))
             row[x + radius] = last
-        for x in range(radius):
-            row[x] = row[radius]
-            row[width + radius + x] = row[width + radius - 1]
-    for y in range(radius):
-        out_center_pad[y] = out_center_pad[radius]
-        out_center_pad[height + radius + y] = out_center_pad[height + radius - 1]
+    replicate_border(out_center_pad, radius)
 
 
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
@@ -671,9 +724,9 @@ def _wanted_columns(want, box):
 # One body: the product and cost gathers as inlined helpers measured 3-6 % slower (numba counts
 # the references of an inlined call's array arguments at every call, here per run and offset).
 @njit(nogil=True, cache=True, fastmath=_FASTMATH, inline="always")
-def _refine_box(left, right, radius, zncc, center_pad, want, box, half, max_cost, by_runs, out):
+def _refine_box(left, right, radius, kind, center_pad, want, box, half, max_cost, by_runs, out):
     """Re-score the wanted pixels of one box (:func:`refine_boxes`). ``by_runs`` (a constant of
-    each kernel) gathers the products ``I_L(p) I_R(p - c(p) - o)`` and the right terms along runs
+    each kernel) gathers the products ``I_L(p) I_R(p - c(p) - o)`` (SAD: ``|I_L - I_R|``) and the right terms along runs
     of constant ``c`` (contiguous reads) or pixel by pixel (the right column clamped to the
     padded row; no bookkeeping). The products of the rows inside the window are kept in a ring
     buffer, so each is gathered once."""
@@ -683,6 +736,7 @@ def _refine_box(left, right, radius, zncc, center_pad, want, box, half, max_cost
     nc = 2 * half + 1
     win = 2 * radius + 1
     wp = right_pad.shape[1]
+    unit = sad_unit(radius)
     y_start, y_end = box[0], box[1]
     xa, xb = _wanted_columns(want, box)
     if y_end <= y_start or xb <= xa:
@@ -719,17 +773,17 @@ def _refine_box(left, right, radius, zncc, center_pad, want, box, half, max_cost
                     lo = min(max(i0, -base), i1)
                     hi = max(min(i1, wp - base), lo)
                     for i in range(i0, lo):
-                        fresh[i] = lrow[i] * rrow[0]
+                        fresh[i] = _term(lrow[i], rrow[0], kind)
                     seg_l = lrow[lo:hi]
                     seg_r = rrow[base + lo:base + hi]
                     seg_f = fresh[lo:hi]
                     for i in range(hi - lo):
-                        seg_f[i] = seg_l[i] * seg_r[i]
+                        seg_f[i] = _term(seg_l[i], seg_r[i], kind)
                     for i in range(hi, i1):
-                        fresh[i] = lrow[i] * rrow[wp - 1]
+                        fresh[i] = _term(lrow[i], rrow[wp - 1], kind)
             else:
                 for i in range(ncol):
-                    fresh[i] = lrow[i] * rrow[min(max(q0[i] - off, 0), wp - 1)]
+                    fresh[i] = _term(lrow[i], rrow[min(max(q0[i] - off, 0), wp - 1)], kind)
             col = colsum[o]
             old = ring[o, slot]
             for i in range(ncol):
@@ -768,9 +822,12 @@ def _refine_box(left, right, radius, zncc, center_pad, want, box, half, max_cost
                     seg_al = al[k0:i1]
                     seg_bl = bl[k0:i1]
                     seg_c = crow_c[k0:i1]
-                    if zncc:
+                    if kind == ZNCC:
                         for i in range(i1 - k0):
                             seg_c[i] = _zncc_cost(seg_box[i], seg_al[i], seg_ar[i], seg_bl[i], seg_br[i])
+                    elif kind == SAD:
+                        for i in range(i1 - k0):
+                            seg_c[i] = _sad_cost(seg_box[i], unit)
                     else:
                         for i in range(i1 - k0):
                             seg_c[i] = _nssd_cost(seg_al[i], seg_ar[i], seg_box[i], seg_bl[i], seg_br[i])
@@ -779,7 +836,7 @@ def _refine_box(left, right, radius, zncc, center_pad, want, box, half, max_cost
                 xr = min(max(wa + i - cy[i] - off, 0), wa + i)
                 ar_at[i] = ar[xr]
                 br_at[i] = br[xr]
-            _costs(crow_c, box_sums, al, bl, ar_at, br_at, nw, zncc)
+            _costs(crow_c, box_sums, al, bl, ar_at, br_at, nw, kind, unit)
             for i in range(nw):
                 d = cy[i] + off
                 crow_c[i] = crow_c[i] if (d >= 0 and wa + i >= d) else BIG     # x_right < 0 or d < 0: none
@@ -795,7 +852,7 @@ def _refine_box(left, right, radius, zncc, center_pad, want, box, half, max_cost
 
 
 @njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
-def refine_boxes(left, right, radius, zncc, center_pad, want, boxes, half, max_cost, out):
+def refine_boxes(left, right, radius, kind, center_pad, want, boxes, half, max_cost, out):
     """Full-resolution re-scoring of a coarse disparity field over ``c + o``, ``|o| <= half``,
     box by box in parallel, the products gathered pixel by pixel (the right column clamped to
     the padded row): the cost does not grow where ``c`` changes every few pixels (the near
@@ -822,20 +879,20 @@ def refine_boxes(left, right, radius, zncc, center_pad, want, boxes, half, max_c
     gathered once.
     """
     for j in prange(boxes.shape[0]):
-        _refine_box(left, right, radius, zncc, center_pad, want, boxes[j], half, max_cost, False, out)
+        _refine_box(left, right, radius, kind, center_pad, want, boxes[j], half, max_cost, False, out)
 
 
 @njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
-def refine_strips(left, right, radius, zncc, center_pad, want, strips, half, max_cost, out):
+def refine_strips(left, right, radius, kind, center_pad, want, strips, half, max_cost, out):
     """:func:`refine_boxes` over row strips (``strips`` as ``boxes``), the products and costs
     gathered along runs of constant ``c`` (contiguous reads: fastest where ``c`` is constant over
     many pixels, a level's up-sampled field). Same sums, same results."""
     for j in prange(strips.shape[0]):
-        _refine_box(left, right, radius, zncc, center_pad, want, strips[j], half, max_cost, True, out)
+        _refine_box(left, right, radius, kind, center_pad, want, strips[j], half, max_cost, True, out)
 
 
 @njit(nogil=True, parallel=True, cache=True, fastmath=_FASTMATH)
-def refine_pixels(left, right, radius, zncc, center_pad, pixels, half, max_cost, n_strips, out):
+def refine_pixels(left, right, radius, kind, center_pad, pixels, half, max_cost, n_strips, out):
     """:func:`refine_boxes` for scattered pixels ``pixels = (ys, xs)`` (same arguments and
     outputs otherwise): each window sum ``sum I_L(p) I_R(p - c(p) - o)`` is added up directly,
     so the work is per wanted pixel rather than per pixel of the rows spanned. The sums are
@@ -848,6 +905,7 @@ def refine_pixels(left, right, radius, zncc, center_pad, pixels, half, max_cost,
     win = 2 * radius + 1
     n = win * win
     wp = right_pad.shape[1]
+    unit = sad_unit(radius)
     rflat = right_pad.reshape(right_pad.size)
     for s in prange(n_strips):
         j0, j1 = _strip_rows(s, n_strips, 0, ys.size)
@@ -877,12 +935,12 @@ def refine_pixels(left, right, radius, zncc, center_pad, pixels, half, max_cost,
                 acc = np.float32(0.0)
                 if q_lo - off >= 0 and q_hi - off < wp:
                     for t in range(n):
-                        acc += lv[t] * np.float32(rflat[qs[t] - off])
+                        acc += _term(lv[t], np.float32(rflat[qs[t] - off]), kind)
                 else:                       # clamped to the padded row, as refine_boxes
                     for t in range(n):
                         yy = y + t // win
                         q = min(max(qs[t] - yy * wp - off, 0), wp - 1)
-                        acc += lv[t] * np.float32(rflat[yy * wp + q])
+                        acc += _term(lv[t], np.float32(rflat[yy * wp + q]), kind)
                 cj[o] = acc
             al = a_left[y, x]
             bl = b_left[y, x]
@@ -892,7 +950,9 @@ def refine_pixels(left, right, radius, zncc, center_pad, pixels, half, max_cost,
                 d = cy + o - half
                 if d < 0 or x < d:
                     c = BIG                 # x_right < 0 or d < 0: no candidate
-                elif zncc:
+                elif kind == SAD:
+                    c = _sad_cost(cj[o], unit)
+                elif kind == ZNCC:
                     c = _zncc_cost(cj[o], al, a_right[y, x - d], bl, b_right[y, x - d])
                 else:
                     c = _nssd_cost(al, a_right[y, x - d], cj[o], bl, b_right[y, x - d])

@@ -1,7 +1,8 @@
 """Area correlation on one image pair and one disparity band (paper section 3.3).
 
 The per-level solver of the multi-range matcher: image pre-filters, the NSSD
-cost of eq. (9) (or ZNCC), and winner-take-all, eq. (10). Conventions:
+cost of eq. (9) (or ZNCC, or the integer engine's normalized SAD), and winner-take-all,
+eq. (10). Conventions:
 docs/conventions.md (disparity ``d = x_left - x_right >= 0``).
 
 Sign convention. The paper writes eq. (9) as
@@ -22,7 +23,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from . import _kernels
+from . import _int_kernels, _kernels
 from .config import COSTS, PREFILTERS
 
 __all__ = ["BandMatch", "PreparedImage", "prefilter", "prepare", "match_band", "match_prepared",
@@ -104,17 +105,27 @@ def _strips(n_strips: int | None, n_rows: int) -> int:
     return max(1, min(int(n_strips), n_rows))
 
 
+_KIND = {"nssd": _kernels.NSSD, "zncc": _kernels.ZNCC, "nsad": _kernels.SAD}
+
+
 @dataclass(frozen=True)
 class PreparedImage:
     """A pre-filtered image ready for the kernels: padded by the window radius
     (replicated border) in the accumulator's dtype, with its window terms ``a``, ``b``
-    (see :mod:`._kernels`)."""
+    (see :mod:`._kernels`); for ``"nsad"`` ``padded`` holds the normalized, quantized image
+    (int16, :func:`._int_kernels.normalize_quantize`) and ``flat`` its flat windows."""
 
     padded: np.ndarray
     a: np.ndarray
     b: np.ndarray
     window: int
-    zncc: bool
+    cost: str
+    flat: np.ndarray | None = None
+
+    @property
+    def kind(self) -> int:
+        """The kernels' code of the cost (``_kernels.NSSD``, ``ZNCC`` or ``SAD``)."""
+        return _KIND[self.cost]
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -135,7 +146,7 @@ def prepare(image: np.ndarray, *, window: int, cost: str, dtype=np.float32) -> P
         Pre-filtered image (:func:`prefilter`).
     window : int
         Odd window size.
-    cost : {"nssd", "zncc"}
+    cost : {"nssd", "zncc", "nsad"}
         The cost the terms are for.
     dtype : numpy dtype
         Accumulator type: float32 when the window sums are exact integers, else float64.
@@ -145,7 +156,7 @@ def prepare(image: np.ndarray, *, window: int, cost: str, dtype=np.float32) -> P
     r = window // 2
     image = np.ascontiguousarray(image, dtype=dtype)
     padded = cv2.copyMakeBorder(image, r, r, r, r, cv2.BORDER_REPLICATE)
-    return _with_terms(padded, window, cost == "zncc")
+    return _with_terms(padded, window, cost)
 
 
 def prepare_gray(gray: np.ndarray, *, kind: str, cap: int, window: int, cost: str) -> PreparedImage:
@@ -168,16 +179,21 @@ def prepare_gray(gray: np.ndarray, *, kind: str, cap: int, window: int, cost: st
     h, w = gray.shape
     padded = np.empty((h + 2 * r, w + 2 * r), np.float32)
     _kernels.xsobel_padded(np.ascontiguousarray(gray, dtype=np.float32), r, np.float32(cap), padded)
-    return _with_terms(padded, window, cost == "zncc")
+    return _with_terms(padded, window, cost)
 
 
-def _with_terms(padded: np.ndarray, window: int, zncc: bool) -> PreparedImage:
+def _with_terms(padded: np.ndarray, window: int, cost: str) -> PreparedImage:
     r = window // 2
     shape = (padded.shape[0] - 2 * r, padded.shape[1] - 2 * r)
     a = np.empty(shape, padded.dtype)
     b = np.empty(shape, np.float32)
-    _kernels.window_terms(padded, r, zncc, a, b)
-    return PreparedImage(padded, a, b, window, zncc)
+    _kernels.window_terms(padded, r, cost != "nssd", a, b)
+    if cost != "nsad":
+        return PreparedImage(padded, a, b, window, cost)
+    quantized = np.empty(padded.shape, np.int16)
+    flat = np.empty(shape, bool)
+    _int_kernels.normalize_quantize(padded, a, b, r, quantized, flat)
+    return PreparedImage(quantized, a, b, window, cost, flat)
 
 
 def _span(name: str, span, size: int) -> tuple[int, int]:
@@ -240,9 +256,20 @@ def match_prepared(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi
     out = (np.full((h, w), -1, np.int32), np.zeros((h, w), np.float32), np.full((h, w), _kernels.BIG, np.float32),
            np.full((h, w), _kernels.BIG, np.float32), np.full((h, w), -1, np.int32))
     if rows[1] > rows[0] and cols[1] > cols[0]:
-        _kernels.band_winners(left.arrays, right.arrays, left.window // 2, left.zncc, (int(d_lo), int(d_hi)),
-                              (*rows, *cols), _strips(n_strips, rows[1] - rows[0]), bool(right_check), out)
+        _search(left, right, (int(d_lo), int(d_hi)), (*rows, *cols), n_strips, bool(right_check), out)
     return out
+
+
+def _search(left: PreparedImage, right: PreparedImage, band, aoi, n_strips, right_check: bool, out) -> None:
+    """The band search of the pair's cost into ``out`` (:func:`match_prepared`'s outputs)."""
+    strips = _strips(n_strips, aoi[1] - aoi[0])
+    if left.cost == "nsad":
+        _int_kernels.band_sad(left.padded, right.padded, left.flat, left.window // 2, band, aoi, strips,
+                              _kernels.sad_unit(left.window // 2), (-1.0, 0.0, -1.0, False, False), (1, 0), out,
+                              (_NONE, _NONE, _NONE))
+    else:
+        _kernels.band_winners(left.arrays, right.arrays, left.window // 2, left.kind == _kernels.ZNCC, band, aoi,
+                              strips, right_check, out)
 
 
 _NONE = np.zeros((1, 1), np.float32)      # an output the kernel is told not to write
@@ -301,10 +328,17 @@ def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi:
         alt_px = np.full((h, w), np.nan, np.float32)
         alt_cost = np.full((h, w), _kernels.BIG, np.float32)
         best_cost = np.full((h, w), _kernels.BIG, np.float32)
-    if rows[1] > rows[0] and cols[1] > cols[0]:
-        checks = (-1.0 if lr_max_diff_px is None else float(lr_max_diff_px), float(uniqueness_ratio),
-                  -1.0 if max_cost is None else float(max_cost), bool(subpixel))
-        _kernels.band_checked(left.arrays, right.arrays, left.window // 2, left.zncc, (int(d_lo), int(d_hi)),
+    checks = (-1.0 if lr_max_diff_px is None else float(lr_max_diff_px), float(uniqueness_ratio),
+              -1.0 if max_cost is None else float(max_cost), bool(subpixel))
+    if rows[1] > rows[0] and cols[1] > cols[0] and left.cost == "nsad":
+        # the checks from the costs the search kept per pixel, row by row inside the search
+        _int_kernels.band_sad(left.padded, right.padded, left.flat, left.window // 2, (int(d_lo), int(d_hi)),
+                              (*rows, *cols), _strips(n_strips, rows[1] - rows[0]), _kernels.sad_unit(left.window // 2),
+                              (*checks, True), (1, 0) if alt_band is None else (int(alt_band[0]), int(alt_band[1])),
+                              (disparity, confidence, _NONE, _NONE, _NONE),
+                              (_NONE, _NONE, _NONE) if alt_band is None else (alt_px, alt_cost, best_cost))
+    elif rows[1] > rows[0] and cols[1] > cols[0]:
+        _kernels.band_checked(left.arrays, right.arrays, left.window // 2, left.kind == _kernels.ZNCC, (int(d_lo), int(d_hi)),
                               (*rows, *cols), _strips(n_strips, rows[1] - rows[0]), checks, (disparity, confidence),
                               (1, 0) if alt_band is None else (int(alt_band[0]), int(alt_band[1])),
                               (_NONE, _NONE, _NONE) if alt_band is None else (alt_px, alt_cost, best_cost))
@@ -330,9 +364,11 @@ def match_band(left: np.ndarray, right: np.ndarray, *, d_lo: int, d_hi: int, win
         ``d <= x`` (its match must lie inside the right image).
     window : int
         Odd window size ``W = 2 w + 1``.
-    cost : {"nssd", "zncc"}
+    cost : {"nssd", "zncc", "nsad"}
         ``"nssd"`` is eq. (9); ``"zncc"`` is ``1 - `` zero-mean normalized
-        cross-correlation, invariant to gain and offset.
+        cross-correlation, invariant to gain and offset; ``"nsad"`` the integer engine's sum
+        of absolute differences of the normalized images (:mod:`._int_kernels`), in the
+        units of ``1 - `` correlation.
     rows, cols : (int, int), optional
         Half-open row and column ranges to evaluate (area of interest, section 3.1);
         the rest of the output is invalid.
@@ -439,7 +475,7 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
             boxes = np.concatenate([np.stack([edges[s], edges[s + 1], boxes[:, 2], boxes[:, 3]], axis=1)
                                     for s in range(threads)])
         # the near guard's fields change every few pixels: products gathered pixel by pixel
-        _kernels.refine_boxes(left.arrays, right.arrays, r, left.zncc, center_pad, want, boxes, int(half_px),
+        _kernels.refine_boxes(left.arrays, right.arrays, r, left.kind, center_pad, want, boxes, int(half_px),
                               max_cost, (out, cost))
         return out, cost
     hit = np.flatnonzero(want[rows[0]:rows[1]].any(axis=1))
@@ -448,13 +484,13 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     rows = (rows[0] + int(hit[0]), rows[0] + int(hit[-1]) + 1)      # only the rows holding pixels to refine
     if np.count_nonzero(want[rows[0]:rows[1]]) * SPARSE_REFINE_SHARE < (rows[1] - rows[0]) * w:
         ys, xs = np.nonzero(want[rows[0]:rows[1]])
-        _kernels.refine_pixels(left.arrays, right.arrays, r, left.zncc, center_pad, (ys + rows[0], xs), int(half_px),
+        _kernels.refine_pixels(left.arrays, right.arrays, r, left.kind, center_pad, (ys + rows[0], xs), int(half_px),
                                max_cost, _strips(n_strips, ys.size), (out, cost))
         return out, cost
     # a level's up-sampled field is constant over runs of pixels: products gathered along them
     n = _strips(n_strips, rows[1] - rows[0])
     edges = [rows[0] + (s * (rows[1] - rows[0])) // n for s in range(n + 1)]
     strips = np.array([(edges[s], edges[s + 1], 0, w) for s in range(n)], np.int64)
-    _kernels.refine_strips(left.arrays, right.arrays, r, left.zncc, center_pad, want, strips, int(half_px), max_cost,
+    _kernels.refine_strips(left.arrays, right.arrays, r, left.kind, center_pad, want, strips, int(half_px), max_cost,
                            (out, cost))
     return out, cost
