@@ -74,13 +74,13 @@ def test_cli_errors(tmp_path, capsys):
     assert entry(["evaluate", str(tmp_path), "--methods", "StereoBM,Census"]) == 2
     assert "unknown method(s) Census" in capsys.readouterr().err
     assert entry(["evaluate", str(tmp_path), "--max-disparity", "0", "--methods", "StereoBM"]) == 2
-    assert "must be >= 1" in capsys.readouterr().err
+    assert "'--max-disparity': 0 is not in the range [1, 4096] px" in capsys.readouterr().err
     assert entry(["evaluate", str(tmp_path), "--json", str(tmp_path), "--methods", "StereoBM"]) == 2
     capsys.readouterr()
-    (tmp_path / "disp0.pfm").write_text("keep")
-    assert entry(["evaluate", str(tmp_path), "--markdown", str(tmp_path / "disp0.pfm"), "--methods", "StereoBM"]) == 2
-    assert "would overwrite a file of the input folder" in capsys.readouterr().err
-    assert (tmp_path / "disp0.pfm").read_text() == "keep"
+    (tmp_path / "disp0.md").write_text("keep")
+    assert entry(["evaluate", str(tmp_path), "--markdown", str(tmp_path / "disp0.md"), "--methods", "StereoBM"]) == 2
+    assert "lies inside the scene" in capsys.readouterr().err
+    assert (tmp_path / "disp0.md").read_text() == "keep"
 
 
 def test_library_errors():

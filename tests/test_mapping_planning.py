@@ -149,6 +149,11 @@ def test_cli_plan_writes_json_and_fails_with_one_line(tmp_path, capsys):
 
     assert entry(["plan", str(tmp_path / "map.yaml"), "--start", "3", "--goal", "9,0",
                   "-o", str(out)]) == 2
+    capsys.readouterr()
     assert entry(["plan", str(tmp_path / "map.yaml"), "--start", "3,0", "--goal", "9,0",
-                  "-o", str(tmp_path / "map.yaml")]) == 2
-    assert "overwrite" in capsys.readouterr().err
+                  "-o", str(tmp_path / "map.json"), "--plot", str(tmp_path / "map.pgm")]) == 2
+    assert "--plot must end in" in capsys.readouterr().err
+    (tmp_path / "link.json").symlink_to(tmp_path / "map.yaml")
+    assert entry(["plan", str(tmp_path / "map.yaml"), "--start", "3,0", "--goal", "9,0",
+                  "-o", str(tmp_path / "link.json")]) == 2
+    assert "would overwrite the input" in capsys.readouterr().err

@@ -192,12 +192,14 @@ def test_points_with_mount_equals_height_and_tilt(corridor, tmp_path, capsys):
 def test_map_without_mount_estimates_and_reports_the_floor(corridor, tmp_path, capsys):
     # the same dataset without any mount: calibration and manifest both lack it
     cal = dataclasses.replace(corridor.calibration, mount=None)
-    write_stereo(tmp_path / "cal.yaml", cal)
+    dataset = tmp_path / "ds"
+    dataset.mkdir()
+    write_stereo(dataset / "cal.yaml", cal)
     frames = [{"left": str(f.left), "right": str(f.right), "pose": list(f.pose), "pan_rad": f.pan_rad}
               for f in corridor.frames]
-    write_manifest(tmp_path / "manifest.yaml", calibration="cal.yaml", mount=None, frames=frames)
-    assert read_manifest(tmp_path).mount is None
-    assert entry(["map", str(tmp_path), "-o", str(tmp_path / "out"), "--quiet"]) == 0
+    write_manifest(dataset / "manifest.yaml", calibration="cal.yaml", mount=None, frames=frames)
+    assert read_manifest(dataset).mount is None
+    assert entry(["map", str(dataset), "-o", str(tmp_path / "out"), "--quiet"]) == 0
     out = capsys.readouterr()
     assert "floor estimated: median of 3 floor fit(s)" in out.out and "warning" not in out.err
     floor = json.loads((tmp_path / "out" / "metrics.json").read_text())["floor"]

@@ -101,7 +101,12 @@ def test_odometry_command_bad_input(sequence, tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("mrstereo: error:") and "missing" in err and err.count("\n") == 1
     assert entry(["odometry", str(sequence), "-o", str(sequence / "manifest.yaml")]) == 2
-    assert "would overwrite" in capsys.readouterr().err
+    assert "--out must end in .txt or .tum" in capsys.readouterr().err
+    assert entry(["odometry", str(sequence), "-o", str(sequence / "t.txt")]) == 2
+    assert "lies inside the dataset" in capsys.readouterr().err
+    assert entry(["odometry", str(sequence), "-o", str(tmp_path / "t.txt"), "--metrics",
+                  str(sequence / "calibration.yaml")]) == 2
+    assert "--metrics must end in .json" in capsys.readouterr().err
     assert entry(["odometry", "-o", str(tmp_path / "t.txt")]) == 2
     assert "RECORDING or --bag" in capsys.readouterr().err
     assert not (tmp_path / "t.txt").exists()

@@ -236,13 +236,14 @@ def _use_loaded(value) -> tuple:
 
 
 @pytest.mark.parametrize("workers", [None, 1, 3])
-def test_worker_threads_and_prefetch_keep_order_and_name_failures(workers):
+def test_worker_threads_and_prefetch_keep_order_and_name_failures(workers, monkeypatch):
     """workers=N: a pool of single-threaded threads of this process (no Dask); prefetch runs on a reader
     thread ahead of func, in order; a failing prefetch or func is that item's failure."""
     import threading
 
     import cv2
 
+    monkeypatch.setenv("MRSTEREO_MAX_WORKERS", "3")          # more threads than the 2 cores of CI
     before = cv2.getNumThreads()
     out = map_ordered(_use_loaded, range(12), workers=workers, prefetch=_loaded, progress=False,
                       return_exceptions=True, label=lambda x: f"item {x}")

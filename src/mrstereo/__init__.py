@@ -7,7 +7,11 @@ disparity sign): docs/conventions.md.
 """
 from __future__ import annotations
 
+from ._limits import _hand_image_limit_to_opencv
+
 __version__ = "0.1.0"
+
+_hand_image_limit_to_opencv()        # before anything loads OpenCV
 
 # Public entry points, imported lazily so that ``import mrstereo`` stays cheap
 # (numba kernels compile only when a stage is used).

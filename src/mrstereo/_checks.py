@@ -14,11 +14,13 @@ from numbers import Real
 import numpy as np
 
 
-def instance(name: str, value, cls: type):
-    """Return ``value``, raising ``TypeError`` unless it is an instance of ``cls``."""
-    if not isinstance(value, cls):
-        article = "an" if cls.__name__[0] in "AEIOU" else "a"
-        raise TypeError(f"{name} must be {article} {cls.__name__}, got {type(value).__name__}")
+def instance(name: str, value, types, what: str | None = None):
+    """Return ``value``, raising ``TypeError`` naming the argument unless it is one of ``types`` (a type or a
+    tuple of types; ``what`` names them in the message)."""
+    if not isinstance(value, types):
+        names = what or " or ".join(t.__name__ for t in (types if isinstance(types, tuple) else (types,)))
+        article = "an" if names[0] in "AEIOU" else "a"
+        raise TypeError(f"{name} must be {article} {names}, got {type(value).__name__}")
     return value
 
 
@@ -45,6 +47,13 @@ def positive_int(name: str, value, *, minimum: int = 1) -> int:
     return int(value)
 
 
+def instances(name: str, values, types):
+    """``values`` when each is one of ``types``, else ``TypeError`` naming ``name[k]``."""
+    for k, value in enumerate(values):
+        instance(f"{name}[{k}]", value, types)
+    return values
+
+
 def image(name: str, value) -> np.ndarray:
     """Check an image: HxW or HxWx3, uint8 or floating, non-empty, finite."""
     if not isinstance(value, np.ndarray):
@@ -69,8 +78,14 @@ def image_dtype(name: str, value: np.ndarray, allowed=(np.uint8, np.uint16, np.f
 
 
 def gray_float32(name: str, value) -> np.ndarray:
-    """Return an image as float32 gray (BGR colour, OpenCV order, with BT.601 weights)."""
+    """Return an image as float32 gray on the 8-bit scale (BGR colour, OpenCV order, with BT.601 weights).
+
+    uint16 values are divided by 257 (65535 -> 255; an 8-bit image times 257 comes back exactly), as
+    :func:`mrstereo.io.matching_image` does: every threshold of the matcher is in 8-bit gray levels.
+    """
     value = image(name, value)
+    if value.dtype == np.uint16:
+        value = value.astype(np.float32) / np.float32(257.0)
     if value.ndim == 3:
         if value.shape[2] == 1:
             value = value[:, :, 0]
@@ -130,11 +145,24 @@ def rng(value) -> np.random.Generator:
 
 
 def memory_limit_bytes() -> int:
-    """The physical memory of this machine in bytes (the bound of :func:`fits_in_memory`)."""
+    """The memory available to a new allocation now, in bytes (the bound of :func:`fits_in_memory`).
+
+    Linux's ``MemAvailable`` (free memory plus what the kernel can reclaim without swapping), else
+    the free physical pages, else the physical memory; 16 GiB on a system that tells none of these.
+    """
     try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):     # not a POSIX system: assume 16 GiB
-        return 16 << 30
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    for pages in ("SC_AVPHYS_PAGES", "SC_PHYS_PAGES"):
+        try:
+            return os.sysconf("SC_PAGE_SIZE") * os.sysconf(pages)
+        except (ValueError, OSError, AttributeError):
+            continue
+    return 16 << 30
 
 
 def format_bytes(n: float) -> str:
@@ -150,12 +178,43 @@ def format_bytes(n: float) -> str:
 
 
 def fits_in_memory(name: str, nbytes: float, what: str, *, limit_bytes: int | None = None) -> None:
-    """Raise ``ValueError`` naming ``name`` when ``nbytes`` for ``what`` exceed the machine's memory.
+    """Raise ``ValueError`` naming ``name`` when ``nbytes`` for ``what`` exceed the available memory.
 
     Called before allocating, so that a mistyped size ends in a message with the size that
     would be needed instead of a MemoryError deep in a kernel (or the system swapping).
     """
     limit = memory_limit_bytes() if limit_bytes is None else limit_bytes
     if not math.isfinite(nbytes) or nbytes > limit:
-        raise ValueError(f"{name}: {what} would need {format_bytes(nbytes)} of memory, more than this "
-                         f"machine's {format_bytes(limit)}")
+        raise ValueError(f"{name}: {what} would need {format_bytes(nbytes)} of memory, more than the "
+                         f"{format_bytes(limit)} available on this machine")
+
+
+def fits_on_disk(name: str, nbytes: float, folder, what: str) -> None:
+    """Raise ``ValueError`` naming ``name`` when writing ``nbytes`` for ``what`` into ``folder`` (or the
+    nearest existing folder above it) would fill its file system."""
+    from pathlib import Path
+
+    parent = Path(folder)
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    try:
+        st = os.statvfs(parent)
+    except (OSError, AttributeError):
+        return
+    free = st.f_bavail * st.f_frsize
+    if not math.isfinite(nbytes) or nbytes > free:
+        raise ValueError(f"{name}: {what} would need about {format_bytes(nbytes)} of disk, more than the "
+                         f"{format_bytes(free)} free in {parent}")
+
+
+def workers(name: str, value) -> int:
+    """A worker count: an int from 1 to :func:`mrstereo._limits.max_workers` (more workers than cores only
+    slow a run down)."""
+    from ._limits import max_workers
+
+    value = positive_int(name, value)
+    cap = max_workers()
+    if value > cap:
+        raise ValueError(f"{name} must be at most {cap} (the cores of this machine; more workers than cores "
+                         f"only wait for each other), got {value}; set MRSTEREO_MAX_WORKERS to allow more")
+    return value

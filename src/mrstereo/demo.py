@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import _checks
 from .io import atomic_write, read_disparity, read_image, write_image
 from .viz.plot import disparity_colorbar, disparity_range_px, draw_disparity, new_figure, save_figure
 
@@ -100,6 +101,10 @@ class _Steps:
         self.bar.close()
 
 
+MAX_DEMO_FRAMES = 1000
+"""The most frames of a demo run (its report draws every stage of every frame)."""
+
+
 def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_frames: int = 30,
              n_calibration_views: int = 12, progress: bool = True, randomize: bool = False) -> DemoResult:
     """Run the whole pipeline on the built-in world and write a report directory.
@@ -120,6 +125,11 @@ def run_demo(out_dir: str | os.PathLike = "mrstereo-demo", *, seed: int = 0, n_f
         A randomized world drawn from ``seed`` (:func:`mrstereo.world.randomize.random_world`:
         corridor, textures, lights, rig, sensors, obstacles) instead of the built-in corridor.
     """
+    seed = _checks.positive_int("seed", seed, minimum=0)
+    n_frames = _checks.positive_int("n_frames", n_frames)
+    if n_frames > MAX_DEMO_FRAMES:
+        raise ValueError(f"n_frames must be at most {MAX_DEMO_FRAMES} (the demo maps every frame and draws "
+                         f"each stage; use `mrstereo synth` and `mrstereo map` for long runs), got {n_frames}")
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()):
         raise ValueError(f"output directory {out} already exists and is not empty")

@@ -23,6 +23,26 @@ __all__ = ["R_BODY_FROM_OPTICAL", "rotation_from_rpy", "rpy_from_rotation",
 R_BODY_FROM_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
+def _array(name: str, value, tail: tuple[int, ...], *, batch: bool = False) -> np.ndarray:
+    """``value`` as a float64 array whose last dimensions are ``tail`` (more in front with ``batch``)."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a numeric array of shape {tail}, got {type(value).__name__}") from None
+    if arr.shape[-len(tail):] != tail or (not batch and arr.ndim != len(tail)):
+        raise ValueError(f"{name} must have shape {'(..., ' if batch else '('}{', '.join(map(str, tail))}), "
+                         f"got {arr.shape}")
+    return arr
+
+
+def _planar(name: str, value) -> tuple[float, float, float]:
+    """A planar pose ``(x, y, yaw)`` of finite numbers."""
+    arr = _array(name, value, (3,))
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be 3 finite numbers (x_m, y_m, yaw_rad), got {arr.tolist()}")
+    return float(arr[0]), float(arr[1]), float(arr[2])
+
+
 def _rot_z(angle: float) -> np.ndarray:
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -56,7 +76,7 @@ def rotation_from_rpy(roll_rad, pitch_rad, yaw_rad) -> np.ndarray:
 def rpy_from_rotation(R) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Inverse of :func:`rotation_from_rpy` for (..., 3, 3): ``(roll, pitch, yaw)``, pitch in
     [-pi/2, pi/2] (0-d arrays for one rotation); at pitch +-pi/2 (gimbal lock) roll is 0."""
-    R = np.asarray(R, dtype=np.float64)
+    R = _array("R", R, (3, 3), batch=True)
     pitch = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
     locked = np.abs(R[..., 2, 0]) > 1.0 - 1e-12
     roll = np.where(locked, 0.0, np.arctan2(R[..., 2, 1], R[..., 2, 2]))
@@ -102,7 +122,7 @@ def T_from_rvec_t(rvec, tvec) -> np.ndarray:
 
 def rvec_t_from_T(T) -> tuple[np.ndarray, np.ndarray]:
     """OpenCV ``(rvec, tvec)`` (3x1 each) of a 4x4 transform."""
-    T = np.asarray(T, dtype=np.float64)
+    T = _array("T", T, (4, 4))
     return cv2.Rodrigues(T[:3, :3])[0].reshape(3, 1), T[:3, 3].reshape(3, 1).copy()
 
 
@@ -151,21 +171,27 @@ def scale_motion(T, fraction: float) -> np.ndarray:
     The constant-velocity motion model's prediction over another time step (exact for a
     rotation about an axis through the origin, first order otherwise).
     """
-    T = np.asarray(T, dtype=np.float64)
+    T = _array("T", T, (4, 4))
+    fraction = _checks.finite_number("fraction", fraction)
     rvec = cv2.Rodrigues(T[:3, :3])[0].ravel()
     return T_from_rvec_t(rvec * fraction, T[:3, 3] * fraction)
 
 
 def rotation_angle_rad(R) -> float:
     """Angle of a rotation matrix, in [0, pi]."""
-    c = (np.trace(np.asarray(R, dtype=np.float64)[:3, :3]) - 1.0) / 2.0
+    R = np.asarray(R, dtype=np.float64)
+    if R.ndim != 2 or R.shape[0] < 3 or R.shape[1] < 3:
+        raise ValueError(f"R must be a 3x3 rotation (or a 4x4 transform), got shape {R.shape}")
+    c = (np.trace(R[:3, :3]) - 1.0) / 2.0
     return float(math.acos(min(1.0, max(-1.0, c))))
 
 
 def quaternion_from_rotation(R) -> np.ndarray:
     """Unit quaternion ``(qx, qy, qz, qw)`` with ``qw >= 0`` of a rotation matrix."""
-    R = np.asarray(R, dtype=np.float64)[:3, :3]
-    rvec = cv2.Rodrigues(R)[0].ravel()
+    R = np.asarray(R, dtype=np.float64)
+    if R.shape not in ((3, 3), (4, 4)) or not np.isfinite(R).all():
+        raise ValueError(f"R must be a finite 3x3 rotation (or a 4x4 transform), got shape {R.shape}")
+    rvec = cv2.Rodrigues(R[:3, :3])[0].ravel()
     angle = float(np.linalg.norm(rvec))
     if angle < 1e-12:
         return np.array([0.0, 0.0, 0.0, 1.0])
@@ -189,8 +215,11 @@ def rotation_from_quaternion(q) -> np.ndarray:
 
 def slerp(q0, q1, fraction: float) -> np.ndarray:
     """Spherical linear interpolation of two quaternions (``fraction`` 0 gives ``q0``, 1 ``q1``)."""
-    q0 = np.asarray(q0, dtype=np.float64) / np.linalg.norm(q0)
-    q1 = np.asarray(q1, dtype=np.float64) / np.linalg.norm(q1)
+    q0, q1 = _array("q0", q0, (4,)), _array("q1", q1, (4,))
+    for name, q in (("q0", q0), ("q1", q1)):
+        if not np.isfinite(q).all() or np.linalg.norm(q) < 1e-12:
+            raise ValueError(f"{name} must be a finite quaternion of non-zero length, got {q.tolist()}")
+    q0, q1 = q0 / np.linalg.norm(q0), q1 / np.linalg.norm(q1)
     dot = float(np.dot(q0, q1))
     if dot < 0.0:
         q1, dot = -q1, -dot
@@ -227,12 +256,14 @@ def planar_from_T(T) -> np.ndarray:
 
 def compose_planar(a, b) -> tuple[float, float, float]:
     """``a * b`` of planar poses ``(x, y, yaw)``."""
+    a, b = _planar("a", a), _planar("b", b)
     c, s = math.cos(a[2]), math.sin(a[2])
     return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2]))
 
 
 def relative_planar(a, b) -> tuple[float, float, float]:
     """``inv(a) * b`` of planar poses."""
+    a, b = _planar("a", a), _planar("b", b)
     c, s = math.cos(a[2]), math.sin(a[2])
     dx, dy = b[0] - a[0], b[1] - a[1]
     return (c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[2] - a[2]))

@@ -80,8 +80,16 @@ def _num(v: float):
     return None if not math.isfinite(v) else float(v)
 
 
+def _views_and_camera(views, camera) -> None:
+    """Views must be CalibrationViews and the camera a Camera (before any field of theirs is read)."""
+    _checks.instances("views", views, CalibrationView)
+    if camera is not None:
+        _checks.instance("camera", camera, Camera)
+
+
 def reprojection_residuals(views: Sequence[CalibrationView], camera: Camera, poses) -> list[np.ndarray]:
     """Projected minus measured pixels (N, 2) per view."""
+    _views_and_camera(views, camera)
     out = []
     for view, T in zip(views, poses):
         cam_pts = view.points_target @ T[:3, :3].T + T[:3, 3]
@@ -102,6 +110,7 @@ def check_view_geometry(view: CalibrationView) -> None:
     The target points and their pixels must span a plane (second singular value of the centred
     points above 1e-6 of the first); such points would otherwise "fit" with an RMS of zero.
     """
+    _checks.instance("view", view, CalibrationView)
     for what, pts in (("target points", view.points_target), ("pixels", view.uv)):
         centred = pts - pts.mean(axis=0)
         s = np.linalg.svd(centred, compute_uv=False)

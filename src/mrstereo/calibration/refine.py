@@ -14,6 +14,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from .. import _checks
 from ..camera import Camera, get_distortion_model, project_points
 from ..transforms import T_from_R_t, rotation_from_rpy, rpy_from_rotation
 from .targets import CalibrationView
@@ -183,6 +184,8 @@ def refine_views(views: Sequence[CalibrationView], camera: Camera, poses: Sequen
     model : {"k1k2", "plumb_bob", "rational", "fisheye"} or CalibrationModel
         The distortion model fitted (:data:`CALIBRATION_MODELS`).
     """
+    _checks.instance("camera", camera, Camera)
+    _checks.instances("views", views, CalibrationView)
     spec = calibration_model(model)
     n_int = (4 if fix_aspect is None else 3) + spec.n_free
     lin = [camera.fx, camera.fy, camera.cx, camera.cy] if fix_aspect is None else [camera.fx, camera.cx, camera.cy]

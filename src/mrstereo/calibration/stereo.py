@@ -83,6 +83,7 @@ def rectified_points(stereo: StereoCamera, uv: np.ndarray, *, side: str) -> np.n
 def rectified_vertical_error_px(stereo: StereoCamera, left_uv: Sequence[np.ndarray],
                                 right_uv: Sequence[np.ndarray]) -> np.ndarray:
     """Mean ``|y_left - y_right|`` per pair of matching raw points after rectification."""
+    _checks.instance("stereo", stereo, StereoCamera)
     out = []
     for a, b in zip(left_uv, right_uv):
         ya = rectified_points(stereo, a, side="left")[:, 1]

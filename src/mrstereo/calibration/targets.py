@@ -71,8 +71,13 @@ def planar_grid(cols: int, rows: int, spacing_m: float) -> np.ndarray:
     cols = _checks.positive_int("cols", cols, minimum=2)
     rows = _checks.positive_int("rows", rows, minimum=2)
     spacing_m = _checks.finite_number("spacing_m", spacing_m, positive=True)
+    _checks.fits_in_memory("cols and rows", 72.0 * cols * rows, f"a grid of {cols} x {rows} points")
     x, y = np.meshgrid(np.arange(cols, dtype=np.float64), np.arange(rows, dtype=np.float64))
     return np.stack([x.ravel() * spacing_m, y.ravel() * spacing_m, np.zeros(x.size)], axis=1)
+
+
+MAX_BOARD_CORNERS = 200
+"""The most inner corners per side of a chessboard (the largest printed targets have a few dozen)."""
 
 
 def parse_board(text: str) -> tuple[int, int]:
@@ -82,8 +87,8 @@ def parse_board(text: str) -> tuple[int, int]:
         cols, rows = (int(p) for p in parts)
     except ValueError:
         raise ValueError(f"board must look like 9x6 (inner corners), got {text!r}") from None
-    if cols < 2 or rows < 2:
-        raise ValueError(f"board needs at least 2x2 inner corners, got {text!r}")
+    if not (2 <= cols <= MAX_BOARD_CORNERS and 2 <= rows <= MAX_BOARD_CORNERS):
+        raise ValueError(f"board needs 2 to {MAX_BOARD_CORNERS} inner corners per side, got {text!r}")
     return cols, rows
 
 

@@ -12,14 +12,13 @@ from __future__ import annotations
 import os
 import threading
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import cv2
 import numpy as np
 import yaml
 
 from .. import _checks
-from ..io import atomic_write, parse_yaml
+from ..io import atomic_write, read_yaml
 from .model import Camera, get_distortion_model
 from .mount import CameraMount, mount_entry, read_mount_entry
 
@@ -132,6 +131,7 @@ class CameraInfo:
     name: str = "camera"
 
     def __post_init__(self) -> None:
+        _checks.instance("camera", self.camera, Camera)
         R = _checks.matrix("R", self.R, (3, 3))
         if _rotation_error(R) > ROTATION_TOL:
             raise ValueError(f"R must be a rotation (orthonormal, det +1), got det {np.linalg.det(R):.4g}")
@@ -212,6 +212,8 @@ class StereoCamera:
     mount: CameraMount | None = None
 
     def __post_init__(self) -> None:
+        _checks.instance("left", self.left, CameraInfo)
+        _checks.instance("right", self.right, CameraInfo)
         if self.left.camera.size != self.right.camera.size:
             raise ValueError("left and right cameras must have the same image size")
         if self.mount is not None and not isinstance(self.mount, CameraMount):
@@ -383,14 +385,7 @@ def check_stereo(stereo: StereoCamera, *, where: str = "stereo calibration") -> 
 
 
 def _load_yaml(path: str | os.PathLike, what: str):
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{what} not found: {path}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise ValueError(f"{what} {path} is not a text file (binary or not UTF-8)") from None
-    return parse_yaml(text, what, path)
+    return read_yaml(path, what)
 
 
 def _dump_yaml(path: str | os.PathLike, data: dict) -> None:
@@ -406,9 +401,11 @@ def read_camera_info(path: str | os.PathLike) -> CameraInfo:
 
 def write_camera_info(path: str | os.PathLike, info: CameraInfo) -> None:
     """Write a ROS camera_info YAML file (atomically)."""
+    _checks.instance("info", info, CameraInfo)
     _dump_yaml(path, info.to_dict())
 
 
 def write_stereo(path: str | os.PathLike, stereo: StereoCamera) -> None:
     """Write the stereo calibration YAML (atomically)."""
+    _checks.instance("stereo", stereo, StereoCamera)
     _dump_yaml(path, stereo.to_dict())

@@ -17,9 +17,8 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
-from ..io import parse_yaml
+from ..io import parse_yaml, read_text
 from .camera_info import (BASELINE_RANGE_M, ROTATION_TOL, CameraInfo, StereoCamera, _rotation_error, camera_from_ros,
                           check_stereo, numbers)
 from .model import Camera
@@ -107,20 +106,14 @@ def _split(paths) -> list[Path]:
     return files
 
 
-class _Loader(yaml.SafeLoader):
-    """Safe YAML that also reads OpenCV's ``!!opencv-matrix`` tag (as its mapping)."""
-
-
-_Loader.add_constructor("tag:yaml.org,2002:opencv-matrix", lambda loader, node: loader.construct_mapping(node, deep=True))
+_OPENCV_MATRIX = "tag:yaml.org,2002:opencv-matrix"      # OpenCV's !!opencv-matrix, read as its mapping
+MAX_CALIBRATION_BYTES = 16 << 20
+"""A calibration file larger than this is refused unread (the largest real ones are a few KB)."""
 
 
 def _load(path: Path) -> dict:
     """The file's content as plain Python (dicts, lists, numbers, strings, arrays)."""
-    raw = path.read_bytes()
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        raise ValueError(f"stereo calibration {path} is not a text file (binary or not UTF-8)") from None
+    text = read_text(path, "stereo calibration", max_bytes=MAX_CALIBRATION_BYTES)
     if "\x00" in text:
         raise ValueError(f"stereo calibration {path} is not a text file (binary)")
     head = text.lstrip()[:64]
@@ -135,7 +128,7 @@ def _load(path: Path) -> dict:
     else:
         opencv_error = None
     try:
-        data = parse_yaml(text, "stereo calibration", path, loader=_Loader)
+        data = parse_yaml(text, "stereo calibration", path, tags=(_OPENCV_MATRIX,))
     except ValueError:
         if opencv_error is not None:
             raise opencv_error from None

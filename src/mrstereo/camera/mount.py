@@ -158,4 +158,6 @@ def read_mount_entry(data: dict, *, where: str, R_rect_from_cam=None) -> CameraM
 
 def mount_entry(mount: CameraMount | None) -> dict:
     """The YAML entry of a mount: ``{"mount": {xyz, rpy}}``, or ``{}`` for None."""
+    if mount is not None and not isinstance(mount, CameraMount):
+        raise TypeError(f"mount must be a CameraMount or None, got {type(mount).__name__}")
     return {} if mount is None else {"mount": mount.to_dict()}

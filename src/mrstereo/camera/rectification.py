@@ -136,6 +136,9 @@ def _rectified_border(camera: Camera, R_rect: np.ndarray) -> dict[str, np.ndarra
 
 def rectified_px_from_raw_px(info: CameraInfo, uv) -> np.ndarray:
     """Raw (distorted) pixels (N, 2) of one camera -> its rectified image (``R``, ``P``)."""
+    from .camera_info import CameraInfo
+
+    _checks.instance("info", info, CameraInfo)
     rays = info.camera.rays(np.asarray(uv, dtype=np.float64)) @ info.R.T
     p = rays @ info.P[:3, :3].T
     with np.errstate(divide="ignore", invalid="ignore"):

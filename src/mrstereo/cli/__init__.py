@@ -190,16 +190,22 @@ def _run(argv: list[str] | None) -> int:
     debug = os.environ.get(DEBUG_ENV, "") not in ("", "0")
     interrupts = _Interrupts()
     interrupts.install()
+    stdout = _QuietPipe.install()
     try:
+        import warnings
+
         import click
 
+        from ..io import protecting_inputs, quiet_decoders
         from ..pipeline.parallel import keep_freed_memory
         from ._main import main
 
         keep_freed_memory()          # this process is ours: no page faults on every frame's arrays
+        quiet_decoders()             # the command reports a bad image itself, in one line
         args = sys.argv[1:] if argv is None else list(argv)
         try:
-            with main.make_context("mrstereo", args) as ctx:
+            with main.make_context("mrstereo", args) as ctx, protecting_inputs(), warnings.catch_warnings():
+                warnings.showwarning = _show_warning
                 main.invoke(ctx)
         except click.exceptions.Exit as exc:           # --help, --version
             return exc.exit_code
@@ -210,6 +216,10 @@ def _run(argv: list[str] | None) -> int:
                 click.echo(exc.format_message())
                 return 0
             raise _UsageError(exc.format_message()) from None
+    except BrokenPipeError:
+        if stdout is not None and stdout.broken:
+            return 0
+        raise
     except KeyboardInterrupt:
         if not interrupts.fired:
             _say("mrstereo: interrupted")
@@ -230,6 +240,8 @@ def _run(argv: list[str] | None) -> int:
              f"at {_ISSUES_URL} (set {DEBUG_ENV}=1 to see the traceback)")
         return EXIT_BUG
     finally:
+        if stdout is not None:
+            stdout.uninstall()
         if argv is None and not interrupts.fired:
             interrupts.linger()         # the process is ours (console script, python -m): to its very end
         else:
@@ -237,6 +249,63 @@ def _run(argv: list[str] | None) -> int:
     if interrupts.fired:                            # the interrupt was swallowed somewhere: still 130
         return _interrupted(interrupts)
     return 0
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning of mrstereo as one line ``mrstereo: warning: ...``; those of other packages are dropped."""
+    if issubclass(category, UserWarning) and f"{os.sep}mrstereo{os.sep}" in str(filename):
+        _say(f"mrstereo: warning: {' '.join(str(message).split())}")
+
+
+class _QuietPipe:
+    """stdout that goes quiet when its reader has gone (``mrstereo ... | head``): the command still
+    writes its files and ends normally, its remaining lines are dropped, as command-line tools do."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+        self.broken = False
+
+    @classmethod
+    def install(cls):
+        if isinstance(sys.stdout, cls) or sys.stdout is None:
+            return None
+        pipe = cls(sys.stdout)
+        sys.stdout = pipe
+        return pipe
+
+    def uninstall(self) -> None:
+        if sys.stdout is self:
+            sys.stdout = self._stream
+
+    def _quiet(self) -> None:
+        if not self.broken:
+            self.broken = True
+            try:
+                devnull = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(devnull, self._stream.fileno())
+                os.close(devnull)
+            except (OSError, ValueError, AttributeError):
+                pass
+
+    def write(self, text):
+        if self.broken:
+            return len(text)
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._quiet()
+            return len(text)
+
+    def flush(self) -> None:
+        if self.broken:
+            return
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._quiet()
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
 
 
 def _interrupted(interrupts: _Interrupts) -> int:

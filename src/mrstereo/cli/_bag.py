@@ -8,16 +8,15 @@ Conventions: docs/conventions.md.
 from __future__ import annotations
 
 import contextlib
-import math
 from pathlib import Path
 
 import click
 
-from ._options import (CALIB_HELP, check_mount_options, check_workers, echo_run_floor, map_config, map_options,
-                       mount_from_options, mount_option, parse_mount, warn, worker_options)
+from ._options import (CALIB_HELP, HEIGHT, TILT, Number, check_mount_options, check_workers, echo_run_floor,
+                       map_config, map_options, mount_from_options, mount_option, parse_mount, warn, worker_options)
 
-__all__ = ["COMMANDS", "BAG_KEYS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset", "recording_options",
-           "recording_of"]
+__all__ = ["COMMANDS", "BAG_KEYS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset",
+           "recording_options", "recording_of", "read_inputs"]
 
 
 BAG_KEYS = ("left_topic", "right_topic", "camera_info_topics", "odom_topic", "use_tf", "world_frame", "base_frame",
@@ -42,12 +41,13 @@ def bag_options(func):
                      help="TF frame of the left camera (an *_optical_frame, else the camera body frame "
                           "x forward): its pose in --base-frame is the camera mount (unless --mount or "
                           "--height is given), its change of heading the head pan."),
-        click.option("--sync-tolerance", "sync_tolerance_s", type=float, default=0.02, show_default=True,
+        click.option("--sync-tolerance", "sync_tolerance_s", type=Number(0.0, 10.0, unit="s"), default=0.02,
+                     show_default=True,
                      help="Largest left/right stamp difference of a stereo pair [s]."),
         click.option("--rectified-images", is_flag=True, help="The bag's images are already rectified."),
-        click.option("--height", "height_m", type=float, default=None,
+        click.option("--height", "height_m", type=HEIGHT, default=None,
                      help="Camera height above the floor [m] (else the stereo YAML mount:/rig:, else estimated)."),
-        click.option("--tilt", "tilt_rad", type=float, default=None,
+        click.option("--tilt", "tilt_rad", type=TILT, default=None,
                      help="Downward camera tilt [rad] (with --height)."),
     ]
     for option in reversed(options):
@@ -69,9 +69,6 @@ def bag_export_kwargs(*, bag, calib, left_topic, right_topic, camera_info_topics
 
     if odom_topic and use_tf:
         raise click.UsageError("give --odom-topic or --tf, not both")
-    if not math.isfinite(sync_tolerance_s) or sync_tolerance_s < 0:
-        raise click.BadParameter(f"must be a finite number >= 0, got {sync_tolerance_s}",
-                                 param_hint="--sync-tolerance")
     info = None
     if camera_info_topics:
         info = tuple(t.strip() for t in camera_info_topics.split(","))
@@ -92,10 +89,38 @@ def bag_export_kwargs(*, bag, calib, left_topic, right_topic, camera_info_topics
                 progress=not quiet)
 
 
+def read_inputs(manifest, bag: Path | None, calib: Path | None, *, rate_hz: float | None = None):
+    """Read what a command's recording is made of, before any work: ``(dataset, bag)``, the dataset None
+    for a bag (``--bag`` or a RECORDING that is one), whose files are registered instead; ``--calib`` too.
+    Every output check that follows sees them all (:func:`mrstereo.io.protecting_inputs`), calibration
+    siblings such as OpenLORIS' trans_matrix.yaml too."""
+    from ..camera import read_stereo
+    from ..io import note_inputs
+    from ..recordings.bag import bag_inputs
+    from ..recordings.layouts import layout_of, read_recording
+    from ..recordings.manifest import Manifest
+
+    if bag is None and not isinstance(manifest, Manifest):
+        manifest, is_bag = recording_of(manifest, None)
+        if is_bag:
+            manifest, bag = None, manifest
+    if calib is not None:
+        read_stereo(calib)
+    if bag is not None:
+        note_inputs(bag_inputs(bag))
+        return None, bag
+    if isinstance(manifest, Manifest):
+        return manifest, None
+    folders = layout_of(manifest) == "image folders"
+    if rate_hz is not None and not folders:
+        raise click.UsageError("--rate only with image folders")
+    return read_recording(manifest, calibration=calib if folders else None, rate_hz=rate_hz), None
+
+
 def recording_options(func):
     """The options of a command reading a RECORDING: ``--bag`` and the bag's topic options, ``--rate``."""
     func = bag_options(func)
-    func = click.option("--rate", "rate_hz", type=float, default=None,
+    func = click.option("--rate", "rate_hz", type=Number(0.0, 1000.0, unit="Hz", open_low=True), default=None,
                         help="Frame rate [Hz] of image folders whose file names are not time stamps.")(func)
     return click.option("--bag", "bag", type=click.Path(path_type=Path),
                         help="A ROS 1 .bag / ROS 2 bag directory (also accepted as RECORDING).")(func)
@@ -197,13 +222,16 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
     Every command that reads a DATASET then reads the recording.
     """
     from ..io import check_output_dir
+    from ..pipeline.sanity import check_pair_streams
     from ..recordings.bag import export_bag
+    from ..recordings.manifest import read_manifest
 
-    check_output_dir("--out", out_dir, inputs=[bag, options.get("calib")], input_dirs=[bag] if bag.is_dir() else [],
-                     must_be_empty=True)
+    read_inputs(None, bag, options.get("calib"))
+    check_output_dir("--out", out_dir, must_be_empty=True)
     kwargs = bag_export_kwargs(bag=bag, quiet=quiet, **options)
     result = export_bag(bag, out_dir, **kwargs)
     echo_export(result)
+    check_pair_streams(read_manifest(out_dir))
     click.echo(f"wrote {result.n_frames} frames to {out_dir} (manifest: {out_dir / 'manifest.yaml'})")
 
 
@@ -239,11 +267,12 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool,
     from ..recordings.layouts import read_recording
 
     check_workers(workers, scheduler, processes)
-    check_output_dir("--out", out_dir)
     config = map_config(**options)
     camera_mount = parse_mount(mount)
+    manifests = [read_recording(m) for m in manifests]
+    check_output_dir("--out", out_dir)
     if camera_mount is not None:
-        manifests = [dataclasses.replace(read_recording(m), mount=camera_mount) for m in manifests]
+        manifests = [dataclasses.replace(m, mount=camera_mount) for m in manifests]
     summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
                         scheduler=scheduler, processes=processes, progress=not quiet, check_mount=not no_mount_check)
     for d in summary.datasets:

@@ -5,20 +5,36 @@ Conventions: docs/conventions.md.
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
 
 import click
 from tqdm import tqdm
 
-from .. import _checks
 from ..calibration import (METHODS, MODELS, MULTIVIEW_GA, GAConfig, calibrate_camera, calibrate_stereo,
                            check_view_geometry, chessboard_pairs, chessboard_views, expand_glob, parse_board,
                            read_control_points, reprojection_residuals)
 from ..calibration.report import camera_line, markdown_report, residual_figure, write_json, write_text
 from ..camera import CameraInfo, read_stereo, write_camera_info, write_stereo
 from ..io import IMAGE_SUFFIXES, check_output_dir, check_outputs, read_image, write_image
-from ._options import CALIB_HELP
+from ._options import CALIB_HELP, MAX_IMAGE_SIDE, SEED, Number, numbers
+
+SQUARE = Number(0.0, 1.0, unit="m", open_low=True)
+"""``--square``: the chessboard's square side."""
+def _force_option():
+    return click.option("--force", is_flag=True,
+                        help="Write the calibration even when the fit did not converge (then a warning).")
+
+
+def _converged(result, force: bool, what: str) -> None:
+    """A fit that did not converge is an error, or with ``--force`` a warning: it is written either way only
+    when forced."""
+    if result.success:
+        return
+    text = f"the {what} did not converge ({' '.join(str(result.message).split())}; RMS {result.rms_px:.4g} px)"
+    if not force:
+        raise RuntimeError(f"{text}: nothing written; check the views (more of them, tilted boards) or give "
+                           "--force to write it anyway")
+    click.echo(f"mrstereo: warning: {text}; written because of --force", err=True)
 
 
 def _progress_bar(total: int, desc: str):
@@ -30,12 +46,6 @@ def _progress_bar(total: int, desc: str):
         bar.set_postfix_str(f"F={best:.4g} px^2", refresh=False)
         bar.update(generation - bar.n)
     return bar, update
-
-
-def _square(square: float) -> float:
-    if not math.isfinite(square) or square <= 0:
-        raise ValueError(f"--square must be a positive finite size in metres, got {square}")
-    return square
 
 
 def _residuals_path(output: Path) -> Path:
@@ -75,17 +85,18 @@ def _siblings(output: Path, stem_suffix: str) -> dict[str, Path]:
               "(default: the file's '# units:' comment, else m).")
 @click.option("--images", "images_glob", help="Glob of chessboard images, e.g. 'left*.jpg'.")
 @click.option("--board", default="9x6", show_default=True, help="Inner corners, columns x rows.")
-@click.option("--square", type=float, default=0.025, show_default=True, help="Square size [m].")
+@click.option("--square", type=SQUARE, default=0.025, show_default=True, help="Square size [m].")
 @_method_option()
 @_model_option()
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the GA's random numbers.")
-@click.option("--generations", type=int, default=None, help="GA generation limit (default 2000 for one "
-              "view, 200 for several).")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the GA's random numbers.")
+@click.option("--generations", type=Number(1, 100_000, integer=True), default=None,
+              help="GA generation limit (default 2000 for one view, 200 for several).")
 @click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False),
               help="camera_info YAML to write (.yaml or .yml).")
+@_force_option()
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def calibrate_cmd(points, image_size, units, images_glob, board, square, method, model, seed, generations, output,
-                  quiet):
+                  force, quiet):
     """Calibrate one camera from chessboards or control points.
 
     Fits the camera with the paper's genetic algorithm (section 2.2), its result
@@ -102,19 +113,15 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
     if points is not None:
         if image_size is None:
             raise click.UsageError("--points needs --image-size WxH")
-        try:
-            width, height = (int(s) for s in image_size.lower().split("x"))
-        except ValueError:
-            raise ValueError(f"--image-size must look like 640x480, got {image_size!r}") from None
-        _checks.positive_int("image width", width)
-        _checks.positive_int("image height", height)
+        width, height = (int(v) for v in numbers(image_size.lower().replace("x", ","), "--image-size", 2, 1,
+                                                  MAX_IMAGE_SIDE, unit="px", what="'WxH', e.g. 640x480"))
         _check_report_outputs(output, "_report", [points], extra={"residuals figure": _residuals_path(output)})
         views = [read_control_points(points, units=units)]
     else:
         cols_rows = parse_board(board)
         paths = expand_glob(images_glob)
         _check_report_outputs(output, "_report", paths, extra={"residuals figure": _residuals_path(output)})
-        found, (width, height) = chessboard_views(paths, cols_rows, _square(square))
+        found, (width, height) = chessboard_views(paths, cols_rows, square)
         views = [v for v in found if v is not None]
         missing = [p.name for p, v in zip(paths, found) if v is None]
         if missing:
@@ -124,7 +131,7 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
     config = None
     if generations is not None:
         base = GAConfig() if len(views) == 1 else MULTIVIEW_GA
-        config = dataclasses.replace(base, generations=_checks.positive_int("--generations", generations))
+        config = dataclasses.replace(base, generations=generations)
     total = (config or (GAConfig() if len(views) == 1 else MULTIVIEW_GA)).generations
     bar, update = _progress_bar(total, "GA") if method != "lm" and not quiet else (None, None)
     try:
@@ -133,6 +140,7 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
     finally:
         if bar is not None:
             bar.close()
+    _converged(result, force, "calibration")
     files = _siblings(output, "_report")
     figure = _residuals_path(output)
     write_camera_info(output, CameraInfo(result.camera, name=output.stem))
@@ -150,16 +158,17 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
 @click.option("--left", "left_glob", required=True, help="Glob of left chessboard images.")
 @click.option("--right", "right_glob", required=True, help="Glob of right chessboard images.")
 @click.option("--board", default="9x6", show_default=True, help="Inner corners, columns x rows.")
-@click.option("--square", type=float, default=0.025, show_default=True, help="Square size [m].")
+@click.option("--square", type=SQUARE, default=0.025, show_default=True, help="Square size [m].")
 @_method_option()
 @_model_option()
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the GA's random numbers.")
-@click.option("--alpha", type=float, default=0.0, show_default=True,
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the GA's random numbers.")
+@click.option("--alpha", type=Number(0.0, 1.0), default=0.0, show_default=True,
               help="Rectified view: 0 = valid pixels only, 1 = all raw pixels.")
 @click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False),
               help="Stereo YAML to write (.yaml or .yml).")
+@_force_option()
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, seed, alpha, output, quiet):
+def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, seed, alpha, output, force, quiet):
     """Calibrate a stereo rig from chessboard image pairs.
 
     Calibrates both cameras and their relative pose, rectifies the pair
@@ -173,8 +182,6 @@ def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, se
         raise ValueError(f"--method ga fits the paper's k1k2 model only; --model {model} needs "
                          "--method ga+lm or lm")
     cols_rows = parse_board(board)
-    square = _square(square)
-    alpha = _checks.finite_number("--alpha", alpha)
     left_paths, right_paths = expand_glob(left_glob, "left images"), expand_glob(right_glob, "right images")
     if len(left_paths) != len(right_paths):
         raise ValueError(f"{len(left_paths)} left images but {len(right_paths)} right images; pairs are "
@@ -195,6 +202,7 @@ def stereo_calibrate_cmd(left_glob, right_glob, board, square, method, model, se
     finally:
         if bar is not None:
             bar.close()
+    _converged(result, force, "stereo calibration")
     files = _siblings(output, "_report")
     summary = result.summary()
     summary["skipped_pairs"] = skipped
@@ -228,10 +236,10 @@ def rectify_cmd(calib, left, right, output):
     if names[0] == names[1]:
         names = ["left_" + names[0], "right_" + names[1]]
     targets = [out_dir / n for n in names]
-    check_output_dir("--out", out_dir)
+    stereo = read_stereo(calib)
+    check_output_dir("--out", out_dir, may_hold_inputs=True)
     check_outputs({f"--out {t}": t for t in targets}, [left, right, calib],
                   suffixes={f"--out {t}": IMAGE_SUFFIXES for t in targets})
-    stereo = read_stereo(calib)
     img_l, img_r = read_image(left), read_image(right)
     rect_l, rect_r = stereo.rectify(img_l, img_r)
     for t, img in zip(targets, (rect_l, rect_r)):

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import click
 
-from ..demo import run_demo
-from ._options import library_default
+from ..demo import MAX_DEMO_FRAMES, run_demo
+from ._options import SEED, Number, library_default
 
 __all__ = ["COMMANDS"]
 
@@ -18,10 +18,10 @@ __all__ = ["COMMANDS"]
 @click.option("-o", "--out", "out_dir", default=library_default(run_demo, "out_dir"), show_default=True,
               type=click.Path(path_type=Path),
               help="Report directory (must not exist or be empty).")
-@click.option("--seed", default=library_default(run_demo, "seed"), show_default=True, type=click.IntRange(min=0),
+@click.option("--seed", default=library_default(run_demo, "seed"), show_default=True, type=SEED,
               help="Seed of the world's textures and noise and of the GA.")
 @click.option("--frames", "n_frames", default=library_default(run_demo, "n_frames"), show_default=True,
-              type=click.IntRange(min=1),
+              type=Number(1, MAX_DEMO_FRAMES, integer=True),
               help="Frames of the corridor sequence (front, +45 and -45 degree views per stop).")
 @click.option("--randomize", is_flag=True,
               help="A randomized world drawn from --seed instead of the built-in corridor (docs/world.md).")
@@ -34,17 +34,13 @@ def demo_command(out_dir: Path, seed: int, n_frames: int, randomize: bool, quiet
     plans a path through the map, and compares every stage with ground truth
     in report.md and metrics.json, with its figures.
     """
-    import os
+    from ..io import staged_new_dir
 
-    from ..io import check_output_dir, temporary_dir
-
-    check_output_dir("--out", out_dir, must_be_empty=True)
-    with temporary_dir(out_dir.absolute().parent, prefix=out_dir.name) as tmp:     # the report complete or not at all
+    with staged_new_dir(out_dir, option="--out") as tmp:        # the report complete or not at all
         result = run_demo(tmp / "report", seed=seed, n_frames=n_frames, progress=not quiet,
                           randomize=randomize)
-        if out_dir.is_dir():
-            out_dir.rmdir()                     # empty, checked above
-        os.replace(tmp / "report", out_dir)
+        for item in (tmp / "report").iterdir():
+            item.rename(tmp / item.name)
     report = out_dir / result.report.relative_to(tmp / "report")
     m = result.metrics
     c, g = m["calibration"], m.get("map") or {}

@@ -9,8 +9,9 @@ from pathlib import Path
 import click
 
 from ..evaluation.report import METHODS, evaluate_scenes
-from ..io import atomic_write, check_outputs
-from ._options import check_workers, library_default, worker_options
+from ..io import atomic_write, check_outputs, note_read
+from ..recordings.manifest import MANIFEST_NAME, read_manifest
+from ._options import Number, check_workers, library_default, worker_options
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -27,7 +28,7 @@ def _write_text(path: Path, text: str) -> None:
               help="Also write the full report as JSON here.")
 @click.option("--markdown", "markdown_out", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write the markdown tables here.")
-@click.option("--max-disparity", "max_disparity", type=int, default=None,
+@click.option("--max-disparity", "max_disparity", type=Number(1, 4096, integer=True, unit="px"), default=None,
               help="Disparity search range in pixels for every scene (default: each scene's ndisp or "
                    "ground-truth maximum rounded up to 16).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
@@ -51,14 +52,16 @@ def evaluate(dirs, methods, json_out, markdown_out, max_disparity, quiet, worker
     if not names or unknown:
         raise click.BadParameter(f"unknown method(s) {', '.join(unknown) or '(none given)'}; "
                                  f"choose from {', '.join(METHODS)}", param_hint="--methods")
-    if max_disparity is not None and max_disparity < 1:
-        raise click.BadParameter(f"must be >= 1, got {max_disparity}", param_hint="--max-disparity")
     for d in dirs:
         if not d.exists():
             raise FileNotFoundError(f"scene directory not found: {d}")
         if not d.is_dir():
             raise ValueError(f"scene must be a directory, got the file {d}")
-    check_outputs({"--json": json_out, "--markdown": markdown_out}, input_dirs=dirs)
+        note_read(d, folder=True, kind="scene")
+        if (d / MANIFEST_NAME).is_file():
+            read_manifest(d)            # its files, wherever they lie (a calibration beside the scene folder)
+    check_outputs({"--json": json_out, "--markdown": markdown_out},
+                  suffixes={"--json": (".json",), "--markdown": (".md", ".markdown", ".txt")})
     report = evaluate_scenes(dirs, methods=names, max_disparity_px=max_disparity, progress=not quiet,
                              workers=workers, scheduler=scheduler, processes=processes)
     markdown = report.to_markdown()

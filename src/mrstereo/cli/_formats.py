@@ -12,15 +12,17 @@ import click
 
 from ..camera import write_stereo
 from ..camera.formats import import_calibration
-from ..io import refuse_overwrite_input
+from ..io import check_outputs
+from ._options import MAX_IMAGE_SIDE, Number
 
 
 def _image_size(text: str | None) -> tuple[int, int] | None:
     if text is None:
         return None
     parts = text.lower().split("x")
-    if len(parts) != 2 or not all(p.strip().isdigit() and int(p) > 0 for p in parts):
-        raise ValueError(f"--image-size/--size must be WIDTHxHEIGHT in pixels, like 640x480, got {text!r}")
+    if len(parts) != 2 or not all(p.strip().isdigit() and 0 < int(p) <= MAX_IMAGE_SIDE for p in parts):
+        raise ValueError(f"--image-size/--size must be WIDTHxHEIGHT in pixels (1 to {MAX_IMAGE_SIDE} each), like "
+                         f"640x480, got {text!r}")
     return int(parts[0]), int(parts[1])
 
 
@@ -36,13 +38,18 @@ def calib_group() -> None:
 @click.option("--image-size", "--size", "image_size", metavar="WxH",
               help="Image size in pixels: of a pre-rectified camera (--fx ...), or of OpenCV files that do not "
                    "store it.")
-@click.option("--alpha", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True,
+@click.option("--alpha", type=Number(0.0, 1.0), default=0.0, show_default=True,
               help="Rectification of raw pairs: 0 keeps only valid pixels, 1 keeps every raw pixel.")
-@click.option("--fx", type=float, help="Pre-rectified camera (no INPUTS): focal length [px] of the rectified images.")
-@click.option("--fy", type=float, help="Pre-rectified camera: vertical focal length [px] (default: --fx).")
-@click.option("--cx", type=float, help="Pre-rectified camera: principal point x [px].")
-@click.option("--cy", type=float, help="Pre-rectified camera: principal point y [px].")
-@click.option("--baseline", "baseline_m", type=float, help="Pre-rectified camera: baseline [m] (OAK-D 0.075).")
+@click.option("--fx", type=Number(0.0, 1e6, unit="px", open_low=True),
+              help="Pre-rectified camera (no INPUTS): focal length [px] of the rectified images.")
+@click.option("--fy", type=Number(0.0, 1e6, unit="px", open_low=True),
+              help="Pre-rectified camera: vertical focal length [px] (default: --fx).")
+@click.option("--cx", type=Number(-1e6, 1e6, unit="px"),
+              help="Pre-rectified camera: principal point x [px].")
+@click.option("--cy", type=Number(-1e6, 1e6, unit="px"),
+              help="Pre-rectified camera: principal point y [px].")
+@click.option("--baseline", "baseline_m", type=Number(0.0, 1e3, unit="m", open_low=True),
+              help="Pre-rectified camera: baseline [m] (OAK-D 0.075).")
 def convert_cmd(inputs, output: Path, image_size, alpha: float, **numbers) -> None:
     """Write another tool's calibration as a stereo YAML.
 
@@ -61,8 +68,7 @@ def convert_cmd(inputs, output: Path, image_size, alpha: float, **numbers) -> No
 
     mrstereo calib convert --fx 798.3 --cx 640.1 --cy 360.4 --baseline 0.075 --size 1280x720 -o stereo.yaml
     """
-    if output.suffix.lower() not in (".yaml", ".yml"):
-        raise ValueError(f"--out must end in .yaml or .yml, got {output}")
+    check_outputs({"--out": output}, suffixes={"--out": (".yaml", ".yml")})
     if inputs and any(v is not None for v in numbers.values()):
         raise click.UsageError("give calibration files (INPUTS) or the numbers of a pre-rectified camera (--fx, "
                                "--cx, --cy, --baseline, --size), not both")
@@ -74,8 +80,10 @@ def convert_cmd(inputs, output: Path, image_size, alpha: float, **numbers) -> No
         click.echo(f"wrote {output}")
         return
     files = [part for item in inputs for part in (item.split(",") if not Path(item).exists() else [item])]
-    refuse_overwrite_input(output, files)
-    result = import_calibration(files, image_size=_image_size(image_size), alpha=alpha)
+    size = _image_size(image_size)
+    check_outputs({"--out": output}, files, suffixes={"--out": (".yaml", ".yml")})
+    result = import_calibration(files, image_size=size, alpha=alpha)      # (reads siblings: trans_matrix.yaml)
+    check_outputs({"--out": output}, files)
     write_stereo(output, result.stereo)
     s = result.stereo
     how = "rectified by mrstereo (Fusiello)" if result.rectified_here else "rectification from the file"

@@ -15,7 +15,8 @@ import numpy as np
 
 from ..io import check_outputs
 from ..pipeline.frame import obstacles_from_pair, scan_from_pair
-from ._options import CALIB_HELP, echo_floor, library_default, mount_from_options, mount_option, profile_option
+from ._options import (ANGLE_RAD, CALIB_HELP, HEIGHT, MAX_DISPARITY, TILT, Number, echo_floor, library_default,
+                       mount_from_options, mount_option, profile_option)
 
 __all__ = ["COMMANDS"]
 
@@ -28,35 +29,31 @@ def _common(func):
                      help=CALIB_HELP + " A stereo YAML may hold the mount (mount: or rig:)."),
         click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False), help="Output file."),
         click.option("--rectified", is_flag=True, help="The images are already rectified."),
-        click.option("--height", "height_m", type=float, default=None,
+        click.option("--height", "height_m", type=HEIGHT, default=None,
                      help="Camera height above the floor [m] (overrides the YAML mount)."),
-        click.option("--tilt", "tilt_rad", type=float, default=None,
+        click.option("--tilt", "tilt_rad", type=TILT, default=None,
                      help="Downward camera tilt [rad] (overrides the YAML mount; needs --height or a YAML mount)."),
-        click.option("--pan", "pan_rad", type=float, default=library_default(obstacles_from_pair, "pan_rad"),
+        click.option("--pan", "pan_rad", type=Number(-ANGLE_RAD, ANGLE_RAD, unit="rad"),
+                     default=library_default(obstacles_from_pair, "pan_rad"),
                      show_default=True, help="Head pan about the robot's z axis [rad], positive to the left."),
         click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]),
                      default=library_default(obstacles_from_pair, "preset"), show_default=True, help="Matcher preset."),
-        click.option("--max-disparity", "max_disparity_px", type=float, default=None,
+        click.option("--max-disparity", "max_disparity_px", type=MAX_DISPARITY, default=None,
                      help="Largest disparity to search [px] (default: the matcher's)."),
-        click.option("--texture-threshold", type=float, default=None,
+        click.option("--texture-threshold", type=Number(0.0, 255.0, unit="gray levels"), default=None,
                      help="T of eq. (13): reject patches with std <= T gray levels (0 disables)."),
-        click.option("--min-height", "min_height_m", type=float, default=None,
+        click.option("--min-height", "min_height_m", type=Number(0.0, 10.0, unit="m"), default=None,
                      help="Obstacles start this high above the floor [m]."),
-        click.option("--max-height", "max_height_m", type=float, default=None,
+        click.option("--max-height", "max_height_m", type=Number(0.0, 20.0, unit="m", open_low=True), default=None,
                      help="Points above this height [m] are ignored."),
-        click.option("--max-range", "max_range_m", type=float, default=None, help="Drop points farther [m]."),
+        click.option("--max-range", "max_range_m", type=Number(0.0, 1000.0, unit="m", open_low=True), default=None,
+                     help="Drop points farther [m]."),
         click.option("--ground", "ground_method", type=click.Choice(["v_disparity", "plane"]), default=None,
                      help="Floor estimator used when the mount is unknown."),
     ]
     for option in reversed(options):
         func = option(func)
     return mount_option(func)
-
-
-def _finite(name: str, value):
-    if value is not None and not math.isfinite(value):
-        raise ValueError(f"{name} must be finite, got {value}")
-    return value
 
 
 def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, preset, max_disparity_px,
@@ -66,14 +63,10 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     from ..camera import read_stereo
     from ..geometry import ObstacleConfig, ground_from_mount
     from ..io import read_image
+    from ..pipeline.sanity import warn_pair
     from ..profiling import stage
     from ..rejection import RejectionConfig
 
-    for name, value in (("--height", height_m), ("--tilt", tilt_rad), ("--pan", pan_rad),
-                        ("--max-disparity", max_disparity_px), ("--texture-threshold", texture_threshold),
-                        ("--min-height", min_height_m), ("--max-height", max_height_m),
-                        ("--max-range", max_range_m)):
-        _finite(name, value)
     stereo = read_stereo(calib)
     if mount is None and stereo.mount is not None and (height_m is not None or tilt_rad is not None):
         # one of --height/--tilt: the other is the calibration YAML's (of its rectified left camera)
@@ -88,6 +81,7 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     if left_img.shape != right_img.shape:
         raise ValueError(f"left and right images differ in size: {left_img.shape[1]}x{left_img.shape[0]} "
                          f"and {right_img.shape[1]}x{right_img.shape[0]}")
+    warn_pair(left_img, right_img, stereo, rectified=rectified)
     rejection = RejectionConfig() if texture_threshold is None else \
         RejectionConfig(texture_threshold=texture_threshold)
     config = ObstacleConfig()
@@ -99,6 +93,13 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     if scan:
         return stereo, scan_from_pair(left_img, right_img, stereo, **scan_kw, **options)
     return stereo, obstacles_from_pair(left_img, right_img, stereo, **options)
+
+
+def _read_inputs(calib) -> None:
+    """The calibration read before any output is checked (its sibling files become inputs too)."""
+    from ..camera import read_stereo
+
+    read_stereo(calib)
 
 
 def _report_ground(obstacles) -> None:
@@ -123,6 +124,7 @@ def points_command(left, right, calib, output, which, color, **kw):
     """
     from ..geometry import write_ply
 
+    _read_inputs(calib)
     check_outputs({"--out": output}, [left, right, calib], suffixes={"--out": (".ply",)})
     _, frame = _run(left, right, calib, output, scan=False, **kw)
     obs = frame.obstacles
@@ -149,10 +151,11 @@ def points_command(left, right, calib, output, which, color, **kw):
 @_common
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Also write a top-view PNG (obstacle points, floor points, scan).")
-@click.option("--angle-increment", "angle_increment_deg", type=float,
+@click.option("--angle-increment", "angle_increment_deg", type=Number(0.01, 90.0, unit="deg"),
               default=math.degrees(library_default(scan_from_pair, "angle_increment_rad")), show_default=True,
               help="Angular step of the scan [deg].")
-@click.option("--range-min", "range_min_m", type=float, default=library_default(scan_from_pair, "range_min_m"),
+@click.option("--range-min", "range_min_m", type=Number(0.0, 100.0, unit="m"),
+              default=library_default(scan_from_pair, "range_min_m"),
               show_default=True, help="Smallest range [m] (raised to the matcher's near limit).")
 def scan_command(left, right, calib, output, plot_path, angle_increment_deg, range_min_m, **kw):
     """Write a stereo pair's virtual laser scan (JSON or CSV).
@@ -166,19 +169,14 @@ def scan_command(left, right, calib, output, plot_path, angle_increment_deg, ran
     angle_rad,range_m,intensity rows with inf, nan, -inf (docs/obstacles.md).
     The camera mount is found as for `mrstereo points`.
     """
-    from .. import _checks
     from ..geometry import plot_top_view, write_scan_csv, write_scan_json
 
     suffix = Path(output).suffix.lower()
+    _read_inputs(calib)
     check_outputs({"--out": output, "--plot": plot_path}, [left, right, calib],
                   suffixes={"--out": (".json", ".csv"), "--plot": (".png",)})
-    _finite("--angle-increment", angle_increment_deg)
-    if angle_increment_deg <= 0:
-        raise ValueError(f"--angle-increment must be > 0, got {angle_increment_deg}")
-    n_rays = 2 * math.pi / math.radians(angle_increment_deg)      # at most a full turn
-    _checks.fits_in_memory("--angle-increment", 40.0 * n_rays, f"a scan of up to {n_rays:.4g} rays")
     _, result = _run(left, right, calib, output, scan=True, angle_increment_rad=math.radians(angle_increment_deg),
-                     range_min_m=_finite("--range-min", range_min_m), **kw)
+                     range_min_m=range_min_m, **kw)
     obs = result.frame.obstacles
     if not obs.success:
         raise RuntimeError(f"{obs.message}; give --mount or --height and --tilt (or a mount: entry in the calibration)")

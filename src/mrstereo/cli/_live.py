@@ -13,7 +13,8 @@ import click
 from ..mapping import MappingConfig
 from ..pipeline.live import LIVE_FILES, LIVE_GRID, LiveConfig
 from ..pipeline.run import PipelineConfig
-from ._options import CALIB_HELP, mount_from_options, mount_option, profile_option
+from .._limits import limit, max_workers
+from ._options import CALIB_HELP, HEIGHT, TILT, Number, mount_from_options, mount_option, profile_option
 
 __all__ = ["COMMANDS", "viewer_option", "record_bag_option", "check_sink_options", "replayed_to_sinks"]
 
@@ -105,10 +106,12 @@ def _pair(text: str, option: str, kind=float, sep: str = ","):
 @click.option("--realtime", is_flag=True,
               help="Replay a video file or recording at its recorded rate: the newest frame wins, the others are "
                    "dropped and counted (a camera always runs in real time).")
-@click.option("--speed", type=float, default=LiveConfig.speed, show_default=True,
+@click.option("--speed", type=Number(0.0, 1000.0, open_low=True), default=LiveConfig.speed, show_default=True,
               help="With --realtime: replay this many times faster than recorded (0.5: half speed).")
-@click.option("--max-frames", type=click.IntRange(min=1), default=None, help="Stop after N frames from the source.")
-@click.option("--save-every", "save_every_s", type=float, default=LiveConfig.save_every_s, show_default=True,
+@click.option("--max-frames", type=Number(1, lambda: limit("MRSTEREO_MAX_FRAMES"), integer=True),
+              default=None, help="Stop after N frames from the source.")
+@click.option("--save-every", "save_every_s", type=Number(0.0, 86400.0, unit="s"),
+              default=LiveConfig.save_every_s, show_default=True,
               help="Write the outputs every S seconds (and at the end).")
 @click.option("--odometry", type=click.Choice(["visual", "given"]), default=None,
               help="Robot poses: stereo visual odometry, or the recording's own odometry. [default: the "
@@ -119,20 +122,22 @@ def _pair(text: str, option: str, kind=float, sep: str = ","):
               show_default=True, help="Matching preset.")
 @click.option("--fusion", type=click.Choice(["log_odds", "union"]), default=MappingConfig.fusion, show_default=True,
               help="Map fusion.")
-@click.option("--resolution", "resolution_m", type=float, default=LIVE_GRID.resolution_m, show_default=True,
+@click.option("--resolution", "resolution_m", type=Number(0.001, 10.0, unit="m"),
+              default=LIVE_GRID.resolution_m, show_default=True,
               help="Cell size [m].")
 @click.option("--size", "size_m", default=f"{LIVE_GRID.width_m:g},{LIVE_GRID.height_m:g}", show_default=True,
               metavar="W,H", help="Map width (x) and height (y) [m].")
 @click.option("--origin", "origin_m", default=f"{LIVE_GRID.origin_x_m:g},{LIVE_GRID.origin_y_m:g}",
               show_default=True, metavar="X,Y", help="World position of the lower-left map corner [m].")
-@click.option("--workers", type=click.IntRange(min=1), default=LiveConfig.workers, show_default=True,
+@click.option("--workers", type=Number(1, max_workers, integer=True), default=LiveConfig.workers, show_default=True,
               help="Frames matched at once (threads; one per core).")
 @click.option("--camera-size", default=None, metavar="WxH",
               help="Ask the camera for frames of this size (a side-by-side camera: the whole frame).")
-@click.option("--camera-fps", type=float, default=None, help="Ask the camera for this frame rate.")
-@click.option("--height", "height_m", type=float, default=None,
+@click.option("--camera-fps", type=Number(0.0, 1000.0, unit="Hz", open_low=True),
+              default=None, help="Ask the camera for this frame rate.")
+@click.option("--height", "height_m", type=HEIGHT, default=None,
               help="Camera height above the floor [m] (else the calibration's mount:/rig:, else estimated).")
-@click.option("--tilt", "tilt_rad", type=float, default=None, help="Downward camera tilt [rad] (with --height).")
+@click.option("--tilt", "tilt_rad", type=TILT, default=None, help="Downward camera tilt [rad] (with --height).")
 @mount_option
 @click.option("--quiet", is_flag=True, help="No progress line.")
 def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, side_by_side: bool, realtime: bool,

@@ -5,7 +5,6 @@ Conventions: docs/conventions.md.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import click
@@ -13,25 +12,25 @@ import click
 from ..io import atomic_write, check_outputs
 from ..mapping.planning import plan_path
 from ..mapping.rosmap import ros_map_files
-from ._options import library_default
+from ._options import Number, library_default, numbers
+
+
+MAX_COORDINATE_M = 1e6
+"""The largest coordinate of ``--start`` / ``--goal`` [m]."""
 
 
 def _xy(ctx, param, value):
     """Parse ``x,y`` (metres) into two floats."""
-    try:
-        x, y = (float(v) for v in value.split(","))
-    except ValueError:
-        raise click.BadParameter(f"expected two numbers 'x,y' in metres, got {value!r}") from None
-    if not (math.isfinite(x) and math.isfinite(y)):
-        raise click.BadParameter(f"coordinates must be finite, got {value!r}")
-    return x, y
+    return numbers(value, param.opts[-1] if param is not None else "X,Y", 2, -MAX_COORDINATE_M, MAX_COORDINATE_M,
+                   unit="m", what="'x,y' in metres")
 
 
 @click.command("plan")
 @click.argument("map_yaml", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--start", required=True, callback=_xy, metavar="X,Y", help="Start (x, y) in metres.")
 @click.option("--goal", required=True, callback=_xy, metavar="X,Y", help="Goal (x, y) in metres.")
-@click.option("--radius", "radius_m", type=float, default=library_default(plan_path, "robot_radius_m"),
+@click.option("--radius", "radius_m", type=Number(0.0, 10.0, unit="m"),
+              default=library_default(plan_path, "robot_radius_m"),
               show_default=True, help="Robot radius [m]: obstacles are inflated by it.")
 @click.option("--unknown", type=click.Choice(["blocked", "free"]),
               default="blocked" if library_default(plan_path, "unknown_is_obstacle") else "free",
@@ -51,11 +50,9 @@ def plan_command(map_yaml: Path, start, goal, radius_m: float, unknown: str, out
     """
     from ..mapping import plot_map, read_ros_map
 
-    if not (math.isfinite(radius_m) and radius_m >= 0):
-        raise click.BadParameter(f"must be a finite number >= 0, got {radius_m}", param_hint="--radius")
-    check_outputs({"--out": output, "--plot": plot_png}, ros_map_files(map_yaml),
-                  suffixes={"--plot": (".png", ".pdf", ".svg")})
     ros_map = read_ros_map(map_yaml)
+    check_outputs({"--out": output, "--plot": plot_png}, ros_map_files(map_yaml),
+                  suffixes={"--out": (".json",), "--plot": (".png", ".pdf", ".svg")})
     result = plan_path(ros_map, start, goal, robot_radius_m=radius_m,
                        unknown_is_obstacle=unknown == "blocked")
     if not result.success:

@@ -9,7 +9,10 @@ from pathlib import Path
 
 import click
 
-from ._options import CALIB_HELP, profile_option
+from ._options import CALIB_HELP, MAX_DISPARITY, profile_option
+
+MAX_DEPTH_M = 1000.0
+"""The farthest depth band edge of ``--depth-bands`` [m]."""
 
 __all__ = ["COMMANDS"]
 
@@ -31,6 +34,9 @@ def _bands(text: str) -> list[tuple[float, float]]:
         if len(parts) != 2:
             raise ValueError(f"--bands must look like 0:24,24:48,48:96, got {text!r}")
         lo, hi = _float_list(parts[0], "--bands")[0], _float_list(parts[1], "--bands")[0]
+        high = MAX_DISPARITY.bounds()[1]
+        if not 0 <= lo < hi <= high:
+            raise ValueError(f"--bands need 0 <= low < high <= {high:g} px, got {item!r}")
         bands.append((lo, hi))
     return bands
 
@@ -41,7 +47,7 @@ def _bands(text: str) -> list[tuple[float, float]]:
 @click.argument("right", type=click.Path(dir_okay=False))
 @click.option("-o", "--out", "output", required=True, type=click.Path(dir_okay=False),
               help="Disparity output: .pfm (Middlebury, inf invalid) or .png (KITTI uint16 x256).")
-@click.option("--max-disparity", type=float,
+@click.option("--max-disparity", type=MAX_DISPARITY,
               help="Search 0..N px (split into ranges N/4, N/2, N at decimations 4, 2, 1; fewer levels "
                    "for N < 32).")
 @click.option("--bands", help="Disparity bands in full-resolution px, e.g. 0:24,24:48,48:96.")
@@ -73,8 +79,6 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
     from ..matching import compute_disparity, preset_config
     from ..profiling import stage
 
-    if max_disparity is not None and not (math.isfinite(max_disparity) and max_disparity > 0):
-        raise ValueError(f"--max-disparity must be a finite number > 0, got {max_disparity}")
     if bands is not None and max_disparity is not None:
         raise ValueError("give --max-disparity or --bands, not both")
     if calib is None and max_disparity is None and bands is None:
@@ -83,6 +87,10 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
         raise ValueError("--depth-bands needs --calib")
     if depth_bands is not None and (max_disparity is not None or bands is not None):
         raise ValueError("give --depth-bands or a disparity search, not both")
+    stereo = None
+    if calib is not None:
+        from ..camera import read_stereo
+        stereo = read_stereo(calib)
     io.check_outputs({"--out": output, "--plot": color_path}, [left, right, calib],
                      suffixes={"--out": (".pfm", ".png"), "--plot": (".png",)})
     aoi_box = None
@@ -92,22 +100,26 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
             aoi_box = tuple(int(v) for v in rows.split(":") + cols.split(":"))
         except ValueError:
             raise ValueError(f"--aoi must look like row0:row1,col0:col1, got {aoi!r}") from None
+        if any(v < 0 for v in aoi_box):
+            raise ValueError(f"--aoi rows and columns must be >= 0, got {aoi!r}")
     band_list = _bands(bands) if bands is not None else None
     depth_list = _float_list(depth_bands, "--depth-bands") if depth_bands is not None else None
+    if depth_list is not None and not all(0 < d <= MAX_DEPTH_M for d in depth_list):
+        raise ValueError(f"--depth-bands edges must be in (0, {MAX_DEPTH_M:g}] m, got {depth_bands!r}")
 
     with stage("read"):
-        left_img = io.read_image(left)
-        right_img = io.read_image(right)
+        left_img = io.matching_image(io.read_image(left))
+        right_img = io.matching_image(io.read_image(right))
     if left_img.shape[:2] != right_img.shape[:2]:
         raise ValueError(f"left and right images differ in size: {left_img.shape[1]}x{left_img.shape[0]} "
                          f"and {right_img.shape[1]}x{right_img.shape[0]}")
-    stereo = None
-    if calib is not None:
-        from ..camera import read_stereo
-        stereo = read_stereo(calib)
-        if not rectified and not stereo.is_rectified:
-            with stage("rectify"):
-                left_img, right_img = stereo.rectify(left_img, right_img)
+    raw = stereo is not None and not rectified and not stereo.is_rectified
+    from ..pipeline.sanity import warn_pair
+
+    warn_pair(left_img, right_img, stereo, rectified=not raw)
+    if raw:
+        with stage("rectify"):
+            left_img, right_img = stereo.rectify(left_img, right_img)
     config = preset_config(preset)
     if single_range:
         config = config.replace(search={"multi_range": False})

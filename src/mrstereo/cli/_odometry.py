@@ -10,11 +10,14 @@ from pathlib import Path
 import click
 
 from ..pipeline.odometry import odometry_from_manifest
-from ._bag import opened_dataset, recording_of, recording_options
+from ._bag import opened_dataset, read_inputs, recording_of, recording_options
 from ._live import check_sink_options, record_bag_option, replayed_to_sinks, viewer_option
 from ._options import library_default, profile_option
 
-__all__ = ["COMMANDS"]
+__all__ = ["COMMANDS", "OUTPUT_SUFFIXES"]
+
+OUTPUT_SUFFIXES = {"--out": (".txt", ".tum"), "--plot": (".png", ".pdf", ".svg"), "--metrics": (".json",)}
+"""What the files of ``mrstereo odometry`` may be called: a TUM trajectory is text, the figure an image."""
 
 
 @click.command("odometry")
@@ -53,25 +56,18 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     """
     import numpy as np
 
-    from ..io import refuse_overwrite_input
+    from ..io import check_outputs
+    from ..pipeline.sanity import check_pair_streams
     from ..odometry.trajectory import plot_trajectories, trajectory_metrics, write_tum
 
-    source, is_bag = recording_of(manifest, bag)
-    if is_bag:
-        manifest, bag = None, source
-    outputs = [p for p in (out_path, plot_path, metrics_path) if p is not None]
-    if len(set(p.resolve() for p in outputs)) != len(outputs):
-        raise click.UsageError("-o, --plot and --metrics must be different files")
-    inputs = [p for p in (manifest, bag, calib) if p is not None]
-    for p in outputs:
-        refuse_overwrite_input(p, inputs)
+    recording_of(manifest, bag)                          # one of them
+    dataset, bag = read_inputs(manifest, bag, calib, rate_hz=rate_hz)
+    outputs = {"--out": out_path, "--plot": plot_path, "--metrics": metrics_path}
+    check_outputs(outputs, suffixes=OUTPUT_SUFFIXES)
+    inputs = [p for p in (bag if dataset is None else dataset.root, calib) if p is not None]
     viewers = check_sink_options(viewers, record_bag, out_path.with_suffix(""), inputs)
-    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, stamps):
-        if bag is None:
-            from ..pipeline.batch import dataset_files
-
-            for p in outputs:
-                refuse_overwrite_input(p, dataset_files(dataset))
+    with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, stamps):
+        check_pair_streams(dataset)
         run = odometry_from_manifest(dataset, calibration=stereo, progress=not quiet,
                                      initial_pose="given" if start == "given" else "identity")
     if stamps is None:
@@ -112,7 +108,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
         if truth is not None:
             curves["ground truth"] = ((np.linalg.inv(truth[0]) if start == "origin" else np.eye(4)) @ truth)[:, :3, 3]
         plot_trajectories(plot_path, curves, lost=~run.tracked, title=f"visual odometry, {len(run.status)} frames")
-    click.echo(f"wrote {', '.join(str(p) for p in outputs)}")
+    click.echo(f"wrote {', '.join(str(p) for p in outputs.values() if p is not None)}")
     if viewers or record_bag is not None:
         from ..pipeline.sinks import replay_odometry
 

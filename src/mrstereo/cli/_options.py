@@ -10,8 +10,69 @@ import math
 
 import click
 
+from .._limits import max_workers
+
 CALIB_HELP = ("Calibration file in any supported format (mrstereo/ROS stereo YAML, Kalibr camchain, OpenCV "
               "FileStorage, OpenLORIS), or two per-camera files as LEFT,RIGHT; see `mrstereo calib convert --help`.")
+
+
+class Number(click.ParamType):
+    """A finite number within ``[low, high]`` (``open_low``/``open_high``: the bound itself excluded).
+
+    Every numeric option of the command line has one: an absurd value (``--pan 1e300``,
+    ``--max-disparity 100000``, ``nan``) is refused at parsing with the valid range and its unit.
+    A bound may be a callable (a limit read when the option is parsed, e.g. the cores).
+    """
+
+    def __init__(self, low, high, *, unit: str = "", integer: bool = False, open_low: bool = False,
+                 open_high: bool = False) -> None:
+        self.low, self.high, self.unit, self.integer = low, high, unit, integer
+        self.open_low, self.open_high = open_low, open_high
+        self.name = "integer" if integer else "float"
+
+    def bounds(self) -> tuple[float, float]:
+        return tuple(b() if callable(b) else b for b in (self.low, self.high))
+
+    def describe(self) -> str:
+        low, high = self.bounds()
+        text = f"{'(' if self.open_low else '['}{low:g}, {high:g}{')' if self.open_high else ']'}"
+        return text + (f" {self.unit}" if self.unit else "")
+
+    def get_metavar(self, param, ctx=None) -> str:
+        return "INTEGER" if self.integer else "FLOAT"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            number = value
+        else:
+            try:
+                number = int(str(value), 10) if self.integer else float(str(value))
+            except ValueError:
+                self.fail(f"{value!r} is not {'an integer' if self.integer else 'a number'}", param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number; the range is {self.describe()}", param, ctx)
+        low, high = self.bounds()
+        if number < low or number > high or (self.open_low and number == low) or \
+                (self.open_high and number == high):
+            self.fail(f"{value} is not in the range {self.describe()}", param, ctx)
+        return int(number) if self.integer else float(number)
+
+
+def numbers(text: str, option: str, count: int, low: float, high: float, *, unit: str = "",
+            what: str = "") -> tuple[float, ...]:
+    """``count`` comma-separated finite numbers in ``[low, high]`` from an option's text."""
+    try:
+        values = tuple(float(v) for v in str(text).split(","))
+    except ValueError:
+        values = ()
+    if len(values) != count or not all(math.isfinite(v) for v in values):
+        raise click.BadParameter(f"expected {count} comma-separated numbers{' ' + what if what else ''}, got "
+                                 f"{text!r}", param_hint=option)
+    bad = [v for v in values if not low <= v <= high]
+    if bad:
+        raise click.BadParameter(f"{bad[0]:g} is not in the range [{low:g}, {high:g}]{' ' + unit if unit else ''}",
+                                 param_hint=option)
+    return values
 
 
 def library_default(func, name: str):
@@ -26,9 +87,10 @@ def worker_options(func):
     func = click.option("--scheduler", default=None, metavar="ADDRESS",
                         help="Run the work (frames, scenes) on an existing Dask cluster (tcp://host:8786); its "
                              "workers must see the same files.")(func)
-    func = click.option("--workers", type=int, default=None,
+    func = click.option("--workers", type=Number(1, max_workers, integer=True), default=None,
                         help="Run the work (frames, scenes) on N single-threaded worker threads (with --processes: a "
-                             "local Dask cluster of N worker processes; default: in this process).")(func)
+                             "local Dask cluster of N worker processes; default: in this process). At most the "
+                             "number of cores (MRSTEREO_MAX_WORKERS raises it).")(func)
     return func
 
 
@@ -37,8 +99,19 @@ def check_workers(workers, scheduler, processes: bool = False) -> None:
         raise click.UsageError("give --workers or --scheduler, not both")
     if processes and workers is None:
         raise click.UsageError("--processes only with --workers")
-    if workers is not None and workers < 1:
-        raise click.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
+
+
+
+HEIGHT = Number(0.0, 20.0, unit="m", open_low=True)
+"""``--height``: the camera above the floor."""
+TILT = Number(-math.pi / 2, math.pi / 2, unit="rad")
+"""``--tilt``: downward tilt of the camera."""
+SEED = Number(0, 2 ** 32 - 1, integer=True)
+"""``--seed`` of every command."""
+MAX_IMAGE_SIDE = 100_000
+"""The largest image width or height of ``--image-size`` [px]."""
+MAX_DISPARITY = Number(1.0, 4096.0, unit="px")
+"""``--max-disparity``: a search below a pixel finds nothing, one beyond the widest images is a typo."""
 
 
 def mount_option(func):
@@ -49,29 +122,30 @@ def mount_option(func):
                              "Overrides a mount:/rig: entry; not with --height/--tilt.")(func)
 
 
+MOUNT_XYZ_M = 100.0
+"""The largest camera position (each of x, y, z) of ``--mount`` [m]."""
+ANGLE_RAD = 2 * math.pi
+"""The largest angle of ``--mount``, ``--pan`` [rad] (in either direction)."""
+
+
 def parse_mount(text):
     """A :class:`~mrstereo.camera.mount.CameraMount` from ``--mount`` text (None stays None)."""
     from ..camera.mount import CameraMount
 
     if text is None:
         return None
-    try:
-        values = [float(v) for v in str(text).split(",")]
-    except ValueError:
-        values = []
-    if len(values) != 6 or not all(math.isfinite(v) for v in values):
-        raise click.BadParameter(f"expected six finite numbers 'x,y,z,roll,pitch,yaw' (metres, radians), "
-                                 f"got {text!r}", param_hint="--mount")
-    return CameraMount.from_xyz_rpy(values[:3], values[3:])
+    values = numbers(text, "--mount", 6, -MOUNT_XYZ_M, MOUNT_XYZ_M, what="'x,y,z,roll,pitch,yaw' (metres, radians)")
+    rpy = values[3:]
+    if not all(abs(v) <= ANGLE_RAD for v in rpy):
+        raise click.BadParameter(f"roll, pitch and yaw must be in [-{ANGLE_RAD:g}, {ANGLE_RAD:g}] rad, got {text!r}",
+                                 param_hint="--mount")
+    return CameraMount.from_xyz_rpy(values[:3], rpy)
 
 
 def check_mount_options(height_m, tilt_rad, mount) -> None:
     """``--mount`` or ``--height``/``--tilt``: not both, finite, no ``--tilt`` without ``--height``."""
     if mount is not None and (height_m is not None or tilt_rad is not None):
         raise click.UsageError("give --mount or --height/--tilt, not both")
-    for name, value in (("--height", height_m), ("--tilt", tilt_rad)):
-        if value is not None and not math.isfinite(value):
-            raise click.BadParameter(f"must be finite, got {value}", param_hint=name)
     if height_m is None and tilt_rad is not None:
         raise click.UsageError("--tilt needs --height")
 
@@ -157,17 +231,18 @@ def map_options(func):
                      show_default=True, help="Matching preset."),
         click.option("--fusion", type=click.Choice(["log_odds", "union"]), default=MappingConfig.fusion,
                      show_default=True, help="Log-odds fusion (OctoMap) or the paper's union of occupied cells."),
-        click.option("--resolution", "resolution_m", type=float, default=GridSpec.resolution_m, show_default=True,
-                     help="Cell size [m]."),
+        click.option("--resolution", "resolution_m", type=Number(0.001, 10.0, unit="m"),
+                     default=GridSpec.resolution_m, show_default=True, help="Cell size [m]."),
         click.option("--size", "size_m", default=None, metavar="W,H",
                      help="A fixed map window: width (x) and height (y) [m], with --origin; points outside are "
                           "counted and warned about. Default: the map grows to cover the path and what was seen."),
         click.option("--origin", "origin_m", default=None, metavar="X,Y",
                      help="World position of the lower-left corner of a fixed map window [m] (with --size)."),
-        click.option("--max-range", "max_range_m", type=float, default=None,
+        click.option("--max-range", "max_range_m", type=Number(0.0, 1000.0, unit="m", open_low=True), default=None,
                      help="Mapping range [m]: points farther from the robot are dropped. Default: where the rig's "
                           "depth error reaches that of the paper's rig at 4 m (4 m or more; `mrstereo info`)."),
-        click.option("--footprint", "footprint_m", type=float, default=MappingConfig.footprint_radius_m,
+        click.option("--footprint", "footprint_m", type=Number(0.0, 100.0, unit="m"),
+                     default=MappingConfig.footprint_radius_m,
                      show_default=True,
                      help="Robot radius [m]: the cells its footprint sweeps along the path are free (0: off)."),
         click.option("--no-mount-check", is_flag=True,
@@ -178,14 +253,8 @@ def map_options(func):
     return func
 
 
-def _pair(text: str, option: str) -> tuple[float, float]:
-    try:
-        a, b = (float(v) for v in text.split(","))
-    except ValueError:
-        raise click.BadParameter(f"expected two numbers 'a,b', got {text!r}", param_hint=option) from None
-    if not (math.isfinite(a) and math.isfinite(b)):
-        raise click.BadParameter(f"expected two finite numbers, got {text!r}", param_hint=option)
-    return a, b
+MAX_MAP_SIZE_M = 100_000.0
+"""The largest map window side and origin coordinate of ``--size``/``--origin`` [m]."""
 
 
 def map_config(*, preset: str, fusion: str, resolution_m: float, size_m: str | None, origin_m: str | None,
@@ -197,21 +266,18 @@ def map_config(*, preset: str, fusion: str, resolution_m: float, size_m: str | N
     from ..mapping import GridSpec
     from ..pipeline.run import PipelineConfig
 
-    if not (math.isfinite(resolution_m) and resolution_m > 0):
-        raise click.BadParameter(f"must be a number > 0, got {resolution_m}", param_hint="--resolution")
     if (size_m is None) != (origin_m is None):
         raise click.UsageError("a fixed map window needs both --size W,H and --origin X,Y")
     grid = None
     if size_m is not None:
-        (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
+        width, height = numbers(size_m, "--size", 2, 0.0, MAX_MAP_SIZE_M, unit="m", what="'W,H' in metres")
+        ox, oy = numbers(origin_m, "--origin", 2, -MAX_MAP_SIZE_M, MAX_MAP_SIZE_M, unit="m", what="'X,Y' in metres")
+        if width <= 0 or height <= 0:
+            raise click.BadParameter(f"width and height must be > 0, got {size_m!r}", param_hint="--size")
         grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
     obstacles = None
     if max_range_m is not None:
-        if not (math.isfinite(max_range_m) and max_range_m > 0):
-            raise click.BadParameter(f"must be a number > 0, got {max_range_m}", param_hint="--max-range")
         obstacles = ObstacleConfig(max_range_m=max_range_m)
-    if not (math.isfinite(footprint_m) and footprint_m >= 0):
-        raise click.BadParameter(f"must be a number >= 0, got {footprint_m}", param_hint="--footprint")
     config = PipelineConfig(preset=preset, grid=grid, resolution_m=resolution_m, obstacles=obstacles)
     return dataclasses.replace(config.with_fusion(fusion),
                                mapping=dataclasses.replace(config.with_fusion(fusion).mapping,

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from ..pipeline.run import build_map
-from ._bag import BAG_KEYS, opened_dataset, recording_of, recording_options
+from ._bag import BAG_KEYS, opened_dataset, read_inputs, recording_of, recording_options
 from ._live import check_sink_options, record_bag_option, replayed_to_sinks, viewer_option
 from ._options import (check_workers, echo_map_warnings, echo_run_floor, library_default, map_config, map_options,
                        profile_option, worker_options)
@@ -64,36 +64,27 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
     --workers N (threads, or processes with --processes) and --scheduler
     ADDRESS (a Dask cluster) spread the frames; the map is the same bit for bit.
     """
-    from ..io import check_output_dir, check_outputs, remove_stale_temporaries, staged_dir
-    from ..pipeline.batch import dataset_files
+    from ..io import check_output_dir, check_outputs, staged_dir
     from ..pipeline.run import check_map, write_map_outputs
 
     check_workers(workers, scheduler, processes)
     if align and odometry == "visual":
         raise click.UsageError("--align corrects the given poses with visual odometry: not with --odometry visual")
-    source, is_bag = recording_of(manifest, bag)
+    recording_of(manifest, bag)                          # one of them
     bag_kw = {k: options.pop(k) for k in list(options) if k in BAG_KEYS}
     config = map_config(**options)
-    check_output_dir("--out", out_dir)
-    outputs = {f"--out {out_dir / name}": out_dir / name for name in MAP_FILES}     # (names the file)
-    if is_bag:
-        inputs = [source, calib]
-        check_outputs(outputs, inputs, input_dirs=[source] if source.is_dir() else [])
-        manifest, bag = None, source
-    else:
-        with opened_dataset(manifest, None, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, _, _):
-            inputs = [manifest, calib] + dataset_files(dataset)
-            check_outputs(outputs, inputs)   # read once: checked here
-        manifest = dataset
+    dataset, bag = read_inputs(manifest, bag, calib, rate_hz=rate_hz)      # read once: checked here, mapped below
+    check_output_dir("--out", out_dir, may_hold_inputs=True)
+    check_outputs({f"--out {out_dir / name}": out_dir / name for name in MAP_FILES})     # (names the file)
+    inputs = [p for p in (bag if dataset is None else dataset.root, calib) if p is not None]
     viewers = check_sink_options(viewers, record_bag, out_dir / "view", inputs, output_dirs=[out_dir])
-    with opened_dataset(manifest, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, _):
+    with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes, odometry=odometry, align=align or None,
                         check_mount=not no_mount_check)
         echo_map_warnings(run)
         check_map(run)
-        remove_stale_temporaries(out_dir)
-        with staged_dir(out_dir, prefix="map") as staging:      # all files or none: a kill leaves the old set
+        with staged_dir(out_dir, prefix="map") as staging:      # all files or none: Ctrl-C leaves the old set
             files = {key: out_dir / path.name for key, path in write_map_outputs(run, staging).items()}
     click.echo(f"map of {len(run.observations)} frames: {run.grid!r}")
     echo_run_floor(run.floor)

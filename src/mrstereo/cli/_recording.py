@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from ._options import Number
+
 __all__ = ["COMMANDS"]
 
 
@@ -15,7 +17,7 @@ __all__ = ["COMMANDS"]
 @click.argument("path", type=click.Path(path_type=Path))
 @click.option("--calib", "calib", type=click.Path(dir_okay=False, path_type=Path),
               help="Calibration of a folder of image folders (any format `mrstereo calib convert` reads).")
-@click.option("--rate", "rate_hz", type=float, default=None,
+@click.option("--rate", "rate_hz", type=Number(0.0, 1000.0, unit="Hz", open_low=True), default=None,
               help="Frame rate [Hz] of image folders whose file names are not time stamps.")
 def info_command(path: Path, calib: Path | None, rate_hz: float | None) -> None:
     """Show what a recording holds and how it will be read.

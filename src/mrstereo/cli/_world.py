@@ -10,7 +10,11 @@ from pathlib import Path
 import click
 
 from ..world.dataset import write_synthetic_dataset
-from ._options import library_default
+from .._limits import limit
+from ._options import SEED, Number, library_default, numbers
+
+IMAGE_SIDE = Number(16, 8192, integer=True, unit="px")
+"""``--width`` / ``--height`` of rendered images."""
 
 __all__ = ["COMMANDS"]
 
@@ -19,15 +23,15 @@ __all__ = ["COMMANDS"]
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(path_type=Path),
               help="New (or empty) dataset directory.")
 @click.option("--seed", default=library_default(write_synthetic_dataset, "seed"), show_default=True,
-              type=click.IntRange(min=0),
+              type=SEED,
               help="Texture and sensor-noise seed (with --randomize: the whole world).")
 @click.option("--frames", "n_frames", default=library_default(write_synthetic_dataset, "n_frames"), show_default=True,
-              type=click.IntRange(min=1),
+              type=Number(1, lambda: limit("MRSTEREO_MAX_FRAMES"), integer=True),
               help="Number of frames (with --path stops: front, +45 and -45 degree views at each stop).")
 @click.option("--width", default=library_default(write_synthetic_dataset, "width"), show_default=True,
-              type=click.IntRange(min=16), help="Image width.")
+              type=IMAGE_SIDE, help="Image width.")
 @click.option("--height", default=library_default(write_synthetic_dataset, "height"), show_default=True,
-              type=click.IntRange(min=16), help="Image height.")
+              type=IMAGE_SIDE, help="Image height.")
 @click.option("--randomize", is_flag=True,
               help="A randomized world drawn from --seed (corridor, textures, lights, rig, sensors, "
                    "obstacles, path) instead of the built-in corridor.")
@@ -41,13 +45,14 @@ __all__ = ["COMMANDS"]
                    "--step metres (odometry sequences; with --randomize: front, along the world's own path); "
                    "street: a long street world (drawn from --seed) driven from a standstill up to --step metres "
                    "per frame, turning up to --turn degrees per frame.")
-@click.option("--step", "step_m", type=float, default=library_default(write_synthetic_dataset, "step_m"),
+@click.option("--step", "step_m", type=Number(0.0, 10.0, unit="m", open_low=True),
+              default=library_default(write_synthetic_dataset, "step_m"),
               show_default=True,
               help="Path length between frames of a front or s-curve sequence [m] (street: at full speed).")
-@click.option("--turn", "turn_deg", type=float,
+@click.option("--turn", "turn_deg", type=Number(0.0, 90.0, unit="deg", open_high=True),
               default=round(math.degrees(library_default(write_synthetic_dataset, "turn_rad_per_frame")), 9),
               show_default=True, help="--path street: the largest heading change per frame at full speed [deg].")
-@click.option("--rate", "rate_hz", type=float, default=library_default(write_synthetic_dataset, "frame_rate_hz"),
+@click.option("--rate", "rate_hz", type=Number(0.0, 1000.0, unit="Hz", open_low=True), default=library_default(write_synthetic_dataset, "frame_rate_hz"),
               show_default=True, help="Frames per second of a sequence (the frames' time stamps).")
 @click.option("--odometry-noise", "odometry_noise", metavar="SCALE,DEG_PER_M", default=None,
               help="Store drifted odometry as each frame's pose (scale error, heading drift in degrees per "
@@ -65,6 +70,7 @@ def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, rand
     labels, the true calibration, the ground-truth map and manifest.yaml.
     With --randomize the world itself is drawn from the seed (docs/world.md).
     """
+
     from ..io import check_output_dir
 
     if wall_texture is not None and not randomize:
@@ -72,19 +78,12 @@ def synth(out_dir: Path, seed: int, n_frames: int, width: int, height: int, rand
     check_output_dir("--out", out_dir, must_be_empty=True)
     noise = None
     if odometry_noise is not None:
-        try:
-            scale, deg_per_m = (float(v) for v in odometry_noise.split(","))
-        except ValueError:
-            raise click.BadParameter(f"expected 'scale,deg_per_m' (e.g. 0.03,2), got {odometry_noise!r}",
-                                     param_hint="--odometry-noise") from None
-        if not (math.isfinite(scale) and math.isfinite(deg_per_m)):
-            raise click.BadParameter(f"must be finite, got {odometry_noise!r}", param_hint="--odometry-noise")
+        scale, deg_per_m = numbers(odometry_noise, "--odometry-noise", 2, -90.0, 90.0,
+                                   what="'scale,deg_per_m' (e.g. 0.03,2)")
+        if abs(scale) > 0.5:
+            raise click.BadParameter(f"the scale error must be in [-0.5, 0.5], got {scale:g}",
+                                     param_hint="--odometry-noise")
         noise = (scale, math.radians(deg_per_m))
-    for name, value in (("--step", step_m), ("--rate", rate_hz)):
-        if not (math.isfinite(value) and value > 0):
-            raise click.BadParameter(f"must be a positive number, got {value}", param_hint=name)
-    if not (math.isfinite(turn_deg) and 0 <= turn_deg < 90):
-        raise click.BadParameter(f"must be a number in [0, 90), got {turn_deg}", param_hint="--turn")
     if randomize and path_kind == "street":
         raise click.UsageError("--path street has its own world: not with --randomize")
     path = write_synthetic_dataset(out_dir, seed=seed, n_frames=n_frames, width=width, height=height,

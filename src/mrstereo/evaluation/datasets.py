@@ -17,6 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .. import _checks
 from ..io import read_image, read_kitti_disparity, read_pfm
 
 __all__ = ["Scene", "load_scene", "load_scenes", "LAYOUTS", "photometric_error", "search_range_px"]
@@ -78,8 +79,12 @@ def photometric_error(left: np.ndarray, right: np.ndarray, disparity_px: np.ndar
     ``d`` or sampling outside the image are ignored. Used to check or choose
     the scale of a ground-truth map: the true scale gives by far the lowest error.
     """
-    gray_l = _gray(left)
-    gray_r = _gray(right)
+    gray_l = _gray(_checks.image("left", left))
+    gray_r = _gray(_checks.image("right", right))
+    _checks.same_shape("left", gray_l, "right", gray_r)
+    disparity_px = np.asarray(disparity_px, dtype=np.float32)
+    if disparity_px.shape != gray_l.shape:
+        raise ValueError(f"disparity_px must have the images' shape {gray_l.shape}, got {disparity_px.shape}")
     height, width = gray_l.shape
     valid = np.isfinite(disparity_px)
     map_x = np.arange(width, dtype=np.float32)[None, :] - np.where(valid, disparity_px, 0).astype(np.float32)

@@ -147,6 +147,7 @@ def T_robot_from_cam_ground(ground: GroundPlane, *, pan_rad: float = 0.0) -> np.
 
 def height_above_ground_m(points_cam, ground: GroundPlane) -> np.ndarray:
     """Height of camera-frame points (..., 3) above the floor: ``h - n . P``."""
+    _checks.instance("ground", ground, GroundPlane)
     p = np.asarray(points_cam, dtype=np.float64)
     return ground.height_m - p @ ground.normal_cam
 

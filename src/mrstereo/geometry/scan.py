@@ -282,6 +282,7 @@ def top_view(points_robot, *, x_range_m: tuple[float, float] = (0.0, 8.0),
 
 def write_scan_json(path: str | os.PathLike, scan: LaserScan) -> None:
     """Write a scan as JSON: the ``sensor_msgs/LaserScan`` fields (:meth:`LaserScan.to_dict`)."""
+    _checks.instance("scan", scan, LaserScan)
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps(scan.to_dict(), indent=1) + "\n")
 
@@ -301,6 +302,8 @@ def write_scan_csv(path: str | os.PathLike, scan: LaserScan) -> None:
     ``range_m`` is a number, ``inf`` (seen clear to range_max), ``nan`` (no measurement) or
     ``-inf`` (too close) -- what ``float()``, ``numpy.loadtxt`` and pandas read as such.
     """
+    _checks.instance("scan", scan, LaserScan)
+
     def number(value: float, digits: int) -> str:
         return f"{value:.{digits}f}" if math.isfinite(value) else str(float(value))
 

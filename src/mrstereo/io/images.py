@@ -5,30 +5,104 @@ Every writer goes through :func:`mrstereo.io.files.atomic_write`. Conventions: d
 from __future__ import annotations
 
 import os
+import tempfile
+import threading
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from .. import _limits
+from ._headers import image_size
 from .files import _existing, atomic_write
 
-__all__ = ["IMAGE_SUFFIXES", "matching_image", "read_image", "write_image", "read_pfm", "write_pfm", "read_kitti_disparity",
-           "write_kitti_disparity", "read_disparity", "write_disparity"]
+__all__ = ["IMAGE_SUFFIXES", "matching_image", "read_image", "decode_image", "check_image_size", "quiet_decoders",
+           "write_image", "read_pfm", "write_pfm", "read_kitti_disparity", "write_kitti_disparity", "read_disparity",
+           "write_disparity"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pbm", ".webp")
 """Suffixes :func:`write_image` writes (OpenCV's encoders present in every build)."""
 
 
+def check_image_size(data, where: str) -> None:
+    """Refuse encoded image ``data`` whose header claims more pixels than ``MRSTEREO_MAX_IMAGE_PIXELS``
+    (or no pixel at all), before it is decoded; ``where`` names it. Data of a format the header reader
+    does not know is left to OpenCV's own limit."""
+    size = image_size(data)
+    if size is None:
+        return
+    width, height = size
+    if width <= 0 or height <= 0:
+        raise ValueError(f"{where}: the image header claims {width}x{height} pixels: corrupt")
+    _limits.within("MRSTEREO_MAX_IMAGE_PIXELS", width * height,
+                   f"{where}: the image header claims {width}x{height} pixels")
+
+
+_quiet = False
+_decode_lock = threading.Lock()
+_NOISE = (b"libpng ", b"[ WARN:", b"[ERROR:", b"[ INFO:", b"[FATAL:", b"Corrupt JPEG", b"Premature end of JPEG",
+          b"JPEG", b"TIFF", b"libtiff", b"Warning,", b"Unknown field with tag")
+
+
+def quiet_decoders(on: bool = True) -> None:
+    """Keep what image decoders print (libpng's and libtiff's warnings, OpenCV's log) off stderr.
+
+    For a process that reports every problem itself (the ``mrstereo`` command): OpenCV's log is silenced
+    and each decode runs with stderr captured; lines of the decoders are dropped, anything else written
+    meanwhile (another thread's progress) is passed on.
+    """
+    global _quiet
+    _quiet = bool(on)
+    if on:
+        try:
+            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+        except AttributeError:
+            pass
+
+
+def decode_image(data, flag: int = cv2.IMREAD_UNCHANGED, *, where: str = "image"):
+    """``cv2.imdecode`` of encoded bytes after :func:`check_image_size`; None when OpenCV cannot decode them."""
+    check_image_size(data, where)
+    buffer = np.frombuffer(data, np.uint8) if not isinstance(data, np.ndarray) else data
+    if buffer.size == 0:
+        return None
+    if not _quiet:
+        return _imdecode(buffer, flag)
+    with _decode_lock, tempfile.TemporaryFile() as captured:
+        try:
+            saved = os.dup(2)
+        except OSError:
+            return _imdecode(buffer, flag)
+        try:
+            os.dup2(captured.fileno(), 2)
+            return _imdecode(buffer, flag)
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            captured.seek(0)
+            kept = [line for line in captured.read().splitlines(keepends=True) if not line.startswith(_NOISE)]
+            if kept:
+                os.write(2, b"".join(kept))
+
+
+def _imdecode(buffer: np.ndarray, flag: int):
+    try:
+        return cv2.imdecode(buffer, flag)
+    except cv2.error:
+        return None
+
+
 def read_image(path: str | os.PathLike, *, gray: bool = False) -> np.ndarray:
     """Read an image file as uint8 (or uint16) HxW or HxWx3 (BGR, OpenCV order).
 
-    Raises ``FileNotFoundError`` for a missing file and ``ValueError`` for a
-    file that is not a readable image.
+    Raises ``FileNotFoundError`` for a missing file and ``ValueError`` for a file that is not a
+    readable image or whose header claims more than ``MRSTEREO_MAX_IMAGE_PIXELS`` pixels (checked
+    before decoding).
     """
     path = _existing(path, "image")
-    data = np.fromfile(path, dtype=np.uint8)
+    data = path.read_bytes()
     flag = cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_UNCHANGED
-    img = cv2.imdecode(data, flag) if data.size else None
+    img = decode_image(data, flag, where=f"image {path}")
     if img is None:
         raise ValueError(f"cannot decode image {path}: corrupt or not an image")
     if img.ndim == 3 and img.shape[2] == 4:
@@ -72,6 +146,8 @@ def read_pfm(path: str | os.PathLike) -> np.ndarray:
         dtype = "<f4" if scale < 0 else ">f4"
         data = np.frombuffer(fh.read(), dtype=dtype)
     count = width * height * channels
+    _limits.within("MRSTEREO_MAX_IMAGE_PIXELS", width * height,
+                   f"PFM {path}: the header claims {width}x{height} pixels")
     if width <= 0 or height <= 0 or data.size < count:
         raise ValueError(f"cannot read PFM {path}: expected {count} values, found {data.size}")
     shape = (height, width, 3) if channels == 3 else (height, width)
@@ -135,10 +211,17 @@ def write_disparity(path: str | os.PathLike, disparity_px: np.ndarray) -> None:
 def matching_image(image: np.ndarray) -> np.ndarray:
     """An image on the 8-bit gray-level scale the matcher's parameters use.
 
-    16-bit images (``mono16`` cameras, 16-bit PNG) become float32 ``v / 257`` (0..255): every one
-    of the 65536 levels stays distinct (float32 keeps 24 bits), and an 8-bit image scaled by 257
-    comes back exactly; others are returned as they are.
+    A 16-bit image that holds 8-bit data -- every value a multiple of 257 (``v * 257``, how ROS and
+    OpenCV widen mono8) or of 256 (``v << 8``) -- becomes that 8-bit image, so it is rectified and
+    matched bit for bit like its 8-bit copy. Other 16-bit images (``mono16`` cameras, 16-bit PNG)
+    become float32 ``v / 257`` (0..255): every one of the 65536 levels stays distinct (float32 keeps
+    24 bits). Other dtypes are returned as they are.
     """
-    if image.dtype == np.uint16:
-        return image.astype(np.float32) / np.float32(257.0)
-    return image
+    if not isinstance(image, np.ndarray):
+        raise TypeError(f"image must be a numpy array, got {type(image).__name__}")
+    if image.dtype != np.uint16:
+        return image
+    for step in (257, 256):
+        if not np.any(image % np.uint16(step)):
+            return (image // np.uint16(step)).astype(np.uint8)
+    return image.astype(np.float32) / np.float32(257.0)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import _checks
 from ..profiling import stage
 from .grid import GridSpec
 from .occupancy import MappingConfig, OccupancyGrid, ViewCells
@@ -67,6 +68,8 @@ def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec | None = Gr
     ``grid`` None: a map that grows (:class:`~mrstereo.mapping.tiles.TiledOccupancyGrid` of cells of
     ``resolution_m``; each view fused within ``view_reach_m`` of its sensor).
     """
+    if isinstance(observations, (str, bytes)):
+        raise TypeError("observations must be FrameObservations, got a string")
     if grid is None:
         occupancy = TiledOccupancyGrid(resolution_m, config=config, view_reach_m=view_reach_m)
     else:
@@ -95,6 +98,8 @@ def add_observation(occupancy: OccupancyGrid | TiledOccupancyGrid, obs: FrameObs
     """One frame into the map, in order: its precomputed cells when they fit the map's grid and
     config and the map does not occlude (``map_occlusion_p`` None), else its cells traced
     against the map so far."""
+    _checks.instance("occupancy", occupancy, (OccupancyGrid, TiledOccupancyGrid))
+    _checks.instance("obs", obs, FrameObservation)
     config = occupancy.config
     with stage("grid"):
         if (isinstance(occupancy, OccupancyGrid) and obs.cells is not None and obs.cells.fits(occupancy.grid, config)

@@ -13,7 +13,11 @@ import numpy as np
 
 from .. import _checks
 
-__all__ = ["GridSpec"]
+__all__ = ["GridSpec", "BYTES_PER_CELL"]
+
+BYTES_PER_CELL = 160.0
+"""Memory a map needs per cell, with a margin: log-odds and heights, each view's ray-casting buffers, the
+known-occupied copy, the metrics and the figure."""
 
 
 @dataclass(frozen=True)
@@ -35,7 +39,7 @@ class GridSpec:
         for name in ("origin_x_m", "origin_y_m"):
             _checks.finite_number(name, getattr(self, name))
         rows, cols = self.height_m / self.resolution_m, self.width_m / self.resolution_m
-        _checks.fits_in_memory("resolution_m", rows * cols * 40.0,        # grid, log-odds, ray-casting buffers
+        _checks.fits_in_memory("width_m, height_m and resolution_m", rows * cols * BYTES_PER_CELL,
                                f"a grid of {rows:.4g} x {cols:.4g} cells")
 
     @property

@@ -185,6 +185,19 @@ def _points_xy(name: str, value) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
+def _cell_indices(name: str, value, n_cells: int) -> np.ndarray:
+    """Flat cell indices as int64 within ``[0, n_cells)`` (the kernel writes where they point)."""
+    arr = np.asarray(value)
+    if arr.size == 0:
+        return np.empty(0, np.int64)
+    if arr.ndim != 1 or arr.dtype.kind not in "iu":
+        raise TypeError(f"{name} must be a 1-D array of integer cell indices, got {arr.dtype} {arr.shape}")
+    low, high = int(arr.min()), int(arr.max())
+    if low < 0 or high >= n_cells:
+        raise ValueError(f"{name} holds cell indices from {low} to {high}, outside the grid's 0..{n_cells - 1}")
+    return np.ascontiguousarray(arr, dtype=np.int64)
+
+
 class ViewCells(NamedTuple):
     """The cells one view hits and clears, ready to be added to a grid in order.
 
@@ -508,13 +521,18 @@ class OccupancyGrid:
         if not cells.fits(self.grid, self.config):
             raise ValueError("cells were computed for another grid or another max_range_m / "
                              "min_points_per_cell / sensor model than this OccupancyGrid's")
+        n_cells = self._log_odds.size
+        hit, miss = _cell_indices("cells.hit", cells.hit, n_cells), _cell_indices("cells.miss", cells.miss, n_cells)
+        if cells.hit_z_m is not None and np.shape(cells.hit_z_m) != (len(hit), 2):
+            raise ValueError(f"cells.hit_z_m must have shape ({len(hit)}, 2) (one row per hit cell), "
+                             f"got {np.shape(cells.hit_z_m)}")
         c = self.config
-        _kernels.apply_cells(self._log_odds.reshape(-1), cells.hit, cells.miss, c.l_hit, c.l_miss, c.l_min,
+        _kernels.apply_cells(self._log_odds.reshape(-1), hit, miss, c.l_hit, c.l_miss, c.l_min,
                              c.l_max, c.fusion == "union")
-        if cells.hit_z_m is not None and len(cells.hit):
+        if cells.hit_z_m is not None and len(hit):
             z = self._z_range_m.reshape(-1, 2)
-            z[cells.hit, 0] = np.minimum(z[cells.hit, 0], cells.hit_z_m[:, 0])
-            z[cells.hit, 1] = np.maximum(z[cells.hit, 1], cells.hit_z_m[:, 1])
+            z[hit, 0] = np.minimum(z[hit, 0], cells.hit_z_m[:, 0])
+            z[hit, 1] = np.maximum(z[hit, 1], cells.hit_z_m[:, 1])
         self.n_updates += 1
         self.points_outside += int(cells.points_outside)
         return GridUpdate(len(cells.hit), len(cells.miss), cells.points_outside)

@@ -46,6 +46,7 @@ def inflate_obstacles(ros_map: RosMap, *, robot_radius_m: float = 0.25,
     A cell is blocked when the distance between its centre and the centre of the nearest
     occupied cell is <= ``robot_radius_m`` (exact Euclidean distance transform).
     """
+    _checks.instance("ros_map", ros_map, RosMap)
     radius = _checks.finite_number("robot_radius_m", robot_radius_m, nonnegative=True)
     obstacles = ros_map.occupied | (ros_map.unknown if unknown_is_obstacle else False)
     if not obstacles.any():
@@ -97,6 +98,8 @@ def plan_path(ros_map, start_xy, goal_xy, *, robot_radius_m: float = 0.25,
     start = _point("start_xy", start_xy)
     goal = _point("goal_xy", goal_xy)
     grid = ros_map.grid
+    if np.shape(ros_map.occupancy) != grid.shape:
+        raise ValueError(f"ros_map.occupancy has shape {np.shape(ros_map.occupancy)} but its grid is {grid.shape}")
     blocked = inflate_obstacles(ros_map, robot_radius_m=robot_radius_m,
                                 unknown_is_obstacle=unknown_is_obstacle)
     x0, x1, y0, y1 = grid.extent_m
@@ -131,6 +134,8 @@ def plan_path(ros_map, start_xy, goal_xy, *, robot_radius_m: float = 0.25,
     cols = grid.shape[1]
     chain = [gr * cols + gc]
     while chain[-1] != sr * cols + sc:
+        if len(chain) > n or came_from[chain[-1]] < 0:       # a broken chain: never loop forever
+            raise RuntimeError("A* returned a path that does not lead back to the start")
         chain.append(int(came_from[chain[-1]]))
     idx = np.array(chain[::-1])
     path_xy = grid.xy_from_cells(idx // cols, idx % cols)

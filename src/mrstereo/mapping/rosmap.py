@@ -11,23 +11,56 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .. import _checks
 from ..io import atomic_write, read_image, read_yaml, write_image
 from .grid import GridSpec
 
-__all__ = ["RosMap", "read_ros_map", "write_ros_map", "ros_map_files", "occupancy_values", "FREE", "OCCUPIED",
-           "UNKNOWN"]
+__all__ = ["RosMap", "read_ros_map", "write_ros_map", "ros_map_files", "occupancy_values", "check_thresholds",
+           "ros_map_on_grid", "FREE", "OCCUPIED", "UNKNOWN"]
 
 FREE, OCCUPIED, UNKNOWN = 254, 0, 205
 
 
+def check_thresholds(occupied_thresh, free_thresh, *, where: str = "") -> tuple[float, float]:
+    """``(occupied_thresh, free_thresh)`` as floats: probabilities with ``free_thresh < occupied_thresh``.
+
+    Thresholds outside [0, 1] or in the wrong order turn walls free (a planner drives through them):
+    refused with a ``ValueError`` (prefixed by ``where``).
+    """
+    prefix = f"{where}: " if where else ""
+    occupied = _checks.finite_number("occupied_thresh", occupied_thresh)
+    free = _checks.finite_number("free_thresh", free_thresh)
+    for name, value in (("occupied_thresh", occupied), ("free_thresh", free)):
+        if not 0.0 <= value <= 1.0:
+            raise ValueError(f"{prefix}{name} must be a probability in [0, 1], got {value:g}")
+    if not free < occupied:
+        raise ValueError(f"{prefix}free_thresh ({free:g}) must be below occupied_thresh ({occupied:g})")
+    return occupied, free
+
+
 @dataclass(frozen=True)
 class RosMap:
-    """A trinary map: ``occupancy`` is float (rows, cols) in [0, 1], NaN unknown, row 0 = min y."""
+    """A trinary map: ``occupancy`` is float (rows, cols) in [0, 1], NaN unknown, row 0 = min y.
+
+    ``occupancy`` must have the shape of ``grid``; a cell is occupied above ``occupied_thresh`` and
+    free below ``free_thresh``, two probabilities with ``0 <= free_thresh < occupied_thresh <= 1``.
+    """
 
     occupancy: np.ndarray
     grid: GridSpec
     occupied_thresh: float = 0.65
     free_thresh: float = 0.196   # as ROS map_saver: 205 (p = 0.196) must read back as unknown
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.grid, GridSpec):
+            raise TypeError(f"grid must be a GridSpec, got {type(self.grid).__name__}")
+        occupancy = np.asarray(self.occupancy)
+        if occupancy.dtype.kind not in "fiub":
+            raise TypeError(f"occupancy must hold numbers (probabilities), got dtype {occupancy.dtype}")
+        if occupancy.shape != self.grid.shape:
+            raise ValueError(f"occupancy has shape {occupancy.shape} but the grid is {self.grid.shape} "
+                             "(rows, cols)")
+        check_thresholds(self.occupied_thresh, self.free_thresh)
 
     @property
     def occupied(self) -> np.ndarray:
@@ -61,6 +94,7 @@ def as_ros_map(name: str, value) -> RosMap:
 
 def write_ros_map(yaml_path: str | os.PathLike, ros_map: RosMap) -> None:
     """Write ``NAME.yaml`` and ``NAME.pgm`` beside it (atomically)."""
+    _checks.instance("ros_map", ros_map, RosMap)
     yaml_path = Path(yaml_path)
     pgm_path = yaml_path.with_suffix(".pgm")
     image = np.full(ros_map.occupancy.shape, UNKNOWN, np.uint8)
@@ -81,9 +115,9 @@ def ros_map_files(yaml_path: str | os.PathLike) -> list[Path]:
     yaml_path = Path(yaml_path)
     files = [yaml_path, yaml_path.with_suffix(".pgm")]
     try:
-        meta = yaml.safe_load(yaml_path.read_text(encoding="utf-8"))
+        meta = read_yaml(yaml_path, "map file")
         files.append(yaml_path.parent / str(meta["image"]))
-    except (OSError, ValueError, TypeError, KeyError, yaml.YAMLError):
+    except (OSError, ValueError, TypeError, KeyError):
         pass
     return files
 
@@ -108,12 +142,46 @@ def read_ros_map(yaml_path: str | os.PathLike) -> RosMap:
         raise ValueError(f"map file {yaml_path}: resolution/origin/thresholds must be numbers") from None
     if not np.isfinite([resolution, ox, oy, occ_t, free_t]).all() or resolution <= 0:
         raise ValueError(f"map file {yaml_path}: resolution must be > 0 and all numbers finite")
+    check_thresholds(occ_t, free_t, where=f"map file {yaml_path}")
+    negate, mode = meta.get("negate", 0), meta.get("mode", "trinary")
+    if negate not in (0, 1, False, True):
+        raise ValueError(f"map file {yaml_path}: negate must be 0 or 1, got {negate!r}")
+    if mode not in ("trinary", "scale", "raw"):
+        raise ValueError(f"map file {yaml_path}: mode must be trinary, scale or raw, got {mode!r}")
+    if not isinstance(meta["image"], str) or not meta["image"]:
+        raise ValueError(f"map file {yaml_path}: image must be a file name, got {meta['image']!r}")
     image = read_image(yaml_path.parent / meta["image"], gray=True)
-    p = (255.0 - image.astype(np.float64)) / 255.0 if not meta.get("negate", 0) else image / 255.0
+    if image.dtype != np.uint8:
+        image = np.round(image / 257.0).astype(np.uint8)
+    p = (255.0 - image.astype(np.float64)) / 255.0 if not negate else image / 255.0
     occupancy = np.flipud(p).copy()
-    if meta.get("mode", "trinary") == "trinary":
+    if mode == "trinary":
         occupancy[(image == UNKNOWN)[::-1]] = np.nan
     rows, cols = occupancy.shape
     grid = GridSpec(width_m=cols * resolution, height_m=rows * resolution, resolution_m=resolution,
                     origin_x_m=ox, origin_y_m=oy)
     return RosMap(occupancy=occupancy, grid=grid, occupied_thresh=occ_t, free_thresh=free_t)
+
+
+def ros_map_on_grid(ros_map: RosMap, grid: GridSpec) -> RosMap | None:
+    """``ros_map`` on another grid of the same resolution whose origin is a whole number of cells away
+    (e.g. a map built with another ``--origin`` or ``--size``): its cells where the two overlap, unknown
+    elsewhere. None when the resolutions differ or the origins are not whole cells apart."""
+    src = ros_map.grid
+    res = src.resolution_m
+    if not isinstance(grid, GridSpec):
+        raise TypeError(f"grid must be a GridSpec, got {type(grid).__name__}")
+    if abs(grid.resolution_m - res) > 1e-9 * res:
+        return None
+    shift = np.array([(grid.origin_y_m - src.origin_y_m) / res, (grid.origin_x_m - src.origin_x_m) / res])
+    if np.abs(shift - np.round(shift)).max() > 1e-6:
+        return None
+    dr, dc = (int(v) for v in np.round(shift))
+    out = np.full(grid.shape, np.nan)
+    rows, cols = grid.shape
+    src_rows, src_cols = src.shape
+    r0, r1 = max(0, -dr), min(rows, src_rows - dr)
+    c0, c1 = max(0, -dc), min(cols, src_cols - dc)
+    if r0 < r1 and c0 < c1:
+        out[r0:r1, c0:c1] = ros_map.occupancy[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
+    return RosMap(occupancy=out, grid=grid, occupied_thresh=ros_map.occupied_thresh, free_thresh=ros_map.free_thresh)

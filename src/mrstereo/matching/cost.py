@@ -196,6 +196,37 @@ def _with_terms(padded: np.ndarray, window: int, cost: str) -> PreparedImage:
     return PreparedImage(quantized, a, b, window, cost, flat)
 
 
+def _span(name: str, span, size: int) -> tuple[int, int]:
+    """A half-open range ``(a, b)`` with ``0 <= a <= b <= size`` (the kernels write where it says)."""
+    try:
+        a, b = (int(v) for v in span)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be two integers (start, stop), got {span!r}") from None
+    if not 0 <= a <= b <= size:
+        raise ValueError(f"{name} must satisfy 0 <= start <= stop <= {size}, got ({a}, {b})")
+    return a, b
+
+
+def _checked_band(left: PreparedImage, right: PreparedImage, d_lo, d_hi, rows, cols):
+    """The band search's arguments checked before a kernel sees them: ``(d_lo, d_hi, rows, cols)``.
+
+    Both images prepared alike and of one size; ``0 <= d_lo <= d_hi``; ``d_hi`` above the widest
+    possible disparity (``width - 1``: a pixel ``x`` searches ``d <= x``) is clipped, which changes no
+    result and bounds the kernel's buffers.
+    """
+    for name, image in (("left", left), ("right", right)):
+        if not isinstance(image, PreparedImage):
+            raise TypeError(f"{name} must be a PreparedImage (from prepare), got {type(image).__name__}")
+    if left.shape != right.shape or left.window != right.window or left.padded.dtype != right.padded.dtype:
+        raise ValueError(f"left and right must be prepared alike: shapes {left.shape} and {right.shape}, windows "
+                         f"{left.window} and {right.window}, dtypes {left.padded.dtype} and {right.padded.dtype}")
+    h, w = left.shape
+    d_lo, d_hi = int(d_lo), int(d_hi)
+    if not 0 <= d_lo <= d_hi:
+        raise ValueError(f"disparities must satisfy 0 <= d_lo <= d_hi, got d_lo={d_lo}, d_hi={d_hi}")
+    return d_lo, min(d_hi, max(d_lo, w - 1)), _span("rows", rows, h), _span("cols", cols, w)
+
+
 def match_prepared(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi: int,
                    rows: tuple[int, int], cols: tuple[int, int], right_check: bool,
                    n_strips: int | None = None) -> tuple[np.ndarray, ...]:
@@ -220,6 +251,7 @@ def match_prepared(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi
         ``(disparity_int, subpixel_px, best_cost, second_cost, right_disparity_int)`` as
         :class:`BandMatch`, with BIG (not inf) where a cost is absent.
     """
+    d_lo, d_hi, rows, cols = _checked_band(left, right, d_lo, d_hi, rows, cols)
     h, w = left.shape
     out = (np.full((h, w), -1, np.int32), np.zeros((h, w), np.float32), np.full((h, w), _kernels.BIG, np.float32),
            np.full((h, w), _kernels.BIG, np.float32), np.full((h, w), -1, np.int32))
@@ -283,6 +315,7 @@ def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi:
         its cost, and the winner's cost (the cross-band ambiguity test,
         :func:`mrstereo.matching.disparity.compute_disparity`).
     """
+    d_lo, d_hi, rows, cols = _checked_band(left, right, d_lo, d_hi, rows, cols)
     h, w = left.shape
     disparity = np.empty((h, w), np.float32)
     confidence = np.empty((h, w), np.float32)
@@ -344,11 +377,16 @@ def match_band(left: np.ndarray, right: np.ndarray, *, d_lo: int, d_hi: int, win
     n_strips : int, optional
         Row strips run in parallel (default: numba's thread count).
     """
+    left, right = np.asarray(left), np.asarray(right)
+    if left.ndim != 2 or left.shape != right.shape:
+        raise ValueError(f"left and right must be 2-D images of one size, got {left.shape} and {right.shape}")
     h, w = left.shape
     rows = (0, h) if rows is None else rows
     cols = (0, w) if cols is None else cols
     if cost not in COSTS:
         raise ValueError(f"cost must be one of {COSTS}, got {cost!r}")
+    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1 or window % 2 == 0:
+        raise ValueError(f"window must be an odd number of pixels >= 1, got {window!r}")
     dtype = _accumulator_dtype(left, right, window)
     pl = prepare(left, window=window, cost=cost, dtype=dtype)
     pr = prepare(right, window=window, cost=cost, dtype=dtype)
@@ -406,9 +444,17 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     disparity_px, cost : ndarray float32 (H, W)
         Refined disparity (NaN invalid) and the winner's cost (inf invalid).
     """
-    h, w = coarse_px.shape
+    _checked_band(left, right, 0, 0, (0, 0), (0, 0))
+    h, w = left.shape
+    coarse_px, want = np.asarray(coarse_px), np.asarray(want, dtype=bool)
+    if coarse_px.shape != (h, w) or want.shape != (h, w):
+        raise ValueError(f"coarse_px and want must have the images' shape {(h, w)}, got {coarse_px.shape} and "
+                         f"{want.shape}")
+    if isinstance(half_px, bool) or not isinstance(half_px, (int, np.integer)) or half_px < 0:
+        raise ValueError(f"half_px must be an integer >= 0, got {half_px!r}")
+    half_px = min(int(half_px), w)        # (offsets beyond the image width find nothing)
     r = left.window // 2
-    rows = (0, h) if rows is None else rows
+    rows = _span("rows", (0, h) if rows is None else rows, h)
     center_pad = np.empty((h + 2 * r, w + 2 * r), np.int32)
     _kernels.fill_center(np.ascontiguousarray(coarse_px, dtype=np.float32), r, center_pad)
     out = np.empty((h, w), np.float32)

@@ -27,6 +27,8 @@ def median_filter(disparity_px: np.ndarray, *, size: int, max_px: float | None =
     """
     if size == 0:
         return disparity_px
+    if size not in (3, 5):          # what cv2.medianBlur takes for 16-bit and float images
+        raise ValueError(f"size must be 0, 3 or 5, got {size!r}")
     disparity_px = np.ascontiguousarray(disparity_px, dtype=np.float32)
     if max_px is None:
         max_px = np.nanmax(disparity_px, initial=0.0)

@@ -4,65 +4,118 @@ For every frame of every dataset (docs/dataset.md) :func:`run_batch` runs the
 chain of :func:`mrstereo.pipeline.frame.scan_from_pair` (rectify -> match ->
 reject (eq. 13) -> 3D (eq. 14-16) -> scan) once and writes::
 
+    OUT/<dataset>/dataset.json             which dataset this folder belongs to
     OUT/<dataset>/frames/NNNNNN.pfm        disparity after rejection (PFM, NaN -> inf)
     OUT/<dataset>/frames/NNNNNN.ply        robot-frame point cloud with intensity
     OUT/<dataset>/frames/NNNNNN.scan.json  virtual laser scan (ROS LaserScan fields)
-    OUT/<dataset>/frames/NNNNNN.obs.npz    the frame's world-frame obstacle / floor points
+    OUT/<dataset>/frames/NNNNNN.obs.npz    the frame's world-frame obstacle / floor points, its fingerprint
     OUT/<dataset>/map/                     map.pgm, map.yaml, map.png, log_odds.npy, batch.json
-    OUT/summary.json                       per dataset counts, and every failed frame
+    OUT/summary.json                       per dataset what was computed, kept and failed; every failure
 
 then fuses each dataset's frames in order into its map (the same map as
 ``mrstereo map``, bit for bit). Frames of all datasets are spread over the
 workers of :func:`mrstereo.pipeline.parallel.map_ordered`.
 
-Resumable: every file is written to a temporary name and renamed, so an
-interrupted run leaves complete files only; a re-run skips frames whose four
-files exist (their points are read back from ``.obs.npz``) and datasets whose
-map was completed without failures. A frame that raises is listed in
-``summary.json`` (and the map's ``batch.json``), the others go on, and the map
-is built from the frames that succeeded; the next run retries it.
+Resumable, and it knows what changed: every frame's results carry a fingerprint of
+what they were computed from -- the sizes and modification times of the frame's
+images, its pose and pan, the calibration, the camera mount (or the frames the
+floor is estimated from), every option of the chain and mrstereo's version -- and
+the map a fingerprint of its frames' and of the grid and fusion options. A re-run
+keeps a frame whose four files read back with the same fingerprint and a map whose
+files are all there with the same fingerprint (and whose frames were all kept);
+everything else is computed again. A dataset's folder is named after the dataset's
+folder; two datasets of one name (``a/ds``, ``b/ds``), or a folder already holding
+another dataset's results, get the name with a hash of the dataset's path
+(``ds-1a2b3c4d``), recorded in ``dataset.json`` and ``summary.json``. A finished
+map replaces the previous one in one step (:func:`mrstereo.io.replace_dir`): a
+reader sees the old map or the new one. A frame that raises is listed in
+``summary.json`` (and the map's ``batch.json``), the others go on, and the map is
+built from the frames that succeeded; the next run retries it.
 
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..camera import CameraMount, StereoCamera
+from .. import __version__
+from ..camera import CameraMount, StereoCamera, mount_entry
 from ..geometry.ply import read_ply, write_ply
 from ..geometry.scan import write_scan_json
-from ..io import (atomic_write, check_output_dir, check_outputs, read_pfm, remove_stale_temporaries, temporary_dir,
-                  write_disparity)
+from ..io import (Inputs, atomic_write, check_output_dir, check_outputs, read_pfm, remove_stale_temporaries,
+                  replace_dir, temporary_dir, write_disparity)
 from ..mapping.fusion import FrameObservation
 from ..mapping.rosmap import ros_map_files
 from ..recordings.layouts import read_recording
 from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
+from .sanity import check_pair_streams
 from .frame import scan_from_pair
 from .parallel import ItemFailure, map_ordered
 from .run import (MapRun, PipelineConfig, floor_for_run, map_from_observations, observation_from_pair, pair_options,
                   with_visual_odometry, write_map_outputs)
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
-           "dataset_files", "SUMMARY_NAME"]
+           "SUMMARY_NAME"]
 
 SUMMARY_NAME = "summary.json"
 _MAP_RECORD = "batch.json"
+_DATASET_RECORD = "dataset.json"
+MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy")
+"""The files of every finished map (metrics.json too when the map has metrics)."""
 
 
-def dataset_files(manifest: Manifest) -> list[Path]:
-    """Every file a run over ``manifest`` reads: the manifest, calibration, ground-truth map, images."""
-    files = [p for p in (manifest.root / "manifest.yaml", manifest.calibration_path) if p.is_file()]
-    if manifest.ground_truth_map is not None:
-        files += ros_map_files(manifest.ground_truth_map)
-    for r in manifest.frames:
-        files += [p for p in (r.left, r.right, r.left_rect, r.right_rect, r.gt_disparity, r.gt_labels)
-                  if p is not None]
-    return files
+# ------------------------------------------------------------------------------------------ fingerprints
+
+def _digest(value) -> str:
+    """A short stable hash of JSON-able ``value`` (anything else by its repr)."""
+    text = json.dumps(value, sort_keys=True, default=repr, separators=(",", ":"))
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:32]
+
+
+def _stat(path: Path | None) -> list | None:
+    """``[path, size, mtime_ns]`` of a file (None for no file): what a changed file changes."""
+    if path is None:
+        return None
+    try:
+        st = os.stat(path)
+    except OSError:
+        return [str(path), None, None]
+    return [str(path), st.st_size, st.st_mtime_ns]
+
+
+def _frame_files(record: FrameRecord) -> list:
+    return [_stat(p) for p in (record.left, record.right, record.left_rect, record.right_rect)]
+
+
+def _dataset_fingerprint(m: Manifest, config: PipelineConfig, floor_frames: int) -> str:
+    """What every frame of ``m`` depends on besides its own files: calibration, mount (or the frames the
+    floor is estimated from), the options of the per-frame chain, mrstereo's version."""
+    mount = mount_entry(m.mount) if m.mount is not None else \
+        {"estimated from": [_frame_files(r) for r in m.frames[:floor_frames]]}
+    chain = {k: repr(getattr(config, k)) for k in ("preset", "max_disparity_px", "matching", "rejection",
+                                                   "obstacles", "free_space")}
+    return _digest({"calibration": m.calibration.to_dict(), "mount": mount, "chain": chain,
+                    "version": __version__})
+
+
+def _frame_fingerprint(base: str, record: FrameRecord) -> str:
+    return _digest([base, _frame_files(record), list(record.pose), record.pan_rad])
+
+
+def _map_fingerprint(m: Manifest, frames: list[str], config: PipelineConfig) -> str:
+    """What a map depends on: its frames' fingerprints, the grid and fusion options, the ground truth it is
+    compared with."""
+    truth = [list(f.true_pose) if f.true_pose is not None else None for f in m.frames]
+    gt = [_stat(p) for p in ros_map_files(m.ground_truth_map)] if m.ground_truth_map is not None else None
+    return _digest({"frames": frames, "grid": repr(config.grid), "mapping": repr(config.mapping),
+                    "range": config.obstacles.max_range_m, "ground_truth": gt, "true_poses": truth})
 
 
 def frame_outputs(frames_dir: str | os.PathLike, index: int) -> dict[str, Path]:
@@ -84,6 +137,8 @@ class FrameTask:
     frames_dir: Path
     dataset: str
     prefer_raw: bool = False
+    fingerprint: str = ""
+    """What the frame's results are computed from (kept in its ``.obs.npz``)."""
 
 
 def _gray(image: np.ndarray) -> np.ndarray:
@@ -115,13 +170,13 @@ def process_frame(task: FrameTask | tuple[FrameTask, tuple]) -> FrameObservation
     write_ply(files["cloud"], obs.points_robot_image.reshape(-1, 3), intensity=_gray(frame.left_rect).ravel(),
               comment=f"mrstereo {task.dataset} frame {task.index} (frame: robot, metres)")
     write_scan_json(files["scan"], result.scan)
-    _save_observation(files["observation"], observation)
+    _save_observation(files["observation"], observation, task.fingerprint)
     return observation
 
 
-def _save_observation(path: Path, obs: FrameObservation) -> None:
+def _save_observation(path: Path, obs: FrameObservation, fingerprint: str) -> None:
     with atomic_write(path) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, index=obs.index, pose=np.array(obs.pose), pan_rad=obs.pan_rad,
+        np.savez(fh, fingerprint=np.array(fingerprint), index=obs.index, pose=np.array(obs.pose), pan_rad=obs.pan_rad,
                  obstacle_points_world=obs.obstacle_points_world, floor_points_world=obs.floor_points_world,
                  n_valid_disparity=obs.n_valid_disparity, ground_message=np.array(obs.ground_message),
                  baseline_focal_m_px=np.nan if obs.baseline_focal_m_px is None else obs.baseline_focal_m_px,
@@ -129,12 +184,15 @@ def _save_observation(path: Path, obs: FrameObservation) -> None:
                  boundary_points=obs.boundary_points)
 
 
-def _resume(files: dict[str, Path]) -> FrameObservation | None:
-    """The observation of a finished frame, or None when one of its four files is missing or unreadable
-    (then the frame is computed again)."""
+def _resume(files: dict[str, Path], fingerprint: str) -> FrameObservation | None:
+    """The observation of a finished frame, or None when one of its four files is missing or unreadable or
+    it was computed from other inputs or options (then the frame is computed again)."""
     if not all(p.is_file() for p in files.values()):
         return None
     try:
+        with np.load(files["observation"]) as z:
+            if "fingerprint" not in z.files or str(z["fingerprint"]) != fingerprint:
+                return None
         read_pfm(files["disparity"])
         json.loads(files["scan"].read_text(encoding="utf-8"))
         read_ply(files["cloud"])
@@ -175,13 +233,15 @@ class DatasetSummary:
     map_status: str = ""
     floor: object | None = None
     """The floor the frames used (:class:`mrstereo.geometry.GroundPlane`); None when all was kept."""
+    fingerprint: str = ""
+    """The map's fingerprint (what it was computed from)."""
     mount_warning: str | None = None
     """Why the dataset's mount was not used (:func:`mrstereo.pipeline.floor_for_run`)."""
 
     def to_dict(self) -> dict:
         out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
                "frames": self.n_frames, "computed": self.n_computed, "skipped": self.n_skipped,
-               "failed": self.n_failed, "map": self.map_status}
+               "failed": self.n_failed, "map": self.map_status, "fingerprint": self.fingerprint}
         if self.floor is not None:
             out["floor"] = self.floor.summary()
         if self.mount_warning is not None:
@@ -198,37 +258,93 @@ class BatchSummary:
     failures: tuple[dict, ...] = field(default_factory=tuple)
 
 
-def _names(manifests: list[Manifest]) -> list[str]:
-    names, seen = [], {}
-    for m in manifests:
-        base = (m.root.parent.name if m.root.name == "mav0" else m.root.name) or "dataset"   # EuRoC: the sequence
-        seen[base] = seen.get(base, 0) + 1
-        names.append(base if seen[base] == 1 else f"{base}_{seen[base]}")
+def _owner(folder: Path) -> str | None:
+    """The dataset root recorded in an output folder's ``dataset.json`` ("" for a folder without one)."""
+    if not folder.exists():
+        return None
+    try:
+        return str(json.loads((folder / _DATASET_RECORD).read_text(encoding="utf-8"))["root"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return ""
+
+
+def _names(manifests: list[Manifest], out: Path) -> list[str]:
+    """One output folder name per dataset, never shared: the dataset folder's name, or with a hash of its
+    path (``ds-1a2b3c4d``) when another dataset of the run has that name or the folder already holds
+    something else (another dataset's results, or anything not written by a batch)."""
+    bases = [(m.root.parent.name if m.root.name == "mav0" else m.root.name) or "dataset"    # EuRoC: the sequence
+             for m in manifests]
+    count = Counter(bases)
+    names = []
+    for m, base in zip(manifests, bases):
+        if count[base] > 1 or _owner(out / base) not in (None, str(m.root)):
+            base = f"{base}-{hashlib.sha256(str(m.root).encode()).hexdigest()[:8]}"
+            if _owner(out / base) not in (None, str(m.root)):
+                raise ValueError(f"out_dir {out}: the folder {base} holds other results; choose another output "
+                                 "folder")
+        names.append(base)
+    clash = [n for n, k in Counter(names).items() if k > 1]
+    if clash:
+        raise ValueError(f"two datasets would share the output folder {out / clash[0]}; rename one of them")
     return names
 
 
-def _map_done(map_dir: Path, n_frames: int) -> bool:
+def _map_done(map_dir: Path, fingerprint: str) -> bool:
+    """The map in ``map_dir`` is complete and was computed from what ``fingerprint`` says."""
     try:
-        record = json.loads((map_dir / _MAP_RECORD).read_text())
+        record = json.loads((map_dir / _MAP_RECORD).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return False
-    return record.get("frames") == n_frames and not record.get("failed") and (map_dir / "log_odds.npy").is_file()
+    files = record.get("files") or MAP_FILES
+    return (record.get("fingerprint") == fingerprint and not record.get("failed")
+            and all((map_dir / name).is_file() for name in files))
 
 
 def _write_map(run: MapRun, map_dir: Path, record: dict) -> None:
-    """Write the map outputs into a temporary directory and swap it into place.
+    """Write the map outputs into a temporary folder and swap it into place in one step.
 
-    The temporary directory (``.map.PID.XXXX.tmp`` beside ``map_dir``) is removed on failure;
+    The temporary folder (``.mrstereo-tmp-PID-XXXXXXXX.map`` beside ``map_dir``) is removed on failure;
     one left by a killed run is removed by the next :func:`run_batch` on the same output.
     """
     with temporary_dir(map_dir.parent, prefix="map") as staging:
         tmp = staging / "map"
-        write_map_outputs(run, tmp)
+        written = write_map_outputs(run, tmp)
+        record = dict(record, files=sorted(p.name for p in written.values()))
         (tmp / _MAP_RECORD).write_text(json.dumps(record, indent=1) + "\n")
-        if map_dir.exists():
-            old = staging / "old"
-            os.replace(map_dir, old)
-        os.replace(tmp, map_dir)
+        replace_dir(tmp, map_dir)
+
+
+@dataclass
+class _Dataset:
+    """What :func:`run_batch` plans for one dataset."""
+
+    name: str
+    manifest: Manifest
+    folder: Path
+    fingerprints: list[str]
+    map_fingerprint: str
+    loaded: dict[int, FrameObservation | None]
+    map_kept: bool = False
+
+
+def _plan(m: Manifest, name: str, out: Path, config: PipelineConfig, maps: bool) -> _Dataset:
+    """Claim the dataset's output folder, clean a killed run's temporaries, read back what is still valid."""
+    folder = out / name
+    frames_dir = folder / "frames"
+    frames_dir.mkdir(parents=True, exist_ok=True)
+    if _owner(folder) != str(m.root):
+        with atomic_write(folder / _DATASET_RECORD) as tmp:
+            tmp.write_text(json.dumps({"root": str(m.root), "manifest": str(m.root / "manifest.yaml")}) + "\n")
+    for where in (frames_dir, folder):
+        remove_stale_temporaries(where)
+    base = _dataset_fingerprint(m, config, floor_frames=10)
+    fingerprints = [_frame_fingerprint(base, r) for r in m.frames]
+    loaded = {k: _resume(frame_outputs(frames_dir, k), fingerprints[k]) for k in range(len(m.frames))}
+    plan = _Dataset(name=name, manifest=m, folder=folder, fingerprints=fingerprints,
+                    map_fingerprint=_map_fingerprint(m, fingerprints, config), loaded=loaded)
+    plan.map_kept = maps and all(v is not None for v in loaded.values()) and \
+        _map_done(folder / "map", plan.map_fingerprint)
+    return plan
 
 
 def _mounted(manifest: Manifest, config: PipelineConfig, check_mount: bool) -> tuple:
@@ -239,17 +355,6 @@ def _mounted(manifest: Manifest, config: PipelineConfig, check_mount: bool) -> t
     if not manifest.has_poses:
         manifest, _ = with_visual_odometry(manifest)
     return floor, manifest
-
-
-def _check_outputs(out: Path, datasets: list[Manifest], names: list[str]) -> None:
-    """Refuse an output root or dataset folder that would write over an input (before any work)."""
-    inputs = [f for m in datasets for f in dataset_files(m)]
-    check_output_dir("out_dir", out, input_dirs=[m.root for m in datasets if out.resolve().is_relative_to(m.root.resolve())],
-                     input_kind="dataset")
-    check_outputs({"summary": out / SUMMARY_NAME}, inputs)
-    for name in names:
-        check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, input_kind="dataset",
-                         input_dirs=[m.root for m in datasets], inputs=inputs)
 
 
 def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
@@ -288,31 +393,28 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     if not datasets:
         raise ValueError("no datasets given")
     out = Path(out_dir)
-    names = _names(datasets)
-    _check_outputs(out, datasets, names)
+    inputs = Inputs()
+    for m in datasets:
+        inputs.update(m.inputs())
+    check_output_dir("out_dir", out, inputs=inputs, input_kind="dataset")
+    check_outputs({"summary": out / SUMMARY_NAME}, inputs)
+    names = _names(datasets, out)
+    for name in names:
+        check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, inputs=inputs)
+    check_pair_streams(datasets)
 
-    tasks, observations, skipped, done_maps, floors = [], {}, {}, set(), {}
+    remove_stale_temporaries(out)
     configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
-    for i, (name, m) in enumerate(zip(names, datasets)):
-        frames_dir = out / name / "frames"
-        frames_dir.mkdir(parents=True, exist_ok=True)
-        remove_stale_temporaries(frames_dir)
-        remove_stale_temporaries(out / name)
-        loaded = {k: _resume(frame_outputs(frames_dir, k)) for k in range(len(m.frames))}
-        complete = [loaded[k] is not None for k in range(len(m.frames))]
-        if maps and all(complete) and _map_done(out / name / "map", len(m.frames)):
-            done_maps.add(name)
-        skipped[name] = sum(complete)
-        if not all(complete) or (maps and name not in done_maps):
-            floors[name], datasets[i] = _mounted(m, configs[name], check_mount)
-            m = datasets[i]
-        for k, record in enumerate(m.frames):
-            if complete[k]:
-                if maps and name not in done_maps:
-                    observations[(name, k)] = loaded[k]
-            else:
-                tasks.append(FrameTask(record=record, index=k, stereo=m.calibration, mount=floors[name].mount,
-                                       config=configs[name], frames_dir=frames_dir, dataset=name))
+    plans = [_plan(m, name, out, configs[name], maps) for m, name in zip(datasets, names)]
+    tasks, floors = [], {}
+    for p in plans:
+        complete = [p.loaded[k] is not None for k in range(len(p.manifest.frames))]
+        if not all(complete) or (maps and not p.map_kept):
+            floors[p.name], p.manifest = _mounted(p.manifest, configs[p.name], check_mount)
+        tasks += [FrameTask(record=record, index=k, stereo=p.manifest.calibration, mount=floors[p.name].mount,
+                            config=configs[p.name], frames_dir=p.folder / "frames", dataset=p.name,
+                            fingerprint=p.fingerprints[k])
+                  for k, record in enumerate(p.manifest.frames) if not complete[k]]
 
     results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, processes=processes,
                           progress=progress,
@@ -323,31 +425,38 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         if isinstance(result, ItemFailure):
             failures.append({"dataset": task.dataset, "frame": task.index, "error": result.error})
         else:
-            observations[(task.dataset, task.index)] = result
+            next(p for p in plans if p.name == task.dataset).loaded[task.index] = result
 
-    summaries = []
-    for name, m in zip(names, datasets):
-        failed = sorted(f["frame"] for f in failures if f["dataset"] == name)
-        computed = sum(1 for t in tasks if t.dataset == name) - len(failed)
-        status = ""
-        if maps:
-            if name in done_maps:
-                status = "kept"
-            else:
-                obs = [observations[(name, k)] for k in range(len(m.frames)) if (name, k) in observations]
-                run = map_from_observations(m, obs, config=configs[name], floor=floors[name].floor,
-                                            mount=floors[name].mount)
-                _write_map(run, out / name / "map", {"frames": len(m.frames), "fused": len(obs), "failed": failed})
-                status = "written" if not failed else f"written from {len(obs)} of {len(m.frames)} frames"
-        summaries.append(DatasetSummary(name=name, manifest=m.root / "manifest.yaml" if m.layout == "dataset" else m.root,
-                                        out_dir=out / name,
-                                        n_frames=len(m.frames), n_computed=computed, n_skipped=skipped[name],
-                                        n_failed=len(failed), map_status=status,
-                                        floor=floors[name].floor if name in floors else None,
-                                        mount_warning=floors[name].warning if name in floors else None))
+    summaries = [_finish(p, tasks, failures, configs[p.name], maps, floors) for p in plans]
     path = out / SUMMARY_NAME
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps({"datasets": [s.to_dict() for s in summaries], "failures": failures,
-                                   "config": {"preset": config.preset, "fusion": config.mapping.fusion}},
+                                   "config": {"preset": config.preset, "fusion": config.mapping.fusion,
+                                              "fingerprint": _digest(repr(config))}},
                                   indent=1) + "\n")
     return BatchSummary(path=path, datasets=tuple(summaries), failures=tuple(failures))
+
+
+def _finish(p: _Dataset, tasks: list, failures: list, config: PipelineConfig, maps: bool,
+            floors: dict) -> DatasetSummary:
+    """Fuse (or keep) one dataset's map; its summary."""
+    m = p.manifest
+    failed = sorted(f["frame"] for f in failures if f["dataset"] == p.name)
+    n_tasks = sum(1 for t in tasks if t.dataset == p.name)
+    status = ""
+    if maps:
+        if p.map_kept:
+            status = "kept"
+        else:
+            obs = [p.loaded[k] for k in range(len(m.frames)) if p.loaded[k] is not None]
+            run = map_from_observations(m, obs, config=config, floor=floors[p.name].floor,
+                                        mount=floors[p.name].mount)
+            _write_map(run, p.folder / "map", {"frames": len(m.frames), "fused": len(obs), "failed": failed,
+                                               "fingerprint": p.map_fingerprint})
+            status = "written" if not failed else f"written from {len(obs)} of {len(m.frames)} frames"
+    floor = floors.get(p.name)
+    return DatasetSummary(name=p.name, manifest=m.root / "manifest.yaml" if m.layout == "dataset" else m.root,
+                          out_dir=p.folder, n_frames=len(m.frames), n_computed=n_tasks - len(failed),
+                          n_skipped=len(m.frames) - n_tasks, n_failed=len(failed), map_status=status,
+                          floor=floor.floor if floor else None, mount_warning=floor.warning if floor else None,
+                          fingerprint=p.map_fingerprint)

@@ -209,7 +209,7 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
         return
     import dask
 
-    workers = _checks.positive_int("workers", workers)
+    workers = _checks.workers("workers", workers)
     if not processes and not numba_thread_safe():
         warnings.warn("numba's workqueue threading layer cannot run kernels from several threads at once: "
                       "using worker processes (install tbb or have libgomp for worker threads)", stacklevel=3)
@@ -318,9 +318,20 @@ def _thread_client(workers: int) -> Iterator[Any]:
         yield client
 
 
+SCHEDULER_TIMEOUT_S = 5.0
+"""How long a scheduler address may take to accept a connection, and then to greet it as Dask does."""
+
+
 def _check_reachable(address: str) -> None:
-    """Fail at once (not after the client's retries) when nothing listens at a tcp:// address."""
+    """Fail within seconds (not after the client's retries, or never) when no Dask scheduler answers at a
+    tcp:// address: nothing listens, the peer accepts and stays silent, or it speaks another protocol
+    (an HTTP server, whose reply Dask's reader would take for a frame length of exabytes).
+
+    A Dask server greets every new connection with its handshake: an 8-byte little-endian length, then
+    that many bytes. The greeting is waited for ``SCHEDULER_TIMEOUT_S`` and its length must be sane.
+    """
     import socket
+    import struct
     from urllib.parse import urlsplit
 
     if "://" not in address:
@@ -333,9 +344,29 @@ def _check_reachable(address: str) -> None:
     except ValueError:
         raise ValueError(f"scheduler address {address!r} has a bad port") from None
     try:
-        socket.create_connection((parts.hostname, port), timeout=5).close()
+        sock = socket.create_connection((parts.hostname, port), timeout=SCHEDULER_TIMEOUT_S)
     except OSError as exc:
         raise OSError(f"cannot connect to the Dask scheduler at {address}: {exc.strerror or exc}") from None
+    if parts.scheme == "tls":               # the greeting is encrypted: the client's own timeout applies
+        sock.close()
+        return
+    with sock:
+        greeting = b""
+        try:
+            while len(greeting) < 8:
+                chunk = sock.recv(8 - len(greeting))
+                if not chunk:
+                    break
+                greeting += chunk
+        except OSError:                     # socket.timeout included
+            raise OSError(f"no Dask scheduler at {address}: it accepts connections but sent no Dask handshake "
+                          f"within {SCHEDULER_TIMEOUT_S:g} s") from None
+    if len(greeting) < 8:
+        raise OSError(f"no Dask scheduler at {address}: it closed the connection without a Dask handshake")
+    length = struct.unpack("<Q", greeting)[0]
+    if not 0 < length < (1 << 20):
+        text = greeting.decode("ascii", "replace").strip()
+        raise OSError(f"no Dask scheduler at {address}: it speaks another protocol (it sent {text!r})")
 
 
 def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: int | None = None,
@@ -393,7 +424,7 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
     if workers is not None and scheduler is not None:
         raise ValueError("give workers or scheduler, not both")
     if workers is not None:
-        workers = _checks.positive_int("workers", workers)
+        workers = _checks.workers("workers", workers)
     items = list(items)
 
     def new_bar():

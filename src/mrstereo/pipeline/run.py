@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
@@ -28,6 +29,7 @@ from ..geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_
 from ..geometry.obstacles import MAPPING_MAX_RANGE_M, ObstacleConfig, mapping_range_m
 from ..io import atomic_write
 from ..mapping import GridSpec, read_ros_map, write_ros_map
+from ..mapping.rosmap import ros_map_on_grid
 from ..mapping.figures import plot_map
 from ..mapping.fusion import FrameObservation, fuse
 from ..mapping.tiles import TiledOccupancyGrid
@@ -444,6 +446,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     from functools import partial
 
     from .parallel import map_ordered
+    from .sanity import check_pair_streams
 
     if not isinstance(manifest, Manifest):
         manifest = read_recording(manifest)
@@ -458,6 +461,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         raise ValueError("align corrects the given odometry with visual odometry: use it with odometry='given'")
     stereo = manifest.calibration if calibration is None else calibration
     prefer_raw = prefer_raw or calibration is not None
+    check_pair_streams(manifest)
     config = _on_true_map(manifest, config.for_rig(stereo))
     mount, floor, warning = floor_for_run(manifest, stereo, config=config, prefer_raw=prefer_raw,
                                           check_mount=check_mount)
@@ -532,16 +536,23 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
     fused = fuse(observations, grid=config.grid, config=config.mapping, resolution_m=config.resolution_m,
                  view_reach_m=range_m + 2.0)
     occupancy = fused.to_grid() if isinstance(fused, TiledOccupancyGrid) else fused
+    _warn_outside(observations, occupancy)
     metrics, gt = None, None
     if manifest.ground_truth_map is not None:
         gt = read_ros_map(manifest.ground_truth_map)
-        compared = occupancy
         if isinstance(fused, TiledOccupancyGrid):
             try:
                 compared = fused.to_grid(gt.grid)           # the map on the ground truth's window
             except ValueError:
                 compared = None                             # not on the map's lattice: no metrics
-        if compared is not None and gt.grid.shape == compared.grid.shape:
+        else:
+            aligned = ros_map_on_grid(gt, occupancy.grid)   # a fixed window: compared where the two overlap
+            compared, gt = (occupancy, aligned) if aligned is not None else (None, gt)
+        if compared is None:
+            warnings.warn(f"no metrics: the ground-truth map {manifest.ground_truth_map} has cells of "
+                          f"{gt.grid.resolution_m:g} m at origin ({gt.grid.origin_x_m:g}, {gt.grid.origin_y_m:g}), "
+                          f"which do not fall on the map's cells of {occupancy.grid.resolution_m:g} m", stacklevel=2)
+        elif gt.grid.shape == compared.grid.shape:
             true_frames = [replace(f, pose=f.true_pose, pose_3d=f.true_pose_3d) if f.true_pose is not None else f
                            for f in manifest.frames]
             views = views_of_frames(true_frames, stereo, range_m=config.obstacle_config.max_range_m, mount=mount)
@@ -549,6 +560,23 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
     return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
                   ground_truth_map=gt, floor=floor, mount=mount, odometry=odometry, fusion=fusion,
                   range_m=range_m)
+
+
+def _warn_outside(observations: list[FrameObservation], occupancy: OccupancyGrid) -> None:
+    """A warning when frames were taken outside the map, or when the map observed no cell at all."""
+    grid = occupancy.grid
+    if observations:
+        rows, cols = grid.cells_from_xy(np.array([o.pose[:2] for o in observations], dtype=np.float64))
+        outside = [o.index for o, inside in zip(observations, grid.inside(rows, cols)) if not inside]
+        if outside:
+            x0, y0 = grid.origin_x_m, grid.origin_y_m
+            warnings.warn(f"{len(outside)} of {len(observations)} frames were taken outside the map "
+                          f"[{x0:g}, {x0 + grid.width_m:g}] x [{y0:g}, {y0 + grid.height_m:g}] m (frame(s) "
+                          f"{', '.join(str(k) for k in outside[:5])}{', ...' if len(outside) > 5 else ''}); "
+                          "give a --size and --origin that cover the path", stacklevel=3)
+    if observations and not (~occupancy.unknown).any():
+        warnings.warn("the map observed no cell: every frame's points fell outside it or none were found; "
+                      "check the poses, --size and --origin", stacklevel=3)
 
 
 def check_map(run: MapRun) -> None:

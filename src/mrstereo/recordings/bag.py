@@ -43,15 +43,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .. import _checks
+from .. import _checks, _limits
 from ..camera import CameraInfo, CameraMount, StereoCamera
-from ..io import check_output_dir
+from ..io import check_output_dir, decode_image, note_inputs
 from ..transforms import R_BODY_FROM_OPTICAL, rotation_from_quaternion, slerp, wrap_angle
+from ._bagfiles import bag_errors, bag_inputs, check_bag_file
 from .manifest import pose_3d_of, staged_dataset
 
 __all__ = ["BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message", "SUPPORTED_ENCODINGS",
            "camera_info_from_message", "stereo_from_camera_info", "stereo_from_bag", "pair_by_stamp",
-           "export_bag", "exported_bag"]
+           "export_bag", "exported_bag", "bag_inputs"]
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
@@ -80,20 +81,27 @@ def _bag_paths(path: str | os.PathLike) -> list[Path]:
 
 @contextlib.contextmanager
 def _open_bag(path: str | os.PathLike):
+    """The rosbags reader of a bag whose records were checked first (:func:`._bagfiles.check_bag_file`);
+    every error of the reader, then and while reading, is one ``ValueError`` naming the bag."""
     from rosbags.highlevel import AnyReader, AnyReaderError
     from rosbags.typesys import Stores, get_typestore
 
     paths = _bag_paths(path)
+    note_inputs(bag_inputs(path))
+    check_bag_file(paths[0])
     try:
-        reader = AnyReader(paths, default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-        reader.open()
+        with bag_errors(path):
+            reader = AnyReader(paths, default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+            reader.open()
     except (AnyReaderError, UnicodeDecodeError) as exc:   # corrupt or unsupported file (readers' errors wrapped)
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ValueError(f"cannot read bag {path}: {first}") from None
     try:
-        yield reader
+        with bag_errors(path):
+            yield reader
     finally:
-        reader.close()
+        with contextlib.suppress(Exception):
+            reader.close()
 
 
 def bag_topics(path: str | os.PathLike) -> dict[str, str]:
@@ -207,7 +215,7 @@ def image_from_message(msg, msgtype: str) -> np.ndarray:
     """
     data = np.asarray(msg.data, dtype=np.uint8).ravel()
     if msgtype.endswith("CompressedImage"):
-        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+        img = decode_image(data, where=f"a CompressedImage (format {msg.format!r})")
         if img is None:
             raise ValueError(f"cannot decode a CompressedImage (format {msg.format!r})")
         if img.dtype not in (np.uint8, np.uint16):
@@ -219,6 +227,7 @@ def image_from_message(msg, msgtype: str) -> np.ndarray:
     ch, dtype = _ENCODINGS[enc]
     itemsize = np.dtype(dtype).itemsize
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    _limits.within("MRSTEREO_MAX_IMAGE_PIXELS", h * w, f"an image message of {w}x{h} pixels")
     if h <= 0 or w <= 0 or step < w * ch * itemsize or data.size < h * step:
         raise ValueError(f"image message of {w}x{h} {enc} has step {step} and {data.size} bytes "
                          f"(needs step >= {w * ch * itemsize} and {h} rows of it)")
@@ -482,16 +491,35 @@ def _read_stream(reader, *, left_topic: str, right_topic: str, odom_topic: str |
     """First pass: the header stamps of the images, the odometry samples and the TF tree."""
     stream = _BagStream(stamps={left_topic: [], right_topic: []})
     wanted = {left_topic, right_topic, odom_topic, *tf_topics}
+    count: dict[str, int] = {}
     for conn, bag_ns, raw in reader.messages(connections=[c for c in reader.connections if c.topic in wanted]):
+        index = count[conn.topic] = count.get(conn.topic, -1) + 1
         if conn.topic in (left_topic, right_topic):
             stream.stamps[conn.topic].append(_stamp_ns(reader.deserialize(raw, conn.msgtype), bag_ns))
+            _limits.within("MRSTEREO_MAX_FRAMES", len(stream.stamps[conn.topic]), f"bag: images on {conn.topic}")
         elif conn.topic == odom_topic:
             msg = reader.deserialize(raw, conn.msgtype)
             p, q = msg.pose.pose.position, msg.pose.pose.orientation
+            _finite_pose(conn.topic, index, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
             stream.odom_samples.append((_stamp_ns(msg, bag_ns), (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)))
         else:
-            stream.tf.add_message(reader.deserialize(raw, conn.msgtype), static=conn.topic == "/tf_static")
+            msg = reader.deserialize(raw, conn.msgtype)
+            for tf in msg.transforms:
+                tr, rot = tf.transform.translation, tf.transform.rotation
+                _finite_pose(f"{conn.topic} ({tf.header.frame_id} -> {tf.child_frame_id})", index,
+                             (tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w))
+            stream.tf.add_message(msg, static=conn.topic == "/tf_static")
     return stream
+
+
+def _finite_pose(topic: str, index: int, translation, quaternion) -> None:
+    """A pose of message ``index`` (from 0) of ``topic``: finite numbers and a quaternion of non-zero length."""
+    values = np.array([*translation, *quaternion], dtype=np.float64)
+    if not np.isfinite(values).all():
+        raise ValueError(f"bag topic {topic}: message {index} has a non-finite pose "
+                         f"(position {list(translation)}, orientation {list(quaternion)})")
+    if np.linalg.norm(values[3:]) < 1e-9:
+        raise ValueError(f"bag topic {topic}: message {index} has a zero orientation quaternion")
 
 
 def _stereo_pairs(stamps: dict[str, list[int]], left_topic: str, right_topic: str,
@@ -629,6 +657,7 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
         raise TypeError(f"calibration must be a StereoCamera, got {type(calibration).__name__}")
     if mount is not None and not isinstance(mount, CameraMount):
         raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
+    note_inputs(bag_inputs(bag))
     check_output_dir("out_dir", out_dir, must_be_empty=True)
     with _open_bag(bag) as reader:
         topics = {c.topic: c.msgtype for c in reader.connections}

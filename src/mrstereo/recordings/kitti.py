@@ -30,11 +30,12 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import cv2
 import numpy as np
 
+from .. import _limits
 from ..camera import Camera, CameraInfo, StereoCamera
 from ..camera.mount import CameraMount
+from ..io import note_inputs, read_image, read_text
 from .manifest import FrameRecord, Manifest, pose_3d_of
 
 __all__ = ["read_kitti_odometry", "is_kitti_odometry", "KITTI_MOUNT"]
@@ -77,7 +78,7 @@ def is_kitti_odometry(path: str | os.PathLike) -> bool:
 def _calibration(path: Path, size: tuple[int, int]) -> StereoCamera:
     """P0 (left) and P1 (right) of ``calib.txt`` as a pre-rectified pair."""
     rows = {}
-    for n, line in enumerate(path.read_text().splitlines(), 1):
+    for n, line in enumerate(read_text(path, "KITTI calibration", max_bytes=1 << 20).splitlines(), 1):
         if ":" not in line:
             continue
         key, values = line.split(":", 1)
@@ -150,6 +151,7 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
     lefts = sorted((seq / "image_0").glob("*.png"))
     if not lefts:
         raise ValueError(f"{seq / 'image_0'} has no PNG images")
+    _limits.within("MRSTEREO_MAX_FRAMES", len(lefts), f"KITTI sequence {seq}: frames")
     rights = [seq / "image_1" / p.name for p in lefts]
     missing = [p for p in rights if not p.is_file()]
     if missing:
@@ -157,9 +159,7 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
     calib_path = seq / "calib.txt"
     if not calib_path.is_file():
         raise FileNotFoundError(f"KITTI calibration not found: {calib_path}")
-    first = cv2.imread(str(lefts[0]), cv2.IMREAD_UNCHANGED)
-    if first is None:
-        raise ValueError(f"cannot read image {lefts[0]}")
+    first = read_image(lefts[0])
     stereo = _calibration(calib_path, (first.shape[1], first.shape[0]))
     indices = [int(p.stem) for p in lefts]
     stamps = None
@@ -186,6 +186,9 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
                                pose_3d=origin if truth is None else truth[i],
                                true_pose_3d=None if truth is None else truth[i])
                    for i, (left, right) in enumerate(zip(lefts, rights)))
-    return Manifest(root=seq.resolve(), calibration=stereo, calibration_path=calib_path.resolve(), mount=mount,
-                    ground_truth_map=None, frames=frames, layout="KITTI odometry", has_poses=truth is not None,
-                    notes=() if truth is not None else (f"no ground truth ({poses_path}): poses from visual odometry",))
+    manifest = Manifest(root=seq.resolve(), calibration=stereo, calibration_path=calib_path.resolve(), mount=mount,
+                        ground_truth_map=None, frames=frames, layout="KITTI odometry", has_poses=truth is not None,
+                        notes=() if truth is not None else
+                        (f"no ground truth ({poses_path}): poses from visual odometry",))
+    note_inputs(manifest.inputs().add(seq / "times.txt", poses_path))
+    return manifest

@@ -25,8 +25,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .. import _limits
 from ..camera import CameraMount, StereoCamera, mount_entry, read_mount_entry, read_stereo, write_stereo
-from ..io import check_output_dir, matching_image, read_image, read_yaml, temporary_dir, write_image, write_pfm
+from ..io import Inputs, matching_image, note_inputs, read_image, read_yaml, staged_new_dir, write_image, write_pfm
 from ..profiling import stage
 from ..transforms import T_from_planar, T_from_position_quaternion, planar_from_T, quaternion_from_rotation
 
@@ -162,6 +163,19 @@ class Manifest:
         stamps = [f.stamp_s for f in self.frames]
         return None if any(s is None for s in stamps) else np.array(stamps, dtype=np.float64)
 
+    def inputs(self) -> Inputs:
+        """What a run over the dataset reads: its folder (no output may go inside it), the manifest, the
+        calibration, the ground-truth map and every frame's files (wherever they lie)."""
+        from ..mapping.rosmap import ros_map_files
+
+        inputs = Inputs(folders=[self.root], kind="dataset")
+        inputs.add(self.root / MANIFEST_NAME, self.calibration_path)
+        if self.ground_truth_map is not None:
+            inputs.add(*ros_map_files(self.ground_truth_map))
+        for r in self.frames:
+            inputs.add(r.left, r.right, r.left_rect, r.right_rect, r.gt_disparity, r.gt_labels, resolved=True)
+        return inputs
+
 
 def rebased(manifest: Manifest, mount: CameraMount) -> Manifest:
     """The recording with its poses moved to the base of ``mount``, the camera staying where it is.
@@ -231,9 +245,12 @@ def read_manifest(path_or_dir: str | os.PathLike) -> Manifest:
     frames_data = data.get("frames")
     if not isinstance(frames_data, list) or not frames_data:
         raise _fail(path, "'frames' must be a non-empty list")
+    _limits.within("MRSTEREO_MAX_FRAMES", len(frames_data), f"manifest {path}: frames")
     frames = tuple(_frame(root, path, k, item) for k, item in enumerate(frames_data))
-    return Manifest(root=root, calibration=calibration, calibration_path=calib_path, mount=mount,
-                    ground_truth_map=gt_map, frames=frames)
+    manifest = Manifest(root=root, calibration=calibration, calibration_path=calib_path, mount=mount,
+                        ground_truth_map=gt_map, frames=frames)
+    note_inputs(manifest.inputs())
+    return manifest
 
 
 def _frame(root: Path, manifest: Path, k: int, item) -> FrameRecord:
@@ -341,8 +358,9 @@ def staged_dataset(out_dir: str | os.PathLike, *, calibration: StereoCamera, mou
                    calibration_name: str = "calibration.yaml", extra: dict | None = None) -> Iterator[DatasetWriter]:
     """Write a new dataset folder: the block adds frames, the end writes calibration and manifest.
 
-    The folder is built in a hidden temporary folder beside ``out_dir`` and renamed into place when
-    the block ends without an error, so a failed or killed run leaves no half-written dataset.
+    The folder is built in a hidden temporary folder and renamed into place when the block ends
+    without an error (:func:`mrstereo.io.staged_new_dir`), so a failed or killed run leaves no
+    half-written dataset.
 
     Parameters
     ----------
@@ -357,17 +375,12 @@ def staged_dataset(out_dir: str | os.PathLike, *, calibration: StereoCamera, mou
     extra : dict, optional
         Further top-level manifest entries (e.g. ``generator:``, ``source:``).
     """
-    out_dir = Path(out_dir)
-    check_output_dir("out_dir", out_dir, must_be_empty=True)
-    with temporary_dir(out_dir.parent, prefix=out_dir.name) as tmp:
+    with staged_new_dir(out_dir) as tmp:
         dataset = DatasetWriter(tmp)
         yield dataset
         write_stereo(tmp / calibration_name, calibration)
         write_manifest(tmp / MANIFEST_NAME, calibration=calibration_name, mount=mount, frames=dataset.frames,
                        ground_truth_map=dataset.ground_truth_map, extra=extra)
-        if out_dir.exists():
-            out_dir.rmdir()          # empty, checked above
-        os.replace(tmp, out_dir)
 
 
 def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -377,6 +390,8 @@ def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.nda
     rectified pair is listed, e.g. to test an estimated calibration. 16-bit images are scaled
     by :func:`matching_image`.
     """
+    if not isinstance(record, FrameRecord):
+        raise TypeError(f"record must be a FrameRecord, got {type(record).__name__}")
     rectified = record.has_rectified and not (prefer_raw and record.has_raw)
     left, right = (record.left_rect, record.right_rect) if rectified else (record.left, record.right)
     with stage("read"):

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import _checks
+from .. import _checks, _limits
 from ..recordings.manifest import staged_dataset
 from .groundtruth import ground_truth_map
 from .paths import PATH_KINDS, drifted_poses, sequence_path, speed_path, waypoint_path
@@ -18,6 +18,10 @@ from .randomize import random_world
 from .render import SensorModel, default_stereo, render_stereo_frame
 from .scene import default_scene
 from .street import street_world
+
+BYTES_PER_PIXEL = 7.0
+"""Disk space of one pixel of a written frame: ground-truth disparity (PFM, 4 bytes), four PNG images and the
+labels (about 3 bytes of compressed texture)."""
 
 __all__ = ["write_synthetic_dataset", "corridor_path", "poses_along"]
 
@@ -36,6 +40,7 @@ def corridor_path(n_stops: int) -> np.ndarray:
 def poses_along(waypoints_xy, n_stops: int) -> np.ndarray:
     """``n_stops`` robot poses (n_stops, 3) evenly spaced along a polyline; yaw follows the path."""
     n_stops = _checks.positive_int("n_stops", n_stops)
+    _checks.fits_in_memory("n_stops", 48.0 * n_stops, f"{n_stops} poses")
     way = np.asarray(waypoints_xy, dtype=np.float64)
     if way.ndim != 2 or way.shape[1] != 2 or len(way) < 2 or not np.isfinite(way).all():
         raise ValueError(f"waypoints_xy must be (K >= 2, 2) finite numbers, got shape {way.shape}")
@@ -65,6 +70,13 @@ def _check_world_options(path: str, randomize: bool, wall_texture, odometry_nois
         raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
     if odometry_noise is not None and len(odometry_noise) != 2:
         raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
+
+
+def _check_sizes(out_dir: Path, n_frames: int, width: int, height: int, supersample: int) -> None:
+    _checks.fits_in_memory("width and height", 64.0 * width * height * supersample ** 2,
+                           f"rendering {width}x{height} images")
+    _checks.fits_on_disk("n_frames", BYTES_PER_PIXEL * width * height * n_frames, out_dir,
+                         f"{n_frames} frames of {width}x{height}")
 
 
 def _frame_poses(path: str, n_frames: int, waypoints_xy, step_m: float,
@@ -136,11 +148,10 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     from tqdm import tqdm
 
     seed = _checks.positive_int("seed", seed, minimum=0)
-    n_frames = _checks.positive_int("n_frames", n_frames)
+    n_frames = _limits.within("MRSTEREO_MAX_FRAMES", _checks.positive_int("n_frames", n_frames), "n_frames")
     width, height = _checks.positive_int("width", width, minimum=16), _checks.positive_int("height", height, minimum=16)
     supersample = _checks.positive_int("supersample", supersample)
-    _checks.fits_in_memory("width and height", 64.0 * width * height * supersample ** 2,
-                           f"rendering {width}x{height} images")
+    _check_sizes(Path(out_dir).absolute(), n_frames, width, height, supersample)
     _check_world_options(path, randomize, wall_texture, odometry_noise)
     rate = _checks.finite_number("frame_rate_hz", frame_rate_hz, positive=True)
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}

@@ -25,6 +25,8 @@ def occupied_footprint(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.0
     The floor and ceiling slabs are not footprints; parts entirely above or
     below ``height_band_m`` (e.g. the lintel over a door) are ignored.
     """
+    _checks.instance("scene", scene, Scene)
+    _checks.instance("grid", grid, GridSpec)
     z_lo, z_hi = _checks.ordered_pair("height_band_m", height_band_m)
     rows, cols = grid.shape
     res = grid.resolution_m
@@ -53,6 +55,7 @@ def obstacle_footprints(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.
     boxes and cylinders of label ``LABEL_OBSTACLE + k``, e.g. a table's top and legs together,
     as in the frames' label images); empty footprints (outside the grid or the height band) are
     left out."""
+    _checks.instance("scene", scene, Scene)
     labels = sorted({p.label for p in (*scene.boxes, *scene.cylinders) if p.label >= LABEL_OBSTACLE})
     footprints = {}
     for label in labels:

@@ -127,6 +127,11 @@ class Scene:
     free_regions_m: tuple[tuple[float, float, float, float], ...] = ()
 
     def __post_init__(self) -> None:
+        for name, kind in (("boxes", Box), ("cylinders", Cylinder), ("decals", Decal), ("lights", Light),
+                           ("materials", Material)):
+            items = getattr(self, name)
+            if isinstance(items, (str, bytes)) or not all(isinstance(item, kind) for item in items):
+                raise TypeError(f"{name} must be a sequence of {kind.__name__}, got {items!r:.60}")
         n_mat = len(self.materials)
         for prim in (*self.boxes, *self.cylinders, *self.decals):
             if not 0 <= prim.material < n_mat:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
+from ..calibration import planar_grid
 from ..camera import Camera, CameraInfo, StereoCamera
 from ..transforms import rotation_from_rpy
 from .render import _ray_table, sensor_noise_sigma
@@ -43,10 +44,13 @@ class RenderedTarget:
 
 
 def target_points(board: tuple[int, int], spacing_m: float) -> np.ndarray:
-    """Target-frame points (N, 3): ``(i * s, j * s, 0)`` for j rows, i columns, row-major."""
-    nx, ny = board
-    j, i = np.mgrid[0:ny, 0:nx]
-    return np.stack([i.ravel() * spacing_m, j.ravel() * spacing_m, np.zeros(nx * ny)], -1)
+    """Target-frame points (N, 3): ``(i * s, j * s, 0)`` for j rows, i columns, row-major
+    (:func:`mrstereo.calibration.planar_grid`)."""
+    try:
+        nx, ny = board
+    except (TypeError, ValueError):
+        raise TypeError(f"board must be (columns, rows), got {board!r}") from None
+    return planar_grid(nx, ny, spacing_m)
 
 
 def _board_extent(target: str, board: tuple[int, int], s: float) -> tuple[float, float, float, float]:

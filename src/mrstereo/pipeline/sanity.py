@@ -1,0 +1,170 @@
+"""Suspicious stereo input, named before a run builds a confident map from it.
+
+Two mistakes of a recording look like valid input to every later stage and give a map with phantom
+obstacles and false free space: the same camera stream recorded as left and right (a duplicated topic),
+and the left and right streams swapped. Both show on the first frames:
+
+- identical streams: most pixels of a pair are equal (two cameras never agree pixel for pixel; in a
+  duplicated stream all do);
+- swapped streams: the scene is shifted the wrong way. In a rectified pair a point of the right image
+  lies left of (or at) its place in the left image, ``x_right = x_left - d`` with ``d >= 0``; OpenCV's
+  semi-global matcher run over disparities of both signs (a probe, at most 320 px wide) finds mostly
+  negative ones in a swapped pair. A raw pair is rectified both ways round (each image with the other
+  camera's maps): a swapped one matches far better the other way.
+
+The thresholds were set on every real pair of the sample data (Middlebury, KITTI 2012/2015, KITTI
+odometry 06, EuRoC, OpenLORIS) and the synthetic corridor, none of which is flagged, while each of them
+duplicated or swapped is: docs/errors.md has the measurement. Conventions: docs/conventions.md.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..camera import StereoCamera
+from ..recordings.manifest import Manifest, frame_pair
+
+__all__ = ["PairCheck", "check_pair", "warn_pair", "check_pair_streams", "IDENTICAL_SHARE", "SWAPPED_SHARE"]
+
+IDENTICAL_SHARE = 0.9
+"""A pair with at least this share of equal pixels is a duplicated stream."""
+SWAPPED_SHARE = 0.65
+"""A pair is swapped when at least this share of the pixels matched either way match only the other way round."""
+_PROBE_WIDTH = 320
+_MIN_MATCHED = 200
+
+
+@dataclass(frozen=True)
+class PairCheck:
+    """What :func:`check_pair` saw in one stereo pair.
+
+    Attributes
+    ----------
+    identical_share : float
+        Share of pixels equal in both images (as read).
+    matched : int
+        Probe pixels matched with a positive disparity, the pair as given.
+    matched_exchanged : int
+        The same with left and right exchanged: a rectified pair's negative disparities; a raw pair
+        rectified the other way round.
+    median_disparity_px : float
+        Median disparity of the pair as given, full-resolution pixels (NaN: too few matched).
+    """
+
+    identical_share: float
+    matched: int
+    matched_exchanged: int
+    median_disparity_px: float
+
+    @property
+    def identical(self) -> bool:
+        return self.identical_share >= IDENTICAL_SHARE
+
+    @property
+    def exchanged_share(self) -> float:
+        """Share of the matched pixels that match only with left and right exchanged."""
+        total = self.matched + self.matched_exchanged
+        return self.matched_exchanged / total if total else float("nan")
+
+    @property
+    def swapped(self) -> bool:
+        return (not self.identical and self.matched + self.matched_exchanged >= _MIN_MATCHED
+                and self.exchanged_share >= SWAPPED_SHARE)
+
+    def describe(self) -> str:
+        if self.identical:
+            return f"{100 * self.identical_share:.1f} % of the pixels of left and right are equal"
+        return (f"{100 * self.exchanged_share:.0f} % of the matched pixels match only with left and right "
+                f"exchanged (median disparity as given {self.median_disparity_px:.1f} px)")
+
+
+def _gray8(image: np.ndarray) -> np.ndarray:
+    if image.ndim == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.shape[2] == 3 else image[:, :, 0]
+    if image.dtype != np.uint8:
+        image = np.clip(np.asarray(image, np.float32) * (1.0 if image.dtype.kind == "f" else 1 / 257.0), 0, 255)
+        image = image.astype(np.uint8)
+    return np.ascontiguousarray(image)
+
+
+def _probe(left: np.ndarray, right: np.ndarray) -> tuple[int, int, float]:
+    """``(positive, negative, median)``: pixels OpenCV's SGBM matches at positive and negative disparities
+    (of both signs, on at most :data:`_PROBE_WIDTH` columns) and their median in full-resolution pixels."""
+    gl, gr = _gray8(left), _gray8(right)
+    scale = min(1.0, _PROBE_WIDTH / gl.shape[1])
+    if scale < 1.0:
+        size = (max(16, round(gl.shape[1] * scale)), max(16, round(gl.shape[0] * scale)))
+        gl, gr = (cv2.resize(g, size, interpolation=cv2.INTER_AREA) for g in (gl, gr))
+    reach = 16 * max(1, min(4, gl.shape[1] // 64))          # disparities -reach .. reach - 1 (probe pixels)
+    if gl.shape[1] <= 2 * reach + 5 or gl.shape[0] < 8:
+        return 0, 0, float("nan")
+    matcher = cv2.StereoSGBM_create(minDisparity=-reach, numDisparities=2 * reach, blockSize=5, P1=8 * 25,
+                                    P2=32 * 25, uniquenessRatio=10, speckleWindowSize=50, speckleRange=2,
+                                    disp12MaxDiff=1)
+    d = matcher.compute(gl, gr).astype(np.float32) / 16.0
+    valid = d > -reach              # SGBM marks "no match" with minDisparity - 1
+    valid[:, :reach] = False        # columns without a partner at every disparity
+    valid[:, -reach:] = False
+    values = d[valid & (np.abs(d) >= 0.5)]
+    median = float(np.median(values)) / scale if values.size >= _MIN_MATCHED else float("nan")
+    return int(np.count_nonzero(values > 0)), int(np.count_nonzero(values < 0)), median
+
+
+def check_pair(left: np.ndarray, right: np.ndarray, stereo: StereoCamera | None = None, *,
+               rectified: bool = True) -> PairCheck:
+    """Look for a duplicated or swapped stream in one pair (images as read; ``rectified=False``: a raw pair,
+    rectified with ``stereo`` both ways round)."""
+    if left.shape != right.shape:
+        raise ValueError(f"left and right images differ in size: {left.shape} and {right.shape}")
+    identical = float(np.mean(left == right))
+    if rectified or stereo is None:
+        positive, negative, median = _probe(left, right)
+        return PairCheck(identical, positive, negative, median)
+    positive, _, median = _probe(*stereo.rectify(left, right))
+    exchanged, _, _ = _probe(*stereo.rectify(right, left))
+    return PairCheck(identical, positive, exchanged, median)
+
+
+_PROBLEMS = (("identical", "identical left and right images (a duplicated camera stream?)",
+              "the result would show phantom obstacles"),
+             ("swapped", "left and right images that look swapped",
+              "the result would show false obstacles and free space; check which camera is left"))
+
+
+def warn_pair(left: np.ndarray, right: np.ndarray, stereo: StereoCamera | None = None, *,
+              rectified: bool = True) -> str | None:
+    """Warn (``warnings.warn``) when one pair looks duplicated or swapped (:func:`check_pair`); return the text."""
+    check = check_pair(left, right, stereo, rectified=rectified)
+    for flag, what, hint in _PROBLEMS:
+        if getattr(check, flag):
+            text = f"the pair has {what}: {check.describe()}; {hint}"
+            warnings.warn(text, UserWarning, stacklevel=2)
+            return text
+    return None
+
+
+def check_pair_streams(manifests, *, n_frames: int = 3) -> list[str]:
+    """Warn (``warnings.warn``, one ``mrstereo: warning:`` line on the command line) about datasets whose
+    first ``n_frames`` frames show identical or swapped left and right streams; return the warnings."""
+    if isinstance(manifests, Manifest):
+        manifests = [manifests]
+    found = []
+    for m in manifests:
+        checks = []
+        for k, record in enumerate(m.frames[:n_frames]):
+            try:
+                left, right, rectified = frame_pair(record)
+                checks.append((k, check_pair(left, right, m.calibration, rectified=rectified)))
+            except (OSError, ValueError, TypeError):      # the run reports an unreadable frame itself
+                continue
+        for flag, what, hint in _PROBLEMS:
+            bad = [(k, c) for k, c in checks if getattr(c, flag)]
+            if bad and len(bad) * 2 > len(checks):
+                seen = "; ".join(f"frame {k}: {c.describe()}" for k, c in bad)
+                found.append(f"dataset {m.root} has {what}: {seen}; {hint}")
+    for text in found:
+        warnings.warn(text, UserWarning, stacklevel=2)
+    return found
