@@ -32,19 +32,30 @@ MEMORY_LIMIT_MB = 1500.0
 
 # ------------------------------------------------------------------------------------------ running a command
 
+# A small launcher runs the command and reports its rusage: a child forked from this test process would count
+# the test process's pages (copied at fork) in its ``ru_maxrss``, a child of the launcher only its own.
+LAUNCHER = """
+import os, subprocess, sys, threading
+proc = subprocess.Popen(sys.argv[3:])
+timer = threading.Timer(float(sys.argv[2]), proc.kill)
+timer.start()
+_, status, usage = os.wait4(proc.pid, 0)
+timer.cancel()
+with open(sys.argv[1], "w") as f:
+    f.write(f"{usage.ru_utime + usage.ru_stime} {usage.ru_maxrss}")
+sys.exit(os.waitstatus_to_exitcode(status))
+"""
+
+
 def run_cli(args, workdir: Path, *, env: dict | None = None, timeout_s: float = 60.0):
     """``(exit code, stderr, CPU seconds, peak MB)`` of ``python -m mrstereo ARGS`` in a fresh process."""
     environment = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg", **(env or {}))
-    out, err = workdir / "stdout.txt", workdir / "stderr.txt"
+    out, err, usage = workdir / "stdout.txt", workdir / "stderr.txt", workdir / "usage.txt"
     with open(out, "wb") as fo, open(err, "wb") as fe:
-        proc = subprocess.Popen([sys.executable, "-m", "mrstereo", *[str(a) for a in args]], stdout=fo, stderr=fe,
-                                env=environment, cwd=workdir)
-        timer = threading.Timer(timeout_s, proc.kill)
-        timer.start()
-        _, status, usage = os.wait4(proc.pid, 0)
-        timer.cancel()
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    return proc.returncode, err.read_text(errors="replace"), usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0
+        proc = subprocess.run([sys.executable, "-c", LAUNCHER, str(usage), str(timeout_s), sys.executable, "-m",
+                               "mrstereo", *[str(a) for a in args]], stdout=fo, stderr=fe, env=environment, cwd=workdir)
+    seconds, peak_kb = (float(v) for v in usage.read_text().split())
+    return proc.returncode, err.read_text(errors="replace"), seconds, peak_kb / 1024.0
 
 
 def refused(args, workdir: Path, *, must: str, env: dict | None = None) -> str:
