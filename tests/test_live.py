@@ -429,18 +429,18 @@ def test_memory_stays_flat_over_thousands_of_frames(tmp_path):
     # memory, which also holds the kernels numba compiles on the way and the allocator's arenas
     tracemalloc.start()
     try:
-        run = run_live(_Looped(manifest, 3000), tmp_path / "out", config=SMALL,
+        run = run_live(_Looped(manifest, 2000), tmp_path / "out", config=SMALL,
                        live=LiveConfig(save_every_s=1.0, odometry="visual"),
                        on_save=lambda r: samples.append((r.frames_processed, tracemalloc.get_traced_memory()[0] / 1e6,
                                                          r.memory_mb)))
     finally:
         tracemalloc.stop()
-    assert run.frames_processed == 3000 and run.frames_mapped > 2000
+    assert run.frames_processed == 2000 and run.frames_mapped > 1300
     samples = np.array(samples)
     early = samples[(samples[:, 0] > 300) & (samples[:, 0] < 1000)]
-    late = samples[samples[:, 0] > 2000]
+    late = samples[samples[:, 0] > 1500]
     assert len(early) and len(late)
-    # a frame's disparity alone is 77 kB (160x120 float32): kept frames would add 150 MB over 2000 frames
+    # a frame's disparity alone is 77 kB (160x120 float32): kept frames would add 80 MB over 1000 frames
     # MB: the trajectory (144 B a frame) is held by the loop, the run and the snapshot being written
     assert np.median(late[:, 1]) - np.median(early[:, 1]) < 4.0, samples
     assert np.median(late[:, 2]) - np.median(early[:, 2]) < 100.0, samples
