@@ -1,22 +1,11 @@
 """Safe file handling: protected inputs, atomic writes, staged output folders, temporaries, bounded YAML.
 
-- **Inputs are protected.** An :class:`Inputs` set holds every file a command reads and every folder it
-  reads as a whole (a dataset, a bag, a benchmark scene). :func:`check_outputs` and
-  :func:`check_output_dir` refuse, before any work, an output that is one of those files (also through a
-  symbolic or hard link) or lies inside one of those folders. Inside :func:`protecting_inputs` (every
-  ``mrstereo`` command runs inside one) the readers of :mod:`mrstereo.io` add what they read to the
-  command's set, and every writer refuses again at the moment of writing: :func:`atomic_write`,
-  :func:`staged_dir`, :func:`staged_new_dir` and :func:`replace_dir` never replace an input.
-- **Writes are atomic.** A file is written under a temporary name beside its target and renamed into
-  place; a set of files is written into a temporary folder and moved in with interrupts held back
-  (:func:`uninterruptible`), so Ctrl-C leaves the old set or the new one; a folder is swapped in one step.
-- **Only mrstereo's temporaries are removed.** Their names carry a marker no other program writes,
-  ``.mrstereo-tmp-PID-XXXXXXXX.NAME``; :func:`remove_stale_temporaries` removes those whose process is gone.
-- **YAML is read with bounds.** :func:`parse_yaml` builds the data from the parser's events without the
-  intermediate node graph and counts every value, aliases expanded: an alias bomb or a file beyond
-  ``MRSTEREO_MAX_YAML_NODES`` values is refused after reading at most that many.
-
-Conventions: docs/conventions.md; the guarantees: docs/errors.md.
+An :class:`Inputs` set holds what a command reads; :func:`check_outputs`, :func:`check_output_dir`
+and every writer (:func:`atomic_write`, :func:`staged_dir`, :func:`staged_new_dir`,
+:func:`replace_dir`) refuse to replace an input. Writes go to a temporary beside the target and are
+renamed into place; only mrstereo's own temporaries (``.mrstereo-tmp-PID-XXXXXXXX.NAME``) are ever
+removed; :func:`parse_yaml` counts every value, aliases expanded, up to ``MRSTEREO_MAX_YAML_NODES``.
+The guarantees: docs/errors.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

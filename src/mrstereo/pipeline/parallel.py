@@ -1,29 +1,12 @@
 """Scale-out: an ordered parallel map, in-process or on a Dask cluster.
 
-Per-frame work of the chain (rectify, match, reject, triangulate) is
-independent from frame to frame; fusion into the grid is an ordered
-reduction. :func:`map_ordered` runs the independent part:
-
-- in this process (``workers=None, scheduler=None``, the default, so nothing
-  changes for a single user);
-- on ``workers`` single-threaded workers (``workers=N``): a pool of threads of
-  this process by default (every hot loop is a numba kernel compiled with
-  ``nogil=True`` or an OpenCV call, both release the GIL, so threads scale like
-  processes without their start-up and without pickling images and results;
-  no Dask cluster is started), or the worker processes of a local
-  ``dask.distributed.LocalCluster`` (``processes=True``);
-- on an existing ``dask.distributed`` cluster (``scheduler="tcp://host:8786"``
-  or a ``distributed.Client``). Its workers must see the same files (the
-  dataset paths are sent, not the images) and have mrstereo installed.
-
-Results come back in input order, whatever order the workers finish in, so a
-reduction over them gives the same result for every worker count. Inside
-workers, numba and OpenCV run on one thread each (``numba.set_num_threads(1)``
-per task, ``cv2.setNumThreads(1)`` while worker threads run; worker processes
-also get ``NUMBA_NUM_THREADS=1``) so that N workers on N cores do not
-oversubscribe them. See docs/scale-out.md.
-
-Conventions: docs/conventions.md.
+Per-frame work of the chain (rectify, match, reject, triangulate) is independent from frame to
+frame; fusion into the grid is an ordered reduction. :func:`map_ordered` runs the independent
+part in this process, on a pool of worker threads (the hot loops release the GIL), on a local
+Dask cluster's processes, or on an existing ``dask.distributed`` cluster. Results come back in
+input order, so a reduction over them is the same for every worker count; inside workers numba
+and OpenCV run on one thread each so that N workers on N cores do not oversubscribe them.
+User guide: docs/scale-out.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -1,33 +1,16 @@
 """Rejection of disparity on uniform image areas: texture / ground suppression, paper eq. (13).
 
-Block matching on a patch without texture (a plain floor, a white wall) finds
-a minimum of the NSSD cost (eq. 9) that is decided by noise; the resulting
-"ghost points" scatter in depth and show up as false obstacles. Section 3.5 of
-the paper models the gray patches of the uniform ground as a Gaussian with a
-small standard deviation and rejects the disparity wherever the local patch
-statistics ``(mu_patch, sigma_patch)`` fall below an experimental threshold T:
+Block matching on a patch without texture finds a minimum of the NSSD cost (eq. 9) decided by
+noise. Section 3.5 of the paper rejects the disparity wherever the local patch statistics
+``(mu_patch, sigma_patch)`` fall below an experimental threshold T:
 
     d(x, y) = invalid   if (mu_patch, sigma_patch) <= T           (13)
               d(x, y)   otherwise
 
-Two readings of ``(mu, sigma) <= T`` are implemented:
-
-* **texture test** (default, no reference image needed): reject where the
-  patch standard deviation ``sigma <= texture_threshold`` (T of eq. 13, gray
-  levels on a 0-255 scale); optionally only where the patch mean also lies in a
-  window ``mean_range`` (e.g. the brightness of the floor), so that a dark but
-  textured region is never rejected by its mean alone.
-* **learned floor model** (the paper's "we have measured means and standard
-  deviations ... with ground areas"): :func:`learn_floor_model` fits a Gaussian
-  to ``(mu, sigma)`` over the floor pixels of a reference image of the empty
-  floor; a patch is rejected when its mean lies within ``k_sigma`` standard
-  deviations of the floor's mean and its standard deviation is no larger than
-  the floor's mean sigma plus ``k_sigma`` standard deviations (texture that
-  is no richer than the floor's).
-
-Rejected disparities become NaN (the library's "invalid"; the paper writes 0).
-Patch statistics use box filters on ``I`` and ``I^2`` (``cv2.boxFilter``), so
-the cost is independent of the window size. Conventions: docs/conventions.md.
+Two readings of ``(mu, sigma) <= T``: the texture test (``sigma <= texture_threshold``, optionally
+only where the mean lies in ``mean_range``) and a learned floor model (:func:`learn_floor_model`,
+a Gaussian over the floor's ``(mu, sigma)``). Rejected disparities become NaN. Patch statistics
+use box filters on ``I`` and ``I^2``. User guide: docs/obstacles.md; conventions: docs/conventions.md.
 
 References
 ----------
