@@ -1,14 +1,8 @@
 """Command-line interface: parse, validate, call one library function per command.
 
-Every failure ends as one line on stderr and a non-zero exit code, never a traceback:
-
-- ``mrstereo: error: ...`` and exit code 2 for everything the user can fix (a usage
-  error, a missing or unreadable file, a bad number, a full disk);
-- ``mrstereo: interrupted`` and exit code 130 for Ctrl-C (SIGINT) or SIGTERM, within a
-  few seconds whatever runs (a Dask cluster starting or stopping included);
-- ``mrstereo: error: internal error ...`` and exit code 1 for a bug, with a request to
-  report it. ``MRSTEREO_DEBUG=1`` shows the traceback instead (docs/errors.md).
-
+Every failure ends as one line on stderr, never a traceback: ``mrstereo: error: ...`` (exit 2) for
+what the user can fix, ``mrstereo: interrupted`` (exit 130) for Ctrl-C or SIGTERM, ``mrstereo: error:
+internal error ...`` (exit 1) for a bug (``MRSTEREO_DEBUG=1`` shows the traceback): docs/errors.md.
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations

@@ -1,20 +1,11 @@
 """Matcher settings: one frozen dataclass per concern, composed by :class:`MatchingConfig`, and three presets.
 
-``paper`` is exactly the paper's matcher (section 3.3-3.4): NSSD of eq. (9) on the
-raw intensities, winner-take-all eq. (10), a median filter per level, gating
-(eq. 11) and union (eq. 12), nothing else. ``robust`` (the default) adds what
-robot users expect from OpenCV StereoBM / ROS stereo_image_proc: an x-Sobel
-pre-filter (gain/offset differences of real cameras), ZNCC, a left-right check,
-uniqueness ratio, maximum cost, sub-pixel parabola and speckle removal, plus four steps
-beyond the paper: fewer levels for a small search range, full-resolution re-scoring of
-the coarsest level, a guard against window "fattening" at depth edges and the filling of
-short gaps between two ends on one surface. ``mapping`` is ``robust`` with stricter
-acceptance, no gap filling and the cross-band ambiguity test, for the robot's map. Defaults were
-chosen by measurement on Middlebury/KITTI (docs/matching.md).
-
-The groups are plain values: :func:`mrstereo.matching.compute_disparity` unpacks them into
-the keyword arguments of its steps, and no kernel sees a config object.
-Conventions: docs/conventions.md.
+``paper`` is exactly the paper's matcher (section 3.3-3.4: NSSD eq. (9), winner-take-all eq. (10),
+median, gating eq. (11), union eq. (12)); ``robust`` (the default) adds what OpenCV StereoBM / ROS
+stereo_image_proc users expect and the steps beyond the paper; ``mapping`` is ``robust`` with
+stricter acceptance for the robot's map. What each adds and how the defaults were chosen:
+docs/matching.md ("Presets"). No kernel sees a config object: :func:`mrstereo.matching.compute_disparity`
+unpacks the groups into keyword arguments. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

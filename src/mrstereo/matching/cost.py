@@ -1,19 +1,9 @@
 """Area correlation on one image pair and one disparity band (paper section 3.3).
 
-The per-level solver of the multi-range matcher: image pre-filters, the NSSD
-cost of eq. (9) (or ZNCC, or the integer engine's normalized SAD), and winner-take-all,
-eq. (10). Conventions:
-docs/conventions.md (disparity ``d = x_left - x_right >= 0``).
-
-Sign convention. The paper writes eq. (9) as
-
-    SSD(x, y, d) = sum_ij [I_L(x+i, y+j) - I_R(x+i+d, y+j)]^2
-                   / sqrt(sum_ij I_L(x+i, y+j)^2 * sum_ij I_R(x+i+d, y+j)^2)
-
-with the right pixel at ``x + d``. mrstereo uses ``x_right = x_left - d`` with
-``d >= 0`` (a point in front of the rig appears further left in the right image), so
-the paper's ``d`` is our ``-d``: we evaluate ``I_R(x + i - d, y + j)``. The paper's
-search ``min d <= d <= max d`` over negative values is our search over ``[d_lo, d_hi]``.
+The per-level solver of the multi-range matcher: image pre-filters, the NSSD cost of eq. (9)
+(or ZNCC, or the integer engine's normalized SAD), and winner-take-all, eq. (10). The paper puts
+the right pixel at ``x + d``; mrstereo uses ``x_right = x_left - d`` with ``d >= 0``, so eq. (9) is
+evaluated on ``I_R(x + i - d, y + j)`` (docs/conventions.md).
 """
 from __future__ import annotations
 

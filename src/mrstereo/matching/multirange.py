@@ -1,15 +1,9 @@
 """Multi-range matching (paper sections 3.1, 3.2, 3.4; eq. 11-12).
 
-The depth range of interest is split into bands of disparity. Each band is searched
-on its own image pair whose HORIZONTAL resolution is reduced by a decimation factor
-``k`` (near objects, large disparities: coarse images; far objects: full
-resolution), so that every level searches only a few disparities. Each level's
-result is median filtered, gated to its band (eq. 11), up-sampled back to full
-width with disparities multiplied by the level's horizontal scale (Step 2), and the
-levels are united (eq. 12).
-
-The driver :func:`run_levels` is generic over the per-level solver, like scikit-image's
-coarse-to-fine optical-flow driver. Conventions: docs/conventions.md.
+Each disparity band is searched on its own pair of horizontally decimated images (near objects:
+coarse images); each level is median filtered, gated to its band (eq. 11), up-sampled to full
+width and the levels are united (eq. 12). :func:`run_levels` is generic over the per-level
+solver. User guide: docs/matching.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -1,14 +1,9 @@
 """From one stereo pair to obstacle points, a point cloud and a virtual laser scan.
 
-rectify (unless already rectified) -> multi-range matching (eq. 9-12,
-:func:`mrstereo.matching.compute_disparity`) -> rejection of uniform patches
-(eq. 13, :mod:`mrstereo.rejection`) -> floor (given mount or estimated) ->
-triangulation into the robot frame (eq. 14-16) -> obstacle / floor split ->
-laser scan. These are the functions behind ``mrstereo points`` and
-``mrstereo scan``. Pixels nearer than the search covers (the matcher's ``too_near``) are
-fail-safe: obstacle points at the near limit along their rays
-(:func:`mrstereo.geometry.obstacles.detect_obstacles`), and a scan return at
-``range_min`` on their bearings (docs/obstacles.md). Conventions: docs/conventions.md.
+rectify -> multi-range matching (eq. 9-12) -> rejection (eq. 13) -> floor -> triangulation into
+the robot frame (eq. 14-16) -> obstacle / floor split -> laser scan: the functions behind
+``mrstereo points`` and ``mrstereo scan``; too-near pixels are fail-safe (docs/obstacles.md).
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -1,15 +1,10 @@
 """The whole chain for a sequence: rectify -> match -> reject -> 3D -> occupancy grid.
 
-Per frame (independent, so it can run anywhere): :func:`observe_frame` reads a stereo pair of a
-dataset manifest, rectifies it with the calibration, matches it with the multi-range approach
-(paper eq. 9-12), rejects uniform patches (eq. 13), triangulates (eq. 14-16), splits obstacle
-from floor points in the robot frame and moves them into the world frame with the frame's pose.
-Then an ordered reduction, :func:`map_from_observations`, fuses them into a log-odds (or union)
-occupancy grid (paper section 5.2) and compares it with the ground-truth map.
-:func:`build_map` runs both over a manifest; :func:`write_map_outputs` writes the ROS map,
-figures and metrics. Without a camera mount, :func:`floor_for_run` estimates the floor once from
-the first frames that show enough of it and the run uses that mount (reported, with its
-confidence, in ``MapRun.floor`` and metrics.json). Conventions: docs/conventions.md.
+:func:`observe_frame` takes one frame through matching (eq. 9-12), rejection (eq. 13) and
+triangulation (eq. 14-16) into world-frame points; :func:`map_from_observations` fuses them in
+order into the occupancy grid (paper section 5.2); :func:`build_map` runs both over a manifest,
+:func:`write_map_outputs` writes the results, :func:`floor_for_run` finds the mount when there is
+none. User guide: docs/mapping.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -1,15 +1,9 @@
 """A plain pair of image folders with a calibration as a recording.
 
-Layout: a folder holding a left and a right image folder, one of the pairs of
-:data:`FOLDER_PAIRS` (``left/ right/``, ``cam0/ cam1/``, ``image_0/ image_1/``, ...), and a
-calibration: given (``calibration=``, the ``--calib`` of a command), or one file of a known
-name in the folder (:data:`CALIBRATION_NAMES`). Images of the two folders are paired by file name
-(else by order, when both hold as many). Stamps come from the file names when they are time
-stamps (``1403715273262142976.png`` in ns, ``1560004885.437324.png`` in s: see
-:func:`stamps_from_names`), else from a frame rate (``rate_hz``), else the frames have none.
-The recording has no poses (visual odometry gives them) and no mount unless the calibration
-holds one (the floor is then found in the images). Conventions: docs/conventions.md; the
-formats: docs/dataset.md.
+A left and a right folder (:data:`FOLDER_PAIRS`) and a calibration given or found by name
+(:data:`CALIBRATION_NAMES`); images paired by name, else by order; stamps from the names
+(:func:`stamps_from_names`) or ``rate_hz``. No poses, no mount unless the calibration holds one.
+The layout: docs/dataset.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -1,17 +1,8 @@
 """Recordings on disk: the dataset manifest shared by bags, synthetic worlds and the pipeline.
 
-Layout (docs/dataset.md)::
-
-    DIR/manifest.yaml        calibration, mount, ground_truth_map, frames
-    DIR/calibration.yaml     stereo calibration (mrstereo.camera.write_stereo)
-    DIR/gt_map.yaml, .pgm    ROS map_server ground-truth map (optional)
-    DIR/left/000000.png ...  raw images; left_rect/, right_rect/ rectified;
-    DIR/gt_disparity/*.pfm   ground-truth disparity (optional); gt_labels/*.png
-
-Paths in the manifest are relative to DIR. ``mrstereo export`` (a ROS bag) and the
-synthetic world (:mod:`mrstereo.world.dataset`) write it with :func:`staged_dataset`;
-``map``, ``batch`` and the pipeline read it. A frame may give only raw or only rectified images,
-and every ground-truth entry is optional. Conventions: docs/conventions.md.
+``DIR/manifest.yaml`` (calibration, mount, ground-truth map, frames; paths relative to ``DIR``),
+written with :func:`staged_dataset` by ``mrstereo export`` and the synthetic world, read by
+``map``, ``batch`` and the pipeline. The layout: docs/dataset.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
