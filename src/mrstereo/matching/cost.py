@@ -403,12 +403,8 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
                       boxes=None) -> tuple[np.ndarray, np.ndarray]:
     """Re-score a coarse disparity field at full resolution (beyond the paper).
 
-    A level of decimation ``k`` knows its winner only to about ``+-k/2`` full-resolution
-    pixels. For each offset ``o`` in ``[-half_px, half_px]`` the full-resolution cost (eq. 9
-    or ZNCC) is evaluated with every window pixel ``p`` shifted by ``round(c(p)) + o``
-    (exactly ``cost(x, c + o)`` where the coarse field ``c`` is constant over the window);
-    the best offset gets the parabola offset. A winner on the edge of the offsets means
-    the true minimum lies outside them: the pixel becomes invalid rather than keeping a guess.
+    The full-resolution cost (eq. 9 or ZNCC) is evaluated at offsets ``[-half_px, half_px]``
+    around the coarse field; the best gets the parabola offset, a winner on the edge is invalid.
 
     Parameters
     ----------
@@ -424,10 +420,8 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     max_cost : float, optional
         Winners costing more become invalid.
     boxes : sequence of (row0, row1, col0, col1), optional
-        Half-open boxes that hold every wanted pixel (clusters, e.g. connected components):
-        the running sums then cover each box instead of every row and column spanned by all
-        the wanted pixels (the near guard's clusters lie scattered over the image), the boxes
-        in parallel (:func:`._kernels.refine_boxes`). Same results.
+        Half-open boxes holding every wanted pixel: the sums cover each box only (scattered
+        clusters), the boxes in parallel. Same results.
 
     Returns
     -------

@@ -301,10 +301,7 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
         Rectified images (gray or BGR; uint8 or float), same size.
     max_disparity_px : float, optional
         Search ``[0, D]``, split into bands ``[0, D/4], [D/4, D/2], [D/2, D]`` at
-        decimations 1, 2, 4 when ``D >= 32``; for a smaller range fewer levels
-        (``[0, D/2], [D/2, D]`` at 1, 2 when ``D >= 16``, else ``[0, D]``: see
-        ``config.min_band_level_px``); one band ``[0, D]`` when ``config.multi_range``
-        is False.
+        decimations 1, 2, 4 (fewer for a small ``D``; docs/matching.md).
     disparity_bands_px : sequence of (float, float), optional
         Explicit bands in full-resolution pixels, one level each.
     calibration : StereoCamera, optional
@@ -329,11 +326,8 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
 
     Notes
     -----
-    Eq. (9) with our sign: ``x_right = x_left - d``, so the paper's ``I_R(x + i + d)``
-    is evaluated as ``I_R(x + i - d)`` with ``d >= 0`` (see :mod:`.cost`). A level of
-    decimation ``k`` matches images of width ``W / k``; its disparity ``d_k`` becomes
-    ``k d_k`` at full resolution before gating to its band (eq. 11). Where several
-    levels keep a value, the more confident one wins (eq. 12).
+    Eq. (9) with our sign convention (:mod:`.cost`); a level's disparity ``d_k`` becomes
+    ``k d_k`` before gating (eq. 11); the more confident level wins (eq. 12).
     """
     _checks.image("left", left)
     _checks.image("right", right)

@@ -92,14 +92,10 @@ def fill_gaps(disparity_px: np.ndarray, confidence: np.ndarray, *, max_gap_px: i
               support_px: int) -> tuple[np.ndarray, np.ndarray]:
     """Fill short runs of invalid pixels that lie on one surface (beyond the paper).
 
-    Along each row, then along each column of the result, a run of at most
-    ``max_gap_px`` invalid pixels is filled by linear interpolation between its two
-    ends when the ends differ by at most ``max_diff_px`` and each is backed by
-    ``support_px`` consecutive valid pixels (the end included) within ``max_diff_px``
-    of it: the ends are on one surface patch, not lone survivors of the checks. Gaps
-    at depth edges (ends on different surfaces), at the image border and longer gaps
-    stay invalid. Filled pixels get the lower confidence of the two ends. The same
-    idea as ELAS's gap interpolation (Geiger et al. 2010), stricter.
+    Rows, then columns: a run of at most ``max_gap_px`` invalid pixels is interpolated
+    linearly when its two ends, each backed by ``support_px`` valid pixels, lie on one
+    surface (within ``max_diff_px``); gaps at depth edges and borders stay invalid.
+    ELAS's gap interpolation (Geiger et al. 2010), stricter.
 
     Parameters
     ----------

@@ -366,10 +366,8 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
     items : iterable
         Inputs, each picklable (keep them small: paths rather than images).
     workers : int, optional
-        Run on this many single-threaded workers: threads of this process (a
-        thread pool: every hot loop is a numba kernel with ``nogil`` or an
-        OpenCV call), or with ``processes=True`` the processes of a fresh local
-        Dask cluster (started and shut down inside the call).
+        Run on this many single-threaded workers: threads of this process, or with
+        ``processes=True`` the processes of a local Dask cluster made for the call.
     scheduler : str or distributed.Client, optional
         Run on an existing Dask cluster. With neither ``workers`` nor
         ``scheduler`` everything runs in this process, one item after another.
@@ -387,11 +385,8 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
     label : callable, optional
         ``label(item) -> str`` names an item in errors (default ``repr``).
     prefetch : callable, optional
-        In this process (no ``scheduler``, no ``processes``): ``func`` is called with
-        ``prefetch(item)`` instead, which a reader thread computes in order a few items
-        ahead (e.g. decoding the images while the previous frames are matched; OpenCV's
-        decoders release the GIL). On Dask workers ``func`` gets the item itself, so it must
-        accept both. A failing ``prefetch`` is that item's failure.
+        In this process only: ``func`` gets ``prefetch(item)``, computed a few items ahead
+        by a reader thread (on Dask workers it gets the item, so it must accept both).
 
     Returns
     -------
