@@ -45,11 +45,8 @@ def _say(line: str) -> None:
 class _Interrupts:
     """SIGINT / SIGTERM: one line, exit 130, whatever the program is doing.
 
-    The first signal prints ``mrstereo: interrupted``, silences stderr (threads of a Dask
-    cluster being torn down would otherwise print tracebacks) and raises KeyboardInterrupt
-    in the main thread, so ``finally`` blocks remove temporary files. A watchdog ends the
-    process with code 130 if the clean-up takes longer than a few seconds; a second signal
-    ends it at once. Worker processes started meanwhile are terminated on the hard exit.
+    The first signal prints the line, silences stderr and raises KeyboardInterrupt in the main
+    thread (``finally`` blocks clean up); a watchdog or a second signal exits at once.
     """
 
     def __init__(self) -> None:

@@ -38,11 +38,8 @@ class CostConfig:
         ``"none"``: the raw intensities (eq. 9); ``"xsobel"``: OpenCV StereoBM's pre-filter
         (see :func:`mrstereo.matching.cost.prefilter`).
     prefilter_cap : int
-        Clip bound of the pre-filter (OpenCV StereoBM: 31). The robust default 7 keeps
-        little more than the sign of the x-derivative beyond the noise (the pre-filter is
-        ``Sobel_x / 4``; 1 grey level of noise becomes about 0.9): one strong edge then
-        weighs no more in a window than weak texture, which cuts errors at depth edges
-        (docs/matching.md).
+        Clip bound of the pre-filter (OpenCV StereoBM: 31; why the robust default is 7:
+        docs/matching.md).
     """
 
     window_px: int = 9
@@ -77,10 +74,8 @@ class SearchConfig:
         ``(2, 1)`` for two, ``(1,)`` for one. Given with ``max_disparity_px``, its length
         sets the number of default bands.
     min_band_level_px : float
-        With ``max_disparity_px`` and no ``decimations``: use the most levels (up to 3)
-        whose nearest band ``[D/2, D]`` still spans this many level pixels at its
-        decimation (:func:`mrstereo.matching.multirange.default_level_count`; 4: three
-        levels for ``D >= 32``, two for ``D >= 16``, else one). 0: always three levels.
+        With ``max_disparity_px`` and no ``decimations``: the level count rule of
+        :func:`mrstereo.matching.multirange.default_level_count`. 0: always three levels.
     band_margin_px : int
         Extra disparities searched beyond each band edge (level pixels); a winner in the
         margin lies outside the band and is gated away (eq. 11) instead of sticking to
@@ -243,11 +238,8 @@ class PostFilterConfig:
         :func:`mrstereo.matching.postfilter.guard_depth_edges`). None: a window radius + 2
         (:attr:`MatchingConfig.fattening_px`); 0: off.
     gap_fill_px : int
-        Fill runs of at most this many invalid pixels along rows, then columns, by
-        linear interpolation, when the two ends differ by at most 1 px and each is backed
-        by ``gap_fill_support_px`` valid pixels agreeing with it (one surface on both sides;
-        beyond the paper, see :func:`mrstereo.matching.postfilter.fill_gaps`). 0: off (holes
-        stay holes).
+        Longest run of invalid pixels filled on one surface (beyond the paper,
+        :func:`mrstereo.matching.postfilter.fill_gaps`). 0: off.
     gap_fill_support_px : int or None
         Consecutive valid pixels (the end included) within 1 px of each end. None: half a
         window (``window_px // 2 + 1``); 1: the ends alone (ELAS).

@@ -256,19 +256,11 @@ def _ambiguous_across_bands(plan: MultiRangePlan, outputs: dict, disparity: np.n
                             config: MatchingConfig) -> np.ndarray:
     """Pixels whose united value another band contests (beyond the paper; eq. 12 over the bands).
 
-    Each level searches only its band, so its uniqueness test never sees a minimum in another
-    band: on a repeated pattern (stripes, tiles) whose period spans more than a band, a far
-    band finds the pattern one period off as a unique, confident winner while the true band,
-    which holds two minima, rejects its own (or the reverse). Here each band's own best minimum
-    (``LevelOutput.alt_px``: the lowest strict local minimum of its cost inside the band,
-    whatever the checks) is a rival of the pixel's value when the value lies in another band,
-    at least 2 level pixels of that band away, and the rival is a confident match (cost at
-    most ``config.ambiguity.rival_max_cost``: the minima of a repeated high-contrast pattern, not the
-    shallow ones of weak texture). The value is ambiguous when a rival costs less than the
-    value's own winner cost (``LevelOutput.best_cost`` of the level whose band holds it) plus
-    ``config.ambiguity.margin``: the uniqueness test of eq. (10) applied across the bands, with
-    an absolute margin (ZNCC costs of a repeated pattern are near 0, where the ratio test is
-    lenient), each cost at its own level's resolution. Returns a bool mask (H, W).
+    The uniqueness test of eq. (10) across the bands, with an absolute margin: another band's
+    own best minimum (``LevelOutput.alt_px``, at least 2 of its level pixels away, costing at
+    most ``config.ambiguity.rival_max_cost``) is a rival; the value is ambiguous when a rival
+    costs less than its winner cost plus ``config.ambiguity.margin`` (docs/matching.md,
+    "Repeated patterns"). Returns a bool mask (H, W).
     """
     height, width = disparity.shape
     ambiguous = np.zeros((height, width), bool)

@@ -177,12 +177,8 @@ def default_level_count(max_disparity_px: float, *, min_band_level_px: float = 4
     nearest band ``[D/2, D]``, at decimation ``2^(n-1)``, still spans ``min_band_level_px``
     level pixels.
 
-    The nearest band of ``n`` levels spans ``D / 2^n`` level pixels. Below about 4 the
-    level's search is mostly its margins, the uniqueness test (second best at least 2 px
-    away) and the parabola have no room, and a level pixel is as wide as the whole band
-    in full-resolution pixels; multi-range also saves little work when ``D`` is small. With
-    the default 4: ``D >= 32`` three levels (4, 2, 1), ``16 <= D < 32`` two (2, 1), else one.
-    ``min_band_level_px = 0`` always gives ``max_levels`` (the paper's three ranges).
+    With the default 4: ``D >= 32`` three levels (4, 2, 1), ``16 <= D < 32`` two (2, 1), else
+    one; ``min_band_level_px = 0`` always gives ``max_levels`` (the paper's three ranges).
     """
     d = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
     least = _checks.finite_number("min_band_level_px", min_band_level_px, nonnegative=True)
@@ -273,9 +269,8 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
         its winners above ``D`` plus half a level pixel are too-near candidates
         (:attr:`RangeLevel.too_near_above_px`). None = off; else at least 1.
     near_guard_decimation : int or None
-        Decimation of the guard's search; None: twice the nearest band's ``k`` when ``D``
-        spans at least ``GUARD_MIN_LEVEL_PX`` (8) pixels of those images (``D >= 16 k``),
-        else ``k`` (a too-near object is large in the image and its disparities are large).
+        Decimation of the guard's search; None: twice the nearest band's ``k`` when ``D >= 16 k``
+        (``GUARD_MIN_LEVEL_PX``), else ``k``.
     """
     width, height = image_size
     if near_guard_reach is not None:

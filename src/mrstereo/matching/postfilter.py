@@ -70,12 +70,8 @@ _SPECKLE_SCALE = 16           # the speckle filter's fixed point: 1/16 px, as St
 def guard_depth_edges(disparity_px: np.ndarray, *, guard_px: int, jump_px: float) -> np.ndarray:
     """Invalidate the foreground side of depth edges, where window matching "fattens".
 
-    A window straddling a depth edge is dominated by the stronger-textured (usually the
-    nearer) surface, so background pixels up to about a window radius from the edge get
-    the foreground's disparity. A pixel is dropped when some valid pixel within
-    ``guard_px`` columns (and one row) has a disparity smaller by more than ``jump_px``
-    (``cv2.erode`` = running minimum; invalid pixels do not count). Drops correct
-    foreground pixels at edges too: it trades density for fewer wrong values.
+    A pixel is dropped when some valid pixel within ``guard_px`` columns (and one row) has a
+    disparity smaller by more than ``jump_px``: it trades density for fewer wrong values.
     """
     if guard_px <= 0:
         return disparity_px
@@ -137,12 +133,8 @@ def near_side(too_near: np.ndarray, *, margin_px: int) -> np.ndarray | None:
     """The too-near pixels and those within ``margin_px`` rows and columns of one (a
     ``2 margin + 1`` square dilation), or None when no pixel is too near.
 
-    A window straddling the silhouette of a too-near object is dominated by the
-    background, whose disparity lies inside the search: beside a too-near region and on
-    parts of it thinner than a window (a lamp's arm) the matcher returns the background's
-    disparity for pixels of the too-near object. The matcher drops every value there
-    (and gap filling does not bridge it): like :func:`guard_depth_edges`, it trades
-    density at the silhouette for no wrong value on the near object.
+    There windows are dominated by the background, whose disparity lies inside the search;
+    like :func:`guard_depth_edges`, dropping them trades density for no wrong value.
     """
     if not too_near.any():
         return None

@@ -150,17 +150,10 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
                    **options) -> PairScan:
     """Virtual laser scan (nearest obstacle per bearing, robot frame) of one stereo pair.
 
-    The bearings span the left camera's horizontal field of view (turned by
-    ``pan_rad``); ``range_max_m`` defaults to ``config.max_range_m``; each ray
-    reports its ``min_points``-th nearest obstacle point (robust to a few stray
-    points, see :func:`laser_scan_from_points`), ``+inf`` when the frame saw the
-    bearing clear to ``range_max`` and ``nan`` otherwise. The scan's ``range_min``
-    is ``range_min_m`` or the matcher's near limit (:func:`near_limit_range_m`),
-    whichever is larger; intensities are the gray levels of the returns' pixels.
-    A ray with at least ``min_points`` too-near obstacle points (fail-safe
-    placements: something nearer than the near limit) reports ``range_min``,
-    whatever else it saw. Other keyword options are those of
-    :func:`obstacles_from_pair`.
+    Bearings over the left camera's field of view (turned by ``pan_rad``); each ray reports its
+    ``min_points``-th nearest obstacle point, ``+inf`` seen clear, ``nan`` unseen, ``range_min``
+    (at least the matcher's near limit) when too-near points fall on it (docs/obstacles.md).
+    Other keyword options are those of :func:`obstacles_from_pair`.
     """
     frame = obstacles_from_pair(left, right, stereo, **options)
     config = options.get("config", ObstacleConfig())
