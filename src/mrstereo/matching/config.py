@@ -168,11 +168,8 @@ class SubpixelConfig:
 class NearGuardConfig:
     """Too-near detection (beyond the paper; ``MatchingConfig.near_guard = None``: off, the paper).
 
-    A search of its own covers the disparities from the largest one ``D`` to ``reach * D``;
-    pixels whose confirmed match lies there are "too near" (NaN, flagged in
-    ``DisparityResult.too_near``) instead of keeping a smaller, wrong disparity from a band
-    they do not belong to. The bands' results are not touched unless a too-near region is
-    found (docs/matching.md).
+    A search of its own covers ``D`` to ``reach * D``; pixels whose confirmed match lies there are
+    "too near" (NaN, flagged in ``DisparityResult.too_near``; docs/matching.md).
 
     Attributes
     ----------
@@ -199,11 +196,9 @@ class NearGuardConfig:
 class AmbiguityConfig:
     """Cross-band ambiguity test (beyond the paper; ``MatchingConfig.ambiguity = None``: off).
 
-    A united value is dropped when another band's own best minimum (a rival, at least 2 of
-    its level pixels away) costs less than the value's winner cost plus ``margin``. Repeated
-    patterns whose period spans more than a band otherwise give a far (or near) band a unique,
-    confident winner one period off (docs/matching.md). Applied when the area of interest spans
-    every row (the levels then hold whole images).
+    A united value is dropped when another band's own best minimum costs less than the value's
+    winner cost plus ``margin`` (repeated patterns, docs/matching.md). Applied when the area of
+    interest spans every row.
 
     Attributes
     ----------

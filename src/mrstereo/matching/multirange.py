@@ -50,8 +50,7 @@ class RangeLevel:
         Pixel x disparity evaluations of the level (inside the area of interest).
     too_near_above_px : float or None
         On the near guard's search (:attr:`MultiRangePlan.guard`): a winner above this
-        disparity (full-resolution pixels) is a too-near candidate (its match lies beyond
-        the largest disparity of the plan). None on the levels of the bands.
+        disparity (full-resolution pixels) is a too-near candidate. None on the bands' levels.
     """
 
     decimation: int

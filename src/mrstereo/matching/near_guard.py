@@ -31,10 +31,9 @@ __all__ = ["too_near", "drop_cut_off"]
 class _GuardSearch:
     """Step 1: the guard's search and its candidates, and what the later steps compare them with.
 
-    ``cost``, ``d_level``, ``beyond`` and ``candidate`` are (H, w_level) maps at the guard's
-    level: the winners' cost and disparity (level pixels), the winners past the near limit, and
-    those of them that pass the checks. ``value_level``: the bands' values there (level pixels,
-    read at each level column's centre). ``source``: the level column of each AOI column.
+    (H, w_level) maps at the guard's level: the winners' ``cost`` and ``d_level``, those past the
+    near limit (``beyond``) and passing the checks (``candidate``), the bands' values
+    (``value_level``); ``source``: the level column of each AOI column.
     """
 
     level: RangeLevel

@@ -20,10 +20,8 @@ _MEDIAN_SCALE = 64.0          # median in 1/64 px fixed point (uint16: up to 102
 def median_filter(disparity_px: np.ndarray, *, size: int, max_px: float | None = None) -> np.ndarray:
     """Median filter of section 3.4 over valid and invalid pixels (invalid counts as -1).
 
-    A valid pixel becomes invalid when most of its neighbours are; an invalid pixel
-    stays invalid (the filter removes outliers, it does not invent values). Runs
-    ``cv2.medianBlur`` on a 1/64-pixel uint16 code (float32 above 1023 px). ``max_px``:
-    a bound on the disparities when the caller knows one (saves a pass over the map).
+    A valid pixel becomes invalid when most of its neighbours are; an invalid pixel stays
+    invalid. ``max_px``: a bound on the disparities when the caller knows one.
     """
     if size == 0:
         return disparity_px

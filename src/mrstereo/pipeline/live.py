@@ -175,9 +175,8 @@ class LiveRun:
 class LatestFrame:
     """A one-frame slot between a producer and consumers; the producer never waits unless ``lossless``.
 
-    ``put`` replaces a frame nobody took yet (``dropped`` counts those); with ``lossless`` it
-    waits until the slot is empty instead. ``take`` hands out the frame with a ticket (0, 1, ...
-    in the order taken) or None once the slot is closed and empty.
+    ``put`` replaces a frame nobody took yet (counted in ``dropped``), or waits with ``lossless``;
+    ``take`` hands out the frame with a ticket (0, 1, ...) or None once closed and empty.
     """
 
     def __init__(self, *, lossless: bool = False) -> None:

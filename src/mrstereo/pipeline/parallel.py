@@ -58,9 +58,8 @@ class ItemFailure:
 class ItemError(RuntimeError):
     """Raised by :func:`map_ordered` when an item fails (``return_exceptions=False``).
 
-    Its message names the item; ``failure`` holds the :class:`ItemFailure` and
-    the original exception is chained as ``__cause__`` when it was raised in
-    this process.
+    Its message names the item; ``failure`` holds the :class:`ItemFailure` (the original
+    exception is ``__cause__`` when raised in this process).
     """
 
     def __init__(self, failure: ItemFailure):
@@ -71,10 +70,8 @@ class ItemError(RuntimeError):
 def limit_threads() -> None:
     """Run numba and OpenCV kernels on one thread in the calling thread / process.
 
-    ``numba.set_num_threads`` is thread-local, so this is called at the start
-    of every task on a worker. ``cv2.setNumThreads`` is process-wide: it is
-    set here only inside worker processes, and by :func:`dask_client` for the
-    lifetime of a cluster of thread workers (then restored).
+    Called at the start of every task (``numba.set_num_threads`` is thread-local); the process-wide
+    ``cv2.setNumThreads`` only in worker processes (:func:`dask_client` sets it for thread workers).
     """
     import numba
 
@@ -93,13 +90,9 @@ _malloc_tuned = False
 def keep_freed_memory() -> bool:
     """Let glibc's malloc keep freed memory for reuse instead of returning it to the system.
 
-    Every frame of the chain allocates and frees many image-sized arrays. With glibc's defaults
-    these are fresh pages, a page fault each on first touch, every frame: large blocks are
-    mmapped and unmapped, and the heap top is trimmed after each frame. Raising the trim threshold
-    to 256 MB and the mmap threshold and top pad to 64 MB keeps them in the heap for the next
-    frame. The setting is process-wide, so it is made only in processes mrstereo owns: the
-    ``mrstereo`` command and its Dask worker processes, never on import. Returns False (and
-    changes nothing) without glibc.
+    The chain's image-sized arrays then stay in the heap from frame to frame instead of costing
+    fresh pages (page faults) every frame. Process-wide, so made only in processes mrstereo owns
+    (the command, its Dask workers), never on import. Returns False without glibc.
     """
     global _malloc_tuned
     if _malloc_tuned:
@@ -216,10 +209,8 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
 def _quiet_children() -> Iterator[None]:
     """Worker processes started in the block write their stderr to /dev/null.
 
-    Ctrl-C in a terminal signals the whole process group: worker processes still importing
-    would each print a KeyboardInterrupt traceback over the one line of the command (their
-    failures reach this process through Dask anyway). A process inherits its parent's file
-    descriptors when it starts, so stderr (fd 2) points to /dev/null while they start.
+    Ctrl-C signals the whole process group: workers still importing would each print a traceback
+    over the command's one line (their failures reach this process through Dask anyway).
     """
     try:
         saved = os.dup(2)
@@ -241,10 +232,8 @@ def _quiet_children() -> Iterator[None]:
 def numba_thread_safe() -> bool:
     """Whether numba's threading layer runs parallel kernels from several threads at once.
 
-    The tbb and omp layers do; workqueue aborts the process on concurrent launches. The layer is
-    chosen when numba first starts its thread pool: this starts it (loading the layer's library)
-    without compiling or loading any kernel. Should numba's internal start-up function
-    be missing, a tiny parallel kernel is launched instead.
+    The tbb and omp layers do; workqueue aborts the process on concurrent launches. This starts
+    numba's thread pool (choosing the layer) without compiling a kernel where numba allows it.
     """
     import numba
 
@@ -310,8 +299,7 @@ def _check_reachable(address: str) -> None:
     tcp:// address: nothing listens, the peer accepts and stays silent, or it speaks another protocol
     (an HTTP server, whose reply Dask's reader would take for a frame length of exabytes).
 
-    A Dask server greets every new connection with its handshake: an 8-byte little-endian length, then
-    that many bytes. The greeting is waited for ``SCHEDULER_TIMEOUT_S`` and its length must be sane.
+    A Dask server's greeting (an 8-byte length, then that many bytes) is awaited ``SCHEDULER_TIMEOUT_S``.
     """
     import socket
     import struct
@@ -413,13 +401,9 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
             return _map_local(func, items, bar, return_exceptions, label, prefetch)
     if not items:
         return []
-    if scheduler is None and not processes:
-        if numba_thread_safe():
-            with new_bar() as bar:
-                return _map_threads(func, items, workers, bar, return_exceptions, label, prefetch)
-        warnings.warn("numba's workqueue threading layer cannot run kernels from several threads at once: "
-                      "using worker processes (install tbb or have libgomp for worker threads)", stacklevel=2)
-        processes = True
+    if scheduler is None and not processes and numba_thread_safe():
+        with new_bar() as bar:
+            return _map_threads(func, items, workers, bar, return_exceptions, label, prefetch)
     with dask_client(workers=workers, scheduler=scheduler, processes=processes) as client, new_bar() as bar:
         return _map_dask(client, func, items, bar, return_exceptions, label, desc)
 

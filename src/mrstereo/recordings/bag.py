@@ -90,10 +90,8 @@ def bag_topics(path: str | os.PathLike) -> dict[str, str]:
 def pick_stereo_topics(topics: dict[str, str], *, need_camera_info: bool = True) -> tuple[str, str]:
     """The left and right image topics of a bag's one stereo pair.
 
-    Candidates are the image topics (with a ``<namespace>/camera_info`` beside them when
-    ``need_camera_info``). Two candidates whose names differ only in ``left``/``right`` or in a number
-    (``cam0``/``cam1``, ``infra1``/``infra2``) form a pair, the left the one that sorts first;
-    exactly one pair is picked.
+    Two image topics (with a ``camera_info`` beside them when ``need_camera_info``) whose names differ
+    only in ``left``/``right`` or a number form a pair, the left sorting first; exactly one is picked.
 
     Raises
     ------
@@ -182,11 +180,8 @@ SUPPORTED_ENCODINGS = tuple(_ENCODINGS)
 def image_from_message(msg, msgtype: str) -> np.ndarray:
     """A ``sensor_msgs/Image`` or ``CompressedImage`` as an OpenCV array.
 
-    Gray (``mono8``, ``8UC1``) and colour (``bgr8``, ``rgb8``, ``bgra8``, ``rgba8``, ``8UC3``,
-    ``8UC4``) become uint8 gray or BGR; ``mono16``/``16UC1`` uint16 gray (byte order from
-    ``is_bigendian``); Bayer mosaics (``bayer_rggb8``, ``bayer_bggr8``, ``bayer_gbrg8``,
-    ``bayer_grbg8``) are debayered to BGR with OpenCV. Rows may be padded (``step``).
-    CompressedImage: whatever OpenCV decodes (jpeg, png; 8 or 16 bit).
+    Gray and colour become uint8 gray or BGR, ``mono16``/``16UC1`` uint16, Bayer mosaics are
+    debayered to BGR; a CompressedImage is whatever OpenCV decodes (encodings: docs/scale-out.md).
 
     Raises ``ValueError`` for an unsupported encoding or an undecodable payload.
     """
@@ -278,9 +273,8 @@ def pair_by_stamp(left_ns: Sequence[int], right_ns: Sequence[int], *, tolerance_
 class TransformTrack:
     """A time series of one transform ``T_parent_from_child`` (odometry or one TF edge).
 
-    ``at(stamp_ns)`` interpolates linearly (slerp for the rotation) between
-    the two nearest samples, returns a sample exactly at its own stamp, and
-    holds the first / last sample outside the span.
+    ``at(stamp_ns)`` interpolates linearly (slerp for the rotation) between the two nearest
+    samples and holds the first / last sample outside the span.
     """
 
     stamps_ns: np.ndarray

@@ -54,15 +54,6 @@ class SampleScene:
     description: str
     files: tuple[SampleFile, ...]
 
-    @property
-    def size_bytes(self) -> int | None:
-        """Size of the local copy (None when a file is missing)."""
-        root = data_root()
-        try:
-            return sum((root / f.path).stat().st_size for f in self.files)
-        except OSError:
-            return None
-
 
 _FILES = tuple(SampleFile(*row) for row in FILES)
 
@@ -128,10 +119,8 @@ def verify(name: str) -> list[str]:
 def fetch(name: str, *, progress: bool = False) -> Path:
     """Make the scene ``name`` available locally and return its folder.
 
-    With ``MRSTEREO_DATA`` set the folder is used as it is: a missing file raises
-    ``FileNotFoundError`` naming it (nothing is downloaded into a user's copy). Otherwise the
-    missing files are downloaded with pooch into its cache folder, each checked against its
-    SHA-256 (a mismatch raises ``ValueError`` and leaves no file behind).
+    With ``MRSTEREO_DATA`` set a missing file raises ``FileNotFoundError``; otherwise missing files
+    are downloaded into pooch's cache and checked (a SHA-256 mismatch raises ``ValueError``).
     """
     entry = scene(name)
     if os.environ.get(ENV_VAR, "").strip():

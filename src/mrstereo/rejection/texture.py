@@ -76,11 +76,8 @@ class RejectionConfig:
 class PatchStatistics:
     """Patch statistics of an image over ``window_px`` x ``window_px`` patches.
 
-    ``sum1 * scale`` and ``sum2 * scale`` are the patch means of ``I`` and ``I^2`` (float64
-    products; ``sum1``, ``sum2`` (H, W) float32 or float64): the exact integer window sums of a
-    uint8 gray image with ``scale = 1 / window_px^2``, or the float64 means themselves with
-    ``scale = 1``. ``mean`` (``mu_patch``) and ``std`` (``sigma_patch``) are formed from them on
-    first use, float32 (H, W).
+    ``sum1 * scale`` and ``sum2 * scale`` are the patch means of ``I`` and ``I^2``; ``mean``
+    (``mu_patch``) and ``std`` (``sigma_patch``) are formed from them on first use, float32 (H, W).
     """
 
     sum1: np.ndarray
@@ -158,12 +155,8 @@ def patch_statistics(image, *, window_px: int = 9) -> PatchStatistics:
     """Local mean and standard deviation over ``window_px`` x ``window_px`` patches.
 
     Box filters on ``I`` and ``I^2`` (borders reflected): ``mu = E[I]``,
-    ``sigma = sqrt(max(E[I^2] - mu^2, 0))``, formed in float64 so that the difference of large
-    squares does not lose precision, stored as float32. A uint8 gray image (the usual rectified
-    frame) takes OpenCV's SIMD box filters of the uint8 image, whose integer window sums are
-    exact (float32 while ``255^2 w^2 < 2^24``, i.e. windows up to 15 px, float64 beyond):
-    ``E[.] = sum / w^2`` is then bit for bit what the float64 filters of the float image give,
-    at less than half the cost. Colour and float images take the float64 filters.
+    ``sigma = sqrt(max(E[I^2] - mu^2, 0))``, formed in float64, stored as float32. A uint8 gray
+    image takes OpenCV's box filters of exact integer window sums: bit for bit the same.
 
     Parameters
     ----------
