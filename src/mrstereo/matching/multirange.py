@@ -160,9 +160,8 @@ class LevelOutput:
 def default_bands_px(max_disparity_px: float, n_levels: int = 3) -> tuple[tuple[float, float], ...]:
     """Bands for a maximum disparity ``D``: ``[0, D/4], [D/4, D/2], [D/2, D]`` for 3 levels.
 
-    Each band doubles the previous one, so that with decimations 1, 2, 4 every level
-    searches about ``D/4`` (finest) or ``D/8`` (coarser) level pixels. Generally the
-    finest band is ``[0, D / 2^(n-1)]``.
+    Each band doubles the previous one (the finest is ``[0, D / 2^(n-1)]``), so with decimations
+    1, 2, 4 every level searches about ``D/4`` or ``D/8`` level pixels.
     """
     d = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
     n = _checks.positive_int("n_levels", n_levels)

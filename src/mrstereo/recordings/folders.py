@@ -54,9 +54,8 @@ def is_image_folders(path: str | os.PathLike) -> bool:
 def stamps_from_names(paths) -> np.ndarray | None:
     """Time stamps [s] read from file names, or None when the names are not time stamps.
 
-    A name is a stamp when its stem is a number of at least 9 digits before the decimal point
-    (a time since 1970 in s, ms, us or ns): ``1403715273262142976`` is nanoseconds,
-    ``1560004885.437324`` seconds. Frame numbers (``000123``) are not stamps.
+    A stem of at least 9 digits before the decimal point is a time since 1970 (s, ms, us or ns:
+    ``1403715273262142976`` ns, ``1560004885.437324`` s); frame numbers are not stamps.
     """
     stems = [Path(p).stem for p in paths]
     if stems and all(re.fullmatch(r"\d{9,10}\.\d+", s) for s in stems):

@@ -370,9 +370,8 @@ def staged_dataset(out_dir: str | os.PathLike, *, calibration: StereoCamera, mou
 def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.ndarray, np.ndarray, bool]:
     """Load a frame's pair ``(left, right, rectified)``: the rectified one when listed.
 
-    ``prefer_raw`` takes the raw pair (to be rectified with the calibration) even when a
-    rectified pair is listed, e.g. to test an estimated calibration. 16-bit images are scaled
-    by :func:`matching_image`.
+    ``prefer_raw`` takes the raw pair even when a rectified one is listed (to test an estimated
+    calibration). 16-bit images are scaled by :func:`matching_image`.
     """
     if not isinstance(record, FrameRecord):
         raise TypeError(f"record must be a FrameRecord, got {type(record).__name__}")

@@ -105,9 +105,8 @@ class PatchStatistics:
 class FloorModel:
     """Gaussian model of the patch statistics ``(mu, sigma)`` of the floor (section 3.5).
 
-    ``mu_mean``/``mu_std`` describe the distribution of the patch means over
-    the floor, ``sigma_mean``/``sigma_std`` that of the patch standard
-    deviations; ``window_px`` is the patch size they were measured with.
+    ``mu_mean``/``mu_std`` and ``sigma_mean``/``sigma_std`` describe the floor's patch means and
+    standard deviations, measured over ``window_px`` patches.
     """
 
     mu_mean: float
