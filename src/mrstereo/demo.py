@@ -1,18 +1,9 @@
 """``mrstereo demo``: the whole paper on the built-in synthetic corridor, with ground truth.
 
-1. world: render a corridor sequence (raw + ideal rectified pairs, GT disparity, GT map);
-2. calibration: render chessboard views of the true rig, detect the corners, calibrate both
-   cameras with the paper's GA (eq. 4-8) polished by LM, rectify by Fusiello (paper section 2);
-3. matching: multi-range NSSD/ZNCC block matching on three horizontal resolutions (eq. 9-12);
-4. rejection and 3D: ground suppression (eq. 13), triangulation (eq. 14-16), obstacles, top view;
-5. mapping: log-odds occupancy grid along the path with the estimated calibration (section 5.2),
-   against the ground-truth map, with the paper's union fusion and a single-range search of the
-   same work for comparison;
-6. planning: A* through the map.
-
-Everything lands in one report directory (report.md, metrics.json, PNG figures).
-
-Conventions: docs/conventions.md.
+World -> calibration (the paper's GA, eq. 4-8, polished by LM; Fusiello rectification, section 2)
+-> multi-range matching (eq. 9-12) -> rejection (eq. 13) and 3D (eq. 14-16) -> log-odds mapping
+along the path (section 5.2) against the ground-truth map -> A* planning; one report directory
+(report.md, metrics.json, PNG figures). User guide: docs/world.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

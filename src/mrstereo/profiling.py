@@ -1,19 +1,9 @@
 """Per-stage wall-clock times of the per-frame chain (``--profile`` of the CLI, benchmarks).
 
-The pipeline functions mark their stages with :func:`stage`; nothing is measured unless a
-:class:`Profile` is active (``with profiling() as prof:``), so the marks cost one global
-lookup when profiling is off. Times from all threads of the process add up into the active
-profile (Dask worker threads included; worker *processes* are not seen).
-
-    from mrstereo.profiling import profiling
-    with profiling() as prof:
-        build_map("corridor")
-    print(prof.table())
-
-Stages used by the library: ``read`` (image decode), ``rectify``, ``match`` (eq. 9-12),
-``reject`` (eq. 13), ``3-D`` (floor, eq. 14-16, obstacle/floor split), ``grid`` (world
-transform, grid cells, fusion), ``scan`` (the virtual laser scan).
-
+The pipeline marks its stages with :func:`stage`; nothing is measured unless a :class:`Profile`
+is active (``with profiling() as prof: ...; print(prof.table())``). Times from all threads of
+the process add up (worker processes are not seen). Stages: ``read``, ``rectify``, ``match``
+(eq. 9-12), ``reject`` (eq. 13), ``3-D`` (eq. 14-16), ``grid``, ``scan``: docs/speed.md.
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations

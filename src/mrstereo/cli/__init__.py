@@ -1,14 +1,8 @@
 """Command-line interface: parse, validate, call one library function per command.
 
-Every failure ends as one line on stderr and a non-zero exit code, never a traceback:
-
-- ``mrstereo: error: ...`` and exit code 2 for everything the user can fix (a usage
-  error, a missing or unreadable file, a bad number, a full disk);
-- ``mrstereo: interrupted`` and exit code 130 for Ctrl-C (SIGINT) or SIGTERM, within a
-  few seconds whatever runs (a Dask cluster starting or stopping included);
-- ``mrstereo: error: internal error ...`` and exit code 1 for a bug, with a request to
-  report it. ``MRSTEREO_DEBUG=1`` shows the traceback instead (docs/errors.md).
-
+Every failure ends as one line on stderr, never a traceback: ``mrstereo: error: ...`` (exit 2) for
+what the user can fix, ``mrstereo: interrupted`` (exit 130) for Ctrl-C or SIGTERM, ``mrstereo: error:
+internal error ...`` (exit 1) for a bug (``MRSTEREO_DEBUG=1`` shows the traceback): docs/errors.md.
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -51,11 +45,8 @@ def _say(line: str) -> None:
 class _Interrupts:
     """SIGINT / SIGTERM: one line, exit 130, whatever the program is doing.
 
-    The first signal prints ``mrstereo: interrupted``, silences stderr (threads of a Dask
-    cluster being torn down would otherwise print tracebacks) and raises KeyboardInterrupt
-    in the main thread, so ``finally`` blocks remove temporary files. A watchdog ends the
-    process with code 130 if the clean-up takes longer than a few seconds; a second signal
-    ends it at once. Worker processes started meanwhile are terminated on the hard exit.
+    The first signal prints the line, silences stderr and raises KeyboardInterrupt in the main
+    thread (``finally`` blocks clean up); a watchdog or a second signal exits at once.
     """
 
     def __init__(self) -> None:

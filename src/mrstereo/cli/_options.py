@@ -199,8 +199,7 @@ def profile_option(stages: str):
     """``--profile``: time the command's ``stages`` (:mod:`mrstereo.profiling`) and print a per-frame table.
 
     ``stages`` names them for the help, e.g. ``"read, rectify, match"``. Put the decorator right
-    under ``@click.command``. Off, the command runs unchanged. Worker processes (``--processes``,
-    ``--scheduler``) are not seen: their stages are missing from the table.
+    under ``@click.command``. Worker processes are not seen.
     """
     def decorate(func):
         @functools.wraps(func)

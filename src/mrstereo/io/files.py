@@ -1,22 +1,11 @@
 """Safe file handling: protected inputs, atomic writes, staged output folders, temporaries, bounded YAML.
 
-- **Inputs are protected.** An :class:`Inputs` set holds every file a command reads and every folder it
-  reads as a whole (a dataset, a bag, a benchmark scene). :func:`check_outputs` and
-  :func:`check_output_dir` refuse, before any work, an output that is one of those files (also through a
-  symbolic or hard link) or lies inside one of those folders. Inside :func:`protecting_inputs` (every
-  ``mrstereo`` command runs inside one) the readers of :mod:`mrstereo.io` add what they read to the
-  command's set, and every writer refuses again at the moment of writing: :func:`atomic_write`,
-  :func:`staged_dir`, :func:`staged_new_dir` and :func:`replace_dir` never replace an input.
-- **Writes are atomic.** A file is written under a temporary name beside its target and renamed into
-  place; a set of files is written into a temporary folder and moved in with interrupts held back
-  (:func:`uninterruptible`), so Ctrl-C leaves the old set or the new one; a folder is swapped in one step.
-- **Only mrstereo's temporaries are removed.** Their names carry a marker no other program writes,
-  ``.mrstereo-tmp-PID-XXXXXXXX.NAME``; :func:`remove_stale_temporaries` removes those whose process is gone.
-- **YAML is read with bounds.** :func:`parse_yaml` builds the data from the parser's events without the
-  intermediate node graph and counts every value, aliases expanded: an alias bomb or a file beyond
-  ``MRSTEREO_MAX_YAML_NODES`` values is refused after reading at most that many.
-
-Conventions: docs/conventions.md; the guarantees: docs/errors.md.
+An :class:`Inputs` set holds what a command reads; :func:`check_outputs`, :func:`check_output_dir`
+and every writer (:func:`atomic_write`, :func:`staged_dir`, :func:`staged_new_dir`,
+:func:`replace_dir`) refuse to replace an input. Writes go to a temporary beside the target and are
+renamed into place; only mrstereo's own temporaries (``.mrstereo-tmp-PID-XXXXXXXX.NAME``) are ever
+removed; :func:`parse_yaml` counts every value, aliases expanded, up to ``MRSTEREO_MAX_YAML_NODES``.
+The guarantees: docs/errors.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -49,10 +38,8 @@ def _resolved(path) -> str:
 class Inputs:
     """Every file a command reads and every folder it reads as a whole.
 
-    ``add`` files (images, calibrations and their sibling files, a manifest, a map and its image);
-    ``add_folder`` folders that are inputs as a whole (a dataset, a ROS 2 bag, a benchmark scene):
-    no output may be written anywhere inside them. Paths are compared after resolving symbolic
-    links; an existing output is also compared by inode (hard links, bind mounts).
+    ``add`` files, ``add_folder`` folders no output may be written inside (a dataset, a ROS 2 bag).
+    Paths are compared resolved, and an existing output also by inode (hard links, bind mounts).
     """
 
     def __init__(self, files: Iterable = (), folders: Iterable = (), *, kind: str = "input folder") -> None:
@@ -172,9 +159,8 @@ _active: list[Inputs] = []
 def protecting_inputs(inputs: Inputs | None = None) -> Iterator[Inputs]:
     """Within the block, what mrstereo reads is an input and no writer of this module replaces one.
 
-    The readers of :mod:`mrstereo.io` (:func:`read_text`, :func:`read_yaml`, images, calibrations, bags)
-    add what they read to the set (:func:`note_read`); the output checks include it; :func:`atomic_write`
-    and the staged folders refuse to write over it. Yields the set (``inputs`` or a new one).
+    The readers of :mod:`mrstereo.io` add what they read (:func:`note_read`); the output checks and
+    writers refuse it. Yields the set (``inputs`` or a new one).
     """
     inputs = Inputs() if inputs is None else inputs
     _active.append(inputs)
@@ -283,10 +269,9 @@ def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
 def atomic_write(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
 
-    The temporary file keeps the target's suffix so that writers choosing a format by extension
-    (OpenCV, matplotlib) still work, and carries mrstereo's marker and process id
-    (:func:`remove_stale_temporaries`). Inside :func:`protecting_inputs` an input is never the
-    target (``ValueError``). A full disk raises ``OSError(ENOSPC)`` naming ``path``.
+    The temporary keeps the target's suffix (writers choose a format by it). Inside
+    :func:`protecting_inputs` an input is never the target (``ValueError``); a full disk raises
+    ``OSError(ENOSPC)`` naming ``path``.
     """
     path = Path(path)
     _refuse_input(f"the output {path}", path)
@@ -361,9 +346,8 @@ def temporary_dir(folder: str | os.PathLike, *, prefix: str = "out") -> Iterator
     """A fresh hidden folder ``.mrstereo-tmp-PID-XXXXXXXX.PREFIX`` inside ``folder``, removed at the end
     whatever happens.
 
-    On the same file system as ``folder``, so what is built there can be renamed into place.
-    A full disk raises ``OSError(ENOSPC)`` naming ``folder``; :func:`remove_stale_temporaries`
-    removes the folder of a killed run.
+    On the same file system as ``folder`` (so it can be renamed into place); a full disk raises
+    ``OSError(ENOSPC)`` naming ``folder``.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -403,10 +387,8 @@ def _move_all(source: Path, folder: Path) -> None:
 def staged_dir(folder: str | os.PathLike, *, prefix: str = "out") -> Iterator[Path]:
     """Yield a fresh temporary folder inside ``folder``; on success move its files into ``folder``.
 
-    Writing a set of outputs there first means a failure, a full disk or an interrupt leaves the
-    previous set (or nothing) plus, after a kill, a hidden temporary folder, never a mix: the moves at
-    the end are renames within one file system made with SIGINT/SIGTERM held back (:func:`uninterruptible`).
-    Stale temporaries of killed runs in ``folder`` are removed first.
+    A failure, a full disk or an interrupt leaves the previous set, never a mix: the moves are renames
+    with SIGINT/SIGTERM held back (:func:`uninterruptible`). Stale temporaries are removed first.
     """
     folder = Path(folder)
     _refuse_input(f"the output folder {folder}", folder / ".")
@@ -420,9 +402,8 @@ def staged_dir(folder: str | os.PathLike, *, prefix: str = "out") -> Iterator[Pa
 def staged_new_dir(folder: str | os.PathLike, *, option: str = "out_dir") -> Iterator[Path]:
     """Build a new folder: yield a temporary folder that becomes ``folder`` when the block succeeds.
 
-    ``folder`` must not exist or be empty (:func:`check_output_dir`; stale temporaries of a killed
-    run there or beside it are removed). A new folder is built beside its place and renamed into it;
-    an existing empty one (the working directory, a mount point) is kept and filled by renames.
+    ``folder`` must not exist or be empty (:func:`check_output_dir`); an existing empty one (the
+    working directory, a mount point) is kept and filled by renames.
     """
     folder = Path(folder).absolute()
     check_output_dir(option, folder, must_be_empty=True)
@@ -461,10 +442,8 @@ def _exchange(a: Path, b: Path) -> bool:
 def replace_dir(new: str | os.PathLike, target: str | os.PathLike) -> None:
     """Put the folder ``new`` in the place of ``target`` in one step; the old ``target`` is then removed.
 
-    Whoever reads ``target`` sees the old folder or the new one, whole: the two are exchanged by one
-    ``renameat2(RENAME_EXCHANGE)`` (two renames with SIGINT/SIGTERM held back where the file system
-    cannot exchange). ``new`` must be on the same file system (e.g. a :func:`temporary_dir` beside
-    ``target``). After a kill at worst the old folder stays under ``new``'s temporary name.
+    A reader sees the old folder or the new one, whole (``renameat2(RENAME_EXCHANGE)``, else two renames
+    with signals held back). ``new`` must be on the same file system (a :func:`temporary_dir` beside ``target``).
     """
     new, target = Path(new), Path(target)
     _refuse_input(f"the output folder {target}", target)
@@ -560,11 +539,9 @@ def check_output_dir(option: str, folder: str | os.PathLike, *, inputs: Iterable
                      input_kind: str = "input folder", may_hold_inputs: bool = False) -> None:
     """Check an output folder before any work: raise ``ValueError`` naming ``option``.
 
-    The folder must not be a file, must be creatable and writable, must not be or lie inside an
-    input folder (``input_dirs``, named ``input_kind``, and those read inside
-    :func:`protecting_inputs`), must not hold any input (unless ``may_hold_inputs``: the command
-    then checks its files one by one), and with ``must_be_empty`` must not exist or be empty
-    (mrstereo temporaries of killed runs do not count).
+    The folder must be creatable and writable, not be or lie inside an input folder (``input_dirs``,
+    named ``input_kind``), not hold an input (unless ``may_hold_inputs``), and with ``must_be_empty``
+    not exist or be empty (mrstereo temporaries do not count).
     """
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
@@ -624,8 +601,7 @@ _YAML_BYTES_PER_NODE = 128      # a file larger than this times the node limit i
 def parse_yaml(text: str, what: str, path, *, tags: Iterable[str] = (), max_nodes: int | None = None):
     """YAML ``text`` of the file ``path`` as Python data (the safe subset: mappings, lists, scalars).
 
-    Built from the parser's events, without the intermediate node graph (5x faster, 6x less memory
-    than ``yaml.safe_load`` on a large manifest). Every value counts, aliases expanded; beyond
+    Built from the parser's events, without the intermediate node graph. Every value counts, aliases expanded; beyond
     ``max_nodes`` (default ``MRSTEREO_MAX_YAML_NODES``) the file is refused with the count reached, so an
     alias bomb ends after reading at most that many. ``tags`` are extra collection tags read as their
     plain mapping or list (OpenCV's ``tag:yaml.org,2002:opencv-matrix``). Invalid YAML, a tag that is not

@@ -47,9 +47,8 @@ _NOISE = (b"libpng ", b"[ WARN:", b"[ERROR:", b"[ INFO:", b"[FATAL:", b"Corrupt 
 def quiet_decoders(on: bool = True) -> None:
     """Keep what image decoders print (libpng's and libtiff's warnings, OpenCV's log) off stderr.
 
-    For a process that reports every problem itself (the ``mrstereo`` command): OpenCV's log is silenced
-    and each decode runs with stderr captured; lines of the decoders are dropped, anything else written
-    meanwhile (another thread's progress) is passed on.
+    For the ``mrstereo`` command, which reports every problem itself: decoder lines are dropped,
+    anything else written meanwhile is passed on.
     """
     global _quiet
     _quiet = bool(on)
@@ -211,11 +210,9 @@ def write_disparity(path: str | os.PathLike, disparity_px: np.ndarray) -> None:
 def matching_image(image: np.ndarray) -> np.ndarray:
     """An image on the 8-bit gray-level scale the matcher's parameters use.
 
-    A 16-bit image that holds 8-bit data -- every value a multiple of 257 (``v * 257``, how ROS and
-    OpenCV widen mono8) or of 256 (``v << 8``) -- becomes that 8-bit image, so it is rectified and
-    matched bit for bit like its 8-bit copy. Other 16-bit images (``mono16`` cameras, 16-bit PNG)
-    become float32 ``v / 257`` (0..255): every one of the 65536 levels stays distinct (float32 keeps
-    24 bits). Other dtypes are returned as they are.
+    A 16-bit image holding 8-bit data (every value a multiple of 257 or 256) becomes that 8-bit
+    image; other 16-bit images become float32 ``v / 257`` (all levels distinct); other dtypes are
+    returned as they are.
     """
     if not isinstance(image, np.ndarray):
         raise TypeError(f"image must be a numpy array, got {type(image).__name__}")

@@ -1,20 +1,11 @@
 """Matcher settings: one frozen dataclass per concern, composed by :class:`MatchingConfig`, and three presets.
 
-``paper`` is exactly the paper's matcher (section 3.3-3.4): NSSD of eq. (9) on the
-raw intensities, winner-take-all eq. (10), a median filter per level, gating
-(eq. 11) and union (eq. 12), nothing else. ``robust`` (the default) adds what
-robot users expect from OpenCV StereoBM / ROS stereo_image_proc: an x-Sobel
-pre-filter (gain/offset differences of real cameras), ZNCC, a left-right check,
-uniqueness ratio, maximum cost, sub-pixel parabola and speckle removal, plus four steps
-beyond the paper: fewer levels for a small search range, full-resolution re-scoring of
-the coarsest level, a guard against window "fattening" at depth edges and the filling of
-short gaps between two ends on one surface. ``mapping`` is ``robust`` with stricter
-acceptance, no gap filling and the cross-band ambiguity test, for the robot's map. Defaults were
-chosen by measurement on Middlebury/KITTI (docs/matching.md).
-
-The groups are plain values: :func:`mrstereo.matching.compute_disparity` unpacks them into
-the keyword arguments of its steps, and no kernel sees a config object.
-Conventions: docs/conventions.md.
+``paper`` is exactly the paper's matcher (section 3.3-3.4: NSSD eq. (9), winner-take-all eq. (10),
+median, gating eq. (11), union eq. (12)); ``robust`` (the default) adds what OpenCV StereoBM / ROS
+stereo_image_proc users expect and the steps beyond the paper; ``mapping`` is ``robust`` with
+stricter acceptance for the robot's map. What each adds and how the defaults were chosen:
+docs/matching.md ("Presets"). No kernel sees a config object: :func:`mrstereo.matching.compute_disparity`
+unpacks the groups into keyword arguments. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -47,11 +38,8 @@ class CostConfig:
         ``"none"``: the raw intensities (eq. 9); ``"xsobel"``: OpenCV StereoBM's pre-filter
         (see :func:`mrstereo.matching.cost.prefilter`).
     prefilter_cap : int
-        Clip bound of the pre-filter (OpenCV StereoBM: 31). The robust default 7 keeps
-        little more than the sign of the x-derivative beyond the noise (the pre-filter is
-        ``Sobel_x / 4``; 1 grey level of noise becomes about 0.9): one strong edge then
-        weighs no more in a window than weak texture, which cuts errors at depth edges
-        (docs/matching.md).
+        Clip bound of the pre-filter (OpenCV StereoBM: 31; why the robust default is 7:
+        docs/matching.md).
     """
 
     window_px: int = 9
@@ -86,10 +74,8 @@ class SearchConfig:
         ``(2, 1)`` for two, ``(1,)`` for one. Given with ``max_disparity_px``, its length
         sets the number of default bands.
     min_band_level_px : float
-        With ``max_disparity_px`` and no ``decimations``: use the most levels (up to 3)
-        whose nearest band ``[D/2, D]`` still spans this many level pixels at its
-        decimation (:func:`mrstereo.matching.multirange.default_level_count`; 4: three
-        levels for ``D >= 32``, two for ``D >= 16``, else one). 0: always three levels.
+        With ``max_disparity_px`` and no ``decimations``: the level count rule of
+        :func:`mrstereo.matching.multirange.default_level_count`. 0: always three levels.
     band_margin_px : int
         Extra disparities searched beyond each band edge (level pixels); a winner in the
         margin lies outside the band and is gated away (eq. 11) instead of sticking to
@@ -182,11 +168,8 @@ class SubpixelConfig:
 class NearGuardConfig:
     """Too-near detection (beyond the paper; ``MatchingConfig.near_guard = None``: off, the paper).
 
-    A search of its own covers the disparities from the largest one ``D`` to ``reach * D``;
-    pixels whose confirmed match lies there are "too near" (NaN, flagged in
-    ``DisparityResult.too_near``) instead of keeping a smaller, wrong disparity from a band
-    they do not belong to. The bands' results are not touched unless a too-near region is
-    found (docs/matching.md).
+    A search of its own covers ``D`` to ``reach * D``; pixels whose confirmed match lies there are
+    "too near" (NaN, flagged in ``DisparityResult.too_near``; docs/matching.md).
 
     Attributes
     ----------
@@ -213,11 +196,9 @@ class NearGuardConfig:
 class AmbiguityConfig:
     """Cross-band ambiguity test (beyond the paper; ``MatchingConfig.ambiguity = None``: off).
 
-    A united value is dropped when another band's own best minimum (a rival, at least 2 of
-    its level pixels away) costs less than the value's winner cost plus ``margin``. Repeated
-    patterns whose period spans more than a band otherwise give a far (or near) band a unique,
-    confident winner one period off (docs/matching.md). Applied when the area of interest spans
-    every row (the levels then hold whole images).
+    A united value is dropped when another band's own best minimum costs less than the value's
+    winner cost plus ``margin`` (repeated patterns, docs/matching.md). Applied when the area of
+    interest spans every row.
 
     Attributes
     ----------
@@ -252,11 +233,8 @@ class PostFilterConfig:
         :func:`mrstereo.matching.postfilter.guard_depth_edges`). None: a window radius + 2
         (:attr:`MatchingConfig.fattening_px`); 0: off.
     gap_fill_px : int
-        Fill runs of at most this many invalid pixels along rows, then columns, by
-        linear interpolation, when the two ends differ by at most 1 px and each is backed
-        by ``gap_fill_support_px`` valid pixels agreeing with it (one surface on both sides;
-        beyond the paper, see :func:`mrstereo.matching.postfilter.fill_gaps`). 0: off (holes
-        stay holes).
+        Longest run of invalid pixels filled on one surface (beyond the paper,
+        :func:`mrstereo.matching.postfilter.fill_gaps`). 0: off.
     gap_fill_support_px : int or None
         Consecutive valid pixels (the end included) within 1 px of each end. None: half a
         window (``window_px // 2 + 1``); 1: the ends alone (ELAS).

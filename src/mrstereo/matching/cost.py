@@ -1,19 +1,9 @@
 """Area correlation on one image pair and one disparity band (paper section 3.3).
 
-The per-level solver of the multi-range matcher: image pre-filters, the NSSD
-cost of eq. (9) (or ZNCC, or the integer engine's normalized SAD), and winner-take-all,
-eq. (10). Conventions:
-docs/conventions.md (disparity ``d = x_left - x_right >= 0``).
-
-Sign convention. The paper writes eq. (9) as
-
-    SSD(x, y, d) = sum_ij [I_L(x+i, y+j) - I_R(x+i+d, y+j)]^2
-                   / sqrt(sum_ij I_L(x+i, y+j)^2 * sum_ij I_R(x+i+d, y+j)^2)
-
-with the right pixel at ``x + d``. mrstereo uses ``x_right = x_left - d`` with
-``d >= 0`` (a point in front of the rig appears further left in the right image), so
-the paper's ``d`` is our ``-d``: we evaluate ``I_R(x + i - d, y + j)``. The paper's
-search ``min d <= d <= max d`` over negative values is our search over ``[d_lo, d_hi]``.
+The per-level solver of the multi-range matcher: image pre-filters, the NSSD cost of eq. (9)
+(or ZNCC, or the integer engine's normalized SAD), and winner-take-all, eq. (10). The paper puts
+the right pixel at ``x + d``; mrstereo uses ``x_right = x_left - d`` with ``d >= 0``, so eq. (9) is
+evaluated on ``I_R(x + i - d, y + j)`` (docs/conventions.md).
 """
 from __future__ import annotations
 
@@ -413,12 +403,8 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
                       boxes=None) -> tuple[np.ndarray, np.ndarray]:
     """Re-score a coarse disparity field at full resolution (beyond the paper).
 
-    A level of decimation ``k`` knows its winner only to about ``+-k/2`` full-resolution
-    pixels. For each offset ``o`` in ``[-half_px, half_px]`` the full-resolution cost (eq. 9
-    or ZNCC) is evaluated with every window pixel ``p`` shifted by ``round(c(p)) + o``
-    (exactly ``cost(x, c + o)`` where the coarse field ``c`` is constant over the window);
-    the best offset gets the parabola offset. A winner on the edge of the offsets means
-    the true minimum lies outside them: the pixel becomes invalid rather than keeping a guess.
+    The full-resolution cost (eq. 9 or ZNCC) is evaluated at offsets ``[-half_px, half_px]``
+    around the coarse field; the best gets the parabola offset, a winner on the edge is invalid.
 
     Parameters
     ----------
@@ -434,10 +420,8 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     max_cost : float, optional
         Winners costing more become invalid.
     boxes : sequence of (row0, row1, col0, col1), optional
-        Half-open boxes that hold every wanted pixel (clusters, e.g. connected components):
-        the running sums then cover each box instead of every row and column spanned by all
-        the wanted pixels (the near guard's clusters lie scattered over the image), the boxes
-        in parallel (:func:`._kernels.refine_boxes`). Same results.
+        Half-open boxes holding every wanted pixel: the sums cover each box only (scattered
+        clusters), the boxes in parallel. Same results.
 
     Returns
     -------

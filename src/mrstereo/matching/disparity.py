@@ -256,19 +256,11 @@ def _ambiguous_across_bands(plan: MultiRangePlan, outputs: dict, disparity: np.n
                             config: MatchingConfig) -> np.ndarray:
     """Pixels whose united value another band contests (beyond the paper; eq. 12 over the bands).
 
-    Each level searches only its band, so its uniqueness test never sees a minimum in another
-    band: on a repeated pattern (stripes, tiles) whose period spans more than a band, a far
-    band finds the pattern one period off as a unique, confident winner while the true band,
-    which holds two minima, rejects its own (or the reverse). Here each band's own best minimum
-    (``LevelOutput.alt_px``: the lowest strict local minimum of its cost inside the band,
-    whatever the checks) is a rival of the pixel's value when the value lies in another band,
-    at least 2 level pixels of that band away, and the rival is a confident match (cost at
-    most ``config.ambiguity.rival_max_cost``: the minima of a repeated high-contrast pattern, not the
-    shallow ones of weak texture). The value is ambiguous when a rival costs less than the
-    value's own winner cost (``LevelOutput.best_cost`` of the level whose band holds it) plus
-    ``config.ambiguity.margin``: the uniqueness test of eq. (10) applied across the bands, with
-    an absolute margin (ZNCC costs of a repeated pattern are near 0, where the ratio test is
-    lenient), each cost at its own level's resolution. Returns a bool mask (H, W).
+    The uniqueness test of eq. (10) across the bands, with an absolute margin: another band's
+    own best minimum (``LevelOutput.alt_px``, at least 2 of its level pixels away, costing at
+    most ``config.ambiguity.rival_max_cost``) is a rival; the value is ambiguous when a rival
+    costs less than its winner cost plus ``config.ambiguity.margin`` (docs/matching.md,
+    "Repeated patterns"). Returns a bool mask (H, W).
     """
     height, width = disparity.shape
     ambiguous = np.zeros((height, width), bool)
@@ -301,10 +293,7 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
         Rectified images (gray or BGR; uint8 or float), same size.
     max_disparity_px : float, optional
         Search ``[0, D]``, split into bands ``[0, D/4], [D/4, D/2], [D/2, D]`` at
-        decimations 1, 2, 4 when ``D >= 32``; for a smaller range fewer levels
-        (``[0, D/2], [D/2, D]`` at 1, 2 when ``D >= 16``, else ``[0, D]``: see
-        ``config.min_band_level_px``); one band ``[0, D]`` when ``config.multi_range``
-        is False.
+        decimations 1, 2, 4 (fewer for a small ``D``; docs/matching.md).
     disparity_bands_px : sequence of (float, float), optional
         Explicit bands in full-resolution pixels, one level each.
     calibration : StereoCamera, optional
@@ -329,11 +318,8 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
 
     Notes
     -----
-    Eq. (9) with our sign: ``x_right = x_left - d``, so the paper's ``I_R(x + i + d)``
-    is evaluated as ``I_R(x + i - d)`` with ``d >= 0`` (see :mod:`.cost`). A level of
-    decimation ``k`` matches images of width ``W / k``; its disparity ``d_k`` becomes
-    ``k d_k`` at full resolution before gating to its band (eq. 11). Where several
-    levels keep a value, the more confident one wins (eq. 12).
+    Eq. (9) with our sign convention (:mod:`.cost`); a level's disparity ``d_k`` becomes
+    ``k d_k`` before gating (eq. 11); the more confident level wins (eq. 12).
     """
     _checks.image("left", left)
     _checks.image("right", right)

@@ -1,15 +1,9 @@
 """Multi-range matching (paper sections 3.1, 3.2, 3.4; eq. 11-12).
 
-The depth range of interest is split into bands of disparity. Each band is searched
-on its own image pair whose HORIZONTAL resolution is reduced by a decimation factor
-``k`` (near objects, large disparities: coarse images; far objects: full
-resolution), so that every level searches only a few disparities. Each level's
-result is median filtered, gated to its band (eq. 11), up-sampled back to full
-width with disparities multiplied by the level's horizontal scale (Step 2), and the
-levels are united (eq. 12).
-
-The driver :func:`run_levels` is generic over the per-level solver, like scikit-image's
-coarse-to-fine optical-flow driver. Conventions: docs/conventions.md.
+Each disparity band is searched on its own pair of horizontally decimated images (near objects:
+coarse images); each level is median filtered, gated to its band (eq. 11), up-sampled to full
+width and the levels are united (eq. 12). :func:`run_levels` is generic over the per-level
+solver. User guide: docs/matching.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -56,8 +50,7 @@ class RangeLevel:
         Pixel x disparity evaluations of the level (inside the area of interest).
     too_near_above_px : float or None
         On the near guard's search (:attr:`MultiRangePlan.guard`): a winner above this
-        disparity (full-resolution pixels) is a too-near candidate (its match lies beyond
-        the largest disparity of the plan). None on the levels of the bands.
+        disparity (full-resolution pixels) is a too-near candidate. None on the bands' levels.
     """
 
     decimation: int
@@ -167,9 +160,8 @@ class LevelOutput:
 def default_bands_px(max_disparity_px: float, n_levels: int = 3) -> tuple[tuple[float, float], ...]:
     """Bands for a maximum disparity ``D``: ``[0, D/4], [D/4, D/2], [D/2, D]`` for 3 levels.
 
-    Each band doubles the previous one, so that with decimations 1, 2, 4 every level
-    searches about ``D/4`` (finest) or ``D/8`` (coarser) level pixels. Generally the
-    finest band is ``[0, D / 2^(n-1)]``.
+    Each band doubles the previous one (the finest is ``[0, D / 2^(n-1)]``), so with decimations
+    1, 2, 4 every level searches about ``D/4`` or ``D/8`` level pixels.
     """
     d = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
     n = _checks.positive_int("n_levels", n_levels)
@@ -183,12 +175,8 @@ def default_level_count(max_disparity_px: float, *, min_band_level_px: float = 4
     nearest band ``[D/2, D]``, at decimation ``2^(n-1)``, still spans ``min_band_level_px``
     level pixels.
 
-    The nearest band of ``n`` levels spans ``D / 2^n`` level pixels. Below about 4 the
-    level's search is mostly its margins, the uniqueness test (second best at least 2 px
-    away) and the parabola have no room, and a level pixel is as wide as the whole band
-    in full-resolution pixels; multi-range also saves little work when ``D`` is small. With
-    the default 4: ``D >= 32`` three levels (4, 2, 1), ``16 <= D < 32`` two (2, 1), else one.
-    ``min_band_level_px = 0`` always gives ``max_levels`` (the paper's three ranges).
+    With the default 4: ``D >= 32`` three levels (4, 2, 1), ``16 <= D < 32`` two (2, 1), else
+    one; ``min_band_level_px = 0`` always gives ``max_levels`` (the paper's three ranges).
     """
     d = _checks.finite_number("max_disparity_px", max_disparity_px, positive=True)
     least = _checks.finite_number("min_band_level_px", min_band_level_px, nonnegative=True)
@@ -279,9 +267,8 @@ def plan_levels(image_size: tuple[int, int], bands_px: Sequence[tuple[float, flo
         its winners above ``D`` plus half a level pixel are too-near candidates
         (:attr:`RangeLevel.too_near_above_px`). None = off; else at least 1.
     near_guard_decimation : int or None
-        Decimation of the guard's search; None: twice the nearest band's ``k`` when ``D``
-        spans at least ``GUARD_MIN_LEVEL_PX`` (8) pixels of those images (``D >= 16 k``),
-        else ``k`` (a too-near object is large in the image and its disparities are large).
+        Decimation of the guard's search; None: twice the nearest band's ``k`` when ``D >= 16 k``
+        (``GUARD_MIN_LEVEL_PX``), else ``k``.
     """
     width, height = image_size
     if near_guard_reach is not None:

@@ -1,40 +1,13 @@
 """The near guard (beyond the paper): pixels whose match lies beyond the largest searched disparity.
 
-A multi-range search ends at a near limit ``D``. A pixel nearer than that has no match in
-any band, yet a band may still find a (wrong, smaller) disparity for it. The guard searches
-past ``D`` on its own decimated images (``plan.guard``), confirms what it finds at full
-resolution, and reports the pixels that are too near; :func:`too_near` is its entry point,
-called by :func:`mrstereo.matching.compute_disparity`. User guide: docs/matching.md
-("Too near"). Conventions: docs/conventions.md.
-
-The steps:
-
-1. The guard's search (decimated images, disparities from ``D`` to ``reach * D``) runs apart
-   from the bands, whose winners and checks stay exactly those of the plan without a guard.
-   A winner above ``D`` plus half a level pixel that passes the maximum cost, the left-right
-   and the uniqueness checks is a candidate.
-2. Where the bands gave the pixel a value, the candidate must beat it (:func:`_near_match_wins`),
-   first on the guard's images (the value re-scored over ``+-1`` level px), then at full
-   resolution (after step 3; the value re-scored over ``+-2`` px). The first test is cheap and
-   removes most stray candidates before step 3.
-3. Each candidate is re-scored at full resolution as the refinement does (offsets
-   ``+-(ceil(k / 2) + refine_margin_px)``, the maximum cost; a minimum on the edge fails).
-4. Too near: the confirmed candidates without a value or whose value lost, in regions
-   larger than a speckle (``speckle_size_px``, connected within ``speckle_range_px`` level
-   pixels).
-5. ``beside``: the candidates clustered with a too-near region (within a window radius + 2 px
-   of each other, :attr:`MatchingConfig.fattening_px`) and that margin around them; they lose
-   their values (:func:`.postfilter.near_side`: silhouettes, thin parts, a repeated pattern's
-   wrong matches on the near object). None without a too-near region: a candidate elsewhere
-   (a repeated pattern, plain paint) changes nothing, so a search that covers the scene gives
-   the values of the matcher without a guard.
-
-The order of the work keeps its cost low without changing the verdict: a too-near region
-lies inside one 8-connected cluster of more than ``speckle_size_px`` confirmed candidates,
-which comes from a cluster of more than ``speckle_size_px / ceil(k)`` candidates at the
-guard's level (each level pixel spans at most ``ceil(k)`` columns). Steps 2-4 run on those
-clusters only, each in its own box (:func:`.cost.refine_candidates`); the other candidates
-matter only for step 5, when a too-near region is found.
+A multi-range search ends at a near limit ``D``; a pixel nearer than that has no match in any
+band, yet a band may still find a (wrong, smaller) disparity for it. The guard searches past ``D``
+on its own decimated images (``plan.guard``), confirms candidates at full resolution
+(:func:`.cost.refine_candidates`), and reports the pixels that are too near; the candidates
+clustered with a too-near region lose their values (:func:`.postfilter.near_side`). Without a
+too-near region the values are those of the matcher without a guard. :func:`too_near` is the
+entry point, called by :func:`mrstereo.matching.compute_disparity`. The steps and why they are
+ordered so: docs/matching.md ("Too near"). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -58,10 +31,9 @@ __all__ = ["too_near", "drop_cut_off"]
 class _GuardSearch:
     """Step 1: the guard's search and its candidates, and what the later steps compare them with.
 
-    ``cost``, ``d_level``, ``beyond`` and ``candidate`` are (H, w_level) maps at the guard's
-    level: the winners' cost and disparity (level pixels), the winners past the near limit, and
-    those of them that pass the checks. ``value_level``: the bands' values there (level pixels,
-    read at each level column's centre). ``source``: the level column of each AOI column.
+    (H, w_level) maps at the guard's level: the winners' ``cost`` and ``d_level``, those past the
+    near limit (``beyond``) and passing the checks (``candidate``), the bands' values
+    (``value_level``); ``source``: the level column of each AOI column.
     """
 
     level: RangeLevel

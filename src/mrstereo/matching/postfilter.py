@@ -20,10 +20,8 @@ _MEDIAN_SCALE = 64.0          # median in 1/64 px fixed point (uint16: up to 102
 def median_filter(disparity_px: np.ndarray, *, size: int, max_px: float | None = None) -> np.ndarray:
     """Median filter of section 3.4 over valid and invalid pixels (invalid counts as -1).
 
-    A valid pixel becomes invalid when most of its neighbours are; an invalid pixel
-    stays invalid (the filter removes outliers, it does not invent values). Runs
-    ``cv2.medianBlur`` on a 1/64-pixel uint16 code (float32 above 1023 px). ``max_px``:
-    a bound on the disparities when the caller knows one (saves a pass over the map).
+    A valid pixel becomes invalid when most of its neighbours are; an invalid pixel stays
+    invalid. ``max_px``: a bound on the disparities when the caller knows one.
     """
     if size == 0:
         return disparity_px
@@ -70,12 +68,8 @@ _SPECKLE_SCALE = 16           # the speckle filter's fixed point: 1/16 px, as St
 def guard_depth_edges(disparity_px: np.ndarray, *, guard_px: int, jump_px: float) -> np.ndarray:
     """Invalidate the foreground side of depth edges, where window matching "fattens".
 
-    A window straddling a depth edge is dominated by the stronger-textured (usually the
-    nearer) surface, so background pixels up to about a window radius from the edge get
-    the foreground's disparity. A pixel is dropped when some valid pixel within
-    ``guard_px`` columns (and one row) has a disparity smaller by more than ``jump_px``
-    (``cv2.erode`` = running minimum; invalid pixels do not count). Drops correct
-    foreground pixels at edges too: it trades density for fewer wrong values.
+    A pixel is dropped when some valid pixel within ``guard_px`` columns (and one row) has a
+    disparity smaller by more than ``jump_px``: it trades density for fewer wrong values.
     """
     if guard_px <= 0:
         return disparity_px
@@ -92,14 +86,10 @@ def fill_gaps(disparity_px: np.ndarray, confidence: np.ndarray, *, max_gap_px: i
               support_px: int) -> tuple[np.ndarray, np.ndarray]:
     """Fill short runs of invalid pixels that lie on one surface (beyond the paper).
 
-    Along each row, then along each column of the result, a run of at most
-    ``max_gap_px`` invalid pixels is filled by linear interpolation between its two
-    ends when the ends differ by at most ``max_diff_px`` and each is backed by
-    ``support_px`` consecutive valid pixels (the end included) within ``max_diff_px``
-    of it: the ends are on one surface patch, not lone survivors of the checks. Gaps
-    at depth edges (ends on different surfaces), at the image border and longer gaps
-    stay invalid. Filled pixels get the lower confidence of the two ends. The same
-    idea as ELAS's gap interpolation (Geiger et al. 2010), stricter.
+    Rows, then columns: a run of at most ``max_gap_px`` invalid pixels is interpolated
+    linearly when its two ends, each backed by ``support_px`` valid pixels, lie on one
+    surface (within ``max_diff_px``); gaps at depth edges and borders stay invalid.
+    ELAS's gap interpolation (Geiger et al. 2010), stricter.
 
     Parameters
     ----------
@@ -141,12 +131,8 @@ def near_side(too_near: np.ndarray, *, margin_px: int) -> np.ndarray | None:
     """The too-near pixels and those within ``margin_px`` rows and columns of one (a
     ``2 margin + 1`` square dilation), or None when no pixel is too near.
 
-    A window straddling the silhouette of a too-near object is dominated by the
-    background, whose disparity lies inside the search: beside a too-near region and on
-    parts of it thinner than a window (a lamp's arm) the matcher returns the background's
-    disparity for pixels of the too-near object. The matcher drops every value there
-    (and gap filling does not bridge it): like :func:`guard_depth_edges`, it trades
-    density at the silhouette for no wrong value on the near object.
+    There windows are dominated by the background, whose disparity lies inside the search;
+    like :func:`guard_depth_edges`, dropping them trades density for no wrong value.
     """
     if not too_near.any():
         return None

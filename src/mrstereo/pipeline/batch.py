@@ -1,38 +1,12 @@
 """Many datasets at once: per-frame products and a map per dataset, resumable, on Dask.
 
-For every frame of every dataset (docs/dataset.md) :func:`run_batch` runs the
-chain of :func:`mrstereo.pipeline.frame.scan_from_pair` (rectify -> match ->
-reject (eq. 13) -> 3D (eq. 14-16) -> scan) once and writes::
-
-    OUT/<dataset>/dataset.json             which dataset this folder belongs to
-    OUT/<dataset>/frames/NNNNNN.pfm        disparity after rejection (PFM, NaN -> inf)
-    OUT/<dataset>/frames/NNNNNN.ply        robot-frame point cloud with intensity
-    OUT/<dataset>/frames/NNNNNN.scan.json  virtual laser scan (ROS LaserScan fields)
-    OUT/<dataset>/frames/NNNNNN.obs.npz    the frame's world-frame obstacle / floor points, its fingerprint
-    OUT/<dataset>/map/                     map.pgm, map.yaml, map.png, log_odds.npy, batch.json
-    OUT/summary.json                       per dataset what was computed, kept and failed; every failure
-
-then fuses each dataset's frames in order into its map (the same map as
-``mrstereo map``, bit for bit). Frames of all datasets are spread over the
-workers of :func:`mrstereo.pipeline.parallel.map_ordered`.
-
-Resumable, and it knows what changed: every frame's results carry a fingerprint of
-what they were computed from -- the sizes and modification times of the frame's
-images, its pose and pan, the calibration, the camera mount (or the frames the
-floor is estimated from), every option of the chain and mrstereo's version -- and
-the map a fingerprint of its frames' and of the grid and fusion options. A re-run
-keeps a frame whose four files read back with the same fingerprint and a map whose
-files are all there with the same fingerprint (and whose frames were all kept);
-everything else is computed again. A dataset's folder is named after the dataset's
-folder; two datasets of one name (``a/ds``, ``b/ds``), or a folder already holding
-another dataset's results, get the name with a hash of the dataset's path
-(``ds-1a2b3c4d``), recorded in ``dataset.json`` and ``summary.json``. A finished
-map replaces the previous one in one step (:func:`mrstereo.io.replace_dir`): a
-reader sees the old map or the new one. A frame that raises is listed in
-``summary.json`` (and the map's ``batch.json``), the others go on, and the map is
-built from the frames that succeeded; the next run retries it.
-
-Conventions: docs/conventions.md.
+For every frame of every dataset :func:`run_batch` runs the chain of
+:func:`mrstereo.pipeline.frame.scan_from_pair` (rectify -> match -> reject (eq. 13) -> 3D
+(eq. 14-16) -> scan) once, writes its products under ``OUT/<dataset>/frames/``, then fuses each
+dataset's frames into ``OUT/<dataset>/map/`` (the same map as ``mrstereo map``, bit for bit).
+Every result carries a fingerprint of what it was computed from, so a re-run keeps what is still
+valid and computes the rest; a failed frame is listed in ``summary.json`` and retried next run.
+The layout and the resume rules: docs/scale-out.md ("Batch"). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

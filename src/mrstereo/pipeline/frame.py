@@ -1,14 +1,9 @@
 """From one stereo pair to obstacle points, a point cloud and a virtual laser scan.
 
-rectify (unless already rectified) -> multi-range matching (eq. 9-12,
-:func:`mrstereo.matching.compute_disparity`) -> rejection of uniform patches
-(eq. 13, :mod:`mrstereo.rejection`) -> floor (given mount or estimated) ->
-triangulation into the robot frame (eq. 14-16) -> obstacle / floor split ->
-laser scan. These are the functions behind ``mrstereo points`` and
-``mrstereo scan``. Pixels nearer than the search covers (the matcher's ``too_near``) are
-fail-safe: obstacle points at the near limit along their rays
-(:func:`mrstereo.geometry.obstacles.detect_obstacles`), and a scan return at
-``range_min`` on their bearings (docs/obstacles.md). Conventions: docs/conventions.md.
+rectify -> multi-range matching (eq. 9-12) -> rejection (eq. 13) -> floor -> triangulation into
+the robot frame (eq. 14-16) -> obstacle / floor split -> laser scan: the functions behind
+``mrstereo points`` and ``mrstereo scan``; too-near pixels are fail-safe (docs/obstacles.md).
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -155,17 +150,10 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
                    **options) -> PairScan:
     """Virtual laser scan (nearest obstacle per bearing, robot frame) of one stereo pair.
 
-    The bearings span the left camera's horizontal field of view (turned by
-    ``pan_rad``); ``range_max_m`` defaults to ``config.max_range_m``; each ray
-    reports its ``min_points``-th nearest obstacle point (robust to a few stray
-    points, see :func:`laser_scan_from_points`), ``+inf`` when the frame saw the
-    bearing clear to ``range_max`` and ``nan`` otherwise. The scan's ``range_min``
-    is ``range_min_m`` or the matcher's near limit (:func:`near_limit_range_m`),
-    whichever is larger; intensities are the gray levels of the returns' pixels.
-    A ray with at least ``min_points`` too-near obstacle points (fail-safe
-    placements: something nearer than the near limit) reports ``range_min``,
-    whatever else it saw. Other keyword options are those of
-    :func:`obstacles_from_pair`.
+    Bearings over the left camera's field of view (turned by ``pan_rad``); each ray reports its
+    ``min_points``-th nearest obstacle point, ``+inf`` seen clear, ``nan`` unseen, ``range_min``
+    (at least the matcher's near limit) when too-near points fall on it (docs/obstacles.md).
+    Other keyword options are those of :func:`obstacles_from_pair`.
     """
     frame = obstacles_from_pair(left, right, stereo, **options)
     config = options.get("config", ObstacleConfig())

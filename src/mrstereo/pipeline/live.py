@@ -1,28 +1,10 @@
 """The live loop: frames from a camera (or a file, or a recording) to a map, a trajectory and a scan, as they come.
 
-Three kinds of threads, never a growing queue between them (docs/live.md):
-
-1. **Capture** reads the source (:mod:`mrstereo.recordings.sources`) and puts each frame in a
-   one-frame slot (:class:`LatestFrame`), stamping its arrival. From a camera, or a file
-   replayed at its recorded rate, a new frame *replaces* one that no worker has taken yet: the
-   newest frame wins, the older one is dropped and counted. A file read as fast as possible
-   waits for the slot instead (nothing is dropped).
-2. **Matchers** (``workers`` threads, one per core by default) take the newest frame and run
-   the per-frame chain: rectify, match (eq. 9-12), reject (eq. 13), 3-D (eq. 14-16), the
-   obstacle/floor split and the virtual laser scan (:func:`mrstereo.pipeline.frame.scan_from_pair`).
-   The matcher's numba kernels and OpenCV release the GIL, so two frames are matched at once
-   on two cores. A matcher takes a new frame only while fewer than ``workers`` matched frames
-   wait for the fuser: everything in flight is bounded.
-3. **The fuser** (the calling thread) takes the matched frames in the order they were taken:
-   the robot's pose (visual odometry, :class:`mrstereo.odometry.StereoOdometry`, or the
-   recording's own odometry), the points into the world and into the occupancy grid
-   (:func:`mrstereo.mapping.fusion.add_observation`), then the sinks (viewers, a ROS bag).
-
-Every ``save_every_s`` seconds a writer thread writes a snapshot -- map.yaml + map.pgm (a
-map_server can reload it), map.png, trajectory.txt (TUM), metrics.json -- each file atomically,
-and once more at the end. A frame's latency is from its arrival to the update of the map.
-Without a camera mount the floor is estimated from the first frames (as
-:func:`mrstereo.pipeline.run.floor_for_run` does); frames before it is known are not mapped.
+Three kinds of threads, never a growing queue between them: capture into a one-frame slot
+(:class:`LatestFrame`; the newest frame wins), matchers running the per-frame chain -- match
+(eq. 9-12), reject (eq. 13), 3-D (eq. 14-16), scan (:func:`mrstereo.pipeline.frame.scan_from_pair`)
+-- and the fuser (the calling thread: pose, grid, sinks). A writer thread saves snapshots every
+``save_every_s`` seconds, each file atomically. How it keeps up: docs/live.md.
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -193,9 +175,8 @@ class LiveRun:
 class LatestFrame:
     """A one-frame slot between a producer and consumers; the producer never waits unless ``lossless``.
 
-    ``put`` replaces a frame nobody took yet (``dropped`` counts those); with ``lossless`` it
-    waits until the slot is empty instead. ``take`` hands out the frame with a ticket (0, 1, ...
-    in the order taken) or None once the slot is closed and empty.
+    ``put`` replaces a frame nobody took yet (counted in ``dropped``), or waits with ``lossless``;
+    ``take`` hands out the frame with a ticket (0, 1, ...) or None once closed and empty.
     """
 
     def __init__(self, *, lossless: bool = False) -> None:

@@ -1,29 +1,12 @@
 """Scale-out: an ordered parallel map, in-process or on a Dask cluster.
 
-Per-frame work of the chain (rectify, match, reject, triangulate) is
-independent from frame to frame; fusion into the grid is an ordered
-reduction. :func:`map_ordered` runs the independent part:
-
-- in this process (``workers=None, scheduler=None``, the default, so nothing
-  changes for a single user);
-- on ``workers`` single-threaded workers (``workers=N``): a pool of threads of
-  this process by default (every hot loop is a numba kernel compiled with
-  ``nogil=True`` or an OpenCV call, both release the GIL, so threads scale like
-  processes without their start-up and without pickling images and results;
-  no Dask cluster is started), or the worker processes of a local
-  ``dask.distributed.LocalCluster`` (``processes=True``);
-- on an existing ``dask.distributed`` cluster (``scheduler="tcp://host:8786"``
-  or a ``distributed.Client``). Its workers must see the same files (the
-  dataset paths are sent, not the images) and have mrstereo installed.
-
-Results come back in input order, whatever order the workers finish in, so a
-reduction over them gives the same result for every worker count. Inside
-workers, numba and OpenCV run on one thread each (``numba.set_num_threads(1)``
-per task, ``cv2.setNumThreads(1)`` while worker threads run; worker processes
-also get ``NUMBA_NUM_THREADS=1``) so that N workers on N cores do not
-oversubscribe them. See docs/scale-out.md.
-
-Conventions: docs/conventions.md.
+Per-frame work of the chain (rectify, match, reject, triangulate) is independent from frame to
+frame; fusion into the grid is an ordered reduction. :func:`map_ordered` runs the independent
+part in this process, on a pool of worker threads (the hot loops release the GIL), on a local
+Dask cluster's processes, or on an existing ``dask.distributed`` cluster. Results come back in
+input order, so a reduction over them is the same for every worker count; inside workers numba
+and OpenCV run on one thread each so that N workers on N cores do not oversubscribe them.
+User guide: docs/scale-out.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -75,9 +58,8 @@ class ItemFailure:
 class ItemError(RuntimeError):
     """Raised by :func:`map_ordered` when an item fails (``return_exceptions=False``).
 
-    Its message names the item; ``failure`` holds the :class:`ItemFailure` and
-    the original exception is chained as ``__cause__`` when it was raised in
-    this process.
+    Its message names the item; ``failure`` holds the :class:`ItemFailure` (the original
+    exception is ``__cause__`` when raised in this process).
     """
 
     def __init__(self, failure: ItemFailure):
@@ -88,10 +70,8 @@ class ItemError(RuntimeError):
 def limit_threads() -> None:
     """Run numba and OpenCV kernels on one thread in the calling thread / process.
 
-    ``numba.set_num_threads`` is thread-local, so this is called at the start
-    of every task on a worker. ``cv2.setNumThreads`` is process-wide: it is
-    set here only inside worker processes, and by :func:`dask_client` for the
-    lifetime of a cluster of thread workers (then restored).
+    Called at the start of every task (``numba.set_num_threads`` is thread-local); the process-wide
+    ``cv2.setNumThreads`` only in worker processes (:func:`dask_client` sets it for thread workers).
     """
     import numba
 
@@ -110,13 +90,9 @@ _malloc_tuned = False
 def keep_freed_memory() -> bool:
     """Let glibc's malloc keep freed memory for reuse instead of returning it to the system.
 
-    Every frame of the chain allocates and frees many image-sized arrays. With glibc's defaults
-    these are fresh pages, a page fault each on first touch, every frame: large blocks are
-    mmapped and unmapped, and the heap top is trimmed after each frame. Raising the trim threshold
-    to 256 MB and the mmap threshold and top pad to 64 MB keeps them in the heap for the next
-    frame. The setting is process-wide, so it is made only in processes mrstereo owns: the
-    ``mrstereo`` command and its Dask worker processes, never on import. Returns False (and
-    changes nothing) without glibc.
+    The chain's image-sized arrays then stay in the heap from frame to frame instead of costing
+    fresh pages (page faults) every frame. Process-wide, so made only in processes mrstereo owns
+    (the command, its Dask workers), never on import. Returns False without glibc.
     """
     global _malloc_tuned
     if _malloc_tuned:
@@ -233,10 +209,8 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
 def _quiet_children() -> Iterator[None]:
     """Worker processes started in the block write their stderr to /dev/null.
 
-    Ctrl-C in a terminal signals the whole process group: worker processes still importing
-    would each print a KeyboardInterrupt traceback over the one line of the command (their
-    failures reach this process through Dask anyway). A process inherits its parent's file
-    descriptors when it starts, so stderr (fd 2) points to /dev/null while they start.
+    Ctrl-C signals the whole process group: workers still importing would each print a traceback
+    over the command's one line (their failures reach this process through Dask anyway).
     """
     try:
         saved = os.dup(2)
@@ -258,10 +232,8 @@ def _quiet_children() -> Iterator[None]:
 def numba_thread_safe() -> bool:
     """Whether numba's threading layer runs parallel kernels from several threads at once.
 
-    The tbb and omp layers do; workqueue aborts the process on concurrent launches. The layer is
-    chosen when numba first starts its thread pool: this starts it (loading the layer's library)
-    without compiling or loading any kernel. Should numba's internal start-up function
-    be missing, a tiny parallel kernel is launched instead.
+    The tbb and omp layers do; workqueue aborts the process on concurrent launches. This starts
+    numba's thread pool (choosing the layer) without compiling a kernel where numba allows it.
     """
     import numba
 
@@ -327,8 +299,7 @@ def _check_reachable(address: str) -> None:
     tcp:// address: nothing listens, the peer accepts and stays silent, or it speaks another protocol
     (an HTTP server, whose reply Dask's reader would take for a frame length of exabytes).
 
-    A Dask server greets every new connection with its handshake: an 8-byte little-endian length, then
-    that many bytes. The greeting is waited for ``SCHEDULER_TIMEOUT_S`` and its length must be sane.
+    A Dask server's greeting (an 8-byte length, then that many bytes) is awaited ``SCHEDULER_TIMEOUT_S``.
     """
     import socket
     import struct
@@ -383,10 +354,8 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
     items : iterable
         Inputs, each picklable (keep them small: paths rather than images).
     workers : int, optional
-        Run on this many single-threaded workers: threads of this process (a
-        thread pool: every hot loop is a numba kernel with ``nogil`` or an
-        OpenCV call), or with ``processes=True`` the processes of a fresh local
-        Dask cluster (started and shut down inside the call).
+        Run on this many single-threaded workers: threads of this process, or with
+        ``processes=True`` the processes of a local Dask cluster made for the call.
     scheduler : str or distributed.Client, optional
         Run on an existing Dask cluster. With neither ``workers`` nor
         ``scheduler`` everything runs in this process, one item after another.
@@ -404,11 +373,8 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
     label : callable, optional
         ``label(item) -> str`` names an item in errors (default ``repr``).
     prefetch : callable, optional
-        In this process (no ``scheduler``, no ``processes``): ``func`` is called with
-        ``prefetch(item)`` instead, which a reader thread computes in order a few items
-        ahead (e.g. decoding the images while the previous frames are matched; OpenCV's
-        decoders release the GIL). On Dask workers ``func`` gets the item itself, so it must
-        accept both. A failing ``prefetch`` is that item's failure.
+        In this process only: ``func`` gets ``prefetch(item)``, computed a few items ahead
+        by a reader thread (on Dask workers it gets the item, so it must accept both).
 
     Returns
     -------
@@ -435,13 +401,9 @@ def map_ordered(func: Callable[[Any], Any], items: Iterable[Any], *, workers: in
             return _map_local(func, items, bar, return_exceptions, label, prefetch)
     if not items:
         return []
-    if scheduler is None and not processes:
-        if numba_thread_safe():
-            with new_bar() as bar:
-                return _map_threads(func, items, workers, bar, return_exceptions, label, prefetch)
-        warnings.warn("numba's workqueue threading layer cannot run kernels from several threads at once: "
-                      "using worker processes (install tbb or have libgomp for worker threads)", stacklevel=2)
-        processes = True
+    if scheduler is None and not processes and numba_thread_safe():
+        with new_bar() as bar:
+            return _map_threads(func, items, workers, bar, return_exceptions, label, prefetch)
     with dask_client(workers=workers, scheduler=scheduler, processes=processes) as client, new_bar() as bar:
         return _map_dask(client, func, items, bar, return_exceptions, label, desc)
 

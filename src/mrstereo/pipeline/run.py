@@ -1,15 +1,10 @@
 """The whole chain for a sequence: rectify -> match -> reject -> 3D -> occupancy grid.
 
-Per frame (independent, so it can run anywhere): :func:`observe_frame` reads a stereo pair of a
-dataset manifest, rectifies it with the calibration, matches it with the multi-range approach
-(paper eq. 9-12), rejects uniform patches (eq. 13), triangulates (eq. 14-16), splits obstacle
-from floor points in the robot frame and moves them into the world frame with the frame's pose.
-Then an ordered reduction, :func:`map_from_observations`, fuses them into a log-odds (or union)
-occupancy grid (paper section 5.2) and compares it with the ground-truth map.
-:func:`build_map` runs both over a manifest; :func:`write_map_outputs` writes the ROS map,
-figures and metrics. Without a camera mount, :func:`floor_for_run` estimates the floor once from
-the first frames that show enough of it and the run uses that mount (reported, with its
-confidence, in ``MapRun.floor`` and metrics.json). Conventions: docs/conventions.md.
+:func:`observe_frame` takes one frame through matching (eq. 9-12), rejection (eq. 13) and
+triangulation (eq. 14-16) into world-frame points; :func:`map_from_observations` fuses them in
+order into the occupancy grid (paper section 5.2); :func:`build_map` runs both over a manifest,
+:func:`write_map_outputs` writes the results, :func:`floor_for_run` finds the mount when there is
+none. User guide: docs/mapping.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -64,8 +59,7 @@ class PipelineConfig:
         Eq. (13) texture / ground suppression.
     obstacles : ObstacleConfig or None
         Height band, range limit and floor estimation. None: the defaults with the rig's mapping
-        range (:func:`~mrstereo.geometry.obstacles.mapping_range_m`: 4 m for the paper's rig, farther
-        for a rig that measures depth well farther), filled in by :meth:`for_rig`.
+        range (:func:`~mrstereo.geometry.obstacles.mapping_range_m`), filled in by :meth:`for_rig`.
     mapping : MappingConfig
         Sensor model and fusion (log-odds or the paper's union).
     grid : GridSpec or None
@@ -76,9 +70,8 @@ class PipelineConfig:
     resolution_m : float
         Cell size of a map that grows (``grid`` None).
     free_space : FreeSpaceConfig or None
-        The free-space boundary (:mod:`mrstereo.geometry.freespace`): where the floor ends in
-        each image column, an obstacle base that the matcher cannot measure (a wall without
-        texture); its points join the frame's obstacle points. None: off.
+        The free-space boundary (:mod:`mrstereo.geometry.freespace`), whose points join the
+        frame's obstacle points. None: off.
     """
 
     preset: str = "mapping"
@@ -339,19 +332,12 @@ def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
                   n_frames: int = 3, check_mount: bool = True) -> RunFloor:
     """The camera mount of a run and the floor it implies: given and checked, or estimated from the first frames.
 
-    The floor is fitted (``config.obstacles.ground_method``, RANSAC) in the first ``max_frames``
-    frames until ``n_frames`` fits are confident (:attr:`GroundPlane.confident`); the median height,
-    tilt and roll of those is the seen floor (the camera is assumed to look along the robot's x
-    axis, on its vertical axis: a floor says nothing about yaw or the horizontal offset). With no
-    confident fit, the fit with the largest inlier share is used and reported as not confident.
-
-    Without a mount in the manifest (``mount:``, ``rig:``, the calibration's) the seen floor is the
-    mount of the run. With one (and ``check_mount``), the mount is used when the camera is at least
-    :data:`MIN_CAMERA_HEIGHT_M` above its floor and the seen floor, if confident in at least two frames
-    (one fit can be a wall's base), agrees with it: camera height within :data:`MOUNT_HEIGHT_TOLERANCE_M`
-    and tilt within :data:`MOUNT_TILT_TOLERANCE_RAD`. Otherwise the seen floor is used and ``warning`` says so with both values (a mount in a
-    base frame that is not on the floor, such as a drone's body frame, puts the camera centimetres
-    "above the floor" and the map would be empty).
+    The seen floor is the median of the first ``n_frames`` confident RANSAC fits within
+    ``max_frames`` frames (else the fit with the largest inlier share, reported as not confident).
+    A given mount is kept (with ``check_mount``) when the camera is at least :data:`MIN_CAMERA_HEIGHT_M`
+    above its floor and a floor seen in two frames agrees within :data:`MOUNT_HEIGHT_TOLERANCE_M` and
+    :data:`MOUNT_TILT_TOLERANCE_RAD`; otherwise the seen floor is used and ``warning`` says why
+    (docs/mapping.md).
 
     Returns
     -------
@@ -423,9 +409,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         process, or the processes of a local Dask cluster with ``processes=True``.
     scheduler : str or distributed.Client, optional
         Observe the frames on an existing Dask cluster (its workers must see
-        the dataset's files). With neither, everything runs in this process.
-        The fused map is the same, bit for bit, in every case
-        (:func:`mrstereo.pipeline.parallel.map_ordered` keeps the frame order).
+        the dataset's files). The map is the same, bit for bit, in every case.
     processes : bool
         With ``workers``: worker processes instead of threads.
     odometry : {"auto", "given", "visual"}
@@ -440,8 +424,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         fuse_odometry`); every frame is mapped, those visual odometry lost on the given steps.
     check_mount : bool
         Check a given mount against the floor seen in the first frames and use the seen floor when they
-        disagree (:func:`floor_for_run`; ``MapRun.mount_warning`` says so). The poses are moved with the
-        mount so that the camera stays where the recording put it (:func:`~mrstereo.recordings.manifest.rebased`).
+        disagree (:func:`floor_for_run`; ``MapRun.mount_warning`` says so).
     """
     from functools import partial
 

@@ -1,20 +1,9 @@
 """Suspicious stereo input, named before a run builds a confident map from it.
 
-Two mistakes of a recording look like valid input to every later stage and give a map with phantom
-obstacles and false free space: the same camera stream recorded as left and right (a duplicated topic),
-and the left and right streams swapped. Both show on the first frames:
-
-- identical streams: most pixels of a pair are equal (two cameras never agree pixel for pixel; in a
-  duplicated stream all do);
-- swapped streams: the scene is shifted the wrong way. In a rectified pair a point of the right image
-  lies left of (or at) its place in the left image, ``x_right = x_left - d`` with ``d >= 0``; OpenCV's
-  semi-global matcher run over disparities of both signs (a probe, at most 320 px wide) finds mostly
-  negative ones in a swapped pair. A raw pair is rectified both ways round (each image with the other
-  camera's maps): a swapped one matches far better the other way.
-
-The thresholds were set on every real pair of the sample data (Middlebury, KITTI 2012/2015, KITTI
-odometry 06, EuRoC, OpenLORIS) and the synthetic corridor, none of which is flagged, while each of them
-duplicated or swapped is: docs/errors.md has the measurement. Conventions: docs/conventions.md.
+Two mistakes look like valid input to every later stage: the same stream recorded as left and
+right (most pixels of a pair equal) and the streams swapped (a semi-global probe over both signs
+of disparity finds mostly negative ones; a raw pair matches better rectified the other way round).
+The thresholds and their measurement: docs/errors.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

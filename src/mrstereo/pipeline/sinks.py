@@ -1,12 +1,8 @@
 """Where a run's frames go besides the map files: live viewers (Rerun, Foxglove) and a ROS 2 bag.
 
-A sink has ``frame(LiveFrame)`` (called for every mapped frame, in order) and ``close()``.
-:class:`ViewerSink` turns a frame into the arrays the loggers of :mod:`mrstereo.viz.live` take;
-:class:`BagSink` into the messages of :class:`mrstereo.recordings.bag_writer.BagWriter`. The map
-and the path go out at most every ``map_every_s`` seconds of the recording's time (a map is the
-largest message) and once more at the end. :func:`open_sinks` makes the sinks the command-line
-options ask for; :func:`replay_map_run` and :func:`replay_odometry` send a finished ``map`` or
-``odometry`` run to the same sinks. Conventions: docs/conventions.md; user guide: docs/live.md.
+A sink has ``frame(LiveFrame)`` and ``close()``; :func:`open_sinks` makes those the options ask
+for, :func:`replay_map_run` and :func:`replay_odometry` replay a finished run into them.
+Conventions: docs/conventions.md; user guide: docs/live.md.
 """
 from __future__ import annotations
 

@@ -1,12 +1,9 @@
 """The files of a ROS bag, checked before a reader trusts them.
 
-:func:`bag_inputs` names what a bag is made of (a ROS 1 file; a ROS 2 folder with metadata.yaml and its
-storage files), so no output is ever written into it. :func:`check_bag_file` walks the records of a ROS 1
-bag or an MCAP file without reading their data: a record claiming more bytes than the file holds (a
-chunk of length 0x7fffffff) is refused in one line naming the byte offset, and a compressed chunk is
-decompressed piecewise into nothing to check it stays within ``MRSTEREO_MAX_MESSAGE_BYTES`` (a 1 MB bag
-can hold a chunk that decompresses to gigabytes). :func:`bag_errors` turns whatever the reader raises on
-a damaged file into one ``ValueError`` naming the bag. Conventions: docs/conventions.md.
+:func:`bag_inputs` names a bag's files (no output is written into them); :func:`check_bag_file`
+refuses records longer than the file and chunks decompressing beyond ``MRSTEREO_MAX_MESSAGE_BYTES``;
+:func:`bag_errors` turns a reader's failure into one ``ValueError`` naming the bag (docs/errors.md).
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

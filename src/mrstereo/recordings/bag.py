@@ -1,34 +1,11 @@
 """ROS bags as stereo datasets: read ROS 1 ``.bag`` and ROS 2 (sqlite3 / mcap) bags without ROS.
 
-Reading uses the ``rosbags`` library. A bag becomes a dataset directory in
-the manifest format (docs/dataset.md), so every command that reads a
-manifest reads a recording too:
-
-1. left and right ``sensor_msgs/Image`` (mono8/16, 16UC1, bgr8, rgb8, bgra8, rgba8, Bayer
-   rggb8/bggr8/gbrg8/grbg8) or ``sensor_msgs/CompressedImage`` messages are paired by their header
-   stamps, each left with the nearest right within ``sync_tolerance_s``
-   (one-to-one, closest pairs first);
-2. the calibration comes from the first ``sensor_msgs/CameraInfo`` of the
-   left and right camera_info topics (``K, D, R, P`` -> :class:`StereoCamera`,
-   ROS's ``P_right[0, 3] = -fx * baseline``) or from a stereo YAML;
-3. the robot pose at each left image stamp comes from ``nav_msgs/Odometry``
-   or from TF (``base_link`` in ``map`` or ``odom``, chained through ``/tf``
-   and ``/tf_static`` in 3-D), interpolated linearly (slerp for rotations)
-   between the two nearest messages and held constant outside their time
-   span; the manifest keeps the 3-D pose (``[x, y, z, qx, qy, qz, qw]``), whose projection on
-   the floor plane, ``(x, y, yaw)`` of the base frame's x axis, the 2-D map uses; every frame keeps
-   its left image's header stamp (``stamp_s``);
-4. the camera mount (``T_base_from_cam``, :class:`~mrstereo.camera.mount.CameraMount`)
-   is the one given, else the stereo YAML's ``mount:``/``rig:``, else the TF pose of ``camera_frame``
-   in ``base_frame`` at the first frame (an ``*optical*`` frame as it is, any
-   other frame as the camera body, x forward, REP 103), else none: the
-   manifest then has no mount and ``map``/``batch`` estimate the floor;
-5. the head pan of a frame is the change of heading of ``camera_frame``'s
-   optical axis in the base frame: relative to the given mount's rectified
-   optical axis, or to ``camera_frame`` at the first frame when the mount comes
-   from TF (0 without a ``camera_frame``).
-
-Conventions: docs/conventions.md; user guide: docs/scale-out.md.
+Reading uses ``rosbags``. A bag becomes a dataset directory in the manifest format
+(docs/dataset.md): left and right images paired by stamp (within ``sync_tolerance_s``), the
+calibration from camera_info (``P_right[0, 3] = -fx * baseline``) or a stereo YAML, the robot
+pose from odometry or TF interpolated at each left stamp, the camera mount given, from the YAML or
+from TF, and the head pan from ``camera_frame``. The rules in full: docs/scale-out.md ("ROS bags").
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -113,10 +90,8 @@ def bag_topics(path: str | os.PathLike) -> dict[str, str]:
 def pick_stereo_topics(topics: dict[str, str], *, need_camera_info: bool = True) -> tuple[str, str]:
     """The left and right image topics of a bag's one stereo pair.
 
-    Candidates are the image topics (with a ``<namespace>/camera_info`` beside them when
-    ``need_camera_info``). Two candidates whose names differ only in ``left``/``right`` or in a number
-    (``cam0``/``cam1``, ``infra1``/``infra2``) form a pair, the left the one that sorts first;
-    exactly one pair is picked.
+    Two image topics (with a ``camera_info`` beside them when ``need_camera_info``) whose names differ
+    only in ``left``/``right`` or a number form a pair, the left sorting first; exactly one is picked.
 
     Raises
     ------
@@ -205,11 +180,8 @@ SUPPORTED_ENCODINGS = tuple(_ENCODINGS)
 def image_from_message(msg, msgtype: str) -> np.ndarray:
     """A ``sensor_msgs/Image`` or ``CompressedImage`` as an OpenCV array.
 
-    Gray (``mono8``, ``8UC1``) and colour (``bgr8``, ``rgb8``, ``bgra8``, ``rgba8``, ``8UC3``,
-    ``8UC4``) become uint8 gray or BGR; ``mono16``/``16UC1`` uint16 gray (byte order from
-    ``is_bigendian``); Bayer mosaics (``bayer_rggb8``, ``bayer_bggr8``, ``bayer_gbrg8``,
-    ``bayer_grbg8``) are debayered to BGR with OpenCV. Rows may be padded (``step``).
-    CompressedImage: whatever OpenCV decodes (jpeg, png; 8 or 16 bit).
+    Gray and colour become uint8 gray or BGR, ``mono16``/``16UC1`` uint16, Bayer mosaics are
+    debayered to BGR; a CompressedImage is whatever OpenCV decodes (encodings: docs/scale-out.md).
 
     Raises ``ValueError`` for an unsupported encoding or an undecodable payload.
     """
@@ -301,9 +273,8 @@ def pair_by_stamp(left_ns: Sequence[int], right_ns: Sequence[int], *, tolerance_
 class TransformTrack:
     """A time series of one transform ``T_parent_from_child`` (odometry or one TF edge).
 
-    ``at(stamp_ns)`` interpolates linearly (slerp for the rotation) between
-    the two nearest samples, returns a sample exactly at its own stamp, and
-    holds the first / last sample outside the span.
+    ``at(stamp_ns)`` interpolates linearly (slerp for the rotation) between the two nearest
+    samples and holds the first / last sample outside the span.
     """
 
     stamps_ns: np.ndarray

@@ -1,21 +1,8 @@
-"""A ROS 2 bag (MCAP storage, through ``rosbags``) of what the pipeline made: what RViz, Nav2, Foxglove and
-Rerun play back.
+"""A ROS 2 bag (MCAP, through ``rosbags``) of what the pipeline made: ``/scan``, ``/points``, ``/map``, ``/odom``, ``/tf``, ``/tf_static``.
 
-Topics and types (frame ids per REP 105):
-
-============== ============================ =====================================================
-``/scan``      sensor_msgs/msg/LaserScan    the virtual laser scan, frame ``base_link``
-``/points``    sensor_msgs/msg/PointCloud2  obstacle points (x, y, z float32), frame ``base_link``
-``/map``       nav_msgs/msg/OccupancyGrid   the occupancy grid, frame ``map``
-``/odom``      nav_msgs/msg/Odometry        the robot's pose: ``odom`` -> ``base_link``
-``/tf``        tf2_msgs/msg/TFMessage       ``odom`` -> ``base_link`` with every pose
-``/tf_static`` tf2_msgs/msg/TFMessage       ``map`` -> ``odom`` (identity: no loop closure) and
-                                            ``base_link`` -> the left camera's optical frame
-============== ============================ =====================================================
-
-``/map`` and ``/tf_static`` are offered latched (transient local). The bag is written into a hidden
-folder beside its destination and renamed into place when closed: a killed run leaves no half bag
-under the name. Conventions: docs/conventions.md; user guide: docs/live.md.
+Frame ids per REP 105; ``/map`` and ``/tf_static`` are latched. The bag is written into a hidden
+folder beside its destination and renamed into place when closed. Topics and types: docs/live.md
+("ROS 2 bag"). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

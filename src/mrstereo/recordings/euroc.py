@@ -1,22 +1,11 @@
 """The EuRoC MAV / ASL folder layout as a recording: stereo frames, stamps, calibration and truth.
 
-Layout (Burri et al. 2016; the ASL dataset format)::
-
-    ROOT/mav0/cam0/data.csv            #timestamp [ns],filename   (left camera)
-    ROOT/mav0/cam0/data/<ns>.png
-    ROOT/mav0/cam0/sensor.yaml         intrinsics [fu, fv, cu, cv], distortion, T_BS (body from camera)
-    ROOT/mav0/cam1/...                 the right camera, the same files
-    ROOT/mav0/state_groundtruth_estimate0/data.csv   optional truth: t [ns], p_RS_R xyz [m], q_RS wxyz
-    ROOT/mav0/body.yaml                the body (IMU) frame's comment
-
-``ROOT`` may be the folder holding ``mav0/`` or ``mav0/`` itself. Left and right images are paired
-by stamp. The calibration is the two ``sensor.yaml`` (a raw pair, rectified by mrstereo). The truth
-is the pose of the body frame -- the IMU of a drone, not a frame on the floor -- interpolated to
-each frame's stamp (slerp); frames outside the truth's time span are left out (said in
-``Manifest.notes``). The recording has no mount: the floor is found in the images when mapping,
-and the poses are moved onto the floor under the camera then (``Manifest.pose_frame_mount``:
-cam0's ``T_BS``). Without truth the recording has no poses (visual odometry gives them).
-Conventions: docs/conventions.md; the formats: docs/dataset.md.
+``ROOT`` (the folder holding ``mav0/`` or ``mav0/`` itself) has ``cam0/`` and ``cam1/`` (``data.csv``,
+``data/<ns>.png``, ``sensor.yaml``) and optionally ``state_groundtruth_estimate0/data.csv``. Images
+are paired by stamp, the calibration is the two ``sensor.yaml`` (a raw pair), the truth is the body
+(IMU) pose interpolated to each frame; frames outside its span are left out. No mount: the floor is
+found when mapping (``Manifest.pose_frame_mount``). The layout: docs/dataset.md.
+Conventions: docs/conventions.md.
 
 References
 ----------

@@ -1,15 +1,9 @@
 """A plain pair of image folders with a calibration as a recording.
 
-Layout: a folder holding a left and a right image folder, one of the pairs of
-:data:`FOLDER_PAIRS` (``left/ right/``, ``cam0/ cam1/``, ``image_0/ image_1/``, ...), and a
-calibration: given (``calibration=``, the ``--calib`` of a command), or one file of a known
-name in the folder (:data:`CALIBRATION_NAMES`). Images of the two folders are paired by file name
-(else by order, when both hold as many). Stamps come from the file names when they are time
-stamps (``1403715273262142976.png`` in ns, ``1560004885.437324.png`` in s: see
-:func:`stamps_from_names`), else from a frame rate (``rate_hz``), else the frames have none.
-The recording has no poses (visual odometry gives them) and no mount unless the calibration
-holds one (the floor is then found in the images). Conventions: docs/conventions.md; the
-formats: docs/dataset.md.
+A left and a right folder (:data:`FOLDER_PAIRS`) and a calibration given or found by name
+(:data:`CALIBRATION_NAMES`); images paired by name, else by order; stamps from the names
+(:func:`stamps_from_names`) or ``rate_hz``. No poses, no mount unless the calibration holds one.
+The layout: docs/dataset.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -60,9 +54,8 @@ def is_image_folders(path: str | os.PathLike) -> bool:
 def stamps_from_names(paths) -> np.ndarray | None:
     """Time stamps [s] read from file names, or None when the names are not time stamps.
 
-    A name is a stamp when its stem is a number of at least 9 digits before the decimal point
-    (a time since 1970 in s, ms, us or ns): ``1403715273262142976`` is nanoseconds,
-    ``1560004885.437324`` seconds. Frame numbers (``000123``) are not stamps.
+    A stem of at least 9 digits before the decimal point is a time since 1970 (s, ms, us or ns:
+    ``1403715273262142976`` ns, ``1560004885.437324`` s); frame numbers are not stamps.
     """
     stems = [Path(p).stem for p in paths]
     if stems and all(re.fullmatch(r"\d{9,10}\.\d+", s) for s in stems):

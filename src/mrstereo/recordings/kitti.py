@@ -1,24 +1,11 @@
 """The KITTI odometry layout as a recording: rectified pairs, stamps, calibration and 3-D truth.
 
-Layout (the KITTI odometry benchmark's files, http://www.cvlibs.net/datasets/kitti/eval_odometry.php)::
-
-    ROOT/sequences/NN/image_0/000000.png ...   left rectified gray images
-    ROOT/sequences/NN/image_1/000000.png ...   right rectified gray images
-    ROOT/sequences/NN/calib.txt                P0: ... P1: ... (3x4 rectified projections, row-major)
-    ROOT/sequences/NN/times.txt                one stamp per frame [s]
-    ROOT/poses/NN.txt                          ground truth (optional; sequences 00-10 have it)
-
-:func:`read_kitti_odometry` returns the same :class:`~mrstereo.recordings.manifest.Manifest` the
-pipeline reads from a dataset directory: frames with both rectified images and their stamps, the
-calibration as a pre-rectified :class:`~mrstereo.camera.StereoCamera` (``P0`` left, ``P1`` right:
-``P1[0, 3] = -fx * baseline_m``), and the truth converted to the REP 103 base frame.
-
-KITTI's poses are ``T_cam0_from_camk``: the left camera of frame ``k`` in the left camera of frame 0
-(x right, y down, z forward). With the camera mount ``M = T_base_from_cam`` (default: the left
-camera 1.65 m above the road, level, looking forward, as the KITTI car carries it), the base pose
-is ``T_world_from_base_k = M T_cam0_from_camk inv(M)``: the world is the base frame of frame 0
-(x forward, y left, z up, on the road). Without a poses file every frame's given pose is the
-origin (use visual odometry). Conventions: docs/conventions.md; the format: docs/dataset.md.
+``ROOT/sequences/NN/{image_0,image_1,calib.txt,times.txt}`` and optionally ``ROOT/poses/NN.txt``.
+:func:`read_kitti_odometry` returns a :class:`~mrstereo.recordings.manifest.Manifest`: the
+calibration as a pre-rectified :class:`~mrstereo.camera.StereoCamera` (``P1[0, 3] = -fx *
+baseline_m``), and KITTI's ``T_cam0_from_camk`` converted to the REP 103 base frame,
+``T_world_from_base_k = M T_cam0_from_camk inv(M)`` with the mount ``M = T_base_from_cam``.
+The layout: docs/dataset.md ("KITTI odometry folders"). Conventions: docs/conventions.md.
 
 References
 ----------

@@ -1,17 +1,9 @@
 """Which recording a path holds, and its reader: the one entry point of commands that take a recording.
 
-A path is read by the first layout whose detection hook accepts it (:data:`LAYOUTS`):
-
-- a dataset directory or its ``manifest.yaml`` (docs/dataset.md): :func:`.manifest.read_manifest`;
-- a KITTI odometry folder (``sequences/NN/`` or one sequence folder): :func:`.kitti.read_kitti_odometry`;
-- a EuRoC/ASL folder (``mav0/cam0``, ``cam1``): :func:`.euroc.read_euroc`;
-- a folder with a left and a right image folder and a calibration: :func:`.folders.read_image_folders`;
-- a ROS 1 ``.bag`` or ROS 2 bag directory: exported to a temporary dataset by :func:`opened_recording`
-  (:func:`.bag.export_bag`; the stereo topics are picked when the bag has one pair).
-
-Every reader returns the same :class:`~mrstereo.recordings.manifest.Manifest` (frames with their
-stamps and poses, calibration, mount, truth): what the pipeline, the odometry and ``mrstereo info``
-read. Conventions: docs/conventions.md; the formats: docs/dataset.md.
+The first layout of :data:`LAYOUTS` whose detection accepts the path reads it (a dataset
+directory, KITTI odometry, EuRoC/ASL, image folders, a ROS bag exported by
+:func:`opened_recording`); each returns a :class:`~mrstereo.recordings.manifest.Manifest`.
+The layouts: docs/dataset.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

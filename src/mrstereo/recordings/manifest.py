@@ -1,17 +1,8 @@
 """Recordings on disk: the dataset manifest shared by bags, synthetic worlds and the pipeline.
 
-Layout (docs/dataset.md)::
-
-    DIR/manifest.yaml        calibration, mount, ground_truth_map, frames
-    DIR/calibration.yaml     stereo calibration (mrstereo.camera.write_stereo)
-    DIR/gt_map.yaml, .pgm    ROS map_server ground-truth map (optional)
-    DIR/left/000000.png ...  raw images; left_rect/, right_rect/ rectified;
-    DIR/gt_disparity/*.pfm   ground-truth disparity (optional); gt_labels/*.png
-
-Paths in the manifest are relative to DIR. ``mrstereo export`` (a ROS bag) and the
-synthetic world (:mod:`mrstereo.world.dataset`) write it with :func:`staged_dataset`;
-``map``, ``batch`` and the pipeline read it. A frame may give only raw or only rectified images,
-and every ground-truth entry is optional. Conventions: docs/conventions.md.
+``DIR/manifest.yaml`` (calibration, mount, ground-truth map, frames; paths relative to ``DIR``),
+written with :func:`staged_dataset` by ``mrstereo export`` and the synthetic world, read by
+``map``, ``batch`` and the pipeline. The layout: docs/dataset.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -43,12 +34,9 @@ GT_KEYS = ("gt_disparity", "gt_labels")
 class FrameRecord:
     """One frame of a dataset: absolute image paths (None when absent), stamp, poses and head pan.
 
-    ``pose`` is the planar pose ``(x_m, y_m, yaw_rad)`` the robot reported (its odometry);
-    ``true_pose``, when the dataset has it (a synthetic sequence with drifted odometry, a
-    benchmark's ground truth), the truth. ``pose_3d`` / ``true_pose_3d``, when the recording
-    knows them, are the same poses in 3-D, ``(x, y, z, qx, qy, qz, qw)`` (TUM order); the planar
-    pose is then their projection on the floor (:func:`mrstereo.transforms.planar_from_T`) and
-    may be left out (None). ``stamp_s``: the frame's time stamp in seconds (None: unknown).
+    ``pose`` ``(x_m, y_m, yaw_rad)`` is the robot's odometry, ``true_pose`` the truth when known;
+    ``pose_3d`` / ``true_pose_3d`` the same in 3-D, ``(x, y, z, qx, qy, qz, qw)`` (TUM order), of
+    which the planar ones are the projection; ``stamp_s`` in seconds (None: unknown).
     """
 
     pose: tuple[float, float, float] | None
@@ -180,10 +168,8 @@ class Manifest:
 def rebased(manifest: Manifest, mount: CameraMount) -> Manifest:
     """The recording with its poses moved to the base of ``mount``, the camera staying where it is.
 
-    The poses are of the frame the recording's camera sits in (``pose_frame_mount``, else ``mount``);
-    with the camera at ``P = T_posed_from_cam`` there and at ``M = T_base_from_cam`` on the new base,
-    every pose (and true pose) becomes ``T_world_from_base = T_world_from_posed P M^-1``. Without poses,
-    or when the two mounts are the same, the recording is returned as it is, with ``mount`` set.
+    With the camera at ``P = T_posed_from_cam`` (``pose_frame_mount``, else ``mount``) and at
+    ``M = T_base_from_cam`` on the new base, every pose becomes ``T_world_from_posed P M^-1``.
     """
     from dataclasses import replace
 
@@ -358,9 +344,7 @@ def staged_dataset(out_dir: str | os.PathLike, *, calibration: StereoCamera, mou
                    calibration_name: str = "calibration.yaml", extra: dict | None = None) -> Iterator[DatasetWriter]:
     """Write a new dataset folder: the block adds frames, the end writes calibration and manifest.
 
-    The folder is built in a hidden temporary folder and renamed into place when the block ends
-    without an error (:func:`mrstereo.io.staged_new_dir`), so a failed or killed run leaves no
-    half-written dataset.
+    Built in a hidden folder and renamed into place on success (:func:`mrstereo.io.staged_new_dir`).
 
     Parameters
     ----------
@@ -386,9 +370,8 @@ def staged_dataset(out_dir: str | os.PathLike, *, calibration: StereoCamera, mou
 def frame_pair(record: FrameRecord, *, prefer_raw: bool = False) -> tuple[np.ndarray, np.ndarray, bool]:
     """Load a frame's pair ``(left, right, rectified)``: the rectified one when listed.
 
-    ``prefer_raw`` takes the raw pair (to be rectified with the calibration) even when a
-    rectified pair is listed, e.g. to test an estimated calibration. 16-bit images are scaled
-    by :func:`matching_image`.
+    ``prefer_raw`` takes the raw pair even when a rectified one is listed (to test an estimated
+    calibration). 16-bit images are scaled by :func:`matching_image`.
     """
     if not isinstance(record, FrameRecord):
         raise TypeError(f"record must be a FrameRecord, got {type(record).__name__}")

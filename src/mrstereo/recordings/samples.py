@@ -1,25 +1,9 @@
 """Sample data: the public stereo scenes the tests, the ``evaluate`` examples and the benchmarks use.
 
-Every file has a name in a small registry (:mod:`mrstereo.recordings._registry`): where it lies under
-the data root, the public GitHub repository, commit and path it comes from, and its SHA-256.
-
-Where the files are read from:
-
-* ``MRSTEREO_DATA`` set: that folder, used as it is (nothing is downloaded; a copy laid out
-  like the registry, ``middlebury2001/tsukuba/...``, ``kitti2012/000070/...``);
-* otherwise pooch's cache folder for mrstereo (``pooch.os_cache("mrstereo")``, e.g.
-  ``~/.cache/mrstereo`` on Linux): :func:`fetch` downloads the missing files from their source
-  (raw.githubusercontent.com at the pinned commit) and checks each SHA-256.
-
-``mrstereo data fetch [NAME...]`` / ``mrstereo data path [NAME]`` / ``mrstereo data list`` are
-the command-line side (docs/evaluation.md).
-
-Licences: Middlebury scenes may be used and published when their papers are cited (Scharstein &
-Szeliski, IJCV 2002 and CVPR 2003); KITTI is CC BY-NC-SA 3.0 (Geiger et al., CVPR 2012; Menze &
-Geiger, CVPR 2015); the OpenCV chessboards come with OpenCV's licence; OpenLORIS-Scene (Shi et al.,
-ICRA 2020) is for research use.
-
-Conventions: docs/conventions.md.
+Every file has a name, source and SHA-256 in :mod:`mrstereo.recordings._registry`. With
+``MRSTEREO_DATA`` set the files are read from that folder as they are; otherwise :func:`fetch`
+downloads the missing ones into pooch's cache and checks them. Command line (``mrstereo data``),
+where the files come from and their licences: docs/evaluation.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -69,15 +53,6 @@ class SampleScene:
     folder: str
     description: str
     files: tuple[SampleFile, ...]
-
-    @property
-    def size_bytes(self) -> int | None:
-        """Size of the local copy (None when a file is missing)."""
-        root = data_root()
-        try:
-            return sum((root / f.path).stat().st_size for f in self.files)
-        except OSError:
-            return None
 
 
 _FILES = tuple(SampleFile(*row) for row in FILES)
@@ -144,10 +119,8 @@ def verify(name: str) -> list[str]:
 def fetch(name: str, *, progress: bool = False) -> Path:
     """Make the scene ``name`` available locally and return its folder.
 
-    With ``MRSTEREO_DATA`` set the folder is used as it is: a missing file raises
-    ``FileNotFoundError`` naming it (nothing is downloaded into a user's copy). Otherwise the
-    missing files are downloaded with pooch into its cache folder, each checked against its
-    SHA-256 (a mismatch raises ``ValueError`` and leaves no file behind).
+    With ``MRSTEREO_DATA`` set a missing file raises ``FileNotFoundError``; otherwise missing files
+    are downloaded into pooch's cache and checked (a SHA-256 mismatch raises ``ValueError``).
     """
     entry = scene(name)
     if os.environ.get(ENV_VAR, "").strip():

@@ -1,21 +1,10 @@
 """Frame sources: stereo pairs with time stamps from cameras, video files and recordings, one interface.
 
-A :class:`FrameSource` is an iterator of :class:`StereoFrame` (the pair, its stamp, and what the
-source knows of it: rectified or raw, the recording's robot pose) plus what the source knows as a
-whole (calibration, camera mount, whether it runs in real time). Behind it:
-
-- :class:`VideoSource`: one or two ``cv2.VideoCapture`` -- a camera (an index such as ``0`` or a
-  device path such as ``/dev/video2``) or a video file; two captures are the left and right
-  cameras (each grabbed, then both retrieved, so the two exposures are as close as the driver
-  allows), one capture with ``side_by_side`` holds both halves in one frame (most USB stereo
-  modules). A camera's stamp is the host's monotonic clock when the frame was grabbed; a video
-  file's is its presentation time (``CAP_PROP_POS_MSEC``).
-- :class:`RecordingSource`: the frames of a recording (:func:`mrstereo.recordings.read_recording`:
-  a dataset, a KITTI folder, an exported bag) with their stamps and the recording's poses.
-
-:func:`open_source` picks one from what the user typed. :func:`paced` replays a file's frames at
-their recorded rate (a camera is always real time). Conventions: docs/conventions.md; the live
-loop: docs/live.md.
+A :class:`FrameSource` is an iterator of :class:`StereoFrame` plus what the source knows as a whole
+(calibration, mount, real time or not): :class:`VideoSource` (one or two ``cv2.VideoCapture``,
+cameras or video files, optionally side by side) or :class:`RecordingSource` (a recording's frames,
+stamps and poses). :func:`open_source` picks one from what the user typed; :func:`paced` replays a
+file at its recorded rate. The live loop: docs/live.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 

@@ -1,33 +1,16 @@
 """Rejection of disparity on uniform image areas: texture / ground suppression, paper eq. (13).
 
-Block matching on a patch without texture (a plain floor, a white wall) finds
-a minimum of the NSSD cost (eq. 9) that is decided by noise; the resulting
-"ghost points" scatter in depth and show up as false obstacles. Section 3.5 of
-the paper models the gray patches of the uniform ground as a Gaussian with a
-small standard deviation and rejects the disparity wherever the local patch
-statistics ``(mu_patch, sigma_patch)`` fall below an experimental threshold T:
+Block matching on a patch without texture finds a minimum of the NSSD cost (eq. 9) decided by
+noise. Section 3.5 of the paper rejects the disparity wherever the local patch statistics
+``(mu_patch, sigma_patch)`` fall below an experimental threshold T:
 
     d(x, y) = invalid   if (mu_patch, sigma_patch) <= T           (13)
               d(x, y)   otherwise
 
-Two readings of ``(mu, sigma) <= T`` are implemented:
-
-* **texture test** (default, no reference image needed): reject where the
-  patch standard deviation ``sigma <= texture_threshold`` (T of eq. 13, gray
-  levels on a 0-255 scale); optionally only where the patch mean also lies in a
-  window ``mean_range`` (e.g. the brightness of the floor), so that a dark but
-  textured region is never rejected by its mean alone.
-* **learned floor model** (the paper's "we have measured means and standard
-  deviations ... with ground areas"): :func:`learn_floor_model` fits a Gaussian
-  to ``(mu, sigma)`` over the floor pixels of a reference image of the empty
-  floor; a patch is rejected when its mean lies within ``k_sigma`` standard
-  deviations of the floor's mean and its standard deviation is no larger than
-  the floor's mean sigma plus ``k_sigma`` standard deviations (texture that
-  is no richer than the floor's).
-
-Rejected disparities become NaN (the library's "invalid"; the paper writes 0).
-Patch statistics use box filters on ``I`` and ``I^2`` (``cv2.boxFilter``), so
-the cost is independent of the window size. Conventions: docs/conventions.md.
+Two readings of ``(mu, sigma) <= T``: the texture test (``sigma <= texture_threshold``, optionally
+only where the mean lies in ``mean_range``) and a learned floor model (:func:`learn_floor_model`,
+a Gaussian over the floor's ``(mu, sigma)``). Rejected disparities become NaN. Patch statistics
+use box filters on ``I`` and ``I^2``. User guide: docs/obstacles.md; conventions: docs/conventions.md.
 
 References
 ----------
@@ -93,11 +76,8 @@ class RejectionConfig:
 class PatchStatistics:
     """Patch statistics of an image over ``window_px`` x ``window_px`` patches.
 
-    ``sum1 * scale`` and ``sum2 * scale`` are the patch means of ``I`` and ``I^2`` (float64
-    products; ``sum1``, ``sum2`` (H, W) float32 or float64): the exact integer window sums of a
-    uint8 gray image with ``scale = 1 / window_px^2``, or the float64 means themselves with
-    ``scale = 1``. ``mean`` (``mu_patch``) and ``std`` (``sigma_patch``) are formed from them on
-    first use, float32 (H, W).
+    ``sum1 * scale`` and ``sum2 * scale`` are the patch means of ``I`` and ``I^2``; ``mean``
+    (``mu_patch``) and ``std`` (``sigma_patch``) are formed from them on first use, float32 (H, W).
     """
 
     sum1: np.ndarray
@@ -125,9 +105,8 @@ class PatchStatistics:
 class FloorModel:
     """Gaussian model of the patch statistics ``(mu, sigma)`` of the floor (section 3.5).
 
-    ``mu_mean``/``mu_std`` describe the distribution of the patch means over
-    the floor, ``sigma_mean``/``sigma_std`` that of the patch standard
-    deviations; ``window_px`` is the patch size they were measured with.
+    ``mu_mean``/``mu_std`` and ``sigma_mean``/``sigma_std`` describe the floor's patch means and
+    standard deviations, measured over ``window_px`` patches.
     """
 
     mu_mean: float
@@ -175,12 +154,8 @@ def patch_statistics(image, *, window_px: int = 9) -> PatchStatistics:
     """Local mean and standard deviation over ``window_px`` x ``window_px`` patches.
 
     Box filters on ``I`` and ``I^2`` (borders reflected): ``mu = E[I]``,
-    ``sigma = sqrt(max(E[I^2] - mu^2, 0))``, formed in float64 so that the difference of large
-    squares does not lose precision, stored as float32. A uint8 gray image (the usual rectified
-    frame) takes OpenCV's SIMD box filters of the uint8 image, whose integer window sums are
-    exact (float32 while ``255^2 w^2 < 2^24``, i.e. windows up to 15 px, float64 beyond):
-    ``E[.] = sum / w^2`` is then bit for bit what the float64 filters of the float image give,
-    at less than half the cost. Colour and float images take the float64 filters.
+    ``sigma = sqrt(max(E[I^2] - mu^2, 0))``, formed in float64, stored as float32. A uint8 gray
+    image takes OpenCV's box filters of exact integer window sums: bit for bit the same.
 
     Parameters
     ----------
