@@ -44,8 +44,8 @@ def ds(synthetic_dataset) -> Path:
 @pytest.fixture(scope="module")
 def long_inputs(synthetic_dataset, tmp_path_factory) -> dict[str, Path]:
     """Inputs that keep the interrupted commands busy for several seconds on a fast machine (the
-    signal must land during the work, not after it): a 40-frame dataset and a 2560x1920 pair."""
-    ds = synthetic_dataset(n_frames=40, width=160, height=120, supersample=1)
+    signal must land during the work, not after it): a 120-frame dataset and a 2560x1920 pair."""
+    ds = synthetic_dataset(n_frames=120, width=160, height=120, supersample=1)
     root = tmp_path_factory.mktemp("long")
     for side in ("left", "right"):
         image = cv2.imread(str(ds / f"{side}_rect" / "000000.png"), cv2.IMREAD_GRAYSCALE)
