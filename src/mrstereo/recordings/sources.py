@@ -48,6 +48,8 @@ class StereoFrame:
         The robot's pose from the recording's odometry (None: the source has none).
     pan_rad : float
         Head pan of the frame (recordings of a panning head).
+    T_world_from_base_true : ndarray (4, 4), optional
+        The robot's true pose (a recording's ground truth; None: unknown).
     """
 
     index: int
@@ -57,6 +59,7 @@ class StereoFrame:
     rectified: bool = False
     T_world_from_base: np.ndarray | None = None
     pan_rad: float = 0.0
+    T_world_from_base_true: np.ndarray | None = None
 
 
 class FrameSource:
@@ -75,6 +78,21 @@ class FrameSource:
         The camera mount the source carries, else None.
     has_poses : bool
         Every frame has the recording's robot pose.
+    rate_hz : float or None
+        The nominal frame rate, when known.
+    n_frames : int or None
+        How many frames the source holds, when known (None: a camera).
+    root : Path or None
+        The recording's folder or file (None: cameras, videos).
+    layout : str
+        What was read (``"dataset"``, ``"EuRoC/ASL"``, ``"KITTI odometry"``, ``"ROS bag"``, ``"video"``, ...).
+    ground_truth_map : Path or None
+        ROS map YAML of the true map, when the recording has one.
+    pose_frame_mount : CameraMount or None
+        The left camera in the frame the poses are of, when that frame is not a base on the floor
+        (see :attr:`mrstereo.recordings.manifest.Manifest.pose_frame_mount`).
+    notes : tuple of str
+        What the reader left out or assumed, one line each.
     """
 
     name: str = "source"
@@ -82,6 +100,13 @@ class FrameSource:
     calibration: StereoCamera | None = None
     mount: CameraMount | None = None
     has_poses: bool = False
+    rate_hz: float | None = None
+    n_frames: int | None = None
+    root: Path | None = None
+    layout: str = ""
+    ground_truth_map: Path | None = None
+    pose_frame_mount: CameraMount | None = None
+    notes: tuple[str, ...] = ()
 
     def __iter__(self) -> Iterator[StereoFrame]:
         raise NotImplementedError
@@ -236,7 +261,12 @@ class RecordingSource(FrameSource):
         self.name = str(manifest.root)
         self.calibration = manifest.calibration
         self.mount = manifest.mount
-        self.has_poses = True
+        self.has_poses = manifest.has_poses
+        self.root = Path(manifest.root)
+        self.layout = manifest.layout
+        self.ground_truth_map = manifest.ground_truth_map
+        self.pose_frame_mount = manifest.pose_frame_mount
+        self.notes = tuple(manifest.notes)
         self.prefer_raw = prefer_raw
         self.rate_hz = float(rate_hz)
         self.n_frames = len(manifest.frames)
@@ -258,7 +288,8 @@ class RecordingSource(FrameSource):
                 (0.0 if last is None else last + 1.0 / self.rate_hz)
             last = stamp
             yield StereoFrame(index=k, stamp_s=float(stamp), left=left, right=right, rectified=rectified,
-                              T_world_from_base=record.T_world_from_base, pan_rad=float(record.pan_rad))
+                              T_world_from_base=record.T_world_from_base, pan_rad=float(record.pan_rad),
+                              T_world_from_base_true=record.T_world_from_base_true)
 
 
 def paced(frames, *, speed: float = 1.0, clock=time.monotonic, sleep=time.sleep) -> Iterator[StereoFrame]:
