@@ -18,6 +18,7 @@ import numpy as np
 from .. import _checks
 from ..camera import StereoCamera
 from ..io import atomic_write
+from . import _scan_kernels
 
 __all__ = [
     "LaserScan", "laser_scan_from_points", "near_limit_range_m", "scan_angles_of_camera", "top_view",
@@ -170,9 +171,7 @@ def laser_scan_from_points(points_robot, *, angle_min_rad: float = -math.pi / 4,
     -------
     LaserScan
     """
-    p = np.asarray(points_robot, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] not in (2, 3):
-        raise ValueError(f"points_robot must have shape (N, 3) or (N, 2), got {p.shape}")
+    p = _scan_points("points_robot", points_robot)
     a0 = _checks.finite_number("angle_min_rad", angle_min_rad)
     a1 = _checks.finite_number("angle_max_rad", angle_max_rad)
     inc = _checks.finite_number("angle_increment_rad", angle_increment_rad, positive=True)
@@ -192,51 +191,39 @@ def laser_scan_from_points(points_robot, *, angle_min_rad: float = -math.pi / 4,
         if value.shape != (p.shape[0],):
             raise ValueError(f"intensities must have one value per point ({p.shape[0]}), got shape "
                              f"{np.shape(intensities)}")
+    observed = None if observed_points_robot is None else _scan_points("observed_points_robot", observed_points_robot)
     n_float = math.floor((a1 - a0) / inc + 1e-9) + 1
-    _checks.fits_in_memory("angle_increment_rad", n_float * 40.0, f"a scan of {n_float:.4g} rays")
+    _checks.fits_in_memory("angle_increment_rad", n_float * (40.0 + 16.0 * m), f"a scan of {n_float:.4g} rays")
     n = int(n_float)
-    finite = np.isfinite(p[:, :2]).all(axis=1)
-    p = p[finite]
-    k, r = _rays(p, a0, inc, n)
-    keep = (r >= r0) & (r <= r1) & (k >= 0) & (k < n)
-    index = np.nonzero(keep)[0]
-    k, r = k[keep], r[keep]
-    ranges = np.full(n, np.nan)
+    # one pass per point set: each bearing keeps its m nearest returns (sorted), and whether anything
+    # was seen on it at range_max or beyond
+    near_r = np.full((n, m), np.inf)
+    near_i = np.full((n, m), -1, np.int64)
+    count = np.zeros(n, np.int64)
+    _scan_kernels.nearest_per_bearing(p, a0, inc, r0, r1, m, near_r, near_i, count)
+    ranges = np.where(count >= m, near_r[:, m - 1], np.nan)
     scan_values = np.full(n, np.nan)
-    if k.size:
-        order = np.lexsort((r, k))                 # by ray, then by range
-        k, r, index = k[order], r[order], index[order]
-        first = np.searchsorted(k, np.arange(n))   # index of each ray's nearest point
-        count = np.bincount(k, minlength=n)
+    if value is not None:
         has = count >= m
-        ranges[has] = r[first[has] + m - 1]
-        if value is not None:
-            scan_values[has] = value[finite][index[first[has] + m - 1]]
-    seen = p if observed_points_robot is None else np.concatenate(
-        [p[:, :2], _checks.points3("observed_points_robot", _as3(observed_points_robot))[:, :2]])
-    seen = seen[np.isfinite(seen[:, :2]).all(axis=1)]
-    ks, rs = _rays(seen, a0, inc, n)
-    inside = (ks >= 0) & (ks < n)
-    clear_to = np.zeros(n)
-    np.maximum.at(clear_to, ks[inside], rs[inside])
-    ranges[np.isnan(ranges) & (clear_to >= r1)] = np.inf
+        scan_values[has] = value[near_i[has, m - 1]]
+    reach = np.zeros(n, bool)
+    for seen in (p, observed):
+        if seen is not None and len(seen):
+            _scan_kernels.seen_to_range(seen, a0, inc, r1, reach)
+    ranges[np.isnan(ranges) & reach] = np.inf
     return LaserScan(angle_min_rad=a0, angle_max_rad=a0 + (n - 1) * inc, angle_increment_rad=inc,
                      range_min_m=r0, range_max_m=r1, ranges_m=ranges,
                      intensities=scan_values if value is not None else np.empty(0),
                      frame_id=frame_id, stamp_s=stamp)
 
 
-def _rays(points: np.ndarray, angle_min_rad: float, increment_rad: float, n: int):
-    """Ray index (nearest bearing) and horizontal range of each (x, y[, z]) point."""
-    r = np.hypot(points[:, 0], points[:, 1])
-    k = np.rint((np.arctan2(points[:, 1], points[:, 0]) - angle_min_rad) / increment_rad).astype(np.int64)
-    return k, r
-
-
-def _as3(points) -> np.ndarray:
-    arr = np.asarray(points, dtype=np.float64)
-    if arr.ndim == 2 and arr.shape[1] == 2:
-        arr = np.concatenate([arr, np.zeros((arr.shape[0], 1))], axis=1)
+def _scan_points(name: str, value) -> np.ndarray:
+    """Points (N, 2 or 3) as given when they are float32 or float64 (the kernels read both), else as float64."""
+    arr = np.asarray(value)
+    if arr.dtype not in (np.float32, np.float64):
+        arr = np.asarray(arr, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] not in (2, 3):
+        raise ValueError(f"{name} must have shape (N, 3) or (N, 2), got {arr.shape}")
     return arr
 
 
