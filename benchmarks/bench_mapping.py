@@ -6,7 +6,14 @@ Prints medians (ms) of:
 - OpenCV StereoBM on a 640x480 pair, 96 disparities (the cost of one frame's matching);
 - A* (plan_path) corner to corner on the default 240x120 grid, empty and with walls.
 
+``--euroc``: the real frames of the EuRoC sample (``$MRSTEREO_DATA/euroc_asl_sample``, 752x480, about
+100 000 obstacle points a frame) through the chain of ``mrstereo map`` and ``mrstereo scan``, one thread:
+per frame the CPU time (``time.process_time``) of the stages ``match``, ``grid`` (the points into the world
+frame and the update of the growing map) and ``scan`` (the virtual laser scan), medians over the frames and
+repeats, and grid + scan as a share of matching (issue 33's budget: at most 15 %).
+
 Run: python benchmarks/bench_mapping.py [--points 100000] [--repeat 15]
+     python benchmarks/bench_mapping.py --euroc [--repeat 3]
 """
 from __future__ import annotations
 
@@ -50,11 +57,65 @@ def naive_cv2_lines(wall: np.ndarray, floor: np.ndarray, grid: GridSpec, sensor_
     return free
 
 
+def euroc_stages(repeat: int) -> None:
+    """Per-frame CPU time of match, grid and scan on the EuRoC sample's frames (one thread)."""
+    import math
+    import os
+    from pathlib import Path
+
+    import numba
+
+    from mrstereo.mapping.fusion import add_observation
+    from mrstereo.mapping.tiles import TiledOccupancyGrid
+    from mrstereo.pipeline.frame import scan_from_pair
+    from mrstereo.pipeline.run import PipelineConfig, floor_for_run, observation_from_pair, pair_options
+    from mrstereo.profiling import Profile, profiling
+    from mrstereo.recordings.layouts import read_recording
+    from mrstereo.recordings.manifest import frame_pair, rebased
+
+    cv2.setNumThreads(1)
+    numba.set_num_threads(1)
+    root = Path(os.environ.get("MRSTEREO_DATA", "data")) / "euroc_asl_sample"
+    manifest = read_recording(root)
+    stereo = manifest.calibration
+    config = PipelineConfig().for_rig(stereo)
+    mount = floor_for_run(manifest, stereo, config=config).mount
+    manifest = rebased(manifest, mount)
+    range_m = config.obstacle_config.max_range_m
+    pairs = [frame_pair(record) for record in manifest.frames]
+    samples: dict[str, list[float]] = {"match": [], "grid": [], "scan": []}
+    points = []
+    for k in range(repeat + 1):                     # the first round compiles and warms up
+        occupancy = TiledOccupancyGrid(config.resolution_m, config=config.mapping, view_reach_m=range_m + 2.0)
+        for index, (record, (left, right, rectified)) in enumerate(zip(manifest.frames, pairs)):
+            profile = Profile(clock=time.process_time)
+            with profiling(profile):
+                result = scan_from_pair(left, right, stereo, rectified=rectified, mount=mount, min_points=3,
+                                        **pair_options(config))
+                obs = observation_from_pair(result.frame, record, index=index, config=config, stereo=stereo)
+                add_observation(occupancy, obs)
+            if k:
+                for name in samples:
+                    samples[name].append(1e3 * profile.seconds.get(name, math.nan))
+                points.append(len(obs.obstacle_points_world))
+    med = {name: float(np.median(v)) for name, v in samples.items()}
+    print(f"EuRoC sample, {len(pairs)} frames {stereo.size[0]}x{stereo.size[1]} x {repeat} repeats, one thread, "
+          f"CPU time (process_time); median {int(np.median(points))} obstacle points a frame")
+    for name, ms in med.items():
+        print(f"{name:<6} {ms:8.2f} ms/frame")
+    share = (med["grid"] + med["scan"]) / med["match"]
+    print(f"grid + scan {med['grid'] + med['scan']:.2f} ms = {100 * share:.1f} % of matching")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, default=100_000)
     parser.add_argument("--repeat", type=int, default=15)
+    parser.add_argument("--euroc", action="store_true", help="the stages of real EuRoC frames (see above)")
     args = parser.parse_args()
+    if args.euroc:
+        euroc_stages(min(args.repeat, 3) if args.repeat == 15 else args.repeat)
+        return
     rng = np.random.default_rng(0)
     wall, floor = corridor_view(args.points, rng)
     sensor = (0.2, 0.0)

@@ -100,10 +100,16 @@ def T_robot_from_cam(*, height_m: float, tilt_rad: float = 0.0, pan_rad: float =
 
 
 def transform_points(T_b_from_a: np.ndarray, points_a) -> np.ndarray:
-    """Apply a 4x4 transform to points of shape (..., 3); NaN rows stay NaN."""
+    """Apply a 4x4 transform to points of shape (..., 3); NaN rows stay NaN.
+
+    ``cv2.transform`` (``R p + t`` per point): a BLAS product of (N, 3) by (3, 3) starts the BLAS threads,
+    which on a busy machine costs 100 times the arithmetic.
+    """
     p = np.asarray(points_a, dtype=np.float64)
     T = _checks.matrix("T_b_from_a", T_b_from_a, (4, 4))
-    return p @ T[:3, :3].T + T[:3, 3]
+    if p.ndim == 0 or p.shape[-1] != 3 or p.size == 0:
+        return p @ T[:3, :3].T + T[:3, 3]
+    return cv2.transform(np.ascontiguousarray(p).reshape(-1, 1, 3), T[:3]).reshape(p.shape)
 
 
 def T_from_R_t(R, t) -> np.ndarray:

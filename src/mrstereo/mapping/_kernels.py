@@ -61,10 +61,12 @@ def _cell(v, n):
 
 
 @njit(nogil=True, cache=True)
-def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cells, is_obstacle, margin_per_cell2,
-                   flags, ends, n_points, z_range):
+def mark_endpoints(points, keep, sx, sy, origin_x, origin_y, resolution, max_range_cells, is_obstacle,
+                   margin_per_cell2, flags, ends, n_points, z_range):
     """Flag the end cell of every ray; return the number of points ending outside the grid.
 
+    ``points`` (N, 2 or 3) float32 or float64 (taken as float64); ``keep`` (N,) bool selects the points
+    (length 0: all).
     Obstacle ends inside the grid and range (``max_range_cells`` <= 0: unlimited) get ``HIT``, floor
     ends ``END_FREE | FLOOR``; a ray leaving the grid or range is cut and its last cell gets
     ``END_FREE``. ``ends`` (rows, cols, 4) receives per flagged cell the last end that fell in it (the
@@ -75,13 +77,16 @@ def mark_endpoints(points, sx, sy, origin_x, origin_y, resolution, max_range_cel
     """
     rows, cols = flags.shape
     has_z = points.shape[1] > 2
+    select = keep.shape[0] > 0
     outside = 0
     for i in range(points.shape[0]):
-        x = (points[i, 0] - origin_x) / resolution
-        y = (points[i, 1] - origin_y) / resolution
+        if select and not keep[i]:
+            continue
+        x = (np.float64(points[i, 0]) - origin_x) / resolution
+        y = (np.float64(points[i, 1]) - origin_y) / resolution
         if not (math.isfinite(x) and math.isfinite(y)):
             continue
-        z = points[i, 2] if has_z else np.nan
+        z = np.float64(points[i, 2]) if has_z else np.nan
         cut = False
         if max_range_cells > 0.0:
             d = math.hypot(x - sx, y - sy)
@@ -388,6 +393,30 @@ def astar(blocked, start_r, start_c, goal_r, goal_c, came_from, g_cost):
 
 
 @njit(nogil=True, cache=True)
+def finite_bounds(points, bounds):
+    """``bounds`` (4,) = ``(x_min, y_min, x_max, y_max)`` of the points with finite (x, y), in one pass; returns
+    their number (0: ``bounds`` untouched)."""
+    n = 0
+    for i in range(points.shape[0]):
+        x = np.float64(points[i, 0])
+        y = np.float64(points[i, 1])
+        if not (math.isfinite(x) and math.isfinite(y)):
+            continue
+        if n == 0:
+            bounds[0] = x
+            bounds[1] = y
+            bounds[2] = x
+            bounds[3] = y
+        else:
+            bounds[0] = min(bounds[0], x)
+            bounds[1] = min(bounds[1], y)
+            bounds[2] = max(bounds[2], x)
+            bounds[3] = max(bounds[3], y)
+        n += 1
+    return n
+
+
+@njit(nogil=True, cache=True)
 def count_cells(points, origin_x, origin_y, resolution, counts, cell):
     """Count points per grid cell (``counts`` of grid.shape, zeroed); ``cell[i]`` = flat cell of point i.
 
@@ -398,8 +427,8 @@ def count_cells(points, origin_x, origin_y, resolution, counts, cell):
     rows, cols = counts.shape
     outside = 0
     for i in range(points.shape[0]):
-        col = np.floor((points[i, 0] - origin_x) / resolution)
-        row = np.floor((points[i, 1] - origin_y) / resolution)
+        col = np.floor((np.float64(points[i, 0]) - origin_x) / resolution)
+        row = np.floor((np.float64(points[i, 1]) - origin_y) / resolution)
         if not (np.isfinite(col) and np.isfinite(row)):
             cell[i] = -1
         elif 0 <= col < cols and 0 <= row < rows:

@@ -182,7 +182,18 @@ def _points_xy(name: str, value) -> np.ndarray:
         raise ValueError(f"{name} must have shape (N, 2) or (N, 3), got {arr.shape}")
     if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
         raise TypeError(f"{name} must hold numbers, got dtype {arr.dtype}")
-    return np.ascontiguousarray(arr, dtype=np.float64)
+    # float32 and float64 points as they are (the kernels take each coordinate as float64)
+    return np.ascontiguousarray(arr, dtype=arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64)
+
+
+def _finite_bounds(*point_sets: np.ndarray) -> np.ndarray | None:
+    """``(x_min, y_min, x_max, y_max)`` of the points with finite (x, y) of (N, 2 or 3) arrays (None: none)."""
+    out = None
+    for points in point_sets:
+        bounds = np.empty(4)
+        if len(points) and _kernels.finite_bounds(points, bounds):
+            out = bounds if out is None else np.r_[np.minimum(out[:2], bounds[:2]), np.maximum(out[2:], bounds[2:])]
+    return out
 
 
 def _cell_indices(name: str, value, n_cells: int) -> np.ndarray:
@@ -284,9 +295,8 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
         # sigma_r [cells] = (r res)^2 sigma_d / (b f) / res = r^2 res sigma_d / (b f)
         margin_per_cell2 = config.clear_margin_sigmas * grid.resolution_m * config.disparity_sigma_px / bf
     gap_cells = -1.0 if config.occlusion_gap_m is None else config.occlusion_gap_m / grid.resolution_m
-    if config.min_points_per_cell > 1 and len(obstacles):
-        obstacles = _supported(obstacles, grid, config.min_points_per_cell)
-    flags, ends, n_points, z_range, outside = _ray_ends(obstacles, floor, sx, sy, grid, max_range_cells,
+    keep = _supported(obstacles, grid, config.min_points_per_cell) if config.min_points_per_cell > 1 else None
+    flags, ends, n_points, z_range, outside = _ray_ends(obstacles, keep, floor, sx, sy, grid, max_range_cells,
                                                         margin_per_cell2)
     miss = np.zeros(grid.shape, np.uint8)
     occluded = np.zeros(grid.shape, np.uint8)
@@ -313,11 +323,12 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
                      hit_z_m=z_range.reshape(-1, 2)[hit_index].astype(np.float32))
 
 
-def _ray_ends(obstacles: np.ndarray, floor: np.ndarray, sx: float, sy: float, grid: GridSpec,
-              max_range_cells: float, margin_per_cell2: float) -> tuple:
+def _ray_ends(obstacles: np.ndarray, keep: np.ndarray | None, floor: np.ndarray, sx: float, sy: float,
+              grid: GridSpec, max_range_cells: float, margin_per_cell2: float) -> tuple:
     """``(flags, ends, n_points, z_range, points_outside)``: the end cell of every ray of a view marked
     (:func:`_kernels.mark_endpoints`; ``flags`` a bit set per cell, ``ends`` each end cell's representative
-    point and clearing margin, ``z_range`` the lowest and highest obstacle point in each cell)."""
+    point and clearing margin, ``z_range`` the lowest and highest obstacle point in each cell); ``keep``
+    selects the obstacle points (None: all)."""
     flags = np.zeros(grid.shape, np.uint8)
     ends = np.empty(grid.shape + (4,), np.float64)
     n_points = np.zeros(grid.shape, np.float64)
@@ -325,9 +336,11 @@ def _ray_ends(obstacles: np.ndarray, floor: np.ndarray, sx: float, sy: float, gr
     z_range[..., 0] = np.inf
     z_range[..., 1] = -np.inf
     outside = 0
-    for points, is_obstacle in ((obstacles, True), (floor, False)):
+    every = np.empty(0, bool)
+    for points, selected, is_obstacle in ((obstacles, keep, True), (floor, None, False)):
         if len(points):
-            outside += _kernels.mark_endpoints(points, sx, sy, grid.origin_x_m, grid.origin_y_m,
+            outside += _kernels.mark_endpoints(points, every if selected is None else selected, sx, sy,
+                                               grid.origin_x_m, grid.origin_y_m,
                                                grid.resolution_m, max_range_cells, is_obstacle, margin_per_cell2,
                                                flags, ends, n_points, z_range)
     return flags, ends, n_points, z_range, outside
@@ -354,19 +367,21 @@ def _known_occupied(value, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _supported(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:
-    """Obstacle points whose cell holds at least ``min_points`` of them: counted per cell by a kernel
-    inside the grid, grouped by ``(row, col)`` keys with ``np.unique`` outside it.
+    """``keep`` (N,) bool: the obstacle points whose cell holds at least ``min_points`` of them, counted per
+    cell by a kernel inside the grid, grouped by ``(row, col)`` keys with ``np.unique`` outside it.
     """
+    keep = np.empty(len(points), bool)
+    if not len(points):
+        return keep
     counts = np.zeros(grid.shape, np.int64)
     cell = np.empty(len(points), np.int64)
     outside = _kernels.count_cells(points, float(grid.origin_x_m), float(grid.origin_y_m), float(grid.resolution_m),
                                    counts, cell)
-    keep = np.empty(len(points), bool)
     _kernels.keep_supported(cell, counts, min_points, keep)
     if outside:
         idx = np.flatnonzero(cell == -2)
-        col = np.floor((points[idx, 0] - grid.origin_x_m) / grid.resolution_m)
-        row = np.floor((points[idx, 1] - grid.origin_y_m) / grid.resolution_m)
+        col = np.floor((points[idx, 0].astype(np.float64) - grid.origin_x_m) / grid.resolution_m)
+        row = np.floor((points[idx, 1].astype(np.float64) - grid.origin_y_m) / grid.resolution_m)
         if max(np.abs(col).max(), np.abs(row).max()) >= 2.0 ** 31:      # keys may collide: group all at once
             return _supported_by_keys(points, grid, min_points)
         key = (row.astype(np.int64) << 32) + col.astype(np.int64)
@@ -374,18 +389,18 @@ def _supported(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarra
         n = n_per_key[inverse]
         n[key == -1] += np.count_nonzero(cell == -1)    # cell (0, -1) shares key -1 with the non-finite points
         keep[idx] = n >= min_points
-    return np.compress(keep, points, axis=0)       # points[keep], copying whole rows
+    return keep
 
 
 def _supported_by_keys(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:
     """:func:`_supported` by grouping ``(row << 32) + col`` keys of all points with ``np.unique``."""
-    col = np.floor((points[:, 0] - grid.origin_x_m) / grid.resolution_m)
-    row = np.floor((points[:, 1] - grid.origin_y_m) / grid.resolution_m)
+    col = np.floor((points[:, 0].astype(np.float64) - grid.origin_x_m) / grid.resolution_m)
+    row = np.floor((points[:, 1].astype(np.float64) - grid.origin_y_m) / grid.resolution_m)
     finite = np.isfinite(col) & np.isfinite(row)
     key = np.full(len(points), -1, np.int64)
     key[finite] = (row[finite].astype(np.int64) << 32) + col[finite].astype(np.int64)
     _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-    return points[finite & (counts[inverse] >= min_points)]
+    return finite & (counts[inverse] >= min_points)
 
 
 WINDOW_MIN_CELLS = 1 << 18
@@ -397,12 +412,11 @@ def _view_window(grid: GridSpec, obstacles: np.ndarray, floor: np.ndarray, senso
     """``(r0, r1, c0, c1)``: the cells of the bounding box of a view's points and its sensor, a cell of
     margin around, within the grid (a ray between two points of a box stays in it)."""
     origin = np.asarray(sensor_origin_world, dtype=np.float64).ravel()[:2]
-    xy = np.concatenate([obstacles[:, :2], floor[:, :2], origin[None, :] if origin.size == 2 else np.empty((0, 2))])
-    xy = xy[np.isfinite(xy).all(axis=1)]
+    bounds = _finite_bounds(obstacles, floor, origin[None, :] if origin.size == 2 else np.empty((0, 2)))
     rows, cols = grid.shape
-    if not len(xy):
+    if bounds is None:
         return 0, rows, 0, cols
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    lo, hi = bounds[:2], bounds[2:]
     c0 = int(np.clip(np.floor((lo[0] - grid.origin_x_m) / grid.resolution_m) - 1, 0, cols))
     c1 = int(np.clip(np.floor((hi[0] - grid.origin_x_m) / grid.resolution_m) + 2, 0, cols))
     r0 = int(np.clip(np.floor((lo[1] - grid.origin_y_m) / grid.resolution_m) - 1, 0, rows))

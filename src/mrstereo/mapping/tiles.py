@@ -18,7 +18,7 @@ import numpy as np
 
 from .. import _checks
 from .grid import GridSpec
-from .occupancy import GridUpdate, MappingConfig, OccupancyGrid, _points_xy
+from .occupancy import GridUpdate, MappingConfig, OccupancyGrid, _finite_bounds, _points_xy
 
 __all__ = ["TiledOccupancyGrid", "TILE_CELLS"]
 
@@ -137,16 +137,17 @@ class TiledOccupancyGrid:
         return sum(a.nbytes + b.nbytes for a, b in self._tiles.values())
 
     # ------------------------------------------------------------------ updates
-    def _window(self, xy_m: np.ndarray, centre_xy_m) -> tuple[int, int, int, int]:
-        """The lattice window of the points ``xy_m`` (and ``centre``), within ``view_reach_m`` of ``centre``."""
+    def _window(self, point_sets, centre_xy_m) -> tuple[int, int, int, int]:
+        """The lattice window of the points (a sequence of (N, 2 or 3) arrays) and ``centre``, within
+        ``view_reach_m`` of ``centre``."""
         r = self.resolution_m
         cx, cy = float(centre_xy_m[0]), float(centre_xy_m[1])
         lo = np.array([cx, cy]) - self.view_reach_m
         hi = np.array([cx, cy]) + self.view_reach_m
-        pts = xy_m[np.isfinite(xy_m).all(axis=1)] if len(xy_m) else xy_m
-        if len(pts):
-            lo = np.maximum(lo, np.minimum(pts.min(axis=0), [cx, cy]))
-            hi = np.minimum(hi, np.maximum(pts.max(axis=0), [cx, cy]))
+        bounds = _finite_bounds(*point_sets)
+        if bounds is not None:
+            lo = np.maximum(lo, np.minimum(bounds[:2], [cx, cy]))
+            hi = np.minimum(hi, np.maximum(bounds[2:], [cx, cy]))
         else:
             lo = hi = np.array([cx, cy])
         c0, r0 = (int(math.floor(v / r)) - 1 for v in lo)
@@ -159,11 +160,11 @@ class TiledOccupancyGrid:
         sensor = np.asarray(sensor_origin_world, dtype=np.float64).ravel()
         if sensor.shape not in ((2,), (3,)) or not np.isfinite(sensor).all():
             raise ValueError(f"sensor_origin_world must be 2 or 3 finite numbers (x, y[, z]), got {sensor_origin_world!r}")
-        xy = np.concatenate([_points_xy(name, p)[:, :2] for name, p in (("points_obstacle_world", points_obstacle_world),
-                                                                         ("points_free_world", points_free_world))])
-        window = self.to_grid(self.spec(*self._window(xy, sensor[:2])))
+        obstacles = _points_xy("points_obstacle_world", points_obstacle_world)
+        floor = _points_xy("points_free_world", points_free_world)
+        window = self.to_grid(self.spec(*self._window((obstacles, floor), sensor[:2])))
         window.points_outside = 0
-        result = window.update(points_obstacle_world, points_free_world, sensor_origin_world,
+        result = window.update(obstacles, floor, sensor_origin_world,
                                baseline_focal_m_px=baseline_focal_m_px)
         self._store(window)
         self.n_updates += 1

@@ -164,16 +164,18 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
         range_min = max(range_min, near_limit_range_m(stereo, obstacles.T_robot_from_cam, frame.max_disparity_px))
     gray = frame.left_rect if frame.left_rect.ndim == 2 else frame.left_rect.mean(axis=2)
     with stage("scan"):
-        near = obstacles.too_near_obstacle_mask
-        measured = obstacles.obstacle_mask & ~near
-        scan = laser_scan_from_points(obstacles.points_robot_image[measured], angle_min_rad=lo, angle_max_rad=hi,
+        # the obstacle points are those of obstacle_mask in raster order: no (H, W, 3) image needed
+        points, values = obstacles.obstacle_points_robot, gray[obstacles.obstacle_mask]
+        near = obstacles.too_near_obstacle_mask[obstacles.obstacle_mask]
+        measured = (points, values) if not near.any() else (points[~near], values[~near])
+        scan = laser_scan_from_points(measured[0], angle_min_rad=lo, angle_max_rad=hi,
                                       angle_increment_rad=angle_increment_rad, range_min_m=range_min,
                                       range_max_m=config.max_range_m if range_max_m is None else range_max_m,
-                                      min_points=min_points, intensities=gray[measured],
+                                      min_points=min_points, intensities=measured[1],
                                       observed_points_robot=obstacles.points_robot)
         if near.any():
             # the too-near bearings, whatever the placement's range (it is a bound, not a measurement)
-            hits = laser_scan_from_points(obstacles.points_robot_image[near], angle_min_rad=lo, angle_max_rad=hi,
+            hits = laser_scan_from_points(points[near], angle_min_rad=lo, angle_max_rad=hi,
                                           angle_increment_rad=angle_increment_rad, range_min_m=0.0,
                                           range_max_m=1e9, min_points=min_points)
             scan.ranges_m[np.isfinite(hits.ranges_m)] = scan.range_min_m
