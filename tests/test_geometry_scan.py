@@ -198,3 +198,56 @@ def test_top_view_marks_bearings_seen_clear_to_range_max(tmp_path):
     bgr = read_image(tmp_path / "top.png").astype(int)
     light = (np.abs(bgr[..., 2] - 0x80) < 12) & (np.abs(bgr[..., 1] - 0xa0) < 12) & (np.abs(bgr[..., 0] - 0xe0) < 12)
     assert light.sum() > 20                       # the four +inf bearings (and their legend entry)
+
+
+def _sorted_scan(points, observed, a0, inc, n, r0, r1, m, values):
+    """The scan by sorting every return by (bearing, range) (a stable lexsort: equal ranges in point order)."""
+    p = points[np.isfinite(points[:, :2]).all(axis=1)]
+    v = values[np.isfinite(points[:, :2]).all(axis=1)]
+    r = np.hypot(p[:, 0], p[:, 1])
+    k = np.rint((np.arctan2(p[:, 1], p[:, 0]) - a0) / inc).astype(np.int64)
+    keep = (r >= r0) & (r <= r1) & (k >= 0) & (k < n)
+    ranges, out_values = np.full(n, np.nan), np.full(n, np.nan)
+    for ray in range(n):
+        sel = np.flatnonzero(keep & (k == ray))
+        sel = sel[np.argsort(r[sel], kind="stable")]
+        if len(sel) >= m:
+            ranges[ray], out_values[ray] = r[sel[m - 1]], v[sel[m - 1]]
+    seen = np.concatenate([p[:, :2], observed[:, :2]])
+    seen = seen[np.isfinite(seen).all(axis=1)]
+    rs = np.hypot(seen[:, 0], seen[:, 1])
+    ks = np.rint((np.arctan2(seen[:, 1], seen[:, 0]) - a0) / inc).astype(np.int64)
+    far = np.zeros(n, bool)
+    far[ks[(ks >= 0) & (ks < n) & (rs >= r1)]] = True
+    ranges[np.isnan(ranges) & far] = np.inf
+    return ranges, out_values
+
+
+@pytest.mark.parametrize("m", [1, 3, 7])
+def test_the_per_bearing_reduction_is_the_sorted_scan(m):
+    """The one-pass kernel (each bearing keeps its m nearest) gives the scan of sorting every return: ranges,
+    intensities (equal ranges: the earlier point), +inf where something was seen at range_max, float32 points."""
+    rng = np.random.default_rng(m)
+    n_pts = 20000
+    a = rng.uniform(-1.2, 1.2, n_pts)
+    a[(a > 0.2) & (a < 0.4)] += 0.3                                 # bearings 0.2-0.4: seen far (+inf) only
+    a[(a > -0.5) & (a < -0.3)] -= 0.3                               # -0.5..-0.3: nothing seen (nan)
+    r = np.round(rng.uniform(0.05, 12.0, n_pts), 1)                  # many equal ranges on one bearing
+    pts = np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(0, 1, n_pts)])
+    pts[rng.random(n_pts) < 0.01, 0] = np.nan
+    b = rng.uniform(0.2, 0.4, 200)
+    observed = np.column_stack([20.0 * np.cos(b), 20.0 * np.sin(b), np.zeros(200)])
+    values = rng.uniform(0, 255, n_pts)
+    kw = dict(angle_min_rad=-1.0, angle_max_rad=1.0, angle_increment_rad=math.radians(0.7), range_min_m=0.3,
+              range_max_m=8.0, min_points=m, intensities=values, observed_points_robot=observed)
+    scan = laser_scan_from_points(pts, **kw)
+    n = scan.ranges_m.size
+    ranges, out_values = _sorted_scan(pts, observed, -1.0, math.radians(0.7), n, 0.3, 8.0, m, values)
+    np.testing.assert_array_equal(scan.ranges_m, ranges)
+    np.testing.assert_array_equal(scan.intensities, out_values)
+    assert np.isinf(scan.ranges_m).sum() >= 10 and np.isnan(scan.ranges_m).sum() >= 10
+    assert np.isfinite(scan.ranges_m).sum() > n // 2
+    as32 = laser_scan_from_points(pts.astype(np.float32), **kw)
+    ranges32, _ = _sorted_scan(pts.astype(np.float32).astype(np.float64), observed, -1.0, math.radians(0.7), n, 0.3,
+                               8.0, m, values)
+    np.testing.assert_array_equal(as32.ranges_m, ranges32)

@@ -455,3 +455,41 @@ def test_map_occlusion_bad_input():
         view_cells(None, None, sensor, known_occupied=np.zeros(GridSpec().shape, bool))
     with pytest.raises(ValueError, match="p_min"):
         OccupancyGrid(config=PLAIN).known_occupied(1.5)
+
+
+def _reduced_to_cells(points: np.ndarray, grid: GridSpec) -> np.ndarray:
+    """Per cell the points a view's map depends on, in point order: the lowest and the highest (by z) and then
+    the last point repeated, as many points as the cell held."""
+    row, col = grid.cells_from_xy(points[:, :2])
+    key = row * grid.shape[1] + col
+    out = []
+    for cell in np.unique(key):
+        idx = np.flatnonzero(key == cell)
+        if len(idx) >= 3:
+            idx = [idx[np.argmin(points[idx, 2])], idx[np.argmax(points[idx, 2])]] + [idx[-1]] * (len(idx) - 2)
+        out.append(points[idx])
+    return np.concatenate(out)
+
+
+def test_a_view_depends_on_its_points_only_through_their_cells():
+    """The points are reduced to their cells before any ray is cast: a cloud with the same count, lowest and
+    highest obstacle point and last point per cell gives the same hits, misses, heights and occluded cells,
+    with the full stereo sensor model (support, range margin, see-through, occlusion, overhang)."""
+    rng = np.random.default_rng(3)
+    grid = GridSpec()
+    k = 15000
+    wall = np.column_stack([rng.uniform(1.0, 6.0, k), np.where(rng.random(k) < 0.5, 1.5, -1.5)
+                            + rng.normal(0.0, 0.05, k), rng.uniform(0.05, 1.5, k)])
+    table = np.column_stack([rng.uniform(3.0, 3.5, 2000), rng.uniform(-0.4, 0.4, 2000), rng.uniform(0.7, 0.75, 2000)])
+    ghosts = np.column_stack([rng.uniform(1.0, 8.0, 300), rng.uniform(-1.4, 1.4, 300), rng.uniform(0.1, 1.0, 300)])
+    obstacles = np.concatenate([wall, table, ghosts])
+    floor = np.column_stack([rng.uniform(0.5, 9.0, k), rng.uniform(-1.4, 1.4, k), np.zeros(k)])
+    sensor = (0.21, 0.03, 0.4)
+    full = view_cells(obstacles, floor, sensor, grid=grid, baseline_focal_m_px=40.0)
+    small = view_cells(_reduced_to_cells(obstacles, grid), _reduced_to_cells(floor, grid), sensor, grid=grid,
+                       baseline_focal_m_px=40.0)
+    assert len(_reduced_to_cells(obstacles, grid)) == len(obstacles)
+    assert len({tuple(p) for p in _reduced_to_cells(obstacles, grid)}) < 0.4 * len(obstacles)
+    for name in ("hit", "miss", "hit_z_m"):
+        np.testing.assert_array_equal(getattr(small, name), getattr(full, name))
+    assert small.occluded == full.occluded > 0 and len(full.hit) > 100 and len(full.miss) > 1000

@@ -12,18 +12,34 @@ the metrics. Conventions: docs/conventions.md. User guide: docs/mapping.md.
 """
 from __future__ import annotations
 
+import json
 import math
+import os
+import warnings
+from dataclasses import asdict
+from pathlib import Path
 
 import numpy as np
+import yaml
 
 from .. import _checks
-from .grid import GridSpec
-from .occupancy import GridUpdate, MappingConfig, OccupancyGrid, _finite_bounds, _points_xy
+from ..io import atomic_write, write_image
+from .grid import BYTES_PER_CELL, GridSpec
+from .occupancy import GridUpdate, MappingConfig, OccupancyGrid, _finite_bounds, _points_xy, log_odds_from_probability
+from .rosmap import FREE, OCCUPIED, UNKNOWN
 
-__all__ = ["TiledOccupancyGrid", "TILE_CELLS"]
+__all__ = ["TiledOccupancyGrid", "TILE_CELLS", "DENSE_MAP_MAX_CELLS", "OVERVIEW_MAX_PX"]
 
 TILE_CELLS = 128
 """Cells along a tile's side (6.4 m at 5 cm): 256 KiB of log-odds and heights per tile."""
+
+DENSE_MAP_MAX_CELLS = 2048 * 2048
+"""The most cells of a map written whole as one dense grid (map.pgm, log_odds.npy, map.png, the metrics):
+2048 x 2048, a 102.4 m square at 5 cm, about 670 MB while it is written. A larger map's dense grid is the
+square of this size around a given point (the last pose); the whole map is in the tiles and the overview."""
+
+OVERVIEW_MAX_PX = 4096
+"""The longest side of the overview image in pixels (each pixel a square of 2^k cells)."""
 
 
 class TiledOccupancyGrid:
@@ -50,6 +66,13 @@ class TiledOccupancyGrid:
             raise TypeError(f"config must be a MappingConfig, got {type(self.config).__name__}")
         self.view_reach_m = _checks.finite_number("view_reach_m", view_reach_m, positive=True)
         self.tile_cells = _checks.positive_int("tile_cells", tile_cells)
+        # a view is fused in a dense window of up to (2 reach)^2: refused here, before any frame is matched
+        side = 2.0 * self.view_reach_m / self.resolution_m + 3.0
+        _checks.fits_in_memory("resolution_m and view_reach_m", side * side * BYTES_PER_CELL,
+                               f"one view's window of up to {side:.4g} x {side:.4g} cells of {self.resolution_m:g} m "
+                               f"({self.view_reach_m:g} m each way from the sensor)")
+        _checks.fits_in_memory("tile_cells", 16.0 * self.tile_cells ** 2, f"a tile of {self.tile_cells} x "
+                               f"{self.tile_cells} cells")
         self._tiles: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         self.n_updates = 0
         self.points_outside = 0
@@ -113,8 +136,9 @@ class TiledOccupancyGrid:
             self._tiles[key][0][tile] = values
             self._tiles[key][1][tile] = z
 
-    def bounds(self) -> GridSpec:
-        """The smallest lattice window holding every known cell (one cell at the origin when none is)."""
+    def _known_cells(self) -> tuple[int, int, int, int]:
+        """``(row0, col0, rows, cols)`` of the smallest lattice window holding every known cell (one cell at the
+        origin when none is)."""
         rows, cols = [], []
         t = self.tile_cells
         for (ty, tx), (values, _) in self._tiles.items():
@@ -124,8 +148,19 @@ class TiledOccupancyGrid:
                 rows += [ty * t + r[0], ty * t + r[-1]]
                 cols += [tx * t + c[0], tx * t + c[-1]]
         if not rows:
-            return self.spec(0, 0, 1, 1)
-        return self.spec(min(rows), min(cols), max(rows) - min(rows) + 1, max(cols) - min(cols) + 1)
+            return 0, 0, 1, 1
+        return min(rows), min(cols), max(rows) - min(rows) + 1, max(cols) - min(cols) + 1
+
+    def bounds(self) -> GridSpec:
+        """The smallest lattice window holding every known cell (one cell at the origin when none is); a
+        ValueError when a dense grid of it would not fit in memory (:meth:`extent_m` has no limit)."""
+        return self.spec(*self._known_cells())
+
+    def extent_m(self) -> tuple[float, float, float, float]:
+        """``(x_min, x_max, y_min, y_max)`` of the known cells (GridSpec's ``extent_m`` of :meth:`bounds`)."""
+        row0, col0, rows, cols = self._known_cells()
+        r = self.resolution_m
+        return col0 * r, (col0 + cols) * r, row0 * r, (row0 + rows) * r
 
     @property
     def n_tiles(self) -> int:
@@ -181,3 +216,122 @@ class TiledOccupancyGrid:
         cleared = window.clear_disc(xy_m, radius_m)
         self._store(window)
         return cleared
+
+    # ------------------------------------------------------------------ outputs
+    def map_window(self, centre_xy_m=None, *, max_cells: int = DENSE_MAP_MAX_CELLS) -> GridSpec:
+        """The window of the dense grid to write: :meth:`bounds` when it holds at most ``max_cells`` cells, else
+        the square of ``sqrt(max_cells)`` cells a side centred on ``centre_xy_m`` (default the map's centre),
+        kept within the bounds, with one warning that says so."""
+        row0, col0, rows, cols = self._known_cells()
+        if rows * cols <= max_cells:
+            return self.spec(row0, col0, rows, cols)
+        side = max(1, int(math.isqrt(int(max_cells))))
+        if centre_xy_m is None:
+            centre = (col0 + cols / 2.0, row0 + rows / 2.0)
+        else:
+            centre = (float(centre_xy_m[0]) / self.resolution_m, float(centre_xy_m[1]) / self.resolution_m)
+        h, w = min(side, rows), min(side, cols)
+        r = int(np.clip(math.floor(centre[1]) - h // 2, row0, row0 + rows - h))
+        c = int(np.clip(math.floor(centre[0]) - w // 2, col0, col0 + cols - w))
+        window = self.spec(r, c, h, w)
+        warnings.warn(f"the map covers {cols * self.resolution_m:g} x {rows * self.resolution_m:g} m ({cols} x {rows} "
+                      f"cells), more than "
+                      f"one dense map of {max_cells} cells: map.pgm, log_odds.npy and map.png hold the "
+                      f"{window.width_m:g} x {window.height_m:g} m around ({window.origin_x_m + window.width_m / 2:g}, "
+                      f"{window.origin_y_m + window.height_m / 2:g}) m; the whole map is in tiles.npz and "
+                      "overview.png/overview.yaml", stacklevel=2)
+        return window
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the tiles as one compressed ``.npz`` (atomically): per tile ``t<row>_<col>_log_odds`` (float64,
+        NaN unknown, row 0 = min y) and ``t<row>_<col>_z`` (lowest and highest obstacle point, float32), the tile
+        ``<row>, <col>`` covering cells ``[row T, (row + 1) T) x [col T, (col + 1) T)`` of the lattice from the
+        world origin (``T`` = ``tile_cells``); ``meta`` a JSON string (resolution, tile_cells, view_reach_m, the
+        config, n_updates, points_outside). :meth:`load` reads it back."""
+        path = Path(path)
+        if path.suffix != ".npz":
+            raise ValueError(f"tiles file must end in .npz, got {path}")
+        meta = {"resolution_m": self.resolution_m, "tile_cells": self.tile_cells, "view_reach_m": self.view_reach_m,
+                "config": asdict(self.config), "n_updates": self.n_updates, "points_outside": self.points_outside}
+        arrays = {"meta": np.array(json.dumps(meta))}
+        for (ty, tx), (values, z) in sorted(self._tiles.items()):
+            arrays[f"t{ty}_{tx}_log_odds"], arrays[f"t{ty}_{tx}_z"] = values, z
+        with atomic_write(path) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "TiledOccupancyGrid":
+        """The map :meth:`save` wrote."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"tiles file not found: {path}")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                meta = json.loads(str(data["meta"]))
+                out = cls(meta["resolution_m"], config=MappingConfig(**meta["config"]),
+                          view_reach_m=meta["view_reach_m"], tile_cells=meta["tile_cells"])
+                t = out.tile_cells
+                for name in data.files:
+                    if name.endswith("_log_odds"):
+                        ty, tx = (int(v) for v in name[1:-len("_log_odds")].split("_"))
+                        values, z = data[name], data[name[:-len("log_odds")] + "z"]
+                        if values.shape != (t, t) or z.shape != (t, t, 2):
+                            raise ValueError(f"tile {name} has shape {values.shape}, not ({t}, {t})")
+                        out._tiles[(ty, tx)] = (values.astype(np.float64), z.astype(np.float32))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"cannot read tiles file {path}: {exc}") from None
+        out.n_updates, out.points_outside = int(meta["n_updates"]), int(meta["points_outside"])
+        return out
+
+    def overview(self, *, max_px: int = OVERVIEW_MAX_PX) -> tuple[np.ndarray, GridSpec]:
+        """``(image, grid)``: the whole map downsampled, one pixel per square of ``2^k`` cells (the smallest ``k``
+        with both sides at most ``max_px``), computed tile by tile (no dense raster of the map). A pixel is
+        occupied (0) when one of its cells is, else free (254) when one is, else unknown (205): map_server's
+        trinary values, row 0 at the lowest y (flip it for an image file), ``grid`` its geometry."""
+        max_px = _checks.positive_int("max_px", max_px)
+        row0, col0, rows, cols = self._known_cells()
+        k = 1
+        while math.ceil((row0 + rows) / k) - row0 // k > max_px or math.ceil((col0 + cols) / k) - col0 // k > max_px:
+            k *= 2
+        r_lo, c_lo = row0 // k, col0 // k
+        shape = (-(-(row0 + rows) // k) - r_lo, -(-(col0 + cols) // k) - c_lo)
+        level = np.zeros(shape, np.uint8)                 # 0 unknown, 1 free, 2 occupied: the largest wins
+        threshold = float(log_odds_from_probability(self.config.occupied_thresh))
+        t = self.tile_cells
+        for (ty, tx), (values, _) in self._tiles.items():
+            known = ~np.isnan(values)
+            if not known.any():
+                continue
+            cls = known.astype(np.uint8) + (np.nan_to_num(values, nan=-np.inf) > threshold)
+            # (known cells lie within the bounds, so every index below is inside ``level``)
+            if t % k == 0:                                # whole blocks inside the tile: a reshape
+                block = cls.reshape(t // k, k, t // k, k).max(axis=(1, 3))
+                r, c = ty * (t // k) - r_lo, tx * (t // k) - c_lo
+                rs, cs = slice(max(r, 0), min(r + t // k, shape[0])), slice(max(c, 0), min(c + t // k, shape[1]))
+                sub = block[rs.start - r:rs.stop - r, cs.start - c:cs.stop - c]
+                level[rs, cs] = np.maximum(level[rs, cs], sub)
+            elif k % t == 0:                              # the tile inside one pixel
+                r, c = (ty * t) // k - r_lo, (tx * t) // k - c_lo
+                level[r, c] = max(level[r, c], cls.max())
+            else:
+                rr, cc = np.nonzero(cls)
+                np.maximum.at(level, ((ty * t + rr) // k - r_lo, (tx * t + cc) // k - c_lo), cls[rr, cc])
+        image = np.choose(level, np.array([UNKNOWN, FREE, OCCUPIED], np.uint8))
+        res = self.resolution_m * k
+        grid = GridSpec(width_m=round(shape[1] * res, 9), height_m=round(shape[0] * res, 9), resolution_m=res,
+                        origin_x_m=round(c_lo * res, 9), origin_y_m=round(r_lo * res, 9))
+        return image, grid
+
+    def write_overview(self, yaml_path: str | os.PathLike, *, max_px: int = OVERVIEW_MAX_PX) -> Path:
+        """Write :meth:`overview` as a map_server map: ``NAME.yaml`` and the image ``NAME.png`` beside it (trinary,
+        top row max y), atomically; returns the image's path."""
+        yaml_path = Path(yaml_path)
+        image, grid = self.overview(max_px=max_px)
+        png = yaml_path.with_suffix(".png")
+        write_image(png, np.flipud(image))
+        meta = {"image": png.name, "resolution": float(grid.resolution_m),
+                "origin": [float(grid.origin_x_m), float(grid.origin_y_m), 0.0], "negate": 0,
+                "occupied_thresh": 0.65, "free_thresh": 0.196, "mode": "trinary"}
+        with atomic_write(yaml_path) as tmp:
+            tmp.write_text(yaml.safe_dump(meta, sort_keys=False, default_flow_style=None))
+        return png

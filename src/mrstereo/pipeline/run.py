@@ -137,6 +137,9 @@ class MapRun:
     """The mapping range of the run (its obstacle configuration's ``max_range_m``)."""
     mount_warning: str | None = None
     """Why the given mount was not used (:func:`floor_for_run`), None when it was (or none was given)."""
+    tiles: TiledOccupancyGrid | None = None
+    """The whole map when it grew (``config.grid`` None); ``grid`` is then its dense window
+    (:meth:`~mrstereo.mapping.tiles.TiledOccupancyGrid.map_window`: all of it unless it is too large)."""
 
     def pose_metrics(self) -> dict:
         """Odometry and alignment figures for metrics.json (empty when the given poses were used)."""
@@ -446,6 +449,8 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     prefer_raw = prefer_raw or calibration is not None
     check_pair_streams(manifest)
     config = _on_true_map(manifest, config.for_rig(stereo))
+    if config.grid is None:         # a map that grows: its memory checked before any frame is matched
+        TiledOccupancyGrid(config.resolution_m, config=config.mapping, view_reach_m=config.obstacle_config.max_range_m + 2.0)
     mount, floor, warning = floor_for_run(manifest, stereo, config=config, prefer_raw=prefer_raw,
                                           check_mount=check_mount)
     manifest = rebased(manifest, mount)
@@ -518,8 +523,9 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
     range_m = config.obstacle_config.max_range_m
     fused = fuse(observations, grid=config.grid, config=config.mapping, resolution_m=config.resolution_m,
                  view_reach_m=range_m + 2.0)
-    occupancy = fused.to_grid() if isinstance(fused, TiledOccupancyGrid) else fused
-    _warn_outside(observations, occupancy)
+    tiles = fused if isinstance(fused, TiledOccupancyGrid) else None
+    occupancy = fused if tiles is None else tiles.to_grid(tiles.map_window(observations[-1].pose if observations else None))
+    _warn_outside(observations if tiles is None else [], occupancy)     # (a map that grows holds every frame)
     metrics, gt = None, None
     if manifest.ground_truth_map is not None:
         gt = read_ros_map(manifest.ground_truth_map)
@@ -542,7 +548,7 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
             metrics = map_metrics(compared, gt, path_xy=np.array([f.pose for f in true_frames]), views=views)
     return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
                   ground_truth_map=gt, floor=floor, mount=mount, odometry=odometry, fusion=fusion,
-                  range_m=range_m)
+                  range_m=range_m, tiles=tiles)
 
 
 def _warn_outside(observations: list[FrameObservation], occupancy: OccupancyGrid) -> None:
@@ -596,7 +602,8 @@ def views_of_frames(frames, stereo: StereoCamera, *, range_m: float = MAPPING_MA
 
 
 def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
-    """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy and metrics.json.
+    """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy and metrics.json; for a map that grew
+    also tiles.npz and overview.png + overview.yaml (docs/mapping.md, "A map that grows").
 
     metrics.json holds the comparison with the ground-truth map (when there is
     one) and ``floor``: the floor of the run with its confidence.
@@ -628,4 +635,8 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
     plot_map(run.grid, out / "map.png", robot_path=path, fov_views=views,
              planned_path=planned_path, ground_truth=run.ground_truth_map,
              title=f"occupancy grid ({run.grid.config.fusion})")
+    if run.tiles is not None:           # the whole map that grew: its tiles and an overview image
+        run.tiles.save(out / "tiles.npz")
+        files.update(tiles=out / "tiles.npz", overview_yaml=out / "overview.yaml",
+                     overview_png=run.tiles.write_overview(out / "overview.yaml"))
     return files
