@@ -15,8 +15,8 @@ from .. import _checks
 from ..io import atomic_write, read_image, read_yaml, write_image
 from .grid import GridSpec
 
-__all__ = ["RosMap", "read_ros_map", "write_ros_map", "ros_map_files", "occupancy_values", "check_thresholds",
-           "ros_map_on_grid", "FREE", "OCCUPIED", "UNKNOWN"]
+__all__ = ["RosMap", "read_ros_map", "write_ros_map", "write_map_yaml", "ros_map_files", "occupancy_values",
+           "check_thresholds", "ros_map_on_grid", "FREE", "OCCUPIED", "UNKNOWN"]
 
 FREE, OCCUPIED, UNKNOWN = 254, 0, 205
 
@@ -101,11 +101,15 @@ def write_ros_map(yaml_path: str | os.PathLike, ros_map: RosMap) -> None:
     image[ros_map.free] = FREE
     image[ros_map.occupied] = OCCUPIED
     write_image(pgm_path, np.flipud(image))
-    g = ros_map.grid
-    meta = {"image": pgm_path.name, "resolution": float(g.resolution_m),
-            "origin": [float(g.origin_x_m), float(g.origin_y_m), 0.0], "negate": 0,
-            "occupied_thresh": float(ros_map.occupied_thresh), "free_thresh": float(ros_map.free_thresh),
-            "mode": "trinary"}
+    write_map_yaml(yaml_path, pgm_path.name, ros_map.grid, ros_map.occupied_thresh, ros_map.free_thresh)
+
+
+def write_map_yaml(yaml_path: str | os.PathLike, image_name: str, grid: GridSpec, occupied_thresh: float = 0.65,
+                   free_thresh: float = 0.196) -> None:
+    """Write the map_server YAML of a trinary map image ``image_name`` (beside it) on ``grid``, atomically."""
+    meta = {"image": image_name, "resolution": float(grid.resolution_m),
+            "origin": [float(grid.origin_x_m), float(grid.origin_y_m), 0.0], "negate": 0,
+            "occupied_thresh": float(occupied_thresh), "free_thresh": float(free_thresh), "mode": "trinary"}
     with atomic_write(yaml_path) as tmp:
         tmp.write_text(yaml.safe_dump(meta, sort_keys=False, default_flow_style=None))
 

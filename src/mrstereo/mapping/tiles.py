@@ -20,13 +20,12 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from .. import _checks
 from ..io import atomic_write, write_image
 from .grid import BYTES_PER_CELL, GridSpec
 from .occupancy import GridUpdate, MappingConfig, OccupancyGrid, _finite_bounds, _points_xy, log_odds_from_probability
-from .rosmap import FREE, OCCUPIED, UNKNOWN
+from .rosmap import FREE, OCCUPIED, UNKNOWN, write_map_yaml
 
 __all__ = ["TiledOccupancyGrid", "TILE_CELLS", "DENSE_MAP_MAX_CELLS", "OVERVIEW_MAX_PX"]
 
@@ -329,9 +328,5 @@ class TiledOccupancyGrid:
         image, grid = self.overview(max_px=max_px)
         png = yaml_path.with_suffix(".png")
         write_image(png, np.flipud(image))
-        meta = {"image": png.name, "resolution": float(grid.resolution_m),
-                "origin": [float(grid.origin_x_m), float(grid.origin_y_m), 0.0], "negate": 0,
-                "occupied_thresh": 0.65, "free_thresh": 0.196, "mode": "trinary"}
-        with atomic_write(yaml_path) as tmp:
-            tmp.write_text(yaml.safe_dump(meta, sort_keys=False, default_flow_style=None))
+        write_map_yaml(yaml_path, png.name, grid)
         return png
