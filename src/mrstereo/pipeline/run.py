@@ -450,7 +450,8 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     check_pair_streams(manifest)
     config = _on_true_map(manifest, config.for_rig(stereo))
     if config.grid is None:         # a map that grows: its memory checked before any frame is matched
-        TiledOccupancyGrid(config.resolution_m, config=config.mapping, view_reach_m=config.obstacle_config.max_range_m + 2.0)
+        TiledOccupancyGrid(config.resolution_m, config=config.mapping,
+                           view_reach_m=config.obstacle_config.max_range_m + 2.0)
     mount, floor, warning = floor_for_run(manifest, stereo, config=config, prefer_raw=prefer_raw,
                                           check_mount=check_mount)
     manifest = rebased(manifest, mount)
@@ -524,7 +525,8 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
     fused = fuse(observations, grid=config.grid, config=config.mapping, resolution_m=config.resolution_m,
                  view_reach_m=range_m + 2.0)
     tiles = fused if isinstance(fused, TiledOccupancyGrid) else None
-    occupancy = fused if tiles is None else tiles.to_grid(tiles.map_window(observations[-1].pose if observations else None))
+    last_pose = observations[-1].pose if observations else None
+    occupancy = fused if tiles is None else tiles.to_grid(tiles.map_window(last_pose))
     _warn_outside(observations if tiles is None else [], occupancy)     # (a map that grows holds every frame)
     metrics, gt = None, None
     if manifest.ground_truth_map is not None:
@@ -603,7 +605,7 @@ def views_of_frames(frames, stereo: StereoCamera, *, range_m: float = MAPPING_MA
 
 def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
     """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy and metrics.json; for a map that grew
-    also tiles.npz and overview.png + overview.yaml (docs/mapping.md, "A map that grows").
+    also tiles.npz and overview.png + overview.yaml (docs/mapping.md, "A long drive").
 
     metrics.json holds the comparison with the ground-truth map (when there is
     one) and ``floor``: the floor of the run with its confidence.
