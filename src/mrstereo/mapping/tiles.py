@@ -221,6 +221,7 @@ class TiledOccupancyGrid:
         """The window of the dense grid to write: :meth:`bounds` when it holds at most ``max_cells`` cells, else
         the square of ``sqrt(max_cells)`` cells a side centred on ``centre_xy_m`` (default the map's centre),
         kept within the bounds, with one warning that says so."""
+        max_cells = _checks.positive_int("max_cells", max_cells)
         row0, col0, rows, cols = self._known_cells()
         if rows * cols <= max_cells:
             return self.spec(row0, col0, rows, cols)
