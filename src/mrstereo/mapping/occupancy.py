@@ -311,7 +311,7 @@ def view_cells(points_obstacle_world, points_free_world, sensor_origin_world, *,
         known, known_z = _known_occupied(known_occupied, grid)
         solid = known & ((flags & _kernels.HIT) == 0)
         flags[solid] |= _kernels.BLOCK
-        z_range[solid] = known_z[solid]
+        z_range[solid] = _solid_heights(known_z[solid])
     z_clear = np.inf if config.clear_below_m is None else float(config.clear_below_m)
     n_occluded += _kernels.cast_rays(flags, ends, z_range, sx, sy, sz, gap_cells, z_tol, bool(config.overhang_shadow),
                                      z_clear, miss, occluded)
@@ -347,23 +347,27 @@ def _ray_ends(obstacles: np.ndarray, keep: np.ndarray | None, floor: np.ndarray,
 
 
 def _known_occupied(value, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
-    """``(mask, z_range_m)`` of :meth:`OccupancyGrid.known_occupied` checked against ``grid``; cells
-    without heights reach from -inf to inf (every sight line meets them).
-    """
+    """``(mask, z_range_m)`` of :meth:`OccupancyGrid.known_occupied` checked against ``grid`` (not copied)."""
     try:
         mask, z = value
     except (TypeError, ValueError):
         raise TypeError("known_occupied must be (mask, z_range_m), e.g. OccupancyGrid.known_occupied()") from None
-    mask = np.asarray(mask)
-    z = np.array(z, dtype=np.float64)
+    mask, z = np.asarray(mask), np.asarray(z)
     if mask.shape != grid.shape or mask.dtype != bool:
         raise ValueError(f"known_occupied mask must be a bool array of the grid's shape {grid.shape}, "
                          f"got {mask.dtype} {mask.shape}")
-    if z.shape != grid.shape + (2,):
-        raise ValueError(f"known_occupied z_range_m must have shape {grid.shape + (2,)}, got {z.shape}")
-    unknown = ~(np.isfinite(z).all(axis=-1) & (z[..., 0] <= z[..., 1]))
-    z[unknown] = (-np.inf, np.inf)
+    if z.shape != grid.shape + (2,) or z.dtype.kind not in "fiu":
+        raise ValueError(f"known_occupied z_range_m must be numbers of shape {grid.shape + (2,)}, "
+                         f"got {z.dtype} {z.shape}")
     return mask, z
+
+
+def _solid_heights(z) -> np.ndarray:
+    """The heights (K, 2) of known-occupied cells as float64; a cell without heights reaches from -inf to inf
+    (every sight line meets it)."""
+    z = np.array(z, dtype=np.float64)
+    z[~(np.isfinite(z).all(axis=-1) & (z[:, 0] <= z[:, 1]))] = (-np.inf, np.inf)
+    return z
 
 
 def _supported(points: np.ndarray, grid: GridSpec, min_points: int) -> np.ndarray:
@@ -501,8 +505,7 @@ class OccupancyGrid:
         known = None
         if self.config.map_occlusion_p is not None:
             level = float(log_odds_from_probability(self.config.map_occlusion_p))
-            known = (np.nan_to_num(self._log_odds[r0:r1, c0:c1], nan=-np.inf) >= level,
-                     self._z_range_m[r0:r1, c0:c1].copy())
+            known = (self._log_odds[r0:r1, c0:c1] >= level, self._z_range_m[r0:r1, c0:c1])     # (NaN: False)
         cells = view_cells(obstacles, floor, sensor_origin_world, grid=window, config=self.config,
                            baseline_focal_m_px=baseline_focal_m_px, known_occupied=known)
         if not whole:

@@ -108,15 +108,11 @@ class TiledOccupancyGrid:
         tiles, unknown where no view reached."""
         spec = self.bounds() if spec is None else spec
         row0, col0, rows, cols = self._cells_of(spec)
-        log_odds = np.full((rows, cols), np.nan)
-        z = np.empty((rows, cols, 2), np.float32)
-        z[..., 0], z[..., 1] = np.inf, -np.inf
+        grid = OccupancyGrid(spec, config=self.config)          # all unknown, no heights: filled from the tiles
         for key, win, tile in self._overlaps(row0, col0, rows, cols):
             if key in self._tiles:
-                log_odds[win] = self._tiles[key][0][tile]
-                z[win] = self._tiles[key][1][tile]
-        grid = OccupancyGrid(spec, config=self.config, log_odds=log_odds)
-        grid._z_range_m[...] = z
+                grid._log_odds[win] = self._tiles[key][0][tile]
+                grid._z_range_m[win] = self._tiles[key][1][tile]
         grid.n_updates, grid.points_outside = self.n_updates, self.points_outside
         return grid
 
