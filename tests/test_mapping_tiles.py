@@ -58,3 +58,13 @@ def test_the_footprint_is_free_and_a_fixed_window_counts_what_falls_outside():
     wall = np.repeat([[0.8, 0.0, 0.3], [5.0, 0.0, 0.3]], 5, axis=0)     # 5 points a cell: supported
     stats = grid.update(wall, None, (0.0, 0.0))
     assert stats.points_outside == 5 and grid.points_outside == 5 and grid.probability()[20, 36] > 0.5
+
+
+def test_the_footprint_cleared_in_the_tiles_is_that_of_one_dense_grid():
+    rng = np.random.default_rng(5)
+    tiles = TiledOccupancyGrid(0.05, tile_cells=16)
+    dense = OccupancyGrid(GridSpec(width_m=20.0, height_m=20.0, resolution_m=0.05, origin_x_m=-10.0, origin_y_m=-10.0))
+    for xy, radius in zip(rng.uniform(-8.0, 8.0, (40, 2)), rng.uniform(0.0, 0.9, 40)):   # discs across tile borders
+        assert tiles.clear_disc(xy, radius) == dense.clear_disc(xy, radius) > 0
+    np.testing.assert_array_equal(tiles.to_grid(dense.grid).log_odds, dense.log_odds)
+    assert tiles.n_tiles < (20.0 / (16 * 0.05)) ** 2 / 4                    # only the tiles the discs touched

@@ -407,6 +407,26 @@ def _supported_by_keys(points: np.ndarray, grid: GridSpec, min_points: int) -> n
     return finite & (counts[inverse] >= min_points)
 
 
+def disc_cells(grid: GridSpec, xy_m, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(rows, cols)`` of the cells of ``grid`` a disc of ``radius_m`` at ``xy_m`` touches (its square comes within
+    ``radius_m`` of the centre): :meth:`OccupancyGrid.clear_disc`."""
+    xy = np.asarray(xy_m, dtype=np.float64).ravel()
+    if xy.shape != (2,) and xy.shape != (3,) or not np.isfinite(xy[:2]).all():
+        raise ValueError(f"xy_m must be two finite numbers (x, y) in metres, got {xy_m!r}")
+    radius = _checks.finite_number("radius_m", radius_m, nonnegative=True)
+    half = 0.5 * grid.resolution_m
+    (r0, c0), (r1, c1) = (grid.cells_from_xy(xy[:2] + d) for d in (-radius - half, radius + half))
+    rows, cols = grid.shape
+    r0, c0, r1, c1 = max(int(r0), 0), max(int(c0), 0), min(int(r1), rows - 1), min(int(c1), cols - 1)
+    if r0 > r1 or c0 > c1:
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    rr, cc = np.mgrid[r0:r1 + 1, c0:c1 + 1]
+    centres = grid.xy_from_cells(rr, cc)
+    gap = np.maximum(np.abs(centres - xy[:2]) - half, 0.0)
+    touched = (gap ** 2).sum(axis=-1) <= radius * radius + 1e-12
+    return rr[touched], cc[touched]
+
+
 WINDOW_MIN_CELLS = 1 << 18
 """In a grid with more cells, a view's cells are computed in its own window of the grid (each view
 allocates a few arrays of the grid's size: about 70 bytes per cell)."""
@@ -563,22 +583,9 @@ class OccupancyGrid:
         the centre of the robot's own cell is free too, so a planner inflating obstacles by the robot's
         radius can start there. Returns the number of cells cleared (inside the grid).
         """
-        xy = np.asarray(xy_m, dtype=np.float64).ravel()
-        if xy.shape != (2,) and xy.shape != (3,) or not np.isfinite(xy[:2]).all():
-            raise ValueError(f"xy_m must be two finite numbers (x, y) in metres, got {xy_m!r}")
-        radius = _checks.finite_number("radius_m", radius_m, nonnegative=True)
-        g, half = self.grid, 0.5 * self.grid.resolution_m
-        (r0, c0), (r1, c1) = (g.cells_from_xy(xy[:2] + d) for d in (-radius - half, radius + half))
-        rows, cols = g.shape
-        r0, c0, r1, c1 = max(int(r0), 0), max(int(c0), 0), min(int(r1), rows - 1), min(int(c1), cols - 1)
-        if r0 > r1 or c0 > c1:
-            return 0
-        rr, cc = np.mgrid[r0:r1 + 1, c0:c1 + 1]
-        centres = g.xy_from_cells(rr, cc)
-        gap = np.maximum(np.abs(centres - xy[:2]) - half, 0.0)
-        touched = (gap ** 2).sum(axis=-1) <= radius * radius + 1e-12
-        self._log_odds[rr[touched], cc[touched]] = self.config.l_min
-        return int(touched.sum())
+        rows, cols = disc_cells(self.grid, xy_m, radius_m)
+        self._log_odds[rows, cols] = self.config.l_min
+        return len(rows)
 
     # ---------------------------------------------------------------- outputs
     @property

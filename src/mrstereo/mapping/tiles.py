@@ -24,7 +24,8 @@ import numpy as np
 from .. import _checks
 from ..io import atomic_write, write_image
 from .grid import BYTES_PER_CELL, GridSpec
-from .occupancy import GridUpdate, MappingConfig, OccupancyGrid, _finite_bounds, _points_xy, log_odds_from_probability
+from .occupancy import (GridUpdate, MappingConfig, OccupancyGrid, _finite_bounds, _points_xy, disc_cells,
+                        log_odds_from_probability)
 from .rosmap import FREE, OCCUPIED, UNKNOWN, write_map_yaml
 
 __all__ = ["TiledOccupancyGrid", "TILE_CELLS", "DENSE_MAP_MAX_CELLS", "OVERVIEW_MAX_PX"]
@@ -116,20 +117,24 @@ class TiledOccupancyGrid:
         grid.n_updates, grid.points_outside = self.n_updates, self.points_outside
         return grid
 
+    def _tile(self, key: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """The tile at ``key`` (log-odds, heights), created unknown without heights when missing."""
+        if key not in self._tiles:
+            t = self.tile_cells
+            z = np.empty((t, t, 2), np.float32)
+            z[..., 0], z[..., 1] = np.inf, -np.inf
+            self._tiles[key] = (np.full((t, t), np.nan), z)
+        return self._tiles[key]
+
     def _store(self, grid: OccupancyGrid) -> None:
         """Write a window back into the tiles, creating those it holds known cells or heights of."""
         row0, col0, rows, cols = self._cells_of(grid.grid)
-        t = self.tile_cells
         for key, win, tile in self._overlaps(row0, col0, rows, cols):
             values, z = grid._log_odds[win], grid._z_range_m[win]
-            if key not in self._tiles:
-                if np.isnan(values).all() and not np.isfinite(z).any():
-                    continue
-                zt = np.empty((t, t, 2), np.float32)
-                zt[..., 0], zt[..., 1] = np.inf, -np.inf
-                self._tiles[key] = (np.full((t, t), np.nan), zt)
-            self._tiles[key][0][tile] = values
-            self._tiles[key][1][tile] = z
+            if key not in self._tiles and np.isnan(values).all() and not np.isfinite(z).any():
+                continue
+            self._tile(key)[0][tile] = values
+            self._tile(key)[1][tile] = z
 
     def _known_cells(self) -> tuple[int, int, int, int]:
         """``(row0, col0, rows, cols)`` of the smallest lattice window holding every known cell (one cell at the
@@ -202,15 +207,21 @@ class TiledOccupancyGrid:
         return result
 
     def clear_disc(self, xy_m, radius_m: float) -> int:
-        """Mark the cells a disc of ``radius_m`` at ``xy_m`` touches free (:meth:`OccupancyGrid.clear_disc`)."""
+        """Mark the cells a disc of ``radius_m`` at ``xy_m`` touches free (:meth:`OccupancyGrid.clear_disc`), written
+        into the tiles (created where missing)."""
         r = self.resolution_m
         x, y = float(xy_m[0]), float(xy_m[1])
         c0, r0 = int(math.floor((x - radius_m) / r)) - 1, int(math.floor((y - radius_m) / r)) - 1
         n = int(math.ceil(2 * radius_m / r)) + 3
-        window = self.to_grid(self.spec(r0, c0, n, n))
-        cleared = window.clear_disc(xy_m, radius_m)
-        self._store(window)
-        return cleared
+        rows, cols = disc_cells(self.spec(r0, c0, n, n), xy_m, radius_m)
+        rows, cols = rows + r0, cols + c0
+        t = self.tile_cells
+        keys = (rows // t) * (1 << 32) + cols // t
+        for key in np.unique(keys):
+            sel = keys == key
+            ty, tx = int(rows[sel][0] // t), int(cols[sel][0] // t)
+            self._tile((ty, tx))[0][rows[sel] - ty * t, cols[sel] - tx * t] = self.config.l_min
+        return len(rows)
 
     # ------------------------------------------------------------------ outputs
     def map_window(self, centre_xy_m=None, *, max_cells: int = DENSE_MAP_MAX_CELLS) -> GridSpec:
