@@ -78,7 +78,6 @@ def _run_in_subprocess(length_m: float, out: Path) -> dict:
 @pytest.mark.parametrize("length_m", [1000.0, 10000.0])
 def test_an_l_shaped_drive_maps_in_under_2_gb_as_tiles_and_an_overview(tmp_path, length_m):
     result = _run_in_subprocess(length_m, tmp_path)
-    print({k: v for k, v in result.items() if k != "warnings"})
     assert result["peak_bytes"] < 2 * 1024 ** 3, result
     half = length_m / 2.0
     x0, y0, w, h = result["bounds"]                          # the whole L: about half the length each way
