@@ -110,11 +110,13 @@ def oxts_poses(records: np.ndarray) -> np.ndarray:
     scale = math.cos(math.radians(lat[0]))
     x = scale * EARTH_RADIUS_M * np.radians(lon)
     y = scale * EARTH_RADIUS_M * np.log(np.tan(np.radians(90.0 + lat) / 2.0))
+    R = rotation_from_rpy(records[:, 3], records[:, 4], records[:, 5])
+    t = np.stack([x, y, alt], axis=1)
     T = np.zeros((len(records), 4, 4))
-    T[:, :3, :3] = rotation_from_rpy(records[:, 3], records[:, 4], records[:, 5])
-    T[:, :3, 3] = np.stack([x, y, alt], axis=1)
+    T[:, :3, :3] = R[0].T @ R                                  # inv(T_0) T_k, the large offsets taken first
+    T[:, :3, 3] = (t - t[0]) @ R[0]
     T[:, 3, 3] = 1.0
-    return np.linalg.inv(T[0]) @ T
+    return T
 
 
 def _stamps_s(path: Path, count: int) -> np.ndarray:
