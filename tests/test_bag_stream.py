@@ -177,3 +177,34 @@ def test_bag_options_for_a_folder_and_a_missing_pair_are_named(dataset, tmp_path
     with pytest.raises(ValueError, match="topic '/nope' is not in the bag"):
         BagSource(bag, left_topic="/nope", right_topic=TOPICS["right_topic"])
     assert os.listdir(tmp_path) == ["run"]
+
+
+def test_closing_a_source_midway_closes_the_bag(dataset, tmp_path):
+    bag = write_bag(tmp_path / "run", dataset, ros1=False, odom=True)
+    source = BagSource(bag)
+    frames = iter(source)
+    assert next(frames).index == 0
+    source.close()
+    with pytest.raises(StopIteration):
+        next(frames)
+    assert [f.index for f in source] == list(range(len(dataset.frames)))      # a new pass reads it again
+
+
+def test_command_options_open_a_bag_or_a_folder_as_a_source(dataset, tmp_path, capsys):
+    from mrstereo.cli._bag import opened_source
+
+    bag = write_bag(tmp_path / "run.bag", dataset, ros1=True, odom=True)
+    options = dict(left_topic=None, right_topic=None, camera_info_topics=None, odom_topic=None, use_tf=False,
+                   world_frame=None, base_frame="base_link", camera_frame=None, sync_tolerance_s=0.02,
+                   rectified_images=False, height_m=0.5, tilt_rad=0.1, mount=None)
+    with opened_source(bag, None, None, quiet=True, bag_kw=options) as source:
+        assert isinstance(source, BagSource) and source.pose_source == "odometry /odom"
+        assert source.mount.T_base_from_rectified(source.calibration.left.R)[2, 3] == pytest.approx(0.5)
+    assert "bag: 6 stereo pairs" in capsys.readouterr().err
+    with opened_source(dataset.root, None, None, quiet=True, bag_kw=options) as source:
+        assert isinstance(source, RecordingSource) and source.n_frames == len(dataset.frames)
+        assert source.mount.T_base_from_rectified(source.calibration.left.R)[2, 3] == pytest.approx(0.5)
+    import click
+    with pytest.raises(click.UsageError, match="--odom-topic only with a ROS bag"):
+        with opened_source(dataset.root, None, None, quiet=True, bag_kw=dict(options, odom_topic="/odom")):
+            pass

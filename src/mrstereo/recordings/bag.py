@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import weakref
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -657,6 +658,7 @@ class BagSource(FrameSource):
         if left_topic == right_topic:
             raise ValueError(f"left and right topics must differ, both are {left_topic!r}")
         self.bag, self.name, self.root = bag, str(bag), Path(bag)
+        self._readings: weakref.WeakSet = weakref.WeakSet()
         self.left_topic, self.right_topic, self.rectified = left_topic, right_topic, bool(rectified)
         with _open_bag(bag) as reader:
             topics = {c.topic: c.msgtype for c in reader.connections}
@@ -699,8 +701,16 @@ class BagSource(FrameSource):
             yield from _decoded_pairs(reader, self._pairs, topics=(self.left_topic, self.right_topic),
                                       calibration=self.calibration)
 
+    def close(self) -> None:
+        """Close the bag of every iteration still open (idempotent)."""
+        readings, self._readings = self._readings, weakref.WeakSet()
+        for reading in list(readings):
+            reading.close()
+
     def __iter__(self) -> Iterator[StereoFrame]:
-        for k, left, right in self.decoded():
+        reading = self.decoded()
+        self._readings.add(reading)
+        for k, left, right in reading:
             pose = self.poses[k]
             yield StereoFrame(index=k, stamp_s=self.stamps_ns[k] / 1e9, left=frame_image(left),
                               right=frame_image(right), rectified=self.rectified,

@@ -77,7 +77,8 @@ class FrameSource:
     root : Path or None
         The recording's folder or file (None: cameras, videos).
     layout : str
-        What was read (``"dataset"``, ``"EuRoC/ASL"``, ``"KITTI odometry"``, ``"ROS bag"``, ``"video"``, ...).
+        What was read (``"dataset"``, ``"EuRoC/ASL"``, ``"KITTI odometry"``, ``"KITTI raw"``, ``"ROS bag"``,
+        ``"video"``, ...).
     ground_truth_map : Path or None
         ROS map YAML of the true map, when the recording has one.
     pose_frame_mount : CameraMount or None
