@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -126,29 +127,13 @@ def main() -> None:
     parser.add_argument("--size", type=int, nargs=2, default=[320, 240], metavar=("W", "H"))
     parser.add_argument("--map", action="store_true", help="also map the synthetic bags (mrstereo live)")
     parser.add_argument("--skip-map-command", action="store_true", help="do not run mrstereo map on the EuRoC bag")
+    parser.add_argument("--skip-euroc", action="store_true", help="only the synthetic bags")
     args = parser.parse_args()
     print(f"load: {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} on {os.cpu_count()} cores")
     with tempfile.TemporaryDirectory(prefix="bench-bag-") as top:
         top = Path(top)
-        euroc = read_recording(data_root() / "euroc_asl_sample")
-        work = top / "euroc"
-        work.mkdir()
-        bag = write_bag(work / "euroc_bag", euroc, args.euroc_frames, odom=False)
-        print(f"EuRoC ROS 2 bag: {args.euroc_frames} pairs of 752x480, {tree_bytes(bag) / 1e6:.1f} MB")
-        from mrstereo.recordings.bag import export_bag
-
-        export_bag(bag, top / "exported", progress=False)
-        print(f"  its export (what every command wrote to the temporary directory before): "
-              f"{tree_bytes(top / 'exported') / 1e6:.1f} MB")
-        commands = [("info", ["mrstereo", "info", str(bag)]),
-                    ("live", ["mrstereo", "live", str(bag), "-o", str(work / "out" / "live")]),
-                    ("map", ["mrstereo", "map", str(bag), "-o", str(work / "out" / "map"), "--quiet"])]
-        for name, command in commands:
-            if name == "map" and args.skip_map_command:
-                continue
-            r = measured(command, work)
-            print(f"  mrstereo {name:5s}: tmp dir peak {r['tmp_peak'] / 1e6:7.3f} MB, image files outside the output "
-                  f"{r['outside']}, peak RSS {r['rss_kb'] / 1024:.0f} MB, {r['wall']:.0f} s")
+        if not args.skip_euroc:
+            _euroc(top, args)
         w, h = args.size
         synthetic = read_recording(_corridor(top / "corridor", w, h))
         for n in args.frames:
@@ -165,9 +150,29 @@ def main() -> None:
                 line += (f"; mapped (live): peak RSS {r['rss_kb'] / 1024:.0f} MB, tmp dir peak {r['tmp_peak'] / 1e6:.3f}"
                          f" MB, image files outside the output {r['outside']}, {r['wall']:.0f} s")
             print(line, flush=True)
-            import shutil
-
             shutil.rmtree(folder)
+
+
+def _euroc(top: Path, args) -> None:
+    euroc = read_recording(data_root() / "euroc_asl_sample")
+    work = top / "euroc"
+    work.mkdir()
+    bag = write_bag(work / "euroc_bag", euroc, args.euroc_frames, odom=False)
+    print(f"EuRoC ROS 2 bag: {args.euroc_frames} pairs of 752x480, {tree_bytes(bag) / 1e6:.1f} MB")
+    from mrstereo.recordings.bag import export_bag
+
+    export_bag(bag, top / "exported", progress=False)
+    print(f"  its export (what every command wrote to the temporary directory before): "
+          f"{tree_bytes(top / 'exported') / 1e6:.1f} MB")
+    commands = [("info", ["mrstereo", "info", str(bag)]),
+                ("live", ["mrstereo", "live", str(bag), "-o", str(work / "out" / "live")]),
+                ("map", ["mrstereo", "map", str(bag), "-o", str(work / "out" / "map"), "--quiet"])]
+    for name, command in commands:
+        if name == "map" and args.skip_map_command:
+            continue
+        r = measured(command, work)
+        print(f"  mrstereo {name:5s}: tmp dir peak {r['tmp_peak'] / 1e6:7.3f} MB, image files outside the output "
+              f"{r['outside']}, peak RSS {r['rss_kb'] / 1024:.0f} MB, {r['wall']:.0f} s")
 
 
 def _corridor(folder: Path, width: int, height: int) -> Path:
