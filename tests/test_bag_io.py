@@ -13,7 +13,7 @@ from mrstereo.geometry.ground import ground_from_mount
 from mrstereo.io import read_image
 from mrstereo.pipeline.run import build_map, floor_for_run
 from mrstereo.recordings.bag import (TfTree, TransformTrack, bag_topics, camera_info_from_message, export_bag,
-                                     exported_bag, image_from_message, pair_by_stamp, stereo_from_camera_info)
+                                     image_from_message, pair_by_stamp, stereo_from_camera_info)
 from mrstereo.recordings.manifest import read_manifest, write_manifest
 from mrstereo.transforms import planar_from_T
 
@@ -50,11 +50,12 @@ def _rig(dataset):
 def test_ros2_bag_with_tf_maps_exactly_like_the_manifest(dataset, reference, tmp_path):
     bag = write_bag(tmp_path / "run2", dataset, ros1=False, odom=False, tf=True)
     assert bag_topics(bag)["/tf"] == "tf2_msgs/msg/TFMessage"
-    with exported_bag(bag, **TOPICS, use_tf=True, camera_frame="stereo_link", progress=False,
-                      **_rig_options(dataset)) as manifest:
-        assert [f.pose for f in manifest.frames] == [f.pose for f in dataset.frames]
-        assert [f.pan_rad for f in manifest.frames] == [f.pan_rad for f in dataset.frames]
-        run = build_map(manifest, progress=False)
+    export_bag(bag, tmp_path / "exported", **TOPICS, use_tf=True, camera_frame="stereo_link", progress=False,
+               **_rig_options(dataset))
+    manifest = read_manifest(tmp_path / "exported")
+    assert [f.pose for f in manifest.frames] == [f.pose for f in dataset.frames]
+    assert [f.pan_rad for f in manifest.frames] == [f.pan_rad for f in dataset.frames]
+    run = build_map(manifest, progress=False)
     assert run.grid.n_updates == len(dataset.frames)
     assert _same(run.grid.log_odds, reference)
 
@@ -68,8 +69,8 @@ def test_ros1_bag_with_odometry_maps_like_the_manifest_subset(dataset, tmp_path)
                             "pose": list(dataset.frames[k].pose)} for k in front])
     expected = build_map(subset, progress=False).grid.log_odds
     images = {k: TOPICS[k] for k in ("left_topic", "right_topic")}      # camera_info found beside the images
-    with exported_bag(bag, **images, odom_topic="/odom", progress=False, **_rig_options(dataset)) as manifest:
-        run = build_map(manifest, progress=False)
+    export_bag(bag, tmp_path / "exported", **images, odom_topic="/odom", progress=False, **_rig_options(dataset))
+    run = build_map(tmp_path / "exported", progress=False)
     assert _same(run.grid.log_odds, expected)
 
 

@@ -16,7 +16,7 @@ from ._options import (CALIB_HELP, HEIGHT, TILT, Number, check_mount_options, ch
                        map_config, map_options, mount_from_options, mount_option, parse_mount, warn, worker_options)
 
 __all__ = ["COMMANDS", "BAG_KEYS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset",
-           "recording_options", "recording_of", "read_inputs"]
+           "opened_source", "recording_options", "recording_of", "read_inputs"]
 
 
 BAG_KEYS = ("left_topic", "right_topic", "camera_info_topics", "odom_topic", "use_tf", "world_frame", "base_frame",
@@ -172,11 +172,7 @@ def opened_dataset(manifest, bag: Path | None, calib: Path | None, *, quiet: boo
                                           has_poses=not result.pose_source.startswith("none"))
             yield dataset, None, np.asarray(result.stamps_ns, dtype=np.float64) / 1e9
             return
-        used = [f"--{k.replace('_', '-')}" for k, v in bag_kw.items()
-                if v not in (None, False) and k not in ("height_m", "tilt_rad", "mount", "base_frame",
-                                                         "sync_tolerance_s")]
-        if used:
-            raise click.UsageError(f"{', '.join(used)} only with a ROS bag")
+        _no_bag_options(bag_kw)
         if isinstance(manifest, Manifest):
             dataset = manifest
         else:
@@ -192,7 +188,52 @@ def opened_dataset(manifest, bag: Path | None, calib: Path | None, *, quiet: boo
         yield dataset, stereo, None
 
 
+def _no_bag_options(bag_kw: dict) -> None:
+    """Refuse the bag options given to a RECORDING that is not a bag."""
+    used = [f"--{k.replace('_', '-')}" for k, v in bag_kw.items()
+            if v not in (None, False) and k not in ("height_m", "tilt_rad", "mount", "base_frame", "sync_tolerance_s")]
+    if used:
+        raise click.UsageError(f"{', '.join(used)} only with a ROS bag")
+
+
+@contextlib.contextmanager
+def opened_source(recording, bag: Path | None, calib: Path | None, *, quiet: bool, bag_kw: dict,
+                  rate_hz: float | None = None):
+    """The recording a command works on as a :class:`~mrstereo.recordings.sources.FrameSource`
+    (:func:`mrstereo.recordings.open_recording`), open for the ``with`` block.
+
+    A ROS bag (``--bag``, or a RECORDING that is one) is read message by message with the bag options
+    (topics picked when not given; one line on stderr says what was found). Any other RECORDING gets
+    ``--height``/``--tilt``/``--mount`` as its mount; ``--calib`` is the calibration of image folders,
+    and replaces any other recording's (whose raw images are then read); ``--rate`` the frame rate of
+    image folders.
+    """
+    from ..recordings.layouts import layout_of, open_recording
+
+    path, is_bag = recording_of(recording, bag)
+    if is_bag:
+        from ..recordings.bag import BagSource
+
+        if rate_hz is not None:
+            raise click.UsageError("--rate only with image folders")
+        source = BagSource(path, **bag_export_kwargs(bag=path, calib=calib, quiet=quiet, **bag_kw))
+        echo_export(source)
+    else:
+        _no_bag_options(bag_kw)
+        folders = layout_of(path) == "image folders"
+        if rate_hz is not None and not folders:
+            raise click.UsageError("--rate only with image folders")
+        source = open_recording(path, calibration=calib, prefer_raw=calib is not None and not folders,
+                                rate_hz=rate_hz)
+        mount = mount_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"), source.calibration)
+        if mount is not None:
+            source.mount = mount
+    with source:
+        yield source
+
+
 def echo_export(result) -> None:
+    """One line on stderr of what a bag gave (a :class:`~mrstereo.recordings.bag.BagExport` or ``BagSource``)."""
     from ..geometry.ground import ground_from_mount
 
     mount = "none (the floor is estimated when mapping)"

@@ -1,7 +1,8 @@
-"""ROS bags as stereo datasets: read ROS 1 ``.bag`` and ROS 2 (sqlite3 / mcap) bags without ROS.
+"""ROS bags as frame sources: read ROS 1 ``.bag`` and ROS 2 (sqlite3 / mcap) bags without ROS.
 
-Reading uses ``rosbags``. A bag becomes a dataset directory in the manifest format
-(docs/dataset.md): left and right images paired by stamp (within ``sync_tolerance_s``), the
+Reading uses ``rosbags``, message by message. A bag is a :class:`BagSource` of in-memory stereo
+frames (and, with :func:`export_bag`, a dataset directory in the manifest format,
+docs/dataset.md): left and right images paired by stamp (within ``sync_tolerance_s``), the
 calibration from camera_info (``P_right[0, 3] = -fx * baseline``) or a stereo YAML, the robot
 pose from odometry or TF interpolated at each left stamp, the camera mount given, from the YAML or
 from TF, and the head pan from ``camera_frame``. The rules in full: docs/scale-out.md ("ROS bags").
@@ -12,7 +13,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import tempfile
+import weakref
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,13 +24,14 @@ import numpy as np
 from .. import _checks, _limits
 from ..camera import CameraInfo, CameraMount, StereoCamera
 from ..io import check_output_dir, decode_image, note_inputs
-from ..transforms import R_BODY_FROM_OPTICAL, rotation_from_quaternion, slerp, wrap_angle
+from ..transforms import R_BODY_FROM_OPTICAL, T_from_position_quaternion, rotation_from_quaternion, slerp, wrap_angle
 from ._bagfiles import bag_errors, bag_inputs, check_bag_file
 from .manifest import pose_3d_of, staged_dataset
+from .frames import FrameSource, StereoFrame, frame_image
 
-__all__ = ["BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message", "SUPPORTED_ENCODINGS",
-           "camera_info_from_message", "stereo_from_camera_info", "stereo_from_bag", "pair_by_stamp",
-           "export_bag", "exported_bag", "bag_inputs"]
+__all__ = ["BagSource", "BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message",
+           "SUPPORTED_ENCODINGS", "camera_info_from_message", "stereo_from_camera_info", "stereo_from_bag",
+           "pair_by_stamp", "export_bag", "bag_inputs"]
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
@@ -552,34 +554,172 @@ def _mount_and_pans(tf: TfTree, frame_stamps: list[int], *, mount: CameraMount |
     return mount, source, pans
 
 
-def _write_pairs(reader, dataset, pairs: list[tuple[int, int]], *, topics: tuple[str, str], keys: tuple[str, str],
-                 calibration: StereoCamera, progress: bool) -> None:
-    """Second pass: decode the paired images and write them as frames ``0 .. len(pairs) - 1``."""
-    from tqdm.auto import tqdm
+def _decoded_pairs(reader, pairs: list[tuple[int, int]], *, topics: tuple[str, str],
+                   calibration: StereoCamera) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+    """Second pass: ``(k, left, right)`` of the paired images in frame order, decoded in memory.
 
+    Messages arrive in bag order; an image waits only until its partner is decoded and the frames
+    before it are handed out, so memory holds a few images whatever the length of the bag.
+    """
     slot = {topics[0]: {i: k for k, (i, _) in enumerate(pairs)}, topics[1]: {j: k for k, (_, j) in enumerate(pairs)}}
-    key_of = dict(zip(topics, keys))
+    side = {topics[0]: 0, topics[1]: 1}
     count = dict.fromkeys(topics, 0)
-    with tqdm(total=2 * len(pairs), desc="exporting", unit="image", disable=not progress) as bar:
-        for conn, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic in topics]):
-            n = count[conn.topic]
-            count[conn.topic] += 1
-            k = slot[conn.topic].get(n)
-            if k is None:
-                continue
-            image = image_from_message(reader.deserialize(raw, conn.msgtype), conn.msgtype)
-            if (image.shape[1], image.shape[0]) != tuple(calibration.size):
-                raise ValueError(f"{conn.topic}: images are {image.shape[1]}x{image.shape[0]} but the "
-                                 f"calibration is {calibration.size[0]}x{calibration.size[1]}")
-            dataset.write(key_of[conn.topic], k, image)
-            bar.update(1)
+    waiting: dict[int, list] = {}
+    next_k = 0
+    for conn, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic in topics]):
+        n = count[conn.topic]
+        count[conn.topic] += 1
+        k = slot[conn.topic].get(n)
+        if k is None:
+            continue
+        image = image_from_message(reader.deserialize(raw, conn.msgtype), conn.msgtype)
+        if (image.shape[1], image.shape[0]) != tuple(calibration.size):
+            raise ValueError(f"{conn.topic}: images are {image.shape[1]}x{image.shape[0]} but the "
+                             f"calibration is {calibration.size[0]}x{calibration.size[1]}")
+        waiting.setdefault(k, [None, None])[side[conn.topic]] = image
+        while next_k in waiting and all(im is not None for im in waiting[next_k]):
+            left, right = waiting.pop(next_k)
+            yield next_k, left, right
+            next_k += 1
 
 
-def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic: str, right_topic: str,
-               camera_info_topics: tuple[str, str] | None = None, calibration: StereoCamera | None = None,
-               odom_topic: str | None = None, use_tf: bool = False, world_frame: str | None = None,
-               base_frame: str = "base_link", camera_frame: str | None = None, sync_tolerance_s: float = 0.02,
-               mount: CameraMount | None = None, rectified: bool = False, progress: bool = True) -> BagExport:
+class BagSource(FrameSource):
+    """A ROS 1 / ROS 2 bag read message by message as :class:`~mrstereo.recordings.sources.StereoFrame`.
+
+    Opening reads what is small (image stamps, camera_info, odometry, TF) and pairs the left and
+    right images by stamp; iterating decodes the paired images in memory, one pair at a time, so
+    nothing is written to disk and memory stays flat however long the bag. The rules (pairing,
+    calibration, pose, mount, pan): docs/scale-out.md ("ROS bags").
+
+    Parameters
+    ----------
+    bag : path
+        A ROS 1 ``.bag`` file or a ROS 2 bag directory (sqlite3 or mcap).
+    left_topic, right_topic : str, optional
+        ``sensor_msgs/Image`` or ``CompressedImage`` topics; neither: the bag's one stereo pair
+        (:func:`pick_stereo_topics`), and its one odometry topic when no pose source is named.
+    camera_info_topics : (str, str), optional
+        Left and right ``CameraInfo`` topics. Default: ``calibration`` if given, else
+        ``<image topic namespace>/camera_info`` when present.
+    calibration : StereoCamera, optional
+        Use this calibration (a stereo YAML) instead of camera_info messages.
+    odom_topic : str, optional
+        ``nav_msgs/Odometry`` topic giving the robot pose.
+    use_tf : bool
+        Take the pose of ``base_frame`` in ``world_frame`` from ``/tf`` and ``/tf_static`` instead.
+    world_frame : str, optional
+        TF world frame; default ``map`` when TF connects it to ``base_frame``, else ``odom``.
+    base_frame : str
+        The robot's TF frame.
+    camera_frame : str, optional
+        TF frame of the left camera (optical or body frame): its pose in ``base_frame`` is the mount
+        when none is given, its change of heading the head pan (default: pan 0).
+    sync_tolerance_s : float
+        Largest left/right stamp difference of a pair.
+    mount : CameraMount, optional
+        Camera mount; default the calibration's, else from TF (``camera_frame``), else none (the
+        floor is estimated when mapping).
+    rectified : bool
+        The images are already rectified.
+    progress : bool
+        Accepted for the keywords of :func:`export_bag` (a source draws no progress bar).
+
+    Attributes
+    ----------
+    stamps_ns : tuple of int
+        The left image stamp of every frame.
+    n_left, n_right : int
+        Image messages on the two topics.
+    pose_source, mount_source : str
+        Where the poses and the mount came from (``"odometry /odom"``, ``"tf odom <- base_link"``,
+        ``"calibration"``, ...).
+    left_topic, right_topic : str
+        The image topics read.
+    """
+
+    layout = "ROS bag"
+
+    def __init__(self, bag: str | os.PathLike, *, left_topic: str | None = None, right_topic: str | None = None,
+                 camera_info_topics: tuple[str, str] | None = None, calibration: StereoCamera | None = None,
+                 odom_topic: str | None = None, use_tf: bool = False, world_frame: str | None = None,
+                 base_frame: str = "base_link", camera_frame: str | None = None, sync_tolerance_s: float = 0.02,
+                 mount: CameraMount | None = None, rectified: bool = False, progress: bool = False) -> None:
+        tolerance = _checks.finite_number("sync_tolerance_s", sync_tolerance_s, nonnegative=True)
+        if odom_topic is not None and use_tf:
+            raise ValueError("give an odometry topic or use TF for the pose, not both")
+        if calibration is not None and not isinstance(calibration, StereoCamera):
+            raise TypeError(f"calibration must be a StereoCamera, got {type(calibration).__name__}")
+        if mount is not None and not isinstance(mount, CameraMount):
+            raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
+        picked = with_picked_topics(bag, dict(left_topic=left_topic, right_topic=right_topic, odom_topic=odom_topic,
+                                              use_tf=use_tf, calibration=calibration,
+                                              camera_info_topics=camera_info_topics))
+        left_topic, right_topic, odom_topic = picked["left_topic"], picked["right_topic"], picked["odom_topic"]
+        if left_topic == right_topic:
+            raise ValueError(f"left and right topics must differ, both are {left_topic!r}")
+        self.bag, self.name, self.root = bag, str(bag), Path(bag)
+        self._readings: weakref.WeakSet = weakref.WeakSet()
+        self.left_topic, self.right_topic, self.rectified = left_topic, right_topic, bool(rectified)
+        with _open_bag(bag) as reader:
+            topics = {c.topic: c.msgtype for c in reader.connections}
+            for topic, side in ((left_topic, "left"), (right_topic, "right")):
+                _require_topic(topics, topic, f"{side} topic", IMAGE_TYPES)
+            if calibration is None:
+                camera_info_topics = _camera_info_topics(topics, left_topic, right_topic, camera_info_topics)
+            if odom_topic is not None:
+                _require_topic(topics, odom_topic, "odometry topic", (ODOMETRY_TYPE,))
+            tf_topics = [t for t in TF_TOPICS if topics.get(t) in TF_TYPES]
+            if (use_tf or camera_frame is not None) and not tf_topics:
+                raise ValueError("TF requested but the bag has no /tf or /tf_static topic of type "
+                                 "tf2_msgs/msg/TFMessage")
+            stream = _read_stream(reader, left_topic=left_topic, right_topic=right_topic, odom_topic=odom_topic,
+                                  tf_topics=tf_topics if use_tf or camera_frame is not None else ())
+            self._pairs = _stereo_pairs(stream.stamps, left_topic, right_topic, tolerance)
+            if calibration is None:
+                calibration = _stereo_of_reader(reader, camera_info_topics)
+        self.calibration = calibration
+        self.stamps_ns = tuple(stream.stamps[left_topic][i] for i, _ in self._pairs)
+        self.n_left, self.n_right = len(stream.stamps[left_topic]), len(stream.stamps[right_topic])
+        self.poses, self.pose_source = _robot_poses(stream, list(self.stamps_ns), odom_topic=odom_topic, use_tf=use_tf,
+                                                    world_frame=world_frame, base_frame=base_frame)
+        self.mount, self.mount_source, self.pans = _mount_and_pans(
+            stream.tf, list(self.stamps_ns), mount=mount, calibration=calibration, base_frame=base_frame,
+            camera_frame=camera_frame)
+        self.has_poses = odom_topic is not None or use_tf
+        self.n_frames = len(self._pairs)
+        self.stamps_s = np.asarray(self.stamps_ns, dtype=np.float64) / 1e9
+        if self.n_frames > 1:
+            self.rate_hz = float(1.0 / np.median(np.diff(self.stamps_s))) if np.ptp(self.stamps_s) > 0 else None
+        self.notes = tuple(note for note in (
+            f"{self.n_left - self.n_frames} left and {self.n_right - self.n_frames} right images without a "
+            "partner image left out" if max(self.n_left, self.n_right) > self.n_frames else "",
+            "" if self.has_poses else "no odometry topic and no --tf: poses from visual odometry") if note)
+
+    def decoded(self) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+        """``(k, left, right)`` of every frame as decoded (:func:`image_from_message`: uint8 gray or BGR, uint16)."""
+        with _open_bag(self.bag) as reader:
+            yield from _decoded_pairs(reader, self._pairs, topics=(self.left_topic, self.right_topic),
+                                      calibration=self.calibration)
+
+    def close(self) -> None:
+        """Close the bag of every iteration still open (idempotent)."""
+        readings, self._readings = self._readings, weakref.WeakSet()
+        for reading in list(readings):
+            reading.close()
+
+    def __iter__(self) -> Iterator[StereoFrame]:
+        reading = self.decoded()
+        self._readings.add(reading)
+        for k, left, right in reading:
+            pose = self.poses[k]
+            yield StereoFrame(index=k, stamp_s=self.stamps_ns[k] / 1e9, left=frame_image(left),
+                              right=frame_image(right), rectified=self.rectified,
+                              T_world_from_base=T_from_position_quaternion(pose[:3], pose[3:]),
+                              pan_rad=float(self.pans[k]))
+
+
+def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, progress: bool = True,
+               **options) -> BagExport:
     """Write the stereo pairs of a bag as a dataset directory (manifest format, PNG images).
 
     Parameters
@@ -588,80 +728,32 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, left_topic
         A ROS 1 ``.bag`` file or a ROS 2 bag directory (sqlite3 or mcap).
     out_dir : path
         New (or empty) directory; built beside it and renamed into place.
-    left_topic, right_topic : str
-        ``sensor_msgs/Image`` or ``CompressedImage`` topics.
-    camera_info_topics : (str, str), optional
-        Left and right ``CameraInfo`` topics. Default: ``calibration`` if
-        given, else ``<image topic namespace>/camera_info`` when present.
-    calibration : StereoCamera, optional
-        Use this calibration (a stereo YAML) instead of camera_info messages.
-    odom_topic : str, optional
-        ``nav_msgs/Odometry`` topic giving the robot pose.
-    use_tf : bool
-        Take the pose of ``base_frame`` in ``world_frame`` from ``/tf`` and
-        ``/tf_static`` instead.
-    world_frame : str, optional
-        TF world frame; default ``map`` when TF connects it to ``base_frame``,
-        else ``odom``.
-    base_frame : str
-        The robot's TF frame.
-    camera_frame : str, optional
-        TF frame of the left camera (optical or body frame): its pose in
-        ``base_frame`` is the mount when none is given, its change of heading
-        the head pan (default: pan 0).
-    sync_tolerance_s : float
-        Largest left/right stamp difference of a pair.
-    mount : CameraMount, optional
-        Camera mount; default the calibration's, else from TF (``camera_frame``),
-        else none (the floor is estimated when mapping).
-    rectified : bool
-        The images are already rectified (written as ``left_rect``/``right_rect``).
     progress : bool
         tqdm progress bar on stderr.
+    **options
+        Those of :class:`BagSource` (topics, calibration, pose source, TF frames, mount, ``rectified``):
+        the dataset holds the frames the source yields, as decoded (8-bit or 16-bit PNG).
     """
-    tolerance = _checks.finite_number("sync_tolerance_s", sync_tolerance_s, nonnegative=True)
-    if odom_topic is not None and use_tf:
-        raise ValueError("give an odometry topic or use TF for the pose, not both")
-    if left_topic == right_topic:
-        raise ValueError(f"left and right topics must differ, both are {left_topic!r}")
-    if calibration is not None and not isinstance(calibration, StereoCamera):
-        raise TypeError(f"calibration must be a StereoCamera, got {type(calibration).__name__}")
-    if mount is not None and not isinstance(mount, CameraMount):
-        raise TypeError(f"mount must be a CameraMount, got {type(mount).__name__}")
+    from tqdm.auto import tqdm
+
     note_inputs(bag_inputs(bag))
     check_output_dir("out_dir", out_dir, must_be_empty=True)
-    with _open_bag(bag) as reader:
-        topics = {c.topic: c.msgtype for c in reader.connections}
-        for topic, side in ((left_topic, "left"), (right_topic, "right")):
-            _require_topic(topics, topic, f"{side} topic", IMAGE_TYPES)
-        if calibration is None:
-            camera_info_topics = _camera_info_topics(topics, left_topic, right_topic, camera_info_topics)
-        if odom_topic is not None:
-            _require_topic(topics, odom_topic, "odometry topic", (ODOMETRY_TYPE,))
-        tf_topics = [t for t in TF_TOPICS if topics.get(t) in TF_TYPES]
-        if (use_tf or camera_frame is not None) and not tf_topics:
-            raise ValueError("TF requested but the bag has no /tf or /tf_static topic of type tf2_msgs/msg/TFMessage")
-        stream = _read_stream(reader, left_topic=left_topic, right_topic=right_topic, odom_topic=odom_topic,
-                              tf_topics=tf_topics if use_tf or camera_frame is not None else ())
-        pairs = _stereo_pairs(stream.stamps, left_topic, right_topic, tolerance)
-        if calibration is None:
-            calibration = _stereo_of_reader(reader, camera_info_topics)
-        frame_stamps = [stream.stamps[left_topic][i] for i, _ in pairs]
-        poses, pose_source = _robot_poses(stream, frame_stamps, odom_topic=odom_topic, use_tf=use_tf,
-                                          world_frame=world_frame, base_frame=base_frame)
-        mount, mount_source, pans = _mount_and_pans(stream.tf, frame_stamps, mount=mount, calibration=calibration,
-                                                    base_frame=base_frame, camera_frame=camera_frame)
-        source = {"bag": str(Path(bag).resolve()), "left_topic": left_topic, "right_topic": right_topic,
-                  "pose_source": pose_source, "mount_source": mount_source, "stamps_ns": frame_stamps}
-        with staged_dataset(out_dir, calibration=calibration, mount=mount, calibration_name=CALIBRATION_NAME,
-                            extra={"source": source}) as dataset:
-            _write_pairs(reader, dataset, pairs, topics=(left_topic, right_topic), calibration=calibration,
-                         keys=("left_rect", "right_rect") if rectified else ("left", "right"), progress=progress)
-            for k in range(len(pairs)):
-                dataset.add_frame(k, pose=poses[k], pan_rad=pans[k], stamp_s=frame_stamps[k] / 1e9)
-    return BagExport(out_dir=Path(out_dir), n_frames=len(pairs), n_left=len(stream.stamps[left_topic]),
-                     n_right=len(stream.stamps[right_topic]), stamps_ns=tuple(frame_stamps), calibration=calibration,
-                     mount=mount, mount_source=mount_source, pose_source=pose_source)
+    source = BagSource(bag, **options)
+    info = {"bag": str(Path(bag).resolve()), "left_topic": source.left_topic, "right_topic": source.right_topic,
+            "pose_source": source.pose_source, "mount_source": source.mount_source,
+            "stamps_ns": list(source.stamps_ns)}
+    keys = ("left_rect", "right_rect") if source.rectified else ("left", "right")
+    with staged_dataset(out_dir, calibration=source.calibration, mount=source.mount, calibration_name=CALIBRATION_NAME,
+                        extra={"source": info}) as dataset, \
+            tqdm(total=source.n_frames, desc="exporting", unit="frame", disable=not progress) as bar:
+        for k, left, right in source.decoded():
+            dataset.write(keys[0], k, left)
+            dataset.write(keys[1], k, right)
+            dataset.add_frame(k, pose=source.poses[k], pan_rad=source.pans[k], stamp_s=source.stamps_ns[k] / 1e9)
+            bar.update(1)
+    return BagExport(out_dir=Path(out_dir), n_frames=source.n_frames, n_left=source.n_left, n_right=source.n_right,
+                     stamps_ns=source.stamps_ns, calibration=source.calibration, mount=source.mount,
+                     mount_source=source.mount_source, pose_source=source.pose_source)
 
 
 def _pose_of(T: np.ndarray) -> tuple[float, ...]:
@@ -681,20 +773,3 @@ def _optical_in_base(T_base_from_frame: np.ndarray, frame: str) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3] = R_BODY_FROM_OPTICAL
     return T_base_from_frame @ T
-
-
-@contextlib.contextmanager
-def exported_bag(bag: str | os.PathLike, **options) -> Iterator:
-    """Export a bag to a temporary dataset and yield its :class:`~mrstereo.recordings.manifest.Manifest`.
-
-    Options are those of :func:`export_bag`. The directory is removed at the
-    end of the block, e.g.::
-
-        with exported_bag("run.bag", left_topic=..., right_topic=..., odom_topic="/odom") as manifest:
-            run = build_map(manifest, workers=2)
-    """
-    from .manifest import read_manifest
-
-    with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
-        export_bag(bag, Path(tmp) / "dataset", **options)
-        yield read_manifest(Path(tmp) / "dataset")

@@ -25,7 +25,8 @@ from ..camera.mount import CameraMount
 from ..io import note_inputs, read_image, read_text
 from .manifest import FrameRecord, Manifest, pose_3d_of
 
-__all__ = ["read_kitti_odometry", "is_kitti_odometry", "KITTI_MOUNT"]
+__all__ = ["read_kitti_odometry", "is_kitti_odometry", "KITTI_MOUNT", "calib_rows", "stereo_from_projections",
+           "numbers_file"]
 
 KITTI_MOUNT = CameraMount.from_xyz_rpy((0.0, 0.0, 1.65), (0.0, 0.0, 0.0))
 """The left camera of the KITTI car: 1.65 m above the road, level, looking forward (Geiger et al. 2012)."""
@@ -62,32 +63,46 @@ def is_kitti_odometry(path: str | os.PathLike) -> bool:
                for f in folders)
 
 
-def _calibration(path: Path, size: tuple[int, int]) -> StereoCamera:
-    """P0 (left) and P1 (right) of ``calib.txt`` as a pre-rectified pair."""
+def calib_rows(path: Path, sizes: dict[str, int], what: str = "KITTI calibration") -> dict[str, np.ndarray]:
+    """The rows ``key: numbers`` of a KITTI calibration file named in ``sizes`` (key -> count of numbers);
+    other lines (``calib_time: ...``) are not read. Raises ``ValueError`` naming the file, line and key."""
+    lines = {}
+    for n, line in enumerate(read_text(path, what, max_bytes=1 << 20).splitlines(), 1):
+        if ":" in line:
+            key, values = line.split(":", 1)
+            lines[key.strip()] = (n, values)
     rows = {}
-    for n, line in enumerate(read_text(path, "KITTI calibration", max_bytes=1 << 20).splitlines(), 1):
-        if ":" not in line:
-            continue
-        key, values = line.split(":", 1)
+    for key, size in sizes.items():
+        if key not in lines:
+            raise ValueError(f"{path}: needs '{key}:' with {size} numbers")
+        n, values = lines[key]
         try:
-            rows[key.strip()] = np.array([float(v) for v in values.split()], dtype=np.float64)
+            rows[key] = np.array([float(v) for v in values.split()], dtype=np.float64)
         except ValueError:
-            raise ValueError(f"{path} line {n}: {key.strip()} must be numbers") from None
-    for key in ("P0", "P1"):
-        if key not in rows or rows[key].size != 12:
-            raise ValueError(f"{path}: needs '{key}:' with 12 numbers (a row-major 3x4 projection), "
-                             f"got {0 if key not in rows else rows[key].size}")
-    P0, P1 = rows["P0"].reshape(3, 4), rows["P1"].reshape(3, 4)
+            raise ValueError(f"{path} line {n}: {key} must be numbers") from None
+        if rows[key].size != size or not np.isfinite(rows[key]).all():
+            raise ValueError(f"{path} line {n}: '{key}:' needs {size} numbers (finite), got {rows[key].size}")
+    return rows
+
+
+def stereo_from_projections(P0: np.ndarray, P1: np.ndarray, size: tuple[int, int], where: Path) -> StereoCamera:
+    """A pre-rectified pair from the left and right 3x4 projections (``P1[0, 3] = -fx * baseline_m``)."""
     width, height = size
     try:
         camera = Camera(width=width, height=height, fx=P0[0, 0], fy=P0[1, 1], cx=P0[0, 2], cy=P0[1, 2])
         right = Camera(width=width, height=height, fx=P1[0, 0], fy=P1[1, 1], cx=P1[0, 2], cy=P1[1, 2])
         return StereoCamera(left=CameraInfo(camera, P=P0, name="left"), right=CameraInfo(right, P=P1, name="right"))
     except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
+        raise ValueError(f"{where}: {exc}") from None
 
 
-def _numbers_file(path: Path, columns: int, what: str) -> np.ndarray:
+def _calibration(path: Path, size: tuple[int, int]) -> StereoCamera:
+    """P0 (left) and P1 (right) of ``calib.txt`` as a pre-rectified pair."""
+    rows = calib_rows(path, {"P0": 12, "P1": 12})
+    return stereo_from_projections(rows["P0"].reshape(3, 4), rows["P1"].reshape(3, 4), size, path)
+
+
+def numbers_file(path: Path, columns: int, what: str) -> np.ndarray:
     try:
         values = np.loadtxt(path, dtype=np.float64, ndmin=2)
     except ValueError as exc:
@@ -151,14 +166,14 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
     indices = [int(p.stem) for p in lefts]
     stamps = None
     if (seq / "times.txt").is_file():
-        times = _numbers_file(seq / "times.txt", 1, "KITTI times").ravel()
+        times = numbers_file(seq / "times.txt", 1, "KITTI times").ravel()
         if max(indices) >= len(times):
             raise ValueError(f"{seq / 'times.txt'} has {len(times)} stamps but image_0 has frame {max(indices)}")
         stamps = times[indices]
     truth = None
     poses_path = seq.parent.parent / "poses" / f"{seq.name}.txt"
     if poses_path.is_file():
-        rows = _numbers_file(poses_path, 12, "KITTI poses")
+        rows = numbers_file(poses_path, 12, "KITTI poses")
         if max(indices) >= len(rows):
             raise ValueError(f"{poses_path} has {len(rows)} poses but image_0 has frame {max(indices)}")
         M = mount.T_base_from_cam
