@@ -42,6 +42,12 @@ def test_mrstereo_data_is_used_as_is(tmp_path, monkeypatch, capsys):
     with pytest.raises(FileNotFoundError, match=f"{data.ENV_VAR}=.* has no .*middlebury2003/teddy/"):
         data.fetch("teddy")
     assert not (tmp_path / "middlebury2003").exists()        # nothing downloaded into a user's copy
+    assert entry(["data", "path", "teddy"]) == 2              # not there: an error naming the fetch command
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "mrstereo data fetch teddy" in err
+    for f in data.scene("teddy").files:                       # complete: its folder
+        (tmp_path / f.path).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / f.path).write_bytes(b"")
     assert entry(["data", "path", "teddy"]) == 0
     assert capsys.readouterr().out.strip() == str(tmp_path / "middlebury2003" / "teddy")
 
@@ -101,3 +107,14 @@ def test_cli_fetch_and_list(served, capsys):
     assert "verified" in line and "2 files" in line
     assert entry(["data", "fetch", "nope"]) == 2
     assert capsys.readouterr().err.startswith("mrstereo: error: unknown sample data 'nope'")
+
+
+def test_fetch_offline_is_one_line(served, capsys, monkeypatch):
+    source, _, server = served
+    port = server.server_port
+    server.shutdown()
+    server.server_close()                                  # nothing listens there any more: as offline
+    monkeypatch.setattr(data, "_url", lambda f: f"http://127.0.0.1:{port}/{f.source_path}")
+    assert entry(["data", "fetch", "fake", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("mrstereo: error: could not download sample data 'fake'") and err.count("\n") == 1
