@@ -285,6 +285,18 @@ def test_map_and_odometry_send_their_runs_to_the_same_outputs(dataset, tmp_path,
     assert frames == list(range(10))
 
 
+@pytest.mark.parametrize("stamp_s", [-1.0, 1e12, 2.2e9])
+def test_a_stamp_a_bag_cannot_hold_is_one_error_and_no_bag(tmp_path, stamp_s):
+    from mrstereo.recordings.bag_writer import BagWriter
+
+    writer = BagWriter(tmp_path / "bag")
+    writer.pose(int(1e9), np.eye(4))
+    with pytest.raises(ValueError, match="--record-bag: a time stamp of .* cannot be written"):
+        writer.pose(int(stamp_s * 1e9), np.eye(4))
+    writer.discard()
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_viewer_without_its_package_is_a_one_line_error(dataset, tmp_path, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "rerun", None)            # as if rerun-sdk were not installed
     for command in (["live", str(dataset), "-o", str(tmp_path / "live")],

@@ -24,6 +24,10 @@ BAG_TOPICS = {"/scan": "sensor_msgs/msg/LaserScan", "/points": "sensor_msgs/msg/
               "/plan": "nav_msgs/msg/Path"}
 """Every topic the writer can create and its message type (a topic is created with its first message)."""
 
+MAX_STAMP_NS = 2**31 * 10**9
+"""Stamps a ROS 2 bag holds: from 0 (the bag's log times are unsigned) to 2^31 s (``builtin_interfaces/Time.sec``
+is an int32: 2038-01-19)."""
+
 LATCHED_TOPICS = ("/tf_static", "/map")
 """Offered as transient local (latched), as robot_state_publisher and map_server offer them: a node that
 subscribes after ``ros2 bag play`` sent them still gets the last message."""
@@ -92,6 +96,10 @@ class BagWriter:
                                                            w=float(q[3]))))
 
     def _write(self, topic: str, msg, stamp_ns: int) -> None:
+        if not 0 <= stamp_ns < MAX_STAMP_NS:
+            raise ValueError(f"--record-bag: a time stamp of {stamp_ns / 1e9:.10g} s cannot be written to a ROS 2 "
+                             "bag (stamps from 0 to 2^31 s, before 2038-01-19): the recording's stamps are wrong; "
+                             "fix them or record no bag")
         if topic not in self._conn:
             self._conn[topic] = self._writer.add_connection(topic, BAG_TOPICS[topic], typestore=self.ts,
                                                             offered_qos_profiles=_qos(topic in LATCHED_TOPICS))
