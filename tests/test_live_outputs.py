@@ -315,12 +315,30 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_rerun_serves_its_web_viewer_on_localhost(tmp_path):
+def _listeners(port: int) -> list[str]:
+    """Local addresses listening on ``port`` (``ss -ltn``)."""
+    import subprocess
+
+    lines = subprocess.run(["ss", "-Hltn", f"sport = :{port}"], capture_output=True, text=True).stdout.splitlines()
+    return [line.split()[3].rsplit(":", 1)[0] for line in lines]
+
+
+def test_rerun_serves_on_localhost_only_and_its_web_viewer_when_asked(tmp_path):
     _need("rerun")
     from mrstereo.viz.live import RerunLogger
 
+    grpc = _free_port()
+    logger = RerunLogger(rrd_path=tmp_path / "a.rrd", mode="serve", grpc_port=grpc)
+    try:
+        assert logger.url == f"rerun+http://127.0.0.1:{grpc}/proxy"
+        assert _listeners(grpc) == ["127.0.0.1"]
+        with pytest.raises(ValueError, match=f"--viewer-port: port {grpc} is in use"):   # a second run: one line
+            RerunLogger(rrd_path=tmp_path / "b.rrd", mode="serve", grpc_port=grpc)
+        assert sorted(p.name for p in tmp_path.iterdir()) == [".a.rrd.%d.tmp" % os.getpid()]   # nothing of b
+    finally:
+        logger.close()
     web, grpc = _free_port(), _free_port()
-    logger = RerunLogger(rrd_path=tmp_path / "view.rrd", mode="serve", web_port=web, grpc_port=grpc)
+    logger = RerunLogger(rrd_path=tmp_path / "view.rrd", mode="web", web_port=web, grpc_port=grpc)
     try:
         assert logger.url == f"http://127.0.0.1:{web}/?url=rerun+http://127.0.0.1:{grpc}/proxy"
         with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=30) as reply:
@@ -329,6 +347,19 @@ def test_rerun_serves_its_web_viewer_on_localhost(tmp_path):
     finally:
         logger.close()
     assert (tmp_path / "view.rrd").is_file()
+
+
+def test_a_busy_foxglove_port_is_one_line_before_anything_starts(tmp_path):
+    _need("foxglove")
+    from mrstereo.viz.live import FoxgloveLogger
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        with pytest.raises(ValueError, match=f"--foxglove-port: port {port} is in use"):
+            FoxgloveLogger(mcap_path=tmp_path / "v.mcap", port=port)
+    assert list(tmp_path.iterdir()) == []
 
 
 class _WebSocket:

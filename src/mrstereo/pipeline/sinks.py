@@ -167,7 +167,8 @@ def open_sinks(stereo: StereoCamera, view_stem: str | os.PathLike, *, viewers: S
                                       else "serve")
                 logger = RerunLogger(rrd_path=stem.with_suffix(".rrd"), mode=mode)
                 if echo is not None and logger.url:
-                    echo(f"rerun: open {logger.url} in a browser (or `rerun {logger.url.split('url=')[-1]}`)")
+                    echo(f"rerun: open {logger.url} in a browser" if mode == "web" else
+                         f"rerun: connect a viewer with `rerun {logger.url}`")
             else:
                 logger = FoxgloveLogger(mcap_path=stem.with_suffix(".mcap"), port=foxglove_port)
                 if echo is not None and logger.url:
