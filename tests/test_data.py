@@ -15,7 +15,7 @@ from mrstereo.recordings import samples as data
 
 def test_registry_names_every_file_once_with_a_source_and_a_sha256():
     paths = [f.path for f in data._FILES]
-    assert len(paths) == len(set(paths)) == 93
+    assert len(paths) == len(set(paths)) == 93 + 22 + 15           # + KITTI raw, EuRoC ASL
     for name in data.NAMES:
         scene = data.scene(name)
         assert scene.files and scene.description
@@ -118,3 +118,32 @@ def test_fetch_offline_is_one_line(served, capsys, monkeypatch):
     assert entry(["data", "fetch", "fake", "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("mrstereo: error: could not download sample data 'fake'") and err.count("\n") == 1
+
+
+def test_a_csv_cut_to_the_scenes_images_is_fetched_and_checked(served, tmp_path, monkeypatch):
+    source, _, server = served
+    upstream = b"#timestamp [ns],filename\n1,1.png\n2,2.png\n3,3.png\n"
+    (source / "data.csv").write_bytes(upstream)
+    (source / "2.png").write_bytes(b"two")
+    cut = b"#timestamp [ns],filename\n2,2.png\n"
+    rows = (data.SampleFile("asl/cam0/data/2.png", "owner/repo", "0123456", "2.png", hashlib.sha256(b"two").hexdigest()),
+            data.SampleFile("asl/cam0/data.csv", "owner/repo", "0123456", "data.csv", hashlib.sha256(cut).hexdigest(),
+                            "listed rows"))
+    monkeypatch.setattr(data, "_FILES", data._FILES + rows)
+    monkeypatch.setitem(data.SCENES, "asl", "asl")
+    folder = data.fetch("asl")
+    assert (folder / "cam0" / "data.csv").read_bytes() == cut and data.verify("asl") == []
+    assert sorted(p.name for p in data.data_root().iterdir() if p.name.startswith(".")) == []    # no temporaries
+    (folder / "cam0" / "data.csv").unlink()
+    (source / "data.csv").write_bytes(upstream.replace(b"2,2.png", b"2,2.png,x"))                 # upstream changed
+    with pytest.raises(ValueError, match="hash differs"):
+        data.fetch("asl")
+    assert not (folder / "cam0" / "data.csv").exists()
+
+
+def test_the_euroc_and_kitti_raw_samples_are_in_the_registry():
+    for name, folder in (("euroc-asl-sample", "euroc_asl_sample"), ("kitti-raw-sample", "kitti_raw_sample")):
+        entry = data.scene(name)
+        assert entry.folder == folder and entry.description
+        if data.is_available(name):
+            assert data.verify(name) == []
