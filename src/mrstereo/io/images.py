@@ -53,6 +53,10 @@ def quiet_decoders(on: bool = True) -> None:
     global _quiet
     _quiet = bool(on)
     if on:
+        # FFmpeg's own log ("[mjpeg @ 0x...] ...") is read when OpenCV opens its first video, and the Rust
+        # viewers' (rerun, foxglove) when they start: both before any of that happens here
+        os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+        os.environ.setdefault("RUST_LOG", "off")
         try:
             cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
         except AttributeError:
