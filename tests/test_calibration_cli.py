@@ -55,6 +55,7 @@ def test_calibrate_stereo_and_rectify_real(tmp_path, capsys):
     (["calibrate", "--images", "/nonexistent/*.jpg"], "no images match"),
     (["calibrate", "--images", str(DATA / "left*.jpg"), "--square", "nan"], "--square"),
     (["calibrate", "--images", str(DATA / "left01.jpg"), "--board", "7x7"], "not found in any"),
+    (["calibrate", "--images", str(DATA / "left0[12].jpg")], "found in 2 image(s)"),
     (["stereo-calibrate", "--left", str(DATA / "left0*.jpg"), "--right", str(DATA / "right*.jpg")],
      "9 left images but 13 right"),
 ])

@@ -15,7 +15,7 @@ from mrstereo.recordings import samples as data
 
 def test_registry_names_every_file_once_with_a_source_and_a_sha256():
     paths = [f.path for f in data._FILES]
-    assert len(paths) == len(set(paths)) == 93
+    assert len(paths) == len(set(paths)) == 93 + 22 + 15           # + KITTI raw, EuRoC ASL
     for name in data.NAMES:
         scene = data.scene(name)
         assert scene.files and scene.description
@@ -42,6 +42,12 @@ def test_mrstereo_data_is_used_as_is(tmp_path, monkeypatch, capsys):
     with pytest.raises(FileNotFoundError, match=f"{data.ENV_VAR}=.* has no .*middlebury2003/teddy/"):
         data.fetch("teddy")
     assert not (tmp_path / "middlebury2003").exists()        # nothing downloaded into a user's copy
+    assert entry(["data", "path", "teddy"]) == 2              # not there: an error naming the fetch command
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "mrstereo data fetch teddy" in err
+    for f in data.scene("teddy").files:                       # complete: its folder
+        (tmp_path / f.path).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / f.path).write_bytes(b"")
     assert entry(["data", "path", "teddy"]) == 0
     assert capsys.readouterr().out.strip() == str(tmp_path / "middlebury2003" / "teddy")
 
@@ -101,3 +107,43 @@ def test_cli_fetch_and_list(served, capsys):
     assert "verified" in line and "2 files" in line
     assert entry(["data", "fetch", "nope"]) == 2
     assert capsys.readouterr().err.startswith("mrstereo: error: unknown sample data 'nope'")
+
+
+def test_fetch_offline_is_one_line(served, capsys, monkeypatch):
+    source, _, server = served
+    port = server.server_port
+    server.shutdown()
+    server.server_close()                                  # nothing listens there any more: as offline
+    monkeypatch.setattr(data, "_url", lambda f: f"http://127.0.0.1:{port}/{f.source_path}")
+    assert entry(["data", "fetch", "fake", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("mrstereo: error: could not download sample data 'fake'") and err.count("\n") == 1
+
+
+def test_a_csv_cut_to_the_scenes_images_is_fetched_and_checked(served, tmp_path, monkeypatch):
+    source, _, server = served
+    upstream = b"#timestamp [ns],filename\n1,1.png\n2,2.png\n3,3.png\n"
+    (source / "data.csv").write_bytes(upstream)
+    (source / "2.png").write_bytes(b"two")
+    cut = b"#timestamp [ns],filename\n2,2.png\n"
+    rows = (data.SampleFile("asl/cam0/data/2.png", "owner/repo", "0123456", "2.png", hashlib.sha256(b"two").hexdigest()),
+            data.SampleFile("asl/cam0/data.csv", "owner/repo", "0123456", "data.csv", hashlib.sha256(cut).hexdigest(),
+                            "listed rows"))
+    monkeypatch.setattr(data, "_FILES", data._FILES + rows)
+    monkeypatch.setitem(data.SCENES, "asl", "asl")
+    folder = data.fetch("asl")
+    assert (folder / "cam0" / "data.csv").read_bytes() == cut and data.verify("asl") == []
+    assert sorted(p.name for p in data.data_root().iterdir() if p.name.startswith(".")) == []    # no temporaries
+    (folder / "cam0" / "data.csv").unlink()
+    (source / "data.csv").write_bytes(upstream.replace(b"2,2.png", b"2,2.png,x"))                 # upstream changed
+    with pytest.raises(ValueError, match="hash differs"):
+        data.fetch("asl")
+    assert not (folder / "cam0" / "data.csv").exists()
+
+
+def test_the_euroc_and_kitti_raw_samples_are_in_the_registry():
+    for name, folder in (("euroc-asl-sample", "euroc_asl_sample"), ("kitti-raw-sample", "kitti_raw_sample")):
+        entry = data.scene(name)
+        assert entry.folder == folder and entry.description
+        if data.is_available(name):
+            assert data.verify(name) == []

@@ -110,6 +110,38 @@ def test_cli_points_and_scan(tmp_path, frame, capsys):
     assert (tmp_path / "s.csv").read_text().startswith("angle_rad,range_m,intensity\n")
 
 
+def test_cli_points_labels_every_point_and_writes_a_depth_png(tmp_path, frame, capsys):
+    import cv2
+    import plyfile
+
+    stereo, fr = frame
+    left, right, calib = _files(tmp_path, stereo, fr)
+    assert entry(["points", left, right, "--calib", calib, "-o", str(tmp_path / "all.ply"), "--pan", str(PAN),
+                  "--depth-png", str(tmp_path / "depth.png")]) == 0
+    cloud = read_ply(tmp_path / "all.ply")
+    assert set(np.unique(cloud.label)) == {0, 1, 2}
+    z = cloud.points[:, 2]
+    cfg = ObstacleConfig()
+    obstacle, floor = cloud.label == 1, cloud.label == 2
+    assert (z[obstacle] > cfg.min_obstacle_height_m - 1e-4).all() and (z[obstacle] < cfg.max_obstacle_height_m).all()
+    assert np.median(np.abs(z[floor])) < 0.02 and floor.sum() > 200
+    v = plyfile.PlyData.read(str(tmp_path / "all.ply"))["vertex"]            # an independent reader sees it
+    np.testing.assert_array_equal(v["label"], cloud.label)
+    assert entry(["points", left, right, "--calib", calib, "-o", str(tmp_path / "o.ply"), "--pan", str(PAN),
+                  "--which", "obstacles"]) == 0
+    assert len(read_ply(tmp_path / "o.ply").points) == obstacle.sum()
+    # the depth image: uint16 millimetres, 0 invalid, within a few percent of the rendered truth
+    depth = cv2.imread(str(tmp_path / "depth.png"), cv2.IMREAD_UNCHANGED)
+    assert depth.dtype == np.uint16 and depth.shape == fr.depth_m.shape
+    both = (depth > 0) & np.isfinite(fr.depth_m)
+    assert both.mean() > 0.3
+    rel = np.abs(depth[both] / 1000.0 - fr.depth_m[both]) / fr.depth_m[both]
+    assert np.median(rel) < 0.03
+    assert entry(["points", left, right, "--calib", calib, "-o", str(tmp_path / "x.ply"),
+                  "--depth-png", str(tmp_path / "depth.jpg")]) == 2
+    assert "--depth-png" in capsys.readouterr().err and not (tmp_path / "x.ply").exists()
+
+
 def test_cli_points_color_takes_the_colour_left_image_and_refuses_a_gray_one(tmp_path, frame, capsys):
     import cv2
 

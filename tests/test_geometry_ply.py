@@ -65,3 +65,15 @@ def test_independent_reader_agrees(tmp_path):
     v = plyfile.PlyData.read(str(tmp_path / "c.ply"))["vertex"]
     np.testing.assert_array_equal(np.stack([v["x"], v["y"], v["z"]], axis=1), pts.astype(np.float32))
     np.testing.assert_array_equal(np.stack([v["red"], v["green"], v["blue"]], axis=1), [[255, 0, 10], [1, 2, 3]])
+
+
+def test_labels_round_trip_and_are_named_in_the_header(tmp_path):
+    pts = np.array([[0.5, -1.0, 2.0], [3.0, 0.25, -0.5], [np.nan, 0, 0], [1.0, 1.0, 0.0]])
+    assert write_ply(tmp_path / "l.ply", pts, intensity=[1, 2, 3, 4], label=[1, 2, 1, 0]) == 3
+    cloud = read_ply(tmp_path / "l.ply")
+    np.testing.assert_array_equal(cloud.label, [1, 2, 0])          # the NaN point dropped with its label
+    np.testing.assert_array_equal(cloud.intensity, [1, 2, 4])
+    header = (tmp_path / "l.ply").read_bytes().split(b"end_header")[0].decode()
+    assert "property uchar label" in header and "label 0 other, 1 obstacle, 2 floor" in header
+    with pytest.raises(ValueError, match="label"):
+        write_ply(tmp_path / "m.ply", pts, label=[1, 2])

@@ -1,4 +1,7 @@
 """Disparity and image files: PFM and KITTI round trips, atomic writes, clear errors."""
+import os
+
+import cv2
 import numpy as np
 import pytest
 
@@ -70,3 +73,26 @@ def test_outputs_get_normal_permissions(tmp_path):
     mask = os.umask(0)
     os.umask(mask)
     assert mode == 0o666 & ~mask
+
+
+def test_the_command_keeps_ffmpegs_log_off_stderr(tmp_path):
+    """A damaged MJPG video: FFmpeg prints "[mjpeg @ 0x...]" lines unless the command has quieted it first."""
+    import subprocess
+    import sys
+
+    writer = cv2.VideoWriter(str(tmp_path / "v.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 10, (64, 48), False)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        writer.write(rng.integers(0, 255, (48, 64), dtype=np.uint8))
+    writer.release()
+    data = bytearray((tmp_path / "v.avi").read_bytes())
+    data[3000:-100:97] = bytes(len(data[3000:-100:97]))
+    (tmp_path / "bad.avi").write_bytes(bytes(data))
+    read = (f"import cv2\nc = cv2.VideoCapture({str(tmp_path / 'bad.avi')!r})\n"
+            "while c.grab():\n    c.retrieve()\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENCV_FFMPEG_LOGLEVEL", "RUST_LOG")}
+    loud = subprocess.run([sys.executable, "-c", read], capture_output=True, text=True, env=env, timeout=120)
+    quiet = subprocess.run([sys.executable, "-c", "from mrstereo.io import quiet_decoders\nquiet_decoders()\n" + read],
+                           capture_output=True, text=True, env=env, timeout=120)
+    assert "[mjpeg @" in loud.stderr                 # the damage is real
+    assert "[mjpeg @" not in quiet.stderr and quiet.returncode == 0

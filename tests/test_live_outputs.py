@@ -67,13 +67,22 @@ def read_bag(path) -> dict[str, list]:
     out: dict[str, list] = {}
     with Reader(path) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
-        assert types == BAG_TOPICS
+        assert types == {t: BAG_TOPICS[t] for t in types}
         latched = {c.topic for c in reader.connections
                    if any(q.durability.name == "TRANSIENT_LOCAL" for q in c.ext.offered_qos_profiles)}
-        assert latched == set(LATCHED_TOPICS)
+        assert latched == set(LATCHED_TOPICS) & set(types)
         for conn, stamp_ns, raw in reader.messages():
             out.setdefault(conn.topic, []).append((stamp_ns, store.deserialize_cdr(raw, conn.msgtype)))
+    assert set(out) == set(types), "every topic in the bag carries messages"
     return out
+
+
+def nav2_static_layer(grid_msg) -> np.ndarray:
+    """Costs Nav2's static layer gives a nav_msgs/OccupancyGrid with its defaults (trinary_costmap true,
+    lethal_cost_threshold 100, unknown_cost_value -1, track_unknown_space true): 254 lethal, 255 no
+    information, 0 free (nav2_costmap_2d StaticLayer::interpretValue)."""
+    values = np.asarray(grid_msg.data, dtype=np.int8).reshape(grid_msg.info.height, grid_msg.info.width)
+    return np.where(values == -1, 255, np.where(values >= 100, 254, 0)).astype(np.uint8)
 
 
 def _T(position, orientation) -> np.ndarray:
@@ -118,14 +127,11 @@ def check_bag(bag: dict, stamps_s, T_world_from_base, final_map=None) -> None:
 
 
 def same_map(values: np.ndarray, ros_map) -> None:
-    """OccupancyGrid values (-1, 0..100) tell what a trinary map_server map does: unknown, free, occupied."""
-    unknown = ~np.isfinite(ros_map.occupancy)
-    np.testing.assert_array_equal(values == -1, unknown)
-    from mrstereo.mapping import MappingConfig
-
-    threshold = MappingConfig().occupied_thresh              # what the map calls occupied
-    sure = np.abs(values.astype(float) / 100 - threshold) > 0.011      # (the values are rounded to 1/100)
-    np.testing.assert_array_equal(((values / 100) > threshold)[sure], ros_map.occupied[sure])
+    """Trinary OccupancyGrid values (-1, 0, 100) tell what a map_server map does: unknown, free, occupied."""
+    assert set(np.unique(values)) <= {-1, 0, 100}
+    np.testing.assert_array_equal(values == -1, ros_map.unknown)
+    np.testing.assert_array_equal(values == 100, ros_map.occupied)
+    np.testing.assert_array_equal(values == 0, ros_map.free)
 
 
 def rrd_rows(path) -> dict[str, list]:
@@ -174,7 +180,8 @@ def test_a_live_run_to_a_bag_and_both_viewers_files(dataset, tmp_path):
         run = run_live(source, tmp_path / "out", config=CONFIG, live=LiveConfig(odometry="visual"),
                        sinks=[*sinks, kept])
     assert run.frames_mapped == 10 and len(kept.frames) == 10
-    final = occupancy_values(run.grid.probability())
+    final = occupancy_values(run.grid.to_ros_map().occupancy)       # the bag's /map: trinary, as map.pgm
+    percent = occupancy_values(run.grid.probability(), trinary=False)     # the viewers': probabilities
     stamps, T = read_tum(tmp_path / "out" / "trajectory.txt")
     np.testing.assert_allclose(T, run.T_world_from_base, atol=1e-6)
 
@@ -200,7 +207,7 @@ def test_a_live_run_to_a_bag_and_both_viewers_files(dataset, tmp_path):
         assert sum(b.num_rows for b in rows[entity]) == 10, entity
     _, grids = rrd_column(rows, "/world/map", "GridMap:data")
     values = np.frombuffer(bytes(np.concatenate(grids[-1]).astype(np.uint8)), np.int8)
-    np.testing.assert_array_equal(values.reshape(final.shape), final)
+    np.testing.assert_array_equal(values.reshape(percent.shape), percent)
 
     # Foxglove: its schemas, every frame, the last map
     fox = mcap_messages(tmp_path / "out" / "view.mcap")
@@ -213,7 +220,7 @@ def test_a_live_run_to_a_bag_and_both_viewers_files(dataset, tmp_path):
         np.testing.assert_allclose([odom.pose.position.x, odom.pose.position.y, odom.pose.position.z],
                                    T[:3, 3], atol=1e-9)
     _, grid = fox["/map"][-1]
-    np.testing.assert_array_equal(np.frombuffer(grid.data, np.int8).reshape(final.shape), final)
+    np.testing.assert_array_equal(np.frombuffer(grid.data, np.int8).reshape(percent.shape), percent)
     assert sorted(p.name for p in (tmp_path / "out").iterdir() if p.name.startswith(".")) == []   # no temporaries
 
 
@@ -246,19 +253,25 @@ def test_map_and_odometry_send_their_runs_to_the_same_outputs(dataset, tmp_path,
     manifest = read_recording(dataset)
     T_given = np.stack([f.T_world_from_base for f in manifest.frames])
     stamps = [f.stamp_s for f in manifest.frames]
-    from mrstereo.mapping.occupancy import probability_from_log_odds
-
-    final = occupancy_values(probability_from_log_odds(np.load(out / "log_odds.npy")))
-    same_map(final, read_ros_map(out / "map.yaml"))
     bag = read_bag(tmp_path / "map_bag")
-    check_bag(bag, stamps, T_given, (final, read_ros_map(out / "map.yaml").grid))
+    check_bag(bag, stamps, T_given, read_ros_map(out / "map.yaml"))
+    # Nav2's static layer with its defaults sees map.pgm's obstacles, free cells and unknown cells
+    ros_map = read_ros_map(out / "map.yaml")
+    costs = nav2_static_layer(bag["/map"][-1][1])
+    assert ros_map.occupied.sum() > 20
+    np.testing.assert_array_equal(costs == 254, ros_map.occupied)
+    np.testing.assert_array_equal(costs == 255, ros_map.unknown)
+    np.testing.assert_array_equal(costs == 0, ros_map.free)
     assert len(bag["/scan"]) == len(bag["/points"]) == 10
     rows = rrd_rows(out / "view.rrd")
     frames, translations = rrd_column(rows, "/world/robot", "Transform3D:translation")
     np.testing.assert_allclose(np.array(translations).reshape(-1, 3), T_given[:, :3, 3], atol=1e-6)
-    fox = mcap_messages(out / "view.mcap")
+    from mrstereo.mapping.occupancy import probability_from_log_odds
+
+    percent = occupancy_values(probability_from_log_odds(np.load(out / "log_odds.npy")), trinary=False)
+    fox = mcap_messages(out / "view.mcap")           # viewers show the probabilities
     _, grid = fox["/map"][-1]
-    np.testing.assert_array_equal(np.frombuffer(grid.data, np.int8).reshape(final.shape), final)
+    np.testing.assert_array_equal(np.frombuffer(grid.data, np.int8).reshape(percent.shape), percent)
 
     traj = tmp_path / "odo" / "trajectory.txt"
     code = entry(["odometry", str(dataset), "-o", str(traj), "--record-bag", str(tmp_path / "odo_bag"),
@@ -267,9 +280,21 @@ def test_map_and_odometry_send_their_runs_to_the_same_outputs(dataset, tmp_path,
     stamps, T = read_tum(traj)
     bag = read_bag(tmp_path / "odo_bag")
     check_bag(bag, stamps, T)
-    assert "/scan" not in bag and "/map" not in bag            # poses only
+    assert set(bag) == {"/odom", "/tf", "/tf_static"}            # poses only: no empty topics
     frames, _ = rrd_column(rrd_rows(traj.with_suffix(".rrd")), "/world/robot", "Transform3D:translation")
     assert frames == list(range(10))
+
+
+@pytest.mark.parametrize("stamp_s", [-1.0, 1e12, 2.2e9])
+def test_a_stamp_a_bag_cannot_hold_is_one_error_and_no_bag(tmp_path, stamp_s):
+    from mrstereo.recordings.bag_writer import BagWriter
+
+    writer = BagWriter(tmp_path / "bag")
+    writer.pose(int(1e9), np.eye(4))
+    with pytest.raises(ValueError, match="--record-bag: a time stamp of .* cannot be written"):
+        writer.pose(int(stamp_s * 1e9), np.eye(4))
+    writer.discard()
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_viewer_without_its_package_is_a_one_line_error(dataset, tmp_path, capsys, monkeypatch):
@@ -290,12 +315,30 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_rerun_serves_its_web_viewer_on_localhost(tmp_path):
+def _listeners(port: int) -> list[str]:
+    """Local addresses listening on ``port`` (``ss -ltn``)."""
+    import subprocess
+
+    lines = subprocess.run(["ss", "-Hltn", f"sport = :{port}"], capture_output=True, text=True).stdout.splitlines()
+    return [line.split()[3].rsplit(":", 1)[0] for line in lines]
+
+
+def test_rerun_serves_on_localhost_only_and_its_web_viewer_when_asked(tmp_path):
     _need("rerun")
     from mrstereo.viz.live import RerunLogger
 
+    grpc = _free_port()
+    logger = RerunLogger(rrd_path=tmp_path / "a.rrd", mode="serve", grpc_port=grpc)
+    try:
+        assert logger.url == f"rerun+http://127.0.0.1:{grpc}/proxy"
+        assert _listeners(grpc) == ["127.0.0.1"]
+        with pytest.raises(ValueError, match=f"--viewer-port: port {grpc} is in use"):   # a second run: one line
+            RerunLogger(rrd_path=tmp_path / "b.rrd", mode="serve", grpc_port=grpc)
+        assert sorted(p.name for p in tmp_path.iterdir()) == [".a.rrd.%d.tmp" % os.getpid()]   # nothing of b
+    finally:
+        logger.close()
     web, grpc = _free_port(), _free_port()
-    logger = RerunLogger(rrd_path=tmp_path / "view.rrd", mode="serve", web_port=web, grpc_port=grpc)
+    logger = RerunLogger(rrd_path=tmp_path / "view.rrd", mode="web", web_port=web, grpc_port=grpc)
     try:
         assert logger.url == f"http://127.0.0.1:{web}/?url=rerun+http://127.0.0.1:{grpc}/proxy"
         with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=30) as reply:
@@ -304,6 +347,19 @@ def test_rerun_serves_its_web_viewer_on_localhost(tmp_path):
     finally:
         logger.close()
     assert (tmp_path / "view.rrd").is_file()
+
+
+def test_a_busy_foxglove_port_is_one_line_before_anything_starts(tmp_path):
+    _need("foxglove")
+    from mrstereo.viz.live import FoxgloveLogger
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        with pytest.raises(ValueError, match=f"--foxglove-port: port {port} is in use"):
+            FoxgloveLogger(mcap_path=tmp_path / "v.mcap", port=port)
+    assert list(tmp_path.iterdir()) == []
 
 
 class _WebSocket:

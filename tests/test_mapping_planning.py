@@ -41,7 +41,7 @@ def assert_valid_path(result, blocked):
 
 def test_empty_map_gives_the_octile_distance():
     start, goal = (0.62, -2.31), (10.93, 1.77)
-    result = plan_path(ros(free_map()), start, goal)
+    result = plan_path(ros(free_map()), start, goal, smooth=False)
     (r0, r1), (c0, c1) = zip(GRID.cells_from_xy(start), GRID.cells_from_xy(goal))
     dr, dc = abs(r1 - r0), abs(c1 - c0)
     octile = (max(dr, dc) + (math.sqrt(2) - 1) * min(dr, dc)) * GRID.resolution_m
@@ -49,18 +49,51 @@ def test_empty_map_gives_the_octile_distance():
     np.testing.assert_allclose(result.path_xy[0], GRID.xy_from_cells(r0, c0))
     np.testing.assert_allclose(result.path_xy[-1], GRID.xy_from_cells(r1, c1))
     assert_valid_path(result, np.zeros(GRID.shape, bool))
+    # smoothed: the straight line between the two cell centres, headings along it
+    straight = plan_path(ros(free_map()), start, goal)
+    assert straight.length_m == pytest.approx(np.hypot(*(result.path_xy[-1] - result.path_xy[0])))
+    np.testing.assert_allclose(straight.yaw_rad, math.atan2(*(result.path_xy[-1] - result.path_xy[0])[::-1]))
+    assert straight.poses.shape == (len(straight.path_xy), 3)
+
+
+def assert_clear(result, blocked):
+    """Every point of the polyline (sampled at a tenth of a cell) lies in an unblocked cell."""
+    a, b = result.path_xy[:-1], result.path_xy[1:]
+    t = np.linspace(0.0, 1.0, 11)[None, :, None]
+    dense = (a[:, None] + t * (b - a)[:, None]).reshape(-1, 2)
+    r, c = GRID.cells_from_xy(dense)
+    assert not blocked[r, c].any()
 
 
 def test_goes_around_a_wall_and_keeps_the_radius():
     occ = free_map()
     occ[20:120, 120] = 1.0                   # wall from y = -2 m up to the top, open below
-    result = plan_path(ros(occ), (3.0, 1.0), (9.0, 1.0), robot_radius_m=0.25)
+    result = plan_path(ros(occ), (3.0, 1.0), (9.0, 1.0), robot_radius_m=0.25, smooth=False)
     blocked = inflate_obstacles(ros(occ), robot_radius_m=0.25)
     assert result.success
     assert_valid_path(result, blocked)
     assert result.path_xy[:, 1].min() < -2.0 - 0.25       # passed below the wall end
     around_the_end = 2 * np.hypot(3.0, 1.0 + 2.0 + 0.25)  # via the inflated wall end
     assert around_the_end < result.length_m < around_the_end * 1.1
+    # smoothed: shorter, still clear of the inflated wall, within a cell of the shortest way round it
+    smooth = plan_path(ros(occ), (3.0, 1.0), (9.0, 1.0), robot_radius_m=0.25, goal_yaw_rad=math.pi / 2)
+    assert_clear(smooth, blocked)
+    assert around_the_end - 0.1 < smooth.length_m < result.length_m
+    assert smooth.length_m < around_the_end * 1.02
+    assert smooth.yaw_rad[-1] == pytest.approx(math.pi / 2) and smooth.yaw_rad[0] < 0     # heads down first
+
+
+def test_a_shortcut_crosses_no_blocked_cell_and_no_blocked_corner():
+    from mrstereo.mapping._kernels import segment_free
+
+    blocked = np.zeros((5, 5), np.uint8)
+    assert segment_free(blocked, 0, 0, 4, 4) and segment_free(blocked, 4, 1, 0, 3)
+    blocked[1, 0] = 1                       # beside the corner the diagonal (0,0)-(1,1) passes: refused
+    assert not segment_free(blocked, 0, 0, 1, 1) and not segment_free(blocked, 2, 2, 0, 0)
+    assert segment_free(blocked, 0, 0, 0, 4)
+    blocked[:] = 0
+    blocked[2, 2] = 1                       # (0,1)-(4,3) passes through (2,2); (0,0)-(4,1) does not
+    assert not segment_free(blocked, 0, 1, 4, 3) and segment_free(blocked, 0, 0, 4, 1)
 
 
 @pytest.mark.parametrize("gap_cells, passes", [(8, False), (10, False), (11, True), (16, True)])
@@ -69,6 +102,7 @@ def test_inflation_blocks_gaps_narrower_than_the_robot(gap_cells, passes):
     assert result.success is passes
     if passes:
         assert result.length_m == pytest.approx(6.0, abs=0.2)
+        assert_clear(result, inflate_obstacles(ros(wall_with_gap(gap_cells)), robot_radius_m=0.25))
     else:
         assert "no path" in result.message and result.path_xy.shape == (0, 2)
 
@@ -157,3 +191,42 @@ def test_cli_plan_writes_json_and_fails_with_one_line(tmp_path, capsys):
     assert entry(["plan", str(tmp_path / "map.yaml"), "--start", "3,0", "--goal", "9,0",
                   "-o", str(tmp_path / "link.json")]) == 2
     assert "would overwrite the input" in capsys.readouterr().err
+
+
+def test_cli_plan_from_the_robots_last_pose_with_a_heading_into_a_bag(tmp_path, capsys):
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    from mrstereo.odometry.trajectory import write_tum
+    from mrstereo.transforms import T_from_planar
+
+    write_ros_map(tmp_path / "map.yaml", ros(wall_with_gap(16)))
+    code = entry(["plan", str(tmp_path / "map.yaml"), "--start", "robot", "--goal", "9,0", "-o",
+                  str(tmp_path / "p.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and "trajectory.txt" in err and err.count("\n") == 1     # no trajectory beside the map
+    write_tum(tmp_path / "trajectory.txt", [0.0, 1.0], [T_from_planar(1.0, 0.5, 0.0), T_from_planar(3.0, 0.4, 0.2)])
+    code = entry(["plan", str(tmp_path / "map.yaml"), "--start", "robot", "--goal", "9,0,1.5708", "-o",
+                  str(tmp_path / "p.json"), "--record-bag", str(tmp_path / "bag")])
+    assert code == 0, capsys.readouterr().err
+    record = json.loads((tmp_path / "p.json").read_text())
+    assert record["start"] == pytest.approx([3.0, 0.4])
+    assert record["poses"][-1][2] == pytest.approx(1.5708) and record["goal_yaw_rad"] == pytest.approx(1.5708)
+    r, c = GRID.cells_from_xy(np.array([3.0, 0.4]))
+    np.testing.assert_allclose(record["path_xy"][0], GRID.xy_from_cells(r, c))
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with Reader(tmp_path / "bag") as reader:
+        msgs = {c.topic: store.deserialize_cdr(raw, c.msgtype) for c, _, raw in reader.messages()}
+    assert set(msgs) == {"/map", "/plan"}
+    plan = msgs["/plan"]
+    assert plan.header.frame_id == "map" and len(plan.poses) == len(record["poses"])
+    xy = np.array([[p.pose.position.x, p.pose.position.y] for p in plan.poses])
+    np.testing.assert_allclose(xy, record["path_xy"], atol=1e-6)
+    q = plan.poses[-1].pose.orientation
+    assert 2 * math.atan2(q.z, q.w) == pytest.approx(1.5708, abs=1e-6)
+    values = np.asarray(msgs["/map"].data, np.int8).reshape(GRID.shape)
+    assert set(np.unique(values)) == {0, 100} and (values[:, 120] == 100).sum() == 120 - 16
+    for bad in ("9,0,90", "9"):            # degrees for radians; one number
+        assert entry(["plan", str(tmp_path / "map.yaml"), "--start", "3,0", "--goal", bad, "-o",
+                      str(tmp_path / "q.json")]) == 2
+        assert "--goal" in capsys.readouterr().err

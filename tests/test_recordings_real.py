@@ -170,6 +170,13 @@ def test_a_prerectified_camera_from_four_numbers_and_a_size(tmp_path, capsys):
     assert entry(["calib", "convert", "--fx", "718", "--cx", "600", "--cy", "180", "--baseline", "75", "--size",
                   "640x400", "-o", str(tmp_path / "x.yaml")]) == 2
     assert "millimetres or centimetres" in capsys.readouterr().err and not (tmp_path / "x.yaml").exists()
+    for option, value in (("--cx", "5000"), ("--cy", "-3")):          # a principal point off the image
+        args = {"--cx": "600", "--cy": "180", option: value}
+        assert entry(["calib", "convert", "--fx", "718", "--cx", args["--cx"], "--cy", args["--cy"], "--baseline",
+                      "0.5", "--size", "1241x376", "-o", str(tmp_path / "x.yaml")]) == 2
+        err = capsys.readouterr().err
+        assert option in err and "outside the image" in err and err.count("\n") == 1
+        assert not (tmp_path / "x.yaml").exists()
 
 
 def test_image_folders_with_four_numbers_map_and_track(kitti_seq, tmp_path, capsys):

@@ -126,6 +126,11 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
         missing = [p.name for p, v in zip(paths, found) if v is None]
         if missing:
             click.echo(f"board not found in {len(missing)} image(s): {', '.join(missing)}", err=True)
+        if len(views) < MIN_BOARD_VIEWS:
+            raise ValueError(f"the board was found in {len(views)} image(s) of {images_glob}: a flat board seen "
+                             f"from fewer than {MIN_BOARD_VIEWS} angles does not determine a camera (focal length "
+                             "and principal point trade off); take more views at different angles, or use a 3-D "
+                             "control-point target (--points)")
     for view in views:
         check_view_geometry(view)          # before any progress bar: one line for degenerate points
     config = None
@@ -152,6 +157,11 @@ def calibrate_cmd(points, image_size, units, images_glob, board, square, method,
     if result.outlier_views:
         click.echo("outlier views: " + ", ".join(result.view_names[i] for i in result.outlier_views), err=True)
     click.echo(f"wrote {output}, {files['json'].name}, {files['md'].name}, {figure.name}")
+
+
+MIN_BOARD_VIEWS = 3
+"""Chessboard views a camera calibration needs at least (Zhang 2000: a plane gives two constraints per view on
+the five intrinsics)."""
 
 
 @click.command("stereo-calibrate")

@@ -40,7 +40,13 @@ def fetch_command(names: tuple[str, ...], quiet: bool) -> None:
     from ..recordings.samples import fetch
 
     for name in _names(names):
-        click.echo(f"{name}: {fetch(name, progress=not quiet)}")
+        try:
+            folder = fetch(name, progress=not quiet)
+        except OSError as err:             # no network, DNS, refused, timed out (requests' errors are OSErrors)
+            reason = str(getattr(err, "__cause__", None) or err).splitlines()[0][:160]
+            raise OSError(f"could not download sample data {name!r} (offline?): {type(err).__name__}: {reason}; "
+                          f"or set MRSTEREO_DATA to a local copy") from None
+        click.echo(f"{name}: {folder}")
 
 
 @data_group.command("path")
@@ -48,12 +54,20 @@ def fetch_command(names: tuple[str, ...], quiet: bool) -> None:
 def path_command(name: str | None) -> None:
     """Print the folder of a sample scene, or the data root.
 
-    The folder of the scene NAME (or the data root without NAME), whether or
-    not it was fetched.
+    The folder of the scene NAME (or the data root without NAME). A scene
+    that is not there (not fetched, or incomplete) is an error that names the
+    fetch command.
     """
-    from ..recordings.samples import data_root, local_path
+    from ..recordings.samples import data_root, local_path, missing_files
 
-    click.echo(local_path(_names((name,))[0]) if name else data_root())
+    if not name:
+        click.echo(data_root())
+        return
+    missing = missing_files(_names((name,))[0])
+    if missing:
+        raise FileNotFoundError(f"sample data {name!r} is not here ({missing[0]} is missing): run "
+                                f"`mrstereo data fetch {name}` first (or set MRSTEREO_DATA to a local copy)")
+    click.echo(local_path(name))
 
 
 @data_group.command("list")

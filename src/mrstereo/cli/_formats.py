@@ -105,6 +105,10 @@ def _prerectified(*, image_size, fx, fy, cx, cy, baseline_m):
         raise click.BadParameter(f"is in metres, got {baseline_m:g} (millimetres or centimetres?)",
                                  param_hint="--baseline")
     width, height = image_size
+    for name, value, extent in (("--cx", cx, width), ("--cy", cy, height)):
+        if not 0.0 <= value <= extent:      # a principal point off the image: a typo or another image size
+            raise click.BadParameter(f"{value:g} px is outside the image (0 to {extent} px for --size "
+                                     f"{width}x{height})", param_hint=name)
     camera = Camera(width=width, height=height, fx=fx, fy=fx if fy is None else fy, cx=cx, cy=cy)
     return StereoCamera.ideal(camera, baseline_m)
 

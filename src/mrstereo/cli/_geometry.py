@@ -112,7 +112,10 @@ def _report_ground(obstacles) -> None:
 @click.option("--which", type=click.Choice(["all", "obstacles", "floor"]), default="all", show_default=True,
               help="Which points to write.")
 @click.option("--color", is_flag=True, help="Write red/green/blue from the colour left image (else its gray level).")
-def points_command(left, right, calib, output, which, color, **kw):
+@click.option("--depth-png", "depth_png", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write the depth of the rectified left image as a 16-bit PNG in millimetres, 0 invalid "
+                   "(RealSense / ROS depth_image_proc 16UC1), from the matcher's disparity.")
+def points_command(left, right, calib, output, which, color, depth_png, **kw):
     """Write a stereo pair's robot-frame point cloud as PLY.
 
     LEFT and RIGHT are a raw pair (rectified with --calib first) or a rectified
@@ -125,22 +128,28 @@ def points_command(left, right, calib, output, which, color, **kw):
     from ..geometry import write_ply
 
     _read_inputs(calib)
-    check_outputs({"--out": output}, [left, right, calib], suffixes={"--out": (".ply",)})
-    _, frame = _run(left, right, calib, output, scan=False, **kw)
+    check_outputs({"--out": output, "--depth-png": depth_png}, [left, right, calib],
+                  suffixes={"--out": (".ply",), "--depth-png": (".png",)})
+    stereo, frame = _run(left, right, calib, output, scan=False, **kw)
     obs = frame.obstacles
     if not obs.success:
         raise RuntimeError(f"{obs.message}; give --mount or --height and --tilt (or a mount: entry in the calibration)")
     valid = np.isfinite(obs.points_robot_image).all(axis=-1)
     mask = {"all": valid, "obstacles": obs.obstacle_mask, "floor": obs.floor_mask}[which]
     pts = obs.points_robot_image[mask]
+    label = np.where(obs.obstacle_mask, 1, np.where(obs.floor_mask, 2, 0)).astype(np.uint8)[mask]
     img = frame.left_rect
-    if color:
-        if img.ndim != 3:
-            raise ValueError(f"--color needs a colour left image, {left} is gray")
-        n = write_ply(output, pts, colors_rgb=img[mask][:, ::-1], comment="mrstereo robot frame, metres")
-    else:
-        gray = img if img.ndim == 2 else np.asarray(img, np.float32) @ np.float32([0.114, 0.587, 0.299])
-        n = write_ply(output, pts, intensity=np.asarray(gray)[mask], comment="mrstereo robot frame, metres")
+    if color and img.ndim != 3:
+        raise ValueError(f"--color needs a colour left image, {left} is gray")
+    gray = img if img.ndim == 2 else np.asarray(img, np.float32) @ np.float32([0.114, 0.587, 0.299])
+    look = {"colors_rgb": img[mask][:, ::-1]} if color else {"intensity": np.asarray(gray)[mask]}
+    n = write_ply(output, pts, label=label, comment="mrstereo robot frame, metres", **look)
+    if depth_png is not None:
+        from ..geometry import depth_m_from_disparity_px
+        from ..io.images import write_depth_png
+
+        write_depth_png(depth_png, depth_m_from_disparity_px(frame.raw_disparity_px, focal_px=stereo.focal_px,
+                                                             baseline_m=stereo.baseline_m))
     _report_ground(obs)
     click.echo(f"wrote {n} points ({int(obs.obstacle_mask.sum())} obstacle, {int(obs.floor_mask.sum())} floor) "
                f"to {output}", err=True)

@@ -1,7 +1,7 @@
 """Point clouds as binary little-endian PLY files (Open3D, MeshLab, CloudCompare read them).
 
-``x y z`` float32 per vertex, then ``intensity`` or ``red green blue`` uchar; non-finite points
-are dropped. Layout: docs/obstacles.md (PLY). Conventions: docs/conventions.md.
+``x y z`` float32 per vertex, then ``intensity`` or ``red green blue`` uchar, then an optional ``label``
+uchar (:data:`LABELS`: what the chain made of the point); non-finite points are dropped. Layout: docs/obstacles.md (PLY). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -13,7 +13,11 @@ import numpy as np
 from .. import _checks
 from ..io import atomic_write
 
-__all__ = ["PointCloud", "write_ply", "read_ply"]
+__all__ = ["PointCloud", "write_ply", "read_ply", "LABELS"]
+
+LABELS = {0: "other", 1: "obstacle", 2: "floor"}
+"""The ``label`` property of a point: 1 an obstacle point (in the height band, within range), 2 a floor point,
+0 any other measured point (above the band, beyond the range, neither)."""
 
 _PLY_TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
@@ -24,14 +28,16 @@ _PLY_TYPES = {
 
 @dataclass(frozen=True)
 class PointCloud:
-    """Points (N, 3) float32 with optional intensity (N,) uint8 or RGB colours (N, 3) uint8."""
+    """Points (N, 3) float32 with optional intensity (N,) uint8 or RGB colours (N, 3) uint8, and labels (N,)
+    uint8 (:data:`LABELS`)."""
 
     points: np.ndarray
     intensity: np.ndarray | None = None
     colors_rgb: np.ndarray | None = None
+    label: np.ndarray | None = None
 
 
-def write_ply(path: str | os.PathLike, points, *, intensity=None, colors_rgb=None,
+def write_ply(path: str | os.PathLike, points, *, intensity=None, colors_rgb=None, label=None,
               comment: str = "mrstereo point cloud") -> int:
     """Write a binary little-endian PLY of ``x y z`` float32 (+ intensity or red green blue uchar), atomically.
 
@@ -44,6 +50,8 @@ def write_ply(path: str | os.PathLike, points, *, intensity=None, colors_rgb=Non
         Gray value 0-255 per point.
     colors_rgb : ndarray of shape (N, 3), optional
         Colour per point in **RGB** order (OpenCV BGR: ``bgr[..., ::-1]``).
+    label : ndarray of shape (N,), optional
+        A class per point (:data:`LABELS`), written as the ``label`` property with the codes in a comment.
     comment : str
         One header line.
 
@@ -63,6 +71,10 @@ def write_ply(path: str | os.PathLike, points, *, intensity=None, colors_rgb=Non
     elif colors_rgb is not None:
         extra = _uint8("colors_rgb", colors_rgb, (p.shape[0], 3))
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    if label is not None:
+        extra = np.concatenate([extra, _uint8("label", label, (p.shape[0],))[:, None]], axis=1)
+        fields.append(("label", "u1"))
+        comment += "; label " + ", ".join(f"{k} {v}" for k, v in LABELS.items())
     if "\n" in comment:
         raise ValueError("comment must be one line")
     keep = np.isfinite(p).all(axis=1)
@@ -92,7 +104,7 @@ def read_ply(path: str | os.PathLike) -> PointCloud:
     """Read the vertices of a binary little-endian PLY (as written by :func:`write_ply` or Open3D).
 
     Only the first element must be ``vertex`` with scalar properties; ``x y z``
-    are required, ``intensity`` or ``red green blue`` are returned when present.
+    are required, ``intensity``, ``red green blue`` and ``label`` are returned when present.
     """
     with open(path, "rb") as fh:
         if fh.readline().strip() != b"ply":
@@ -135,4 +147,5 @@ def read_ply(path: str | os.PathLike) -> PointCloud:
     intensity = rec["intensity"].copy() if "intensity" in names else None
     colors = (np.stack([rec["red"], rec["green"], rec["blue"]], axis=1).copy()
               if all(k in names for k in ("red", "green", "blue")) else None)
-    return PointCloud(points=points, intensity=intensity, colors_rgb=colors)
+    label = rec["label"].copy() if "label" in names else None
+    return PointCloud(points=points, intensity=intensity, colors_rgb=colors, label=label)

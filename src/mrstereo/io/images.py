@@ -16,7 +16,7 @@ from .. import _limits
 from ._headers import image_size
 from .files import _existing, atomic_write
 
-__all__ = ["IMAGE_SUFFIXES", "matching_image", "read_image", "decode_image", "check_image_size", "quiet_decoders",
+__all__ = ["write_depth_png", "IMAGE_SUFFIXES", "matching_image", "read_image", "decode_image", "check_image_size", "quiet_decoders",
            "write_image", "read_pfm", "write_pfm", "read_kitti_disparity", "write_kitti_disparity", "read_disparity",
            "write_disparity"]
 
@@ -53,6 +53,10 @@ def quiet_decoders(on: bool = True) -> None:
     global _quiet
     _quiet = bool(on)
     if on:
+        # FFmpeg's own log ("[mjpeg @ 0x...] ...") is read when OpenCV opens its first video, and the Rust
+        # viewers' (rerun, foxglove) when they start: both before any of that happens here
+        os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+        os.environ.setdefault("RUST_LOG", "off")
         try:
             cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
         except AttributeError:
@@ -183,6 +187,16 @@ def write_kitti_disparity(path: str | os.PathLike, disparity_px: np.ndarray) -> 
     valid = np.isfinite(d) & (d > 0)
     value = np.zeros(d.shape, np.uint16)
     value[valid] = np.clip(np.round(d[valid] * 256.0), 1, 65535).astype(np.uint16)
+    write_image(path, value)
+
+
+def write_depth_png(path: str | os.PathLike, depth_m: np.ndarray) -> None:
+    """Write depth as a 16-bit PNG in millimetres, 0 invalid (RealSense and ROS ``depth_image_proc``'s 16UC1):
+    NaN, non-positive and depths beyond 65.535 m are 0."""
+    z = np.asarray(depth_m, dtype=np.float64)
+    valid = np.isfinite(z) & (z > 0) & (z * 1000.0 <= 65535.0)
+    value = np.zeros(z.shape, np.uint16)
+    value[valid] = np.clip(np.round(z[valid] * 1000.0), 1, 65535).astype(np.uint16)
     write_image(path, value)
 
 

@@ -417,6 +417,59 @@ def finite_bounds(points, bounds):
 
 
 @njit(nogil=True, cache=True)
+def segment_free(blocked, r0, c0, r1, c1):
+    """True when no cell the straight segment between the centres of cells (r0, c0) and (r1, c1) passes
+    through is blocked (Amanatides-Woo traversal; where it crosses a cell corner exactly, both cells
+    beside the corner must be free, as A*'s no-corner-cutting rule)."""
+    nr = abs(r1 - r0)
+    nc = abs(c1 - c0)
+    sr = 1 if r1 > r0 else -1
+    sc = 1 if c1 > c0 else -1
+    r = r0
+    c = c0
+    ir = 0
+    ic = 0
+    if blocked[r, c]:
+        return False
+    while ir < nr or ic < nc:
+        a = (1 + 2 * ir) * nc          # compare the next row and column crossings, (ir + 1/2)/nr vs (ic + 1/2)/nc
+        b = (1 + 2 * ic) * nr
+        if a == b:
+            if blocked[r + sr, c] or blocked[r, c + sc]:
+                return False
+            r += sr
+            c += sc
+            ir += 1
+            ic += 1
+        elif a < b:
+            r += sr
+            ir += 1
+        else:
+            c += sc
+            ic += 1
+        if blocked[r, c]:
+            return False
+    return True
+
+
+@njit(nogil=True, cache=True)
+def shortcut_path(blocked, rows, cols, keep):
+    """Line-of-sight shortcuts of a cell path (``rows``, ``cols``, int64): from each kept cell, the farthest
+    cell of the path reached by a free straight segment before the first blocked one is kept next
+    (``keep``, uint8, zeroed, filled with 1 for the kept cells; the first and last are always kept)."""
+    n = len(rows)
+    keep[0] = 1
+    keep[n - 1] = 1
+    i = 0
+    while i < n - 1:
+        j = i + 1
+        while j + 1 < n and segment_free(blocked, rows[i], cols[i], rows[j + 1], cols[j + 1]):
+            j += 1
+        keep[j] = 1
+        i = j
+
+
+@njit(nogil=True, cache=True)
 def count_cells(points, origin_x, origin_y, resolution, counts, cell):
     """Count points per grid cell (``counts`` of grid.shape, zeroed); ``cell[i]`` = flat cell of point i.
 

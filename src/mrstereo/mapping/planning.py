@@ -2,7 +2,9 @@
 
 8-connected A* with the octile heuristic (admissible and consistent) and no corner cutting;
 every cell within ``robot_radius_m`` of an occupied cell is blocked (the lethal zone of Nav2's
-inflation layer). User guide: docs/mapping.md, "Planning". Conventions: docs/conventions.md.
+inflation layer). The cell path is then smoothed by line-of-sight shortcuts that cross no blocked
+cell (the inflated clearance is kept) and given headings: the direction of travel, the goal's own
+heading at the end when one is asked for. User guide: docs/mapping.md, "Planning". Conventions: docs/conventions.md.
 
 References
 ----------
@@ -28,8 +30,10 @@ __all__ = ["PlanResult", "plan_path", "inflate_obstacles"]
 class PlanResult:
     """Outcome of :func:`plan_path`.
 
-    ``path_xy`` holds world (x, y) cell centres from the start cell to the goal cell, shape
-    (K, 2) (empty on failure); ``length_m`` is its length (inf on failure).
+    ``path_xy`` holds world (x, y) points from the start cell's centre to the goal cell's, shape
+    (K, 2) (empty on failure): the A* cell centres, or with smoothing the shortcut polyline sampled
+    about every cell; ``yaw_rad`` (K,) the heading at each (direction of travel; the goal heading at
+    the end when given); ``length_m`` the path's length (inf on failure).
     """
 
     success: bool
@@ -37,6 +41,12 @@ class PlanResult:
     path_xy: np.ndarray = field(repr=False)
     length_m: float
     expanded_cells: int
+    yaw_rad: np.ndarray = field(default_factory=lambda: np.empty(0), repr=False)
+
+    @property
+    def poses(self) -> np.ndarray:
+        """(K, 3) ``(x_m, y_m, yaw_rad)`` along the path (a nav_msgs/Path's poses)."""
+        return np.column_stack([self.path_xy, self.yaw_rad]) if len(self.path_xy) else np.empty((0, 3))
 
 
 def inflate_obstacles(ros_map: RosMap, *, robot_radius_m: float = 0.25,
@@ -74,8 +84,8 @@ def _fail(message: str, expanded: int = 0) -> PlanResult:
 
 
 def plan_path(ros_map, start_xy, goal_xy, *, robot_radius_m: float = 0.25,
-              unknown_is_obstacle: bool = True) -> PlanResult:
-    """Shortest 8-connected path between two world points for a disc robot (A*).
+              unknown_is_obstacle: bool = True, smooth: bool = True, goal_yaw_rad: float | None = None) -> PlanResult:
+    """Shortest 8-connected path between two world points for a disc robot (A*), smoothed.
 
     Parameters
     ----------
@@ -87,6 +97,22 @@ def plan_path(ros_map, start_xy, goal_xy, *, robot_radius_m: float = 0.25,
         Obstacles are inflated by this radius (cell-centre distances).
     unknown_is_obstacle : bool
         Block unknown cells (default) or treat them as free.
+    smooth : bool
+        Replace the staircase of cells by line-of-sight shortcuts through unblocked cells only
+        (:func:`mrstereo.mapping._kernels.shortcut_path`): never closer to an obstacle than the
+        inflation allows, never longer than the A* path.
+    goal_yaw_rad : float, optional
+        The heading the robot should have at the goal (the last pose's yaw); default the direction
+        of the last step.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mrstereo.mapping import GridSpec, RosMap, plan_path
+    >>> free = RosMap(np.zeros((40, 40)), GridSpec(4.0, 4.0, 0.1, 0.0, 0.0))
+    >>> result = plan_path(free, (0.25, 0.25), (3.75, 3.75), robot_radius_m=0.2)
+    >>> round(result.length_m, 3), len(result.path_xy) > 2
+    (4.95, True)
 
     Returns
     -------
@@ -138,7 +164,38 @@ def plan_path(ros_map, start_xy, goal_xy, *, robot_radius_m: float = 0.25,
             raise RuntimeError("A* returned a path that does not lead back to the start")
         chain.append(int(came_from[chain[-1]]))
     idx = np.array(chain[::-1])
-    path_xy = grid.xy_from_cells(idx // cols, idx % cols)
-    length_m = float(g_cost[gr * cols + gc]) * grid.resolution_m
-    return PlanResult(True, f"path of {length_m:.3f} m through {len(idx)} cells", path_xy,
-                      length_m, int(expanded))
+    rows_, cols_ = idx // cols, idx % cols
+    if smooth and len(idx) > 2:
+        keep = np.zeros(len(idx), np.uint8)
+        _kernels.shortcut_path(np.ascontiguousarray(blocked, dtype=np.uint8), rows_, cols_, keep)
+        corners = grid.xy_from_cells(rows_[keep > 0], cols_[keep > 0])
+        path_xy = _sampled(corners, grid.resolution_m)
+    else:
+        path_xy = grid.xy_from_cells(rows_, cols_)
+    length_m = float(np.linalg.norm(np.diff(path_xy, axis=0), axis=1).sum())
+    yaw = _headings(path_xy, goal_yaw_rad)
+    what = f"{len(path_xy)} points" if smooth else f"{len(idx)} cells"
+    return PlanResult(True, f"path of {length_m:.3f} m through {what}", path_xy, length_m, int(expanded), yaw)
+
+
+def _sampled(corners: np.ndarray, step_m: float) -> np.ndarray:
+    """The polyline through ``corners`` (K, 2) with points about every ``step_m`` on each segment (corners kept)."""
+    parts = [corners[:1]]
+    for a, b in zip(corners[:-1], corners[1:]):
+        n = max(1, int(math.ceil(np.linalg.norm(b - a) / step_m - 1e-9)))
+        t = np.arange(1, n + 1)[:, None] / n
+        parts.append(a + t * (b - a))
+    return np.concatenate(parts)
+
+
+def _headings(path_xy: np.ndarray, goal_yaw_rad: float | None) -> np.ndarray:
+    """The direction of travel at each point of a path (the next step's; the last step's at the end, or the goal's)."""
+    if len(path_xy) < 2:
+        yaw = np.zeros(len(path_xy))
+    else:
+        step = np.diff(path_xy, axis=0)
+        yaw = np.arctan2(step[:, 1], step[:, 0])
+        yaw = np.append(yaw, yaw[-1])
+    if goal_yaw_rad is not None and len(yaw):
+        yaw[-1] = _checks.finite_number("goal_yaw_rad", goal_yaw_rad)
+    return yaw

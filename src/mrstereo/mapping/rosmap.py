@@ -75,11 +75,21 @@ class RosMap:
         return ~(self.occupied | self.free)
 
 
-def occupancy_values(probability) -> np.ndarray:
-    """``nav_msgs/OccupancyGrid`` data of occupancy probabilities (rows, cols), NaN unknown: int8, -1
-    unknown, else the probability in percent (0 free .. 100 occupied), rows in the same order (row 0 at
-    the grid's origin, the lowest y)."""
+def occupancy_values(probability, *, trinary: bool = True, occupied_thresh: float = RosMap.occupied_thresh,
+                     free_thresh: float = RosMap.free_thresh) -> np.ndarray:
+    """``nav_msgs/OccupancyGrid`` data of occupancy probabilities (rows, cols), NaN unknown, rows in the same
+    order (row 0 at the grid's origin, the lowest y): int8, -1 unknown.
+
+    ``trinary`` (default): 100 above ``occupied_thresh``, 0 below ``free_thresh``, -1 between, the values
+    map_server and slam_toolbox publish and the thresholds of map.yaml, so that Nav2's static layer with its
+    defaults (trinary, lethal at 100) sees the obstacles of map.pgm. Otherwise the probability in percent
+    (0 free .. 100 occupied).
+    """
     p = np.asarray(probability, dtype=np.float64)
+    if trinary:
+        occupied, free = check_thresholds(occupied_thresh, free_thresh)
+        known = np.nan_to_num(p, nan=0.5 * (occupied + free))
+        return np.where(known > occupied, 100, np.where(known < free, 0, -1)).astype(np.int8)
     return np.where(np.isnan(p), -1, np.rint(np.clip(np.nan_to_num(p), 0.0, 1.0) * 100.0)).astype(np.int8)
 
 

@@ -1,7 +1,8 @@
 """Suspicious stereo input, named before a run builds a confident map from it.
 
 Two mistakes look like valid input to every later stage: the same stream recorded as left and
-right (most pixels of a pair equal) and the streams swapped (a semi-global probe over both signs
+right (most pixels of a pair equal, or, with sensor noise or a second encoding, the textured pixels
+equal within a few gray levels where a real pair's are shifted) and the streams swapped (a semi-global probe over both signs
 of disparity finds mostly negative ones; a raw pair matches better rectified the other way round).
 The thresholds and their measurement: docs/errors.md. Conventions: docs/conventions.md.
 """
@@ -20,6 +21,13 @@ __all__ = ["PairCheck", "check_pair", "warn_pair", "check_pair_streams", "IDENTI
 
 IDENTICAL_SHARE = 0.9
 """A pair with at least this share of equal pixels is a duplicated stream."""
+SAME_VIEW_SHARE = 0.5
+"""A pair whose textured pixels are equal within :data:`SAME_VIEW_LEVELS` gray levels at least this often shows one
+view twice (measured on one pair of each of eight real scenes, KITTI, Middlebury, EuRoC, OpenLORIS, OpenCV's
+chessboards: 0.05-0.17; one image twice with +/-2 levels of noise: 1.00, with Gaussian noise of sigma 3: 0.87)."""
+SAME_VIEW_LEVELS = 4
+_TEXTURE_GRADIENT = 40.0          # |horizontal Sobel| of a textured pixel
+_MIN_TEXTURED = 500
 SWAPPED_SHARE = 0.65
 """A pair is swapped when at least this share of the pixels matched either way match only the other way round."""
 _PROBE_WIDTH = 320
@@ -34,6 +42,10 @@ class PairCheck:
     ----------
     identical_share : float
         Share of pixels equal in both images (as read).
+    same_view_share : float
+        Share of the textured pixels of the left image (a strong horizontal gradient) whose gray level
+        the right image has within :data:`SAME_VIEW_LEVELS` at the same place (NaN: too few textured
+        pixels): a real pair's are shifted, one view twice matches with noise.
     matched : int
         Probe pixels matched with a positive disparity, the pair as given.
     matched_exchanged : int
@@ -47,10 +59,11 @@ class PairCheck:
     matched: int
     matched_exchanged: int
     median_disparity_px: float
+    same_view_share: float = float("nan")
 
     @property
     def identical(self) -> bool:
-        return self.identical_share >= IDENTICAL_SHARE
+        return self.identical_share >= IDENTICAL_SHARE or self.same_view_share >= SAME_VIEW_SHARE
 
     @property
     def exchanged_share(self) -> float:
@@ -64,8 +77,11 @@ class PairCheck:
                 and self.exchanged_share >= SWAPPED_SHARE)
 
     def describe(self) -> str:
-        if self.identical:
+        if self.identical_share >= IDENTICAL_SHARE:
             return f"{100 * self.identical_share:.1f} % of the pixels of left and right are equal"
+        if self.identical:
+            return (f"{100 * self.same_view_share:.0f} % of the textured pixels of left and right are equal within "
+                    f"{SAME_VIEW_LEVELS} gray levels (a real pair's are shifted)")
         return (f"{100 * self.exchanged_share:.0f} % of the matched pixels match only with left and right "
                 f"exchanged (median disparity as given {self.median_disparity_px:.1f} px)")
 
@@ -77,6 +93,16 @@ def _gray8(image: np.ndarray) -> np.ndarray:
         image = np.clip(np.asarray(image, np.float32) * (1.0 if image.dtype.kind == "f" else 1 / 257.0), 0, 255)
         image = image.astype(np.uint8)
     return np.ascontiguousarray(image)
+
+
+def _same_view_share(left: np.ndarray, right: np.ndarray) -> float:
+    """:attr:`PairCheck.same_view_share` of a pair (images as read)."""
+    gl, gr = _gray8(left), _gray8(right)
+    textured = np.abs(cv2.Sobel(gl, cv2.CV_32F, 1, 0, ksize=3)) > _TEXTURE_GRADIENT
+    if np.count_nonzero(textured) < _MIN_TEXTURED:
+        return float("nan")
+    diff = cv2.absdiff(gl, gr)
+    return float(np.mean(diff[textured] <= SAME_VIEW_LEVELS))
 
 
 def _probe(left: np.ndarray, right: np.ndarray) -> tuple[int, int, float]:
@@ -109,12 +135,13 @@ def check_pair(left: np.ndarray, right: np.ndarray, stereo: StereoCamera | None 
     if left.shape != right.shape:
         raise ValueError(f"left and right images differ in size: {left.shape} and {right.shape}")
     identical = float(np.mean(left == right))
+    same = _same_view_share(left, right)
     if rectified or stereo is None:
         positive, negative, median = _probe(left, right)
-        return PairCheck(identical, positive, negative, median)
+        return PairCheck(identical, positive, negative, median, same)
     positive, _, median = _probe(*stereo.rectify(left, right))
     exchanged, _, _ = _probe(*stereo.rectify(right, left))
-    return PairCheck(identical, positive, exchanged, median)
+    return PairCheck(identical, positive, exchanged, median, same)
 
 
 _PROBLEMS = (("identical", "identical left and right images (a duplicated camera stream?)",

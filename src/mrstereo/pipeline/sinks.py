@@ -27,9 +27,12 @@ MAX_VIEW_POINTS = 20000
 """Obstacle points sent to a viewer per frame at most (an even subsample beyond)."""
 
 
-def _grid_message(grid: OccupancyGrid) -> tuple[np.ndarray, float, tuple[float, float]]:
+def _grid_message(grid: OccupancyGrid, *, trinary: bool = True) -> tuple[np.ndarray, float, tuple[float, float]]:
+    """The map as ``nav_msgs/OccupancyGrid`` data (trinary with map.yaml's thresholds, or percent), its cell
+    size and origin."""
     g = grid.grid
-    return occupancy_values(grid.probability()), g.resolution_m, (g.origin_x_m, g.origin_y_m)
+    values = occupancy_values(grid.to_ros_map().occupancy if trinary else grid.probability(), trinary=trinary)
+    return values, g.resolution_m, (g.origin_x_m, g.origin_y_m)
 
 
 class _Throttled:
@@ -86,7 +89,8 @@ class ViewerSink:
     def _map(self, stamp_s: float, index: int) -> None:
         t = self._throttle
         self._map_sent = stamp_s
-        self.logger.map(stamp_s=stamp_s, index=index, grid=None if t.grid is None else _grid_message(t.grid),
+        self.logger.map(stamp_s=stamp_s, index=index,
+                        grid=None if t.grid is None else _grid_message(t.grid, trinary=False),
                         path_xyz=t.path_xyz)
 
     def close(self) -> None:
@@ -101,10 +105,12 @@ class ViewerSink:
 
 
 class BagSink:
-    """Frames to a ROS 2 bag: /odom, /tf, /scan, /points every frame, /map throttled and at the end."""
+    """Frames to a ROS 2 bag: /odom, /tf, /scan, /points every frame, /map throttled and at the end
+    (trinary as map_server publishes it, or probabilities in percent with ``trinary=False``)."""
 
-    def __init__(self, writer, *, map_every_s: float = 1.0) -> None:
+    def __init__(self, writer, *, map_every_s: float = 1.0, trinary: bool = True) -> None:
         self.writer = writer
+        self.trinary = trinary
         self._throttle = _Throttled(map_every_s)
         self._map_written_at: float | None = None
 
@@ -125,7 +131,7 @@ class BagSink:
             self._write_map(stamp_ns, frame.grid)
 
     def _write_map(self, stamp_ns: int, grid: OccupancyGrid) -> None:
-        values, resolution_m, origin = _grid_message(grid)
+        values, resolution_m, origin = _grid_message(grid, trinary=self.trinary)
         self.writer.map(stamp_ns, values, resolution_m=resolution_m, origin_xy=origin)
         self._map_written_at = stamp_ns
 
@@ -161,7 +167,8 @@ def open_sinks(stereo: StereoCamera, view_stem: str | os.PathLike, *, viewers: S
                                       else "serve")
                 logger = RerunLogger(rrd_path=stem.with_suffix(".rrd"), mode=mode)
                 if echo is not None and logger.url:
-                    echo(f"rerun: open {logger.url} in a browser (or `rerun {logger.url.split('url=')[-1]}`)")
+                    echo(f"rerun: open {logger.url} in a browser" if mode == "web" else
+                         f"rerun: connect a viewer with `rerun {logger.url}`")
             else:
                 logger = FoxgloveLogger(mcap_path=stem.with_suffix(".mcap"), port=foxglove_port)
                 if echo is not None and logger.url:

@@ -1,6 +1,7 @@
-"""A ROS 2 bag (MCAP, through ``rosbags``) of what the pipeline made: ``/scan``, ``/points``, ``/map``, ``/odom``, ``/tf``, ``/tf_static``.
+"""A ROS 2 bag (MCAP, through ``rosbags``) of what the pipeline made: ``/scan``, ``/points``, ``/map``, ``/odom``, ``/tf``, ``/tf_static``, ``/plan``.
 
-Frame ids per REP 105; ``/map`` and ``/tf_static`` are latched. The bag is written into a hidden
+Frame ids per REP 105; ``/map`` and ``/tf_static`` are latched; a topic is in the bag only when a message was
+written to it (no empty topics). The bag is written into a hidden
 folder beside its destination and renamed into place when closed. Topics and types: docs/live.md
 ("ROS 2 bag"). Conventions: docs/conventions.md.
 """
@@ -19,8 +20,13 @@ __all__ = ["BagWriter", "BAG_TOPICS", "LATCHED_TOPICS", "MAP_FRAME", "ODOM_FRAME
 MAP_FRAME, ODOM_FRAME, BASE_FRAME, CAMERA_FRAME = "map", "odom", "base_link", "camera_left_optical_frame"
 BAG_TOPICS = {"/scan": "sensor_msgs/msg/LaserScan", "/points": "sensor_msgs/msg/PointCloud2",
               "/map": "nav_msgs/msg/OccupancyGrid", "/odom": "nav_msgs/msg/Odometry",
-              "/tf": "tf2_msgs/msg/TFMessage", "/tf_static": "tf2_msgs/msg/TFMessage"}
-"""Every topic the writer creates and its message type."""
+              "/tf": "tf2_msgs/msg/TFMessage", "/tf_static": "tf2_msgs/msg/TFMessage",
+              "/plan": "nav_msgs/msg/Path"}
+"""Every topic the writer can create and its message type (a topic is created with its first message)."""
+
+MAX_STAMP_NS = 2**31 * 10**9
+"""Stamps a ROS 2 bag holds: from 0 (the bag's log times are unsigned) to 2^31 s (``builtin_interfaces/Time.sec``
+is an int32: 2038-01-19)."""
 
 LATCHED_TOPICS = ("/tf_static", "/map")
 """Offered as transient local (latched), as robot_state_publisher and map_server offer them: a node that
@@ -62,10 +68,9 @@ class BagWriter:
         self.T = self.ts.types
         self._writer = Writer(self._tmp / self.path.name, version=9, storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
-        self._conn = {topic: self._writer.add_connection(topic, msgtype, typestore=self.ts,
-                                                         offered_qos_profiles=_qos(topic in LATCHED_TOPICS))
-                      for topic, msgtype in BAG_TOPICS.items()}
-        self.counts = dict.fromkeys(BAG_TOPICS, 0)
+        self._conn: dict = {}
+        self.counts: dict[str, int] = {}
+        """Messages written per topic (only topics with messages)."""
 
     # -- message parts ------------------------------------------------------------------------
     def _header(self, stamp_ns: int, frame: str):
@@ -91,6 +96,14 @@ class BagWriter:
                                                            w=float(q[3]))))
 
     def _write(self, topic: str, msg, stamp_ns: int) -> None:
+        if not 0 <= stamp_ns < MAX_STAMP_NS:
+            raise ValueError(f"--record-bag: a time stamp of {stamp_ns / 1e9:.10g} s cannot be written to a ROS 2 "
+                             "bag (stamps from 0 to 2^31 s, before 2038-01-19): the recording's stamps are wrong; "
+                             "fix them or record no bag")
+        if topic not in self._conn:
+            self._conn[topic] = self._writer.add_connection(topic, BAG_TOPICS[topic], typestore=self.ts,
+                                                            offered_qos_profiles=_qos(topic in LATCHED_TOPICS))
+            self.counts[topic] = 0
         self._writer.write(self._conn[topic], int(stamp_ns), self.ts.serialize_cdr(msg, BAG_TOPICS[topic]))
         self.counts[topic] += 1
 
@@ -148,6 +161,20 @@ class BagWriter:
                                              origin=self._pose(origin))
         self._write("/map", G["nav_msgs/msg/OccupancyGrid"](header=self._header(stamp_ns, MAP_FRAME), info=info,
                                                             data=values.ravel()), stamp_ns)
+
+    def plan(self, stamp_ns: int, poses_xy_yaw) -> None:
+        """``/plan``: a nav_msgs/Path in the map frame of ``(x_m, y_m, yaw_rad)`` poses, as Nav2's planners publish."""
+        G = self.T
+        stamped = []
+        for x, y, yaw in np.asarray(poses_xy_yaw, dtype=np.float64).reshape(-1, 3):
+            T = np.eye(4)
+            c, s_ = np.cos(yaw), np.sin(yaw)
+            T[:2, :2] = [[c, -s_], [s_, c]]
+            T[:2, 3] = x, y
+            stamped.append(G["geometry_msgs/msg/PoseStamped"](header=self._header(stamp_ns, MAP_FRAME),
+                                                              pose=self._pose(T)))
+        self._write("/plan", G["nav_msgs/msg/Path"](header=self._header(stamp_ns, MAP_FRAME), poses=stamped),
+                    stamp_ns)
 
     def close(self) -> None:
         """Finish the bag and move it into place."""

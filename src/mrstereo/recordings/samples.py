@@ -29,6 +29,8 @@ _DESCRIPTIONS = {
     "kitti2015-000000": "KITTI 2015 training frame 000000, 1242x375, sparse GT (CC BY-NC-SA 3.0)",
     "opencv-stereo-chessboard": "OpenCV samples: 13 stereo pairs of a 9x6 chessboard, 640x480",
     "openloris-sample": "OpenLORIS-Scene: 4 T265 fisheye stereo frames, calibration, odometry (research use)",
+    "kitti-raw-sample": "KITTI raw drive 2011_09_26_drive_0005, 5 frames in the raw layout, OXTS (CC BY-NC-SA 3.0)",
+    "euroc-asl-sample": "EuRoC MAV V1_01_easy, 5 stereo frames in the ASL folder layout (cite Burri et al. 2016)",
 }
 
 
@@ -39,6 +41,7 @@ class SampleFile:
     commit: str
     source_path: str     # path inside the repository
     sha256: str
+    derived: str = ""    # "listed rows": the repository's CSV cut to the rows of the scene's images (sha256 of the cut)
 
     @property
     def url(self) -> str:
@@ -134,11 +137,36 @@ def fetch(name: str, *, progress: bool = False) -> Path:
 
     root = data_root()
     pooch.get_logger().setLevel("INFO" if progress else "WARNING")
-    fetcher = pooch.create(path=root, base_url="", registry={f.path: f"sha256:{f.sha256}" for f in entry.files},
-                           urls={f.path: _url(f) for f in entry.files}, retry_if_failed=2)
-    for f in entry.files:
+    direct = [f for f in entry.files if not f.derived]
+    fetcher = pooch.create(path=root, base_url="", registry={f.path: f"sha256:{f.sha256}" for f in direct},
+                           urls={f.path: _url(f) for f in direct}, retry_if_failed=2)
+    for f in direct:
         fetcher.fetch(f.path, progressbar=progress)
+    for f in entry.files:
+        if f.derived and not (root / f.path).is_file():
+            _fetch_listed_rows(f, root, entry, progress)
     return root / entry.folder
+
+
+def _fetch_listed_rows(f: SampleFile, root: Path, entry: SampleScene, progress: bool) -> None:
+    """Download a CSV of the repository and keep its comment lines and the rows that name an image of the
+    scene (``data/<name>`` beside it), checked against the registry's SHA-256 of the cut file."""
+    import tempfile
+
+    import pooch
+
+    listed = {Path(g.path).name for g in entry.files if Path(g.path).parent == Path(f.path).parent / "data"}
+    with tempfile.TemporaryDirectory(prefix=".mrstereo-fetch-", dir=root) as tmp:
+        whole = Path(pooch.retrieve(_url(f), known_hash=None, path=tmp, progressbar=progress))
+        lines = whole.read_bytes().splitlines(keepends=True)
+        kept = b"".join(line for line in lines if line.startswith(b"#")
+                        or line.split(b",")[-1].strip().decode("utf-8", "replace") in listed)
+        if hashlib.sha256(kept).hexdigest() != f.sha256:
+            raise ValueError(f"{f.path}: the rows of {_url(f)} do not give the registry's SHA-256 (hash differs)")
+        target = root / f.path
+        target.parent.mkdir(parents=True, exist_ok=True)
+        (Path(tmp) / "cut").write_bytes(kept)
+        os.replace(Path(tmp) / "cut", target)
 
 
 def _url(f: SampleFile) -> str:

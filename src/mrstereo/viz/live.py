@@ -21,7 +21,7 @@ import numpy as np
 
 from ..transforms import quaternion_from_rotation
 
-__all__ = ["require_viewers", "RerunLogger", "FoxgloveLogger", "disparity_colours", "scan_points", "MAP_FRAME", "BASE_FRAME",
+__all__ = ["require_viewers", "check_port", "RerunLogger", "FoxgloveLogger", "disparity_colours", "scan_points", "MAP_FRAME", "BASE_FRAME",
            "CAMERA_FRAME"]
 
 MAP_FRAME, BASE_FRAME, CAMERA_FRAME = "map", "base_link", "camera_left_optical_frame"
@@ -36,6 +36,29 @@ def require_viewers(viewers) -> None:
         module, package = _PACKAGES[viewer]
         if importlib.util.find_spec(module) is None:
             raise RuntimeError(f"--viewer {viewer} needs {package}: pip install \"mrstereo[viz]\"")
+
+
+def check_port(port: int, option: str) -> int:
+    """``port`` when no socket of this machine holds it (any address), else ``ValueError`` naming ``option``.
+
+    Checked before a viewer server starts, so that a busy port is one line before any work instead of a
+    server's own log lines and a half-started run. Port 0 (the system picks one) is always free.
+    """
+    import socket
+
+    port = int(port)
+    if not 0 <= port <= 65535:
+        raise ValueError(f"{option}: {port} is not a port number (0 to 65535)")
+    if port == 0:
+        return port
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)     # a closed connection's TIME_WAIT is free
+        try:
+            probe.bind(("0.0.0.0", port))
+        except OSError:
+            raise ValueError(f"{option}: port {port} is in use (another viewer or run?); give a free one with "
+                             f"{option}") from None
+    return port
 
 
 def disparity_colours(disparity_px: np.ndarray, max_disparity_px: float | None = None) -> np.ndarray:
@@ -84,11 +107,13 @@ class RerunLogger:
     ----------
     rrd_path : path, optional
         Save the stream here (written to a hidden temporary file, renamed when closed).
-    mode : {"spawn", "serve", "none"}
-        ``spawn`` the native viewer (needs a display), ``serve`` the web viewer and the data on
-        localhost (``web_port``, ``grpc_port``), or only save.
+    mode : {"spawn", "serve", "web", "none"}
+        ``spawn`` the native viewer (needs a display); ``serve`` the data stream on 127.0.0.1
+        (``grpc_port``) for a viewer to connect to (``rerun URL``); ``web`` that and Rerun's web viewer
+        on ``web_port`` (Rerun serves its web viewer on every interface of the machine, so it is only
+        started when asked for); ``none`` only save.
     web_port, grpc_port : int
-        Ports of the served web viewer and of the data stream.
+        Ports of the web viewer and of the data stream (checked free before anything starts).
     memory_limit : str
         Data the server keeps for viewers that connect late (older data is dropped).
     """
@@ -97,8 +122,12 @@ class RerunLogger:
                  memory_limit: str = "256MiB", application_id: str = "mrstereo_live") -> None:
         import rerun as rr
 
-        if mode not in ("spawn", "serve", "none"):
-            raise ValueError(f"mode must be 'spawn', 'serve' or 'none', got {mode!r}")
+        if mode not in ("spawn", "serve", "web", "none"):
+            raise ValueError(f"mode must be 'spawn', 'serve', 'web' or 'none', got {mode!r}")
+        if mode != "none":
+            check_port(grpc_port, "--viewer-port")
+        if mode == "web":
+            check_port(web_port, "--viewer-web-port")
         self._rr = rr
         self.path = None if rrd_path is None else Path(rrd_path)
         self._tmp = None if self.path is None else _hidden_temporary(self.path)
@@ -108,12 +137,13 @@ class RerunLogger:
         if mode == "spawn":
             self.rec.spawn(port=grpc_port, connect=False)
             sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{grpc_port}/proxy"))
-        elif mode == "serve":
+        elif mode in ("serve", "web"):
             server = rr.GrpcServerSink("127.0.0.1", grpc_port, server_memory_limit=memory_limit)
             sinks.append(server)
+            self.url = server.uri
         if sinks:
             self.rec.set_sinks(*sinks)
-        if mode == "serve":
+        if mode == "web":
             rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=server.uri)
             self.url = f"http://127.0.0.1:{web_port}/?url={server.uri}"
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -192,12 +222,15 @@ class FoxgloveLogger:
     mcap_path : path, optional
         Write the stream here (a hidden temporary file, renamed when closed).
     port : int, optional
-        The websocket server's port on 127.0.0.1 (``ws://127.0.0.1:PORT``); None: no server.
+        The websocket server's port on 127.0.0.1 (``ws://127.0.0.1:PORT``; checked free before anything
+        starts); None: no server.
     """
 
     def __init__(self, *, mcap_path=None, port: int | None = 8765, name: str = "mrstereo live") -> None:
         import foxglove
 
+        if port is not None:
+            check_port(port, "--foxglove-port")
         self._fg = foxglove
         self.context = foxglove.Context()
         self.path = None if mcap_path is None else Path(mcap_path)
