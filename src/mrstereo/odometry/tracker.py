@@ -184,10 +184,15 @@ class StereoOdometry:
                              size=c.window_keyframes, fixed=c.window_fixed, huber_px=c.huber_px,
                              iterations=c.refine_iterations, outlier_px=c.outlier_px)
         self._keyframe: Keyframe | None = None
-        self._T_world_from_cam: np.ndarray | None = None      # the last frame's camera pose
-        self._velocity = np.eye(4)                             # T_prevcam_from_cam of the last step
+        # the motion model rests on measured frames only (a lost frame's pose is a guess): the last
+        # measured camera pose, the time since it, and the motion between the last two measured frames
+        self._T_measured: np.ndarray | None = None
+        self._since_measured_s = 0.0
+        self._velocity = np.eye(4)                             # T_prevcam_from_cam between measured frames
         self._velocity_dt = c.frame_interval_s
         self._velocity_known = False
+        self._deviation = np.zeros(2)                          # mean squared model deviation (m^2, rad^2)
+        self._n_deviation = 0
         self._stamp: float | None = None
         self._lost_streak = 0
         self._links: list[_FrameLink] = []
@@ -224,20 +229,29 @@ class StereoOdometry:
         if self._keyframe is None:
             T_world_from_cam = self.T_world_from_base0 @ T_base_from_cam
             self._new_keyframe(left, right, disparity_px, T_world_from_cam, None)
+            self._T_measured, self._since_measured_s = T_world_from_cam, 0.0
             n = int(self._keyframe.valid.sum())
             return self._finish(start, T_world_from_cam, T_base_from_cam, KEYFRAME, n, n, dt)
-        # the motion model: the last step again, scaled to this frame's time step
-        T_pred = self._T_world_from_cam @ scale_motion(self._velocity, dt / self._velocity_dt)
-        status, T_world_from_cam, n_tracked, n_inliers, tracked = self._track(left, T_pred, dt)
+        # the motion model: the last measured motion again, scaled to the time since the last measured frame
+        dt_pred = self._since_measured_s + dt
+        T_pred = self._predict(dt_pred)
+        status, T_world_from_cam, n_tracked, n_inliers, tracked = self._track(left, T_pred, dt_pred)
+        if status == LOST:                       # the keyframes of the window, then fresh features
+            status, T_world_from_cam, n_tracked, n_inliers, tracked = self._relocalize(
+                left, right, disparity_px, T_pred, dt_pred, (status, T_world_from_cam, n_tracked, n_inliers, tracked))
         if status == LOST:
             self._lost_streak += 1
+            self._since_measured_s += dt
             if self._lost_streak >= self.config.max_lost_streak:
-                self._map.clear()                # restart at the predicted pose
+                self._map.clear()                # restart at the predicted pose, the motion kept
                 self._new_keyframe(left, right, disparity_px, T_pred, None)
-                self._velocity_known = False
+                self._T_measured, self._since_measured_s = T_pred, 0.0
                 self._lost_streak = 0
             return self._finish(start, T_pred, T_base_from_cam, LOST, n_tracked, n_inliers, dt)
         self._lost_streak = 0
+        self._measure(T_world_from_cam, dt_pred, T_pred)
+        if status == KEYFRAME:                   # re-found from fresh features: already a keyframe
+            return self._finish(start, T_world_from_cam, T_base_from_cam, status, n_tracked, n_inliers, dt)
         kf, c = self._keyframe, self.config
         T_key_from_cam = np.linalg.inv(kf.T_world_from_cam) @ T_world_from_cam
         depth = self._median_depth(kf)
@@ -245,6 +259,7 @@ class StereoOdometry:
                 or np.linalg.norm(T_key_from_cam[:3, 3]) > c.keyframe_depth_fraction * depth
                 or rotation_angle_rad(T_key_from_cam[:3, :3]) > c.keyframe_angle_rad):
             T_world_from_cam = self._new_keyframe(left, right, disparity_px, T_world_from_cam, tracked)
+            self._T_measured = T_world_from_cam
             status = KEYFRAME
         return self._finish(start, T_world_from_cam, T_base_from_cam, status, n_tracked, n_inliers, dt)
 
@@ -269,12 +284,6 @@ class StereoOdometry:
         return stamp - previous
 
     def _finish(self, start, T_world_from_cam, T_base_from_cam, status, n_tracked, n_inliers, dt) -> FrameEstimate:
-        if self._T_world_from_cam is not None:
-            self._velocity = np.linalg.inv(self._T_world_from_cam) @ T_world_from_cam
-            self._velocity_dt = dt
-            # a lost frame's motion is a guess: the next frame is held to the absolute limits only
-            self._velocity_known = status != LOST
-        self._T_world_from_cam = T_world_from_cam
         kf = self._keyframe
         self._n_frames += 1
         if self.keep_history:
@@ -393,10 +402,7 @@ class StereoOdometry:
         # new landmarks: the new corners with a stereo match (eq. 14-16)
         fresh = np.isfinite(u_right[len(uv):])
         nuv = new_uv[fresh]
-        d = nuv[:, 0] - u_right[len(uv):][fresh]
-        z = depth_m_from_disparity_px(d, focal_px=s.focal_px, baseline_m=s.baseline_m, doffs_px=s.doffs_px)
-        K = self._K
-        points_cam = np.column_stack([(nuv[:, 0] - K[0, 2]) * z / K[0, 0], (nuv[:, 1] - K[1, 2]) * z / K[1, 1], z])
+        points_cam = self._backproject(nuv, nuv[:, 0] - u_right[len(uv):][fresh])
         new_ids = self._map.add_landmarks(transform_points(T_world_from_cam, points_cam))
         kf = Keyframe(frame=self._n_frames, T_world_from_cam=np.array(T_world_from_cam, dtype=np.float64),
                       image=left, landmark=np.concatenate([ids, new_ids]),
@@ -407,41 +413,108 @@ class StereoOdometry:
         self._map.refine()
         return kf.T_world_from_cam
 
-    def _track(self, left, T_pred, dt):
-        """Track the keyframe into ``left`` from the motion model's prediction; when that loses most
-        features (a sudden stop, a wrong prediction after a lost frame), again from the last pose."""
-        c, kf = self.config, self._keyframe
+    def _predict(self, elapsed) -> np.ndarray:
+        """The motion model's pose ``elapsed`` seconds after the last measured frame."""
+        if not self._velocity_known:
+            return self._T_measured
+        return self._T_measured @ scale_motion(self._velocity, elapsed / self._velocity_dt)
+
+    def _measure(self, T_world_from_cam, elapsed, T_pred) -> None:
+        """A measured pose: it updates the velocity and the statistics of the model's deviation."""
+        if self._velocity_known:
+            off = np.linalg.inv(T_pred) @ T_world_from_cam
+            sample = np.array([float(off[:3, 3] @ off[:3, 3]), rotation_angle_rad(off[:3, :3]) ** 2])
+            self._n_deviation = min(self._n_deviation + 1, 20)
+            self._deviation += (sample - self._deviation) / self._n_deviation
+        self._velocity = np.linalg.inv(self._T_measured) @ T_world_from_cam
+        self._velocity_dt, self._velocity_known = elapsed, True
+        self._T_measured, self._since_measured_s = T_world_from_cam, 0.0
+
+    def _track(self, left, T_pred, dt, kf: Keyframe | None = None):
+        """Track keyframe ``kf`` (the reference) into ``left`` from the motion model's prediction; when
+        that loses most features (a sudden stop, a wrong prediction), again from the last measured pose."""
+        c = self.config
+        kf = self._keyframe if kf is None else kf
         valid = np.flatnonzero(kf.valid)
-        if len(valid) < c.min_inliers:
+        if len(valid) < c.min_inliers or kf.image is None:
             return LOST, None, 0, 0, None
         points_key = transform_points(np.linalg.inv(kf.T_world_from_cam), self._map.points(kf.landmark[valid]))
-        result = self._track_from(left, T_pred, dt, valid, points_key)
+        result = self._track_from(left, T_pred, dt, valid, points_key, kf)
         if result[3] < c.keyframe_inlier_fraction * len(valid):
-            retry = self._track_from(left, self._T_world_from_cam, dt, valid, points_key)
-            if retry[3] > result[3]:
+            retry = self._track_from(left, self._T_measured, dt, valid, points_key, kf)
+            if retry[3] > result[3] or (retry[0] != LOST and result[0] == LOST):
                 result = retry
         return result
 
-    def _track_from(self, left, T_guess, dt, valid, points_key):
+    def _relocalize(self, left, right, disparity_px, T_pred, dt, lost):
+        """A frame the reference keyframe could not place: the other keyframes of the window (newest
+        first) and, failing those, fresh features of this frame found in the reference keyframe."""
+        for kf in reversed(self._map.keyframes):
+            if kf is self._keyframe:
+                continue
+            result = self._track(left, T_pred, dt, kf)
+            if result[0] != LOST:
+                self._keyframe = kf
+                return result
+        return self._track_fresh(left, right, disparity_px, T_pred, dt, lost)
+
+    def _track_fresh(self, left, right, disparity_px, T_guess, dt, lost):
+        """The frame from scratch: new corners with their depth from this frame's pair, found in the
+        reference keyframe's image, PnP (the keyframe's view of this frame's points). The reference's
+        landmarks are then tracked again from that pose; if they still fail, the frame starts a new
+        window (a keyframe at the measured pose: no jump)."""
         c, kf = self.config, self._keyframe
-        T_guess_from_key = np.linalg.inv(T_guess) @ kf.T_world_from_cam
-        X = transform_points(T_guess_from_key, points_key)
-        guess = kf.uv[valid].astype(np.float64).copy()
+        uv = self._corners(left, c.max_features, np.empty((0, 2), np.float32))
+        u_right = self._right_columns(left, right, disparity_px, uv, np.full(len(uv), np.nan))
+        stereo = np.isfinite(u_right)
+        if stereo.sum() < c.min_inliers or kf.image is None:
+            return lost
+        uv = uv[stereo]
+        points_cam = self._backproject(uv, uv[:, 0] - u_right[stereo])
+        T_key_from_guess = np.linalg.inv(kf.T_world_from_cam) @ T_guess
+        uv_key, ok = self._klt(left, kf.image, uv, self._project(T_key_from_guess, points_cam, uv), c.klt_levels,
+                               c.klt_window_px)
+        solved = self._solve_pnp(points_cam[ok], uv_key[ok].astype(np.float64), T_key_from_guess)
+        if solved is None:
+            return lost
+        T_world_from_cam = kf.T_world_from_cam @ solved[0]
+        if not self._plausible(T_world_from_cam, T_guess, dt):
+            return lost
+        result = self._track(left, T_world_from_cam, dt)
+        if result[0] != LOST:
+            return result
+        self._map.clear()
+        T_world_from_cam = self._new_keyframe(left, right, disparity_px, T_world_from_cam, None)
+        return KEYFRAME, T_world_from_cam, int(ok.sum()), len(solved[1]), None
+
+    def _project(self, T_b_from_a, points_a, fallback_uv) -> np.ndarray:
+        """Pixels (N, 2) of points ``points_a`` seen from b; ``fallback_uv`` where behind the camera."""
+        X = transform_points(T_b_from_a, points_a)
+        guess = np.asarray(fallback_uv, dtype=np.float64).copy()
         front = X[:, 2] > 0.05
         guess[front] = (X[front, :2] / X[front, 2:3]) * [self._K[0, 0], self._K[1, 1]] + self._K[:2, 2]
-        uv, ok = self._klt(kf.image, left, kf.uv[valid], guess, c.klt_levels, c.klt_window_px)
-        n_tracked = int(ok.sum())
-        if n_tracked < c.min_inliers:
-            return LOST, None, n_tracked, 0, None
-        obj = points_key[ok]
-        img = uv[ok].astype(np.float64)
-        rvec, tvec = rvec_t_from_T(T_guess_from_key)
+        return guess
+
+    def _backproject(self, uv, disparity_px) -> np.ndarray:
+        """Camera-frame points of pixels ``uv`` (N, 2) with their disparities, eq. (14)-(16)."""
+        s, K = self.stereo, self._K
+        z = depth_m_from_disparity_px(disparity_px, focal_px=s.focal_px, baseline_m=s.baseline_m,
+                                      doffs_px=s.doffs_px)
+        return np.column_stack([(uv[:, 0] - K[0, 2]) * z / K[0, 0], (uv[:, 1] - K[1, 2]) * z / K[1, 1], z])
+
+    def _solve_pnp(self, obj, img, T_guess):
+        """PnP-RANSAC from ``T_guess`` (camera from object), then LM on the inliers re-selected twice;
+        ``(T_cam_from_obj, inliers)`` or None with fewer than ``min_inliers``."""
+        c = self.config
+        if len(obj) < c.min_inliers:
+            return None
+        rvec, tvec = rvec_t_from_T(T_guess)
         found, rvec, tvec, inliers = cv2.solvePnPRansac(
             obj, img, self._K, None, rvec.copy(), tvec.copy(), useExtrinsicGuess=True,
             iterationsCount=c.ransac_iterations, reprojectionError=c.ransac_threshold_px, confidence=0.999,
             flags=cv2.SOLVEPNP_ITERATIVE)
         if not found or inliers is None or len(inliers) < c.min_inliers:
-            return LOST, None, n_tracked, 0 if inliers is None else len(inliers), None
+            return None
         inl = inliers.ravel()
         for _ in range(2):             # LM on the inliers, re-select under the polished pose
             rvec, tvec = cv2.solvePnPRefineLM(obj[inl], img[inl], self._K, None, rvec, tvec)
@@ -449,27 +522,45 @@ class StereoOdometry:
             err = np.linalg.norm(proj.reshape(-1, 2) - img, axis=1)
             inl = np.flatnonzero(err < c.ransac_threshold_px)
             if len(inl) < c.min_inliers:
-                return LOST, None, n_tracked, len(inl), None
-        T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_from_rvec_t(rvec, tvec))
-        T_pred = self._T_world_from_cam @ scale_motion(self._velocity, dt / self._velocity_dt)
-        if not (np.isfinite(T_world_from_cam).all() and self._plausible(T_world_from_cam, T_pred, dt)):
+                return None
+        T = T_from_rvec_t(rvec, tvec)
+        return (T, inl) if np.isfinite(T).all() else None
+
+    def _track_from(self, left, T_guess, dt, valid, points_key, kf):
+        c = self.config
+        T_guess_from_key = np.linalg.inv(T_guess) @ kf.T_world_from_cam
+        guess = self._project(T_guess_from_key, points_key, kf.uv[valid])
+        uv, ok = self._klt(kf.image, left, kf.uv[valid], guess, c.klt_levels, c.klt_window_px)
+        n_tracked = int(ok.sum())
+        if n_tracked < c.min_inliers:
+            return LOST, None, n_tracked, 0, None
+        img = uv[ok].astype(np.float64)
+        solved = self._solve_pnp(points_key[ok], img, T_guess_from_key)
+        if solved is None:
+            return LOST, None, n_tracked, 0, None
+        T_cam_from_key, inl = solved
+        T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_cam_from_key)
+        if not self._plausible(T_world_from_cam, self._predict(dt), dt):
             return LOST, None, n_tracked, len(inl), None
         tracked = (kf.landmark[valid][ok][inl], img[inl].astype(np.float32))
         return TRACKED, T_world_from_cam, n_tracked, len(inl), tracked
 
     def _plausible(self, T_world_from_cam, T_pred, dt) -> bool:
-        """The step from the last frame within the speed and turn-rate limits, and (once the motion is
-        known) within the acceleration limits of the motion model's prediction."""
+        """The step from the last measured frame (``dt`` ago) within the speed and turn-rate limits and,
+        once the motion is known, its deviation from the motion model's prediction within what the
+        acceleration limits allow plus three times the model's usual deviation (its RMS over the last
+        measured frames, as kiss-icp's adaptive threshold): a gross failure, never a real motion."""
         c = self.config
-        step = np.linalg.inv(self._T_world_from_cam) @ T_world_from_cam
+        step = np.linalg.inv(self._T_measured) @ T_world_from_cam
         if (np.linalg.norm(step[:3, 3]) > c.max_speed_mps * dt
                 or rotation_angle_rad(step[:3, :3]) > c.max_turn_rate_radps * dt):
             return False
         if not self._velocity_known:
             return True
         off = np.linalg.inv(T_pred) @ T_world_from_cam
-        return (np.linalg.norm(off[:3, 3]) <= c.max_acceleration_mps2 * dt * dt
-                and rotation_angle_rad(off[:3, :3]) <= c.max_angular_acceleration_radps2 * dt * dt)
+        sigma = np.sqrt(self._deviation) if self._n_deviation >= 5 else np.zeros(2)
+        return (np.linalg.norm(off[:3, 3]) <= c.max_acceleration_mps2 * dt * dt + 3.0 * sigma[0]
+                and rotation_angle_rad(off[:3, :3]) <= c.max_angular_acceleration_radps2 * dt * dt + 3.0 * sigma[1])
 
 
 def _row_slope(image: np.ndarray, uv: np.ndarray, window_px: int) -> np.ndarray:
