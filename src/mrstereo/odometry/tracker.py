@@ -113,6 +113,9 @@ class OdometryConfig:
     huber_px: float = 1.0
     refine_iterations: int = 10
     outlier_px: float = 3.0
+    calibrate_disparity_offset: bool = True
+    offset_prior_weight: float = 20.0
+    max_disparity_offset_px: float = 3.0
 
     def __post_init__(self) -> None:
         for name in ("max_features", "klt_window_px", "stereo_window_px", "klt_levels", "stereo_levels",
@@ -122,7 +125,8 @@ class OdometryConfig:
         for name in ("min_corner_distance_px", "max_fb_error_px", "max_row_error_px",
                      "min_disparity_px", "ransac_threshold_px", "keyframe_depth_fraction", "keyframe_angle_rad",
                      "max_speed_mps", "max_turn_rate_radps", "max_acceleration_mps2",
-                     "max_angular_acceleration_radps2", "frame_interval_s", "huber_px", "outlier_px"):
+                     "max_angular_acceleration_radps2", "frame_interval_s", "huber_px", "outlier_px",
+                     "offset_prior_weight", "max_disparity_offset_px"):
             _checks.finite_number(name, getattr(self, name), positive=True)
         if not 0.0 < self.corner_quality < 1.0:
             raise ValueError(f"corner_quality must be in (0, 1), got {self.corner_quality}")
@@ -191,6 +195,9 @@ class StereoOdometry:
         self._velocity = np.eye(4)                             # T_prevcam_from_cam between measured frames
         self._velocity_dt = c.frame_interval_s
         self._velocity_known = False
+        # the disparity offset learnt from the motion (px; added to the rig's doffs) and its information
+        self._offset_px, self._offset_weight = 0.0, c.offset_prior_weight
+        self._offset_sum = 0.0
         self._deviation = np.zeros(2)                          # mean squared model deviation (m^2, rad^2)
         self._n_deviation = 0
         self._stamp: float | None = None
@@ -258,6 +265,8 @@ class StereoOdometry:
         if (n_inliers < c.keyframe_inlier_fraction * int(kf.valid.sum())
                 or np.linalg.norm(T_key_from_cam[:3, 3]) > c.keyframe_depth_fraction * depth
                 or rotation_angle_rad(T_key_from_cam[:3, :3]) > c.keyframe_angle_rad):
+            if c.calibrate_disparity_offset:
+                self._learn_offset(kf, tracked, T_world_from_cam)
             T_world_from_cam = self._new_keyframe(left, right, disparity_px, T_world_from_cam, tracked)
             self._T_measured = T_world_from_cam
             status = KEYFRAME
@@ -394,7 +403,7 @@ class StereoOdometry:
         guess_d = np.full(len(uv), np.nan)
         if len(ids):
             z = transform_points(T_cam_from_world, self._map.points(ids))[:, 2]
-            guess_d = s.focal_px * s.baseline_m / np.maximum(z, 1e-3) - s.doffs_px
+            guess_d = s.focal_px * s.baseline_m / np.maximum(z, 1e-3) - s.doffs_px - self._offset_px
         new_uv = self._corners(left, c.max_features - len(uv), uv)
         all_uv = np.concatenate([uv, new_uv]).astype(np.float32)
         u_right = self._right_columns(left, right, disparity_px, all_uv,
@@ -495,12 +504,55 @@ class StereoOdometry:
         guess[front] = (X[front, :2] / X[front, 2:3]) * [self._K[0, 0], self._K[1, 1]] + self._K[:2, 2]
         return guess
 
-    def _backproject(self, uv, disparity_px) -> np.ndarray:
-        """Camera-frame points of pixels ``uv`` (N, 2) with their disparities, eq. (14)-(16)."""
+    def _backproject(self, uv, disparity_px, offset_px: float | None = None) -> np.ndarray:
+        """Camera-frame points of pixels ``uv`` (N, 2) with their disparities, eq. (14)-(16), the rig's
+        ``doffs`` plus the learnt disparity offset (or ``offset_px``)."""
         s, K = self.stereo, self._K
+        offset = self._offset_px if offset_px is None else offset_px
         z = depth_m_from_disparity_px(disparity_px, focal_px=s.focal_px, baseline_m=s.baseline_m,
-                                      doffs_px=s.doffs_px)
+                                      doffs_px=s.doffs_px + offset)
         return np.column_stack([(uv[:, 0] - K[0, 2]) * z / K[0, 0], (uv[:, 1] - K[1, 2]) * z / K[1, 1], z])
+
+    def _learn_offset(self, kf: Keyframe, tracked, T_world_from_cam) -> None:
+        """Learn the disparity offset from the motion between keyframe ``kf`` and this frame.
+
+        A rig whose rectified principal points are off by ``e`` px gives depths ``b f / (d + doffs)``
+        wrong by the factor ``d / (d + e)``: far points much more than near ones, which no rigid
+        motion reconciles. The keyframe's stereo points are re-made with the offset ``o - h``, ``o``,
+        ``o + h`` and the pose refined on this frame's tracks each time; the vertex of the parabola
+        through the three (truncated) reprojection costs is this pair's offset, its curvature the
+        weight of an information-weighted mean over the run (starting from 0 px with
+        ``offset_prior_weight``; at most ``max_disparity_offset_px`` either way).
+        """
+        c = self.config
+        ids, uv_now = tracked
+        order = np.argsort(kf.landmark)
+        j = order[np.searchsorted(kf.landmark[order], ids)]
+        d = kf.uv[j, 0] - kf.u_right[j]
+        use = np.isfinite(d)
+        if use.sum() < c.min_inliers:
+            return
+        uv_key, d, img = kf.uv[j][use].astype(np.float64), d[use], uv_now[use].astype(np.float64)
+        rvec0, tvec0 = rvec_t_from_T(np.linalg.inv(T_world_from_cam) @ kf.T_world_from_cam)
+        h, o = 0.5, self._offset_px
+        costs = []
+        for offset in (o - h, o, o + h):
+            obj = self._backproject(uv_key, d, offset)
+            if not (obj[:, 2] > 0).all():
+                return
+            rvec, tvec = cv2.solvePnPRefineLM(obj, img, self._K, None, rvec0.copy(), tvec0.copy())
+            proj, _ = cv2.projectPoints(obj, rvec, tvec, self._K, None)
+            err2 = np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1)
+            costs.append(float(np.minimum(err2, c.ransac_threshold_px ** 2).sum()))
+        curvature = (costs[2] - 2.0 * costs[1] + costs[0]) / (h * h)
+        if not curvature > 0.0:
+            return
+        vertex = o - (costs[2] - costs[0]) / (2.0 * h) / curvature
+        vertex = float(np.clip(vertex, -c.max_disparity_offset_px, c.max_disparity_offset_px))
+        self._offset_sum += curvature * vertex
+        self._offset_weight += curvature
+        self._offset_px = self._offset_sum / self._offset_weight
+        self._map.cx_right_px = float(self.stereo.right.P[0, 2]) + self._offset_px
 
     def _solve_pnp(self, obj, img, T_guess):
         """PnP-RANSAC from ``T_guess`` (camera from object), then LM on the inliers re-selected twice;
