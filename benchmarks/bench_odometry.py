@@ -174,10 +174,10 @@ def kitti(path: Path) -> None:
         print(_compare_line(label, compare(manifest, frames)))
 
 
-def street(root: Path, seeds: list[int], frames: int) -> None:
+def street(root: Path, seeds: list[int], frames: int, steps=(0.5, 1.0, 1.5)) -> None:
     rows = []
     for seed in seeds:
-        for step in (0.5, 1.0, 1.5):
+        for step in steps:
             out = root / f"street-seed{seed}-step{step}-{frames}"
             if not (out / "manifest.yaml").is_file():
                 write_synthetic_dataset(out, seed=seed, n_frames=frames, path="street", step_m=step, progress=False)
@@ -312,6 +312,8 @@ def main() -> None:
     parser.add_argument("--street", action="store_true", help="the street sequences at car speed")
     parser.add_argument("--street-seeds", type=int, nargs="+", default=[100, 101, 102])
     parser.add_argument("--street-frames", type=int, default=60)
+    parser.add_argument("--street-steps", type=float, nargs="+", default=[0.5, 1.0, 1.5],
+                        help="metres per frame of the street sequences")
     parser.add_argument("--maps-randomized", type=str, default=None, metavar="SEEDS",
                         help="maps of randomized worlds with drifted odometry, e.g. 100-119 (settings chosen on 0-9)")
     args = parser.parse_args()
@@ -326,7 +328,7 @@ def main() -> None:
         kitti(args.kitti)
         return
     if args.street:
-        street(args.data, args.street_seeds, args.street_frames)
+        street(args.data, args.street_seeds, args.street_frames, args.street_steps)
         return
     rows, vo_rows = [], []
     for seed in args.seeds:
