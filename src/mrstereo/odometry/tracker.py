@@ -1,11 +1,14 @@
 """Stereo visual odometry: KLT tracks against a keyframe, PnP-RANSAC, a window of keyframes refined.
 
-Per rectified pair: predict the pose by the last motion scaled to the frame's time step; track
-the reference keyframe's features into the left image by pyramidal Lucas-Kanade (forward-backward
-checked; against the keyframe, so that a robot standing still gets the same pose every frame);
-``cv2.solvePnPRansac`` then ``cv2.solvePnPRefineLM`` on the landmarks; refuse a step beyond the
-speed, turn-rate and acceleration limits over the time step (the frame is *lost*: its pose is the
-prediction, and tracking restarts after ``max_lost_streak`` lost frames); make a new keyframe when
+Per rectified pair: predict the pose by the last measured motion scaled to the time since the last
+measured frame; track the reference keyframe's features into the left image by pyramidal
+Lucas-Kanade (forward-backward checked; against the keyframe, so that a robot standing still gets
+the same pose every frame); ``cv2.solvePnPRansac`` then ``cv2.solvePnPRefineLM`` on the landmarks;
+refuse a step beyond the speed, turn-rate and acceleration limits over that time (the latter plus
+three times the motion model's RMS deviation); a refused frame is tried against the window's other
+keyframes, then from fresh features PnP'd into the reference keyframe, and only then *lost* (its
+pose is the prediction; tracking restarts after ``max_lost_streak`` lost frames); learn the
+disparity offset of the rig from the motion at each keyframe; make a new keyframe when
 too few inliers remain or the camera moved or turned far enough, with new Shi-Tomasi corners
 matched into the right image along the row and triangulated by eq. (14)-(16); bundle-adjust the
 last ``window_keyframes`` keyframes (:mod:`mrstereo.odometry.window`). Each step and why:
@@ -82,6 +85,11 @@ class OdometryConfig:
     huber_px, refine_iterations, outlier_px : float, int, float
         The refinement's Huber threshold and steps, and the distance from its landmark's projection
         beyond which an observation is dropped after it.
+    calibrate_disparity_offset : bool
+        Learn the rig's disparity offset (a rectified principal point off) from the motion.
+    offset_prior_weight, max_disparity_offset_px : float
+        The weight of the offset's 0 px start (in the units of a keyframe pair's cost curvature,
+        px^2 per px^2) and its largest size either way.
     """
 
     max_features: int = 300
