@@ -187,7 +187,7 @@ def rpe_segments(T_true, delta_m: float) -> list[int]:
     ends, path = [0], 0.0
     for i in range(1, len(p)):
         path += float(np.linalg.norm(p[i] - p[i - 1]))
-        if path >= delta_m:
+        if path >= delta_m - 1e-9:          # (ten 0.1 m steps are a metre, whatever the rounding)
             ends.append(i)
             path = 0.0
     return ends
