@@ -90,7 +90,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     if reference is not None and dataset.pose_frame_mount is not None:
         # the truth is of another body (EuRoC's): the estimate moved to it through the camera mounts
         mount = dataset.mount or CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-        R = stereo.left.R
+        R = (stereo or dataset.calibration).left.R
         estimate = moved_to_body(estimate, [mount.T_base_from_rectified(R, f.pan_rad) for f in dataset.frames],
                                  dataset.pose_frame_mount.T_base_from_rectified(R), reference[0])
         ref_name += " (of the recording's body frame)"
