@@ -87,9 +87,10 @@ class OdometryConfig:
         beyond which an observation is dropped after it.
     calibrate_disparity_offset : bool
         Learn the rig's disparity offset (a rectified principal point off) from the motion.
-    offset_prior_weight, max_disparity_offset_px : float
+    offset_prior_weight, min_disparity_offset_px, max_disparity_offset_px : float
         The weight of the offset's 0 px start (in the units of a keyframe pair's cost curvature,
-        px^2 per px^2) and its largest size either way.
+        px^2 per px^2); the smallest learnt offset used (below it, 0: within the learner's own bias,
+        +0.06 to +0.12 px on synthetic rigs with none) and its largest size either way.
     """
 
     max_features: int = 300
@@ -123,6 +124,7 @@ class OdometryConfig:
     outlier_px: float = 3.0
     calibrate_disparity_offset: bool = True
     offset_prior_weight: float = 20.0
+    min_disparity_offset_px: float = 0.15
     max_disparity_offset_px: float = 3.0
 
     def __post_init__(self) -> None:
@@ -136,6 +138,10 @@ class OdometryConfig:
                      "max_angular_acceleration_radps2", "frame_interval_s", "huber_px", "outlier_px",
                      "offset_prior_weight", "max_disparity_offset_px"):
             _checks.finite_number(name, getattr(self, name), positive=True)
+        if not (isinstance(self.min_disparity_offset_px, (int, float)) and 0.0 <= self.min_disparity_offset_px
+                <= self.max_disparity_offset_px):
+            raise ValueError(f"min_disparity_offset_px must be in [0, max_disparity_offset_px], got "
+                             f"{self.min_disparity_offset_px!r}")
         if not 0.0 < self.corner_quality < 1.0:
             raise ValueError(f"corner_quality must be in (0, 1), got {self.corner_quality}")
         if not 0.0 < self.keyframe_inlier_fraction < 1.0:
@@ -205,7 +211,7 @@ class StereoOdometry:
         self._velocity_known = False
         # the disparity offset learnt from the motion (px; added to the rig's doffs) and its information
         self._offset_px, self._offset_weight = 0.0, c.offset_prior_weight
-        self._offset_sum = 0.0
+        self._offset_sum = self._offset_mean_px = 0.0
         self._deviation = np.zeros(2)                          # mean squared model deviation (m^2, rad^2)
         self._n_deviation = 0
         self._stamp: float | None = None
@@ -542,7 +548,7 @@ class StereoOdometry:
             return
         uv_key, d, img = kf.uv[j][use].astype(np.float64), d[use], uv_now[use].astype(np.float64)
         rvec0, tvec0 = rvec_t_from_T(np.linalg.inv(T_world_from_cam) @ kf.T_world_from_cam)
-        h, o = 0.5, self._offset_px
+        h, o = 0.5, self._offset_mean_px
         costs = []
         for offset in (o - h, o, o + h):
             obj = self._backproject(uv_key, d, offset)
@@ -559,7 +565,8 @@ class StereoOdometry:
         vertex = float(np.clip(vertex, -c.max_disparity_offset_px, c.max_disparity_offset_px))
         self._offset_sum += curvature * vertex
         self._offset_weight += curvature
-        self._offset_px = self._offset_sum / self._offset_weight
+        self._offset_mean_px = self._offset_sum / self._offset_weight
+        self._offset_px = self._offset_mean_px if abs(self._offset_mean_px) >= c.min_disparity_offset_px else 0.0
         self._map.cx_right_px = float(self.stereo.right.P[0, 2]) + self._offset_px
 
     def _solve_pnp(self, obj, img, T_guess):
