@@ -130,27 +130,33 @@ def _odometry_pairs(manifest):
 
 def compare(manifest, frames: slice = slice(None)) -> dict:
     """mrstereo's visual odometry and the frame-to-frame baseline on a recording, against its truth."""
-    from mrstereo.odometry import visual_odometry
-
     records = manifest.frames[frames]
     pairs = _odometry_pairs(replace(manifest, frames=records))
     truth = np.stack([f.T_world_from_base_true if f.true_pose is not None else f.T_world_from_base for f in records])
     mount = manifest.mount or CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
     mounts = np.stack([mount.T_base_from_rectified(manifest.calibration.left.R, f.pan_rad) for f in records])
     stamps = [f.stamp_s for f in records]
-    visual_odometry(pairs[:4], manifest.calibration, T_base_from_cam=mounts[:4])     # numba's cached kernels loaded
+    return compare_pairs(pairs, manifest.calibration, truth, mounts, None if None in stamps else stamps)
+
+
+def compare_pairs(pairs, stereo, truth, mounts, stamps, config=None) -> dict:
+    """mrstereo's visual odometry (``config``: the defaults) and the frame-to-frame baseline on
+    rectified pairs, against the true base poses."""
+    from mrstereo.odometry import OdometryConfig, visual_odometry
+
+    visual_odometry(pairs[:4], stereo, T_base_from_cam=mounts[:4])          # numba's cached kernels loaded
     t0 = time.perf_counter()
-    vo = visual_odometry(pairs, manifest.calibration, T_base_from_cam=mounts, T_world_from_base0=truth[0],
-                         stamps_s=None if None in stamps else stamps)
+    vo = visual_odometry(pairs, stereo, T_base_from_cam=mounts, T_world_from_base0=truth[0], stamps_s=stamps,
+                         config=config or OdometryConfig())
     wall = (time.perf_counter() - t0) / len(pairs)
-    T_cam, base_times, failed = baseline_odometry(pairs, manifest.calibration, truth[0] @ mounts[0])
+    T_cam, base_times, failed = baseline_odometry(pairs, stereo, truth[0] @ mounts[0])
     T_base = np.stack([T @ np.linalg.inv(M) for T, M in zip(T_cam, mounts)])
     return {"vo": trajectory_metrics(vo.T_world_from_base, truth), "vo_lost": vo.n_lost,
             "vo_ms": 1000 * float(np.mean(vo.time_s)), "vo_ms_median": 1000 * float(np.median(vo.time_s)),
             "vo_wall_ms": 1000 * wall, "keyframes": vo.status.count("keyframe"),
             "vo_online": trajectory_metrics(vo.T_world_from_base_online, truth),
             "base": trajectory_metrics(T_base, truth), "base_failed": failed,
-            "base_ms": 1000 * float(np.mean(base_times)), "size": manifest.calibration.size, "result": vo}
+            "base_ms": 1000 * float(np.mean(base_times)), "size": stereo.size, "result": vo}
 
 
 def _compare_line(label: str, r: dict) -> str:
@@ -165,19 +171,103 @@ def _compare_line(label: str, r: dict) -> str:
 
 
 def kitti(path: Path) -> None:
-    manifest = read_recording(path)
-    n = len(manifest.frames)
-    print(f"KITTI odometry {manifest.root}: {n} frames (the sample holds frames 0-{n - 1}; later frames of the "
-          "sequence are not in it)")
-    for label, frames in ((f"frames 0-{n - 1}", slice(None)), (f"frames 0-{n // 2}", slice(0, n // 2 + 1)),
-                          (f"frames {n // 2}-{n - 1}", slice(n // 2, None))):
-        print(_compare_line(label, compare(manifest, frames)))
+    """KITTI 06 (the sequence the defaults were chosen on: all and halves) and 01 (a highway curve)."""
+    paths = [path] if path.name != "kitti_odometry_06" else [path, path.with_name("kitti_odometry_01")]
+    for root in paths:
+        if not root.is_dir():
+            print(f"{root}: not found, skipped")
+            continue
+        manifest = read_recording(root)
+        n = len(manifest.frames)
+        print(f"KITTI odometry {manifest.root}: {n} frames")
+        for label, frames in ((f"frames 0-{n - 1}", slice(None)), (f"frames 0-{n // 2}", slice(0, n // 2 + 1)),
+                              (f"frames {n // 2}-{n - 1}", slice(n // 2, None))):
+            r = compare(manifest, frames)
+            print(_compare_line(label, r))
+            lost = np.flatnonzero(~r["result"].tracked)
+            if len(lost):
+                print(f"    lost frames: {lost.tolist()}")
 
 
-def street(root: Path, seeds: list[int], frames: int) -> None:
+def _oxts_poses(files) -> np.ndarray:
+    """``T_world_from_imu`` of OXTS records (the KITTI devkit's ``convertOxtsToPose``: Mercator
+    scale of the first latitude, roll-pitch-yaw of the IMU), the first pose the origin."""
+    rows = np.array([np.loadtxt(f)[:6] for f in files])
+    scale = math.cos(math.radians(rows[0, 0]))
+    earth = 6378137.0
+    poses = []
+    for lat, lon, alt, roll, pitch, yaw in rows:
+        t = [scale * lon * math.pi * earth / 180.0, scale * earth * math.log(math.tan(math.pi * (90.0 + lat) / 360.0)),
+             alt]
+        rx = cv2.Rodrigues(np.array([roll, 0.0, 0.0]))[0]
+        ry = cv2.Rodrigues(np.array([0.0, pitch, 0.0]))[0]
+        rz = cv2.Rodrigues(np.array([0.0, 0.0, yaw]))[0]
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = rz @ ry @ rx, t
+        poses.append(T)
+    return np.linalg.inv(poses[0]) @ np.stack(poses)
+
+
+def _calib_rows(path: Path) -> dict:
+    out = {}
+    for line in path.read_text().splitlines():
+        key, _, values = line.partition(":")
+        try:
+            out[key.strip()] = np.array([float(v) for v in values.split()])
+        except ValueError:
+            pass
+    return out
+
+
+def kitti_raw(path: Path) -> None:
+    """A KITTI raw drive read by this script (evaluation only): the rectified gray pair of
+    ``P_rect_00``/``P_rect_01``, the image stamps, and the OXTS poses moved to the rectified left
+    camera through imu -> velo -> cam0 -> R_rect_00; the base is that camera (REP 103 axes)."""
+    from mrstereo.camera import Camera, CameraInfo, StereoCamera
+
+    drive = sorted(path.glob("**/*_drive_*_sync"))[0] if not path.name.endswith("_sync") else path
+    date = drive.parent
+    cam = _calib_rows(date / "calib_cam_to_cam.txt")
+    w, h = (int(v) for v in cam["S_rect_00"])
+    infos = []
+    for k in ("00", "01"):
+        P = cam[f"P_rect_{k}"].reshape(3, 4)
+        infos.append(CameraInfo(Camera(width=w, height=h, fx=P[0, 0], fy=P[1, 1], cx=P[0, 2], cy=P[1, 2]),
+                                R=np.eye(3), P=P))
+    stereo = StereoCamera(*infos)
+    def rigid(rows):
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = rows["R"].reshape(3, 3), rows["T"]
+        return T
+    T_velo_from_imu = rigid(_calib_rows(date / "calib_imu_to_velo.txt"))
+    T_cam0_from_velo = rigid(_calib_rows(date / "calib_velo_to_cam.txt"))
+    T_rect_from_cam0 = np.eye(4)
+    T_rect_from_cam0[:3, :3] = cam["R_rect_00"].reshape(3, 3)
+    T_imu_from_rect = np.linalg.inv(T_rect_from_cam0 @ T_cam0_from_velo @ T_velo_from_imu)
+    left = sorted((drive / "image_00" / "data").glob("*.png"))
+    right = sorted((drive / "image_01" / "data").glob("*.png"))
+    oxts = sorted((drive / "oxts" / "data").glob("*.txt"))
+    truth_cam = _oxts_poses(oxts) @ T_imu_from_rect
+    mount = CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)).T_base_from_rectified()
+    truth = truth_cam @ np.linalg.inv(mount)
+    import datetime
+    stamps = []
+    for line in (drive / "image_00" / "timestamps.txt").read_text().split("\n"):
+        if line.strip():
+            day, _, frac = line.strip().partition(".")
+            t = datetime.datetime.strptime(day, "%Y-%m-%d %H:%M:%S").timestamp()
+            stamps.append(t + float("0." + frac))
+    pairs = [(cv2.imread(str(a), cv2.IMREAD_GRAYSCALE), cv2.imread(str(b), cv2.IMREAD_GRAYSCALE))
+             for a, b in zip(left, right)]
+    r = compare_pairs(pairs, stereo, truth, np.stack([mount] * len(pairs)), np.array(stamps) - stamps[0])
+    print(f"KITTI raw {drive.name} (held out; read by this script, truth from OXTS):")
+    print(_compare_line(f"frames 0-{len(pairs) - 1}", r))
+
+
+def street(root: Path, seeds: list[int], frames: int, steps=(0.5, 1.0, 1.5)) -> None:
     rows = []
     for seed in seeds:
-        for step in (0.5, 1.0, 1.5):
+        for step in steps:
             out = root / f"street-seed{seed}-step{step}-{frames}"
             if not (out / "manifest.yaml").is_file():
                 write_synthetic_dataset(out, seed=seed, n_frames=frames, path="street", step_m=step, progress=False)
@@ -309,9 +399,13 @@ def main() -> None:
     parser.add_argument("--speed-frames", type=int, default=30)
     parser.add_argument("--kitti", nargs="?", type=Path, const=Path(os.environ.get("MRSTEREO_DATA", "."))
                         / "kitti_odometry_06", help="a KITTI odometry folder (default: the shared sample)")
+    parser.add_argument("--held-out", nargs="?", type=Path, const=Path(os.environ.get("MRSTEREO_DATA", "."))
+                        / "kitti_raw_sample", help="a KITTI raw date folder or drive (default: the shared sample)")
     parser.add_argument("--street", action="store_true", help="the street sequences at car speed")
     parser.add_argument("--street-seeds", type=int, nargs="+", default=[100, 101, 102])
     parser.add_argument("--street-frames", type=int, default=60)
+    parser.add_argument("--street-steps", type=float, nargs="+", default=[0.5, 1.0, 1.5],
+                        help="metres per frame of the street sequences")
     parser.add_argument("--maps-randomized", type=str, default=None, metavar="SEEDS",
                         help="maps of randomized worlds with drifted odometry, e.g. 100-119 (settings chosen on 0-9)")
     args = parser.parse_args()
@@ -322,11 +416,14 @@ def main() -> None:
     if args.speed:
         speed(args.data, args.speed_frames)
         return
-    if args.kitti is not None:
-        kitti(args.kitti)
+    if args.kitti is not None or args.held_out is not None:
+        if args.kitti is not None:
+            kitti(args.kitti)
+        if args.held_out is not None:
+            kitti_raw(args.held_out)
         return
     if args.street:
-        street(args.data, args.street_seeds, args.street_frames)
+        street(args.data, args.street_seeds, args.street_frames, args.street_steps)
         return
     rows, vo_rows = [], []
     for seed in args.seeds:

@@ -58,7 +58,8 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
 
     from ..io import check_outputs
     from ..pipeline.sanity import check_pair_streams
-    from ..odometry.trajectory import plot_trajectories, trajectory_metrics, write_tum
+    from ..camera import CameraMount
+    from ..odometry.trajectory import moved_to_body, plot_trajectories, trajectory_metrics, write_tum
 
     recording_of(manifest, bag)                          # one of them
     dataset, bag = read_inputs(manifest, bag, calib, rate_hz=rate_hz)
@@ -85,7 +86,15 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
         reference, ref_name = None, "none"      # (the given poses are placeholders: nothing to compare with)
     elif start == "origin":       # compare from the common start
         reference = np.linalg.inv(reference[0]) @ reference
-    metrics = None if reference is None else trajectory_metrics(run.T_world_from_base, reference)
+    estimate = run.T_world_from_base
+    if reference is not None and dataset.pose_frame_mount is not None:
+        # the truth is of another body (EuRoC's): the estimate moved to it through the camera mounts
+        mount = dataset.mount or CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        R = (stereo or dataset.calibration).left.R
+        estimate = moved_to_body(estimate, [mount.T_base_from_rectified(R, f.pan_rad) for f in dataset.frames],
+                                 dataset.pose_frame_mount.T_base_from_rectified(R), reference[0])
+        ref_name += " (of the recording's body frame)"
+    metrics = None if reference is None else trajectory_metrics(estimate, reference)
     click.echo(f"odometry of {len(run.status)} frames: {run.message}; "
                f"{run.status.count('keyframe')} keyframes, median {np.median(run.n_inliers[1:]) if len(run.status) > 1 else 0:.0f} "
                f"inliers, {1000 * np.median(run.time_s):.1f} ms per frame (CPU)")

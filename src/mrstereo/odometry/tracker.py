@@ -1,11 +1,14 @@
 """Stereo visual odometry: KLT tracks against a keyframe, PnP-RANSAC, a window of keyframes refined.
 
-Per rectified pair: predict the pose by the last motion scaled to the frame's time step; track
-the reference keyframe's features into the left image by pyramidal Lucas-Kanade (forward-backward
-checked; against the keyframe, so that a robot standing still gets the same pose every frame);
-``cv2.solvePnPRansac`` then ``cv2.solvePnPRefineLM`` on the landmarks; refuse a step beyond the
-speed, turn-rate and acceleration limits over the time step (the frame is *lost*: its pose is the
-prediction, and tracking restarts after ``max_lost_streak`` lost frames); make a new keyframe when
+Per rectified pair: predict the pose by the last measured motion scaled to the time since the last
+measured frame; track the reference keyframe's features into the left image by pyramidal
+Lucas-Kanade (forward-backward checked; against the keyframe, so that a robot standing still gets
+the same pose every frame); ``cv2.solvePnPRansac`` then ``cv2.solvePnPRefineLM`` on the landmarks;
+refuse a step beyond the speed, turn-rate and acceleration limits over that time (the latter plus
+three times the motion model's RMS deviation); a refused frame is tried against the window's other
+keyframes, then from fresh features PnP'd into the reference keyframe, and only then *lost* (its
+pose is the prediction; tracking restarts after ``max_lost_streak`` lost frames); learn the
+disparity offset of the rig from the motion at each keyframe; make a new keyframe when
 too few inliers remain or the camera moved or turned far enough, with new Shi-Tomasi corners
 matched into the right image along the row and triangulated by eq. (14)-(16); bundle-adjust the
 last ``window_keyframes`` keyframes (:mod:`mrstereo.odometry.window`). Each step and why:
@@ -82,6 +85,12 @@ class OdometryConfig:
     huber_px, refine_iterations, outlier_px : float, int, float
         The refinement's Huber threshold and steps, and the distance from its landmark's projection
         beyond which an observation is dropped after it.
+    calibrate_disparity_offset : bool
+        Learn the rig's disparity offset (a rectified principal point off) from the motion.
+    offset_prior_weight, min_disparity_offset_px, max_disparity_offset_px : float
+        The weight of the offset's 0 px start (in the units of a keyframe pair's cost curvature,
+        px^2 per px^2); the smallest learnt offset used (below it, 0: within the learner's own bias,
+        +0.06 to +0.12 px on synthetic rigs with none) and its largest size either way.
     """
 
     max_features: int = 300
@@ -113,6 +122,10 @@ class OdometryConfig:
     huber_px: float = 1.0
     refine_iterations: int = 10
     outlier_px: float = 3.0
+    calibrate_disparity_offset: bool = True
+    offset_prior_weight: float = 20.0
+    min_disparity_offset_px: float = 0.15
+    max_disparity_offset_px: float = 3.0
 
     def __post_init__(self) -> None:
         for name in ("max_features", "klt_window_px", "stereo_window_px", "klt_levels", "stereo_levels",
@@ -122,8 +135,13 @@ class OdometryConfig:
         for name in ("min_corner_distance_px", "max_fb_error_px", "max_row_error_px",
                      "min_disparity_px", "ransac_threshold_px", "keyframe_depth_fraction", "keyframe_angle_rad",
                      "max_speed_mps", "max_turn_rate_radps", "max_acceleration_mps2",
-                     "max_angular_acceleration_radps2", "frame_interval_s", "huber_px", "outlier_px"):
+                     "max_angular_acceleration_radps2", "frame_interval_s", "huber_px", "outlier_px",
+                     "offset_prior_weight", "max_disparity_offset_px"):
             _checks.finite_number(name, getattr(self, name), positive=True)
+        if not (isinstance(self.min_disparity_offset_px, (int, float)) and 0.0 <= self.min_disparity_offset_px
+                <= self.max_disparity_offset_px):
+            raise ValueError(f"min_disparity_offset_px must be in [0, max_disparity_offset_px], got "
+                             f"{self.min_disparity_offset_px!r}")
         if not 0.0 < self.corner_quality < 1.0:
             raise ValueError(f"corner_quality must be in (0, 1), got {self.corner_quality}")
         if not 0.0 < self.keyframe_inlier_fraction < 1.0:
@@ -184,10 +202,18 @@ class StereoOdometry:
                              size=c.window_keyframes, fixed=c.window_fixed, huber_px=c.huber_px,
                              iterations=c.refine_iterations, outlier_px=c.outlier_px)
         self._keyframe: Keyframe | None = None
-        self._T_world_from_cam: np.ndarray | None = None      # the last frame's camera pose
-        self._velocity = np.eye(4)                             # T_prevcam_from_cam of the last step
+        # the motion model rests on measured frames only (a lost frame's pose is a guess): the last
+        # measured camera pose, the time since it, and the motion between the last two measured frames
+        self._T_measured: np.ndarray | None = None
+        self._since_measured_s = 0.0
+        self._velocity = np.eye(4)                             # T_prevcam_from_cam between measured frames
         self._velocity_dt = c.frame_interval_s
         self._velocity_known = False
+        # the disparity offset learnt from the motion (px; added to the rig's doffs) and its information
+        self._offset_px, self._offset_weight = 0.0, c.offset_prior_weight
+        self._offset_sum = self._offset_mean_px = 0.0
+        self._deviation = np.zeros(2)                          # mean squared model deviation (m^2, rad^2)
+        self._n_deviation = 0
         self._stamp: float | None = None
         self._lost_streak = 0
         self._links: list[_FrameLink] = []
@@ -224,27 +250,39 @@ class StereoOdometry:
         if self._keyframe is None:
             T_world_from_cam = self.T_world_from_base0 @ T_base_from_cam
             self._new_keyframe(left, right, disparity_px, T_world_from_cam, None)
+            self._T_measured, self._since_measured_s = T_world_from_cam, 0.0
             n = int(self._keyframe.valid.sum())
             return self._finish(start, T_world_from_cam, T_base_from_cam, KEYFRAME, n, n, dt)
-        # the motion model: the last step again, scaled to this frame's time step
-        T_pred = self._T_world_from_cam @ scale_motion(self._velocity, dt / self._velocity_dt)
-        status, T_world_from_cam, n_tracked, n_inliers, tracked = self._track(left, T_pred, dt)
+        # the motion model: the last measured motion again, scaled to the time since the last measured frame
+        dt_pred = self._since_measured_s + dt
+        T_pred = self._predict(dt_pred)
+        status, T_world_from_cam, n_tracked, n_inliers, tracked = self._track(left, T_pred, dt_pred)
+        if status == LOST:                       # the keyframes of the window, then fresh features
+            status, T_world_from_cam, n_tracked, n_inliers, tracked = self._relocalize(
+                left, right, disparity_px, T_pred, dt_pred, (status, T_world_from_cam, n_tracked, n_inliers, tracked))
         if status == LOST:
             self._lost_streak += 1
+            self._since_measured_s += dt
             if self._lost_streak >= self.config.max_lost_streak:
-                self._map.clear()                # restart at the predicted pose
+                self._map.clear()                # restart at the predicted pose, the motion kept
                 self._new_keyframe(left, right, disparity_px, T_pred, None)
-                self._velocity_known = False
+                self._T_measured, self._since_measured_s = T_pred, 0.0
                 self._lost_streak = 0
             return self._finish(start, T_pred, T_base_from_cam, LOST, n_tracked, n_inliers, dt)
         self._lost_streak = 0
+        self._measure(T_world_from_cam, dt_pred, T_pred)
+        if status == KEYFRAME:                   # re-found from fresh features: already a keyframe
+            return self._finish(start, T_world_from_cam, T_base_from_cam, status, n_tracked, n_inliers, dt)
         kf, c = self._keyframe, self.config
         T_key_from_cam = np.linalg.inv(kf.T_world_from_cam) @ T_world_from_cam
         depth = self._median_depth(kf)
         if (n_inliers < c.keyframe_inlier_fraction * int(kf.valid.sum())
                 or np.linalg.norm(T_key_from_cam[:3, 3]) > c.keyframe_depth_fraction * depth
                 or rotation_angle_rad(T_key_from_cam[:3, :3]) > c.keyframe_angle_rad):
+            if c.calibrate_disparity_offset:
+                self._learn_offset(kf, tracked, T_world_from_cam)
             T_world_from_cam = self._new_keyframe(left, right, disparity_px, T_world_from_cam, tracked)
+            self._T_measured = T_world_from_cam
             status = KEYFRAME
         return self._finish(start, T_world_from_cam, T_base_from_cam, status, n_tracked, n_inliers, dt)
 
@@ -269,12 +307,6 @@ class StereoOdometry:
         return stamp - previous
 
     def _finish(self, start, T_world_from_cam, T_base_from_cam, status, n_tracked, n_inliers, dt) -> FrameEstimate:
-        if self._T_world_from_cam is not None:
-            self._velocity = np.linalg.inv(self._T_world_from_cam) @ T_world_from_cam
-            self._velocity_dt = dt
-            # a lost frame's motion is a guess: the next frame is held to the absolute limits only
-            self._velocity_known = status != LOST
-        self._T_world_from_cam = T_world_from_cam
         kf = self._keyframe
         self._n_frames += 1
         if self.keep_history:
@@ -385,7 +417,7 @@ class StereoOdometry:
         guess_d = np.full(len(uv), np.nan)
         if len(ids):
             z = transform_points(T_cam_from_world, self._map.points(ids))[:, 2]
-            guess_d = s.focal_px * s.baseline_m / np.maximum(z, 1e-3) - s.doffs_px
+            guess_d = s.focal_px * s.baseline_m / np.maximum(z, 1e-3) - s.doffs_px - self._offset_px
         new_uv = self._corners(left, c.max_features - len(uv), uv)
         all_uv = np.concatenate([uv, new_uv]).astype(np.float32)
         u_right = self._right_columns(left, right, disparity_px, all_uv,
@@ -393,10 +425,7 @@ class StereoOdometry:
         # new landmarks: the new corners with a stereo match (eq. 14-16)
         fresh = np.isfinite(u_right[len(uv):])
         nuv = new_uv[fresh]
-        d = nuv[:, 0] - u_right[len(uv):][fresh]
-        z = depth_m_from_disparity_px(d, focal_px=s.focal_px, baseline_m=s.baseline_m, doffs_px=s.doffs_px)
-        K = self._K
-        points_cam = np.column_stack([(nuv[:, 0] - K[0, 2]) * z / K[0, 0], (nuv[:, 1] - K[1, 2]) * z / K[1, 1], z])
+        points_cam = self._backproject(nuv, nuv[:, 0] - u_right[len(uv):][fresh])
         new_ids = self._map.add_landmarks(transform_points(T_world_from_cam, points_cam))
         kf = Keyframe(frame=self._n_frames, T_world_from_cam=np.array(T_world_from_cam, dtype=np.float64),
                       image=left, landmark=np.concatenate([ids, new_ids]),
@@ -407,41 +436,152 @@ class StereoOdometry:
         self._map.refine()
         return kf.T_world_from_cam
 
-    def _track(self, left, T_pred, dt):
-        """Track the keyframe into ``left`` from the motion model's prediction; when that loses most
-        features (a sudden stop, a wrong prediction after a lost frame), again from the last pose."""
-        c, kf = self.config, self._keyframe
+    def _predict(self, elapsed) -> np.ndarray:
+        """The motion model's pose ``elapsed`` seconds after the last measured frame."""
+        if not self._velocity_known:
+            return self._T_measured
+        return self._T_measured @ scale_motion(self._velocity, elapsed / self._velocity_dt)
+
+    def _measure(self, T_world_from_cam, elapsed, T_pred) -> None:
+        """A measured pose: it updates the velocity and the statistics of the model's deviation."""
+        if self._velocity_known:
+            off = np.linalg.inv(T_pred) @ T_world_from_cam
+            sample = np.array([float(off[:3, 3] @ off[:3, 3]), rotation_angle_rad(off[:3, :3]) ** 2])
+            self._n_deviation = min(self._n_deviation + 1, 20)
+            self._deviation += (sample - self._deviation) / self._n_deviation
+        self._velocity = np.linalg.inv(self._T_measured) @ T_world_from_cam
+        self._velocity_dt, self._velocity_known = elapsed, True
+        self._T_measured, self._since_measured_s = T_world_from_cam, 0.0
+
+    def _track(self, left, T_pred, dt, kf: Keyframe | None = None):
+        """Track keyframe ``kf`` (the reference) into ``left`` from the motion model's prediction; when
+        that loses most features (a sudden stop, a wrong prediction), again from the last measured pose."""
+        c = self.config
+        kf = self._keyframe if kf is None else kf
         valid = np.flatnonzero(kf.valid)
-        if len(valid) < c.min_inliers:
+        if len(valid) < c.min_inliers or kf.image is None:
             return LOST, None, 0, 0, None
         points_key = transform_points(np.linalg.inv(kf.T_world_from_cam), self._map.points(kf.landmark[valid]))
-        result = self._track_from(left, T_pred, dt, valid, points_key)
+        result = self._track_from(left, T_pred, dt, valid, points_key, kf)
         if result[3] < c.keyframe_inlier_fraction * len(valid):
-            retry = self._track_from(left, self._T_world_from_cam, dt, valid, points_key)
-            if retry[3] > result[3]:
+            retry = self._track_from(left, self._T_measured, dt, valid, points_key, kf)
+            if retry[3] > result[3] or (retry[0] != LOST and result[0] == LOST):
                 result = retry
         return result
 
-    def _track_from(self, left, T_guess, dt, valid, points_key):
+    def _relocalize(self, left, right, disparity_px, T_pred, dt, lost):
+        """A frame the reference keyframe could not place: the other keyframes of the window (newest
+        first) and, failing those, fresh features of this frame found in the reference keyframe."""
+        for kf in reversed(self._map.keyframes):
+            if kf is self._keyframe:
+                continue
+            result = self._track(left, T_pred, dt, kf)
+            if result[0] != LOST:
+                self._keyframe = kf
+                return result
+        return self._track_fresh(left, right, disparity_px, T_pred, dt, lost)
+
+    def _track_fresh(self, left, right, disparity_px, T_guess, dt, lost):
+        """The frame from scratch: new corners with their depth from this frame's pair, found in the
+        reference keyframe's image, PnP (the keyframe's view of this frame's points). The reference's
+        landmarks are then tracked again from that pose; if they still fail, the frame starts a new
+        window (a keyframe at the measured pose: no jump)."""
         c, kf = self.config, self._keyframe
-        T_guess_from_key = np.linalg.inv(T_guess) @ kf.T_world_from_cam
-        X = transform_points(T_guess_from_key, points_key)
-        guess = kf.uv[valid].astype(np.float64).copy()
+        uv = self._corners(left, c.max_features, np.empty((0, 2), np.float32))
+        u_right = self._right_columns(left, right, disparity_px, uv, np.full(len(uv), np.nan))
+        stereo = np.isfinite(u_right)
+        if stereo.sum() < c.min_inliers or kf.image is None:
+            return lost
+        uv = uv[stereo]
+        points_cam = self._backproject(uv, uv[:, 0] - u_right[stereo])
+        T_key_from_guess = np.linalg.inv(kf.T_world_from_cam) @ T_guess
+        uv_key, ok = self._klt(left, kf.image, uv, self._project(T_key_from_guess, points_cam, uv), c.klt_levels,
+                               c.klt_window_px)
+        solved = self._solve_pnp(points_cam[ok], uv_key[ok].astype(np.float64), T_key_from_guess)
+        if solved is None:
+            return lost
+        T_world_from_cam = kf.T_world_from_cam @ solved[0]
+        if not self._plausible(T_world_from_cam, T_guess, dt):
+            return lost
+        result = self._track(left, T_world_from_cam, dt)
+        if result[0] != LOST:
+            return result
+        self._map.clear()
+        T_world_from_cam = self._new_keyframe(left, right, disparity_px, T_world_from_cam, None)
+        return KEYFRAME, T_world_from_cam, int(ok.sum()), len(solved[1]), None
+
+    def _project(self, T_b_from_a, points_a, fallback_uv) -> np.ndarray:
+        """Pixels (N, 2) of points ``points_a`` seen from b; ``fallback_uv`` where behind the camera."""
+        X = transform_points(T_b_from_a, points_a)
+        guess = np.asarray(fallback_uv, dtype=np.float64).copy()
         front = X[:, 2] > 0.05
         guess[front] = (X[front, :2] / X[front, 2:3]) * [self._K[0, 0], self._K[1, 1]] + self._K[:2, 2]
-        uv, ok = self._klt(kf.image, left, kf.uv[valid], guess, c.klt_levels, c.klt_window_px)
-        n_tracked = int(ok.sum())
-        if n_tracked < c.min_inliers:
-            return LOST, None, n_tracked, 0, None
-        obj = points_key[ok]
-        img = uv[ok].astype(np.float64)
-        rvec, tvec = rvec_t_from_T(T_guess_from_key)
+        return guess
+
+    def _backproject(self, uv, disparity_px, offset_px: float | None = None) -> np.ndarray:
+        """Camera-frame points of pixels ``uv`` (N, 2) with their disparities, eq. (14)-(16), the rig's
+        ``doffs`` plus the learnt disparity offset (or ``offset_px``)."""
+        s, K = self.stereo, self._K
+        offset = self._offset_px if offset_px is None else offset_px
+        z = depth_m_from_disparity_px(disparity_px, focal_px=s.focal_px, baseline_m=s.baseline_m,
+                                      doffs_px=s.doffs_px + offset)
+        return np.column_stack([(uv[:, 0] - K[0, 2]) * z / K[0, 0], (uv[:, 1] - K[1, 2]) * z / K[1, 1], z])
+
+    def _learn_offset(self, kf: Keyframe, tracked, T_world_from_cam) -> None:
+        """Learn the disparity offset from the motion between keyframe ``kf`` and this frame.
+
+        A rig whose rectified principal points are off by ``e`` px gives depths ``b f / (d + doffs)``
+        wrong by the factor ``d / (d + e)``: far points much more than near ones, which no rigid
+        motion reconciles. The keyframe's stereo points are re-made with the offset ``o - h``, ``o``,
+        ``o + h`` and the pose refined on this frame's tracks each time; the vertex of the parabola
+        through the three (truncated) reprojection costs is this pair's offset, its curvature the
+        weight of an information-weighted mean over the run (starting from 0 px with
+        ``offset_prior_weight``; at most ``max_disparity_offset_px`` either way).
+        """
+        c = self.config
+        ids, uv_now = tracked
+        order = np.argsort(kf.landmark)
+        j = order[np.searchsorted(kf.landmark[order], ids)]
+        d = kf.uv[j, 0] - kf.u_right[j]
+        use = np.isfinite(d)
+        if use.sum() < c.min_inliers:
+            return
+        uv_key, d, img = kf.uv[j][use].astype(np.float64), d[use], uv_now[use].astype(np.float64)
+        rvec0, tvec0 = rvec_t_from_T(np.linalg.inv(T_world_from_cam) @ kf.T_world_from_cam)
+        h, o = 0.5, self._offset_mean_px
+        costs = []
+        for offset in (o - h, o, o + h):
+            obj = self._backproject(uv_key, d, offset)
+            if not (obj[:, 2] > 0).all():
+                return
+            rvec, tvec = cv2.solvePnPRefineLM(obj, img, self._K, None, rvec0.copy(), tvec0.copy())
+            proj, _ = cv2.projectPoints(obj, rvec, tvec, self._K, None)
+            err2 = np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1)
+            costs.append(float(np.minimum(err2, c.ransac_threshold_px ** 2).sum()))
+        curvature = (costs[2] - 2.0 * costs[1] + costs[0]) / (h * h)
+        if not curvature > 0.0:
+            return
+        vertex = o - (costs[2] - costs[0]) / (2.0 * h) / curvature
+        vertex = float(np.clip(vertex, -c.max_disparity_offset_px, c.max_disparity_offset_px))
+        self._offset_sum += curvature * vertex
+        self._offset_weight += curvature
+        self._offset_mean_px = self._offset_sum / self._offset_weight
+        self._offset_px = self._offset_mean_px if abs(self._offset_mean_px) >= c.min_disparity_offset_px else 0.0
+        self._map.cx_right_px = float(self.stereo.right.P[0, 2]) + self._offset_px
+
+    def _solve_pnp(self, obj, img, T_guess):
+        """PnP-RANSAC from ``T_guess`` (camera from object), then LM on the inliers re-selected twice;
+        ``(T_cam_from_obj, inliers)`` or None with fewer than ``min_inliers``."""
+        c = self.config
+        if len(obj) < c.min_inliers:
+            return None
+        rvec, tvec = rvec_t_from_T(T_guess)
         found, rvec, tvec, inliers = cv2.solvePnPRansac(
             obj, img, self._K, None, rvec.copy(), tvec.copy(), useExtrinsicGuess=True,
             iterationsCount=c.ransac_iterations, reprojectionError=c.ransac_threshold_px, confidence=0.999,
             flags=cv2.SOLVEPNP_ITERATIVE)
         if not found or inliers is None or len(inliers) < c.min_inliers:
-            return LOST, None, n_tracked, 0 if inliers is None else len(inliers), None
+            return None
         inl = inliers.ravel()
         for _ in range(2):             # LM on the inliers, re-select under the polished pose
             rvec, tvec = cv2.solvePnPRefineLM(obj[inl], img[inl], self._K, None, rvec, tvec)
@@ -449,27 +589,45 @@ class StereoOdometry:
             err = np.linalg.norm(proj.reshape(-1, 2) - img, axis=1)
             inl = np.flatnonzero(err < c.ransac_threshold_px)
             if len(inl) < c.min_inliers:
-                return LOST, None, n_tracked, len(inl), None
-        T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_from_rvec_t(rvec, tvec))
-        T_pred = self._T_world_from_cam @ scale_motion(self._velocity, dt / self._velocity_dt)
-        if not (np.isfinite(T_world_from_cam).all() and self._plausible(T_world_from_cam, T_pred, dt)):
+                return None
+        T = T_from_rvec_t(rvec, tvec)
+        return (T, inl) if np.isfinite(T).all() else None
+
+    def _track_from(self, left, T_guess, dt, valid, points_key, kf):
+        c = self.config
+        T_guess_from_key = np.linalg.inv(T_guess) @ kf.T_world_from_cam
+        guess = self._project(T_guess_from_key, points_key, kf.uv[valid])
+        uv, ok = self._klt(kf.image, left, kf.uv[valid], guess, c.klt_levels, c.klt_window_px)
+        n_tracked = int(ok.sum())
+        if n_tracked < c.min_inliers:
+            return LOST, None, n_tracked, 0, None
+        img = uv[ok].astype(np.float64)
+        solved = self._solve_pnp(points_key[ok], img, T_guess_from_key)
+        if solved is None:
+            return LOST, None, n_tracked, 0, None
+        T_cam_from_key, inl = solved
+        T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_cam_from_key)
+        if not self._plausible(T_world_from_cam, self._predict(dt), dt):
             return LOST, None, n_tracked, len(inl), None
         tracked = (kf.landmark[valid][ok][inl], img[inl].astype(np.float32))
         return TRACKED, T_world_from_cam, n_tracked, len(inl), tracked
 
     def _plausible(self, T_world_from_cam, T_pred, dt) -> bool:
-        """The step from the last frame within the speed and turn-rate limits, and (once the motion is
-        known) within the acceleration limits of the motion model's prediction."""
+        """The step from the last measured frame (``dt`` ago) within the speed and turn-rate limits and,
+        once the motion is known, its deviation from the motion model's prediction within what the
+        acceleration limits allow plus three times the model's usual deviation (its RMS over the last
+        measured frames, as kiss-icp's adaptive threshold): a gross failure, never a real motion."""
         c = self.config
-        step = np.linalg.inv(self._T_world_from_cam) @ T_world_from_cam
+        step = np.linalg.inv(self._T_measured) @ T_world_from_cam
         if (np.linalg.norm(step[:3, 3]) > c.max_speed_mps * dt
                 or rotation_angle_rad(step[:3, :3]) > c.max_turn_rate_radps * dt):
             return False
         if not self._velocity_known:
             return True
         off = np.linalg.inv(T_pred) @ T_world_from_cam
-        return (np.linalg.norm(off[:3, 3]) <= c.max_acceleration_mps2 * dt * dt
-                and rotation_angle_rad(off[:3, :3]) <= c.max_angular_acceleration_radps2 * dt * dt)
+        sigma = np.sqrt(self._deviation) if self._n_deviation >= 5 else np.zeros(2)
+        return (np.linalg.norm(off[:3, 3]) <= c.max_acceleration_mps2 * dt * dt + 3.0 * sigma[0]
+                and rotation_angle_rad(off[:3, :3]) <= c.max_angular_acceleration_radps2 * dt * dt + 3.0 * sigma[1])
 
 
 def _row_slope(image: np.ndarray, uv: np.ndarray, window_px: int) -> np.ndarray:

@@ -3,7 +3,7 @@
 TUM format: one line ``t tx ty tz qx qy qz qw`` per pose (the base in the world), ``#`` comments.
 Metrics (:func:`trajectory_metrics`; definitions in docs/odometry.md, Metrics): ATE after a
 rigid Umeyama alignment (``evo_ape -a``) and unaligned, RPE per metre over consecutive segments
-(``evo_rpe --delta 1 --delta_unit m``), end-point error. Conventions: docs/conventions.md.
+(``evo_rpe --delta 1 --delta_unit m --pairs_from_reference``, divided by the 1 m), end-point error. Conventions: docs/conventions.md.
 
 References
 ----------
@@ -25,7 +25,8 @@ from ..io import atomic_write
 from ..transforms import T_from_position_quaternion, T_from_R_t, quaternion_from_rotation, rotation_angle_rad
 
 __all__ = ["write_tum", "read_tum", "umeyama_alignment", "TrajectoryMetrics", "trajectory_metrics",
-           "path_length_m", "plot_trajectories"]
+           "path_length_m", "plot_trajectories", "moved_to_body",
+           "rpe_segments"]
 
 
 def _poses(name: str, T) -> np.ndarray:
@@ -158,6 +159,40 @@ class TrajectoryMetrics:
                 f"{rpe}, end point {end}")
 
 
+def moved_to_body(T_world_from_base, T_base_from_cam, T_body_from_cam, T_world_from_body0=None) -> np.ndarray:
+    """The poses of another body carrying the same camera: ``T_world_from_base @ T_base_from_cam @
+    inv(T_body_from_cam)`` per frame (N, 4, 4), so that an estimate and a truth of different bodies
+    (EuRoC's body frame, a drone's IMU) are compared as one body.
+
+    ``T_base_from_cam``, ``T_body_from_cam``: (4, 4) or one per frame; ``T_world_from_body0``: the
+    world re-anchored so that the first pose is this one (the truth's first pose).
+    """
+    T = _poses("T_world_from_base", T_world_from_base)
+    M = np.broadcast_to(np.asarray(T_base_from_cam, dtype=np.float64), T.shape)
+    B = np.broadcast_to(np.asarray(T_body_from_cam, dtype=np.float64), T.shape)
+    out = T @ M @ np.linalg.inv(B)
+    if T_world_from_body0 is not None:
+        out = np.asarray(T_world_from_body0, dtype=np.float64) @ np.linalg.inv(out[0]) @ out
+    return out
+
+
+def rpe_segments(T_true, delta_m: float) -> list[int]:
+    """The frames that cut the true path into consecutive segments of at least ``delta_m`` metres.
+
+    As ``evo_rpe --delta D --delta_unit m --pairs_from_reference`` (evo's ``filter_pairs_by_path``,
+    consecutive pairs): the first frame starts the first segment; walking the true positions, a
+    frame ends a segment (and starts the next) when the path since the last end reaches ``delta_m``.
+    """
+    p = _poses("T_true", T_true)[:, :3, 3]
+    ends, path = [0], 0.0
+    for i in range(1, len(p)):
+        path += float(np.linalg.norm(p[i] - p[i - 1]))
+        if path >= delta_m - 1e-9:          # (ten 0.1 m steps are a metre, whatever the rounding)
+            ends.append(i)
+            path = 0.0
+    return ends
+
+
 def trajectory_metrics(T_estimated, T_true, *, delta_m: float = 1.0, alignment: str = "se3") -> TrajectoryMetrics:
     """ATE, RPE per metre and end-point error of ``T_estimated`` against ``T_true`` (same frames).
 
@@ -187,10 +222,8 @@ def trajectory_metrics(T_estimated, T_true, *, delta_m: float = 1.0, alignment: 
         aligned = float(np.sqrt(np.mean(np.sum((p @ A[:3, :3].T + A[:3, 3] - q) ** 2, axis=1))))
     dist = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
     t_err, r_err = [], []
-    for i in range(len(P)):
-        j = int(np.searchsorted(dist, dist[i] + delta_m - 1e-9))
-        if j >= len(P):
-            break
+    ends = rpe_segments(Q, delta_m)
+    for i, j in zip(ends, ends[1:]):
         E = np.linalg.inv(np.linalg.inv(Q[i]) @ Q[j]) @ (np.linalg.inv(P[i]) @ P[j])
         t_err.append(np.linalg.norm(E[:3, 3]))
         r_err.append(math.degrees(rotation_angle_rad(E[:3, :3])))

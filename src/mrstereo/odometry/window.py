@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from .. import _checks
-from ..transforms import T_from_rvec_t, rotation_jacobian_factor, rotations_from_rvecs
+from ..transforms import T_from_rvec_t, rotation_jacobian_factor, rotations_from_rvecs, transform_points
 from ._kernels import window_back_substitute, window_normal_equations, window_residuals, window_schur
 
 __all__ = ["WindowResult", "refine_window"]
@@ -294,6 +294,13 @@ class LocalMap:
         if not result.success:
             return result
         for kf, T_cam_from_world in zip(self.keyframes, result.T_cam_from_world):
+            # the landmarks only this keyframe sees (not refined) move with it: they were made from its pair
+            own = kf.landmark[kf.valid]
+            own = own[~np.isin(own, shared)]
+            if len(own):
+                rows = np.searchsorted(self.ids, own)
+                moved = np.linalg.inv(T_cam_from_world) @ np.linalg.inv(kf.T_world_from_cam)
+                self.xyz[rows] = transform_points(moved, self.xyz[rows])
             kf.T_world_from_cam = np.linalg.inv(T_cam_from_world)
         self.xyz[np.searchsorted(self.ids, shared)] = result.points_world
         bad = result.error_px > self.outlier_px
