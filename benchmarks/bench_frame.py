@@ -28,11 +28,11 @@ quote numbers measured on a quiet machine only. ``--cpu`` times the stages in CP
 calling thread instead (one thread): on a busy machine it still counts each chain's own work
 (not the time other processes took), though shared caches still slow both chains.
 
-``--cost nsad`` (or ``zncc``, ``nssd``) runs the matcher with that window cost in both modes
+``--cost nssd`` (or ``zncc``) runs the matcher with that window cost in both modes
 (default: the preset's).
 
     python benchmarks/bench_frame.py [--repeats 3] [--frames 10] [--sizes 640x480,320x240] [--cpu] [--odometry]
-    python benchmarks/bench_frame.py --scenes [--repeats 5] [--cpu] [--near-guard 0] [--cost nsad]
+    python benchmarks/bench_frame.py --scenes [--repeats 5] [--cpu] [--near-guard 0] [--cost nssd]
 """
 from __future__ import annotations
 
@@ -314,7 +314,7 @@ def main() -> None:
                              "(robust to other processes on a busy machine; wall-clock by default)")
     parser.add_argument("--near-guard", type=float, default=None,
                         help="scenes: the reach of the matcher's too-near guard (0 = without the guard; default the preset's)")
-    parser.add_argument("--cost", choices=("nssd", "zncc", "nsad"), default=None,
+    parser.add_argument("--cost", choices=("nssd", "zncc"), default=None,
                         help="the matcher's window cost (default: the preset's)")
     args = parser.parse_args()
     keep_freed_memory()          # as the mrstereo command does (for both chains of this process)
