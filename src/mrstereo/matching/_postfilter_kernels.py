@@ -1,5 +1,5 @@
 """Numba kernels of the post-filters (:mod:`mrstereo.matching.postfilter`): the median's fixed-point code,
-speckles (marked by ``cv2.filterSpeckles``), the depth-edge guard, gap filling.
+speckles, the depth-edge guard, gap filling.
 
 Private: no validation, no defaults. Conventions: docs/conventions.md.
 """
@@ -39,17 +39,90 @@ def decode_median(coded, disparity, scale, out):
             orow[x] = v if (c != 0) & np.isfinite(dr[x]) else nan
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _root(parent, i):
+    """Union-find root of ``i`` (path halving)."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
 @njit(nogil=True, cache=True)
-def drop_marked(disparity, code, marked, out):
-    """``out = disparity`` with NaN where ``code == marked`` (speckles marked by ``cv2.filterSpeckles``)."""
+def drop_speckles(disparity, scale, max_code, max_diff_code, max_size, code, labels, parent, size, out):
+    """``out = disparity`` with NaN on connected regions of at most ``max_size`` pixels.
+
+    Pixels are coded ``clip(rint(d * scale), 0, max_code)``; 4-neighbours connect when
+    both are valid and their codes differ by at most ``max_diff_code``: the regions of
+    ``cv2.filterSpeckles`` on that code, found by union-find over the horizontal runs of
+    connected pixels instead of a flood fill. Per row: links (a branch-free pass), run
+    labels (a running count), then the unions with the row above where a
+    vertical link joins two runs not yet seen joined. Scratch: ``code``, ``labels`` int32
+    (H, W); ``parent``, ``size`` int32 (H * W).
+    """
     height, width = disparity.shape
+    encode_fixed(disparity, scale, 0, 0, max_code, -1, code)
+    link = np.empty(width, np.bool_)          # link[x]: x - 1 and x connect
+    n_runs = 0
+    for y in range(height):
+        cr = code[y]
+        lr = labels[y]
+        link[0] = False
+        for x in range(1, width):
+            c = cr[x]
+            p = cr[x - 1]
+            link[x] = (c >= 0) & (p >= 0) & (abs(c - p) <= max_diff_code)
+        count = 0                        # pixels of the current run (in a register)
+        for x in range(width):
+            valid = cr[x] >= 0
+            if valid and not link[x]:
+                if count:
+                    size[n_runs - 1] = count
+                parent[n_runs] = n_runs
+                n_runs += 1
+                count = 0
+            count += 1 if valid else 0
+            lr[x] = n_runs - 1 if valid else -1
+        if count:
+            size[n_runs - 1] = count
+        if y == 0:
+            continue
+        up_codes = code[y - 1]
+        up_labels = labels[y - 1]
+        for x in range(width):           # vertical links, in place of the row links
+            c = cr[x]
+            u = up_codes[x]
+            link[x] = (c >= 0) & (u >= 0) & (abs(c - u) <= max_diff_code)
+        prev_up, prev_here = -1, -1
+        for x in range(width):           # unite where a link joins two runs not yet seen joined
+            if not link[x]:
+                continue
+            up = up_labels[x]
+            run = lr[x]
+            if up == prev_up and run == prev_here:
+                continue
+            prev_up, prev_here = up, run
+            a = _root(parent, up)
+            b = _root(parent, run)
+            if a != b:                   # the older run's root stays the root
+                parent[max(a, b)] = min(a, b)
+    # a root is the smallest run of its region: sizes add up into it going up, and the
+    # flag "small" overwrites it last going down
+    for run in range(n_runs):
+        root = _root(parent, run)
+        parent[run] = root
+        if root != run:
+            size[root] += size[run]
+    for run in range(n_runs - 1, -1, -1):
+        size[run] = 1 if size[parent[run]] <= max_size else 0
     nan = np.float32(np.nan)
     for y in range(height):
         dr = disparity[y]
-        cr = code[y]
+        lr = labels[y]
         orow = out[y]
-        for x in range(width):           # branch-free (vectorizes)
-            orow[x] = nan if cr[x] == marked else dr[x]
+        for x in range(width):
+            run = lr[x]
+            orow[x] = nan if run >= 0 and size[run] != 0 else dr[x]
 
 
 @njit(nogil=True, cache=True)

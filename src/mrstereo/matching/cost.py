@@ -254,8 +254,10 @@ def match_prepared(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi
     """
     d_lo, d_hi, rows, cols = _checked_band(left, right, d_lo, d_hi, rows, cols)
     h, w = left.shape
-    out = (np.full((h, w), -1, np.int32), np.zeros((h, w), np.float32), np.full((h, w), _band_kernels.BIG, np.float32),
-           np.full((h, w), _band_kernels.BIG, np.float32), np.full((h, w), -1, np.int32))
+    big = _band_kernels.BIG
+    out = (_outside((h, w), np.int32, rows, cols, -1), _outside((h, w), np.float32, rows, cols, 0.0),
+           _outside((h, w), np.float32, rows, cols, big), _outside((h, w), np.float32, rows, cols, big),
+           _outside((h, w), np.int32, rows, (0, w) if right_check else (0, 0), -1))
     if rows[1] > rows[0] and cols[1] > cols[0]:
         _band_kernels.band_winners(left.arrays, right.arrays, left.window // 2, left.kind == _band_kernels.ZNCC,
                                    (d_lo, d_hi), (*rows, *cols), _strips(n_strips, rows[1] - rows[0]),
@@ -264,6 +266,20 @@ def match_prepared(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi
 
 
 _NONE = np.zeros((1, 1), np.float32)      # an output the kernel is told not to write
+
+
+def _outside(shape: tuple[int, int], dtype, rows: tuple[int, int], cols: tuple[int, int], value) -> np.ndarray:
+    """A new array whose pixels outside ``rows`` x ``cols`` hold ``value`` (the kernel writes the inside;
+    an empty span: everywhere)."""
+    out = np.empty(shape, dtype)
+    if rows[1] <= rows[0] or cols[1] <= cols[0]:
+        out.fill(value)
+        return out
+    out[:rows[0]] = value
+    out[rows[1]:] = value
+    out[rows[0]:rows[1], :cols[0]] = value
+    out[rows[0]:rows[1], cols[1]:] = value
+    return out
 
 
 class CheckedMatch(NamedTuple):
@@ -316,9 +332,9 @@ def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi:
     confidence[rows[1]:] = 0.0
     alt_px = alt_cost = best_cost = None
     if alt_band is not None:
-        alt_px = np.full((h, w), np.nan, np.float32)
-        alt_cost = np.full((h, w), _band_kernels.BIG, np.float32)
-        best_cost = np.full((h, w), _band_kernels.BIG, np.float32)
+        alt_px = _outside((h, w), np.float32, rows, cols, np.nan)
+        alt_cost = _outside((h, w), np.float32, rows, cols, _band_kernels.BIG)
+        best_cost = _outside((h, w), np.float32, rows, cols, _band_kernels.BIG)
     checks = (-1.0 if lr_max_diff_px is None else float(lr_max_diff_px), float(uniqueness_ratio),
               -1.0 if max_cost is None else float(max_cost), bool(subpixel))
     if rows[1] > rows[0] and cols[1] > cols[0]:
@@ -492,20 +508,25 @@ def _tiles(want: np.ndarray, box, radius: int, n_threads: int) -> np.ndarray:
     ``box`` in one band of rows per thread when the tiles would not save a fifth of the sums."""
     row0, row1, col0, col1 = (int(v) for v in box)
     n_rows = row1 - row0
-    n_bands = max(n_threads, -(-n_rows // TILE_ROWS))
-    edges = [row0 + (b * n_rows) // n_bands for b in range(n_bands + 1)]
-    boxes = []
-    for b in range(n_bands):
-        hit = np.flatnonzero(want[edges[b]:edges[b + 1], col0:col1].any(axis=0)) + col0
-        if not hit.size:
-            continue
-        breaks = np.flatnonzero(np.diff(hit) > TILE_GAP_COLS + 2 * radius)
-        starts = np.concatenate([hit[:1], hit[breaks + 1]])
-        ends = np.concatenate([hit[breaks], hit[-1:]]) + 1
-        boxes += [(edges[b], edges[b + 1], int(a), int(e)) for a, e in zip(starts, ends)]
-    tiles = np.array(boxes, np.int64).reshape(-1, 4)
-    tiled = int(((tiles[:, 1] - tiles[:, 0] + 2 * radius) * (tiles[:, 3] - tiles[:, 2] + 2 * radius)).sum())
-    if 5 * tiled < 4 * (n_rows + 2 * radius * n_threads) * (col1 - col0 + 2 * radius):
-        return tiles
+    if n_rows >= 2 * TILE_ROWS:
+        # per band the wanted columns, gaps shorter than TILE_GAP_COLS + 2 r closed, then their runs
+        full = n_rows // TILE_ROWS
+        edges = np.append(row0 + TILE_ROWS * np.arange(full + 1), row1)[:full + 1 + (n_rows % TILE_ROWS > 0)]
+        hit = want[row0:row0 + full * TILE_ROWS, col0:col1].reshape(full, TILE_ROWS, col1 - col0).any(axis=1)
+        if n_rows % TILE_ROWS:
+            hit = np.vstack([hit, want[row0 + full * TILE_ROWS:row1, col0:col1].any(axis=0)])
+        hit = hit.view(np.uint8)
+        gap = TILE_GAP_COLS + 2 * radius
+        margin = gap + 2                 # zero columns on both sides: the closing never meets the border
+        closed = cv2.morphologyEx(np.pad(hit, ((0, 0), (margin, margin))), cv2.MORPH_CLOSE,
+                                  np.ones((1, gap + 1), np.uint8))
+        step = np.diff(closed.astype(np.int8), axis=1)
+        bands, starts = np.nonzero(step == 1)
+        ends = np.nonzero(step == -1)[1]
+        tiles = np.stack([edges[bands], edges[bands + 1], col0 + starts + 1 - margin, col0 + ends + 1 - margin],
+                         axis=1).astype(np.int64)
+        tiled = int(((tiles[:, 1] - tiles[:, 0] + 2 * radius) * (tiles[:, 3] - tiles[:, 2] + 2 * radius)).sum())
+        if 5 * tiled < 4 * (n_rows + 2 * radius * n_threads) * (col1 - col0 + 2 * radius):
+            return tiles
     edges = [row0 + (s * n_rows) // n_threads for s in range(n_threads + 1)]
     return np.array([(edges[s], edges[s + 1], col0, col1) for s in range(n_threads)], np.int64)

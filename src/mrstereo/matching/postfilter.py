@@ -46,26 +46,26 @@ def median_filter(disparity_px: np.ndarray, *, size: int, max_px: float | None =
 
 def remove_speckles(disparity_px: np.ndarray, *, max_size_px: int, max_diff_px: float) -> np.ndarray:
     """Invalidate connected regions (4-neighbours within ``max_diff_px``) of at most
-    ``max_size_px`` pixels: ``cv2.filterSpeckles`` on a 1/16-pixel fixed-point copy (StereoBM's)."""
+    ``max_size_px`` pixels: exactly ``cv2.filterSpeckles`` on a 1/16-pixel fixed-point copy, by
+    union-find over row runs (each pixel visited a fixed number of times, no flood fill; faster
+    than OpenCV's, docs/matching.md "Speed")."""
     if max_size_px <= 0:
         return disparity_px
     disparity_px = np.ascontiguousarray(disparity_px, dtype=np.float32)
     if disparity_px.ndim != 2:
         raise ValueError(f"disparity_px must be a 2-D map (H, W), got shape {disparity_px.shape}")
     h, w = disparity_px.shape
-    code = scratch("speckle_code", (h, w), np.int16)
-    _postfilter_kernels.encode_fixed(disparity_px, np.float32(_SPECKLE_SCALE), 0, 0, 2047 * _SPECKLE_SCALE,
-                                     _SPECKLE_INVALID, code)
-    # (OpenCV's scratch: a point, a label and a flag per pixel)
-    cv2.filterSpeckles(code, _SPECKLE_INVALID, int(max_size_px), int(round(max_diff_px * _SPECKLE_SCALE)),
-                       scratch("speckle_buffer", (1, h * w * 9), np.uint8))
     out = np.empty((h, w), np.float32)
-    _postfilter_kernels.drop_marked(disparity_px, code, _SPECKLE_INVALID, out)
+    _postfilter_kernels.drop_speckles(disparity_px, np.float32(_SPECKLE_SCALE), 2047 * _SPECKLE_SCALE,
+                                      int(round(max_diff_px * _SPECKLE_SCALE)), int(max_size_px),
+                                      scratch("speckle_code", (h, w), np.int32),
+                                      scratch("speckle_labels", (h, w), np.int32),
+                                      scratch("speckle_parent", (h * w,), np.int32),
+                                      scratch("speckle_size", (h * w,), np.int32), out)
     return out
 
 
 _SPECKLE_SCALE = 16           # the speckle filter's fixed point: 1/16 px, as StereoBM's output
-_SPECKLE_INVALID = -1         # the code of invalid pixels (and of the speckles cv2 marks)
 
 
 def guard_depth_edges(disparity_px: np.ndarray, *, guard_px: int, jump_px: float) -> np.ndarray:
