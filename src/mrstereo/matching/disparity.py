@@ -46,8 +46,9 @@ class DisparityResult:
     plan : MultiRangePlan
         The levels searched and their work (``plan.describe()``).
     levels : tuple of ndarray float32 (H, W)
-        Each level's gated, full-width disparity (finest level first; refined levels after
-        their full-resolution re-scoring), before the union.
+        Each level's gated, full-width disparity (finest level first; a refined level re-scored
+        at full resolution where the union can take its values, up-sampled elsewhere), before the
+        union.
     """
 
     disparity_px: np.ndarray
