@@ -49,7 +49,7 @@ import numba
 import numpy as np
 
 from mrstereo.io import read_image
-from mrstereo.mapping import OccupancyGrid
+from mrstereo.mapping import GridSpec, OccupancyGrid
 from mrstereo.mapping.fusion import add_observation
 from mrstereo.pipeline.frame import obstacles_from_pair
 from mrstereo.pipeline.parallel import keep_freed_memory
@@ -124,7 +124,7 @@ class OpenCVChain:
         self.counts = np.zeros(config.grid.shape, dtype=np.int32)
 
     def __call__(self, k: int, left, right) -> dict[str, float]:
-        record, grid, obst = self.manifest.frames[k], self.config.grid, self.config.obstacles
+        record, grid, obst = self.manifest.frames[k], self.config.grid, self.config.obstacle_config
         T_rc = self.manifest.mount.T_base_from_rectified(self.manifest.calibration.left.R, record.pan_rad)
         t = [CLOCK()]
         left_r = cv2.remap(left, *self.maps[0], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
@@ -165,6 +165,8 @@ def whole_frame(sizes, n_frames: int, repeats: int, seed: int, odometry: bool = 
     from mrstereo.world.dataset import write_synthetic_dataset
 
     config = PipelineConfig()
+    if config.grid is None:          # both chains on one fixed grid (the default map grows in tiles)
+        config = dataclasses.replace(config, grid=GridSpec())
     if cost is not None:
         config = dataclasses.replace(config, matching=preset_config(config.preset).replace(cost={"kind": cost}))
     print(f"whole frame, raw pair -> grid update; synthetic corridor seed {seed}, {n_frames} frames, "
