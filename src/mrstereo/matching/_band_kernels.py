@@ -168,41 +168,29 @@ def box_sum(col, out, partial, m, win):
             out[i] += seg[i]
 
 
-@njit(nogil=True, parallel=True, cache=True, fastmath=FASTMATH)
-def window_terms(padded, radius, zncc, n_strips, out_a, out_b):
+@njit(nogil=True, cache=True, fastmath=FASTMATH)
+def window_terms(padded, radius, zncc, out_a, out_b):
     """Per-pixel terms ``a``, ``b`` (module docstring) of the ``W x W`` windows of an image
     padded by ``radius``: running column sums of ``I`` and ``I^2`` down the image plus
-    :func:`box_sum` along the row; ``n_strips`` row strips in parallel, each with its own sums
-    (exact sums only, float32: the same terms for any number of strips)."""
-    height = out_a.shape[0]
+    :func:`box_sum` along the row."""
+    height, width = out_a.shape
+    wp = width + 2 * radius
     win = 2 * radius + 1
     n = np.float32(win * win)
     inv_sqrt_n = np.float32(1.0 / np.sqrt(win * win))
-    for s in prange(n_strips):
-        y_start, y_end = strip_rows(s, n_strips, 0, height)
-        _window_terms_rows(padded, radius, zncc, (y_start, y_end), n, inv_sqrt_n, out_a, out_b)
-
-
-@njit(nogil=True, cache=True, fastmath=FASTMATH, inline="always")
-def _window_terms_rows(padded, radius, zncc, rows, n, inv_sqrt_n, out_a, out_b):
-    """:func:`window_terms` of image rows ``rows[0] .. rows[1] - 1``, running sums from ``rows[0]``."""
-    y_start, y_end = rows
-    width = out_a.shape[1]
-    wp = width + 2 * radius
-    win = 2 * radius + 1
     col1 = np.zeros(wp, padded.dtype)
     col2 = np.zeros(wp, padded.dtype)
     box1 = np.empty(width, padded.dtype)
     box2 = np.empty(width, padded.dtype)
     partial = np.empty((4, wp), padded.dtype)
-    for yy in range(y_start, y_start + 2 * radius):
+    for yy in range(2 * radius):
         row = padded[yy]
         for c in range(wp):
             col1[c] += row[c]
             col2[c] += row[c] * row[c]
-    for y in range(y_start, y_end):
+    for y in range(height):
         add = padded[y + 2 * radius]
-        if y > y_start:
+        if y > 0:
             sub = padded[y - 1]
             for c in range(wp):
                 col1[c] += add[c] - sub[c]
@@ -256,12 +244,12 @@ def replicate_border(padded, radius):
         padded[height + radius + y] = padded[height + radius - 1]
 
 
-@njit(nogil=True, parallel=True, cache=True, fastmath=FASTMATH)
+@njit(nogil=True, cache=True, fastmath=FASTMATH)
 def xsobel_padded(gray, radius, cap, out_pad):
     """OpenCV StereoBM's pre-filter, ``clip(rint(Sobel_x(gray) / 4), -cap, cap)`` (3x3,
-    replicated border), written into ``out_pad`` padded by ``radius`` (replicated); rows in parallel."""
+    replicated border), written into ``out_pad`` padded by ``radius`` (replicated)."""
     height, width = gray.shape
-    for y in prange(height):
+    for y in range(height):
         up = gray[max(y - 1, 0)]
         mid = gray[y]
         down = gray[min(y + 1, height - 1)]

@@ -38,13 +38,13 @@ def _costs(out, window_sums, a_l, b_l, a_r, b_r, n, kind):
 
 
 # ----------------------------------------------------------------------------- refinement
-@njit(nogil=True, parallel=True, cache=True)
+@njit(nogil=True, cache=True)
 def fill_center(disparity_px, radius, out_center_pad):
     """Integer coarse field for the refinement: ``round(d)``, NaNs filled with the nearest
     valid value to the left in the row (else to the right, else 0), padded by ``radius`` with
-    replicated borders; rows in parallel."""
+    replicated borders."""
     height, width = disparity_px.shape
-    for y in prange(height):
+    for y in range(height):
         first = -1
         for x in range(width):
             if np.isfinite(disparity_px[y, x]):

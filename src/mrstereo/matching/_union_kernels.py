@@ -6,48 +6,42 @@ Private: no validation, no defaults. Conventions: docs/conventions.md.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ._band_kernels import FASTMATH
 
 
-@njit(nogil=True, parallel=True, cache=True, fastmath=FASTMATH)
+@njit(nogil=True, cache=True, fastmath=FASTMATH)
 def upsample_gate(level_d, level_c, source_cols, scale, lo, hi, top, row0, row1, col0, col1, out_d, out_c):
     """Step 2 + eq. (11): nearest-neighbour up-sampling along x (full-resolution column
     ``x`` reads level column ``source_cols[x]``), disparity times ``scale``, kept where inside
-    ``[lo, hi]`` and the AOI rows/cols (level rows start at full-resolution row ``top``); rows in parallel."""
+    ``[lo, hi]`` and the AOI rows/cols (level rows start at full-resolution row ``top``)."""
     height, width = out_d.shape
-    for y in prange(height):
-        _upsample_gate_row(level_d, level_c, source_cols, scale, lo, hi, y - top, y >= row0 and y < row1, col0,
-                           col1, out_d[y], out_c[y])
-
-
-@njit(nogil=True, cache=True, fastmath=FASTMATH, inline="always")
-def _upsample_gate_row(level_d, level_c, source_cols, scale, lo, hi, level_row, inside, col0, col1, od, oc):
-    """One row of :func:`upsample_gate` (``inside``: in the AOI's rows)."""
-    width = od.size
     nan = np.float32(np.nan)
     zero = np.float32(0.0)
-    if not inside:
+    for y in range(height):
+        od = out_d[y]
+        oc = out_c[y]
+        if y < row0 or y >= row1:
+            for x in range(width):
+                od[x] = nan
+                oc[x] = zero
+            continue
+        ld = level_d[y - top]
+        lc = level_c[y - top]
+        if level_d.shape[1] == width:       # full-resolution level: no gather (vectorizes)
+            for x in range(width):
+                d = ld[x] * scale
+                ok = (d >= lo) and (d <= hi) and (x >= col0) and (x < col1)
+                od[x] = d if ok else nan
+                oc[x] = lc[x] if ok else zero
+            continue
         for x in range(width):
-            od[x] = nan
-            oc[x] = zero
-        return
-    ld = level_d[level_row]
-    lc = level_c[level_row]
-    if level_d.shape[1] == width:       # full-resolution level: no gather (vectorizes)
-        for x in range(width):
-            d = ld[x] * scale
+            sx = source_cols[x]
+            d = ld[sx] * scale
             ok = (d >= lo) and (d <= hi) and (x >= col0) and (x < col1)
             od[x] = d if ok else nan
-            oc[x] = lc[x] if ok else zero
-        return
-    for x in range(width):
-        sx = source_cols[x]
-        d = ld[sx] * scale
-        ok = (d >= lo) and (d <= hi) and (x >= col0) and (x < col1)
-        od[x] = d if ok else nan
-        oc[x] = lc[sx] if ok else zero
+            oc[x] = lc[sx] if ok else zero
 
 
 @njit(nogil=True, cache=True)

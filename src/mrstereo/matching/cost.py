@@ -191,9 +191,7 @@ def _with_terms(padded: np.ndarray, window: int, cost: str) -> PreparedImage:
     shape = (padded.shape[0] - 2 * r, padded.shape[1] - 2 * r)
     a = np.empty(shape, padded.dtype)
     b = np.empty(shape, np.float32)
-    # float32 sums are exact (prepare, prepare_gray): row strips in parallel give the same terms
-    strips = _strips(None, shape[0]) if padded.dtype == np.float32 else 1
-    _band_kernels.window_terms(padded, r, cost == "zncc", strips, a, b)
+    _band_kernels.window_terms(padded, r, cost == "zncc", a, b)
     return PreparedImage(padded, a, b, window, cost)
 
 
