@@ -28,11 +28,11 @@ quote numbers measured on a quiet machine only. ``--cpu`` times the stages in CP
 calling thread instead (one thread): on a busy machine it still counts each chain's own work
 (not the time other processes took), though shared caches still slow both chains.
 
-``--cost nsad`` (or ``zncc``, ``nssd``) runs the matcher with that window cost in both modes
+``--cost nssd`` (or ``zncc``) runs the matcher with that window cost in both modes
 (default: the preset's).
 
     python benchmarks/bench_frame.py [--repeats 3] [--frames 10] [--sizes 640x480,320x240] [--cpu] [--odometry]
-    python benchmarks/bench_frame.py --scenes [--repeats 5] [--cpu] [--near-guard 0] [--cost nsad]
+    python benchmarks/bench_frame.py --scenes [--repeats 5] [--cpu] [--near-guard 0] [--cost nssd]
 """
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ import numba
 import numpy as np
 
 from mrstereo.io import read_image
-from mrstereo.mapping import OccupancyGrid
+from mrstereo.mapping import GridSpec, OccupancyGrid
 from mrstereo.mapping.fusion import add_observation
 from mrstereo.pipeline.frame import obstacles_from_pair
 from mrstereo.pipeline.parallel import keep_freed_memory
@@ -124,7 +124,7 @@ class OpenCVChain:
         self.counts = np.zeros(config.grid.shape, dtype=np.int32)
 
     def __call__(self, k: int, left, right) -> dict[str, float]:
-        record, grid, obst = self.manifest.frames[k], self.config.grid, self.config.obstacles
+        record, grid, obst = self.manifest.frames[k], self.config.grid, self.config.obstacle_config
         T_rc = self.manifest.mount.T_base_from_rectified(self.manifest.calibration.left.R, record.pan_rad)
         t = [CLOCK()]
         left_r = cv2.remap(left, *self.maps[0], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
@@ -165,6 +165,8 @@ def whole_frame(sizes, n_frames: int, repeats: int, seed: int, odometry: bool = 
     from mrstereo.world.dataset import write_synthetic_dataset
 
     config = PipelineConfig()
+    if config.grid is None:          # both chains on one fixed grid (the default map grows in tiles)
+        config = dataclasses.replace(config, grid=GridSpec())
     if cost is not None:
         config = dataclasses.replace(config, matching=preset_config(config.preset).replace(cost={"kind": cost}))
     print(f"whole frame, raw pair -> grid update; synthetic corridor seed {seed}, {n_frames} frames, "
@@ -314,7 +316,7 @@ def main() -> None:
                              "(robust to other processes on a busy machine; wall-clock by default)")
     parser.add_argument("--near-guard", type=float, default=None,
                         help="scenes: the reach of the matcher's too-near guard (0 = without the guard; default the preset's)")
-    parser.add_argument("--cost", choices=("nssd", "zncc", "nsad"), default=None,
+    parser.add_argument("--cost", choices=("nssd", "zncc"), default=None,
                         help="the matcher's window cost (default: the preset's)")
     args = parser.parse_args()
     keep_freed_memory()          # as the mrstereo command does (for both chains of this process)

@@ -22,8 +22,7 @@ over the same depths: where the paper's multi-range pays, and the work ratio's b
 
 Each thread count also times one band search alone (80 disparities at full resolution, with the
 pre-filter and the preparation of each cost) against StereoBM over the same 80 disparities:
-ns per pixel x disparity for ZNCC (float32) and nsad (the integer engine). The speed, accuracy
-and corridor tables hold the robust and mapping presets with the nsad cost beside the defaults.
+ns per pixel x disparity.
 
     python benchmarks/bench_matching.py [--repeats 15] [--threads 1]
     python benchmarks/bench_matching.py --accuracy [--scale 0.5]
@@ -91,14 +90,15 @@ def per_evaluation(left, right, bm, n_disp: int, repeats: int) -> None:
 
     h, w = left.shape
     evaluations = h * w * n_disp
-    for kind in ("zncc", "nsad"):
-        def search():
-            pair = [prepare_gray(im.astype(np.float32), kind="xsobel", cap=7, window=9, cost=kind)
-                    for im in (left, right)]
-            match_prepared(*pair, d_lo=0, d_hi=n_disp - 1, rows=(0, h), cols=(0, w), right_check=True)
-        ms, base_ms, ratio = paired(search, lambda: bm.compute(left, right), repeats)
-        print(f"  band search alone, {kind}: {1e6 * ms / evaluations:.3f} ns per pixel x disparity, StereoBM "
-              f"{1e6 * base_ms / evaluations:.3f}: ratio {ratio:.2f}")
+
+    def search():
+        pair = [prepare_gray(im.astype(np.float32), kind="xsobel", cap=7, window=9, cost="zncc")
+                for im in (left, right)]
+        match_prepared(*pair, d_lo=0, d_hi=n_disp - 1, rows=(0, h), cols=(0, w), right_check=True)
+
+    ms, base_ms, ratio = paired(search, lambda: bm.compute(left, right), repeats)
+    print(f"  band search alone, zncc: {1e6 * ms / evaluations:.3f} ns per pixel x disparity, StereoBM "
+          f"{1e6 * base_ms / evaluations:.3f}: ratio {ratio:.2f}")
 
 
 def speed(repeats: int, thread_counts=(1, 2)) -> None:
@@ -110,11 +110,8 @@ def speed(repeats: int, thread_counts=(1, 2)) -> None:
     def run(config):
         return lambda: compute_disparity(left, right, calibration=rig, config=config)
 
-    nsad = robust.replace(cost={"kind": "nsad"})
     runs = {
         "mrstereo robust multi-range": run(robust),
-        "mrstereo nsad multi-range": run(nsad),
-        "mrstereo nsad single-range": run(nsad.replace(search={"multi_range": False})),
         "robust without gap filling": run(robust.replace(postfilter={"gap_fill_px": 0})),
         "mrstereo paper multi-range": run(paper),
         "mrstereo robust single-range": run(robust.replace(search={"multi_range": False})),
@@ -130,7 +127,7 @@ def speed(repeats: int, thread_counts=(1, 2)) -> None:
             ms, base_ms, ratio = paired(fn, lambda: bm.compute(left, right), repeats)
             print(f"threads={threads}  {name:30s} median {ms:6.1f} ms  StereoBM 80 disp 9x9 {base_ms:5.1f} ms"
                   f"  ratio {ratio:4.2f}")
-        for name in ("robust", "nsad", "paper"):     # the same matcher over the same depths, alternating
+        for name in ("robust", "paper"):     # the same matcher over the same depths, alternating
             multi_ms, single_ms, ratio = paired(runs[f"mrstereo {name} multi-range"],
                                                 runs[f"mrstereo {name} single-range"], repeats)
             print(f"threads={threads}  {name} multi-range {multi_ms:.1f} ms vs single range {single_ms:.1f} ms: "
@@ -219,9 +216,7 @@ def accuracy(scale: float = 1.0) -> None:
         "OpenCV StereoBM": lambda s: stereo_bm(s.left, s.right, max_disparity_px=s.max_disparity_px),
         "OpenCV StereoSGBM": lambda s: stereo_sgbm(s.left, s.right, max_disparity_px=s.max_disparity_px),
         "mrstereo robust (default)": mr(),
-        "mrstereo robust, nsad cost": mr(robust.replace(cost={"kind": "nsad"})),
         "mrstereo mapping (the mapping chain's)": mr(preset="mapping"),
-        "mrstereo mapping, nsad cost": mr(preset_config("mapping").replace(cost={"kind": "nsad"})),
         "mrstereo paper": mr(preset="paper"),
         "robust without the near guard": mr(robust.replace(near_guard=None)),
         "robust without gap filling": mr(robust.replace(postfilter={"gap_fill_px": 0})),
@@ -245,8 +240,6 @@ def accuracy(scale: float = 1.0) -> None:
         print(f"| {name} | {first[:, 0].mean():.1f} | {first[:, 1].mean():.1f} | "
               + " | ".join(f"{a:.1f}/{b:.1f}" for a, b in cells) + " |", flush=True)
     corridor({"robust (default)": robust, "mapping": preset_config("mapping"),
-              "robust, nsad cost": robust.replace(cost={"kind": "nsad"}),
-              "mapping, nsad cost": preset_config("mapping").replace(cost={"kind": "nsad"}),
               "robust without gap filling": robust.replace(postfilter={"gap_fill_px": 0}),
               "robust, gap filling from the ends alone": robust.replace(postfilter={"gap_fill_support_px": 1})})
 

@@ -49,8 +49,6 @@ def matchers():
         "mrstereo robust, no guard": lambda l, r, d: _mr(l, r, d, robust.replace(near_guard=None)),
         "mrstereo robust": lambda l, r, d: _mr(l, r, d, robust),
         "mrstereo mapping": lambda l, r, d: _mr(l, r, d, preset_config("mapping")),
-        "mrstereo robust, nsad cost": lambda l, r, d: _mr(l, r, d, robust.replace(cost={"kind": "nsad"})),
-        "mrstereo mapping, nsad cost": lambda l, r, d: _mr(l, r, d, preset_config("mapping").replace(cost={"kind": "nsad"})),
     }
 
 

@@ -114,7 +114,7 @@ def test_real_scenes_keep_their_density_and_accuracy(middlebury_scene, name):
 
 
 def test_rival_kernels_equal_the_numpy_expressions():
-    from mrstereo.matching import _kernels
+    from mrstereo.matching import _union_kernels
 
     rng = np.random.default_rng(1)
     h, w, w_level, scale, lo, hi = 30, 64, 32, 2.0, 6.0, 16.0
@@ -126,13 +126,13 @@ def test_rival_kernels_equal_the_numpy_expressions():
     alt_cost = rng.uniform(0, 0.4, (h, w_level)).astype(np.float32)
     source = np.minimum(((np.arange(w) + 0.5) / scale).astype(np.intp), w_level - 1)
     value_cost = np.full((h, w), np.inf, np.float32)
-    _kernels.band_value_cost(d, best, source, np.float32(lo), np.float32(hi), value_cost)
+    _union_kernels.band_value_cost(d, best, source, np.float32(lo), np.float32(hi), value_cost)
     with np.errstate(invalid="ignore"):
         inside = (d >= lo) & (d <= hi)
     np.testing.assert_array_equal(value_cost, np.where(inside, best[:, source], np.inf))
     value_cost = rng.uniform(0, 0.3, (h, w)).astype(np.float32)
     mask = np.zeros((h, w), bool)
-    _kernels.band_rivals(d, alt, alt_cost, source, np.float32(scale), np.float32(lo), np.float32(hi),
+    _union_kernels.band_rivals(d, alt, alt_cost, source, np.float32(scale), np.float32(lo), np.float32(hi),
                          np.float32(2 * scale), np.float32(0.2), np.float32(0.15), value_cost, mask)
     a, c = alt[:, source] * scale, alt_cost[:, source]
     with np.errstate(invalid="ignore"):

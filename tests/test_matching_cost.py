@@ -77,8 +77,8 @@ def test_prefilter_xsobel_matches_opencv_sobel_and_is_integer():
         prefilter(img, "laplace")
 
 
-@pytest.mark.parametrize("kind", ["zncc", "nsad"])
-def test_gain_and_offset_change_leaves_the_normalized_winner_unchanged(kind):
+def test_gain_and_offset_change_leaves_the_normalized_winner_unchanged():
+    kind = "zncc"
     rng = np.random.default_rng(6)
     left = _textured(rng, 16, 40)
     right = np.roll(left, -4, axis=1)
@@ -124,7 +124,7 @@ def test_refinement_of_scattered_pixels_equals_the_running_sums(share):
     assert np.isnan(d_dense[~want]).all()
 
 
-@pytest.mark.parametrize("kind", ["zncc", "nssd", "nsad"])
+@pytest.mark.parametrize("kind", ["zncc", "nssd"])
 def test_refinement_in_boxes_equals_the_running_sums_bit_for_bit(kind):
     """refine_candidates(boxes=...) (running sums per box, products gathered pixel by pixel)
     gives the disparities and costs of the dense path (running sums over row strips, products
@@ -162,63 +162,15 @@ def test_refinement_in_boxes_equals_the_running_sums_bit_for_bit(kind):
     np.testing.assert_array_equal(strips[1], dense[1])
 
 
-def _normalized_reference(image, window):
-    """Each pixel normalized by its own window's mean and deviation (replicated border), times
-    8 steps per deviation, rounded and clipped to +-31 (the integer engine's values)."""
-    r = window // 2
-    padded = np.pad(image.astype(np.float64), r, mode="edge")
-    h, w = image.shape
-    out = np.empty((h, w))
-    for y in range(h):
-        for x in range(w):
-            win = padded[y:y + window, x:x + window]
-            out[y, x] = (image[y, x] - win.mean()) / max(win.std(), 1e-12)
-    return np.clip(np.rint(8.0 * out), -31, 31)
-
-
-def test_integer_engine_normalizes_once_and_sums_absolute_differences():
-    """The nsad cost: the prepared values are the per-pixel normalized, quantized image (float32
-    rounding aside), and the band search's winner and cost are those of a numpy SAD over those
-    values, ``cost = (SAD / (n 8))^2``, with the second best 2+ disparities away."""
-    from mrstereo.matching import cost as C
-
-    rng = np.random.default_rng(8)
-    left = _textured(rng, 15, 26)
-    right = _textured(rng, 15, 26)
-    window, d_lo, d_hi = 5, 1, 7
-    pl, pr = (C.prepare(im.astype(np.int32), window=window, cost="nsad") for im in (left, right))
-    r = window // 2
-    q_left = pl.padded[r:-r, r:-r].astype(np.float64)
-    ref = _normalized_reference(left, window)
-    assert np.abs(q_left - ref).max() <= 1 and (q_left == ref).mean() > 0.97
-    d_int, _, best, second, _ = C.match_prepared(pl, pr, d_lo=d_lo, d_hi=d_hi, rows=(0, 15), cols=(0, 26),
-                                                 right_check=False)
-    lq, rq = pl.padded.astype(np.int64), pr.padded.astype(np.int64)
-    n = window * window
-    for y in range(15):
-        for x in range(d_lo, 26):
-            sads = np.array([np.abs(lq[y:y + window, x:x + window] - rq[y:y + window, x - d:x - d + window]).sum()
-                             if d <= x else np.inf for d in range(d_lo, d_hi + 1)])
-            k = int(np.argmin(sads))
-            assert d_int[y, x] == d_lo + k
-            assert best[y, x] == pytest.approx((sads[k] / (8.0 * n)) ** 2, rel=1e-5)
-            far = np.abs(np.arange(sads.size) - k) > 1
-            c2 = (sads[far].min() / (8.0 * n)) ** 2 if np.isfinite(sads[far]).any() else None
-            if c2 is not None:
-                assert second[y, x] == pytest.approx(c2, rel=1e-5)
-    assert (d_int[:, :d_lo] == -1).all()
-
-
-def test_integer_engine_checks_come_from_the_kept_costs():
-    """match_checked with nsad = the raw winners of the same search through the left-right,
-    uniqueness and maximum-cost checks, evaluated here in numpy; a flat left window has no match."""
+def test_checks_in_the_search_equal_the_checks_of_the_raw_winners():
+    """match_checked (the checks fused into the search) = the raw winners of the same search
+    through the left-right, uniqueness and maximum-cost checks, evaluated here in numpy."""
     from mrstereo.matching import cost as C
 
     rng = np.random.default_rng(9)
     right = _textured(rng, 30, 70)
     left = np.roll(right, 6, axis=1)
-    left[:, 40:55] = 100.0                                    # flat: no match there
-    pl, pr = (C.prepare_gray(im, kind="xsobel", cap=7, window=7, cost="nsad") for im in (left, right))
+    pl, pr = (C.prepare_gray(im, kind="xsobel", cap=7, window=7, cost="zncc") for im in (left, right))
     d_int, sub, best, second, d_right = C.match_prepared(pl, pr, d_lo=0, d_hi=15, rows=(0, 30), cols=(0, 70),
                                                          right_check=True)
     checked = C.match_checked(pl, pr, d_lo=0, d_hi=15, rows=(0, 30), cols=(0, 70), lr_max_diff_px=1.0,
@@ -228,5 +180,4 @@ def test_integer_engine_checks_come_from_the_kept_costs():
     ok = (d_int >= 0) & (back >= 0) & (np.abs(d_int - back) <= 1) & (best <= 0.9 * second) & (best <= 0.6)
     np.testing.assert_array_equal(np.isfinite(checked.disparity_px), ok)
     np.testing.assert_allclose(checked.disparity_px[ok], (d_int + sub)[ok], atol=1e-6)
-    assert (d_int[:, 44:51] == -1).all()                       # the flat windows
-    assert np.nanmedian(np.abs(checked.disparity_px[:, 10:38] - 6)) < 0.2
+    assert np.nanmedian(np.abs(checked.disparity_px[:, 10:64] - 6)) < 0.2

@@ -1,4 +1,4 @@
-"""The near guard's kernels (matching/_kernels.py guard_*) equal the numpy expressions they
+"""The near guard's kernels (matching/_guard_kernels.py) equal the numpy expressions they
 replace, bit for bit: random winners with ties at the thresholds, both float widths."""
 from __future__ import annotations
 
@@ -6,7 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from mrstereo.matching import _kernels, preset_config
+from mrstereo.matching import _guard_kernels, preset_config
+from mrstereo.matching._band_kernels import BIG
 from mrstereo.matching.near_guard import (_finite_in_clusters, _guard_candidates, _in_large_clusters, _large_clusters,
                                          _level_spans)
 from mrstereo.matching.multirange import RangeLevel
@@ -41,7 +42,7 @@ def _winners(seed: int, shape=(60, 90)):
     sub[rng.random(shape) < 0.2] = 0.5                     # d + 0.5: ties with the threshold
     c1 = rng.uniform(0, 1.2, shape).astype(np.float32)
     c2 = (c1 / rng.choice([0.85, 0.9, 1.0, 1.3], shape)).astype(np.float32)
-    c2[rng.random(shape) < 0.1] = _kernels.BIG
+    c2[rng.random(shape) < 0.1] = BIG
     d_right = np.where(rng.random(shape) < 0.7, d_int + rng.integers(-2, 3, shape), -1).astype(np.int32)
     return d_int, sub, c1, c2, d_right
 
@@ -97,7 +98,7 @@ def test_guard_upsample_and_cluster_pixels_equal_numpy(width, w_level, col0, col
     first_col, end_col = _level_spans(source, col0, w_level)
     field = np.empty((height, width), np.float32)
     want = np.empty((height, width), bool)
-    _kernels.guard_upsample(beyond, d_level, labels_level, first_col, end_col, scale, field, want)
+    _guard_kernels.guard_upsample(beyond, d_level, labels_level, first_col, end_col, scale, field, want)
     field_np = np.full((height, width), np.nan, np.float32)
     field_np[:, col0:col1] = np.where(beyond, d_level * np.float32(scale), np.float32(np.nan))[:, source]
     labels = np.zeros((height, width), labels_level.dtype)

@@ -173,3 +173,42 @@ def test_bad_images():
         compute_disparity(np.full((20, 30), np.nan, np.float32), img, max_disparity_px=8)
     with pytest.raises(ValueError, match="window_px must be odd"):
         CostConfig(window_px=8)
+
+
+def test_refinement_only_where_the_union_can_take_it_changes_no_result(monkeypatch):
+    """The coarsest level is re-scored only where no finer level holds a value at least as confident
+    (eq. 12 keeps that one whatever the re-scoring gives): the same disparity and confidence as
+    re-scoring every valid value, on the warm-up pair and a real-texture two-plane pair, with fewer
+    pixels re-scored."""
+    from mrstereo.matching import _union_kernels, cost
+    from mrstereo.matching.warmup import warm_pair
+
+    wanted = []
+    original_refine = cost.refine_candidates
+
+    def counting(*args, **kwargs):
+        wanted.append(int(np.count_nonzero(args[3])))
+        return original_refine(*args, **kwargs)
+
+    def everywhere(d, c, kept_d, kept_c, first, out):
+        out[...] = np.isfinite(d)
+
+    left, right, _ = _two_plane_pair(5, 40)
+    pairs = [(warm_pair(), 64.0), ((left, right), 48.0)]
+    from mrstereo.matching import disparity as disparity_module
+    monkeypatch.setattr(disparity_module, "refine_candidates", counting)
+    totals = np.zeros(2, int)
+    for (l, r), d_max in pairs:
+        for preset in ("robust", "mapping"):
+            wanted.clear()
+            fast = compute_disparity(l, r, max_disparity_px=d_max, preset=preset)
+            fewer = sum(wanted)
+            wanted.clear()
+            with monkeypatch.context() as m:
+                m.setattr(_union_kernels, "can_win", everywhere)
+                full = compute_disparity(l, r, max_disparity_px=d_max, preset=preset)
+            assert np.array_equal(fast.disparity_px, full.disparity_px, equal_nan=True)
+            assert np.array_equal(fast.confidence, full.confidence)
+            assert np.array_equal(fast.too_near, full.too_near)
+            totals += (fewer, sum(wanted))
+    assert totals[0] < totals[1]

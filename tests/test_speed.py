@@ -85,8 +85,13 @@ def test_profile_times_the_stages_of_a_pair(tmp_path):
     stereo, (left, right) = _stereo(), _images()
     with profiling() as prof:
         obstacles_from_pair(left, right, stereo, max_disparity_px=16)
-    assert set(prof.calls) == {"rectify", "match", "reject", "3-D"}
-    assert all(n == 1 for n in prof.calls.values())
+    assert {name for name in prof.calls if "." not in name} == {"rectify", "match", "reject", "3-D"}
+    assert all(prof.calls[name] == 1 for name in ("rectify", "match", "reject", "3-D"))
+    # the matcher's parts, each its own time, together within the match stage
+    parts = {name for name in prof.calls if name.startswith("match.")}
+    assert {"match.prepare", "match.search", "match.post"} <= parts
+    assert 0 < sum(prof.seconds[name] for name in parts) <= prof.seconds["match"]
+    assert "  .search" in prof.table() and "  .other" in prof.table()
 
 
 def test_cli_profile_prints_a_stage_table(tmp_path, capsys):
@@ -207,3 +212,79 @@ def test_profile_clock_is_a_parameter():
             pass
     assert prof.seconds == {"match": 2.0} and prof.calls == {"match": 2}
     assert Profile().clock is time.perf_counter
+
+
+def test_profile_parts_count_their_own_time_and_the_parent_the_whole():
+    ticks = iter(range(100))
+    with profiling(Profile(clock=lambda: float(next(ticks)))) as prof:
+        with stage("match"):                      # 0 .. 9
+            with stage("match.search"):           # 1 .. 6, of which 2 .. 5 is prepare (nested)
+                with stage("match.prepare"):
+                    with stage("other"):          # a plain stage inside a part is not a part: 3 .. 4
+                        pass
+            with stage("match.post"):             # 7 .. 8
+                pass
+    assert prof.seconds == {"other": 1.0, "match.prepare": 3.0, "match.search": 2.0, "match.post": 1.0,
+                            "match": 9.0}
+    table = prof.table(1)
+    lines = table.splitlines()
+    assert lines[-1].split()[:2] == ["sum", "10000.00"]          # match + other, not the parts
+    assert any(line.split() == [".other", "3000.00", "3.000"] for line in lines)    # 9 - (3 + 2 + 1)
+
+
+# ------------------------------------------------------------------------------------------ first run
+def _signature_counts(modules) -> dict:
+    return {(module.__name__, name): len(value.signatures) for module in modules
+            for name, value in vars(module).items() if hasattr(value, "signatures")}
+
+
+def test_the_matcher_warm_up_compiles_what_a_real_frame_runs(tmp_path):
+    """After warm_up, matching real-looking frames (a rendered corridor, both presets, with a
+    calibration) and a too-near box compiles no further kernel variant: the first frame is not
+    held up by a compile."""
+    from mrstereo.matching import compute_disparity
+    from mrstereo.matching.warmup import KERNEL_MODULES, cache_is_cold, warm_up
+
+    results = warm_up()
+    assert any(result.too_near.sum() > 500 for result in results)        # the near guard's whole path ran
+    assert all(np.isfinite(result.disparity_px).mean() > 0.3 for result in results)
+    assert not cache_is_cold()                                            # written to numba's cache
+    assert cache_is_cold((pickle,))                                       # a module without kernels: nothing cached
+    before = _signature_counts(KERNEL_MODULES)
+    assert sum(before.values()) > 20
+    stereo = StereoCamera.ideal(Camera(width=160, height=120, fx=100.0, fy=100.0, cx=80.0, cy=60.0), 0.12)
+    left, right = _images()
+    left[30:90, 40:100] = np.roll(right, 30, axis=1)[30:90, 40:100]       # a box at 30 px, past the near limit
+    for preset in ("robust", "mapping"):
+        compute_disparity(left, right, calibration=stereo, preset=preset)
+        compute_disparity(left.astype(np.float32), right, max_disparity_px=20, preset=preset)
+    assert _signature_counts(KERNEL_MODULES) == before
+
+
+def test_warm_up_covers_the_chain_and_says_compiling_only_when_cold(capsys, monkeypatch):
+    """After mrstereo._warmup.warm_up, a whole frame (rectify, match, reject, 3-D, free space, scan, grid)
+    compiles no further kernel variant; the command says it compiles only when numba's cache is cold."""
+    from mrstereo import _warmup
+    from mrstereo.mapping import OccupancyGrid
+    from mrstereo.matching import warmup
+    from mrstereo.pipeline.frame import scan_from_pair
+    from mrstereo.geometry import FreeSpaceConfig
+
+    _warmup.warm_up()
+    modules = _warmup.chain_kernel_modules()
+    before = _signature_counts(modules)
+    stereo, (left, right) = _stereo(), _images()
+    frame = scan_from_pair(left, right, stereo, max_disparity_px=16, preset="mapping", free_space=FreeSpaceConfig())
+    grid = OccupancyGrid()
+    obstacles = frame.frame.obstacles
+    grid.update(obstacles.obstacle_points_robot.astype(np.float32), obstacles.floor_points_robot.astype(np.float32),
+                (0.0, 0.0, 0.45), baseline_focal_m_px=12.0)
+    assert _signature_counts(modules) == before
+
+    assert entry(["warm-up"]) == 0
+    captured = capsys.readouterr()
+    assert "kernels ready" in captured.out and _warmup.COLD_MESSAGE not in captured.err     # (warm: loaded)
+    monkeypatch.setattr(warmup, "cache_is_cold", lambda modules=None: True)
+    said = []
+    assert _warmup.warm_up(say=said.append) > 0
+    assert said == [_warmup.COLD_MESSAGE]

@@ -20,7 +20,7 @@ LAYERS = [
     {"mapping"},
     {"odometry"},
     {"recordings"},
-    {"pipeline"},
+    {"pipeline", "_warmup"},
     {"world", "evaluation"},
     {"demo"},
     {"cli", "__main__"},

@@ -18,6 +18,7 @@ COMMAND_MODULES = {
     "calib": "_formats", "disparity": "_matching", "evaluate": "_evaluation", "points": "_geometry",
     "scan": "_geometry", "plan": "_mapping", "map": "_pipeline", "demo": "_demo", "export": "_bag",
     "batch": "_bag", "data": "_data", "odometry": "_odometry", "info": "_recording", "live": "_live",
+    "warm-up": "_warmup",
 }
 """Command name -> the module of ``mrstereo.cli`` that defines it (in its ``COMMANDS`` list)."""
 

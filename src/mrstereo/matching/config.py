@@ -17,7 +17,7 @@ from .. import _checks
 __all__ = ["MatchingConfig", "CostConfig", "SearchConfig", "AcceptanceConfig", "SubpixelConfig", "NearGuardConfig",
            "AmbiguityConfig", "PostFilterConfig", "PRESETS", "preset_config", "COSTS", "PREFILTERS"]
 
-COSTS = ("nssd", "zncc", "nsad")
+COSTS = ("nssd", "zncc")
 PREFILTERS = ("none", "xsobel")
 
 
@@ -29,11 +29,9 @@ class CostConfig:
     ----------
     window_px : int
         Odd window size ``W`` of eq. (9) (``w = (W - 1) / 2``), in pixels of each level, 3-31.
-    kind : {"nssd", "zncc", "nsad"}
+    kind : {"nssd", "zncc"}
         ``"nssd"``: eq. (9) (the paper's reference). ``"zncc"``: 1 - zero-mean normalized
-        cross-correlation. ``"nsad"``: the integer engine, ZNCC's normalization done once per
-        pixel and level, then sums of absolute differences on 16-bit integers, reported in
-        ``1 - correlation`` units (:mod:`mrstereo.matching._int_kernels`; docs/matching.md).
+        cross-correlation.
     prefilter : {"none", "xsobel"}
         ``"none"``: the raw intensities (eq. 9); ``"xsobel"``: OpenCV StereoBM's pre-filter
         (see :func:`mrstereo.matching.cost.prefilter`).
@@ -109,7 +107,7 @@ class AcceptanceConfig:
         Reject when the second-best cost (2+ px from the winner) is within this fraction
         of the best: ``c2 * (1 - ratio) < c1`` (0 = off; StereoBM's uniquenessRatio/100).
     max_cost : float or None
-        Reject winners whose cost exceeds this (None = off). For ZNCC (and nsad) the cost is
+        Reject winners whose cost exceeds this (None = off). For ZNCC the cost is
         ``1 - correlation``, so 0.6 keeps correlations above 0.4; it drops matches of
         pixels whose true disparity lies outside the level's band and weak matches on
         plain walls and floors.

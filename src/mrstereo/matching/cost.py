@@ -1,19 +1,20 @@
 """Area correlation on one image pair and one disparity band (paper section 3.3).
 
 The per-level solver of the multi-range matcher: image pre-filters, the NSSD cost of eq. (9)
-(or ZNCC, or the integer engine's normalized SAD), and winner-take-all, eq. (10). The paper puts
+(or ZNCC), winner-take-all, eq. (10), and the full-resolution refinement. The paper puts
 the right pixel at ``x + d``; mrstereo uses ``x_right = x_left - d`` with ``d >= 0``, so eq. (9) is
 evaluated on ``I_R(x + i - d, y + j)`` (docs/conventions.md).
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import cv2
 import numpy as np
 
-from . import _int_kernels, _kernels
+from . import _band_kernels, _refine_kernels
 from .config import COSTS, PREFILTERS
 
 __all__ = ["BandMatch", "PreparedImage", "prefilter", "prepare", "match_band", "match_prepared",
@@ -88,6 +89,21 @@ def _accumulator_dtype(left: np.ndarray, right: np.ndarray, window: int):
     return np.float64
 
 
+_SCRATCH = threading.local()
+
+
+def scratch(name: str, shape: tuple[int, ...], dtype) -> np.ndarray:
+    """A buffer of the calling thread, kept from call to call per name, shape and dtype (contents
+    undefined): the per-frame work allocates no full-size temporary (one set per image size)."""
+    buffers = _SCRATCH.__dict__.setdefault("buffers", {})
+    key = (name, tuple(shape), np.dtype(dtype).str)
+    if key not in buffers:
+        if len(buffers) > 64:            # many image sizes: start again
+            buffers.clear()
+        buffers[key] = np.empty(shape, dtype)
+    return buffers[key]
+
+
 def _strips(n_strips: int | None, n_rows: int) -> int:
     if n_strips is None:
         import numba
@@ -95,26 +111,24 @@ def _strips(n_strips: int | None, n_rows: int) -> int:
     return max(1, min(int(n_strips), n_rows))
 
 
-_KIND = {"nssd": _kernels.NSSD, "zncc": _kernels.ZNCC, "nsad": _kernels.SAD}
+_KIND = {"nssd": _band_kernels.NSSD, "zncc": _band_kernels.ZNCC}
 
 
 @dataclass(frozen=True)
 class PreparedImage:
     """A pre-filtered image ready for the kernels: padded by the window radius
     (replicated border) in the accumulator's dtype, with its window terms ``a``, ``b``
-    (see :mod:`._kernels`); for ``"nsad"`` ``padded`` holds the normalized, quantized image
-    (int16, :func:`._int_kernels.normalize_quantize`) and ``flat`` its flat windows."""
+    (see :mod:`._band_kernels`)."""
 
     padded: np.ndarray
     a: np.ndarray
     b: np.ndarray
     window: int
     cost: str
-    flat: np.ndarray | None = None
 
     @property
     def kind(self) -> int:
-        """The kernels' code of the cost (``_kernels.NSSD``, ``ZNCC`` or ``SAD``)."""
+        """The kernels' code of the cost (``_band_kernels.NSSD`` or ``ZNCC``)."""
         return _KIND[self.cost]
 
     @property
@@ -136,7 +150,7 @@ def prepare(image: np.ndarray, *, window: int, cost: str, dtype=np.float32) -> P
         Pre-filtered image (:func:`prefilter`).
     window : int
         Odd window size.
-    cost : {"nssd", "zncc", "nsad"}
+    cost : {"nssd", "zncc"}
         The cost the terms are for.
     dtype : numpy dtype
         Accumulator type: float32 when the window sums are exact integers, else float64.
@@ -168,7 +182,7 @@ def prepare_gray(gray: np.ndarray, *, kind: str, cap: int, window: int, cost: st
     r = window // 2
     h, w = gray.shape
     padded = np.empty((h + 2 * r, w + 2 * r), np.float32)
-    _kernels.xsobel_padded(np.ascontiguousarray(gray, dtype=np.float32), r, np.float32(cap), padded)
+    _band_kernels.xsobel_padded(np.ascontiguousarray(gray, dtype=np.float32), r, np.float32(cap), padded)
     return _with_terms(padded, window, cost)
 
 
@@ -177,13 +191,8 @@ def _with_terms(padded: np.ndarray, window: int, cost: str) -> PreparedImage:
     shape = (padded.shape[0] - 2 * r, padded.shape[1] - 2 * r)
     a = np.empty(shape, padded.dtype)
     b = np.empty(shape, np.float32)
-    _kernels.window_terms(padded, r, cost != "nssd", a, b)
-    if cost != "nsad":
-        return PreparedImage(padded, a, b, window, cost)
-    quantized = np.empty(padded.shape, np.int16)
-    flat = np.empty(shape, bool)
-    _int_kernels.normalize_quantize(padded, a, b, r, quantized, flat)
-    return PreparedImage(quantized, a, b, window, cost, flat)
+    _band_kernels.window_terms(padded, r, cost == "zncc", a, b)
+    return PreparedImage(padded, a, b, window, cost)
 
 
 def _span(name: str, span, size: int) -> tuple[int, int]:
@@ -243,26 +252,32 @@ def match_prepared(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi
     """
     d_lo, d_hi, rows, cols = _checked_band(left, right, d_lo, d_hi, rows, cols)
     h, w = left.shape
-    out = (np.full((h, w), -1, np.int32), np.zeros((h, w), np.float32), np.full((h, w), _kernels.BIG, np.float32),
-           np.full((h, w), _kernels.BIG, np.float32), np.full((h, w), -1, np.int32))
+    big = _band_kernels.BIG
+    out = (_outside((h, w), np.int32, rows, cols, -1), _outside((h, w), np.float32, rows, cols, 0.0),
+           _outside((h, w), np.float32, rows, cols, big), _outside((h, w), np.float32, rows, cols, big),
+           _outside((h, w), np.int32, rows, (0, w) if right_check else (0, 0), -1))
     if rows[1] > rows[0] and cols[1] > cols[0]:
-        _search(left, right, (int(d_lo), int(d_hi)), (*rows, *cols), n_strips, bool(right_check), out)
+        _band_kernels.band_winners(left.arrays, right.arrays, left.window // 2, left.kind == _band_kernels.ZNCC,
+                                   (d_lo, d_hi), (*rows, *cols), _strips(n_strips, rows[1] - rows[0]),
+                                   bool(right_check), out)
     return out
 
 
-def _search(left: PreparedImage, right: PreparedImage, band, aoi, n_strips, right_check: bool, out) -> None:
-    """The band search of the pair's cost into ``out`` (:func:`match_prepared`'s outputs)."""
-    strips = _strips(n_strips, aoi[1] - aoi[0])
-    if left.cost == "nsad":
-        _int_kernels.band_sad(left.padded, right.padded, left.flat, left.window // 2, band, aoi, strips,
-                              _kernels.sad_unit(left.window // 2), (-1.0, 0.0, -1.0, False, False), (1, 0), out,
-                              (_NONE, _NONE, _NONE))
-    else:
-        _kernels.band_winners(left.arrays, right.arrays, left.window // 2, left.kind == _kernels.ZNCC, band, aoi,
-                              strips, right_check, out)
-
-
 _NONE = np.zeros((1, 1), np.float32)      # an output the kernel is told not to write
+
+
+def _outside(shape: tuple[int, int], dtype, rows: tuple[int, int], cols: tuple[int, int], value) -> np.ndarray:
+    """A new array whose pixels outside ``rows`` x ``cols`` hold ``value`` (the kernel writes the inside;
+    an empty span: everywhere)."""
+    out = np.empty(shape, dtype)
+    if rows[1] <= rows[0] or cols[1] <= cols[0]:
+        out.fill(value)
+        return out
+    out[:rows[0]] = value
+    out[rows[1]:] = value
+    out[rows[0]:rows[1], :cols[0]] = value
+    out[rows[0]:rows[1], cols[1]:] = value
+    return out
 
 
 class CheckedMatch(NamedTuple):
@@ -315,23 +330,17 @@ def match_checked(left: PreparedImage, right: PreparedImage, *, d_lo: int, d_hi:
     confidence[rows[1]:] = 0.0
     alt_px = alt_cost = best_cost = None
     if alt_band is not None:
-        alt_px = np.full((h, w), np.nan, np.float32)
-        alt_cost = np.full((h, w), _kernels.BIG, np.float32)
-        best_cost = np.full((h, w), _kernels.BIG, np.float32)
+        alt_px = _outside((h, w), np.float32, rows, cols, np.nan)
+        alt_cost = _outside((h, w), np.float32, rows, cols, _band_kernels.BIG)
+        best_cost = _outside((h, w), np.float32, rows, cols, _band_kernels.BIG)
     checks = (-1.0 if lr_max_diff_px is None else float(lr_max_diff_px), float(uniqueness_ratio),
               -1.0 if max_cost is None else float(max_cost), bool(subpixel))
-    if rows[1] > rows[0] and cols[1] > cols[0] and left.cost == "nsad":
-        # the checks from the costs the search kept per pixel, row by row inside the search
-        _int_kernels.band_sad(left.padded, right.padded, left.flat, left.window // 2, (int(d_lo), int(d_hi)),
-                              (*rows, *cols), _strips(n_strips, rows[1] - rows[0]), _kernels.sad_unit(left.window // 2),
-                              (*checks, True), (1, 0) if alt_band is None else (int(alt_band[0]), int(alt_band[1])),
-                              (disparity, confidence, _NONE, _NONE, _NONE),
-                              (_NONE, _NONE, _NONE) if alt_band is None else (alt_px, alt_cost, best_cost))
-    elif rows[1] > rows[0] and cols[1] > cols[0]:
-        _kernels.band_checked(left.arrays, right.arrays, left.window // 2, left.kind == _kernels.ZNCC, (int(d_lo), int(d_hi)),
-                              (*rows, *cols), _strips(n_strips, rows[1] - rows[0]), checks, (disparity, confidence),
-                              (1, 0) if alt_band is None else (int(alt_band[0]), int(alt_band[1])),
-                              (_NONE, _NONE, _NONE) if alt_band is None else (alt_px, alt_cost, best_cost))
+    if rows[1] > rows[0] and cols[1] > cols[0]:
+        _band_kernels.band_checked(left.arrays, right.arrays, left.window // 2, left.kind == _band_kernels.ZNCC,
+                                   (d_lo, d_hi), (*rows, *cols), _strips(n_strips, rows[1] - rows[0]), checks,
+                                   (disparity, confidence),
+                                   (1, 0) if alt_band is None else (int(alt_band[0]), int(alt_band[1])),
+                                   (_NONE, _NONE, _NONE) if alt_band is None else (alt_px, alt_cost, best_cost))
     else:
         disparity[rows[0]:rows[1]] = np.nan
         confidence[rows[0]:rows[1]] = 0.0
@@ -354,11 +363,9 @@ def match_band(left: np.ndarray, right: np.ndarray, *, d_lo: int, d_hi: int, win
         ``d <= x`` (its match must lie inside the right image).
     window : int
         Odd window size ``W = 2 w + 1``.
-    cost : {"nssd", "zncc", "nsad"}
+    cost : {"nssd", "zncc"}
         ``"nssd"`` is eq. (9); ``"zncc"`` is ``1 - `` zero-mean normalized
-        cross-correlation, invariant to gain and offset; ``"nsad"`` the integer engine's sum
-        of absolute differences of the normalized images (:mod:`._int_kernels`), in the
-        units of ``1 - `` correlation.
+        cross-correlation, invariant to gain and offset.
     rows, cols : (int, int), optional
         Half-open row and column ranges to evaluate (area of interest, section 3.1);
         the rest of the output is invalid.
@@ -382,8 +389,8 @@ def match_band(left: np.ndarray, right: np.ndarray, *, d_lo: int, d_hi: int, win
     pr = prepare(right, window=window, cost=cost, dtype=dtype)
     disp, sub, c1, c2, disp_right = match_prepared(pl, pr, d_lo=d_lo, d_hi=d_hi, rows=rows, cols=cols,
                                                    right_check=right_check, n_strips=n_strips)
-    c1[c1 >= _kernels.BIG] = np.inf
-    c2[c2 >= _kernels.BIG] = np.inf
+    c1[c1 >= _band_kernels.BIG] = np.inf
+    c2[c2 >= _band_kernels.BIG] = np.inf
     return BandMatch(disparity_int=disp, subpixel_px=sub, best_cost=c1, second_cost=c2,
                      right_disparity_int=disp_right if right_check else None, d_lo=int(d_lo),
                      d_hi=int(d_hi))
@@ -400,7 +407,7 @@ SPARSE_REFINE_SHARE = 40
 
 def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.ndarray, want: np.ndarray, *, half_px: int,
                       max_cost: float | None = None, rows: tuple[int, int] | None = None, n_strips: int | None = None,
-                      boxes=None) -> tuple[np.ndarray, np.ndarray]:
+                      boxes=None, into: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Re-score a coarse disparity field at full resolution (beyond the paper).
 
     The full-resolution cost (eq. 9 or ZNCC) is evaluated at offsets ``[-half_px, half_px]``
@@ -422,6 +429,10 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     boxes : sequence of (row0, row1, col0, col1), optional
         Half-open boxes holding every wanted pixel: the sums cover each box only (scattered
         clusters), the boxes in parallel. Same results.
+    into : (ndarray, ndarray), optional
+        ``(disparity_px, cost)`` float32 (H, W), C-contiguous, to write the wanted pixels into
+        (``disparity_px`` may be ``coarse_px`` itself); the other pixels keep their values.
+        Default: new arrays, NaN and inf elsewhere.
 
     Returns
     -------
@@ -439,12 +450,16 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     half_px = min(int(half_px), w)        # (offsets beyond the image width find nothing)
     r = left.window // 2
     rows = _span("rows", (0, h) if rows is None else rows, h)
-    center_pad = np.empty((h + 2 * r, w + 2 * r), np.int32)
-    _kernels.fill_center(np.ascontiguousarray(coarse_px, dtype=np.float32), r, center_pad)
-    out = np.empty((h, w), np.float32)
-    out.fill(np.nan)
-    cost = np.empty((h, w), np.float32)
-    cost.fill(np.inf)
+    center_pad = scratch("center", (h + 2 * r, w + 2 * r), np.int32)
+    _refine_kernels.fill_center(np.ascontiguousarray(coarse_px, dtype=np.float32), r, center_pad)
+    if into is None:
+        out = np.full((h, w), np.nan, np.float32)
+        cost = np.full((h, w), np.inf, np.float32)
+    else:
+        out, cost = into
+        for name, array in (("into disparity_px", out), ("into cost", cost)):
+            if array.shape != (h, w) or array.dtype != np.float32 or not array.flags.c_contiguous:
+                raise ValueError(f"{name} must be C-contiguous float32 {(h, w)}, got {array.dtype} {array.shape}")
     want = np.ascontiguousarray(want)
     max_cost = -1.0 if max_cost is None else float(max_cost)
     if boxes is not None:
@@ -454,13 +469,12 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
         boxes[:, 2] = np.maximum(boxes[:, 2], 0)
         boxes[:, 3] = np.minimum(boxes[:, 3], w)
         threads = _strips(n_strips, h)
-        if len(boxes) < threads:        # fewer boxes than threads: each in row strips
-            edges = [boxes[:, 0] + (boxes[:, 1] - boxes[:, 0]) * s // threads for s in range(threads + 1)]
-            boxes = np.concatenate([np.stack([edges[s], edges[s + 1], boxes[:, 2], boxes[:, 3]], axis=1)
-                                    for s in range(threads)])
+        # each box as the tiles holding its wanted pixels (or in row strips: at least one per thread)
+        boxes = np.concatenate([_tiles(want, box, r, threads if len(boxes) < threads else 1) for box in boxes
+                                if box[1] > box[0] and box[3] > box[2]] or [np.zeros((0, 4), np.int64)])
         # the near guard's fields change every few pixels: products gathered pixel by pixel
-        _kernels.refine_boxes(left.arrays, right.arrays, r, left.kind, center_pad, want, boxes, int(half_px),
-                              max_cost, (out, cost))
+        _refine_kernels.refine_boxes(left.arrays, right.arrays, r, left.kind, center_pad, want, boxes, int(half_px),
+                                     max_cost, (out, cost))
         return out, cost
     hit = np.flatnonzero(want[rows[0]:rows[1]].any(axis=1))
     if not hit.size:
@@ -468,13 +482,49 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     rows = (rows[0] + int(hit[0]), rows[0] + int(hit[-1]) + 1)      # only the rows holding pixels to refine
     if np.count_nonzero(want[rows[0]:rows[1]]) * SPARSE_REFINE_SHARE < (rows[1] - rows[0]) * w:
         ys, xs = np.nonzero(want[rows[0]:rows[1]])
-        _kernels.refine_pixels(left.arrays, right.arrays, r, left.kind, center_pad, (ys + rows[0], xs), int(half_px),
-                               max_cost, _strips(n_strips, ys.size), (out, cost))
+        _refine_kernels.refine_pixels(left.arrays, right.arrays, r, left.kind, center_pad, (ys + rows[0], xs),
+                                      int(half_px), max_cost, _strips(n_strips, ys.size), (out, cost))
         return out, cost
-    # a level's up-sampled field is constant over runs of pixels: products gathered along them
-    n = _strips(n_strips, rows[1] - rows[0])
-    edges = [rows[0] + (s * (rows[1] - rows[0])) // n for s in range(n + 1)]
-    strips = np.array([(edges[s], edges[s + 1], 0, w) for s in range(n)], np.int64)
-    _kernels.refine_strips(left.arrays, right.arrays, r, left.kind, center_pad, want, strips, int(half_px), max_cost,
-                           (out, cost))
+    # a level's up-sampled field is constant over runs of pixels: products gathered along them, in the
+    # tiles that hold wanted pixels
+    _refine_kernels.refine_strips(left.arrays, right.arrays, r, left.kind, center_pad, want,
+                                  _tiles(want, (*rows, 0, w), r, _strips(n_strips, rows[1] - rows[0])), int(half_px),
+                                  max_cost, (out, cost))
     return out, cost
+
+
+# The dense refinement's tiles: bands of TILE_ROWS rows (running sums restart at each, 2 r rows more
+# work), in each the runs of columns holding wanted pixels, runs less than TILE_GAP_COLS apart joined
+# (each run costs 2 r columns more). Sums of integer-valued images are exact: any tiling, same results.
+TILE_ROWS = 48
+TILE_GAP_COLS = 32
+
+
+def _tiles(want: np.ndarray, box, radius: int, n_threads: int) -> np.ndarray:
+    """Boxes ``(row0, row1, col0, col1)`` covering the wanted pixels of ``box``: bands of
+    :data:`TILE_ROWS` rows, in each the column runs of wanted pixels (:data:`TILE_GAP_COLS`); or
+    ``box`` in one band of rows per thread when the tiles would not save a fifth of the sums."""
+    row0, row1, col0, col1 = (int(v) for v in box)
+    n_rows = row1 - row0
+    if n_rows >= 2 * TILE_ROWS:
+        # per band the wanted columns, gaps shorter than TILE_GAP_COLS + 2 r closed, then their runs
+        full = n_rows // TILE_ROWS
+        edges = np.append(row0 + TILE_ROWS * np.arange(full + 1), row1)[:full + 1 + (n_rows % TILE_ROWS > 0)]
+        hit = want[row0:row0 + full * TILE_ROWS, col0:col1].reshape(full, TILE_ROWS, col1 - col0).any(axis=1)
+        if n_rows % TILE_ROWS:
+            hit = np.vstack([hit, want[row0 + full * TILE_ROWS:row1, col0:col1].any(axis=0)])
+        hit = hit.view(np.uint8)
+        gap = TILE_GAP_COLS + 2 * radius
+        margin = gap + 2                 # zero columns on both sides: the closing never meets the border
+        closed = cv2.morphologyEx(np.pad(hit, ((0, 0), (margin, margin))), cv2.MORPH_CLOSE,
+                                  np.ones((1, gap + 1), np.uint8))
+        step = np.diff(closed.astype(np.int8), axis=1)
+        bands, starts = np.nonzero(step == 1)
+        ends = np.nonzero(step == -1)[1]
+        tiles = np.stack([edges[bands], edges[bands + 1], col0 + starts + 1 - margin, col0 + ends + 1 - margin],
+                         axis=1).astype(np.int64)
+        tiled = int(((tiles[:, 1] - tiles[:, 0] + 2 * radius) * (tiles[:, 3] - tiles[:, 2] + 2 * radius)).sum())
+        if 5 * tiled < 4 * (n_rows + 2 * radius * n_threads) * (col1 - col0 + 2 * radius):
+            return tiles
+    edges = [row0 + (s * n_rows) // n_threads for s in range(n_threads + 1)]
+    return np.array([(edges[s], edges[s + 1], col0, col1) for s in range(n_threads)], np.int64)

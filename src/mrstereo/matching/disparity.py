@@ -15,9 +15,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import _checks
-from . import _kernels
+from ..profiling import stage
+from . import _union_kernels
 from .config import EDGE_JUMP_PX, GAP_FILL_DIFF_PX, MatchingConfig, preset_config
-from .cost import match_checked, prepare, prepare_gray, refine_candidates
+from .cost import match_checked, prepare, prepare_gray, refine_candidates, scratch
 from .multirange import (DEFAULT_DEPTH_EDGES_M, LevelOutput, MultiRangePlan, RangeLevel, bands_px_from_depth_m,
                          decimate_horizontally, default_bands_px, default_level_count, plan_levels, run_levels)
 from .near_guard import drop_cut_off, too_near
@@ -45,8 +46,9 @@ class DisparityResult:
     plan : MultiRangePlan
         The levels searched and their work (``plan.describe()``).
     levels : tuple of ndarray float32 (H, W)
-        Each level's gated, full-width disparity (finest level first; refined levels after
-        their full-resolution re-scoring), before the union.
+        Each level's gated, full-width disparity (finest level first; a refined level re-scored
+        at full resolution where the union can take its values, up-sampled elsewhere), before the
+        union.
     """
 
     disparity_px: np.ndarray
@@ -183,7 +185,7 @@ def _solve_prepared(pair, level: RangeLevel, rows: tuple[int, int], cols: tuple[
     if checks.median_size:
         disparity = median_filter(disparity, size=checks.median_size,
                                   max_px=level.search_px[1] + 0.5)      # (+ the parabola offset)
-        _kernels.zero_where_invalid(disparity, confidence)
+        _union_kernels.zero_where_invalid(disparity, confidence)
     return LevelOutput(disparity_px=disparity, confidence=confidence, alt_px=alt_px, alt_cost=alt_cost,
                        best_cost=best_cost)
 
@@ -227,28 +229,34 @@ class _Levels:
 
     def pair_at(self, w_level: int):
         if w_level not in self.pairs:
-            if w_level not in self.decimated:
-                self.decimated[w_level] = (decimate_horizontally(self.left, w_level),
-                                           decimate_horizontally(self.right, w_level))
-            self.pairs[w_level] = _prepare_pair(*self.decimated[w_level], self.config)
+            with stage("match.prepare"):
+                if w_level not in self.decimated:
+                    self.decimated[w_level] = (decimate_horizontally(self.left, w_level),
+                                               decimate_horizontally(self.right, w_level))
+                self.pairs[w_level] = _prepare_pair(*self.decimated[w_level], self.config)
         return self.pairs[w_level]
 
     def solve(self, left: np.ndarray, right: np.ndarray, level: RangeLevel, rows, cols) -> LevelOutput:
         """:func:`solve_level`, on the shared pair when the level's images have the whole height."""
         whole = left.shape[0] == self.left.shape[0]
-        if whole:
-            out = _solve_prepared(self.pair_at(left.shape[1]), level, rows, cols, self.config)
-        else:
-            out = solve_level(left, right, level, rows, cols, config=self.config)
+        pair = self.pair_at(left.shape[1]) if whole else None
+        with stage("match.search"):
+            if whole:
+                out = _solve_prepared(pair, level, rows, cols, self.config)
+            else:
+                out = solve_level(left, right, level, rows, cols, config=self.config)
         if self.config.ambiguity is not None and whole:
             self.outputs[level] = out
         return out
 
     def refine(self, level: RangeLevel, coarse_px: np.ndarray, want: np.ndarray) -> np.ndarray:
         """Full-resolution re-scoring of a coarse level (beyond the paper)."""
-        refined, _ = refine_candidates(*self.pair_at(self.left.shape[1]), coarse_px, want, rows=self.rows,
-                                       half_px=int(math.ceil(level.scale / 2)) + self.config.subpixel.refine_margin_px,
-                                       max_cost=self.config.acceptance.max_cost)
+        pair = self.pair_at(self.left.shape[1])
+        half_px = int(math.ceil(level.scale / 2)) + self.config.subpixel.refine_margin_px
+        with stage("match.refine"):       # in place: the wanted pixels are the valid ones it can change
+            refined, _ = refine_candidates(*pair, coarse_px, want, rows=self.rows, half_px=half_px,
+                                           max_cost=self.config.acceptance.max_cost,
+                                           into=(coarse_px, scratch("refine_cost", coarse_px.shape, np.float32)))
         return refined
 
 
@@ -272,10 +280,10 @@ def _ambiguous_across_bands(plan: MultiRangePlan, outputs: dict, disparity: np.n
                for level, _ in levels]
     value_cost = np.full((height, width), np.inf, np.float32)
     for (level, out), source in zip(levels, sources):
-        _kernels.band_value_cost(disparity, out.best_cost, source, np.float32(level.band_px[0]),
+        _union_kernels.band_value_cost(disparity, out.best_cost, source, np.float32(level.band_px[0]),
                                  np.float32(level.band_px[1]), value_cost)
     for (level, out), source in zip(levels, sources):
-        _kernels.band_rivals(disparity, out.alt_px, out.alt_cost, source, np.float32(level.scale),
+        _union_kernels.band_rivals(disparity, out.alt_px, out.alt_cost, source, np.float32(level.scale),
                              np.float32(level.band_px[0]), np.float32(level.band_px[1]),
                              np.float32(2.0 * level.scale), np.float32(config.ambiguity.rival_max_cost),
                              np.float32(config.ambiguity.margin), value_cost, ambiguous)
@@ -348,10 +356,14 @@ def compute_disparity(left, right, *, max_disparity_px=None, disparity_bands_px=
         decimated=shared.decimated)
     near, beside = np.zeros((height, width), bool), None
     if plan.guard is not None:     # (contests the bands' values before the ambiguity test drops any)
-        near, beside = too_near(plan, shared.pair_at, disparity, config)
-    if shared.outputs and len(plan.levels) > 1:
-        _kernels.invalidate(disparity, confidence, _ambiguous_across_bands(plan, shared.outputs, disparity, config))
-    disparity, confidence = _post_filter(disparity, confidence, beside, config)
+        shared.pair_at(plan.guard.size[0])
+        with stage("match.guard"):
+            near, beside = too_near(plan, shared.pair_at, disparity, config)
+    with stage("match.post"):
+        if shared.outputs and len(plan.levels) > 1:
+            ambiguous = _ambiguous_across_bands(plan, shared.outputs, disparity, config)
+            _union_kernels.invalidate(disparity, confidence, ambiguous)
+        disparity, confidence = _post_filter(disparity, confidence, beside, config)
     return DisparityResult(disparity_px=disparity, confidence=confidence, plan=plan, levels=levels, too_near=near)
 
 
@@ -364,11 +376,11 @@ def _post_filter(disparity: np.ndarray, confidence: np.ndarray, beside: np.ndarr
     disparity = remove_speckles(disparity, max_size_px=post.speckle_size_px, max_diff_px=post.speckle_range_px)
     disparity = guard_depth_edges(disparity, guard_px=config.edge_guard, jump_px=EDGE_JUMP_PX)
     if beside is not None:
-        _kernels.invalidate(disparity, confidence, beside)
+        _union_kernels.invalidate(disparity, confidence, beside)
     disparity, confidence = fill_gaps(disparity, confidence, max_gap_px=post.gap_fill_px,
                                       max_diff_px=GAP_FILL_DIFF_PX, support_px=config.gap_support)
     if beside is not None:
-        _kernels.invalidate(disparity, confidence, beside)
+        _union_kernels.invalidate(disparity, confidence, beside)
         drop_cut_off(disparity, beside, config)
-    _kernels.zero_where_invalid(disparity, confidence)
+    _union_kernels.zero_where_invalid(disparity, confidence)
     return disparity, confidence

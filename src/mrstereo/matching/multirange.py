@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from .. import _checks
-from . import _kernels
+from . import _union_kernels
 
 __all__ = ["RangeLevel", "MultiRangePlan", "LevelOutput", "plan_levels", "default_bands_px",
            "default_level_count", "bands_px_from_depth_m", "decimate_horizontally", "run_levels",
@@ -362,8 +362,9 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
     refine : callable, optional
         ``refine(level, disparity_px, want) -> disparity_px``: re-score at full resolution
         the up-sampled map of a decimated level (``scale >= refine_min_scale``) at the pixels ``want`` (its
-        values within one level pixel of the band), NaN = rejected, before the exact gate
-        (beyond the paper, see :func:`.cost.refine_candidates`).
+        values within one level pixel of the band that the union can take: where no finer level
+        holds a value at least as confident), NaN = rejected, before the exact gate (beyond the
+        paper, see :func:`.cost.refine_candidates`); ``disparity_px`` may be the input, refined in place.
     decimated : dict, optional
         Cache ``{width: (left, right)}`` of whole-height decimated images, filled and
         reused (the caller may share it with its own per-width work).
@@ -373,7 +374,8 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
     disparity_px, confidence : ndarray float32 (H, W)
         United disparity (full-resolution pixels, NaN invalid) and its confidence.
     levels : tuple of ndarray float32 (H, W)
-        Each level's gated, up-sampled disparity (finest first).
+        Each level's gated, up-sampled disparity (finest first); a refined level holds its
+        re-scored values where the union can take them, its up-sampled ones elsewhere.
 
     The near guard (``plan.guard``) is not run here: it is not a band of eq. (11)-(12)
     (see :func:`mrstereo.matching.disparity.compute_disparity`).
@@ -386,7 +388,9 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
     left_rows = left[top:bottom]
     right_rows = right[top:bottom]
     rows = (row0 - top, row1 - top)
-    maps, confs = [], []
+    maps = []
+    disparity = np.empty((height, width), np.float32)
+    confidence = np.empty((height, width), np.float32)
     for level in plan.levels:
         w_level = level.size[0]
         if decimated is not None and top == 0 and bottom == height:
@@ -407,22 +411,16 @@ def run_levels(left: np.ndarray, right: np.ndarray, plan: MultiRangePlan, solve:
         d_full = np.empty((height, width), np.float32)
         c_full = np.empty((height, width), np.float32)
         source_cols = np.minimum(((np.arange(width) + 0.5) / level.scale).astype(np.intp), w_level - 1)
-        _kernels.upsample_gate(out.disparity_px, out.confidence, source_cols, np.float32(level.scale),
+        _union_kernels.upsample_gate(out.disparity_px, out.confidence, source_cols, np.float32(level.scale),
                                np.float32(lo - slack), np.float32(hi + slack), top, row0, row1, col0, col1,
                                d_full, c_full)
         if refining:
-            d_full = refine(level, d_full, np.isfinite(d_full))
-            _kernels.gate(d_full, c_full, float(lo), float(hi))
+            # only where the union (eq. 12) can take the value: elsewhere a finer level's is at least as confident
+            want = np.empty((height, width), np.bool_)
+            _union_kernels.can_win(d_full, c_full, disparity, confidence, not maps, want)
+            d_full = refine(level, d_full, want)
+            _union_kernels.gate(d_full, c_full, float(lo), float(hi))
+        # Eq. (12), level by level (finest first): where several levels keep a value, the more confident wins
+        _union_kernels.unite(d_full, c_full, not maps, disparity, confidence)
         maps.append(d_full)
-        confs.append(c_full)
-    disparity, confidence = _union(maps, confs)
     return disparity, confidence, tuple(maps)
-
-
-def _union(maps: list[np.ndarray], confs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. (12): unite gated level maps (finest first); where several levels keep a value, the
-    more confident one wins."""
-    disparity, confidence = (np.empty(maps[0].shape, np.float32) for _ in range(2))
-    for i, (d, c) in enumerate(zip(maps, confs)):
-        _kernels.unite(d, c, i == 0, disparity, confidence)
-    return disparity, confidence

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from . import _kernels
+from . import _guard_kernels
 from .config import MatchingConfig
 from .cost import match_prepared, refine_candidates
 from .multirange import MultiRangePlan, RangeLevel, _level_cols
@@ -117,7 +117,7 @@ def _guard_search(plan: MultiRangePlan, pair_at: Callable, disparity: np.ndarray
 
 
 def _guard_candidates(d_int, sub, c1, c2, d_right, guard: RangeLevel, config: MatchingConfig):
-    """Step 1 in one kernel (:func:`._kernels.guard_candidates`): ``(d_level, beyond,
+    """Step 1 in one kernel (:func:`._guard_kernels.guard_candidates`): ``(d_level, beyond,
     candidate)``, the level disparity ``d_int (+ sub)`` in float32, the winners above
     ``guard.too_near_above_px`` and those that pass the maximum cost, the left-right and the
     uniqueness checks; each in the float type numpy gives the expression."""
@@ -132,7 +132,7 @@ def _guard_candidates(d_int, sub, c1, c2, d_right, guard: RangeLevel, config: Ma
                     float(keep) if checks.uniqueness_ratio > 0 else -1.0, np.result_type(f32, keep) == np.float64)
     shape = d_int.shape
     out = np.empty(shape, f32), np.empty(shape, bool), np.empty(shape, bool)
-    _kernels.guard_candidates((d_int, sub, c1, c2, d_right), bool(config.subpixel.parabola), float(guard.scale),
+    _guard_kernels.guard_candidates((d_int, sub, c1, c2, d_right), bool(config.subpixel.parabola), float(guard.scale),
                               float(guard.too_near_above_px), wide, check_values, out)
     return out
 
@@ -183,7 +183,7 @@ def _confirmed_clusters(search: _GuardSearch, config: MatchingConfig) -> _Cluste
     field = np.empty((height, width), np.float32)
     want = np.empty((height, width), np.bool_)
     first_col, end_col = _level_spans(search.source, col0, w_level)
-    _kernels.guard_upsample(search.beyond, search.d_level, labels_level, first_col, end_col, float(guard.scale),
+    _guard_kernels.guard_upsample(search.beyond, search.d_level, labels_level, first_col, end_col, float(guard.scale),
                             field, want)
     boxes = _full_boxes(level_boxes, guard.scale, col0, col1)
     confirmed_px, confirmed_cost = refine_candidates(*search.pair_at(width), field, want, rows=search.rows,
@@ -322,7 +322,7 @@ def _finite_in_clusters(values: np.ndarray, labels_level: np.ndarray, first_col:
     end_col[c] - 1``), in row-major order, and their level labels."""
     n_max = np.count_nonzero(labels_level) * int((end_col - first_col).max(initial=0))
     ys, xs, cluster = np.empty(n_max, np.intp), np.empty(n_max, np.intp), np.empty(n_max, labels_level.dtype)
-    n = _kernels.guard_finite(values, labels_level, first_col, end_col, ys, xs, cluster)
+    n = _guard_kernels.guard_finite(values, labels_level, first_col, end_col, ys, xs, cluster)
     return ys[:n], xs[:n], cluster[:n]
 
 
@@ -338,7 +338,7 @@ def _in_large_clusters(mask: np.ndarray, size_px: int) -> np.ndarray:
         return mask
     n_labels, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8, ltype=_label_type(mask.shape))
     out = np.empty(mask.shape, bool)
-    _kernels.in_large_labels(labels, n_labels, size_px, out)
+    _guard_kernels.in_large_labels(labels, n_labels, size_px, out)
     return out
 
 
@@ -357,7 +357,7 @@ def _large_clusters(mask: np.ndarray, size_px: int) -> tuple[np.ndarray, np.ndar
     x, y, w, h = (stats[large, i] for i in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH,
                                              cv2.CC_STAT_HEIGHT))
     numbered = np.empty(labels.shape, labels.dtype)
-    _kernels.map_labels(labels, number, numbered)
+    _guard_kernels.map_labels(labels, number, numbered)
     return numbered, np.stack([y, y + h, x, x + w], axis=1)
 
 
