@@ -166,10 +166,13 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
     with stage("scan"):
         near = obstacles.too_near_obstacle_mask
         measured = obstacles.obstacle_mask & ~near
-        scan = laser_scan_from_points(obstacles.points_robot_image[measured], angle_min_rad=lo, angle_max_rad=hi,
+        drops = obstacles.drop_points_robot             # drop edges: returns without an intensity
+        scan = laser_scan_from_points(np.concatenate([obstacles.points_robot_image[measured], drops]),
+                                      angle_min_rad=lo, angle_max_rad=hi,
                                       angle_increment_rad=angle_increment_rad, range_min_m=range_min,
                                       range_max_m=config.max_range_m if range_max_m is None else range_max_m,
-                                      min_points=min_points, intensities=gray[measured],
+                                      min_points=min_points,
+                                      intensities=np.concatenate([gray[measured], np.full(len(drops), np.nan)]),
                                       observed_points_robot=obstacles.points_robot)
         if near.any():
             # the too-near bearings, whatever the placement's range (it is a bound, not a measurement)
