@@ -7,22 +7,28 @@ Randomized worlds (``random_world(seed, drops=True)``: a ledge or a drivable ram
 a kerb, a sunken step; tuned on seeds 0-4, reported on 100-109), the frames of ``write_synthetic_dataset``'s
 ``stops`` path (front, +45 and -45 degrees at each stop), per seed:
 
-* **edge recall**: the true drop-edge cells (``mrstereo.world.drop_edges``) some frame had in view within the
-  mapping range that are lethal in the map, a lethal cell next to it counting (1-cell tolerance);
+* **edge recall**: the true drop-edge cells (``mrstereo.world.drop_edges``) whose floor some frame's true
+  disparity shows within 2.5 m (``--view``; the robot must know an edge before it is near it) that are lethal in the map, a lethal
+  cell next to it counting (1-cell tolerance); **recall 4 m**: the same within the mapping range (4 m), where
+  a far edge seen at a grazing angle may hide a drivable slope and is not marked;
 * **false drops**: the drivable cells (reachable from the start over steps within ``max_step_m``: flat floor,
-  the ramp, the kerb, the sunken step) in view and more than one cell from a true edge that the drop test
+  the ramp, the kerb, the sunken step) in some frame's field of view (4 m) and more than one cell from a true edge that the drop test
   made lethal (lethal with it, not without), over those cells; **on ramps/kerbs**: the same on the cells off
   the plain floor;
 * **crossings**: paths planned (``mrstereo.mapping.plan_path``, unknown cells allowed as Nav2 does) from the
   start to a goal in each hole or beyond the ledge that enter an undrivable cell (0 is required).
+
+``--speed``: the CPU time of a frame (``obstacles_from_pair``: rectify, match, reject, 3-D, free space) with and
+without the drop test, interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480).
 
 ``--real``: the first frames of the EuRoC ASL sample, KITTI odometry 06 and OpenLORIS: the share of cells
 free without the drop test that are not free with it (at most 0.5 % on these flat floors).
 
 Usage::
 
-    python benchmarks/bench_drops.py --seeds 100-109 [--frames 12]
-    python benchmarks/bench_drops.py --real [--frames 12]
+    python benchmarks/bench_drops.py --seeds 100-109 [--frames 24]
+    python benchmarks/bench_drops.py --real [--frames 24]
+    python benchmarks/bench_drops.py --speed [--repeats 15]
 """
 from __future__ import annotations
 
@@ -107,7 +113,32 @@ def _in_view(grid, views) -> np.ndarray:
     return seen
 
 
-def evaluate_seed(seed: int, frames: int, data_dir: Path) -> dict:
+def _seen_floor(manifest, grid, height: np.ndarray, range_m: float) -> np.ndarray:
+    """Cells whose floor some frame's true disparity shows within ``range_m`` of the camera (a true point at
+    the cell's floor height): what the cameras could see, near blind zone and occlusions included."""
+    from mrstereo.geometry import ground_from_mount, points_robot_from_disparity
+    from mrstereo.geometry.ground import T_robot_from_cam_ground
+    from mrstereo.io.images import read_pfm
+    from mrstereo.transforms import T_from_planar
+
+    stereo = manifest.calibration
+    floor = ground_from_mount(manifest.mount, R_rect_from_cam=stereo.left.R)
+    seen = np.zeros(grid.shape, bool)
+    for record in manifest.frames:
+        T_cam = T_robot_from_cam_ground(floor, pan_rad=record.pan_rad)
+        p = points_robot_from_disparity(read_pfm(record.gt_disparity), stereo, T_cam).reshape(-1, 3)
+        p = p[np.isfinite(p).all(axis=1) & (np.hypot(*(p[:, :2] - T_cam[:2, 3]).T) <= range_m)]
+        T = T_from_planar(*record.pose)
+        w = p @ T[:3, :3].T + T[:3, 3]
+        r, c = grid.cells_from_xy(w[:, :2])
+        inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
+        r, c, z = r[inside], c[inside], w[inside, 2]
+        on_floor = np.abs(z - height[r, c]) < 0.02
+        seen[r[on_floor], c[on_floor]] = True
+    return seen
+
+
+def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5) -> dict:
     """Render world ``seed`` with drops, map it with and without the drop test, score both (see the module)."""
     from scipy.ndimage import binary_dilation
 
@@ -133,13 +164,16 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path) -> dict:
     start = tuple(int(v[0]) for v in grid.cells_from_xy(np.array([manifest.frames[0].pose[:2]])))
     drivable = _drivable(np.nan_to_num(height, nan=-9.0), free, start, step)
     views = views_of_frames(manifest.frames, manifest.calibration, range_m=run.range_m, mount=run.mount)
-    seen = _in_view(grid, views)
+    seen = _seen_floor(manifest, grid, height, view_m)
+    seen_far = _seen_floor(manifest, grid, height, run.range_m)
     lethal_plain = plain.grid.to_ros_map().occupied
     lethal = run.grid.to_ros_map().occupied
     near_lethal = binary_dilation(lethal, np.ones((3, 3), bool))
     target = edges & seen
     recall = float((near_lethal & target).sum() / max(target.sum(), 1))
-    away = drivable & seen & ~binary_dilation(edges, np.ones((3, 3), bool))
+    far = edges & seen_far
+    recall_far = float((near_lethal & far).sum() / max(far.sum(), 1))
+    away = drivable & _in_view(grid, views) & ~binary_dilation(edges, np.ones((3, 3), bool))
     added = lethal & ~lethal_plain
     off_plain = away & (np.abs(np.nan_to_num(height)) > 1e-6)
     goals = _goals(world)
@@ -150,7 +184,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path) -> dict:
             r, c = grid.cells_from_xy(plan.path_xy)
             inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
             crossings += int((free[r[inside], c[inside]] & ~drivable[r[inside], c[inside]]).any())
-    return {"seed": seed, "edge cells in view": int(target.sum()), "edge recall": recall,
+    return {"seed": seed, "edge cells in view": int(target.sum()), "edge recall": recall, "recall 4 m": recall_far,
             "false drops": float((added & away).sum() / max(away.sum(), 1)),
             "on ramps/kerbs": float((added & off_plain).sum() / max(off_plain.sum(), 1)),
             "ramp/kerb cells": int(off_plain.sum()), "goals": len(goals), "crossings": crossings,
@@ -193,13 +227,52 @@ def evaluate_real(frames: int) -> list[dict]:
     return rows
 
 
+def measure_speed(repeats: int) -> list[dict]:
+    """Median CPU seconds of one frame with and without the drop test (interleaved), per input."""
+    from mrstereo.geometry import ObstacleConfig
+    from mrstereo.pipeline.frame import obstacles_from_pair
+    from mrstereo.recordings import read_recording
+    from mrstereo.recordings.manifest import frame_pair
+    from mrstereo.recordings.samples import data_root
+    from mrstereo.world import default_scene, default_stereo, render_stereo_frame
+
+    stereo = default_stereo()
+    frame = render_stereo_frame(default_scene(0), stereo, pose=(1.0, 0.0, 0.0))
+    inputs = [("corridor 320x240", frame.left_rect, frame.right_rect, stereo, True, None)]
+    euroc = data_root() / "euroc_asl_sample"
+    if euroc.exists():
+        manifest = read_recording(euroc)
+        left, right, rectified = frame_pair(manifest.frames[0])
+        inputs.append(("EuRoC 752x480", left, right, manifest.calibration, rectified, manifest.mount))
+    rows = []
+    for name, left, right, calib, rectified, mount in inputs:
+        times: dict[str, list[float]] = {"with": [], "without": []}
+        configs = {"with": ObstacleConfig(), "without": ObstacleConfig(drops=None)}
+        for k in range(repeats + 1):
+            for key in ("with", "without") if k % 2 else ("without", "with"):
+                t0 = time.process_time()
+                obstacles_from_pair(left, right, calib, rectified=rectified, mount=mount, config=configs[key])
+                if k:                                           # the first round compiles
+                    times[key].append(time.process_time() - t0)
+        a, b = (float(np.median(times[key])) for key in ("with", "without"))
+        rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": a / b})
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", nargs="+", default=["100-109"], help="seeds, e.g. 0-4 or 100-109")
-    parser.add_argument("--frames", type=int, default=12, help="frames per world or recording")
+    parser.add_argument("--frames", type=int, default=24, help="frames per world or recording")
+    parser.add_argument("--view", type=float, default=2.5, help="range [m] of the edges the recall counts")
     parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
     parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
+    parser.add_argument("--speed", action="store_true", help="CPU time of a frame with and without the drop test")
+    parser.add_argument("--repeats", type=int, default=15, help="--speed: runs of each")
     args = parser.parse_args()
+    if args.speed:
+        for row in measure_speed(args.repeats):
+            print("  ".join(f"{k}: {v:.4f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()))
+        return
     if args.real:
         for row in evaluate_real(args.frames):
             print("  ".join(f"{k}: {v:.4f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()),
@@ -209,7 +282,7 @@ def main() -> None:
     data.mkdir(parents=True, exist_ok=True)
     rows = []
     for seed in _parse_seeds(args.seeds):
-        row = evaluate_seed(seed, args.frames, data)
+        row = evaluate_seed(seed, args.frames, data, args.view)
         rows.append(row)
         print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()), flush=True)
     edge = sum(r["edge cells in view"] for r in rows)

@@ -102,8 +102,8 @@ def test_exact_disparity_marks_the_ledge_and_not_the_ramp(ledge, ramp):
             continue
         edge = pts[pts[:, 0] < x_e + 0.05]
         assert len(edge) > 100
-        # on the edge: within 0.3 m before it (edge_reach_m), none on the floor nearer than that
-        assert edge[:, 0].min() > x_e - 0.35 and edge[:, 0].max() < x_e + 0.05
+        # on the edge: within 0.1 m before it (edge_reach_m), none on the floor nearer than that
+        assert edge[:, 0].min() > x_e - 0.15 and edge[:, 0].max() < x_e + 0.05
         assert np.all(pts[:, 2] == 0.0)           # at floor level
         # the robot frame's obstacle points end with them; without the drop test they are not there
         np.testing.assert_array_equal(res.obstacle_points_robot[-len(res.drop_points_robot):], res.drop_points_robot)
@@ -164,7 +164,7 @@ def test_a_flat_floor_has_no_drop():
     lower = t + rays * np.where(rays[..., 2] < 0, (height + 0.5) / -np.minimum(rays[..., 2], -1e-6), np.nan)[..., None]
     points[beyond] = lower[beyond]
     found = find_drops(points, T, bf)
-    assert len(found.edge_points_robot) and np.all(np.abs(found.edge_points_robot[:, 0] - 1.5) < 0.35)
+    assert len(found.edge_points_robot) and np.all(np.abs(found.edge_points_robot[:, 0] - 1.5) < 0.15)
     assert np.count_nonzero(found.edge_columns) > 0.5 * w
     assert np.all(found.below_points_robot[:, 0] > 1.5)
     far = np.where((flat[..., 0] > 3.0)[..., None], t + rays * np.where(

@@ -519,9 +519,9 @@ def random_world(seed: int, *, width: int = 320, height: int = 240,
     drops : bool
         Add drops (docs/world.md, "Drops"): a ledge or a drivable ramp down across the corridor beyond the
         path's end (the path stops 0.7 m before it, obstacles beyond it are removed), one or two holes or
-        stairwells, a raised kerb and a sunken step beside the path; drawn from a stream of their own. A
-        floor drawn as plain paint or faint tiles becomes a textured one (checker, wood or carpet): stereo
-        measures next to nothing on those, so no drop either.
+        stairwells, a raised kerb and a sunken step beside the path; drawn from a stream of their own. The
+        floor is wood or carpet (on paint, faint tiles or large checks stereo measures next to nothing, so
+        no drop either).
         ``groundtruth.floor_heights`` / ``drop_edges`` give their truth.
     """
     seed = _checks.positive_int("seed", seed, minimum=0)
@@ -552,9 +552,10 @@ def random_world(seed: int, *, width: int = 320, height: int = 240,
         boxes, obstacle_boxes, cylinders, waypoints, kept, drop_summary = _add_drops(
             seed, corridor, waypoints, ids["floor"], boxes, obstacle_boxes, cylinders)
         obstacle_kinds = [obstacle_kinds[label - LABEL_OBSTACLE] for label in kept]
-        if bank.names[ids["floor"]] in ("paint", "tiles"):    # stereo measures no drop on a floor without texture
-            bank.names[ids["floor"]], bank.materials[ids["floor"]] = _material(np.random.default_rng(
-                np.random.SeedSequence([seed, 0xC0441D0, 3])), _FLOOR, ["checker", "wood", "carpet"])
+        # a floor stereo measures everywhere (paint, faint tiles and large checks give it next to no
+        # disparity, so no drop either): wood or carpet, from a stream of its own
+        bank.names[ids["floor"]], bank.materials[ids["floor"]] = _material(np.random.default_rng(
+            np.random.SeedSequence([seed, 0xC0441D0, 3])), _FLOOR, ["wood", "carpet"])
     wall = ids["wall"]
     if wall_texture is not None and wall_texture != bank.names[wall]:
         # after every other draw, from a stream of its own: the rest of the world stays the seed's
