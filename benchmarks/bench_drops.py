@@ -53,8 +53,10 @@ def _parse_seeds(values: list[str]) -> list[int]:
 def paired_maps(manifest, *, frames: int | None = None, config=None):
     """Map a recording's first ``frames`` frames with and without the drop test, matching each frame once.
 
-    Returns ``(with_drops, without_drops)`` :class:`mrstereo.pipeline.run.MapRun`.
+    Returns ``(with_drops, without_drops)`` :class:`mrstereo.pipeline.run.MapRun` and each frame's drop
+    points in the world frame.
     """
+    from mrstereo.transforms import T_from_planar
     from mrstereo.pipeline.frame import obstacles_from_pair
     from mrstereo.pipeline.run import (PipelineConfig, floor_for_run, map_from_observations, observation_from_pair,
                                        pair_options, with_visual_odometry)
@@ -71,7 +73,7 @@ def paired_maps(manifest, *, frames: int | None = None, config=None):
     if not manifest.has_poses:
         visual, vo = with_visual_odometry(manifest)
         records = [r for r, ok in zip(visual.frames, vo.tracked) if ok]
-    with_drops, without = [], []
+    with_drops, without, drops_world = [], [], []
     for k, record in enumerate(records):
         left, right, rectified = frame_pair(record)
         frame = obstacles_from_pair(left, right, stereo, rectified=rectified, mount=mount, pan_rad=record.pan_rad,
@@ -81,8 +83,11 @@ def paired_maps(manifest, *, frames: int | None = None, config=None):
             :len(obs.obstacle_points_robot) - len(obs.drop_points_robot)]))
         for out, f in ((with_drops, frame), (without, plain)):
             out.append(observation_from_pair(f, record, index=k, config=config, stereo=stereo))
-    return tuple(map_from_observations(manifest, obs, config=config, stereo=stereo, floor=floor, mount=mount)
+        T = T_from_planar(*record.pose)
+        drops_world.append(obs.drop_points_robot @ T[:3, :3].T + T[:3, 3])
+    runs = tuple(map_from_observations(manifest, obs, config=config, stereo=stereo, floor=floor, mount=mount)
                  for obs in (with_drops, without))
+    return runs + (drops_world,)
 
 
 def _drivable(height: np.ndarray, free: np.ndarray, start: tuple[int, int], max_step_m: float) -> np.ndarray:
@@ -144,6 +149,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5) -
 
     from mrstereo.geometry.drops import DropConfig
     from mrstereo.mapping import plan_path
+    from mrstereo.mapping.heights import HeightLayer
     from mrstereo.pipeline.run import views_of_frames
     from mrstereo.world import drop_edges, floor_heights, ground_truth_map, random_world, read_manifest
     from mrstereo.world import write_synthetic_dataset
@@ -154,7 +160,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5) -
     manifest = read_manifest(ds)
     world = random_world(seed, drops=True)
     t0 = time.process_time()
-    run, plain = paired_maps(manifest)
+    run, plain, drops_world = paired_maps(manifest)
     cpu = time.process_time() - t0
     grid = run.grid.grid
     step = DropConfig().max_step_m
@@ -167,29 +173,35 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5) -
     seen = _seen_floor(manifest, grid, height, view_m)
     seen_far = _seen_floor(manifest, grid, height, run.range_m)
     lethal_plain = plain.grid.to_ros_map().occupied
-    lethal = run.grid.to_ros_map().occupied
-    near_lethal = binary_dilation(lethal, np.ones((3, 3), bool))
-    target = edges & seen
-    recall = float((near_lethal & target).sum() / max(target.sum(), 1))
-    far = edges & seen_far
-    recall_far = float((near_lethal & far).sum() / max(far.sum(), 1))
+    layer = HeightLayer(grid)
+    for points in drops_world:
+        layer.add_drops(points)
+    target, far = edges & seen, edges & seen_far
+    scores = {}
+    for name, ros_map in (("grid", run.grid.to_ros_map()), ("+layer", layer.lethal(run.grid.to_ros_map()))):
+        near_lethal = binary_dilation(ros_map.occupied, np.ones((3, 3), bool))
+        scores[name] = (float((near_lethal & target).sum() / max(target.sum(), 1)),
+                        float((near_lethal & far).sum() / max(far.sum(), 1)), ros_map)
     away = drivable & _in_view(grid, views) & ~binary_dilation(edges, np.ones((3, 3), bool))
-    added = lethal & ~lethal_plain
     off_plain = away & (np.abs(np.nan_to_num(height)) > 1e-6)
     goals = _goals(world)
-    crossings = 0
-    for goal in goals:
-        plan = plan_path(run.grid.to_ros_map(), manifest.frames[0].pose[:2], goal, unknown_is_obstacle=False)
-        if plan.success:
-            r, c = grid.cells_from_xy(plan.path_xy)
-            inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
-            crossings += int((free[r[inside], c[inside]] & ~drivable[r[inside], c[inside]]).any())
-    return {"seed": seed, "edge cells in view": int(target.sum()), "edge recall": recall, "recall 4 m": recall_far,
-            "false drops": float((added & away).sum() / max(away.sum(), 1)),
-            "on ramps/kerbs": float((added & off_plain).sum() / max(off_plain.sum(), 1)),
-            "ramp/kerb cells": int(off_plain.sum()), "goals": len(goals), "crossings": crossings,
-            "cpu s": cpu, "kinds": [world.summary["drops"]["end"]["kind"]]
-            + [p["kind"] for p in world.summary["drops"]["patches"]]}
+    row = {"seed": seed, "edge cells in view": int(target.sum())}
+    for name, (recall, recall_far, ros_map) in scores.items():
+        added = ros_map.occupied & ~lethal_plain
+        crossings = 0
+        for goal in goals:
+            plan = plan_path(ros_map, manifest.frames[0].pose[:2], goal, unknown_is_obstacle=False)
+            if plan.success:
+                r, c = grid.cells_from_xy(plan.path_xy)
+                inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
+                crossings += int((free[r[inside], c[inside]] & ~drivable[r[inside], c[inside]]).any())
+        row.update({f"{name} recall": recall, f"{name} recall 4 m": recall_far,
+                    f"{name} false drops": float((added & away).sum() / max(away.sum(), 1)),
+                    f"{name} on ramps/kerbs": float((added & off_plain).sum() / max(off_plain.sum(), 1)),
+                    f"{name} crossings": crossings})
+    row.update({"ramp/kerb cells": int(off_plain.sum()), "goals": len(goals), "cpu s": cpu,
+                "kinds": [world.summary["drops"]["end"]["kind"]] + [p["kind"] for p in world.summary["drops"]["patches"]]})
+    return row
 
 
 def _goals(world) -> list[tuple[float, float]]:
@@ -215,7 +227,7 @@ def evaluate_real(frames: int) -> list[dict]:
             rows.append({"recording": name, "missing": str(root)})
             continue
         t0 = time.process_time()
-        run, plain = paired_maps(read_recording(root), frames=frames)
+        run, plain, drops_world = paired_maps(read_recording(root), frames=frames)
         a, b = (r.grid.to_ros_map() for r in (run, plain))
         free = b.free
         changed = free & ~a.free
@@ -286,10 +298,12 @@ def main() -> None:
         rows.append(row)
         print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()), flush=True)
     edge = sum(r["edge cells in view"] for r in rows)
-    print(f"all: edge recall {sum(r['edge recall'] * r['edge cells in view'] for r in rows) / max(edge, 1):.3f} "
-          f"(min {min(r['edge recall'] for r in rows):.3f}), false drops max {max(r['false drops'] for r in rows):.4f}, "
-          f"on ramps/kerbs max {max(r['on ramps/kerbs'] for r in rows):.4f}, "
-          f"crossings {sum(r['crossings'] for r in rows)} of {sum(r['goals'] for r in rows)} goals")
+    for name in ("grid", "+layer"):
+        print(f"all, {name}: edge recall {sum(r[name + ' recall'] * r['edge cells in view'] for r in rows) / max(edge, 1):.3f} "
+              f"(min {min(r[name + ' recall'] for r in rows):.3f}), false drops max "
+              f"{max(r[name + ' false drops'] for r in rows):.4f}, on ramps/kerbs max "
+              f"{max(r[name + ' on ramps/kerbs'] for r in rows):.4f}, "
+              f"crossings {sum(r[name + ' crossings'] for r in rows)} of {sum(r['goals'] for r in rows)} goals")
 
 
 if __name__ == "__main__":

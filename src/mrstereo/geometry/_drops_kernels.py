@@ -37,8 +37,10 @@ def _below(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
 
 @njit(nogil=True, cache=True)
 def _steep(points, rows, j, k0, k1, max_step_m, tan_slope, noise_m):
-    """Does the run ``rows[k0:k1]`` of column ``j`` hold a face steeper than the slope limit over a step?"""
-    for a in range(k0, k1):
+    """Does the run ``rows[k0:k1]`` of column ``j`` start with a face steeper than the slope limit over a
+    step (the far wall of a pit, a stair riser; later in the run a wall rising from a lower floor that a
+    gentle slope led to)?"""
+    for a in range(k0, min(k0 + 4, k1)):
         pa = rows[a]
         for b in range(a + 1, min(a + 12, k1)):
             pb = rows[b]
@@ -51,15 +53,16 @@ def _steep(points, rows, j, k0, k1, max_step_m, tan_slope, noise_m):
 
 
 @njit(nogil=True, cache=True)
-def column_drops(points, t, floor_near, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m, support, edge_reach_m,
+def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m, support, edge_reach_m,
                  spacing_m, out_edge, out_below, edge_columns):
     """Drop edges and negative obstacles of a robot-frame point image ``points`` (H, W, 3), NaN invalid.
 
     Up each column (from the image's bottom) a run of at least ``support`` measured points below the floor
     (``z < -(max_step + n_sigma sigma_h)``) is a drop when no drivable surface reaches it: it lies deeper
     than a step plus a slope of ``tan_slope`` from the last floor-level point ``A`` before it (``-thr < z <
-    low_m``; none measured: the floor where the column's bottom pixel looks, ``floor_near`` (W, 2)), or it
-    holds a face steeper than that slope over a step (a pit's far wall, a stair riser). Its edge lies before
+    low_m``; none measured: the floor under the camera, where the robot stands), or it
+    starts with a face steeper than that slope over a step and floor follows it (a hole's far wall, a stair
+    riser). Its edge lies before
     ``E``, where the sight line to the run's first point passes floor level: points every ``spacing_m`` over
     the last ``edge_reach_m`` of ``A -> E`` go to ``out_edge``, the run's points to ``out_below``, all at floor
     level. A rise from a drop to supported floor-level points marks the first of them (a far rim). ``t``: the
@@ -77,7 +80,7 @@ def column_drops(points, t, floor_near, max_step_m, tan_slope, sigma_per_m2, n_s
             if not math.isnan(points[i, j, 2]):
                 rows[m] = i
                 m += 1
-        xa, ya, za, sa = floor_near[j, 0], floor_near[j, 1], 0.0, 0.0
+        xa, ya, za, sa = tx, ty, 0.0, 0.0
         in_drop = False
         k = 0
         while k < m:
@@ -111,8 +114,11 @@ def column_drops(points, t, floor_near, max_step_m, tan_slope, sigma_per_m2, n_s
                 d = math.sqrt((points[q, j, 0] - xa) ** 2 + (points[q, j, 1] - ya) ** 2)
                 deepest = max(deepest, za - points[q, j, 2] - math.sqrt(sa * sa + sq * sq) - tan_slope * d)
                 end += 1
-            if end - k >= support and (deepest > max_step_m
-                                       or _steep(points, rows, j, k, end, max_step_m, tan_slope, sp)):
+            # a steep face counts when floor follows it (a hole's far wall up to its far rim; a wall rising
+            # from a lower floor goes on above the floor)
+            rim = end < m and points[rows[end], j, 2] < low_m
+            if end - k >= support and (deepest > max_step_m or (
+                    rim and _steep(points, rows, j, k, end, max_step_m, tan_slope, sp))):
                 s = tz / (tz - zp)                   # the sight line to the run's first point at floor level
                 ex, ey = tx + s * (xp - tx), ty + s * (yp - ty)
                 length = math.sqrt((ex - xa) ** 2 + (ey - ya) ** 2)

@@ -71,8 +71,7 @@ class DropResult:
 
 
 def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float, *,
-               config: DropConfig = DropConfig(), floor_top_m: float = 0.08, max_range_m: float = 8.0,
-               bottom_floor_xy=None) -> DropResult:
+               config: DropConfig = DropConfig(), floor_top_m: float = 0.08, max_range_m: float = 8.0) -> DropResult:
     """Drop edges and negative obstacles of one frame's robot-frame points.
 
     Parameters
@@ -89,9 +88,6 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
         A drop's upper side lies below this height (an obstacle config's ``min_obstacle_height_m``).
     max_range_m : float
         Returned points lie within this horizontal range of the camera.
-    bottom_floor_xy : ndarray of shape (W, 2), optional
-        Where each column's bottom pixel sees the floor (robot x, y): the nearest floor a column without a
-        measured floor point may descend from (default: under the camera, the most lenient).
 
     Returns
     -------
@@ -113,15 +109,8 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     columns = np.zeros(w, np.int64)
     if t[2] <= 0.0:
         raise ValueError(f"T_robot_from_cam puts the camera {t[2]:.3f} m above the floor; it must be above it")
-    if bottom_floor_xy is None:
-        near = np.repeat(t[None, :2], w, axis=0)
-    else:
-        near = np.ascontiguousarray(bottom_floor_xy, dtype=np.float64)
-        if near.shape != (w, 2):
-            raise ValueError(f"bottom_floor_xy must have shape ({w}, 2), got {near.shape}")
-        near = np.where(np.isfinite(near), near, t[:2])
     n_edge, n_below = _drops_kernels.column_drops(
-        pts, t, near, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
+        pts, t, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
         float(config.disparity_sigma_px) / bf, float(config.n_sigma), top, int(config.support),
         float(config.edge_reach_m), float(config.spacing_m), out_edge, out_below, columns)
     edge, below = out_edge[:n_edge], out_below[:n_below]

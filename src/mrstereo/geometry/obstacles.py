@@ -284,25 +284,11 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     return result if config.drops is None else _with_drops(result, stereo, config)
 
 
-def _bottom_floor_xy(stereo: StereoCamera, T_robot_from_cam: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """(W, 2): where the ray of each column's bottom pixel meets the floor (NaN where it looks up)."""
-    h, w = shape
-    intr = _rectified_intrinsics(stereo)
-    u = np.arange(w, dtype=np.float64)
-    rays = np.stack([(u - intr["cx_px"]) / intr["focal_px"], np.full(w, (h - 1 - intr["cy_px"]) / intr["fy_px"]),
-                     np.ones(w)], axis=1) @ T_robot_from_cam[:3, :3].T
-    t = T_robot_from_cam[:3, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(rays[:, 2] < 0.0, t[2] / -rays[:, 2], np.nan)
-    return t[:2] + rays[:, :2] * s[:, None]
-
-
 def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleConfig) -> ObstacleResult:
     """``result`` with the drop test's obstacle points (:func:`.drops.find_drops` on its point image)."""
     drops = find_drops(result.points_robot_image, result.T_robot_from_cam,
                        float(stereo.baseline_m) * float(stereo.focal_px), config=config.drops,
-                       floor_top_m=config.min_obstacle_height_m, max_range_m=config.max_range_m,
-                       bottom_floor_xy=_bottom_floor_xy(stereo, result.T_robot_from_cam, result.obstacle_mask.shape))
+                       floor_top_m=config.min_obstacle_height_m, max_range_m=config.max_range_m)
     found = drops.points_robot
     if not len(found):
         return result

@@ -21,22 +21,28 @@ from .grid import GridSpec
 
 __all__ = ["HeightLayer", "read_height_layer"]
 
-_LAYERS = ("max_height_m", "min_height_m")
+_LAYERS = ("max_height_m", "min_height_m", "drop")
 
 
 class HeightLayer:
-    """Highest and lowest point height [m] per cell of ``grid`` (NaN where no point fell), and the count."""
+    """Highest and lowest point height [m] per cell of ``grid`` (NaN where no point fell), the count, and the
+    drop cells: where one frame put at least ``min_drop_points`` drop-test points (:meth:`add_drops`).
 
-    def __init__(self, grid: GridSpec = GridSpec()) -> None:
+    The occupancy grid's rays clear a cell that later views look past, which erodes a drop edge (flat, at
+    floor level) once the robot sees beyond it; the drop cells keep it: :meth:`lethal` ORs them into a map.
+    """
+
+    def __init__(self, grid: GridSpec = GridSpec(), *, min_drop_points: int = 5) -> None:
         _checks.instance("grid", grid, GridSpec)
         self.grid = grid
+        self.min_drop_points = _checks.positive_int("min_drop_points", min_drop_points)
         self.max_height_m = np.full(grid.shape, np.nan, np.float32)
         self.min_height_m = np.full(grid.shape, np.nan, np.float32)
         self.count = np.zeros(grid.shape, np.int64)
+        self.drop = np.zeros(grid.shape, bool)
 
-    def add(self, points_world) -> int:
-        """Add world-frame points (N, 3) (z above the floor; rows with NaN skipped); returns how many fell
-        in the grid."""
+    def _cells(self, points_world) -> tuple[np.ndarray, np.ndarray]:
+        """Flat cell index and z of the finite points (N, 3) inside the grid."""
         p = np.asarray(points_world, dtype=np.float64)
         if p.ndim != 2 or p.shape[1] != 3:
             raise ValueError(f"points_world must have shape (N, 3), got {p.shape}")
@@ -44,8 +50,33 @@ class HeightLayer:
         row, col = self.grid.cells_from_xy(p[:, :2])
         rows, cols = self.grid.shape
         inside = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
-        flat = row[inside] * cols + col[inside]
-        z = p[inside, 2].astype(np.float32)
+        return row[inside] * cols + col[inside], p[inside, 2]
+
+    def add_drops(self, points_world) -> int:
+        """Mark the cells where this frame's drop points (``ObstacleResult.drop_points_robot`` in the world
+        frame) number at least ``min_drop_points``; returns how many cells that makes."""
+        flat, _ = self._cells(points_world)
+        hits = np.bincount(flat, minlength=self.drop.size).reshape(self.drop.shape) >= self.min_drop_points
+        self.drop |= hits
+        return int(hits.sum())
+
+    def lethal(self, ros_map):
+        """``ros_map`` (a :class:`~mrstereo.mapping.rosmap.RosMap` on this layer's grid) with the drop cells
+        occupied."""
+        from dataclasses import replace
+
+        if ros_map.grid != self.grid:
+            raise ValueError("ros_map must be on the height layer's grid")
+        occupancy = np.array(ros_map.occupancy, dtype=np.float64, copy=True)
+        occupancy[self.drop] = 1.0
+        return replace(ros_map, occupancy=occupancy)
+
+    def add(self, points_world) -> int:
+        """Add world-frame points (N, 3) (z above the floor; rows with NaN skipped); returns how many fell
+        in the grid."""
+        flat, z = self._cells(points_world)
+        z = z.astype(np.float32)
+        rows, cols = self.grid.shape
         if not flat.size:
             return 0
         hi = np.full(rows * cols, -np.inf, np.float32)
@@ -60,7 +91,8 @@ class HeightLayer:
 
     def save(self, folder: str | os.PathLike, *, frame_id: str = "map") -> dict[str, Path]:
         """Write ``heights.yaml``, ``max_height_m.npy``, ``min_height_m.npy`` (float32, row 0 at the grid's
-        lowest y, as the occupancy grid) and ``heights.png`` into ``folder``; each file atomically."""
+        lowest y, as the occupancy grid), ``drop.npy`` (bool) and ``heights.png`` into ``folder``; each file
+        atomically."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         out = {}
@@ -89,7 +121,7 @@ class HeightLayer:
         cmap = matplotlib.colormaps["coolwarm"].with_extremes(bad="#dde6f0")
         values = np.concatenate([a[np.isfinite(a)] for a in (self.max_height_m, self.min_height_m)])
         limit = float(max(0.1, np.percentile(np.abs(values), 99))) if values.size else 1.0
-        for k, (name, title) in enumerate(zip(_LAYERS, ("highest point", "lowest point"))):
+        for k, (name, title) in enumerate(zip(_LAYERS[:2], ("highest point", "lowest point"))):
             ax = fig.add_subplot(1, 2, k + 1)
             im = ax.imshow(np.ma.masked_invalid(getattr(self, name)), cmap=cmap, vmin=-limit, vmax=limit,
                            origin="lower", extent=self.grid.extent_m, interpolation="nearest")
@@ -115,8 +147,9 @@ def read_height_layer(folder: str | os.PathLike) -> HeightLayer:
         layer = HeightLayer(grid)
         for name in _LAYERS:
             array = np.load(folder / meta["layers"][name])
-            if array.shape != grid.shape or array.dtype != np.float32:
-                raise ValueError(f"{name} is {array.dtype} {array.shape}, expected float32 {grid.shape}")
+            dtype = np.bool_ if name == "drop" else np.float32
+            if array.shape != grid.shape or array.dtype != dtype:
+                raise ValueError(f"{name} is {array.dtype} {array.shape}, expected {np.dtype(dtype)} {grid.shape}")
             setattr(layer, name, array)
     except (KeyError, TypeError, IndexError, OSError) as exc:
         raise ValueError(f"{meta_path} is not a height layer: {exc}") from None
