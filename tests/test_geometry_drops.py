@@ -192,3 +192,33 @@ def test_height_layer_round_trip(tmp_path):
         layer.add(np.zeros((3, 2)))
     with pytest.raises(ValueError, match="heights.yaml"):
         read_height_layer(tmp_path)
+
+
+def test_scan_command_reports_the_ledge_unless_told_not_to(ledge, tmp_path):
+    """`mrstereo scan` on a matched frame 0.7 m before the ledge: returns at the edge, none without the test."""
+    import cv2
+    from click.testing import CliRunner
+
+    from mrstereo.camera import write_stereo
+    from mrstereo.cli import main
+    from mrstereo.geometry.scan import read_scan_json
+
+    pose = (float(ledge.waypoints_xy[-1, 0]), float(ledge.waypoints_xy[-1, 1]), 0.0)
+    frame = render_stereo_frame(ledge.scene, ledge.stereo, pose=pose, sensors=ledge.sensors)
+    cv2.imwrite(str(tmp_path / "l.png"), frame.left_rect)
+    cv2.imwrite(str(tmp_path / "r.png"), frame.right_rect)
+    write_stereo(tmp_path / "calib.yaml", ledge.stereo)
+    x_e = ledge.summary["drops"]["end"]["x_m"]
+    ranges = {}
+    for name, extra in (("drops", []), ("none", ["--no-drops"])):
+        out = tmp_path / f"{name}.json"
+        result = CliRunner().invoke(main, ["scan", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--calib",
+                                           str(tmp_path / "calib.yaml"), "--rectified", "-o", str(out), *extra])
+        assert result.exit_code == 0, result.output
+        ranges[name] = np.asarray(read_scan_json(out).ranges_m)
+    ahead = np.isfinite(ranges["drops"]) & (ranges["drops"] < x_e - pose[0] + 0.1)
+    assert ahead.sum() >= 5                                  # bearings that stop at the edge
+    assert not np.any(np.isfinite(ranges["none"][ahead]) & (ranges["none"][ahead] < x_e - pose[0] + 0.1))
+    bad = CliRunner().invoke(main, ["scan", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--calib",
+                                    str(tmp_path / "calib.yaml"), "-o", str(tmp_path / "x.json"), "--max-slope", "95"])
+    assert bad.exit_code == 2 and "--max-slope" in bad.output

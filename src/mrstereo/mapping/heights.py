@@ -3,8 +3,8 @@
 Beside the occupancy grid, it shows why a cell is lethal (a wall: high points; a drop: low ones) and gives
 a planner for rough ground the heights. Fed with world-frame points whose z is the height above the floor
 (the pipeline's ``FrameObservation.obstacle_points_world`` and ``floor_points_world``); saved as float32
-arrays, a YAML description in the spirit of ROS ``grid_map`` and a figure. User guide: docs/mapping.md,
-"Height layer". Conventions: docs/conventions.md.
+arrays, a YAML description in the spirit of ROS ``grid_map`` and a figure. User guide: docs/obstacles.md,
+"Drops". Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
