@@ -222,3 +222,11 @@ def test_scan_command_reports_the_ledge_unless_told_not_to(ledge, tmp_path):
     bad = CliRunner().invoke(main, ["scan", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--calib",
                                     str(tmp_path / "calib.yaml"), "-o", str(tmp_path / "x.json"), "--max-slope", "95"])
     assert bad.exit_code == 2 and "--max-slope" in bad.output
+
+
+def test_drops_need_a_randomized_world(tmp_path):
+    from mrstereo.world import write_synthetic_dataset
+
+    with pytest.raises(ValueError, match="drops applies to a randomized world"):
+        write_synthetic_dataset(tmp_path / "x", drops=True, progress=False)
+    assert not (tmp_path / "x").exists()
