@@ -148,7 +148,7 @@ def _seen_floor(manifest, grid, height: np.ndarray, range_m: float) -> np.ndarra
     return seen
 
 
-def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5) -> dict:
+def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, drop_frames: int = 1) -> dict:
     """Render world ``seed`` with drops, map it with and without the drop test, score both (see the module)."""
     from scipy.ndimage import binary_dilation
 
@@ -178,7 +178,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5) -
     seen = _seen_floor(manifest, grid, height, view_m)
     seen_far = _seen_floor(manifest, grid, height, run.range_m)
     lethal_plain = plain.grid.to_ros_map().occupied
-    layer = HeightLayer(grid)
+    layer = HeightLayer(grid, min_drop_frames=drop_frames)
     for points in drops_world:
         layer.add_drops(points)
     target, far = edges & seen, edges & seen_far
@@ -289,6 +289,7 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", default=["100-109"], help="seeds, e.g. 0-4 or 100-109")
     parser.add_argument("--frames", type=int, default=24, help="frames per world or recording")
     parser.add_argument("--view", type=float, default=2.5, help="range [m] of the edges the recall counts")
+    parser.add_argument("--drop-frames", type=int, default=1, help="frames that must mark a drop-layer cell")
     parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
     parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
     parser.add_argument("--speed", action="store_true", help="CPU time of a frame with and without the drop test")
@@ -307,7 +308,7 @@ def main() -> None:
     data.mkdir(parents=True, exist_ok=True)
     rows = []
     for seed in _parse_seeds(args.seeds):
-        row = evaluate_seed(seed, args.frames, data, args.view)
+        row = evaluate_seed(seed, args.frames, data, args.view, args.drop_frames)
         rows.append(row)
         print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()), flush=True)
     edge = sum(r["edge cells in view"] for r in rows)

@@ -26,16 +26,19 @@ _LAYERS = ("max_height_m", "min_height_m", "drop")
 
 class HeightLayer:
     """Highest and lowest point height [m] per cell of ``grid`` (NaN where no point fell), the count, and the
-    drop cells: where one frame put at least ``min_drop_points`` drop-test points (:meth:`add_drops`).
+    drop cells: where at least ``min_drop_frames`` frames each put ``min_drop_points`` drop-test points
+    (:meth:`add_drops`).
 
     The occupancy grid's rays clear a cell that later views look past, which erodes a drop edge (flat, at
     floor level) once the robot sees beyond it; the drop cells keep it: :meth:`lethal` ORs them into a map.
     """
 
-    def __init__(self, grid: GridSpec = GridSpec(), *, min_drop_points: int = 5) -> None:
+    def __init__(self, grid: GridSpec = GridSpec(), *, min_drop_points: int = 5, min_drop_frames: int = 1) -> None:
         _checks.instance("grid", grid, GridSpec)
         self.grid = grid
         self.min_drop_points = _checks.positive_int("min_drop_points", min_drop_points)
+        self.min_drop_frames = _checks.positive_int("min_drop_frames", min_drop_frames)
+        self.drop_frames = np.zeros(grid.shape, np.int64)
         self.max_height_m = np.full(grid.shape, np.nan, np.float32)
         self.min_height_m = np.full(grid.shape, np.nan, np.float32)
         self.count = np.zeros(grid.shape, np.int64)
@@ -57,7 +60,8 @@ class HeightLayer:
         frame) number at least ``min_drop_points``; returns how many cells that makes."""
         flat, _ = self._cells(points_world)
         hits = np.bincount(flat, minlength=self.drop.size).reshape(self.drop.shape) >= self.min_drop_points
-        self.drop |= hits
+        self.drop_frames += hits
+        self.drop = self.drop_frames >= self.min_drop_frames
         return int(hits.sum())
 
     def lethal(self, ros_map):
