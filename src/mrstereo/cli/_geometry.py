@@ -13,6 +13,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from ..geometry.drops import DropConfig
 from ..io import check_outputs
 from ..pipeline.frame import obstacles_from_pair, scan_from_pair
 from ._options import (ANGLE_RAD, CALIB_HELP, HEIGHT, MAX_DISPARITY, TILT, Number, echo_floor, library_default,
@@ -50,6 +51,14 @@ def _common(func):
                      help="Drop points farther [m]."),
         click.option("--ground", "ground_method", type=click.Choice(["v_disparity", "plane"]), default=None,
                      help="Floor estimator used when the mount is unknown."),
+        click.option("--max-step", "max_step_m", type=Number(0.0, 1.0, unit="m"),
+                     default=DropConfig.max_step_m, show_default=True,
+                     help="Highest step the robot climbs up or down [m]; a deeper drop is an obstacle."),
+        click.option("--max-slope", "max_slope_deg", type=Number(0.0, 89.0, unit="deg"),
+                     default=DropConfig.max_slope_deg, show_default=True,
+                     help="Steepest slope the robot drives [deg]; a floor that falls away faster is a drop."),
+        click.option("--no-drops", "no_drops", is_flag=True,
+                     help="No drop test (where the floor ends is not an obstacle)."),
     ]
     for option in reversed(options):
         func = option(func)
@@ -57,7 +66,8 @@ def _common(func):
 
 
 def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, preset, max_disparity_px,
-         texture_threshold, min_height_m, max_height_m, max_range_m, ground_method, mount, scan: bool, **scan_kw):
+         texture_threshold, min_height_m, max_height_m, max_range_m, ground_method, max_step_m, max_slope_deg,
+         no_drops, mount, scan: bool, **scan_kw):
     from dataclasses import replace
 
     from ..camera import read_stereo
@@ -87,7 +97,8 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     config = ObstacleConfig()
     updates = {k: v for k, v in (("min_obstacle_height_m", min_height_m), ("max_obstacle_height_m", max_height_m),
                                  ("max_range_m", max_range_m), ("ground_method", ground_method)) if v is not None}
-    config = replace(config, **updates)
+    drops = None if no_drops else DropConfig(max_step_m=max_step_m, max_slope_deg=max_slope_deg)
+    config = replace(config, drops=drops, **updates)
     options = dict(rectified=rectified, mount=camera_mount, pan_rad=pan_rad, preset=preset,
                    max_disparity_px=max_disparity_px, rejection=rejection, config=config)
     if scan:

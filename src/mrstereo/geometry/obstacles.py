@@ -4,14 +4,15 @@ Eq. (14)-(16) give camera-frame points; the mount (or the fitted floor, :mod:`.g
 into the robot frame. A point is an **obstacle** when ``min_obstacle_height_m < z <=
 max_obstacle_height_m`` (as costmap_2d), **floor** when ``|z| <= floor_tolerance_m``, else
 ignored. A too-near pixel (``DisparityResult.too_near``) is placed at the near-limit depth and
-classified by the same rules, never as floor (fail-safe). User guide: docs/obstacles.md.
+classified by the same rules, never as floor (fail-safe). Where the floor ends (a ledge, a hole) the
+drop test (:mod:`.drops`) adds obstacle points on the edge. User guide: docs/obstacles.md.
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
 import math
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -19,6 +20,7 @@ import numpy as np
 from .. import _checks
 from ..camera import CameraMount, StereoCamera
 from . import _kernels
+from .drops import DropConfig, find_drops
 from .ground import FLOOR_FIT_RANGE_M, GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_mount
 
 __all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity",
@@ -55,7 +57,7 @@ class ObstacleConfig:
     Z^2 / (b f) dd``, are too large). Without a mount, or with ``estimate_ground`` around a roughly
     known one (within ``prior_height_tolerance_m`` / ``prior_tilt_tolerance_rad``, falling back to it),
     the floor is estimated by ``ground_method`` within ``ground_height_range_m``, RANSAC seeded by
-    ``seed``.
+    ``seed``. ``drops``: the drop test's options (the robot's ``max_step_m`` and ``max_slope_deg``), None: off.
     """
 
     min_obstacle_height_m: float = 0.08
@@ -68,8 +70,11 @@ class ObstacleConfig:
     prior_height_tolerance_m: float = 0.15
     prior_tilt_tolerance_rad: float = 0.1
     seed: int = 0
+    drops: DropConfig | None = DropConfig()
 
     def __post_init__(self) -> None:
+        if self.drops is not None and not isinstance(self.drops, DropConfig):
+            raise TypeError(f"drops must be a DropConfig or None, got {type(self.drops).__name__}")
         lo = _checks.finite_number("min_obstacle_height_m", self.min_obstacle_height_m, nonnegative=True)
         hi = _checks.finite_number("max_obstacle_height_m", self.max_obstacle_height_m, positive=True)
         if hi <= lo:
@@ -94,6 +99,8 @@ class ObstacleResult:
     ``points_robot`` (N, 3): the robot-frame points of the pixels with a disparity (and the too-near
     placements), raster order, with their flat pixel indices ``pixels``; ``obstacle_points_robot`` /
     ``floor_points_robot`` among them and the disjoint (H, W) ``obstacle_mask`` / ``floor_mask``;
+    ``drop_points_robot`` the drop test's obstacle points (edges, then lower points; :mod:`.drops`), which
+    ``obstacle_points_robot`` ends with;
     ``ground`` and ``T_robot_from_cam`` used; ``success`` False (empty masks) without a floor,
     ``message`` how it was obtained; ``too_near_mask`` the too-near pixels placed at the near limit.
     """
@@ -109,6 +116,7 @@ class ObstacleResult:
     success: bool
     message: str
     too_near_mask: np.ndarray | None = None
+    drop_points_robot: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
 
     @property
     def too_near_obstacle_mask(self) -> np.ndarray:
@@ -264,12 +272,28 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
         max_height_m=float(config.max_obstacle_height_m), floor_tolerance_m=float(config.floor_tolerance_m),
         points=points, pixels=pixels, obstacle_points=obstacle_points, floor_points=floor_points, obstacle=obstacle,
         floor=floor)
-    return ObstacleResult(points_robot=points[:n], pixels=pixels[:n], obstacle_points_robot=obstacle_points[:n_obstacle],
-                          floor_points_robot=floor_points[:n_floor], obstacle_mask=obstacle, floor_mask=floor,
-                          ground=ground, T_robot_from_cam=T, success=True,
-                          message=f"floor from {ground.method}: height {ground.height_m:.3f} m, "
-                                  f"tilt {np.degrees(ground.tilt_rad):.2f} deg; "
-                                  f"{int(n_obstacle)} obstacle and {int(n_floor_band)} floor points"
-                                  + (f" ({n_near} obstacle points too near, placed at the near limit)"
-                                     if n_near else ""),
-                          too_near_mask=np.zeros((h, w), dtype=bool) if near is None else near)
+    result = ObstacleResult(points_robot=points[:n], pixels=pixels[:n], obstacle_points_robot=obstacle_points[:n_obstacle],
+                            floor_points_robot=floor_points[:n_floor], obstacle_mask=obstacle, floor_mask=floor,
+                            ground=ground, T_robot_from_cam=T, success=True,
+                            message=f"floor from {ground.method}: height {ground.height_m:.3f} m, "
+                                    f"tilt {np.degrees(ground.tilt_rad):.2f} deg; "
+                                    f"{int(n_obstacle)} obstacle and {int(n_floor_band)} floor points"
+                                    + (f" ({n_near} obstacle points too near, placed at the near limit)"
+                                       if n_near else ""),
+                            too_near_mask=np.zeros((h, w), dtype=bool) if near is None else near)
+    return result if config.drops is None else _with_drops(result, stereo, config)
+
+
+def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleConfig) -> ObstacleResult:
+    """``result`` with the drop test's obstacle points (:func:`.drops.find_drops` on its point image)."""
+    drops = find_drops(result.points_robot_image, result.T_robot_from_cam,
+                       float(stereo.baseline_m) * float(stereo.focal_px), config=config.drops,
+                       floor_top_m=config.min_obstacle_height_m, max_range_m=config.max_range_m)
+    found = drops.points_robot
+    if not len(found):
+        return result
+    out = replace(result, obstacle_points_robot=np.concatenate([result.obstacle_points_robot, found]),
+                  drop_points_robot=found,
+                  message=result.message + f"; {int(np.count_nonzero(drops.edge_columns))} columns with a drop")
+    out.__dict__["points_robot_image"] = result.points_robot_image      # computed once
+    return out

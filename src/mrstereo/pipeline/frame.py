@@ -164,14 +164,18 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
         range_min = max(range_min, near_limit_range_m(stereo, obstacles.T_robot_from_cam, frame.max_disparity_px))
     gray = frame.left_rect if frame.left_rect.ndim == 2 else frame.left_rect.mean(axis=2)
     with stage("scan"):
-        # the obstacle points are those of obstacle_mask in raster order: no (H, W, 3) image needed
-        points, values = obstacles.obstacle_points_robot, gray[obstacles.obstacle_mask]
-        near = obstacles.too_near_obstacle_mask[obstacles.obstacle_mask]
-        measured = (points, values) if not near.any() else (points[~near], values[~near])
-        scan = laser_scan_from_points(measured[0], angle_min_rad=lo, angle_max_rad=hi,
+        # the obstacle points are those of obstacle_mask in raster order (no (H, W, 3) image needed), then the
+        # drop test's (returns without an intensity)
+        n = int(np.count_nonzero(obstacles.obstacle_mask))
+        points, drops = obstacles.obstacle_points_robot[:n], obstacles.obstacle_points_robot[n:]
+        keep = ~obstacles.too_near_obstacle_mask[obstacles.obstacle_mask]
+        near = ~keep
+        scan = laser_scan_from_points(np.concatenate([points[keep], drops]), angle_min_rad=lo, angle_max_rad=hi,
                                       angle_increment_rad=angle_increment_rad, range_min_m=range_min,
                                       range_max_m=config.max_range_m if range_max_m is None else range_max_m,
-                                      min_points=min_points, intensities=measured[1],
+                                      min_points=min_points,
+                                      intensities=np.concatenate([gray[obstacles.obstacle_mask][keep],
+                                                                  np.full(len(drops), np.nan)]),
                                       observed_points_robot=obstacles.points_robot)
         if near.any():
             # the too-near bearings, whatever the placement's range (it is a bound, not a measurement)

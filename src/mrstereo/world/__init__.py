@@ -6,7 +6,7 @@ Conventions: docs/conventions.md.
 """
 from ..recordings.manifest import FrameRecord, Manifest, read_manifest, write_manifest
 from .dataset import corridor_path, poses_along, write_synthetic_dataset
-from .groundtruth import ground_truth_map, obstacle_footprints, occupied_footprint
+from .groundtruth import drop_edges, floor_heights, ground_truth_map, obstacle_footprints, occupied_footprint
 from .randomize import RandomWorld, random_stereo, random_world
 from .render import SensorModel, StereoFrame, camera_poses, default_stereo, render_stereo_frame, render_view
 from .scene import (LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_NAMES, LABEL_NONE, LABEL_OBSTACLE, LABEL_POSTER,
@@ -20,7 +20,7 @@ __all__ = [
     "LABEL_SKIRTING", "LABEL_OBSTACLE", "LABEL_NAMES",
     "RandomWorld", "random_world", "random_stereo", "SensorModel",
     "StereoFrame", "default_stereo", "render_stereo_frame", "render_view", "camera_poses",
-    "ground_truth_map", "occupied_footprint", "obstacle_footprints",
+    "ground_truth_map", "occupied_footprint", "obstacle_footprints", "floor_heights", "drop_edges",
     "RenderedTarget", "render_calibration_views", "render_paper_dot_target", "target_points",
     "FrameRecord", "Manifest", "read_manifest", "write_manifest", "write_synthetic_dataset", "corridor_path",
     "poses_along",

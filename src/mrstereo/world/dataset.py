@@ -12,7 +12,7 @@ import numpy as np
 
 from .. import _checks, _limits
 from ..recordings.manifest import staged_dataset
-from .groundtruth import ground_truth_map
+from .groundtruth import drop_edges, floor_heights, ground_truth_map
 from .paths import PATH_KINDS, drifted_poses, sequence_path, speed_path, waypoint_path
 from .randomize import random_world
 from .render import SensorModel, default_stereo, render_stereo_frame
@@ -60,7 +60,7 @@ def poses_along(waypoints_xy, n_stops: int) -> np.ndarray:
 _PANS = (0.0, math.pi / 4, -math.pi / 4)   # front, left and right views (paper Sec. 5.2)
 
 
-def _check_world_options(path: str, randomize: bool, wall_texture, odometry_noise) -> None:
+def _check_world_options(path: str, randomize: bool, wall_texture, odometry_noise, drops: bool = False) -> None:
     if path not in PATH_KINDS:
         raise ValueError(f"path must be one of {', '.join(PATH_KINDS)}, got {path!r}")
     if randomize and path in ("s-curve", "street"):
@@ -68,6 +68,8 @@ def _check_world_options(path: str, randomize: bool, wall_texture, odometry_nois
                          "path='front' (along the world's own waypoints)")
     if wall_texture is not None and not randomize:
         raise ValueError("wall_texture applies to a randomized world only (randomize=True)")
+    if drops and not randomize:
+        raise ValueError("drops applies to a randomized world only (randomize=True)")
     if odometry_noise is not None and len(odometry_noise) != 2:
         raise ValueError(f"odometry_noise must be (scale_error, heading_drift_rad_per_m), got {odometry_noise!r}")
 
@@ -102,7 +104,7 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                             odometry_noise: tuple[float, float] | None = None,
                             progress: bool = True, randomize: bool = False,
                             wall_texture: str | None = None, turn_rad_per_frame: float = math.radians(3.0),
-                            frame_rate_hz: float = 10.0) -> Path:
+                            frame_rate_hz: float = 10.0, drops: bool = False) -> Path:
     """Render the default corridor (or a randomized world) along its path and write a dataset directory.
 
     Written: raw and rectified images, GT disparity (PFM), GT labels (PNG), the true calibration,
@@ -139,6 +141,9 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
         ``street``: the largest heading change per frame at full speed.
     frame_rate_hz : float
         Frames per second of a sequence (its ``stamp_s``).
+    drops : bool
+        With ``randomize=True``: a world with drops (``random_world(..., drops=True)``); their truth on the
+        map's grid is written as ``gt_drops.npz`` (``floor_height_m``, ``drop_edge``; docs/world.md).
 
     Returns
     -------
@@ -152,12 +157,12 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
     width, height = _checks.positive_int("width", width, minimum=16), _checks.positive_int("height", height, minimum=16)
     supersample = _checks.positive_int("supersample", supersample)
     _check_sizes(Path(out_dir).absolute(), n_frames, width, height, supersample)
-    _check_world_options(path, randomize, wall_texture, odometry_noise)
+    _check_world_options(path, randomize, wall_texture, odometry_noise, drops)
     rate = _checks.finite_number("frame_rate_hz", frame_rate_hz, positive=True)
     generator = {"name": "mrstereo.world", "seed": seed, "width": width, "height": height, "path": path}
     if randomize or path == "street":
         world = (street_world(seed, width=width, height=height) if path == "street" else
-                 random_world(seed, width=width, height=height, wall_texture=wall_texture))
+                 random_world(seed, width=width, height=height, wall_texture=wall_texture, drops=drops))
         stereo, scene, sensors, waypoints = world.stereo, world.scene, world.sensors, world.waypoints_xy
         generator["street" if path == "street" else "randomized"] = world.summary
     else:
@@ -177,6 +182,9 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
                                        "heading_drift_rad_per_m": float(odometry_noise[1])}
     with staged_dataset(out_dir, calibration=stereo, mount=stereo.mount, extra={"generator": generator}) as dataset:
         dataset.write_ground_truth_map(ground_truth_map(scene))
+        if drops:
+            np.savez_compressed(dataset.root / "gt_drops.npz", floor_height_m=floor_heights(scene),
+                                drop_edge=drop_edges(scene))
         for k in tqdm(range(n_frames), desc="rendering", unit="frame", disable=not progress):
             pose = tuple(float(v) for v in poses[k])
             frame = render_stereo_frame(scene, stereo, pose=pose, pan_rad=pans[k], seed=seed * 100003 + k,

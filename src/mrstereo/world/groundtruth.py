@@ -3,6 +3,7 @@
 Occupied: every cell whose square overlaps the footprint of a wall, door panel
 or obstacle. Free: the remaining cells of the corridor's free space (including
 the door recesses and the scene's ``free_regions_m``, e.g. side rooms). Unknown (NaN): everything else, e.g. behind the walls.
+Drops (a world's floor at several heights): :func:`floor_heights` and :func:`drop_edges`.
 Grid conventions: :class:`mrstereo.mapping.grid.GridSpec`, docs/conventions.md.
 """
 from __future__ import annotations
@@ -16,7 +17,12 @@ from ..mapping.grid import GridSpec
 from ..mapping.rosmap import RosMap
 from .scene import LABEL_CEILING, LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, Scene
 
-__all__ = ["ground_truth_map", "occupied_footprint", "obstacle_footprints"]
+__all__ = ["ground_truth_map", "occupied_footprint", "obstacle_footprints", "floor_heights", "drop_edges",
+           "DROP_STEP_M"]
+
+DROP_STEP_M = 0.05
+"""The step a robot climbs (``ObstacleConfig.max_step_m``): a larger height difference between neighbouring
+floor cells is a drop edge."""
 
 
 def occupied_footprint(scene: Scene, grid: GridSpec, *, height_band_m=(0.02, 2.0)) -> np.ndarray:
@@ -103,3 +109,41 @@ def _recesses(scene: Scene, x: np.ndarray, y: np.ndarray) -> np.ndarray:
             ya, yb = box.max_m[1], -scene.half_width_m
         out |= (x > box.min_m[0]) & (x < box.max_m[0]) & (y >= ya) & (y < yb)
     return out
+
+
+def floor_heights(scene: Scene, grid: GridSpec | None = None) -> np.ndarray:
+    """Height of the floor [m] at each cell centre (rows, cols) float64: the highest top of the floor boxes
+    (``LABEL_FLOOR``) over it (0 on the plain floor, lower in pits and on ramps down, higher on kerbs), NaN
+    where there is none."""
+    _checks.instance("scene", scene, Scene)
+    grid = GridSpec() if grid is None else grid
+    _checks.instance("grid", grid, GridSpec)
+    centres = grid.cell_centres()
+    x, y = centres[..., 0], centres[..., 1]
+    height = np.full(grid.shape, -np.inf)
+    for box in scene.boxes:
+        if box.label == LABEL_FLOOR:
+            inside = (x >= box.min_m[0]) & (x < box.max_m[0]) & (y >= box.min_m[1]) & (y < box.max_m[1])
+            height[inside] = np.maximum(height[inside], box.max_m[2])
+    height[np.isinf(height)] = np.nan
+    return height
+
+
+def drop_edges(scene: Scene, grid: GridSpec | None = None, *, max_step_m: float = DROP_STEP_M) -> np.ndarray:
+    """Drop-edge cells (rows, cols) bool: free cells of the true map whose floor is more than ``max_step_m``
+    above that of a neighbouring cell (8-neighbourhood) -- where the drivable floor ends. A ramp of 1 cm
+    risers, a kerb or a sunken step within ``max_step_m`` has none."""
+    grid = GridSpec() if grid is None else grid
+    step = _checks.finite_number("max_step_m", max_step_m, nonnegative=True)
+    height = floor_heights(scene, grid)
+    padded = np.pad(height, 1, constant_values=np.nan)
+    rows, cols = height.shape
+    lowest = np.full(height.shape, np.inf)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr or dc:
+                neighbour = padded[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols]
+                lowest = np.fmin(lowest, np.where(np.isnan(neighbour), np.inf, neighbour))
+    with np.errstate(invalid="ignore"):
+        edge = height - lowest > step
+    return edge & (ground_truth_map(scene, grid).occupancy == 0.0)

@@ -18,11 +18,11 @@ from ..camera import Camera, CameraInfo, CameraMount, StereoCamera
 from ..geometry.ground import ground_from_mount
 from ..transforms import rotation_from_rpy
 from .render import SensorModel
-from .scene import (LABEL_DOOR, LABEL_OBSTACLE, LABEL_POSTER, TEXTURE_BLOTCH, TEXTURE_CHECKER, TEXTURE_POSTER,
+from .scene import (LABEL_DOOR, LABEL_FLOOR, LABEL_OBSTACLE, LABEL_POSTER, TEXTURE_BLOTCH, TEXTURE_CHECKER, TEXTURE_POSTER,
                     TEXTURE_STRIPES_U, TEXTURE_STRIPES_V, TEXTURE_TILES, TEXTURE_WEAK, TEXTURE_WOOD, WALL_THICK_M, Box,
                     Cylinder, Decal, Light, Material, Scene, _corridor_boxes)
 
-__all__ = ["RandomWorld", "random_world", "random_stereo", "RANGES", "WALL_TEXTURES"]
+__all__ = ["RandomWorld", "random_world", "random_stereo", "RANGES", "DROP_RANGES", "WALL_TEXTURES"]
 
 RANGES = {
     "corridor_width_m": (1.6, 3.0),
@@ -40,6 +40,21 @@ RANGES = {
 }
 """Ranges of the randomized quantities (uniform draws)."""
 
+DROP_RANGES = {
+    "ledge_depth_m": (0.3, 1.5),
+    "hole_depth_m": (0.3, 1.5),
+    "hole_size_m": (0.4, 1.0),
+    "holes": (1, 2),
+    "kerb_m": (0.03, 0.05),
+    "ramp_depth_m": (0.1, 0.25),
+    "ramp_slope_deg": (3.0, 7.0),
+    "stair_riser_m": (0.15, 0.2),
+}
+"""Ranges of the drops of ``random_world(..., drops=True)`` (uniform draws; docs/world.md, "Drops")."""
+
+SLAB_DEPTH_M = 2.0      # the floor slab of a world with drops: pit walls reach this deep
+RAMP_RISER_M = 0.01     # a ramp is a flight of 1 cm risers (axis-aligned boxes)
+
 _CLEARANCE_M = 0.4      # obstacles keep this far from the robot path (robot radius + margin)
 _GRID_HALF_M = 2.95     # everything the map should show stays within |y| < 3 m (the default grid)
 
@@ -48,7 +63,8 @@ _GRID_HALF_M = 2.95     # everything the map should show stays within |y| < 3 m 
 class RandomWorld:
     """One randomized world: the scene, the true stereo rig (``stereo.mount``), the left and right
     sensors, the robot path ``waypoints_xy`` (K, 2) clear of every obstacle by 0.4 m, and ``summary``:
-    the drawn parameters in plain numbers (written into the dataset manifest).
+    the drawn parameters in plain numbers (written into the dataset manifest). With ``drops=True`` the
+    summary's ``"drops"`` lists the ledge or ramp, holes, kerbs and sunken steps drawn.
     """
 
     seed: int
@@ -360,8 +376,132 @@ def _draw_sensors(rng) -> tuple[SensorModel, SensorModel]:
                         noise_sigma=noise * rng.uniform(0.8, 1.25)))
 
 
+# --------------------------------------------------------------------------- drops (docs/world.md, "Drops")
+def _slab_boxes(outer, pits, mat: int) -> list[Box]:
+    """The floor slab ``outer`` (x0, x1, y0, y1), ``SLAB_DEPTH_M`` deep, without the rectangles ``pits``."""
+    xs = sorted({outer[0], outer[1], *(v for p in pits for v in p[:2])})
+    ys = sorted({outer[2], outer[3], *(v for p in pits for v in p[2:])})
+    boxes = []
+    for ya, yb in zip(ys[:-1], ys[1:]):
+        run = None
+        for xa, xb in zip(xs[:-1], xs[1:]):
+            cx, cy = 0.5 * (xa + xb), 0.5 * (ya + yb)
+            hole = any(p[0] < cx < p[1] and p[2] < cy < p[3] for p in pits)
+            if not hole:
+                run = (xa if run is None else run[0], xb)
+            if run is not None and (hole or xb == xs[-1]):
+                boxes.append(Box((run[0], ya, -SLAB_DEPTH_M), (run[1], yb, 0.0), mat, LABEL_FLOOR))
+                run = None
+    return boxes
+
+
+def _clip_path(waypoints: np.ndarray, x_max: float) -> np.ndarray:
+    """The path up to ``x = x_max`` (its waypoints' x increase)."""
+    keep = waypoints[waypoints[:, 0] <= x_max]
+    if len(keep) < len(waypoints):
+        a, b = waypoints[len(keep) - 1], waypoints[len(keep)]
+        keep = np.vstack([keep, a + (b - a) * (x_max - a[0]) / (b[0] - a[0])])
+    return np.round(keep, 3)
+
+
+def _draw_end(rng, corridor: _Corridor, waypoints: np.ndarray, floor: int) -> tuple:
+    """A ledge (the floor ends 0.3-1.5 m above a lower floor) or a drivable ramp down to a lower floor across
+    the corridor beyond the path's end: ``(pit, fill boxes, x_edge, summary)``."""
+    half, x1 = corridor.half_m, corridor.x1_m
+    if rng.uniform() < 0.6:
+        depth = _u(rng, DROP_RANGES["ledge_depth_m"])
+        x_e = min(float(waypoints[-1, 0]) + rng.uniform(0.8, 1.8), x1 - 1.0)
+        pit = (x_e, x1, -half, half)
+        fill = [Box((x_e, -half, -depth - 0.2), (x1, half, -depth), floor, LABEL_FLOOR)]
+        return pit, fill, x_e, {"kind": "ledge", "x_m": round(x_e, 3), "depth_m": round(depth, 3)}
+    slope = math.radians(_u(rng, DROP_RANGES["ramp_slope_deg"]))
+    n = max(1, int(round(min(_u(rng, DROP_RANGES["ramp_depth_m"]), 3.0 * math.tan(slope)) / RAMP_RISER_M)))
+    run = RAMP_RISER_M / math.tan(slope)
+    x_e = min(float(waypoints[-1, 0]) + rng.uniform(0.8, 1.8), x1 - n * run - 0.5)
+    pit = (x_e, x1, -half, half)
+    fill = [Box((x_e + k * run, -half, -SLAB_DEPTH_M), (x_e + (k + 1) * run, half, -(k + 1) * RAMP_RISER_M),
+                floor, LABEL_FLOOR) for k in range(n)]
+    fill.append(Box((x_e + n * run, -half, -SLAB_DEPTH_M), (x1, half, -n * RAMP_RISER_M), floor, LABEL_FLOOR))
+    return pit, fill, x_e, {"kind": "ramp", "x_m": round(x_e, 3), "depth_m": round(n * RAMP_RISER_M, 3),
+                            "slope_deg": round(math.degrees(slope), 2)}
+
+
+def _draw_patches(rng, corridor: _Corridor, x_end: float, path_pts: np.ndarray, placed: list,
+                  floor: int) -> tuple[list, list[Box], list[dict]]:
+    """Holes and stairwells down (0.3-1.5 m), a raised kerb (3-5 cm) and a sunken step (3-5 cm) beside the
+    path, clear of it, of the obstacles and of each other: ``(pits, boxes, summaries)``."""
+    half = corridor.half_m
+    kinds = ["hole"] * int(rng.integers(DROP_RANGES["holes"][0], DROP_RANGES["holes"][1] + 1)) + ["kerb", "sunken"]
+    pits, boxes, out = [], [], []
+    for kind in kinds:
+        for _attempt in range(80):
+            sx, sy = (rng.uniform(*DROP_RANGES["hole_size_m"]) for _ in range(2))
+            x = rng.uniform(0.3, max(0.31, x_end - sx - 0.3))
+            y = rng.uniform(-half, half - sy) if rng.uniform() < 0.5 else rng.choice([-half, half - sy])
+            rect = (x, x + sx, float(y), float(y) + sy)
+            if rect[1] < x_end - 0.3 and _rect_clear(rect, path_pts, placed, 0.15):
+                break
+        else:
+            continue
+        placed.append(rect)
+        x0, x1, y0, y1 = rect
+        if kind == "kerb":
+            h = _u(rng, DROP_RANGES["kerb_m"])
+            boxes.append(Box((x0, y0, 0.0), (x1, y1, h), floor, LABEL_FLOOR))
+            out.append({"kind": "kerb", "rect_m": [round(v, 3) for v in rect], "height_m": round(h, 3)})
+            continue
+        depth = _u(rng, DROP_RANGES["kerb_m"] if kind == "sunken" else DROP_RANGES["hole_depth_m"])
+        pits.append(rect)
+        boxes.append(Box((x0, y0, -depth - 0.2), (x1, y1, -depth), floor, LABEL_FLOOR))
+        stairs = kind == "hole" and depth > 0.5 and rng.uniform() < 0.5
+        if stairs:       # a stairwell: a flight down along x from the far side
+            riser = _u(rng, DROP_RANGES["stair_riser_m"])
+            for k in range(1, int(depth / riser)):
+                xa = x1 - 0.27 * k
+                if xa <= x0:
+                    break
+                boxes.append(Box((xa, y0, -depth), (xa + 0.27, y1, -k * riser), floor, LABEL_FLOOR))
+        out.append({"kind": "stairwell" if stairs else kind, "rect_m": [round(v, 3) for v in rect],
+                    "depth_m": round(depth, 3)})
+    return pits, boxes, out
+
+
+def _footprints(boxes: list[Box], cylinders: list[Cylinder]) -> dict[int, tuple]:
+    """Footprint rectangle (x0, x1, y0, y1) of each obstacle label."""
+    rects: dict[int, tuple] = {}
+    for lo, hi, label in ([(b.min_m[:2], b.max_m[:2], b.label) for b in boxes]
+                          + [((c.centre_m[0] - c.radius_m, c.centre_m[1] - c.radius_m),
+                              (c.centre_m[0] + c.radius_m, c.centre_m[1] + c.radius_m), c.label) for c in cylinders]):
+        r = rects.get(label, (np.inf, -np.inf, np.inf, -np.inf))
+        rects[label] = (min(r[0], lo[0]), max(r[1], hi[0]), min(r[2], lo[1]), max(r[3], hi[1]))
+    return rects
+
+
+def _add_drops(seed: int, corridor: _Corridor, waypoints: np.ndarray, floor: int, boxes: list[Box],
+               obstacle_boxes: list[Box], cylinders: list[Cylinder]) -> tuple:
+    """Drops drawn from a stream of their own (the rest stays the world of ``seed``): the floor slab with its
+    pits replaces the corridor's floor box ``boxes[0]``; obstacles beyond the end's edge are removed (the
+    others relabelled in order) and the path stops 0.7 m before it. Returns ``(boxes, obstacle_boxes,
+    cylinders, waypoints, kept labels, summary)``."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0xC0441D0, 2]))
+    end_pit, fill, x_e, end = _draw_end(rng, corridor, waypoints, floor)
+    waypoints = _clip_path(waypoints, x_e - 0.7)
+    rects = _footprints(obstacle_boxes, cylinders)
+    keep = sorted((label for label, r in rects.items() if r[1] < x_e - 0.1), key=lambda label: rects[label][0])
+    new = {label: LABEL_OBSTACLE + k for k, label in enumerate(keep)}
+    obstacle_boxes = [Box(b.min_m, b.max_m, b.material, new[b.label]) for b in obstacle_boxes if b.label in new]
+    cylinders = [Cylinder(c.centre_m, c.radius_m, c.height_m, c.material, new[c.label]) for c in cylinders
+                 if c.label in new]
+    placed = [rects[label] for label in keep]
+    pits, patch_boxes, patches = _draw_patches(rng, corridor, x_e, _path_points(waypoints), placed, floor)
+    slab = boxes[0]
+    outer = (slab.min_m[0], slab.max_m[0], slab.min_m[1], slab.max_m[1])
+    boxes = _slab_boxes(outer, [end_pit] + pits, floor) + fill + patch_boxes + boxes[1:]
+    return boxes, obstacle_boxes, cylinders, waypoints, keep, {"end": end, "patches": patches}
+
+
 def random_world(seed: int, *, width: int = 320, height: int = 240,
-                 wall_texture: str | None = None) -> RandomWorld:
+                 wall_texture: str | None = None, drops: bool = False) -> RandomWorld:
     """Draw a corridor world, its stereo rig, sensors and robot path from ``seed``.
 
     World frame as in :func:`mrstereo.world.default_scene`; everything the default map shows lies
@@ -376,6 +516,13 @@ def random_world(seed: int, *, width: int = 320, height: int = 240,
     wall_texture : {"paint", "tiles", "stripes", "blotch", "wood"}, optional
         The walls' material kind, drawn from a stream of its own after all other draws, so the rest
         stays the world of ``seed``.
+    drops : bool
+        Add drops (docs/world.md, "Drops"): a ledge or a drivable ramp down across the corridor beyond the
+        path's end (the path stops 0.7 m before it, obstacles beyond it are removed), one or two holes or
+        stairwells, a raised kerb and a sunken step beside the path; drawn from a stream of their own. The
+        floor is wood or carpet (on paint, faint tiles or large checks stereo measures next to nothing, so
+        no drop either).
+        ``groundtruth.floor_heights`` / ``drop_edges`` give their truth.
     """
     seed = _checks.positive_int("seed", seed, minimum=0)
     if wall_texture is not None and wall_texture not in WALL_TEXTURES:
@@ -400,6 +547,15 @@ def random_world(seed: int, *, width: int = 320, height: int = 240,
     obstacle_boxes, cylinders, obstacle_kinds = _draw_obstacles(rng, corridor, bank, _path_points(waypoints))
     lights, ambient = _draw_lights(rng, corridor)
     sensors = _draw_sensors(rng)
+    drop_summary = None
+    if drops:
+        boxes, obstacle_boxes, cylinders, waypoints, kept, drop_summary = _add_drops(
+            seed, corridor, waypoints, ids["floor"], boxes, obstacle_boxes, cylinders)
+        obstacle_kinds = [obstacle_kinds[label - LABEL_OBSTACLE] for label in kept]
+        # a floor stereo measures everywhere (paint, faint tiles and large checks give it next to no
+        # disparity, so no drop either): wood or carpet, from a stream of its own
+        bank.names[ids["floor"]], bank.materials[ids["floor"]] = _material(np.random.default_rng(
+            np.random.SeedSequence([seed, 0xC0441D0, 3])), _FLOOR, ["wood", "carpet"])
     wall = ids["wall"]
     if wall_texture is not None and wall_texture != bank.names[wall]:
         # after every other draw, from a stream of its own: the rest of the world stays the seed's
@@ -425,5 +581,7 @@ def random_world(seed: int, *, width: int = 320, height: int = 240,
         "sensors": [{"gain": round(s.gain, 3), "black_level": round(s.black_level, 2),
                      "noise_sigma": round(s.noise_sigma, 2)} for s in sensors],
     }
+    if drop_summary is not None:
+        summary["drops"] = drop_summary
     return RandomWorld(seed=seed, scene=scene, stereo=stereo, sensors=sensors, waypoints_xy=waypoints,
                        summary=summary)

@@ -1,0 +1,328 @@
+"""Drop-offs: maps of randomized worlds with drops, and the same test on real recordings of flat floors.
+
+Each frame is matched once and mapped twice, with and without the drop test (the same observation without
+the drop test's points, :mod:`mrstereo.geometry.drops`), so the two maps differ by the drop test only.
+
+Randomized worlds (``random_world(seed, drops=True)``: a ledge or a drivable ramp down, holes, stairwells,
+a kerb, a sunken step; tuned on seeds 0-4, reported on 100-109), the frames of ``write_synthetic_dataset``'s
+``stops`` path (front, +45 and -45 degrees at each stop), per seed:
+
+* **edge recall**: the true drop-edge cells (``mrstereo.world.drop_edges``) whose floor some frame's true
+  disparity shows within 2.5 m (``--view``; the robot must know an edge before it is near it) that are lethal in the map, a lethal
+  cell next to it counting (1-cell tolerance); **recall 4 m**: the same within the mapping range (4 m), where
+  a far edge seen at a grazing angle may hide a drivable slope and is not marked;
+* **false drops**: the drivable cells (reachable from the start over steps within ``max_step_m``: flat floor,
+  the ramp, the kerb, the sunken step) in some frame's field of view (4 m) and more than one cell from a true edge that the drop test
+  made lethal (lethal with it, not without), over those cells (**false > 0.15 m**: more than 3 cells from a
+  true edge); **on ramps/kerbs**: the same on the cells off
+  the plain floor;
+* **crossings**: paths planned (``mrstereo.mapping.plan_path``, unknown cells allowed as Nav2 does) from the
+  start to a goal in each hole or beyond the ledge that enter an undrivable cell (0 is required).
+
+``--speed``: the CPU time of a frame (``obstacles_from_pair``: rectify, match, reject, 3-D, free space) with and
+without the drop test, interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480).
+
+``--real``: the first frames of the EuRoC ASL sample, KITTI odometry 06 and OpenLORIS: the share of cells
+free without the drop test that are not free with it (at most 0.5 % on these flat floors), in the grid and with
+the drop layer.
+
+Each world row gives both maps: ``grid`` (the occupancy grid with the drop points among the obstacle points, as
+the pipeline maps today) and ``+layer`` (the same with ``mrstereo.mapping.heights.HeightLayer``'s drop cells
+lethal: the grid's rays erode a drop edge once a later view looks past it).
+
+Usage::
+
+    python benchmarks/bench_drops.py --seeds 100-109 [--frames 24]
+    python benchmarks/bench_drops.py --real [--frames 24]
+    python benchmarks/bench_drops.py --speed [--repeats 15]
+"""
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+
+def _parse_seeds(values: list[str]) -> list[int]:
+    seeds: list[int] = []
+    for v in values:
+        for part in v.split(","):
+            a, _, b = part.partition("-")
+            seeds += list(range(int(a), int(b or a) + 1)) if part else []
+    return seeds
+
+
+def paired_maps(manifest, *, frames: int | None = None, config=None):
+    """Map a recording's first ``frames`` frames with and without the drop test, matching each frame once.
+
+    Returns ``(with_drops, without_drops)`` :class:`mrstereo.pipeline.run.MapRun` and each frame's drop
+    points in the world frame.
+    """
+    from mrstereo.transforms import T_from_planar
+    from mrstereo.pipeline.frame import obstacles_from_pair
+    from mrstereo.pipeline.run import (PipelineConfig, floor_for_run, map_from_observations, observation_from_pair,
+                                       pair_options, with_visual_odometry)
+    from mrstereo.recordings.manifest import frame_pair, rebased
+
+    config = PipelineConfig() if config is None else config
+    stereo = manifest.calibration
+    config = config.for_rig(stereo)
+    if frames is not None:
+        manifest = replace(manifest, frames=manifest.frames[:frames])
+    mount, floor, _ = floor_for_run(manifest, stereo, config=config, prefer_raw=False, check_mount=True)
+    manifest = rebased(manifest, mount)
+    records = list(manifest.frames)
+    if not manifest.has_poses:
+        visual, vo = with_visual_odometry(manifest)
+        records = [r for r, ok in zip(visual.frames, vo.tracked) if ok]
+    with_drops, without, drops_world = [], [], []
+    for k, record in enumerate(records):
+        left, right, rectified = frame_pair(record)
+        frame = obstacles_from_pair(left, right, stereo, rectified=rectified, mount=mount, pan_rad=record.pan_rad,
+                                    **pair_options(config))
+        obs = frame.obstacles
+        plain = replace(frame, obstacles=replace(obs, obstacle_points_robot=obs.obstacle_points_robot[
+            :len(obs.obstacle_points_robot) - len(obs.drop_points_robot)]))
+        for out, f in ((with_drops, frame), (without, plain)):
+            out.append(observation_from_pair(f, record, index=k, config=config, stereo=stereo))
+        T = T_from_planar(*record.pose)
+        drops_world.append(obs.drop_points_robot @ T[:3, :3].T + T[:3, 3])
+    runs = tuple(map_from_observations(manifest, obs, config=config, stereo=stereo, floor=floor, mount=mount)
+                 for obs in (with_drops, without))
+    return runs + (drops_world,)
+
+
+def _drivable(height: np.ndarray, free: np.ndarray, start: tuple[int, int], max_step_m: float) -> np.ndarray:
+    """Cells reachable from ``start`` over free cells whose floor heights differ by at most ``max_step_m``."""
+    reach = np.zeros(height.shape, bool)
+    stack = [start]
+    reach[start] = True
+    rows, cols = height.shape
+    while stack:
+        r, c = stack.pop()
+        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            rr, cc = r + dr, c + dc
+            if (0 <= rr < rows and 0 <= cc < cols and not reach[rr, cc] and free[rr, cc]
+                    and abs(height[rr, cc] - height[r, c]) <= max_step_m):
+                reach[rr, cc] = True
+                stack.append((rr, cc))
+    return reach
+
+
+def _in_view(grid, views) -> np.ndarray:
+    """Cells inside some frame's field-of-view wedge ``(x, y, heading, half_fov, range)``."""
+    centres = grid.cell_centres()
+    seen = np.zeros(grid.shape, bool)
+    for x, y, heading, half, reach in views:
+        dx, dy = centres[..., 0] - x, centres[..., 1] - y
+        bearing = np.angle(np.exp(1j * (np.arctan2(dy, dx) - heading)))
+        seen |= (np.hypot(dx, dy) <= reach) & (np.abs(bearing) <= half)
+    return seen
+
+
+def _seen_floor(manifest, grid, height: np.ndarray, range_m: float) -> np.ndarray:
+    """Cells whose floor some frame's true disparity shows within ``range_m`` of the camera (a true point at
+    the cell's floor height): what the cameras could see, near blind zone and occlusions included."""
+    from mrstereo.geometry import ground_from_mount, points_robot_from_disparity
+    from mrstereo.geometry.ground import T_robot_from_cam_ground
+    from mrstereo.io.images import read_pfm
+    from mrstereo.transforms import T_from_planar
+
+    stereo = manifest.calibration
+    floor = ground_from_mount(manifest.mount, R_rect_from_cam=stereo.left.R)
+    seen = np.zeros(grid.shape, bool)
+    for record in manifest.frames:
+        T_cam = T_robot_from_cam_ground(floor, pan_rad=record.pan_rad)
+        p = points_robot_from_disparity(read_pfm(record.gt_disparity), stereo, T_cam).reshape(-1, 3)
+        p = p[np.isfinite(p).all(axis=1) & (np.hypot(*(p[:, :2] - T_cam[:2, 3]).T) <= range_m)]
+        T = T_from_planar(*record.pose)
+        w = p @ T[:3, :3].T + T[:3, 3]
+        r, c = grid.cells_from_xy(w[:, :2])
+        inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
+        r, c, z = r[inside], c[inside], w[inside, 2]
+        on_floor = np.abs(z - height[r, c]) < 0.02
+        seen[r[on_floor], c[on_floor]] = True
+    return seen
+
+
+def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, drop_frames: int = 1) -> dict:
+    """Render world ``seed`` with drops, map it with and without the drop test, score both (see the module)."""
+    from scipy.ndimage import binary_dilation
+
+    from mrstereo.geometry.drops import DropConfig
+    from mrstereo.mapping import plan_path
+    from mrstereo.mapping.heights import HeightLayer
+    from mrstereo.pipeline.run import views_of_frames
+    from mrstereo.world import drop_edges, floor_heights, ground_truth_map, random_world, read_manifest
+    from mrstereo.world import write_synthetic_dataset
+
+    ds = data_dir / f"drops_seed{seed}_{frames}f"
+    if not (ds / "manifest.yaml").is_file():
+        write_synthetic_dataset(ds, seed=seed, n_frames=frames, progress=False, randomize=True, drops=True)
+    manifest = read_manifest(ds)
+    world = random_world(seed, drops=True)
+    t0 = time.process_time()
+    run, plain, drops_world = paired_maps(manifest)
+    cpu = time.process_time() - t0
+    grid = run.grid.grid
+    step = DropConfig().max_step_m
+    edges = drop_edges(world.scene, grid, max_step_m=step)
+    height = floor_heights(world.scene, grid)
+    free = ground_truth_map(world.scene, grid).occupancy == 0.0
+    start = tuple(int(v[0]) for v in grid.cells_from_xy(np.array([manifest.frames[0].pose[:2]])))
+    drivable = _drivable(np.nan_to_num(height, nan=-9.0), free, start, step)
+    views = views_of_frames(manifest.frames, manifest.calibration, range_m=run.range_m, mount=run.mount)
+    seen = _seen_floor(manifest, grid, height, view_m)
+    seen_far = _seen_floor(manifest, grid, height, run.range_m)
+    lethal_plain = plain.grid.to_ros_map().occupied
+    layer = HeightLayer(grid, min_drop_frames=drop_frames)
+    for points in drops_world:
+        layer.add_drops(points)
+    target, far = edges & seen, edges & seen_far
+    scores = {}
+    for name, ros_map in (("grid", run.grid.to_ros_map()), ("+layer", layer.lethal(run.grid.to_ros_map()))):
+        near_lethal = binary_dilation(ros_map.occupied, np.ones((3, 3), bool))
+        scores[name] = (float((near_lethal & target).sum() / max(target.sum(), 1)),
+                        float((near_lethal & far).sum() / max(far.sum(), 1)), ros_map)
+    away = drivable & _in_view(grid, views) & ~binary_dilation(edges, np.ones((3, 3), bool))
+    off_plain = away & (np.abs(np.nan_to_num(height)) > 1e-6)
+    away_far = away & ~binary_dilation(edges, np.ones((7, 7), bool))
+    goals = _goals(world)
+    row = {"seed": seed, "edge cells in view": int(target.sum())}
+    for name, (recall, recall_far, ros_map) in scores.items():
+        added = ros_map.occupied & ~lethal_plain
+        crossings = 0
+        for goal in goals:
+            plan = plan_path(ros_map, manifest.frames[0].pose[:2], goal, unknown_is_obstacle=False)
+            if plan.success:
+                r, c = grid.cells_from_xy(plan.path_xy)
+                inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
+                crossings += int((free[r[inside], c[inside]] & ~drivable[r[inside], c[inside]]).any())
+        row.update({f"{name} recall": recall, f"{name} recall 4 m": recall_far,
+                    f"{name} false drops": float((added & away).sum() / max(away.sum(), 1)),
+                    f"{name} false > 0.15 m": float((added & away_far).sum() / max(away_far.sum(), 1)),
+                    f"{name} on ramps/kerbs": float((added & off_plain).sum() / max(off_plain.sum(), 1)),
+                    f"{name} crossings": crossings})
+    row.update({"ramp/kerb cells": int(off_plain.sum()), "goals": len(goals), "cpu s": cpu,
+                "kinds": [world.summary["drops"]["end"]["kind"]] + [p["kind"] for p in world.summary["drops"]["patches"]]})
+    return row
+
+
+def _goals(world) -> list[tuple[float, float]]:
+    """Goals past a drop: the centre of each hole or stairwell, and beyond the ledge."""
+    drops = world.summary["drops"]
+    goals = [((p["rect_m"][0] + p["rect_m"][1]) / 2, (p["rect_m"][2] + p["rect_m"][3]) / 2)
+             for p in drops["patches"] if p["kind"] in ("hole", "stairwell")]
+    if drops["end"]["kind"] == "ledge":
+        goals.append((drops["end"]["x_m"] + 0.6, 0.0))
+    return goals
+
+
+def evaluate_real(frames: int) -> list[dict]:
+    """Flat floors of real recordings: the share of free cells the drop test changes."""
+    from mrstereo.mapping.heights import HeightLayer
+    from mrstereo.mapping.rosmap import ros_map_on_grid
+    from mrstereo.recordings import read_recording
+    from mrstereo.recordings.samples import data_root
+
+    rows = []
+    for name, path in (("EuRoC ASL sample", "euroc_asl_sample"), ("KITTI odometry 06", "kitti_odometry_06"),
+                       ("OpenLORIS", "openloris_sample")):
+        root = data_root() / path
+        if not root.exists():
+            rows.append({"recording": name, "missing": str(root)})
+            continue
+        t0 = time.process_time()
+        run, plain, drops_world = paired_maps(read_recording(root), frames=frames)
+        a, b = (r.grid.to_ros_map() for r in (run, plain))
+        b = ros_map_on_grid(b, a.grid)           # the map with drops may reach farther: compare on its window
+        free = b.free
+        changed = free & ~a.free
+        layer = HeightLayer(a.grid)
+        for points in drops_world:
+            layer.add_drops(points)
+        with_layer = free & ~layer.lethal(a).free
+        rows.append({"recording": name, "free cells": int(free.sum()), "changed": int(changed.sum()),
+                     "share changed": float(changed.sum() / max(free.sum(), 1)),
+                     "+layer share changed": float(with_layer.sum() / max(free.sum(), 1)),
+                     "drop points": int(sum(len(o.obstacle_points_world) for o in run.observations)
+                                        - sum(len(o.obstacle_points_world) for o in plain.observations)),
+                     "cpu s": time.process_time() - t0})
+    return rows
+
+
+def measure_speed(repeats: int) -> list[dict]:
+    """Median CPU seconds of one frame with and without the drop test (interleaved), per input."""
+    from mrstereo.geometry import ObstacleConfig
+    from mrstereo.pipeline.frame import obstacles_from_pair
+    from mrstereo.recordings import read_recording
+    from mrstereo.recordings.manifest import frame_pair
+    from mrstereo.recordings.samples import data_root
+    from mrstereo.world import default_scene, default_stereo, render_stereo_frame
+
+    stereo = default_stereo()
+    frame = render_stereo_frame(default_scene(0), stereo, pose=(1.0, 0.0, 0.0))
+    inputs = [("corridor 320x240", frame.left_rect, frame.right_rect, stereo, True, None)]
+    euroc = data_root() / "euroc_asl_sample"
+    if euroc.exists():
+        manifest = read_recording(euroc)
+        left, right, rectified = frame_pair(manifest.frames[0])
+        inputs.append(("EuRoC 752x480", left, right, manifest.calibration, rectified, manifest.mount))
+    rows = []
+    for name, left, right, calib, rectified, mount in inputs:
+        times: dict[str, list[float]] = {"with": [], "without": []}
+        configs = {"with": ObstacleConfig(), "without": ObstacleConfig(drops=None)}
+        for k in range(repeats + 1):
+            for key in ("with", "without") if k % 2 else ("without", "with"):
+                t0 = time.process_time()
+                obstacles_from_pair(left, right, calib, rectified=rectified, mount=mount, config=configs[key])
+                if k:                                           # the first round compiles
+                    times[key].append(time.process_time() - t0)
+        a, b = (float(np.median(times[key])) for key in ("with", "without"))
+        rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": a / b})
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", nargs="+", default=["100-109"], help="seeds, e.g. 0-4 or 100-109")
+    parser.add_argument("--frames", type=int, default=24, help="frames per world or recording")
+    parser.add_argument("--view", type=float, default=2.5, help="range [m] of the edges the recall counts")
+    parser.add_argument("--drop-frames", type=int, default=1, help="frames that must mark a drop-layer cell")
+    parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
+    parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
+    parser.add_argument("--speed", action="store_true", help="CPU time of a frame with and without the drop test")
+    parser.add_argument("--repeats", type=int, default=15, help="--speed: runs of each")
+    args = parser.parse_args()
+    if args.speed:
+        for row in measure_speed(args.repeats):
+            print("  ".join(f"{k}: {v:.4f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()))
+        return
+    if args.real:
+        for row in evaluate_real(args.frames):
+            print("  ".join(f"{k}: {v:.4f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()),
+                  flush=True)
+        return
+    data = Path(args.data) if args.data else Path(tempfile.mkdtemp(prefix="bench_drops_"))
+    data.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for seed in _parse_seeds(args.seeds):
+        row = evaluate_seed(seed, args.frames, data, args.view, args.drop_frames)
+        rows.append(row)
+        print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()), flush=True)
+    edge = sum(r["edge cells in view"] for r in rows)
+    for name in ("grid", "+layer"):
+        print(f"all, {name}: edge recall {sum(r[name + ' recall'] * r['edge cells in view'] for r in rows) / max(edge, 1):.3f} "
+              f"(min {min(r[name + ' recall'] for r in rows):.3f}), false drops max "
+              f"{max(r[name + ' false drops'] for r in rows):.4f} (> 0.15 m from an edge: "
+              f"{max(r[name + ' false > 0.15 m'] for r in rows):.4f}), on ramps/kerbs max "
+              f"{max(r[name + ' on ramps/kerbs'] for r in rows):.4f}, "
+              f"crossings {sum(r[name + ' crossings'] for r in rows)} of {sum(r['goals'] for r in rows)} goals")
+
+
+if __name__ == "__main__":
+    main()

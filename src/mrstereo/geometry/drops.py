@@ -1,0 +1,119 @@
+"""Negative obstacles: where the floor ends (a ledge, a stairwell, a hole) and what lies below it.
+
+Beyond the paper, which marks only points above the floor. Up each column of the disparity image the
+floor's points are followed until the next measured point lies below the floor by more than the robot
+climbs (``max_step_m`` plus three times the point's height uncertainty) and no drivable slope
+(``max_slope_deg``) joins the two: the floor visibly ends there. The edge (between the last floor point
+and where the sight line to the lower point passes floor level) and the lower points become obstacle
+points at floor level (z = 0, below any sight line, so the grid's occlusion tests never see through them), so
+the scan and the grid mark them like any obstacle; the far rim of a hole
+(a rise from below the floor back to it) too. A drivable ramp, a kerb or a sunken step within the limits
+is no drop. User guide: docs/obstacles.md, "Drops". Conventions: docs/conventions.md.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _checks
+from . import _drops_kernels
+
+__all__ = ["DropConfig", "DropResult", "find_drops"]
+
+
+@dataclass(frozen=True)
+class DropConfig:
+    """Options of :func:`find_drops` (docs/obstacles.md, "Drops").
+
+    The robot's limits: the highest step it climbs up or down (``max_step_m``) and the steepest slope it
+    drives (``max_slope_deg``). The noise margin: ``n_sigma`` times a point's height uncertainty for a
+    disparity error of ``disparity_sigma_px``. A drop needs ``support`` measured points below the floor
+    after it in its column; its edge is marked over the last ``edge_reach_m`` before where the sight line
+    passes floor level, a point every ``spacing_m``.
+    """
+
+    max_step_m: float = 0.05
+    max_slope_deg: float = 10.0
+    disparity_sigma_px: float = 0.25
+    n_sigma: float = 3.0
+    support: int = 3
+    edge_reach_m: float = 0.1
+    spacing_m: float = 0.01
+
+    def __post_init__(self) -> None:
+        _checks.finite_number("max_step_m", self.max_step_m, nonnegative=True)
+        slope = _checks.finite_number("max_slope_deg", self.max_slope_deg, nonnegative=True)
+        if slope >= 90.0:
+            raise ValueError(f"max_slope_deg must be below 90, got {slope}")
+        _checks.finite_number("disparity_sigma_px", self.disparity_sigma_px, nonnegative=True)
+        _checks.finite_number("n_sigma", self.n_sigma, nonnegative=True)
+        _checks.positive_int("support", self.support)
+        _checks.finite_number("edge_reach_m", self.edge_reach_m, nonnegative=True)
+        _checks.finite_number("spacing_m", self.spacing_m, positive=True)
+
+
+@dataclass(frozen=True)
+class DropResult:
+    """Output of :func:`find_drops`: ``edge_points_robot`` (N, 3) the points on the drop edges,
+    ``below_points_robot`` (M, 3) the points below the floor past an edge (both at floor level, z = 0),
+    ``edge_columns`` (W,) the number of edges found in each image column."""
+
+    edge_points_robot: np.ndarray
+    below_points_robot: np.ndarray
+    edge_columns: np.ndarray
+
+    @property
+    def points_robot(self) -> np.ndarray:
+        """All the drop's obstacle points: the edges', then the lower ones."""
+        return np.concatenate([self.edge_points_robot, self.below_points_robot])
+
+
+def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float, *,
+               config: DropConfig = DropConfig(), floor_top_m: float = 0.08, max_range_m: float = 8.0) -> DropResult:
+    """Drop edges and negative obstacles of one frame's robot-frame points.
+
+    Parameters
+    ----------
+    points_robot_image : ndarray of shape (H, W, 3)
+        Robot-frame point of every pixel (z: height above the floor), NaN where none
+        (``ObstacleResult.points_robot_image``).
+    T_robot_from_cam : ndarray of shape (4, 4)
+        Places the camera (the sight lines' origin).
+    baseline_focal_m_px : float
+        ``b f`` of the rig: the points' depth uncertainty ``Z^2 sigma_d / (b f)`` (eq. 14 differentiated).
+    config : DropConfig
+    floor_top_m : float
+        A drop's upper side lies below this height (an obstacle config's ``min_obstacle_height_m``).
+    max_range_m : float
+        Returned points lie within this horizontal range of the camera.
+
+    Returns
+    -------
+    DropResult
+    """
+    _checks.instance("config", config, DropConfig)
+    pts = np.ascontiguousarray(points_robot_image, dtype=np.float64)
+    if pts.ndim != 3 or pts.shape[2] != 3:
+        raise ValueError(f"points_robot_image must have shape (H, W, 3), got {pts.shape}")
+    T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
+    bf = _checks.finite_number("baseline_focal_m_px", baseline_focal_m_px, positive=True)
+    reach = _checks.finite_number("max_range_m", max_range_m, positive=True)
+    top = _checks.finite_number("floor_top_m", floor_top_m, positive=True)
+    t = np.ascontiguousarray(T[:3, 3], dtype=np.float64)
+    h, w = pts.shape[:2]
+    per_edge = int(config.edge_reach_m / config.spacing_m) + 2
+    out_edge = np.empty((4 * w * per_edge, 3))
+    out_below = np.empty((h * w // 2 + 1, 3))
+    columns = np.zeros(w, np.int64)
+    if t[2] <= 0.0:
+        raise ValueError(f"T_robot_from_cam puts the camera {t[2]:.3f} m above the floor; it must be above it")
+    n_edge, n_below = _drops_kernels.column_drops(
+        pts, t, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
+        float(config.disparity_sigma_px) / bf, float(config.n_sigma), top, int(config.support),
+        float(config.edge_reach_m), float(config.spacing_m), out_edge, out_below, columns)
+    edge, below = out_edge[:n_edge], out_below[:n_below]
+    edge = edge[np.hypot(edge[:, 0] - t[0], edge[:, 1] - t[1]) <= reach]
+    below = below[np.hypot(below[:, 0] - t[0], below[:, 1] - t[1]) <= reach]
+    return DropResult(edge_points_robot=edge, below_points_robot=below, edge_columns=columns)

@@ -1,0 +1,232 @@
+"""Drop-offs: worlds with drops and their truth, the drop test on exact and matched disparities, the height layer."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mrstereo.geometry import ObstacleConfig, detect_obstacles
+from mrstereo.geometry.drops import DropConfig, find_drops
+from mrstereo.mapping import GridSpec
+from mrstereo.mapping.heights import HeightLayer, read_height_layer
+from mrstereo.transforms import T_from_planar
+from mrstereo.world import LABEL_FLOOR, drop_edges, floor_heights, random_world, render_stereo_frame
+from mrstereo.world.randomize import DROP_RANGES, RAMP_RISER_M
+
+LEDGE_SEED, RAMP_SEED = 0, 1        # tuning seeds: seed 0 ends in a ledge, seed 1 in a ramp down
+
+
+@pytest.fixture(scope="module")
+def ledge():
+    return random_world(LEDGE_SEED, drops=True)
+
+
+@pytest.fixture(scope="module")
+def ramp():
+    return random_world(RAMP_SEED, drops=True)
+
+
+def _world_points(world, pose, result):
+    T = T_from_planar(*pose)
+    p = result.drop_points_robot
+    return p @ T[:3, :3].T + T[:3, 3]
+
+
+def test_drops_are_an_option_that_leaves_the_rest_of_the_world(ledge):
+    plain = random_world(LEDGE_SEED)
+    assert random_world(LEDGE_SEED, drops=False).scene == plain.scene
+    assert "drops" not in plain.summary and ledge.summary["drops"]["end"]["kind"] == "ledge"
+    np.testing.assert_array_equal(ledge.stereo.left.P, plain.stereo.left.P)
+    assert ledge.sensors == plain.sensors and ledge.scene.lights == plain.scene.lights
+    # the path is the plain world's, stopped 0.7 m before the edge
+    x_e = ledge.summary["drops"]["end"]["x_m"]
+    assert ledge.waypoints_xy[-1, 0] == pytest.approx(x_e - 0.7, abs=1e-3)
+    np.testing.assert_array_equal(ledge.waypoints_xy[:-1], plain.waypoints_xy[:len(ledge.waypoints_xy) - 1])
+
+
+def test_truth_of_a_ledge_holes_and_a_ramp(ledge, ramp):
+    grid = GridSpec()
+    for world in (ledge, ramp):
+        drops = world.summary["drops"]
+        height = floor_heights(world.scene, grid)
+        edges = drop_edges(world.scene, grid)
+        centres = grid.cell_centres()
+        x, y = centres[..., 0], centres[..., 1]
+        x_e = drops["end"]["x_m"]
+        inside = np.abs(y) < world.scene.half_width_m - 0.05
+        on_floor = inside & (x > 0.0) & (x < x_e - 0.1)
+        holes = [p for p in drops["patches"] if p["kind"] in ("hole", "stairwell", "sunken", "kerb")]
+        for p in holes:
+            x0, x1, y0, y1 = p["rect_m"]
+            in_patch = (x > x0 - 0.1) & (x < x1 + 0.1) & (y > y0 - 0.1) & (y < y1 + 0.1)
+            on_floor &= ~in_patch
+            cells = (x > x0) & (x < x1) & (y > y0) & (y < y1)
+            expected = p["height_m"] if p["kind"] == "kerb" else -p["depth_m"]
+            if p["kind"] != "stairwell":
+                np.testing.assert_allclose(height[cells], expected, atol=1e-3)
+            # a hole's rim is an edge all round (inside the corridor), a kerb's or a sunken step's nowhere
+            rim = in_patch & ~cells & inside & (x > x0 - 0.05) & (x < x1 + 0.05) & (y > y0 - 0.05) & (y < y1 + 0.05)
+            assert edges[rim].any() == (p["kind"] in ("hole", "stairwell"))
+        assert np.all(height[on_floor] == 0.0) and not edges[on_floor].any()
+        across = inside & (np.abs(x - x_e) < 0.5 * grid.resolution_m + 1e-9)
+        if drops["end"]["kind"] == "ledge":
+            assert edges[inside & (x < x_e) & (x > x_e - grid.resolution_m)].all()
+            beyond = inside & (x > x_e + 0.05) & (x < world.scene.x_range_m[1])
+            np.testing.assert_allclose(height[beyond], -drops["end"]["depth_m"], atol=1e-3)
+        else:                                   # a ramp of 1 cm risers: no edge, down to its depth
+            assert not edges[inside & (x > x_e - 0.5)].any()
+            section = inside & (x > x_e) & (x < world.scene.x_range_m[1])
+            assert np.nanmin(height[section]) == pytest.approx(-drops["end"]["depth_m"], abs=1e-3)
+            row = grid.cells_from_xy(np.array([[0.0, 0.0]]))[0][0]
+            along = height[row][(x[row] > x_e - 0.2) & (x[row] < world.scene.x_range_m[1])]
+            assert along.min() < 0.0 and np.all(np.abs(np.diff(along)) <= RAMP_RISER_M + 1e-9)
+        assert across.any()
+    assert DROP_RANGES["kerb_m"][1] <= DropConfig().max_step_m
+    assert all(b.label == LABEL_FLOOR for b in ledge.scene.boxes if b.max_m[2] <= 0.05 and b.min_m[2] < 0.0)
+
+
+def _frame(world, pose):
+    return render_stereo_frame(world.scene, world.stereo, pose=pose, sensors=world.sensors, supersample=1)
+
+
+def test_exact_disparity_marks_the_ledge_and_not_the_ramp(ledge, ramp):
+    for world, is_ledge in ((ledge, True), (ramp, False)):
+        x_e = world.summary["drops"]["end"]["x_m"]
+        pose = (float(world.waypoints_xy[-1, 0]), float(world.waypoints_xy[-1, 1]), 0.0)
+        frame = _frame(world, pose)
+        res = detect_obstacles(frame.disparity_px, world.stereo)
+        pts = _world_points(world, pose, res)
+        if not is_ledge:
+            assert len(pts) == 0, pts[:5]
+            continue
+        edge = pts[pts[:, 0] < x_e + 0.05]
+        assert len(edge) > 100
+        # on the edge: within 0.1 m before it (edge_reach_m), none on the floor nearer than that
+        assert edge[:, 0].min() > x_e - 0.15 and edge[:, 0].max() < x_e + 0.05
+        assert np.all(pts[:, 2] == 0.0)           # at floor level
+        # the robot frame's obstacle points end with them; without the drop test they are not there
+        np.testing.assert_array_equal(res.obstacle_points_robot[-len(res.drop_points_robot):], res.drop_points_robot)
+        off = detect_obstacles(frame.disparity_px, world.stereo, config=ObstacleConfig(drops=None))
+        assert len(off.drop_points_robot) == 0
+        assert len(off.obstacle_points_robot) == len(res.obstacle_points_robot) - len(res.drop_points_robot)
+
+
+def test_the_robot_limits_decide_what_is_a_drop(ledge):
+    depth = ledge.summary["drops"]["end"]["depth_m"]
+    pose = (float(ledge.waypoints_xy[-1, 0]), float(ledge.waypoints_xy[-1, 1]), 0.0)
+    res = detect_obstacles(_frame(ledge, pose).disparity_px, ledge.stereo)
+    assert len(res.drop_points_robot)
+    # a robot that climbs more than the ledge is deep sees no drop
+    config = ObstacleConfig(drops=DropConfig(max_step_m=depth + 0.1))
+    h, w = res.obstacle_mask.shape
+    image = res.points_robot_image
+    bf = ledge.stereo.baseline_m * ledge.stereo.focal_px
+    assert len(find_drops(image, res.T_robot_from_cam, bf, config=config.drops).points_robot) == 0
+    # nor one that drives any slope when the lower floor is seen far from the edge... unless it is steep
+    steep = find_drops(image, res.T_robot_from_cam, bf, config=DropConfig(max_slope_deg=89.0))
+    assert len(steep.edge_points_robot) <= len(res.drop_points_robot)
+    with pytest.raises(ValueError, match="max_slope_deg"):
+        DropConfig(max_slope_deg=90.0)
+    with pytest.raises(ValueError, match="max_step_m"):
+        DropConfig(max_step_m=-0.1)
+    with pytest.raises(TypeError, match="drops must be a DropConfig"):
+        ObstacleConfig(drops=0.05)
+    with pytest.raises(ValueError, match="points_robot_image"):
+        find_drops(image[..., :2], res.T_robot_from_cam, bf)
+    assert w == ledge.stereo.size[0] and h == ledge.stereo.size[1]
+
+
+def test_a_flat_floor_has_no_drop():
+    """A flat floor seen by a tilted camera (analytic points plus noise): nothing below it is a drop."""
+    rng = np.random.default_rng(3)
+    h, w, f, height = 240, 320, 200.0, 0.5
+    v, u = np.mgrid[0:h, 0:w].astype(float)
+    tilt = math.radians(10.0)
+    ray_cam = np.stack([(u - w / 2) / f, (v - h / 2) / f, np.ones_like(u)], -1)
+    # camera x right, y down, z forward -> robot x forward, y left, z up, tilted down by `tilt`
+    R = np.array([[0, -math.sin(tilt), math.cos(tilt)], [-1, 0, 0], [0, -math.cos(tilt), -math.sin(tilt)]])
+    rays = ray_cam @ R.T
+    t = np.array([0.0, 0.0, height])
+    s = np.where(rays[..., 2] < -1e-6, height / -np.minimum(rays[..., 2], -1e-6), np.nan)
+    points = t + rays * s[..., None]
+    bf = 0.12 * f
+    depth = s * ray_cam[..., 2]
+    points[..., 2] += rng.normal(0, 1, (h, w)) * 0.25 * depth ** 2 / bf * height / np.maximum(depth, 1e-9)
+    points[np.hypot(points[..., 0], points[..., 1]) > 6.0] = np.nan
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    assert len(find_drops(points, T, bf).points_robot) == 0
+    flat = points.copy()
+    # the same floor ending 1.5 m ahead, 0.5 m down: its edge is found (no 10 degree slope reaches the lower
+    # floor seen 3 m ahead); 3 m ahead the lower floor is seen 6 m ahead: a drivable slope could hide in between
+    beyond = points[..., 0] > 1.5
+    lower = t + rays * np.where(rays[..., 2] < 0, (height + 0.5) / -np.minimum(rays[..., 2], -1e-6), np.nan)[..., None]
+    points[beyond] = lower[beyond]
+    found = find_drops(points, T, bf)
+    assert len(found.edge_points_robot) and np.all(np.abs(found.edge_points_robot[:, 0] - 1.5) < 0.15)
+    assert np.count_nonzero(found.edge_columns) > 0.5 * w
+    assert np.all(found.below_points_robot[:, 0] > 1.5)
+    far = np.where((flat[..., 0] > 3.0)[..., None], t + rays * np.where(
+        rays[..., 2] < 0, (height + 0.5) / -np.minimum(rays[..., 2], -1e-6), np.nan)[..., None], flat)
+    far[np.hypot(far[..., 0], far[..., 1]) > 6.0] = np.nan
+    assert len(find_drops(far, T, bf).edge_points_robot) == 0
+
+
+def test_height_layer_round_trip(tmp_path):
+    grid = GridSpec(width_m=2.0, height_m=1.0, resolution_m=0.1, origin_x_m=0.0, origin_y_m=-0.5)
+    layer = HeightLayer(grid)
+    assert layer.add(np.array([[0.52, 0.01, 0.4], [0.58, 0.09, -0.3], [0.55, 0.05, 0.1], [9.0, 0.0, 1.0],
+                               [np.nan, 0.0, 0.0]])) == 3
+    layer.add(np.array([[0.51, 0.02, 0.6]]))
+    r, c = (int(v[0]) for v in grid.cells_from_xy(np.array([[0.55, 0.05]])))
+    assert layer.max_height_m[r, c] == pytest.approx(0.6) and layer.min_height_m[r, c] == pytest.approx(-0.3)
+    assert layer.count[r, c] == 4 and np.isnan(layer.max_height_m).sum() == grid.shape[0] * grid.shape[1] - 1
+    files = layer.save(tmp_path / "heights")
+    assert files["png"].stat().st_size > 1000
+    back = read_height_layer(tmp_path / "heights")
+    assert back.grid == grid
+    np.testing.assert_array_equal(back.min_height_m, layer.min_height_m)
+    assert back.max_height_m.dtype == np.float32
+    with pytest.raises(ValueError, match="points_world"):
+        layer.add(np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="heights.yaml"):
+        read_height_layer(tmp_path)
+
+
+def test_scan_command_reports_the_ledge_unless_told_not_to(ledge, tmp_path):
+    """`mrstereo scan` on a matched frame 0.7 m before the ledge: returns at the edge, none without the test."""
+    import cv2
+    from click.testing import CliRunner
+
+    from mrstereo.camera import write_stereo
+    from mrstereo.cli import main
+    from mrstereo.geometry.scan import read_scan_json
+
+    pose = (float(ledge.waypoints_xy[-1, 0]), float(ledge.waypoints_xy[-1, 1]), 0.0)
+    frame = render_stereo_frame(ledge.scene, ledge.stereo, pose=pose, sensors=ledge.sensors)
+    cv2.imwrite(str(tmp_path / "l.png"), frame.left_rect)
+    cv2.imwrite(str(tmp_path / "r.png"), frame.right_rect)
+    write_stereo(tmp_path / "calib.yaml", ledge.stereo)
+    x_e = ledge.summary["drops"]["end"]["x_m"]
+    ranges = {}
+    for name, extra in (("drops", []), ("none", ["--no-drops"])):
+        out = tmp_path / f"{name}.json"
+        result = CliRunner().invoke(main, ["scan", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--calib",
+                                           str(tmp_path / "calib.yaml"), "--rectified", "-o", str(out), *extra])
+        assert result.exit_code == 0, result.output
+        ranges[name] = np.asarray(read_scan_json(out).ranges_m)
+    ahead = np.isfinite(ranges["drops"]) & (ranges["drops"] < x_e - pose[0] + 0.1)
+    assert ahead.sum() >= 5                                  # bearings that stop at the edge
+    assert not np.any(np.isfinite(ranges["none"][ahead]) & (ranges["none"][ahead] < x_e - pose[0] + 0.1))
+    bad = CliRunner().invoke(main, ["scan", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--calib",
+                                    str(tmp_path / "calib.yaml"), "-o", str(tmp_path / "x.json"), "--max-slope", "95"])
+    assert bad.exit_code == 2 and "--max-slope" in bad.output
+
+
+def test_drops_need_a_randomized_world(tmp_path):
+    from mrstereo.world import write_synthetic_dataset
+
+    with pytest.raises(ValueError, match="drops applies to a randomized world"):
+        write_synthetic_dataset(tmp_path / "x", drops=True, progress=False)
+    assert not (tmp_path / "x").exists()
