@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import signal
 import subprocess
 import sys
 import threading
@@ -354,23 +353,15 @@ def test_live_command_errors_are_one_line(sequence, tmp_path):
 
 
 def _interrupted(dataset, out, *, twice: bool):
-    """``live`` on the recording replayed at a tenth of its rate (12 s), Ctrl-C once the first outputs are
-    written (and again half a second later): ``(returncode, stdout, stderr)``."""
+    """``live`` on the recording replayed at a tenth of its rate (12 s), Ctrl-C once its third snapshot of the
+    outputs is written (and, with ``twice``, again while it stops): ``(returncode, stdout, stderr)``. The run
+    signals itself at these points (``MRSTEREO_SIGNAL_AT``, :mod:`mrstereo._interrupt`)."""
+    env = dict(os.environ, MRSTEREO_SIGNAL_AT="save:3" + (",stopping:1" if twice else ""))
     proc = subprocess.Popen([sys.executable, "-m", "mrstereo", "live", str(dataset), "-o", str(out), "--realtime",
                              "--speed", "0.1", "--save-every", "0.5", "--size", "12,6", "--origin", "0,-3", "--quiet"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
     try:
-        deadline = time.time() + 300
-        while not (out / "metrics.json").is_file() and time.time() < deadline and proc.poll() is None:
-            time.sleep(0.1)
-        assert proc.poll() is None, proc.communicate()
-        time.sleep(0.5)
-        proc.send_signal(signal.SIGINT)
-        if twice:
-            time.sleep(0.05)                # (two signals at once reach Python's handler as one; the run's
-                                            # stop, writing its outputs, takes longer)
-            proc.send_signal(signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=120)
+        stdout, stderr = proc.communicate(timeout=300)
     finally:
         if proc.poll() is None:
             proc.kill()
