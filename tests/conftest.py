@@ -8,6 +8,8 @@
   :func:`mrstereo.recordings.samples.local_path`. Without the files they skip with a reason that names the
   environment variable and the fetch command; nothing is downloaded during a test run. CI
   (``.ci/run``) points ``MRSTEREO_DATA`` at a local copy.
+* ``@pytest.mark.extra("scale")`` (or ``"viz"``): the test needs an optional extra of pyproject.toml and
+  skips without it, with the install command (CI installs them all: README, Quick start).
 * ``slow`` (pyproject.toml) marks the tests that take many seconds: ``python -m pytest -m "not slow"``
   skips them.
 * The suite runs on parallel workers (pytest-xdist, ``-n auto`` in pyproject.toml; ``-p no:xdist`` or
@@ -41,10 +43,28 @@ def skip_reason(name: str) -> str | None:
             f"or run `mrstereo data fetch {name}`")
 
 
+# the optional extras of pyproject.toml and the modules each installs
+EXTRAS = {"scale": ("dask", "distributed"), "viz": ("rerun", "foxglove")}
+
+
+def extra_missing(name: str) -> str | None:
+    """Why the tests of the extra ``name`` cannot run (None when its packages are installed)."""
+    import importlib.util
+
+    missing = [m for m in EXTRAS[name] if importlib.util.find_spec(m) is None]
+    return f"needs the {name} extra ({', '.join(missing)} not installed): pip install -e \".[{name}]\"" \
+        if missing else None
+
+
 def pytest_runtest_setup(item):
     for marker in item.iter_markers("sample_data"):
         for name in marker.args:
             reason = skip_reason(name)
+            if reason:
+                pytest.skip(reason)
+    for marker in item.iter_markers("extra"):
+        for name in marker.args:
+            reason = extra_missing(name)
             if reason:
                 pytest.skip(reason)
 

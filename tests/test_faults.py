@@ -459,6 +459,7 @@ def _unwarned(err: bytes) -> str:
                    if not line.startswith("mrstereo: warning: "))
 
 
+@pytest.mark.extra("scale")
 @pytest.mark.parametrize("point", ["start:1", "cluster:1", "frame:2"], ids=["start-up", "cluster start", "work"])
 def test_ctrl_c_is_one_line_and_exit_130_within_seconds(ds, tmp_path, point):
     """SIGINT to the process group, as a terminal's Ctrl-C, during start-up, cluster start and work."""
@@ -470,6 +471,16 @@ def test_ctrl_c_is_one_line_and_exit_130_within_seconds(ds, tmp_path, point):
     if out.exists():                                    # all or nothing
         names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
         assert names in (set(), {"map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json"})
+
+
+@pytest.mark.parametrize("args", [["map", "{DS}", "-o", "{T}/m", "--workers", "2", "--processes", "--quiet"],
+                                  ["batch", "{DS}", "-o", "{T}/b", "--scheduler", "tcp://127.0.0.1:8786", "--quiet"]],
+                         ids=["processes", "scheduler"])
+def test_without_dask_processes_and_schedulers_are_one_line_naming_the_extra(ds, tmp_path, capsys, monkeypatch, args):
+    monkeypatch.setitem(sys.modules, "distributed", None)          # as if the scale extra were not installed
+    values = {"{T}": str(tmp_path), "{DS}": str(ds)}
+    _run(capsys, [_fill(a, values) for a in args], must='need Dask (dask, distributed): pip install "mrstereo[scale]"')
+    assert not list(tmp_path.iterdir())                             # refused before any work
 
 
 def test_ctrl_c_after_the_command_finished_is_still_one_line_and_130():
@@ -495,19 +506,21 @@ def test_console_run_ends_with_its_exit_code_and_output():
 
 LONG_COMMANDS = {       # the point where the signal lands: after a frame, with frames still to do
     "synth": (["synth", "--out", "{T}/S", "--frames", "3", "--width", "160", "--height", "120", "--quiet"],
-              "frame:2"),
-    "map (threads)": (["map", "{DS}", "-o", "{T}/m", "--workers", "2", "--quiet"], "frame:1"),
-    "batch (processes)": (["batch", "{DS}", "-o", "{T}/b", "--workers", "2", "--processes", "--quiet"], "frame:1"),
+              "frame:2", None),
+    "map (threads)": (["map", "{DS}", "-o", "{T}/m", "--workers", "2", "--quiet"], "frame:1", None),
+    "batch (processes)": (["batch", "{DS}", "-o", "{T}/b", "--workers", "2", "--processes", "--quiet"], "frame:1",
+                          "scale"),
     "disparity": (["disparity", "{DS}/left_rect/000000.png", "{DS}/right_rect/000000.png", "--max-disparity", "16",
-                   "--single-range", "-o", "{T}/d.pfm"], "frame:1"),
+                   "--single-range", "-o", "{T}/d.pfm"], "frame:1", None),
 }
 
 
 @pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
-@pytest.mark.parametrize("command", sorted(LONG_COMMANDS))
+@pytest.mark.parametrize("command", [pytest.param(name, marks=[pytest.mark.extra(extra)] if extra else [])
+                                     for name, (_, _, extra) in sorted(LONG_COMMANDS.items())])
 def test_every_long_command_stops_with_one_line(ds, tmp_path, command, signame):
     values = {"{T}": str(tmp_path), "{DS}": str(ds)}
-    args, point = LONG_COMMANDS[command]
+    args, point, _ = LONG_COMMANDS[command]
     code, err, took = _signalled([_fill(a, values) for a in args], point, tmp_path, signame)
     assert (code, _unwarned(err)) == (130, "mrstereo: interrupted\n")
     assert took < 5.0

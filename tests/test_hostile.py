@@ -290,6 +290,7 @@ def _http_server():
     return f"tcp://127.0.0.1:{httpd.server_address[1]}", httpd.shutdown
 
 
+@pytest.mark.extra("scale")
 @pytest.mark.parametrize("server", [_silent_server, _http_server], ids=["silent", "http"])
 def test_a_scheduler_that_is_no_dask_scheduler_is_one_line_within_seconds(server, ds, tmp_path):
     address, stop = server()

@@ -33,12 +33,9 @@ def _need(module: str) -> None:
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory):
-    """A rendered s-curve drive: 10 frames, 320x240."""
-    from mrstereo.world.dataset import write_synthetic_dataset
-
-    return write_synthetic_dataset(tmp_path_factory.mktemp("outputs") / "seq", n_frames=10, supersample=1,
-                                   path="s-curve", step_m=0.1, progress=False)
+def dataset(synthetic_dataset):
+    """A rendered s-curve drive: 10 frames, 320x240 (shared: read it, never change it)."""
+    return synthetic_dataset(n_frames=10, supersample=1, path="s-curve", step_m=0.1)
 
 
 class _Kept:
