@@ -25,11 +25,11 @@ from mrstereo.recordings.bag_writer import BAG_TOPICS, LATCHED_TOPICS
 from mrstereo.recordings.sources import RecordingSource
 
 CONFIG = PipelineConfig(grid=GridSpec())        # the map on the paper's 12 m x 6 m corridor region
-VIZ = "the viewer packages are the optional extra: pip install \"mrstereo[viz]\""
+VIZ = "the viewer packages are the optional extra viz: pip install -e \".[viz]\""
 
 
 def _need(module: str) -> None:
-    pytest.importorskip(module, reason=f"{module} not installed ({VIZ}; the test extra has them)")
+    pytest.importorskip(module, reason=f"{module} not installed ({VIZ})")
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ started by a test with ``start_new_session=True``), never its worker processes o
 
 The points: ``start`` (the command line, its handlers installed), ``cluster`` (a Dask cluster
 started), ``frame`` (each frame done, in the process that runs the command), ``save`` (each live
-snapshot written), ``stopping`` (the live loop's first Ctrl-C handled).
+snapshot written), ``stopping`` (the live loop's first Ctrl-C handled). Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
