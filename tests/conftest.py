@@ -8,12 +8,24 @@
   :func:`mrstereo.recordings.samples.local_path`. Without the files they skip with a reason that names the
   environment variable and the fetch command; nothing is downloaded during a test run. CI
   (``.ci/run``) points ``MRSTEREO_DATA`` at a local copy.
+* ``@pytest.mark.extra("scale")`` (or ``"viz"``): the test needs an optional extra of pyproject.toml and
+  skips without it, with the install command (CI installs them all: README, Quick start).
 * ``slow`` (pyproject.toml) marks the tests that take many seconds: ``python -m pytest -m "not slow"``
   skips them.
+* The suite runs on parallel workers (pytest-xdist, ``-n auto`` in pyproject.toml; ``-p no:xdist`` or
+  ``-n 0`` runs it in one process). The workers share the synthetic datasets (each made once, under a file
+  lock, in the run's temporary root) and take turns to compile numba kernels (one cross-process lock around
+  numba's compiler lock), so a kernel compiled by one worker is loaded from numba's cache by the other and
+  two workers never write one cache index at the same time.
 
 Helpers for writing ROS bags live in ``_bags.py``.
 """
 from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import os
 
 import cv2
 import numpy as np
@@ -31,10 +43,28 @@ def skip_reason(name: str) -> str | None:
             f"or run `mrstereo data fetch {name}`")
 
 
+# the optional extras of pyproject.toml and the modules each installs
+EXTRAS = {"scale": ("dask", "distributed"), "viz": ("rerun", "foxglove")}
+
+
+def extra_missing(name: str) -> str | None:
+    """Why the tests of the extra ``name`` cannot run (None when its packages are installed)."""
+    import importlib.util
+
+    missing = [m for m in EXTRAS[name] if importlib.util.find_spec(m) is None]
+    return f"needs the {name} extra ({', '.join(missing)} not installed): pip install -e \".[{name}]\"" \
+        if missing else None
+
+
 def pytest_runtest_setup(item):
     for marker in item.iter_markers("sample_data"):
         for name in marker.args:
             reason = skip_reason(name)
+            if reason:
+                pytest.skip(reason)
+    for marker in item.iter_markers("extra"):
+        for name in marker.args:
+            reason = extra_missing(name)
             if reason:
                 pytest.skip(reason)
 
@@ -73,10 +103,79 @@ def sample_data():
     return get
 
 
+def pytest_configure(config):
+    if hasattr(config, "workerinput"):           # an xdist worker: take turns with the others to compile
+        _serialize_numba_compiles(config.workerinput["testrunuid"])
+
+
+def _serialize_numba_compiles(run_id: str) -> None:
+    """Hold a lock file shared by the run's workers while this process holds numba's compiler lock.
+
+    numba's cache index (one per function) is read, extended and rewritten without a lock between
+    processes: two workers compiling two signatures of one kernel at once can pair an index entry with
+    the other's code. Under the lock a worker also finds in the cache what another has just compiled.
+    """
+    from numba.core.compiler_lock import global_compiler_lock as lock
+
+    path = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"mrstereo-tests-{run_id}.numba.lock")
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
+    acquire, release, depth = lock.acquire, lock.release, [0]
+
+    def acquire_both():
+        acquire()                        # numba's in-process RLock: depth is this thread's alone
+        depth[0] += 1
+        if depth[0] == 1:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+
+    def release_both():
+        depth[0] -= 1
+        if depth[0] == 0:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+        release()
+
+    lock.acquire, lock.release = acquire_both, release_both
+
+
+@contextlib.contextmanager
+def _file_lock(path):
+    with open(path, "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
 @pytest.fixture(scope="session")
-def synthetic_dataset(tmp_path_factory):
+def shared_root(tmp_path_factory):
+    """A folder every worker of this run sees (the run's temporary root under xdist), for data made once."""
+    base = tmp_path_factory.getbasetemp()
+    root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "shared"
+    root.mkdir(exist_ok=True)
+    return root
+
+
+@pytest.fixture(scope="session")
+def shared_data(shared_root):
+    """``shared_data(name, make) -> Path``: ``make(folder)`` run once per test run (all workers) for ``name``
+    under a file lock; ``make`` writes the new folder it is given (and returns nothing). Read it, never change it."""
+    def get(name: str, make):
+        folder = shared_root / name
+        with _file_lock(shared_root / f"{name}.lock"):
+            if not folder.exists():
+                staging = shared_root / f".{name}.{os.getpid()}"
+                staging.mkdir()
+                make(staging)
+                staging.rename(folder)
+        return folder
+    return get
+
+
+@pytest.fixture(scope="session")
+def synthetic_dataset(shared_data):
     """``synthetic_dataset(**params) -> Path``: a dataset of :func:`mrstereo.world.write_synthetic_dataset`,
-    rendered once per test session for each set of ``params`` (its folder is ``corridor<seed>``).
+    rendered once per test run (shared by the parallel workers) for each set of ``params`` (its folder is
+    ``corridor<seed>``).
 
     Every test that asks for the same parameters gets the same folder: read it, never change it (copy it
     first). At the end of the session each dataset is checked to be unchanged.
@@ -88,9 +187,10 @@ def synthetic_dataset(tmp_path_factory):
     def make(**params):
         key = tuple(sorted(params.items()))
         if key not in made:
-            folder = tmp_path_factory.mktemp("synthetic") / f"corridor{params.get('seed', 0)}"
-            path = write_synthetic_dataset(folder, progress=False, **params)
-            made[key] = (path, _digest(path))
+            name = f"synthetic-{hashlib.sha1(repr(key).encode()).hexdigest()[:12]}"
+            corridor = f"corridor{params.get('seed', 0)}"
+            folder = shared_data(name, lambda new: write_synthetic_dataset(new / corridor, progress=False, **params))
+            made[key] = (folder / corridor, _digest(folder / corridor))
         return made[key][0]
 
     yield make

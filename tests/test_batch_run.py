@@ -95,6 +95,7 @@ def test_failed_frame_is_listed_the_rest_goes_on_and_a_rerun_retries_it(datasets
     assert np.array_equal(np.load(out / "gamma" / "map" / "log_odds.npy"), expected, equal_nan=True)
 
 
+@pytest.mark.extra("scale")
 def test_batch_on_a_dask_cluster_gives_the_same_files(datasets, tmp_path):
     import distributed
     local = tmp_path / "local"

@@ -120,6 +120,7 @@ def test_mrstereo_methods_are_wired_in(monkeypatch):
 
 
 @needs_data
+@pytest.mark.extra("scale")
 def test_evaluate_on_a_dask_cluster_gives_the_same_rows():
     import distributed
 

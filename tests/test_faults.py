@@ -41,18 +41,6 @@ def ds(synthetic_dataset) -> Path:
     return synthetic_dataset(seed=1, n_frames=3, width=160, height=120, supersample=1)
 
 
-@pytest.fixture(scope="module")
-def long_inputs(synthetic_dataset, tmp_path_factory) -> dict[str, Path]:
-    """Inputs that keep the interrupted commands busy for several seconds on a fast machine (the
-    signal must land during the work, not after it): a 120-frame dataset and a 2560x1920 pair."""
-    ds = synthetic_dataset(n_frames=120, width=160, height=120, supersample=1)
-    root = tmp_path_factory.mktemp("long")
-    for side in ("left", "right"):
-        image = cv2.imread(str(ds / f"{side}_rect" / "000000.png"), cv2.IMREAD_GRAYSCALE)
-        cv2.imwrite(str(root / f"{side}_big.png"), cv2.resize(image, (2560, 1920)))
-    return {"DS": ds, "L": root}
-
-
 @pytest.fixture
 def ds_copy(ds, tmp_path) -> Path:
     """A private copy whose ground-truth map is called map.yaml / map.pgm (the names ``map`` writes)."""
@@ -425,51 +413,74 @@ def test_temporaries_of_live_processes_are_kept(tmp_path):
 
 # ------------------------------------------------------------------------------------------ kills
 
-def _children(pid: int) -> list[int]:
+def _signalled(args: list, point: str, tmp_path: Path, signame: str = "SIGINT"):
+    """``python -m mrstereo ARGS`` in a session of its own that signals its process group (as a terminal's
+    Ctrl-C does) when the run reaches ``point`` (``MRSTEREO_SIGNAL_AT``, :mod:`mrstereo._interrupt`):
+    ``(returncode, stderr, seconds from the signal to the end)``, once no process of the session is left."""
     import psutil
 
-    try:
-        return [c.pid for c in psutil.Process(pid).children(recursive=True)]
-    except psutil.NoSuchProcess:
-        return []
+    sent_file, err_file = tmp_path / "signal-sent", tmp_path / "stderr"
+    env = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg",
+               MRSTEREO_SIGNAL_AT=f"{point}:{signame}:{sent_file}")
+    with open(err_file, "wb") as stderr:    # a file, not a pipe: the end of the run is its process's end
+        proc = subprocess.Popen([sys.executable, "-m", "mrstereo", *map(str, args)], stdout=subprocess.DEVNULL,
+                                stderr=stderr, env=env, start_new_session=True)
+        proc.wait(timeout=300)
+    ended = time.monotonic()
+    err = err_file.read_bytes()
+    assert sent_file.is_file(), f"the run never reached {point}: {err.decode()}"
+    took = ended - float(sent_file.read_text())
+    sent_file.unlink()
+    err_file.unlink()
+
+    def left() -> list:               # the session's other processes (Dask workers...)
+        out = []
+        for p in psutil.process_iter(["pid", "status", "cmdline"]):
+            try:
+                if os.getsid(p.pid) == proc.pid and p.info["status"] != psutil.STATUS_ZOMBIE:
+                    out.append((p.pid, " ".join(p.info["cmdline"] or ())[:100]))
+            except (ProcessLookupError, PermissionError):
+                pass
+        return out
+
+    deadline = time.monotonic() + 5
+    while left() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    still = left()
+    if still:
+        os.killpg(proc.pid, signal.SIGKILL)
+    assert not still, f"processes of the interrupted run still running 5 s after it: {still}"
+    return proc.returncode, err, took
 
 
-@pytest.mark.slow
 def _unwarned(err: bytes) -> str:
     """stderr without the ``mrstereo: warning:`` lines a run may print about its input before the signal."""
     return "".join(line for line in err.decode().splitlines(keepends=True)
                    if not line.startswith("mrstereo: warning: "))
 
 
-@pytest.mark.parametrize("delay_s", [0.7, 2.5, 4.0])
-def test_ctrl_c_is_one_line_and_exit_130_within_seconds(long_inputs, tmp_path, delay_s):
+@pytest.mark.extra("scale")
+@pytest.mark.parametrize("point", ["start:1", "cluster:1", "frame:2"], ids=["start-up", "cluster start", "work"])
+def test_ctrl_c_is_one_line_and_exit_130_within_seconds(ds, tmp_path, point):
     """SIGINT to the process group, as a terminal's Ctrl-C, during start-up, cluster start and work."""
-    import psutil
-
     out = tmp_path / "m"
-    env = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg")
-    proc = subprocess.Popen([sys.executable, "-m", "mrstereo", "map", str(long_inputs["DS"]), "-o", str(out),
-                             "--workers", "2", "--processes", "--quiet"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, start_new_session=True)
-    time.sleep(delay_s)
-    children = _children(proc.pid)
-    if proc.poll() is not None:
-        pytest.skip("the run ended before the signal")
-    os.killpg(proc.pid, signal.SIGINT)
-    sent = time.monotonic()
-    _, err = proc.communicate(timeout=30)
-    took = time.monotonic() - sent
-    assert proc.returncode == 130, err.decode()
+    code, err, took = _signalled(["map", ds, "-o", out, "--workers", "2", "--processes", "--quiet"], point, tmp_path)
+    assert code == 130, err.decode()
     assert _unwarned(err) == "mrstereo: interrupted\n"
     assert took < 5.0
-    deadline = time.monotonic() + 5
-    while any(psutil.pid_exists(c) and psutil.Process(c).status() != psutil.STATUS_ZOMBIE for c in children) \
-            and time.monotonic() < deadline:
-        time.sleep(0.2)
-    assert not [c for c in children if psutil.pid_exists(c) and psutil.Process(c).status() != psutil.STATUS_ZOMBIE]
     if out.exists():                                    # all or nothing
         names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
         assert names in (set(), {"map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json"})
+
+
+@pytest.mark.parametrize("args", [["map", "{DS}", "-o", "{T}/m", "--workers", "2", "--processes", "--quiet"],
+                                  ["batch", "{DS}", "-o", "{T}/b", "--scheduler", "tcp://127.0.0.1:8786", "--quiet"]],
+                         ids=["processes", "scheduler"])
+def test_without_dask_processes_and_schedulers_are_one_line_naming_the_extra(ds, tmp_path, capsys, monkeypatch, args):
+    monkeypatch.setitem(sys.modules, "distributed", None)          # as if the scale extra were not installed
+    values = {"{T}": str(tmp_path), "{DS}": str(ds)}
+    _run(capsys, [_fill(a, values) for a in args], must='need Dask (dask, distributed): pip install "mrstereo[scale]"')
+    assert not list(tmp_path.iterdir())                             # refused before any work
 
 
 def test_ctrl_c_after_the_command_finished_is_still_one_line_and_130():
@@ -493,32 +504,26 @@ def test_console_run_ends_with_its_exit_code_and_output():
     assert bad.returncode == 2 and bad.stderr.decode().startswith("mrstereo: error: ")
 
 
-LONG_COMMANDS = {
-    "synth": ["synth", "--out", "{T}/S", "--frames", "40", "--width", "320", "--height", "240", "--quiet"],
-    "map (threads)": ["map", "{DS}", "-o", "{T}/m", "--workers", "2", "--quiet"],
-    "batch (processes)": ["batch", "{DS}", "-o", "{T}/b", "--workers", "2", "--processes", "--quiet"],
-    "disparity": ["disparity", "{L}/left_big.png", "{L}/right_big.png", "--max-disparity", "512",
-                  "--single-range", "-o", "{T}/d.pfm"],
+LONG_COMMANDS = {       # the point where the signal lands: after a frame, with frames still to do
+    "synth": (["synth", "--out", "{T}/S", "--frames", "3", "--width", "160", "--height", "120", "--quiet"],
+              "frame:2", None),
+    "map (threads)": (["map", "{DS}", "-o", "{T}/m", "--workers", "2", "--quiet"], "frame:1", None),
+    "batch (processes)": (["batch", "{DS}", "-o", "{T}/b", "--workers", "2", "--processes", "--quiet"], "frame:1",
+                          "scale"),
+    "disparity": (["disparity", "{DS}/left_rect/000000.png", "{DS}/right_rect/000000.png", "--max-disparity", "16",
+                   "--single-range", "-o", "{T}/d.pfm"], "frame:1", None),
 }
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
-@pytest.mark.parametrize("command", sorted(LONG_COMMANDS))
-def test_every_long_command_stops_with_one_line(long_inputs, tmp_path, command, signum):
-    values = {"{T}": str(tmp_path), "{DS}": str(long_inputs["DS"]), "{L}": str(long_inputs["L"])}
-    args = [_fill(a, values) for a in LONG_COMMANDS[command]]
-    env = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg")
-    proc = subprocess.Popen([sys.executable, "-m", "mrstereo", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, env=env, start_new_session=True)
-    time.sleep(2.0)
-    if proc.poll() is not None:
-        pytest.skip("the run ended before the signal")
-    os.killpg(proc.pid, signum)
-    sent = time.monotonic()
-    _, err = proc.communicate(timeout=30)
-    assert (proc.returncode, _unwarned(err)) == (130, "mrstereo: interrupted\n")
-    assert time.monotonic() - sent < 5.0
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("command", [pytest.param(name, marks=[pytest.mark.extra(extra)] if extra else [])
+                                     for name, (_, _, extra) in sorted(LONG_COMMANDS.items())])
+def test_every_long_command_stops_with_one_line(ds, tmp_path, command, signame):
+    values = {"{T}": str(tmp_path), "{DS}": str(ds)}
+    args, point, _ = LONG_COMMANDS[command]
+    code, err, took = _signalled([_fill(a, values) for a in args], point, tmp_path, signame)
+    assert (code, _unwarned(err)) == (130, "mrstereo: interrupted\n")
+    assert took < 5.0
     visible = [p.name for p in tmp_path.rglob("*") if p.is_file() and not any(
         part.startswith(".") for part in p.relative_to(tmp_path).parts)]
     partial = [v for v in visible if v not in ("d.pfm",)] if command != "batch (processes)" else []

@@ -25,20 +25,17 @@ from mrstereo.recordings.bag_writer import BAG_TOPICS, LATCHED_TOPICS
 from mrstereo.recordings.sources import RecordingSource
 
 CONFIG = PipelineConfig(grid=GridSpec())        # the map on the paper's 12 m x 6 m corridor region
-VIZ = "the viewer packages are the optional extra: pip install \"mrstereo[viz]\""
+VIZ = "the viewer packages are the optional extra viz: pip install -e \".[viz]\""
 
 
 def _need(module: str) -> None:
-    pytest.importorskip(module, reason=f"{module} not installed ({VIZ}; the test extra has them)")
+    pytest.importorskip(module, reason=f"{module} not installed ({VIZ})")
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory):
-    """A rendered s-curve drive: 10 frames, 320x240."""
-    from mrstereo.world.dataset import write_synthetic_dataset
-
-    return write_synthetic_dataset(tmp_path_factory.mktemp("outputs") / "seq", n_frames=10, supersample=1,
-                                   path="s-curve", step_m=0.1, progress=False)
+def dataset(synthetic_dataset):
+    """A rendered s-curve drive: 10 frames, 320x240 (shared: read it, never change it)."""
+    return synthetic_dataset(n_frames=10, supersample=1, path="s-curve", step_m=0.1)
 
 
 class _Kept:

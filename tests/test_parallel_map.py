@@ -6,7 +6,6 @@ import json
 import time
 from functools import partial
 
-import distributed  # noqa: E402
 import numpy as np
 import pytest
 
@@ -34,6 +33,12 @@ def _threads(_):
 @pytest.fixture(scope="module")
 def threaded_cluster():
     """A real scheduler + 2 thread workers in this process (fast to start)."""
+    from conftest import extra_missing
+
+    if extra_missing("scale"):
+        pytest.skip(extra_missing("scale"))
+    import distributed
+
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",
                                   host="127.0.0.1",
                                   dashboard_address=":0") as cluster, distributed.Client(cluster) as client:
@@ -92,6 +97,7 @@ def test_build_map_on_a_thread_cluster_is_bit_identical(dataset, threaded_cluste
 
 
 @pytest.mark.slow
+@pytest.mark.extra("scale")
 def test_two_worker_processes_single_threaded_and_bit_identical(dataset):
     """A LocalCluster of 2 processes (workers=2, processes=True): one numba and OpenCV thread each; the same map."""
     from mrstereo.pipeline.parallel import dask_client
@@ -109,11 +115,13 @@ def test_two_worker_processes_single_threaded_and_bit_identical(dataset):
         assert a.index == b.index and np.array_equal(a.obstacle_points_world, b.obstacle_points_world)
 
 
+@pytest.mark.extra("scale")
 def test_workers_option_runs_a_local_cluster():
     assert map_ordered(partial(_slow_square, n=0), [0, 1, 2], workers=1, progress=False) == [0, 1, 4]
     assert map_ordered(partial(_slow_square, n=0), [0, 1, 2], workers=1, processes=True, progress=False) == [0, 1, 4]
 
 
+@pytest.mark.extra("scale")
 def test_two_worker_threads_single_threaded_and_bit_identical(dataset):
     """workers=2 (the default): two worker threads in this process, one numba and OpenCV thread each while
     the cluster runs, OpenCV's setting restored after; the same map and observations."""
@@ -191,6 +199,7 @@ def test_cli_processes_needs_workers(dataset, tmp_path, capsys):
     assert not (tmp_path / "a").exists()
 
 
+@pytest.mark.extra("scale")
 def test_worker_threads_fall_back_to_processes_without_a_thread_safe_numba_layer(monkeypatch):
     import mrstereo.pipeline.parallel as parallel
 

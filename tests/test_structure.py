@@ -12,7 +12,7 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 
 # Bottom to top: a module may import its own layer or a lower one, never a higher one.
 LAYERS = [
-    {"mrstereo", "_checks", "_limits", "profiling", "transforms", "io", "viz"},
+    {"mrstereo", "_checks", "_interrupt", "_limits", "profiling", "transforms", "io", "viz"},
     {"camera"},
     {"calibration", "matching"},
     {"rejection"},

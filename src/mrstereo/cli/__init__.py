@@ -13,6 +13,8 @@ import signal
 import sys
 import threading
 
+from .._interrupt import reached
+
 # Only the standard library here: the console script imports this module first, and
 # entry() installs the interrupt handler before the commands (1.5 s of imports) load.
 # The commands are registered in cli/_main.py.
@@ -183,6 +185,7 @@ def _run(argv: list[str] | None) -> int:
     interrupts.install()
     stdout = _QuietPipe.install()
     try:
+        reached("start")
         import warnings
 
         import click

@@ -13,6 +13,7 @@ import click
 from ..mapping import MappingConfig
 from ..pipeline.live import LIVE_FILES, LIVE_GRID, LiveConfig
 from ..pipeline.run import PipelineConfig
+from .._interrupt import reached
 from .._limits import limit, max_workers
 from ._options import CALIB_HELP, HEIGHT, TILT, Number, mount_from_options, mount_option, profile_option
 
@@ -246,6 +247,7 @@ class _stop_on_signals:
             raise KeyboardInterrupt
         self.stop.set()
         click.echo("\nmrstereo: stopping: writing the outputs (Ctrl-C again to abort)", err=True)
+        reached("stopping")
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():

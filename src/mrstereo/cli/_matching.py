@@ -9,6 +9,7 @@ from pathlib import Path
 
 import click
 
+from .._interrupt import reached
 from ._options import CALIB_HELP, MAX_DISPARITY, profile_option
 
 MAX_DEPTH_M = 1000.0
@@ -125,6 +126,7 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
         config = config.replace(search={"multi_range": False})
     if no_fill:
         config = config.replace(postfilter={"gap_fill_px": 0})
+    reached("frame")
     with stage("match"):
         result = compute_disparity(left_img, right_img, max_disparity_px=max_disparity, disparity_bands_px=band_list,
                                    calibration=stereo, depth_bands_m=depth_list, config=config, aoi=aoi_box)

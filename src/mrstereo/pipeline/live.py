@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._interrupt import reached
 from ..camera import CameraMount, StereoCamera, mount_entry
 from ..geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount
 from ..geometry.scan import LaserScan
@@ -322,6 +323,7 @@ class _Writer:
                 self._write(snapshot)
             except BaseException as exc:        # reported by the fuser
                 self.error = exc
+            reached("save")
 
     def close(self) -> None:
         with self._cond:
@@ -656,6 +658,7 @@ def _fuse_in_order(threads: _Threads, fuser: _Fuser, grid: OccupancyGrid, writer
             t0 = time.thread_time()
             fuser.fuse(item, grid)
             clock.fuse_cpu_s += time.thread_time() - t0
+            reached("frame")
         if writer.error is not None:
             raise writer.error
         if threads.errors:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .. import _checks
+from .._interrupt import reached
 
 __all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory"]
 
@@ -163,6 +164,7 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
     ------
     distributed.Client
     """
+    require_scale()
     from distributed import Client, LocalCluster
 
     if (workers is None) == (scheduler is None):
@@ -202,7 +204,16 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=":0", env=env, silence_logs=logging.CRITICAL)
     with cluster, Client(cluster) as client:
+        reached("cluster")
         yield client
+
+
+def require_scale() -> None:
+    """Raise RuntimeError naming the extra when Dask is not installed (``--processes``, ``--scheduler``)."""
+    import importlib.util
+
+    if any(importlib.util.find_spec(m) is None for m in ("dask", "distributed")):
+        raise RuntimeError('--processes and --scheduler need Dask (dask, distributed): pip install "mrstereo[scale]"')
 
 
 @contextlib.contextmanager
@@ -458,6 +469,7 @@ def _prefetched(items: Sequence, prefetch, depth: int) -> Iterator[tuple[bool, A
 def _map_local(func, items: Sequence, bar, return_exceptions: bool, label, prefetch=None) -> list:
     results = []
     for k, (ok, value) in enumerate(_prefetched(items, prefetch, depth=2)):
+        reached("frame")
         if ok:
             try:
                 results.append(func(value))
@@ -492,6 +504,7 @@ def _map_threads(func, items: Sequence, workers: int, bar, return_exceptions: bo
                 ok, value = future.result()[0]
                 results[k] = value if ok else _failure(k, items, label, *value, return_exceptions)
                 bar.update(1)
+                reached("frame")
 
     with _single_threaded_kernels(), ThreadPoolExecutor(workers, thread_name_prefix="mrstereo-worker") as pool:
         try:
@@ -548,6 +561,7 @@ def _map_dask(client, func, items: Sequence, bar, return_exceptions: bool, label
                     results[k] = value if ok else _failure(k, items, label, *value, return_exceptions)
             future.release()
             bar.update(n)
+            reached("frame")
     finally:
         client.cancel([f for f in futures if not f.done()])
     return results

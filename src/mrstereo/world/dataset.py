@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _checks, _limits
+from .._interrupt import reached
 from ..recordings.manifest import staged_dataset
 from .groundtruth import drop_edges, floor_heights, ground_truth_map
 from .paths import PATH_KINDS, drifted_poses, sequence_path, speed_path, waypoint_path
@@ -186,6 +187,7 @@ def write_synthetic_dataset(out_dir: str | os.PathLike, *, seed: int = 0, n_fram
             np.savez_compressed(dataset.root / "gt_drops.npz", floor_height_m=floor_heights(scene),
                                 drop_edge=drop_edges(scene))
         for k in tqdm(range(n_frames), desc="rendering", unit="frame", disable=not progress):
+            reached("frame")
             pose = tuple(float(v) for v in poses[k])
             frame = render_stereo_frame(scene, stereo, pose=pose, pan_rad=pans[k], seed=seed * 100003 + k,
                                         supersample=supersample, sensors=sensors)
