@@ -52,7 +52,7 @@ from mrstereo.io import read_image
 from mrstereo.mapping import OccupancyGrid
 from mrstereo.mapping.fusion import add_observation
 from mrstereo.pipeline.frame import obstacles_from_pair
-from mrstereo.pipeline.parallel import keep_freed_memory
+from mrstereo._executor import keep_freed_memory
 from mrstereo.pipeline.run import PipelineConfig, observation_from_pair, pair_options
 from mrstereo.profiling import Profile, profiling
 from mrstereo.recordings.manifest import read_manifest

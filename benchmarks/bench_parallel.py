@@ -51,7 +51,7 @@ def _observe_range(data: Path, start: int, stop: int) -> None:
     import numba
     from threadpoolctl import threadpool_limits
 
-    from mrstereo.pipeline.parallel import keep_freed_memory
+    from mrstereo._executor import keep_freed_memory
     from mrstereo.pipeline.run import observe_frame
     from mrstereo.recordings.manifest import read_manifest
 
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     if argv is None and len(sys.argv) == 5 and sys.argv[1] == "--observe-range":
         _observe_range(Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]))
         return 0
-    from mrstereo.pipeline.parallel import keep_freed_memory
+    from mrstereo._executor import keep_freed_memory
     from mrstereo.pipeline.run import build_map
     from mrstereo.recordings.manifest import read_manifest
     from mrstereo.world.dataset import write_synthetic_dataset

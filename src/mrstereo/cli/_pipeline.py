@@ -95,8 +95,10 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
         click.echo(f"vs ground truth: precision {m.precision:.3f}, recall {m.recall:.3f}{in_view}, "
                    f"wall profile error {m.mean_distance_m * 100:.1f} cm, free correct {m.free_precision:.3f}"
                    f"{coverage}")
-    if run.odometry is not None:
-        click.echo(f"visual odometry: {run.odometry.message}")
+    if run.odometry:
+        vo = run.odometry["visual_odometry"]
+        click.echo(f"visual odometry: {vo['frames']} frames, {vo['keyframes']} keyframes, {vo['lost']} lost "
+                   f"(median {vo['median_inliers']:.0f} inliers)")
     if run.fusion is not None:
         a = run.pose_metrics()["alignment"]
         click.echo(f"given odometry fused with visual odometry: {a['visual_steps']} of {a['frames'] - 1} steps "

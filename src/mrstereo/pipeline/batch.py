@@ -26,14 +26,16 @@ from ..geometry.scan import write_scan_json
 from ..io import (Inputs, atomic_write, check_output_dir, check_outputs, read_pfm, remove_stale_temporaries,
                   replace_dir, temporary_dir, write_disparity)
 from ..mapping.fusion import FrameObservation
+from ..mapping.observations import load_observation, observation_fingerprint, save_observation
 from ..mapping.rosmap import ros_map_files
 from ..recordings.layouts import read_recording
 from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
+from ..recordings.sources import StereoFrame
 from .sanity import check_pair_streams
-from .frame import scan_from_pair
-from .parallel import ItemFailure, map_ordered
-from .run import (MapRun, PipelineConfig, floor_for_run, map_from_observations, observation_from_pair, pair_options,
-                  with_visual_odometry, write_map_outputs)
+from .._executor import ItemFailure, map_ordered
+from .mapper import StereoMapper, observe, world_observation
+from .run import (MapRun, PipelineConfig, map_from_observations, recording_source, with_visual_odometry,
+                  write_map_outputs)
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
            "SUMMARY_NAME"]
@@ -134,28 +136,17 @@ def process_frame(task: FrameTask | tuple[FrameTask, tuple]) -> FrameObservation
     """
     task, pair = task if isinstance(task, tuple) else (task, None)
     left, right, rectified = frame_pair(task.record, prefer_raw=task.prefer_raw) if pair is None else pair
-    result = scan_from_pair(left, right, task.stereo, rectified=rectified, mount=task.mount,
-                            pan_rad=task.record.pan_rad, **pair_options(task.config))
-    frame = result.frame
-    obs = frame.obstacles
-    observation = observation_from_pair(frame, task.record, index=task.index, config=task.config, stereo=task.stereo)
+    frame = StereoFrame(index=task.index, stamp_s=0.0, left=left, right=right, rectified=rectified,
+                        pan_rad=float(task.record.pan_rad))
+    observed = observe(frame, task.stereo, task.mount, task.config)
+    observation = world_observation(observed, tuple(float(v) for v in task.record.pose), task.stereo)
     files = frame_outputs(task.frames_dir, task.index)
-    write_disparity(files["disparity"], frame.disparity_px)
-    write_ply(files["cloud"], obs.points_robot_image.reshape(-1, 3), intensity=_gray(frame.left_rect).ravel(),
+    write_disparity(files["disparity"], observed.disparity_px)
+    write_ply(files["cloud"], observed.points_robot_image.reshape(-1, 3), intensity=_gray(observed.left_rect).ravel(),
               comment=f"mrstereo {task.dataset} frame {task.index} (frame: robot, metres)")
-    write_scan_json(files["scan"], result.scan)
-    _save_observation(files["observation"], observation, task.fingerprint)
+    write_scan_json(files["scan"], observed.scan)
+    save_observation(files["observation"], observation, task.fingerprint)
     return observation
-
-
-def _save_observation(path: Path, obs: FrameObservation, fingerprint: str) -> None:
-    with atomic_write(path) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, fingerprint=np.array(fingerprint), index=obs.index, pose=np.array(obs.pose), pan_rad=obs.pan_rad,
-                 obstacle_points_world=obs.obstacle_points_world, floor_points_world=obs.floor_points_world,
-                 n_valid_disparity=obs.n_valid_disparity, ground_message=np.array(obs.ground_message),
-                 baseline_focal_m_px=np.nan if obs.baseline_focal_m_px is None else obs.baseline_focal_m_px,
-                 sensor_height_m=np.nan if obs.sensor_height_m is None else obs.sensor_height_m,
-                 boundary_points=obs.boundary_points)
 
 
 def _resume(files: dict[str, Path], fingerprint: str) -> FrameObservation | None:
@@ -164,33 +155,14 @@ def _resume(files: dict[str, Path], fingerprint: str) -> FrameObservation | None
     if not all(p.is_file() for p in files.values()):
         return None
     try:
-        with np.load(files["observation"]) as z:
-            if "fingerprint" not in z.files or str(z["fingerprint"]) != fingerprint:
-                return None
+        if observation_fingerprint(files["observation"]) != fingerprint:
+            return None
         read_pfm(files["disparity"])
         json.loads(files["scan"].read_text(encoding="utf-8"))
         read_ply(files["cloud"])
-        return _load_observation(files["observation"])
+        return load_observation(files["observation"])
     except Exception:                  # any damage: recompute (the files are rewritten atomically)
         return None
-
-
-def _load_observation(path: Path) -> FrameObservation:
-    with np.load(path) as z:
-        return FrameObservation(index=int(z["index"]), pose=tuple(float(v) for v in z["pose"]),
-                                pan_rad=float(z["pan_rad"]), obstacle_points_world=z["obstacle_points_world"],
-                                floor_points_world=z["floor_points_world"],
-                                n_valid_disparity=int(z["n_valid_disparity"]),
-                                ground_message=str(z["ground_message"]),
-                                baseline_focal_m_px=_optional_float(z["baseline_focal_m_px"]),
-                                sensor_height_m=_optional_float(z["sensor_height_m"]),
-                                boundary_points=int(z["boundary_points"]))
-
-
-def _optional_float(value) -> float | None:
-    """A scalar saved by :func:`_save_observation` (NaN: None)."""
-    value = float(value)
-    return None if np.isnan(value) else value
 
 
 @dataclass(frozen=True)
@@ -210,7 +182,7 @@ class DatasetSummary:
     fingerprint: str = ""
     """The map's fingerprint (what it was computed from)."""
     mount_warning: str | None = None
-    """Why the dataset's mount was not used (:func:`mrstereo.pipeline.floor_for_run`)."""
+    """Why the dataset's mount was not used (:class:`mrstereo.geometry.floor.FloorVote`)."""
 
     def to_dict(self) -> dict:
         out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
@@ -324,11 +296,13 @@ def _plan(m: Manifest, name: str, out: Path, config: PipelineConfig, maps: bool)
 def _mounted(manifest: Manifest, config: PipelineConfig, check_mount: bool) -> tuple:
     """``(RunFloor, recording)``: the mount (checked) or the floor estimated once, the poses on that base,
     and the poses of visual odometry for a recording without any (as ``mrstereo map`` takes them)."""
-    floor = floor_for_run(manifest, config=config, check_mount=check_mount)
-    manifest = rebased(manifest, floor.mount)
+    mapper = StereoMapper(manifest.calibration, manifest.mount, config, check_mount=check_mount, name=str(manifest.root))
+    with recording_source(manifest) as source:
+        mapper.settle(iter(source))
+    manifest = rebased(manifest, mapper.mount)
     if not manifest.has_poses:
         manifest, _ = with_visual_odometry(manifest)
-    return floor, manifest
+    return mapper.floor_decision, manifest
 
 
 def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
@@ -348,7 +322,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     maps : bool
         Also fuse a map per dataset.
     workers, scheduler, processes
-        Where the frames run (:func:`mrstereo.pipeline.parallel.map_ordered`).
+        Where the frames run (:func:`mrstereo._executor.map_ordered`).
     progress : bool
         A tqdm bar over all frames to compute.
     check_mount : bool

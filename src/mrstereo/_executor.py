@@ -22,7 +22,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .. import _checks
+from . import _checks
 
 __all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory"]
 
