@@ -257,17 +257,16 @@ class StereoMapper:
     Examples
     --------
     >>> import numpy as np
-    >>> from mrstereo import StereoMapper, PipelineConfig
-    >>> from mrstereo.camera import CameraMount, StereoCamera
-    >>> stereo = StereoCamera.ideal(width=160, height=120, focal_px=120.0, baseline_m=0.12)
-    >>> mount = CameraMount.from_xyz_rpy((0.0, 0.0, 0.5), (0.0, 0.2, 0.0))
+    >>> from mrstereo import CameraMount, PipelineConfig, StereoCamera, StereoMapper
+    >>> from mrstereo.camera import Camera
+    >>> stereo = StereoCamera.ideal(Camera(width=160, height=120, fx=120.0, fy=120.0, cx=80.0, cy=60.0), 0.12)
+    >>> mount = CameraMount.from_xyz_rpy((0.0, 0.0, 0.5), (0.0, 0.0, 0.0))
     >>> mapper = StereoMapper(stereo, mount, PipelineConfig(), check_mount=False)
-    >>> rng = np.random.default_rng(0)
-    >>> left = rng.integers(0, 255, (120, 160), dtype=np.uint8)
-    >>> right = np.roll(left, -8, axis=1)            # a wall 1.8 m ahead
+    >>> left = np.random.default_rng(0).integers(0, 255, (120, 160)).astype(np.uint8)
+    >>> right = np.roll(left, -8, axis=1)            # a textured wall 1.8 m ahead
     >>> [frame] = mapper.step(left, right, pose=np.eye(4))
-    >>> frame.status, len(mapper.trajectory_T)
-    ('given', 1)
+    >>> frame.status, len(mapper.trajectory_T), mapper.occupancy().occupied.any()
+    ('given', 1, True)
     """
 
     def __init__(self, calibration: StereoCamera, mount: CameraMount | None = None,
