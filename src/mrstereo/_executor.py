@@ -14,7 +14,9 @@ import contextlib
 import functools
 import logging
 import os
+import resource
 import sys
+import threading
 import traceback as _traceback
 import uuid
 import warnings
@@ -22,9 +24,12 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from . import _checks
 
-__all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory"]
+__all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory",
+           "LatestFrame", "Ordered", "Writer", "Growing", "rss_mb", "peak_rss_mb"]
 
 _WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
@@ -551,3 +556,151 @@ def _map_dask(client, func, items: Sequence, bar, return_exceptions: bool, label
     finally:
         client.cancel([f for f in futures if not f.done()])
     return results
+
+
+# ------------------------------------------------------------------ a live loop's threads
+
+class LatestFrame:
+    """A one-frame slot between a producer and consumers; the producer never waits unless ``lossless``.
+
+    ``put`` replaces a frame nobody took yet (counted in ``dropped``), or waits with ``lossless``;
+    ``take`` hands out the frame with a ticket (0, 1, ...) or None once closed and empty.
+    """
+
+    def __init__(self, *, lossless: bool = False) -> None:
+        self.lossless = lossless
+        self.dropped = 0
+        self.tickets = 0
+        self._item = None
+        self._closed = False
+        self._cond = threading.Condition()
+
+    def put(self, item, stop: threading.Event) -> bool:
+        """Offer ``item``; False when stopped before it could be placed (lossless only)."""
+        with self._cond:
+            if self.lossless:
+                while self._item is not None and not stop.is_set():
+                    self._cond.wait(0.1)
+                if stop.is_set():
+                    return False
+            elif self._item is not None:
+                self.dropped += 1
+            self._item = item
+            self._cond.notify_all()
+            return True
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+    def take(self, timeout_s: float = 0.1):
+        """``(ticket, item)``; ``(None, None)`` after ``timeout_s`` with nothing; raises StopIteration when
+        closed and empty."""
+        with self._cond:
+            if self._item is None and not self._closed:
+                self._cond.wait(timeout_s)
+            if self._item is None:
+                if self._closed:
+                    raise StopIteration
+                return None, None
+            item, self._item = self._item, None
+            ticket, self.tickets = self.tickets, self.tickets + 1
+            self._cond.notify_all()
+            return ticket, item
+
+    def discard(self) -> bool:
+        """Drop a frame still in the slot (counted); True if there was one."""
+        with self._cond:
+            if self._item is None:
+                return False
+            self._item = None
+            self.dropped += 1
+            self._cond.notify_all()
+            return True
+
+
+class Ordered:
+    """Matched frames handed to the fuser by ticket, in the order the matchers took them."""
+
+    def __init__(self) -> None:
+        self._items: dict[int, object] = {}
+        self._cond = threading.Condition()
+
+    def put(self, ticket: int, item) -> None:
+        with self._cond:
+            self._items[ticket] = item
+            self._cond.notify_all()
+
+    def get(self, ticket: int, timeout_s: float) -> object | None:
+        with self._cond:
+            if ticket not in self._items:
+                self._cond.wait(timeout_s)
+            return self._items.pop(ticket, None)
+
+
+def rss_mb() -> float:
+    """Resident memory of this process now [MB] (Linux /proc; 0 elsewhere)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e6      # Linux: kibibytes
+
+
+class Growing:
+    """An array that grows along its first axis by doubling (the trajectory)."""
+
+    def __init__(self, shape: tuple[int, ...]) -> None:
+        self._data = np.empty((64,) + shape)
+        self.n = 0
+
+    def append(self, value) -> None:
+        if self.n == len(self._data):
+            self._data = np.concatenate([self._data, np.empty_like(self._data)])
+        self._data[self.n] = value
+        self.n += 1
+
+    def view(self) -> np.ndarray:
+        return self._data[:self.n]
+
+
+class Writer:
+    """Writes snapshots of the outputs on its own thread; a newer snapshot replaces one not yet begun."""
+
+    def __init__(self, write: Callable[[dict], None]) -> None:
+        self._write = write
+        self._pending = None
+        self._cond = threading.Condition()
+        self._closed = False
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._loop, name="mrstereo-live-writer", daemon=True)
+        self._thread.start()
+
+    def submit(self, snapshot: dict) -> None:
+        with self._cond:
+            self._pending = snapshot
+            self._cond.notify_all()
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                while self._pending is None and not self._closed:
+                    self._cond.wait()
+                snapshot, self._pending = self._pending, None
+                if snapshot is None:
+                    return
+            try:
+                self._write(snapshot)
+            except BaseException as exc:        # reported by the fuser
+                self.error = exc
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+        self._thread.join()

@@ -63,7 +63,7 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     from ..camera import read_stereo
     from ..geometry import ObstacleConfig, ground_from_mount
     from ..io import read_image
-    from ..pipeline.sanity import warn_pair
+    from ..rejection.streams import warn_pair
     from ..profiling import stage
     from ..rejection import RejectionConfig
 

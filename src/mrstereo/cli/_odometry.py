@@ -57,7 +57,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     import numpy as np
 
     from ..io import check_outputs
-    from ..pipeline.sanity import check_pair_streams
+    from ..pipeline.run import check_pair_streams
     from ..odometry.trajectory import plot_trajectories, trajectory_metrics, write_tum
 
     recording_of(manifest, bag)                          # one of them

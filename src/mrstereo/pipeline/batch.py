@@ -31,10 +31,9 @@ from ..mapping.rosmap import ros_map_files
 from ..recordings.layouts import read_recording
 from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
 from ..recordings.sources import StereoFrame
-from .sanity import check_pair_streams
 from .._executor import ItemFailure, map_ordered
 from .mapper import StereoMapper, observe, world_observation
-from .run import (MapRun, PipelineConfig, map_from_observations, recording_source, with_visual_odometry,
+from .run import (MapRun, PipelineConfig, check_pair_streams, map_from_observations, recording_source, with_visual_odometry,
                   write_map_outputs)
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",

@@ -13,11 +13,10 @@ import gc
 import json
 import math
 import os
-import resource
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +33,7 @@ from ..odometry.trajectory import write_tum
 from ..profiling import Profile, active, profiling, stage
 from ..recordings.sources import FrameSource, StereoFrame, paced
 from ..transforms import planar_from_T
+from .._executor import Growing, LatestFrame, Ordered, Writer, peak_rss_mb, rss_mb
 from .mapper import MappedFrame, Observed, PipelineConfig, StereoMapper
 from .run import config_for_recording
 
@@ -168,66 +168,6 @@ class LiveRun:
         return out
 
 
-class LatestFrame:
-    """A one-frame slot between a producer and consumers; the producer never waits unless ``lossless``.
-
-    ``put`` replaces a frame nobody took yet (counted in ``dropped``), or waits with ``lossless``;
-    ``take`` hands out the frame with a ticket (0, 1, ...) or None once closed and empty.
-    """
-
-    def __init__(self, *, lossless: bool = False) -> None:
-        self.lossless = lossless
-        self.dropped = 0
-        self.tickets = 0
-        self._item = None
-        self._closed = False
-        self._cond = threading.Condition()
-
-    def put(self, item, stop: threading.Event) -> bool:
-        """Offer ``item``; False when stopped before it could be placed (lossless only)."""
-        with self._cond:
-            if self.lossless:
-                while self._item is not None and not stop.is_set():
-                    self._cond.wait(0.1)
-                if stop.is_set():
-                    return False
-            elif self._item is not None:
-                self.dropped += 1
-            self._item = item
-            self._cond.notify_all()
-            return True
-
-    def close(self) -> None:
-        with self._cond:
-            self._closed = True
-            self._cond.notify_all()
-
-    def take(self, timeout_s: float = 0.1):
-        """``(ticket, item)``; ``(None, None)`` after ``timeout_s`` with nothing; raises StopIteration when
-        closed and empty."""
-        with self._cond:
-            if self._item is None and not self._closed:
-                self._cond.wait(timeout_s)
-            if self._item is None:
-                if self._closed:
-                    raise StopIteration
-                return None, None
-            item, self._item = self._item, None
-            ticket, self.tickets = self.tickets, self.tickets + 1
-            self._cond.notify_all()
-            return ticket, item
-
-    def discard(self) -> bool:
-        """Drop a frame still in the slot (counted); True if there was one."""
-        with self._cond:
-            if self._item is None:
-                return False
-            self._item = None
-            self.dropped += 1
-            self._cond.notify_all()
-            return True
-
-
 @dataclass
 class _Matched:
     """A frame through the matcher (:meth:`StereoMapper.observe`), with its arrival time."""
@@ -236,92 +176,6 @@ class _Matched:
     arrival_s: float
     observed: Observed | None = None
     error: BaseException | None = None
-
-
-class _Ordered:
-    """Matched frames handed to the fuser by ticket, in the order the matchers took them."""
-
-    def __init__(self) -> None:
-        self._items: dict[int, _Matched] = {}
-        self._cond = threading.Condition()
-
-    def put(self, ticket: int, item: _Matched) -> None:
-        with self._cond:
-            self._items[ticket] = item
-            self._cond.notify_all()
-
-    def get(self, ticket: int, timeout_s: float) -> _Matched | None:
-        with self._cond:
-            if ticket not in self._items:
-                self._cond.wait(timeout_s)
-            return self._items.pop(ticket, None)
-
-
-def _rss_mb() -> float:
-    """Resident memory of this process now [MB] (Linux /proc; 0 elsewhere)."""
-    try:
-        with open("/proc/self/statm") as fh:
-            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
-    except (OSError, ValueError, IndexError):
-        return 0.0
-
-
-def _peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e6      # Linux: kibibytes
-
-
-class _Growing:
-    """An array that grows along its first axis by doubling (the trajectory)."""
-
-    def __init__(self, shape: tuple[int, ...]) -> None:
-        self._data = np.empty((64,) + shape)
-        self.n = 0
-
-    def append(self, value) -> None:
-        if self.n == len(self._data):
-            self._data = np.concatenate([self._data, np.empty_like(self._data)])
-        self._data[self.n] = value
-        self.n += 1
-
-    def view(self) -> np.ndarray:
-        return self._data[:self.n]
-
-
-class _Writer:
-    """Writes snapshots of the outputs on its own thread; a newer snapshot replaces one not yet begun."""
-
-    def __init__(self, write: Callable[[dict], None]) -> None:
-        self._write = write
-        self._pending = None
-        self._cond = threading.Condition()
-        self._closed = False
-        self.error: BaseException | None = None
-        self._thread = threading.Thread(target=self._loop, name="mrstereo-live-writer", daemon=True)
-        self._thread.start()
-
-    def submit(self, snapshot: dict) -> None:
-        with self._cond:
-            self._pending = snapshot
-            self._cond.notify_all()
-
-    def _loop(self) -> None:
-        while True:
-            with self._cond:
-                while self._pending is None and not self._closed:
-                    self._cond.wait()
-                snapshot, self._pending = self._pending, None
-                if snapshot is None:
-                    return
-            try:
-                self._write(snapshot)
-            except BaseException as exc:        # reported by the fuser
-                self.error = exc
-
-    def close(self) -> None:
-        with self._cond:
-            self._closed = True
-            self._cond.notify_all()
-        self._thread.join()
 
 
 def write_live_outputs(out_dir: Path, snapshot: dict) -> dict[str, Path]:
@@ -351,9 +205,9 @@ class _Fuser:
 
     def __init__(self, mapper: StereoMapper, live: LiveConfig, sinks: Sequence, run: LiveRun) -> None:
         self.mapper, self.live, self.sinks, self.run = mapper, live, list(sinks), run
-        self.latencies = _Growing(())
+        self.latencies = Growing(())
 
-    def fuse(self, item: _Matched) -> None:
+    def fuse(self, item) -> None:
         run, mapper = self.run, self.mapper
         run.frames_processed += 1
         for mapped in mapper.integrate(item.observed):
@@ -394,7 +248,7 @@ class _Threads:
     def __init__(self, source: FrameSource, live: LiveConfig, fuser: _Fuser, stop: threading.Event) -> None:
         self.source, self.live, self.fuser, self.stop = source, live, fuser, stop
         self.slot = LatestFrame(lossless=not (source.realtime or live.realtime))
-        self.ordered = _Ordered()
+        self.ordered = Ordered()
         self.in_flight = threading.Semaphore(live.workers)
         self.errors: list[BaseException] = []
         self.cpu: dict[str, float] = {}
@@ -514,7 +368,7 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
     fuser = _Fuser(mapper, live, sinks, run)
     threads = _Threads(source, live, fuser, stop or threading.Event())
     clock = _Clock(profile=active() or Profile())
-    writer = _Writer(lambda snapshot: run.files.update(write_live_outputs(out, snapshot)))
+    writer = Writer(lambda snapshot: run.files.update(write_live_outputs(out, snapshot)))
     interrupted = None
     with profiling(clock.profile):
         threads.start()
@@ -556,7 +410,7 @@ class _Clock:
     fuse_cpu_s: float = 0.0
 
 
-def _fuse_in_order(threads: _Threads, fuser: _Fuser, writer: _Writer, clock: _Clock,
+def _fuse_in_order(threads: _Threads, fuser: _Fuser, writer: Writer, clock: _Clock,
                    on_save: Callable[[LiveRun], None] | None) -> None:
     """The fuser: the matched frames in the order taken into the map; a snapshot every ``save_every_s``."""
     next_ticket, last_save = 0, time.perf_counter()
@@ -606,7 +460,7 @@ def _snapshot(run: LiveRun, fuser: _Fuser, threads: _Threads, clock: _Clock) -> 
     run.grid = mapper.occupancy()
     run.cpu_s = {"process": time.process_time() - clock.cpu_start_s, "fuser": clock.fuse_cpu_s, **threads.cpu}
     run.stage_ms = clock.profile.per_frame_ms(max(run.frames_processed, 1))
-    run.memory_mb, run.peak_memory_mb = _rss_mb(), _peak_rss_mb()
+    run.memory_mb, run.peak_memory_mb = rss_mb(), peak_rss_mb()
     metrics = run.metrics()
     comment = (f"mrstereo live: {run.source}; odometry {run.odometry}; {run.frames_mapped} frames mapped of "
                f"{run.frames_in}\nthe robot base in the world (REP 103), each frame's pose as known at that frame")

@@ -265,7 +265,7 @@ class StereoMapper:
     >>> left = np.random.default_rng(0).integers(0, 255, (120, 160)).astype(np.uint8)
     >>> right = np.roll(left, -8, axis=1)            # a textured wall 1.8 m ahead
     >>> [frame] = mapper.step(left, right, pose=np.eye(4))
-    >>> frame.status, len(mapper.trajectory_T), mapper.occupancy().occupied.any()
+    >>> frame.status, len(mapper.trajectory_T), int(mapper.occupancy().occupied.sum()) > 20
     ('given', 1, True)
     """
 

@@ -27,12 +27,13 @@ from ..mapping.occupancy import OccupancyGrid
 from ..mapping.rosmap import ros_map_on_grid
 from ..mapping.tiles import TiledOccupancyGrid
 from ..recordings.layouts import read_recording
-from ..recordings.manifest import Manifest, pose_3d_of, rebased
+from ..recordings.manifest import Manifest, frame_pair, pose_3d_of, rebased
+from ..rejection.streams import PROBLEMS, check_pair
 from ..transforms import T_from_planar
 from .mapper import PipelineConfig, StereoMapper, observe, views_of_poses
 
 __all__ = ["PipelineConfig", "MapRun", "build_map", "map_frames", "finish_map", "map_from_observations",
-           "write_map_outputs", "check_map", "recording_source"]
+           "write_map_outputs", "check_map", "recording_source", "check_pair_streams"]
 
 
 @dataclass
@@ -176,8 +177,6 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         Check a given mount against the floor seen in the first frames and use the seen floor when they
         disagree (``MapRun.mount_warning`` says so).
     """
-    from .sanity import check_pair_streams
-
     if not isinstance(manifest, Manifest):
         manifest = read_recording(manifest)
     if not isinstance(config, PipelineConfig):
@@ -354,3 +353,27 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
              planned_path=planned_path, ground_truth=run.ground_truth_map,
              title=f"occupancy grid ({run.grid.config.fusion})")
     return files
+
+
+def check_pair_streams(manifests, *, n_frames: int = 3) -> list[str]:
+    """Warn (``warnings.warn``, one ``mrstereo: warning:`` line on the command line) about datasets whose
+    first ``n_frames`` frames show identical or swapped left and right streams; return the warnings."""
+    if isinstance(manifests, Manifest):
+        manifests = [manifests]
+    found = []
+    for m in manifests:
+        checks = []
+        for k, record in enumerate(m.frames[:n_frames]):
+            try:
+                left, right, rectified = frame_pair(record)
+                checks.append((k, check_pair(left, right, m.calibration, rectified=rectified)))
+            except (OSError, ValueError, TypeError):      # the run reports an unreadable frame itself
+                continue
+        for flag, what, hint in PROBLEMS:
+            bad = [(k, c) for k, c in checks if getattr(c, flag)]
+            if bad and len(bad) * 2 > len(checks):
+                seen = "; ".join(f"frame {k}: {c.describe()}" for k, c in bad)
+                found.append(f"dataset {m.root} has {what}: {seen}; {hint}")
+    for text in found:
+        warnings.warn(text, UserWarning, stacklevel=2)
+    return found
