@@ -33,7 +33,7 @@ from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
 from ..recordings.sources import StereoFrame
 from .._executor import ItemFailure, map_ordered
 from .mapper import StereoMapper, observe, world_observation
-from .run import (MapRun, PipelineConfig, check_pair_streams, map_from_observations, recording_source, with_visual_odometry,
+from .run import (MapRun, PipelineConfig, check_pair_streams, map_from_observations, with_visual_odometry,
                   write_map_outputs)
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
@@ -292,12 +292,23 @@ def _plan(m: Manifest, name: str, out: Path, config: PipelineConfig, maps: bool)
     return plan
 
 
+def _readable(manifest: Manifest):
+    """The recording's frames, None for one that cannot be read (the run reports it when it gets there)."""
+    for k, record in enumerate(manifest.frames):
+        try:
+            left, right, rectified = frame_pair(record)
+        except (OSError, ValueError):
+            yield None
+            continue
+        yield StereoFrame(index=k, stamp_s=0.0, left=left, right=right, rectified=rectified,
+                          T_world_from_base=record.T_world_from_base, pan_rad=float(record.pan_rad))
+
+
 def _mounted(manifest: Manifest, config: PipelineConfig, check_mount: bool) -> tuple:
     """``(RunFloor, recording)``: the mount (checked) or the floor estimated once, the poses on that base,
     and the poses of visual odometry for a recording without any (as ``mrstereo map`` takes them)."""
     mapper = StereoMapper(manifest.calibration, manifest.mount, config, check_mount=check_mount, name=str(manifest.root))
-    with recording_source(manifest) as source:
-        mapper.settle(iter(source))
+    mapper.settle(_readable(manifest))
     manifest = rebased(manifest, mapper.mount)
     if not manifest.has_poses:
         manifest, _ = with_visual_odometry(manifest)

@@ -15,6 +15,7 @@ import math
 import os
 import threading
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -391,6 +392,8 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
         run.stopped = threads.counts.get("end", "stopped" if requested else "end of source")
     writer.submit(_snapshot(run, fuser, threads, clock))
     writer.close()
+    if fuser.mapper.outside_warning():
+        warnings.warn(fuser.mapper.outside_warning(), stacklevel=2)
     for sink in sinks:
         sink.close()
     if writer.error is not None:

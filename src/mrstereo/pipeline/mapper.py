@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -312,7 +311,7 @@ class StereoMapper:
         self.vo_time_s: list[float] = []
         self.n_points = 0
         self.frames_lost = 0
-        self.frames_outside = 0
+        self.frames_outside: list[int] = []
 
     # ------------------------------------------------------------------ the floor
     @property
@@ -381,10 +380,16 @@ class StereoMapper:
 
     def settle(self, frames):
         """Take frames from the iterator ``frames`` until the floor is known, holding them unmapped (the
-        next :meth:`integrate` maps them first); returns the next frame, not taken (None: the end)."""
+        next :meth:`integrate` maps them first); returns the next frame, not taken (None: the end).
+        A None in ``frames`` is a frame that could not be read: it counts as seen, without a floor fit."""
         for frame in frames:
             if self.floor_decision is not None:
                 return frame
+            if frame is None:
+                self._vote.skip()
+                if self._vote.done:
+                    self.floor_decision = self._vote.result()
+                continue
             self._vote_on(self.observe(frame))
         if self.floor_decision is None and self._held:
             self.floor_decision = self._vote.result()
@@ -482,18 +487,25 @@ class StereoMapper:
         self._count_outside(obs)
 
     def _count_outside(self, obs: FrameObservation) -> None:
-        """A frame taken outside a fixed map window is counted and warned about (once)."""
+        """A frame taken outside a fixed map window is counted (:meth:`outside_warning`)."""
         if not isinstance(self.grid, OccupancyGrid):
             return
         g = self.grid.grid
         rows, cols = g.cells_from_xy(np.array([obs.pose[:2]], dtype=np.float64))
         if not g.inside(rows, cols)[0]:
-            self.frames_outside += 1
-            if self.frames_outside == 1:
-                x0, y0 = g.origin_x_m, g.origin_y_m
-                warnings.warn(f"frame {obs.index} was taken outside the map [{x0:g}, {x0 + g.width_m:g}] x "
-                              f"[{y0:g}, {y0 + g.height_m:g}] m: give a --size and --origin that cover the path "
-                              "(or none: a map that grows)", stacklevel=4)
+            self.frames_outside.append(obs.index)
+
+    def outside_warning(self) -> str | None:
+        """What to tell the user when frames were taken outside a fixed map window (None: none were)."""
+        outside = self.frames_outside
+        if not outside:
+            return None
+        g = self.grid.grid
+        x0, y0 = g.origin_x_m, g.origin_y_m
+        return (f"{len(outside)} of {len(self.trajectory_index)} frames were taken outside the map [{x0:g}, "
+                f"{x0 + g.width_m:g}] x [{y0:g}, {y0 + g.height_m:g}] m (frame(s) "
+                f"{', '.join(str(k) for k in outside[:5])}{', ...' if len(outside) > 5 else ''}); "
+                "give a --size and --origin that cover the path")
 
     # ------------------------------------------------------------------ outputs
     def occupancy(self) -> OccupancyGrid:

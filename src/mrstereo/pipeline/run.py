@@ -227,6 +227,8 @@ def finish_map(mapper: StereoMapper, manifest: Manifest, *, fusion=None) -> MapR
     """The :class:`MapRun` of a mapper that has taken every frame of ``manifest``: its grid compared with
     the recording's ground-truth map (along the true path, with the true fields of view)."""
     occupancy = mapper.occupancy()
+    if mapper.outside_warning():
+        warnings.warn(mapper.outside_warning(), stacklevel=3)
     if mapper.trajectory_index and not (~occupancy.unknown).any():
         warnings.warn("the map observed no cell: every frame's points fell outside it or none were found; "
                       "check the poses, --size and --origin", stacklevel=3)
