@@ -5,7 +5,7 @@ frames, rendered by this script into a temporary folder) at 640x480 and 320x240,
 process, alternating frame by frame, with one thread and two (``numba.set_num_threads``,
 ``cv2.setNumThreads``; NUMBA_NUM_THREADS must allow 2):
 
-* mrstereo: :func:`mrstereo.pipeline.frame.obstacles_from_pair` on the raw pair (rectify with the
+* mrstereo: :func:`mrstereo.geometry.pair.obstacles_from_pair` on the raw pair (rectify with the
   calibration, multi-range matching of the ``mapping`` preset, eq. 13 rejection, floor from
   the mount, eq. 14-16, obstacle/floor split) then the grid cells it hits and clears and the
   log-odds update (:func:`mrstereo.pipeline.run.observation_from_pair`,
@@ -51,7 +51,7 @@ import numpy as np
 from mrstereo.io import read_image
 from mrstereo.mapping import OccupancyGrid
 from mrstereo.mapping.fusion import add_observation
-from mrstereo.pipeline.frame import obstacles_from_pair
+from mrstereo.geometry.pair import obstacles_from_pair
 from mrstereo._executor import keep_freed_memory
 from mrstereo.pipeline.run import PipelineConfig, observation_from_pair, pair_options
 from mrstereo.profiling import Profile, profiling

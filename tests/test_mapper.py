@@ -103,7 +103,7 @@ def test_import_mrstereo_is_cheap_and_lists_its_public_objects():
         assert getattr(mrstereo, name) is not None
 
 
-DOCTEST_MODULES = ["mrstereo.pipeline.mapper", "mrstereo.pipeline.frame"]
+DOCTEST_MODULES = ["mrstereo.pipeline.mapper", "mrstereo.geometry.pair"]
 
 
 @pytest.mark.parametrize("module", DOCTEST_MODULES)

@@ -115,13 +115,13 @@ def test_the_check_sees_a_cycle_and_an_upward_import(tmp_path, monkeypatch):
 
 
 # The per-frame chain match -> reject -> 3-D -> scan -> grid is composed in one place: pipeline/mapper.py
-# (the pair half, match -> reject -> 3-D, in pipeline/frame.py). A module that runs a pair through the chain
+# (the pair half, match -> reject -> 3-D, in geometry/pair.py). A module that runs a pair through the chain
 # must not also put points into a grid, and within pipeline/ only the mapper runs pairs through the chain.
 _PAIR_CHAIN = re.compile(r"\b(obstacles_from_pair|scan_from_pair)\(")
 _STAGES = re.compile(r"\b(compute_disparity|reject_uniform|detect_obstacles)\(")
 _GRID_UPDATE = re.compile(r"\b(fuse_step|add_observation|fuse|view_cells)\(|\.update\(\w*obstacle|\.apply\(")
 _MAPPER = "pipeline/mapper.py"
-_PAIR = "pipeline/frame.py"
+_PAIR = "geometry/pair.py"
 
 
 def _chain_modules(src_root: Path) -> dict[str, set[str]]:
@@ -129,8 +129,10 @@ def _chain_modules(src_root: Path) -> dict[str, set[str]]:
     found = {}
     for path in (src_root / "mrstereo").rglob("*.py"):
         text = "\n".join(line.split("#")[0] for line in path.read_text(encoding="utf-8").splitlines())
-        kinds = {kind for kind, pattern in (("pair", _PAIR_CHAIN), ("stages", _STAGES), ("grid", _GRID_UPDATE))
-                 if pattern.search(text.replace("def obstacles_from_pair(", "").replace("def scan_from_pair(", ""))}
+        text = re.sub(r"def \w+\(", "def (", text)                  # definitions are not calls
+        kinds = {kind for kind, pattern in (("pair", _PAIR_CHAIN), ("grid", _GRID_UPDATE)) if pattern.search(text)}
+        if len(set(_STAGES.findall(text))) >= 2:                      # two stages called one after the other
+            kinds.add("stages")
         found[path.relative_to(src_root / "mrstereo").as_posix()] = kinds
     return found
 
@@ -142,7 +144,7 @@ def _chain_violations(src_root: Path) -> list[str]:
             bad.append(f"{module} runs pairs through the chain and updates a grid (only {_MAPPER} may)")
         if module.startswith("pipeline/") and "pair" in kinds and module not in (_MAPPER, _PAIR):
             bad.append(f"{module} runs pairs through the chain (in pipeline/ only {_MAPPER} may)")
-        if "stages" in kinds and module.startswith("pipeline/") and module != _PAIR:
+        if "stages" in kinds and module.startswith(("pipeline/", "geometry/", "mapping/")) and module != _PAIR:
             bad.append(f"{module} composes match, reject and 3-D itself (only {_PAIR} may)")
     return bad
 
@@ -157,7 +159,8 @@ def test_the_chain_check_sees_a_second_composition(tmp_path):
     pkg = tmp_path / "mrstereo" / "pipeline"
     pkg.mkdir(parents=True)
     (pkg / "mapper.py").write_text("a = scan_from_pair(l, r)\nfuse_step(grid, a)\n")
-    (pkg / "frame.py").write_text("d = compute_disparity(l, r)\n")
+    (tmp_path / "mrstereo" / "geometry").mkdir()
+    (tmp_path / "mrstereo" / "geometry" / "pair.py").write_text("d = compute_disparity(l, r)\n")
     assert not _chain_violations(tmp_path)
     (pkg / "live.py").write_text("p = obstacles_from_pair(l, r)  \nadd_observation(grid, p)\n")
     (pkg / "batch.py").write_text("x = scan_from_pair(l, r)\n")

@@ -26,7 +26,7 @@ _LAZY = {
     # the stages
     "StereoCamera": "mrstereo.camera", "CameraMount": "mrstereo.camera", "read_stereo": "mrstereo.camera",
     "compute_disparity": "mrstereo.matching",
-    "obstacles_from_pair": "mrstereo.pipeline.frame", "scan_from_pair": "mrstereo.pipeline.frame",
+    "obstacles_from_pair": "mrstereo.geometry.pair", "scan_from_pair": "mrstereo.geometry.pair",
     "FloorVote": "mrstereo.geometry.floor",
     "OccupancyGrid": "mrstereo.mapping", "GridSpec": "mrstereo.mapping", "MappingConfig": "mrstereo.mapping",
     "read_ros_map": "mrstereo.mapping", "write_ros_map": "mrstereo.mapping",

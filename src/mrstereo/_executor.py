@@ -29,7 +29,7 @@ import numpy as np
 from . import _checks
 
 __all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory",
-           "LatestFrame", "Ordered", "Writer", "Growing", "rss_mb", "peak_rss_mb"]
+           "LatestFrame", "Ordered", "Writer", "Growing", "rss_mb", "peak_rss_mb", "StreamThreads"]
 
 _WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
@@ -704,3 +704,90 @@ class Writer:
             self._closed = True
             self._cond.notify_all()
         self._thread.join()
+
+
+class StreamThreads:
+    """A capture thread and ``workers`` worker threads over a stream, and what they share: a one-frame slot
+    (:class:`LatestFrame`; ``lossless`` False: the newest frame wins), the worked items in order
+    (:class:`Ordered`, by ticket), the bound on items in flight (``in_flight``: the consumer releases
+    one per item taken), errors, counts and CPU times.
+
+    ``frames`` is iterated on the capture thread, each frame wrapped by ``make_item``; ``work(item)``
+    runs on a worker (its exception stored in ``item.error``); at most ``max_items`` frames are taken.
+    """
+
+    def __init__(self, frames, make_item: Callable, work: Callable, *, workers: int, lossless: bool,
+                 max_items: int | None, stop: threading.Event, name: str = "mrstereo-live") -> None:
+        self.frames, self.make_item, self.work, self.max_items, self.stop = frames, make_item, work, max_items, stop
+        self.slot = LatestFrame(lossless=lossless)
+        self.ordered = Ordered()
+        self.in_flight = threading.Semaphore(workers)
+        self.errors: list[BaseException] = []
+        self.cpu: dict[str, float] = {}
+        self.counts = {"in": 0}
+        self.threads = [threading.Thread(target=self._capture, name=f"{name}-capture", daemon=True)]
+        self.threads += [threading.Thread(target=self._worker, args=(k,), name=f"{name}-match-{k}",
+                                          daemon=True) for k in range(workers)]
+
+    def start(self) -> None:
+        for t in self.threads:
+            t.start()
+
+    def join(self) -> None:
+        self.stop.set()
+        for t in self.threads:
+            t.join(timeout=5.0)
+
+    def matching(self) -> bool:
+        """A worker still runs."""
+        return any(t.is_alive() for t in self.threads[1:])
+
+    def _capture(self) -> None:
+        import time
+
+        start, slot, stop = time.thread_time(), self.slot, self.stop
+        try:
+            for frame in self.frames:
+                if stop.is_set():
+                    break
+                self.counts["in"] += 1
+                if not slot.put(self.make_item(frame), stop):
+                    self.counts["in"] -= 1
+                    break
+                if self.max_items is not None and self.counts["in"] >= self.max_items:
+                    self.counts["end"] = "max frames"
+                    break
+        except BaseException as exc:
+            self.errors.append(exc)
+            stop.set()
+        finally:
+            slot.close()
+            self.cpu["capture"] = time.thread_time() - start
+
+    def _worker(self, k: int) -> None:
+        import time
+
+        import numba
+
+        start = time.thread_time()
+        numba.set_num_threads(1)            # one core per worker: the workers are the parallelism
+        try:
+            while True:
+                while not self.in_flight.acquire(timeout=0.1):
+                    if self.stop.is_set():
+                        return
+                try:
+                    ticket, item = self.slot.take()
+                except StopIteration:
+                    self.in_flight.release()
+                    return
+                if item is None:
+                    self.in_flight.release()
+                    continue
+                try:
+                    self.work(item)
+                except BaseException as exc:
+                    item.error = exc
+                self.ordered.put(ticket, item)
+        finally:
+            self.cpu[f"matcher {k}"] = time.thread_time() - start

@@ -3,7 +3,7 @@ growing map (:mod:`.mapper`), a recording to a map (:mod:`.run`), live (:mod:`.l
 (:mod:`.batch`). Conventions: docs/conventions.md.
 """
 from .batch import run_batch
-from .frame import PairObstacles, PairScan, obstacles_from_pair, scan_from_pair
+from ..geometry.pair import PairObstacles, PairScan, obstacles_from_pair, scan_from_pair
 from .mapper import MappedFrame, PipelineConfig, StereoMapper
 from .odometry import odometry_from_manifest
 from .run import MapRun, build_map, write_map_outputs

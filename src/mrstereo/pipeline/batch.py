@@ -1,7 +1,7 @@
 """Many datasets at once: per-frame products and a map per dataset, resumable, on Dask.
 
 For every frame of every dataset :func:`run_batch` runs the chain of
-:func:`mrstereo.pipeline.frame.scan_from_pair` (rectify -> match -> reject (eq. 13) -> 3D
+:func:`mrstereo.geometry.pair.scan_from_pair` (rectify -> match -> reject (eq. 13) -> 3D
 (eq. 14-16) -> scan) once, writes its products under ``OUT/<dataset>/frames/``, then fuses each
 dataset's frames into ``OUT/<dataset>/map/`` (the same map as ``mrstereo map``, bit for bit).
 Every result carries a fingerprint of what it was computed from, so a re-run keeps what is still
@@ -17,16 +17,12 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from .. import __version__
 from ..camera import CameraMount, StereoCamera, mount_entry
-from ..geometry.ply import read_ply, write_ply
-from ..geometry.scan import write_scan_json
-from ..io import (Inputs, atomic_write, check_output_dir, check_outputs, read_pfm, remove_stale_temporaries,
-                  replace_dir, temporary_dir, write_disparity)
+from ..io import (Inputs, atomic_write, check_output_dir, check_outputs, remove_stale_temporaries, replace_dir,
+                  temporary_dir)
 from ..mapping.fusion import FrameObservation
-from ..mapping.observations import load_observation, observation_fingerprint, save_observation
+from ..mapping.observations import digest, file_stamp, frame_outputs, resume_frame, save_frame
 from ..mapping.rosmap import ros_map_files
 from ..recordings.layouts import read_recording
 from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
@@ -48,25 +44,8 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy")
 
 # ------------------------------------------------------------------------------------------ fingerprints
 
-def _digest(value) -> str:
-    """A short stable hash of JSON-able ``value`` (anything else by its repr)."""
-    text = json.dumps(value, sort_keys=True, default=repr, separators=(",", ":"))
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:32]
-
-
-def _stat(path: Path | None) -> list | None:
-    """``[path, size, mtime_ns]`` of a file (None for no file): what a changed file changes."""
-    if path is None:
-        return None
-    try:
-        st = os.stat(path)
-    except OSError:
-        return [str(path), None, None]
-    return [str(path), st.st_size, st.st_mtime_ns]
-
-
 def _frame_files(record: FrameRecord) -> list:
-    return [_stat(p) for p in (record.left, record.right, record.left_rect, record.right_rect)]
+    return [file_stamp(p) for p in (record.left, record.right, record.left_rect, record.right_rect)]
 
 
 def _dataset_fingerprint(m: Manifest, config: PipelineConfig, floor_frames: int) -> str:
@@ -76,28 +55,21 @@ def _dataset_fingerprint(m: Manifest, config: PipelineConfig, floor_frames: int)
         {"estimated from": [_frame_files(r) for r in m.frames[:floor_frames]]}
     chain = {k: repr(getattr(config, k)) for k in ("preset", "max_disparity_px", "matching", "rejection",
                                                    "obstacles", "free_space")}
-    return _digest({"calibration": m.calibration.to_dict(), "mount": mount, "chain": chain,
+    return digest({"calibration": m.calibration.to_dict(), "mount": mount, "chain": chain,
                     "version": __version__})
 
 
 def _frame_fingerprint(base: str, record: FrameRecord) -> str:
-    return _digest([base, _frame_files(record), list(record.pose), record.pan_rad])
+    return digest([base, _frame_files(record), list(record.pose), record.pan_rad])
 
 
 def _map_fingerprint(m: Manifest, frames: list[str], config: PipelineConfig) -> str:
     """What a map depends on: its frames' fingerprints, the grid and fusion options, the ground truth it is
     compared with."""
     truth = [list(f.true_pose) if f.true_pose is not None else None for f in m.frames]
-    gt = [_stat(p) for p in ros_map_files(m.ground_truth_map)] if m.ground_truth_map is not None else None
-    return _digest({"frames": frames, "grid": repr(config.grid), "mapping": repr(config.mapping),
+    gt = [file_stamp(p) for p in ros_map_files(m.ground_truth_map)] if m.ground_truth_map is not None else None
+    return digest({"frames": frames, "grid": repr(config.grid), "mapping": repr(config.mapping),
                     "range": config.obstacles.max_range_m, "ground_truth": gt, "true_poses": truth})
-
-
-def frame_outputs(frames_dir: str | os.PathLike, index: int) -> dict[str, Path]:
-    """The four files of frame ``index``: disparity, cloud, scan, observation."""
-    base = Path(frames_dir) / f"{index:06d}"
-    return {"disparity": base.with_suffix(".pfm"), "cloud": base.with_suffix(".ply"),
-            "scan": Path(f"{base}.scan.json"), "observation": Path(f"{base}.obs.npz")}
 
 
 @dataclass(frozen=True)
@@ -114,12 +86,6 @@ class FrameTask:
     prefer_raw: bool = False
     fingerprint: str = ""
     """What the frame's results are computed from (kept in its ``.obs.npz``)."""
-
-
-def _gray(image: np.ndarray) -> np.ndarray:
-    import cv2
-
-    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
 
 
 def _read_task(task: FrameTask) -> tuple[FrameTask, tuple]:
@@ -139,29 +105,11 @@ def process_frame(task: FrameTask | tuple[FrameTask, tuple]) -> FrameObservation
                         pan_rad=float(task.record.pan_rad))
     observed = observe(frame, task.stereo, task.mount, task.config)
     observation = world_observation(observed, tuple(float(v) for v in task.record.pose), task.stereo)
-    files = frame_outputs(task.frames_dir, task.index)
-    write_disparity(files["disparity"], observed.disparity_px)
-    write_ply(files["cloud"], observed.points_robot_image.reshape(-1, 3), intensity=_gray(observed.left_rect).ravel(),
-              comment=f"mrstereo {task.dataset} frame {task.index} (frame: robot, metres)")
-    write_scan_json(files["scan"], observed.scan)
-    save_observation(files["observation"], observation, task.fingerprint)
+    save_frame(frame_outputs(task.frames_dir, task.index), observation, fingerprint=task.fingerprint,
+               disparity_px=observed.disparity_px, points_robot_image=observed.points_robot_image,
+               left_rect=observed.left_rect, scan=observed.scan,
+               comment=f"mrstereo {task.dataset} frame {task.index} (frame: robot, metres)")
     return observation
-
-
-def _resume(files: dict[str, Path], fingerprint: str) -> FrameObservation | None:
-    """The observation of a finished frame, or None when one of its four files is missing or unreadable or
-    it was computed from other inputs or options (then the frame is computed again)."""
-    if not all(p.is_file() for p in files.values()):
-        return None
-    try:
-        if observation_fingerprint(files["observation"]) != fingerprint:
-            return None
-        read_pfm(files["disparity"])
-        json.loads(files["scan"].read_text(encoding="utf-8"))
-        read_ply(files["cloud"])
-        return load_observation(files["observation"])
-    except Exception:                  # any damage: recompute (the files are rewritten atomically)
-        return None
 
 
 @dataclass(frozen=True)
@@ -284,7 +232,7 @@ def _plan(m: Manifest, name: str, out: Path, config: PipelineConfig, maps: bool)
         remove_stale_temporaries(where)
     base = _dataset_fingerprint(m, config, floor_frames=10)
     fingerprints = [_frame_fingerprint(base, r) for r in m.frames]
-    loaded = {k: _resume(frame_outputs(frames_dir, k), fingerprints[k]) for k in range(len(m.frames))}
+    loaded = {k: resume_frame(frame_outputs(frames_dir, k), fingerprints[k]) for k in range(len(m.frames))}
     plan = _Dataset(name=name, manifest=m, folder=folder, fingerprints=fingerprints,
                     map_fingerprint=_map_fingerprint(m, fingerprints, config), loaded=loaded)
     plan.map_kept = maps and all(v is not None for v in loaded.values()) and \
@@ -390,7 +338,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps({"datasets": [s.to_dict() for s in summaries], "failures": failures,
                                    "config": {"preset": config.preset, "fusion": config.mapping.fusion,
-                                              "fingerprint": _digest(repr(config))}},
+                                              "fingerprint": digest(repr(config))}},
                                   indent=1) + "\n")
     return BatchSummary(path=path, datasets=tuple(summaries), failures=tuple(failures))
 

@@ -2,7 +2,7 @@
 
 Three kinds of threads, never a growing queue between them: capture into a one-frame slot
 (:class:`LatestFrame`; the newest frame wins), matchers running the per-frame chain -- match
-(eq. 9-12), reject (eq. 13), 3-D (eq. 14-16), scan (:func:`mrstereo.pipeline.frame.scan_from_pair`)
+(eq. 9-12), reject (eq. 13), 3-D (eq. 14-16), scan (:func:`mrstereo.geometry.pair.scan_from_pair`)
 -- and the fuser (the calling thread: pose, grid, sinks). A writer thread saves snapshots every
 ``save_every_s`` seconds, each file atomically. How it keeps up: docs/live.md.
 Conventions: docs/conventions.md.
@@ -24,7 +24,6 @@ import numpy as np
 
 from ..camera import CameraMount, StereoCamera, mount_entry
 from ..geometry.ground import GroundPlane
-from ..geometry.scan import LaserScan
 from ..io import atomic_write
 from ..mapping import RosMap, write_ros_map
 from ..mapping.figures import plot_map
@@ -34,7 +33,8 @@ from ..odometry.trajectory import write_tum
 from ..profiling import Profile, active, profiling, stage
 from ..recordings.sources import FrameSource, StereoFrame, paced
 from ..transforms import planar_from_T
-from .._executor import Growing, LatestFrame, Ordered, Writer, peak_rss_mb, rss_mb
+from .._executor import Growing, LatestFrame, StreamThreads, Writer, peak_rss_mb, rss_mb
+from ..mapping.sinks import LiveFrame
 from .mapper import MappedFrame, Observed, PipelineConfig, StereoMapper
 from .run import config_for_recording
 
@@ -87,27 +87,6 @@ class LiveConfig:
             raise ValueError(f"workers must be >= 1, got {self.workers!r}")
         if self.odometry not in (None, "visual", "given"):
             raise ValueError(f"odometry must be 'visual', 'given' or None, got {self.odometry!r}")
-
-
-@dataclass(frozen=True)
-class LiveFrame:
-    """What one mapped frame produced: what the sinks (viewers, bags) receive.
-
-    ``grid`` is the live map itself: a sink reads it during its call and keeps no reference.
-    Points and the scan are in the robot frame (REP 103), poses are ``T_world_from_base`` and
-    the rectified left camera's mount ``T_base_from_cam`` (optical axes, docs/conventions.md).
-    """
-
-    index: int
-    stamp_s: float
-    T_world_from_base: np.ndarray
-    T_base_from_cam: np.ndarray
-    left_rect: np.ndarray
-    disparity_px: np.ndarray
-    obstacle_points_robot: np.ndarray
-    scan: LaserScan
-    grid: OccupancyGrid
-    status: str = "tracked"
 
 
 @dataclass
@@ -242,84 +221,6 @@ class _Fuser:
                 sink.frame(out)
 
 
-class _Threads:
-    """Capture and matchers of a run and what they share: the slot, the matched frames in order, the
-    bound on frames in flight, errors, counts and CPU times."""
-
-    def __init__(self, source: FrameSource, live: LiveConfig, fuser: _Fuser, stop: threading.Event) -> None:
-        self.source, self.live, self.fuser, self.stop = source, live, fuser, stop
-        self.slot = LatestFrame(lossless=not (source.realtime or live.realtime))
-        self.ordered = Ordered()
-        self.in_flight = threading.Semaphore(live.workers)
-        self.errors: list[BaseException] = []
-        self.cpu: dict[str, float] = {}
-        self.counts = {"in": 0}
-        self.threads = [threading.Thread(target=self._capture, name="mrstereo-live-capture", daemon=True)]
-        self.threads += [threading.Thread(target=self._matcher, args=(k,), name=f"mrstereo-live-match-{k}",
-                                          daemon=True) for k in range(live.workers)]
-
-    def start(self) -> None:
-        for t in self.threads:
-            t.start()
-
-    def join(self) -> None:
-        self.stop.set()
-        for t in self.threads:
-            t.join(timeout=5.0)
-
-    def matching(self) -> bool:
-        """A matcher still runs."""
-        return any(t.is_alive() for t in self.threads[1:])
-
-    def _capture(self) -> None:
-        start, live, slot, stop = time.thread_time(), self.live, self.slot, self.stop
-        try:
-            frames = paced(self.source, speed=live.speed) if live.realtime and not self.source.realtime \
-                else self.source
-            for frame in frames:
-                if stop.is_set():
-                    break
-                self.counts["in"] += 1
-                if not slot.put(_Matched(frame=frame, arrival_s=time.perf_counter()), stop):
-                    self.counts["in"] -= 1
-                    break
-                if live.max_frames is not None and self.counts["in"] >= live.max_frames:
-                    self.counts["end"] = "max frames"
-                    break
-        except BaseException as exc:
-            self.errors.append(exc)
-            stop.set()
-        finally:
-            slot.close()
-            self.cpu["capture"] = time.thread_time() - start
-
-    def _matcher(self, k: int) -> None:
-        start = time.thread_time()
-        import numba
-
-        numba.set_num_threads(1)            # one core per matcher: the matchers are the parallelism
-        try:
-            while True:
-                while not self.in_flight.acquire(timeout=0.1):
-                    if self.stop.is_set():
-                        return
-                try:
-                    ticket, item = self.slot.take()
-                except StopIteration:
-                    self.in_flight.release()
-                    return
-                if item is None:
-                    self.in_flight.release()
-                    continue
-                try:
-                    item.observed = self.fuser.mapper.observe(item.frame)
-                except BaseException as exc:
-                    item.error = exc
-                self.ordered.put(ticket, item)
-        finally:
-            self.cpu[f"matcher {k}"] = time.thread_time() - start
-
-
 def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: StereoCamera | None = None,
              mount: CameraMount | None = None, config: PipelineConfig | None = None,
              live: LiveConfig = LiveConfig(), sinks: Sequence = (), stop: threading.Event | None = None,
@@ -367,7 +268,10 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
     run = LiveRun(grid=mapper.grid, stamps_s=np.empty(0), T_world_from_base=np.empty((0, 4, 4)), source=source.name,
                   odometry=odometry)
     fuser = _Fuser(mapper, live, sinks, run)
-    threads = _Threads(source, live, fuser, stop or threading.Event())
+    frames = paced(source, speed=live.speed) if live.realtime and not source.realtime else source
+    threads = StreamThreads(frames, lambda frame: _Matched(frame=frame, arrival_s=time.perf_counter()),
+                            _observe_with(mapper), workers=live.workers, lossless=not (source.realtime or live.realtime),
+                            max_items=live.max_frames, stop=stop or threading.Event())
     clock = _Clock(profile=active() or Profile())
     writer = Writer(lambda snapshot: run.files.update(write_live_outputs(out, snapshot)))
     interrupted = None
@@ -403,6 +307,12 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
     return run
 
 
+def _observe_with(mapper: StereoMapper) -> Callable:
+    def work(item: _Matched) -> None:
+        item.observed = mapper.observe(item.frame)
+    return work
+
+
 @dataclass
 class _Clock:
     """When the run started (wall and CPU), the fuser's CPU time, the stage profile."""
@@ -413,7 +323,7 @@ class _Clock:
     fuse_cpu_s: float = 0.0
 
 
-def _fuse_in_order(threads: _Threads, fuser: _Fuser, writer: Writer, clock: _Clock,
+def _fuse_in_order(threads: StreamThreads, fuser: _Fuser, writer: Writer, clock: _Clock,
                    on_save: Callable[[LiveRun], None] | None) -> None:
     """The fuser: the matched frames in the order taken into the map; a snapshot every ``save_every_s``."""
     next_ticket, last_save = 0, time.perf_counter()
@@ -451,7 +361,7 @@ def _discard_quietly(sink) -> None:
         pass
 
 
-def _snapshot(run: LiveRun, fuser: _Fuser, threads: _Threads, clock: _Clock) -> dict:
+def _snapshot(run: LiveRun, fuser: _Fuser, threads: StreamThreads, clock: _Clock) -> dict:
     """Bring the run's counts up to date and copy what the writer needs."""
     run.frames_in = threads.counts["in"]
     run.frames_dropped = threads.slot.dropped

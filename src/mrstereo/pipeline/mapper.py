@@ -31,7 +31,7 @@ from ..odometry import LOST, OdometryConfig, StereoOdometry
 from ..profiling import stage
 from ..rejection import RejectionConfig
 from ..transforms import T_from_planar, planar_from_T, transform_points
-from .frame import obstacles_from_pair, scan_from_pair
+from ..geometry.pair import obstacles_from_pair, scan_from_pair
 
 __all__ = ["PipelineConfig", "StereoMapper", "MappedFrame", "Observed", "observe", "world_observation"]
 
@@ -118,7 +118,7 @@ class PipelineConfig:
         return replace(self, mapping=replace(self.mapping, fusion=fusion))
 
     def pair_options(self) -> dict:
-        """Keyword options of :func:`mrstereo.pipeline.frame.obstacles_from_pair` for this config."""
+        """Keyword options of :func:`mrstereo.geometry.pair.obstacles_from_pair` for this config."""
         return {"preset": self.preset, "max_disparity_px": self.max_disparity_px, "matching": self.matching,
                 "rejection": self.rejection, "config": self.obstacle_config, "free_space": self.free_space}
 

@@ -2,7 +2,8 @@
 
 rectify -> multi-range matching (eq. 9-12) -> rejection (eq. 13) -> floor -> triangulation into
 the robot frame (eq. 14-16) -> obstacle / floor split -> laser scan: the functions behind
-``mrstereo points`` and ``mrstereo scan``; too-near pixels are fail-safe (docs/obstacles.md).
+``mrstereo points`` and ``mrstereo scan``, and the pair half of :class:`mrstereo.StereoMapper`'s chain;
+too-near pixels are fail-safe (docs/obstacles.md).
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -14,9 +15,9 @@ import numpy as np
 
 from .. import _checks
 from ..camera import CameraMount, StereoCamera
-from ..geometry.freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
-from ..geometry.obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
-from ..geometry.scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
+from .freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
+from .obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
+from .scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
 from ..matching import DisparityResult, compute_disparity
 from ..profiling import stage
 from ..rejection import FloorModel, RejectionConfig, RejectionResult, reject_uniform
