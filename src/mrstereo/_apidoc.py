@@ -12,7 +12,7 @@ import mrstereo
 _HEADER = """# API reference
 
 The public objects of `import mrstereo` (`dir(mrstereo)`), each with its signature and the summary of its
-docstring; the full docstrings (parameters, examples) are in the source and in `help(mrstereo.NAME)`. Generated
+docstring; the full docstrings (parameters, examples) are in the source and in `help()` of each object. Generated
 from the docstrings by `python -m mrstereo._apidoc > docs/api.md` (tests/test_mapper.py checks it is up to date).
 """
 
