@@ -121,3 +121,17 @@ def test_the_api_reference_is_generated_from_the_docstrings_and_up_to_date():
     assert "### `mrstereo.StereoMapper(" in text and ">>> mapper.step(" in text.replace("[frame] = ", "")
     assert (ROOT / "docs" / "api.md").read_text(encoding="utf-8") == text, \
         "docs/api.md is out of date: python -m mrstereo._apidoc > docs/api.md"
+
+
+def test_live_names_a_duplicated_camera_stream_as_map_does(small, tmp_path, capsys):
+    import shutil
+
+    data = tmp_path / "DS"
+    shutil.copytree(small, data)
+    for side in ("", "_rect"):                                   # one camera recorded as left and right
+        shutil.rmtree(data / f"right{side}")
+        shutil.copytree(data / f"left{side}", data / f"right{side}")
+    for command in ("map", "live"):
+        entry([command, str(data), "-o", str(tmp_path / command), "--quiet"])
+        warned = [line for line in capsys.readouterr().err.splitlines() if line.startswith("mrstereo: warning:")]
+        assert any("identical left and right images" in line for line in warned), (command, warned)

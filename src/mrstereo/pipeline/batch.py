@@ -11,6 +11,7 @@ The layout and the resume rules: docs/scale-out.md ("Batch"). Conventions: docs/
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import os
 from collections import Counter
@@ -29,7 +30,7 @@ from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
 from ..recordings.sources import StereoFrame
 from .._executor import ItemFailure, map_ordered
 from .mapper import StereoMapper, observe, world_observation
-from .run import (MapRun, PipelineConfig, check_pair_streams, map_from_observations, with_visual_odometry,
+from .run import (MapRun, PipelineConfig, map_from_observations, with_visual_odometry,
                   write_map_outputs)
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
@@ -256,6 +257,10 @@ def _mounted(manifest: Manifest, config: PipelineConfig, check_mount: bool) -> t
     """``(RunFloor, recording)``: the mount (checked) or the floor estimated once, the poses on that base,
     and the poses of visual odometry for a recording without any (as ``mrstereo map`` takes them)."""
     mapper = StereoMapper(manifest.calibration, manifest.mount, config, check_mount=check_mount, name=str(manifest.root))
+    for frame in itertools.islice(_readable(manifest), mapper.streams.n_frames):
+        if frame is not None:
+            mapper.check_streams(frame)                 # duplicated or swapped streams named
+    mapper.streams.warn()
     mapper.settle(_readable(manifest))
     manifest = rebased(manifest, mapper.mount)
     if not manifest.has_poses:
@@ -307,7 +312,6 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     names = _names(datasets, out)
     for name in names:
         check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, inputs=inputs)
-    check_pair_streams(datasets)
 
     remove_stale_temporaries(out)
     configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}

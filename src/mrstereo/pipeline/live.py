@@ -190,6 +190,7 @@ class _Fuser:
     def fuse(self, item) -> None:
         run, mapper = self.run, self.mapper
         run.frames_processed += 1
+        mapper.check_streams(item.frame)
         for mapped in mapper.integrate(item.observed):
             if mapped.status == LOST:
                 continue

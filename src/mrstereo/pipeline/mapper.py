@@ -30,6 +30,7 @@ from ..matching.config import MatchingConfig
 from ..odometry import LOST, OdometryConfig, StereoOdometry
 from ..profiling import stage
 from ..rejection import RejectionConfig
+from ..rejection.streams import StreamCheck
 from ..transforms import T_from_planar, planar_from_T, transform_points
 from ..geometry.pair import obstacles_from_pair, scan_from_pair
 
@@ -292,6 +293,7 @@ class StereoMapper:
             self.grid = OccupancyGrid(self.config.grid, config=self.config.mapping)
         self._vote = FloorVote(calibration, mount, check_mount=check_mount, name=name)
         self._held: list = []
+        self.streams = StreamCheck(calibration, name)
         self.floor_decision: RunFloor | None = None
         if self._vote.done:
             self.floor_decision = self._vote.result()
@@ -362,7 +364,13 @@ class StereoMapper:
 
     def step_frame(self, frame) -> list[MappedFrame]:
         """:meth:`step` of a :class:`~mrstereo.recordings.sources.StereoFrame` (its pose, stamp, pan)."""
+        self.check_streams(frame)
         return self.integrate(self.observe(frame))
+
+    def check_streams(self, frame) -> None:
+        """Look for a duplicated or swapped camera stream in the first frames
+        (:class:`~mrstereo.rejection.streams.StreamCheck`, one warning); :meth:`step_frame` calls it."""
+        self.streams.add(frame.index, frame.left, frame.right, rectified=frame.rectified)
 
     def observe(self, frame, *, keep_images: bool = True) -> Observed:
         """The per-frame chain with the mount as known now (:func:`observe`); thread-safe."""
@@ -390,9 +398,11 @@ class StereoMapper:
                 if self._vote.done:
                     self.floor_decision = self._vote.result()
                 continue
+            self.check_streams(frame)
             self._vote_on(self.observe(frame))
         if self.floor_decision is None and self._held:
             self.floor_decision = self._vote.result()
+        self.streams.warn()
         return None
 
     def take_held(self) -> list:
@@ -415,6 +425,7 @@ class StereoMapper:
     def finish(self) -> list[MappedFrame]:
         """The end of the frames: decide the floor from the frames held (a run shorter than the floor
         estimate's frames) and map them. Raises ValueError when no floor was found and no mount given."""
+        self.streams.warn()
         if self.floor_decision is None and self._held:
             self.floor_decision = self._vote.result()
         return self._map_held()

@@ -27,8 +27,8 @@ from ..mapping.occupancy import OccupancyGrid
 from ..mapping.rosmap import ros_map_on_grid
 from ..mapping.tiles import TiledOccupancyGrid
 from ..recordings.layouts import read_recording
-from ..recordings.manifest import Manifest, frame_pair, pose_3d_of, rebased
-from ..rejection.streams import PROBLEMS, check_pair
+from ..recordings.manifest import Manifest, pose_3d_of, rebased
+from ..rejection.streams import StreamCheck
 from ..transforms import T_from_planar
 from .mapper import PipelineConfig, StereoMapper, observe, views_of_poses
 
@@ -117,6 +117,7 @@ def map_frames(mapper: StereoMapper, frames, *, workers: int | None = None, sche
         if first is None:
             mapper.finish()
             return
+        mapper.check_streams(first)
         pending = [first]
         use_dask = scheduler is not None or processes or not numba_thread_safe()
         client = dask_client(workers=workers if scheduler is None else None, scheduler=scheduler,
@@ -128,6 +129,7 @@ def map_frames(mapper: StereoMapper, frames, *, workers: int | None = None, sche
             where = {"scheduler": c} if use_dask else {"workers": workers}
             while pending:
                 for frame in frames:
+                    mapper.check_streams(frame)
                     pending.append(frame)
                     if len(pending) >= chunk:
                         break
@@ -190,7 +192,6 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         raise ValueError("align corrects the given odometry with visual odometry: use it with odometry='given'")
     stereo = manifest.calibration if calibration is None else calibration
     prefer_raw = prefer_raw or calibration is not None
-    check_pair_streams(manifest)
     config = _on_true_map(manifest, config.for_rig(stereo))
     mapper = StereoMapper(stereo, manifest.mount, config, check_mount=check_mount, odometry=odometry,
                           pose_frame_mount=manifest.pose_frame_mount, keep_observations=True, name=str(manifest.root))
@@ -357,25 +358,15 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
     return files
 
 
-def check_pair_streams(manifests, *, n_frames: int = 3) -> list[str]:
-    """Warn (``warnings.warn``, one ``mrstereo: warning:`` line on the command line) about datasets whose
-    first ``n_frames`` frames show identical or swapped left and right streams; return the warnings."""
-    if isinstance(manifests, Manifest):
-        manifests = [manifests]
-    found = []
-    for m in manifests:
-        checks = []
-        for k, record in enumerate(m.frames[:n_frames]):
-            try:
-                left, right, rectified = frame_pair(record)
-                checks.append((k, check_pair(left, right, m.calibration, rectified=rectified)))
-            except (OSError, ValueError, TypeError):      # the run reports an unreadable frame itself
-                continue
-        for flag, what, hint in PROBLEMS:
-            bad = [(k, c) for k, c in checks if getattr(c, flag)]
-            if bad and len(bad) * 2 > len(checks):
-                seen = "; ".join(f"frame {k}: {c.describe()}" for k, c in bad)
-                found.append(f"dataset {m.root} has {what}: {seen}; {hint}")
-    for text in found:
-        warnings.warn(text, UserWarning, stacklevel=2)
-    return found
+def check_pair_streams(manifest: Manifest) -> list[str]:
+    """Warn (one ``mrstereo: warning:`` line on the command line) when the first frames of a recording show
+    identical or swapped left and right streams (:class:`~mrstereo.rejection.streams.StreamCheck`, as a
+    :class:`StereoMapper` does); return the warnings."""
+    check = StreamCheck(manifest.calibration, f"dataset {manifest.root}")
+    try:
+        with recording_source(manifest) as source:
+            for frame in itertools.islice(source, check.n_frames):
+                check.add(frame.index, frame.left, frame.right, rectified=frame.rectified)
+    except (OSError, ValueError, TypeError):      # an unreadable frame: the run reports it itself
+        pass
+    return check.warn()

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..camera import StereoCamera
 
-__all__ = ["PairCheck", "check_pair", "warn_pair", "PROBLEMS", "IDENTICAL_SHARE", "SWAPPED_SHARE"]
+__all__ = ["PairCheck", "check_pair", "warn_pair", "StreamCheck", "PROBLEMS", "IDENTICAL_SHARE", "SWAPPED_SHARE"]
 
 IDENTICAL_SHARE = 0.9
 """A pair with at least this share of equal pixels is a duplicated stream."""
@@ -132,3 +132,43 @@ def warn_pair(left: np.ndarray, right: np.ndarray, stereo: StereoCamera | None =
             warnings.warn(text, UserWarning, stacklevel=2)
             return text
     return None
+
+
+class StreamCheck:
+    """A run's first ``n_frames`` pairs looked at for a duplicated or swapped stream (:func:`check_pair`);
+    :meth:`warn` warns (``warnings.warn``) once when most of them show one. ``name`` is what is read."""
+
+    def __init__(self, stereo: StereoCamera | None, name: str, *, n_frames: int = 3) -> None:
+        self.stereo, self.name, self.n_frames = stereo, name, int(n_frames)
+        self.checks: list[tuple[int, PairCheck]] = []
+        self.warned = False
+
+    @property
+    def done(self) -> bool:
+        return self.warned or len(self.checks) >= self.n_frames
+
+    def add(self, index: int, left: np.ndarray, right: np.ndarray, *, rectified: bool = True) -> None:
+        """One pair (as read); the warning once the first ``n_frames`` are in."""
+        if self.done:
+            return
+        try:
+            self.checks.append((index, check_pair(left, right, self.stereo, rectified=rectified)))
+        except ValueError:              # (images of two sizes: the chain names them)
+            return
+        if len(self.checks) >= self.n_frames:
+            self.warn()
+
+    def warn(self) -> list[str]:
+        """Warn about what most of the pairs seen show (once); the warnings."""
+        if self.warned:
+            return []
+        self.warned = True
+        found = []
+        for flag, what, hint in PROBLEMS:
+            bad = [(k, c) for k, c in self.checks if getattr(c, flag)]
+            if bad and len(bad) * 2 > len(self.checks):
+                seen = "; ".join(f"frame {k}: {c.describe()}" for k, c in bad)
+                found.append(f"{self.name} has {what}: {seen}; {hint}")
+        for text in found:
+            warnings.warn(text, UserWarning, stacklevel=3)
+        return found
