@@ -96,9 +96,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
                    f"wall profile error {m.mean_distance_m * 100:.1f} cm, free correct {m.free_precision:.3f}"
                    f"{coverage}")
     if run.odometry:
-        vo = run.odometry["visual_odometry"]
-        click.echo(f"visual odometry: {vo['frames']} frames, {vo['keyframes']} keyframes, {vo['lost']} lost "
-                   f"(median {vo['median_inliers']:.0f} inliers)")
+        click.echo(f"visual odometry: {run.odometry['visual_odometry']['message']}")
     if run.fusion is not None:
         a = run.pose_metrics()["alignment"]
         click.echo(f"given odometry fused with visual odometry: {a['visual_steps']} of {a['frames'] - 1} steps "

@@ -313,6 +313,7 @@ class StereoMapper:
         self.vo_time_s: list[float] = []
         self.n_points = 0
         self.frames_lost = 0
+        self.lost_index: list[int] = []
         self.frames_outside: list[int] = []
 
     # ------------------------------------------------------------------ the floor
@@ -467,6 +468,7 @@ class StereoMapper:
         grid_s = 0.0
         if status == LOST:
             self.frames_lost += 1
+            self.lost_index.append(observed.index)
         else:
             start = time.perf_counter()
             self.add(world_observation(observed, tuple(float(v) for v in planar_from_T(T)), self.stereo),
@@ -536,7 +538,11 @@ class StereoMapper:
         """Visual odometry figures for metrics.json (empty with given poses)."""
         if not self.vo_status:
             return {}
-        return {"visual_odometry": {"frames": len(self.vo_status), "lost": self.vo_status.count(LOST),
+        lost = self.lost_index
+        message = f"tracked all {len(self.vo_status)} frames" if not lost else \
+            (f"lost tracking on {len(lost)} of {len(self.vo_status)} frames ({', '.join(map(str, lost[:10]))}"
+             f"{', ...' if len(lost) > 10 else ''}); they are not mapped")
+        return {"visual_odometry": {"message": message, "frames": len(self.vo_status), "lost": len(lost),
                                     "keyframes": self.vo_status.count("keyframe"),
                                     "median_inliers": float(np.median(self.vo_inliers)),
                                     "median_time_s": float(np.median(self.vo_time_s))}}
