@@ -29,7 +29,7 @@ import numpy as np
 from . import _checks
 
 __all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory",
-           "LatestFrame", "Ordered", "Writer", "Growing", "rss_mb", "peak_rss_mb", "StreamThreads"]
+           "LatestFrame", "Ordered", "Writer", "Growing", "rss_mb", "peak_rss_mb", "StreamThreads", "read_ahead"]
 
 _WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
@@ -456,6 +456,49 @@ def _prefetched(items: Sequence, prefetch, depth: int) -> Iterator[tuple[bool, A
     try:
         for _ in items:
             yield ready.get()
+    finally:
+        stop.set()
+
+
+def read_ahead(iterable: Iterable, depth: int = 2) -> Iterator:
+    """The items of ``iterable`` in order, read up to ``depth`` ahead by a daemon reader thread (a recording's
+    images decoded while the frames before them are matched; OpenCV's decoders release the GIL). An
+    exception of the reader is raised where its item would have come; the reader stops when the consumer
+    does."""
+    import queue
+
+    ready: queue.Queue = queue.Queue(maxsize=max(1, int(depth)))
+    stop = threading.Event()
+    end = object()
+
+    def put(value) -> bool:
+        while not stop.is_set():
+            try:
+                ready.put(value, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def read() -> None:
+        try:
+            for item in iterable:
+                if not put((True, item)):
+                    return
+        except BaseException as exc:            # handed to the consumer
+            put((False, exc))
+            return
+        put((True, end))
+
+    threading.Thread(target=read, name="mrstereo-reader", daemon=True).start()
+    try:
+        while True:
+            ok, value = ready.get()
+            if not ok:
+                raise value
+            if value is end:
+                return
+            yield value
     finally:
         stop.set()
 

@@ -30,6 +30,7 @@ from ..recordings.layouts import read_recording
 from ..recordings.manifest import Manifest, pose_3d_of, rebased
 from ..rejection.streams import StreamCheck
 from ..transforms import T_from_planar
+from .._executor import read_ahead
 from .mapper import PipelineConfig, StereoMapper, observe, views_of_poses
 
 __all__ = ["PipelineConfig", "MapRun", "build_map", "map_frames", "finish_map", "map_from_observations",
@@ -197,7 +198,7 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
                           pose_frame_mount=manifest.pose_frame_mount, keep_observations=True, name=str(manifest.root))
     fused = None
     with recording_source(manifest, prefer_raw=prefer_raw) as source:
-        frames = iter(source)
+        frames = read_ahead(source, depth=2 if workers is None else workers + 1)     # decoded while matching
         if align is not None:
             fused, frames = _aligned(mapper, manifest, frames, calibration, progress, align)
         map_frames(mapper, frames, workers=workers, scheduler=scheduler, processes=processes, progress=progress,
