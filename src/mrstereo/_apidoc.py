@@ -1,6 +1,7 @@
 """docs/api.md from the docstrings of the public objects (:data:`mrstereo.__all__`).
 
 ``python -m mrstereo._apidoc > docs/api.md`` regenerates it; tests/test_mapper.py checks it is up to date.
+Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
