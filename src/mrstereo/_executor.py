@@ -424,40 +424,22 @@ def _failure(k: int, items: Sequence, label, exc: BaseException, tb: str, return
 def _prefetched(items: Sequence, prefetch, depth: int) -> Iterator[tuple[bool, Any]]:
     """``(True, prefetch(item))`` or ``(False, (exception, traceback))`` per item, in order.
 
-    Without ``prefetch``: ``(True, item)``. With it, a daemon reader thread computes up to ``depth``
-    items ahead of the consumer and stops when the consumer does.
+    Without ``prefetch``: ``(True, item)``. With it, a reader thread computes up to ``depth`` items ahead
+    of the consumer (:func:`read_ahead`) and stops when the consumer does.
     """
     if prefetch is None:
         for item in items:
             yield True, item
         return
-    import queue
-    import threading
 
-    ready: queue.Queue = queue.Queue(maxsize=max(1, depth))
-    stop = threading.Event()
-
-    def read() -> None:
+    def values():
         for item in items:
             try:
-                value = (True, prefetch(item))
+                yield True, prefetch(item)
             except Exception as exc:
-                value = (False, (exc, _traceback.format_exc()))
-            while not stop.is_set():
-                try:
-                    ready.put(value, timeout=0.1)
-                    break
-                except queue.Full:
-                    continue
-            if stop.is_set():
-                return
+                yield False, (exc, _traceback.format_exc())
 
-    threading.Thread(target=read, name="mrstereo-reader", daemon=True).start()
-    try:
-        for _ in items:
-            yield ready.get()
-    finally:
-        stop.set()
+    yield from read_ahead(values(), depth)
 
 
 def read_ahead(iterable: Iterable, depth: int = 2) -> Iterator:
