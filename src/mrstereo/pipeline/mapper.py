@@ -20,7 +20,7 @@ from ..camera import CameraMount, StereoCamera
 from ..geometry.floor import FloorVote, RunFloor
 from ..geometry.freespace import FreeSpaceConfig
 from ..geometry.ground import GroundPlane
-from ..geometry.obstacles import MAPPING_MAX_RANGE_M, ObstacleConfig, mapping_range_m
+from ..geometry.obstacles import MAPPING_MAX_RANGE_M, ObstacleConfig, ground_for_frame, mapping_range_m
 from ..geometry.scan import LaserScan
 from ..mapping import GridSpec
 from ..mapping.fusion import FrameObservation, fuse_step
@@ -148,6 +148,8 @@ class Observed:
     right_rect: np.ndarray | None = None
     points_robot_image: np.ndarray | None = None
     """(H, W, 3) robot-frame point of every pixel (NaN: none), with ``keep_images``."""
+    floor_fit: GroundPlane | None = None
+    """The floor fitted without the mount (``fit_floor``: a given mount being checked)."""
     frame: object | None = None
     """The :class:`~mrstereo.recordings.sources.StereoFrame` itself while the floor is not known (kept to be
     mapped once it is)."""
@@ -155,9 +157,10 @@ class Observed:
 
 
 def observe(frame, stereo: StereoCamera, mount: CameraMount | None, config: PipelineConfig, *,
-            keep_images: bool = True) -> Observed:
+            keep_images: bool = True, fit_floor: bool = False) -> Observed:
     """The per-frame chain of one :class:`~mrstereo.recordings.sources.StereoFrame`: rectify, match, reject,
     3-D, scan with ``mount``; with ``mount`` None only the floor fit (without a mount, without free space).
+    ``fit_floor``: with a mount, also the floor fitted without it (``floor_fit``: a given mount checked).
     Pure: runs on any thread or worker. ``keep_images`` False: no images in the result (a worker's reply
     when the poses are given)."""
     start = time.perf_counter()
@@ -179,7 +182,12 @@ def observe(frame, stereo: StereoCamera, mount: CameraMount | None, config: Pipe
                             **config.pair_options())
     pair, obs = result.frame, result.frame.obstacles
     boundary = pair.boundary.points_robot if pair.boundary is not None else np.empty((0, 3))
-    return Observed(**base, mount=mount, ground=obs.ground,
+    floor_fit = None
+    if fit_floor:           # the fit of the matcher's disparity, as without a mount
+        with stage("3-D"):
+            floor_fit = ground_for_frame(pair.raw_disparity_px, replace(stereo, mount=None), mount=None,
+                                         config=config.obstacle_config)
+    return Observed(**base, mount=mount, ground=obs.ground, floor_fit=floor_fit, frame=frame if fit_floor else None,
                     obstacle_points_robot=np.concatenate([obs.obstacle_points_robot, boundary]),
                     n_boundary=len(boundary), floor_points_robot=obs.floor_points_robot,
                     n_valid_disparity=int(np.isfinite(pair.disparity_px).sum()),
@@ -374,7 +382,10 @@ class StereoMapper:
         self.streams.add(frame.index, frame.left, frame.right, rectified=frame.rectified)
 
     def observe(self, frame, *, keep_images: bool = True) -> Observed:
-        """The per-frame chain with the mount as known now (:func:`observe`); thread-safe."""
+        """The per-frame chain with the mount as known now (:func:`observe`); thread-safe. While a given mount
+        is being checked: with that mount, and the floor fitted without it."""
+        if self.floor_decision is None and self._vote.mount is not None:
+            return observe(frame, self.stereo, self._vote.mount, self.config, keep_images=True, fit_floor=True)
         return observe(frame, self.stereo, self.mount, self.config, keep_images=keep_images)
 
     def integrate(self, observed: Observed) -> list[MappedFrame]:
@@ -409,19 +420,23 @@ class StereoMapper:
     def take_held(self) -> list:
         """The frames held unmapped (they leave the mapper)."""
         held, self._held = self._held, []
-        return held
+        return [o.frame for o in held]
 
     def _vote_on(self, observed: Observed) -> None:
-        if observed.mount is None:
-            self._vote.add(observed.index, observed.ground)
+        fit = observed.ground if observed.mount is None else observed.floor_fit
+        if fit is not None:
+            self._vote.add(observed.index, fit)
         else:
             self._vote.skip()
-        self._held.append(observed.frame)
+        self._held.append(observed)
         if self._vote.done:
             self.floor_decision = self._vote.result()
 
     def _map_held(self) -> list[MappedFrame]:
-        return [self._map(self.observe(frame)) for frame in self.take_held()]
+        """The held frames into the map: as observed when that was with the mount decided (a given mount
+        kept), else observed again."""
+        held, self._held = self._held, []
+        return [self._map(o if o.mount is self.mount else self.observe(o.frame)) for o in held]
 
     def finish(self) -> list[MappedFrame]:
         """The end of the frames: decide the floor from the frames held (a run shorter than the floor
