@@ -5,11 +5,10 @@ frames, rendered by this script into a temporary folder) at 640x480 and 320x240,
 process, alternating frame by frame, with one thread and two (``numba.set_num_threads``,
 ``cv2.setNumThreads``; NUMBA_NUM_THREADS must allow 2):
 
-* mrstereo: :func:`mrstereo.pipeline.frame.obstacles_from_pair` on the raw pair (rectify with the
+* mrstereo: :class:`mrstereo.StereoMapper` on the raw pair with the given pose (rectify with the
   calibration, multi-range matching of the ``mapping`` preset, eq. 13 rejection, floor from
-  the mount, eq. 14-16, obstacle/floor split) then the grid cells it hits and clears and the
-  log-odds update (:func:`mrstereo.pipeline.run.observation_from_pair`,
-  :func:`mrstereo.mapping.fusion.add_observation`).
+  the mount, eq. 14-16, obstacle/floor split, scan) then the grid cells it hits and clears and the
+  log-odds update, as ``mrstereo map`` runs it.
 * OpenCV: ``cv2.remap`` x2 with maps built once, ``StereoBM`` (9x9, ``numDisparities`` the
   multiple of 16 covering mrstereo's near limit), ``cv2.reprojectImageTo3D``, the same height
   band and range limit in the robot frame, ``np.add.at`` of the obstacle points into a grid of
@@ -49,11 +48,10 @@ import numba
 import numpy as np
 
 from mrstereo.io import read_image
-from mrstereo.mapping import GridSpec, OccupancyGrid
-from mrstereo.mapping.fusion import add_observation
-from mrstereo.pipeline.frame import obstacles_from_pair
-from mrstereo.pipeline.parallel import keep_freed_memory
-from mrstereo.pipeline.run import PipelineConfig, observation_from_pair, pair_options
+from mrstereo._executor import keep_freed_memory
+from mrstereo.mapping import GridSpec
+from mrstereo.matching import make_plan
+from mrstereo.pipeline.mapper import PipelineConfig, StereoMapper
 from mrstereo.profiling import Profile, profiling
 from mrstereo.recordings.manifest import read_manifest
 from mrstereo.transforms import T_from_planar
@@ -82,17 +80,15 @@ class MrstereoChain:
 
     def __init__(self, manifest, config: PipelineConfig, odometry: bool = False):
         self.manifest, self.config = manifest, config
-        self.grid = OccupancyGrid(config.grid, config=config.mapping)
+        self.mapper = StereoMapper(manifest.calibration, manifest.mount, config, check_mount=False)
+        plan = make_plan(manifest.calibration.size, calibration=manifest.calibration)
+        self.max_disparity_px = max(level.band_px[1] for level in plan.levels)     # the search's near limit
         self.odometry, self.vo = odometry, None
 
     def __call__(self, k: int, left, right) -> dict[str, float]:
         record = self.manifest.frames[k]
         with profiling(Profile(clock=CLOCK)) as prof:
-            frame = obstacles_from_pair(left, right, self.manifest.calibration, rectified=False,
-                                        mount=self.manifest.mount, pan_rad=record.pan_rad, **pair_options(self.config))
-            obs = observation_from_pair(frame, record, index=k, config=self.config,
-                                        stereo=self.manifest.calibration)
-            add_observation(self.grid, obs)       # traced against the map so far, as map does
+            [frame] = self.mapper.step(left, right, pose=record.T_world_from_base, pan_rad=record.pan_rad)
         if self.odometry:
             from mrstereo.odometry import StereoOdometry
 
@@ -102,9 +98,8 @@ class MrstereoChain:
             left_rect, right_rect = stereo.rectify(left, right)       # (done inside the chain above too)
             t0 = CLOCK()
             mount = self.manifest.mount.T_base_from_rectified(stereo.left.R, record.pan_rad)
-            self.vo.step(left_rect, right_rect, T_base_from_cam=mount, disparity_px=frame.raw_disparity_px)
+            self.vo.step(left_rect, right_rect, T_base_from_cam=mount, disparity_px=frame.disparity_px)
             prof.add("odometry", CLOCK() - t0)
-        self.max_disparity_px = frame.max_disparity_px
         return {name: 1000.0 * prof.seconds.get(name, 0.0) for name in STAGES + ("odometry",)}
 
 

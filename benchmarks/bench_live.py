@@ -7,7 +7,7 @@
 640x480: the corridor rendered along an S-curve (5 cm per frame), written as one lossless
 side-by-side video at ``--rate`` frames per second, replayed with ``--realtime`` (the newest frame
 wins, as from a camera) through the whole chain: rectify, match, reject, 3-D, scan, visual
-odometry, the growing map (:data:`mrstereo.pipeline.live.LIVE_GRID`, 40 m x 40 m in 5 cm cells).
+odometry, the growing map (tiles of 5 cm cells, as ``mrstereo map``).
 The same video is then read as fast as it goes (nothing dropped): the loop's throughput.
 ``--euroc``: the real EuRoC frames (752x480, ``$MRSTEREO_DATA/euroc_asl_sample``) driven forth and
 back to ``--euroc-frames`` frames in a 20 Hz side-by-side video, replayed in real time; the camera's

@@ -129,7 +129,8 @@ def evaluate_seed(seed: int, *, randomized: bool, frames: int, data_dir: str | N
     many obstacles the frames show."""
     from mrstereo.mapping import read_ros_map
     from mrstereo.mapping.fusion import fuse
-    from mrstereo.pipeline.run import PipelineConfig, build_map, views_of_frames
+    from mrstereo.pipeline.mapper import views_of_poses
+    from mrstereo.pipeline.run import PipelineConfig, build_map
     from mrstereo.world import default_scene, obstacle_footprints, random_world, read_manifest, write_synthetic_dataset
 
     t0 = time.perf_counter()
@@ -142,7 +143,8 @@ def evaluate_seed(seed: int, *, randomized: bool, frames: int, data_dir: str | N
     gt = read_ros_map(manifest.ground_truth_map)
     path = np.array([f.pose for f in manifest.frames])
     config = PipelineConfig()
-    views = views_of_frames(manifest.frames, manifest.calibration, range_m=config.obstacles.max_range_m)
+    views = views_of_poses(path, [f.pan_rad for f in manifest.frames], manifest.calibration,
+                           range_m=config.for_rig(manifest.calibration).obstacles.max_range_m)
     scene = random_world(seed).scene if randomized else default_scene(seed)
     footprints = obstacle_footprints(scene, gt.grid)
     obstacles = seen_obstacles(manifest, footprints, range_m=config.obstacles.max_range_m)

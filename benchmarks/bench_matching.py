@@ -41,7 +41,7 @@ import numpy as np
 
 from mrstereo.camera import Camera, StereoCamera
 from mrstereo.matching import compute_disparity, make_plan, preset_config
-from mrstereo.pipeline.parallel import keep_freed_memory
+from mrstereo._executor import keep_freed_memory
 from mrstereo.recordings import samples as sample_data
 
 # the public sample scenes (mrstereo.recordings.samples: $MRSTEREO_DATA or `mrstereo data fetch`)

@@ -20,7 +20,7 @@ processes, started and stopped inside every run as ``mrstereo map --workers N
   (Python start-up, imports and the map files included), and the same on the
   sequence's first frame alone: the command's serial part is its time on one
   frame less one frame's work (the in-process 1-worker time per frame);
-- the machine's ceiling: the per-frame work (``observe_frame``) of all frames in
+- the machine's ceiling: the per-frame work (``StereoMapper.observe``) of all frames in
   one plain Python process vs half of them in each of two independent processes
   started together (no Dask, no communication; loop times without start-up; each
   single-threaded as a worker is: numba, OpenCV and BLAS).
@@ -51,19 +51,22 @@ def _observe_range(data: Path, start: int, stop: int) -> None:
     import numba
     from threadpoolctl import threadpool_limits
 
-    from mrstereo.pipeline.parallel import keep_freed_memory
-    from mrstereo.pipeline.run import observe_frame
+    from mrstereo._executor import keep_freed_memory
+    from mrstereo.pipeline.mapper import PipelineConfig, observe
     from mrstereo.recordings.manifest import read_manifest
+    from mrstereo.recordings.sources import RecordingSource
 
     keep_freed_memory()
     numba.set_num_threads(1)
     cv2.setNumThreads(1)
     threadpool_limits(limits=1, user_api="blas")      # as the workers: OpenBLAS's idle threads spin
     m = read_manifest(data)
-    observe_frame(m.frames[start], m.calibration, mount=m.mount)        # kernels loaded
+    config = PipelineConfig().for_rig(m.calibration)
+    frames = [f for f in RecordingSource(m) if start <= f.index < stop]
+    observe(frames[0], m.calibration, m.mount, config)                  # kernels loaded
     t = time.perf_counter()
-    for k in range(start, stop):
-        observe_frame(m.frames[k], m.calibration, index=k, mount=m.mount)
+    for frame in frames:
+        observe(frame, m.calibration, m.mount, config)
     print(time.perf_counter() - t)
 
 
@@ -81,7 +84,7 @@ def main(argv=None) -> int:
     if argv is None and len(sys.argv) == 5 and sys.argv[1] == "--observe-range":
         _observe_range(Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]))
         return 0
-    from mrstereo.pipeline.parallel import keep_freed_memory
+    from mrstereo._executor import keep_freed_memory
     from mrstereo.pipeline.run import build_map
     from mrstereo.recordings.manifest import read_manifest
     from mrstereo.world.dataset import write_synthetic_dataset

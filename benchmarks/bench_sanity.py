@@ -1,4 +1,4 @@
-"""The thresholds of mrstereo.pipeline.sanity measured: every real pair of the sample data and synthetic
+"""The thresholds of mrstereo.rejection.streams measured: every real pair of the sample data and synthetic
 corridors, as recorded, with the left stream duplicated and with the streams swapped.
 
 Prints one row per pair (identical share, share of negative disparities, median disparity, verdict) and the
@@ -17,7 +17,7 @@ from pathlib import Path
 
 from mrstereo.camera import read_stereo
 from mrstereo.io import matching_image, read_image
-from mrstereo.pipeline.sanity import check_pair
+from mrstereo.rejection.streams import check_pair
 from mrstereo.recordings.samples import data_root
 
 

@@ -11,7 +11,8 @@ import yaml
 from mrstereo.cli import entry
 from mrstereo.geometry.ground import ground_from_mount
 from mrstereo.io import read_image
-from mrstereo.pipeline.run import build_map, floor_for_run
+from mrstereo.pipeline.mapper import StereoMapper
+from mrstereo.pipeline.run import build_map, recording_source
 from mrstereo.recordings.bag import (TfTree, TransformTrack, bag_topics, camera_info_from_message, export_bag,
                                      image_from_message, pair_by_stamp, stereo_from_camera_info)
 from mrstereo.recordings.manifest import read_manifest, write_manifest
@@ -110,7 +111,10 @@ def test_mount_is_estimated_when_not_given(synthetic_dataset, tmp_path):
     assert result.mount is None and result.mount_source.startswith("none")
     manifest = read_manifest(tmp_path / "out")
     assert manifest.mount is None
-    mount, floor, _ = floor_for_run(manifest)
+    mapper = StereoMapper(manifest.calibration, manifest.mount)
+    with recording_source(manifest) as source:
+        mapper.settle(iter(source))                     # the first frames until the floor is known
+    mount, floor = mapper.mount, mapper.floor
     assert floor.confident and floor.method == "plane"
     assert floor.height_m == pytest.approx(_rig(data).height_m, abs=0.02)
     assert floor.tilt_rad == pytest.approx(_rig(data).tilt_rad, abs=0.02)

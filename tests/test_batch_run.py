@@ -13,7 +13,7 @@ from mrstereo.geometry import read_ply, read_scan_json
 from mrstereo.io import read_disparity, read_image
 from mrstereo.mapping.fusion import fuse
 from mrstereo.pipeline.batch import SUMMARY_NAME, frame_outputs, run_batch
-from mrstereo.pipeline.frame import scan_from_pair
+from mrstereo.geometry.pair import scan_from_pair
 from mrstereo.pipeline.run import PipelineConfig, build_map
 from mrstereo.recordings.manifest import read_manifest
 

@@ -4,7 +4,6 @@ A camera at height H tilted down by TILT sees a flat floor and, in some frames, 
 ``x = WALL_X`` (robot frame) with no texture: the matcher measures nothing on it, the floor is
 measured on a sparse set of pixels. Image gray levels with noise; no stereo matching involved.
 """
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -150,25 +149,22 @@ def test_bad_input():
 def test_boundary_points_join_the_observation_marked_and_map_the_plain_wall():
     from mrstereo.mapping import OccupancyGrid
     from mrstereo.mapping.fusion import add_observation
-    from mrstereo.matching import DisparityResult, make_plan
-    from mrstereo.pipeline.frame import PairObstacles
-    from mrstereo.pipeline.run import PipelineConfig, observation_from_pair
+    from mrstereo.pipeline.mapper import Observed, PipelineConfig, world_observation
     from mrstereo.recordings.manifest import FrameRecord
-    from mrstereo.rejection import reject_uniform
     from mrstereo.transforms import T_from_planar, transform_points
 
     image, disparity = _frame()
     stereo = _stereo()
     obstacles = detect_obstacles(disparity, stereo, config=ObstacleConfig(max_range_m=4.0))
     boundary = free_space_boundary(image, obstacles, disparity, stereo, max_range_m=4.0)
-    matching = DisparityResult(disparity_px=disparity, confidence=np.isfinite(disparity).astype(np.float32),
-                               plan=make_plan(stereo.size, max_disparity_px=64), levels=(disparity,),
-                               too_near=np.zeros(disparity.shape, bool))
-    frame = PairObstacles(left_rect=image, matching=matching, rejection=reject_uniform(disparity, image),
-                          obstacles=obstacles, boundary=boundary)
+    def observed(boundary_points):
+        return Observed(index=0, stamp_s=0.0, pan_rad=0.0, mount=None, ground=obstacles.ground,
+                        obstacle_points_robot=np.concatenate([obstacles.obstacle_points_robot, boundary_points]),
+                        n_boundary=len(boundary_points), floor_points_robot=obstacles.floor_points_robot)
+
     record = FrameRecord(pose=(1.0, 0.5, 0.3))
     config = PipelineConfig()
-    obs = observation_from_pair(frame, record, index=0, config=config, stereo=stereo)
+    obs = world_observation(observed(boundary.points_robot), record.pose, stereo)
     n = len(boundary.points_robot)
     assert n > 0 and obs.boundary_points == n
     np.testing.assert_allclose(obs.obstacle_points_world[-n:],
@@ -180,6 +176,5 @@ def test_boundary_points_join_the_observation_marked_and_map_the_plain_wall():
     wall_xy = transform_points(T_from_planar(*record.pose), boundary.base_points_robot)[:, :2]
     r, c = window.cells_from_xy(wall_xy)
     assert occupied[r, c].mean() > 0.8               # the plain wall is in the map
-    without = replace(frame, boundary=None)
-    bare = observation_from_pair(without, record, index=0, config=config, stereo=stereo)
+    bare = world_observation(observed(np.empty((0, 3))), record.pose, stereo)
     assert bare.boundary_points == 0 and len(bare.obstacle_points_world) == len(obs.obstacle_points_world) - n

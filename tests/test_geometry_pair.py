@@ -11,7 +11,7 @@ from mrstereo.cli import entry
 from mrstereo.geometry import (ObstacleConfig, ground_from_mount, laser_scan_from_points, points_robot_from_disparity,
                                read_ply, read_scan_json)
 from mrstereo.io import write_image
-from mrstereo.pipeline.frame import obstacles_from_pair, scan_from_pair
+from mrstereo.geometry.pair import obstacles_from_pair, scan_from_pair
 from mrstereo.world import LABEL_FLOOR, default_scene, default_stereo, is_obstacle_label, render_stereo_frame
 
 POSE, PAN = (1.2, -0.3, 0.0), 0.35

@@ -232,13 +232,13 @@ def test_a_ros_bag_is_a_recording_source(sequence, tmp_path):
     source = open_source([str(bag)])
     try:
         assert source.layout == "ROS bag" and source.has_poses and source.n_frames == 12
-        run = run_live(source, tmp_path / "out", config=SMALL, live=LiveConfig(floor_frames=2))
+        run = run_live(source, tmp_path / "out", config=SMALL)
     finally:
         source.close()
     assert run.odometry == "given" and run.frames_processed == 12
-    assert run.frames_mapped == 12 - run.frames_before_floor
+    assert run.frames_mapped == 12 and run.frames_before_floor == 0      # the frames held for the floor too
     _, T = read_tum(tmp_path / "out" / "trajectory.txt")
-    truth = np.stack([f.T_world_from_base for f in manifest.frames])[run.frames_before_floor:]
+    truth = np.stack([f.T_world_from_base for f in manifest.frames])
     np.testing.assert_allclose(T[:, :2, 3], truth[:, :2, 3], atol=1e-6)      # the bag's planar odometry
 
 
@@ -248,11 +248,11 @@ def test_the_floor_is_estimated_from_the_first_frames_without_a_mount(sequence, 
 
     stereo = replace(manifest.calibration, mount=None)
     with VideoSource(videos["sbs"], side_by_side=True) as source:
-        run = run_live(source, tmp_path / "out", calibration=stereo, config=SMALL, live=LiveConfig(floor_frames=2))
-    assert run.floor is not None and run.floor.method != "mount" and "median of 2" in run.floor.message
+        run = run_live(source, tmp_path / "out", calibration=stereo, config=SMALL)
+    assert run.floor is not None and run.floor.method != "mount" and "median of 3" in run.floor.message
     true_floor = manifest.mount.T_base_from_cam[2, 3]
     assert run.floor.height_m == pytest.approx(true_floor, abs=0.03)
-    assert run.frames_before_floor == 2 and run.frames_mapped == 10
+    assert run.frames_before_floor == 0 and run.frames_mapped == 12     # held until the floor was known, then mapped
 
 
 def test_a_frame_of_the_wrong_size_is_an_error_naming_it(sequence, tmp_path):

@@ -14,7 +14,7 @@ from mrstereo.cli import entry
 from mrstereo.geometry import detect_obstacles
 from mrstereo.io import read_disparity
 from mrstereo.matching import MatchingConfig, NearGuardConfig, compute_disparity, make_plan
-from mrstereo.pipeline.frame import scan_from_pair
+from mrstereo.geometry.pair import scan_from_pair
 from mrstereo.recordings.samples import local_path
 from mrstereo.viz.plot import colorize_disparity
 

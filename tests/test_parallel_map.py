@@ -1,4 +1,4 @@
-"""mrstereo.pipeline.parallel.map_ordered on real dask.distributed clusters (loopback), and build_map on workers:
+"""mrstereo._executor.map_ordered on real dask.distributed clusters (loopback), and build_map on workers:
 input order, failures named or returned, one thread per worker, the same map bit for bit."""
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from functools import partial
 import numpy as np
 import pytest
 
-from mrstereo.pipeline.parallel import ItemError, ItemFailure, map_ordered
+from mrstereo._executor import ItemError, ItemFailure, map_ordered
 from mrstereo.pipeline.run import build_map
 from mrstereo.recordings.manifest import read_manifest
 
@@ -100,7 +100,7 @@ def test_build_map_on_a_thread_cluster_is_bit_identical(dataset, threaded_cluste
 @pytest.mark.extra("scale")
 def test_two_worker_processes_single_threaded_and_bit_identical(dataset):
     """A LocalCluster of 2 processes (workers=2, processes=True): one numba and OpenCV thread each; the same map."""
-    from mrstereo.pipeline.parallel import dask_client
+    from mrstereo._executor import dask_client
 
     local = build_map(dataset, progress=False)
     with dask_client(workers=2, processes=True) as client:
@@ -129,7 +129,7 @@ def test_two_worker_threads_single_threaded_and_bit_identical(dataset):
 
     import cv2
 
-    from mrstereo.pipeline.parallel import dask_client
+    from mrstereo._executor import dask_client
 
     local = build_map(dataset, progress=False)
     before = cv2.getNumThreads()
@@ -169,26 +169,24 @@ def test_cli_map_on_a_scheduler_matches_in_process(dataset, threaded_cluster, tm
 def test_fuse_uses_the_frames_cells_only_when_they_fit(dataset):
     from dataclasses import replace
 
+    from mrstereo.mapping import GridSpec
     from mrstereo.mapping.fusion import fuse
+    from mrstereo.mapping.occupancy import view_cells
     from mrstereo.pipeline.run import PipelineConfig
 
-    from mrstereo.mapping import GridSpec
-
-    config = PipelineConfig(grid=GridSpec())            # a fixed window: frames can carry their cells
+    config = PipelineConfig(grid=GridSpec())
     config = replace(config, mapping=replace(config.mapping, map_occlusion_p=None))   # cells per frame
     run = build_map(dataset, progress=False, config=config)
-    assert all(o.cells is not None and o.cells.fits(config.grid, config.mapping) for o in run.observations)
-    bare = [replace(o, cells=None) for o in run.observations]      # fuse computes the cells from the points
-    np.testing.assert_array_equal(fuse(bare, grid=config.grid, config=config.mapping).log_odds, run.grid.log_odds)
+    cells = [replace(o, cells=view_cells(o.obstacle_points_world, o.floor_points_world, o.sensor_origin_world,
+                                         grid=config.grid, config=config.mapping,
+                                         baseline_focal_m_px=o.baseline_focal_m_px)) for o in run.observations]
+    assert all(o.cells.fits(config.grid, config.mapping) for o in cells)
+    np.testing.assert_array_equal(fuse(cells, grid=config.grid, config=config.mapping).log_odds, run.grid.log_odds)
     other = replace(config.mapping, min_points_per_cell=1)        # other cells: the stored ones must not be used
-    fused_other = fuse(run.observations, grid=config.grid, config=other).log_odds
-    np.testing.assert_array_equal(fused_other, fuse(bare, grid=config.grid, config=other).log_odds)
-    # the default map occludes: frames carry no cells, each view is traced in order against the map so far
-    default = build_map(dataset, progress=False, config=PipelineConfig(grid=GridSpec()))
-    assert all(o.cells is None for o in default.observations)
-    np.testing.assert_array_equal(fuse(default.observations, grid=config.grid, config=PipelineConfig().mapping).log_odds,
-                                  default.grid.log_odds)
+    fused_other = fuse(cells, grid=config.grid, config=other).log_odds
+    np.testing.assert_array_equal(fused_other, fuse(run.observations, grid=config.grid, config=other).log_odds)
     assert not np.array_equal(fused_other, run.grid.log_odds, equal_nan=True)
+
 
 
 def test_cli_processes_needs_workers(dataset, tmp_path, capsys):
@@ -201,7 +199,7 @@ def test_cli_processes_needs_workers(dataset, tmp_path, capsys):
 
 @pytest.mark.extra("scale")
 def test_worker_threads_fall_back_to_processes_without_a_thread_safe_numba_layer(monkeypatch):
-    import mrstereo.pipeline.parallel as parallel
+    import mrstereo._executor as parallel
 
     monkeypatch.setattr(parallel, "numba_thread_safe", lambda: False)
     with pytest.warns(UserWarning, match="workqueue threading layer"):
@@ -211,7 +209,7 @@ def test_worker_threads_fall_back_to_processes_without_a_thread_safe_numba_layer
 
 
 def test_chunked_tasks_keep_order_and_per_item_failures(threaded_cluster):
-    from mrstereo.pipeline.parallel import _chunk_size
+    from mrstereo._executor import _chunk_size
 
     _, client = threaded_cluster
     assert _chunk_size(client, 40) == 2 and _chunk_size(client, 5) == 1 and _chunk_size(client, 10_000) == 8

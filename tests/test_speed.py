@@ -80,7 +80,7 @@ def test_profile_accumulates_named_stages_and_is_off_by_default():
 
 
 def test_profile_times_the_stages_of_a_pair(tmp_path):
-    from mrstereo.pipeline.frame import obstacles_from_pair
+    from mrstereo.geometry.pair import obstacles_from_pair
 
     stereo, (left, right) = _stereo(), _images()
     with profiling() as prof:

@@ -5,6 +5,7 @@ Read from the source (``ast``; imports inside functions count too), nothing is i
 from __future__ import annotations
 
 import ast
+import re
 import sys
 from pathlib import Path
 
@@ -12,7 +13,7 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 
 # Bottom to top: a module may import its own layer or a lower one, never a higher one.
 LAYERS = [
-    {"mrstereo", "_checks", "_interrupt", "_limits", "profiling", "transforms", "io", "viz"},
+    {"mrstereo", "_checks", "_executor", "_interrupt", "_limits", "profiling", "transforms", "io", "viz"},
     {"camera"},
     {"calibration", "matching"},
     {"rejection"},
@@ -111,3 +112,59 @@ def test_the_check_sees_a_cycle_and_an_upward_import(tmp_path, monkeypatch):
     assert "mrstereo.camera.b" in graph["mrstereo.camera.a"] and "mrstereo.camera.a" in graph["mrstereo.camera.b"]
     assert _layer("mrstereo.pipeline") > _layer("mrstereo.camera.b")
     assert "mrstereo.pipeline" in graph["mrstereo.camera.b"]
+
+
+# The per-frame chain match -> reject -> 3-D -> scan -> grid is composed in one place: pipeline/mapper.py
+# (the pair half, match -> reject -> 3-D, in geometry/pair.py). A module that runs a pair through the chain
+# must not also put points into a grid, and within pipeline/ only the mapper runs pairs through the chain.
+_PAIR_CHAIN = re.compile(r"\b(obstacles_from_pair|scan_from_pair)\(")
+_STAGES = re.compile(r"\b(compute_disparity|reject_uniform|detect_obstacles)\(")
+_GRID_UPDATE = re.compile(r"\b(fuse_step|add_observation|fuse|view_cells)\(|\.update\(\w*obstacle|\.apply\(")
+_MAPPER = "pipeline/mapper.py"
+_PAIR = "geometry/pair.py"
+
+
+def _chain_modules(src_root: Path) -> dict[str, set[str]]:
+    """``{module path: {"pair", "stages", "grid"}}``: which parts of the chain each module calls."""
+    found = {}
+    for path in (src_root / "mrstereo").rglob("*.py"):
+        text = "\n".join(line.split("#")[0] for line in path.read_text(encoding="utf-8").splitlines())
+        text = re.sub(r"def \w+\(", "def (", text)                  # definitions are not calls
+        kinds = {kind for kind, pattern in (("pair", _PAIR_CHAIN), ("grid", _GRID_UPDATE)) if pattern.search(text)}
+        if len(set(_STAGES.findall(text))) >= 2:                      # two stages called one after the other
+            kinds.add("stages")
+        found[path.relative_to(src_root / "mrstereo").as_posix()] = kinds
+    return found
+
+
+def _chain_violations(src_root: Path) -> list[str]:
+    bad = []
+    for module, kinds in _chain_modules(src_root).items():
+        if {"pair", "grid"} <= kinds and module != _MAPPER:
+            bad.append(f"{module} runs pairs through the chain and updates a grid (only {_MAPPER} may)")
+        if module.startswith("pipeline/") and "pair" in kinds and module not in (_MAPPER, _PAIR):
+            bad.append(f"{module} runs pairs through the chain (in pipeline/ only {_MAPPER} may)")
+        if "stages" in kinds and module.startswith(("pipeline/", "geometry/", "mapping/")) and module != _PAIR:
+            bad.append(f"{module} composes match, reject and 3-D itself (only {_PAIR} may)")
+    return bad
+
+
+def test_the_per_frame_chain_is_composed_in_the_mapper_only():
+    assert not _chain_violations(SRC), "; ".join(_chain_violations(SRC))
+    kinds = _chain_modules(SRC)
+    assert {"pair", "grid"} <= kinds[_MAPPER] and "stages" in kinds[_PAIR]
+
+
+def test_the_chain_check_sees_a_second_composition(tmp_path):
+    pkg = tmp_path / "mrstereo" / "pipeline"
+    pkg.mkdir(parents=True)
+    (pkg / "mapper.py").write_text("a = scan_from_pair(l, r)\nfuse_step(grid, a)\n")
+    (tmp_path / "mrstereo" / "geometry").mkdir()
+    (tmp_path / "mrstereo" / "geometry" / "pair.py").write_text("d = compute_disparity(l, r)\n")
+    assert not _chain_violations(tmp_path)
+    (pkg / "live.py").write_text("p = obstacles_from_pair(l, r)  \nadd_observation(grid, p)\n")
+    (pkg / "batch.py").write_text("x = scan_from_pair(l, r)\n")
+    (pkg / "run.py").write_text("d = compute_disparity(l, r)\nrej = reject_uniform(d, l)\n")
+    found = " ".join(_chain_violations(tmp_path))
+    assert "live.py runs pairs through the chain and updates a grid" in found
+    assert "batch.py runs pairs" in found and "run.py composes" in found

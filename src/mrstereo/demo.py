@@ -213,7 +213,7 @@ def _first_frame(out: Path, manifest, estimated, calibration: dict) -> dict:
     against the ideal one (into ``calibration``), the disparity of each range and after eq. (13) against the
     ground truth, the top view. Returns the frame's metrics."""
     from .geometry.scan import plot_top_view
-    from .pipeline.frame import scan_from_pair
+    from .geometry.pair import scan_from_pair
     from .pipeline.run import PipelineConfig
 
     record = manifest.frames[0]

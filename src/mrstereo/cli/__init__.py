@@ -191,7 +191,7 @@ def _run(argv: list[str] | None) -> int:
         import click
 
         from ..io import protecting_inputs, quiet_decoders
-        from ..pipeline.parallel import keep_freed_memory
+        from .._executor import keep_freed_memory
         from ._main import main
 
         keep_freed_memory()          # this process is ours: no page faults on every frame's arrays

@@ -1,7 +1,7 @@
 """CLI: ``mrstereo points`` (PLY point cloud) and ``mrstereo scan`` (virtual laser scan).
 
 Both run one stereo pair through rectification, multi-range matching,
-eq. (13) rejection and the 3D stage (:mod:`mrstereo.pipeline.frame`).
+eq. (13) rejection and the 3D stage (:mod:`mrstereo.geometry.pair`).
 
 Conventions: docs/conventions.md.
 """
@@ -15,7 +15,7 @@ import numpy as np
 
 from ..geometry.drops import DropConfig
 from ..io import check_outputs
-from ..pipeline.frame import obstacles_from_pair, scan_from_pair
+from ..geometry.pair import obstacles_from_pair, scan_from_pair
 from ._options import (ANGLE_RAD, CALIB_HELP, HEIGHT, MAX_DISPARITY, TILT, Number, echo_floor, library_default,
                        mount_from_options, mount_option, profile_option)
 
@@ -73,7 +73,7 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     from ..camera import read_stereo
     from ..geometry import ObstacleConfig, ground_from_mount
     from ..io import read_image
-    from ..pipeline.sanity import warn_pair
+    from ..rejection.streams import warn_pair
     from ..profiling import stage
     from ..rejection import RejectionConfig
 

@@ -10,12 +10,11 @@ from pathlib import Path
 
 import click
 
-from ..mapping import MappingConfig
-from ..pipeline.live import LIVE_FILES, LIVE_GRID, LiveConfig
-from ..pipeline.run import PipelineConfig
+from ..pipeline.live import LIVE_FILES, LiveConfig
 from .._interrupt import reached
 from .._limits import limit, max_workers
-from ._options import CALIB_HELP, HEIGHT, TILT, Number, mount_from_options, mount_option, profile_option
+from ._options import (CALIB_HELP, HEIGHT, TILT, Number, map_config, map_options, mount_from_options, mount_option,
+                       profile_option)
 
 __all__ = ["COMMANDS", "viewer_option", "record_bag_option", "check_sink_options", "replayed_to_sinks"]
 
@@ -119,17 +118,7 @@ def _pair(text: str, option: str, kind=float, sep: str = ","):
                    "recording's when it has one, else visual]")
 @viewer_option
 @record_bag_option
-@click.option("--preset", type=click.Choice(["mapping", "robust", "paper"]), default=PipelineConfig.preset,
-              show_default=True, help="Matching preset.")
-@click.option("--fusion", type=click.Choice(["log_odds", "union"]), default=MappingConfig.fusion, show_default=True,
-              help="Map fusion.")
-@click.option("--resolution", "resolution_m", type=Number(0.001, 10.0, unit="m"),
-              default=LIVE_GRID.resolution_m, show_default=True,
-              help="Cell size [m].")
-@click.option("--size", "size_m", default=f"{LIVE_GRID.width_m:g},{LIVE_GRID.height_m:g}", show_default=True,
-              metavar="W,H", help="Map width (x) and height (y) [m].")
-@click.option("--origin", "origin_m", default=f"{LIVE_GRID.origin_x_m:g},{LIVE_GRID.origin_y_m:g}",
-              show_default=True, metavar="X,Y", help="World position of the lower-left map corner [m].")
+@map_options
 @click.option("--workers", type=Number(1, max_workers, integer=True), default=LiveConfig.workers, show_default=True,
               help="Frames matched at once (threads; one per core).")
 @click.option("--camera-size", default=None, metavar="WxH",
@@ -143,9 +132,9 @@ def _pair(text: str, option: str, kind=float, sep: str = ","):
 @click.option("--quiet", is_flag=True, help="No progress line.")
 def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, side_by_side: bool, realtime: bool,
                  speed: float, max_frames: int | None, save_every_s: float, odometry: str | None,
-                 viewers: tuple[str, ...], record_bag: Path | None, preset: str, fusion: str, resolution_m: float, size_m: str, origin_m: str,
-                 workers: int, camera_size: str | None, camera_fps: float | None, height_m: float | None,
-                 tilt_rad: float | None, mount, quiet: bool) -> None:
+                 viewers: tuple[str, ...], record_bag: Path | None, workers: int, camera_size: str | None,
+                 camera_fps: float | None, height_m: float | None, tilt_rad: float | None, mount, quiet: bool,
+                 no_mount_check: bool, **options) -> None:
     """Map live from stereo cameras, video files or a recording.
 
     Cameras, video files or a recording in, a map out as it grows.
@@ -163,7 +152,6 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
     """
     from ..camera import read_stereo
     from ..io import check_output_dir, check_outputs
-    from ..mapping import GridSpec
     from ..pipeline.live import run_live
     from ..recordings.sources import is_camera, open_source
 
@@ -172,8 +160,7 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
     for value, option in ((save_every_s, "--save-every"), (speed, "--speed")):
         if not (value > 0 and value < float("inf")):
             raise click.BadParameter(f"must be a number > 0, got {value}", param_hint=option)
-    (width, height), (ox, oy) = _pair(size_m, "--size"), _pair(origin_m, "--origin")
-    grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
+    config = map_config(**options)
     size = _pair(camera_size, "--camera-size", int, "x") if camera_size else None
     file_inputs = [Path(s) for s in sources if not is_camera(s)] + ([calib] if calib is not None else [])
     check_output_dir("--out", out_dir, inputs=file_inputs,
@@ -188,9 +175,8 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
         if stereo is None:
             raise click.UsageError("cameras and video files need --calib (a stereo calibration)")
         camera_mount = mount_from_options(height_m, tilt_rad, mount, stereo)
-        config = PipelineConfig(preset=preset, grid=grid).with_fusion(fusion)
         live = LiveConfig(save_every_s=save_every_s, max_frames=max_frames, realtime=realtime, speed=speed,
-                          workers=workers, odometry=odometry)
+                          workers=workers, odometry=odometry, check_mount=not no_mount_check)
         sinks = []
         try:
             if sinks_needed:
@@ -216,6 +202,10 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
                f"({run.frames_dropped} dropped), {run.frames_mapped} mapped at {m['rate_hz']:.1f} Hz; latency "
                f"median {m['latency_ms']['median']:.0f} ms, p95 {m['latency_ms']['p95']:.0f} ms; odometry "
                f"{run.odometry}{f' ({run.frames_lost} frames lost)' if run.frames_lost else ''}")
+    if run.mount_warning:
+        from ._options import warn
+
+        warn(run.mount_warning)
     if run.floor is not None and run.floor.method != "mount":
         click.echo(f"floor {run.floor.message}: height {run.floor.height_m:.3f} m, tilt {run.floor.tilt_rad:.4f} rad")
     click.echo(f"wrote {', '.join(LIVE_FILES)}{''.join(f', {n}' for n in _view_files(viewers))} to {out_dir}"

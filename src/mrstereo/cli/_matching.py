@@ -115,7 +115,7 @@ def disparity(left, right, output, max_disparity, bands, calib, depth_bands, rec
         raise ValueError(f"left and right images differ in size: {left_img.shape[1]}x{left_img.shape[0]} "
                          f"and {right_img.shape[1]}x{right_img.shape[0]}")
     raw = stereo is not None and not rectified and not stereo.is_rectified
-    from ..pipeline.sanity import warn_pair
+    from ..rejection.streams import warn_pair
 
     warn_pair(left_img, right_img, stereo, rectified=not raw)
     if raw:

@@ -96,8 +96,8 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
         click.echo(f"vs ground truth: precision {m.precision:.3f}, recall {m.recall:.3f}{in_view}, "
                    f"wall profile error {m.mean_distance_m * 100:.1f} cm, free correct {m.free_precision:.3f}"
                    f"{coverage}")
-    if run.odometry is not None:
-        click.echo(f"visual odometry: {run.odometry.message}")
+    if run.odometry:
+        click.echo(f"visual odometry: {run.odometry['visual_odometry']['message']}")
     if run.fusion is not None:
         a = run.pose_metrics()["alignment"]
         click.echo(f"given odometry fused with visual odometry: {a['visual_steps']} of {a['frames'] - 1} steps "

@@ -236,14 +236,14 @@ def evaluate_scenes(dirs: Iterable, *, methods: Sequence[str] = METHODS, max_dis
     progress : bool
         Show a tqdm progress bar on stderr.
     workers, scheduler, processes :
-        Spread the (scene, method) runs as :func:`mrstereo.pipeline.parallel.map_ordered` does;
+        Spread the (scene, method) runs as :func:`mrstereo._executor.map_ordered` does;
         per-run times on workers include each worker's first numba compilation.
 
     Returns
     -------
     EvaluationReport
     """
-    from ..pipeline.parallel import map_ordered
+    from .._executor import map_ordered
 
     methods = _check_methods(methods)
     dirs = list(dirs)

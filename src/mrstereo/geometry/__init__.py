@@ -1,5 +1,6 @@
 """3D from disparity: triangulation (eq. 14-16), ground plane, obstacles, free-space boundary, top view,
-laser scan, PLY. The whole per-frame chain is :mod:`mrstereo.pipeline.frame`.
+laser scan, PLY; one stereo pair to obstacles and a scan: :mod:`.pair` (the map of many pairs:
+:class:`mrstereo.StereoMapper`).
 
 Conventions: docs/conventions.md.
 """

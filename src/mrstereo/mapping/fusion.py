@@ -19,7 +19,7 @@ from .grid import GridSpec
 from .occupancy import MappingConfig, OccupancyGrid, ViewCells
 from .tiles import TiledOccupancyGrid
 
-__all__ = ["FrameObservation", "fuse", "add_observation", "sweep_footprint", "MAX_SWEEP_M"]
+__all__ = ["FrameObservation", "fuse", "fuse_step", "add_observation", "sweep_footprint", "MAX_SWEEP_M"]
 
 MAX_SWEEP_M = 2.0
 """Consecutive frames at most this far apart are joined by a straight sweep of the robot's footprint."""
@@ -76,12 +76,19 @@ def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec | None = Gr
         occupancy = OccupancyGrid(grid, config=config)
     previous = None
     for obs in observations:
-        if config.footprint_radius_m:
-            near = previous is not None and math.dist(previous[:2], obs.pose[:2]) <= MAX_SWEEP_M
-            sweep_footprint(occupancy, previous if near else obs.pose, obs.pose, config.footprint_radius_m)
-        add_observation(occupancy, obs)
+        fuse_step(occupancy, obs, previous)
         previous = obs.pose
     return occupancy
+
+
+def fuse_step(occupancy: OccupancyGrid | TiledOccupancyGrid, obs: FrameObservation, previous_pose=None) -> None:
+    """One step of :func:`fuse`: the robot's footprint swept from ``previous_pose`` (the frame before's, None
+    for the first) to the frame's pose, then the frame added (:func:`add_observation`)."""
+    radius = occupancy.config.footprint_radius_m
+    if radius:
+        near = previous_pose is not None and math.dist(previous_pose[:2], obs.pose[:2]) <= MAX_SWEEP_M
+        sweep_footprint(occupancy, previous_pose if near else obs.pose, obs.pose, radius)
+    add_observation(occupancy, obs)
 
 
 def sweep_footprint(occupancy, start_xy, end_xy, radius_m: float) -> None:

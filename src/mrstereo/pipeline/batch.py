@@ -1,7 +1,7 @@
 """Many datasets at once: per-frame products and a map per dataset, resumable, on Dask.
 
 For every frame of every dataset :func:`run_batch` runs the chain of
-:func:`mrstereo.pipeline.frame.scan_from_pair` (rectify -> match -> reject (eq. 13) -> 3D
+:func:`mrstereo.geometry.pair.scan_from_pair` (rectify -> match -> reject (eq. 13) -> 3D
 (eq. 14-16) -> scan) once, writes its products under ``OUT/<dataset>/frames/``, then fuses each
 dataset's frames into ``OUT/<dataset>/map/`` (the same map as ``mrstereo map``, bit for bit).
 Every result carries a fingerprint of what it was computed from, so a re-run keeps what is still
@@ -11,29 +11,27 @@ The layout and the resume rules: docs/scale-out.md ("Batch"). Conventions: docs/
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import os
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from .. import __version__
 from ..camera import CameraMount, StereoCamera, mount_entry
-from ..geometry.ply import read_ply, write_ply
-from ..geometry.scan import write_scan_json
-from ..io import (Inputs, atomic_write, check_output_dir, check_outputs, read_pfm, remove_stale_temporaries,
-                  replace_dir, temporary_dir, write_disparity)
+from ..io import (Inputs, atomic_write, check_output_dir, check_outputs, remove_stale_temporaries, replace_dir,
+                  temporary_dir)
 from ..mapping.fusion import FrameObservation
+from ..mapping.observations import digest, file_stamp, frame_outputs, resume_frame, save_frame
 from ..mapping.rosmap import ros_map_files
 from ..recordings.layouts import read_recording
 from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
-from .sanity import check_pair_streams
-from .frame import scan_from_pair
-from .parallel import ItemFailure, map_ordered
-from .run import (MapRun, PipelineConfig, floor_for_run, map_from_observations, observation_from_pair, pair_options,
-                  with_visual_odometry, write_map_outputs)
+from ..recordings.sources import StereoFrame
+from .._executor import ItemFailure, map_ordered
+from .mapper import StereoMapper, observe, world_observation
+from .run import (MapRun, PipelineConfig, map_from_observations, with_visual_odometry,
+                  write_map_outputs)
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
            "SUMMARY_NAME"]
@@ -47,25 +45,8 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy")
 
 # ------------------------------------------------------------------------------------------ fingerprints
 
-def _digest(value) -> str:
-    """A short stable hash of JSON-able ``value`` (anything else by its repr)."""
-    text = json.dumps(value, sort_keys=True, default=repr, separators=(",", ":"))
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:32]
-
-
-def _stat(path: Path | None) -> list | None:
-    """``[path, size, mtime_ns]`` of a file (None for no file): what a changed file changes."""
-    if path is None:
-        return None
-    try:
-        st = os.stat(path)
-    except OSError:
-        return [str(path), None, None]
-    return [str(path), st.st_size, st.st_mtime_ns]
-
-
 def _frame_files(record: FrameRecord) -> list:
-    return [_stat(p) for p in (record.left, record.right, record.left_rect, record.right_rect)]
+    return [file_stamp(p) for p in (record.left, record.right, record.left_rect, record.right_rect)]
 
 
 def _dataset_fingerprint(m: Manifest, config: PipelineConfig, floor_frames: int) -> str:
@@ -75,28 +56,21 @@ def _dataset_fingerprint(m: Manifest, config: PipelineConfig, floor_frames: int)
         {"estimated from": [_frame_files(r) for r in m.frames[:floor_frames]]}
     chain = {k: repr(getattr(config, k)) for k in ("preset", "max_disparity_px", "matching", "rejection",
                                                    "obstacles", "free_space")}
-    return _digest({"calibration": m.calibration.to_dict(), "mount": mount, "chain": chain,
+    return digest({"calibration": m.calibration.to_dict(), "mount": mount, "chain": chain,
                     "version": __version__})
 
 
 def _frame_fingerprint(base: str, record: FrameRecord) -> str:
-    return _digest([base, _frame_files(record), list(record.pose), record.pan_rad])
+    return digest([base, _frame_files(record), list(record.pose), record.pan_rad])
 
 
 def _map_fingerprint(m: Manifest, frames: list[str], config: PipelineConfig) -> str:
     """What a map depends on: its frames' fingerprints, the grid and fusion options, the ground truth it is
     compared with."""
     truth = [list(f.true_pose) if f.true_pose is not None else None for f in m.frames]
-    gt = [_stat(p) for p in ros_map_files(m.ground_truth_map)] if m.ground_truth_map is not None else None
-    return _digest({"frames": frames, "grid": repr(config.grid), "mapping": repr(config.mapping),
+    gt = [file_stamp(p) for p in ros_map_files(m.ground_truth_map)] if m.ground_truth_map is not None else None
+    return digest({"frames": frames, "grid": repr(config.grid), "mapping": repr(config.mapping),
                     "range": config.obstacles.max_range_m, "ground_truth": gt, "true_poses": truth})
-
-
-def frame_outputs(frames_dir: str | os.PathLike, index: int) -> dict[str, Path]:
-    """The four files of frame ``index``: disparity, cloud, scan, observation."""
-    base = Path(frames_dir) / f"{index:06d}"
-    return {"disparity": base.with_suffix(".pfm"), "cloud": base.with_suffix(".ply"),
-            "scan": Path(f"{base}.scan.json"), "observation": Path(f"{base}.obs.npz")}
 
 
 @dataclass(frozen=True)
@@ -115,12 +89,6 @@ class FrameTask:
     """What the frame's results are computed from (kept in its ``.obs.npz``)."""
 
 
-def _gray(image: np.ndarray) -> np.ndarray:
-    import cv2
-
-    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
-
-
 def _read_task(task: FrameTask) -> tuple[FrameTask, tuple]:
     """``task`` -> ``(task, pair)``: the frame's images decoded (by the run's reader thread)."""
     return task, frame_pair(task.record, prefer_raw=task.prefer_raw)
@@ -134,63 +102,15 @@ def process_frame(task: FrameTask | tuple[FrameTask, tuple]) -> FrameObservation
     """
     task, pair = task if isinstance(task, tuple) else (task, None)
     left, right, rectified = frame_pair(task.record, prefer_raw=task.prefer_raw) if pair is None else pair
-    result = scan_from_pair(left, right, task.stereo, rectified=rectified, mount=task.mount,
-                            pan_rad=task.record.pan_rad, **pair_options(task.config))
-    frame = result.frame
-    obs = frame.obstacles
-    observation = observation_from_pair(frame, task.record, index=task.index, config=task.config, stereo=task.stereo)
-    files = frame_outputs(task.frames_dir, task.index)
-    write_disparity(files["disparity"], frame.disparity_px)
-    write_ply(files["cloud"], obs.points_robot_image.reshape(-1, 3), intensity=_gray(frame.left_rect).ravel(),
-              comment=f"mrstereo {task.dataset} frame {task.index} (frame: robot, metres)")
-    write_scan_json(files["scan"], result.scan)
-    _save_observation(files["observation"], observation, task.fingerprint)
+    frame = StereoFrame(index=task.index, stamp_s=0.0, left=left, right=right, rectified=rectified,
+                        pan_rad=float(task.record.pan_rad))
+    observed = observe(frame, task.stereo, task.mount, task.config)
+    observation = world_observation(observed, tuple(float(v) for v in task.record.pose), task.stereo)
+    save_frame(frame_outputs(task.frames_dir, task.index), observation, fingerprint=task.fingerprint,
+               disparity_px=observed.disparity_px, points_robot_image=observed.points_robot_image,
+               left_rect=observed.left_rect, scan=observed.scan,
+               comment=f"mrstereo {task.dataset} frame {task.index} (frame: robot, metres)")
     return observation
-
-
-def _save_observation(path: Path, obs: FrameObservation, fingerprint: str) -> None:
-    with atomic_write(path) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, fingerprint=np.array(fingerprint), index=obs.index, pose=np.array(obs.pose), pan_rad=obs.pan_rad,
-                 obstacle_points_world=obs.obstacle_points_world, floor_points_world=obs.floor_points_world,
-                 n_valid_disparity=obs.n_valid_disparity, ground_message=np.array(obs.ground_message),
-                 baseline_focal_m_px=np.nan if obs.baseline_focal_m_px is None else obs.baseline_focal_m_px,
-                 sensor_height_m=np.nan if obs.sensor_height_m is None else obs.sensor_height_m,
-                 boundary_points=obs.boundary_points)
-
-
-def _resume(files: dict[str, Path], fingerprint: str) -> FrameObservation | None:
-    """The observation of a finished frame, or None when one of its four files is missing or unreadable or
-    it was computed from other inputs or options (then the frame is computed again)."""
-    if not all(p.is_file() for p in files.values()):
-        return None
-    try:
-        with np.load(files["observation"]) as z:
-            if "fingerprint" not in z.files or str(z["fingerprint"]) != fingerprint:
-                return None
-        read_pfm(files["disparity"])
-        json.loads(files["scan"].read_text(encoding="utf-8"))
-        read_ply(files["cloud"])
-        return _load_observation(files["observation"])
-    except Exception:                  # any damage: recompute (the files are rewritten atomically)
-        return None
-
-
-def _load_observation(path: Path) -> FrameObservation:
-    with np.load(path) as z:
-        return FrameObservation(index=int(z["index"]), pose=tuple(float(v) for v in z["pose"]),
-                                pan_rad=float(z["pan_rad"]), obstacle_points_world=z["obstacle_points_world"],
-                                floor_points_world=z["floor_points_world"],
-                                n_valid_disparity=int(z["n_valid_disparity"]),
-                                ground_message=str(z["ground_message"]),
-                                baseline_focal_m_px=_optional_float(z["baseline_focal_m_px"]),
-                                sensor_height_m=_optional_float(z["sensor_height_m"]),
-                                boundary_points=int(z["boundary_points"]))
-
-
-def _optional_float(value) -> float | None:
-    """A scalar saved by :func:`_save_observation` (NaN: None)."""
-    value = float(value)
-    return None if np.isnan(value) else value
 
 
 @dataclass(frozen=True)
@@ -210,7 +130,7 @@ class DatasetSummary:
     fingerprint: str = ""
     """The map's fingerprint (what it was computed from)."""
     mount_warning: str | None = None
-    """Why the dataset's mount was not used (:func:`mrstereo.pipeline.floor_for_run`)."""
+    """Why the dataset's mount was not used (:class:`mrstereo.geometry.floor.FloorVote`)."""
 
     def to_dict(self) -> dict:
         out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
@@ -313,7 +233,7 @@ def _plan(m: Manifest, name: str, out: Path, config: PipelineConfig, maps: bool)
         remove_stale_temporaries(where)
     base = _dataset_fingerprint(m, config, floor_frames=10)
     fingerprints = [_frame_fingerprint(base, r) for r in m.frames]
-    loaded = {k: _resume(frame_outputs(frames_dir, k), fingerprints[k]) for k in range(len(m.frames))}
+    loaded = {k: resume_frame(frame_outputs(frames_dir, k), fingerprints[k]) for k in range(len(m.frames))}
     plan = _Dataset(name=name, manifest=m, folder=folder, fingerprints=fingerprints,
                     map_fingerprint=_map_fingerprint(m, fingerprints, config), loaded=loaded)
     plan.map_kept = maps and all(v is not None for v in loaded.values()) and \
@@ -321,14 +241,31 @@ def _plan(m: Manifest, name: str, out: Path, config: PipelineConfig, maps: bool)
     return plan
 
 
+def _readable(manifest: Manifest):
+    """The recording's frames, None for one that cannot be read (the run reports it when it gets there)."""
+    for k, record in enumerate(manifest.frames):
+        try:
+            left, right, rectified = frame_pair(record)
+        except (OSError, ValueError):
+            yield None
+            continue
+        yield StereoFrame(index=k, stamp_s=0.0, left=left, right=right, rectified=rectified,
+                          T_world_from_base=record.T_world_from_base, pan_rad=float(record.pan_rad))
+
+
 def _mounted(manifest: Manifest, config: PipelineConfig, check_mount: bool) -> tuple:
     """``(RunFloor, recording)``: the mount (checked) or the floor estimated once, the poses on that base,
     and the poses of visual odometry for a recording without any (as ``mrstereo map`` takes them)."""
-    floor = floor_for_run(manifest, config=config, check_mount=check_mount)
-    manifest = rebased(manifest, floor.mount)
+    mapper = StereoMapper(manifest.calibration, manifest.mount, config, check_mount=check_mount, name=str(manifest.root))
+    for frame in itertools.islice(_readable(manifest), mapper.streams.n_frames):
+        if frame is not None:
+            mapper.check_streams(frame)                 # duplicated or swapped streams named
+    mapper.streams.warn()
+    mapper.settle(_readable(manifest))
+    manifest = rebased(manifest, mapper.mount)
     if not manifest.has_poses:
         manifest, _ = with_visual_odometry(manifest)
-    return floor, manifest
+    return mapper.floor_decision, manifest
 
 
 def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
@@ -348,7 +285,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     maps : bool
         Also fuse a map per dataset.
     workers, scheduler, processes
-        Where the frames run (:func:`mrstereo.pipeline.parallel.map_ordered`).
+        Where the frames run (:func:`mrstereo._executor.map_ordered`).
     progress : bool
         A tqdm bar over all frames to compute.
     check_mount : bool
@@ -375,7 +312,6 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     names = _names(datasets, out)
     for name in names:
         check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, inputs=inputs)
-    check_pair_streams(datasets)
 
     remove_stale_temporaries(out)
     configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
@@ -406,7 +342,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps({"datasets": [s.to_dict() for s in summaries], "failures": failures,
                                    "config": {"preset": config.preset, "fusion": config.mapping.fusion,
-                                              "fingerprint": _digest(repr(config))}},
+                                              "fingerprint": digest(repr(config))}},
                                   indent=1) + "\n")
     return BatchSummary(path=path, datasets=tuple(summaries), failures=tuple(failures))
 

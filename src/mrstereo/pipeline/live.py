@@ -2,7 +2,7 @@
 
 Three kinds of threads, never a growing queue between them: capture into a one-frame slot
 (:class:`LatestFrame`; the newest frame wins), matchers running the per-frame chain -- match
-(eq. 9-12), reject (eq. 13), 3-D (eq. 14-16), scan (:func:`mrstereo.pipeline.frame.scan_from_pair`)
+(eq. 9-12), reject (eq. 13), 3-D (eq. 14-16), scan (:func:`mrstereo.geometry.pair.scan_from_pair`)
 -- and the fuser (the calling thread: pose, grid, sinks). A writer thread saves snapshots every
 ``save_every_s`` seconds, each file atomically. How it keeps up: docs/live.md.
 Conventions: docs/conventions.md.
@@ -13,37 +13,33 @@ import gc
 import json
 import math
 import os
-import resource
 import threading
 import time
+import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .._interrupt import reached
 from ..camera import CameraMount, StereoCamera, mount_entry
-from ..geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount
-from ..geometry.scan import LaserScan
+from ..geometry.ground import GroundPlane
 from ..io import atomic_write
-from ..mapping import GridSpec, RosMap, write_ros_map
+from ..mapping import RosMap, write_ros_map
 from ..mapping.figures import plot_map
-from ..mapping.fusion import add_observation
 from ..mapping.occupancy import OccupancyGrid
-from ..odometry import LOST, OdometryConfig, StereoOdometry
+from ..odometry import LOST
 from ..odometry.trajectory import write_tum
 from ..profiling import Profile, active, profiling, stage
-from ..recordings.manifest import FrameRecord, pose_3d_of
 from ..recordings.sources import FrameSource, StereoFrame, paced
 from ..transforms import planar_from_T
-from .frame import PairObstacles, scan_from_pair
-from .run import PipelineConfig, median_floor, observation_from_pair, pair_options
+from .._interrupt import reached
+from .._executor import Growing, LatestFrame, StreamThreads, Writer, peak_rss_mb, rss_mb
+from ..mapping.sinks import LiveFrame
+from .mapper import MappedFrame, Observed, PipelineConfig, StereoMapper
+from .run import config_for_recording
 
-__all__ = ["LIVE_GRID", "LiveConfig", "LiveFrame", "LiveRun", "LatestFrame", "run_live", "LIVE_FILES"]
-
-LIVE_GRID = GridSpec(width_m=40.0, height_m=40.0, resolution_m=0.05, origin_x_m=-20.0, origin_y_m=-20.0)
-"""The live map's default extent: 40 m x 40 m around the start in 5 cm cells."""
+__all__ = ["LiveConfig", "LiveFrame", "LiveRun", "LatestFrame", "run_live", "LIVE_FILES"]
 
 LIVE_FILES = ("map.yaml", "map.pgm", "map.png", "trajectory.txt", "metrics.json")
 """What :func:`run_live` writes into its output folder."""
@@ -69,10 +65,8 @@ class LiveConfig:
     odometry : {"visual", "given"} or None
         The robot's pose: stereo visual odometry, or the recording's own odometry; None: the
         recording's when it has one, else visual.
-    floor_frames : int
-        Without a camera mount: the floor is the median of this many confident floor fits...
-    max_floor_frames : int
-        ... among the first frames, at most this many (then the best fit is taken).
+    check_mount : bool
+        Check a given mount against the floor seen in the first frames (as ``mrstereo map`` does).
     """
 
     save_every_s: float = 5.0
@@ -81,8 +75,7 @@ class LiveConfig:
     speed: float = 1.0
     workers: int = 2
     odometry: str | None = None
-    floor_frames: int = 3
-    max_floor_frames: int = 10
+    check_mount: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.save_every_s) and self.save_every_s > 0):
@@ -95,29 +88,6 @@ class LiveConfig:
             raise ValueError(f"workers must be >= 1, got {self.workers!r}")
         if self.odometry not in (None, "visual", "given"):
             raise ValueError(f"odometry must be 'visual', 'given' or None, got {self.odometry!r}")
-        if self.floor_frames < 1 or self.max_floor_frames < self.floor_frames:
-            raise ValueError("floor_frames must be >= 1 and max_floor_frames >= floor_frames")
-
-
-@dataclass(frozen=True)
-class LiveFrame:
-    """What one mapped frame produced: what the sinks (viewers, bags) receive.
-
-    ``grid`` is the live map itself: a sink reads it during its call and keeps no reference.
-    Points and the scan are in the robot frame (REP 103), poses are ``T_world_from_base`` and
-    the rectified left camera's mount ``T_base_from_cam`` (optical axes, docs/conventions.md).
-    """
-
-    index: int
-    stamp_s: float
-    T_world_from_base: np.ndarray
-    T_base_from_cam: np.ndarray
-    left_rect: np.ndarray
-    disparity_px: np.ndarray
-    obstacle_points_robot: np.ndarray
-    scan: LaserScan
-    grid: OccupancyGrid
-    status: str = "tracked"
 
 
 @dataclass
@@ -138,6 +108,7 @@ class LiveRun:
     odometry: str = "visual"
     floor: GroundPlane | None = None
     mount: CameraMount | None = None
+    mount_warning: str | None = None
     source: str = ""
     stopped: str = "end of source"
     cpu_s: dict = field(default_factory=dict)
@@ -170,181 +141,22 @@ class LiveRun:
             out["floor"] = self.floor.summary()
         if self.mount is not None:
             out["mount"] = mount_entry(self.mount)
+        if self.mount_warning:
+            out["mount_warning"] = self.mount_warning
+        g = self.grid.grid
+        out["map_window"] = {"origin_m": [g.origin_x_m, g.origin_y_m], "size_m": [g.width_m, g.height_m],
+                             "resolution_m": g.resolution_m, "points_outside": int(self.grid.points_outside)}
         return out
-
-
-class LatestFrame:
-    """A one-frame slot between a producer and consumers; the producer never waits unless ``lossless``.
-
-    ``put`` replaces a frame nobody took yet (counted in ``dropped``), or waits with ``lossless``;
-    ``take`` hands out the frame with a ticket (0, 1, ...) or None once closed and empty.
-    """
-
-    def __init__(self, *, lossless: bool = False) -> None:
-        self.lossless = lossless
-        self.dropped = 0
-        self.tickets = 0
-        self._item = None
-        self._closed = False
-        self._cond = threading.Condition()
-
-    def put(self, item, stop: threading.Event) -> bool:
-        """Offer ``item``; False when stopped before it could be placed (lossless only)."""
-        with self._cond:
-            if self.lossless:
-                while self._item is not None and not stop.is_set():
-                    self._cond.wait(0.1)
-                if stop.is_set():
-                    return False
-            elif self._item is not None:
-                self.dropped += 1
-            self._item = item
-            self._cond.notify_all()
-            return True
-
-    def close(self) -> None:
-        with self._cond:
-            self._closed = True
-            self._cond.notify_all()
-
-    def take(self, timeout_s: float = 0.1):
-        """``(ticket, item)``; ``(None, None)`` after ``timeout_s`` with nothing; raises StopIteration when
-        closed and empty."""
-        with self._cond:
-            if self._item is None and not self._closed:
-                self._cond.wait(timeout_s)
-            if self._item is None:
-                if self._closed:
-                    raise StopIteration
-                return None, None
-            item, self._item = self._item, None
-            ticket, self.tickets = self.tickets, self.tickets + 1
-            self._cond.notify_all()
-            return ticket, item
-
-    def discard(self) -> bool:
-        """Drop a frame still in the slot (counted); True if there was one."""
-        with self._cond:
-            if self._item is None:
-                return False
-            self._item = None
-            self.dropped += 1
-            self._cond.notify_all()
-            return True
 
 
 @dataclass
 class _Matched:
-    """A frame after the matcher: the pair's chain and the rectified right image (for odometry)."""
+    """A frame through the matcher (:meth:`StereoMapper.observe`), with its arrival time."""
 
     frame: StereoFrame
     arrival_s: float
-    right_rect: np.ndarray | None = None
-    pair: PairObstacles | None = None
-    scan: LaserScan | None = None
+    observed: Observed | None = None
     error: BaseException | None = None
-
-
-class _Ordered:
-    """Matched frames handed to the fuser by ticket, in the order the matchers took them."""
-
-    def __init__(self) -> None:
-        self._items: dict[int, _Matched] = {}
-        self._cond = threading.Condition()
-
-    def put(self, ticket: int, item: _Matched) -> None:
-        with self._cond:
-            self._items[ticket] = item
-            self._cond.notify_all()
-
-    def get(self, ticket: int, timeout_s: float) -> _Matched | None:
-        with self._cond:
-            if ticket not in self._items:
-                self._cond.wait(timeout_s)
-            return self._items.pop(ticket, None)
-
-
-def _rss_mb() -> float:
-    """Resident memory of this process now [MB] (Linux /proc; 0 elsewhere)."""
-    try:
-        with open("/proc/self/statm") as fh:
-            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
-    except (OSError, ValueError, IndexError):
-        return 0.0
-
-
-def _peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e6      # Linux: kibibytes
-
-
-class _Growing:
-    """An array that grows along its first axis by doubling (the trajectory)."""
-
-    def __init__(self, shape: tuple[int, ...]) -> None:
-        self._data = np.empty((64,) + shape)
-        self.n = 0
-
-    def append(self, value) -> None:
-        if self.n == len(self._data):
-            self._data = np.concatenate([self._data, np.empty_like(self._data)])
-        self._data[self.n] = value
-        self.n += 1
-
-    def view(self) -> np.ndarray:
-        return self._data[:self.n]
-
-
-class _Writer:
-    """Writes snapshots of the outputs on its own thread; a newer snapshot replaces one not yet begun."""
-
-    def __init__(self, write: Callable[[dict], None]) -> None:
-        self._write = write
-        self._pending = None
-        self._cond = threading.Condition()
-        self._closed = False
-        self.error: BaseException | None = None
-        self._thread = threading.Thread(target=self._loop, name="mrstereo-live-writer", daemon=True)
-        self._thread.start()
-
-    def submit(self, snapshot: dict) -> None:
-        with self._cond:
-            self._pending = snapshot
-            self._cond.notify_all()
-
-    def _loop(self) -> None:
-        while True:
-            with self._cond:
-                while self._pending is None and not self._closed:
-                    self._cond.wait()
-                snapshot, self._pending = self._pending, None
-                if snapshot is None:
-                    return
-            try:
-                self._write(snapshot)
-            except BaseException as exc:        # reported by the fuser
-                self.error = exc
-            reached("save")
-
-    def close(self) -> None:
-        with self._cond:
-            self._closed = True
-            self._cond.notify_all()
-        self._thread.join()
-
-
-def _known_region(ros_map: RosMap, margin_cells: int = 20) -> RosMap:
-    """The map cropped to its known cells and a margin (the figure of a mostly unknown live map)."""
-    known = np.flatnonzero(np.isfinite(ros_map.occupancy).any(axis=1)), \
-        np.flatnonzero(np.isfinite(ros_map.occupancy).any(axis=0))
-    if not len(known[0]):
-        return ros_map
-    g = ros_map.grid
-    r0, r1 = max(0, known[0][0] - margin_cells), min(g.shape[0], known[0][-1] + 1 + margin_cells)
-    c0, c1 = max(0, known[1][0] - margin_cells), min(g.shape[1], known[1][-1] + 1 + margin_cells)
-    grid = GridSpec(width_m=(c1 - c0) * g.resolution_m, height_m=(r1 - r0) * g.resolution_m,
-                    resolution_m=g.resolution_m, origin_x_m=g.origin_x_m + c0 * g.resolution_m,
-                    origin_y_m=g.origin_y_m + r0 * g.resolution_m)
-    return replace(ros_map, occupancy=ros_map.occupancy[r0:r1, c0:c1], grid=grid)
 
 
 def write_live_outputs(out_dir: Path, snapshot: dict) -> dict[str, Path]:
@@ -357,7 +169,7 @@ def write_live_outputs(out_dir: Path, snapshot: dict) -> dict[str, Path]:
     write_ros_map(files["map_yaml"], ros_map)
     T = snapshot["T_world_from_base"]
     path = planar_from_T(T) if len(T) else None
-    plot_map(_known_region(ros_map), files["map_png"], robot_path=path,
+    plot_map(ros_map, files["map_png"], robot_path=path,
              title=f"live map, {len(T)} frames ({snapshot['metrics']['rate_hz']:.1f} Hz)")
     if len(T):                  # (no pose yet: the floor is being estimated)
         write_tum(files["trajectory"], snapshot["stamps_s"], T, comment=snapshot["comment"])
@@ -370,186 +182,45 @@ def write_live_outputs(out_dir: Path, snapshot: dict) -> dict[str, Path]:
 
 
 class _Fuser:
-    """The ordered part of the loop: floor, pose, map, sinks, outputs (runs in the calling thread)."""
+    """The ordered part of the loop: the mapper's integration (floor, pose, map), sinks (the calling thread)."""
 
-    def __init__(self, stereo: StereoCamera, source: FrameSource, config: PipelineConfig, live: LiveConfig,
-                 mount: CameraMount | None, sinks: Sequence, run: LiveRun) -> None:
-        self.stereo, self.config, self.live, self.sinks, self.run = stereo, config, live, list(sinks), run
-        self.mount = mount
-        self.floor_fits: list[tuple[int, GroundPlane]] = []
-        self.best_fit: tuple[int, GroundPlane] | None = None
-        self.floor_seen = 0
-        self.odometry = live.odometry or ("given" if source.has_poses else "visual")
-        if self.odometry == "given" and not source.has_poses:
-            raise ValueError(f"{source.name} has no odometry of its own: use visual odometry")
-        run.odometry = self.odometry
-        self.vo: StereoOdometry | None = None
-        self.trajectory_T = _Growing((4, 4))
-        self.trajectory_t = _Growing(())
-        self.latencies = _Growing(())
-        if mount is not None:
-            self._fix_mount(mount, ground_from_mount(mount, R_rect_from_cam=stereo.left.R))
+    def __init__(self, mapper: StereoMapper, live: LiveConfig, sinks: Sequence, run: LiveRun) -> None:
+        self.mapper, self.live, self.sinks, self.run = mapper, live, list(sinks), run
+        self.latencies = Growing(())
 
-    def _fix_mount(self, mount: CameraMount, floor: GroundPlane) -> None:
-        self.mount = mount
-        self.run.mount, self.run.floor = mount, floor
-
-    def _floor(self, item: _Matched) -> bool:
-        """Collect floor fits until the mount is known; True once it is."""
-        if self.mount is not None:
-            return True
-        ground = item.pair.obstacles.ground
-        self.floor_seen += 1
-        if ground.success and (self.best_fit is None or ground.inlier_share > self.best_fit[1].inlier_share):
-            self.best_fit = (item.frame.index, ground)
-        if ground.confident:
-            self.floor_fits.append((item.frame.index, ground))
-        if len(self.floor_fits) >= self.live.floor_frames or \
-                (self.floor_seen >= self.live.max_floor_frames and self.best_fit is not None):
-            used = self.floor_fits or [self.best_fit]
-            floor = median_floor(used, confident=bool(self.floor_fits))
-            # the fits are of the rectified left frame; the mount is of the raw camera (p_rect = R p_raw)
-            self._fix_mount(CameraMount.from_rectified(T_robot_from_cam_ground(floor), self.stereo.left.R), floor)
-        elif self.floor_seen >= self.live.max_floor_frames:
-            raise ValueError(f"no floor found in the first {self.floor_seen} frames of the source; give the camera "
-                             "mount (--mount x,y,z,roll,pitch,yaw or --height/--tilt, or mount:/rig: in the "
-                             "calibration)")
-        return False
-
-    def _pose(self, item: _Matched, T_base_from_cam: np.ndarray) -> tuple[np.ndarray, str]:
-        frame = item.frame
-        if self.odometry == "given":
-            return np.asarray(frame.T_world_from_base, dtype=np.float64), "given"
-        if self.vo is None:
-            T0 = frame.T_world_from_base if frame.T_world_from_base is not None else np.eye(4)
-            self.vo = StereoOdometry(self.stereo, T0, OdometryConfig(), keep_history=False)
-        with stage("odometry"):
-            estimate = self.vo.step(item.pair.left_rect, item.right_rect, T_base_from_cam=T_base_from_cam,
-                                    stamp_s=frame.stamp_s)
-        return estimate.T_world_from_base, estimate.status
-
-    def fuse(self, item: _Matched, grid: OccupancyGrid) -> None:
-        run = self.run
+    def fuse(self, item) -> None:
+        run, mapper = self.run, self.mapper
         run.frames_processed += 1
-        if not self._floor(item):
-            run.frames_before_floor += 1
-            return
-        frame = item.frame
-        T_base_from_cam = self.mount.T_base_from_rectified(self.stereo.left.R, frame.pan_rad)
-        T, status = self._pose(item, T_base_from_cam)
-        if status == LOST:
-            run.frames_lost += 1
-            return
-        record = FrameRecord(pose=None, pose_3d=pose_3d_of(T), pan_rad=frame.pan_rad, stamp_s=frame.stamp_s)
-        obs = observation_from_pair(item.pair, record, index=frame.index, config=self.config, stereo=self.stereo)
-        add_observation(grid, obs)
-        self.latencies.append(1000.0 * (time.perf_counter() - item.arrival_s))
-        run.frames_mapped += 1
-        self.trajectory_T.append(T)
-        self.trajectory_t.append(frame.stamp_s)
-        if self.sinks:
-            out = LiveFrame(index=frame.index, stamp_s=frame.stamp_s, T_world_from_base=T,
-                            T_base_from_cam=T_base_from_cam, left_rect=item.pair.left_rect,
-                            disparity_px=item.pair.disparity_px,
-                            obstacle_points_robot=item.pair.obstacles.obstacle_points_robot, scan=item.scan,
-                            grid=grid, status=status)
-            with stage("sinks"):
-                for sink in self.sinks:
-                    sink.frame(out)
+        mapper.check_streams(item.frame)
+        for mapped in mapper.integrate(item.observed):
+            if mapped.status == LOST:
+                continue
+            self.latencies.append(1000.0 * (time.perf_counter() - item.arrival_s))
+            if self.sinks:
+                self._sinks(mapped)
+        run.frames_mapped, run.frames_lost = len(mapper.trajectory_index), mapper.frames_lost
+        run.frames_before_floor = mapper.frames_held
+        run.floor, run.mount = mapper.floor, mapper.mount
+        run.mount_warning = mapper.mount_warning
 
+    def fuse_rest(self) -> None:
+        """The end of the source: the frames still held for the floor estimate are mapped."""
+        mapper = self.mapper
+        for mapped in mapper.finish():
+            if self.sinks and mapped.status != LOST:
+                self._sinks(mapped)
+        self.run.frames_mapped, self.run.frames_lost = len(mapper.trajectory_index), mapper.frames_lost
+        self.run.frames_before_floor = 0
+        self.run.floor, self.run.mount, self.run.mount_warning = mapper.floor, mapper.mount, mapper.mount_warning
 
-def _match(item: _Matched, stereo: StereoCamera, mount: CameraMount | None, config: PipelineConfig) -> None:
-    frame = item.frame
-    left, right = frame.left, frame.right
-    if (left.shape[1], left.shape[0]) != tuple(stereo.size):
-        raise ValueError(f"frame {frame.index} is {left.shape[1]}x{left.shape[0]} but the calibration is "
-                         f"{stereo.size[0]}x{stereo.size[1]}")
-    if not frame.rectified and not stereo.is_rectified:
-        with stage("rectify"):
-            left, right = stereo.rectify(left, right)
-    result = scan_from_pair(left, right, stereo, rectified=True, mount=mount, pan_rad=frame.pan_rad,
-                            **pair_options(config))
-    item.right_rect, item.pair, item.scan = right, result.frame, replace(result.scan, stamp_s=frame.stamp_s)
-
-
-class _Threads:
-    """Capture and matchers of a run and what they share: the slot, the matched frames in order, the
-    bound on frames in flight, errors, counts and CPU times."""
-
-    def __init__(self, source: FrameSource, stereo: StereoCamera, config: PipelineConfig, live: LiveConfig,
-                 fuser: _Fuser, stop: threading.Event) -> None:
-        self.source, self.stereo, self.config, self.live, self.fuser, self.stop = \
-            source, stereo, config, live, fuser, stop
-        self.slot = LatestFrame(lossless=not (source.realtime or live.realtime))
-        self.ordered = _Ordered()
-        self.in_flight = threading.Semaphore(live.workers)
-        self.errors: list[BaseException] = []
-        self.cpu: dict[str, float] = {}
-        self.counts = {"in": 0}
-        self.threads = [threading.Thread(target=self._capture, name="mrstereo-live-capture", daemon=True)]
-        self.threads += [threading.Thread(target=self._matcher, args=(k,), name=f"mrstereo-live-match-{k}",
-                                          daemon=True) for k in range(live.workers)]
-
-    def start(self) -> None:
-        for t in self.threads:
-            t.start()
-
-    def join(self) -> None:
-        self.stop.set()
-        for t in self.threads:
-            t.join(timeout=5.0)
-
-    def matching(self) -> bool:
-        """A matcher still runs."""
-        return any(t.is_alive() for t in self.threads[1:])
-
-    def _capture(self) -> None:
-        start, live, slot, stop = time.thread_time(), self.live, self.slot, self.stop
-        try:
-            frames = paced(self.source, speed=live.speed) if live.realtime and not self.source.realtime \
-                else self.source
-            for frame in frames:
-                if stop.is_set():
-                    break
-                self.counts["in"] += 1
-                if not slot.put(_Matched(frame=frame, arrival_s=time.perf_counter()), stop):
-                    self.counts["in"] -= 1
-                    break
-                if live.max_frames is not None and self.counts["in"] >= live.max_frames:
-                    self.counts["end"] = "max frames"
-                    break
-        except BaseException as exc:
-            self.errors.append(exc)
-            stop.set()
-        finally:
-            slot.close()
-            self.cpu["capture"] = time.thread_time() - start
-
-    def _matcher(self, k: int) -> None:
-        start = time.thread_time()
-        import numba
-
-        numba.set_num_threads(1)            # one core per matcher: the matchers are the parallelism
-        try:
-            while True:
-                while not self.in_flight.acquire(timeout=0.1):
-                    if self.stop.is_set():
-                        return
-                try:
-                    ticket, item = self.slot.take()
-                except StopIteration:
-                    self.in_flight.release()
-                    return
-                if item is None:
-                    self.in_flight.release()
-                    continue
-                try:
-                    _match(item, self.stereo, self.fuser.mount, self.config)
-                except BaseException as exc:
-                    item.error = exc
-                self.ordered.put(ticket, item)
-        finally:
-            self.cpu[f"matcher {k}"] = time.thread_time() - start
+    def _sinks(self, mapped: MappedFrame) -> None:
+        out = LiveFrame(index=mapped.index, stamp_s=mapped.stamp_s, T_world_from_base=mapped.T_world_from_base,
+                        T_base_from_cam=mapped.T_base_from_cam, left_rect=mapped.left_rect,
+                        disparity_px=mapped.disparity_px, obstacle_points_robot=mapped.obstacle_points_robot,
+                        scan=mapped.scan, grid=self.mapper.grid, status=mapped.status)
+        with stage("sinks"):
+            for sink in self.sinks:
+                sink.frame(out)
 
 
 def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: StereoCamera | None = None,
@@ -570,7 +241,8 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
         The camera on the robot (default: the source's, else the calibration's; with none the floor is
         estimated from the first frames).
     config : PipelineConfig, optional
-        Every stage's options; default: the map's, on :data:`LIVE_GRID`.
+        Every stage's options (default: the map's; a map that grows, or the window of the recording's
+        ground-truth map).
     live : LiveConfig
         Rate, saving, workers, odometry.
     sinks : sequence
@@ -587,23 +259,29 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
         raise ValueError(f"{source.name}: no calibration: give one (--calib)")
     if not isinstance(live, LiveConfig):
         raise TypeError(f"live must be a LiveConfig, got {type(live).__name__}")
-    config = PipelineConfig(grid=LIVE_GRID) if config is None else config
-    if config.grid is None:                 # (a live map has a fixed window: its files are rewritten while it runs)
-        config = replace(config, grid=replace(LIVE_GRID, resolution_m=config.resolution_m))
-    config = config.for_rig(stereo)        # the rig's mapping range, as a map run takes it
+    if live.odometry == "given" and not source.has_poses:
+        raise ValueError(f"{source.name} has no odometry of its own: use visual odometry")
+    odometry = live.odometry or ("given" if source.has_poses else "visual")
+    config = config_for_recording(PipelineConfig() if config is None else config, source.ground_truth_map)
+    mapper = StereoMapper(stereo, mount or source.mount or stereo.mount, config, check_mount=live.check_mount,
+                          odometry=odometry, pose_frame_mount=source.pose_frame_mount, name=source.name)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    grid = OccupancyGrid(config.grid, config=config.mapping)
-    run = LiveRun(grid=grid, stamps_s=np.empty(0), T_world_from_base=np.empty((0, 4, 4)), source=source.name)
-    fuser = _Fuser(stereo, source, config, live, mount or source.mount or stereo.mount, sinks, run)
-    threads = _Threads(source, stereo, config, live, fuser, stop or threading.Event())
+    run = LiveRun(grid=mapper.grid, stamps_s=np.empty(0), T_world_from_base=np.empty((0, 4, 4)), source=source.name,
+                  odometry=odometry)
+    fuser = _Fuser(mapper, live, sinks, run)
+    frames = paced(source, speed=live.speed) if live.realtime and not source.realtime else source
+    threads = StreamThreads(frames, lambda frame: _Matched(frame=frame, arrival_s=time.perf_counter()),
+                            _observe_with(mapper), workers=live.workers, lossless=not (source.realtime or live.realtime),
+                            max_items=live.max_frames, stop=stop or threading.Event())
     clock = _Clock(profile=active() or Profile())
-    writer = _Writer(lambda snapshot: run.files.update(write_live_outputs(out, snapshot)))
+    writer = Writer(lambda snapshot: run.files.update(write_live_outputs(out, snapshot)))
     interrupted = None
     with profiling(clock.profile):
         threads.start()
         try:
-            _fuse_in_order(threads, fuser, grid, writer, clock, on_save)
+            _fuse_in_order(threads, fuser, writer, clock, on_save)
+            fuser.fuse_rest()
         except KeyboardInterrupt as exc:
             interrupted = exc
             run.stopped = "interrupted"
@@ -618,8 +296,10 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
             threads.join()
     if run.stopped == "end of source":
         run.stopped = threads.counts.get("end", "stopped" if requested else "end of source")
-    writer.submit(_snapshot(run, fuser, grid, threads, clock))
+    writer.submit(_snapshot(run, fuser, threads, clock))
     writer.close()
+    if fuser.mapper.outside_warning():
+        warnings.warn(fuser.mapper.outside_warning(), stacklevel=2)
     for sink in sinks:
         sink.close()
     if writer.error is not None:
@@ -627,6 +307,12 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
     if interrupted is not None:
         raise interrupted
     return run
+
+
+def _observe_with(mapper: StereoMapper) -> Callable:
+    def work(item: _Matched) -> None:
+        item.observed = mapper.observe(item.frame)
+    return work
 
 
 @dataclass
@@ -639,7 +325,7 @@ class _Clock:
     fuse_cpu_s: float = 0.0
 
 
-def _fuse_in_order(threads: _Threads, fuser: _Fuser, grid: OccupancyGrid, writer: _Writer, clock: _Clock,
+def _fuse_in_order(threads: StreamThreads, fuser: _Fuser, writer: Writer, clock: _Clock,
                    on_save: Callable[[LiveRun], None] | None) -> None:
     """The fuser: the matched frames in the order taken into the map; a snapshot every ``save_every_s``."""
     next_ticket, last_save = 0, time.perf_counter()
@@ -656,7 +342,7 @@ def _fuse_in_order(threads: _Threads, fuser: _Fuser, grid: OccupancyGrid, writer
             if item.error is not None:
                 raise item.error
             t0 = time.thread_time()
-            fuser.fuse(item, grid)
+            fuser.fuse(item)
             clock.fuse_cpu_s += time.thread_time() - t0
             reached("frame")
         if writer.error is not None:
@@ -666,7 +352,7 @@ def _fuse_in_order(threads: _Threads, fuser: _Fuser, grid: OccupancyGrid, writer
         now = time.perf_counter()
         if now - last_save >= fuser.live.save_every_s:
             last_save = now
-            writer.submit(_snapshot(fuser.run, fuser, grid, threads, clock))
+            writer.submit(_snapshot(fuser.run, fuser, threads, clock))
             if on_save is not None:
                 on_save(fuser.run)
 
@@ -678,19 +364,21 @@ def _discard_quietly(sink) -> None:
         pass
 
 
-def _snapshot(run: LiveRun, fuser: _Fuser, grid: OccupancyGrid, threads: _Threads, clock: _Clock) -> dict:
+def _snapshot(run: LiveRun, fuser: _Fuser, threads: StreamThreads, clock: _Clock) -> dict:
     """Bring the run's counts up to date and copy what the writer needs."""
     run.frames_in = threads.counts["in"]
     run.frames_dropped = threads.slot.dropped
     run.duration_s = time.perf_counter() - clock.start_s
     run.latency_ms = fuser.latencies.view().copy()
-    run.stamps_s = fuser.trajectory_t.view().copy()
-    run.T_world_from_base = fuser.trajectory_T.view().copy()
+    mapper = fuser.mapper
+    run.stamps_s = np.array(mapper.trajectory_stamps_s)
+    run.T_world_from_base = np.array(mapper.trajectory_T) if mapper.trajectory_T else np.empty((0, 4, 4))
+    run.grid = mapper.occupancy()
     run.cpu_s = {"process": time.process_time() - clock.cpu_start_s, "fuser": clock.fuse_cpu_s, **threads.cpu}
     run.stage_ms = clock.profile.per_frame_ms(max(run.frames_processed, 1))
-    run.memory_mb, run.peak_memory_mb = _rss_mb(), _peak_rss_mb()
+    run.memory_mb, run.peak_memory_mb = rss_mb(), peak_rss_mb()
     metrics = run.metrics()
     comment = (f"mrstereo live: {run.source}; odometry {run.odometry}; {run.frames_mapped} frames mapped of "
                f"{run.frames_in}\nthe robot base in the world (REP 103), each frame's pose as known at that frame")
-    return {"ros_map": grid.to_ros_map(), "T_world_from_base": run.T_world_from_base, "stamps_s": run.stamps_s,
+    return {"ros_map": run.grid.to_ros_map(), "T_world_from_base": run.T_world_from_base, "stamps_s": run.stamps_s,
             "metrics": metrics, "comment": comment}

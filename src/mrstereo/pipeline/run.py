@@ -1,119 +1,40 @@
-"""The whole chain for a sequence: rectify -> match -> reject -> 3D -> occupancy grid.
+"""A recording to a map: its frames through a :class:`~mrstereo.pipeline.mapper.StereoMapper`.
 
-:func:`observe_frame` takes one frame through matching (eq. 9-12), rejection (eq. 13) and
-triangulation (eq. 14-16) into world-frame points; :func:`map_from_observations` fuses them in
-order into the occupancy grid (paper section 5.2); :func:`build_map` runs both over a manifest,
-:func:`write_map_outputs` writes the results, :func:`floor_for_run` finds the mount when there is
-none. User guide: docs/mapping.md. Conventions: docs/conventions.md.
+:func:`build_map` drives the mapper over a recording's frames (on workers when asked),
+:func:`finish_map` compares the map with the recording's ground-truth map, :func:`write_map_outputs`
+writes the results. User guide: docs/mapping.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
+import itertools
 import json
-import math
 import os
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 
 from ..camera import CameraMount, StereoCamera, mount_entry
-from ..geometry.freespace import FreeSpaceConfig
-from ..geometry.ground import GroundPlane, T_robot_from_cam_ground, ground_from_mount
-from ..geometry.obstacles import MAPPING_MAX_RANGE_M, ObstacleConfig, mapping_range_m
+from ..geometry.ground import GroundPlane
+from ..geometry.obstacles import MAPPING_MAX_RANGE_M
 from ..io import atomic_write
-from ..mapping import GridSpec, read_ros_map, write_ros_map
-from ..mapping.rosmap import ros_map_on_grid
+from ..mapping import read_ros_map, write_ros_map
 from ..mapping.figures import plot_map
-from ..mapping.fusion import FrameObservation, fuse
-from ..mapping.tiles import TiledOccupancyGrid
+from ..mapping.fusion import FrameObservation
 from ..mapping.metrics import MapMetrics, map_metrics
-from ..mapping.occupancy import MappingConfig, OccupancyGrid, view_cells
-from ..matching.config import MatchingConfig
-from ..profiling import stage
+from ..mapping.occupancy import OccupancyGrid
+from ..mapping.rosmap import ros_map_on_grid
+from ..mapping.tiles import TiledOccupancyGrid
 from ..recordings.layouts import read_recording
-from ..recordings.manifest import FrameRecord, Manifest, frame_pair, pose_3d_of, rebased
-from ..rejection import RejectionConfig
-from ..transforms import T_from_planar, transform_points
-from .frame import PairObstacles, obstacles_from_pair
+from ..recordings.manifest import Manifest, pose_3d_of, rebased
+from ..rejection.streams import StreamCheck
+from ..transforms import T_from_planar
+from .._executor import read_ahead
+from .mapper import PipelineConfig, StereoMapper, observe, views_of_poses
 
-__all__ = ["PipelineConfig", "MapRun", "observe_frame", "build_map", "map_from_observations", "floor_for_run",
-           "write_map_outputs", "views_of_frames", "check_map", "RunFloor"]
-
-
-@dataclass(frozen=True)
-class PipelineConfig:
-    """Options of every stage of a map, each stage's config with its own defaults.
-
-    Attributes
-    ----------
-    preset : str
-        Matching preset: ``"mapping"`` (the robust matcher with the stricter acceptance a map
-        needs), ``"robust"`` or the paper's exact ``"paper"``.
-    max_disparity_px : float, optional
-        Overrides the disparity search derived from the calibration's depth bands.
-    matching : MatchingConfig, optional
-        Full matcher configuration (overrides ``preset``).
-    rejection : RejectionConfig
-        Eq. (13) texture / ground suppression.
-    obstacles : ObstacleConfig or None
-        Height band, range limit and floor estimation. None: the defaults with the rig's mapping
-        range (:func:`~mrstereo.geometry.obstacles.mapping_range_m`), filled in by :meth:`for_rig`.
-    mapping : MappingConfig
-        Sensor model and fusion (log-odds or the paper's union).
-    grid : GridSpec or None
-        A fixed map window (extent and resolution); points outside it are counted
-        (``MapRun.points_outside``). None: the window of the recording's ground-truth map when it
-        has one (maps compared cell by cell), else a map that grows with the path
-        (:class:`~mrstereo.mapping.tiles.TiledOccupancyGrid`), written over the cells seen.
-    resolution_m : float
-        Cell size of a map that grows (``grid`` None).
-    free_space : FreeSpaceConfig or None
-        The free-space boundary (:mod:`mrstereo.geometry.freespace`), whose points join the
-        frame's obstacle points. None: off.
-    """
-
-    preset: str = "mapping"
-    max_disparity_px: float | None = None
-    matching: MatchingConfig | None = None
-    rejection: RejectionConfig = field(default_factory=RejectionConfig)
-    obstacles: ObstacleConfig | None = None
-    mapping: MappingConfig = field(default_factory=MappingConfig)
-    grid: GridSpec | None = None
-    resolution_m: float = GridSpec.resolution_m
-    free_space: FreeSpaceConfig | None = field(default_factory=FreeSpaceConfig)
-
-    def single_range_equal_work(self, stereo: StereoCamera) -> PipelineConfig:
-        """A single full-resolution range doing the same work as the multi-range plan.
-
-        The baseline the paper argues against: one disparity window ``[0, n]`` with ``n``
-        chosen so that pixel x disparity evaluations equal the three ranges' (it cannot see
-        closer than ``b f / n``: the near blind zone).
-        """
-        from ..matching import make_plan
-        from ..matching.config import preset_config
-
-        plan = make_plan(stereo.size, calibration=stereo)
-        n = max(1, round(plan.work / (stereo.size[0] * stereo.size[1])))
-        base = self.matching or preset_config(self.preset)
-        return replace(self, matching=base.replace(search={"multi_range": False}), max_disparity_px=float(n))
-
-    def for_rig(self, stereo: StereoCamera) -> PipelineConfig:
-        """The configuration a run with the calibration ``stereo`` uses: ``obstacles`` filled in with the
-        rig's mapping range when it is None."""
-        if self.obstacles is not None:
-            return self
-        return replace(self, obstacles=ObstacleConfig(max_range_m=mapping_range_m(stereo)))
-
-    @property
-    def obstacle_config(self) -> ObstacleConfig:
-        """``obstacles``, or the defaults with the shortest mapping range when not filled in (:meth:`for_rig`)."""
-        return self.obstacles if self.obstacles is not None else ObstacleConfig(max_range_m=MAPPING_MAX_RANGE_M)
-
-    def with_fusion(self, fusion: str) -> PipelineConfig:
-        """The same configuration with another grid fusion (``"log_odds"`` or ``"union"``)."""
-        return replace(self, mapping=replace(self.mapping, fusion=fusion))
+__all__ = ["PipelineConfig", "MapRun", "build_map", "map_frames", "finish_map", "map_from_observations",
+           "write_map_outputs", "check_map", "recording_source", "check_pair_streams"]
 
 
 @dataclass
@@ -126,17 +47,17 @@ class MapRun:
     metrics: MapMetrics | None
     ground_truth_map: object | None
     floor: GroundPlane | None = None
-    """The floor of the run: the given mount's, or the estimate :func:`floor_for_run` made."""
+    """The floor of the run: the given mount's, or the estimate from the first frames."""
     mount: CameraMount | None = None
     """The camera mount every frame used."""
-    odometry: object | None = None
-    """The :class:`mrstereo.odometry.OdometryResult` when the poses came from visual odometry."""
+    odometry: dict | None = None
+    """Visual odometry figures (``{"visual_odometry": {...}}``) when the poses came from it."""
     fusion: object | None = None
     """The :class:`mrstereo.odometry.fusion.FusedOdometry` when the given poses were fused with visual odometry."""
     range_m: float = MAPPING_MAX_RANGE_M
     """The mapping range of the run (its obstacle configuration's ``max_range_m``)."""
     mount_warning: str | None = None
-    """Why the given mount was not used (:func:`floor_for_run`), None when it was (or none was given)."""
+    """Why the given mount was not used (:class:`~mrstereo.geometry.floor.FloorVote`), None when it was (or none was given)."""
     tiles: TiledOccupancyGrid | None = None
     """The whole map when it grew (``config.grid`` None); ``grid`` is then its dense window
     (:meth:`~mrstereo.mapping.tiles.TiledOccupancyGrid.map_window`: all of it unless it is too large)."""
@@ -144,12 +65,7 @@ class MapRun:
     def pose_metrics(self) -> dict:
         """Odometry and alignment figures for metrics.json (empty when the given poses were used)."""
         out = {}
-        if self.odometry is not None:
-            vo = self.odometry
-            out["visual_odometry"] = {"frames": len(vo.status), "lost": vo.n_lost,
-                                      "keyframes": vo.status.count("keyframe"),
-                                      "median_inliers": float(np.median(vo.n_inliers)),
-                                      "median_time_s": float(np.median(vo.time_s))}
+        out.update(self.odometry or {})
         if self.fusion is not None:
             moved, turned = self.fusion.corrections([f.pose for f in self.manifest.frames])
             out["alignment"] = {"frames": len(moved), "visual_steps": int(self.fusion.visual_used.sum()),
@@ -171,233 +87,74 @@ class MapRun:
         return out
 
 
-def pair_options(config: PipelineConfig) -> dict:
-    """Keyword options of :func:`mrstereo.pipeline.frame.obstacles_from_pair` for a config."""
-    return {"preset": config.preset, "max_disparity_px": config.max_disparity_px, "matching": config.matching,
-            "rejection": config.rejection, "config": config.obstacle_config, "free_space": config.free_space}
+def recording_source(recording, *, prefer_raw: bool = False):
+    """The :class:`~mrstereo.recordings.sources.FrameSource` of a recording (a Manifest or a path): the one
+    place a map run turns a recording into frames."""
+    from ..recordings.sources import RecordingSource
+
+    manifest = recording if isinstance(recording, Manifest) else read_recording(recording)
+    return RecordingSource(manifest, prefer_raw=prefer_raw)
 
 
-def observation_from_pair(frame: PairObstacles, record: FrameRecord, *, index: int,
-                          config: PipelineConfig = PipelineConfig(),
-                          stereo: StereoCamera | None = None) -> FrameObservation:
-    """Move a frame's obstacle and floor points into the world frame; find their grid cells.
+def map_frames(mapper: StereoMapper, frames, *, workers: int | None = None, scheduler=None,
+               processes: bool = False, progress: bool = True, total: int | None = None) -> None:
+    """Drive ``mapper`` over ``frames`` in order: the first frames until the floor is known one by one, the
+    rest observed on ``workers`` (threads, or Dask processes / an existing ``scheduler``) in chunks and
+    integrated in order -- the same map, bit for bit, in every case."""
+    import contextlib
+    from functools import partial
 
-    Parameters
-    ----------
-    frame : PairObstacles
-        The frame's points (:func:`mrstereo.pipeline.frame.obstacles_from_pair`).
-    record : FrameRecord
-        Its manifest entry: the pose and head pan.
-    index : int
-        Its position in the sequence.
-    config : PipelineConfig
-        The grid and sensor model of the cells.
-    stereo : StereoCamera, optional
-        The calibration the frame was matched with: gives the mapping's range uncertainty its
-        ``b f``; without it rays clear up to each point.
-    """
-    with stage("grid"):
-        T = T_from_planar(*record.pose)
-        obs = frame.obstacles
-        boundary = frame.boundary.points_robot if frame.boundary is not None else np.empty((0, 3))
-        obstacles = transform_points(T, np.concatenate([obs.obstacle_points_robot, boundary])).astype(np.float32)
-        floor = transform_points(T, obs.floor_points_robot).astype(np.float32)
-        bf = None if stereo is None else float(stereo.baseline_m * stereo.focal_px)
-        height = float(obs.ground.height_m) if obs.success else None
-        origin = tuple(record.pose[:2]) + (() if height is None else (height,))
-        # (a map that occludes traces every view against the map so far, in order: add_observation)
-        cells = None if config.mapping.map_occlusion_p is not None or config.grid is None else \
-            view_cells(obstacles, floor, origin, grid=config.grid, config=config.mapping, baseline_focal_m_px=bf)
-    return FrameObservation(index=index, pose=tuple(float(v) for v in record.pose), pan_rad=float(record.pan_rad),
-                            obstacle_points_world=obstacles, floor_points_world=floor,
-                            n_valid_disparity=int(np.isfinite(frame.disparity_px).sum()),
-                            ground_message=obs.message, cells=cells, baseline_focal_m_px=bf,
-                            sensor_height_m=height, boundary_points=len(boundary))
+    from tqdm.auto import tqdm
 
+    from .._executor import dask_client, map_ordered, numba_thread_safe
 
-def observe_frame(record: FrameRecord, stereo: StereoCamera, *, index: int = 0, mount: CameraMount | None = None,
-                  config: PipelineConfig = PipelineConfig(), prefer_raw: bool = False,
-                  pair: tuple[np.ndarray, np.ndarray, bool] | None = None) -> FrameObservation:
-    """Run rectify -> match -> reject -> 3D on one manifest frame; points in the world frame.
-
-    Parameters
-    ----------
-    record : FrameRecord
-        The manifest frame.
-    stereo : StereoCamera
-        The calibration.
-    index : int
-        The frame's position in the sequence.
-    mount : CameraMount, optional
-        The camera mount (default: the calibration's; with neither the floor is estimated).
-    config : PipelineConfig
-        Options of every stage.
-    prefer_raw : bool
-        Rectify the raw images even where the dataset has rectified ones.
-    pair : (ndarray, ndarray, bool), optional
-        The frame's images as :func:`frame_pair` reads them (read ahead by a reader thread);
-        default read here.
-    """
-    left, right, rectified = frame_pair(record, prefer_raw=prefer_raw) if pair is None else pair
-    frame = obstacles_from_pair(left, right, stereo, rectified=rectified, mount=mount, pan_rad=record.pan_rad,
-                                **pair_options(config))
-    return observation_from_pair(frame, record, index=index, config=config, stereo=stereo)
-
-
-def _observe_indexed(indexed: tuple, *, stereo: StereoCamera, mount: CameraMount | None, config: PipelineConfig,
-                     prefer_raw: bool) -> FrameObservation:
-    """:func:`observe_frame` of ``(index, record)`` or ``(index, record, pair)``: the picklable unit of work
-    of :func:`build_map` (``pair`` read ahead by :func:`_read_indexed`)."""
-    k, record, *pair = indexed
-    return observe_frame(record, stereo, index=k, mount=mount, config=config, prefer_raw=prefer_raw,
-                         pair=pair[0] if pair else None)
-
-
-def _read_indexed(indexed: tuple[int, FrameRecord], *, prefer_raw: bool) -> tuple:
-    """``(index, record)`` -> ``(index, record, pair)``: the images decoded (a sequence run's reader thread)."""
-    k, record = indexed
-    return k, record, frame_pair(record, prefer_raw=prefer_raw)
-
-
-MOUNT_HEIGHT_TOLERANCE_M = 0.10
-"""A given mount whose camera height differs more than this from the floor seen in the images is not used."""
-MOUNT_TILT_TOLERANCE_RAD = math.radians(5.0)
-"""A given mount whose tilt differs more than this from the floor seen in the images is not used."""
-MIN_CAMERA_HEIGHT_M = 0.05
-"""A given mount with the camera lower than this above the floor is taken for a base frame that is not on the floor."""
-
-
-class RunFloor(NamedTuple):
-    """The camera mount of a run and the floor it implies (:func:`floor_for_run`)."""
-
-    mount: CameraMount
-    floor: GroundPlane
-    warning: str | None = None
-    """Why the given mount was not used, or looks wrong: one line for the user (None: nothing to say)."""
-
-
-def _seen_floor(manifest: Manifest, stereo: StereoCamera, config: PipelineConfig, prefer_raw: bool,
-                max_frames: int, n_frames: int) -> tuple[GroundPlane | None, int]:
-    """The floor fitted in the first ``max_frames`` frames: the median of the first ``n_frames`` confident
-    fits, else the fit with the largest inlier share (not confident), else None; and the number of
-    confident fits."""
-    stereo = replace(stereo, mount=None)
-    fits, best = [], None
-    for k, record in enumerate(manifest.frames[:max(1, int(max_frames))]):
-        try:
-            left, right, rectified = frame_pair(record, prefer_raw=prefer_raw)
-        except (OSError, ValueError):
-            continue                       # an unreadable frame: the run reports it when it gets there
-        ground = obstacles_from_pair(left, right, stereo, rectified=rectified, mount=None,
-                                     **pair_options(replace(config, free_space=None))).obstacles.ground
-        if ground.success and (best is None or ground.inlier_share > best[1].inlier_share):
-            best = (k, ground)
-        if ground.confident:
-            fits.append((k, ground))
-            if len(fits) >= n_frames:
-                break
-    if best is None:
-        return None, 0
-    return median_floor(fits or [best], confident=bool(fits)), len(fits)
-
-
-def median_floor(fits: list[tuple[int, GroundPlane]], *, confident: bool) -> GroundPlane:
-    """The median height, tilt and roll of floor fits ``(frame index, GroundPlane)``."""
-    med = {name: float(np.median([getattr(g, name) for _, g in fits]))
-           for name in ("height_m", "tilt_rad", "roll_rad", "inlier_share", "residual_m")}
-    frames = ", ".join(str(k) for k, _ in fits)
-    return GroundPlane(**med, success=True, method=fits[0][1].method,
-                       n_inliers=int(np.median([g.n_inliers for _, g in fits])),
-                       message=f"estimated: median of {len(fits)} floor fit(s), frame(s) {frames}"
-                               + ("" if confident else " (none confident)"))
-
-
-def _disagreement(given: GroundPlane, seen: GroundPlane | None) -> str | None:
-    """Why a given mount's floor disagrees with the seen one (None: it agrees, or nothing to compare)."""
-    if given.height_m < MIN_CAMERA_HEIGHT_M:
-        return f"a camera {given.height_m:.3f} m above the floor is below {MIN_CAMERA_HEIGHT_M:.2f} m"
-    if seen is None:
-        return None
-    dh, dt = abs(given.height_m - seen.height_m), abs(given.tilt_rad - seen.tilt_rad)
-    if dh > MOUNT_HEIGHT_TOLERANCE_M:
-        return f"the height is off by {dh:.3f} m (more than {MOUNT_HEIGHT_TOLERANCE_M:.2f} m)"
-    if dt > MOUNT_TILT_TOLERANCE_RAD:
-        return f"the tilt is off by {math.degrees(dt):.1f} deg (more than {math.degrees(MOUNT_TILT_TOLERANCE_RAD):.0f} deg)"
-    return None
-
-
-def _floor_text(floor: GroundPlane) -> str:
-    return f"height {floor.height_m:.3f} m, tilt {math.degrees(floor.tilt_rad):.1f} deg"
-
-
-def floor_for_run(manifest: Manifest, stereo: StereoCamera | None = None, *,
-                  config: PipelineConfig = PipelineConfig(), prefer_raw: bool = False, max_frames: int = 10,
-                  n_frames: int = 3, check_mount: bool = True) -> RunFloor:
-    """The camera mount of a run and the floor it implies: given and checked, or estimated from the first frames.
-
-    The seen floor is the median of the first ``n_frames`` confident RANSAC fits within
-    ``max_frames`` frames (else the fit with the largest inlier share, reported as not confident).
-    A given mount is kept (with ``check_mount``) when the camera is at least :data:`MIN_CAMERA_HEIGHT_M`
-    above its floor and a floor seen in two frames agrees within :data:`MOUNT_HEIGHT_TOLERANCE_M` and
-    :data:`MOUNT_TILT_TOLERANCE_RAD`; otherwise the seen floor is used and ``warning`` says why
-    (docs/mapping.md).
-
-    Returns
-    -------
-    RunFloor
-        The mount, the floor with its confidence (``inlier_share``, ``residual_m``; in ``message``
-        which frames it came from), and the warning (None when there is nothing to say).
-
-    Raises
-    ------
-    ValueError
-        No mount and no floor in any of the first ``max_frames`` frames.
-    """
-    if not isinstance(manifest, Manifest):
-        raise TypeError(f"manifest must be a Manifest, got {type(manifest).__name__}")
-    stereo = manifest.calibration if stereo is None else stereo
-    given = None if manifest.mount is None else ground_from_mount(manifest.mount, R_rect_from_cam=stereo.left.R)
-    if given is not None and not check_mount:
-        return RunFloor(manifest.mount, given)
-    seen, n_confident = _seen_floor(manifest, stereo, config, prefer_raw, max_frames, n_frames)
-    if given is None:
-        if seen is None:
-            raise ValueError(f"no floor found in the first {min(len(manifest.frames), max_frames)} frames of "
-                             f"{manifest.root}; give the camera mount (--mount x,y,z,roll,pitch,yaw or "
-                             "--height/--tilt, or mount:/rig: in the manifest or stereo YAML)")
-        return RunFloor(_mount_of_floor(seen, stereo), seen)
-    # one confident fit can be a wall's base or a ramp: a plausible mount is replaced on repeated evidence only
-    repeated = n_confident >= min(2, len(manifest.frames))
-    reason = _disagreement(given, seen if seen is not None and seen.confident and repeated else None)
-    if reason is None:
-        return RunFloor(manifest.mount, given)
-    advice = ("give the mount of a base frame on the floor (--base-frame of a bag, --mount x,y,z,roll,pitch,yaw, "
-              "--height/--tilt), or no mount to have the floor estimated")
-    if seen is None:
-        return RunFloor(manifest.mount, given, f"the camera mount looks wrong ({reason}: {_floor_text(given)}) and no "
-                                               f"floor was seen in the first frames to replace it; {advice}")
-    used = replace(seen, message=f"{seen.message}; used instead of the given mount ({_floor_text(given)})")
-    return RunFloor(_mount_of_floor(seen, stereo), used,
-                    f"the camera mount disagrees with the floor seen in the images ({reason}): given "
-                    f"{_floor_text(given)}, seen {_floor_text(seen)}; the seen floor is used; {advice}; "
-                    "--no-mount-check keeps the given mount")
-
-
-def _mount_of_floor(floor: GroundPlane, stereo: StereoCamera) -> CameraMount:
-    # the estimate is of the rectified left frame; the mount is of the raw camera (p_rect = R p_raw)
-    return CameraMount.from_rectified(T_robot_from_cam_ground(floor), stereo.left.R)
+    frames = iter(frames)
+    with tqdm(total=total, desc="mapping", unit="frame", disable=not progress) as bar:
+        if workers is None and scheduler is None:
+            for frame in frames:
+                mapper.step_frame(frame)
+                bar.update(1)
+            mapper.finish()
+            return
+        first = mapper.settle(frames)
+        bar.update(mapper.frames_held)
+        if first is None:
+            mapper.finish()
+            return
+        mapper.check_streams(first)
+        pending = [first]
+        use_dask = scheduler is not None or processes or not numba_thread_safe()
+        client = dask_client(workers=workers if scheduler is None else None, scheduler=scheduler,
+                             processes=processes) if use_dask else contextlib.nullcontext()
+        observe_one = partial(observe, stereo=mapper.stereo, mount=mapper.mount, config=mapper.config,
+                              keep_images=mapper.odometry != "given")
+        chunk = 8 * (workers or 2)
+        with client as c:
+            where = {"scheduler": c} if use_dask else {"workers": workers}
+            while pending:
+                for frame in frames:
+                    mapper.check_streams(frame)
+                    pending.append(frame)
+                    if len(pending) >= chunk:
+                        break
+                for item in map_ordered(observe_one, pending, progress=False, desc="mapping",
+                                        label=lambda f: f"frame {f.index}", **where):
+                    mapper.integrate(item)
+                bar.update(len(pending))
+                pending = []
+        mapper.finish()
 
 
 def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
               calibration: StereoCamera | None = None, prefer_raw: bool = False,
               progress: bool = True, workers: int | None = None, scheduler=None,
               processes: bool = False, odometry: str = "auto", align=None, check_mount: bool = True) -> MapRun:
-    """Map a whole dataset: observe every frame, fuse in order, compare with the GT map if any.
+    """Map a whole recording with a :class:`~mrstereo.pipeline.mapper.StereoMapper`; compare with the GT map if any.
 
     Parameters
     ----------
     manifest : Manifest or path
-        The dataset (docs/dataset.md).
+        The recording (docs/dataset.md).
     config : PipelineConfig
         Options of every stage.
     calibration : StereoCamera, optional
@@ -411,29 +168,21 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         Observe the frames on this many single-threaded workers: threads of this
         process, or the processes of a local Dask cluster with ``processes=True``.
     scheduler : str or distributed.Client, optional
-        Observe the frames on an existing Dask cluster (its workers must see
-        the dataset's files). The map is the same, bit for bit, in every case.
+        Observe the frames on an existing Dask cluster. The map is the same, bit for bit, in every case.
     processes : bool
         With ``workers``: worker processes instead of threads.
     odometry : {"auto", "given", "visual"}
-        ``"auto"``: the recording's poses when it has some (``Manifest.has_poses``), else visual
-        odometry. ``"visual"``: the poses come from stereo visual odometry
-        (:func:`mrstereo.pipeline.odometry_from_manifest`, run in order before the
-        matching), starting at the first frame's given pose; frames where tracking is
-        lost are left out of the map.
+        ``"auto"``: the recording's poses when it has some, else visual odometry. ``"visual"``: stereo
+        visual odometry frame by frame (the pose each frame has when it is mapped, as a robot has it),
+        starting at the first frame's given pose; frames where tracking is lost are left out of the map.
     align : FusionConfig or True, optional
         Correct the given poses with visual odometry (with ``odometry="given"``): each step of
         the given odometry fused with the visual odometry's (:func:`mrstereo.odometry.fusion.
         fuse_odometry`); every frame is mapped, those visual odometry lost on the given steps.
     check_mount : bool
         Check a given mount against the floor seen in the first frames and use the seen floor when they
-        disagree (:func:`floor_for_run`; ``MapRun.mount_warning`` says so).
+        disagree (``MapRun.mount_warning`` says so).
     """
-    from functools import partial
-
-    from .parallel import map_ordered
-    from .sanity import check_pair_streams
-
     if not isinstance(manifest, Manifest):
         manifest = read_recording(manifest)
     if not isinstance(config, PipelineConfig):
@@ -447,37 +196,52 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
         raise ValueError("align corrects the given odometry with visual odometry: use it with odometry='given'")
     stereo = manifest.calibration if calibration is None else calibration
     prefer_raw = prefer_raw or calibration is not None
-    check_pair_streams(manifest)
     config = _on_true_map(manifest, config.for_rig(stereo))
-    if config.grid is None:         # a map that grows: its memory checked before any frame is matched
-        TiledOccupancyGrid(config.resolution_m, config=config.mapping,
-                           view_reach_m=config.obstacle_config.max_range_m + 2.0)
-    mount, floor, warning = floor_for_run(manifest, stereo, config=config, prefer_raw=prefer_raw,
-                                          check_mount=check_mount)
-    manifest = rebased(manifest, mount)
-    items = list(enumerate(manifest.frames))
-    vo = fused = None
-    if odometry == "visual" or align is not None:
-        visual, vo = with_visual_odometry(manifest, calibration=calibration, progress=progress)
-    if odometry == "visual":
-        items = [(k, record) for k, record, ok in zip(range(len(items)), visual.frames, vo.tracked) if ok]
-    elif align is not None:
-        from ..odometry.fusion import FusionConfig, fuse_odometry
+    mapper = StereoMapper(stereo, manifest.mount, config, check_mount=check_mount, odometry=odometry,
+                          pose_frame_mount=manifest.pose_frame_mount, keep_observations=True, name=str(manifest.root))
+    fused = None
+    with recording_source(manifest, prefer_raw=prefer_raw) as source:
+        frames = read_ahead(source, depth=2 if workers is None else workers + 1)     # decoded while matching
+        if align is not None:
+            fused, frames = _aligned(mapper, manifest, frames, calibration, progress, align)
+        map_frames(mapper, frames, workers=workers, scheduler=scheduler, processes=processes, progress=progress,
+                   total=len(manifest.frames))
+    return finish_map(mapper, rebased(manifest, mapper.mount), fusion=fused)
 
-        fused = fuse_odometry([f.pose for f in manifest.frames], vo.poses, vo.tracked,
-                              config=FusionConfig() if align is True else align)
-        items = [(k, replace(record, pose=tuple(float(v) for v in pose), pose_3d=None))
-                 for (k, record), pose in zip(items, fused.poses)]
-    observe = partial(_observe_indexed, stereo=stereo, mount=mount, config=config, prefer_raw=prefer_raw)
-    observations = map_ordered(observe, items, workers=workers, scheduler=scheduler,
-                               processes=processes, progress=progress, desc="mapping", unit="frame",
-                               prefetch=partial(_read_indexed, prefer_raw=prefer_raw),
-                               label=lambda item: f"frame {item[0]} ({(item[1].left_rect or item[1].left).name})")
-    run = map_from_observations(manifest, observations, config=config, stereo=stereo, floor=floor, mount=mount,
-                                odometry=vo, fusion=fused)
-    run.mount_warning = warning
-    return run
 
+def _aligned(mapper: StereoMapper, manifest: Manifest, frames, calibration, progress: bool, align):
+    """The floor settled on the first frames, the given poses (on its base) fused with visual odometry of the
+    whole recording; the frames with the fused poses."""
+    from ..odometry.fusion import FusionConfig, fuse_odometry
+
+    first = mapper.settle(frames)
+    base = rebased(manifest, mapper.mount)
+    _, vo = with_visual_odometry(base, calibration=calibration, progress=progress)
+    fused = fuse_odometry([f.pose for f in base.frames], vo.poses, vo.tracked,
+                          config=FusionConfig() if align is True else align)
+    poses = {k: T_from_planar(*p) for k, p in enumerate(fused.poses)}
+    mapper.odometry, mapper.pose_frame_mount = "given", mapper.mount
+
+    def with_fused(stream):
+        for frame in stream:
+            yield replace(frame, T_world_from_base=poses[frame.index])
+    return fused, with_fused(itertools.chain(mapper.take_held(), [] if first is None else [first], frames))
+
+
+def finish_map(mapper: StereoMapper, manifest: Manifest, *, fusion=None) -> MapRun:
+    """The :class:`MapRun` of a mapper that has taken every frame of ``manifest``: its grid compared with
+    the recording's ground-truth map (along the true path, with the true fields of view)."""
+    occupancy = mapper.occupancy()
+    if mapper.outside_warning():
+        warnings.warn(mapper.outside_warning(), stacklevel=3)
+    if mapper.trajectory_index and not (~occupancy.unknown).any():
+        warnings.warn("the map observed no cell: every frame's points fell outside it or none were found; "
+                      "check the poses, --size and --origin", stacklevel=3)
+    metrics, gt = _compare(mapper, occupancy, manifest)
+    return MapRun(grid=occupancy, observations=mapper.observations, manifest=manifest, metrics=metrics,
+                  ground_truth_map=gt, floor=mapper.floor, mount=mapper.mount, fusion=fusion,
+                  range_m=mapper.range_m, mount_warning=mapper.mount_warning, odometry=mapper.odometry_metrics(),
+                  tiles=mapper.grid if isinstance(mapper.grid, TiledOccupancyGrid) else None)
 
 def with_visual_odometry(manifest: Manifest, *, calibration: StereoCamera | None = None, progress: bool = False):
     """``(recording, run)``: the recording with every frame's pose from stereo visual odometry
@@ -491,83 +255,57 @@ def with_visual_odometry(manifest: Manifest, *, calibration: StereoCamera | None
 
 
 def _on_true_map(manifest: Manifest, config: PipelineConfig) -> PipelineConfig:
+    return config_for_recording(config, manifest.ground_truth_map)
+
+
+def config_for_recording(config: PipelineConfig, ground_truth_map=None) -> PipelineConfig:
     """``config`` with the window of the recording's ground-truth map (at ``config.resolution_m``) when it has
-    one and no window is given."""
-    if config.grid is not None or manifest.ground_truth_map is None:
+    one and no window is given: the map is compared with it cell by cell (``map`` and ``live`` alike)."""
+    if config.grid is not None or ground_truth_map is None:
         return config
-    return replace(config, grid=replace(read_ros_map(manifest.ground_truth_map).grid, resolution_m=config.resolution_m))
+    return replace(config, grid=replace(read_ros_map(ground_truth_map).grid, resolution_m=config.resolution_m))
 
 
 def map_from_observations(manifest: Manifest, observations: list[FrameObservation], *,
                           config: PipelineConfig = PipelineConfig(), stereo: StereoCamera | None = None,
-                          floor: GroundPlane | None = None, mount=None, odometry=None, fusion=None) -> MapRun:
-    """Fuse a run's frame observations in order and compare the map with the dataset's ground-truth map.
-
-    The metrics are taken along the dataset's true path (``true_pose`` where the frames have one)
-    with the true fields of view, whatever poses the frames were fused at.
-
-    Parameters
-    ----------
-    manifest : Manifest
-        The dataset the observations come from.
-    observations : list of FrameObservation
-        The frames in order (:func:`observe_frame`).
-    config : PipelineConfig
-        Its ``grid`` and ``mapping`` fuse; its obstacle range is the range of the views.
-    stereo : StereoCamera, optional
-        The calibration the frames were matched with (default: the manifest's).
-    floor, mount, odometry, fusion
-        Carried into the :class:`MapRun` (see there).
-    """
+                          floor: GroundPlane | None = None, mount=None, fusion=None) -> MapRun:
+    """Fuse a run's frame observations in order (:meth:`StereoMapper.add`) and compare the map with the
+    dataset's ground-truth map (:func:`finish_map`). ``floor`` and ``mount`` are those the frames used."""
     stereo = manifest.calibration if stereo is None else stereo
-    config = _on_true_map(manifest, config)
-    range_m = config.obstacle_config.max_range_m
-    fused = fuse(observations, grid=config.grid, config=config.mapping, resolution_m=config.resolution_m,
-                 view_reach_m=range_m + 2.0)
-    tiles = fused if isinstance(fused, TiledOccupancyGrid) else None
-    last_pose = observations[-1].pose if observations else None
-    occupancy = fused if tiles is None else tiles.to_grid(tiles.map_window(last_pose))
-    _warn_outside(observations if tiles is None else [], occupancy)     # (a map that grows holds every frame)
-    metrics, gt = None, None
-    if manifest.ground_truth_map is not None:
-        gt = read_ros_map(manifest.ground_truth_map)
-        if isinstance(fused, TiledOccupancyGrid):
-            try:
-                compared = fused.to_grid(gt.grid)           # the map on the ground truth's window
-            except ValueError:
-                compared = None                             # not on the map's lattice: no metrics
-        else:
-            aligned = ros_map_on_grid(gt, occupancy.grid)   # a fixed window: compared where the two overlap
-            compared, gt = (occupancy, aligned) if aligned is not None else (None, gt)
-        if compared is None:
-            warnings.warn(f"no metrics: the ground-truth map {manifest.ground_truth_map} has cells of "
-                          f"{gt.grid.resolution_m:g} m at origin ({gt.grid.origin_x_m:g}, {gt.grid.origin_y_m:g}), "
-                          f"which do not fall on the map's cells of {occupancy.grid.resolution_m:g} m", stacklevel=2)
-        elif gt.grid.shape == compared.grid.shape:
-            true_frames = [replace(f, pose=f.true_pose, pose_3d=f.true_pose_3d) if f.true_pose is not None else f
-                           for f in manifest.frames]
-            views = views_of_frames(true_frames, stereo, range_m=config.obstacle_config.max_range_m, mount=mount)
-            metrics = map_metrics(compared, gt, path_xy=np.array([f.pose for f in true_frames]), views=views)
-    return MapRun(grid=occupancy, observations=observations, manifest=manifest, metrics=metrics,
-                  ground_truth_map=gt, floor=floor, mount=mount, odometry=odometry, fusion=fusion,
-                  range_m=range_m, tiles=tiles)
+    mapper = StereoMapper(stereo, mount, _on_true_map(manifest, config), check_mount=False, keep_observations=True,
+                          name=str(manifest.root))
+    for obs in observations:
+        mapper.add(obs)
+    run = finish_map(mapper, manifest, fusion=fusion)
+    run.floor = floor
+    return run
 
 
-def _warn_outside(observations: list[FrameObservation], occupancy: OccupancyGrid) -> None:
-    """A warning when frames were taken outside the map, or when the map observed no cell at all."""
-    grid = occupancy.grid
-    if observations:
-        rows, cols = grid.cells_from_xy(np.array([o.pose[:2] for o in observations], dtype=np.float64))
-        outside = [o.index for o, inside in zip(observations, grid.inside(rows, cols)) if not inside]
-        if outside:
-            x0, y0 = grid.origin_x_m, grid.origin_y_m
-            warnings.warn(f"{len(outside)} of {len(observations)} frames were taken outside the map "
-                          f"[{x0:g}, {x0 + grid.width_m:g}] x [{y0:g}, {y0 + grid.height_m:g}] m (frame(s) "
-                          f"{', '.join(str(k) for k in outside[:5])}{', ...' if len(outside) > 5 else ''}); "
-                          "give a --size and --origin that cover the path", stacklevel=3)
-    if observations and not (~occupancy.unknown).any():
-        warnings.warn("the map observed no cell: every frame's points fell outside it or none were found; "
-                      "check the poses, --size and --origin", stacklevel=3)
+def _compare(mapper: StereoMapper, occupancy: OccupancyGrid, manifest: Manifest):
+    """``(metrics, ground truth)`` of a map against the recording's ground-truth map (None, None without one),
+    along the true path with the true fields of view, whatever poses the frames were fused at."""
+    if manifest.ground_truth_map is None:
+        return None, None
+    gt = read_ros_map(manifest.ground_truth_map)
+    if isinstance(mapper.grid, TiledOccupancyGrid):
+        try:
+            compared = mapper.grid.to_grid(gt.grid)         # the map on the ground truth's window
+        except ValueError:
+            compared = None                                 # not on the map's lattice: no metrics
+    else:
+        aligned = ros_map_on_grid(gt, occupancy.grid)       # a fixed window: compared where the two overlap
+        compared, gt = (occupancy, aligned) if aligned is not None else (None, gt)
+    if compared is None:
+        warnings.warn(f"no metrics: the ground-truth map {manifest.ground_truth_map} has cells of "
+                      f"{gt.grid.resolution_m:g} m at origin ({gt.grid.origin_x_m:g}, {gt.grid.origin_y_m:g}), "
+                      f"which do not fall on the map's cells of {occupancy.grid.resolution_m:g} m", stacklevel=3)
+        return None, gt
+    if gt.grid.shape != compared.grid.shape:
+        return None, gt
+    path = np.array([f.true_pose if f.true_pose is not None else f.pose for f in manifest.frames])
+    views = views_of_poses(path, [f.pan_rad for f in manifest.frames], mapper.stereo, range_m=mapper.range_m,
+                           mount=mapper.mount)
+    return map_metrics(compared, gt, path_xy=path, views=views), gt
 
 
 def check_map(run: MapRun) -> None:
@@ -586,21 +324,6 @@ def check_map(run: MapRun) -> None:
                      f"within the mapping range of {run.range_m:.1f} m (camera height {height}). A camera high above "
                      "the floor sees it only farther away: raise --max-range; check the camera mount (mrstereo info) "
                      "or leave it out to have the floor estimated")
-
-
-def views_of_frames(frames, stereo: StereoCamera, *, range_m: float = MAPPING_MAX_RANGE_M,
-                    mount: CameraMount | None = None) -> list[tuple]:
-    """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of frames (anything with ``pose``, ``pan_rad``).
-
-    The heading is the robot's plus the head pan plus the camera's heading on the robot (the optical axis of
-    ``mount``'s rectified camera, projected on the floor; 0 without a mount).
-    """
-    half = math.atan2(stereo.size[0] / 2.0, stereo.focal_px)
-    offset = 0.0
-    if mount is not None:
-        T = mount.T_base_from_rectified(stereo.left.R)
-        offset = math.atan2(T[1, 2], T[0, 2]) if abs(T[1, 2]) > 1e-12 else 0.0
-    return [(f.pose[0], f.pose[1], f.pose[2] + f.pan_rad + offset, half, range_m) for f in frames]
 
 
 def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
@@ -633,7 +356,8 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
             tmp.write_text(json.dumps(report, indent=2))
         files["metrics"] = out / "metrics.json"
     path = np.array([o.pose for o in run.observations]) if run.observations else None
-    views = views_of_frames(run.observations, run.manifest.calibration, range_m=run.range_m, mount=run.mount)
+    views = views_of_poses(path if path is not None else [], [o.pan_rad for o in run.observations],
+                           run.manifest.calibration, range_m=run.range_m, mount=run.mount)
     plot_map(run.grid, out / "map.png", robot_path=path, fov_views=views,
              planned_path=planned_path, ground_truth=run.ground_truth_map,
              title=f"occupancy grid ({run.grid.config.fusion})")
@@ -642,3 +366,17 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
         files.update(tiles=out / "tiles.npz", overview_yaml=out / "overview.yaml",
                      overview_png=run.tiles.write_overview(out / "overview.yaml"))
     return files
+
+
+def check_pair_streams(manifest: Manifest) -> list[str]:
+    """Warn (one ``mrstereo: warning:`` line on the command line) when the first frames of a recording show
+    identical or swapped left and right streams (:class:`~mrstereo.rejection.streams.StreamCheck`, as a
+    :class:`StereoMapper` does); return the warnings."""
+    check = StreamCheck(manifest.calibration, f"dataset {manifest.root}")
+    try:
+        with recording_source(manifest) as source:
+            for frame in itertools.islice(source, check.n_frames):
+                check.add(frame.index, frame.left, frame.right, rectified=frame.rectified)
+    except (OSError, ValueError, TypeError):      # an unreadable frame: the run reports it itself
+        pass
+    return check.warn()

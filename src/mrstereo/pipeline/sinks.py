@@ -1,12 +1,9 @@
-"""Where a run's frames go besides the map files: live viewers (Rerun, Foxglove) and a ROS 2 bag.
-
-A sink has ``frame(LiveFrame)`` and ``close()``; :func:`open_sinks` makes those the options ask
-for, :func:`replay_map_run` and :func:`replay_odometry` replay a finished run into them.
+"""The sinks a command asks for (viewers, a ROS 2 bag: :mod:`mrstereo.mapping.sinks`), and finished runs
+replayed into them: :func:`open_sinks` makes them, :func:`replay_map_run` and :func:`replay_odometry` replay.
 Conventions: docs/conventions.md; user guide: docs/live.md.
 """
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -14,138 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import StereoCamera
-from ..geometry.scan import LaserScan, laser_scan_from_points, scan_angles_of_camera
+from ..geometry.scan import laser_scan_from_points, scan_angles_of_camera
 from ..mapping.fusion import add_observation
 from ..mapping.occupancy import OccupancyGrid
-from ..mapping.rosmap import occupancy_values
+from ..mapping.sinks import BagSink, LiveFrame, ViewerSink
 from ..transforms import T_from_planar, transform_points
-from .live import LiveFrame
 
 __all__ = ["ViewerSink", "BagSink", "open_sinks", "replay_map_run", "replay_odometry"]
-
-MAX_VIEW_POINTS = 20000
-"""Obstacle points sent to a viewer per frame at most (an even subsample beyond)."""
-
-
-def _grid_message(grid: OccupancyGrid, *, trinary: bool = True) -> tuple[np.ndarray, float, tuple[float, float]]:
-    """The map as ``nav_msgs/OccupancyGrid`` data (trinary with map.yaml's thresholds, or percent), its cell
-    size and origin."""
-    g = grid.grid
-    values = occupancy_values(grid.to_ros_map().occupancy if trinary else grid.probability(), trinary=trinary)
-    return values, g.resolution_m, (g.origin_x_m, g.origin_y_m)
-
-
-class _Throttled:
-    """Map and path at most every ``map_every_s`` of stream time; the path kept for them."""
-
-    def __init__(self, map_every_s: float) -> None:
-        self.map_every_s = map_every_s
-        self._last = -math.inf
-        self._path: list[np.ndarray] = []
-        self.grid: OccupancyGrid | None = None
-        self.last_stamp_s = 0.0
-        self.last_index = 0
-        self.seen = False
-
-    def due(self, frame: LiveFrame) -> bool:
-        self._path.append(np.asarray(frame.T_world_from_base, dtype=np.float64)[:3, 3].copy())
-        self.grid, self.last_stamp_s, self.last_index = frame.grid, frame.stamp_s, frame.index
-        self.seen = True
-        if frame.stamp_s - self._last >= self.map_every_s:
-            self._last = frame.stamp_s
-            return True
-        return False
-
-    @property
-    def path_xyz(self) -> np.ndarray:
-        return np.array(self._path)
-
-
-class ViewerSink:
-    """A frame to a viewer logger (:class:`~mrstereo.viz.live.RerunLogger` or
-    :class:`~mrstereo.viz.live.FoxgloveLogger`)."""
-
-    def __init__(self, logger, stereo: StereoCamera, *, map_every_s: float = 1.0) -> None:
-        self.logger = logger
-        P = stereo.left.P
-        logger.camera(np.array([[P[0, 0], 0.0, P[0, 2]], [0.0, P[1, 1], P[1, 2]], [0.0, 0.0, 1.0]]),
-                      stereo.size[0], stereo.size[1])
-        self._throttle = _Throttled(map_every_s)
-        self._map_sent: float | None = None
-
-    def frame(self, frame: LiveFrame) -> None:
-        due = self._throttle.due(frame)
-        points = frame.obstacle_points_robot
-        if len(points) > MAX_VIEW_POINTS:
-            points = points[np.linspace(0, len(points) - 1, MAX_VIEW_POINTS).astype(np.int64)]
-        scan = frame.scan
-        self.logger.frame(stamp_s=frame.stamp_s, index=frame.index, T_world_from_base=frame.T_world_from_base,
-                          T_base_from_cam=frame.T_base_from_cam, image=frame.left_rect,
-                          disparity_px=frame.disparity_px, points_base=points,
-                          scan=None if scan is None else (scan.angle_min_rad, scan.angle_max_rad, scan.ranges_m))
-        if due:
-            self._map(frame.stamp_s, frame.index)
-
-    def _map(self, stamp_s: float, index: int) -> None:
-        t = self._throttle
-        self._map_sent = stamp_s
-        self.logger.map(stamp_s=stamp_s, index=index,
-                        grid=None if t.grid is None else _grid_message(t.grid, trinary=False),
-                        path_xyz=t.path_xyz)
-
-    def close(self) -> None:
-        t = self._throttle
-        if t.seen and self._map_sent != t.last_stamp_s:
-            self._map(t.last_stamp_s, t.last_index)
-        self.logger.close()
-
-    def discard(self) -> None:
-        """After an error: stop the viewer, keep no file."""
-        self.logger.discard()
-
-
-class BagSink:
-    """Frames to a ROS 2 bag: /odom, /tf, /scan, /points every frame, /map throttled and at the end
-    (trinary as map_server publishes it, or probabilities in percent with ``trinary=False``)."""
-
-    def __init__(self, writer, *, map_every_s: float = 1.0, trinary: bool = True) -> None:
-        self.writer = writer
-        self.trinary = trinary
-        self._throttle = _Throttled(map_every_s)
-        self._map_written_at: float | None = None
-
-    def frame(self, frame: LiveFrame) -> None:
-        stamp_ns = int(round(frame.stamp_s * 1e9))
-        w = self.writer
-        if not self._throttle.seen:
-            w.static(stamp_ns, frame.T_base_from_cam)
-        w.pose(stamp_ns, frame.T_world_from_base)
-        if frame.scan is not None:
-            s: LaserScan = frame.scan
-            w.scan(stamp_ns, angle_min_rad=s.angle_min_rad, angle_max_rad=s.angle_max_rad,
-                   angle_increment_rad=s.angle_increment_rad, range_min_m=s.range_min_m, range_max_m=s.range_max_m,
-                   ranges_m=s.ranges_m, intensities=s.intensities)
-        if frame.grid is not None:
-            w.points(stamp_ns, frame.obstacle_points_robot)
-        if self._throttle.due(frame) and frame.grid is not None:
-            self._write_map(stamp_ns, frame.grid)
-
-    def _write_map(self, stamp_ns: int, grid: OccupancyGrid) -> None:
-        values, resolution_m, origin = _grid_message(grid, trinary=self.trinary)
-        self.writer.map(stamp_ns, values, resolution_m=resolution_m, origin_xy=origin)
-        self._map_written_at = stamp_ns
-
-    def close(self) -> None:
-        t = self._throttle
-        stamp_ns = int(round(t.last_stamp_s * 1e9))
-        if t.grid is not None and self._map_written_at != stamp_ns:
-            self._write_map(stamp_ns, t.grid)
-        self.writer.close()
-
-    def discard(self) -> None:
-        """After an error: no bag."""
-        self.writer.discard()
-
 
 def open_sinks(stereo: StereoCamera, view_stem: str | os.PathLike, *, viewers: Sequence[str] = (),
                record_bag: str | os.PathLike | None = None, foxglove_port: int | None = 8765,

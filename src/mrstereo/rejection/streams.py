@@ -15,9 +15,8 @@ import cv2
 import numpy as np
 
 from ..camera import StereoCamera
-from ..recordings.manifest import Manifest, frame_pair
 
-__all__ = ["PairCheck", "check_pair", "warn_pair", "check_pair_streams", "IDENTICAL_SHARE", "SWAPPED_SHARE"]
+__all__ = ["PairCheck", "check_pair", "warn_pair", "StreamCheck", "PROBLEMS", "IDENTICAL_SHARE", "SWAPPED_SHARE"]
 
 IDENTICAL_SHARE = 0.9
 """A pair with at least this share of equal pixels is a duplicated stream."""
@@ -144,7 +143,7 @@ def check_pair(left: np.ndarray, right: np.ndarray, stereo: StereoCamera | None 
     return PairCheck(identical, positive, exchanged, median, same)
 
 
-_PROBLEMS = (("identical", "identical left and right images (a duplicated camera stream?)",
+PROBLEMS = (("identical", "identical left and right images (a duplicated camera stream?)",
               "the result would show phantom obstacles"),
              ("swapped", "left and right images that look swapped",
               "the result would show false obstacles and free space; check which camera is left"))
@@ -154,7 +153,7 @@ def warn_pair(left: np.ndarray, right: np.ndarray, stereo: StereoCamera | None =
               rectified: bool = True) -> str | None:
     """Warn (``warnings.warn``) when one pair looks duplicated or swapped (:func:`check_pair`); return the text."""
     check = check_pair(left, right, stereo, rectified=rectified)
-    for flag, what, hint in _PROBLEMS:
+    for flag, what, hint in PROBLEMS:
         if getattr(check, flag):
             text = f"the pair has {what}: {check.describe()}; {hint}"
             warnings.warn(text, UserWarning, stacklevel=2)
@@ -162,25 +161,41 @@ def warn_pair(left: np.ndarray, right: np.ndarray, stereo: StereoCamera | None =
     return None
 
 
-def check_pair_streams(manifests, *, n_frames: int = 3) -> list[str]:
-    """Warn (``warnings.warn``, one ``mrstereo: warning:`` line on the command line) about datasets whose
-    first ``n_frames`` frames show identical or swapped left and right streams; return the warnings."""
-    if isinstance(manifests, Manifest):
-        manifests = [manifests]
-    found = []
-    for m in manifests:
-        checks = []
-        for k, record in enumerate(m.frames[:n_frames]):
-            try:
-                left, right, rectified = frame_pair(record)
-                checks.append((k, check_pair(left, right, m.calibration, rectified=rectified)))
-            except (OSError, ValueError, TypeError):      # the run reports an unreadable frame itself
-                continue
-        for flag, what, hint in _PROBLEMS:
-            bad = [(k, c) for k, c in checks if getattr(c, flag)]
-            if bad and len(bad) * 2 > len(checks):
+class StreamCheck:
+    """A run's first ``n_frames`` pairs looked at for a duplicated or swapped stream (:func:`check_pair`);
+    :meth:`warn` warns (``warnings.warn``) once when most of them show one. ``name`` is what is read."""
+
+    def __init__(self, stereo: StereoCamera | None, name: str, *, n_frames: int = 3) -> None:
+        self.stereo, self.name, self.n_frames = stereo, name, int(n_frames)
+        self.checks: list[tuple[int, PairCheck]] = []
+        self.warned = False
+
+    @property
+    def done(self) -> bool:
+        return self.warned or len(self.checks) >= self.n_frames
+
+    def add(self, index: int, left: np.ndarray, right: np.ndarray, *, rectified: bool = True) -> None:
+        """One pair (as read); the warning once the first ``n_frames`` are in."""
+        if self.done:
+            return
+        try:
+            self.checks.append((index, check_pair(left, right, self.stereo, rectified=rectified)))
+        except ValueError:              # (images of two sizes: the chain names them)
+            return
+        if len(self.checks) >= self.n_frames:
+            self.warn()
+
+    def warn(self) -> list[str]:
+        """Warn about what most of the pairs seen show (once); the warnings."""
+        if self.warned:
+            return []
+        self.warned = True
+        found = []
+        for flag, what, hint in PROBLEMS:
+            bad = [(k, c) for k, c in self.checks if getattr(c, flag)]
+            if bad and len(bad) * 2 > len(self.checks):
                 seen = "; ".join(f"frame {k}: {c.describe()}" for k, c in bad)
-                found.append(f"dataset {m.root} has {what}: {seen}; {hint}")
-    for text in found:
-        warnings.warn(text, UserWarning, stacklevel=2)
-    return found
+                found.append(f"{self.name} has {what}: {seen}; {hint}")
+        for text in found:
+            warnings.warn(text, UserWarning, stacklevel=3)
+        return found

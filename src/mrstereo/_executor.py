@@ -14,7 +14,9 @@ import contextlib
 import functools
 import logging
 import os
+import resource
 import sys
+import threading
 import traceback as _traceback
 import uuid
 import warnings
@@ -22,10 +24,13 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .. import _checks
-from .._interrupt import reached
+import numpy as np
 
-__all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory"]
+from . import _checks
+from ._interrupt import reached
+
+__all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory",
+           "LatestFrame", "Ordered", "Writer", "Growing", "rss_mb", "peak_rss_mb", "StreamThreads", "read_ahead"]
 
 _WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
@@ -430,38 +435,63 @@ def _failure(k: int, items: Sequence, label, exc: BaseException, tb: str, return
 def _prefetched(items: Sequence, prefetch, depth: int) -> Iterator[tuple[bool, Any]]:
     """``(True, prefetch(item))`` or ``(False, (exception, traceback))`` per item, in order.
 
-    Without ``prefetch``: ``(True, item)``. With it, a daemon reader thread computes up to ``depth``
-    items ahead of the consumer and stops when the consumer does.
+    Without ``prefetch``: ``(True, item)``. With it, a reader thread computes up to ``depth`` items ahead
+    of the consumer (:func:`read_ahead`) and stops when the consumer does.
     """
     if prefetch is None:
         for item in items:
             yield True, item
         return
-    import queue
-    import threading
 
-    ready: queue.Queue = queue.Queue(maxsize=max(1, depth))
-    stop = threading.Event()
-
-    def read() -> None:
+    def values():
         for item in items:
             try:
-                value = (True, prefetch(item))
+                yield True, prefetch(item)
             except Exception as exc:
-                value = (False, (exc, _traceback.format_exc()))
-            while not stop.is_set():
-                try:
-                    ready.put(value, timeout=0.1)
-                    break
-                except queue.Full:
-                    continue
-            if stop.is_set():
-                return
+                yield False, (exc, _traceback.format_exc())
+
+    yield from read_ahead(values(), depth)
+
+
+def read_ahead(iterable: Iterable, depth: int = 2) -> Iterator:
+    """The items of ``iterable`` in order, read up to ``depth`` ahead by a daemon reader thread (a recording's
+    images decoded while the frames before them are matched; OpenCV's decoders release the GIL). An
+    exception of the reader is raised where its item would have come; the reader stops when the consumer
+    does."""
+    import queue
+
+    ready: queue.Queue = queue.Queue(maxsize=max(1, int(depth)))
+    stop = threading.Event()
+    end = object()
+
+    def put(value) -> bool:
+        while not stop.is_set():
+            try:
+                ready.put(value, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def read() -> None:
+        try:
+            for item in iterable:
+                if not put((True, item)):
+                    return
+        except BaseException as exc:            # handed to the consumer
+            put((False, exc))
+            return
+        put((True, end))
 
     threading.Thread(target=read, name="mrstereo-reader", daemon=True).start()
     try:
-        for _ in items:
-            yield ready.get()
+        while True:
+            ok, value = ready.get()
+            if not ok:
+                raise value
+            if value is end:
+                return
+            yield value
     finally:
         stop.set()
 
@@ -565,3 +595,239 @@ def _map_dask(client, func, items: Sequence, bar, return_exceptions: bool, label
     finally:
         client.cancel([f for f in futures if not f.done()])
     return results
+
+
+# ------------------------------------------------------------------ a live loop's threads
+
+class LatestFrame:
+    """A one-frame slot between a producer and consumers; the producer never waits unless ``lossless``.
+
+    ``put`` replaces a frame nobody took yet (counted in ``dropped``), or waits with ``lossless``;
+    ``take`` hands out the frame with a ticket (0, 1, ...) or None once closed and empty.
+    """
+
+    def __init__(self, *, lossless: bool = False) -> None:
+        self.lossless = lossless
+        self.dropped = 0
+        self.tickets = 0
+        self._item = None
+        self._closed = False
+        self._cond = threading.Condition()
+
+    def put(self, item, stop: threading.Event) -> bool:
+        """Offer ``item``; False when stopped before it could be placed (lossless only)."""
+        with self._cond:
+            if self.lossless:
+                while self._item is not None and not stop.is_set():
+                    self._cond.wait(0.1)
+                if stop.is_set():
+                    return False
+            elif self._item is not None:
+                self.dropped += 1
+            self._item = item
+            self._cond.notify_all()
+            return True
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+    def take(self, timeout_s: float = 0.1):
+        """``(ticket, item)``; ``(None, None)`` after ``timeout_s`` with nothing; raises StopIteration when
+        closed and empty."""
+        with self._cond:
+            if self._item is None and not self._closed:
+                self._cond.wait(timeout_s)
+            if self._item is None:
+                if self._closed:
+                    raise StopIteration
+                return None, None
+            item, self._item = self._item, None
+            ticket, self.tickets = self.tickets, self.tickets + 1
+            self._cond.notify_all()
+            return ticket, item
+
+    def discard(self) -> bool:
+        """Drop a frame still in the slot (counted); True if there was one."""
+        with self._cond:
+            if self._item is None:
+                return False
+            self._item = None
+            self.dropped += 1
+            self._cond.notify_all()
+            return True
+
+
+class Ordered:
+    """Matched frames handed to the fuser by ticket, in the order the matchers took them."""
+
+    def __init__(self) -> None:
+        self._items: dict[int, object] = {}
+        self._cond = threading.Condition()
+
+    def put(self, ticket: int, item) -> None:
+        with self._cond:
+            self._items[ticket] = item
+            self._cond.notify_all()
+
+    def get(self, ticket: int, timeout_s: float) -> object | None:
+        with self._cond:
+            if ticket not in self._items:
+                self._cond.wait(timeout_s)
+            return self._items.pop(ticket, None)
+
+
+def rss_mb() -> float:
+    """Resident memory of this process now [MB] (Linux /proc; 0 elsewhere)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e6      # Linux: kibibytes
+
+
+class Growing:
+    """An array that grows along its first axis by doubling (the trajectory)."""
+
+    def __init__(self, shape: tuple[int, ...]) -> None:
+        self._data = np.empty((64,) + shape)
+        self.n = 0
+
+    def append(self, value) -> None:
+        if self.n == len(self._data):
+            self._data = np.concatenate([self._data, np.empty_like(self._data)])
+        self._data[self.n] = value
+        self.n += 1
+
+    def view(self) -> np.ndarray:
+        return self._data[:self.n]
+
+
+class Writer:
+    """Writes snapshots of the outputs on its own thread; a newer snapshot replaces one not yet begun."""
+
+    def __init__(self, write: Callable[[dict], None]) -> None:
+        self._write = write
+        self._pending = None
+        self._cond = threading.Condition()
+        self._closed = False
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._loop, name="mrstereo-live-writer", daemon=True)
+        self._thread.start()
+
+    def submit(self, snapshot: dict) -> None:
+        with self._cond:
+            self._pending = snapshot
+            self._cond.notify_all()
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                while self._pending is None and not self._closed:
+                    self._cond.wait()
+                snapshot, self._pending = self._pending, None
+                if snapshot is None:
+                    return
+            try:
+                self._write(snapshot)
+            except BaseException as exc:        # reported by the fuser
+                self.error = exc
+            reached("save")
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+        self._thread.join()
+
+
+class StreamThreads:
+    """A capture thread and ``workers`` worker threads over a stream, and what they share: a one-frame slot
+    (:class:`LatestFrame`; ``lossless`` False: the newest frame wins), the worked items in order
+    (:class:`Ordered`, by ticket), the bound on items in flight (``in_flight``: the consumer releases
+    one per item taken), errors, counts and CPU times.
+
+    ``frames`` is iterated on the capture thread, each frame wrapped by ``make_item``; ``work(item)``
+    runs on a worker (its exception stored in ``item.error``); at most ``max_items`` frames are taken.
+    """
+
+    def __init__(self, frames, make_item: Callable, work: Callable, *, workers: int, lossless: bool,
+                 max_items: int | None, stop: threading.Event, name: str = "mrstereo-live") -> None:
+        self.frames, self.make_item, self.work, self.max_items, self.stop = frames, make_item, work, max_items, stop
+        self.slot = LatestFrame(lossless=lossless)
+        self.ordered = Ordered()
+        self.in_flight = threading.Semaphore(workers)
+        self.errors: list[BaseException] = []
+        self.cpu: dict[str, float] = {}
+        self.counts = {"in": 0}
+        self.threads = [threading.Thread(target=self._capture, name=f"{name}-capture", daemon=True)]
+        self.threads += [threading.Thread(target=self._worker, args=(k,), name=f"{name}-match-{k}",
+                                          daemon=True) for k in range(workers)]
+
+    def start(self) -> None:
+        for t in self.threads:
+            t.start()
+
+    def join(self) -> None:
+        self.stop.set()
+        for t in self.threads:
+            t.join(timeout=5.0)
+
+    def matching(self) -> bool:
+        """A worker still runs."""
+        return any(t.is_alive() for t in self.threads[1:])
+
+    def _capture(self) -> None:
+        import time
+
+        start, slot, stop = time.thread_time(), self.slot, self.stop
+        try:
+            for frame in self.frames:
+                if stop.is_set():
+                    break
+                self.counts["in"] += 1
+                if not slot.put(self.make_item(frame), stop):
+                    self.counts["in"] -= 1
+                    break
+                if self.max_items is not None and self.counts["in"] >= self.max_items:
+                    self.counts["end"] = "max frames"
+                    break
+        except BaseException as exc:
+            self.errors.append(exc)
+            stop.set()
+        finally:
+            slot.close()
+            self.cpu["capture"] = time.thread_time() - start
+
+    def _worker(self, k: int) -> None:
+        import time
+
+        import numba
+
+        start = time.thread_time()
+        numba.set_num_threads(1)            # one core per worker: the workers are the parallelism
+        try:
+            while True:
+                while not self.in_flight.acquire(timeout=0.1):
+                    if self.stop.is_set():
+                        return
+                try:
+                    ticket, item = self.slot.take()
+                except StopIteration:
+                    self.in_flight.release()
+                    return
+                if item is None:
+                    self.in_flight.release()
+                    continue
+                try:
+                    self.work(item)
+                except BaseException as exc:
+                    item.error = exc
+                self.ordered.put(ticket, item)
+        finally:
+            self.cpu[f"matcher {k}"] = time.thread_time() - start

@@ -2,7 +2,8 @@
 
 rectify -> multi-range matching (eq. 9-12) -> rejection (eq. 13) -> floor -> triangulation into
 the robot frame (eq. 14-16) -> obstacle / floor split -> laser scan: the functions behind
-``mrstereo points`` and ``mrstereo scan``; too-near pixels are fail-safe (docs/obstacles.md).
+``mrstereo points`` and ``mrstereo scan``, and the pair half of :class:`mrstereo.StereoMapper`'s chain;
+too-near pixels are fail-safe (docs/obstacles.md).
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -14,9 +15,9 @@ import numpy as np
 
 from .. import _checks
 from ..camera import CameraMount, StereoCamera
-from ..geometry.freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
-from ..geometry.obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
-from ..geometry.scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
+from .freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
+from .obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
+from .scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
 from ..matching import DisparityResult, compute_disparity
 from ..profiling import stage
 from ..rejection import FloorModel, RejectionConfig, RejectionResult, reject_uniform
@@ -111,6 +112,22 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
     free_space : FreeSpaceConfig, optional
         Also find where the floor ends in each column (:func:`~mrstereo.geometry.freespace.free_space_boundary`):
         ``PairObstacles.boundary``. None: not computed.
+
+    Examples
+    --------
+    A textured wall 1.8 m in front of a level camera 0.5 m above the floor:
+
+    >>> import numpy as np
+    >>> from mrstereo import CameraMount, StereoCamera, obstacles_from_pair
+    >>> from mrstereo.camera import Camera
+    >>> stereo = StereoCamera.ideal(Camera(width=160, height=120, fx=120.0, fy=120.0, cx=80.0, cy=60.0), 0.12)
+    >>> left = np.random.default_rng(0).integers(0, 255, (120, 160)).astype(np.uint8)
+    >>> right = np.roll(left, -8, axis=1)            # 8 px of disparity: b f / d = 0.12 * 120 / 8 = 1.8 m
+    >>> mount = CameraMount.from_xyz_rpy((0.0, 0.0, 0.5), (0.0, 0.0, 0.0))
+    >>> frame = obstacles_from_pair(left, right, stereo, rectified=True, mount=mount)
+    >>> points = frame.obstacles.obstacle_points_robot            # (N, 3) robot frame: x forward, z up
+    >>> bool(np.median(points[:, 0]).round(1) == 1.8)
+    True
     """
 
     if not isinstance(stereo, StereoCamera):
