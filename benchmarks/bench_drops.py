@@ -63,7 +63,7 @@ def paired_maps(manifest, *, frames: int | None = None, config=None):
     points in the world frame.
     """
     from mrstereo.transforms import T_from_planar
-    from mrstereo.pipeline.frame import obstacles_from_pair
+    from mrstereo.geometry.pair import obstacles_from_pair
     from mrstereo.pipeline.run import (PipelineConfig, floor_for_run, map_from_observations, observation_from_pair,
                                        pair_options, with_visual_odometry)
     from mrstereo.recordings.manifest import frame_pair, rebased
@@ -258,7 +258,7 @@ def evaluate_real(frames: int) -> list[dict]:
 def measure_speed(repeats: int) -> list[dict]:
     """Median CPU seconds of one frame with and without the drop test (interleaved), per input."""
     from mrstereo.geometry import ObstacleConfig
-    from mrstereo.pipeline.frame import obstacles_from_pair
+    from mrstereo.geometry.pair import obstacles_from_pair
     from mrstereo.recordings import read_recording
     from mrstereo.recordings.manifest import frame_pair
     from mrstereo.recordings.samples import data_root

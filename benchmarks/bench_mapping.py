@@ -67,7 +67,7 @@ def euroc_stages(repeat: int) -> None:
 
     from mrstereo.mapping.fusion import add_observation
     from mrstereo.mapping.tiles import TiledOccupancyGrid
-    from mrstereo.pipeline.frame import scan_from_pair
+    from mrstereo.geometry.pair import scan_from_pair
     from mrstereo.pipeline.run import PipelineConfig, floor_for_run, observation_from_pair, pair_options
     from mrstereo.profiling import Profile, profiling
     from mrstereo.recordings.layouts import read_recording

@@ -98,7 +98,7 @@ def test_import_mrstereo_is_cheap_and_lists_its_public_objects():
     assert out[0] == "False False"
     names = set(out[1].split())
     assert {"StereoMapper", "PipelineConfig", "StereoCamera", "read_stereo", "compute_disparity", "build_map",
-            "obstacles_from_pair", "open_source", "opened_recording", "run_live", "LiveConfig"} <= names
+            "obstacles_from_pair", "open_source", "open_recording", "run_live", "LiveConfig"} <= names
     for name in mrstereo.__all__:
         assert getattr(mrstereo, name) is not None
 

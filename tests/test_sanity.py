@@ -1,11 +1,11 @@
-"""One view twice or swapped streams named on real pairs (pipeline.sanity)."""
+"""One view twice or swapped streams named on real pairs (rejection.streams)."""
 from __future__ import annotations
 
 import cv2
 import numpy as np
 import pytest
 
-from mrstereo.pipeline.sanity import SAME_VIEW_SHARE, check_pair
+from mrstereo.rejection.streams import SAME_VIEW_SHARE, check_pair
 from mrstereo.recordings.samples import data_root
 
 PAIRS = {   # one real rectified pair of each kind: left, right under the data root

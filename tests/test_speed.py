@@ -267,7 +267,7 @@ def test_warm_up_covers_the_chain_and_says_compiling_only_when_cold(capsys, monk
     from mrstereo import _warmup
     from mrstereo.mapping import OccupancyGrid
     from mrstereo.matching import warmup
-    from mrstereo.pipeline.frame import scan_from_pair
+    from mrstereo.geometry.pair import scan_from_pair
     from mrstereo.geometry import FreeSpaceConfig
 
     _warmup.warm_up()

@@ -35,7 +35,7 @@ _LAZY = {
     # recordings
     "StereoFrame": "mrstereo.recordings.sources", "FrameSource": "mrstereo.recordings.sources",
     "open_source": "mrstereo.recordings.sources",
-    "read_recording": "mrstereo.recordings.layouts", "opened_recording": "mrstereo.recordings.layouts",
+    "read_recording": "mrstereo.recordings.layouts", "open_recording": "mrstereo.recordings.layouts",
     "read_image": "mrstereo.io",
 }
 

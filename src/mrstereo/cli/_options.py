@@ -100,7 +100,7 @@ def check_workers(workers, scheduler, processes: bool = False) -> None:
     if processes and workers is None:
         raise click.UsageError("--processes only with --workers")
     if processes or scheduler is not None:
-        from ..pipeline.parallel import require_scale
+        from .._executor import require_scale
         require_scale()                 # before any work: one line naming the extra
 
 
