@@ -12,11 +12,10 @@
   skips without it, with the install command (CI installs them all: README, Quick start).
 * ``slow`` (pyproject.toml) marks the tests that take many seconds: ``python -m pytest -m "not slow"``
   skips them.
-* The suite runs on parallel workers (pytest-xdist, ``-n auto`` in pyproject.toml; ``-p no:xdist`` or
+* The suite runs on parallel workers (pytest-xdist, ``-n auto`` in pyproject.toml;
   ``-n 0`` runs it in one process). The workers share the synthetic datasets (each made once, under a file
-  lock, in the run's temporary root) and take turns to compile numba kernels (one cross-process lock around
-  numba's compiler lock), so a kernel compiled by one worker is loaded from numba's cache by the other and
-  two workers never write one cache index at the same time.
+  lock, in the run's temporary root) and take turns to read and write numba's cache files (a kernel's cache
+  index and code are saved whole for the other worker).
 
 Helpers for writing ROS bags live in ``_bags.py``.
 """
@@ -104,36 +103,34 @@ def sample_data():
 
 
 def pytest_configure(config):
-    if hasattr(config, "workerinput"):           # an xdist worker: take turns with the others to compile
-        _serialize_numba_compiles(config.workerinput["testrunuid"])
+    if hasattr(config, "workerinput"):           # an xdist worker: numba's cache files in turns with the others
+        _lock_numba_cache_files(config.workerinput["testrunuid"])
 
 
-def _serialize_numba_compiles(run_id: str) -> None:
-    """Hold a lock file shared by the run's workers while this process holds numba's compiler lock.
+def _lock_numba_cache_files(run_id: str) -> None:
+    """Hold a lock file shared by the run's workers while numba reads or writes a kernel's cache files.
 
-    numba's cache index (one per function) is read, extended and rewritten without a lock between
-    processes: two workers compiling two signatures of one kernel at once can pair an index entry with
-    the other's code. Under the lock a worker also finds in the cache what another has just compiled.
+    numba's cache index (one per function) is read, extended and rewritten, then the code file written,
+    without a lock between processes: two workers saving two signatures of one kernel at once can pair an
+    index entry with the other's code. The lock makes each save (index and code) whole for the others;
+    the compiling itself stays parallel.
     """
-    from numba.core.compiler_lock import global_compiler_lock as lock
+    from numba.core.caching import IndexDataCacheFile
 
     path = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"mrstereo-tests-{run_id}.numba.lock")
     fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
-    acquire, release, depth = lock.acquire, lock.release, [0]
 
-    def acquire_both():
-        acquire()                        # numba's in-process RLock: depth is this thread's alone
-        depth[0] += 1
-        if depth[0] == 1:
+    def locked(method):
+        def call(self, *args):          # under numba's compiler lock: one thread of this process at a time
             fcntl.flock(fd, fcntl.LOCK_EX)
+            try:
+                return method(self, *args)
+            finally:
+                fcntl.flock(fd, fcntl.LOCK_UN)
+        return call
 
-    def release_both():
-        depth[0] -= 1
-        if depth[0] == 0:
-            fcntl.flock(fd, fcntl.LOCK_UN)
-        release()
-
-    lock.acquire, lock.release = acquire_both, release_both
+    IndexDataCacheFile.save = locked(IndexDataCacheFile.save)
+    IndexDataCacheFile.load = locked(IndexDataCacheFile.load)
 
 
 @contextlib.contextmanager
