@@ -346,6 +346,22 @@ def test_rerun_serves_on_localhost_only_and_its_web_viewer_when_asked(tmp_path):
     assert (tmp_path / "view.rrd").is_file()
 
 
+def test_live_refuses_a_busy_viewer_port_in_one_line_before_any_work(dataset, tmp_path, capsys):
+    for module in ("rerun", "foxglove"):
+        _need(module)
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = str(busy.getsockname()[1])
+        for viewer, option in (("foxglove", "--foxglove-port"), ("rerun", "--viewer-port"),
+                               ("rerun", "--viewer-web-port")):
+            code = entry(["live", str(dataset), "-o", str(tmp_path / "out"), "--viewer", viewer, option, port,
+                          "--quiet"])
+            err = capsys.readouterr().err.strip().splitlines()
+            assert code == 2 and len(err) == 1 and err[0].startswith(f"mrstereo: error: {option}: port {port} is in use")
+            assert not (tmp_path / "out").exists()
+
+
 def test_a_busy_foxglove_port_is_one_line_before_anything_starts(tmp_path):
     _need("foxglove")
     from mrstereo.viz.live import FoxgloveLogger

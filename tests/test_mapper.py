@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import doctest
 import json
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -90,6 +91,19 @@ def test_live_checks_a_given_mount_against_the_floor_as_map_does(small, tmp_path
     metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
     assert run.mount_warning and "height is off" in metrics["mount_warning"]
     assert abs(run.floor.height_m - true[2, 3]) < 0.05           # the floor seen is used, not the wrong mount
+
+
+@pytest.mark.parametrize("command", ["map", "live"])
+def test_an_upside_down_mount_is_replaced_by_the_floor_seen(small, tmp_path, capsys, command):
+    """The right height and tilt, but the camera given upside down (roll pi): map and live both refuse it."""
+    true = read_recording(small).mount
+    x, y, z = true.T_base_from_cam[:3, 3]
+    out = tmp_path / command
+    assert entry([command, str(small), "-o", str(out), "--quiet", "--mount",
+                  f"{x},{y},{z},3.14159,0.15,0"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert re.search(r"roll is off by 1[78]\d deg", metrics["mount_warning"])
+    assert "roll is off" in capsys.readouterr().err
 
 
 def test_import_mrstereo_is_cheap_and_lists_its_public_objects():

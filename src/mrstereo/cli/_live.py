@@ -19,13 +19,16 @@ from ._options import (CALIB_HELP, HEIGHT, TILT, Number, map_config, map_options
 __all__ = ["COMMANDS", "viewer_option", "record_bag_option", "check_sink_options", "replayed_to_sinks"]
 
 VIEWERS = ("none", "rerun", "foxglove")
+VIEWER_PORT, FOXGLOVE_PORT = 9876, 8765
+"""Default ports on 127.0.0.1 of Rerun's data stream and of Foxglove's websocket server (their tools' own)."""
 
 
 def viewer_option(func):
     """``--viewer none|rerun|foxglove`` (repeatable): the live view (optional extra ``mrstereo[viz]``)."""
     return click.option("--viewer", "viewers", type=click.Choice(VIEWERS), multiple=True,
-                        help="Live view: rerun (spawns the viewer with a display, else serves it on localhost; "
-                             "saves OUT/view.rrd) and/or foxglove (websocket on localhost:8765; saves OUT/view.mcap). "
+                        help="Live view: rerun (spawns the viewer with a display, else serves its data on localhost, "
+                             "--viewer-port; saves OUT/view.rrd) and/or foxglove (websocket on localhost, "
+                             "--foxglove-port; saves OUT/view.mcap). "
                              "Needs pip install \"mrstereo[viz]\". [default: none]")(func)
 
 
@@ -129,11 +132,20 @@ def _pair(text: str, option: str, kind=float, sep: str = ","):
               help="Camera height above the floor [m] (else the calibration's mount:/rig:, else estimated).")
 @click.option("--tilt", "tilt_rad", type=TILT, default=None, help="Downward camera tilt [rad] (with --height).")
 @mount_option
+@click.option("--viewer-port", type=Number(0, 65535, integer=True), default=VIEWER_PORT, show_default=True,
+              help="--viewer rerun without a display: the port of its data stream on 127.0.0.1 (connect a viewer "
+                   "with `rerun rerun+http://127.0.0.1:PORT/proxy`).")
+@click.option("--viewer-web-port", type=Number(1, 65535, integer=True), default=None,
+              help="--viewer rerun: also serve Rerun's web viewer on this port (Rerun serves it on every interface "
+                   "of the machine, not only localhost).")
+@click.option("--foxglove-port", type=Number(0, 65535, integer=True), default=FOXGLOVE_PORT, show_default=True,
+              help="--viewer foxglove: the port of its websocket server on 127.0.0.1.")
 @click.option("--quiet", is_flag=True, help="No progress line.")
 def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, side_by_side: bool, realtime: bool,
                  speed: float, max_frames: int | None, save_every_s: float, odometry: str | None,
                  viewers: tuple[str, ...], record_bag: Path | None, workers: int, camera_size: str | None,
-                 camera_fps: float | None, height_m: float | None, tilt_rad: float | None, mount, quiet: bool,
+                 camera_fps: float | None, height_m: float | None, tilt_rad: float | None, mount,
+                 viewer_port: int, viewer_web_port: int | None, foxglove_port: int, quiet: bool,
                  no_mount_check: bool, **options) -> None:
     """Map live from stereo cameras, video files or a recording.
 
@@ -167,8 +179,12 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
                      input_dirs=[p for p in file_inputs if p.is_dir()])
     check_outputs({f"--out {out_dir / name}": out_dir / name for name in LIVE_FILES}, file_inputs)
     viewers = check_sink_options(viewers, record_bag, out_dir / "view", file_inputs, output_dirs=[out_dir])
+    _check_ports(viewers, viewer_port, viewer_web_port, foxglove_port)
     sinks_needed = bool(viewers) or record_bag is not None
     stereo = read_stereo(calib) if calib is not None else None
+    from .._warmup import warm_up
+
+    warm_up(say=lambda line: click.echo(line, err=True))      # compiled before the source opens: no frame dropped
     with open_source(sources, side_by_side=side_by_side, prefer_raw=calib is not None, size=size,
                      rate_hz=camera_fps) as source:
         stereo = stereo or source.calibration
@@ -182,7 +198,9 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
             if sinks_needed:
                 from ..pipeline.sinks import open_sinks
 
-                sinks = open_sinks(stereo, out_dir / "view", viewers=viewers, record_bag=record_bag, echo=click.echo)
+                sinks = open_sinks(stereo, out_dir / "view", viewers=viewers, record_bag=record_bag, echo=click.echo,
+                                   viewer_port=viewer_port, viewer_web_port=viewer_web_port,
+                                   foxglove_port=foxglove_port)
             stop = threading.Event()
             with _stop_on_signals(stop, quiet):
                 run = run_live(source, out_dir, calibration=stereo, mount=camera_mount, config=config, live=live,
@@ -210,6 +228,18 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
         click.echo(f"floor {run.floor.message}: height {run.floor.height_m:.3f} m, tilt {run.floor.tilt_rad:.4f} rad")
     click.echo(f"wrote {', '.join(LIVE_FILES)}{''.join(f', {n}' for n in _view_files(viewers))} to {out_dir}"
                + (f"; the bag to {record_bag}" if record_bag is not None else ""))
+
+
+def _check_ports(viewers, viewer_port: int, viewer_web_port: int | None, foxglove_port: int) -> None:
+    """The ports the viewers will listen on, free before any work (one line naming the option otherwise)."""
+    from ..viz.live import check_port
+
+    if "rerun" in viewers:
+        check_port(viewer_port, "--viewer-port")
+        if viewer_web_port is not None:
+            check_port(viewer_web_port, "--viewer-web-port")
+    if "foxglove" in viewers:
+        check_port(foxglove_port, "--foxglove-port")
 
 
 def _view_files(viewers) -> list[str]:

@@ -27,6 +27,9 @@ MOUNT_HEIGHT_TOLERANCE_M = 0.10
 """A given mount whose camera height differs more than this from the floor seen in the images is not used."""
 MOUNT_TILT_TOLERANCE_RAD = math.radians(5.0)
 """A given mount whose tilt differs more than this from the floor seen in the images is not used."""
+MOUNT_ROLL_TOLERANCE_RAD = math.radians(10.0)
+"""A given mount whose roll about the optical axis differs more than this from the floor seen in the images (an
+upside-down or sideways camera) is not used."""
 MIN_CAMERA_HEIGHT_M = 0.05
 """A given mount with the camera lower than this above the floor is taken for a base frame that is not on the floor."""
 FLOOR_FRAMES = 3
@@ -72,6 +75,10 @@ def _disagreement(given: GroundPlane, seen: GroundPlane | None) -> str | None:
         return f"the height is off by {dh:.3f} m (more than {MOUNT_HEIGHT_TOLERANCE_M:.2f} m)"
     if dt > MOUNT_TILT_TOLERANCE_RAD:
         return f"the tilt is off by {math.degrees(dt):.1f} deg (more than {math.degrees(MOUNT_TILT_TOLERANCE_RAD):.0f} deg)"
+    dr = abs(math.remainder(given.roll_rad - seen.roll_rad, math.tau))
+    if dr > MOUNT_ROLL_TOLERANCE_RAD:
+        return (f"the roll is off by {math.degrees(dr):.0f} deg (more than {math.degrees(MOUNT_ROLL_TOLERANCE_RAD):.0f} "
+                "deg: the camera upside down or on its side?)")
     return None
 
 
