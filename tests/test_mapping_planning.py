@@ -230,3 +230,18 @@ def test_cli_plan_from_the_robots_last_pose_with_a_heading_into_a_bag(tmp_path, 
         assert entry(["plan", str(tmp_path / "map.yaml"), "--start", "3,0", "--goal", bad, "-o",
                       str(tmp_path / "q.json")]) == 2
         assert "--goal" in capsys.readouterr().err
+
+
+def test_plan_starts_where_a_map_run_left_the_robot(synthetic_dataset, tmp_path, capsys):
+    """`mrstereo map` writes trajectory.txt; `plan --start robot` on its map.yaml starts at its last pose."""
+    from mrstereo.odometry.trajectory import read_tum
+
+    data = synthetic_dataset(seed=5, n_frames=6, width=160, height=120, supersample=1)
+    assert entry(["map", str(data), "-o", str(tmp_path / "m"), "--quiet"]) == 0
+    _, T = read_tum(tmp_path / "m" / "trajectory.txt")
+    assert len(T) == 6
+    code = entry(["plan", str(tmp_path / "m" / "map.yaml"), "--start", "robot", "--goal",
+                  f"{T[-1][0, 3] + 0.5},{T[-1][1, 3]}", "--unknown", "free", "-o", str(tmp_path / "p.json")])
+    assert code == 0, capsys.readouterr().err
+    record = json.loads((tmp_path / "p.json").read_text())
+    assert record["start"] == pytest.approx([T[-1][0, 3], T[-1][1, 3]])

@@ -16,8 +16,8 @@ from ._options import (check_workers, echo_map_warnings, echo_run_floor, library
 
 __all__ = ["COMMANDS"]
 
-MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json", "tiles.npz", "overview.yaml",
-             "overview.png")
+MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json", "trajectory.txt", "tiles.npz",
+             "overview.yaml", "overview.png")
 """What ``mrstereo map`` writes into its output folder (:func:`mrstereo.pipeline.write_map_outputs`)."""
 
 

@@ -58,6 +58,8 @@ class MapRun:
     """The mapping range of the run (its obstacle configuration's ``max_range_m``)."""
     mount_warning: str | None = None
     """Why the given mount was not used (:class:`~mrstereo.geometry.floor.FloorVote`), None when it was (or none was given)."""
+    trajectory: tuple[np.ndarray, np.ndarray] | None = None
+    """``(stamps_s (N,), T_world_from_base (N, 4, 4))`` of the mapped frames (trajectory.txt)."""
     tiles: TiledOccupancyGrid | None = None
     """The whole map when it grew (``config.grid`` None); ``grid`` is then its dense window
     (:meth:`~mrstereo.mapping.tiles.TiledOccupancyGrid.map_window`: all of it unless it is too large)."""
@@ -241,7 +243,9 @@ def finish_map(mapper: StereoMapper, manifest: Manifest, *, fusion=None) -> MapR
     return MapRun(grid=occupancy, observations=mapper.observations, manifest=manifest, metrics=metrics,
                   ground_truth_map=gt, floor=mapper.floor, mount=mapper.mount, fusion=fusion,
                   range_m=mapper.range_m, mount_warning=mapper.mount_warning, odometry=mapper.odometry_metrics(),
-                  tiles=mapper.grid if isinstance(mapper.grid, TiledOccupancyGrid) else None)
+                  tiles=mapper.grid if isinstance(mapper.grid, TiledOccupancyGrid) else None,
+                  trajectory=(np.array(mapper.trajectory_stamps_s), np.array(mapper.trajectory_T))
+                  if mapper.trajectory_T else None)
 
 def with_visual_odometry(manifest: Manifest, *, calibration: StereoCamera | None = None, progress: bool = False):
     """``(recording, run)``: the recording with every frame's pose from stereo visual odometry
@@ -327,8 +331,9 @@ def check_map(run: MapRun) -> None:
 
 
 def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
-    """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy and metrics.json; for a map that grew
-    also tiles.npz and overview.png + overview.yaml (docs/mapping.md, "A long drive").
+    """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy, metrics.json and trajectory.txt (the
+    mapped frames' poses, TUM: ``mrstereo plan --start robot`` starts from its last); for a map that grew also
+    tiles.npz and overview.png + overview.yaml (docs/mapping.md, "A long drive").
 
     metrics.json holds the comparison with the ground-truth map (when there is
     one) and ``floor``: the floor of the run with its confidence.
@@ -355,6 +360,11 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
         with atomic_write(out / "metrics.json") as tmp:
             tmp.write_text(json.dumps(report, indent=2))
         files["metrics"] = out / "metrics.json"
+    if run.trajectory is not None:
+        from ..odometry.trajectory import write_tum
+
+        files["trajectory"] = write_tum(out / "trajectory.txt", *run.trajectory,
+                                        comment="mrstereo map: the mapped frames' robot base in the map frame")
     path = np.array([o.pose for o in run.observations]) if run.observations else None
     views = views_of_poses(path if path is not None else [], [o.pan_rad for o in run.observations],
                            run.manifest.calibration, range_m=run.range_m, mount=run.mount)
