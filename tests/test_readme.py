@@ -78,12 +78,24 @@ def _outputs(argv: list[str]) -> list[str]:
 @pytest.mark.parametrize("line", [line for block in _shell_blocks(README, marked=True) for line in block])
 def test_marked_readme_example_runs(line, demo_like, monkeypatch, capsys):
     monkeypatch.chdir(demo_like)
-    argv = shlex.split(line)
+    argv = shlex.split(_with_sample_paths(line))
     assert argv[0] == "mrstereo"
     code = entry(argv[1:])
     assert code == 0, capsys.readouterr().err
     for out in _outputs(argv[1:]):
         assert Path(out).exists(), out
+
+
+def _with_sample_paths(line: str) -> str:
+    """``$(mrstereo data path NAME)`` replaced by the sample's folder, as the shell would (skip without it)."""
+    from mrstereo.recordings import samples
+
+    def folder(match):
+        name = match.group(1)
+        if samples.missing_files(name):
+            pytest.skip(f"sample data {name!r} not found: set {samples.ENV_VAR} or run `mrstereo data fetch {name}`")
+        return str(samples.local_path(name))
+    return re.sub(r"\$\(mrstereo data path ([\w.-]+)\)", folder, line)
 
 
 def test_the_readme_python_runs(demo_like, monkeypatch, capsys):
