@@ -109,6 +109,7 @@ def map_frames(mapper: StereoMapper, frames, *, workers: int | None = None, sche
     from tqdm.auto import tqdm
 
     from .._executor import dask_client, map_ordered, numba_thread_safe
+    from .._interrupt import reached
 
     frames = iter(frames)
     with tqdm(total=total, desc="mapping", unit="frame", disable=not progress) as bar:
@@ -116,6 +117,7 @@ def map_frames(mapper: StereoMapper, frames, *, workers: int | None = None, sche
             for frame in frames:
                 mapper.step_frame(frame)
                 bar.update(1)
+                reached("frame")
             mapper.finish()
             return
         first = mapper.settle(frames)
