@@ -180,6 +180,9 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
     if obstacles.success and math.isfinite(frame.max_disparity_px):
         range_min = max(range_min, near_limit_range_m(stereo, obstacles.T_robot_from_cam, frame.max_disparity_px))
     gray = frame.left_rect if frame.left_rect.ndim == 2 else frame.left_rect.mean(axis=2)
+    range_max = config.max_range_m if range_max_m is None else range_max_m
+    if range_max_m is None and range_max <= range_min:     # a mapping range inside the near limit: an empty scan
+        range_max = range_min + 0.01
     with stage("scan"):
         # the obstacle points are those of obstacle_mask in raster order (no (H, W, 3) image needed), then the
         # drop test's (returns without an intensity)
@@ -189,7 +192,7 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
         near = ~keep
         scan = laser_scan_from_points(np.concatenate([points[keep], drops]), angle_min_rad=lo, angle_max_rad=hi,
                                       angle_increment_rad=angle_increment_rad, range_min_m=range_min,
-                                      range_max_m=config.max_range_m if range_max_m is None else range_max_m,
+                                      range_max_m=range_max,
                                       min_points=min_points,
                                       intensities=np.concatenate([gray[obstacles.obstacle_mask][keep],
                                                                   np.full(len(drops), np.nan)]),

@@ -111,29 +111,28 @@ def map_frames(mapper: StereoMapper, frames, *, workers: int | None = None, sche
     from .._executor import dask_client, map_ordered, numba_thread_safe
     from .._interrupt import reached
 
-    frames = iter(frames)
+    frames = _counted(frames, reached)
     with tqdm(total=total, desc="mapping", unit="frame", disable=not progress) as bar:
         if workers is None and scheduler is None:
             for frame in frames:
                 mapper.step_frame(frame)
                 bar.update(1)
-                reached("frame")
             mapper.finish()
             return
-        first = mapper.settle(frames)
-        bar.update(mapper.frames_held)
-        if first is None:
-            mapper.finish()
-            return
-        mapper.check_streams(first)
-        pending = [first]
         use_dask = scheduler is not None or processes or not numba_thread_safe()
         client = dask_client(workers=workers if scheduler is None else None, scheduler=scheduler,
                              processes=processes) if use_dask else contextlib.nullcontext()
-        observe_one = partial(observe, stereo=mapper.stereo, mount=mapper.mount, config=mapper.config,
-                              keep_images=mapper.odometry != "given")
-        chunk = 8 * (workers or 2)
-        with client as c:
+        with client as c:                               # (started first: a Ctrl-C meets it as it starts)
+            first = mapper.settle(frames)
+            bar.update(mapper.frames_held)
+            if first is None:
+                mapper.finish()
+                return
+            mapper.check_streams(first)
+            pending = [first]
+            observe_one = partial(observe, stereo=mapper.stereo, mount=mapper.mount, config=mapper.config,
+                                  keep_images=mapper.odometry != "given")
+            chunk = 8 * (workers or 2)
             where = {"scheduler": c} if use_dask else {"workers": workers}
             while pending:
                 for frame in frames:
@@ -147,6 +146,13 @@ def map_frames(mapper: StereoMapper, frames, *, workers: int | None = None, sche
                 bar.update(len(pending))
                 pending = []
         mapper.finish()
+
+
+def _counted(frames, reached):
+    """``frames``, the interrupt tests' point ``frame`` reached as each is taken (mrstereo._interrupt)."""
+    for frame in frames:
+        yield frame
+        reached("frame")
 
 
 def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
