@@ -32,7 +32,25 @@ def _error(message: str, event) -> yaml.YAMLError:
     return yaml.constructor.ConstructorError(None, None, message, event.start_mark)
 
 
+_CACHE: dict = {}
+_CACHE_SIZE = 4096
+
+
 def _scalar(event):
+    """``(value, tag)`` of a scalar event; plain scalars seen before (a manifest's keys, repeated values) come
+    from a small cache of these immutable values instead of the resolver and the constructor."""
+    if event.tag is None:
+        key = (event.value, event.implicit, event.style)
+        found = _CACHE.get(key)
+        if found is None:
+            if len(_CACHE) >= _CACHE_SIZE:
+                _CACHE.clear()
+            found = _CACHE[key] = _resolved(event)
+        return found
+    return _resolved(event)
+
+
+def _resolved(event):
     tag = event.tag
     if tag is None or tag == "!":
         tag = _RESOLVER.resolve(ScalarNode, event.value, event.implicit)
