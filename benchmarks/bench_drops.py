@@ -62,37 +62,18 @@ def paired_maps(manifest, *, frames: int | None = None, config=None):
     Returns ``(with_drops, without_drops)`` :class:`mrstereo.pipeline.run.MapRun` and each frame's drop
     points in the world frame.
     """
-    from mrstereo.transforms import T_from_planar
-    from mrstereo.geometry.pair import obstacles_from_pair
-    from mrstereo.pipeline.run import (PipelineConfig, floor_for_run, map_from_observations, observation_from_pair,
-                                       pair_options, with_visual_odometry)
-    from mrstereo.recordings.manifest import frame_pair, rebased
+    from mrstereo.geometry.drops import DropConfig
+    from mrstereo.pipeline.run import PipelineConfig, build_map
 
     config = PipelineConfig() if config is None else config
-    stereo = manifest.calibration
-    config = config.for_rig(stereo)
     if frames is not None:
         manifest = replace(manifest, frames=manifest.frames[:frames])
-    mount, floor, _ = floor_for_run(manifest, stereo, config=config, prefer_raw=False, check_mount=True)
-    manifest = rebased(manifest, mount)
-    records = list(manifest.frames)
-    if not manifest.has_poses:
-        visual, vo = with_visual_odometry(manifest)
-        records = [r for r, ok in zip(visual.frames, vo.tracked) if ok]
-    with_drops, without, drops_world = [], [], []
-    for k, record in enumerate(records):
-        left, right, rectified = frame_pair(record)
-        frame = obstacles_from_pair(left, right, stereo, rectified=rectified, mount=mount, pan_rad=record.pan_rad,
-                                    **pair_options(config))
-        obs = frame.obstacles
-        plain = replace(frame, obstacles=replace(obs, obstacle_points_robot=obs.obstacle_points_robot[
-            :len(obs.obstacle_points_robot) - len(obs.drop_points_robot)]))
-        for out, f in ((with_drops, frame), (without, plain)):
-            out.append(observation_from_pair(f, record, index=k, config=config, stereo=stereo))
-        T = T_from_planar(*record.pose)
-        drops_world.append(obs.drop_points_robot @ T[:3, :3].T + T[:3, 3])
-    runs = tuple(map_from_observations(manifest, obs, config=config, stereo=stereo, floor=floor, mount=mount)
-                 for obs in (with_drops, without))
+    obstacles = config.for_rig(manifest.calibration).obstacle_config
+    runs = tuple(build_map(manifest, config=replace(config, obstacles=replace(obstacles, drops=drops)), progress=False)
+                 for drops in (DropConfig(), None))
+    # the drop test's points lie on the floor (z = 0), every other obstacle point above the floor band
+    drops_world = [o.obstacle_points_world[np.abs(o.obstacle_points_world[:, 2]) < 1e-6].astype(np.float64)
+                   for o in runs[0].observations]
     return runs + (drops_world,)
 
 
@@ -156,7 +137,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, d
     from mrstereo.geometry.drops import DropConfig
     from mrstereo.mapping import plan_path
     from mrstereo.mapping.heights import HeightLayer
-    from mrstereo.pipeline.run import views_of_frames
+    from mrstereo.pipeline.mapper import views_of_poses
     from mrstereo.world import drop_edges, floor_heights, ground_truth_map, random_world, read_manifest
     from mrstereo.world import write_synthetic_dataset
 
@@ -175,7 +156,8 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, d
     free = ground_truth_map(world.scene, grid).occupancy == 0.0
     start = tuple(int(v[0]) for v in grid.cells_from_xy(np.array([manifest.frames[0].pose[:2]])))
     drivable = _drivable(np.nan_to_num(height, nan=-9.0), free, start, step)
-    views = views_of_frames(manifest.frames, manifest.calibration, range_m=run.range_m, mount=run.mount)
+    views = views_of_poses([f.pose for f in manifest.frames], [f.pan_rad for f in manifest.frames],
+                           manifest.calibration, range_m=run.range_m, mount=run.mount)
     seen = _seen_floor(manifest, grid, height, view_m)
     seen_far = _seen_floor(manifest, grid, height, run.range_m)
     lethal_plain = plain.grid.to_ros_map().occupied
@@ -275,7 +257,7 @@ def measure_speed(repeats: int) -> list[dict]:
     rows = []
     for name, left, right, calib, rectified, mount in inputs:
         times: dict[str, list[float]] = {"with": [], "without": []}
-        configs = {"with": ObstacleConfig(), "without": ObstacleConfig(drops=None)}
+        configs = {"with": ObstacleConfig(drops=DropConfig()), "without": ObstacleConfig()}
         for k in range(repeats + 1):
             for key in ("with", "without") if k % 2 else ("without", "with"):
                 t0 = time.process_time()

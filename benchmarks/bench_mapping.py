@@ -65,39 +65,33 @@ def euroc_stages(repeat: int) -> None:
 
     import numba
 
-    from mrstereo.mapping.fusion import add_observation
-    from mrstereo.mapping.tiles import TiledOccupancyGrid
-    from mrstereo.geometry.pair import scan_from_pair
-    from mrstereo.pipeline.run import PipelineConfig, floor_for_run, observation_from_pair, pair_options
+    from mrstereo.pipeline.mapper import StereoMapper
+    from mrstereo.pipeline.run import PipelineConfig, build_map
     from mrstereo.profiling import Profile, profiling
     from mrstereo.recordings.layouts import read_recording
-    from mrstereo.recordings.manifest import frame_pair, rebased
+    from mrstereo.recordings.sources import RecordingSource
 
     cv2.setNumThreads(1)
     numba.set_num_threads(1)
     root = Path(os.environ.get("MRSTEREO_DATA", "data")) / "euroc_asl_sample"
     manifest = read_recording(root)
     stereo = manifest.calibration
-    config = PipelineConfig().for_rig(stereo)
-    mount = floor_for_run(manifest, stereo, config=config).mount
-    manifest = rebased(manifest, mount)
-    range_m = config.obstacle_config.max_range_m
-    pairs = [frame_pair(record) for record in manifest.frames]
+    config = PipelineConfig()
+    mount = build_map(manifest, progress=False).mount          # the floor found once: every round maps with it
+    with RecordingSource(manifest) as source:
+        frames = list(source)
     samples: dict[str, list[float]] = {"match": [], "grid": [], "scan": []}
     points = []
     for k in range(repeat + 1):                     # the first round compiles and warms up
-        occupancy = TiledOccupancyGrid(config.resolution_m, config=config.mapping, view_reach_m=range_m + 2.0)
-        for index, (record, (left, right, rectified)) in enumerate(zip(manifest.frames, pairs)):
+        mapper = StereoMapper(stereo, mount, config, check_mount=False)
+        for frame in frames:
             profile = Profile(clock=time.process_time)
             with profiling(profile):
-                result = scan_from_pair(left, right, stereo, rectified=rectified, mount=mount, min_points=3,
-                                        **pair_options(config))
-                obs = observation_from_pair(result.frame, record, index=index, config=config, stereo=stereo)
-                add_observation(occupancy, obs)
-            if k:
+                mapped = mapper.step_frame(frame)
+            if k and mapped:
                 for name in samples:
                     samples[name].append(1e3 * profile.seconds.get(name, math.nan))
-                points.append(len(obs.obstacle_points_world))
+                points.append(len(mapped[-1].obstacle_points_robot))
     med = {name: float(np.median(v)) for name, v in samples.items()}
     print(f"EuRoC sample, {len(pairs)} frames {stereo.size[0]}x{stereo.size[1]} x {repeat} repeats, one thread, "
           f"CPU time (process_time); median {int(np.median(points))} obstacle points a frame")

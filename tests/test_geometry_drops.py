@@ -95,7 +95,7 @@ def test_exact_disparity_marks_the_ledge_and_not_the_ramp(ledge, ramp):
         x_e = world.summary["drops"]["end"]["x_m"]
         pose = (float(world.waypoints_xy[-1, 0]), float(world.waypoints_xy[-1, 1]), 0.0)
         frame = _frame(world, pose)
-        res = detect_obstacles(frame.disparity_px, world.stereo)
+        res = detect_obstacles(frame.disparity_px, world.stereo, config=ObstacleConfig(drops=DropConfig()))
         pts = _world_points(world, pose, res)
         if not is_ledge:
             assert len(pts) == 0, pts[:5]
@@ -115,7 +115,7 @@ def test_exact_disparity_marks_the_ledge_and_not_the_ramp(ledge, ramp):
 def test_the_robot_limits_decide_what_is_a_drop(ledge):
     depth = ledge.summary["drops"]["end"]["depth_m"]
     pose = (float(ledge.waypoints_xy[-1, 0]), float(ledge.waypoints_xy[-1, 1]), 0.0)
-    res = detect_obstacles(_frame(ledge, pose).disparity_px, ledge.stereo)
+    res = detect_obstacles(_frame(ledge, pose).disparity_px, ledge.stereo, config=ObstacleConfig(drops=DropConfig()))
     assert len(res.drop_points_robot)
     # a robot that climbs more than the ledge is deep sees no drop
     config = ObstacleConfig(drops=DropConfig(max_step_m=depth + 0.1))
@@ -210,7 +210,7 @@ def test_scan_command_reports_the_ledge_unless_told_not_to(ledge, tmp_path):
     write_stereo(tmp_path / "calib.yaml", ledge.stereo)
     x_e = ledge.summary["drops"]["end"]["x_m"]
     ranges = {}
-    for name, extra in (("drops", []), ("none", ["--no-drops"])):
+    for name, extra in (("drops", ["--drops"]), ("none", [])):
         out = tmp_path / f"{name}.json"
         result = CliRunner().invoke(main, ["scan", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--calib",
                                            str(tmp_path / "calib.yaml"), "--rectified", "-o", str(out), *extra])

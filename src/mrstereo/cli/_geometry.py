@@ -57,8 +57,9 @@ def _common(func):
         click.option("--max-slope", "max_slope_deg", type=Number(0.0, 89.0, unit="deg"),
                      default=DropConfig.max_slope_deg, show_default=True,
                      help="Steepest slope the robot drives [deg]; a floor that falls away faster is a drop."),
-        click.option("--no-drops", "no_drops", is_flag=True,
-                     help="No drop test (where the floor ends is not an obstacle)."),
+        click.option("--drops", "drops", is_flag=True,
+                     help="Drop test: where the floor ends (a ledge, a hole, a stairwell) is an obstacle, a step "
+                          "or slope within --max-step and --max-slope is not (docs/obstacles.md, \"Drops\")."),
     ]
     for option in reversed(options):
         func = option(func)
@@ -67,7 +68,7 @@ def _common(func):
 
 def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, preset, max_disparity_px,
          texture_threshold, min_height_m, max_height_m, max_range_m, ground_method, max_step_m, max_slope_deg,
-         no_drops, mount, scan: bool, **scan_kw):
+         drops, mount, scan: bool, **scan_kw):
     from dataclasses import replace
 
     from ..camera import read_stereo
@@ -97,7 +98,7 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     config = ObstacleConfig()
     updates = {k: v for k, v in (("min_obstacle_height_m", min_height_m), ("max_obstacle_height_m", max_height_m),
                                  ("max_range_m", max_range_m), ("ground_method", ground_method)) if v is not None}
-    drops = None if no_drops else DropConfig(max_step_m=max_step_m, max_slope_deg=max_slope_deg)
+    drops = DropConfig(max_step_m=max_step_m, max_slope_deg=max_slope_deg) if drops else None
     config = replace(config, drops=drops, **updates)
     options = dict(rectified=rectified, mount=camera_mount, pan_rad=pan_rad, preset=preset,
                    max_disparity_px=max_disparity_px, rejection=rejection, config=config)

@@ -70,7 +70,7 @@ class ObstacleConfig:
     prior_height_tolerance_m: float = 0.15
     prior_tilt_tolerance_rad: float = 0.1
     seed: int = 0
-    drops: DropConfig | None = DropConfig()
+    drops: DropConfig | None = None
 
     def __post_init__(self) -> None:
         if self.drops is not None and not isinstance(self.drops, DropConfig):
