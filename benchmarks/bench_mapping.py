@@ -93,7 +93,7 @@ def euroc_stages(repeat: int) -> None:
                     samples[name].append(1e3 * profile.seconds.get(name, math.nan))
                 points.append(len(mapped[-1].obstacle_points_robot))
     med = {name: float(np.median(v)) for name, v in samples.items()}
-    print(f"EuRoC sample, {len(pairs)} frames {stereo.size[0]}x{stereo.size[1]} x {repeat} repeats, one thread, "
+    print(f"EuRoC sample, {len(frames)} frames {stereo.size[0]}x{stereo.size[1]} x {repeat} repeats, one thread, "
           f"CPU time (process_time); median {int(np.median(points))} obstacle points a frame")
     for name, ms in med.items():
         print(f"{name:<6} {ms:8.2f} ms/frame")
