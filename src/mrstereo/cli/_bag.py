@@ -279,11 +279,13 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool,
                   no_mount_check: bool, **options) -> None:
     """Process many recordings into per-frame outputs and maps.
 
-    RECORDINGS are dataset folders, KITTI odometry or EuRoC/ASL folders
-    (`mrstereo info` shows what is read). Per frame a disparity (PFM), a point
-    cloud (PLY) and a laser scan (JSON); per recording a map, as `mrstereo
-    map` makes it, with the same map options. Resumable: finished outputs
-    are kept on a re-run, failed frames are retried.
+    RECORDINGS are dataset folders, KITTI odometry or EuRoC/ASL folders and
+    ROS bags (`mrstereo info` shows what is read). Per frame a disparity
+    (PFM), a point cloud (PLY) and a laser scan (JSON); per recording a map,
+    as `mrstereo map` makes it, with the same map options. A bag (its one
+    stereo pair and odometry topic picked) is read as a stream and gives its
+    map only. Resumable: finished outputs are kept on a re-run, failed frames
+    are retried; a bag's map is kept while the bag and options are unchanged.
 
     Failures of single frames are listed in OUT/summary.json and the rest goes on;
     the command then ends with an error line naming how many failed. A dataset
@@ -295,15 +297,16 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool,
 
     from ..io import check_output_dir
     from ..pipeline.batch import run_batch
-    from ..recordings.layouts import read_recording
+    from ..recordings.bag import BagSource
+    from ..recordings.layouts import is_bag, read_recording
 
     check_workers(workers, scheduler, processes)
     config = map_config(**options)
     camera_mount = parse_mount(mount)
-    manifests = [read_recording(m) for m in manifests]
+    manifests = [BagSource(m, mount=camera_mount) if is_bag(m) else read_recording(m) for m in manifests]
     check_output_dir("--out", out_dir)
     if camera_mount is not None:
-        manifests = [dataclasses.replace(m, mount=camera_mount) for m in manifests]
+        manifests = [m if isinstance(m, BagSource) else dataclasses.replace(m, mount=camera_mount) for m in manifests]
     summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
                         scheduler=scheduler, processes=processes, progress=not quiet, check_mount=not no_mount_check)
     for d in summary.datasets:
