@@ -149,7 +149,8 @@ def main() -> None:
             if args.map:
                 r = measured(["mrstereo", args.map_command, str(bag), "-o", str(folder / "out" / "m"), "--quiet"],
                              folder)
-                line += (f"; mapped ({args.map_command}): peak RSS {r['rss_kb'] / 1024:.0f} MB, tmp dir peak {r['tmp_peak'] / 1e6:.3f}"
+                line += (f"; mapped ({args.map_command}): peak RSS {r['rss_kb'] / 1024:.0f} MB, "
+                         f"tmp dir peak {r['tmp_peak'] / 1e6:.3f}"
                          f" MB, image files outside the output {r['outside']}, {r['wall']:.0f} s")
             print(line, flush=True)
             shutil.rmtree(folder)

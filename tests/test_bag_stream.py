@@ -287,3 +287,27 @@ def test_mapping_the_euroc_bag_writes_no_image_file(tmp_path, empty_tmpdir):
         assert entry(["map", str(bag), "-o", str(tmp_path / "out"), "--quiet"]) == 0
     assert tmp.peak < 5_000_000 and not tmp.images, (tmp.peak, tmp.images)
     assert _image_files(tmp_path, tmp_path / "out") == [] and (tmp_path / "out" / "map.pgm").is_file()
+
+
+def _map_peak_bytes(bag, mount) -> int:
+    from mrstereo.pipeline.run import build_map
+
+    tracemalloc.start()
+    try:
+        run = build_map(BagSource(bag, mount=mount), progress=False)
+        assert len(run.observations) > 0
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_mapping_memory_is_flat_however_long_the_bag(dataset, tmp_path):
+    """Mapping 30 pairs of a bag takes no more memory than mapping 6 (24 more pairs held would be 0.92 MB):
+    the frames are read, mapped and dropped one by one (docs/dataset.md: 2,000 pairs against 100 with
+    `benchmarks/bench_bag_stream.py --map`)."""
+    order = [0, 1, 2, 3, 4, 5, 4, 3, 2, 1]
+    short, long = (write_bag(tmp_path / f"run{n}", dataset, ros1=False, odom=True,
+                             frames=[order[k % len(order)] for k in range(n)]) for n in (6, 30))
+    _map_peak_bytes(short, dataset.mount)                   # (first use: caches filled)
+    grown = _map_peak_bytes(long, dataset.mount) - _map_peak_bytes(short, dataset.mount)
+    assert grown < 600_000, f"mapping 30 pairs took {grown / 1e6:.2f} MB more than mapping 6"
