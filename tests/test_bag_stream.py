@@ -294,7 +294,7 @@ def _map_peak_bytes(bag, mount) -> int:
 
     tracemalloc.start()
     try:
-        run = build_map(BagSource(bag, mount=mount), progress=False)
+        run = build_map(BagSource(bag, mount=mount), progress=False, keep_points=False)
         assert len(run.observations) > 0
         return tracemalloc.get_traced_memory()[1]
     finally:

@@ -401,7 +401,7 @@ def _bag_map(source: BagSource, folder: Path, config: PipelineConfig, maps: bool
     if maps and _map_done(folder / "map", fingerprint):
         status = "kept"
     elif maps:
-        result = build_map(source, config=config, **run)
+        result = build_map(source, config=config, keep_points=False, **run)
         _write_map(result, folder / "map", {"frames": n, "fused": len(result.observations), "failed": [],
                                             "fingerprint": fingerprint})
         status, floor, warning = "written", result.floor, result.mount_warning

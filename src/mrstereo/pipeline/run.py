@@ -64,6 +64,8 @@ class MapRun:
     tiles: TiledOccupancyGrid | None = None
     """The whole map when it grew (``config.grid`` None); ``grid`` is then its dense window
     (:meth:`~mrstereo.mapping.tiles.TiledOccupancyGrid.map_window`: all of it unless it is too large)."""
+    n_points: int | None = None
+    """The floor and obstacle points the frames put into the map (None: count ``observations``' points)."""
 
     def pose_metrics(self) -> dict:
         """Odometry and alignment figures for metrics.json (empty when the given poses were used)."""
@@ -151,7 +153,8 @@ def map_frames(mapper: StereoMapper, frames, *, workers: int | None = None, sche
 def build_map(manifest: Manifest | FrameSource | str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
               calibration: StereoCamera | None = None, prefer_raw: bool = False,
               progress: bool = True, workers: int | None = None, scheduler=None,
-              processes: bool = False, odometry: str = "auto", align=None, check_mount: bool = True) -> MapRun:
+              processes: bool = False, odometry: str = "auto", align=None, check_mount: bool = True,
+              keep_points: bool = True) -> MapRun:
     """Map a whole recording with a :class:`~mrstereo.pipeline.mapper.StereoMapper`; compare with the GT map if any.
 
     Parameters
@@ -186,6 +189,9 @@ def build_map(manifest: Manifest | FrameSource | str | os.PathLike, *, config: P
     check_mount : bool
         Check a given mount against the floor seen in the first frames and use the seen floor when they
         disagree (``MapRun.mount_warning`` says so).
+    keep_points : bool
+        Keep every frame's world points in ``MapRun.observations`` (to fuse again or replay them); False:
+        only their poses and counts, so memory stays flat however long the recording.
     """
     source = manifest if isinstance(manifest, FrameSource) else None
     if source is not None:
@@ -205,7 +211,8 @@ def build_map(manifest: Manifest | FrameSource | str | os.PathLike, *, config: P
     prefer_raw = prefer_raw or calibration is not None
     config = _on_true_map(manifest, config.for_rig(stereo))
     mapper = StereoMapper(stereo, manifest.mount, config, check_mount=check_mount, odometry=odometry,
-                          pose_frame_mount=manifest.pose_frame_mount, keep_observations=True, name=str(manifest.root))
+                          pose_frame_mount=manifest.pose_frame_mount, keep_observations=keep_points or "poses",
+                          name=str(manifest.root))
     fused = None
     with recording_source(manifest, prefer_raw=prefer_raw) if source is None else nullcontext(source) as frames:
         frames = read_ahead(frames, depth=2 if workers is None else workers + 1)     # decoded while matching
@@ -248,7 +255,7 @@ def finish_map(mapper: StereoMapper, manifest: Manifest, *, fusion=None) -> MapR
     return MapRun(grid=occupancy, observations=mapper.observations, manifest=manifest, metrics=metrics,
                   ground_truth_map=gt, floor=mapper.floor, mount=mapper.mount, fusion=fusion,
                   range_m=mapper.range_m, mount_warning=mapper.mount_warning, odometry=mapper.odometry_metrics(),
-                  tiles=mapper.grid if isinstance(mapper.grid, TiledOccupancyGrid) else None)
+                  tiles=mapper.grid if isinstance(mapper.grid, TiledOccupancyGrid) else None, n_points=mapper.n_points)
 
 def with_visual_odometry(manifest: Manifest, *, calibration: StereoCamera | None = None, progress: bool = False,
                          source=None):
@@ -324,7 +331,8 @@ def check_map(run: MapRun) -> None:
     ValueError
         With the likely causes: the mapping range, the camera mount, the images.
     """
-    seen = sum(len(o.obstacle_points_world) + len(o.floor_points_world) for o in run.observations)
+    seen = run.n_points if run.n_points is not None else \
+        sum(len(o.obstacle_points_world) + len(o.floor_points_world) for o in run.observations)
     if seen:
         return
     height = f"{run.floor.height_m:.2f} m" if run.floor is not None and run.floor.success else "unknown"
