@@ -508,8 +508,8 @@ class StereoMapper:
         self.n_points += len(obs.obstacle_points_world) + len(obs.floor_points_world)
         if self.keep_observations:
             self.observations.append(obs if self.keep_observations is True else replace(
-                obs, obstacle_points_world=obs.obstacle_points_world[:0], floor_points_world=obs.floor_points_world[:0],
-                cells=None))
+                obs, obstacle_points_world=obs.obstacle_points_world[:0].copy(),      # (copies: a view keeps it all)
+                floor_points_world=obs.floor_points_world[:0].copy(), cells=None))
         self.trajectory_T.append(T_from_planar(*obs.pose) if T_world_from_base is None else T_world_from_base)
         self.trajectory_index.append(obs.index)
         self.trajectory_stamps_s.append(float(obs.index) * 0.1 if stamp_s is None else stamp_s)
