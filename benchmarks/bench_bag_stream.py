@@ -11,7 +11,7 @@
    command's peak resident memory.
 2. Synthetic bags of ``--frames`` pairs (the corridor at ``--size``, with odometry, frames driven forth and
    back): the peak resident memory of a fresh process that reads every frame (BagSource), and with
-   ``--map`` of ``mrstereo live BAG -o OUT``.
+   ``--map`` of ``mrstereo map BAG -o OUT`` (``--map-command live``: of ``mrstereo live BAG -o OUT``).
 """
 from __future__ import annotations
 
@@ -125,7 +125,8 @@ def main() -> None:
     parser.add_argument("--euroc-frames", type=int, default=95)
     parser.add_argument("--frames", type=int, nargs="+", default=[100, 2000])
     parser.add_argument("--size", type=int, nargs=2, default=[320, 240], metavar=("W", "H"))
-    parser.add_argument("--map", action="store_true", help="also map the synthetic bags (mrstereo live)")
+    parser.add_argument("--map", action="store_true", help="also map the synthetic bags")
+    parser.add_argument("--map-command", choices=["map", "live"], default="map", help="what maps them")
     parser.add_argument("--skip-map-command", action="store_true", help="do not run mrstereo map on the EuRoC bag")
     parser.add_argument("--skip-euroc", action="store_true", help="only the synthetic bags")
     args = parser.parse_args()
@@ -146,8 +147,10 @@ def main() -> None:
             line = (f"synthetic bag of {n} pairs ({w}x{h}, {tree_bytes(bag) / 1e6:.0f} MB): read {count} frames, "
                     f"peak RSS {int(rss) / 1024:.0f} MB")
             if args.map:
-                r = measured(["mrstereo", "live", str(bag), "-o", str(folder / "out" / "live")], folder)
-                line += (f"; mapped (live): peak RSS {r['rss_kb'] / 1024:.0f} MB, tmp dir peak {r['tmp_peak'] / 1e6:.3f}"
+                r = measured(["mrstereo", args.map_command, str(bag), "-o", str(folder / "out" / "m"), "--quiet"],
+                             folder)
+                line += (f"; mapped ({args.map_command}): peak RSS {r['rss_kb'] / 1024:.0f} MB, "
+                         f"tmp dir peak {r['tmp_peak'] / 1e6:.3f}"
                          f" MB, image files outside the output {r['outside']}, {r['wall']:.0f} s")
             print(line, flush=True)
             shutil.rmtree(folder)

@@ -208,3 +208,106 @@ def test_command_options_open_a_bag_or_a_folder_as_a_source(dataset, tmp_path, c
     with pytest.raises(click.UsageError, match="--odom-topic only with a ROS bag"):
         with opened_source(dataset.root, None, None, quiet=True, bag_kw=dict(options, odom_topic="/odom")):
             pass
+
+
+class _TmpPeak:
+    """Poll a folder while a command runs: its peak size [bytes] and every image file seen in it."""
+
+    def __init__(self, folder):
+        import threading
+
+        self.folder, self.peak, self.images = folder, 0, set()
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._poll, daemon=True)
+
+    def _poll(self):
+        while True:
+            files = _files(self.folder)
+            self.peak = max(self.peak, sum(p.stat().st_size for p in files if p.exists()))
+            self.images |= {p.name for p in files if p.suffix.lower() in (".png", ".pgm", ".pfm", ".ppm")}
+            if self._done.wait(0.005):
+                return
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._done.set()
+        self._thread.join()
+
+
+def _image_files(folder, out):
+    return sorted(p for p in folder.rglob("*.p[gnf]m") if out not in p.parents) + \
+        sorted(p for p in folder.rglob("*.png") if out not in p.parents)
+
+
+def test_map_odometry_and_batch_read_a_bag_as_a_stream(dataset, tmp_path, empty_tmpdir):
+    """``map``, ``odometry`` and ``batch`` on a bag write nothing to the temporary directory and no image outside
+    their outputs; the map and the trajectory are those of the exported dataset, batch's map is map's."""
+    bag = write_bag(tmp_path / "run", dataset, ros1=False, odom=False, tf=True)
+    from mrstereo.geometry.ground import ground_from_mount
+
+    rig = ground_from_mount(dataset.mount, R_rect_from_cam=dataset.calibration.left.R)
+    common = ["--tf", "--camera-frame", "stereo_link", "--height", str(rig.height_m), "--tilt", str(rig.tilt_rad),
+              "--quiet"]
+    with _TmpPeak(empty_tmpdir) as tmp:
+        assert entry(["map", str(bag), "-o", str(tmp_path / "out" / "map"), *common]) == 0
+        assert entry(["odometry", str(bag), "-o", str(tmp_path / "out" / "vo.txt"), *common]) == 0
+        assert entry(["batch", str(bag), str(dataset.root), "-o", str(tmp_path / "out" / "batch"), "--quiet"]) == 0
+    assert tmp.peak == 0 and not tmp.images and _image_files(tmp_path, tmp_path / "out") == []
+    export_bag(bag, tmp_path / "exported", **TOPICS, use_tf=True, camera_frame="stereo_link", progress=False,
+               mount=dataset.mount)
+    assert entry(["map", str(tmp_path / "exported"), "-o", str(tmp_path / "ref" / "map"), "--quiet"]) == 0
+    assert entry(["odometry", str(tmp_path / "exported"), "-o", str(tmp_path / "ref" / "vo.txt"), "--quiet"]) == 0
+    map_pgm = (tmp_path / "out" / "map" / "map.pgm").read_bytes()
+    assert map_pgm == (tmp_path / "ref" / "map" / "map.pgm").read_bytes()
+    np.testing.assert_array_equal(np.load(tmp_path / "out" / "map" / "log_odds.npy"),
+                                  np.load(tmp_path / "ref" / "map" / "log_odds.npy"))
+    np.testing.assert_allclose(np.loadtxt(tmp_path / "out" / "vo.txt"), np.loadtxt(tmp_path / "ref" / "vo.txt"),
+                               atol=1e-9)
+    # batch with the bag's defaults (its odometry: here TF is not picked, so the map of `map BAG` without --tf)
+    assert entry(["map", str(bag), "-o", str(tmp_path / "out" / "plain"), "--quiet"]) == 0
+    assert (tmp_path / "out" / "batch" / "run" / "map" / "map.pgm").read_bytes() == \
+        (tmp_path / "out" / "plain" / "map.pgm").read_bytes()
+    assert entry(["batch", str(bag), "-o", str(tmp_path / "out" / "batch"), "--quiet"]) == 0     # kept whole
+    summary = (tmp_path / "out" / "batch" / "summary.json").read_text()
+    assert '"map": "kept"' in summary and '"computed": 0' in summary
+
+
+def test_mapping_the_euroc_bag_writes_no_image_file(tmp_path, empty_tmpdir):
+    """EuRoC frames (752x480) as a ROS 2 bag: `map` leaves the temporary directory empty (the export of these
+    12 pairs, its 5 frames forth and back, is 4.4 MB of PNG files) and writes no image outside its output folder."""
+    from mrstereo.recordings import read_recording
+    from mrstereo.recordings.samples import data_root
+
+    euroc = read_recording(data_root() / "euroc_asl_sample")
+    bag = write_bag(tmp_path / "euroc", euroc, ros1=False, odom=False, frames=[0, 1, 2, 3, 4, 3, 2, 1, 0, 1, 2, 3])
+    with _TmpPeak(empty_tmpdir) as tmp:
+        assert entry(["map", str(bag), "-o", str(tmp_path / "out"), "--quiet"]) == 0
+    assert tmp.peak < 5_000_000 and not tmp.images, (tmp.peak, tmp.images)
+    assert _image_files(tmp_path, tmp_path / "out") == [] and (tmp_path / "out" / "map.pgm").is_file()
+
+
+def _map_peak_bytes(bag, mount) -> int:
+    from mrstereo.pipeline.run import build_map
+
+    tracemalloc.start()
+    try:
+        run = build_map(BagSource(bag, mount=mount), progress=False, keep_points=False)
+        assert len(run.observations) > 0
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_mapping_memory_is_flat_however_long_the_bag(dataset, tmp_path):
+    """Mapping 30 pairs of a bag takes no more memory than mapping 6 (24 more pairs held would be 0.92 MB):
+    the frames are read, mapped and dropped one by one (docs/dataset.md: 2,000 pairs against 100 with
+    `benchmarks/bench_bag_stream.py --map`)."""
+    order = [0, 1, 2, 3, 4, 5, 4, 3, 2, 1]
+    short, long = (write_bag(tmp_path / f"run{n}", dataset, ros1=False, odom=True,
+                             frames=[order[k % len(order)] for k in range(n)]) for n in (6, 30))
+    _map_peak_bytes(short, dataset.mount)                   # (first use: caches filled)
+    grown = _map_peak_bytes(long, dataset.mount) - _map_peak_bytes(short, dataset.mount)
+    assert grown < 600_000, f"mapping 30 pairs took {grown / 1e6:.2f} MB more than mapping 6"

@@ -138,54 +138,44 @@ def recording_of(path: Path | None, bag: Path | None) -> tuple[Path, bool]:
 @contextlib.contextmanager
 def opened_dataset(manifest, bag: Path | None, calib: Path | None, *, quiet: bool, bag_kw: dict,
                    rate_hz: float | None = None):
-    """The recording a command works on: ``(dataset, stereo, stamps_s)``.
+    """The recording a command works on: ``(recording, stereo, stamps_s)``.
 
-    A ROS bag (``--bag``, or a RECORDING that is one; topics picked when not given) is exported into a
-    temporary dataset that lives as long as the ``with`` block, its stamps in seconds. Any other
-    RECORDING (a path, or a Manifest already read) gets ``--height``/``--tilt``/``--mount`` applied and
-    ``--calib`` read (``stereo`` None: the recording's own calibration; stamps None). Image folders
-    take ``--calib`` as their calibration and ``--rate`` as their frame rate.
+    A ROS bag (``--bag``, or a RECORDING that is one; topics picked when not given) is a
+    :class:`~mrstereo.recordings.bag.BagSource` read message by message, never exported (:func:`opened_source`;
+    ``stereo`` None: the bag's calibration or ``--calib`` is in it), open for the ``with`` block, with its
+    stamps in seconds. Any other RECORDING (a path, or a Manifest already read) is a Manifest with
+    ``--height``/``--tilt``/``--mount`` applied and ``--calib`` read (``stereo`` None: the recording's own
+    calibration; stamps None). Image folders take ``--calib`` as their calibration and ``--rate`` as their
+    frame rate.
     """
     import dataclasses
-    import tempfile
-
-    import numpy as np
 
     from ..camera import read_stereo
     from ..recordings.layouts import layout_of, read_recording
-    from ..recordings.manifest import Manifest, read_manifest
+    from ..recordings.manifest import Manifest
 
     if bag is None and not isinstance(manifest, Manifest):
         manifest, is_bag = recording_of(manifest, None)
         if is_bag:
             manifest, bag = None, manifest
-    with tempfile.TemporaryDirectory(prefix="mrstereo-bag-") as tmp:
-        if bag is not None:
-            from ..recordings.bag import export_bag
-
-            if rate_hz is not None:
-                raise click.UsageError("--rate only with image folders")
-            result = export_bag(bag, Path(tmp) / "dataset",
-                                **bag_export_kwargs(bag=bag, calib=calib, quiet=quiet, **bag_kw))
-            echo_export(result)
-            dataset = dataclasses.replace(read_manifest(result.out_dir), layout="ROS bag",
-                                          has_poses=not result.pose_source.startswith("none"))
-            yield dataset, None, np.asarray(result.stamps_ns, dtype=np.float64) / 1e9
-            return
-        _no_bag_options(bag_kw)
-        if isinstance(manifest, Manifest):
-            dataset = manifest
-        else:
-            folders = layout_of(manifest) == "image folders"
-            if rate_hz is not None and not folders:
-                raise click.UsageError("--rate only with image folders")
-            dataset = read_recording(manifest, calibration=calib if folders else None, rate_hz=rate_hz)
-        stereo = read_stereo(calib) if calib is not None else None
-        mount = mount_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"),
-                                   dataset.calibration if stereo is None else stereo)
-        if mount is not None:
-            dataset = dataclasses.replace(dataset, mount=mount)
-        yield dataset, stereo, None
+    if bag is not None:
+        with opened_source(None, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as source:
+            yield source, None, source.stamps_s
+        return
+    _no_bag_options(bag_kw)
+    if isinstance(manifest, Manifest):
+        dataset = manifest
+    else:
+        folders = layout_of(manifest) == "image folders"
+        if rate_hz is not None and not folders:
+            raise click.UsageError("--rate only with image folders")
+        dataset = read_recording(manifest, calibration=calib if folders else None, rate_hz=rate_hz)
+    stereo = read_stereo(calib) if calib is not None else None
+    mount = mount_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"),
+                               dataset.calibration if stereo is None else stereo)
+    if mount is not None:
+        dataset = dataclasses.replace(dataset, mount=mount)
+    yield dataset, stereo, None
 
 
 def _no_bag_options(bag_kw: dict) -> None:
@@ -289,11 +279,13 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool,
                   no_mount_check: bool, **options) -> None:
     """Process many recordings into per-frame outputs and maps.
 
-    RECORDINGS are dataset folders, KITTI odometry or EuRoC/ASL folders
-    (`mrstereo info` shows what is read). Per frame a disparity (PFM), a point
-    cloud (PLY) and a laser scan (JSON); per recording a map, as `mrstereo
-    map` makes it, with the same map options. Resumable: finished outputs
-    are kept on a re-run, failed frames are retried.
+    RECORDINGS are dataset folders, KITTI odometry or EuRoC/ASL folders and
+    ROS bags (`mrstereo info` shows what is read). Per frame a disparity
+    (PFM), a point cloud (PLY) and a laser scan (JSON); per recording a map,
+    as `mrstereo map` makes it, with the same map options. A bag (its one
+    stereo pair and odometry topic picked) is read as a stream and gives its
+    map only. Resumable: finished outputs are kept on a re-run, failed frames
+    are retried; a bag's map is kept while the bag and options are unchanged.
 
     Failures of single frames are listed in OUT/summary.json and the rest goes on;
     the command then ends with an error line naming how many failed. A dataset
@@ -305,15 +297,16 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool,
 
     from ..io import check_output_dir
     from ..pipeline.batch import run_batch
-    from ..recordings.layouts import read_recording
+    from ..recordings.bag import BagSource
+    from ..recordings.layouts import is_bag, read_recording
 
     check_workers(workers, scheduler, processes)
     config = map_config(**options)
     camera_mount = parse_mount(mount)
-    manifests = [read_recording(m) for m in manifests]
+    manifests = [BagSource(m, mount=camera_mount) if is_bag(m) else read_recording(m) for m in manifests]
     check_output_dir("--out", out_dir)
     if camera_mount is not None:
-        manifests = [dataclasses.replace(m, mount=camera_mount) for m in manifests]
+        manifests = [m if isinstance(m, BagSource) else dataclasses.replace(m, mount=camera_mount) for m in manifests]
     summary = run_batch(manifests, out_dir, config=config, maps=not no_maps, workers=workers,
                         scheduler=scheduler, processes=processes, progress=not quiet, check_mount=not no_mount_check)
     for d in summary.datasets:

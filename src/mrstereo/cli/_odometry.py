@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from ..pipeline.odometry import odometry_from_manifest
+from ..pipeline.odometry import manifest_of, odometry_from_manifest
 from ._bag import opened_dataset, read_inputs, recording_of, recording_options
 from ._live import check_sink_options, record_bag_option, replayed_to_sinks, viewer_option
 from ._options import library_default, profile_option
@@ -67,10 +67,12 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     check_outputs(outputs, suffixes=OUTPUT_SUFFIXES)
     inputs = [p for p in (bag if dataset is None else dataset.root, calib) if p is not None]
     viewers = check_sink_options(viewers, record_bag, out_path.with_suffix(""), inputs)
-    with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, stamps):
-        check_pair_streams(dataset)
-        run = odometry_from_manifest(dataset, calibration=stereo, progress=not quiet,
+    with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (recording, stereo,
+                                                                                              stamps):
+        check_pair_streams(recording)
+        run = odometry_from_manifest(recording, calibration=stereo, progress=not quiet,
                                      initial_pose="given" if start == "given" else "identity")
+        dataset = recording if stamps is None else manifest_of(recording)     # (a bag: its stamps and poses)
     if stamps is None:
         stamps = run.stamps_s if run.stamps_s is not None else np.arange(len(run.status), dtype=np.float64)
     stamp_note = "" if run.stamps_s is not None or bag is not None else \

@@ -82,7 +82,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
     with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes, odometry=odometry, align=align or None,
-                        check_mount=not no_mount_check)
+                        check_mount=not no_mount_check, keep_points=bool(viewers) or record_bag is not None)
         echo_map_warnings(run)
         check_map(run)
         with staged_dir(out_dir, prefix="map") as staging:      # all files or none: Ctrl-C leaves the old set

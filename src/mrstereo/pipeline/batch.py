@@ -25,12 +25,13 @@ from ..io import (Inputs, atomic_write, check_output_dir, check_outputs, remove_
 from ..mapping.fusion import FrameObservation
 from ..mapping.observations import digest, file_stamp, frame_outputs, resume_frame, save_frame
 from ..mapping.rosmap import ros_map_files
-from ..recordings.layouts import read_recording
+from ..recordings.bag import BagSource, bag_inputs
+from ..recordings.layouts import is_bag, read_recording
 from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
 from ..recordings.sources import StereoFrame
 from .._executor import ItemFailure, map_ordered
 from .mapper import StereoMapper, observe, world_observation
-from .run import (MapRun, PipelineConfig, map_from_observations, with_visual_odometry,
+from .run import (MapRun, PipelineConfig, build_map, map_from_observations, with_visual_odometry,
                   write_map_outputs)
 
 __all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
@@ -275,9 +276,11 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
 
     Parameters
     ----------
-    manifests : sequence of path or Manifest
-        The recordings (:func:`mrstereo.recordings.read_recording`: dataset, KITTI, EuRoC/ASL folders);
-        all are read (and validated) before any work starts.
+    manifests : sequence of path, Manifest or BagSource
+        The recordings (:func:`mrstereo.recordings.read_recording`: dataset, KITTI, EuRoC/ASL folders, and
+        ROS bags, read as :class:`~mrstereo.recordings.bag.BagSource` streams); all are read (and validated)
+        before any work starts. A bag gives its map only (no per-frame files), made as :func:`build_map`
+        makes it, and is kept whole on a re-run while the bag and the options are unchanged.
     out_dir : path
         Output root; created if needed, reused by a re-run.
     config : PipelineConfig
@@ -298,15 +301,19 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     """
     if not isinstance(config, PipelineConfig):
         raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
-    if isinstance(manifests, (str, os.PathLike, Manifest)):
+    if isinstance(manifests, (str, os.PathLike, Manifest, BagSource)):
         manifests = [manifests]
-    datasets = [m if isinstance(m, Manifest) else read_recording(m) for m in manifests]
+    datasets = [m if isinstance(m, (Manifest, BagSource)) else BagSource(m) if is_bag(m) else read_recording(m)
+                for m in manifests]
     if not datasets:
         raise ValueError("no datasets given")
+    sources = datasets
+    datasets = [m.manifest if isinstance(m, BagSource) else m for m in sources]      # (a bag's: stamps, poses)
+    bags = {id(m): source for m, source in zip(datasets, sources) if isinstance(source, BagSource)}
     out = Path(out_dir)
     inputs = Inputs()
     for m in datasets:
-        inputs.update(m.inputs())
+        inputs.update(bag_inputs(m.root) if id(m) in bags else m.inputs())
     check_output_dir("out_dir", out, inputs=inputs, input_kind="dataset")
     check_outputs({"summary": out / SUMMARY_NAME}, inputs)
     names = _names(datasets, out)
@@ -315,7 +322,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
 
     remove_stale_temporaries(out)
     configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
-    plans = [_plan(m, name, out, configs[name], maps) for m, name in zip(datasets, names)]
+    plans = [_plan(m, name, out, configs[name], maps) for m, name in zip(datasets, names) if id(m) not in bags]
     tasks, floors = [], {}
     for p in plans:
         complete = [p.loaded[k] is not None for k in range(len(p.manifest.frames))]
@@ -338,6 +345,10 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
             next(p for p in plans if p.name == task.dataset).loaded[task.index] = result
 
     summaries = [_finish(p, tasks, failures, configs[p.name], maps, floors) for p in plans]
+    summaries += [_bag_map(bags[id(m)], out / name, config, maps, workers=workers, scheduler=scheduler,
+                           processes=processes, progress=progress, check_mount=check_mount)
+                  for m, name in zip(datasets, names) if id(m) in bags]
+    summaries.sort(key=lambda d: names.index(d.name))
     path = out / SUMMARY_NAME
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps({"datasets": [s.to_dict() for s in summaries], "failures": failures,
@@ -370,3 +381,31 @@ def _finish(p: _Dataset, tasks: list, failures: list, config: PipelineConfig, ma
                           n_skipped=len(m.frames) - n_tasks, n_failed=len(failed), map_status=status,
                           floor=floor.floor if floor else None, mount_warning=floor.warning if floor else None,
                           fingerprint=p.map_fingerprint)
+
+
+def _bag_map(source: BagSource, folder: Path, config: PipelineConfig, maps: bool, **run) -> DatasetSummary:
+    """A bag's map: its frames read as a stream and mapped in order (:func:`build_map`, the map of
+    ``mrstereo map BAG``), kept when the bag, its topics and the options are those of the map already there."""
+    folder.mkdir(parents=True, exist_ok=True)
+    if _owner(folder) != str(source.root):
+        with atomic_write(folder / _DATASET_RECORD) as tmp:
+            tmp.write_text(json.dumps({"root": str(source.root), "manifest": str(source.root)}) + "\n")
+    remove_stale_temporaries(folder)
+    root = Path(source.root)
+    files = sorted(p for p in root.iterdir() if p.is_file()) if root.is_dir() else [root]
+    fingerprint = digest({"bag": [file_stamp(p) for p in files],
+                          "topics": [source.left_topic, source.right_topic, source.pose_source, source.mount_source],
+                          "mount": mount_entry(source.mount) if source.mount is not None else None,
+                          "config": repr(config), "check_mount": run["check_mount"], "version": __version__})
+    n, status, floor, warning = source.n_frames, "", None, None
+    if maps and _map_done(folder / "map", fingerprint):
+        status = "kept"
+    elif maps:
+        result = build_map(source, config=config, keep_points=False, **run)
+        _write_map(result, folder / "map", {"frames": n, "fused": len(result.observations), "failed": [],
+                                            "fingerprint": fingerprint})
+        status, floor, warning = "written", result.floor, result.mount_warning
+    return DatasetSummary(name=folder.name, manifest=source.root, out_dir=folder, n_frames=n,
+                          n_computed=n if status == "written" else 0, n_skipped=0 if status == "written" else n,
+                          n_failed=0, map_status=status, floor=floor, fingerprint=fingerprint,
+                          mount_warning=warning)

@@ -257,8 +257,9 @@ class StereoMapper:
     pose_frame_mount : CameraMount, optional
         The camera in the frame the given poses are of, when that frame is not the base on the floor
         (the poses are moved to the base, the camera staying where it is).
-    keep_observations : bool
-        Keep each mapped frame's world points (``observations``: to fuse again, replay or store).
+    keep_observations : bool or "poses"
+        Keep each mapped frame's world points (``observations``: to fuse again, replay or store);
+        ``"poses"``: its observation without the points (pose, pan, counts: memory flat in the length).
     name : str
         What is mapped, for messages.
 
@@ -280,7 +281,7 @@ class StereoMapper:
     def __init__(self, calibration: StereoCamera, mount: CameraMount | None = None,
                  config: PipelineConfig | None = None, *, check_mount: bool = True,
                  odometry: str = "auto", pose_frame_mount: CameraMount | None = None,
-                 keep_observations: bool = False, name: str = "the source") -> None:
+                 keep_observations: bool | str = False, name: str = "the source") -> None:
         if not isinstance(calibration, StereoCamera):
             raise TypeError(f"calibration must be a StereoCamera, got {type(calibration).__name__}")
         if mount is not None and not isinstance(mount, CameraMount):
@@ -506,7 +507,9 @@ class StereoMapper:
         self._previous_xy = obs.pose
         self.n_points += len(obs.obstacle_points_world) + len(obs.floor_points_world)
         if self.keep_observations:
-            self.observations.append(obs)
+            self.observations.append(obs if self.keep_observations is True else replace(
+                obs, obstacle_points_world=obs.obstacle_points_world[:0].copy(),      # (copies: a view keeps it all)
+                floor_points_world=obs.floor_points_world[:0].copy(), cells=None))
         self.trajectory_T.append(T_from_planar(*obs.pose) if T_world_from_base is None else T_world_from_base)
         self.trajectory_index.append(obs.index)
         self.trajectory_stamps_s.append(float(obs.index) * 0.1 if stamp_s is None else stamp_s)

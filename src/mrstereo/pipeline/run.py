@@ -10,6 +10,7 @@ import itertools
 import json
 import os
 import warnings
+from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -26,12 +27,14 @@ from ..mapping.metrics import MapMetrics, map_metrics
 from ..mapping.occupancy import OccupancyGrid
 from ..mapping.rosmap import ros_map_on_grid
 from ..mapping.tiles import TiledOccupancyGrid
+from ..recordings.frames import FrameSource
 from ..recordings.layouts import read_recording
 from ..recordings.manifest import Manifest, pose_3d_of, rebased
 from ..rejection.streams import StreamCheck
 from ..transforms import T_from_planar
 from .._executor import read_ahead
 from .mapper import PipelineConfig, StereoMapper, observe, views_of_poses
+from .odometry import manifest_of
 
 __all__ = ["PipelineConfig", "MapRun", "build_map", "map_frames", "finish_map", "map_from_observations",
            "write_map_outputs", "check_map", "recording_source", "check_pair_streams"]
@@ -63,6 +66,8 @@ class MapRun:
     tiles: TiledOccupancyGrid | None = None
     """The whole map when it grew (``config.grid`` None); ``grid`` is then its dense window
     (:meth:`~mrstereo.mapping.tiles.TiledOccupancyGrid.map_window`: all of it unless it is too large)."""
+    n_points: int | None = None
+    """The floor and obstacle points the frames put into the map (None: count ``observations``' points)."""
 
     def pose_metrics(self) -> dict:
         """Odometry and alignment figures for metrics.json (empty when the given poses were used)."""
@@ -155,16 +160,18 @@ def _counted(frames, reached):
         reached("frame")
 
 
-def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
+def build_map(manifest: Manifest | FrameSource | str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
               calibration: StereoCamera | None = None, prefer_raw: bool = False,
               progress: bool = True, workers: int | None = None, scheduler=None,
-              processes: bool = False, odometry: str = "auto", align=None, check_mount: bool = True) -> MapRun:
+              processes: bool = False, odometry: str = "auto", align=None, check_mount: bool = True,
+              keep_points: bool = True) -> MapRun:
     """Map a whole recording with a :class:`~mrstereo.pipeline.mapper.StereoMapper`; compare with the GT map if any.
 
     Parameters
     ----------
-    manifest : Manifest or path
-        The recording (docs/dataset.md).
+    manifest : Manifest, FrameSource or path
+        The recording (docs/dataset.md), or a source that knows its frames' poses up front (a
+        :class:`~mrstereo.recordings.bag.BagSource`: the bag read message by message, nothing written).
     config : PipelineConfig
         Options of every stage.
     calibration : StereoCamera, optional
@@ -192,8 +199,14 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     check_mount : bool
         Check a given mount against the floor seen in the first frames and use the seen floor when they
         disagree (``MapRun.mount_warning`` says so).
+    keep_points : bool
+        Keep every frame's world points in ``MapRun.observations`` (to fuse again or replay them); False:
+        only their poses and counts, so memory stays flat however long the recording.
     """
-    if not isinstance(manifest, Manifest):
+    source = manifest if isinstance(manifest, FrameSource) else None
+    if source is not None:
+        manifest = manifest_of(source)
+    elif not isinstance(manifest, Manifest):
         manifest = read_recording(manifest)
     if not isinstance(config, PipelineConfig):
         raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
@@ -208,25 +221,26 @@ def build_map(manifest: Manifest | str | os.PathLike, *, config: PipelineConfig 
     prefer_raw = prefer_raw or calibration is not None
     config = _on_true_map(manifest, config.for_rig(stereo))
     mapper = StereoMapper(stereo, manifest.mount, config, check_mount=check_mount, odometry=odometry,
-                          pose_frame_mount=manifest.pose_frame_mount, keep_observations=True, name=str(manifest.root))
+                          pose_frame_mount=manifest.pose_frame_mount, keep_observations=keep_points or "poses",
+                          name=str(manifest.root))
     fused = None
-    with recording_source(manifest, prefer_raw=prefer_raw) as source:
-        frames = read_ahead(source, depth=2 if workers is None else workers + 1)     # decoded while matching
+    with recording_source(manifest, prefer_raw=prefer_raw) if source is None else nullcontext(source) as frames:
+        frames = read_ahead(frames, depth=2 if workers is None else workers + 1)     # decoded while matching
         if align is not None:
-            fused, frames = _aligned(mapper, manifest, frames, calibration, progress, align)
+            fused, frames = _aligned(mapper, manifest, frames, calibration, progress, align, source)
         map_frames(mapper, frames, workers=workers, scheduler=scheduler, processes=processes, progress=progress,
                    total=len(manifest.frames))
     return finish_map(mapper, rebased(manifest, mapper.mount), fusion=fused)
 
 
-def _aligned(mapper: StereoMapper, manifest: Manifest, frames, calibration, progress: bool, align):
+def _aligned(mapper: StereoMapper, manifest: Manifest, frames, calibration, progress: bool, align, source=None):
     """The floor settled on the first frames, the given poses (on its base) fused with visual odometry of the
-    whole recording; the frames with the fused poses."""
+    whole recording (read a second time: from ``source`` when given); the frames with the fused poses."""
     from ..odometry.fusion import FusionConfig, fuse_odometry
 
     first = mapper.settle(frames)
     base = rebased(manifest, mapper.mount)
-    _, vo = with_visual_odometry(base, calibration=calibration, progress=progress)
+    _, vo = with_visual_odometry(base, calibration=calibration, progress=progress, source=source)
     fused = fuse_odometry([f.pose for f in base.frames], vo.poses, vo.tracked,
                           config=FusionConfig() if align is True else align)
     poses = {k: T_from_planar(*p) for k, p in enumerate(fused.poses)}
@@ -251,17 +265,18 @@ def finish_map(mapper: StereoMapper, manifest: Manifest, *, fusion=None) -> MapR
     return MapRun(grid=occupancy, observations=mapper.observations, manifest=manifest, metrics=metrics,
                   ground_truth_map=gt, floor=mapper.floor, mount=mapper.mount, fusion=fusion,
                   range_m=mapper.range_m, mount_warning=mapper.mount_warning, odometry=mapper.odometry_metrics(),
-                  tiles=mapper.grid if isinstance(mapper.grid, TiledOccupancyGrid) else None,
+                  tiles=mapper.grid if isinstance(mapper.grid, TiledOccupancyGrid) else None, n_points=mapper.n_points,
                   trajectory=(np.array(mapper.trajectory_stamps_s), np.array(mapper.trajectory_T))
                   if mapper.trajectory_T else None)
 
-def with_visual_odometry(manifest: Manifest, *, calibration: StereoCamera | None = None, progress: bool = False):
+def with_visual_odometry(manifest: Manifest, *, calibration: StereoCamera | None = None, progress: bool = False,
+                         source=None):
     """``(recording, run)``: the recording with every frame's pose from stereo visual odometry
-    (:func:`mrstereo.pipeline.odometry.odometry_from_manifest`; a lost frame gets the motion model's
-    prediction, ``run.tracked`` says which), for a recording without poses."""
+    (:func:`mrstereo.pipeline.odometry.odometry_from_manifest`, its images from ``source`` when given; a
+    lost frame gets the motion model's prediction, ``run.tracked`` says which), for a recording without poses."""
     from .odometry import odometry_from_manifest
 
-    vo = odometry_from_manifest(manifest, calibration=calibration, progress=progress)
+    vo = odometry_from_manifest(manifest, calibration=calibration, progress=progress, source=source)
     frames = tuple(replace(f, pose=None, pose_3d=pose_3d_of(T)) for f, T in zip(manifest.frames, vo.T_world_from_base))
     return replace(manifest, frames=frames, has_poses=True), vo
 
@@ -328,7 +343,8 @@ def check_map(run: MapRun) -> None:
     ValueError
         With the likely causes: the mapping range, the camera mount, the images.
     """
-    seen = sum(len(o.obstacle_points_world) + len(o.floor_points_world) for o in run.observations)
+    seen = run.n_points if run.n_points is not None else \
+        sum(len(o.obstacle_points_world) + len(o.floor_points_world) for o in run.observations)
     if seen:
         return
     height = f"{run.floor.height_m:.2f} m" if run.floor is not None and run.floor.success else "unknown"
@@ -386,13 +402,13 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
     return files
 
 
-def check_pair_streams(manifest: Manifest) -> list[str]:
-    """Warn (one ``mrstereo: warning:`` line on the command line) when the first frames of a recording show
-    identical or swapped left and right streams (:class:`~mrstereo.rejection.streams.StreamCheck`, as a
-    :class:`StereoMapper` does); return the warnings."""
+def check_pair_streams(manifest: Manifest | FrameSource) -> list[str]:
+    """Warn (one ``mrstereo: warning:`` line on the command line) when the first frames of a recording (or a
+    source that can be read twice, a bag) show identical or swapped left and right streams
+    (:class:`~mrstereo.rejection.streams.StreamCheck`, as a :class:`StereoMapper` does); return the warnings."""
     check = StreamCheck(manifest.calibration, f"dataset {manifest.root}")
     try:
-        with recording_source(manifest) as source:
+        with recording_source(manifest) if isinstance(manifest, Manifest) else nullcontext(manifest) as source:
             for frame in itertools.islice(source, check.n_frames):
                 check.add(frame.index, frame.left, frame.right, rectified=frame.rectified)
     except (OSError, ValueError, TypeError):      # an unreadable frame: the run reports it itself

@@ -26,7 +26,7 @@ from ..camera import CameraInfo, CameraMount, StereoCamera
 from ..io import check_output_dir, decode_image, note_inputs
 from ..transforms import R_BODY_FROM_OPTICAL, T_from_position_quaternion, rotation_from_quaternion, slerp, wrap_angle
 from ._bagfiles import bag_errors, bag_inputs, check_bag_file
-from .manifest import pose_3d_of, staged_dataset
+from .manifest import FrameRecord, Manifest, pose_3d_of, staged_dataset
 from .frames import FrameSource, StereoFrame, frame_image
 
 __all__ = ["BagSource", "BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message",
@@ -694,6 +694,16 @@ class BagSource(FrameSource):
             f"{self.n_left - self.n_frames} left and {self.n_right - self.n_frames} right images without a "
             "partner image left out" if max(self.n_left, self.n_right) > self.n_frames else "",
             "" if self.has_poses else "no odometry topic and no --tf: poses from visual odometry") if note)
+
+    @property
+    def manifest(self) -> Manifest:
+        """What the bag knows of its frames before they are read, as a recording without image files:
+        every frame's stamp, pose and pan, the calibration and mount (for a run's metrics and views)."""
+        frames = tuple(FrameRecord(pose=None, pose_3d=tuple(float(v) for v in pose), pan_rad=float(pan),
+                                   stamp_s=ns / 1e9) for pose, pan, ns in zip(self.poses, self.pans, self.stamps_ns))
+        return Manifest(root=self.root, calibration=self.calibration, calibration_path=self.root, mount=self.mount,
+                        ground_truth_map=None, frames=frames, layout=self.layout, has_poses=self.has_poses,
+                        notes=self.notes)
 
     def decoded(self) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
         """``(k, left, right)`` of every frame as decoded (:func:`image_from_message`: uint8 gray or BGR, uint16)."""
