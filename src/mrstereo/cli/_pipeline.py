@@ -46,7 +46,7 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json", "
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odometry: str, align: bool,
                 workers: int | None, scheduler: str | None, processes: bool, bag: Path | None, rate_hz: float | None,
-                viewers: tuple[str, ...], record_bag: Path | None, quiet: bool, no_mount_check: bool,
+                viewers: tuple[str, ...], record_bag: Path | None, quiet: bool, no_mount_check: bool, truth,
                 **options) -> None:
     """Build an occupancy grid map from a recording.
 
@@ -74,12 +74,13 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
     recording_of(manifest, bag)                          # one of them
     bag_kw = {k: options.pop(k) for k in list(options) if k in BAG_KEYS}
     config = map_config(**options)
-    dataset, bag = read_inputs(manifest, bag, calib, rate_hz=rate_hz)      # read once: checked here, mapped below
+    dataset, bag = read_inputs(manifest, bag, calib, rate_hz=rate_hz, truth=truth)    # read once: checked, mapped below
     check_output_dir("--out", out_dir, may_hold_inputs=True)
     check_outputs({f"--out {out_dir / name}": out_dir / name for name in MAP_FILES})     # (names the file)
     inputs = [p for p in (bag if dataset is None else dataset.root, calib) if p is not None]
     viewers = check_sink_options(viewers, record_bag, out_dir / "view", inputs, output_dirs=[out_dir])
-    with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, _):
+    with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz, truth=truth) as \
+            (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes, odometry=odometry, align=align or None,
                         check_mount=not no_mount_check, keep_points=bool(viewers) or record_bag is not None)
