@@ -25,6 +25,7 @@ from ..geometry.scan import LaserScan
 from ..mapping import GridSpec
 from ..mapping.fusion import FrameObservation, fuse_step
 from ..mapping.occupancy import MappingConfig, OccupancyGrid
+from ..mapping.prior import prior_grid
 from ..mapping.tiles import TiledOccupancyGrid
 from ..matching.config import MatchingConfig
 from ..odometry import LOST, OdometryConfig, StereoOdometry
@@ -262,6 +263,10 @@ class StereoMapper:
         ``"poses"``: its observation without the points (pose, pan, counts: memory flat in the length).
     name : str
         What is mapped, for messages.
+    prior : path, RosMap or OccupancyGrid, optional
+        A saved map to continue mapping on (``map.yaml`` of an earlier run; :func:`mrstereo.mapping.prior.
+        prior_grid`: its occupied / free cells as log-odds ``l_max`` / ``l_min``, unknown ones unknown, the same
+        resolution). The frames' poses must be in its frame; the map made covers it and what is seen.
 
     Examples
     --------
@@ -281,7 +286,7 @@ class StereoMapper:
     def __init__(self, calibration: StereoCamera, mount: CameraMount | None = None,
                  config: PipelineConfig | None = None, *, check_mount: bool = True,
                  odometry: str = "auto", pose_frame_mount: CameraMount | None = None,
-                 keep_observations: bool | str = False, name: str = "the source") -> None:
+                 keep_observations: bool | str = False, name: str = "the source", prior=None) -> None:
         if not isinstance(calibration, StereoCamera):
             raise TypeError(f"calibration must be a StereoCamera, got {type(calibration).__name__}")
         if mount is not None and not isinstance(mount, CameraMount):
@@ -300,6 +305,16 @@ class StereoMapper:
                                            view_reach_m=self.range_m + 2.0)
         else:
             self.grid = OccupancyGrid(self.config.grid, config=self.config.mapping)
+        if prior is not None:
+            seed = prior_grid(prior, config=self.config.mapping, resolution_m=self.config.resolution_m,
+                              grid=self.config.grid)
+            if isinstance(self.grid, TiledOccupancyGrid):
+                try:
+                    self.grid.seed(seed)
+                except ValueError as exc:
+                    raise ValueError(f"prior {prior}: {exc} (give the map a window: --size/--origin)") from None
+            else:
+                self.grid = seed
         self._vote = FloorVote(calibration, mount, check_mount=check_mount, name=name)
         self._held: list = []
         self.streams = StreamCheck(calibration, name)

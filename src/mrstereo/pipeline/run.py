@@ -164,7 +164,7 @@ def build_map(manifest: Manifest | FrameSource | str | os.PathLike, *, config: P
               calibration: StereoCamera | None = None, prefer_raw: bool = False,
               progress: bool = True, workers: int | None = None, scheduler=None,
               processes: bool = False, odometry: str = "auto", align=None, check_mount: bool = True,
-              keep_points: bool = True) -> MapRun:
+              keep_points: bool = True, prior=None) -> MapRun:
     """Map a whole recording with a :class:`~mrstereo.pipeline.mapper.StereoMapper`; compare with the GT map if any.
 
     Parameters
@@ -202,6 +202,8 @@ def build_map(manifest: Manifest | FrameSource | str | os.PathLike, *, config: P
     keep_points : bool
         Keep every frame's world points in ``MapRun.observations`` (to fuse again or replay them); False:
         only their poses and counts, so memory stays flat however long the recording.
+    prior : path, RosMap or OccupancyGrid, optional
+        A saved map to continue on (:class:`~mrstereo.pipeline.mapper.StereoMapper`'s ``prior``).
     """
     source = manifest if isinstance(manifest, FrameSource) else None
     if source is not None:
@@ -222,7 +224,7 @@ def build_map(manifest: Manifest | FrameSource | str | os.PathLike, *, config: P
     config = _on_true_map(manifest, config.for_rig(stereo))
     mapper = StereoMapper(stereo, manifest.mount, config, check_mount=check_mount, odometry=odometry,
                           pose_frame_mount=manifest.pose_frame_mount, keep_observations=keep_points or "poses",
-                          name=str(manifest.root))
+                          name=str(manifest.root), prior=prior)
     fused = None
     with recording_source(manifest, prefer_raw=prefer_raw) if source is None else nullcontext(source) as frames:
         frames = read_ahead(frames, depth=2 if workers is None else workers + 1)     # decoded while matching
