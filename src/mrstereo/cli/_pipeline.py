@@ -71,7 +71,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
     ADDRESS (a Dask cluster) spread the frames; the map is the same bit for bit.
     """
     from ..io import check_output_dir, check_outputs, staged_dir
-    from ..pipeline.run import check_map, write_map_outputs
+    from ..evaluation.outputs import check_map, write_map_outputs
 
     check_workers(workers, scheduler, processes)
     if align and odometry == "visual":

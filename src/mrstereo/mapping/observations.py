@@ -3,7 +3,9 @@
 Each frame leaves four files (:func:`frame_outputs`): its disparity (PFM), point cloud (PLY), virtual
 scan (JSON) and what it adds to the map (:class:`~mrstereo.mapping.fusion.FrameObservation`, ``.npz``)
 with a fingerprint of what it was computed from (:func:`digest` of the inputs, :func:`file_stamp` of
-files); :func:`resume_frame` reads back a frame whose files are whole and whose fingerprint matches.
+files; :func:`dataset_fingerprint`, :func:`frame_fingerprint`, :func:`map_fingerprint`);
+:func:`resume_frame` reads back a frame whose files are whole and whose fingerprint matches. Each dataset
+has its own output folder (:func:`output_names`), claimed by its ``dataset.json``.
 Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -11,17 +13,25 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
+from .. import __version__
+from ..camera import mount_entry
 from ..geometry.ply import read_ply, write_ply
 from ..geometry.scan import write_scan_json
 from ..io import atomic_write, read_pfm, write_disparity
 from .fusion import FrameObservation
+from .rosmap import ros_map_files
 
 __all__ = ["save_observation", "load_observation", "observation_fingerprint", "frame_outputs", "save_frame",
-           "resume_frame", "digest", "file_stamp"]
+           "resume_frame", "digest", "file_stamp", "dataset_fingerprint", "frame_fingerprint", "map_fingerprint",
+           "output_owner", "output_names", "DATASET_RECORD"]
+
+DATASET_RECORD = "dataset.json"
+"""The file that claims a dataset's output folder (its ``root``)."""
 
 
 def digest(value) -> str:
@@ -110,3 +120,63 @@ def _optional_float(value) -> float | None:
     """A scalar saved by :func:`save_observation` (NaN: None)."""
     value = float(value)
     return None if np.isnan(value) else value
+
+
+def _frame_files(record) -> list:
+    return [file_stamp(p) for p in (record.left, record.right, record.left_rect, record.right_rect)]
+
+
+def dataset_fingerprint(m, config, floor_frames: int) -> str:
+    """What every frame of ``m`` depends on besides its own files: calibration, mount (or the frames the
+    floor is estimated from), the options of the per-frame chain, mrstereo's version."""
+    mount = mount_entry(m.mount) if m.mount is not None else \
+        {"estimated from": [_frame_files(r) for r in m.frames[:floor_frames]]}
+    chain = {k: repr(getattr(config, k)) for k in ("preset", "max_disparity_px", "matching", "rejection",
+                                                   "obstacles", "free_space")}
+    return digest({"calibration": m.calibration.to_dict(), "mount": mount, "chain": chain,
+                    "version": __version__})
+
+
+def frame_fingerprint(base: str, record) -> str:
+    return digest([base, _frame_files(record), list(record.pose), record.pan_rad])
+
+
+def map_fingerprint(m, frames: list[str], config) -> str:
+    """What a map depends on: its frames' fingerprints, the grid and fusion options, the ground truth it is
+    compared with."""
+    truth = [list(f.true_pose) if f.true_pose is not None else None for f in m.frames]
+    gt = [file_stamp(p) for p in ros_map_files(m.ground_truth_map)] if m.ground_truth_map is not None else None
+    return digest({"frames": frames, "grid": repr(config.grid), "mapping": repr(config.mapping),
+                    "range": config.obstacles.max_range_m, "ground_truth": gt, "true_poses": truth})
+
+
+
+def output_owner(folder: Path) -> str | None:
+    """The dataset root recorded in an output folder's ``dataset.json`` ("" for a folder without one)."""
+    if not folder.exists():
+        return None
+    try:
+        return str(json.loads((folder / DATASET_RECORD).read_text(encoding="utf-8"))["root"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return ""
+
+
+def output_names(manifests, out: Path) -> list[str]:
+    """One output folder name per dataset, never shared: the dataset folder's name, or with a hash of its
+    path (``ds-1a2b3c4d``) when another dataset of the run has that name or the folder already holds
+    something else (another dataset's results, or anything not written by a batch)."""
+    bases = [(m.root.parent.name if m.root.name == "mav0" else m.root.name) or "dataset"    # EuRoC: the sequence
+             for m in manifests]
+    count = Counter(bases)
+    names = []
+    for m, base in zip(manifests, bases):
+        if count[base] > 1 or output_owner(out / base) not in (None, str(m.root)):
+            base = f"{base}-{hashlib.sha256(str(m.root).encode()).hexdigest()[:8]}"
+            if output_owner(out / base) not in (None, str(m.root)):
+                raise ValueError(f"out_dir {out}: the folder {base} holds other results; choose another output "
+                                 "folder")
+        names.append(base)
+    clash = [n for n, k in Counter(names).items() if k > 1]
+    if clash:
+        raise ValueError(f"two datasets would share the output folder {out / clash[0]}; rename one of them")
+    return names

@@ -61,7 +61,7 @@ def open_sinks(stereo: StereoCamera, view_stem: str | os.PathLike, *, viewers: S
 
 
 def replay_map_run(run, sinks: Sequence, *, config) -> None:
-    """Send a finished map run (:class:`mrstereo.pipeline.run.MapRun`) to ``sinks`` frame by frame: the
+    """Send a finished map run (:class:`mrstereo.evaluation.outputs.MapRun`) to ``sinks`` frame by frame: the
     pose, the obstacle points back in the robot frame, the scan they make, the map as fused up to the
     frame and, with the last frame, the run's map as written (the frames' images are not kept by a map run)."""
     stereo = run.manifest.calibration
