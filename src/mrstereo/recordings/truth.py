@@ -55,15 +55,6 @@ def check_truth(truth) -> None:
         raise FileNotFoundError(f"ground truth file not found: {truth}")
 
 
-def _rows(path: Path) -> list[tuple[int, list[str]]]:
-    rows = []
-    for n, line in enumerate(read_text(path, "ground truth", max_bytes=1 << 30).splitlines(), 1):
-        line = line.strip()
-        if line and not line.startswith("#"):
-            rows.append((n, line.replace(",", " ").split()))
-    return rows
-
-
 def read_poses_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """The poses of a TUM file or a EuRoC csv: ``(stamps_ns (N,) int64, T_world_from_frame (N, 4, 4))``.
 
@@ -80,7 +71,9 @@ def read_poses_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         A line that is neither (naming the file and line), a zero quaternion, no pose.
     """
     path = Path(path)
-    rows = _rows(path)
+    rows = [(n, line.replace(",", " ").split())
+            for n, line in enumerate(read_text(path, "ground truth", max_bytes=1 << 30).splitlines(), 1)
+            if line.strip() and not line.strip().startswith("#")]
     euroc = bool(rows) and rows[0][1][0].isdigit() and len(rows[0][1]) >= 8 and len(rows[0][1][0]) > 12
     stamps, poses = [], []
     for n, row in rows:
