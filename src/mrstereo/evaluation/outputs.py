@@ -30,7 +30,8 @@ from ..recordings.manifest import Manifest
 from ..transforms import T_from_planar, planar_from_T
 
 __all__ = ["MapRun", "map_vs_truth", "check_map", "write_map_outputs", "LiveRun", "write_live_outputs",
-           "LIVE_FILES", "MAP_FILES", "MAP_RECORD", "write_map_dir", "map_dir_current"]
+           "LIVE_FILES", "MAP_FILES", "MAP_RECORD", "write_map_dir", "map_dir_current", "DatasetSummary",
+           "BatchSummary"]
 
 MAP_RECORD = "batch.json"
 """What a map folder written by :func:`write_map_dir` was computed from (its fingerprint) and holds."""
@@ -290,3 +291,42 @@ def write_map_dir(run: MapRun, map_dir: Path, record: dict) -> None:
         record = dict(record, files=sorted(p.name for p in written.values()))
         (tmp / MAP_RECORD).write_text(json.dumps(record, indent=1) + "\n")
         replace_dir(tmp, map_dir)
+
+
+@dataclass(frozen=True)
+class DatasetSummary:
+    """What :func:`~mrstereo.pipeline.batch.run_batch` did with one dataset."""
+
+    name: str
+    manifest: Path
+    out_dir: Path
+    n_frames: int
+    n_computed: int
+    n_skipped: int
+    n_failed: int
+    map_status: str = ""
+    floor: object | None = None
+    """The floor the frames used (:class:`mrstereo.geometry.GroundPlane`); None when all was kept."""
+    fingerprint: str = ""
+    """The map's fingerprint (what it was computed from)."""
+    mount_warning: str | None = None
+    """Why the dataset's mount was not used (:class:`mrstereo.geometry.floor.FloorVote`)."""
+
+    def to_dict(self) -> dict:
+        out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
+               "frames": self.n_frames, "computed": self.n_computed, "skipped": self.n_skipped,
+               "failed": self.n_failed, "map": self.map_status, "fingerprint": self.fingerprint}
+        if self.floor is not None:
+            out["floor"] = self.floor.summary()
+        if self.mount_warning is not None:
+            out["mount_warning"] = self.mount_warning
+        return out
+
+
+@dataclass(frozen=True)
+class BatchSummary:
+    """Result of :func:`~mrstereo.pipeline.batch.run_batch` (also written to ``OUT/summary.json``)."""
+
+    path: Path
+    datasets: tuple[DatasetSummary, ...]
+    failures: tuple[dict, ...] = field(default_factory=tuple)

@@ -13,12 +13,12 @@ from __future__ import annotations
 import itertools
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from .. import __version__
 from ..camera import StereoCamera, mount_entry
-from ..evaluation.outputs import map_dir_current, write_map_dir
+from ..evaluation.outputs import BatchSummary, DatasetSummary, map_dir_current, write_map_dir
 from ..io import Inputs, atomic_write, check_output_dir, check_outputs, remove_stale_temporaries
 from ..mapping.fusion import FrameObservation, world_observation
 from ..mapping.observations import (DATASET_RECORD, dataset_fingerprint, digest, file_stamp, frame_fingerprint,
@@ -75,45 +75,6 @@ def process_frame(task: FrameTask | tuple[FrameTask, tuple]) -> FrameObservation
                left_rect=observed.left_rect, scan=observed.scan,
                comment=f"mrstereo {task.dataset} frame {task.index} (frame: robot, metres)")
     return observation
-
-
-@dataclass(frozen=True)
-class DatasetSummary:
-    """What :func:`run_batch` did with one dataset."""
-
-    name: str
-    manifest: Path
-    out_dir: Path
-    n_frames: int
-    n_computed: int
-    n_skipped: int
-    n_failed: int
-    map_status: str = ""
-    floor: object | None = None
-    """The floor the frames used (:class:`mrstereo.geometry.GroundPlane`); None when all was kept."""
-    fingerprint: str = ""
-    """The map's fingerprint (what it was computed from)."""
-    mount_warning: str | None = None
-    """Why the dataset's mount was not used (:class:`mrstereo.geometry.floor.FloorVote`)."""
-
-    def to_dict(self) -> dict:
-        out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
-               "frames": self.n_frames, "computed": self.n_computed, "skipped": self.n_skipped,
-               "failed": self.n_failed, "map": self.map_status, "fingerprint": self.fingerprint}
-        if self.floor is not None:
-            out["floor"] = self.floor.summary()
-        if self.mount_warning is not None:
-            out["mount_warning"] = self.mount_warning
-        return out
-
-
-@dataclass(frozen=True)
-class BatchSummary:
-    """Result of :func:`run_batch` (also written to ``OUT/summary.json``)."""
-
-    path: Path
-    datasets: tuple[DatasetSummary, ...]
-    failures: tuple[dict, ...] = field(default_factory=tuple)
 
 
 @dataclass
