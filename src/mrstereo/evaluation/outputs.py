@@ -137,6 +137,22 @@ def check_map(run: MapRun) -> None:
                      "or leave it out to have the floor estimated")
 
 
+def _floor_and_window(run, *, range_m: float | None = None) -> dict:
+    """metrics.json's ``floor``, ``mount``, ``mount_warning`` (when known) and ``map_window`` of a run."""
+    out = {}
+    if run.floor is not None:
+        out["floor"] = run.floor.summary()
+    if run.mount is not None:
+        out["mount"] = mount_entry(run.mount)
+    if run.mount_warning:
+        out["mount_warning"] = run.mount_warning
+    g = run.grid.grid
+    out["map_window"] = {"origin_m": [g.origin_x_m, g.origin_y_m], "size_m": [g.width_m, g.height_m],
+                         "resolution_m": g.resolution_m, **({} if range_m is None else {"range_m": range_m}),
+                         "points_outside": int(run.grid.points_outside)}
+    return out
+
+
 def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
     """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy, metrics.json and trajectory.txt (the
     mapped frames' poses, TUM: ``mrstereo plan --start robot`` starts from its last); for a map that grew also
@@ -152,16 +168,7 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
     files = {"map_yaml": out / "map.yaml", "map_pgm": out / "map.pgm", "map_png": out / "map.png",
              "log_odds": out / "log_odds.npy"}
     report = run.metrics.to_dict() if run.metrics is not None else {}
-    if run.floor is not None:
-        report["floor"] = run.floor.summary()
-    if run.mount is not None:
-        report["mount"] = mount_entry(run.mount)
-    if run.mount_warning:
-        report["mount_warning"] = run.mount_warning
-    g = run.grid.grid
-    report["map_window"] = {"origin_m": [g.origin_x_m, g.origin_y_m], "size_m": [g.width_m, g.height_m],
-                            "resolution_m": g.resolution_m, "range_m": run.range_m,
-                            "points_outside": int(run.grid.points_outside)}
+    report.update(_floor_and_window(run, range_m=run.range_m))
     report.update(run.pose_metrics())
     if report:
         with atomic_write(out / "metrics.json") as tmp:
@@ -234,15 +241,7 @@ class LiveRun:
                "stage_ms_per_frame": {k: round(v, 2) for k, v in self.stage_ms.items()}}
         if self.duration_s > 0 and self.cpu_s:
             out["cores_used"] = round(self.cpu_s.get("process", 0.0) / self.duration_s, 2)
-        if self.floor is not None:
-            out["floor"] = self.floor.summary()
-        if self.mount is not None:
-            out["mount"] = mount_entry(self.mount)
-        if self.mount_warning:
-            out["mount_warning"] = self.mount_warning
-        g = self.grid.grid
-        out["map_window"] = {"origin_m": [g.origin_x_m, g.origin_y_m], "size_m": [g.width_m, g.height_m],
-                             "resolution_m": g.resolution_m, "points_outside": int(self.grid.points_outside)}
+        out.update(_floor_and_window(self))
         return out
 
 
