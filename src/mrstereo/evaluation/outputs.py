@@ -22,6 +22,7 @@ from ..mapping import RosMap, read_ros_map, write_ros_map
 from ..mapping.figures import plot_map
 from ..mapping.fusion import FrameObservation
 from ..mapping.metrics import MapMetrics, map_metrics, views_of_poses
+from ..mapping.observations import content_digest
 from ..mapping.occupancy import OccupancyGrid
 from ..mapping.rosmap import ros_map_on_grid
 from ..mapping.tiles import TiledOccupancyGrid
@@ -268,18 +269,20 @@ def write_live_outputs(out_dir: Path, snapshot: dict) -> dict[str, Path]:
 
 
 def map_dir_current(map_dir: Path, fingerprint: str) -> bool:
-    """The map in ``map_dir`` is complete and was computed from what ``fingerprint`` says."""
+    """The map in ``map_dir`` is complete, was computed from what ``fingerprint`` says and its files are
+    those written then (their bytes' hash)."""
     try:
         record = json.loads((map_dir / MAP_RECORD).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        files = record.get("files") or MAP_FILES
+        return (record.get("fingerprint") == fingerprint and not record.get("failed")
+                and record.get("content") == content_digest(map_dir / name for name in files))
+    except (OSError, ValueError, TypeError):
         return False
-    files = record.get("files") or MAP_FILES
-    return (record.get("fingerprint") == fingerprint and not record.get("failed")
-            and all((map_dir / name).is_file() for name in files))
 
 
 def write_map_dir(run: MapRun, map_dir: Path, record: dict) -> None:
-    """Write the map outputs into a temporary folder and swap it into place in one step.
+    """Write the map outputs into a temporary folder and swap it into place in one step, with ``record``
+    and the hash of the files (:func:`map_dir_current`) in its ``batch.json``.
 
     The temporary folder (``.mrstereo-tmp-PID-XXXXXXXX.map`` beside ``map_dir``) is removed on failure;
     one left by a killed run is removed by the next :func:`~mrstereo.pipeline.batch.run_batch` on the same output.
@@ -287,7 +290,8 @@ def write_map_dir(run: MapRun, map_dir: Path, record: dict) -> None:
     with temporary_dir(map_dir.parent, prefix="map") as staging:
         tmp = staging / "map"
         written = write_map_outputs(run, tmp)
-        record = dict(record, files=sorted(p.name for p in written.values()))
+        names = sorted(p.name for p in written.values())
+        record = dict(record, files=names, content=content_digest(tmp / name for name in names))
         (tmp / MAP_RECORD).write_text(json.dumps(record, indent=1) + "\n")
         replace_dir(tmp, map_dir)
 
