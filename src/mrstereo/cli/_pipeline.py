@@ -116,7 +116,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
                    f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg on average")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
     if viewers or record_bag is not None:
-        from ..pipeline.sinks import replay_map_run
+        from ..mapping.sinks import replay_map_run
 
         replayed_to_sinks(lambda sinks: replay_map_run(run, sinks, config=config), run.manifest.calibration,
                           out_dir / "view", viewers, record_bag)

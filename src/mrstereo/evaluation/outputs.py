@@ -22,6 +22,7 @@ from ..mapping import RosMap, read_ros_map, write_ros_map
 from ..mapping.figures import plot_map
 from ..mapping.fusion import FrameObservation
 from ..mapping.metrics import MapMetrics, map_metrics, views_of_poses
+from ..mapping.observations import content_digest
 from ..mapping.occupancy import OccupancyGrid
 from ..mapping.rosmap import ros_map_on_grid
 from ..mapping.tiles import TiledOccupancyGrid
@@ -30,7 +31,8 @@ from ..recordings.manifest import Manifest
 from ..transforms import T_from_planar, planar_from_T
 
 __all__ = ["MapRun", "map_vs_truth", "check_map", "write_map_outputs", "LiveRun", "write_live_outputs",
-           "LIVE_FILES", "MAP_FILES", "MAP_RECORD", "write_map_dir", "map_dir_current"]
+           "LIVE_FILES", "MAP_FILES", "MAP_RECORD", "write_map_dir", "map_dir_current", "DatasetSummary",
+           "BatchSummary"]
 
 MAP_RECORD = "batch.json"
 """What a map folder written by :func:`write_map_dir` was computed from (its fingerprint) and holds."""
@@ -136,6 +138,22 @@ def check_map(run: MapRun) -> None:
                      "or leave it out to have the floor estimated")
 
 
+def _floor_and_window(run, *, range_m: float | None = None) -> dict:
+    """metrics.json's ``floor``, ``mount``, ``mount_warning`` (when known) and ``map_window`` of a run."""
+    out = {}
+    if run.floor is not None:
+        out["floor"] = run.floor.summary()
+    if run.mount is not None:
+        out["mount"] = mount_entry(run.mount)
+    if run.mount_warning:
+        out["mount_warning"] = run.mount_warning
+    g = run.grid.grid
+    out["map_window"] = {"origin_m": [g.origin_x_m, g.origin_y_m], "size_m": [g.width_m, g.height_m],
+                         "resolution_m": g.resolution_m, **({} if range_m is None else {"range_m": range_m}),
+                         "points_outside": int(run.grid.points_outside)}
+    return out
+
+
 def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
     """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy, metrics.json and trajectory.txt (the
     mapped frames' poses, TUM: ``mrstereo plan --start robot`` starts from its last); for a map that grew also
@@ -151,16 +169,7 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
     files = {"map_yaml": out / "map.yaml", "map_pgm": out / "map.pgm", "map_png": out / "map.png",
              "log_odds": out / "log_odds.npy"}
     report = run.metrics.to_dict() if run.metrics is not None else {}
-    if run.floor is not None:
-        report["floor"] = run.floor.summary()
-    if run.mount is not None:
-        report["mount"] = mount_entry(run.mount)
-    if run.mount_warning:
-        report["mount_warning"] = run.mount_warning
-    g = run.grid.grid
-    report["map_window"] = {"origin_m": [g.origin_x_m, g.origin_y_m], "size_m": [g.width_m, g.height_m],
-                            "resolution_m": g.resolution_m, "range_m": run.range_m,
-                            "points_outside": int(run.grid.points_outside)}
+    report.update(_floor_and_window(run, range_m=run.range_m))
     report.update(run.pose_metrics())
     if report:
         with atomic_write(out / "metrics.json") as tmp:
@@ -233,15 +242,7 @@ class LiveRun:
                "stage_ms_per_frame": {k: round(v, 2) for k, v in self.stage_ms.items()}}
         if self.duration_s > 0 and self.cpu_s:
             out["cores_used"] = round(self.cpu_s.get("process", 0.0) / self.duration_s, 2)
-        if self.floor is not None:
-            out["floor"] = self.floor.summary()
-        if self.mount is not None:
-            out["mount"] = mount_entry(self.mount)
-        if self.mount_warning:
-            out["mount_warning"] = self.mount_warning
-        g = self.grid.grid
-        out["map_window"] = {"origin_m": [g.origin_x_m, g.origin_y_m], "size_m": [g.width_m, g.height_m],
-                             "resolution_m": g.resolution_m, "points_outside": int(self.grid.points_outside)}
+        out.update(_floor_and_window(self))
         return out
 
 
@@ -268,18 +269,20 @@ def write_live_outputs(out_dir: Path, snapshot: dict) -> dict[str, Path]:
 
 
 def map_dir_current(map_dir: Path, fingerprint: str) -> bool:
-    """The map in ``map_dir`` is complete and was computed from what ``fingerprint`` says."""
+    """The map in ``map_dir`` is complete, was computed from what ``fingerprint`` says and its files are
+    those written then (their bytes' hash)."""
     try:
         record = json.loads((map_dir / MAP_RECORD).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        files = record.get("files") or MAP_FILES
+        return (record.get("fingerprint") == fingerprint and not record.get("failed")
+                and record.get("content") == content_digest(map_dir / name for name in files))
+    except (OSError, ValueError, TypeError):
         return False
-    files = record.get("files") or MAP_FILES
-    return (record.get("fingerprint") == fingerprint and not record.get("failed")
-            and all((map_dir / name).is_file() for name in files))
 
 
 def write_map_dir(run: MapRun, map_dir: Path, record: dict) -> None:
-    """Write the map outputs into a temporary folder and swap it into place in one step.
+    """Write the map outputs into a temporary folder and swap it into place in one step, with ``record``
+    and the hash of the files (:func:`map_dir_current`) in its ``batch.json``.
 
     The temporary folder (``.mrstereo-tmp-PID-XXXXXXXX.map`` beside ``map_dir``) is removed on failure;
     one left by a killed run is removed by the next :func:`~mrstereo.pipeline.batch.run_batch` on the same output.
@@ -287,6 +290,46 @@ def write_map_dir(run: MapRun, map_dir: Path, record: dict) -> None:
     with temporary_dir(map_dir.parent, prefix="map") as staging:
         tmp = staging / "map"
         written = write_map_outputs(run, tmp)
-        record = dict(record, files=sorted(p.name for p in written.values()))
+        names = sorted(p.name for p in written.values())
+        record = dict(record, files=names, content=content_digest(tmp / name for name in names))
         (tmp / MAP_RECORD).write_text(json.dumps(record, indent=1) + "\n")
         replace_dir(tmp, map_dir)
+
+
+@dataclass(frozen=True)
+class DatasetSummary:
+    """What :func:`~mrstereo.pipeline.batch.run_batch` did with one dataset."""
+
+    name: str
+    manifest: Path
+    out_dir: Path
+    n_frames: int
+    n_computed: int
+    n_skipped: int
+    n_failed: int
+    map_status: str = ""
+    floor: object | None = None
+    """The floor the frames used (:class:`mrstereo.geometry.GroundPlane`); None when all was kept."""
+    fingerprint: str = ""
+    """The map's fingerprint (what it was computed from)."""
+    mount_warning: str | None = None
+    """Why the dataset's mount was not used (:class:`mrstereo.geometry.floor.FloorVote`)."""
+
+    def to_dict(self) -> dict:
+        out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
+               "frames": self.n_frames, "computed": self.n_computed, "skipped": self.n_skipped,
+               "failed": self.n_failed, "map": self.map_status, "fingerprint": self.fingerprint}
+        if self.floor is not None:
+            out["floor"] = self.floor.summary()
+        if self.mount_warning is not None:
+            out["mount_warning"] = self.mount_warning
+        return out
+
+
+@dataclass(frozen=True)
+class BatchSummary:
+    """Result of :func:`~mrstereo.pipeline.batch.run_batch` (also written to ``OUT/summary.json``)."""
+
+    path: Path
+    datasets: tuple[DatasetSummary, ...]
+    failures: tuple[dict, ...] = field(default_factory=tuple)

@@ -218,7 +218,8 @@ class Observed:
     pan_rad: float
     mount: CameraMount | None
     """The mount the chain used; None: only the floor was fitted (the floor is not known yet)."""
-    ground: GroundPlane
+    ground: GroundPlane | None
+    """The floor of the frame (None: not looked for, the pair only rectified for visual odometry)."""
     T_world_from_base: np.ndarray | None = None
     T_world_from_base_true: np.ndarray | None = None
     obstacle_points_robot: np.ndarray | None = None
@@ -245,7 +246,7 @@ def observe_pair(frame, stereo: StereoCamera, mount: CameraMount | None, config,
     """The per-frame chain of one :class:`~mrstereo.recordings.sources.StereoFrame`: rectify, match, reject,
     3-D, scan with ``mount`` and ``config`` (a :class:`~mrstereo.pipeline.mapper.PipelineConfig`: its
     ``pair_options()`` and ``obstacle_config``); with ``mount`` None only the floor fit (without a mount,
-    without free space).
+    without free space); with ``config`` None only the rectified pair (what visual odometry alone needs).
     ``fit_floor``: with a mount, also the floor fitted without it (``floor_fit``: a given mount checked).
     Pure: runs on any thread or worker. ``keep_images`` False: no images in the result (a worker's reply
     when the poses are given)."""
@@ -259,6 +260,9 @@ def observe_pair(frame, stereo: StereoCamera, mount: CameraMount | None, config,
             left, right = stereo.rectify(left, right)
     base = {"index": frame.index, "stamp_s": float(frame.stamp_s), "pan_rad": float(frame.pan_rad),
             "T_world_from_base": frame.T_world_from_base, "T_world_from_base_true": frame.T_world_from_base_true}
+    if config is None:
+        return Observed(**base, mount=mount, ground=None, left_rect=left, right_rect=right,
+                        time_s=time.perf_counter() - start)
     if mount is None:
         options = replace(config, free_space=None).pair_options()
         ground = obstacles_from_pair(left, right, replace(stereo, mount=None), rectified=True, mount=None,

@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 from collections import Counter
 from pathlib import Path
 
@@ -20,15 +21,15 @@ import numpy as np
 
 from .. import __version__
 from ..camera import mount_entry
-from ..geometry.ply import read_ply, write_ply
+from ..geometry.ply import write_ply
 from ..geometry.scan import write_scan_json
-from ..io import atomic_write, read_pfm, write_disparity
+from ..io import atomic_write, write_disparity
 from .fusion import FrameObservation
 from .rosmap import ros_map_files
 
 __all__ = ["save_observation", "load_observation", "observation_fingerprint", "frame_outputs", "save_frame",
            "resume_frame", "digest", "file_stamp", "dataset_fingerprint", "frame_fingerprint", "map_fingerprint",
-           "output_owner", "output_names", "DATASET_RECORD"]
+           "output_owner", "output_names", "DATASET_RECORD", "content_digest", "remove_stale_frames", "claim_folder", "bag_fingerprint"]
 
 DATASET_RECORD = "dataset.json"
 """The file that claims a dataset's output folder (its ``root``)."""
@@ -51,6 +52,17 @@ def file_stamp(path: Path | None) -> list | None:
     return [str(path), st.st_size, st.st_mtime_ns]
 
 
+def content_digest(paths) -> str:
+    """A hash of the files' bytes, in order (a changed, truncated or edited file changes it)."""
+    h = hashlib.sha256()
+    for path in paths:
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+        h.update(b"\0")
+    return h.hexdigest()[:32]
+
+
 def frame_outputs(frames_dir: str | os.PathLike, index: int) -> dict[str, Path]:
     """The four files of frame ``index``: disparity, cloud, scan, observation."""
     base = Path(frames_dir) / f"{index:06d}"
@@ -60,30 +72,48 @@ def frame_outputs(frames_dir: str | os.PathLike, index: int) -> dict[str, Path]:
 
 def save_frame(files: dict[str, Path], obs: FrameObservation, *, fingerprint: str, disparity_px: np.ndarray,
                points_robot_image: np.ndarray, left_rect: np.ndarray, scan, comment: str = "") -> None:
-    """Write a frame's four files (:func:`frame_outputs`), each atomically, the observation last."""
+    """Write a frame's four files (:func:`frame_outputs`), each atomically, the observation last with the
+    fingerprint of its inputs and the bytes of the other three (:func:`resume_frame` checks both)."""
     import cv2
 
     gray = cv2.cvtColor(left_rect, cv2.COLOR_BGR2GRAY) if left_rect.ndim == 3 else left_rect
     write_disparity(files["disparity"], disparity_px)
     write_ply(files["cloud"], points_robot_image.reshape(-1, 3), intensity=gray.ravel(), comment=comment)
     write_scan_json(files["scan"], scan)
-    save_observation(files["observation"], obs, fingerprint)
+    save_observation(files["observation"], obs, _with_files(fingerprint, files))
+
+
+def _with_files(fingerprint: str, files: dict[str, Path]) -> str:
+    return digest([fingerprint, content_digest(files[k] for k in ("disparity", "cloud", "scan"))])
 
 
 def resume_frame(files: dict[str, Path], fingerprint: str) -> FrameObservation | None:
-    """The observation of a finished frame, or None when one of its four files is missing or unreadable or
-    it was computed from other inputs or options (then the frame is computed again)."""
+    """The observation of a finished frame, or None when one of its four files is missing, unreadable or
+    changed since it was written, or it was computed from other inputs or options (then the frame is
+    computed again)."""
     if not all(p.is_file() for p in files.values()):
         return None
     try:
-        if observation_fingerprint(files["observation"]) != fingerprint:
+        if observation_fingerprint(files["observation"]) != _with_files(fingerprint, files):
             return None
-        read_pfm(files["disparity"])
-        json.loads(files["scan"].read_text(encoding="utf-8"))
-        read_ply(files["cloud"])
         return load_observation(files["observation"])
     except Exception:                  # any damage: recompute (the files are rewritten atomically)
         return None
+
+
+def remove_stale_frames(frames_dir: str | os.PathLike, n_frames: int) -> list[Path]:
+    """Remove the files :func:`save_frame` wrote for frames ``n_frames`` and on (frames no longer in the
+    recording); nothing else in ``frames_dir`` is touched. Returns the files removed."""
+    removed = []
+    for path in Path(frames_dir).glob("*"):
+        match = _FRAME_FILE.fullmatch(path.name)
+        if match and int(match.group(1)) >= n_frames and path.is_file():
+            path.unlink()
+            removed.append(path)
+    return removed
+
+
+_FRAME_FILE = re.compile(r"(\d{6,})(\.pfm|\.ply|\.scan\.json|\.obs\.npz)")
 
 
 def save_observation(path: str | os.PathLike, obs: FrameObservation, fingerprint: str = "") -> None:
@@ -126,15 +156,16 @@ def _frame_files(record) -> list:
     return [file_stamp(p) for p in (record.left, record.right, record.left_rect, record.right_rect)]
 
 
-def dataset_fingerprint(m, config, floor_frames: int) -> str:
+def dataset_fingerprint(m, config, floor_frames: int, check_mount: bool = True) -> str:
     """What every frame of ``m`` depends on besides its own files: calibration, mount (or the frames the
-    floor is estimated from), the options of the per-frame chain, mrstereo's version."""
+    floor is estimated from) and whether it is checked, the options of the per-frame chain and of the
+    visual odometry (the poses of a recording without any), mrstereo's version."""
     mount = mount_entry(m.mount) if m.mount is not None else \
         {"estimated from": [_frame_files(r) for r in m.frames[:floor_frames]]}
     chain = {k: repr(getattr(config, k)) for k in ("preset", "max_disparity_px", "matching", "rejection",
-                                                   "obstacles", "free_space")}
-    return digest({"calibration": m.calibration.to_dict(), "mount": mount, "chain": chain,
-                    "version": __version__})
+                                                   "obstacles", "free_space", "odometry")}
+    return digest({"calibration": m.calibration.to_dict(), "mount": mount, "check_mount": check_mount,
+                   "chain": chain, "version": __version__})
 
 
 def frame_fingerprint(base: str, record) -> str:
@@ -142,12 +173,12 @@ def frame_fingerprint(base: str, record) -> str:
 
 
 def map_fingerprint(m, frames: list[str], config) -> str:
-    """What a map depends on: its frames' fingerprints, the grid and fusion options, the ground truth it is
-    compared with."""
+    """What a map depends on: its frames' fingerprints, every option of ``config`` (a
+    :class:`~mrstereo.pipeline.mapper.PipelineConfig`: window, resolution, fusion, range...), the ground truth
+    it is compared with."""
     truth = [list(f.true_pose) if f.true_pose is not None else None for f in m.frames]
     gt = [file_stamp(p) for p in ros_map_files(m.ground_truth_map)] if m.ground_truth_map is not None else None
-    return digest({"frames": frames, "grid": repr(config.grid), "mapping": repr(config.mapping),
-                    "range": config.obstacles.max_range_m, "ground_truth": gt, "true_poses": truth})
+    return digest({"frames": frames, "config": repr(config), "ground_truth": gt, "true_poses": truth})
 
 
 
@@ -159,6 +190,24 @@ def output_owner(folder: Path) -> str | None:
         return str(json.loads((folder / DATASET_RECORD).read_text(encoding="utf-8"))["root"])
     except (OSError, ValueError, KeyError, TypeError):
         return ""
+
+
+def bag_fingerprint(source, config, check_mount: bool) -> str:
+    """What the map of a bag (a :class:`~mrstereo.recordings.bag.BagSource`) depends on: its files, topics
+    and mount, every option of ``config``, the mount check, mrstereo's version."""
+    root = Path(source.root)
+    files = sorted(p for p in root.iterdir() if p.is_file()) if root.is_dir() else [root]
+    return digest({"bag": [file_stamp(p) for p in files],
+                   "topics": [source.left_topic, source.right_topic, source.pose_source, source.mount_source],
+                   "mount": mount_entry(source.mount) if source.mount is not None else None,
+                   "config": repr(config), "check_mount": check_mount, "version": __version__})
+
+
+def claim_folder(folder: Path, root, manifest) -> None:
+    """Mark ``folder`` as the output of the recording at ``root`` (its ``dataset.json``) unless it is."""
+    if output_owner(folder) != str(root):
+        with atomic_write(folder / DATASET_RECORD) as tmp:
+            tmp.write_text(json.dumps({"root": str(root), "manifest": str(manifest)}) + "\n")
 
 
 def output_names(manifests, out: Path) -> list[str]:

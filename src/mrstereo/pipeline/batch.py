@@ -13,16 +13,15 @@ from __future__ import annotations
 import itertools
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
-from .. import __version__
-from ..camera import StereoCamera, mount_entry
-from ..evaluation.outputs import map_dir_current, write_map_dir
+from ..camera import StereoCamera
+from ..evaluation.outputs import BatchSummary, DatasetSummary, map_dir_current, write_map_dir
 from ..io import Inputs, atomic_write, check_output_dir, check_outputs, remove_stale_temporaries
 from ..mapping.fusion import FrameObservation, world_observation
-from ..mapping.observations import (DATASET_RECORD, dataset_fingerprint, digest, file_stamp, frame_fingerprint,
-                                    frame_outputs, map_fingerprint, output_names, output_owner, resume_frame,
+from ..mapping.observations import (bag_fingerprint, claim_folder, dataset_fingerprint, digest, frame_fingerprint,
+                                    frame_outputs, map_fingerprint, output_names, remove_stale_frames, resume_frame,
                                     save_frame)
 from ..recordings.bag import BagSource, bag_inputs
 from ..recordings.layouts import is_bag, read_recording
@@ -77,45 +76,6 @@ def process_frame(task: FrameTask | tuple[FrameTask, tuple]) -> FrameObservation
     return observation
 
 
-@dataclass(frozen=True)
-class DatasetSummary:
-    """What :func:`run_batch` did with one dataset."""
-
-    name: str
-    manifest: Path
-    out_dir: Path
-    n_frames: int
-    n_computed: int
-    n_skipped: int
-    n_failed: int
-    map_status: str = ""
-    floor: object | None = None
-    """The floor the frames used (:class:`mrstereo.geometry.GroundPlane`); None when all was kept."""
-    fingerprint: str = ""
-    """The map's fingerprint (what it was computed from)."""
-    mount_warning: str | None = None
-    """Why the dataset's mount was not used (:class:`mrstereo.geometry.floor.FloorVote`)."""
-
-    def to_dict(self) -> dict:
-        out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
-               "frames": self.n_frames, "computed": self.n_computed, "skipped": self.n_skipped,
-               "failed": self.n_failed, "map": self.map_status, "fingerprint": self.fingerprint}
-        if self.floor is not None:
-            out["floor"] = self.floor.summary()
-        if self.mount_warning is not None:
-            out["mount_warning"] = self.mount_warning
-        return out
-
-
-@dataclass(frozen=True)
-class BatchSummary:
-    """Result of :func:`run_batch` (also written to ``OUT/summary.json``)."""
-
-    path: Path
-    datasets: tuple[DatasetSummary, ...]
-    failures: tuple[dict, ...] = field(default_factory=tuple)
-
-
 @dataclass
 class _Dataset:
     """What :func:`run_batch` plans for one dataset."""
@@ -129,17 +89,17 @@ class _Dataset:
     map_kept: bool = False
 
 
-def _plan(m: Manifest, name: str, out: Path, config: PipelineConfig, maps: bool) -> _Dataset:
-    """Claim the dataset's output folder, clean a killed run's temporaries, read back what is still valid."""
+def _plan(m: Manifest, name: str, out: Path, config: PipelineConfig, maps: bool, check_mount: bool) -> _Dataset:
+    """Claim the dataset's output folder, clean a killed run's temporaries and the files of frames no longer
+    in the recording, read back what is still valid."""
     folder = out / name
     frames_dir = folder / "frames"
     frames_dir.mkdir(parents=True, exist_ok=True)
-    if output_owner(folder) != str(m.root):
-        with atomic_write(folder / DATASET_RECORD) as tmp:
-            tmp.write_text(json.dumps({"root": str(m.root), "manifest": str(m.root / "manifest.yaml")}) + "\n")
+    claim_folder(folder, m.root, m.root / "manifest.yaml")
     for where in (frames_dir, folder):
         remove_stale_temporaries(where)
-    base = dataset_fingerprint(m, config, floor_frames=10)
+    remove_stale_frames(frames_dir, len(m.frames))
+    base = dataset_fingerprint(m, config, floor_frames=10, check_mount=check_mount)
     fingerprints = [frame_fingerprint(base, r) for r in m.frames]
     loaded = {k: resume_frame(frame_outputs(frames_dir, k), fingerprints[k]) for k in range(len(m.frames))}
     plan = _Dataset(name=name, manifest=m, folder=folder, fingerprints=fingerprints,
@@ -230,7 +190,7 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
 
     remove_stale_temporaries(out)
     configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
-    plans = [_plan(m, name, out, configs[name], maps) for m, name in zip(datasets, names) if id(m) not in bags]
+    plans = [_plan(m, name, out, configs[name], maps, check_mount) for m, name in zip(datasets, names) if id(m) not in bags]
     tasks, floors = [], {}
     for p in plans:
         complete = [p.loaded[k] is not None for k in range(len(p.manifest.frames))]
@@ -294,16 +254,9 @@ def _bag_map(source: BagSource, folder: Path, config: PipelineConfig, maps: bool
     """A bag's map: its frames read as a stream and mapped in order (:func:`build_map`, the map of
     ``mrstereo map BAG``), kept when the bag, its topics and the options are those of the map already there."""
     folder.mkdir(parents=True, exist_ok=True)
-    if output_owner(folder) != str(source.root):
-        with atomic_write(folder / DATASET_RECORD) as tmp:
-            tmp.write_text(json.dumps({"root": str(source.root), "manifest": str(source.root)}) + "\n")
+    claim_folder(folder, source.root, source.root)
     remove_stale_temporaries(folder)
-    root = Path(source.root)
-    files = sorted(p for p in root.iterdir() if p.is_file()) if root.is_dir() else [root]
-    fingerprint = digest({"bag": [file_stamp(p) for p in files],
-                          "topics": [source.left_topic, source.right_topic, source.pose_source, source.mount_source],
-                          "mount": mount_entry(source.mount) if source.mount is not None else None,
-                          "config": repr(config), "check_mount": run["check_mount"], "version": __version__})
+    fingerprint = bag_fingerprint(source, config, run["check_mount"])
     n, status, floor, warning = source.n_frames, "", None, None
     if maps and map_dir_current(folder / "map", fingerprint):
         status = "kept"

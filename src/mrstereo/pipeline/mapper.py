@@ -30,7 +30,7 @@ from ..mapping.occupancy import MappingConfig, OccupancyGrid
 from ..mapping.prior import prior_grid
 from ..mapping.tiles import TiledOccupancyGrid
 from ..matching.config import MatchingConfig
-from ..odometry import LOST, OdometryConfig, StereoOdometry
+from ..odometry import LOST, OdometryConfig, OdometryResult, StereoOdometry
 from ..profiling import stage
 from ..rejection import RejectionConfig
 from ..rejection.streams import StreamCheck
@@ -172,6 +172,11 @@ class StereoMapper:
     keep_observations : bool or "poses"
         Keep each mapped frame's world points (``observations``: to fuse again, replay or store);
         ``"poses"``: its observation without the points (pose, pan, counts: memory flat in the length).
+    track_only : bool
+        Visual odometry alone (``mrstereo odometry``): each pair rectified and tracked, no matching, floor,
+        obstacles or map; every frame joins the trajectory (a lost one at the motion model's prediction) and
+        :meth:`odometry_run` gives the refined poses. Without a mount the camera is level on the floor
+        (the base is its REP 103 body frame). The streams are not checked (the caller does).
     name : str
         What is mapped, for messages.
     prior : path, RosMap or OccupancyGrid, optional
@@ -197,7 +202,8 @@ class StereoMapper:
     def __init__(self, calibration: StereoCamera, mount: CameraMount | None = None,
                  config: PipelineConfig | None = None, *, check_mount: bool = True,
                  odometry: str = "auto", pose_frame_mount: CameraMount | None = None,
-                 keep_observations: bool | str = False, name: str = "the source", prior=None) -> None:
+                 keep_observations: bool | str = False, name: str = "the source", track_only: bool = False,
+                 prior=None) -> None:
         if not isinstance(calibration, StereoCamera):
             raise TypeError(f"calibration must be a StereoCamera, got {type(calibration).__name__}")
         if mount is not None and not isinstance(mount, CameraMount):
@@ -205,6 +211,12 @@ class StereoMapper:
         config = PipelineConfig() if config is None else config
         if not isinstance(config, PipelineConfig):
             raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
+        if track_only:
+            if odometry == "given":
+                raise ValueError("track_only estimates the poses: odometry must be 'visual' or 'auto'")
+            odometry, check_mount = "visual", False
+            mount = mount or CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        self.track_only = bool(track_only)
         self.stereo = calibration
         self.config = config.for_rig(calibration)
         self.name = name
@@ -246,6 +258,7 @@ class StereoMapper:
         self.vo_status: list[str] = []
         self.vo_inliers: list[int] = []
         self.vo_time_s: list[float] = []
+        self.vo_tracked: list[int] = []
         self.n_points = 0
         self.frames_lost = 0
         self.lost_index: list[int] = []
@@ -282,7 +295,7 @@ class StereoMapper:
         """
         from ..recordings.sources import StereoFrame
 
-        index = len(self.trajectory_index) + self.frames_lost + len(self._held)
+        index = len(self.trajectory_index) + len(self._held) + (0 if self.track_only else self.frames_lost)
         if stamp_s is None:
             stamp_s = self._last_stamp + 0.1 if self._last_stamp is not None else 0.0
         pose = None if pose is None else np.asarray(pose, dtype=np.float64)
@@ -306,7 +319,8 @@ class StereoMapper:
     def check_streams(self, frame) -> None:
         """Look for a duplicated or swapped camera stream in the first frames
         (:class:`~mrstereo.rejection.streams.StreamCheck`, one warning); :meth:`step_frame` calls it."""
-        self.streams.add(frame.index, frame.left, frame.right, rectified=frame.rectified)
+        if not self.track_only:
+            self.streams.add(frame.index, frame.left, frame.right, rectified=frame.rectified)
 
     def observe(self, frame, *, keep_images: bool = True) -> Observed:
         """The per-frame chain with the mount as known now (:meth:`observer`); thread-safe. While a given mount
@@ -319,8 +333,8 @@ class StereoMapper:
     def observer(self, *, keep_images: bool = True):
         """The per-frame chain (:func:`~mrstereo.geometry.pair.observe_pair`) with this mapper's rig, config and
         mount as known now: a picklable function of a frame, for workers (threads or processes)."""
-        return partial(observe_pair, stereo=self.stereo, mount=self.mount, config=self.config,
-                       keep_images=keep_images)
+        return partial(observe_pair, stereo=self.stereo, mount=self.mount,
+                       config=None if self.track_only else self.config, keep_images=keep_images)
 
     def integrate(self, observed: Observed) -> list[MappedFrame]:
         """Take an observed frame into the map, in order (the ordered half of :meth:`step`)."""
@@ -393,13 +407,14 @@ class StereoMapper:
             raise ValueError("visual odometry needs the rectified images (keep_images=True)")
         if self._vo is None:
             T0 = observed.T_world_from_base if observed.T_world_from_base is not None else np.eye(4)
-            self._vo = StereoOdometry(self.stereo, T0, self.config.odometry, keep_history=False)
+            self._vo = StereoOdometry(self.stereo, T0, self.config.odometry, keep_history=self.track_only)
         with stage("odometry"):
             estimate = self._vo.step(observed.left_rect, observed.right_rect, T_base_from_cam=T_base_from_cam,
                                      stamp_s=observed.stamp_s)
         self.vo_status.append(estimate.status)
         self.vo_inliers.append(estimate.n_inliers)
         self.vo_time_s.append(estimate.time_s)
+        self.vo_tracked.append(estimate.n_tracked)
         return estimate.T_world_from_base, estimate.status
 
     def _pose_shift(self) -> np.ndarray:
@@ -418,17 +433,20 @@ class StereoMapper:
         if status == LOST:
             self.frames_lost += 1
             self.lost_index.append(observed.index)
-        else:
+        if self.track_only:             # every frame on the trajectory, nothing into the map
+            self._on_trajectory(observed.index, T, observed.stamp_s, observed.T_world_from_base_true, observed.pan_rad)
+        elif status != LOST:
             start = time.perf_counter()
             self.add(world_observation(observed, tuple(float(v) for v in planar_from_T(T)), self.stereo),
                      T_world_from_base=T,
                      stamp_s=observed.stamp_s, T_world_from_base_true=observed.T_world_from_base_true)
             grid_s = time.perf_counter() - start
+        points = observed.obstacle_points_robot
         return MappedFrame(index=observed.index, stamp_s=observed.stamp_s, T_world_from_base=T,
                            T_base_from_cam=T_base_from_cam, status=status, disparity_px=observed.disparity_px,
                            left_rect=observed.left_rect,
-                           obstacle_points_robot=observed.obstacle_points_robot[:len(observed.obstacle_points_robot)
-                                                                                - observed.n_boundary],
+                           obstacle_points_robot=np.empty((0, 3), np.float32) if points is None else
+                           points[:len(points) - observed.n_boundary],
                            scan=observed.scan, times_s={"chain": observed.time_s, "odometry": odometry_s,
                                                         "grid": grid_s})
 
@@ -443,12 +461,16 @@ class StereoMapper:
             self.observations.append(obs if self.keep_observations is True else replace(
                 obs, obstacle_points_world=obs.obstacle_points_world[:0].copy(),      # (copies: a view keeps it all)
                 floor_points_world=obs.floor_points_world[:0].copy(), cells=None))
-        self.trajectory_T.append(T_from_planar(*obs.pose) if T_world_from_base is None else T_world_from_base)
-        self.trajectory_index.append(obs.index)
-        self.trajectory_stamps_s.append(float(obs.index) * 0.1 if stamp_s is None else stamp_s)
-        self.true_T.append(T_world_from_base_true)
-        self.pan_rad.append(obs.pan_rad)
+        self._on_trajectory(obs.index, T_from_planar(*obs.pose) if T_world_from_base is None else T_world_from_base,
+                            float(obs.index) * 0.1 if stamp_s is None else stamp_s, T_world_from_base_true, obs.pan_rad)
         self._count_outside(obs)
+
+    def _on_trajectory(self, index: int, T_world_from_base, stamp_s: float, T_world_from_base_true, pan_rad: float):
+        self.trajectory_T.append(T_world_from_base)
+        self.trajectory_index.append(index)
+        self.trajectory_stamps_s.append(stamp_s)
+        self.true_T.append(T_world_from_base_true)
+        self.pan_rad.append(pan_rad)
 
     def _count_outside(self, obs: FrameObservation) -> None:
         """A frame taken outside a fixed map window is counted (:meth:`outside_warning`)."""
@@ -489,6 +511,18 @@ class StereoMapper:
     def views(self) -> list[tuple]:
         """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of the mapped frames."""
         return views_of_poses(self.planar_poses, self.pan_rad, self.stereo, range_m=self.range_m, mount=self.mount)
+
+    def odometry_run(self) -> OdometryResult:
+        """The visual odometry of a ``track_only`` mapper's frames: the poses refined over the window (a lost
+        frame: the motion model's prediction), and as known at each frame; ``stamps_s`` those tracked with."""
+        if not self.track_only or self._vo is None:
+            raise ValueError("odometry_run needs a track_only mapper that has tracked at least one frame")
+        T, online = self._vo.trajectory(), np.stack(self.trajectory_T)
+        for a in (T, online):
+            a.setflags(write=False)
+        return OdometryResult(T_world_from_base=T, status=tuple(self.vo_status), n_tracked=np.array(self.vo_tracked),
+                              n_inliers=np.array(self.vo_inliers), time_s=np.array(self.vo_time_s),
+                              stamps_s=np.array(self.trajectory_stamps_s), T_world_from_base_online=online)
 
     def odometry_metrics(self) -> dict:
         """Visual odometry figures for metrics.json (empty with given poses)."""
