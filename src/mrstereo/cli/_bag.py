@@ -13,7 +13,8 @@ from pathlib import Path
 import click
 
 from ._options import (CALIB_HELP, HEIGHT, TILT, Number, check_mount_options, check_workers, echo_run_floor,
-                       map_config, map_options, mount_from_options, mount_option, parse_mount, warn, worker_options)
+                       map_config, map_options, mount_from_options, mount_option, parse_mount, truth_option, warn,
+                       worker_options)
 
 __all__ = ["COMMANDS", "BAG_KEYS", "bag_options", "bag_export_kwargs", "worker_options", "opened_dataset",
            "opened_source", "recording_options", "recording_of", "read_inputs"]
@@ -89,11 +90,12 @@ def bag_export_kwargs(*, bag, calib, left_topic, right_topic, camera_info_topics
                 progress=not quiet)
 
 
-def read_inputs(manifest, bag: Path | None, calib: Path | None, *, rate_hz: float | None = None):
+def read_inputs(manifest, bag: Path | None, calib: Path | None, *, rate_hz: float | None = None, truth=None):
     """Read what a command's recording is made of, before any work: ``(dataset, bag)``, the dataset None
     for a bag (``--bag`` or a RECORDING that is one), whose files are registered instead; ``--calib`` too.
     Every output check that follows sees them all (:func:`mrstereo.io.protecting_inputs`), calibration
-    siblings such as OpenLORIS' trans_matrix.yaml too."""
+    siblings such as OpenLORIS' trans_matrix.yaml too. ``truth``: ``--truth FILE`` / ``--no-truth``
+    (:func:`mrstereo.recordings.read_recording`), a bag's applied when it is opened."""
     from ..camera import read_stereo
     from ..io import note_inputs
     from ..recordings.bag import bag_inputs
@@ -114,12 +116,13 @@ def read_inputs(manifest, bag: Path | None, calib: Path | None, *, rate_hz: floa
     folders = layout_of(manifest) == "image folders"
     if rate_hz is not None and not folders:
         raise click.UsageError("--rate only with image folders")
-    return read_recording(manifest, calibration=calib if folders else None, rate_hz=rate_hz), None
+    return read_recording(manifest, calibration=calib if folders else None, rate_hz=rate_hz, truth=truth), None
 
 
 def recording_options(func):
-    """The options of a command reading a RECORDING: ``--bag`` and the bag's topic options, ``--rate``."""
-    func = bag_options(func)
+    """The options of a command reading a RECORDING: ``--bag`` and the bag's topic options, ``--rate``,
+    ``--truth``/``--no-truth`` (the command gets ``truth``)."""
+    func = truth_option(bag_options(func))
     func = click.option("--rate", "rate_hz", type=Number(0.0, 1000.0, unit="Hz", open_low=True), default=None,
                         help="Frame rate [Hz] of image folders whose file names are not time stamps.")(func)
     return click.option("--bag", "bag", type=click.Path(path_type=Path),
@@ -137,7 +140,7 @@ def recording_of(path: Path | None, bag: Path | None) -> tuple[Path, bool]:
 
 @contextlib.contextmanager
 def opened_dataset(manifest, bag: Path | None, calib: Path | None, *, quiet: bool, bag_kw: dict,
-                   rate_hz: float | None = None):
+                   rate_hz: float | None = None, truth=None):
     """The recording a command works on: ``(recording, stereo, stamps_s)``.
 
     A ROS bag (``--bag``, or a RECORDING that is one; topics picked when not given) is a
@@ -146,7 +149,7 @@ def opened_dataset(manifest, bag: Path | None, calib: Path | None, *, quiet: boo
     stamps in seconds. Any other RECORDING (a path, or a Manifest already read) is a Manifest with
     ``--height``/``--tilt``/``--mount`` applied and ``--calib`` read (``stereo`` None: the recording's own
     calibration; stamps None). Image folders take ``--calib`` as their calibration and ``--rate`` as their
-    frame rate.
+    frame rate; ``truth`` is ``--truth FILE`` / ``--no-truth``.
     """
     import dataclasses
 
@@ -159,7 +162,7 @@ def opened_dataset(manifest, bag: Path | None, calib: Path | None, *, quiet: boo
         if is_bag:
             manifest, bag = None, manifest
     if bag is not None:
-        with opened_source(None, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as source:
+        with opened_source(None, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz, truth=truth) as source:
             yield source, None, source.stamps_s
         return
     _no_bag_options(bag_kw)
@@ -169,7 +172,7 @@ def opened_dataset(manifest, bag: Path | None, calib: Path | None, *, quiet: boo
         folders = layout_of(manifest) == "image folders"
         if rate_hz is not None and not folders:
             raise click.UsageError("--rate only with image folders")
-        dataset = read_recording(manifest, calibration=calib if folders else None, rate_hz=rate_hz)
+        dataset = read_recording(manifest, calibration=calib if folders else None, rate_hz=rate_hz, truth=truth)
     stereo = read_stereo(calib) if calib is not None else None
     mount = mount_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"),
                                dataset.calibration if stereo is None else stereo)
@@ -188,7 +191,7 @@ def _no_bag_options(bag_kw: dict) -> None:
 
 @contextlib.contextmanager
 def opened_source(recording, bag: Path | None, calib: Path | None, *, quiet: bool, bag_kw: dict,
-                  rate_hz: float | None = None):
+                  rate_hz: float | None = None, truth=None):
     """The recording a command works on as a :class:`~mrstereo.recordings.sources.FrameSource`
     (:func:`mrstereo.recordings.open_recording`), open for the ``with`` block.
 
@@ -196,7 +199,7 @@ def opened_source(recording, bag: Path | None, calib: Path | None, *, quiet: boo
     (topics picked when not given; one line on stderr says what was found). Any other RECORDING gets
     ``--height``/``--tilt``/``--mount`` as its mount; ``--calib`` is the calibration of image folders,
     and replaces any other recording's (whose raw images are then read); ``--rate`` the frame rate of
-    image folders.
+    image folders; ``truth`` is ``--truth FILE`` / ``--no-truth``.
     """
     from ..recordings.layouts import layout_of, open_recording
 
@@ -206,7 +209,7 @@ def opened_source(recording, bag: Path | None, calib: Path | None, *, quiet: boo
 
         if rate_hz is not None:
             raise click.UsageError("--rate only with image folders")
-        source = BagSource(path, **bag_export_kwargs(bag=path, calib=calib, quiet=quiet, **bag_kw))
+        source = BagSource(path, truth=truth, **bag_export_kwargs(bag=path, calib=calib, quiet=quiet, **bag_kw))
         echo_export(source)
     else:
         _no_bag_options(bag_kw)
@@ -214,7 +217,7 @@ def opened_source(recording, bag: Path | None, calib: Path | None, *, quiet: boo
         if rate_hz is not None and not folders:
             raise click.UsageError("--rate only with image folders")
         source = open_recording(path, calibration=calib, prefer_raw=calib is not None and not folders,
-                                rate_hz=rate_hz)
+                                rate_hz=rate_hz, truth=truth)
         mount = mount_from_options(bag_kw["height_m"], bag_kw["tilt_rad"], bag_kw.get("mount"), source.calibration)
         if mount is not None:
             source.mount = mount
@@ -274,9 +277,10 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
 @map_options
 @click.option("--no-maps", is_flag=True, help="Only the per-frame outputs, no map per dataset.")
 @mount_option
+@truth_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool, no_maps: bool, mount, quiet: bool,
-                  no_mount_check: bool, **options) -> None:
+                  no_mount_check: bool, truth, **options) -> None:
     """Process many recordings into per-frame outputs and maps.
 
     RECORDINGS are dataset folders, KITTI odometry or EuRoC/ASL folders and
@@ -303,7 +307,10 @@ def batch_command(manifests, out_dir: Path, workers, scheduler, processes: bool,
     check_workers(workers, scheduler, processes)
     config = map_config(**options)
     camera_mount = parse_mount(mount)
-    manifests = [BagSource(m, mount=camera_mount) if is_bag(m) else read_recording(m) for m in manifests]
+    if truth and len(manifests) > 1:
+        raise click.UsageError(f"--truth FILE is the truth of one recording, got {len(manifests)} RECORDINGS")
+    manifests = [BagSource(m, mount=camera_mount, truth=truth) if is_bag(m) else read_recording(m, truth=truth)
+                 for m in manifests]
     check_output_dir("--out", out_dir)
     if camera_mount is not None:
         manifests = [m if isinstance(m, BagSource) else dataclasses.replace(m, mount=camera_mount) for m in manifests]

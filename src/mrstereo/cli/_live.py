@@ -10,11 +10,12 @@ from pathlib import Path
 
 import click
 
-from ..pipeline.live import LIVE_FILES, LiveConfig
+from ..evaluation.outputs import LIVE_FILES
+from ..pipeline.live import LiveConfig
 from .._interrupt import reached
 from .._limits import limit, max_workers
 from ._options import (CALIB_HELP, HEIGHT, TILT, Number, map_config, map_options, mount_from_options, mount_option,
-                       profile_option)
+                       profile_option, truth_option)
 
 __all__ = ["COMMANDS", "viewer_option", "record_bag_option", "check_sink_options", "replayed_to_sinks"]
 
@@ -140,13 +141,14 @@ def _pair(text: str, option: str, kind=float, sep: str = ","):
                    "of the machine, not only localhost).")
 @click.option("--foxglove-port", type=Number(0, 65535, integer=True), default=FOXGLOVE_PORT, show_default=True,
               help="--viewer foxglove: the port of its websocket server on 127.0.0.1.")
+@truth_option
 @click.option("--quiet", is_flag=True, help="No progress line.")
 def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, side_by_side: bool, realtime: bool,
                  speed: float, max_frames: int | None, save_every_s: float, odometry: str | None,
                  viewers: tuple[str, ...], record_bag: Path | None, workers: int, camera_size: str | None,
                  camera_fps: float | None, height_m: float | None, tilt_rad: float | None, mount,
                  viewer_port: int, viewer_web_port: int | None, foxglove_port: int, quiet: bool,
-                 no_mount_check: bool, **options) -> None:
+                 no_mount_check: bool, truth, **options) -> None:
     """Map live from stereo cameras, video files or a recording.
 
     Cameras, video files or a recording in, a map out as it grows.
@@ -186,7 +188,7 @@ def live_command(sources: tuple[str, ...], out_dir: Path, calib: Path | None, si
 
     warm_up(say=lambda line: click.echo(line, err=True))      # compiled before the source opens: no frame dropped
     with open_source(sources, side_by_side=side_by_side, prefer_raw=calib is not None, size=size,
-                     rate_hz=camera_fps) as source:
+                     rate_hz=camera_fps, truth=truth) as source:
         stereo = stereo or source.calibration
         if stereo is None:
             raise click.UsageError("cameras and video files need --calib (a stereo calibration)")

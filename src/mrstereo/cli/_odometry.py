@@ -41,7 +41,7 @@ OUTPUT_SUFFIXES = {"--out": (".txt", ".tum"), "--plot": (".png", ".pdf", ".svg")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | None, metrics_path: Path | None,
                      calib: Path | None, start: str, bag: Path | None, rate_hz: float | None,
-                     viewers: tuple[str, ...], record_bag: Path | None, quiet: bool, **bag_kw) -> None:
+                     viewers: tuple[str, ...], record_bag: Path | None, quiet: bool, truth, **bag_kw) -> None:
     """Stereo visual odometry of a recording or a ROS bag.
 
     RECORDING is a dataset folder (docs/dataset.md), a KITTI odometry or
@@ -62,13 +62,13 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     from ..pipeline.run import check_pair_streams
 
     recording_of(manifest, bag)                          # one of them
-    dataset, bag = read_inputs(manifest, bag, calib, rate_hz=rate_hz)
+    dataset, bag = read_inputs(manifest, bag, calib, rate_hz=rate_hz, truth=truth)
     outputs = {"--out": out_path, "--plot": plot_path, "--metrics": metrics_path}
     check_outputs(outputs, suffixes=OUTPUT_SUFFIXES)
     inputs = [p for p in (bag if dataset is None else dataset.root, calib) if p is not None]
     viewers = check_sink_options(viewers, record_bag, out_path.with_suffix(""), inputs)
-    with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (recording, stereo,
-                                                                                              stamps):
+    opened = opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz, truth=truth)
+    with opened as (recording, stereo, stamps):
         check_pair_streams(recording)
         run = odometry_from_manifest(recording, calibration=stereo, progress=not quiet,
                                      initial_pose="given" if start == "given" else "identity")
@@ -121,7 +121,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
         plot_trajectories(plot_path, curves, lost=~run.tracked, title=f"visual odometry, {len(run.status)} frames")
     click.echo(f"wrote {', '.join(str(p) for p in outputs.values() if p is not None)}")
     if viewers or record_bag is not None:
-        from ..pipeline.sinks import replay_odometry
+        from ..mapping.sinks import replay_odometry
 
         mount = dataset.mount.T_base_from_rectified((stereo or dataset.calibration).left.R) \
             if dataset.mount is not None else None

@@ -7,6 +7,7 @@ from __future__ import annotations
 import functools
 import inspect
 import math
+from pathlib import Path
 
 import click
 
@@ -305,3 +306,24 @@ def echo_map_warnings(run, *, prefix: str = "") -> None:
         warn(f"{prefix}{n} points fell outside the map window x {g.origin_x_m:g}..{g.origin_x_m + g.width_m:g} m, "
              f"y {g.origin_y_m:g}..{g.origin_y_m + g.height_m:g} m (their rays were cut at its border; counted in "
              f"metrics.json): {advice}")
+
+
+def truth_option(func):
+    """``--truth FILE`` and ``--no-truth`` of every command that reads a recording, passed on as ``truth``:
+    None (the recording's own truth), False (none) or the file (:mod:`mrstereo.recordings.truth`)."""
+    @functools.wraps(func)
+    def wrapper(*args, truth_file=None, no_truth: bool = False, **kwargs):
+        if truth_file is not None and no_truth:
+            raise click.UsageError("give --truth FILE or --no-truth, not both")
+        return func(*args, truth=False if no_truth else truth_file, **kwargs)
+
+    wrapper = click.option(
+        "--no-truth", is_flag=True,
+        help="Read no ground truth of the recording (not even its file: an empty or broken one does not stop "
+             "the run); the poses come from visual odometry (a bag: its odometry topic and TF are not read).")(wrapper)
+    return click.option(
+        "--truth", "truth_file", type=click.Path(dir_okay=False, path_type=Path), default=None,
+        help="Ground truth from this file instead of the recording's: TUM 't x y z qx qy qz qw' (t in s) or EuRoC "
+             "csv (t in ns, p, q wxyz), matched to the frames by stamp (nearest within 20 ms; frames without a "
+             "pose are left out). Poses of the EuRoC body frame, of KITTI's / image folders' left camera (in "
+             "the first camera's frame), of a dataset's or bag's robot base (docs/dataset.md).")(wrapper)

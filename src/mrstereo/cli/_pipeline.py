@@ -43,11 +43,16 @@ MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy", "metrics.json", "
 @recording_options
 @viewer_option
 @record_bag_option
+@click.option("--resume-from", "prior_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Continue mapping on this saved map (map.yaml of an earlier run, or any map_server map of "
+                   "the same resolution): its occupied / free cells start at the sensor model's most certain "
+                   "log-odds, its unknown cells unknown; the recording's poses must be in its frame. The map "
+                   "written covers both.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odometry: str, align: bool,
                 workers: int | None, scheduler: str | None, processes: bool, bag: Path | None, rate_hz: float | None,
-                viewers: tuple[str, ...], record_bag: Path | None, quiet: bool, no_mount_check: bool,
-                **options) -> None:
+                viewers: tuple[str, ...], record_bag: Path | None, prior_path: Path | None, quiet: bool,
+                no_mount_check: bool, truth, **options) -> None:
     """Build an occupancy grid map from a recording.
 
     RECORDING is a dataset folder (docs/dataset.md), a KITTI odometry or
@@ -66,7 +71,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
     ADDRESS (a Dask cluster) spread the frames; the map is the same bit for bit.
     """
     from ..io import check_output_dir, check_outputs, staged_dir
-    from ..pipeline.run import check_map, write_map_outputs
+    from ..evaluation.outputs import check_map, write_map_outputs
 
     check_workers(workers, scheduler, processes)
     if align and odometry == "visual":
@@ -74,15 +79,21 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
     recording_of(manifest, bag)                          # one of them
     bag_kw = {k: options.pop(k) for k in list(options) if k in BAG_KEYS}
     config = map_config(**options)
-    dataset, bag = read_inputs(manifest, bag, calib, rate_hz=rate_hz)      # read once: checked here, mapped below
+    dataset, bag = read_inputs(manifest, bag, calib, rate_hz=rate_hz, truth=truth)    # read once: checked, mapped below
+    if prior_path is not None:
+        from ..mapping.rosmap import read_ros_map
+
+        read_ros_map(prior_path)                             # a bad map refused before any work
     check_output_dir("--out", out_dir, may_hold_inputs=True)
     check_outputs({f"--out {out_dir / name}": out_dir / name for name in MAP_FILES})     # (names the file)
     inputs = [p for p in (bag if dataset is None else dataset.root, calib) if p is not None]
     viewers = check_sink_options(viewers, record_bag, out_dir / "view", inputs, output_dirs=[out_dir])
-    with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz) as (dataset, stereo, _):
+    with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz, truth=truth) as \
+            (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,
                         scheduler=scheduler, processes=processes, odometry=odometry, align=align or None,
-                        check_mount=not no_mount_check, keep_points=bool(viewers) or record_bag is not None)
+                        check_mount=not no_mount_check, keep_points=bool(viewers) or record_bag is not None,
+                        prior=prior_path)
         echo_map_warnings(run)
         check_map(run)
         with staged_dir(out_dir, prefix="map") as staging:      # all files or none: Ctrl-C leaves the old set
@@ -105,7 +116,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
                    f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg on average")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
     if viewers or record_bag is not None:
-        from ..pipeline.sinks import replay_map_run
+        from ..mapping.sinks import replay_map_run
 
         replayed_to_sinks(lambda sinks: replay_map_run(run, sinks, config=config), run.manifest.calibration,
                           out_dir / "view", viewers, record_bag)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from ._options import Number
+from ._options import Number, truth_option
 
 __all__ = ["COMMANDS"]
 
@@ -20,7 +20,8 @@ __all__ = ["COMMANDS"]
                    "`mrstereo calib convert` reads).")
 @click.option("--rate", "rate_hz", type=Number(0.0, 1000.0, unit="Hz", open_low=True), default=None,
               help="Frame rate [Hz] of image folders whose file names are not time stamps.")
-def info_command(path: Path, calib: Path | None, rate_hz: float | None) -> None:
+@truth_option
+def info_command(path: Path, calib: Path | None, rate_hz: float | None, truth) -> None:
     """Show what a recording holds and how it will be read.
 
     Frames, rate, image size, calibration, mount, truth and odometry.
@@ -38,7 +39,7 @@ def info_command(path: Path, calib: Path | None, rate_hz: float | None) -> None:
 
         topics = describe_bag(path)
         try:
-            source = open_recording(path, calibration=calib)
+            source = open_recording(path, calibration=calib, truth=truth)
         except ValueError as exc:                      # no pair, no calibration: the topics say what there is
             lines = topics + [("note", str(exc))]
         else:
@@ -50,7 +51,7 @@ def info_command(path: Path, calib: Path | None, rate_hz: float | None) -> None:
                     [line for line in topics if line[0] in ("duration", "topic")]
     else:
         with open_recording(path, calibration=calib if layout == "image folders" else None,
-                            rate_hz=rate_hz) as source:
+                            rate_hz=rate_hz, truth=truth) as source:
             lines = describe_recording(source)
     width = max(len(what) for what, _ in lines)
     for what, value in lines:

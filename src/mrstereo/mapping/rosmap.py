@@ -16,7 +16,7 @@ from ..io import atomic_write, read_image, read_yaml, write_image
 from .grid import GridSpec
 
 __all__ = ["RosMap", "read_ros_map", "write_ros_map", "write_map_yaml", "ros_map_files", "occupancy_values",
-           "check_thresholds", "ros_map_on_grid", "FREE", "OCCUPIED", "UNKNOWN"]
+           "check_thresholds", "ros_map_on_grid", "array_on_grid", "FREE", "OCCUPIED", "UNKNOWN"]
 
 FREE, OCCUPIED, UNKNOWN = 254, 0, 205
 
@@ -181,7 +181,15 @@ def ros_map_on_grid(ros_map: RosMap, grid: GridSpec) -> RosMap | None:
     """``ros_map`` on another grid of the same resolution whose origin is a whole number of cells away
     (e.g. a map built with another ``--origin`` or ``--size``): its cells where the two overlap, unknown
     elsewhere. None when the resolutions differ or the origins are not whole cells apart."""
-    src = ros_map.grid
+    out = array_on_grid(ros_map.occupancy, ros_map.grid, grid)
+    if out is None:
+        return None
+    return RosMap(occupancy=out, grid=grid, occupied_thresh=ros_map.occupied_thresh, free_thresh=ros_map.free_thresh)
+
+
+def array_on_grid(values: np.ndarray, src: GridSpec, grid: GridSpec) -> np.ndarray | None:
+    """The cell values (rows, cols) of grid ``src`` on ``grid`` (float, NaN where ``src`` has no cell), or None
+    when the resolutions differ or the origins are not a whole number of cells apart."""
     res = src.resolution_m
     if not isinstance(grid, GridSpec):
         raise TypeError(f"grid must be a GridSpec, got {type(grid).__name__}")
@@ -197,5 +205,5 @@ def ros_map_on_grid(ros_map: RosMap, grid: GridSpec) -> RosMap | None:
     r0, r1 = max(0, -dr), min(rows, src_rows - dr)
     c0, c1 = max(0, -dc), min(cols, src_cols - dc)
     if r0 < r1 and c0 < c1:
-        out[r0:r1, c0:c1] = ros_map.occupancy[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
-    return RosMap(occupancy=out, grid=grid, occupied_thresh=ros_map.occupied_thresh, free_thresh=ros_map.free_thresh)
+        out[r0:r1, c0:c1] = values[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
+    return out

@@ -117,6 +117,14 @@ class TiledOccupancyGrid:
         grid.n_updates, grid.points_outside = self.n_updates, self.points_outside
         return grid
 
+    def seed(self, grid: OccupancyGrid) -> None:
+        """Write the cells of ``grid`` into the tiles: a saved map to map on (:func:`mrstereo.mapping.prior.
+        prior_grid`), before any view. Its origin must be on the lattice (whole cells from (0, 0): maps written
+        by ``mrstereo map`` are), else ``ValueError``."""
+        if not isinstance(grid, OccupancyGrid):
+            raise TypeError(f"grid must be an OccupancyGrid, got {type(grid).__name__}")
+        self._store(grid)
+
     def _tile(self, key: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
         """The tile at ``key`` (log-odds, heights), created unknown without heights when missing."""
         if key not in self._tiles:

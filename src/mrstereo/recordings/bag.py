@@ -28,6 +28,7 @@ from ..transforms import R_BODY_FROM_OPTICAL, T_from_position_quaternion, rotati
 from ._bagfiles import bag_errors, bag_inputs, check_bag_file
 from .manifest import FrameRecord, Manifest, pose_3d_of, staged_dataset
 from .frames import FrameSource, StereoFrame, frame_image
+from .truth import TRUTH_FRAMES, TRUTH_TOLERANCE_S, check_truth, match_stamps, read_poses_file
 
 __all__ = ["BagSource", "BagExport", "TransformTrack", "TfTree", "bag_topics", "image_from_message",
            "SUPPORTED_ENCODINGS", "camera_info_from_message", "stereo_from_camera_info", "stereo_from_bag",
@@ -623,6 +624,10 @@ class BagSource(FrameSource):
         The images are already rectified.
     progress : bool
         Accepted for the keywords of :func:`export_bag` (a source draws no progress bar).
+    truth : None, False or path
+        None: the poses of the odometry topic or TF; False: none of them (visual odometry); a TUM or
+        EuRoC csv file of the base's poses instead, matched to the frames by stamp (frames without one
+        left out; :mod:`mrstereo.recordings.truth`), also the true poses.
 
     Attributes
     ----------
@@ -643,8 +648,10 @@ class BagSource(FrameSource):
                  camera_info_topics: tuple[str, str] | None = None, calibration: StereoCamera | None = None,
                  odom_topic: str | None = None, use_tf: bool = False, world_frame: str | None = None,
                  base_frame: str = "base_link", camera_frame: str | None = None, sync_tolerance_s: float = 0.02,
-                 mount: CameraMount | None = None, rectified: bool = False, progress: bool = False) -> None:
+                 mount: CameraMount | None = None, rectified: bool = False, progress: bool = False,
+                 truth=None) -> None:
         tolerance = _checks.finite_number("sync_tolerance_s", sync_tolerance_s, nonnegative=True)
+        check_truth(truth)
         if odom_topic is not None and use_tf:
             raise ValueError("give an odometry topic or use TF for the pose, not both")
         if calibration is not None and not isinstance(calibration, StereoCamera):
@@ -655,6 +662,8 @@ class BagSource(FrameSource):
                                               use_tf=use_tf, calibration=calibration,
                                               camera_info_topics=camera_info_topics))
         left_topic, right_topic, odom_topic = picked["left_topic"], picked["right_topic"], picked["odom_topic"]
+        if truth is not None:                          # --no-truth / --truth FILE: not the bag's odometry
+            odom_topic, use_tf = None, False
         if left_topic == right_topic:
             raise ValueError(f"left and right topics must differ, both are {left_topic!r}")
         self.bag, self.name, self.root = bag, str(bag), Path(bag)
@@ -675,6 +684,7 @@ class BagSource(FrameSource):
             stream = _read_stream(reader, left_topic=left_topic, right_topic=right_topic, odom_topic=odom_topic,
                                   tf_topics=tf_topics if use_tf or camera_frame is not None else ())
             self._pairs = _stereo_pairs(stream.stamps, left_topic, right_topic, tolerance)
+            truth_poses = self._match_truth(truth, stream.stamps[left_topic]) if truth else None
             if calibration is None:
                 calibration = _stereo_of_reader(reader, camera_info_topics)
         self.calibration = calibration
@@ -685,7 +695,12 @@ class BagSource(FrameSource):
         self.mount, self.mount_source, self.pans = _mount_and_pans(
             stream.tf, list(self.stamps_ns), mount=mount, calibration=calibration, base_frame=base_frame,
             camera_frame=camera_frame)
-        self.has_poses = odom_topic is not None or use_tf
+        self.has_poses = odom_topic is not None or use_tf or truth_poses is not None
+        if truth_poses is not None:
+            self.poses, self.pose_source = [_pose_of(T) for T in truth_poses], f"ground truth {truth}"
+            self.true_poses = tuple(truth_poses)
+        elif truth is False:
+            self.pose_source = "none (--no-truth: the odometry topic and TF not read)"
         self.n_frames = len(self._pairs)
         self.stamps_s = np.asarray(self.stamps_ns, dtype=np.float64) / 1e9
         if self.n_frames > 1:
@@ -693,13 +708,32 @@ class BagSource(FrameSource):
         self.notes = tuple(note for note in (
             f"{self.n_left - self.n_frames} left and {self.n_right - self.n_frames} right images without a "
             "partner image left out" if max(self.n_left, self.n_right) > self.n_frames else "",
-            "" if self.has_poses else "no odometry topic and no --tf: poses from visual odometry") if note)
+            "" if self.has_poses else "no odometry topic and no --tf: poses from visual odometry",
+            self._truth_note) if note)
+
+    _truth_note = ""
+
+    def _match_truth(self, truth, left_ns: list[int]) -> list[np.ndarray]:
+        """The poses of the file ``truth`` at the frames (nearest stamp within :data:`TRUTH_TOLERANCE_S`); the
+        frames without one are left out."""
+        stamps_ns, T = read_poses_file(truth)
+        frames_s = np.array([left_ns[i] for i, _ in self._pairs], dtype=np.float64) / 1e9
+        index = match_stamps(stamps_ns, frames_s, TRUTH_TOLERANCE_S)
+        if not (index >= 0).any():
+            raise ValueError(f"ground truth {truth}: no pose within {TRUTH_TOLERANCE_S * 1e3:g} ms of any of the "
+                             f"{len(frames_s)} stereo pairs of {self.bag}")
+        self._truth_note = (f"ground truth from {truth}: {int((index >= 0).sum())} of {len(frames_s)} frames got "
+                            f"a pose within {TRUTH_TOLERANCE_S * 1e3:g} ms (poses of {TRUTH_FRAMES['ROS bag']})")
+        self._pairs = [pair for pair, i in zip(self._pairs, index) if i >= 0]
+        return [T[i] for i in index if i >= 0]
 
     @property
     def manifest(self) -> Manifest:
         """What the bag knows of its frames before they are read, as a recording without image files:
         every frame's stamp, pose and pan, the calibration and mount (for a run's metrics and views)."""
+        truth = self.true_poses is not None
         frames = tuple(FrameRecord(pose=None, pose_3d=tuple(float(v) for v in pose), pan_rad=float(pan),
+                                   true_pose_3d=tuple(float(v) for v in pose) if truth else None,
                                    stamp_s=ns / 1e9) for pose, pan, ns in zip(self.poses, self.pans, self.stamps_ns))
         return Manifest(root=self.root, calibration=self.calibration, calibration_path=self.root, mount=self.mount,
                         ground_truth_map=None, frames=frames, layout=self.layout, has_poses=self.has_poses,

@@ -22,8 +22,10 @@ import numpy as np
 from ..camera import CameraMount
 from ..camera.formats import euroc_body_from_camera, import_calibration
 from ..io import read_text
+from ..transforms import quaternion_from_rotation
 from .bag import TransformTrack, pair_by_stamp
 from .manifest import FrameRecord, Manifest, pose_3d_of
+from .truth import check_truth, read_poses_file, with_truth
 
 __all__ = ["read_euroc", "is_euroc", "GROUND_TRUTH_CSV"]
 
@@ -70,30 +72,24 @@ def _camera_list(cam: Path) -> tuple[np.ndarray, list[Path]]:
 
 def _truth_track(path: Path) -> TransformTrack:
     """The body poses of ``state_groundtruth_estimate0/data.csv`` (t, p xyz, q wxyz, ...)."""
-    rows = _csv_rows(path, "EuRoC ground truth")
-    samples = []
-    for n, row in enumerate(rows, 1):
-        try:
-            t, values = int(row[0]), [float(v) for v in row[1:8]]
-        except (ValueError, IndexError):
-            raise ValueError(f"EuRoC ground truth {path}: row {n} must start with 'timestamp_ns, px, py, pz, qw, qx, "
-                             "qy, qz'") from None
-        if len(values) != 7 or not np.isfinite(values).all() or sum(v * v for v in values[3:]) < 1e-12:
-            raise ValueError(f"EuRoC ground truth {path}: row {n} needs 7 finite numbers and a non-zero quaternion")
-        qw, qx, qy, qz = values[3:]
-        samples.append((t, values[:3], (qx, qy, qz, qw)))
-    if not samples:
-        raise ValueError(f"EuRoC ground truth {path} holds no pose")
-    return TransformTrack.from_samples(samples)
+    try:
+        stamps_ns, T = read_poses_file(path)
+    except ValueError as exc:
+        raise ValueError(f"{exc}; --no-truth (truth=False) reads the folder without it") from None
+    return TransformTrack.from_samples([(int(t), T_k[:3, 3], quaternion_from_rotation(T_k[:3, :3]))
+                                       for t, T_k in zip(stamps_ns, T)])
 
 
-def read_euroc(path: str | os.PathLike) -> Manifest:
+def read_euroc(path: str | os.PathLike, *, truth=None) -> Manifest:
     """Read a EuRoC/ASL folder as a recording (a :class:`Manifest`).
 
     Parameters
     ----------
     path : path
         ``mav0/`` or the folder holding it.
+    truth : None, False or path
+        None: the folder's ``state_groundtruth_estimate0/data.csv``; False: no truth (not even read);
+        a TUM or EuRoC csv file of body poses instead (:func:`mrstereo.recordings.truth.with_truth`).
 
     Returns
     -------
@@ -109,6 +105,7 @@ def read_euroc(path: str | os.PathLike) -> Manifest:
     ValueError
         Not a EuRoC folder, unreadable lists or truth, no pair of left/right stamps.
     """
+    check_truth(truth)
     root = Path(path)
     mav = _mav_dir(root) if root.is_dir() else None
     if mav is None:
@@ -128,7 +125,7 @@ def read_euroc(path: str | os.PathLike) -> Manifest:
         notes.append(f"{len(left_ns) - len(pairs)} cam0 and {len(right_ns) - len(pairs)} cam1 images without a "
                      "partner image left out")
     truth_csv = mav / GROUND_TRUTH_CSV
-    track = _truth_track(truth_csv) if truth_csv.is_file() else None
+    track = _truth_track(truth_csv) if truth is None and truth_csv.is_file() else None
     if track is not None:
         lo, hi = int(track.stamps_ns[0]) - _TRUTH_EDGE_NS, int(track.stamps_ns[-1]) + _TRUTH_EDGE_NS
         inside = [(i, j) for i, j in pairs if lo <= left_ns[i] <= hi]
@@ -137,7 +134,7 @@ def read_euroc(path: str | os.PathLike) -> Manifest:
         if len(inside) < len(pairs):
             notes.append(f"{len(pairs) - len(inside)} frames outside the ground truth's time span left out")
         pairs = inside
-    else:
+    elif truth is None:
         notes.append(f"no ground truth ({GROUND_TRUTH_CSV}): poses from visual odometry")
     frames = []
     for i, j in pairs:
@@ -148,6 +145,8 @@ def read_euroc(path: str | os.PathLike) -> Manifest:
         frames.append(FrameRecord(pose=(0.0, 0.0, 0.0) if pose is None else None, pose_3d=pose, true_pose_3d=pose,
                                   left=left_files[i].resolve(), right=right_files[j].resolve(),
                                   stamp_s=int(left_ns[i]) / 1e9))
-    return Manifest(root=mav.resolve(), calibration=calibration, calibration_path=sensors[0].resolve(), mount=None,
-                    ground_truth_map=None, frames=tuple(frames), layout="EuRoC/ASL", has_poses=track is not None,
-                    pose_frame_mount=CameraMount(T_body_from_cam0) if track is not None else None, notes=tuple(notes))
+    manifest = Manifest(root=mav.resolve(), calibration=calibration, calibration_path=sensors[0].resolve(), mount=None,
+                        ground_truth_map=None, frames=tuple(frames), layout="EuRoC/ASL", has_poses=track is not None,
+                        pose_frame_mount=CameraMount(T_body_from_cam0) if track is not None else None,
+                        notes=tuple(notes))
+    return with_truth(manifest, truth, pose_frame_mount=CameraMount(T_body_from_cam0))

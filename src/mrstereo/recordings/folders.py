@@ -17,6 +17,7 @@ import numpy as np
 from ..camera import StereoCamera, read_stereo
 from ..io import IMAGE_SUFFIXES
 from .manifest import FrameRecord, Manifest
+from .truth import camera_to_base, check_truth, with_truth
 
 __all__ = ["read_image_folders", "is_image_folders", "image_folder_pair", "stamps_from_names", "FOLDER_PAIRS",
            "CALIBRATION_NAMES"]
@@ -75,7 +76,7 @@ def _calibration_file(path: Path) -> Path | None:
 
 
 def read_image_folders(path: str | os.PathLike, *, calibration: StereoCamera | str | os.PathLike | None = None,
-                       rate_hz: float | None = None) -> Manifest:
+                       rate_hz: float | None = None, truth=None) -> Manifest:
     """Read a folder with a left and a right image folder as a recording (a :class:`Manifest`).
 
     Parameters
@@ -88,6 +89,10 @@ def read_image_folders(path: str | os.PathLike, *, calibration: StereoCamera | s
         :data:`CALIBRATION_NAMES` in the folder.
     rate_hz : float, optional
         The frame rate, for names that are not time stamps (frames ``1 / rate_hz`` apart from 0).
+    truth : None, False or path
+        A TUM or EuRoC csv file of the left camera's poses in the first camera's frame, matched by
+        stamp and moved to the base with the calibration's mount (which it needs)
+        (:func:`mrstereo.recordings.truth.with_truth`); None or False: no poses.
 
     Returns
     -------
@@ -99,6 +104,7 @@ def read_image_folders(path: str | os.PathLike, *, calibration: StereoCamera | s
     ValueError
         No image folder pair, no calibration, images that cannot be paired, a bad rate.
     """
+    check_truth(truth)
     root = Path(path)
     pair = image_folder_pair(root)
     if pair is None:
@@ -133,7 +139,14 @@ def read_image_folders(path: str | os.PathLike, *, calibration: StereoCamera | s
     frames = tuple(FrameRecord(pose=(0.0, 0.0, 0.0), left=a.resolve(), right=b.resolve(),
                                stamp_s=None if stamps is None else float(stamps[k]))
                    for k, (a, b) in enumerate(zip(lefts, rights)))
-    return Manifest(root=root.resolve(), calibration=stereo,
-                    calibration_path=(calibration_path or root).resolve(), mount=stereo.mount,
-                    ground_truth_map=None, frames=frames, layout="image folders", has_poses=False,
-                    notes=tuple(notes))
+    manifest = Manifest(root=root.resolve(), calibration=stereo,
+                        calibration_path=(calibration_path or root).resolve(), mount=stereo.mount,
+                        ground_truth_map=None, frames=frames, layout="image folders", has_poses=False,
+                        notes=tuple(notes))
+    if truth is None or truth is False:
+        return manifest
+    if stereo.mount is None:
+        raise ValueError(f"ground truth {truth}: the poses of the left camera of image folders are moved to the robot "
+                         f"base with the camera mount, and the calibration {manifest.calibration_path} has none "
+                         "(add mount: to it)")
+    return with_truth(manifest, truth, to_base=lambda T: camera_to_base(T, stereo.mount))

@@ -24,6 +24,7 @@ from ..camera import Camera, CameraInfo, StereoCamera
 from ..camera.mount import CameraMount
 from ..io import note_inputs, read_image, read_text
 from .manifest import FrameRecord, Manifest, pose_3d_of
+from .truth import camera_to_base, check_truth, with_truth
 
 __all__ = ["read_kitti_odometry", "is_kitti_odometry", "KITTI_MOUNT", "calib_rows", "stereo_from_projections",
            "numbers_file"]
@@ -113,7 +114,7 @@ def numbers_file(path: Path, columns: int, what: str) -> np.ndarray:
 
 
 def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
-                        mount: CameraMount | None = None) -> Manifest:
+                        mount: CameraMount | None = None, truth=None) -> Manifest:
     """Read a KITTI odometry sequence as a recording (a :class:`Manifest`).
 
     KITTI's rotations hold 7 digits; as unit quaternions they agree with the file to 1e-8.
@@ -128,6 +129,9 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
         ``"06"`` etc.; needed when the root holds several sequences.
     mount : CameraMount, optional
         The left camera on the base (default :data:`KITTI_MOUNT`).
+    truth : None, False or path
+        None: ``poses/NN.txt``; False: no truth (not even read); a TUM or EuRoC csv file of the left
+        camera's poses instead, matched by stamp (:func:`mrstereo.recordings.truth.with_truth`).
 
     Returns
     -------
@@ -143,6 +147,7 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
     ValueError
         Not a KITTI layout, unreadable numbers, stamps or poses that do not match the images.
     """
+    check_truth(truth)
     root = Path(path)
     if not root.is_dir():
         raise FileNotFoundError(f"KITTI odometry folder not found: {root}")
@@ -170,27 +175,24 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
         if max(indices) >= len(times):
             raise ValueError(f"{seq / 'times.txt'} has {len(times)} stamps but image_0 has frame {max(indices)}")
         stamps = times[indices]
-    truth = None
+    poses = None
     poses_path = seq.parent.parent / "poses" / f"{seq.name}.txt"
-    if poses_path.is_file():
+    if truth is None and poses_path.is_file():
         rows = numbers_file(poses_path, 12, "KITTI poses")
         if max(indices) >= len(rows):
             raise ValueError(f"{poses_path} has {len(rows)} poses but image_0 has frame {max(indices)}")
-        M = mount.T_base_from_cam
-        M_inv = np.linalg.inv(M)
-        truth = []
-        for k in indices:
-            T_cam0_from_camk = np.vstack([rows[k].reshape(3, 4), [0.0, 0.0, 0.0, 1.0]])
-            truth.append(pose_3d_of(M @ T_cam0_from_camk @ M_inv))
+        poses = [pose_3d_of(camera_to_base(np.vstack([rows[k].reshape(3, 4), [0.0, 0.0, 0.0, 1.0]]), mount))
+                 for k in indices]
     origin = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
     frames = tuple(FrameRecord(pose=None, left_rect=left.resolve(), right_rect=right.resolve(),
                                stamp_s=None if stamps is None else float(stamps[i]),
-                               pose_3d=origin if truth is None else truth[i],
-                               true_pose_3d=None if truth is None else truth[i])
+                               pose_3d=origin if poses is None else poses[i],
+                               true_pose_3d=None if poses is None else poses[i])
                    for i, (left, right) in enumerate(zip(lefts, rights)))
     manifest = Manifest(root=seq.resolve(), calibration=stereo, calibration_path=calib_path.resolve(), mount=mount,
-                        ground_truth_map=None, frames=frames, layout="KITTI odometry", has_poses=truth is not None,
-                        notes=() if truth is not None else
+                        ground_truth_map=None, frames=frames, layout="KITTI odometry", has_poses=poses is not None,
+                        notes=() if poses is not None or truth is not None else
                         (f"no ground truth ({poses_path}): poses from visual odometry",))
     note_inputs(manifest.inputs().add(seq / "times.txt", poses_path))
-    return manifest
+    return with_truth(manifest, truth, to_base=lambda T: camera_to_base(T, mount))
+

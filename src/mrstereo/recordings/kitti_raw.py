@@ -37,6 +37,7 @@ from ..io import note_inputs, read_image, read_text
 from ..transforms import T_from_R_t, rotation_from_rpy
 from .kitti import calib_rows, stereo_from_projections
 from .manifest import FrameRecord, Manifest, pose_3d_of
+from .truth import camera_to_base, check_truth, with_truth
 
 __all__ = ["read_kitti_raw", "is_kitti_raw", "oxts_poses", "OXTS_HEIGHT_M", "EARTH_RADIUS_M"]
 
@@ -146,7 +147,7 @@ def _oxts_records(drive: Path, names: list[str]) -> np.ndarray:
     return np.array(rows)
 
 
-def read_kitti_raw(path: str | os.PathLike, *, drive: str | None = None) -> Manifest:
+def read_kitti_raw(path: str | os.PathLike, *, drive: str | None = None, truth=None) -> Manifest:
     """Read a KITTI raw drive as a recording (a :class:`Manifest`).
 
     Parameters
@@ -155,6 +156,9 @@ def read_kitti_raw(path: str | os.PathLike, *, drive: str | None = None) -> Mani
         The drive folder (``DATE_drive_NNNN_sync/``) or the date folder holding it.
     drive : str, optional
         The drive (``"0005"`` or its folder name) of a date folder holding several.
+    truth : None, False or path
+        None: the OXTS records; False: no truth (not even read); a TUM or EuRoC csv file of the left
+        camera's poses instead, matched by stamp (:func:`mrstereo.recordings.truth.with_truth`).
 
     Returns
     -------
@@ -171,6 +175,7 @@ def read_kitti_raw(path: str | os.PathLike, *, drive: str | None = None) -> Mani
     ValueError
         Not a KITTI raw layout, unreadable numbers or stamps.
     """
+    check_truth(truth)
     root = Path(path)
     if not root.is_dir():
         raise FileNotFoundError(f"KITTI raw folder not found: {root}")
@@ -195,19 +200,19 @@ def read_kitti_raw(path: str | os.PathLike, *, drive: str | None = None) -> Mani
     mount = CameraMount(T_base_from_imu @ np.linalg.inv(_T_rect_from_imu(date)))
     indices = [int(p.stem) for p in lefts]
     stamps = _stamps_s(drive_dir / "image_00" / "timestamps.txt", max(indices) + 1)[indices]
-    notes, truth = [], None
-    if (drive_dir / "oxts" / "data").is_dir():
+    notes, poses = [], None
+    if truth is None and (drive_dir / "oxts" / "data").is_dir():
         T_imu = oxts_poses(_oxts_records(drive_dir, [p.stem for p in lefts]))
-        truth = [pose_3d_of(T_base_from_imu @ T @ np.linalg.inv(T_base_from_imu)) for T in T_imu]
-    else:
+        poses = [pose_3d_of(T_base_from_imu @ T @ np.linalg.inv(T_base_from_imu)) for T in T_imu]
+    elif truth is None:
         notes.append(f"no OXTS records ({drive_dir / 'oxts' / 'data'}): poses from visual odometry")
     origin = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
     frames = tuple(FrameRecord(pose=None, left_rect=left.resolve(), right_rect=right.resolve(), stamp_s=float(stamps[i]),
-                               pose_3d=origin if truth is None else truth[i],
-                               true_pose_3d=None if truth is None else truth[i])
+                               pose_3d=origin if poses is None else poses[i],
+                               true_pose_3d=None if poses is None else poses[i])
                    for i, (left, right) in enumerate(zip(lefts, rights)))
     manifest = Manifest(root=drive_dir.resolve(), calibration=stereo, calibration_path=(date / _CALIB_NAMES[0]).resolve(),
                         mount=mount, ground_truth_map=None, frames=frames, layout="KITTI raw",
-                        has_poses=truth is not None, notes=tuple(notes))
+                        has_poses=poses is not None, notes=tuple(notes))
     note_inputs(manifest.inputs().add(*(date / n for n in _CALIB_NAMES), drive_dir / "image_00" / "timestamps.txt"))
-    return manifest
+    return with_truth(manifest, truth, to_base=lambda T: camera_to_base(T, mount))

@@ -18,6 +18,7 @@ from .kitti import is_kitti_odometry, read_kitti_odometry
 from .kitti_raw import is_kitti_raw, read_kitti_raw
 from .manifest import MANIFEST_NAME, Manifest, read_manifest
 from .frames import FrameSource, RecordingSource
+from .truth import check_truth, with_truth
 
 __all__ = ["LAYOUTS", "read_recording", "open_recording", "is_bag", "layout_of", "describe_recording"]
 
@@ -63,7 +64,8 @@ def layout_of(path: str | os.PathLike) -> str:
     raise ValueError(f"{path} is not a recording mrstereo reads: looked for {looked}")
 
 
-def read_recording(path: str | os.PathLike, *, calibration=None, rate_hz: float | None = None) -> Manifest:
+def read_recording(path: str | os.PathLike, *, calibration=None, rate_hz: float | None = None,
+                   truth=None) -> Manifest:
     """Read the recording at ``path`` with the reader of its layout (:data:`LAYOUTS`).
 
     Parameters
@@ -75,31 +77,36 @@ def read_recording(path: str | os.PathLike, *, calibration=None, rate_hz: float 
         The calibration of image folders (others carry their own; a command's ``--calib`` replaces it).
     rate_hz : float, optional
         The frame rate of image folders whose file names are not stamps.
+    truth : None, False or path
+        None: the recording's own truth (or poses); False: none, not even read (the poses then come from
+        visual odometry); a TUM or EuRoC csv file of poses instead, matched to the frames by stamp
+        (:mod:`mrstereo.recordings.truth`: the frame its poses are of, per layout).
 
     Raises
     ------
     FileNotFoundError
-        Nothing at ``path``.
+        Nothing at ``path``, no ``truth`` file.
     ValueError
         A folder of no known layout (the message lists what was looked for), a bag, or what its reader raises.
     """
+    check_truth(truth)
     layout = layout_of(path)
     if layout == "dataset":
-        return read_manifest(path)
+        return with_truth(read_manifest(path), truth)
     if layout == "KITTI odometry":
-        return read_kitti_odometry(path)
+        return read_kitti_odometry(path, truth=truth)
     if layout == "KITTI raw":
-        return read_kitti_raw(path)
+        return read_kitti_raw(path, truth=truth)
     if layout == "EuRoC/ASL":
-        return read_euroc(path)
+        return read_euroc(path, truth=truth)
     if layout == "image folders":
-        return read_image_folders(path, calibration=calibration, rate_hz=rate_hz)
+        return read_image_folders(path, calibration=calibration, rate_hz=rate_hz, truth=truth)
     raise ValueError(f"{path} is a ROS bag: open it with mrstereo.recordings.open_recording (read message by "
                      "message) or write it as a dataset with mrstereo.recordings.bag.export_bag")
 
 
 def open_recording(path: str | os.PathLike, *, calibration=None, mount=None, prefer_raw: bool = False,
-                   rate_hz: float | None = None, **bag_options) -> FrameSource:
+                   rate_hz: float | None = None, truth=None, **bag_options) -> FrameSource:
     """The recording at ``path`` as a :class:`~mrstereo.recordings.sources.FrameSource` of in-memory frames.
 
     Every layout of :data:`LAYOUTS`: a dataset, KITTI odometry, KITTI raw, EuRoC/ASL or image folders
@@ -119,6 +126,8 @@ def open_recording(path: str | os.PathLike, *, calibration=None, mount=None, pre
         A recording's raw images even where it has rectified ones (a calibration of one's own).
     rate_hz : float, optional
         The frame rate of image folders whose file names are not stamps.
+    truth : None, False or path
+        The recording's own truth, none, or a file's (:func:`read_recording`; a bag's: its odometry).
     **bag_options
         Those of :class:`~mrstereo.recordings.bag.BagSource` (topics, odometry, TF frames,
         ``sync_tolerance_s``, ``rectified``); without topics the bag's one stereo pair is picked.
@@ -142,10 +151,10 @@ def open_recording(path: str | os.PathLike, *, calibration=None, mount=None, pre
     if layout_of(path) == "ROS bag":
         from .bag import BagSource
 
-        return BagSource(path, calibration=calibration, mount=mount, **bag_options)
+        return BagSource(path, calibration=calibration, mount=mount, truth=truth, **bag_options)
     if bag_options:
         raise ValueError(f"{path} is not a ROS bag: the bag options {', '.join(sorted(bag_options))} do not apply")
-    manifest = read_recording(path, calibration=calibration, rate_hz=rate_hz)
+    manifest = read_recording(path, calibration=calibration, rate_hz=rate_hz, truth=truth)
     if calibration is not None and manifest.layout != "image folders":
         manifest = dataclasses.replace(manifest, calibration=calibration)
     if mount is not None:

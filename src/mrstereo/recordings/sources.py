@@ -163,7 +163,7 @@ def paced(frames, *, speed: float = 1.0, clock=time.monotonic, sleep=time.sleep)
 
 def open_source(sources: Sequence[str | os.PathLike], *, side_by_side: bool = False,
                 prefer_raw: bool = False, size: tuple[int, int] | None = None,
-                rate_hz: float | None = None) -> FrameSource:
+                rate_hz: float | None = None, truth=None) -> FrameSource:
     """The source the user named: cameras, video files or one recording.
 
     Parameters
@@ -180,10 +180,16 @@ def open_source(sources: Sequence[str | os.PathLike], *, side_by_side: bool = Fa
         A recording's raw images even where it has rectified ones (a calibration of one's own).
     size, rate_hz
         Asked of cameras (see :class:`VideoSource`).
+    truth : None, False or path
+        A recording's own truth, none, or a file's (:func:`~mrstereo.recordings.read_recording`).
     """
     specs = [str(s) for s in sources]
     if len(specs) not in (1, 2):
         raise ValueError(f"give one or two sources (left and right), got {len(specs)}")
+    if truth is not None and (len(specs) == 2 or is_camera(specs[0])
+                              or Path(specs[0]).suffix.lower() in VIDEO_SUFFIXES):
+        raise ValueError(f"truth (--truth/--no-truth) is for a recording, not for cameras or video files "
+                         f"({', '.join(specs)})")
     if len(specs) == 2:
         if side_by_side:
             raise ValueError("side_by_side takes one source, got two")
@@ -197,4 +203,4 @@ def open_source(sources: Sequence[str | os.PathLike], *, side_by_side: bool = Fa
         return VideoSource(spec, side_by_side=True, size=size, rate_hz=rate_hz)
     if side_by_side:
         raise ValueError(f"side_by_side is for a camera or a video file, not a recording ({spec})")
-    return open_recording(spec, prefer_raw=prefer_raw)
+    return open_recording(spec, prefer_raw=prefer_raw, truth=truth)
