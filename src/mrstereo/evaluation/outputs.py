@@ -93,7 +93,8 @@ class MapRun:
 
 
 def map_vs_truth(mapper, occupancy: OccupancyGrid, manifest: Manifest):
-    """``(metrics, ground truth)`` of a :class:`~mrstereo.pipeline.mapper.StereoMapper`'s map against the recording's ground-truth map (None, None without one),
+    """``(metrics, ground truth)`` of a :class:`~mrstereo.pipeline.mapper.StereoMapper`'s map against the
+    recording's ground-truth map (None, None without one),
     along the true path with the true fields of view, whatever poses the frames were fused at."""
     if manifest.ground_truth_map is None:
         return None, None

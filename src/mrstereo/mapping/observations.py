@@ -29,7 +29,8 @@ from .rosmap import ros_map_files
 
 __all__ = ["save_observation", "load_observation", "observation_fingerprint", "frame_outputs", "save_frame",
            "resume_frame", "digest", "file_stamp", "dataset_fingerprint", "frame_fingerprint", "map_fingerprint",
-           "output_owner", "output_names", "DATASET_RECORD", "content_digest", "remove_stale_frames", "claim_folder", "bag_fingerprint"]
+           "output_owner", "output_names", "DATASET_RECORD", "content_digest", "remove_stale_frames", "claim_folder",
+           "bag_fingerprint"]
 
 DATASET_RECORD = "dataset.json"
 """The file that claims a dataset's output folder (its ``root``)."""

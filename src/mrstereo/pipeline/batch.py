@@ -190,7 +190,8 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
 
     remove_stale_temporaries(out)
     configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
-    plans = [_plan(m, name, out, configs[name], maps, check_mount) for m, name in zip(datasets, names) if id(m) not in bags]
+    plans = [_plan(m, name, out, configs[name], maps, check_mount)
+             for m, name in zip(datasets, names) if id(m) not in bags]
     tasks, floors = [], {}
     for p in plans:
         complete = [p.loaded[k] is not None for k in range(len(p.manifest.frames))]

@@ -9,6 +9,7 @@ Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import threading
@@ -197,7 +198,8 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
             threads.join()
             writer.close()
             for sink in sinks:
-                _discard_quietly(sink)
+                with contextlib.suppress(Exception):        # (the error raised is the run's)
+                    sink.discard()
             raise
         finally:
             requested = threads.stop.is_set()
@@ -263,13 +265,6 @@ def _fuse_in_order(threads: StreamThreads, fuser: _Fuser, writer: Writer, clock:
             writer.submit(_snapshot(fuser.run, fuser, threads, clock))
             if on_save is not None:
                 on_save(fuser.run)
-
-
-def _discard_quietly(sink) -> None:
-    try:
-        sink.discard()
-    except Exception:
-        pass
 
 
 def _snapshot(run: LiveRun, fuser: _Fuser, threads: StreamThreads, clock: _Clock) -> dict:

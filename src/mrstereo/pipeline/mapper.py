@@ -25,7 +25,6 @@ from ..geometry.pair import Observed, observe_pair
 from ..geometry.scan import LaserScan
 from ..mapping import GridSpec
 from ..mapping.fusion import FrameObservation, fuse_step, world_observation
-from ..mapping.metrics import views_of_poses
 from ..mapping.occupancy import MappingConfig, OccupancyGrid
 from ..mapping.prior import prior_grid
 from ..mapping.tiles import TiledOccupancyGrid
@@ -507,10 +506,6 @@ class StereoMapper:
     def planar_poses(self) -> np.ndarray:
         """``(N, 3)`` ``(x_m, y_m, yaw_rad)`` of the mapped frames."""
         return planar_from_T(np.array(self.trajectory_T)) if self.trajectory_T else np.empty((0, 3))
-
-    def views(self) -> list[tuple]:
-        """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of the mapped frames."""
-        return views_of_poses(self.planar_poses, self.pan_rad, self.stereo, range_m=self.range_m, mount=self.mount)
 
     def odometry_run(self) -> OdometryResult:
         """The visual odometry of a ``track_only`` mapper's frames: the poses refined over the window (a lost

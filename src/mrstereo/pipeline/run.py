@@ -2,7 +2,8 @@
 
 :func:`build_map` drives the mapper over a recording's frames (on workers when asked),
 :func:`finish_map` makes its :class:`~mrstereo.evaluation.outputs.MapRun` (compared with the recording's
-ground-truth map), which :func:`~mrstereo.evaluation.outputs.write_map_outputs` writes. User guide: docs/mapping.md. Conventions: docs/conventions.md.
+ground-truth map), which :func:`~mrstereo.evaluation.outputs.write_map_outputs` writes.
+User guide: docs/mapping.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -159,7 +160,7 @@ def build_map(manifest: Manifest | FrameSource | str | os.PathLike, *, config: P
         raise ValueError("align corrects the given odometry with visual odometry: use it with odometry='given'")
     stereo = manifest.calibration if calibration is None else calibration
     prefer_raw = prefer_raw or calibration is not None
-    config = _on_true_map(manifest, config.for_rig(stereo))
+    config = config_for_recording(config.for_rig(stereo), manifest.ground_truth_map)
     mapper = StereoMapper(stereo, manifest.mount, config, check_mount=check_mount, odometry=odometry,
                           pose_frame_mount=manifest.pose_frame_mount, keep_observations=keep_points or "poses",
                           name=str(manifest.root), prior=prior)
@@ -221,10 +222,6 @@ def with_visual_odometry(manifest: Manifest, *, calibration: StereoCamera | None
     return replace(manifest, frames=frames, has_poses=True), vo
 
 
-def _on_true_map(manifest: Manifest, config: PipelineConfig) -> PipelineConfig:
-    return config_for_recording(config, manifest.ground_truth_map)
-
-
 def config_for_recording(config: PipelineConfig, ground_truth_map=None) -> PipelineConfig:
     """``config`` with the window of the recording's ground-truth map (at ``config.resolution_m``) when it has
     one and no window is given: the map is compared with it cell by cell (``map`` and ``live`` alike)."""
@@ -239,7 +236,8 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
     """Fuse a run's frame observations in order (:meth:`StereoMapper.add`) and compare the map with the
     dataset's ground-truth map (:func:`finish_map`). ``floor`` and ``mount`` are those the frames used."""
     stereo = manifest.calibration if stereo is None else stereo
-    mapper = StereoMapper(stereo, mount, _on_true_map(manifest, config), check_mount=False, keep_observations=True,
+    mapper = StereoMapper(stereo, mount, config_for_recording(config, manifest.ground_truth_map), check_mount=False,
+                          keep_observations=True,
                           name=str(manifest.root))
     for obs in observations:
         mapper.add(obs)

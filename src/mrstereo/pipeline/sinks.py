@@ -1,5 +1,6 @@
 """The sinks a command asks for (viewers, a ROS 2 bag: :mod:`mrstereo.mapping.sinks`, where finished runs
-are replayed into them: :func:`~mrstereo.mapping.sinks.replay_map_run`, :func:`~mrstereo.mapping.sinks.replay_odometry`).
+are replayed into them: :func:`~mrstereo.mapping.sinks.replay_map_run`,
+:func:`~mrstereo.mapping.sinks.replay_odometry`).
 Conventions: docs/conventions.md; user guide: docs/live.md.
 """
 from __future__ import annotations
