@@ -173,25 +173,82 @@ def test_a_flat_floor_has_no_drop():
     assert len(find_drops(far, T, bf).edge_points_robot) == 0
 
 
-def test_height_layer_round_trip(tmp_path):
-    grid = GridSpec(width_m=2.0, height_m=1.0, resolution_m=0.1, origin_x_m=0.0, origin_y_m=-0.5)
-    layer = HeightLayer(grid)
-    assert layer.add(np.array([[0.52, 0.01, 0.4], [0.58, 0.09, -0.3], [0.55, 0.05, 0.1], [9.0, 0.0, 1.0],
-                               [np.nan, 0.0, 0.0]])) == 3
-    layer.add(np.array([[0.51, 0.02, 0.6]]))
+def _layers_grid():
+    from mrstereo.mapping import MappingConfig, OccupancyGrid
+
+    grid = GridSpec(width_m=4.0, height_m=1.0, resolution_m=0.1, origin_x_m=0.0, origin_y_m=-0.5)
+    return OccupancyGrid(grid, config=MappingConfig(footprint_radius_m=None))
+
+
+def test_height_layer_keeps_the_lowest_and_highest_point_and_round_trips(tmp_path):
+    occupancy = _layers_grid()
+    grid = occupancy.grid
+    occupancy.add_layers(np.array([[0.52, 0.01, 0.4], [9.0, 0.0, 1.0], [np.nan, 0.0, 0.0]]),
+                         np.array([[0.55, 0.05, 0.01]]), np.array([[0.58, 0.09, -0.3]]))
+    occupancy.add_layers(np.array([[0.51, 0.02, 0.6]]), np.empty((0, 3)))
     r, c = (int(v[0]) for v in grid.cells_from_xy(np.array([[0.55, 0.05]])))
+    layer = HeightLayer.of(occupancy)
     assert layer.max_height_m[r, c] == pytest.approx(0.6) and layer.min_height_m[r, c] == pytest.approx(-0.3)
-    assert layer.count[r, c] == 4 and np.isnan(layer.max_height_m).sum() == grid.shape[0] * grid.shape[1] - 1
+    assert np.isnan(layer.max_height_m).sum() == grid.shape[0] * grid.shape[1] - 1
+    assert not layer.drop.any()                        # one drop point: fewer than drop_min_points
     files = layer.save(tmp_path / "heights")
-    assert files["png"].stat().st_size > 1000
+    assert files["heights_png"].stat().st_size > 1000
     back = read_height_layer(tmp_path / "heights")
     assert back.grid == grid
     np.testing.assert_array_equal(back.min_height_m, layer.min_height_m)
-    assert back.max_height_m.dtype == np.float32
+    assert back.max_height_m.dtype == np.float32 and back.drop.dtype == np.bool_
     with pytest.raises(ValueError, match="points_world"):
-        layer.add(np.zeros((3, 2)))
+        occupancy.add_layers(np.zeros((3, 2)), np.empty((0, 3)))
     with pytest.raises(ValueError, match="heights.yaml"):
         read_height_layer(tmp_path)
+    with pytest.raises(ValueError, match="drop"):
+        HeightLayer(grid, layer.max_height_m, layer.min_height_m, layer.drop[:, :3])
+
+
+def test_a_drop_cell_stays_lethal_under_rays_and_is_cleared_only_by_floor_measured_in_it():
+    occupancy = _layers_grid()
+    grid = occupancy.grid
+    edge = np.array([[2.05, 0.05, 0.0]] * 4)                            # 4 drop points in cell (x 2.0-2.1)
+    r, c = (int(v[0]) for v in grid.cells_from_xy(edge[:1, :2]))
+    assert occupancy.add_layers(np.empty((0, 3)), np.empty((0, 3)), edge) == 1
+    assert occupancy.drop[r, c] and occupancy.occupied[r, c] and occupancy.drop.sum() == 1
+    # later views see far beyond the edge: their rays cross the cell (misses) many times
+    floor = np.array([[x, 0.05, 0.0] for x in np.linspace(2.5, 3.9, 30) for _ in range(6)])
+    for _ in range(10):
+        occupancy.update(None, floor, (0.2, 0.05, 0.5), layers=(np.empty((0, 3)), floor, None))
+    assert occupancy.log_odds[r, c] < 0                                   # the log-odds alone say free
+    assert occupancy.drop[r, c] and occupancy.occupied[r, c] and not occupancy.free[r, c]
+    assert occupancy.to_ros_map().occupied[r, c]
+    # floor measured in the cell itself: one vote off per view with enough floor points there
+    on_cell = np.array([[2.05, 0.05, 0.0]] * occupancy.config.drop_clear_points)
+    occupancy.add_layers(np.empty((0, 3)), on_cell, np.empty((0, 3)))
+    assert not occupancy.drop[r, c] and occupancy.free[r, c]
+    # votes add up to drop_max_votes; a view voting for the drop is not counted against it
+    for _ in range(5):
+        occupancy.add_layers(np.empty((0, 3)), on_cell, edge)
+    assert occupancy._drop_votes[r, c] == occupancy.config.drop_max_votes
+    # the robot's footprint clears it (it stood there)
+    occupancy.clear_disc((2.05, 0.05), 0.1)
+    assert not occupancy.drop.any()
+
+
+def test_the_drop_layer_survives_tiles_and_their_file(tmp_path):
+    from mrstereo.mapping import MappingConfig
+    from mrstereo.mapping.tiles import TiledOccupancyGrid
+
+    tiles = TiledOccupancyGrid(0.1, config=MappingConfig(footprint_radius_m=None), view_reach_m=5.0, tile_cells=16)
+    edge = np.array([[2.05, 0.05, 0.0]] * 4 + [[2.15, 0.05, -0.4]] * 3)
+    floor = np.array([[x, 0.05, 0.0] for x in np.linspace(0.5, 1.9, 15) for _ in range(6)])
+    tiles.update(edge, floor, (0.2, 0.05, 0.5), layers=(edge, floor, edge))
+    dense = tiles.to_grid()
+    r, c = (int(v[0]) for v in dense.grid.cells_from_xy(np.array([[2.15, 0.05]])))
+    assert dense.drop[r, c] and dense.drop[r, c - 1] and dense.drop.sum() == 2
+    assert dense.heights_m[r, c, 0] == pytest.approx(-0.4)
+    tiles.save(tmp_path / "tiles.npz")
+    back = TiledOccupancyGrid.load(tmp_path / "tiles.npz").to_grid()
+    np.testing.assert_array_equal(back.drop, dense.drop)
+    np.testing.assert_array_equal(back.heights_m, dense.heights_m)
+    assert tiles.overview()[0][r, c] == 0                                 # occupied in the overview
 
 
 def test_scan_command_reports_the_ledge_unless_told_not_to(ledge, tmp_path):
@@ -210,7 +267,7 @@ def test_scan_command_reports_the_ledge_unless_told_not_to(ledge, tmp_path):
     write_stereo(tmp_path / "calib.yaml", ledge.stereo)
     x_e = ledge.summary["drops"]["end"]["x_m"]
     ranges = {}
-    for name, extra in (("drops", ["--drops"]), ("none", [])):
+    for name, extra in (("drops", ["--drops"]), ("none", ["--no-drops"])):
         out = tmp_path / f"{name}.json"
         result = CliRunner().invoke(main, ["scan", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--calib",
                                            str(tmp_path / "calib.yaml"), "--rectified", "-o", str(out), *extra])

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..camera import CameraMount, StereoCamera
+from ..geometry.drops import DropConfig
 from ..geometry.floor import FloorVote, RunFloor
 from ..geometry.freespace import FreeSpaceConfig
 from ..geometry.ground import GroundPlane
@@ -53,8 +54,11 @@ class PipelineConfig:
     rejection : RejectionConfig
         Eq. (13) texture / ground suppression.
     obstacles : ObstacleConfig or None
-        Height band, range limit and floor estimation. None: the defaults with the rig's mapping
-        range (:func:`~mrstereo.geometry.obstacles.mapping_range_m`), filled in by :meth:`for_rig`.
+        Height band, range limit, floor estimation and drop test. None: the defaults with the rig's mapping
+        range (:func:`~mrstereo.geometry.obstacles.mapping_range_m`) and ``drops``, filled in by :meth:`for_rig`.
+    drops : DropConfig or None
+        The drop test (the robot's ``max_step_m`` and ``max_slope_deg``; None: off) of the filled-in
+        ``obstacles`` (``ObstacleConfig.drops`` when ``obstacles`` is given).
     mapping : MappingConfig
         Sensor model and fusion (log-odds or the paper's union).
     grid : GridSpec or None
@@ -81,6 +85,7 @@ class PipelineConfig:
     matching: MatchingConfig | None = None
     rejection: RejectionConfig = field(default_factory=RejectionConfig)
     obstacles: ObstacleConfig | None = None
+    drops: DropConfig | None = ObstacleConfig.drops
     mapping: MappingConfig = field(default_factory=MappingConfig)
     grid: GridSpec | None = None
     resolution_m: float = GridSpec.resolution_m
@@ -107,12 +112,14 @@ class PipelineConfig:
         rig's mapping range when it is None."""
         if self.obstacles is not None:
             return self
-        return replace(self, obstacles=ObstacleConfig(max_range_m=mapping_range_m(stereo)))
+        return replace(self, obstacles=ObstacleConfig(max_range_m=mapping_range_m(stereo), drops=self.drops))
 
     @property
     def obstacle_config(self) -> ObstacleConfig:
         """``obstacles``, or the defaults with the shortest mapping range when not filled in (:meth:`for_rig`)."""
-        return self.obstacles if self.obstacles is not None else ObstacleConfig(max_range_m=MAPPING_MAX_RANGE_M)
+        if self.obstacles is not None:
+            return self.obstacles
+        return ObstacleConfig(max_range_m=MAPPING_MAX_RANGE_M, drops=self.drops)
 
     def with_fusion(self, fusion: str) -> PipelineConfig:
         """The same configuration with another grid fusion (``"log_odds"`` or ``"union"``)."""
@@ -141,6 +148,8 @@ class Observed:
     """Obstacle points, then ``n_boundary`` free-space boundary points."""
     n_boundary: int = 0
     floor_points_robot: np.ndarray | None = None
+    drop_points_robot: np.ndarray | None = None
+    """The drop test's points at their measured height (None: the test is off)."""
     n_valid_disparity: int = 0
     scan: LaserScan | None = None
     disparity_px: np.ndarray | None = None
@@ -190,6 +199,7 @@ def observe(frame, stereo: StereoCamera, mount: CameraMount | None, config: Pipe
     return Observed(**base, mount=mount, ground=obs.ground, floor_fit=floor_fit, frame=frame if fit_floor else None,
                     obstacle_points_robot=np.concatenate([obs.obstacle_points_robot, boundary]),
                     n_boundary=len(boundary), floor_points_robot=obs.floor_points_robot,
+                    drop_points_robot=obs.drop_points_robot if config.obstacle_config.drops is not None else None,
                     n_valid_disparity=int(np.isfinite(pair.disparity_px).sum()),
                     scan=replace(result.scan, stamp_s=float(frame.stamp_s)),
                     disparity_px=pair.disparity_px if keep_images else None,
@@ -205,13 +215,15 @@ def world_observation(observed: Observed, pose: tuple[float, float, float], ster
         T = T_from_planar(*pose)
         obstacles = transform_points(T, observed.obstacle_points_robot).astype(np.float32)
         floor = transform_points(T, observed.floor_points_robot).astype(np.float32)
+        drops = None if observed.drop_points_robot is None else \
+            transform_points(T, observed.drop_points_robot).astype(np.float32)
         ground = observed.ground
         height = float(ground.height_m) if ground.success else None
     return FrameObservation(index=observed.index, pose=pose, pan_rad=observed.pan_rad,
                             obstacle_points_world=obstacles, floor_points_world=floor,
                             n_valid_disparity=observed.n_valid_disparity, ground_message=ground.message,
                             baseline_focal_m_px=float(stereo.baseline_m * stereo.focal_px),
-                            sensor_height_m=height, boundary_points=observed.n_boundary)
+                            sensor_height_m=height, boundary_points=observed.n_boundary, drop_points_world=drops)
 
 
 @dataclass(frozen=True)
@@ -509,7 +521,8 @@ class StereoMapper:
         if self.keep_observations:
             self.observations.append(obs if self.keep_observations is True else replace(
                 obs, obstacle_points_world=obs.obstacle_points_world[:0].copy(),      # (copies: a view keeps it all)
-                floor_points_world=obs.floor_points_world[:0].copy(), cells=None))
+                floor_points_world=obs.floor_points_world[:0].copy(), cells=None,
+                drop_points_world=None if obs.drop_points_world is None else obs.drop_points_world[:0].copy()))
         self.trajectory_T.append(T_from_planar(*obs.pose) if T_world_from_base is None else T_world_from_base)
         self.trajectory_index.append(obs.index)
         self.trajectory_stamps_s.append(float(obs.index) * 0.1 if stamp_s is None else stamp_s)

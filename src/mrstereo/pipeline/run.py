@@ -23,6 +23,7 @@ from ..io import atomic_write
 from ..mapping import read_ros_map, write_ros_map
 from ..mapping.figures import plot_map
 from ..mapping.fusion import FrameObservation
+from ..mapping.heights import HeightLayer
 from ..mapping.metrics import MapMetrics, map_metrics
 from ..mapping.occupancy import OccupancyGrid
 from ..mapping.rosmap import ros_map_on_grid
@@ -355,8 +356,9 @@ def check_map(run: MapRun) -> None:
 
 
 def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
-    """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy, metrics.json and trajectory.txt (the
-    mapped frames' poses, TUM: ``mrstereo plan --start robot`` starts from its last); for a map that grew also
+    """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy, metrics.json, trajectory.txt (the
+    mapped frames' poses, TUM: ``mrstereo plan --start robot`` starts from its last) and the height layer in
+    heights/ (:class:`~mrstereo.mapping.heights.HeightLayer`); for a map that grew also
     tiles.npz and overview.png + overview.yaml (docs/mapping.md, "A long drive").
 
     metrics.json holds the comparison with the ground-truth map (when there is
@@ -395,6 +397,7 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
     plot_map(run.grid, out / "map.png", robot_path=path, fov_views=views,
              planned_path=planned_path, ground_truth=run.ground_truth_map,
              title=f"occupancy grid ({run.grid.config.fusion})")
+    files.update(HeightLayer.of(run.grid).save(out / "heights"))      # the height and drop layers
     if run.tiles is not None:           # the whole map that grew: its tiles and an overview image
         run.tiles.save(out / "tiles.npz")
         files.update(tiles=out / "tiles.npz", overview_yaml=out / "overview.yaml",
