@@ -104,9 +104,16 @@ def test_exact_disparity_marks_the_ledge_and_not_the_ramp(ledge, ramp):
         assert len(edge) > 100
         # on the edge: within 0.1 m before it (edge_reach_m), none on the floor nearer than that
         assert edge[:, 0].min() > x_e - 0.15 and edge[:, 0].max() < x_e + 0.05
-        assert np.all(pts[:, 2] == 0.0)           # at floor level
-        # the robot frame's obstacle points end with them; without the drop test they are not there
-        np.testing.assert_array_equal(res.obstacle_points_robot[-len(res.drop_points_robot):], res.drop_points_robot)
+        # the edge at floor level, the points below it (the ledge's face) at their height, none deeper than it
+        depth = world.summary["drops"]["end"]["depth_m"]
+        assert np.all(edge[:, 2] == 0.0)
+        lower = pts[pts[:, 2] < 0.0]                 # the lower floor and the walls down to it
+        assert len(lower) > 100 and np.all(lower[:, 0] > x_e - 0.01)
+        assert lower[:, 2].min() < -0.5 and np.all(lower[:, 2] > -depth - 0.01)       # the ledge's face
+        # the robot frame's obstacle points end with them at floor level; without the drop test they are not there
+        at_floor = res.drop_points_robot.copy()
+        at_floor[:, 2] = 0.0
+        np.testing.assert_array_equal(res.obstacle_points_robot[-len(res.drop_points_robot):], at_floor)
         off = detect_obstacles(frame.disparity_px, world.stereo, config=ObstacleConfig(drops=None))
         assert len(off.drop_points_robot) == 0
         assert len(off.obstacle_points_robot) == len(res.obstacle_points_robot) - len(res.drop_points_robot)

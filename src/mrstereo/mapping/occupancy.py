@@ -561,7 +561,7 @@ class OccupancyGrid:
         measured height) widens its cell's lowest and highest height. A cell with at least
         ``config.drop_min_points`` of ``drop_points_world`` gets a drop vote (up to ``drop_max_votes``); a
         cell with at least ``drop_clear_points`` of ``floor_points_world`` and no vote from this view loses
-        one. Votes change only here and under the footprint (:meth:`clear_disc`), never by a ray passing
+        one (``drop_points_world`` None: no drop test, no votes either way). Votes change only here and under the footprint (:meth:`clear_disc`), never by a ray passing
         over the cell. Returns the number of cells that got a vote.
         """
         rows, cols = self.grid.shape
@@ -580,8 +580,8 @@ class OccupancyGrid:
                 seen = np.isfinite(lo)
                 heights[seen, 0] = np.fmin(heights[seen, 0], lo[seen])
                 heights[seen, 1] = np.fmax(heights[seen, 1], hi[seen])
-        if not counts[2].size:
-            return 0
+        if drop_points_world is None or not (counts[2].size or self._drop_votes.any()):
+            return 0                                    # (no drop test, or nothing to vote on)
         votes = np.bincount(counts[2], minlength=rows * cols) >= c.drop_min_points
         floor = np.bincount(counts[1], minlength=rows * cols) >= c.drop_clear_points
         v = self._drop_votes.reshape(-1)

@@ -31,7 +31,7 @@ from .rosmap import FREE, OCCUPIED, UNKNOWN, write_map_yaml
 __all__ = ["TiledOccupancyGrid", "TILE_CELLS", "DENSE_MAP_MAX_CELLS", "OVERVIEW_MAX_PX"]
 
 TILE_CELLS = 128
-"""Cells along a tile's side (6.4 m at 5 cm): 256 KiB of log-odds and heights per tile."""
+"""Cells along a tile's side (6.4 m at 5 cm): 416 KiB of log-odds, heights and drop votes per tile."""
 
 DENSE_MAP_MAX_CELLS = 2048 * 2048
 """The most cells of a map written whole as one dense grid (map.pgm, log_odds.npy, map.png, the metrics):
