@@ -4,7 +4,7 @@ Each frame is matched once and mapped twice, with and without the drop test (the
 the drop test's points, :mod:`mrstereo.geometry.drops`), so the two maps differ by the drop test only.
 
 Randomized worlds (``random_world(seed, drops=True)``: a ledge or a drivable ramp down, holes, stairwells,
-a kerb, a sunken step; tuned on seeds 0-4, reported on 100-109), the frames of ``write_synthetic_dataset``'s
+a kerb, a sunken step; the layer's rules chosen on seeds 0-4 and 100-109, reported on 200-209), the frames of ``write_synthetic_dataset``'s
 ``stops`` path (front, +45 and -45 degrees at each stop), per seed:
 
 * **edge recall**: the true drop-edge cells (``mrstereo.world.drop_edges``) whose floor some frame's true
@@ -20,19 +20,18 @@ a kerb, a sunken step; tuned on seeds 0-4, reported on 100-109), the frames of `
   start to a goal in each hole or beyond the ledge that enter an undrivable cell (0 is required).
 
 ``--speed``: the CPU time of a frame (``obstacles_from_pair``: rectify, match, reject, 3-D, free space) with and
-without the drop test, interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480).
+without the drop test, interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480); and of a
+whole mapper step (the grid and its height and drop layers too) on corridor frames, with the layers' share.
 
-``--real``: the first frames of the EuRoC ASL sample, KITTI odometry 06 and OpenLORIS: the share of cells
-free without the drop test that are not free with it (at most 0.5 % on these flat floors), in the grid and with
-the drop layer.
+``--real``: the first frames of the EuRoC ASL sample, KITTI odometry 06 and 01 and OpenLORIS: the share of cells
+free without the drop test that are not free with it (at most 0.5 % on these flat floors), and the drop cells.
 
-Each world row gives both maps: ``grid`` (the occupancy grid with the drop points among the obstacle points, as
-the pipeline maps today) and ``+layer`` (the same with ``mrstereo.mapping.heights.HeightLayer``'s drop cells
-lethal: the grid's rays erode a drop edge once a later view looks past it).
+The map with the drop test is the pipeline's: its drop layer (``OccupancyGrid.drop``, votes that rays do not
+clear) lethal beside the log-odds.
 
 Usage::
 
-    python benchmarks/bench_drops.py --seeds 100-109 [--frames 24]
+    python benchmarks/bench_drops.py --seeds 200-209 [--frames 24]
     python benchmarks/bench_drops.py --real [--frames 24]
     python benchmarks/bench_drops.py --speed [--repeats 15]
 """
@@ -221,6 +220,7 @@ REAL = (("EuRoC ASL sample", "euroc_asl_sample"), ("KITTI odometry 06", "kitti_o
 def measure_speed(repeats: int) -> list[dict]:
     """Median CPU seconds of one frame with and without the drop test (interleaved), per input."""
     from mrstereo.geometry import ObstacleConfig
+    from mrstereo.geometry.drops import DropConfig
     from mrstereo.geometry.pair import obstacles_from_pair
     from mrstereo.recordings import read_recording
     from mrstereo.recordings.manifest import frame_pair
@@ -247,12 +247,57 @@ def measure_speed(repeats: int) -> list[dict]:
                     times[key].append(time.process_time() - t0)
         a, b = (float(np.median(times[key])) for key in ("with", "without"))
         rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": a / b})
-    return rows
+    return rows + [_mapper_speed(repeats)]
+
+
+def _mapper_speed(repeats: int) -> dict:
+    """Median CPU seconds of a whole mapper step (the chain, the grid, the height and drop layers) with and
+    without the drop test, two mappers stepped through the same corridor frames in turn; and of the layers'
+    update alone (``OccupancyGrid.add_layers``) within the step with the test."""
+    from mrstereo.geometry.drops import DropConfig
+    from mrstereo.mapping.occupancy import OccupancyGrid
+    from mrstereo.pipeline.mapper import PipelineConfig, StereoMapper
+    from mrstereo.transforms import T_from_planar
+    from mrstereo.world import default_scene, default_stereo, render_stereo_frame
+
+    stereo = default_stereo()
+    scene = default_scene(0)
+    poses = [(0.5 + 0.25 * k, 0.0, 0.0) for k in range(repeats + 1)]
+    frames = [render_stereo_frame(scene, stereo, pose=p) for p in poses]
+    mappers = {key: StereoMapper(stereo, stereo.mount, PipelineConfig(drops=d), check_mount=False)
+               for key, d in (("with", DropConfig()), ("without", None))}
+    times: dict[str, list[float]] = {"with": [], "without": [], "layers": []}
+    original = OccupancyGrid.add_layers
+    spent = [0.0]
+
+    def timed(self, *args, **kwargs):
+        t0 = time.process_time()
+        try:
+            return original(self, *args, **kwargs)
+        finally:
+            spent[0] += time.process_time() - t0
+
+    OccupancyGrid.add_layers = timed
+    try:
+        for k, (pose, frame) in enumerate(zip(poses, frames)):
+            for key in ("with", "without") if k % 2 else ("without", "with"):
+                spent[0] = 0.0
+                t0 = time.process_time()
+                mappers[key].step(frame.left_rect, frame.right_rect, rectified=True, pose=T_from_planar(*pose))
+                if k:                                           # the first round compiles
+                    times[key].append(time.process_time() - t0)
+                    if key == "with":
+                        times["layers"].append(spent[0])
+    finally:
+        OccupancyGrid.add_layers = original
+    a, b, layers = (float(np.median(times[key])) for key in ("with", "without", "layers"))
+    return {"input": "mapper step, corridor 320x240", "with drops cpu s": a, "without cpu s": b, "ratio": a / b,
+            "layers cpu s": layers, "layers share": layers / a}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", nargs="+", default=["100-109"], help="seeds, e.g. 0-4 or 100-109")
+    parser.add_argument("--seeds", nargs="+", default=["200-209"], help="seeds, e.g. 0-4 or 200-209")
     parser.add_argument("--frames", type=int, default=24, help="frames per world or recording")
     parser.add_argument("--view", type=float, default=2.5, help="range [m] of the edges the recall counts")
     parser.add_argument("--drop-min-points", type=int, default=None, help="MappingConfig.drop_min_points")

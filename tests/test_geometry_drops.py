@@ -288,6 +288,55 @@ def test_scan_command_reports_the_ledge_unless_told_not_to(ledge, tmp_path):
     assert bad.exit_code == 2 and "--max-slope" in bad.output
 
 
+def test_map_marks_the_ledge_lethal_writes_the_height_layer_and_plan_stops_short_of_it(ledge, tmp_path):
+    """`mrstereo map --drops` on two frames 0.7 m before the ledge: drop cells at the ledge in heights/drop.npy,
+    occupied in map.pgm and magenta in map.png; `plan` across the ledge finds no way; `--no-drops` marks none."""
+    import cv2
+    from click.testing import CliRunner
+
+    from mrstereo.camera import write_stereo
+    from mrstereo.cli import main
+    from mrstereo.mapping import read_ros_map
+
+    pose = (float(ledge.waypoints_xy[-1, 0]), float(ledge.waypoints_xy[-1, 1]), 0.0)
+    frame = render_stereo_frame(ledge.scene, ledge.stereo, pose=pose, sensors=ledge.sensors)
+    for side, image in (("left", frame.left_rect), ("right", frame.right_rect)):
+        (tmp_path / "rec" / side).mkdir(parents=True)
+        for k in range(2):
+            cv2.imwrite(str(tmp_path / "rec" / side / f"{k:06d}.png"), image)
+    write_stereo(tmp_path / "calib.yaml", ledge.stereo)
+    x_e = ledge.summary["drops"]["end"]["x_m"] - pose[0]       # the edge ahead of the robot (at the map's origin)
+    layers = {}
+    for flag in ("--drops", "--no-drops"):
+        out = tmp_path / flag.strip("-")
+        result = CliRunner().invoke(main, ["map", str(tmp_path / "rec"), "--calib", str(tmp_path / "calib.yaml"),
+                                           "-o", str(out), "--quiet", flag, "--max-step", "0.05"])
+        assert result.exit_code == 0, result.output
+        layers[flag] = read_height_layer(out / "heights")
+        assert (out / "heights" / "heights.png").stat().st_size > 1000
+    drop, grid = layers["--drops"].drop, layers["--drops"].grid
+    assert not layers["--no-drops"].drop.any()
+    centres = grid.cell_centres()
+    at_edge = drop & (np.abs(centres[..., 0] - x_e) < 0.3)
+    assert at_edge.sum() >= 10 and (drop & (centres[..., 0] < x_e - 0.3)).sum() <= 0.05 * drop.sum()
+    ros_map = read_ros_map(tmp_path / "drops" / "map.yaml")
+    assert ros_map.occupied[drop].all()
+    # the lower floor beyond the edge is seen below the floor: the height layer's lowest points there
+    low = layers["--drops"].min_height_m
+    assert np.nanmin(low[centres[..., 0] > x_e]) < -0.3
+    # planning straight across the ledge, unknown cells allowed: no path, or one that never enters a drop cell
+    result = CliRunner().invoke(main, ["plan", str(tmp_path / "drops" / "map.yaml"), "--start", "0,0", "--goal",
+                                       f"{x_e + 0.8:.2f},0", "--unknown", "free", "-o", str(tmp_path / "p.json")])
+    if result.exit_code == 0:
+        import json
+
+        path = np.array(json.loads((tmp_path / "p.json").read_text())["path_xy"])
+        r, c = grid.cells_from_xy(path)
+        assert not drop[r[grid.inside(r, c)], c[grid.inside(r, c)]].any()
+    else:
+        assert "mrstereo: error:" in result.output
+
+
 def test_drops_need_a_randomized_world(tmp_path):
     from mrstereo.world import write_synthetic_dataset
 
