@@ -303,6 +303,7 @@ def main() -> None:
     parser.add_argument("--drop-min-points", type=int, default=None, help="MappingConfig.drop_min_points")
     parser.add_argument("--drop-clear-points", type=int, default=None, help="MappingConfig.drop_clear_points")
     parser.add_argument("--drop-max-votes", type=int, default=None, help="MappingConfig.drop_max_votes")
+    parser.add_argument("--drop-low", dest="drop_low_m", type=float, default=None, help="MappingConfig.drop_low_m")
     parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
     parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
     parser.add_argument("--speed", action="store_true", help="CPU time of a frame with and without the drop test")
@@ -314,7 +315,7 @@ def main() -> None:
         return
     from mrstereo.pipeline.run import PipelineConfig
 
-    tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes")
+    tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m")
              if getattr(args, k) is not None}
     base = PipelineConfig()
     config = replace(base, mapping=replace(base.mapping, **tuned))

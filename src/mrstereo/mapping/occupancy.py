@@ -101,6 +101,11 @@ class MappingConfig:
         clears it, only floor measured in it (and the robot's footprint).
     drop_clear_points : int
     drop_max_votes : int
+    drop_low_m : float or None
+        The height layer's edge: a cell with a point at floor level next to a cell whose lowest point lies
+        more than this below the floor is a drop cell too (the floor ends there and the view goes on lower).
+        None (the default): off; on the tuning worlds 0.1 m raised the edge recall from 0.675 to 0.700 and
+        the false drops on flat floor from 2.3 % to 7.1 % (docs/obstacles.md, "Drops").
     """
 
     p_hit: float = 0.7
@@ -123,10 +128,13 @@ class MappingConfig:
     drop_min_points: int = 3
     drop_clear_points: int = 20
     drop_max_votes: int = 3
+    drop_low_m: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("drop_min_points", "drop_clear_points", "drop_max_votes"):
             _checks.positive_int(name, getattr(self, name))
+        if self.drop_low_m is not None:
+            _checks.finite_number("drop_low_m", self.drop_low_m, positive=True)
         if self.footprint_radius_m is not None:
             _checks.finite_number("footprint_radius_m", self.footprint_radius_m, nonnegative=True)
         _checks.positive_int("min_points_per_cell", self.min_points_per_cell)
@@ -668,8 +676,20 @@ class OccupancyGrid:
 
     @property
     def drop(self) -> np.ndarray:
-        """The drop cells: a drop vote (:meth:`add_layers`); occupied whatever the log-odds."""
-        return self._drop_votes > 0
+        """The drop cells, occupied whatever the log-odds: those with a drop vote (:meth:`add_layers`), and the
+        floor's last cells before a lower one (the height layer: a cell with a point at floor level next to
+        a cell whose lowest point lies more than ``config.drop_low_m`` below the floor)."""
+        from scipy.ndimage import binary_dilation
+
+        voted = self._drop_votes > 0
+        if self.config.drop_low_m is None:
+            return voted
+        low = np.nan_to_num(self._heights_m[..., 0], nan=0.0) < -self.config.drop_low_m
+        if not low.any():
+            return voted
+        lo, hi = self._heights_m[..., 0], self._heights_m[..., 1]
+        floor = (np.nan_to_num(hi, nan=-np.inf) > -self.config.drop_low_m) & ~low
+        return voted | (binary_dilation(low, np.ones((3, 3), bool)) & floor)
 
     @property
     def heights_m(self) -> np.ndarray:
