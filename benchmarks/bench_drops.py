@@ -57,7 +57,7 @@ def _parse_seeds(values: list[str]) -> list[int]:
 
 def paired_maps(manifest, *, frames: int | None = None, config=None, drops=None):
     """Map a recording's first ``frames`` frames with the drop test (``drops``, default ``DropConfig()``) and
-    without it; returns the two :class:`mrstereo.pipeline.run.MapRun`."""
+    without it; returns the two :class:`mrstereo.evaluation.outputs.MapRun`."""
     from mrstereo.geometry.drops import DropConfig
     from mrstereo.pipeline.run import PipelineConfig, build_map
 
@@ -129,7 +129,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
 
     from mrstereo.geometry.drops import DropConfig
     from mrstereo.mapping import plan_path
-    from mrstereo.pipeline.mapper import views_of_poses
+    from mrstereo.mapping.metrics import views_of_poses
     from mrstereo.world import drop_edges, floor_heights, ground_truth_map, random_world, read_manifest
     from mrstereo.world import write_synthetic_dataset
 
