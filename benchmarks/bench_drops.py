@@ -34,6 +34,7 @@ Usage::
     python benchmarks/bench_drops.py --seeds 200-209 [--frames 24]
     python benchmarks/bench_drops.py --real [--frames 24]
     python benchmarks/bench_drops.py --speed [--repeats 15]
+    python benchmarks/bench_drops.py --corridor [--data DIR]
 """
 from __future__ import annotations
 
@@ -217,6 +218,36 @@ REAL = (("EuRoC ASL sample", "euroc_asl_sample"), ("KITTI odometry 06", "kitti_o
 """The real recordings with a floor in the data folder (``MRSTEREO_DATA``)."""
 
 
+def evaluate_corridor(data_dir: Path) -> list[dict]:
+    """The corridor's precision bounds with and without the drop test: the 12-frame s-curve drive of
+    tests/test_live.py (visual odometry from the raw images; bound: 0.6 of the occupied cells on true walls) and
+    the demo's 6-frame corridor (``MapMetrics.precision``; bound 0.8), both on the paper's 12 m x 6 m window."""
+    from mrstereo.geometry.drops import DropConfig
+    from mrstereo.mapping import GridSpec, read_ros_map
+    from mrstereo.pipeline.run import PipelineConfig, build_map
+    from mrstereo.recordings import read_recording
+    from mrstereo.world import write_synthetic_dataset
+
+    rows = []
+    for name, folder, options, run_kw in (
+            ("live s-curve, 12 frames", "scurve", dict(n_frames=12, supersample=1, path="s-curve", step_m=0.1),
+             dict(odometry="visual", prefer_raw=True)),
+            ("demo corridor, 6 frames", "demo", dict(n_frames=6), {})):
+        ds = data_dir / folder
+        if not (ds / "manifest.yaml").is_file():
+            write_synthetic_dataset(ds, progress=False, **options)
+        manifest = read_recording(ds)
+        gt = read_ros_map(manifest.ground_truth_map)
+        for drops in (None, DropConfig()):
+            run = build_map(manifest, config=PipelineConfig(grid=GridSpec(), drops=drops), progress=False, **run_kw)
+            ours = run.grid.to_ros_map()
+            rows.append({"map": name, "drops": drops is not None,
+                         "occupied on true walls": float((gt.occupied & ours.occupied).sum() / max(ours.occupied.sum(), 1)),
+                         "precision": float(run.metrics.precision), "recall": float(run.metrics.recall),
+                         "drop cells": int(run.grid.drop.sum())})
+    return rows
+
+
 def measure_speed(repeats: int) -> list[dict]:
     """Median CPU seconds of one frame with and without the drop test (interleaved), per input."""
     from mrstereo.geometry import ObstacleConfig
@@ -307,6 +338,7 @@ def main() -> None:
     parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
     parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
     parser.add_argument("--speed", action="store_true", help="CPU time of a frame with and without the drop test")
+    parser.add_argument("--corridor", action="store_true", help="the corridor maps' precision with and without it")
     parser.add_argument("--repeats", type=int, default=15, help="--speed: runs of each")
     args = parser.parse_args()
     if args.speed:
@@ -319,6 +351,12 @@ def main() -> None:
              if getattr(args, k) is not None}
     base = PipelineConfig()
     config = replace(base, mapping=replace(base.mapping, **tuned))
+    if args.corridor:
+        data = Path(args.data) if args.data else Path(tempfile.mkdtemp(prefix="bench_drops_"))
+        for row in evaluate_corridor(data):
+            print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()),
+                  flush=True)
+        return
     if args.real:
         for row in evaluate_real(args.frames, config):
             print("  ".join(f"{k}: {v:.4f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()),
