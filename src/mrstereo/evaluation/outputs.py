@@ -294,7 +294,7 @@ def write_map_dir(run: MapRun, map_dir: Path, record: dict) -> None:
     with temporary_dir(map_dir.parent, prefix="map") as staging:
         tmp = staging / "map"
         written = write_map_outputs(run, tmp)
-        names = sorted(p.name for p in written.values())
+        names = sorted(p.relative_to(tmp).as_posix() for p in written.values())       # (heights/ among them)
         record = dict(record, files=names, content=content_digest(tmp / name for name in names))
         (tmp / MAP_RECORD).write_text(json.dumps(record, indent=1) + "\n")
         replace_dir(tmp, map_dir)
