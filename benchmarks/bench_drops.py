@@ -4,7 +4,7 @@ Each frame is matched once and mapped twice, with and without the drop test (the
 the drop test's points, :mod:`mrstereo.geometry.drops`), so the two maps differ by the drop test only.
 
 Randomized worlds (``random_world(seed, drops=True)``: a ledge or a drivable ramp down, holes, stairwells,
-a kerb, a sunken step; tuned on seeds 0-4, reported on 100-109), the frames of ``write_synthetic_dataset``'s
+a kerb, a sunken step; the layer's rules chosen on seeds 0-4 and 100-109, reported on 200-209), the frames of ``write_synthetic_dataset``'s
 ``stops`` path (front, +45 and -45 degrees at each stop), per seed:
 
 * **edge recall**: the true drop-edge cells (``mrstereo.world.drop_edges``) whose floor some frame's true
@@ -20,21 +20,21 @@ a kerb, a sunken step; tuned on seeds 0-4, reported on 100-109), the frames of `
   start to a goal in each hole or beyond the ledge that enter an undrivable cell (0 is required).
 
 ``--speed``: the CPU time of a frame (``obstacles_from_pair``: rectify, match, reject, 3-D, free space) with and
-without the drop test, interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480).
+without the drop test, interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480); and of a
+whole mapper step (the grid and its height and drop layers too) on corridor frames, with the layers' share.
 
-``--real``: the first frames of the EuRoC ASL sample, KITTI odometry 06 and OpenLORIS: the share of cells
-free without the drop test that are not free with it (at most 0.5 % on these flat floors), in the grid and with
-the drop layer.
+``--real``: the first frames of the EuRoC ASL sample, KITTI odometry 06 and 01 and OpenLORIS: the share of cells
+free without the drop test that are not free with it (at most 0.5 % on these flat floors), and the drop cells.
 
-Each world row gives both maps: ``grid`` (the occupancy grid with the drop points among the obstacle points, as
-the pipeline maps today) and ``+layer`` (the same with ``mrstereo.mapping.heights.HeightLayer``'s drop cells
-lethal: the grid's rays erode a drop edge once a later view looks past it).
+The map with the drop test is the pipeline's: its drop layer (``OccupancyGrid.drop``, votes that rays do not
+clear) lethal beside the log-odds.
 
 Usage::
 
-    python benchmarks/bench_drops.py --seeds 100-109 [--frames 24]
+    python benchmarks/bench_drops.py --seeds 200-209 [--frames 24]
     python benchmarks/bench_drops.py --real [--frames 24]
     python benchmarks/bench_drops.py --speed [--repeats 15]
+    python benchmarks/bench_drops.py --corridor [--data DIR]
 """
 from __future__ import annotations
 
@@ -56,12 +56,9 @@ def _parse_seeds(values: list[str]) -> list[int]:
     return seeds
 
 
-def paired_maps(manifest, *, frames: int | None = None, config=None):
-    """Map a recording's first ``frames`` frames with and without the drop test, matching each frame once.
-
-    Returns ``(with_drops, without_drops)`` :class:`mrstereo.evaluation.outputs.MapRun` and each frame's drop
-    points in the world frame.
-    """
+def paired_maps(manifest, *, frames: int | None = None, config=None, drops=None):
+    """Map a recording's first ``frames`` frames with the drop test (``drops``, default ``DropConfig()``) and
+    without it; returns the two :class:`mrstereo.evaluation.outputs.MapRun`."""
     from mrstereo.geometry.drops import DropConfig
     from mrstereo.pipeline.run import PipelineConfig, build_map
 
@@ -69,12 +66,9 @@ def paired_maps(manifest, *, frames: int | None = None, config=None):
     if frames is not None:
         manifest = replace(manifest, frames=manifest.frames[:frames])
     obstacles = config.for_rig(manifest.calibration).obstacle_config
-    runs = tuple(build_map(manifest, config=replace(config, obstacles=replace(obstacles, drops=drops)), progress=False)
-                 for drops in (DropConfig(), None))
-    # the drop test's points lie on the floor (z = 0), every other obstacle point above the floor band
-    drops_world = [o.obstacle_points_world[np.abs(o.obstacle_points_world[:, 2]) < 1e-6].astype(np.float64)
-                   for o in runs[0].observations]
-    return runs + (drops_world,)
+    drops = DropConfig() if drops is None else drops
+    return tuple(build_map(manifest, config=replace(config, obstacles=replace(obstacles, drops=d)), progress=False)
+                 for d in (drops, None))
 
 
 def _drivable(height: np.ndarray, free: np.ndarray, start: tuple[int, int], max_step_m: float) -> np.ndarray:
@@ -130,13 +124,12 @@ def _seen_floor(manifest, grid, height: np.ndarray, range_m: float) -> np.ndarra
     return seen
 
 
-def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, drop_frames: int = 1) -> dict:
+def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, config=None) -> dict:
     """Render world ``seed`` with drops, map it with and without the drop test, score both (see the module)."""
     from scipy.ndimage import binary_dilation
 
     from mrstereo.geometry.drops import DropConfig
     from mrstereo.mapping import plan_path
-    from mrstereo.mapping.heights import HeightLayer
     from mrstereo.mapping.metrics import views_of_poses
     from mrstereo.world import drop_edges, floor_heights, ground_truth_map, random_world, read_manifest
     from mrstereo.world import write_synthetic_dataset
@@ -147,7 +140,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, d
     manifest = read_manifest(ds)
     world = random_world(seed, drops=True)
     t0 = time.process_time()
-    run, plain, drops_world = paired_maps(manifest)
+    run, plain = paired_maps(manifest, config=config)
     cpu = time.process_time() - t0
     grid = run.grid.grid
     step = DropConfig().max_step_m
@@ -161,37 +154,29 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, d
     seen = _seen_floor(manifest, grid, height, view_m)
     seen_far = _seen_floor(manifest, grid, height, run.range_m)
     lethal_plain = plain.grid.to_ros_map().occupied
-    layer = HeightLayer(grid, min_drop_frames=drop_frames)
-    for points in drops_world:
-        layer.add_drops(points)
     target, far = edges & seen, edges & seen_far
-    scores = {}
-    for name, ros_map in (("grid", run.grid.to_ros_map()), ("+layer", layer.lethal(run.grid.to_ros_map()))):
-        near_lethal = binary_dilation(ros_map.occupied, np.ones((3, 3), bool))
-        scores[name] = (float((near_lethal & target).sum() / max(target.sum(), 1)),
-                        float((near_lethal & far).sum() / max(far.sum(), 1)), ros_map)
+    ros_map = run.grid.to_ros_map()
+    near_lethal = binary_dilation(ros_map.occupied, np.ones((3, 3), bool))
     away = drivable & _in_view(grid, views) & ~binary_dilation(edges, np.ones((3, 3), bool))
     off_plain = away & (np.abs(np.nan_to_num(height)) > 1e-6)
     away_far = away & ~binary_dilation(edges, np.ones((7, 7), bool))
-    goals = _goals(world)
-    row = {"seed": seed, "edge cells in view": int(target.sum())}
-    for name, (recall, recall_far, ros_map) in scores.items():
-        added = ros_map.occupied & ~lethal_plain
-        crossings = 0
-        for goal in goals:
-            plan = plan_path(ros_map, manifest.frames[0].pose[:2], goal, unknown_is_obstacle=False)
-            if plan.success:
-                r, c = grid.cells_from_xy(plan.path_xy)
-                inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
-                crossings += int((free[r[inside], c[inside]] & ~drivable[r[inside], c[inside]]).any())
-        row.update({f"{name} recall": recall, f"{name} recall 4 m": recall_far,
-                    f"{name} false drops": float((added & away).sum() / max(away.sum(), 1)),
-                    f"{name} false > 0.15 m": float((added & away_far).sum() / max(away_far.sum(), 1)),
-                    f"{name} on ramps/kerbs": float((added & off_plain).sum() / max(off_plain.sum(), 1)),
-                    f"{name} crossings": crossings})
-    row.update({"ramp/kerb cells": int(off_plain.sum()), "goals": len(goals), "cpu s": cpu,
-                "kinds": [world.summary["drops"]["end"]["kind"]] + [p["kind"] for p in world.summary["drops"]["patches"]]})
-    return row
+    added = ros_map.occupied & ~lethal_plain
+    crossings, goals = 0, _goals(world)
+    for goal in goals:
+        plan = plan_path(ros_map, manifest.frames[0].pose[:2], goal, unknown_is_obstacle=False)
+        if plan.success:
+            r, c = grid.cells_from_xy(plan.path_xy)
+            inside = grid.inside(r, c)
+            crossings += int((free[r[inside], c[inside]] & ~drivable[r[inside], c[inside]]).any())
+    return {"seed": seed, "edge cells in view": int(target.sum()),
+            "recall": float((near_lethal & target).sum() / max(target.sum(), 1)),
+            "recall 4 m": float((near_lethal & far).sum() / max(far.sum(), 1)),
+            "false drops": float((added & away).sum() / max(away.sum(), 1)),
+            "false > 0.15 m": float((added & away_far).sum() / max(away_far.sum(), 1)),
+            "on ramps/kerbs": float((added & off_plain).sum() / max(off_plain.sum(), 1)),
+            "crossings": crossings, "drop cells": int(run.grid.drop.sum()),
+            "ramp/kerb cells": int(off_plain.sum()), "goals": len(goals), "cpu s": cpu,
+            "kinds": [world.summary["drops"]["end"]["kind"]] + [p["kind"] for p in world.summary["drops"]["patches"]]}
 
 
 def _goals(world) -> list[tuple[float, float]]:
@@ -204,42 +189,69 @@ def _goals(world) -> list[tuple[float, float]]:
     return goals
 
 
-def evaluate_real(frames: int) -> list[dict]:
+def evaluate_real(frames: int, config=None) -> list[dict]:
     """Flat floors of real recordings: the share of free cells the drop test changes."""
-    from mrstereo.mapping.heights import HeightLayer
     from mrstereo.mapping.rosmap import ros_map_on_grid
     from mrstereo.recordings import read_recording
     from mrstereo.recordings.samples import data_root
 
     rows = []
-    for name, path in (("EuRoC ASL sample", "euroc_asl_sample"), ("KITTI odometry 06", "kitti_odometry_06"),
-                       ("OpenLORIS", "openloris_sample")):
+    for name, path in REAL:
         root = data_root() / path
         if not root.exists():
             rows.append({"recording": name, "missing": str(root)})
             continue
         t0 = time.process_time()
-        run, plain, drops_world = paired_maps(read_recording(root), frames=frames)
+        run, plain = paired_maps(read_recording(root), frames=frames, config=config)
         a, b = (r.grid.to_ros_map() for r in (run, plain))
         b = ros_map_on_grid(b, a.grid)           # the map with drops may reach farther: compare on its window
         free = b.free
         changed = free & ~a.free
-        layer = HeightLayer(a.grid)
-        for points in drops_world:
-            layer.add_drops(points)
-        with_layer = free & ~layer.lethal(a).free
         rows.append({"recording": name, "free cells": int(free.sum()), "changed": int(changed.sum()),
                      "share changed": float(changed.sum() / max(free.sum(), 1)),
-                     "+layer share changed": float(with_layer.sum() / max(free.sum(), 1)),
-                     "drop points": int(sum(len(o.obstacle_points_world) for o in run.observations)
-                                        - sum(len(o.obstacle_points_world) for o in plain.observations)),
-                     "cpu s": time.process_time() - t0})
+                     "drop cells": int(run.grid.drop.sum()), "cpu s": time.process_time() - t0})
+    return rows
+
+
+REAL = (("EuRoC ASL sample", "euroc_asl_sample"), ("KITTI odometry 06", "kitti_odometry_06"),
+        ("KITTI odometry 01", "kitti_odometry_01"), ("OpenLORIS", "openloris_sample"))
+"""The real recordings with a floor in the data folder (``MRSTEREO_DATA``)."""
+
+
+def evaluate_corridor(data_dir: Path) -> list[dict]:
+    """The corridor's precision bounds with and without the drop test: the 12-frame s-curve drive of
+    tests/test_live.py (visual odometry from the raw images; bound: 0.6 of the occupied cells on true walls) and
+    the demo's 6-frame corridor (``MapMetrics.precision``; bound 0.8), both on the paper's 12 m x 6 m window."""
+    from mrstereo.geometry.drops import DropConfig
+    from mrstereo.mapping import GridSpec, read_ros_map
+    from mrstereo.pipeline.run import PipelineConfig, build_map
+    from mrstereo.recordings import read_recording
+    from mrstereo.world import write_synthetic_dataset
+
+    rows = []
+    for name, folder, options, run_kw in (
+            ("live s-curve, 12 frames", "scurve", dict(n_frames=12, supersample=1, path="s-curve", step_m=0.1),
+             dict(odometry="visual", prefer_raw=True)),
+            ("demo corridor, 6 frames", "demo", dict(n_frames=6), {})):
+        ds = data_dir / folder
+        if not (ds / "manifest.yaml").is_file():
+            write_synthetic_dataset(ds, progress=False, **options)
+        manifest = read_recording(ds)
+        gt = read_ros_map(manifest.ground_truth_map)
+        for drops in (None, DropConfig()):
+            run = build_map(manifest, config=PipelineConfig(grid=GridSpec(), drops=drops), progress=False, **run_kw)
+            ours = run.grid.to_ros_map()
+            rows.append({"map": name, "drops": drops is not None,
+                         "occupied on true walls": float((gt.occupied & ours.occupied).sum() / max(ours.occupied.sum(), 1)),
+                         "precision": float(run.metrics.precision), "recall": float(run.metrics.recall),
+                         "drop cells": int(run.grid.drop.sum())})
     return rows
 
 
 def measure_speed(repeats: int) -> list[dict]:
     """Median CPU seconds of one frame with and without the drop test (interleaved), per input."""
     from mrstereo.geometry import ObstacleConfig
+    from mrstereo.geometry.drops import DropConfig
     from mrstereo.geometry.pair import obstacles_from_pair
     from mrstereo.recordings import read_recording
     from mrstereo.recordings.manifest import frame_pair
@@ -266,26 +278,87 @@ def measure_speed(repeats: int) -> list[dict]:
                     times[key].append(time.process_time() - t0)
         a, b = (float(np.median(times[key])) for key in ("with", "without"))
         rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": a / b})
-    return rows
+    return rows + [_mapper_speed(repeats)]
+
+
+def _mapper_speed(repeats: int) -> dict:
+    """Median CPU seconds of a whole mapper step (the chain, the grid, the height and drop layers) with and
+    without the drop test, two mappers stepped through the same corridor frames in turn; and of the layers'
+    update alone (``OccupancyGrid.add_layers``) within the step with the test."""
+    from mrstereo.geometry.drops import DropConfig
+    from mrstereo.mapping.occupancy import OccupancyGrid
+    from mrstereo.pipeline.mapper import PipelineConfig, StereoMapper
+    from mrstereo.transforms import T_from_planar
+    from mrstereo.world import default_scene, default_stereo, render_stereo_frame
+
+    stereo = default_stereo()
+    scene = default_scene(0)
+    poses = [(0.5 + 0.25 * k, 0.0, 0.0) for k in range(repeats + 1)]
+    frames = [render_stereo_frame(scene, stereo, pose=p) for p in poses]
+    mappers = {key: StereoMapper(stereo, stereo.mount, PipelineConfig(drops=d), check_mount=False)
+               for key, d in (("with", DropConfig()), ("without", None))}
+    times: dict[str, list[float]] = {"with": [], "without": [], "layers": []}
+    original = OccupancyGrid.add_layers
+    spent = [0.0]
+
+    def timed(self, *args, **kwargs):
+        t0 = time.process_time()
+        try:
+            return original(self, *args, **kwargs)
+        finally:
+            spent[0] += time.process_time() - t0
+
+    OccupancyGrid.add_layers = timed
+    try:
+        for k, (pose, frame) in enumerate(zip(poses, frames)):
+            for key in ("with", "without") if k % 2 else ("without", "with"):
+                spent[0] = 0.0
+                t0 = time.process_time()
+                mappers[key].step(frame.left_rect, frame.right_rect, rectified=True, pose=T_from_planar(*pose))
+                if k:                                           # the first round compiles
+                    times[key].append(time.process_time() - t0)
+                    if key == "with":
+                        times["layers"].append(spent[0])
+    finally:
+        OccupancyGrid.add_layers = original
+    a, b, layers = (float(np.median(times[key])) for key in ("with", "without", "layers"))
+    return {"input": "mapper step, corridor 320x240", "with drops cpu s": a, "without cpu s": b, "ratio": a / b,
+            "layers cpu s": layers, "layers share": layers / a}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", nargs="+", default=["100-109"], help="seeds, e.g. 0-4 or 100-109")
+    parser.add_argument("--seeds", nargs="+", default=["200-209"], help="seeds, e.g. 0-4 or 200-209")
     parser.add_argument("--frames", type=int, default=24, help="frames per world or recording")
     parser.add_argument("--view", type=float, default=2.5, help="range [m] of the edges the recall counts")
-    parser.add_argument("--drop-frames", type=int, default=1, help="frames that must mark a drop-layer cell")
+    parser.add_argument("--drop-min-points", type=int, default=None, help="MappingConfig.drop_min_points")
+    parser.add_argument("--drop-clear-points", type=int, default=None, help="MappingConfig.drop_clear_points")
+    parser.add_argument("--drop-max-votes", type=int, default=None, help="MappingConfig.drop_max_votes")
+    parser.add_argument("--drop-low", dest="drop_low_m", type=float, default=None, help="MappingConfig.drop_low_m")
     parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
     parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
     parser.add_argument("--speed", action="store_true", help="CPU time of a frame with and without the drop test")
+    parser.add_argument("--corridor", action="store_true", help="the corridor maps' precision with and without it")
     parser.add_argument("--repeats", type=int, default=15, help="--speed: runs of each")
     args = parser.parse_args()
     if args.speed:
         for row in measure_speed(args.repeats):
             print("  ".join(f"{k}: {v:.4f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()))
         return
+    from mrstereo.pipeline.run import PipelineConfig
+
+    tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m")
+             if getattr(args, k) is not None}
+    base = PipelineConfig()
+    config = replace(base, mapping=replace(base.mapping, **tuned))
+    if args.corridor:
+        data = Path(args.data) if args.data else Path(tempfile.mkdtemp(prefix="bench_drops_"))
+        for row in evaluate_corridor(data):
+            print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()),
+                  flush=True)
+        return
     if args.real:
-        for row in evaluate_real(args.frames):
+        for row in evaluate_real(args.frames, config):
             print("  ".join(f"{k}: {v:.4f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()),
                   flush=True)
         return
@@ -293,17 +366,16 @@ def main() -> None:
     data.mkdir(parents=True, exist_ok=True)
     rows = []
     for seed in _parse_seeds(args.seeds):
-        row = evaluate_seed(seed, args.frames, data, args.view, args.drop_frames)
+        row = evaluate_seed(seed, args.frames, data, args.view, config)
         rows.append(row)
         print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()), flush=True)
     edge = sum(r["edge cells in view"] for r in rows)
-    for name in ("grid", "+layer"):
-        print(f"all, {name}: edge recall {sum(r[name + ' recall'] * r['edge cells in view'] for r in rows) / max(edge, 1):.3f} "
-              f"(min {min(r[name + ' recall'] for r in rows):.3f}), false drops max "
-              f"{max(r[name + ' false drops'] for r in rows):.4f} (> 0.15 m from an edge: "
-              f"{max(r[name + ' false > 0.15 m'] for r in rows):.4f}), on ramps/kerbs max "
-              f"{max(r[name + ' on ramps/kerbs'] for r in rows):.4f}, "
-              f"crossings {sum(r[name + ' crossings'] for r in rows)} of {sum(r['goals'] for r in rows)} goals")
+    print(f"all: edge recall {sum(r['recall'] * r['edge cells in view'] for r in rows) / max(edge, 1):.3f} "
+          f"(min {min(r['recall'] for r in rows):.3f}), false drops max "
+          f"{max(r['false drops'] for r in rows):.4f} (> 0.15 m from an edge: "
+          f"{max(r['false > 0.15 m'] for r in rows):.4f}), on ramps/kerbs max "
+          f"{max(r['on ramps/kerbs'] for r in rows):.4f}, "
+          f"crossings {sum(r['crossings'] for r in rows)} of {sum(r['goals'] for r in rows)} goals")
 
 
 if __name__ == "__main__":

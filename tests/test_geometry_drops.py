@@ -104,9 +104,16 @@ def test_exact_disparity_marks_the_ledge_and_not_the_ramp(ledge, ramp):
         assert len(edge) > 100
         # on the edge: within 0.1 m before it (edge_reach_m), none on the floor nearer than that
         assert edge[:, 0].min() > x_e - 0.15 and edge[:, 0].max() < x_e + 0.05
-        assert np.all(pts[:, 2] == 0.0)           # at floor level
-        # the robot frame's obstacle points end with them; without the drop test they are not there
-        np.testing.assert_array_equal(res.obstacle_points_robot[-len(res.drop_points_robot):], res.drop_points_robot)
+        # the edge at floor level, the points below it (the ledge's face) at their height, none deeper than it
+        depth = world.summary["drops"]["end"]["depth_m"]
+        assert np.all(edge[:, 2] == 0.0)
+        lower = pts[pts[:, 2] < 0.0]                 # the lower floor and the walls down to it
+        assert len(lower) > 100 and np.all(lower[:, 0] > x_e - 0.01)
+        assert lower[:, 2].min() < -0.5 and np.all(lower[:, 2] > -depth - 0.01)       # the ledge's face
+        # the robot frame's obstacle points end with them at floor level; without the drop test they are not there
+        at_floor = res.drop_points_robot.copy()
+        at_floor[:, 2] = 0.0
+        np.testing.assert_array_equal(res.obstacle_points_robot[-len(res.drop_points_robot):], at_floor)
         off = detect_obstacles(frame.disparity_px, world.stereo, config=ObstacleConfig(drops=None))
         assert len(off.drop_points_robot) == 0
         assert len(off.obstacle_points_robot) == len(res.obstacle_points_robot) - len(res.drop_points_robot)
@@ -173,25 +180,82 @@ def test_a_flat_floor_has_no_drop():
     assert len(find_drops(far, T, bf).edge_points_robot) == 0
 
 
-def test_height_layer_round_trip(tmp_path):
-    grid = GridSpec(width_m=2.0, height_m=1.0, resolution_m=0.1, origin_x_m=0.0, origin_y_m=-0.5)
-    layer = HeightLayer(grid)
-    assert layer.add(np.array([[0.52, 0.01, 0.4], [0.58, 0.09, -0.3], [0.55, 0.05, 0.1], [9.0, 0.0, 1.0],
-                               [np.nan, 0.0, 0.0]])) == 3
-    layer.add(np.array([[0.51, 0.02, 0.6]]))
+def _layers_grid():
+    from mrstereo.mapping import MappingConfig, OccupancyGrid
+
+    grid = GridSpec(width_m=4.0, height_m=1.0, resolution_m=0.1, origin_x_m=0.0, origin_y_m=-0.5)
+    return OccupancyGrid(grid, config=MappingConfig(footprint_radius_m=None))
+
+
+def test_height_layer_keeps_the_lowest_and_highest_point_and_round_trips(tmp_path):
+    occupancy = _layers_grid()
+    grid = occupancy.grid
+    occupancy.add_layers(np.array([[0.52, 0.01, 0.4], [9.0, 0.0, 1.0], [np.nan, 0.0, 0.0]]),
+                         np.array([[0.55, 0.05, 0.01]]), np.array([[0.58, 0.09, -0.3]]))
+    occupancy.add_layers(np.array([[0.51, 0.02, 0.6]]), np.empty((0, 3)))
     r, c = (int(v[0]) for v in grid.cells_from_xy(np.array([[0.55, 0.05]])))
+    layer = HeightLayer.of(occupancy)
     assert layer.max_height_m[r, c] == pytest.approx(0.6) and layer.min_height_m[r, c] == pytest.approx(-0.3)
-    assert layer.count[r, c] == 4 and np.isnan(layer.max_height_m).sum() == grid.shape[0] * grid.shape[1] - 1
+    assert np.isnan(layer.max_height_m).sum() == grid.shape[0] * grid.shape[1] - 1
+    assert not layer.drop.any()                        # one drop point: fewer than drop_min_points
     files = layer.save(tmp_path / "heights")
-    assert files["png"].stat().st_size > 1000
+    assert files["heights_png"].stat().st_size > 1000
     back = read_height_layer(tmp_path / "heights")
     assert back.grid == grid
     np.testing.assert_array_equal(back.min_height_m, layer.min_height_m)
-    assert back.max_height_m.dtype == np.float32
+    assert back.max_height_m.dtype == np.float32 and back.drop.dtype == np.bool_
     with pytest.raises(ValueError, match="points_world"):
-        layer.add(np.zeros((3, 2)))
+        occupancy.add_layers(np.zeros((3, 2)), np.empty((0, 3)))
     with pytest.raises(ValueError, match="heights.yaml"):
         read_height_layer(tmp_path)
+    with pytest.raises(ValueError, match="drop"):
+        HeightLayer(grid, layer.max_height_m, layer.min_height_m, layer.drop[:, :3])
+
+
+def test_a_drop_cell_stays_lethal_under_rays_and_is_cleared_only_by_floor_measured_in_it():
+    occupancy = _layers_grid()
+    grid = occupancy.grid
+    edge = np.array([[2.05, 0.05, 0.0]] * 4)                            # 4 drop points in cell (x 2.0-2.1)
+    r, c = (int(v[0]) for v in grid.cells_from_xy(edge[:1, :2]))
+    assert occupancy.add_layers(np.empty((0, 3)), np.empty((0, 3)), edge) == 1
+    assert occupancy.drop[r, c] and occupancy.occupied[r, c] and occupancy.drop.sum() == 1
+    # later views see far beyond the edge: their rays cross the cell (misses) many times
+    floor = np.array([[x, 0.05, 0.0] for x in np.linspace(2.5, 3.9, 30) for _ in range(6)])
+    for _ in range(10):
+        occupancy.update(None, floor, (0.2, 0.05, 0.5), layers=(np.empty((0, 3)), floor, None))
+    assert occupancy.log_odds[r, c] < 0                                   # the log-odds alone say free
+    assert occupancy.drop[r, c] and occupancy.occupied[r, c] and not occupancy.free[r, c]
+    assert occupancy.to_ros_map().occupied[r, c]
+    # floor measured in the cell itself: one vote off per view with enough floor points there
+    on_cell = np.array([[2.05, 0.05, 0.0]] * occupancy.config.drop_clear_points)
+    occupancy.add_layers(np.empty((0, 3)), on_cell, np.empty((0, 3)))
+    assert not occupancy.drop[r, c] and occupancy.free[r, c]
+    # votes add up to drop_max_votes; a view voting for the drop is not counted against it
+    for _ in range(5):
+        occupancy.add_layers(np.empty((0, 3)), on_cell, edge)
+    assert occupancy._drop_votes[r, c] == occupancy.config.drop_max_votes
+    # the robot's footprint clears it (it stood there)
+    occupancy.clear_disc((2.05, 0.05), 0.1)
+    assert not occupancy.drop.any()
+
+
+def test_the_drop_layer_survives_tiles_and_their_file(tmp_path):
+    from mrstereo.mapping import MappingConfig
+    from mrstereo.mapping.tiles import TiledOccupancyGrid
+
+    tiles = TiledOccupancyGrid(0.1, config=MappingConfig(footprint_radius_m=None), view_reach_m=5.0, tile_cells=16)
+    edge = np.array([[2.05, 0.05, 0.0]] * 4 + [[2.15, 0.05, -0.4]] * 3)
+    floor = np.array([[x, 0.05, 0.0] for x in np.linspace(0.5, 1.9, 15) for _ in range(6)])
+    tiles.update(edge, floor, (0.2, 0.05, 0.5), layers=(edge, floor, edge))
+    dense = tiles.to_grid()
+    r, c = (int(v[0]) for v in dense.grid.cells_from_xy(np.array([[2.15, 0.05]])))
+    assert dense.drop[r, c] and dense.drop[r, c - 1] and dense.drop.sum() == 2
+    assert dense.heights_m[r, c, 0] == pytest.approx(-0.4)
+    tiles.save(tmp_path / "tiles.npz")
+    back = TiledOccupancyGrid.load(tmp_path / "tiles.npz").to_grid()
+    np.testing.assert_array_equal(back.drop, dense.drop)
+    np.testing.assert_array_equal(back.heights_m, dense.heights_m)
+    assert tiles.overview()[0][r, c] == 0                                 # occupied in the overview
 
 
 def test_scan_command_reports_the_ledge_unless_told_not_to(ledge, tmp_path):
@@ -210,7 +274,7 @@ def test_scan_command_reports_the_ledge_unless_told_not_to(ledge, tmp_path):
     write_stereo(tmp_path / "calib.yaml", ledge.stereo)
     x_e = ledge.summary["drops"]["end"]["x_m"]
     ranges = {}
-    for name, extra in (("drops", ["--drops"]), ("none", [])):
+    for name, extra in (("drops", ["--drops"]), ("none", ["--no-drops"])):
         out = tmp_path / f"{name}.json"
         result = CliRunner().invoke(main, ["scan", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--calib",
                                            str(tmp_path / "calib.yaml"), "--rectified", "-o", str(out), *extra])
@@ -222,6 +286,55 @@ def test_scan_command_reports_the_ledge_unless_told_not_to(ledge, tmp_path):
     bad = CliRunner().invoke(main, ["scan", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--calib",
                                     str(tmp_path / "calib.yaml"), "-o", str(tmp_path / "x.json"), "--max-slope", "95"])
     assert bad.exit_code == 2 and "--max-slope" in bad.output
+
+
+def test_map_marks_the_ledge_lethal_writes_the_height_layer_and_plan_stops_short_of_it(ledge, tmp_path):
+    """`mrstereo map --drops` on two frames 0.7 m before the ledge: drop cells at the ledge in heights/drop.npy,
+    occupied in map.pgm and magenta in map.png; `plan` across the ledge finds no way; `--no-drops` marks none."""
+    import cv2
+    from click.testing import CliRunner
+
+    from mrstereo.camera import write_stereo
+    from mrstereo.cli import main
+    from mrstereo.mapping import read_ros_map
+
+    pose = (float(ledge.waypoints_xy[-1, 0]), float(ledge.waypoints_xy[-1, 1]), 0.0)
+    frame = render_stereo_frame(ledge.scene, ledge.stereo, pose=pose, sensors=ledge.sensors)
+    for side, image in (("left", frame.left_rect), ("right", frame.right_rect)):
+        (tmp_path / "rec" / side).mkdir(parents=True)
+        for k in range(2):
+            cv2.imwrite(str(tmp_path / "rec" / side / f"{k:06d}.png"), image)
+    write_stereo(tmp_path / "calib.yaml", ledge.stereo)
+    x_e = ledge.summary["drops"]["end"]["x_m"] - pose[0]       # the edge ahead of the robot (at the map's origin)
+    layers = {}
+    for flag in ("--drops", "--no-drops"):
+        out = tmp_path / flag.strip("-")
+        result = CliRunner().invoke(main, ["map", str(tmp_path / "rec"), "--calib", str(tmp_path / "calib.yaml"),
+                                           "-o", str(out), "--quiet", flag, "--max-step", "0.05"])
+        assert result.exit_code == 0, result.output
+        layers[flag] = read_height_layer(out / "heights")
+        assert (out / "heights" / "heights.png").stat().st_size > 1000
+    drop, grid = layers["--drops"].drop, layers["--drops"].grid
+    assert not layers["--no-drops"].drop.any()
+    centres = grid.cell_centres()
+    at_edge = drop & (np.abs(centres[..., 0] - x_e) < 0.3)
+    assert at_edge.sum() >= 10 and (drop & (centres[..., 0] < x_e - 0.3)).sum() <= 0.05 * drop.sum()
+    ros_map = read_ros_map(tmp_path / "drops" / "map.yaml")
+    assert ros_map.occupied[drop].all()
+    # the lower floor beyond the edge is seen below the floor: the height layer's lowest points there
+    low = layers["--drops"].min_height_m
+    assert np.nanmin(low[centres[..., 0] > x_e]) < -0.3
+    # planning straight across the ledge, unknown cells allowed: no path, or one that never enters a drop cell
+    result = CliRunner().invoke(main, ["plan", str(tmp_path / "drops" / "map.yaml"), "--start", "0,0", "--goal",
+                                       f"{x_e + 0.8:.2f},0", "--unknown", "free", "-o", str(tmp_path / "p.json")])
+    if result.exit_code == 0:
+        import json
+
+        path = np.array(json.loads((tmp_path / "p.json").read_text())["path_xy"])
+        r, c = grid.cells_from_xy(path)
+        assert not drop[r[grid.inside(r, c)], c[grid.inside(r, c)]].any()
+    else:
+        assert "mrstereo: error:" in result.output
 
 
 def test_drops_need_a_randomized_world(tmp_path):

@@ -84,7 +84,9 @@ def test_an_l_shaped_drive_maps_in_under_2_gb_as_tiles_and_an_overview(tmp_path,
     assert x0 < 0.0 and y0 < -1.9 and half + 2.0 < x0 + w < half + 6.0 and half - 1.0 < y0 + h < half + 6.0
     # the tiles hold the corridor along the path (two 4 m wide legs), not the square of the bounding box
     corridor_cells = length_m * 8.0 / 0.05 ** 2
-    assert result["tile_bytes"] < 2 * 16 * corridor_cells and result["tile_bytes"] < 0.1 * 16 * w * h / 0.05 ** 2
+    cell_bytes = 8 + 8 + 8 + 2               # log-odds, obstacle heights, the height layer, drop votes
+    assert (result["tile_bytes"] < 2 * cell_bytes * corridor_cells
+            and result["tile_bytes"] < 0.1 * cell_bytes * w * h / 0.05 ** 2)
     assert result["n_updates"] == len(np.arange(0.0, length_m, 2.5))
     # map.pgm: the 2048 x 2048 cells around the last pose, said in one warning
     wx, wy, ww, wh = result["window"]

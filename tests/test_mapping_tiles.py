@@ -38,8 +38,9 @@ def test_a_kilometre_path_holds_the_tiles_along_it_not_a_square_kilometre():
         tiles.update(*_view(x0, rng))
     bounds = tiles.bounds()
     assert bounds.width_m > 1000.0
-    dense_bytes = (bounds.width_m / 0.05) ** 2 * (8 + 8)      # a square kilometre of log-odds and heights
-    assert tiles.nbytes < 0.02 * dense_bytes                 # 82 MB, not 6.4 GB
+    # a square kilometre of log-odds, obstacle heights, the height layer and drop votes
+    dense_bytes = (bounds.width_m / 0.05) ** 2 * (8 + 8 + 8 + 2)
+    assert tiles.nbytes < 0.02 * dense_bytes                 # 134 MB, not 10 GB
     assert tiles.n_tiles <= 2 * (1005 / (128 * 0.05) + 2)     # one or two rows of 6.4 m tiles
 
 

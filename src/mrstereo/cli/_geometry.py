@@ -13,11 +13,10 @@ from pathlib import Path
 import click
 import numpy as np
 
-from ..geometry.drops import DropConfig
 from ..io import check_outputs
 from ..geometry.pair import obstacles_from_pair, scan_from_pair
-from ._options import (ANGLE_RAD, CALIB_HELP, HEIGHT, MAX_DISPARITY, TILT, Number, echo_floor, library_default,
-                       mount_from_options, mount_option, profile_option)
+from ._options import (ANGLE_RAD, CALIB_HELP, HEIGHT, MAX_DISPARITY, TILT, Number, drop_config, drop_options,
+                       echo_floor, library_default, mount_from_options, mount_option, profile_option)
 
 __all__ = ["COMMANDS"]
 
@@ -51,19 +50,10 @@ def _common(func):
                      help="Drop points farther [m]."),
         click.option("--ground", "ground_method", type=click.Choice(["v_disparity", "plane"]), default=None,
                      help="Floor estimator used when the mount is unknown."),
-        click.option("--max-step", "max_step_m", type=Number(0.0, 1.0, unit="m"),
-                     default=DropConfig.max_step_m, show_default=True,
-                     help="Highest step the robot climbs up or down [m]; a deeper drop is an obstacle."),
-        click.option("--max-slope", "max_slope_deg", type=Number(0.0, 89.0, unit="deg"),
-                     default=DropConfig.max_slope_deg, show_default=True,
-                     help="Steepest slope the robot drives [deg]; a floor that falls away faster is a drop."),
-        click.option("--drops", "drops", is_flag=True,
-                     help="Drop test: where the floor ends (a ledge, a hole, a stairwell) is an obstacle, a step "
-                          "or slope within --max-step and --max-slope is not (docs/obstacles.md, \"Drops\")."),
     ]
     for option in reversed(options):
         func = option(func)
-    return mount_option(func)
+    return mount_option(drop_options(func))
 
 
 def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, preset, max_disparity_px,
@@ -98,8 +88,8 @@ def _run(left, right, calib, output, *, rectified, height_m, tilt_rad, pan_rad, 
     config = ObstacleConfig()
     updates = {k: v for k, v in (("min_obstacle_height_m", min_height_m), ("max_obstacle_height_m", max_height_m),
                                  ("max_range_m", max_range_m), ("ground_method", ground_method)) if v is not None}
-    drops = DropConfig(max_step_m=max_step_m, max_slope_deg=max_slope_deg) if drops else None
-    config = replace(config, drops=drops, **updates)
+    config = replace(config, drops=drop_config(drops=drops, max_step_m=max_step_m, max_slope_deg=max_slope_deg),
+                     **updates)
     options = dict(rectified=rectified, mount=camera_mount, pan_rad=pan_rad, preset=preset,
                    max_disparity_px=max_disparity_px, rejection=rejection, config=config)
     if scan:

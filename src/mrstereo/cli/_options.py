@@ -223,9 +223,38 @@ def profile_option(stages: str):
     return decorate
 
 
+def drop_options(func):
+    """The drop test's options (``map``, ``batch``, ``live``, ``points``, ``scan``): ``--drops/--no-drops``,
+    ``--max-step``, ``--max-slope`` (:func:`drop_config`); defaults those of the library."""
+    from ..geometry.drops import DropConfig
+    from ..geometry.obstacles import ObstacleConfig
+
+    options = [
+        click.option("--drops/--no-drops", "drops", default=ObstacleConfig.drops is not None, show_default=True,
+                     help="Drop test: where the floor ends (a ledge, a hole, a stairwell) is lethal, a step or slope "
+                          "within --max-step and --max-slope is not (docs/obstacles.md, \"Drops\")."),
+        click.option("--max-step", "max_step_m", type=Number(0.0, 1.0, unit="m"),
+                     default=DropConfig.max_step_m, show_default=True,
+                     help="Highest step the robot climbs up or down [m]; a deeper drop is lethal."),
+        click.option("--max-slope", "max_slope_deg", type=Number(0.0, 89.0, unit="deg"),
+                     default=DropConfig.max_slope_deg, show_default=True,
+                     help="Steepest slope the robot drives [deg]; a floor that falls away faster is a drop."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def drop_config(*, drops: bool, max_step_m: float, max_slope_deg: float, **_):
+    """The :class:`~mrstereo.geometry.drops.DropConfig` of the :func:`drop_options` (None: ``--no-drops``)."""
+    from ..geometry.drops import DropConfig
+
+    return DropConfig(max_step_m=max_step_m, max_slope_deg=max_slope_deg) if drops else None
+
+
 def map_options(func):
-    """The options of a map shared by ``map`` and ``batch``: preset, fusion, window or growth, range, footprint,
-    mount check (:func:`map_config`)."""
+    """The options of a map shared by ``map``, ``batch`` and ``live``: preset, fusion, window or growth, range,
+    footprint, mount check, the drop test (:func:`map_config`)."""
     from ..mapping import GridSpec, MappingConfig
     from ..pipeline.run import PipelineConfig
 
@@ -253,7 +282,7 @@ def map_options(func):
     ]
     for option in reversed(options):
         func = option(func)
-    return func
+    return drop_options(func)
 
 
 MAX_MAP_SIZE_M = 100_000.0
@@ -261,7 +290,7 @@ MAX_MAP_SIZE_M = 100_000.0
 
 
 def map_config(*, preset: str, fusion: str, resolution_m: float, size_m: str | None, origin_m: str | None,
-               max_range_m: float | None, footprint_m: float, **_):
+               max_range_m: float | None, footprint_m: float, **options):
     """The :class:`~mrstereo.pipeline.PipelineConfig` of the :func:`map_options`."""
     import dataclasses
 
@@ -278,10 +307,11 @@ def map_config(*, preset: str, fusion: str, resolution_m: float, size_m: str | N
         if width <= 0 or height <= 0:
             raise click.BadParameter(f"width and height must be > 0, got {size_m!r}", param_hint="--size")
         grid = GridSpec(width_m=width, height_m=height, resolution_m=resolution_m, origin_x_m=ox, origin_y_m=oy)
+    drops = drop_config(**options)
     obstacles = None
     if max_range_m is not None:
-        obstacles = ObstacleConfig(max_range_m=max_range_m)
-    config = PipelineConfig(preset=preset, grid=grid, resolution_m=resolution_m, obstacles=obstacles)
+        obstacles = ObstacleConfig(max_range_m=max_range_m, drops=drops)
+    config = PipelineConfig(preset=preset, grid=grid, resolution_m=resolution_m, obstacles=obstacles, drops=drops)
     return dataclasses.replace(config.with_fusion(fusion),
                                mapping=dataclasses.replace(config.with_fusion(fusion).mapping,
                                                            footprint_radius_m=footprint_m or None))

@@ -21,6 +21,7 @@ from ..io import atomic_write, replace_dir, temporary_dir
 from ..mapping import RosMap, read_ros_map, write_ros_map
 from ..mapping.figures import plot_map
 from ..mapping.fusion import FrameObservation
+from ..mapping.heights import HeightLayer
 from ..mapping.metrics import MapMetrics, map_metrics, views_of_poses
 from ..mapping.observations import content_digest
 from ..mapping.occupancy import OccupancyGrid
@@ -156,7 +157,8 @@ def _floor_and_window(run, *, range_m: float | None = None) -> dict:
 
 
 def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
-    """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy, metrics.json and trajectory.txt (the
+    """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy, the height layer in heights/
+    (:class:`~mrstereo.mapping.heights.HeightLayer`), metrics.json and trajectory.txt (the
     mapped frames' poses, TUM: ``mrstereo plan --start robot`` starts from its last); for a map that grew also
     tiles.npz and overview.png + overview.yaml (docs/mapping.md, "A long drive").
 
@@ -185,6 +187,7 @@ def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=N
     plot_map(run.grid, out / "map.png", robot_path=path, fov_views=views,
              planned_path=planned_path, ground_truth=run.ground_truth_map,
              title=f"occupancy grid ({run.grid.config.fusion})")
+    files.update(HeightLayer.of(run.grid).save(out / "heights"))      # the height and drop layers
     if run.tiles is not None:           # the whole map that grew: its tiles and an overview image
         run.tiles.save(out / "tiles.npz")
         files.update(tiles=out / "tiles.npz", overview_yaml=out / "overview.yaml",
@@ -291,7 +294,7 @@ def write_map_dir(run: MapRun, map_dir: Path, record: dict) -> None:
     with temporary_dir(map_dir.parent, prefix="map") as staging:
         tmp = staging / "map"
         written = write_map_outputs(run, tmp)
-        names = sorted(p.name for p in written.values())
+        names = sorted(p.relative_to(tmp).as_posix() for p in written.values())       # (heights/ among them)
         record = dict(record, files=names, content=content_digest(tmp / name for name in names))
         (tmp / MAP_RECORD).write_text(json.dumps(record, indent=1) + "\n")
         replace_dir(tmp, map_dir)

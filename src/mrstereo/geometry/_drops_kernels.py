@@ -132,7 +132,7 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
                     if n_below < out_below.shape[0]:
                         out_below[n_below, 0] = points[r, j, 0]
                         out_below[n_below, 1] = points[r, j, 1]
-                        out_below[n_below, 2] = 0.0
+                        out_below[n_below, 2] = points[r, j, 2]
                         n_below += 1
                 edge_columns[j] += 1
                 in_drop = True

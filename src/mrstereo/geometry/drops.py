@@ -56,9 +56,9 @@ class DropConfig:
 
 @dataclass(frozen=True)
 class DropResult:
-    """Output of :func:`find_drops`: ``edge_points_robot`` (N, 3) the points on the drop edges,
-    ``below_points_robot`` (M, 3) the points below the floor past an edge (both at floor level, z = 0),
-    ``edge_columns`` (W,) the number of edges found in each image column."""
+    """Output of :func:`find_drops`: ``edge_points_robot`` (N, 3) the points on the drop edges (at floor
+    level, z = 0), ``below_points_robot`` (M, 3) the measured points below the floor past an edge (their own
+    height), ``edge_columns`` (W,) the number of edges found in each image column."""
 
     edge_points_robot: np.ndarray
     below_points_robot: np.ndarray
@@ -66,8 +66,16 @@ class DropResult:
 
     @property
     def points_robot(self) -> np.ndarray:
-        """All the drop's obstacle points: the edges', then the lower ones."""
+        """All the drop's points, the edges' then the lower ones, at their measured height."""
         return np.concatenate([self.edge_points_robot, self.below_points_robot])
+
+    @property
+    def obstacle_points_robot(self) -> np.ndarray:
+        """:attr:`points_robot` at floor level (z = 0): obstacle points below every sight line, so the grid's
+        occlusion tests never see through them."""
+        out = self.points_robot
+        out[:, 2] = 0.0
+        return out
 
 
 def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float, *,

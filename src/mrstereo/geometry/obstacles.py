@@ -99,8 +99,8 @@ class ObstacleResult:
     ``points_robot`` (N, 3): the robot-frame points of the pixels with a disparity (and the too-near
     placements), raster order, with their flat pixel indices ``pixels``; ``obstacle_points_robot`` /
     ``floor_points_robot`` among them and the disjoint (H, W) ``obstacle_mask`` / ``floor_mask``;
-    ``drop_points_robot`` the drop test's obstacle points (edges, then lower points; :mod:`.drops`), which
-    ``obstacle_points_robot`` ends with;
+    ``drop_points_robot`` the drop test's points (edges at floor level, then the lower points at their
+    measured height; :mod:`.drops`), which ``obstacle_points_robot`` ends with at floor level (z = 0);
     ``ground`` and ``T_robot_from_cam`` used; ``success`` False (empty masks) without a floor,
     ``message`` how it was obtained; ``too_near_mask`` the too-near pixels placed at the near limit.
     """
@@ -292,7 +292,8 @@ def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleCo
     found = drops.points_robot
     if not len(found):
         return result
-    out = replace(result, obstacle_points_robot=np.concatenate([result.obstacle_points_robot, found]),
+    out = replace(result, obstacle_points_robot=np.concatenate([result.obstacle_points_robot,
+                                                                drops.obstacle_points_robot]),
                   drop_points_robot=found,
                   message=result.message + f"; {int(np.count_nonzero(drops.edge_columns))} columns with a drop")
     out.__dict__["points_robot_image"] = result.points_robot_image      # computed once

@@ -15,9 +15,10 @@ from ..io import atomic_write
 from ..viz.plot import new_figure
 from .rosmap import RosMap
 
-__all__ = ["plot_map"]
+__all__ = ["plot_map", "DROP_COLOUR"]
 
 _UNKNOWN = "#cfd8e6"      # pale blue: cells never observed
+DROP_COLOUR = "#c51b8a"   # magenta: drop cells (the floor ends there; lethal), in every map figure
 
 
 def _probability(value) -> tuple[np.ndarray, object]:
@@ -36,7 +37,7 @@ def _array(name: str, value, columns: int) -> np.ndarray:
 
 
 def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fov_views=None,
-             planned_path=None, ground_truth=None, title: str | None = None) -> None:
+             planned_path=None, ground_truth=None, title: str | None = None, drop_cells=None) -> None:
     """Draw the map and write it as an image (PNG/PDF/SVG by suffix).
 
     Parameters
@@ -54,6 +55,10 @@ def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fo
         A planned path (e.g. ``PlanResult.path_xy``).
     ground_truth : RosMap, optional
         True map; its occupied cells are overlaid in red (the paper's solid lines).
+    title : str, optional
+    drop_cells : ndarray of bool, optional
+        The drop cells (where the floor ends, lethal), drawn in :data:`DROP_COLOUR`; default those of an
+        :class:`~mrstereo.mapping.occupancy.OccupancyGrid` (its ``drop``).
     """
     import matplotlib
     from matplotlib.patches import Patch, Wedge
@@ -68,6 +73,14 @@ def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fo
     cmap = matplotlib.colormaps["gray"].with_extremes(bad=_UNKNOWN)
     ax.imshow(np.ma.masked_invalid(1.0 - probability), cmap=cmap, vmin=0.0, vmax=1.0,
               origin="lower", extent=extent, interpolation="nearest")
+    drop_cells = getattr(grid_or_rosmap, "drop", None) if drop_cells is None else np.asarray(drop_cells, bool)
+    if drop_cells is not None and drop_cells.shape != (rows, cols):
+        raise ValueError(f"drop_cells must have the map's shape {(rows, cols)}, got {drop_cells.shape}")
+    has_drops = drop_cells is not None and bool(drop_cells.any())
+    if has_drops:
+        ax.imshow(np.ma.masked_where(~drop_cells, np.ones((rows, cols))),
+                  cmap=matplotlib.colors.ListedColormap([DROP_COLOUR]), vmin=0.0, vmax=1.0, origin="lower",
+                  extent=extent, interpolation="nearest")
     if ground_truth is not None:
         _checks.instance("ground_truth", ground_truth, RosMap)
         ax.contour(ground_truth.occupied.astype(float), levels=[0.5], colors="tab:red", linewidths=1.0,
@@ -108,6 +121,8 @@ def plot_map(grid_or_rosmap, path_png: str | os.PathLike, *, robot_path=None, fo
     shades = [Patch(facecolor="white", edgecolor="0.5", label="free"),
               Patch(facecolor="black", edgecolor="0.5", label="occupied"),
               Patch(facecolor=_UNKNOWN, edgecolor="0.5", label="unknown (never observed)")]
+    if has_drops:
+        shades.insert(2, Patch(facecolor=DROP_COLOUR, edgecolor="0.5", label="drop: the floor ends (lethal)"))
     known = probability[np.isfinite(probability)]
     if np.any((known > 0.02) & (known < 0.98)):
         shades.insert(1, Patch(facecolor="0.55", edgecolor="0.5", label="gray: 1 - p(occupied)"))

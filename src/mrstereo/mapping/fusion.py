@@ -48,6 +48,16 @@ class FrameObservation:
     boundary_points: int = 0
     """The last ``boundary_points`` rows of ``obstacle_points_world`` are free-space boundary points
     (:mod:`mrstereo.geometry.freespace`: a floor's end seen in the image, not a stereo measurement)."""
+    drop_points_world: np.ndarray | None = None
+    """The drop test's points (:mod:`mrstereo.geometry.drops`) at their measured height, for the map's drop and
+    height layers (their floor-level copies are among ``obstacle_points_world``); None: no drop test."""
+
+    @property
+    def layers(self) -> tuple:
+        """The arguments of :meth:`OccupancyGrid.add_layers`: the measured obstacle points (without the
+        boundary's), the floor points, the drop points."""
+        n = len(self.obstacle_points_world) - self.boundary_points
+        return self.obstacle_points_world[:n], self.floor_points_world, self.drop_points_world
 
     @property
     def sensor_origin_world(self) -> tuple[float, ...]:
@@ -107,7 +117,7 @@ def sweep_footprint(occupancy, start_xy, end_xy, radius_m: float) -> None:
 def add_observation(occupancy: OccupancyGrid | TiledOccupancyGrid, obs: FrameObservation) -> None:
     """One frame into the map, in order: its precomputed cells when they fit the map's grid and
     config and the map does not occlude (``map_occlusion_p`` None), else its cells traced
-    against the map so far."""
+    against the map so far; then its height and drop layers (:meth:`OccupancyGrid.add_layers`)."""
     _checks.instance("occupancy", occupancy, (OccupancyGrid, TiledOccupancyGrid))
     _checks.instance("obs", obs, FrameObservation)
     config = occupancy.config
@@ -115,9 +125,10 @@ def add_observation(occupancy: OccupancyGrid | TiledOccupancyGrid, obs: FrameObs
         if (isinstance(occupancy, OccupancyGrid) and obs.cells is not None and obs.cells.fits(occupancy.grid, config)
                 and config.map_occlusion_p is None):
             occupancy.apply(obs.cells)
+            occupancy.add_layers(*obs.layers)
         else:
             occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world,
-                             baseline_focal_m_px=obs.baseline_focal_m_px)
+                             baseline_focal_m_px=obs.baseline_focal_m_px, layers=obs.layers)
 
 
 def world_observation(observed, pose: tuple[float, float, float], stereo: StereoCamera) -> FrameObservation:
@@ -127,10 +138,12 @@ def world_observation(observed, pose: tuple[float, float, float], stereo: Stereo
         T = T_from_planar(*pose)
         obstacles = transform_points(T, observed.obstacle_points_robot).astype(np.float32)
         floor = transform_points(T, observed.floor_points_robot).astype(np.float32)
+        drops = None if observed.drop_points_robot is None else \
+            transform_points(T, observed.drop_points_robot).astype(np.float32)
         ground = observed.ground
         height = float(ground.height_m) if ground.success else None
     return FrameObservation(index=observed.index, pose=pose, pan_rad=observed.pan_rad,
                             obstacle_points_world=obstacles, floor_points_world=floor,
                             n_valid_disparity=observed.n_valid_disparity, ground_message=ground.message,
                             baseline_focal_m_px=float(stereo.baseline_m * stereo.focal_px),
-                            sensor_height_m=height, boundary_points=observed.n_boundary)
+                            sensor_height_m=height, boundary_points=observed.n_boundary, drop_points_world=drops)

@@ -125,7 +125,8 @@ def save_observation(path: str | os.PathLike, obs: FrameObservation, fingerprint
                  n_valid_disparity=obs.n_valid_disparity, ground_message=np.array(obs.ground_message),
                  baseline_focal_m_px=np.nan if obs.baseline_focal_m_px is None else obs.baseline_focal_m_px,
                  sensor_height_m=np.nan if obs.sensor_height_m is None else obs.sensor_height_m,
-                 boundary_points=obs.boundary_points)
+                 boundary_points=obs.boundary_points,
+                 **({} if obs.drop_points_world is None else {"drop_points_world": obs.drop_points_world}))
 
 
 def observation_fingerprint(path: str | os.PathLike) -> str | None:
@@ -144,7 +145,8 @@ def load_observation(path: str | os.PathLike) -> FrameObservation:
                                 ground_message=str(z["ground_message"]),
                                 baseline_focal_m_px=_optional_float(z["baseline_focal_m_px"]),
                                 sensor_height_m=_optional_float(z["sensor_height_m"]),
-                                boundary_points=int(z["boundary_points"]))
+                                boundary_points=int(z["boundary_points"]),
+                                drop_points_world=z["drop_points_world"] if "drop_points_world" in z.files else None)
 
 
 def _optional_float(value) -> float | None:

@@ -31,7 +31,7 @@ from .rosmap import FREE, OCCUPIED, UNKNOWN, write_map_yaml
 __all__ = ["TiledOccupancyGrid", "TILE_CELLS", "DENSE_MAP_MAX_CELLS", "OVERVIEW_MAX_PX"]
 
 TILE_CELLS = 128
-"""Cells along a tile's side (6.4 m at 5 cm): 256 KiB of log-odds and heights per tile."""
+"""Cells along a tile's side (6.4 m at 5 cm): 416 KiB of log-odds, heights and drop votes per tile."""
 
 DENSE_MAP_MAX_CELLS = 2048 * 2048
 """The most cells of a map written whole as one dense grid (map.pgm, log_odds.npy, map.png, the metrics):
@@ -40,6 +40,10 @@ square of this size around a given point (the last pose); the whole map is in th
 
 OVERVIEW_MAX_PX = 4096
 """The longest side of the overview image in pixels (each pixel a square of 2^k cells)."""
+
+_LAYERS = ("_log_odds", "_z_range_m", "_heights_m", "_drop_votes")
+"""The :class:`OccupancyGrid` arrays a tile holds, in order (saved as ``log_odds``, ``z``, ``heights``, ``drop``)."""
+_SAVED = ("log_odds", "z", "heights", "drop")
 
 
 class TiledOccupancyGrid:
@@ -105,15 +109,15 @@ class TiledOccupancyGrid:
                        (slice(r0 - ty * t, r1 - ty * t), slice(c0 - tx * t, c1 - tx * t)))
 
     def to_grid(self, spec: GridSpec | None = None) -> OccupancyGrid:
-        """The dense grid of a lattice window (default :meth:`bounds`): log-odds and heights copied from the
-        tiles, unknown where no view reached."""
+        """The dense grid of a lattice window (default :meth:`bounds`): log-odds, heights and drop votes copied
+        from the tiles, unknown where no view reached."""
         spec = self.bounds() if spec is None else spec
         row0, col0, rows, cols = self._cells_of(spec)
         grid = OccupancyGrid(spec, config=self.config)          # all unknown, no heights: filled from the tiles
         for key, win, tile in self._overlaps(row0, col0, rows, cols):
             if key in self._tiles:
-                grid._log_odds[win] = self._tiles[key][0][tile]
-                grid._z_range_m[win] = self._tiles[key][1][tile]
+                for name, values in zip(_LAYERS, self._tiles[key]):
+                    getattr(grid, name)[win] = values[tile]
         grid.n_updates, grid.points_outside = self.n_updates, self.points_outside
         return grid
 
@@ -125,32 +129,34 @@ class TiledOccupancyGrid:
             raise TypeError(f"grid must be an OccupancyGrid, got {type(grid).__name__}")
         self._store(grid)
 
-    def _tile(self, key: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-        """The tile at ``key`` (log-odds, heights), created unknown without heights when missing."""
+    def _tile(self, key: tuple[int, int]) -> tuple[np.ndarray, ...]:
+        """The tile at ``key`` (the arrays of :data:`_LAYERS`), created unknown without heights when missing."""
         if key not in self._tiles:
             t = self.tile_cells
             z = np.empty((t, t, 2), np.float32)
             z[..., 0], z[..., 1] = np.inf, -np.inf
-            self._tiles[key] = (np.full((t, t), np.nan), z)
+            self._tiles[key] = (np.full((t, t), np.nan), z, np.full((t, t, 2), np.nan, np.float32),
+                                np.zeros((t, t), np.int16))
         return self._tiles[key]
 
     def _store(self, grid: OccupancyGrid) -> None:
-        """Write a window back into the tiles, creating those it holds known cells or heights of."""
+        """Write a window back into the tiles, creating those it holds known cells, heights or drops of."""
         row0, col0, rows, cols = self._cells_of(grid.grid)
         for key, win, tile in self._overlaps(row0, col0, rows, cols):
-            values, z = grid._log_odds[win], grid._z_range_m[win]
-            if key not in self._tiles and np.isnan(values).all() and not np.isfinite(z).any():
+            arrays = [getattr(grid, name)[win] for name in _LAYERS]
+            if key not in self._tiles and not (~np.isnan(arrays[0]).all() or np.isfinite(arrays[1]).any()
+                                               or np.isfinite(arrays[2]).any() or arrays[3].any()):
                 continue
-            self._tile(key)[0][tile] = values
-            self._tile(key)[1][tile] = z
+            for stored, values in zip(self._tile(key), arrays):
+                stored[tile] = values
 
     def _known_cells(self) -> tuple[int, int, int, int]:
         """``(row0, col0, rows, cols)`` of the smallest lattice window holding every known cell (one cell at the
         origin when none is)."""
         rows, cols = [], []
         t = self.tile_cells
-        for (ty, tx), (values, _) in self._tiles.items():
-            known = ~np.isnan(values)
+        for (ty, tx), (values, _, _, votes) in self._tiles.items():
+            known = ~np.isnan(values) | (votes > 0)
             if known.any():
                 r, c = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
                 rows += [ty * t + r[0], ty * t + r[-1]]
@@ -177,7 +183,7 @@ class TiledOccupancyGrid:
     @property
     def nbytes(self) -> int:
         """Bytes held by the tiles."""
-        return sum(a.nbytes + b.nbytes for a, b in self._tiles.values())
+        return sum(a.nbytes for arrays in self._tiles.values() for a in arrays)
 
     # ------------------------------------------------------------------ updates
     def _window(self, point_sets, centre_xy_m) -> tuple[int, int, int, int]:
@@ -198,8 +204,9 @@ class TiledOccupancyGrid:
         return r0, c0, r1 - r0 + 1, c1 - c0 + 1
 
     def update(self, points_obstacle_world, points_free_world, sensor_origin_world, *,
-               baseline_focal_m_px: float | None = None) -> GridUpdate:
-        """Add one view (:meth:`OccupancyGrid.update`) in the window of its sensor and points."""
+               baseline_focal_m_px: float | None = None, layers: tuple | None = None) -> GridUpdate:
+        """Add one view (:meth:`OccupancyGrid.update`, with its ``layers``) in the window of its sensor and
+        points."""
         sensor = np.asarray(sensor_origin_world, dtype=np.float64).ravel()
         if sensor.shape not in ((2,), (3,)) or not np.isfinite(sensor).all():
             raise ValueError(f"sensor_origin_world must be 2 or 3 finite numbers (x, y[, z]), got {sensor_origin_world!r}")
@@ -208,7 +215,7 @@ class TiledOccupancyGrid:
         window = self.to_grid(self.spec(*self._window((obstacles, floor), sensor[:2])))
         window.points_outside = 0
         result = window.update(obstacles, floor, sensor_origin_world,
-                               baseline_focal_m_px=baseline_focal_m_px)
+                               baseline_focal_m_px=baseline_focal_m_px, layers=layers)
         self._store(window)
         self.n_updates += 1
         self.points_outside += result.points_outside
@@ -228,7 +235,9 @@ class TiledOccupancyGrid:
         for key in np.unique(keys):
             sel = keys == key
             ty, tx = int(rows[sel][0] // t), int(cols[sel][0] // t)
-            self._tile((ty, tx))[0][rows[sel] - ty * t, cols[sel] - tx * t] = self.config.l_min
+            tile = self._tile((ty, tx))
+            tile[0][rows[sel] - ty * t, cols[sel] - tx * t] = self.config.l_min
+            tile[3][rows[sel] - ty * t, cols[sel] - tx * t] = 0
         return len(rows)
 
     # ------------------------------------------------------------------ outputs
@@ -269,8 +278,9 @@ class TiledOccupancyGrid:
         meta = {"resolution_m": self.resolution_m, "tile_cells": self.tile_cells, "view_reach_m": self.view_reach_m,
                 "config": asdict(self.config), "n_updates": self.n_updates, "points_outside": self.points_outside}
         arrays = {"meta": np.array(json.dumps(meta))}
-        for (ty, tx), (values, z) in sorted(self._tiles.items()):
-            arrays[f"t{ty}_{tx}_log_odds"], arrays[f"t{ty}_{tx}_z"] = values, z
+        for (ty, tx), tile in sorted(self._tiles.items()):
+            for name, values in zip(_SAVED, tile):
+                arrays[f"t{ty}_{tx}_{name}"] = values
         with atomic_write(path) as tmp, open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
 
@@ -289,10 +299,15 @@ class TiledOccupancyGrid:
                 for name in data.files:
                     if name.endswith("_log_odds"):
                         ty, tx = (int(v) for v in name[1:-len("_log_odds")].split("_"))
-                        values, z = data[name], data[name[:-len("log_odds")] + "z"]
-                        if values.shape != (t, t) or z.shape != (t, t, 2):
-                            raise ValueError(f"tile {name} has shape {values.shape}, not ({t}, {t})")
-                        out._tiles[(ty, tx)] = (values.astype(np.float64), z.astype(np.float32))
+                        tile = out._tile((ty, tx))
+                        for saved, stored in zip(_SAVED, tile):
+                            key = name[:-len("log_odds")] + saved
+                            if key not in data.files and saved in ("heights", "drop"):
+                                continue                    # (a map saved before the height and drop layers)
+                            values = data[key]
+                            if values.shape != stored.shape:
+                                raise ValueError(f"tile {key} has shape {values.shape}, not {stored.shape}")
+                            stored[...] = values
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise ValueError(f"cannot read tiles file {path}: {exc}") from None
         out.n_updates, out.points_outside = int(meta["n_updates"]), int(meta["points_outside"])
@@ -313,11 +328,11 @@ class TiledOccupancyGrid:
         level = np.zeros(shape, np.uint8)                 # 0 unknown, 1 free, 2 occupied: the largest wins
         threshold = float(log_odds_from_probability(self.config.occupied_thresh))
         t = self.tile_cells
-        for (ty, tx), (values, _) in self._tiles.items():
-            known = ~np.isnan(values)
+        for (ty, tx), (values, _, _, votes) in self._tiles.items():
+            known = ~np.isnan(values) | (votes > 0)
             if not known.any():
                 continue
-            cls = known.astype(np.uint8) + (np.nan_to_num(values, nan=-np.inf) > threshold)
+            cls = known.astype(np.uint8) + ((np.nan_to_num(values, nan=-np.inf) > threshold) | (votes > 0))
             # (known cells lie within the bounds, so every index below is inside ``level``)
             if t % k == 0:                                # whole blocks inside the tile: a reshape
                 block = cls.reshape(t // k, k, t // k, k).max(axis=(1, 3))

@@ -17,6 +17,7 @@ from functools import partial
 import numpy as np
 
 from ..camera import CameraMount, StereoCamera
+from ..geometry.drops import DropConfig
 from ..geometry.floor import FloorVote, RunFloor
 from ..geometry.freespace import FreeSpaceConfig
 from ..geometry.ground import GroundPlane
@@ -54,8 +55,11 @@ class PipelineConfig:
     rejection : RejectionConfig
         Eq. (13) texture / ground suppression.
     obstacles : ObstacleConfig or None
-        Height band, range limit and floor estimation. None: the defaults with the rig's mapping
-        range (:func:`~mrstereo.geometry.obstacles.mapping_range_m`), filled in by :meth:`for_rig`.
+        Height band, range limit, floor estimation and drop test. None: the defaults with the rig's mapping
+        range (:func:`~mrstereo.geometry.obstacles.mapping_range_m`) and ``drops``, filled in by :meth:`for_rig`.
+    drops : DropConfig or None
+        The drop test (the robot's ``max_step_m`` and ``max_slope_deg``; None: off) of the filled-in
+        ``obstacles`` (``ObstacleConfig.drops`` when ``obstacles`` is given).
     mapping : MappingConfig
         Sensor model and fusion (log-odds or the paper's union).
     grid : GridSpec or None
@@ -82,6 +86,7 @@ class PipelineConfig:
     matching: MatchingConfig | None = None
     rejection: RejectionConfig = field(default_factory=RejectionConfig)
     obstacles: ObstacleConfig | None = None
+    drops: DropConfig | None = ObstacleConfig.drops
     mapping: MappingConfig = field(default_factory=MappingConfig)
     grid: GridSpec | None = None
     resolution_m: float = GridSpec.resolution_m
@@ -108,12 +113,14 @@ class PipelineConfig:
         rig's mapping range when it is None."""
         if self.obstacles is not None:
             return self
-        return replace(self, obstacles=ObstacleConfig(max_range_m=mapping_range_m(stereo)))
+        return replace(self, obstacles=ObstacleConfig(max_range_m=mapping_range_m(stereo), drops=self.drops))
 
     @property
     def obstacle_config(self) -> ObstacleConfig:
         """``obstacles``, or the defaults with the shortest mapping range when not filled in (:meth:`for_rig`)."""
-        return self.obstacles if self.obstacles is not None else ObstacleConfig(max_range_m=MAPPING_MAX_RANGE_M)
+        if self.obstacles is not None:
+            return self.obstacles
+        return ObstacleConfig(max_range_m=MAPPING_MAX_RANGE_M, drops=self.drops)
 
     def with_fusion(self, fusion: str) -> PipelineConfig:
         """The same configuration with another grid fusion (``"log_odds"`` or ``"union"``)."""
@@ -459,7 +466,8 @@ class StereoMapper:
         if self.keep_observations:
             self.observations.append(obs if self.keep_observations is True else replace(
                 obs, obstacle_points_world=obs.obstacle_points_world[:0].copy(),      # (copies: a view keeps it all)
-                floor_points_world=obs.floor_points_world[:0].copy(), cells=None))
+                floor_points_world=obs.floor_points_world[:0].copy(), cells=None,
+                drop_points_world=None if obs.drop_points_world is None else obs.drop_points_world[:0].copy()))
         self._on_trajectory(obs.index, T_from_planar(*obs.pose) if T_world_from_base is None else T_world_from_base,
                             float(obs.index) * 0.1 if stamp_s is None else stamp_s, T_world_from_base_true, obs.pan_rad)
         self._count_outside(obs)
