@@ -180,8 +180,11 @@ def test_rpe_matches_evo():
         assert m.rpe_translation_per_m * delta == pytest.approx(trans_m, abs=2e-6)
         assert m.rpe_rotation_deg_per_m * delta == pytest.approx(angle_deg, abs=2e-6)
     assert trajectory_metrics(P, Q).ate_rmse_m == pytest.approx(0.072291, abs=2e-6)
-    assert trajectory_metrics(P, Q).all_pairs                                    # the default
-    assert rpe_pairs(Q[:3], 100.0, all_pairs=False) == [] and rpe_pairs(Q[:3], 100.0) == []
+    assert not trajectory_metrics(P, Q).all_pairs                                # the default
+    assert rpe_pairs(Q[:3], 100.0) == [] and rpe_pairs(Q[:3], 100.0, all_pairs=True) == []
+    # a car at 1.2 m per frame: no pair within 10 % of 1 m (evo: "empty index list"); consecutive ones
+    car = np.stack([T_from_planar(1.2 * k, 0.0, 0.0) for k in range(6)])
+    assert rpe_pairs(car, 1.0, all_pairs=True) == [] and rpe_pairs(car, 1.0) == [(k, k + 1) for k in range(5)]
 
 
 def test_estimate_moved_to_the_truths_body():
@@ -266,10 +269,10 @@ def test_euroc_rpe_compares_one_body_and_matches_evo(tmp_path):
     _, truth = read_tum(DATA / "euroc_truth_body.txt")
     _, base = read_tum(DATA / "euroc_estimate_base.txt")
     body = moved_to_body(base, T_base_from_cam, T_body_from_cam, truth[0])
-    m = trajectory_metrics(body, truth)
+    m = trajectory_metrics(body, truth, all_pairs=True)
     assert m.rpe_rotation_deg_per_m == pytest.approx(1.259281, abs=2e-5)
     assert m.rpe_translation_per_m == pytest.approx(0.019378, abs=2e-6)
     assert m.ate_rmse_m == pytest.approx(0.013960, abs=2e-6)
-    two_bodies = trajectory_metrics(base, truth)
+    two_bodies = trajectory_metrics(base, truth, all_pairs=True)
     assert two_bodies.rpe_rotation_deg_per_m == pytest.approx(10.018601, abs=2e-5)
     assert two_bodies.rpe_translation_per_m == pytest.approx(1.318686, abs=2e-5)

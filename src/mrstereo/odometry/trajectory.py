@@ -2,9 +2,9 @@
 
 TUM format: one line ``t tx ty tz qx qy qz qw`` per pose (the base in the world), ``#`` comments.
 Metrics (:func:`trajectory_metrics`; definitions in docs/odometry.md, Metrics): ATE after a
-rigid Umeyama alignment (``evo_ape -a``) and unaligned, RPE per metre over all pairs of frames 1 m
-of true path apart (``evo_rpe --delta 1 --delta_unit m --pairs_from_reference --all_pairs``,
-divided by the 1 m), end-point error. Conventions: docs/conventions.md.
+rigid Umeyama alignment (``evo_ape -a``) and unaligned, RPE per metre over consecutive segments of
+the true path (``evo_rpe --delta 1 --delta_unit m --pairs_from_reference``; with ``all_pairs``,
+``--all_pairs``; divided by the 1 m), end-point error. Conventions: docs/conventions.md.
 
 References
 ----------
@@ -132,7 +132,7 @@ class TrajectoryMetrics:
     n_poses: int
     alignment: str
     delta_m: float
-    all_pairs: bool = True
+    all_pairs: bool = False
 
     @property
     def ate_percent(self) -> float:
@@ -179,7 +179,7 @@ def moved_to_body(T_world_from_base, T_base_from_cam, T_body_from_cam, T_world_f
     return out
 
 
-def rpe_pairs(T_true, delta_m: float, *, all_pairs: bool = True) -> list[tuple[int, int]]:
+def rpe_pairs(T_true, delta_m: float, *, all_pairs: bool = False) -> list[tuple[int, int]]:
     """The pairs of frames ``(i, j)`` about ``delta_m`` metres of true path apart, as
     ``evo_rpe --delta D --delta_unit m --pairs_from_reference`` forms them (evo's
     ``filter_pairs_by_path``).
@@ -209,7 +209,7 @@ def rpe_pairs(T_true, delta_m: float, *, all_pairs: bool = True) -> list[tuple[i
 
 
 def trajectory_metrics(T_estimated, T_true, *, delta_m: float = 1.0, alignment: str = "se3",
-                       all_pairs: bool = True) -> TrajectoryMetrics:
+                       all_pairs: bool = False) -> TrajectoryMetrics:
     """ATE, RPE per metre and end-point error of ``T_estimated`` against ``T_true`` (same frames).
 
     Parameters
@@ -222,7 +222,9 @@ def trajectory_metrics(T_estimated, T_true, *, delta_m: float = 1.0, alignment: 
         Alignment of the ATE (``ate_rmse_unaligned_m`` is always given too). The RPE compares
         relative poses, which no rigid alignment changes (``evo_rpe -a`` gives the same numbers).
     all_pairs : bool
-        RPE over all pairs (``evo_rpe --all_pairs``) or consecutive segments (:func:`rpe_pairs`).
+        RPE over all pairs (``evo_rpe --all_pairs``) or consecutive segments (:func:`rpe_pairs`). All
+        pairs need frames closer than a tenth of ``delta_m``: a car at 1.2 m per frame has no pair
+        within 10 % of 1 m (evo: "empty index list"), hence consecutive segments by default.
     """
     P = _poses("T_estimated", T_estimated)
     Q = _poses("T_true", T_true)
