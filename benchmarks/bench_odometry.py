@@ -23,7 +23,8 @@ odometry (3 % scale error, 2 deg/m heading drift) beside the true poses (``mrste
 --path s-curve --step 0.1 --odometry-noise 0.03,2``). Printed:
 
 - visual odometry against the true poses: ATE RMSE (SE(3)-aligned, as ``evo_ape -a``, and
-  unaligned from the common start), RPE per metre, end-point error, in % of the distance;
+  unaligned from the common start), the estimated path's length over the true one (``path x``:
+  its scale), RPE per metre, end-point error, in % of the distance;
 - occupancy-map precision / recall against the ground-truth map with the true poses, the drifted
   odometry, ``map --align`` (the drifted odometry fused with visual odometry) and
   ``map --odometry visual``. The frames are matched once; each run re-poses their robot-frame
@@ -56,7 +57,7 @@ from mrstereo.mapping import read_ros_map
 from mrstereo.mapping.fusion import fuse
 from mrstereo.mapping.metrics import map_metrics
 from mrstereo.odometry.fusion import fuse_odometry
-from mrstereo.odometry.trajectory import trajectory_metrics
+from mrstereo.odometry.trajectory import path_length_m, trajectory_metrics
 from mrstereo.pipeline.run import PipelineConfig, build_map
 from mrstereo.recordings.layouts import read_recording
 from mrstereo.recordings.manifest import frame_pair, read_manifest
@@ -152,6 +153,7 @@ def compare_pairs(pairs, stereo, truth, mounts, stamps, config=None) -> dict:
     T_cam, base_times, failed = baseline_odometry(pairs, stereo, truth[0] @ mounts[0])
     T_base = np.stack([T @ np.linalg.inv(M) for T, M in zip(T_cam, mounts)])
     return {"vo": trajectory_metrics(vo.T_world_from_base, truth), "vo_lost": vo.n_lost,
+            "vo_path_m": path_length_m(vo.T_world_from_base),
             "vo_ms": 1000 * float(np.mean(vo.time_s)), "vo_ms_median": 1000 * float(np.median(vo.time_s)),
             "vo_wall_ms": 1000 * wall, "keyframes": vo.status.count("keyframe"),
             "vo_online": trajectory_metrics(vo.T_world_from_base_online, truth),
@@ -162,7 +164,8 @@ def compare_pairs(pairs, stereo, truth, mounts, stamps, config=None) -> dict:
 def _compare_line(label: str, r: dict) -> str:
     v, b = r["vo"], r["base"]
     return (f"{label}: {v.path_length_m:.1f} m, {v.n_poses} frames {r['size'][0]}x{r['size'][1]} | mrstereo: ATE "
-            f"{v.ate_percent:.2f} % ({100 * v.ate_rmse_m:.1f} cm; online {r['vo_online'].ate_percent:.2f} %), "
+            f"{v.ate_percent:.2f} % ({100 * v.ate_rmse_m:.1f} cm; online {r['vo_online'].ate_percent:.2f} %; path "
+            f"x{r['vo_path_m'] / v.path_length_m:.3f}), "
             f"end {v.end_point_percent:.2f} %, RPE {100 * v.rpe_translation_per_m:.2f} % "
             f"{v.rpe_rotation_deg_per_m:.3f} deg/m, lost {r['vo_lost']}, {r['keyframes']} keyframes, "
             f"{r['vo_ms']:.1f} ms/frame CPU (median {r['vo_ms_median']:.1f}) | baseline ORB+SGBM+PnP: ATE "
