@@ -150,10 +150,10 @@ def test_a_failed_reference_is_relocalized_then_retried_from_scratch(drive, monk
     original = StereoOdometry._track
 
     def failing(everything):
-        def track(self, left, T_pred, dt, kf=None):
+        def track(self, left, T_pred, dt, kf=None, **kw):
             if self._n_frames == 10 and (everything or kf is None):
                 return LOST, None, 0, 0, None
-            return original(self, left, T_pred, dt, kf)
+            return original(self, left, T_pred, dt, kf, **kw)
         return track
 
     for everything, expected in ((False, None), (True, KEYFRAME)):
