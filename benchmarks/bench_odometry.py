@@ -62,7 +62,7 @@ from mrstereo.odometry.trajectory import path_length_m, trajectory_metrics
 from mrstereo.pipeline.run import PipelineConfig, build_map
 from mrstereo.recordings.layouts import read_recording
 from mrstereo.recordings.manifest import frame_pair, read_manifest
-from mrstereo.transforms import T_from_planar, T_from_rvec_t, transform_points
+from mrstereo.transforms import T_from_planar, T_from_rvec_t, rotation_angle_rad, transform_points
 from mrstereo.world.dataset import write_synthetic_dataset
 
 NOISE = (0.03, math.radians(2.0))
@@ -241,6 +241,15 @@ def kitti_scale(path: Path) -> None:
     vo, truth_len = r["result"], r["vo"].path_length_m
     print(f"{manifest.root}: ATE {r['vo'].ate_percent:.2f} %, path {r['vo_path_m']:.2f} m for {truth_len:.2f} m "
           f"(x{r['vo_path_m'] / truth_len:.3f})")
+    P, Q = vo.T_world_from_base, np.stack([f.T_world_from_base_true for f in manifest.frames])
+    p, q = P[:, :3, 3] - P[:, :3, 3].mean(0), Q[:, :3, 3] - Q[:, :3, 3].mean(0)
+    U, S, Vt = np.linalg.svd(q.T @ p / len(p))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U) * np.linalg.det(Vt))])
+    scale = np.trace(np.diag(S) @ D) / np.mean(np.sum(p * p, axis=1))               # Umeyama with scale
+    sim3 = np.sqrt(np.mean(np.sum((scale * p @ (U @ D @ Vt).T - q) ** 2, axis=1)))
+    E = np.linalg.inv(np.linalg.inv(Q[0]) @ Q[-1]) @ np.linalg.inv(P[0]) @ P[-1]
+    print(f"  with scale (Sim(3)) aligned: ATE {100 * sim3 / truth_len:.2f} % (scale {scale:.3f}); rotation drift "
+          f"over the run {math.degrees(rotation_angle_rad(E[:3, :3])):.2f} deg")
     tracker = StereoOdometry(manifest.calibration, config=OdometryConfig())
     mounts = CameraMount.from_xyz_rpy((0, 0, 0), (0, 0, 0)).T_base_from_rectified(manifest.calibration.left.R)
     for left, right in _odometry_pairs(manifest):
@@ -253,12 +262,13 @@ def kitti_scale(path: Path) -> None:
 
     sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=128, blockSize=5, P1=200, P2=800, uniquenessRatio=10,
                                  mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY)
-    diff, rows = [], []
+    diff, rows, disps = [], [], []
     for left, right in _odometry_pairs(manifest)[::5]:
         uv, d = stereo_d(left, right)
         ds = sgbm.compute(left, right).astype(np.float32)[np.rint(uv[:, 1]).astype(int), np.rint(uv[:, 0]).astype(int)]
         ok = np.isfinite(d) & (ds > 0)
         diff.append(ds[ok] / 16.0 - d[ok])
+        disps.append(d[ok])
         crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.003)
         q, found, _ = cv2.calcOpticalFlowPyrLK(left, right, uv.reshape(-1, 1, 2), None, winSize=(21, 21), maxLevel=4,
                                                criteria=crit)
@@ -266,7 +276,8 @@ def kitti_scale(path: Path) -> None:
         q = q.reshape(-1, 2)
         good = (found.ravel() == 1) & (found2.ravel() == 1) & (np.linalg.norm(back.reshape(-1, 2) - uv, axis=1) < 0.2)
         rows.append(np.column_stack([uv[good], q[good, 1] - uv[good, 1]]))
-    print(f"  cv2.StereoSGBM minus the tracker's disparity at the corners: median {np.median(np.concatenate(diff)):+.3f} px")
+    print(f"  cv2.StereoSGBM minus the tracker's disparity at the corners: median {np.median(np.concatenate(diff)):+.3f} px"
+          f" (the tracker's median disparity {np.median(np.concatenate(disps)):.1f} px)")
     rows = np.concatenate(rows)
     cx, cy = manifest.calibration.left.P[0, 2], manifest.calibration.left.P[1, 2]
     A = np.column_stack([np.ones(len(rows)), (rows[:, 0] - cx) / 100, (rows[:, 1] - cy) / 100])
