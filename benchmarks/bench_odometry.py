@@ -276,7 +276,8 @@ def kitti_scale(path: Path) -> None:
         q = q.reshape(-1, 2)
         good = (found.ravel() == 1) & (found2.ravel() == 1) & (np.linalg.norm(back.reshape(-1, 2) - uv, axis=1) < 0.2)
         rows.append(np.column_stack([uv[good], q[good, 1] - uv[good, 1]]))
-    print(f"  cv2.StereoSGBM minus the tracker's disparity at the corners: median {np.median(np.concatenate(diff)):+.3f} px"
+    print(f"  cv2.StereoSGBM minus the tracker's disparity at the corners: median "
+          f"{np.median(np.concatenate(diff)):+.3f} px"
           f" (the tracker's median disparity {np.median(np.concatenate(disps)):.1f} px)")
     rows = np.concatenate(rows)
     cx, cy = manifest.calibration.left.P[0, 2], manifest.calibration.left.P[1, 2]

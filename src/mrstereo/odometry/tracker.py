@@ -474,7 +474,8 @@ class StereoOdometry:
     def _track(self, left, T_pred, dt, kf: Keyframe | None = None, *, T_retry=None, gate=None):
         """Track keyframe ``kf`` (the reference) into ``left`` from the motion model's prediction; when
         that loses most features (a sudden stop, a wrong prediction), again from the last measured pose;
-        with ``T_retry``, from that pose too in any case (the better of the two). ``gate(T_world_from_cam)``: the plausibility test (default :meth:`_plausible`)."""
+        with ``T_retry``, from that pose too in any case (the better of the two).
+        ``gate(T_world_from_cam)``: the plausibility test (default :meth:`_plausible`)."""
         c = self.config
         kf = self._keyframe if kf is None else kf
         valid = np.flatnonzero(kf.valid)
