@@ -1,6 +1,7 @@
 """Visual odometry and drift-robust mapping on real and synthetic sequences (docs/odometry.md).
 
     python benchmarks/bench_odometry.py --kitti [PATH]           # KITTI odometry 06 (the shared sample)
+    python benchmarks/bench_odometry.py --kitti-scale [PATH ...] # where 01's and 06's error comes from
     python benchmarks/bench_odometry.py --street [--street-seeds 100 101 102]
     python benchmarks/bench_odometry.py [--seeds 0 1 2] [--frames 91] [--data DIR]
     python benchmarks/bench_odometry.py --vo-only [--random-seeds 0 1 2]
@@ -23,7 +24,8 @@ odometry (3 % scale error, 2 deg/m heading drift) beside the true poses (``mrste
 --path s-curve --step 0.1 --odometry-noise 0.03,2``). Printed:
 
 - visual odometry against the true poses: ATE RMSE (SE(3)-aligned, as ``evo_ape -a``, and
-  unaligned from the common start), RPE per metre, end-point error, in % of the distance;
+  unaligned from the common start), the estimated path's length over the true one (``path x``:
+  its scale), RPE per metre, end-point error, in % of the distance;
 - occupancy-map precision / recall against the ground-truth map with the true poses, the drifted
   odometry, ``map --align`` (the drifted odometry fused with visual odometry) and
   ``map --odometry visual``. The frames are matched once; each run re-poses their robot-frame
@@ -56,11 +58,11 @@ from mrstereo.mapping import read_ros_map
 from mrstereo.mapping.fusion import fuse
 from mrstereo.mapping.metrics import map_metrics
 from mrstereo.odometry.fusion import fuse_odometry
-from mrstereo.odometry.trajectory import trajectory_metrics
+from mrstereo.odometry.trajectory import path_length_m, trajectory_metrics
 from mrstereo.pipeline.run import PipelineConfig, build_map
 from mrstereo.recordings.layouts import read_recording
 from mrstereo.recordings.manifest import frame_pair, read_manifest
-from mrstereo.transforms import T_from_planar, T_from_rvec_t, transform_points
+from mrstereo.transforms import T_from_planar, T_from_rvec_t, rotation_angle_rad, transform_points
 from mrstereo.world.dataset import write_synthetic_dataset
 
 NOISE = (0.03, math.radians(2.0))
@@ -152,6 +154,7 @@ def compare_pairs(pairs, stereo, truth, mounts, stamps, config=None) -> dict:
     T_cam, base_times, failed = baseline_odometry(pairs, stereo, truth[0] @ mounts[0])
     T_base = np.stack([T @ np.linalg.inv(M) for T, M in zip(T_cam, mounts)])
     return {"vo": trajectory_metrics(vo.T_world_from_base, truth), "vo_lost": vo.n_lost,
+            "vo_path_m": path_length_m(vo.T_world_from_base),
             "vo_ms": 1000 * float(np.mean(vo.time_s)), "vo_ms_median": 1000 * float(np.median(vo.time_s)),
             "vo_wall_ms": 1000 * wall, "keyframes": vo.status.count("keyframe"),
             "vo_online": trajectory_metrics(vo.T_world_from_base_online, truth),
@@ -162,7 +165,8 @@ def compare_pairs(pairs, stereo, truth, mounts, stamps, config=None) -> dict:
 def _compare_line(label: str, r: dict) -> str:
     v, b = r["vo"], r["base"]
     return (f"{label}: {v.path_length_m:.1f} m, {v.n_poses} frames {r['size'][0]}x{r['size'][1]} | mrstereo: ATE "
-            f"{v.ate_percent:.2f} % ({100 * v.ate_rmse_m:.1f} cm; online {r['vo_online'].ate_percent:.2f} %), "
+            f"{v.ate_percent:.2f} % ({100 * v.ate_rmse_m:.1f} cm; online {r['vo_online'].ate_percent:.2f} %; path "
+            f"x{r['vo_path_m'] / v.path_length_m:.3f}), "
             f"end {v.end_point_percent:.2f} %, RPE {100 * v.rpe_translation_per_m:.2f} % "
             f"{v.rpe_rotation_deg_per_m:.3f} deg/m, lost {r['vo_lost']}, {r['keyframes']} keyframes, "
             f"{r['vo_ms']:.1f} ms/frame CPU (median {r['vo_ms_median']:.1f}) | baseline ORB+SGBM+PnP: ATE "
@@ -187,6 +191,102 @@ def kitti(path: Path) -> None:
             lost = np.flatnonzero(~r["result"].tracked)
             if len(lost):
                 print(f"    lost frames: {lost.tolist()}")
+
+
+def _disparity_fit(manifest, stereo_d, gap: int = 2):
+    """The affine disparity error ``a + b (v - cy) / 100 + c (u - cx) / 100`` [px] (and ``a`` alone) that
+    best explains the true motion: keyframe-like corners with their stereo disparity, tracked ``gap``
+    frames on, projected with the true relative pose (truncated squared reprojection errors)."""
+    from scipy.optimize import minimize
+
+    st = manifest.calibration
+    K = np.array([[st.left.P[0, 0], 0, st.left.P[0, 2]], [0, st.left.P[1, 1], st.left.P[1, 2]], [0, 0, 1.0]])
+    fb = st.focal_px * st.baseline_m
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.003)
+    pairs = _odometry_pairs(manifest)
+    truth = [f.T_world_from_base_true @ CameraMount.from_xyz_rpy((0, 0, 0), (0, 0, 0)).T_base_from_rectified(
+        st.left.R) for f in manifest.frames]
+    data = []
+    for a in range(0, len(pairs) - gap, 2):
+        uv, d = stereo_d(*pairs[a])
+        cur, ok = uv.copy(), np.isfinite(d)
+        for j in range(a + 1, a + gap + 1):
+            nxt, found, _ = cv2.calcOpticalFlowPyrLK(pairs[j - 1][0], pairs[j][0], cur.reshape(-1, 1, 2), None,
+                                                     winSize=(11, 11), maxLevel=3, criteria=crit)
+            ok &= found.ravel() == 1
+            cur = nxt.reshape(-1, 2)
+        data.append((uv[ok], d[ok], cur[ok], np.linalg.inv(truth[a + gap]) @ truth[a]))
+
+    def cost(p):
+        total = 0.0
+        for uv, d, cur, T in data:
+            z = fb / (d + p[0] + sum(q * (uv[:, k] - K[k, 2]) / 100.0 for k, q in zip((1, 0), p[1:])))
+            X = np.column_stack([(uv[:, 0] - K[0, 2]) * z / K[0, 0], (uv[:, 1] - K[1, 2]) * z / K[1, 1], z])
+            Xb = X @ T[:3, :3].T + T[:3, 3]
+            err2 = np.sum((Xb[:, :2] / Xb[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2] - cur) ** 2, axis=1)
+            total += np.minimum(np.where((z > 0) & (Xb[:, 2] > 0), err2, 9.0), 4.0).sum()
+        return total
+
+    return [minimize(cost, np.r_[0.5, np.zeros(n)], method="Nelder-Mead") for n in (0, 2)]
+
+
+def kitti_scale(path: Path) -> None:
+    """Where a KITTI sequence's error comes from: the path's length, the learnt disparity offset, the
+    tracker's stereo disparities against ``cv2.StereoSGBM``'s, the disparity error the true motion
+    asks for, and the stereo matches' row error across the image (docs/odometry.md, Measured)."""
+    from mrstereo.odometry import OdometryConfig, StereoOdometry
+
+    manifest = read_recording(path)
+    r = compare(manifest)
+    vo, truth_len = r["result"], r["vo"].path_length_m
+    print(f"{manifest.root}: ATE {r['vo'].ate_percent:.2f} %, path {r['vo_path_m']:.2f} m for {truth_len:.2f} m "
+          f"(x{r['vo_path_m'] / truth_len:.3f})")
+    P, Q = vo.T_world_from_base, np.stack([f.T_world_from_base_true for f in manifest.frames])
+    p, q = P[:, :3, 3] - P[:, :3, 3].mean(0), Q[:, :3, 3] - Q[:, :3, 3].mean(0)
+    U, S, Vt = np.linalg.svd(q.T @ p / len(p))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U) * np.linalg.det(Vt))])
+    scale = np.trace(np.diag(S) @ D) / np.mean(np.sum(p * p, axis=1))               # Umeyama with scale
+    sim3 = np.sqrt(np.mean(np.sum((scale * p @ (U @ D @ Vt).T - q) ** 2, axis=1)))
+    E = np.linalg.inv(np.linalg.inv(Q[0]) @ Q[-1]) @ np.linalg.inv(P[0]) @ P[-1]
+    print(f"  with scale (Sim(3)) aligned: ATE {100 * sim3 / truth_len:.2f} % (scale {scale:.3f}); rotation drift "
+          f"over the run {math.degrees(rotation_angle_rad(E[:3, :3])):.2f} deg")
+    tracker = StereoOdometry(manifest.calibration, config=OdometryConfig())
+    mounts = CameraMount.from_xyz_rpy((0, 0, 0), (0, 0, 0)).T_base_from_rectified(manifest.calibration.left.R)
+    for left, right in _odometry_pairs(manifest):
+        tracker.step(left, right, T_base_from_cam=mounts)
+    print(f"  learnt disparity offset {tracker._offset_mean_px:+.2f} px (used {tracker._offset_px:+.2f})")
+
+    def stereo_d(left, right):
+        uv = tracker._corners(left, 300, np.empty((0, 2), np.float32))
+        return uv, uv[:, 0] - tracker._right_columns(left, right, None, uv, np.full(len(uv), np.nan))
+
+    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=128, blockSize=5, P1=200, P2=800, uniquenessRatio=10,
+                                 mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY)
+    diff, rows, disps = [], [], []
+    for left, right in _odometry_pairs(manifest)[::5]:
+        uv, d = stereo_d(left, right)
+        ds = sgbm.compute(left, right).astype(np.float32)[np.rint(uv[:, 1]).astype(int), np.rint(uv[:, 0]).astype(int)]
+        ok = np.isfinite(d) & (ds > 0)
+        diff.append(ds[ok] / 16.0 - d[ok])
+        disps.append(d[ok])
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.003)
+        q, found, _ = cv2.calcOpticalFlowPyrLK(left, right, uv.reshape(-1, 1, 2), None, winSize=(21, 21), maxLevel=4,
+                                               criteria=crit)
+        back, found2, _ = cv2.calcOpticalFlowPyrLK(right, left, q, None, winSize=(21, 21), maxLevel=4, criteria=crit)
+        q = q.reshape(-1, 2)
+        good = (found.ravel() == 1) & (found2.ravel() == 1) & (np.linalg.norm(back.reshape(-1, 2) - uv, axis=1) < 0.2)
+        rows.append(np.column_stack([uv[good], q[good, 1] - uv[good, 1]]))
+    print(f"  cv2.StereoSGBM minus the tracker's disparity at the corners: median "
+          f"{np.median(np.concatenate(diff)):+.3f} px"
+          f" (the tracker's median disparity {np.median(np.concatenate(disps)):.1f} px)")
+    rows = np.concatenate(rows)
+    cx, cy = manifest.calibration.left.P[0, 2], manifest.calibration.left.P[1, 2]
+    A = np.column_stack([np.ones(len(rows)), (rows[:, 0] - cx) / 100, (rows[:, 1] - cy) / 100])
+    coef = np.linalg.lstsq(A, rows[:, 2], rcond=None)[0]
+    print(f"  stereo row error dy = {coef[0]:+.2f} {coef[1]:+.3f} (u - cx)/100 {coef[2]:+.3f} (v - cy)/100 px")
+    offset, affine = _disparity_fit(manifest, stereo_d)
+    print(f"  with the true motion: offset {offset.x[0]:+.2f} px; affine {affine.x[0]:+.2f} {affine.x[1]:+.3f} "
+          f"(v - cy)/100 {affine.x[2]:+.3f} (u - cx)/100 px, cost {affine.fun / offset.fun:.2f} of the offset's")
 
 
 def _oxts_poses(files) -> np.ndarray:
@@ -401,6 +501,8 @@ def main() -> None:
                         / "kitti_odometry_06", help="a KITTI odometry folder (default: the shared sample)")
     parser.add_argument("--held-out", nargs="?", type=Path, const=Path(os.environ.get("MRSTEREO_DATA", "."))
                         / "kitti_raw_sample", help="a KITTI raw date folder or drive (default: the shared sample)")
+    parser.add_argument("--kitti-scale", nargs="*", type=Path, default=None, metavar="PATH",
+                        help="where KITTI's error comes from (default: the shared 01 and 06)")
     parser.add_argument("--street", action="store_true", help="the street sequences at car speed")
     parser.add_argument("--street-seeds", type=int, nargs="+", default=[100, 101, 102])
     parser.add_argument("--street-frames", type=int, default=60)
@@ -421,6 +523,11 @@ def main() -> None:
             kitti(args.kitti)
         if args.held_out is not None:
             kitti_raw(args.held_out)
+        return
+    if args.kitti_scale is not None:
+        data = Path(os.environ.get("MRSTEREO_DATA", "."))
+        for root in args.kitti_scale or [data / "kitti_odometry_01", data / "kitti_odometry_06"]:
+            kitti_scale(root)
         return
     if args.street:
         street(args.data, args.street_seeds, args.street_frames, args.street_steps)

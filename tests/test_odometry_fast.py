@@ -6,13 +6,17 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from mrstereo.camera import CameraMount
 from mrstereo.odometry import KEYFRAME, LOST, TRACKED, OdometryConfig, StereoOdometry, visual_odometry
-from mrstereo.odometry.trajectory import moved_to_body, read_tum, rpe_segments, trajectory_metrics
+from mrstereo.odometry.trajectory import moved_to_body, read_tum, rpe_pairs, trajectory_metrics
+from mrstereo.recordings.layouts import read_recording
+from mrstereo.recordings.samples import data_root
 from mrstereo.transforms import T_from_planar, T_from_rvec_t
 from mrstereo.world.paths import speed_path
 from mrstereo.world.render import render_stereo_frame
@@ -146,10 +150,10 @@ def test_a_failed_reference_is_relocalized_then_retried_from_scratch(drive, monk
     original = StereoOdometry._track
 
     def failing(everything):
-        def track(self, left, T_pred, dt, kf=None):
+        def track(self, left, T_pred, dt, kf=None, **kw):
             if self._n_frames == 10 and (everything or kf is None):
                 return LOST, None, 0, 0, None
-            return original(self, left, T_pred, dt, kf)
+            return original(self, left, T_pred, dt, kf, **kw)
         return track
 
     for everything, expected in ((False, None), (True, KEYFRAME)):
@@ -163,17 +167,24 @@ def test_a_failed_reference_is_relocalized_then_retried_from_scratch(drive, monk
 
 
 def test_rpe_matches_evo():
-    """``evo_rpe tum truth.txt estimate.txt --delta D --delta_unit m --pairs_from_reference`` (evo
-    1.38.1) on the files in tests/data/odometry_rpe: RMSE of the translation part (m) and of the
-    angle (deg); ``evo_ape ... -a``: 0.072291 m."""
+    """``evo_rpe tum truth.txt estimate.txt --delta D --delta_unit m --pairs_from_reference
+    -r trans_part`` (and ``-r angle_deg``), with ``--all_pairs`` and without (consecutive pairs), evo
+    1.38.1 in its own venv, on the files in tests/data/odometry_rpe: the RMSE of the translation part
+    (m) and of the angle (deg); with ``-a`` the same; ``evo_ape tum truth.txt estimate.txt -a``:
+    0.072291 m."""
     _, Q = read_tum(DATA / "truth.txt")
     _, P = read_tum(DATA / "estimate.txt")
-    for delta, trans_m, angle_deg in ((1.0, 0.055587, 2.645370), (0.5, 0.029358, 1.840143)):
-        m = trajectory_metrics(P, Q, delta_m=delta)
+    for all_pairs, delta, trans_m, angle_deg in ((False, 1.0, 0.055587, 2.645370), (False, 0.5, 0.029358, 1.840143),
+                                                 (True, 1.0, 0.048570, 2.821682), (True, 0.5, 0.033750, 1.826279)):
+        m = trajectory_metrics(P, Q, delta_m=delta, all_pairs=all_pairs)
         assert m.rpe_translation_per_m * delta == pytest.approx(trans_m, abs=2e-6)
         assert m.rpe_rotation_deg_per_m * delta == pytest.approx(angle_deg, abs=2e-6)
     assert trajectory_metrics(P, Q).ate_rmse_m == pytest.approx(0.072291, abs=2e-6)
-    assert rpe_segments(Q[:3], 100.0) == [0]
+    assert not trajectory_metrics(P, Q).all_pairs                                # the default
+    assert rpe_pairs(Q[:3], 100.0) == [] and rpe_pairs(Q[:3], 100.0, all_pairs=True) == []
+    # a car at 1.2 m per frame: no pair within 10 % of 1 m (evo: "empty index list"); consecutive ones
+    car = np.stack([T_from_planar(1.2 * k, 0.0, 0.0) for k in range(6)])
+    assert rpe_pairs(car, 1.0, all_pairs=True) == [] and rpe_pairs(car, 1.0) == [(k, k + 1) for k in range(5)]
 
 
 def test_estimate_moved_to_the_truths_body():
@@ -192,3 +203,76 @@ def test_estimate_moved_to_the_truths_body():
     moved = moved_to_body(base, T_base_from_cam, T_body_from_cam, body[0])
     np.testing.assert_allclose(moved, body, atol=1e-9)
     assert trajectory_metrics(moved, body).rpe_rotation_deg_per_m < 1e-6
+
+
+def test_a_blackout_ends_relocalized_at_a_place_seen_before():
+    """Forward at 10 m/s for 14 m, then six dark frames while the car backs up 3 m to where it was,
+    then creeping backwards: the motion model's prediction runs on forward (10 m off when the images
+    return) and the window was restarted from guesses during the dark. Against the archived
+    keyframes near the prediction the first frame back is placed (a keyframe within 0.4 m of the
+    truth, the drift of before); with no archive every frame after the dark stays lost, metres off."""
+    world = street_world(3, width=320, height=240, length_m=40.0)
+    x = list(np.arange(15) * 1.0)
+    for v in (0.5, 0.0, -0.5, -1.0, -1.0, -1.0, *([-0.05] * 6)):
+        x.append(x[-1] + v)
+    truth = np.stack([T_from_planar(xi, 0.0, 0.0) for xi in x])
+    blank = None
+    pairs = []
+    for k, xi in enumerate(x):
+        if 15 <= k < 21:
+            pairs.append((blank, blank))
+            continue
+        f = render_stereo_frame(world.scene, world.stereo, pose=(xi, 0.0, 0.0), seed=k, supersample=1,
+                                sensors=world.sensors)
+        pairs.append((f.left_rect, f.right_rect))
+        blank = np.full_like(f.left_rect, 128) if blank is None else blank
+    pairs = [(blank, blank) if p[0] is None else p for p in pairs]
+    _, status, T = _run_tracker(world, truth, pairs)
+    assert status[15:21] == [LOST] * 6 and status[21] == KEYFRAME and LOST not in status[22:]
+    err = np.linalg.norm(T[:, :3, 3] - truth[:, :3, 3], axis=1)
+    assert err[21:].max() < 0.4
+    _, status, T = _run_tracker(world, truth, pairs, archive_keyframes=0)
+    assert status[21:] == [LOST] * 6
+    assert np.linalg.norm(T[21:, :3, 3] - truth[21:, :3, 3], axis=1).min() > 5.0
+
+
+def _euroc_mounts(tmp_path):
+    """The shared EuRoC sample's two mounts of its rectified left camera: on the robot base (no mount
+    given: the camera's own axes turned to REP 103) and on the EuRoC body (cam0's ``T_BS``), as the
+    ``odometry`` command takes them from the recording (a truth file added: the body is its frame)."""
+    src = data_root() / "euroc_asl_sample"
+    if not (src / "mav0" / "cam0" / "data.csv").is_file():
+        pytest.skip(f"EuRoC sample not found under {src} (set MRSTEREO_DATA)")
+    root = tmp_path / "euroc"
+    shutil.copytree(src, root)
+    stamps = np.loadtxt(src / "mav0" / "cam0" / "data.csv", delimiter=",", usecols=0, dtype=np.int64)
+    t = np.linspace(stamps[0] - 10**8, stamps[-1] + 10**8, 20).astype(np.int64)
+    (root / "mav0" / "state_groundtruth_estimate0").mkdir()
+    (root / "mav0" / "state_groundtruth_estimate0" / "data.csv").write_text(
+        "#t\n" + "\n".join(f"{ti},{0.1 * k:.3f},0,1,1,0,0,0" for k, ti in enumerate(t)) + "\n")
+    m = read_recording(root)
+    R = m.calibration.left.R
+    base = (m.mount or CameraMount.from_xyz_rpy((0, 0, 0), (0, 0, 0))).T_base_from_rectified(R)
+    return base, m.pose_frame_mount.T_base_from_rectified(R)
+
+
+def test_euroc_rpe_compares_one_body_and_matches_evo(tmp_path):
+    """A hand-held path of the EuRoC body (IMU) frame, 20 Hz, 3.3 m (the truth), and the robot-base
+    trajectory of the same camera that ``odometry -o`` writes (tests/data/odometry_rpe/euroc_*.txt).
+    Moved to the body through the recording's mounts, the RPE is evo's on the body frame's files
+    (evo 1.38.1, its own venv; euroc_estimate_body.txt = the moved estimate written as TUM):
+    ``evo_rpe tum euroc_truth_body.txt euroc_estimate_body.txt --delta 1 --delta_unit m
+    --pairs_from_reference --all_pairs -a -r angle_deg``: 1.259281 (``-r trans_part``: 0.019378);
+    ``evo_ape tum euroc_truth_body.txt euroc_estimate_body.txt -a``: 0.013960 m. The base's file
+    against the body's truth (two bodies) gives evo 10.018601 deg and 1.318686 m: so does ours."""
+    T_base_from_cam, T_body_from_cam = _euroc_mounts(tmp_path)
+    _, truth = read_tum(DATA / "euroc_truth_body.txt")
+    _, base = read_tum(DATA / "euroc_estimate_base.txt")
+    body = moved_to_body(base, T_base_from_cam, T_body_from_cam, truth[0])
+    m = trajectory_metrics(body, truth, all_pairs=True)
+    assert m.rpe_rotation_deg_per_m == pytest.approx(1.259281, abs=2e-5)
+    assert m.rpe_translation_per_m == pytest.approx(0.019378, abs=2e-6)
+    assert m.ate_rmse_m == pytest.approx(0.013960, abs=2e-6)
+    two_bodies = trajectory_metrics(base, truth, all_pairs=True)
+    assert two_bodies.rpe_rotation_deg_per_m == pytest.approx(10.018601, abs=2e-5)
+    assert two_bodies.rpe_translation_per_m == pytest.approx(1.318686, abs=2e-5)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mrstereo.odometry.window import Keyframe, LocalMap, refine_window
-from mrstereo.transforms import T_from_rvec_t, rotation_jacobian_factor, rotations_from_rvecs
+from mrstereo.transforms import T_from_rvec_t, rotation_jacobian_factor, rotations_from_rvecs, transform_points
 
 K = np.array([[400.0, 0.0, 330.0], [0.0, 410.0, 235.0], [0.0, 0.0, 1.0]])     # off-centre, fx != fy
 BASELINE = 0.3
@@ -137,6 +137,8 @@ def test_local_map_slides_and_drops_outliers():
         if k == 2:
             wrong = ids[pt[sel]][:5]
             obs_uv[:5] += 20.0                                               # five wrong tracks
+        if k == 3:
+            lm_points_then = lm.points(lm.keyframes[0].landmark[lm.keyframes[0].valid])
         gone = lm.add_keyframe(Keyframe(frame=k, T_world_from_cam=np.linalg.inv(T[k]) if k == 0 else
                                         np.linalg.inv(T_from_rvec_t(rng.normal(0, 0.003, 3), rng.normal(0, 0.03, 3))
                                                       @ T[k]),
@@ -144,7 +146,12 @@ def test_local_map_slides_and_drops_outliers():
                                         u_right=ur[sel]))
         lm.refine()
         if k == 3:
-            assert [g.frame for g in gone] == [0] and gone[0].image is None
+            assert [g.frame for g in gone] == [0]
+            # it keeps its landmarks in its own camera frame (the window drops them)
+            g = gone[0]
+            assert len(g.points_cam) == g.valid.sum() and g.median_depth_m == pytest.approx(
+                np.median(g.points_cam[:, 2]))
+            np.testing.assert_allclose(transform_points(g.T_world_from_cam, g.points_cam), lm_points_then, atol=1e-9)
     assert [kf_.frame for kf_ in lm.keyframes] == [1, 2, 3]
     for kf_ in lm.keyframes:                                                 # 3 cm off -> within 5 mm
         np.testing.assert_allclose(np.linalg.inv(kf_.T_world_from_cam), T[kf_.frame], atol=5e-3)

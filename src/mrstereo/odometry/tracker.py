@@ -82,6 +82,9 @@ class OdometryConfig:
         Lost frames in a row before tracking restarts from a new keyframe.
     window_keyframes, window_fixed : int
         Keyframes in the refined window (1: none) and the oldest of them held fixed (the gauge).
+    archive_keyframes : int
+        Keyframes kept (with their image and landmarks) after they leave the window, for the
+        relocalization of a lost frame near one of them (0: none).
     huber_px, refine_iterations, outlier_px : float, int, float
         The refinement's Huber threshold and steps, and the distance from its landmark's projection
         beyond which an observation is dropped after it.
@@ -119,6 +122,7 @@ class OdometryConfig:
     max_lost_streak: int = 2
     window_keyframes: int = 7
     window_fixed: int = 1
+    archive_keyframes: int = 50
     huber_px: float = 1.0
     refine_iterations: int = 10
     outlier_px: float = 3.0
@@ -138,6 +142,9 @@ class OdometryConfig:
                      "max_angular_acceleration_radps2", "frame_interval_s", "huber_px", "outlier_px",
                      "offset_prior_weight", "max_disparity_offset_px"):
             _checks.finite_number(name, getattr(self, name), positive=True)
+        if not (isinstance(self.archive_keyframes, int) and not isinstance(self.archive_keyframes, bool)
+                and self.archive_keyframes >= 0):
+            raise ValueError(f"archive_keyframes must be an integer >= 0, got {self.archive_keyframes!r}")
         if not (isinstance(self.min_disparity_offset_px, (int, float)) and 0.0 <= self.min_disparity_offset_px
                 <= self.max_disparity_offset_px):
             raise ValueError(f"min_disparity_offset_px must be in [0, max_disparity_offset_px], got "
@@ -216,6 +223,12 @@ class StereoOdometry:
         self._n_deviation = 0
         self._stamp: float | None = None
         self._lost_streak = 0
+        # the last measured pose and the time since it, kept through restarts from a guess (the gate of a
+        # relocalization against an archived keyframe), and the keyframes that left the window
+        self._T_anchor: np.ndarray | None = None
+        self._anchor_elapsed_s = 0.0
+        self._archive: list[Keyframe] = []
+        self._remeasured = False
         self._links: list[_FrameLink] = []
         self._n_frames = 0
         self._criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.003)
@@ -251,26 +264,30 @@ class StereoOdometry:
             T_world_from_cam = self.T_world_from_base0 @ T_base_from_cam
             self._new_keyframe(left, right, disparity_px, T_world_from_cam, None)
             self._T_measured, self._since_measured_s = T_world_from_cam, 0.0
+            self._T_anchor, self._anchor_elapsed_s = T_world_from_cam, 0.0
             n = int(self._keyframe.valid.sum())
             return self._finish(start, T_world_from_cam, T_base_from_cam, KEYFRAME, n, n, dt)
         # the motion model: the last measured motion again, scaled to the time since the last measured frame
         dt_pred = self._since_measured_s + dt
         T_pred = self._predict(dt_pred)
         status, T_world_from_cam, n_tracked, n_inliers, tracked = self._track(left, T_pred, dt_pred)
-        if status == LOST:                       # the keyframes of the window, then fresh features
+        if status == LOST:     # the window's keyframes, earlier ones near the prediction, then fresh features
             status, T_world_from_cam, n_tracked, n_inliers, tracked = self._relocalize(
                 left, right, disparity_px, T_pred, dt_pred, (status, T_world_from_cam, n_tracked, n_inliers, tracked))
         if status == LOST:
             self._lost_streak += 1
             self._since_measured_s += dt
+            self._anchor_elapsed_s += dt
             if self._lost_streak >= self.config.max_lost_streak:
-                self._map.clear()                # restart at the predicted pose, the motion kept
+                self._archive_keyframes(self._map.clear())     # restart at the predicted pose, the motion kept
                 self._new_keyframe(left, right, disparity_px, T_pred, None)
                 self._T_measured, self._since_measured_s = T_pred, 0.0
                 self._lost_streak = 0
             return self._finish(start, T_pred, T_base_from_cam, LOST, n_tracked, n_inliers, dt)
         self._lost_streak = 0
-        self._measure(T_world_from_cam, dt_pred, T_pred)
+        if not self._remeasured:                 # (a relocalization against an archived keyframe measured it)
+            self._measure(T_world_from_cam, dt_pred, T_pred)
+        self._remeasured = False
         if status == KEYFRAME:                   # re-found from fresh features: already a keyframe
             return self._finish(start, T_world_from_cam, T_base_from_cam, status, n_tracked, n_inliers, dt)
         kf, c = self._keyframe, self.config
@@ -431,7 +448,7 @@ class StereoOdometry:
                       image=left, landmark=np.concatenate([ids, new_ids]),
                       uv=np.concatenate([uv, nuv]).astype(np.float32),
                       u_right=np.concatenate([u_right[:len(uv)], u_right[len(uv):][fresh]]))
-        self._map.add_keyframe(kf)
+        self._archive_keyframes(self._map.add_keyframe(kf))
         self._keyframe = kf
         self._map.refine()
         return kf.T_world_from_cam
@@ -452,26 +469,33 @@ class StereoOdometry:
         self._velocity = np.linalg.inv(self._T_measured) @ T_world_from_cam
         self._velocity_dt, self._velocity_known = elapsed, True
         self._T_measured, self._since_measured_s = T_world_from_cam, 0.0
+        self._T_anchor, self._anchor_elapsed_s = T_world_from_cam, 0.0
 
-    def _track(self, left, T_pred, dt, kf: Keyframe | None = None):
+    def _track(self, left, T_pred, dt, kf: Keyframe | None = None, *, T_retry=None, gate=None):
         """Track keyframe ``kf`` (the reference) into ``left`` from the motion model's prediction; when
-        that loses most features (a sudden stop, a wrong prediction), again from the last measured pose."""
+        that loses most features (a sudden stop, a wrong prediction), again from the last measured pose;
+        with ``T_retry``, from that pose too in any case (the better of the two).
+        ``gate(T_world_from_cam)``: the plausibility test (default :meth:`_plausible`)."""
         c = self.config
         kf = self._keyframe if kf is None else kf
         valid = np.flatnonzero(kf.valid)
         if len(valid) < c.min_inliers or kf.image is None:
             return LOST, None, 0, 0, None
-        points_key = transform_points(np.linalg.inv(kf.T_world_from_cam), self._map.points(kf.landmark[valid]))
-        result = self._track_from(left, T_pred, dt, valid, points_key, kf)
-        if result[3] < c.keyframe_inlier_fraction * len(valid):
-            retry = self._track_from(left, self._T_measured, dt, valid, points_key, kf)
+        points_key = kf.points_cam if kf.points_cam is not None else \
+            transform_points(np.linalg.inv(kf.T_world_from_cam), self._map.points(kf.landmark[valid]))
+        gate = gate or (lambda T: self._plausible(T, self._predict(dt), dt))
+        result = self._track_from(left, T_pred, valid, points_key, kf, gate)
+        if T_retry is not None or result[3] < c.keyframe_inlier_fraction * len(valid):
+            retry = self._track_from(left, self._T_measured if T_retry is None else T_retry, valid, points_key, kf,
+                                     gate)
             if retry[3] > result[3] or (retry[0] != LOST and result[0] == LOST):
                 result = retry
         return result
 
     def _relocalize(self, left, right, disparity_px, T_pred, dt, lost):
         """A frame the reference keyframe could not place: the other keyframes of the window (newest
-        first) and, failing those, fresh features of this frame found in the reference keyframe."""
+        first), the archived keyframes near the prediction (:meth:`_relocalize_archived`) and, failing
+        those, fresh features of this frame found in the reference keyframe."""
         for kf in reversed(self._map.keyframes):
             if kf is self._keyframe:
                 continue
@@ -479,7 +503,65 @@ class StereoOdometry:
             if result[0] != LOST:
                 self._keyframe = kf
                 return result
+        result = self._relocalize_archived(left, right, disparity_px, T_pred, dt)
+        if result is not None:
+            return result
         return self._track_fresh(left, right, disparity_px, T_pred, dt, lost)
+
+    def _archive_keyframes(self, keyframes: list[Keyframe]) -> None:
+        """Keep the keyframes that left the window, the last ``archive_keyframes`` of them (the older
+        ones' images dropped: a live run's memory stays bounded)."""
+        self._archive.extend(kf for kf in keyframes if kf.image is not None)
+        cut = max(0, len(self._archive) - self.config.archive_keyframes)
+        for kf in self._archive[:cut]:
+            kf.image = None
+        self._archive = self._archive[cut:]
+
+    def _relocalize_archived(self, left, right, disparity_px, T_pred, dt):
+        """The frame placed against an archived keyframe near the predicted pose (as ORB-SLAM relocalizes
+        against its keyframe database, here by place: after a blackout or a restart from a guess, the
+        prediction is off by what the motion did meanwhile, a place seen before is not). The candidates:
+        the archived keyframes whose camera is within their median landmark depth of the predicted one
+        and looks within 45 degrees of its direction, nearest first, three at most; each is tracked from
+        its own pose (no motion since it) and from the prediction, then again from the pose found while
+        that adds inliers (from a guess metres off only the far points track: a weak hold on the
+        distance moved). The gate is the speed and
+        turn-rate limits over the time since the last measured frame (a motion model is no guide after a
+        gap). A frame placed so starts a new window there (no jump: the archived keyframe's pose)."""
+        c = self.config
+        if not self._archive or self._T_anchor is None:
+            return None
+        centre, axis = T_pred[:3, 3], T_pred[:3, 2]
+        near = [(float(np.linalg.norm(kf.T_world_from_cam[:3, 3] - centre)), k) for k, kf in enumerate(self._archive)
+                if np.linalg.norm(kf.T_world_from_cam[:3, 3] - centre) <= kf.median_depth_m
+                and float(kf.T_world_from_cam[:3, 2] @ axis) >= math.cos(math.radians(45.0))]
+        elapsed = self._anchor_elapsed_s + dt
+
+        def gate(T_world_from_cam):
+            step = np.linalg.inv(self._T_anchor) @ T_world_from_cam
+            return (np.linalg.norm(step[:3, 3]) <= c.max_speed_mps * elapsed
+                    and rotation_angle_rad(step[:3, :3]) <= c.max_turn_rate_radps * elapsed)
+
+        for _, k in sorted(near)[:3]:
+            kf = self._archive[k]
+            result = self._track(left, kf.T_world_from_cam, dt, kf, T_retry=T_pred, gate=gate)
+            if result[0] == LOST:
+                continue
+            for _ in range(3):      # again from the pose found: from a far guess only the far points track
+                again = self._track(left, result[1], dt, kf, T_retry=result[1], gate=gate)
+                if again[0] == LOST or again[3] <= result[3]:
+                    break
+                result = again
+            T_world_from_cam = result[1]
+            self._velocity = np.linalg.inv(self._T_anchor) @ T_world_from_cam      # the mean motion over the gap
+            self._velocity_dt, self._velocity_known = elapsed, True
+            self._T_measured, self._since_measured_s = T_world_from_cam, 0.0
+            self._T_anchor, self._anchor_elapsed_s = T_world_from_cam, 0.0
+            self._remeasured = True
+            self._archive_keyframes(self._map.clear())
+            T_world_from_cam = self._new_keyframe(left, right, disparity_px, T_world_from_cam, None)
+            return KEYFRAME, T_world_from_cam, result[2], result[3], None
+        return None
 
     def _track_fresh(self, left, right, disparity_px, T_guess, dt, lost):
         """The frame from scratch: new corners with their depth from this frame's pair, found in the
@@ -506,7 +588,7 @@ class StereoOdometry:
         result = self._track(left, T_world_from_cam, dt)
         if result[0] != LOST:
             return result
-        self._map.clear()
+        self._archive_keyframes(self._map.clear())
         T_world_from_cam = self._new_keyframe(left, right, disparity_px, T_world_from_cam, None)
         return KEYFRAME, T_world_from_cam, int(ok.sum()), len(solved[1]), None
 
@@ -593,7 +675,7 @@ class StereoOdometry:
         T = T_from_rvec_t(rvec, tvec)
         return (T, inl) if np.isfinite(T).all() else None
 
-    def _track_from(self, left, T_guess, dt, valid, points_key, kf):
+    def _track_from(self, left, T_guess, valid, points_key, kf, gate):
         c = self.config
         T_guess_from_key = np.linalg.inv(T_guess) @ kf.T_world_from_cam
         guess = self._project(T_guess_from_key, points_key, kf.uv[valid])
@@ -607,7 +689,7 @@ class StereoOdometry:
             return LOST, None, n_tracked, 0, None
         T_cam_from_key, inl = solved
         T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_cam_from_key)
-        if not self._plausible(T_world_from_cam, self._predict(dt), dt):
+        if not gate(T_world_from_cam):
             return LOST, None, n_tracked, len(inl), None
         tracked = (kf.landmark[valid][ok][inl], img[inl].astype(np.float32))
         return TRACKED, T_world_from_cam, n_tracked, len(inl), tracked

@@ -2,8 +2,9 @@
 
 TUM format: one line ``t tx ty tz qx qy qz qw`` per pose (the base in the world), ``#`` comments.
 Metrics (:func:`trajectory_metrics`; definitions in docs/odometry.md, Metrics): ATE after a
-rigid Umeyama alignment (``evo_ape -a``) and unaligned, RPE per metre over consecutive segments
-(``evo_rpe --delta 1 --delta_unit m --pairs_from_reference``, divided by the 1 m), end-point error. Conventions: docs/conventions.md.
+rigid Umeyama alignment (``evo_ape -a``) and unaligned, RPE per metre over consecutive segments of
+the true path (``evo_rpe --delta 1 --delta_unit m --pairs_from_reference``; with ``all_pairs``,
+``--all_pairs``; divided by the 1 m), end-point error. Conventions: docs/conventions.md.
 
 References
 ----------
@@ -26,7 +27,7 @@ from ..transforms import T_from_position_quaternion, T_from_R_t, quaternion_from
 
 __all__ = ["write_tum", "read_tum", "umeyama_alignment", "TrajectoryMetrics", "trajectory_metrics",
            "path_length_m", "plot_trajectories", "moved_to_body",
-           "rpe_segments"]
+           "rpe_pairs"]
 
 
 def _poses(name: str, T) -> np.ndarray:
@@ -117,8 +118,9 @@ class TrajectoryMetrics:
     """Errors of an estimated trajectory against the truth (metres, degrees; docs/odometry.md).
 
     ``ate_rmse_m`` after the ``alignment`` (no scale) and ``ate_rmse_unaligned_m`` from the common
-    first pose; ``rpe_translation_per_m`` and ``rpe_rotation_deg_per_m`` over ``delta_m`` segments
-    (NaN if the path is shorter); ``end_point_error_m``; ``path_length_m`` of the true path; ``n_poses``.
+    first pose; ``rpe_translation_per_m`` and ``rpe_rotation_deg_per_m`` over pairs ``delta_m`` apart
+    (``all_pairs``: every frame starts one, else consecutive segments; NaN if the path is shorter);
+    ``end_point_error_m``; ``path_length_m`` of the true path; ``n_poses``.
     """
 
     ate_rmse_m: float
@@ -130,6 +132,7 @@ class TrajectoryMetrics:
     n_poses: int
     alignment: str
     delta_m: float
+    all_pairs: bool = False
 
     @property
     def ate_percent(self) -> float:
@@ -176,24 +179,37 @@ def moved_to_body(T_world_from_base, T_base_from_cam, T_body_from_cam, T_world_f
     return out
 
 
-def rpe_segments(T_true, delta_m: float) -> list[int]:
-    """The frames that cut the true path into consecutive segments of at least ``delta_m`` metres.
+def rpe_pairs(T_true, delta_m: float, *, all_pairs: bool = False) -> list[tuple[int, int]]:
+    """The pairs of frames ``(i, j)`` about ``delta_m`` metres of true path apart, as
+    ``evo_rpe --delta D --delta_unit m --pairs_from_reference`` forms them (evo's
+    ``filter_pairs_by_path``).
 
-    As ``evo_rpe --delta D --delta_unit m --pairs_from_reference`` (evo's ``filter_pairs_by_path``,
-    consecutive pairs): the first frame starts the first segment; walking the true positions, a
-    frame ends a segment (and starts the next) when the path since the last end reaches ``delta_m``.
+    ``all_pairs`` (``--all_pairs``): each frame ``i`` pairs with the later frame whose path distance
+    from it is nearest ``delta_m``, kept if within 10 % of ``delta_m`` (evo's ``--delta_tol 0.1``).
+    Else consecutive segments: the first frame starts one; walking the true positions, a frame ends a
+    segment (and starts the next) when the path since the last end reaches ``delta_m``.
     """
     p = _poses("T_true", T_true)[:, :3, 3]
+    if all_pairs:
+        dist = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+        pairs = []
+        for i in range(len(p) - 1):
+            ahead = dist[i + 1:] - dist[i]
+            k = int(np.argmin(np.abs(ahead - delta_m)))
+            if abs(ahead[k] - delta_m) <= 0.1 * delta_m:
+                pairs.append((i, i + 1 + k))
+        return pairs
     ends, path = [0], 0.0
     for i in range(1, len(p)):
         path += float(np.linalg.norm(p[i] - p[i - 1]))
         if path >= delta_m - 1e-9:          # (ten 0.1 m steps are a metre, whatever the rounding)
             ends.append(i)
             path = 0.0
-    return ends
+    return list(zip(ends, ends[1:]))
 
 
-def trajectory_metrics(T_estimated, T_true, *, delta_m: float = 1.0, alignment: str = "se3") -> TrajectoryMetrics:
+def trajectory_metrics(T_estimated, T_true, *, delta_m: float = 1.0, alignment: str = "se3",
+                       all_pairs: bool = False) -> TrajectoryMetrics:
     """ATE, RPE per metre and end-point error of ``T_estimated`` against ``T_true`` (same frames).
 
     Parameters
@@ -201,9 +217,14 @@ def trajectory_metrics(T_estimated, T_true, *, delta_m: float = 1.0, alignment: 
     T_estimated, T_true : ndarray (N, 4, 4)
         Poses of the same N frames (``T_world_from_base``).
     delta_m : float
-        RPE segment length along the true path.
+        RPE distance between the frames of a pair, along the true path.
     alignment : {"se3", "se2", "none"}
-        Alignment of the ATE (``ate_rmse_unaligned_m`` is always given too).
+        Alignment of the ATE (``ate_rmse_unaligned_m`` is always given too). The RPE compares
+        relative poses, which no rigid alignment changes (``evo_rpe -a`` gives the same numbers).
+    all_pairs : bool
+        RPE over all pairs (``evo_rpe --all_pairs``) or consecutive segments (:func:`rpe_pairs`). All
+        pairs need frames closer than a tenth of ``delta_m``: a car at 1.2 m per frame has no pair
+        within 10 % of 1 m (evo: "empty index list"), hence consecutive segments by default.
     """
     P = _poses("T_estimated", T_estimated)
     Q = _poses("T_true", T_true)
@@ -222,8 +243,7 @@ def trajectory_metrics(T_estimated, T_true, *, delta_m: float = 1.0, alignment: 
         aligned = float(np.sqrt(np.mean(np.sum((p @ A[:3, :3].T + A[:3, 3] - q) ** 2, axis=1))))
     dist = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
     t_err, r_err = [], []
-    ends = rpe_segments(Q, delta_m)
-    for i, j in zip(ends, ends[1:]):
+    for i, j in rpe_pairs(Q, delta_m, all_pairs=all_pairs):
         E = np.linalg.inv(np.linalg.inv(Q[i]) @ Q[j]) @ (np.linalg.inv(P[i]) @ P[j])
         t_err.append(np.linalg.norm(E[:3, 3]))
         r_err.append(math.degrees(rotation_angle_rad(E[:3, :3])))
@@ -233,7 +253,8 @@ def trajectory_metrics(T_estimated, T_true, *, delta_m: float = 1.0, alignment: 
 
     return TrajectoryMetrics(ate_rmse_m=aligned, ate_rmse_unaligned_m=unaligned, rpe_translation_per_m=rms(t_err),
                              rpe_rotation_deg_per_m=rms(r_err), end_point_error_m=float(np.linalg.norm(p[-1] - q[-1])),
-                             path_length_m=float(dist[-1]), n_poses=len(P), alignment=alignment, delta_m=float(delta_m))
+                             path_length_m=float(dist[-1]), n_poses=len(P), alignment=alignment,
+                             delta_m=float(delta_m), all_pairs=bool(all_pairs))
 
 
 def plot_trajectories(path: str | os.PathLike, trajectories: dict, *, lost=None, title: str = "trajectory") -> Path:

@@ -204,8 +204,10 @@ class _Problem:
 @dataclass
 class Keyframe:
     """A keyframe of the window: its ``frame`` index, ``T_world_from_cam`` (refined while in the
-    window), left ``image`` (dropped when it leaves), and per feature its ``landmark`` id (-1:
-    dropped as an outlier), left ``uv`` and right column ``u_right`` (NaN: no stereo match).
+    window), left ``image`` (dropped when it leaves the tracker's archive), and per feature its
+    ``landmark`` id (-1: dropped as an outlier), left ``uv`` and right column ``u_right`` (NaN: no
+    stereo match). When it leaves the window, ``points_cam`` holds its valid features' landmarks in
+    its camera frame (the window drops them) and ``median_depth_m`` their median depth.
     """
 
     frame: int
@@ -214,6 +216,8 @@ class Keyframe:
     landmark: np.ndarray
     uv: np.ndarray
     u_right: np.ndarray
+    points_cam: np.ndarray | None = None
+    median_depth_m: float = 0.0
 
     @property
     def valid(self) -> np.ndarray:
@@ -239,10 +243,21 @@ class LocalMap:
         self.xyz = np.empty((0, 3))
         self._next_id = 0
 
-    def clear(self) -> None:
+    def clear(self) -> list[Keyframe]:
+        """Drop every keyframe and landmark; returns the keyframes dropped (their landmarks kept in them)."""
+        gone = self._retire(self.keyframes)
         self.keyframes = []
         self.ids = np.empty(0, np.int64)
         self.xyz = np.empty((0, 3))
+        return gone
+
+    def _retire(self, keyframes: list[Keyframe]) -> list[Keyframe]:
+        """Keyframes leaving the window keep their landmarks in their own camera frame."""
+        for kf in keyframes:
+            points = self.points(kf.landmark[kf.valid])
+            kf.points_cam = transform_points(np.linalg.inv(kf.T_world_from_cam), points)
+            kf.median_depth_m = float(np.median(kf.points_cam[:, 2])) if len(points) else 0.0
+        return keyframes
 
     def add_landmarks(self, points_world: np.ndarray) -> np.ndarray:
         """New landmarks; returns their ids."""
@@ -257,13 +272,11 @@ class LocalMap:
         return self.xyz[np.searchsorted(self.ids, ids)]
 
     def add_keyframe(self, keyframe: Keyframe) -> list[Keyframe]:
-        """Append a keyframe; returns the keyframes that left the window (their images dropped)."""
+        """Append a keyframe; returns the keyframes that left the window (with their landmarks)."""
         self.keyframes.append(keyframe)
-        gone = self.keyframes[:-self.size] if len(self.keyframes) > self.size else []
+        gone = self._retire(self.keyframes[:-self.size]) if len(self.keyframes) > self.size else []
         if gone:
             self.keyframes = self.keyframes[-self.size:]
-            for kf in gone:
-                kf.image = None
             seen = np.unique(np.concatenate([kf.landmark[kf.valid] for kf in self.keyframes]))
             keep = np.isin(self.ids, seen)
             self.ids, self.xyz = self.ids[keep], self.xyz[keep]
