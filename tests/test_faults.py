@@ -620,6 +620,57 @@ def test_a_datasets_files_are_inputs_wherever_they_lie(ds, tmp_path, capsys):
     assert _digest(data) == before and calib.read_bytes() == before_calib
 
 
+@pytest.mark.sample_data("euroc-asl-sample")
+def test_a_euroc_recordings_files_are_inputs_for_every_command(sample_data, tmp_path, capsys):
+    """One rule for map, odometry, batch and live: no output over a frame (wherever data.csv puts it), none
+    inside the folder named as the recording (EuRoC's above mav0/) or inside mav0/."""
+    euroc = tmp_path / "euroc"
+    shutil.copytree(sample_data("euroc-asl-sample"), euroc)
+    out = tmp_path / "out"
+    out.mkdir()
+    csv = euroc / "mav0" / "cam0" / "data.csv"
+    first = csv.read_text().splitlines()[1].split(",")
+    shutil.copy(euroc / "mav0" / "cam0" / "data" / first[1], out / "map.png")      # a frame lying in -o
+    csv.write_text(csv.read_text().replace(f"{first[0]},{first[1]}", f"{first[0]},../../../../out/map.png"))
+    before, frame = _digest(euroc), (out / "map.png").read_bytes()
+    for args, must in ((["map", euroc, "-o", out], "would overwrite the input"),
+                       (["map", euroc, "-o", euroc / "out"], "is inside the EuRoC/ASL recording"),
+                       (["map", euroc, "-o", euroc], "is the EuRoC/ASL recording"),
+                       (["odometry", euroc, "-o", euroc / "mav0" / "t.txt"], "lies inside the EuRoC/ASL recording"),
+                       (["odometry", euroc, "-o", out / "t.txt", "--plot", out / "map.png"],
+                        "would overwrite the input"),
+                       (["batch", euroc, "-o", euroc / "out"], "choose a folder apart from it"),
+                       (["live", euroc, "-o", euroc / "out"], "choose a folder apart from it")):
+        _run(capsys, [*args, "--quiet"], must=must)
+    assert _digest(euroc) == before and (out / "map.png").read_bytes() == frame and not (euroc / "out").exists()
+
+
+def test_an_image_folder_recordings_frames_are_inputs(ds, tmp_path, capsys):
+    rec = tmp_path / "rec"
+    (rec / "left").mkdir(parents=True)
+    (rec / "right").mkdir()
+    for k in range(3):
+        shutil.copy(ds / "left" / f"{k:06d}.png", rec / "left" / f"{k:06d}.png")
+        shutil.copy(ds / "right" / f"{k:06d}.png", rec / "right" / f"{k:06d}.png")
+    shutil.copy(ds / "calibration.yaml", rec / "stereo.yaml")
+    os.link(rec / "left" / "000000.png", tmp_path / "map.png")      # the first frame, also named map.png
+    before = _digest(rec)
+    _run(capsys, ["map", rec, "-o", rec / "left", "--quiet"], must="is inside the image folders recording")
+    _run(capsys, ["map", rec, "-o", tmp_path, "--quiet"], must="would overwrite the input")
+    assert _digest(rec) == before
+
+
+def test_record_bag_removes_only_its_own_temporary(ds, tmp_path):
+    """The bag is built in a marked temporary: a user's folder named as the old temporary (.NAME.PID.tmp) stays."""
+    out = tmp_path / "m"
+    theirs = tmp_path / f".rbx.{os.getpid()}.tmp"
+    theirs.mkdir()
+    (theirs / "precious.txt").write_text("keep")
+    assert entry(["map", str(ds), "-o", str(out), "--record-bag", str(tmp_path / "rbx"), "--quiet"]) == 0
+    assert (theirs / "precious.txt").read_text() == "keep"
+    assert (tmp_path / "rbx" / "metadata.yaml").is_file() and not _no_temporaries(tmp_path)
+
+
 @pytest.mark.sample_data("openloris-sample")
 def test_calib_convert_never_overwrites_a_sibling_it_read(sample_data, tmp_path, capsys):
     folder = tmp_path / "loris"

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import new_temporary_dir, remove_stale_temporaries
 from ..transforms import quaternion_from_rotation
 
 __all__ = ["BagWriter", "BAG_TOPICS", "LATCHED_TOPICS", "MAP_FRAME", "ODOM_FRAME", "BASE_FRAME", "CAMERA_FRAME"]
@@ -60,10 +61,10 @@ class BagWriter:
         self.path = Path(path)
         if self.path.exists():
             raise ValueError(f"--record-bag: {self.path} already exists; choose a new folder")
-        # built in a hidden folder beside it under its own name (the storage file is named after the bag)
-        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        shutil.rmtree(self._tmp, ignore_errors=True)
-        self._tmp.mkdir(parents=True)
+        # built in a temporary folder of mrstereo's beside it (only those are ever removed), under its own name
+        # (the storage file is named after the bag)
+        remove_stale_temporaries(self.path.parent)
+        self._tmp = new_temporary_dir(self.path.parent, prefix=self.path.name)
         self.ts = get_typestore(Stores.ROS2_HUMBLE)
         self.T = self.ts.types
         self._writer = Writer(self._tmp / self.path.name, version=9, storage_plugin=StoragePlugin.MCAP)

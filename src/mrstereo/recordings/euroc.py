@@ -21,7 +21,7 @@ import numpy as np
 
 from ..camera import CameraMount
 from ..camera.formats import euroc_body_from_camera, import_calibration
-from ..io import read_text
+from ..io import note_inputs, read_text
 from .bag import TransformTrack, pair_by_stamp
 from .manifest import FrameRecord, Manifest, pose_3d_of
 
@@ -148,6 +148,10 @@ def read_euroc(path: str | os.PathLike) -> Manifest:
         frames.append(FrameRecord(pose=(0.0, 0.0, 0.0) if pose is None else None, pose_3d=pose, true_pose_3d=pose,
                                   left=left_files[i].resolve(), right=right_files[j].resolve(),
                                   stamp_s=int(left_ns[i]) / 1e9))
-    return Manifest(root=mav.resolve(), calibration=calibration, calibration_path=sensors[0].resolve(), mount=None,
-                    ground_truth_map=None, frames=tuple(frames), layout="EuRoC/ASL", has_poses=track is not None,
-                    pose_frame_mount=CameraMount(T_body_from_cam0) if track is not None else None, notes=tuple(notes))
+    manifest = Manifest(root=mav.resolve(), calibration=calibration, calibration_path=sensors[0].resolve(),
+                        mount=None, ground_truth_map=None, frames=tuple(frames), layout="EuRoC/ASL",
+                        has_poses=track is not None, notes=tuple(notes),
+                        pose_frame_mount=CameraMount(T_body_from_cam0) if track is not None else None)
+    note_inputs(manifest.inputs().add(*sensors, mav / "cam0" / "data.csv", mav / "cam1" / "data.csv",
+                                      truth_csv if track is not None else None))
+    return manifest

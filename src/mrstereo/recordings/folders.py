@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import StereoCamera, read_stereo
-from ..io import IMAGE_SUFFIXES
+from ..io import IMAGE_SUFFIXES, note_inputs
 from .manifest import FrameRecord, Manifest
 
 __all__ = ["read_image_folders", "is_image_folders", "image_folder_pair", "stamps_from_names", "FOLDER_PAIRS",
@@ -133,7 +133,9 @@ def read_image_folders(path: str | os.PathLike, *, calibration: StereoCamera | s
     frames = tuple(FrameRecord(pose=(0.0, 0.0, 0.0), left=a.resolve(), right=b.resolve(),
                                stamp_s=None if stamps is None else float(stamps[k]))
                    for k, (a, b) in enumerate(zip(lefts, rights)))
-    return Manifest(root=root.resolve(), calibration=stereo,
-                    calibration_path=(calibration_path or root).resolve(), mount=stereo.mount,
-                    ground_truth_map=None, frames=frames, layout="image folders", has_poses=False,
-                    notes=tuple(notes))
+    manifest = Manifest(root=root.resolve(), calibration=stereo,
+                        calibration_path=(calibration_path or root).resolve(), mount=stereo.mount,
+                        ground_truth_map=None, frames=frames, layout="image folders", has_poses=False,
+                        notes=tuple(notes))
+    note_inputs(manifest.inputs())
+    return manifest

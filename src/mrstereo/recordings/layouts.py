@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ..io import Inputs, note_inputs
 from .euroc import is_euroc, read_euroc
 from .folders import FOLDER_PAIRS, is_image_folders, read_image_folders
 from .kitti import is_kitti_odometry, read_kitti_odometry
@@ -84,16 +85,14 @@ def read_recording(path: str | os.PathLike, *, calibration=None, rate_hz: float 
         A folder of no known layout (the message lists what was looked for), a bag, or what its reader raises.
     """
     layout = layout_of(path)
-    if layout == "dataset":
-        return read_manifest(path)
-    if layout == "KITTI odometry":
-        return read_kitti_odometry(path)
-    if layout == "KITTI raw":
-        return read_kitti_raw(path)
-    if layout == "EuRoC/ASL":
-        return read_euroc(path)
-    if layout == "image folders":
-        return read_image_folders(path, calibration=calibration, rate_hz=rate_hz)
+    readers = {"dataset": read_manifest, "KITTI odometry": read_kitti_odometry, "KITTI raw": read_kitti_raw,
+               "EuRoC/ASL": read_euroc}
+    if layout in readers or layout == "image folders":
+        manifest = readers[layout](path) if layout in readers else \
+            read_image_folders(path, calibration=calibration, rate_hz=rate_hz)
+        if Path(path).is_dir():         # the folder named (EuRoC's above mav0/, KITTI's above sequences/NN/)
+            note_inputs(Inputs(folders=[path], kind=manifest.kind))
+        return manifest
     raise ValueError(f"{path} is a ROS bag: open it with mrstereo.recordings.open_recording (read message by "
                      "message) or write it as a dataset with mrstereo.recordings.bag.export_bag")
 

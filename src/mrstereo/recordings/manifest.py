@@ -151,12 +151,17 @@ class Manifest:
         stamps = [f.stamp_s for f in self.frames]
         return None if any(s is None for s in stamps) else np.array(stamps, dtype=np.float64)
 
+    @property
+    def kind(self) -> str:
+        """What the recording is called in messages: ``"dataset"`` or ``"<layout> recording"``."""
+        return "dataset" if self.layout == "dataset" else f"{self.layout} recording"
+
     def inputs(self) -> Inputs:
         """What a run over the dataset reads: its folder (no output may go inside it), the manifest, the
         calibration, the ground-truth map and every frame's files (wherever they lie)."""
         from ..mapping.rosmap import ros_map_files
 
-        inputs = Inputs(folders=[self.root], kind="dataset")
+        inputs = Inputs(folders=[self.root], kind=self.kind)
         inputs.add(self.root / MANIFEST_NAME, self.calibration_path)
         if self.ground_truth_map is not None:
             inputs.add(*ros_map_files(self.ground_truth_map))
