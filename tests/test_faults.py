@@ -530,6 +530,23 @@ def test_every_long_command_stops_with_one_line(ds, tmp_path, command, signame):
     assert not partial, partial
 
 
+def test_ctrl_c_during_a_slow_realtime_replay_stops_at_once(ds, tmp_path):
+    """``live --realtime`` on a video of a frame every 20 s: Ctrl-C after the first frame ends the wait for the
+    next one, and the run writes its outputs (the first Ctrl-C of live stops it: exit 0)."""
+    for side in ("left", "right"):
+        writer = cv2.VideoWriter(str(tmp_path / f"{side}.mkv"), cv2.VideoWriter_fourcc(*"FFV1"), 0.05, (160, 120),
+                                 isColor=False)
+        for k in range(3):
+            writer.write(cv2.imread(str(ds / side / f"{k:06d}.png"), cv2.IMREAD_GRAYSCALE))
+        writer.release()
+    out = tmp_path / "o"
+    code, err, took = _signalled(["live", tmp_path / "left.mkv", tmp_path / "right.mkv", "--calib",
+                                  ds / "calibration.yaml", "--realtime", "-o", out, "--quiet"], "frame:1", tmp_path)
+    assert code == 0 and "Traceback" not in err.decode(), err.decode()
+    assert took < 5.0
+    assert json.loads((out / "metrics.json").read_text())["frames_in"] == 1
+
+
 def test_sigkill_during_synth_leaves_only_a_marked_temporary(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg")
     proc = subprocess.Popen([sys.executable, "-m", "mrstereo", "synth", "--out", str(tmp_path / "S"), "--frames", "3",

@@ -270,10 +270,11 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
     run = LiveRun(grid=mapper.grid, stamps_s=np.empty(0), T_world_from_base=np.empty((0, 4, 4)), source=source.name,
                   odometry=odometry)
     fuser = _Fuser(mapper, live, sinks, run)
-    frames = paced(source, speed=live.speed) if live.realtime and not source.realtime else source
+    stop = stop or threading.Event()
+    frames = paced(source, speed=live.speed, stop=stop) if live.realtime and not source.realtime else source
     threads = StreamThreads(frames, lambda frame: _Matched(frame=frame, arrival_s=time.perf_counter()),
                             _observe_with(mapper), workers=live.workers, lossless=not (source.realtime or live.realtime),
-                            max_items=live.max_frames, stop=stop or threading.Event())
+                            max_items=live.max_frames, stop=stop)
     clock = _Clock(profile=active() or Profile())
     writer = Writer(lambda snapshot: run.files.update(write_live_outputs(out, snapshot)))
     interrupted = None

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import os
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
@@ -23,7 +24,7 @@ from .frames import FrameSource, RecordingSource, StereoFrame, _gray, frame_imag
 from .layouts import open_recording
 
 __all__ = ["StereoFrame", "FrameSource", "VideoSource", "RecordingSource", "open_source", "paced", "is_camera",
-           "frame_image"]
+           "frame_image", "MAX_STAMP_GAP_S"]
 
 VIDEO_SUFFIXES = (".avi", ".mkv", ".mp4", ".mov", ".webm", ".mpg", ".mpeg", ".m4v", ".ogv", ".wmv", ".flv",
                   ".ts", ".mjpeg", ".mjpg", ".h264", ".h265")
@@ -146,18 +147,41 @@ class VideoSource(FrameSource):
         self._captures = []
 
 
-def paced(frames, *, speed: float = 1.0, clock=time.monotonic, sleep=time.sleep) -> Iterator[StereoFrame]:
+MAX_STAMP_GAP_S = 60.0
+"""The longest wait :func:`paced` takes between two frames' stamps (at speed 1): a longer gap, or a stamp going
+back further, is a jump in the recording's clock, not time to wait."""
+
+
+def paced(frames, *, speed: float = 1.0, clock=time.monotonic, sleep=None, stop=None,
+          max_gap_s: float = MAX_STAMP_GAP_S) -> Iterator[StereoFrame]:
     """Hand out ``frames`` at the rate of their stamps (``speed`` times faster): frame k no earlier than
-    ``(stamp_k - stamp_0) / speed`` after the first. A reader that falls behind is not waited for."""
+    ``(stamp_k - stamp_0) / speed`` after the first. A reader that falls behind is not waited for.
+
+    ``stop`` (a ``threading.Event``) ends a wait at once and the replay with it. Two stamps more than
+    ``max_gap_s`` apart (or going back by more) are a jump of the recording's clock: a warning naming the
+    frames, no wait, and the pacing starts again from that frame.
+    """
     if not (math.isfinite(speed) and speed > 0):
         raise ValueError(f"speed must be a finite number > 0, got {speed!r}")
-    start = first = None
+    wait = sleep or (stop.wait if stop is not None else time.sleep)
+    start = first = previous = None
     for frame in frames:
+        if stop is not None and stop.is_set():
+            return
+        gap = None if previous is None else frame.stamp_s - previous.stamp_s
+        if gap is not None and not abs(gap) <= max_gap_s:
+            warnings.warn(f"the stamps jump by {gap:.6g} s from frame {previous.index} to frame {frame.index} "
+                          f"(more than {max_gap_s:g} s): replayed without waiting, the pacing restarts there",
+                          stacklevel=2)
+            start = None
         if start is None:
             start, first = clock(), frame.stamp_s
+        previous = frame
         delay = start + (frame.stamp_s - first) / speed - clock()
         if delay > 0:
-            sleep(delay)
+            wait(delay)
+            if stop is not None and stop.is_set():
+                return
         yield frame
 
 
