@@ -54,6 +54,14 @@ def _csv_rows(path: Path, what: str) -> list[list[str]]:
     return rows
 
 
+def _stamp_ns(text: str, path: Path, row: int) -> int:
+    """A stamp in nanoseconds that numpy's int64 (and a ROS time) holds."""
+    stamp = int(text)
+    if not 0 <= stamp < 2**63:
+        raise ValueError(f"{path}: row {row} has the stamp {text} ns, beyond the 2^63 ns (year 2262) a stamp may be")
+    return stamp
+
+
 def _camera_list(cam: Path) -> tuple[np.ndarray, list[Path]]:
     """Stamps [ns] and image paths of ``cam/data.csv``."""
     csv = cam / "data.csv"
@@ -61,7 +69,11 @@ def _camera_list(cam: Path) -> tuple[np.ndarray, list[Path]]:
     for n, row in enumerate(_csv_rows(csv, "EuRoC camera list"), 1):
         if len(row) < 2 or not row[0].isdigit():
             raise ValueError(f"EuRoC camera list {csv}: row {n} must be 'timestamp_ns,filename', got {','.join(row)!r}")
-        stamps.append(int(row[0]))
+        stamp = _stamp_ns(row[0], csv, n)
+        if stamps and stamp <= stamps[-1]:
+            raise ValueError(f"EuRoC camera list {csv}: row {n} has the stamp {stamp} ns, not after row {n - 1}'s "
+                             f"{stamps[-1]} ns: the stamps must increase")
+        stamps.append(stamp)
         files.append(cam / "data" / row[1])
     if not stamps:
         raise ValueError(f"EuRoC camera list {csv} lists no image")
@@ -78,6 +90,7 @@ def _truth_track(path: Path) -> TransformTrack:
         except (ValueError, IndexError):
             raise ValueError(f"EuRoC ground truth {path}: row {n} must start with 'timestamp_ns, px, py, pz, qw, qx, "
                              "qy, qz'") from None
+        t = _stamp_ns(row[0], path, n)
         if len(values) != 7 or not np.isfinite(values).all() or sum(v * v for v in values[3:]) < 1e-12:
             raise ValueError(f"EuRoC ground truth {path}: row {n} needs 7 finite numbers and a non-zero quaternion")
         qw, qx, qy, qz = values[3:]

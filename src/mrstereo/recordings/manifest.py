@@ -145,6 +145,19 @@ class Manifest:
     pose_frame_mount: CameraMount | None = None
     notes: tuple[str, ...] = ()
 
+    def __post_init__(self) -> None:
+        previous = None
+        for k, frame in enumerate(self.frames):
+            s = frame.stamp_s
+            if s is None:
+                continue
+            if not math.isfinite(s):
+                raise ValueError(f"{self.kind} {self.root}: frame {k} has the stamp {s!r}: stamps are finite seconds")
+            if previous is not None and not s > previous[1]:
+                raise ValueError(f"{self.kind} {self.root}: frame {k} has the stamp {s:.9g} s, not after frame "
+                                 f"{previous[0]}'s {previous[1]:.9g} s: the stamps must increase")
+            previous = (k, s)
+
     @property
     def stamps_s(self) -> np.ndarray | None:
         """Every frame's stamp (seconds), or None when a frame has none."""
