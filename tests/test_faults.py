@@ -530,6 +530,15 @@ def test_every_long_command_stops_with_one_line(ds, tmp_path, command, signame):
     assert not partial, partial
 
 
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("point", ["import:1", "start:1"], ids=["while loading", "handlers installed"])
+def test_a_signal_in_the_first_milliseconds_is_one_line_and_130(ds, tmp_path, point, signame):
+    """``import``: the first statement of the command line, before its imports (Python's own start-up comes
+    before it); ``start``: its handlers installed, before the command's imports."""
+    code, err, _ = _signalled(["info", ds], point, tmp_path, signame)
+    assert (code, err.decode()) == (130, "mrstereo: interrupted\n")
+
+
 def test_ctrl_c_during_a_slow_realtime_replay_stops_at_once(ds, tmp_path):
     """``live --realtime`` on a video of a frame every 20 s: Ctrl-C after the first frame ends the wait for the
     next one, and the run writes its outputs (the first Ctrl-C of live stops it: exit 0)."""

@@ -15,6 +15,8 @@ import threading
 
 from .._interrupt import reached
 
+reached("import")
+
 # Only the standard library here: the console script imports this module first, and
 # entry() installs the interrupt handler before the commands (1.5 s of imports) load.
 # The commands are registered in cli/_main.py.
