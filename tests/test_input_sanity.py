@@ -72,3 +72,112 @@ def test_euroc_stamps_beyond_int64_or_repeated_are_one_line(sample_data, tmp_pat
             second = rows[2].split(",")[0]
             csv.write_text(csv.read_text().replace(f"{first},", f"{stamp}," if stamp else f"{second},", 1))
         _error(capsys, ["info", euroc], must)
+
+
+# ------------------------------------------------------------------------------------------ two videos
+
+def _video(path: Path, images, fps: float) -> Path:
+    h, w = images[0].shape
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), fps, (w, h), isColor=False)
+    for image in images:
+        writer.write(image)
+    writer.release()
+    return path
+
+
+@pytest.fixture(scope="module")
+def videos(ds, tmp_path_factory) -> dict[str, Path]:
+    """The dataset's raw pairs as videos: left, right, and right ones of another size, rate and length."""
+    folder = tmp_path_factory.mktemp("videos")
+    read = lambda side: [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in sorted((ds / side).glob("*.png"))]  # noqa
+    left, right = read("left"), read("right")
+    return {"left": _video(folder / "left.mkv", left, 10.0), "right": _video(folder / "right.mkv", right, 10.0),
+            "small": _video(folder / "small.mkv", [cv2.resize(im, (80, 60)) for im in right], 10.0),
+            "slow": _video(folder / "slow.mkv", right, 2.5),
+            "short": _video(folder / "short.mkv", right[:2], 10.0)}
+
+
+@pytest.mark.parametrize("right, must", [("small", "160x120 and "), ("slow", "at 2.5 fps")],
+                         ids=["another size", "another rate"])
+def test_two_videos_that_are_no_pair_are_refused_before_work(ds, videos, tmp_path, capsys, right, must):
+    """Videos of two sizes gave an empty map and exit 0; 10 and 2.5 fps were paired frame by frame."""
+    _error(capsys, ["live", videos["left"], videos[right], "--calib", ds / "calibration.yaml", "-o", tmp_path / "o",
+                    "--quiet"], must)
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_shorter_right_video_is_named_when_it_ends(ds, videos, tmp_path, capsys):
+    code = entry(["live", str(videos["left"]), str(videos["short"]), "--calib", str(ds / "calibration.yaml"), "-o",
+                  str(tmp_path / "o"), "--quiet"])
+    err, out = _lines(capsys)
+    assert code == 0 and "live (end of source): 2 frames in" in out
+    assert err == [f"mrstereo: warning: {videos['short']} ended after 2 frames, {videos['left']} has more: the rest "
+                   f"of {videos['left']} is not used"]
+
+
+def test_an_error_of_the_source_ends_the_live_run_with_it(ds, tmp_path):
+    """A source failing after its first frame (a camera switching its size) was a run 'stopped' with exit 0."""
+    from mrstereo.pipeline.live import LiveConfig, run_live
+    from mrstereo.recordings import open_recording
+    from mrstereo.recordings.sources import FrameSource
+
+    class Failing(FrameSource):
+        def __init__(self, source):
+            self.source, self.name, self.realtime, self.has_poses = source, "failing", False, False
+            self.calibration, self.mount, self.pose_frame_mount = source.calibration, source.mount, None
+            self.ground_truth_map = None
+
+        def __iter__(self):
+            yield next(iter(self.source))
+            raise ValueError("failing: frame 1 is 80x60, frame 0 was 160x120")
+
+    with open_recording(ds) as source, pytest.raises(ValueError, match="frame 1 is 80x60"):
+        run_live(Failing(source), tmp_path / "o", live=LiveConfig())
+    assert not (tmp_path / "o" / "map.yaml").exists()
+
+
+def test_live_config_workers_are_bounded_by_the_cores():
+    from mrstereo.pipeline.live import LiveConfig
+
+    with pytest.raises(ValueError, match="workers must be at most .* MRSTEREO_MAX_WORKERS"):
+        LiveConfig(workers=10**6)
+    assert LiveConfig(workers=2).workers == 2
+
+
+# ------------------------------------------------------------------------------------------ KITTI
+
+@pytest.fixture
+def kitti(tmp_path) -> Path:
+    """Two frames of the KITTI odometry sample, with its poses."""
+    from mrstereo.recordings.samples import data_root
+
+    source = data_root() / "kitti_odometry_06"
+    if not (source / "poses" / "06.txt").is_file():
+        pytest.skip("the KITTI odometry sample is not there (MRSTEREO_DATA)")
+    seq = tmp_path / "kitti" / "sequences" / "06"
+    for sub in ("image_0", "image_1"):
+        (seq / sub).mkdir(parents=True)
+        for name in ("000000.png", "000001.png"):
+            shutil.copy(source / "sequences" / "06" / sub / name, seq / sub / name)
+    for name in ("calib.txt", "times.txt"):
+        shutil.copy(source / "sequences" / "06" / name, seq / name)
+    (tmp_path / "kitti" / "poses").mkdir()
+    shutil.copy(source / "poses" / "06.txt", tmp_path / "kitti" / "poses" / "06.txt")
+    return tmp_path / "kitti"
+
+
+def test_kitti_image_names_must_be_frame_numbers(kitti, capsys):
+    """``-1.png`` was frame -1: the last line of times.txt and poses."""
+    for sub in ("image_0", "image_1"):
+        (kitti / "sequences" / "06" / sub / "000001.png").rename(kitti / "sequences" / "06" / sub / "-1.png")
+    _error(capsys, ["info", kitti], "-1.png: a KITTI image name must be its frame number")
+
+
+def test_kitti_poses_must_be_rotations(kitti, capsys):
+    assert entry(["info", str(kitti)]) == 0
+    capsys.readouterr()
+    poses = kitti / "poses" / "06.txt"
+    lines = poses.read_text().splitlines()
+    lines[1] = "0 0 0 1 0 0 0 2 0 0 0 3"                    # a zero rotation matrix, frame 1
+    poses.write_text("\n".join(lines) + "\n")
+    _error(capsys, ["info", kitti], "line 2 (frame 1) is no pose: its 3x3 part is not a rotation")

@@ -33,6 +33,7 @@ from ..odometry.trajectory import write_tum
 from ..profiling import Profile, active, profiling, stage
 from ..recordings.sources import FrameSource, StereoFrame, paced
 from ..transforms import planar_from_T
+from .. import _checks
 from .._interrupt import reached
 from .._executor import Growing, LatestFrame, StreamThreads, Writer, peak_rss_mb, rss_mb
 from ..mapping.sinks import LiveFrame
@@ -84,8 +85,8 @@ class LiveConfig:
             raise ValueError(f"max_frames must be >= 1, got {self.max_frames!r}")
         if not (math.isfinite(self.speed) and self.speed > 0):
             raise ValueError(f"speed must be a finite number > 0, got {self.speed!r}")
-        if int(self.workers) < 1:
-            raise ValueError(f"workers must be >= 1, got {self.workers!r}")
+        if _checks.positive_int("workers", self.workers) > 2:    # (the default, 2, also on one core)
+            _checks.workers("workers", self.workers)
         if self.odometry not in (None, "visual", "given"):
             raise ValueError(f"odometry must be 'visual', 'given' or None, got {self.odometry!r}")
 
@@ -335,6 +336,8 @@ def _fuse_in_order(threads: StreamThreads, fuser: _Fuser, writer: Writer, clock:
         if item is None:
             if threads.stop.is_set():
                 threads.slot.discard()
+            if threads.errors:              # the source failed (a frame of another size...)
+                raise threads.errors[0]
             if not threads.matching() and next_ticket >= threads.slot.tickets:
                 return
         else:

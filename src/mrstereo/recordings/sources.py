@@ -37,6 +37,11 @@ def is_camera(spec: str | int) -> bool:
     return text.isdigit() or text.startswith("/dev/")
 
 
+def _known(value: float) -> float | None:
+    """A capture property, None where the container or the driver does not know it (0, NaN)."""
+    return float(value) if math.isfinite(value) and value > 0 else None
+
+
 def _open_capture(spec: str | int) -> cv2.VideoCapture:
     text = str(spec)
     if is_camera(text):
@@ -99,16 +104,40 @@ class VideoSource(FrameSource):
         except BaseException:
             self.close()
             raise
-        fps = self._captures[0].get(cv2.CAP_PROP_FPS)
-        self.rate_hz = float(fps) if math.isfinite(fps) and fps > 0 else None
-        n = self._captures[0].get(cv2.CAP_PROP_FRAME_COUNT)
-        self.n_frames = int(n) if not self.realtime and math.isfinite(n) and n > 0 else None
+        self._names = [str(s) for s in specs]
+        rates = [_known(c.get(cv2.CAP_PROP_FPS)) for c in self._captures]
+        self.rate_hz = rates[0]
+        n = _known(self._captures[0].get(cv2.CAP_PROP_FRAME_COUNT))
+        self.n_frames = int(n) if not self.realtime and n is not None else None
+        try:
+            self._check_pair(rates)
+        except BaseException:
+            self.close()
+            raise
+
+    def _check_pair(self, rates: list[float | None]) -> None:
+        """Two streams must be a pair: one image size, and (files) one frame rate -- they are paired frame by frame."""
+        if len(self._captures) != 2:
+            return
+        sizes = [tuple(int(_known(c.get(p)) or 0) for p in (cv2.CAP_PROP_FRAME_WIDTH, cv2.CAP_PROP_FRAME_HEIGHT))
+                 for c in self._captures]
+        if all(all(s) for s in sizes) and sizes[0] != sizes[1]:
+            raise ValueError(f"{self._names[0]} is {sizes[0][0]}x{sizes[0][1]} and {self._names[1]} "
+                             f"{sizes[1][0]}x{sizes[1][1]}: the left and right images of a stereo pair have one size")
+        if not self.realtime and None not in rates and abs(rates[0] - rates[1]) > 0.01 * max(rates):
+            raise ValueError(f"{self._names[0]} runs at {rates[0]:g} fps and {self._names[1]} at {rates[1]:g} fps: "
+                             "two videos are paired frame by frame, so they must have one frame rate")
 
     def __iter__(self) -> Iterator[StereoFrame]:
         index = 0
         while self._captures:
             with stage("read"):
-                if not all(c.grab() for c in self._captures):      # grab both first: exposures close in time
+                grabbed = [c.grab() for c in self._captures]      # grab both first: exposures close in time
+                if not all(grabbed):
+                    if any(grabbed) and not self.realtime:
+                        ended, other = (self._names[k] for k in ((0, 1) if not grabbed[0] else (1, 0)))
+                        warnings.warn(f"{ended} ended after {index} frames, {other} has more: the rest of "
+                                      f"{other} is not used", stacklevel=2)
                     return
                 stamp = time.monotonic() if self.realtime else self._file_stamp(index)
                 images = []
