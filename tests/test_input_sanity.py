@@ -181,3 +181,42 @@ def test_kitti_poses_must_be_rotations(kitti, capsys):
     lines[1] = "0 0 0 1 0 0 0 2 0 0 0 3"                    # a zero rotation matrix, frame 1
     poses.write_text("\n".join(lines) + "\n")
     _error(capsys, ["info", kitti], "line 2 (frame 1) is no pose: its 3x3 part is not a rotation")
+
+
+# ------------------------------------------------------------------------------------------ calibration
+
+@pytest.mark.sample_data("opencv-stereo-chessboard")
+def test_a_camera_calibration_from_one_view_is_refused(sample_data, tmp_path, capsys):
+    """A flat board in one image does not determine a camera: refused before the fit, nothing written."""
+    one = sample_data("opencv-stereo-chessboard") / "left01.jpg"
+    _error(capsys, ["calibrate", "--images", one, "-o", tmp_path / "one.yaml", "--quiet"],
+           "a flat board seen from fewer than 3 angles does not determine a camera")
+    assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------------------------------ bags
+
+@pytest.mark.parametrize("ros1", [False, True], ids=["ROS 2", "ROS 1"])
+def test_a_camera_info_that_changes_mid_bag_is_named(ds, tmp_path, capsys, ros1):
+    """The calibration is the bag's first camera_info: a later one that differs (a zoom, a recalibration) was
+    silently ignored; now a warning names the topic and the message."""
+    from _bags import write_bag
+
+    from mrstereo.camera import StereoCamera
+    from mrstereo.recordings.manifest import read_manifest
+
+    manifest = read_manifest(ds)
+    steady = write_bag(tmp_path / ("steady.bag" if ros1 else "steady"), manifest, ros1=ros1)
+    assert entry(["info", str(steady)]) == 0
+    assert _lines(capsys)[0] == []
+    from dataclasses import replace
+
+    cal = manifest.calibration                   # the left camera's focal length 1.5 times longer from frame 2 on
+    other = StereoCamera(left=replace(cal.left, camera=replace(cal.left.camera, fx=1.5 * cal.left.camera.fx)),
+                         right=cal.right)
+    bag = write_bag(tmp_path / ("zoom.bag" if ros1 else "zoom"), manifest, ros1=ros1, recalibrated=(2, other))
+    assert entry(["info", str(bag)]) == 0
+    err, out = _lines(capsys)
+    assert len(err) == 1, err
+    assert err[0].startswith("mrstereo: warning: camera_info /stereo/left/camera_info changes at its message 2 ")
+    assert "frames:           3" in out
