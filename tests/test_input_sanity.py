@@ -220,3 +220,25 @@ def test_a_camera_info_that_changes_mid_bag_is_named(ds, tmp_path, capsys, ros1)
     assert len(err) == 1, err
     assert err[0].startswith("mrstereo: warning: camera_info /stereo/left/camera_info changes at its message 2 ")
     assert "frames:           3" in out
+
+
+# ------------------------------------------------------------------------------------------ given poses
+
+def test_given_poses_that_jump_kilometres_in_a_frame_are_named(ds, tmp_path, capsys):
+    """Odometry jumping 5 km between two frames was mapped without a word (live and map read it alike)."""
+    data = tmp_path / "D"
+    shutil.copytree(ds, data)
+    text = (data / "manifest.yaml").read_text()
+    poses = re.findall(r"  pose: .*\n", text)
+    assert len(poses) == 3
+    head, _, tail = text.rpartition(poses[2])
+    (data / "manifest.yaml").write_text(head + "  pose: [5000.0, 0.0, 0.0]\n" + tail)
+    warning = ("mrstereo: warning: dataset {}: the given poses jump 5000 m from frame 1 to frame 2: the odometry is "
+               "broken there".format(data.resolve()))
+    for args in (["info", data], ["map", data, "-o", tmp_path / "m", "--size", "20,20", "--origin", "-10,-10",
+                                  "--quiet"]):
+        assert entry([str(a) for a in args]) == 0
+        err, _ = _lines(capsys)
+        assert [line for line in err if "given poses" in line] == [line for line in err if line.startswith(warning)]
+        assert len([line for line in err if line.startswith(warning)]) == 1, err
+    assert entry(["info", str(ds)]) == 0 and _lines(capsys)[0] == []
