@@ -909,6 +909,7 @@ def test_duplicated_or_swapped_streams_are_named(ds, tmp_path, capsys, case):
             right.rename(left)
             (data / "tmp").rename(right)
     for args in (["map", data, "-o", tmp_path / "m", "--quiet"], ["batch", data, "-o", tmp_path / "b", "--quiet"],
+                 ["live", data, "-o", tmp_path / "l", "--quiet"],        # live and map: one check
                  ["disparity", data / "left_rect" / "000000.png", data / "right_rect" / "000000.png",
                   "--max-disparity", "32", "-o", tmp_path / "d.pfm"]):
         entry([str(a) for a in args])
