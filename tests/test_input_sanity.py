@@ -242,3 +242,13 @@ def test_given_poses_that_jump_kilometres_in_a_frame_are_named(ds, tmp_path, cap
         assert [line for line in err if "given poses" in line] == [line for line in err if line.startswith(warning)]
         assert len([line for line in err if line.startswith(warning)]) == 1, err
     assert entry(["info", str(ds)]) == 0 and _lines(capsys)[0] == []
+
+
+@pytest.mark.parametrize("first_s", [-1.0, 1e12], ids=["negative", "year 33658"])
+def test_stamps_a_bag_cannot_hold_are_refused_before_any_output(ds, tmp_path, capsys, first_s):
+    """``--record-bag`` of a recording whose stamps a ROS 2 bag cannot hold: one line naming the stamp before
+    work, not after the map was written (a run half done: the map there, the bag missing)."""
+    data = _with_stamps(ds, tmp_path / "D", [first_s, first_s + 0.1, first_s + 0.2])
+    for args in (["map", data, "-o", tmp_path / "m"], ["odometry", data, "-o", tmp_path / "t.txt"]):
+        _error(capsys, [*args, "--record-bag", tmp_path / "bag", "--quiet"], f"a time stamp of {first_s:.10g} s")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["D"]
