@@ -59,7 +59,7 @@ def _parse_seeds(values: list[str]) -> list[int]:
 def paired_maps(manifest, *, frames: int | None = None, config=None):
     """Map a recording's first ``frames`` frames with and without the drop test, matching each frame once.
 
-    Returns ``(with_drops, without_drops)`` :class:`mrstereo.pipeline.run.MapRun` and each frame's drop
+    Returns ``(with_drops, without_drops)`` :class:`mrstereo.evaluation.outputs.MapRun` and each frame's drop
     points in the world frame.
     """
     from mrstereo.geometry.drops import DropConfig
@@ -137,7 +137,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, d
     from mrstereo.geometry.drops import DropConfig
     from mrstereo.mapping import plan_path
     from mrstereo.mapping.heights import HeightLayer
-    from mrstereo.pipeline.mapper import views_of_poses
+    from mrstereo.mapping.metrics import views_of_poses
     from mrstereo.world import drop_edges, floor_heights, ground_truth_map, random_world, read_manifest
     from mrstereo.world import write_synthetic_dataset
 

@@ -129,7 +129,7 @@ def evaluate_seed(seed: int, *, randomized: bool, frames: int, data_dir: str | N
     many obstacles the frames show."""
     from mrstereo.mapping import read_ros_map
     from mrstereo.mapping.fusion import fuse
-    from mrstereo.pipeline.mapper import views_of_poses
+    from mrstereo.mapping.metrics import views_of_poses
     from mrstereo.pipeline.run import PipelineConfig, build_map
     from mrstereo.world import default_scene, obstacle_footprints, random_world, read_manifest, write_synthetic_dataset
 

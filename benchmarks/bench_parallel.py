@@ -52,7 +52,8 @@ def _observe_range(data: Path, start: int, stop: int) -> None:
     from threadpoolctl import threadpool_limits
 
     from mrstereo._executor import keep_freed_memory
-    from mrstereo.pipeline.mapper import PipelineConfig, observe
+    from mrstereo.geometry.pair import observe_pair as observe
+    from mrstereo.pipeline.mapper import PipelineConfig
     from mrstereo.recordings.manifest import read_manifest
     from mrstereo.recordings.sources import RecordingSource
 

@@ -10,7 +10,7 @@ import pytest
 
 from mrstereo.cli import entry
 from mrstereo.geometry import read_ply, read_scan_json
-from mrstereo.io import read_disparity, read_image
+from mrstereo.io import read_disparity, read_image, write_disparity
 from mrstereo.mapping.fusion import fuse
 from mrstereo.pipeline.batch import SUMMARY_NAME, frame_outputs, run_batch
 from mrstereo.geometry.pair import scan_from_pair
@@ -93,6 +93,56 @@ def test_failed_frame_is_listed_the_rest_goes_on_and_a_rerun_retries_it(datasets
     assert summary.failures == ()
     expected = build_map(broken, progress=False).grid.log_odds
     assert np.array_equal(np.load(out / "gamma" / "map" / "log_odds.npy"), expected, equal_nan=True)
+
+
+@pytest.mark.filterwarnings("ignore:no metrics")                 # (the ground truth is on 5 cm cells)
+def test_a_rerun_with_another_resolution_writes_the_map_again(datasets, tmp_path):
+    out = tmp_path / "out"
+    run_batch(datasets[:1], out, progress=False)
+    summary = run_batch(datasets[:1], out, config=PipelineConfig(resolution_m=0.1), progress=False)
+    assert (summary.datasets[0].n_computed, summary.datasets[0].map_status) == (0, "written")   # frames kept
+    assert "resolution: 0.1" in (out / "corridor1" / "map" / "map.yaml").read_text()
+    expected = build_map(datasets[0], config=PipelineConfig(resolution_m=0.1), progress=False).grid.log_odds
+    assert np.array_equal(np.load(out / "corridor1" / "map" / "log_odds.npy"), expected, equal_nan=True)
+
+
+def test_an_edited_map_or_frame_file_is_written_again(datasets, tmp_path):
+    out = tmp_path / "out"
+    run_batch(datasets[:1], out, progress=False)
+    pgm = out / "corridor1" / "map" / "map.pgm"
+    disparity = frame_outputs(out / "corridor1" / "frames", 1)["disparity"]
+    originals = {path: path.read_bytes() for path in (pgm, disparity)}
+    data = bytearray(originals[pgm])
+    data[-1] ^= 0xFF                                        # one cell changed, the file still a valid image
+    pgm.write_bytes(bytes(data))
+    edited = read_disparity(disparity)
+    edited[edited == edited] += 1.0                         # still a valid PFM, every disparity off by 1 px
+    write_disparity(disparity, edited)
+    summary = run_batch(datasets[:1], out, progress=False)
+    assert (summary.datasets[0].n_computed, summary.datasets[0].map_status) == (1, "written")
+    assert all(path.read_bytes() == data for path, data in originals.items())
+    again = run_batch(datasets[:1], out, progress=False)
+    assert (again.datasets[0].n_computed, again.datasets[0].map_status) == (0, "kept")
+
+
+def test_the_files_of_frames_that_left_the_recording_are_removed(datasets, tmp_path):
+    import yaml
+
+    ds = tmp_path / "corridor1"
+    shutil.copytree(datasets[0], ds)
+    out = tmp_path / "out"
+    run_batch([ds], out, progress=False)
+    frames_dir = out / "corridor1" / "frames"
+    (frames_dir / "notes.txt").write_text("mine\n")                   # not mrstereo's: stays
+    data = yaml.safe_load((ds / "manifest.yaml").read_text())
+    data["frames"] = data["frames"][:2]
+    (ds / "manifest.yaml").write_text(yaml.safe_dump(data))
+    summary = run_batch([ds], out, progress=False)
+    assert (summary.datasets[0].n_frames, summary.datasets[0].map_status) == (2, "written")
+    assert sorted(p.name for p in frames_dir.iterdir()) == sorted(
+        [p.name for k in (0, 1) for p in frame_outputs(frames_dir, k).values()] + ["notes.txt"])
+    expected = build_map(ds, progress=False).grid.log_odds
+    assert np.array_equal(np.load(out / "corridor1" / "map" / "log_odds.npy"), expected, equal_nan=True)
 
 
 @pytest.mark.extra("scale")

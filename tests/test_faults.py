@@ -360,7 +360,7 @@ def test_a_really_full_disk(ds, tmp_path, capsys, command):
 # ------------------------------------------------------------------------------------------ partial outputs
 
 def test_map_writes_all_files_or_none(ds, tmp_path, capsys, monkeypatch):
-    import mrstereo.pipeline.run
+    import mrstereo.evaluation.outputs
 
     out = tmp_path / "m"
     out.mkdir()
@@ -369,7 +369,7 @@ def test_map_writes_all_files_or_none(ds, tmp_path, capsys, monkeypatch):
     def fail(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device", "map.png")
 
-    monkeypatch.setattr(mrstereo.pipeline.run, "plot_map", fail)
+    monkeypatch.setattr(mrstereo.evaluation.outputs, "plot_map", fail)
     _run(capsys, ["map", ds, "-o", out, "--quiet"], must="no space left on device")
     assert sorted(p.name for p in out.iterdir()) == ["map.yaml"]           # the old set, nothing new, no temp
     assert (out / "map.yaml").read_text() == "an older map\n"

@@ -149,7 +149,9 @@ def test_bad_input():
 def test_boundary_points_join_the_observation_marked_and_map_the_plain_wall():
     from mrstereo.mapping import OccupancyGrid
     from mrstereo.mapping.fusion import add_observation
-    from mrstereo.pipeline.mapper import Observed, PipelineConfig, world_observation
+    from mrstereo.geometry.pair import Observed
+    from mrstereo.mapping.fusion import world_observation
+    from mrstereo.pipeline.mapper import PipelineConfig
     from mrstereo.recordings.manifest import FrameRecord
     from mrstereo.transforms import T_from_planar, transform_points
 

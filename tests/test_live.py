@@ -19,7 +19,9 @@ from mrstereo.camera import write_stereo
 from mrstereo.cli import entry
 from mrstereo.mapping import GridSpec, read_ros_map
 from mrstereo.odometry.trajectory import read_tum, trajectory_metrics
-from mrstereo.pipeline.live import LIVE_FILES, LatestFrame, LiveConfig, run_live
+from mrstereo._executor import LatestFrame
+from mrstereo.evaluation.outputs import LIVE_FILES
+from mrstereo.pipeline.live import LiveConfig, run_live
 from mrstereo.pipeline.run import PipelineConfig
 from mrstereo.recordings import read_recording
 from mrstereo.recordings.samples import data_root

@@ -41,7 +41,7 @@ def l_drive(length_m: float, step_m: float = 2.5, seed: int = 0):
 
 def map_long_drive(length_m: float, out: str) -> dict:
     """Fuse the drive into a map that grows and write what ``mrstereo map`` writes of it (the calls of
-    :func:`mrstereo.pipeline.run.write_map_outputs`); returns figures and the peak resident memory."""
+    :func:`mrstereo.evaluation.outputs.write_map_outputs`); returns figures and the peak resident memory."""
     import resource
     import warnings
 

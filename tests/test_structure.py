@@ -21,8 +21,9 @@ LAYERS = [
     {"mapping"},
     {"odometry"},
     {"recordings"},
+    {"evaluation"},
     {"pipeline", "_warmup"},
-    {"world", "evaluation"},
+    {"world"},
     {"demo"},
     {"cli", "__main__"},
 ]
@@ -117,8 +118,10 @@ def test_the_check_sees_a_cycle_and_an_upward_import(tmp_path, monkeypatch):
 # The per-frame chain match -> reject -> 3-D -> scan -> grid is composed in one place: pipeline/mapper.py
 # (the pair half, match -> reject -> 3-D, in geometry/pair.py). A module that runs a pair through the chain
 # must not also put points into a grid, and within pipeline/ only the mapper runs pairs through the chain.
-_PAIR_CHAIN = re.compile(r"\b(obstacles_from_pair|scan_from_pair)\(")
+# Visual odometry of frames is the mapper's too: outside the odometry stage only the mapper runs a tracker.
+_PAIR_CHAIN = re.compile(r"\b(obstacles_from_pair|scan_from_pair|observe_pair)\(")
 _STAGES = re.compile(r"\b(compute_disparity|reject_uniform|detect_obstacles)\(")
+_TRACKER = re.compile(r"\b(StereoOdometry|visual_odometry)\(")
 _GRID_UPDATE = re.compile(r"\b(fuse_step|add_observation|fuse|view_cells)\(|\.update\(\w*obstacle|\.apply\(")
 _MAPPER = "pipeline/mapper.py"
 _PAIR = "geometry/pair.py"
@@ -130,7 +133,8 @@ def _chain_modules(src_root: Path) -> dict[str, set[str]]:
     for path in (src_root / "mrstereo").rglob("*.py"):
         text = "\n".join(line.split("#")[0] for line in path.read_text(encoding="utf-8").splitlines())
         text = re.sub(r"def \w+\(", "def (", text)                  # definitions are not calls
-        kinds = {kind for kind, pattern in (("pair", _PAIR_CHAIN), ("grid", _GRID_UPDATE)) if pattern.search(text)}
+        kinds = {kind for kind, pattern in (("pair", _PAIR_CHAIN), ("grid", _GRID_UPDATE), ("tracker", _TRACKER))
+                 if pattern.search(text)}
         if len(set(_STAGES.findall(text))) >= 2:                      # two stages called one after the other
             kinds.add("stages")
         found[path.relative_to(src_root / "mrstereo").as_posix()] = kinds
@@ -146,25 +150,29 @@ def _chain_violations(src_root: Path) -> list[str]:
             bad.append(f"{module} runs pairs through the chain (in pipeline/ only {_MAPPER} may)")
         if "stages" in kinds and module.startswith(("pipeline/", "geometry/", "mapping/")) and module != _PAIR:
             bad.append(f"{module} composes match, reject and 3-D itself (only {_PAIR} may)")
+        if "tracker" in kinds and not module.startswith("odometry/") and module != _MAPPER:
+            bad.append(f"{module} runs visual odometry itself (only {_MAPPER} may)")
     return bad
 
 
 def test_the_per_frame_chain_is_composed_in_the_mapper_only():
     assert not _chain_violations(SRC), "; ".join(_chain_violations(SRC))
     kinds = _chain_modules(SRC)
-    assert {"pair", "grid"} <= kinds[_MAPPER] and "stages" in kinds[_PAIR]
+    assert {"pair", "grid", "tracker"} <= kinds[_MAPPER] and "stages" in kinds[_PAIR]
 
 
 def test_the_chain_check_sees_a_second_composition(tmp_path):
     pkg = tmp_path / "mrstereo" / "pipeline"
     pkg.mkdir(parents=True)
-    (pkg / "mapper.py").write_text("a = scan_from_pair(l, r)\nfuse_step(grid, a)\n")
+    (pkg / "mapper.py").write_text("a = scan_from_pair(l, r)\nfuse_step(grid, a)\nvo = StereoOdometry(s)\n")
     (tmp_path / "mrstereo" / "geometry").mkdir()
     (tmp_path / "mrstereo" / "geometry" / "pair.py").write_text("d = compute_disparity(l, r)\n")
     assert not _chain_violations(tmp_path)
     (pkg / "live.py").write_text("p = obstacles_from_pair(l, r)  \nadd_observation(grid, p)\n")
     (pkg / "batch.py").write_text("x = scan_from_pair(l, r)\n")
     (pkg / "run.py").write_text("d = compute_disparity(l, r)\nrej = reject_uniform(d, l)\n")
+    (pkg / "odometry.py").write_text("result = visual_odometry(pairs, stereo)\n")
     found = " ".join(_chain_violations(tmp_path))
     assert "live.py runs pairs through the chain and updates a grid" in found
     assert "batch.py runs pairs" in found and "run.py composes" in found
+    assert "odometry.py runs visual odometry itself" in found

@@ -23,8 +23,8 @@ _LAZY = {
     # a map from stereo pairs
     "StereoMapper": "mrstereo.pipeline.mapper", "PipelineConfig": "mrstereo.pipeline.mapper",
     "MappedFrame": "mrstereo.pipeline.mapper",
-    "build_map": "mrstereo.pipeline.run", "MapRun": "mrstereo.pipeline.run",
-    "write_map_outputs": "mrstereo.pipeline.run",
+    "build_map": "mrstereo.pipeline.run", "MapRun": "mrstereo.evaluation.outputs",
+    "write_map_outputs": "mrstereo.evaluation.outputs",
     "run_live": "mrstereo.pipeline.live", "LiveConfig": "mrstereo.pipeline.live",
     "run_batch": "mrstereo.pipeline.batch",
     # the stages

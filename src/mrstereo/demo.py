@@ -280,7 +280,7 @@ def _plan(out: Path, run, union, metrics: dict) -> dict:
     """6. A* from the first to the last pose through the map; the map outputs and figures with the path."""
     from .mapping import plan_path
     from .mapping.figures import plot_map
-    from .pipeline.run import write_map_outputs
+    from .evaluation.outputs import write_map_outputs
 
     path_xy = np.array([f.pose for f in run.manifest.frames])
     start, goal = tuple(path_xy[0, :2]), tuple(path_xy[-1, :2])

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import click
 
-from ..pipeline.live import LIVE_FILES, LiveConfig
+from ..evaluation.outputs import LIVE_FILES
+from ..pipeline.live import LiveConfig
 from .._interrupt import reached
 from .._limits import limit, max_workers
 from ._options import (CALIB_HELP, HEIGHT, TILT, Number, map_config, map_options, mount_from_options, mount_option,

@@ -122,7 +122,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
         plot_trajectories(plot_path, curves, lost=~run.tracked, title=f"visual odometry, {len(run.status)} frames")
     click.echo(f"wrote {', '.join(str(p) for p in outputs.values() if p is not None)}")
     if viewers or record_bag is not None:
-        from ..pipeline.sinks import replay_odometry
+        from ..mapping.sinks import replay_odometry
 
         mount = dataset.mount.T_base_from_rectified((stereo or dataset.calibration).left.R) \
             if dataset.mount is not None else None

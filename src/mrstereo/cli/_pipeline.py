@@ -66,7 +66,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
     ADDRESS (a Dask cluster) spread the frames; the map is the same bit for bit.
     """
     from ..io import check_output_dir, check_outputs, staged_dir
-    from ..pipeline.run import check_map, write_map_outputs
+    from ..evaluation.outputs import check_map, write_map_outputs
 
     check_workers(workers, scheduler, processes)
     if align and odometry == "visual":
@@ -106,7 +106,7 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
                    f"{100 * a['mean_correction_m']:.1f} cm / {a['mean_correction_deg']:.2f} deg on average")
     click.echo(f"wrote {', '.join(p.name for p in files.values())} to {out_dir}")
     if viewers or record_bag is not None:
-        from ..pipeline.sinks import replay_map_run
+        from ..mapping.sinks import replay_map_run
 
         replayed_to_sinks(lambda sinks: replay_map_run(run, sinks, config=config), run.manifest.calibration,
                           out_dir / "view", viewers, record_bag)

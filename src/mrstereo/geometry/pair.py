@@ -9,12 +9,14 @@ Conventions: docs/conventions.md.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .. import _checks
 from ..camera import CameraMount, StereoCamera
+from .ground import GroundPlane
 from .freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
 from .obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
 from .scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
@@ -22,7 +24,7 @@ from ..matching import DisparityResult, compute_disparity
 from ..profiling import stage
 from ..rejection import FloorModel, RejectionConfig, RejectionResult, reject_uniform
 
-__all__ = ["PairObstacles", "PairScan", "obstacles_from_pair", "scan_from_pair"]
+__all__ = ["PairObstacles", "PairScan", "obstacles_from_pair", "scan_from_pair", "Observed", "observe_pair"]
 
 
 @dataclass(frozen=True)
@@ -204,3 +206,83 @@ def scan_from_pair(left, right, stereo: StereoCamera, *, angle_increment_rad: fl
                                           range_max_m=1e9, min_points=min_points)
             scan.ranges_m[np.isfinite(hits.ranges_m)] = scan.range_min_m
     return PairScan(scan=scan, frame=frame)
+
+
+@dataclass
+class Observed:
+    """One frame after the pair half of the chain (:func:`observe_pair`), before its pose and the map: what a
+    worker returns. Points in the robot frame (REP 103)."""
+
+    index: int
+    stamp_s: float
+    pan_rad: float
+    mount: CameraMount | None
+    """The mount the chain used; None: only the floor was fitted (the floor is not known yet)."""
+    ground: GroundPlane | None
+    """The floor of the frame (None: not looked for, the pair only rectified for visual odometry)."""
+    T_world_from_base: np.ndarray | None = None
+    T_world_from_base_true: np.ndarray | None = None
+    obstacle_points_robot: np.ndarray | None = None
+    """Obstacle points, then ``n_boundary`` free-space boundary points."""
+    n_boundary: int = 0
+    floor_points_robot: np.ndarray | None = None
+    n_valid_disparity: int = 0
+    scan: LaserScan | None = None
+    disparity_px: np.ndarray | None = None
+    left_rect: np.ndarray | None = None
+    right_rect: np.ndarray | None = None
+    points_robot_image: np.ndarray | None = None
+    """(H, W, 3) robot-frame point of every pixel (NaN: none), with ``keep_images``."""
+    floor_fit: GroundPlane | None = None
+    """The floor fitted without the mount (``fit_floor``: a given mount being checked)."""
+    frame: object | None = None
+    """The :class:`~mrstereo.recordings.sources.StereoFrame` itself while the floor is not known (kept to be
+    mapped once it is)."""
+    time_s: float = 0.0
+
+
+def observe_pair(frame, stereo: StereoCamera, mount: CameraMount | None, config, *,
+            keep_images: bool = True, fit_floor: bool = False) -> Observed:
+    """The per-frame chain of one :class:`~mrstereo.recordings.sources.StereoFrame`: rectify, match, reject,
+    3-D, scan with ``mount`` and ``config`` (a :class:`~mrstereo.pipeline.mapper.PipelineConfig`: its
+    ``pair_options()`` and ``obstacle_config``); with ``mount`` None only the floor fit (without a mount,
+    without free space); with ``config`` None only the rectified pair (what visual odometry alone needs).
+    ``fit_floor``: with a mount, also the floor fitted without it (``floor_fit``: a given mount checked).
+    Pure: runs on any thread or worker. ``keep_images`` False: no images in the result (a worker's reply
+    when the poses are given)."""
+    start = time.perf_counter()
+    left, right = frame.left, frame.right
+    if (left.shape[1], left.shape[0]) != tuple(stereo.size):
+        raise ValueError(f"frame {frame.index} is {left.shape[1]}x{left.shape[0]} but the calibration is "
+                         f"{stereo.size[0]}x{stereo.size[1]}")
+    if not frame.rectified and not stereo.is_rectified:
+        with stage("rectify"):
+            left, right = stereo.rectify(left, right)
+    base = {"index": frame.index, "stamp_s": float(frame.stamp_s), "pan_rad": float(frame.pan_rad),
+            "T_world_from_base": frame.T_world_from_base, "T_world_from_base_true": frame.T_world_from_base_true}
+    if config is None:
+        return Observed(**base, mount=mount, ground=None, left_rect=left, right_rect=right,
+                        time_s=time.perf_counter() - start)
+    if mount is None:
+        options = replace(config, free_space=None).pair_options()
+        ground = obstacles_from_pair(left, right, replace(stereo, mount=None), rectified=True, mount=None,
+                                     **options).obstacles.ground
+        return Observed(**base, mount=None, ground=ground, frame=frame, time_s=time.perf_counter() - start)
+    result = scan_from_pair(left, right, stereo, rectified=True, mount=mount, pan_rad=frame.pan_rad,
+                            **config.pair_options())
+    pair, obs = result.frame, result.frame.obstacles
+    boundary = pair.boundary.points_robot if pair.boundary is not None else np.empty((0, 3))
+    floor_fit = None
+    if fit_floor:           # the fit of the matcher's disparity, as without a mount
+        with stage("3-D"):
+            floor_fit = ground_for_frame(pair.raw_disparity_px, replace(stereo, mount=None), mount=None,
+                                         config=config.obstacle_config)
+    return Observed(**base, mount=mount, ground=obs.ground, floor_fit=floor_fit, frame=frame if fit_floor else None,
+                    obstacle_points_robot=np.concatenate([obs.obstacle_points_robot, boundary]),
+                    n_boundary=len(boundary), floor_points_robot=obs.floor_points_robot,
+                    n_valid_disparity=int(np.isfinite(pair.disparity_px).sum()),
+                    scan=replace(result.scan, stamp_s=float(frame.stamp_s)),
+                    disparity_px=pair.disparity_px if keep_images else None,
+                    left_rect=pair.left_rect if keep_images else None, right_rect=right if keep_images else None,
+                    points_robot_image=obs.points_robot_image if keep_images else None,
+                    time_s=time.perf_counter() - start)

@@ -14,12 +14,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
+from ..camera import StereoCamera
 from ..profiling import stage
+from ..transforms import T_from_planar, transform_points
 from .grid import GridSpec
 from .occupancy import MappingConfig, OccupancyGrid, ViewCells
 from .tiles import TiledOccupancyGrid
 
-__all__ = ["FrameObservation", "fuse", "fuse_step", "add_observation", "sweep_footprint", "MAX_SWEEP_M"]
+__all__ = ["FrameObservation", "world_observation", "fuse", "fuse_step", "add_observation", "sweep_footprint",
+           "MAX_SWEEP_M"]
 
 MAX_SWEEP_M = 2.0
 """Consecutive frames at most this far apart are joined by a straight sweep of the robot's footprint."""
@@ -115,3 +118,19 @@ def add_observation(occupancy: OccupancyGrid | TiledOccupancyGrid, obs: FrameObs
         else:
             occupancy.update(obs.obstacle_points_world, obs.floor_points_world, obs.sensor_origin_world,
                              baseline_focal_m_px=obs.baseline_focal_m_px)
+
+
+def world_observation(observed, pose: tuple[float, float, float], stereo: StereoCamera) -> FrameObservation:
+    """An observed frame's points (:class:`~mrstereo.geometry.pair.Observed`) in the world frame at the planar
+    ``pose`` (the map is of the floor): what it adds to the map."""
+    with stage("grid"):
+        T = T_from_planar(*pose)
+        obstacles = transform_points(T, observed.obstacle_points_robot).astype(np.float32)
+        floor = transform_points(T, observed.floor_points_robot).astype(np.float32)
+        ground = observed.ground
+        height = float(ground.height_m) if ground.success else None
+    return FrameObservation(index=observed.index, pose=pose, pan_rad=observed.pan_rad,
+                            obstacle_points_world=obstacles, floor_points_world=floor,
+                            n_valid_disparity=observed.n_valid_disparity, ground_message=ground.message,
+                            baseline_focal_m_px=float(stereo.baseline_m * stereo.focal_px),
+                            sensor_height_m=height, boundary_points=observed.n_boundary)

@@ -12,11 +12,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .. import _checks
+from ..camera import CameraMount, StereoCamera
 from ..geometry.obstacles import MAPPING_MAX_RANGE_M
 from .grid import dilate_cells, distance_cells
 from .rosmap import as_ros_map
 
-__all__ = ["MapMetrics", "map_metrics", "cells_near_path", "cells_in_view"]
+__all__ = ["MapMetrics", "map_metrics", "cells_near_path", "cells_in_view", "views_of_poses"]
 
 
 @dataclass(frozen=True)
@@ -80,7 +81,7 @@ def cells_in_view(ground_truth, views) -> np.ndarray:
         Occupied cells block the sight; unknown cells (behind walls) are never in view.
     views : sequence of (x_m, y_m, heading_rad, half_fov_rad, range_m)
         The sensor's world position, viewing direction (robot yaw + head pan), half the horizontal
-        field of view and the mapping range (as :func:`mrstereo.pipeline.run.fov_views` gives them).
+        field of view and the mapping range (as :func:`views_of_poses` gives them).
     """
     gt = as_ros_map("ground_truth", ground_truth)
     grid = gt.grid
@@ -186,3 +187,18 @@ def map_metrics(estimated, ground_truth, *, path_xy=None, within_m: float = MAPP
                       evaluated_cells=int(region.sum()), tolerance_cells=tol, within_m=within,
                       free_precision=free_precision, free_coverage=free_coverage,
                       recall_in_view=recall_in_view)
+
+
+def views_of_poses(poses, pan_rad, stereo: StereoCamera, *, range_m: float = MAPPING_MAX_RANGE_M,
+                   mount: CameraMount | None = None) -> list[tuple]:
+    """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of planar poses with their head pans.
+
+    The heading is the robot's plus the head pan plus the camera's heading on the robot (the optical axis of
+    ``mount``'s rectified camera, projected on the floor; 0 without a mount).
+    """
+    half = math.atan2(stereo.size[0] / 2.0, stereo.focal_px)
+    offset = 0.0
+    if mount is not None:
+        T = mount.T_base_from_rectified(stereo.left.R)
+        offset = math.atan2(T[1, 2], T[0, 2]) if abs(T[1, 2]) > 1e-12 else 0.0
+    return [(p[0], p[1], p[2] + pan + offset, half, range_m) for p, pan in zip(poses, pan_rad)]

@@ -3,22 +3,26 @@
 A sink has ``frame(LiveFrame)``, ``close()`` and ``discard()``: :class:`ViewerSink` sends each frame to a
 viewer logger (:mod:`mrstereo.viz.live`), :class:`BagSink` to a bag writer
 (:class:`mrstereo.recordings.bag_writer.BagWriter`); the map and path at most every ``map_every_s`` of
-stream time. ``mrstereo.pipeline.sinks.open_sinks`` makes those a command asks for.
+stream time. ``mrstereo.pipeline.sinks.open_sinks`` makes those a command asks for; :func:`replay_map_run`
+and :func:`replay_odometry` send them a finished run.
 Conventions: docs/conventions.md; user guide: docs/live.md.
 """
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..camera import StereoCamera
-from ..geometry.scan import LaserScan
+from ..geometry.scan import LaserScan, laser_scan_from_points, scan_angles_of_camera
+from ..transforms import T_from_planar, transform_points
+from .fusion import add_observation
 from .occupancy import OccupancyGrid
 from .rosmap import occupancy_values
 
-__all__ = ["LiveFrame", "ViewerSink", "BagSink", "MAX_VIEW_POINTS"]
+__all__ = ["LiveFrame", "ViewerSink", "BagSink", "MAX_VIEW_POINTS", "replay_map_run", "replay_odometry"]
 
 
 @dataclass(frozen=True)
@@ -167,3 +171,41 @@ class BagSink:
     def discard(self) -> None:
         """After an error: no bag."""
         self.writer.discard()
+
+
+def replay_map_run(run, sinks: Sequence, *, config) -> None:
+    """Send a finished map run (:class:`mrstereo.evaluation.outputs.MapRun`) to ``sinks`` frame by frame: the
+    pose, the obstacle points back in the robot frame, the scan they make, the map as fused up to the
+    frame and, with the last frame, the run's map as written (the frames' images are not kept by a map run)."""
+    stereo = run.manifest.calibration
+    frames = run.manifest.frames
+    grid = OccupancyGrid(run.grid.grid, config=config.mapping)        # the map's final window
+    range_max = config.for_rig(stereo).obstacles.max_range_m
+    mount = run.mount
+    last = len(run.observations) - 1
+    for k, obs in enumerate(run.observations):
+        add_observation(grid, obs)
+        record = frames[obs.index]
+        T = T_from_planar(*obs.pose)
+        n = len(obs.obstacle_points_world) - obs.boundary_points
+        points = transform_points(np.linalg.inv(T), obs.obstacle_points_world[:n].astype(np.float64))
+        lo, hi = scan_angles_of_camera(stereo, pan_rad=obs.pan_rad)
+        scan = laser_scan_from_points(points, angle_min_rad=lo, angle_max_rad=hi, range_max_m=range_max, min_points=3)
+        stamp = record.stamp_s if record.stamp_s is not None else float(obs.index)
+        T_base_from_cam = np.eye(4) if mount is None else mount.T_base_from_rectified(stereo.left.R, obs.pan_rad)
+        frame = LiveFrame(index=obs.index, stamp_s=stamp, T_world_from_base=T, T_base_from_cam=T_base_from_cam,
+                          left_rect=None, disparity_px=None, obstacle_points_robot=points.astype(np.float32),
+                          scan=scan, grid=run.grid if k == last else grid)     # the end: the map as written
+        for sink in sinks:
+            sink.frame(frame)
+
+
+def replay_odometry(stamps_s, T_world_from_base, sinks: Sequence, *, T_base_from_cam=None) -> None:
+    """Send a trajectory (an ``odometry`` run) to ``sinks``: poses only."""
+    mount = np.eye(4) if T_base_from_cam is None else np.asarray(T_base_from_cam, dtype=np.float64)
+    for k, (stamp, T) in enumerate(zip(stamps_s, T_world_from_base)):
+        frame = LiveFrame(index=k, stamp_s=float(stamp), T_world_from_base=np.asarray(T), T_base_from_cam=mount,
+                          left_rect=None, disparity_px=None, obstacle_points_robot=np.empty((0, 3), np.float32),
+                          scan=None, grid=None)
+        for sink in sinks:
+            sink.frame(frame)

@@ -10,68 +10,30 @@ The layout and the resume rules: docs/scale-out.md ("Batch"). Conventions: docs/
 """
 from __future__ import annotations
 
-import hashlib
 import itertools
 import json
 import os
-from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
-from .. import __version__
-from ..camera import CameraMount, StereoCamera, mount_entry
-from ..io import (Inputs, atomic_write, check_output_dir, check_outputs, remove_stale_temporaries, replace_dir,
-                  temporary_dir)
-from ..mapping.fusion import FrameObservation
-from ..mapping.observations import digest, file_stamp, frame_outputs, resume_frame, save_frame
-from ..mapping.rosmap import ros_map_files
+from ..camera import StereoCamera
+from ..evaluation.outputs import BatchSummary, DatasetSummary, map_dir_current, write_map_dir
+from ..io import Inputs, atomic_write, check_output_dir, check_outputs, remove_stale_temporaries
+from ..mapping.fusion import FrameObservation, world_observation
+from ..mapping.observations import (bag_fingerprint, claim_folder, dataset_fingerprint, digest, frame_fingerprint,
+                                    frame_outputs, map_fingerprint, output_names, remove_stale_frames, resume_frame,
+                                    save_frame)
 from ..recordings.bag import BagSource, bag_inputs
 from ..recordings.layouts import is_bag, read_recording
 from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
 from ..recordings.sources import StereoFrame
 from .._executor import ItemFailure, map_ordered
-from .mapper import StereoMapper, observe, world_observation
-from .run import (MapRun, PipelineConfig, build_map, map_from_observations, with_visual_odometry,
-                  write_map_outputs)
+from .mapper import StereoMapper
+from .run import PipelineConfig, build_map, map_from_observations, with_visual_odometry
 
-__all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "frame_outputs", "process_frame", "run_batch",
-           "SUMMARY_NAME"]
+__all__ = ["FrameTask", "DatasetSummary", "BatchSummary", "process_frame", "run_batch", "SUMMARY_NAME"]
 
 SUMMARY_NAME = "summary.json"
-_MAP_RECORD = "batch.json"
-_DATASET_RECORD = "dataset.json"
-MAP_FILES = ("map.yaml", "map.pgm", "map.png", "log_odds.npy")
-"""The files of every finished map (metrics.json too when the map has metrics)."""
-
-
-# ------------------------------------------------------------------------------------------ fingerprints
-
-def _frame_files(record: FrameRecord) -> list:
-    return [file_stamp(p) for p in (record.left, record.right, record.left_rect, record.right_rect)]
-
-
-def _dataset_fingerprint(m: Manifest, config: PipelineConfig, floor_frames: int) -> str:
-    """What every frame of ``m`` depends on besides its own files: calibration, mount (or the frames the
-    floor is estimated from), the options of the per-frame chain, mrstereo's version."""
-    mount = mount_entry(m.mount) if m.mount is not None else \
-        {"estimated from": [_frame_files(r) for r in m.frames[:floor_frames]]}
-    chain = {k: repr(getattr(config, k)) for k in ("preset", "max_disparity_px", "matching", "rejection",
-                                                   "obstacles", "free_space")}
-    return digest({"calibration": m.calibration.to_dict(), "mount": mount, "chain": chain,
-                    "version": __version__})
-
-
-def _frame_fingerprint(base: str, record: FrameRecord) -> str:
-    return digest([base, _frame_files(record), list(record.pose), record.pan_rad])
-
-
-def _map_fingerprint(m: Manifest, frames: list[str], config: PipelineConfig) -> str:
-    """What a map depends on: its frames' fingerprints, the grid and fusion options, the ground truth it is
-    compared with."""
-    truth = [list(f.true_pose) if f.true_pose is not None else None for f in m.frames]
-    gt = [file_stamp(p) for p in ros_map_files(m.ground_truth_map)] if m.ground_truth_map is not None else None
-    return digest({"frames": frames, "grid": repr(config.grid), "mapping": repr(config.mapping),
-                    "range": config.obstacles.max_range_m, "ground_truth": gt, "true_poses": truth})
 
 
 @dataclass(frozen=True)
@@ -81,8 +43,8 @@ class FrameTask:
     record: FrameRecord
     index: int
     stereo: StereoCamera
-    mount: CameraMount | None
-    config: PipelineConfig
+    observe: object
+    """The mapper's per-frame chain (:meth:`~mrstereo.pipeline.mapper.StereoMapper.observer`)."""
     frames_dir: Path
     dataset: str
     prefer_raw: bool = False
@@ -98,115 +60,20 @@ def _read_task(task: FrameTask) -> tuple[FrameTask, tuple]:
 def process_frame(task: FrameTask | tuple[FrameTask, tuple]) -> FrameObservation:
     """Run the chain on one frame, write its four files, return what it adds to the map.
 
-    ``task`` may come with its images read ahead (:func:`_read_task`). The observation equals
-    :func:`mrstereo.pipeline.observe_frame`'s for the same record and options.
+    ``task`` may come with its images read ahead (:func:`_read_task`). The observation is the one the
+    :class:`~mrstereo.pipeline.mapper.StereoMapper` fuses for the same frame, pose and options.
     """
     task, pair = task if isinstance(task, tuple) else (task, None)
     left, right, rectified = frame_pair(task.record, prefer_raw=task.prefer_raw) if pair is None else pair
     frame = StereoFrame(index=task.index, stamp_s=0.0, left=left, right=right, rectified=rectified,
                         pan_rad=float(task.record.pan_rad))
-    observed = observe(frame, task.stereo, task.mount, task.config)
+    observed = task.observe(frame)
     observation = world_observation(observed, tuple(float(v) for v in task.record.pose), task.stereo)
     save_frame(frame_outputs(task.frames_dir, task.index), observation, fingerprint=task.fingerprint,
                disparity_px=observed.disparity_px, points_robot_image=observed.points_robot_image,
                left_rect=observed.left_rect, scan=observed.scan,
                comment=f"mrstereo {task.dataset} frame {task.index} (frame: robot, metres)")
     return observation
-
-
-@dataclass(frozen=True)
-class DatasetSummary:
-    """What :func:`run_batch` did with one dataset."""
-
-    name: str
-    manifest: Path
-    out_dir: Path
-    n_frames: int
-    n_computed: int
-    n_skipped: int
-    n_failed: int
-    map_status: str = ""
-    floor: object | None = None
-    """The floor the frames used (:class:`mrstereo.geometry.GroundPlane`); None when all was kept."""
-    fingerprint: str = ""
-    """The map's fingerprint (what it was computed from)."""
-    mount_warning: str | None = None
-    """Why the dataset's mount was not used (:class:`mrstereo.geometry.floor.FloorVote`)."""
-
-    def to_dict(self) -> dict:
-        out = {"name": self.name, "manifest": str(self.manifest), "out_dir": str(self.out_dir),
-               "frames": self.n_frames, "computed": self.n_computed, "skipped": self.n_skipped,
-               "failed": self.n_failed, "map": self.map_status, "fingerprint": self.fingerprint}
-        if self.floor is not None:
-            out["floor"] = self.floor.summary()
-        if self.mount_warning is not None:
-            out["mount_warning"] = self.mount_warning
-        return out
-
-
-@dataclass(frozen=True)
-class BatchSummary:
-    """Result of :func:`run_batch` (also written to ``OUT/summary.json``)."""
-
-    path: Path
-    datasets: tuple[DatasetSummary, ...]
-    failures: tuple[dict, ...] = field(default_factory=tuple)
-
-
-def _owner(folder: Path) -> str | None:
-    """The dataset root recorded in an output folder's ``dataset.json`` ("" for a folder without one)."""
-    if not folder.exists():
-        return None
-    try:
-        return str(json.loads((folder / _DATASET_RECORD).read_text(encoding="utf-8"))["root"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return ""
-
-
-def _names(manifests: list[Manifest], out: Path) -> list[str]:
-    """One output folder name per dataset, never shared: the dataset folder's name, or with a hash of its
-    path (``ds-1a2b3c4d``) when another dataset of the run has that name or the folder already holds
-    something else (another dataset's results, or anything not written by a batch)."""
-    bases = [(m.root.parent.name if m.root.name == "mav0" else m.root.name) or "dataset"    # EuRoC: the sequence
-             for m in manifests]
-    count = Counter(bases)
-    names = []
-    for m, base in zip(manifests, bases):
-        if count[base] > 1 or _owner(out / base) not in (None, str(m.root)):
-            base = f"{base}-{hashlib.sha256(str(m.root).encode()).hexdigest()[:8]}"
-            if _owner(out / base) not in (None, str(m.root)):
-                raise ValueError(f"out_dir {out}: the folder {base} holds other results; choose another output "
-                                 "folder")
-        names.append(base)
-    clash = [n for n, k in Counter(names).items() if k > 1]
-    if clash:
-        raise ValueError(f"two datasets would share the output folder {out / clash[0]}; rename one of them")
-    return names
-
-
-def _map_done(map_dir: Path, fingerprint: str) -> bool:
-    """The map in ``map_dir`` is complete and was computed from what ``fingerprint`` says."""
-    try:
-        record = json.loads((map_dir / _MAP_RECORD).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return False
-    files = record.get("files") or MAP_FILES
-    return (record.get("fingerprint") == fingerprint and not record.get("failed")
-            and all((map_dir / name).is_file() for name in files))
-
-
-def _write_map(run: MapRun, map_dir: Path, record: dict) -> None:
-    """Write the map outputs into a temporary folder and swap it into place in one step.
-
-    The temporary folder (``.mrstereo-tmp-PID-XXXXXXXX.map`` beside ``map_dir``) is removed on failure;
-    one left by a killed run is removed by the next :func:`run_batch` on the same output.
-    """
-    with temporary_dir(map_dir.parent, prefix="map") as staging:
-        tmp = staging / "map"
-        written = write_map_outputs(run, tmp)
-        record = dict(record, files=sorted(p.name for p in written.values()))
-        (tmp / _MAP_RECORD).write_text(json.dumps(record, indent=1) + "\n")
-        replace_dir(tmp, map_dir)
 
 
 @dataclass
@@ -222,23 +89,23 @@ class _Dataset:
     map_kept: bool = False
 
 
-def _plan(m: Manifest, name: str, out: Path, config: PipelineConfig, maps: bool) -> _Dataset:
-    """Claim the dataset's output folder, clean a killed run's temporaries, read back what is still valid."""
+def _plan(m: Manifest, name: str, out: Path, config: PipelineConfig, maps: bool, check_mount: bool) -> _Dataset:
+    """Claim the dataset's output folder, clean a killed run's temporaries and the files of frames no longer
+    in the recording, read back what is still valid."""
     folder = out / name
     frames_dir = folder / "frames"
     frames_dir.mkdir(parents=True, exist_ok=True)
-    if _owner(folder) != str(m.root):
-        with atomic_write(folder / _DATASET_RECORD) as tmp:
-            tmp.write_text(json.dumps({"root": str(m.root), "manifest": str(m.root / "manifest.yaml")}) + "\n")
+    claim_folder(folder, m.root, m.root / "manifest.yaml")
     for where in (frames_dir, folder):
         remove_stale_temporaries(where)
-    base = _dataset_fingerprint(m, config, floor_frames=10)
-    fingerprints = [_frame_fingerprint(base, r) for r in m.frames]
+    remove_stale_frames(frames_dir, len(m.frames))
+    base = dataset_fingerprint(m, config, floor_frames=10, check_mount=check_mount)
+    fingerprints = [frame_fingerprint(base, r) for r in m.frames]
     loaded = {k: resume_frame(frame_outputs(frames_dir, k), fingerprints[k]) for k in range(len(m.frames))}
     plan = _Dataset(name=name, manifest=m, folder=folder, fingerprints=fingerprints,
-                    map_fingerprint=_map_fingerprint(m, fingerprints, config), loaded=loaded)
+                    map_fingerprint=map_fingerprint(m, fingerprints, config), loaded=loaded)
     plan.map_kept = maps and all(v is not None for v in loaded.values()) and \
-        _map_done(folder / "map", plan.map_fingerprint)
+        map_dir_current(folder / "map", plan.map_fingerprint)
     return plan
 
 
@@ -255,18 +122,19 @@ def _readable(manifest: Manifest):
 
 
 def _mounted(manifest: Manifest, config: PipelineConfig, check_mount: bool) -> tuple:
-    """``(RunFloor, recording)``: the mount (checked) or the floor estimated once, the poses on that base,
-    and the poses of visual odometry for a recording without any (as ``mrstereo map`` takes them)."""
+    """``(mapper, recording)``: a mapper with the mount (checked) or the floor estimated once, the poses on
+    that base, and the poses of visual odometry for a recording without any (as ``mrstereo map`` takes them)."""
     mapper = StereoMapper(manifest.calibration, manifest.mount, config, check_mount=check_mount, name=str(manifest.root))
     for frame in itertools.islice(_readable(manifest), mapper.streams.n_frames):
         if frame is not None:
             mapper.check_streams(frame)                 # duplicated or swapped streams named
     mapper.streams.warn()
     mapper.settle(_readable(manifest))
+    mapper.take_held()                                  # (their images: not kept for the run)
     manifest = rebased(manifest, mapper.mount)
     if not manifest.has_poses:
         manifest, _ = with_visual_odometry(manifest)
-    return mapper.floor_decision, manifest
+    return mapper, manifest
 
 
 def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig = PipelineConfig(),
@@ -316,21 +184,21 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
         inputs.update(bag_inputs(m.root) if id(m) in bags else m.inputs())
     check_output_dir("out_dir", out, inputs=inputs, input_kind="dataset")
     check_outputs({"summary": out / SUMMARY_NAME}, inputs)
-    names = _names(datasets, out)
+    names = output_names(datasets, out)
     for name in names:
         check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, inputs=inputs)
 
     remove_stale_temporaries(out)
     configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
-    plans = [_plan(m, name, out, configs[name], maps) for m, name in zip(datasets, names) if id(m) not in bags]
+    plans = [_plan(m, name, out, configs[name], maps, check_mount)
+             for m, name in zip(datasets, names) if id(m) not in bags]
     tasks, floors = [], {}
     for p in plans:
         complete = [p.loaded[k] is not None for k in range(len(p.manifest.frames))]
         if not all(complete) or (maps and not p.map_kept):
             floors[p.name], p.manifest = _mounted(p.manifest, configs[p.name], check_mount)
-        tasks += [FrameTask(record=record, index=k, stereo=p.manifest.calibration, mount=floors[p.name].mount,
-                            config=configs[p.name], frames_dir=p.folder / "frames", dataset=p.name,
-                            fingerprint=p.fingerprints[k])
+        tasks += [FrameTask(record=record, index=k, stereo=p.manifest.calibration, observe=floors[p.name].observer(),
+                            frames_dir=p.folder / "frames", dataset=p.name, fingerprint=p.fingerprints[k])
                   for k, record in enumerate(p.manifest.frames) if not complete[k]]
 
     results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, processes=processes,
@@ -372,14 +240,14 @@ def _finish(p: _Dataset, tasks: list, failures: list, config: PipelineConfig, ma
             obs = [p.loaded[k] for k in range(len(m.frames)) if p.loaded[k] is not None]
             run = map_from_observations(m, obs, config=config, floor=floors[p.name].floor,
                                         mount=floors[p.name].mount)
-            _write_map(run, p.folder / "map", {"frames": len(m.frames), "fused": len(obs), "failed": failed,
+            write_map_dir(run, p.folder / "map", {"frames": len(m.frames), "fused": len(obs), "failed": failed,
                                                "fingerprint": p.map_fingerprint})
             status = "written" if not failed else f"written from {len(obs)} of {len(m.frames)} frames"
     floor = floors.get(p.name)
     return DatasetSummary(name=p.name, manifest=m.root / "manifest.yaml" if m.layout == "dataset" else m.root,
                           out_dir=p.folder, n_frames=len(m.frames), n_computed=n_tasks - len(failed),
                           n_skipped=len(m.frames) - n_tasks, n_failed=len(failed), map_status=status,
-                          floor=floor.floor if floor else None, mount_warning=floor.warning if floor else None,
+                          floor=floor.floor if floor else None, mount_warning=floor.mount_warning if floor else None,
                           fingerprint=p.map_fingerprint)
 
 
@@ -387,22 +255,15 @@ def _bag_map(source: BagSource, folder: Path, config: PipelineConfig, maps: bool
     """A bag's map: its frames read as a stream and mapped in order (:func:`build_map`, the map of
     ``mrstereo map BAG``), kept when the bag, its topics and the options are those of the map already there."""
     folder.mkdir(parents=True, exist_ok=True)
-    if _owner(folder) != str(source.root):
-        with atomic_write(folder / _DATASET_RECORD) as tmp:
-            tmp.write_text(json.dumps({"root": str(source.root), "manifest": str(source.root)}) + "\n")
+    claim_folder(folder, source.root, source.root)
     remove_stale_temporaries(folder)
-    root = Path(source.root)
-    files = sorted(p for p in root.iterdir() if p.is_file()) if root.is_dir() else [root]
-    fingerprint = digest({"bag": [file_stamp(p) for p in files],
-                          "topics": [source.left_topic, source.right_topic, source.pose_source, source.mount_source],
-                          "mount": mount_entry(source.mount) if source.mount is not None else None,
-                          "config": repr(config), "check_mount": run["check_mount"], "version": __version__})
+    fingerprint = bag_fingerprint(source, config, run["check_mount"])
     n, status, floor, warning = source.n_frames, "", None, None
-    if maps and _map_done(folder / "map", fingerprint):
+    if maps and map_dir_current(folder / "map", fingerprint):
         status = "kept"
     elif maps:
         result = build_map(source, config=config, keep_points=False, **run)
-        _write_map(result, folder / "map", {"frames": n, "fused": len(result.observations), "failed": [],
+        write_map_dir(result, folder / "map", {"frames": n, "fused": len(result.observations), "failed": [],
                                             "fingerprint": fingerprint})
         status, floor, warning = "written", result.floor, result.mount_warning
     return DatasetSummary(name=folder.name, manifest=source.root, out_dir=folder, n_frames=n,

@@ -9,8 +9,7 @@ Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
-import gc
-import json
+import contextlib
 import math
 import os
 import threading
@@ -22,29 +21,20 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import CameraMount, StereoCamera, mount_entry
-from ..geometry.ground import GroundPlane
-from ..io import atomic_write
-from ..mapping import RosMap, write_ros_map
-from ..mapping.figures import plot_map
-from ..mapping.occupancy import OccupancyGrid
+from ..camera import CameraMount, StereoCamera
+from ..evaluation.outputs import LiveRun, write_live_outputs
+from ..geometry.pair import Observed
 from ..odometry import LOST
-from ..odometry.trajectory import write_tum
 from ..profiling import Profile, active, profiling, stage
 from ..recordings.sources import FrameSource, StereoFrame, paced
-from ..transforms import planar_from_T
 from .. import _checks
 from .._interrupt import reached
-from .._executor import Growing, LatestFrame, StreamThreads, Writer, peak_rss_mb, rss_mb
+from .._executor import Growing, StreamThreads, Writer, peak_rss_mb, rss_mb
 from ..mapping.sinks import LiveFrame
-from .mapper import MappedFrame, Observed, PipelineConfig, StereoMapper
+from .mapper import MappedFrame, PipelineConfig, StereoMapper
 from .run import config_for_recording
 
-__all__ = ["LiveConfig", "LiveFrame", "LiveRun", "LatestFrame", "run_live", "LIVE_FILES"]
-
-LIVE_FILES = ("map.yaml", "map.pgm", "map.png", "trajectory.txt", "metrics.json")
-"""What :func:`run_live` writes into its output folder."""
-
+__all__ = ["LiveConfig", "run_live"]
 
 @dataclass(frozen=True)
 class LiveConfig:
@@ -92,65 +82,6 @@ class LiveConfig:
 
 
 @dataclass
-class LiveRun:
-    """The counts, times and results of a live run (:func:`run_live`); ``metrics()`` is metrics.json."""
-
-    grid: OccupancyGrid
-    stamps_s: np.ndarray
-    T_world_from_base: np.ndarray
-    frames_in: int = 0
-    frames_processed: int = 0
-    frames_dropped: int = 0
-    frames_mapped: int = 0
-    frames_lost: int = 0
-    frames_before_floor: int = 0
-    latency_ms: np.ndarray = field(default_factory=lambda: np.empty(0))
-    duration_s: float = 0.0
-    odometry: str = "visual"
-    floor: GroundPlane | None = None
-    mount: CameraMount | None = None
-    mount_warning: str | None = None
-    source: str = ""
-    stopped: str = "end of source"
-    cpu_s: dict = field(default_factory=dict)
-    stage_ms: dict = field(default_factory=dict)
-    peak_memory_mb: float = 0.0
-    memory_mb: float = 0.0
-    files: dict = field(default_factory=dict)
-
-    @property
-    def rate_hz(self) -> float:
-        """Frames processed per second of the run."""
-        return self.frames_processed / self.duration_s if self.duration_s > 0 else 0.0
-
-    def metrics(self) -> dict:
-        lat = self.latency_ms
-        q = (lambda p: float(np.percentile(lat, p))) if len(lat) else (lambda p: float("nan"))
-        out = {"source": self.source, "stopped": self.stopped, "frames_in": self.frames_in,
-               "frames_processed": self.frames_processed, "frames_dropped": self.frames_dropped,
-               "frames_mapped": self.frames_mapped, "frames_lost": self.frames_lost,
-               "frames_before_floor": self.frames_before_floor, "duration_s": round(self.duration_s, 3),
-               "rate_hz": round(self.rate_hz, 3),
-               "latency_ms": {"median": round(q(50), 2), "p95": round(q(95), 2), "max": round(q(100), 2)},
-               "peak_memory_mb": round(self.peak_memory_mb, 1), "memory_mb": round(self.memory_mb, 1),
-               "odometry": self.odometry,
-               "cpu_s": {k: round(v, 3) for k, v in self.cpu_s.items()},
-               "stage_ms_per_frame": {k: round(v, 2) for k, v in self.stage_ms.items()}}
-        if self.duration_s > 0 and self.cpu_s:
-            out["cores_used"] = round(self.cpu_s.get("process", 0.0) / self.duration_s, 2)
-        if self.floor is not None:
-            out["floor"] = self.floor.summary()
-        if self.mount is not None:
-            out["mount"] = mount_entry(self.mount)
-        if self.mount_warning:
-            out["mount_warning"] = self.mount_warning
-        g = self.grid.grid
-        out["map_window"] = {"origin_m": [g.origin_x_m, g.origin_y_m], "size_m": [g.width_m, g.height_m],
-                             "resolution_m": g.resolution_m, "points_outside": int(self.grid.points_outside)}
-        return out
-
-
-@dataclass
 class _Matched:
     """A frame through the matcher (:meth:`StereoMapper.observe`), with its arrival time."""
 
@@ -158,28 +89,6 @@ class _Matched:
     arrival_s: float
     observed: Observed | None = None
     error: BaseException | None = None
-
-
-def write_live_outputs(out_dir: Path, snapshot: dict) -> dict[str, Path]:
-    """Write one snapshot: map.pgm then map.yaml (a reader of the YAML finds its image), map.png,
-    trajectory.txt, metrics.json -- each atomically."""
-    out = Path(out_dir)
-    files = {"map_yaml": out / "map.yaml", "map_pgm": out / "map.pgm", "map_png": out / "map.png",
-             "trajectory": out / "trajectory.txt", "metrics": out / "metrics.json"}
-    ros_map: RosMap = snapshot["ros_map"]
-    write_ros_map(files["map_yaml"], ros_map)
-    T = snapshot["T_world_from_base"]
-    path = planar_from_T(T) if len(T) else None
-    plot_map(ros_map, files["map_png"], robot_path=path,
-             title=f"live map, {len(T)} frames ({snapshot['metrics']['rate_hz']:.1f} Hz)")
-    if len(T):                  # (no pose yet: the floor is being estimated)
-        write_tum(files["trajectory"], snapshot["stamps_s"], T, comment=snapshot["comment"])
-    with atomic_write(files["metrics"]) as tmp:
-        tmp.write_text(json.dumps(snapshot["metrics"], indent=2))
-    # a matplotlib figure is a web of reference cycles: only the cycle collector frees it, and a long run
-    # would otherwise hold every figure since the last full collection
-    gc.collect()
-    return files
 
 
 class _Fuser:
@@ -291,7 +200,8 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
             threads.join()
             writer.close()
             for sink in sinks:
-                _discard_quietly(sink)
+                with contextlib.suppress(Exception):        # (the error raised is the run's)
+                    sink.discard()
             raise
         finally:
             requested = threads.stop.is_set()
@@ -359,13 +269,6 @@ def _fuse_in_order(threads: StreamThreads, fuser: _Fuser, writer: Writer, clock:
             writer.submit(_snapshot(fuser.run, fuser, threads, clock))
             if on_save is not None:
                 on_save(fuser.run)
-
-
-def _discard_quietly(sink) -> None:
-    try:
-        sink.discard()
-    except Exception:
-        pass
 
 
 def _snapshot(run: LiveRun, fuser: _Fuser, threads: StreamThreads, clock: _Clock) -> dict:

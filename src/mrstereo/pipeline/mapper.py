@@ -1,8 +1,8 @@
 """The stereo mapper: one stereo pair at a time into a map that grows, with the robot's trajectory.
 
 :class:`StereoMapper` is the one place where the per-frame chain is composed: rectify -> match
-(eq. 9-12) -> reject (eq. 13) -> 3-D (eq. 14-16) -> scan (:func:`observe`, pure, runs on any
-thread or worker) -> pose (given or stereo visual odometry) -> occupancy grid (paper section 5.2,
+(eq. 9-12) -> reject (eq. 13) -> 3-D (eq. 14-16) -> scan (:func:`~mrstereo.geometry.pair.observe_pair`, pure, runs on
+any thread or worker) -> pose (given or stereo visual odometry) -> occupancy grid (paper section 5.2,
 :meth:`StereoMapper.integrate`, in order). ``mrstereo map``, ``batch``, ``live`` and the demo all
 drive it. Without a camera mount the first frames are held until the floor is found
 (:class:`~mrstereo.geometry.floor.FloorVote`), then mapped in order. User guide: docs/mapping.md.
@@ -10,9 +10,9 @@ Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
@@ -20,21 +20,21 @@ from ..camera import CameraMount, StereoCamera
 from ..geometry.floor import FloorVote, RunFloor
 from ..geometry.freespace import FreeSpaceConfig
 from ..geometry.ground import GroundPlane
-from ..geometry.obstacles import MAPPING_MAX_RANGE_M, ObstacleConfig, ground_for_frame, mapping_range_m
+from ..geometry.obstacles import MAPPING_MAX_RANGE_M, ObstacleConfig, mapping_range_m
+from ..geometry.pair import Observed, observe_pair
 from ..geometry.scan import LaserScan
 from ..mapping import GridSpec
-from ..mapping.fusion import FrameObservation, fuse_step
+from ..mapping.fusion import FrameObservation, fuse_step, world_observation
 from ..mapping.occupancy import MappingConfig, OccupancyGrid
 from ..mapping.tiles import TiledOccupancyGrid
 from ..matching.config import MatchingConfig
-from ..odometry import LOST, OdometryConfig, StereoOdometry
+from ..odometry import LOST, OdometryConfig, OdometryResult, StereoOdometry
 from ..profiling import stage
 from ..rejection import RejectionConfig
 from ..rejection.streams import StreamCheck
-from ..transforms import T_from_planar, planar_from_T, transform_points
-from ..geometry.pair import obstacles_from_pair, scan_from_pair
+from ..transforms import T_from_planar, planar_from_T
 
-__all__ = ["PipelineConfig", "StereoMapper", "MappedFrame", "Observed", "observe", "world_observation"]
+__all__ = ["PipelineConfig", "StereoMapper", "MappedFrame"]
 
 
 @dataclass(frozen=True)
@@ -124,96 +124,6 @@ class PipelineConfig:
                 "rejection": self.rejection, "config": self.obstacle_config, "free_space": self.free_space}
 
 
-@dataclass
-class Observed:
-    """One frame after the per-frame chain (:func:`observe`), before its pose and the map: what a worker
-    returns. Points in the robot frame (REP 103)."""
-
-    index: int
-    stamp_s: float
-    pan_rad: float
-    mount: CameraMount | None
-    """The mount the chain used; None: only the floor was fitted (the floor is not known yet)."""
-    ground: GroundPlane
-    T_world_from_base: np.ndarray | None = None
-    T_world_from_base_true: np.ndarray | None = None
-    obstacle_points_robot: np.ndarray | None = None
-    """Obstacle points, then ``n_boundary`` free-space boundary points."""
-    n_boundary: int = 0
-    floor_points_robot: np.ndarray | None = None
-    n_valid_disparity: int = 0
-    scan: LaserScan | None = None
-    disparity_px: np.ndarray | None = None
-    left_rect: np.ndarray | None = None
-    right_rect: np.ndarray | None = None
-    points_robot_image: np.ndarray | None = None
-    """(H, W, 3) robot-frame point of every pixel (NaN: none), with ``keep_images``."""
-    floor_fit: GroundPlane | None = None
-    """The floor fitted without the mount (``fit_floor``: a given mount being checked)."""
-    frame: object | None = None
-    """The :class:`~mrstereo.recordings.sources.StereoFrame` itself while the floor is not known (kept to be
-    mapped once it is)."""
-    time_s: float = 0.0
-
-
-def observe(frame, stereo: StereoCamera, mount: CameraMount | None, config: PipelineConfig, *,
-            keep_images: bool = True, fit_floor: bool = False) -> Observed:
-    """The per-frame chain of one :class:`~mrstereo.recordings.sources.StereoFrame`: rectify, match, reject,
-    3-D, scan with ``mount``; with ``mount`` None only the floor fit (without a mount, without free space).
-    ``fit_floor``: with a mount, also the floor fitted without it (``floor_fit``: a given mount checked).
-    Pure: runs on any thread or worker. ``keep_images`` False: no images in the result (a worker's reply
-    when the poses are given)."""
-    start = time.perf_counter()
-    left, right = frame.left, frame.right
-    if (left.shape[1], left.shape[0]) != tuple(stereo.size):
-        raise ValueError(f"frame {frame.index} is {left.shape[1]}x{left.shape[0]} but the calibration is "
-                         f"{stereo.size[0]}x{stereo.size[1]}")
-    if not frame.rectified and not stereo.is_rectified:
-        with stage("rectify"):
-            left, right = stereo.rectify(left, right)
-    base = {"index": frame.index, "stamp_s": float(frame.stamp_s), "pan_rad": float(frame.pan_rad),
-            "T_world_from_base": frame.T_world_from_base, "T_world_from_base_true": frame.T_world_from_base_true}
-    if mount is None:
-        options = replace(config, free_space=None).pair_options()
-        ground = obstacles_from_pair(left, right, replace(stereo, mount=None), rectified=True, mount=None,
-                                     **options).obstacles.ground
-        return Observed(**base, mount=None, ground=ground, frame=frame, time_s=time.perf_counter() - start)
-    result = scan_from_pair(left, right, stereo, rectified=True, mount=mount, pan_rad=frame.pan_rad,
-                            **config.pair_options())
-    pair, obs = result.frame, result.frame.obstacles
-    boundary = pair.boundary.points_robot if pair.boundary is not None else np.empty((0, 3))
-    floor_fit = None
-    if fit_floor:           # the fit of the matcher's disparity, as without a mount
-        with stage("3-D"):
-            floor_fit = ground_for_frame(pair.raw_disparity_px, replace(stereo, mount=None), mount=None,
-                                         config=config.obstacle_config)
-    return Observed(**base, mount=mount, ground=obs.ground, floor_fit=floor_fit, frame=frame if fit_floor else None,
-                    obstacle_points_robot=np.concatenate([obs.obstacle_points_robot, boundary]),
-                    n_boundary=len(boundary), floor_points_robot=obs.floor_points_robot,
-                    n_valid_disparity=int(np.isfinite(pair.disparity_px).sum()),
-                    scan=replace(result.scan, stamp_s=float(frame.stamp_s)),
-                    disparity_px=pair.disparity_px if keep_images else None,
-                    left_rect=pair.left_rect if keep_images else None, right_rect=right if keep_images else None,
-                    points_robot_image=obs.points_robot_image if keep_images else None,
-                    time_s=time.perf_counter() - start)
-
-
-def world_observation(observed: Observed, pose: tuple[float, float, float], stereo: StereoCamera) -> FrameObservation:
-    """An observed frame's points in the world frame at the planar ``pose`` (the map is of the floor): what it
-    adds to the map."""
-    with stage("grid"):
-        T = T_from_planar(*pose)
-        obstacles = transform_points(T, observed.obstacle_points_robot).astype(np.float32)
-        floor = transform_points(T, observed.floor_points_robot).astype(np.float32)
-        ground = observed.ground
-        height = float(ground.height_m) if ground.success else None
-    return FrameObservation(index=observed.index, pose=pose, pan_rad=observed.pan_rad,
-                            obstacle_points_world=obstacles, floor_points_world=floor,
-                            n_valid_disparity=observed.n_valid_disparity, ground_message=ground.message,
-                            baseline_focal_m_px=float(stereo.baseline_m * stereo.focal_px),
-                            sensor_height_m=height, boundary_points=observed.n_boundary)
-
-
 @dataclass(frozen=True)
 class MappedFrame:
     """What :meth:`StereoMapper.step` produced for one frame.
@@ -260,6 +170,11 @@ class StereoMapper:
     keep_observations : bool or "poses"
         Keep each mapped frame's world points (``observations``: to fuse again, replay or store);
         ``"poses"``: its observation without the points (pose, pan, counts: memory flat in the length).
+    track_only : bool
+        Visual odometry alone (``mrstereo odometry``): each pair rectified and tracked, no matching, floor,
+        obstacles or map; every frame joins the trajectory (a lost one at the motion model's prediction) and
+        :meth:`odometry_run` gives the refined poses. Without a mount the camera is level on the floor
+        (the base is its REP 103 body frame). The streams are not checked (the caller does).
     name : str
         What is mapped, for messages.
 
@@ -281,7 +196,7 @@ class StereoMapper:
     def __init__(self, calibration: StereoCamera, mount: CameraMount | None = None,
                  config: PipelineConfig | None = None, *, check_mount: bool = True,
                  odometry: str = "auto", pose_frame_mount: CameraMount | None = None,
-                 keep_observations: bool | str = False, name: str = "the source") -> None:
+                 keep_observations: bool | str = False, name: str = "the source", track_only: bool = False) -> None:
         if not isinstance(calibration, StereoCamera):
             raise TypeError(f"calibration must be a StereoCamera, got {type(calibration).__name__}")
         if mount is not None and not isinstance(mount, CameraMount):
@@ -289,6 +204,12 @@ class StereoMapper:
         config = PipelineConfig() if config is None else config
         if not isinstance(config, PipelineConfig):
             raise TypeError(f"config must be a PipelineConfig, got {type(config).__name__}")
+        if track_only:
+            if odometry == "given":
+                raise ValueError("track_only estimates the poses: odometry must be 'visual' or 'auto'")
+            odometry, check_mount = "visual", False
+            mount = mount or CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        self.track_only = bool(track_only)
         self.stereo = calibration
         self.config = config.for_rig(calibration)
         self.name = name
@@ -320,6 +241,7 @@ class StereoMapper:
         self.vo_status: list[str] = []
         self.vo_inliers: list[int] = []
         self.vo_time_s: list[float] = []
+        self.vo_tracked: list[int] = []
         self.n_points = 0
         self.frames_lost = 0
         self.lost_index: list[int] = []
@@ -356,7 +278,7 @@ class StereoMapper:
         """
         from ..recordings.sources import StereoFrame
 
-        index = len(self.trajectory_index) + self.frames_lost + len(self._held)
+        index = len(self.trajectory_index) + len(self._held) + (0 if self.track_only else self.frames_lost)
         if stamp_s is None:
             stamp_s = self._last_stamp + 0.1 if self._last_stamp is not None else 0.0
         pose = None if pose is None else np.asarray(pose, dtype=np.float64)
@@ -380,14 +302,22 @@ class StereoMapper:
     def check_streams(self, frame) -> None:
         """Look for a duplicated or swapped camera stream in the first frames
         (:class:`~mrstereo.rejection.streams.StreamCheck`, one warning); :meth:`step_frame` calls it."""
-        self.streams.add(frame.index, frame.left, frame.right, rectified=frame.rectified)
+        if not self.track_only:
+            self.streams.add(frame.index, frame.left, frame.right, rectified=frame.rectified)
 
     def observe(self, frame, *, keep_images: bool = True) -> Observed:
-        """The per-frame chain with the mount as known now (:func:`observe`); thread-safe. While a given mount
+        """The per-frame chain with the mount as known now (:meth:`observer`); thread-safe. While a given mount
         is being checked: with that mount, and the floor fitted without it."""
         if self.floor_decision is None and self._vote.mount is not None:
-            return observe(frame, self.stereo, self._vote.mount, self.config, keep_images=True, fit_floor=True)
-        return observe(frame, self.stereo, self.mount, self.config, keep_images=keep_images)
+            return observe_pair(frame, self.stereo, self._vote.mount, self.config, keep_images=True,
+                                fit_floor=True)
+        return self.observer(keep_images=keep_images)(frame)
+
+    def observer(self, *, keep_images: bool = True):
+        """The per-frame chain (:func:`~mrstereo.geometry.pair.observe_pair`) with this mapper's rig, config and
+        mount as known now: a picklable function of a frame, for workers (threads or processes)."""
+        return partial(observe_pair, stereo=self.stereo, mount=self.mount,
+                       config=None if self.track_only else self.config, keep_images=keep_images)
 
     def integrate(self, observed: Observed) -> list[MappedFrame]:
         """Take an observed frame into the map, in order (the ordered half of :meth:`step`)."""
@@ -460,13 +390,14 @@ class StereoMapper:
             raise ValueError("visual odometry needs the rectified images (keep_images=True)")
         if self._vo is None:
             T0 = observed.T_world_from_base if observed.T_world_from_base is not None else np.eye(4)
-            self._vo = StereoOdometry(self.stereo, T0, self.config.odometry, keep_history=False)
+            self._vo = StereoOdometry(self.stereo, T0, self.config.odometry, keep_history=self.track_only)
         with stage("odometry"):
             estimate = self._vo.step(observed.left_rect, observed.right_rect, T_base_from_cam=T_base_from_cam,
                                      stamp_s=observed.stamp_s)
         self.vo_status.append(estimate.status)
         self.vo_inliers.append(estimate.n_inliers)
         self.vo_time_s.append(estimate.time_s)
+        self.vo_tracked.append(estimate.n_tracked)
         return estimate.T_world_from_base, estimate.status
 
     def _pose_shift(self) -> np.ndarray:
@@ -485,17 +416,20 @@ class StereoMapper:
         if status == LOST:
             self.frames_lost += 1
             self.lost_index.append(observed.index)
-        else:
+        if self.track_only:             # every frame on the trajectory, nothing into the map
+            self._on_trajectory(observed.index, T, observed.stamp_s, observed.T_world_from_base_true, observed.pan_rad)
+        elif status != LOST:
             start = time.perf_counter()
             self.add(world_observation(observed, tuple(float(v) for v in planar_from_T(T)), self.stereo),
                      T_world_from_base=T,
                      stamp_s=observed.stamp_s, T_world_from_base_true=observed.T_world_from_base_true)
             grid_s = time.perf_counter() - start
+        points = observed.obstacle_points_robot
         return MappedFrame(index=observed.index, stamp_s=observed.stamp_s, T_world_from_base=T,
                            T_base_from_cam=T_base_from_cam, status=status, disparity_px=observed.disparity_px,
                            left_rect=observed.left_rect,
-                           obstacle_points_robot=observed.obstacle_points_robot[:len(observed.obstacle_points_robot)
-                                                                                - observed.n_boundary],
+                           obstacle_points_robot=np.empty((0, 3), np.float32) if points is None else
+                           points[:len(points) - observed.n_boundary],
                            scan=observed.scan, times_s={"chain": observed.time_s, "odometry": odometry_s,
                                                         "grid": grid_s})
 
@@ -510,12 +444,16 @@ class StereoMapper:
             self.observations.append(obs if self.keep_observations is True else replace(
                 obs, obstacle_points_world=obs.obstacle_points_world[:0].copy(),      # (copies: a view keeps it all)
                 floor_points_world=obs.floor_points_world[:0].copy(), cells=None))
-        self.trajectory_T.append(T_from_planar(*obs.pose) if T_world_from_base is None else T_world_from_base)
-        self.trajectory_index.append(obs.index)
-        self.trajectory_stamps_s.append(float(obs.index) * 0.1 if stamp_s is None else stamp_s)
-        self.true_T.append(T_world_from_base_true)
-        self.pan_rad.append(obs.pan_rad)
+        self._on_trajectory(obs.index, T_from_planar(*obs.pose) if T_world_from_base is None else T_world_from_base,
+                            float(obs.index) * 0.1 if stamp_s is None else stamp_s, T_world_from_base_true, obs.pan_rad)
         self._count_outside(obs)
+
+    def _on_trajectory(self, index: int, T_world_from_base, stamp_s: float, T_world_from_base_true, pan_rad: float):
+        self.trajectory_T.append(T_world_from_base)
+        self.trajectory_index.append(index)
+        self.trajectory_stamps_s.append(stamp_s)
+        self.true_T.append(T_world_from_base_true)
+        self.pan_rad.append(pan_rad)
 
     def _count_outside(self, obs: FrameObservation) -> None:
         """A frame taken outside a fixed map window is counted (:meth:`outside_warning`)."""
@@ -553,9 +491,17 @@ class StereoMapper:
         """``(N, 3)`` ``(x_m, y_m, yaw_rad)`` of the mapped frames."""
         return planar_from_T(np.array(self.trajectory_T)) if self.trajectory_T else np.empty((0, 3))
 
-    def views(self) -> list[tuple]:
-        """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of the mapped frames."""
-        return views_of_poses(self.planar_poses, self.pan_rad, self.stereo, range_m=self.range_m, mount=self.mount)
+    def odometry_run(self) -> OdometryResult:
+        """The visual odometry of a ``track_only`` mapper's frames: the poses refined over the window (a lost
+        frame: the motion model's prediction), and as known at each frame; ``stamps_s`` those tracked with."""
+        if not self.track_only or self._vo is None:
+            raise ValueError("odometry_run needs a track_only mapper that has tracked at least one frame")
+        T, online = self._vo.trajectory(), np.stack(self.trajectory_T)
+        for a in (T, online):
+            a.setflags(write=False)
+        return OdometryResult(T_world_from_base=T, status=tuple(self.vo_status), n_tracked=np.array(self.vo_tracked),
+                              n_inliers=np.array(self.vo_inliers), time_s=np.array(self.vo_time_s),
+                              stamps_s=np.array(self.trajectory_stamps_s), T_world_from_base_online=online)
 
     def odometry_metrics(self) -> dict:
         """Visual odometry figures for metrics.json (empty with given poses)."""
@@ -569,18 +515,3 @@ class StereoMapper:
                                     "keyframes": self.vo_status.count("keyframe"),
                                     "median_inliers": float(np.median(self.vo_inliers)),
                                     "median_time_s": float(np.median(self.vo_time_s))}}
-
-
-def views_of_poses(poses, pan_rad, stereo: StereoCamera, *, range_m: float = MAPPING_MAX_RANGE_M,
-                   mount: CameraMount | None = None) -> list[tuple]:
-    """Field-of-view wedges ``(x, y, heading, half_fov, range)`` of planar poses with their head pans.
-
-    The heading is the robot's plus the head pan plus the camera's heading on the robot (the optical axis of
-    ``mount``'s rectified camera, projected on the floor; 0 without a mount).
-    """
-    half = math.atan2(stereo.size[0] / 2.0, stereo.focal_px)
-    offset = 0.0
-    if mount is not None:
-        T = mount.T_base_from_rectified(stereo.left.R)
-        offset = math.atan2(T[1, 2], T[0, 2]) if abs(T[1, 2]) > 1e-12 else 0.0
-    return [(p[0], p[1], p[2] + pan + offset, half, range_m) for p, pan in zip(poses, pan_rad)]

@@ -1,18 +1,21 @@
-"""Visual odometry of a recording: its pairs read, rectified and tracked in order.
+"""Visual odometry of a recording: its pairs read, rectified and tracked in order by a
+:class:`~mrstereo.pipeline.mapper.StereoMapper` that tracks only.
 
 Conventions: docs/conventions.md; user guide: docs/odometry.md.
 """
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 
 import numpy as np
 
-from ..camera import CameraMount, StereoCamera
-from ..odometry import OdometryConfig, OdometryResult, visual_odometry
+from ..camera import StereoCamera
+from ..odometry import OdometryConfig, OdometryResult
 from ..recordings.frames import FrameSource, RecordingSource
 from ..recordings.layouts import read_recording
 from ..recordings.manifest import Manifest
+from .mapper import PipelineConfig, StereoMapper
 
 __all__ = ["odometry_from_manifest"]
 
@@ -46,26 +49,28 @@ def odometry_from_manifest(manifest, *, config: OdometryConfig | None = None, ca
     stereo = manifest.calibration if calibration is None else calibration
     if source is None:
         source = RecordingSource(manifest, prefer_raw=calibration is not None)
-
-    def pairs():
-        for frame in source:
-            left, right = frame.left, frame.right
-            if not frame.rectified and not stereo.is_rectified:
-                left, right = stereo.rectify(left, right)
-            yield left, right
-
-    # no mount: a level camera on the floor (the base is the camera's REP 103 body frame)
-    mount = manifest.mount or CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-    mounts = np.stack([mount.T_base_from_rectified(stereo.left.R, r.pan_rad) for r in manifest.frames])
-    T0 = manifest.frames[0].T_world_from_base if initial_pose == "given" else np.eye(4)
-    wrap = None
+    mapper = StereoMapper(stereo, manifest.mount, PipelineConfig(odometry=config or OdometryConfig()),
+                          track_only=True, name=str(manifest.root))
+    stamps = manifest.stamps_s
+    records = manifest.frames
+    if stamps is not None and (not np.isfinite(stamps).all() or (np.diff(stamps) <= 0).any()):
+        raise ValueError("stamps_s must be finite and increasing")
     if progress:
         from tqdm import tqdm
 
-        def wrap(it):
-            return tqdm(it, total=len(manifest.frames), desc="odometry", unit="frame")
-    return visual_odometry(pairs(), stereo, T_base_from_cam=mounts, T_world_from_base0=T0, config=config,
-                           stamps_s=manifest.stamps_s, progress=wrap)
+        source = tqdm(source, total=len(records), desc="odometry", unit="frame")
+    for k, frame in enumerate(source):
+        if k >= len(records):
+            raise ValueError(f"{manifest.root}: the source has more frames than the recording's {len(records)}")
+        # the recording's pose (the start), pan and stamp (without stamps: config.frame_interval_s apart)
+        mapper.step_frame(replace(frame, index=k, pan_rad=float(records[k].pan_rad),
+                                  stamp_s=float(stamps[k]) if stamps is not None else
+                                  k * mapper.config.odometry.frame_interval_s,
+                                  T_world_from_base=records[k].T_world_from_base if initial_pose == "given" else None))
+    mapper.finish()
+    if not mapper.vo_status:
+        raise ValueError(f"{manifest.root} has no frames: visual odometry needs at least one")
+    return replace(mapper.odometry_run(), stamps_s=stamps)
 
 
 def manifest_of(source: FrameSource) -> Manifest:

@@ -1,31 +1,25 @@
 """A recording to a map: its frames through a :class:`~mrstereo.pipeline.mapper.StereoMapper`.
 
 :func:`build_map` drives the mapper over a recording's frames (on workers when asked),
-:func:`finish_map` compares the map with the recording's ground-truth map, :func:`write_map_outputs`
-writes the results. User guide: docs/mapping.md. Conventions: docs/conventions.md.
+:func:`finish_map` makes its :class:`~mrstereo.evaluation.outputs.MapRun` (compared with the recording's
+ground-truth map), which :func:`~mrstereo.evaluation.outputs.write_map_outputs` writes.
+User guide: docs/mapping.md. Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
 import itertools
-import json
 import os
 import warnings
 from contextlib import nullcontext
-from dataclasses import dataclass, replace
-from pathlib import Path
+from dataclasses import replace
 
 import numpy as np
 
-from ..camera import CameraMount, StereoCamera, mount_entry
+from ..camera import StereoCamera
+from ..evaluation.outputs import MapRun, map_vs_truth
 from ..geometry.ground import GroundPlane
-from ..geometry.obstacles import MAPPING_MAX_RANGE_M
-from ..io import atomic_write
-from ..mapping import read_ros_map, write_ros_map
-from ..mapping.figures import plot_map
+from ..mapping import read_ros_map
 from ..mapping.fusion import FrameObservation
-from ..mapping.metrics import MapMetrics, map_metrics
-from ..mapping.occupancy import OccupancyGrid
-from ..mapping.rosmap import ros_map_on_grid
 from ..mapping.tiles import TiledOccupancyGrid
 from ..recordings.frames import FrameSource
 from ..recordings.layouts import read_recording
@@ -33,65 +27,12 @@ from ..recordings.manifest import Manifest, pose_3d_of, rebased
 from ..rejection.streams import StreamCheck
 from ..transforms import T_from_planar
 from .._executor import read_ahead
-from .mapper import PipelineConfig, StereoMapper, observe, views_of_poses
+from .mapper import PipelineConfig, StereoMapper
 from .odometry import manifest_of
 
-__all__ = ["PipelineConfig", "MapRun", "build_map", "map_frames", "finish_map", "map_from_observations",
-           "write_map_outputs", "check_map", "recording_source", "check_pair_streams"]
+__all__ = ["build_map", "map_frames", "finish_map", "map_from_observations", "recording_source",
+           "check_pair_streams", "with_visual_odometry", "config_for_recording"]
 
-
-@dataclass
-class MapRun:
-    """Result of :func:`build_map`."""
-
-    grid: OccupancyGrid
-    observations: list[FrameObservation]
-    manifest: Manifest
-    metrics: MapMetrics | None
-    ground_truth_map: object | None
-    floor: GroundPlane | None = None
-    """The floor of the run: the given mount's, or the estimate from the first frames."""
-    mount: CameraMount | None = None
-    """The camera mount every frame used."""
-    odometry: dict | None = None
-    """Visual odometry figures (``{"visual_odometry": {...}}``) when the poses came from it."""
-    fusion: object | None = None
-    """The :class:`mrstereo.odometry.fusion.FusedOdometry` when the given poses were fused with visual odometry."""
-    range_m: float = MAPPING_MAX_RANGE_M
-    """The mapping range of the run (its obstacle configuration's ``max_range_m``)."""
-    mount_warning: str | None = None
-    """Why the given mount was not used (:class:`~mrstereo.geometry.floor.FloorVote`), None when it was (or none was given)."""
-    trajectory: tuple[np.ndarray, np.ndarray] | None = None
-    """``(stamps_s (N,), T_world_from_base (N, 4, 4))`` of the mapped frames (trajectory.txt)."""
-    tiles: TiledOccupancyGrid | None = None
-    """The whole map when it grew (``config.grid`` None); ``grid`` is then its dense window
-    (:meth:`~mrstereo.mapping.tiles.TiledOccupancyGrid.map_window`: all of it unless it is too large)."""
-    n_points: int | None = None
-    """The floor and obstacle points the frames put into the map (None: count ``observations``' points)."""
-
-    def pose_metrics(self) -> dict:
-        """Odometry and alignment figures for metrics.json (empty when the given poses were used)."""
-        out = {}
-        out.update(self.odometry or {})
-        if self.fusion is not None:
-            moved, turned = self.fusion.corrections([f.pose for f in self.manifest.frames])
-            out["alignment"] = {"frames": len(moved), "visual_steps": int(self.fusion.visual_used.sum()),
-                                "rejected_visual_steps": int(self.fusion.visual_rejected.sum()),
-                                "mean_correction_m": float(np.mean(moved)), "max_correction_m": float(np.max(moved)),
-                                "mean_correction_deg": float(np.degrees(np.mean(turned))),
-                                "max_correction_deg": float(np.degrees(np.max(turned)))}
-        frames = self.manifest.frames
-        if self.observations and all(f.true_pose is not None for f in frames):
-            from ..odometry.trajectory import trajectory_metrics
-
-            by_index = {o.index: o.pose for o in self.observations}
-            used = sorted(by_index)
-            est = np.stack([T_from_planar(*by_index[k]) for k in used])
-            true = np.stack([T_from_planar(*frames[k].true_pose) for k in used])
-            given = np.stack([T_from_planar(*frames[k].pose) for k in used])
-            out["poses_vs_truth"] = trajectory_metrics(est, true).to_dict()
-            out["given_poses_vs_truth"] = trajectory_metrics(given, true).to_dict()
-        return out
 
 
 def recording_source(recording, *, prefer_raw: bool = False):
@@ -109,7 +50,6 @@ def map_frames(mapper: StereoMapper, frames, *, workers: int | None = None, sche
     rest observed on ``workers`` (threads, or Dask processes / an existing ``scheduler``) in chunks and
     integrated in order -- the same map, bit for bit, in every case."""
     import contextlib
-    from functools import partial
 
     from tqdm.auto import tqdm
 
@@ -135,8 +75,7 @@ def map_frames(mapper: StereoMapper, frames, *, workers: int | None = None, sche
                 return
             mapper.check_streams(first)
             pending = [first]
-            observe_one = partial(observe, stereo=mapper.stereo, mount=mapper.mount, config=mapper.config,
-                                  keep_images=mapper.odometry != "given")
+            observe_one = mapper.observer(keep_images=mapper.odometry != "given")
             chunk = 8 * (workers or 2)
             where = {"scheduler": c} if use_dask else {"workers": workers}
             while pending:
@@ -219,7 +158,7 @@ def build_map(manifest: Manifest | FrameSource | str | os.PathLike, *, config: P
         raise ValueError("align corrects the given odometry with visual odometry: use it with odometry='given'")
     stereo = manifest.calibration if calibration is None else calibration
     prefer_raw = prefer_raw or calibration is not None
-    config = _on_true_map(manifest, config.for_rig(stereo))
+    config = config_for_recording(config.for_rig(stereo), manifest.ground_truth_map)
     mapper = StereoMapper(stereo, manifest.mount, config, check_mount=check_mount, odometry=odometry,
                           pose_frame_mount=manifest.pose_frame_mount, keep_observations=keep_points or "poses",
                           name=str(manifest.root))
@@ -261,7 +200,7 @@ def finish_map(mapper: StereoMapper, manifest: Manifest, *, fusion=None) -> MapR
     if mapper.trajectory_index and not (~occupancy.unknown).any():
         warnings.warn("the map observed no cell: every frame's points fell outside it or none were found; "
                       "check the poses, --size and --origin", stacklevel=3)
-    metrics, gt = _compare(mapper, occupancy, manifest)
+    metrics, gt = map_vs_truth(mapper, occupancy, manifest)
     return MapRun(grid=occupancy, observations=mapper.observations, manifest=manifest, metrics=metrics,
                   ground_truth_map=gt, floor=mapper.floor, mount=mapper.mount, fusion=fusion,
                   range_m=mapper.range_m, mount_warning=mapper.mount_warning, odometry=mapper.odometry_metrics(),
@@ -281,10 +220,6 @@ def with_visual_odometry(manifest: Manifest, *, calibration: StereoCamera | None
     return replace(manifest, frames=frames, has_poses=True), vo
 
 
-def _on_true_map(manifest: Manifest, config: PipelineConfig) -> PipelineConfig:
-    return config_for_recording(config, manifest.ground_truth_map)
-
-
 def config_for_recording(config: PipelineConfig, ground_truth_map=None) -> PipelineConfig:
     """``config`` with the window of the recording's ground-truth map (at ``config.resolution_m``) when it has
     one and no window is given: the map is compared with it cell by cell (``map`` and ``live`` alike)."""
@@ -299,107 +234,14 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
     """Fuse a run's frame observations in order (:meth:`StereoMapper.add`) and compare the map with the
     dataset's ground-truth map (:func:`finish_map`). ``floor`` and ``mount`` are those the frames used."""
     stereo = manifest.calibration if stereo is None else stereo
-    mapper = StereoMapper(stereo, mount, _on_true_map(manifest, config), check_mount=False, keep_observations=True,
+    mapper = StereoMapper(stereo, mount, config_for_recording(config, manifest.ground_truth_map), check_mount=False,
+                          keep_observations=True,
                           name=str(manifest.root))
     for obs in observations:
         mapper.add(obs)
     run = finish_map(mapper, manifest, fusion=fusion)
     run.floor = floor
     return run
-
-
-def _compare(mapper: StereoMapper, occupancy: OccupancyGrid, manifest: Manifest):
-    """``(metrics, ground truth)`` of a map against the recording's ground-truth map (None, None without one),
-    along the true path with the true fields of view, whatever poses the frames were fused at."""
-    if manifest.ground_truth_map is None:
-        return None, None
-    gt = read_ros_map(manifest.ground_truth_map)
-    if isinstance(mapper.grid, TiledOccupancyGrid):
-        try:
-            compared = mapper.grid.to_grid(gt.grid)         # the map on the ground truth's window
-        except ValueError:
-            compared = None                                 # not on the map's lattice: no metrics
-    else:
-        aligned = ros_map_on_grid(gt, occupancy.grid)       # a fixed window: compared where the two overlap
-        compared, gt = (occupancy, aligned) if aligned is not None else (None, gt)
-    if compared is None:
-        warnings.warn(f"no metrics: the ground-truth map {manifest.ground_truth_map} has cells of "
-                      f"{gt.grid.resolution_m:g} m at origin ({gt.grid.origin_x_m:g}, {gt.grid.origin_y_m:g}), "
-                      f"which do not fall on the map's cells of {occupancy.grid.resolution_m:g} m", stacklevel=3)
-        return None, gt
-    if gt.grid.shape != compared.grid.shape:
-        return None, gt
-    path = np.array([f.true_pose if f.true_pose is not None else f.pose for f in manifest.frames])
-    views = views_of_poses(path, [f.pan_rad for f in manifest.frames], mapper.stereo, range_m=mapper.range_m,
-                           mount=mapper.mount)
-    return map_metrics(compared, gt, path_xy=path, views=views), gt
-
-
-def check_map(run: MapRun) -> None:
-    """Raise when a run saw nothing: no frame put a single point into the map (an empty map is no result).
-
-    Raises
-    ------
-    ValueError
-        With the likely causes: the mapping range, the camera mount, the images.
-    """
-    seen = run.n_points if run.n_points is not None else \
-        sum(len(o.obstacle_points_world) + len(o.floor_points_world) for o in run.observations)
-    if seen:
-        return
-    height = f"{run.floor.height_m:.2f} m" if run.floor is not None and run.floor.success else "unknown"
-    raise ValueError(f"the map of {len(run.observations)} frames is empty: no frame saw a floor or obstacle point "
-                     f"within the mapping range of {run.range_m:.1f} m (camera height {height}). A camera high above "
-                     "the floor sees it only farther away: raise --max-range; check the camera mount (mrstereo info) "
-                     "or leave it out to have the floor estimated")
-
-
-def write_map_outputs(run: MapRun, out_dir: str | os.PathLike, *, planned_path=None) -> dict[str, Path]:
-    """Write map.pgm + map.yaml (ROS map_server), map.png, log_odds.npy, metrics.json and trajectory.txt (the
-    mapped frames' poses, TUM: ``mrstereo plan --start robot`` starts from its last); for a map that grew also
-    tiles.npz and overview.png + overview.yaml (docs/mapping.md, "A long drive").
-
-    metrics.json holds the comparison with the ground-truth map (when there is
-    one) and ``floor``: the floor of the run with its confidence.
-    """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    write_ros_map(out / "map.yaml", run.grid.to_ros_map())
-    run.grid.save_log_odds(out / "log_odds.npy")
-    files = {"map_yaml": out / "map.yaml", "map_pgm": out / "map.pgm", "map_png": out / "map.png",
-             "log_odds": out / "log_odds.npy"}
-    report = run.metrics.to_dict() if run.metrics is not None else {}
-    if run.floor is not None:
-        report["floor"] = run.floor.summary()
-    if run.mount is not None:
-        report["mount"] = mount_entry(run.mount)
-    if run.mount_warning:
-        report["mount_warning"] = run.mount_warning
-    g = run.grid.grid
-    report["map_window"] = {"origin_m": [g.origin_x_m, g.origin_y_m], "size_m": [g.width_m, g.height_m],
-                            "resolution_m": g.resolution_m, "range_m": run.range_m,
-                            "points_outside": int(run.grid.points_outside)}
-    report.update(run.pose_metrics())
-    if report:
-        with atomic_write(out / "metrics.json") as tmp:
-            tmp.write_text(json.dumps(report, indent=2))
-        files["metrics"] = out / "metrics.json"
-    if run.trajectory is not None:
-        from ..odometry.trajectory import write_tum
-
-        files["trajectory"] = write_tum(out / "trajectory.txt", *run.trajectory,
-                                        comment="mrstereo map: the mapped frames' robot base in the map frame")
-    path = np.array([o.pose for o in run.observations]) if run.observations else None
-    views = views_of_poses(path if path is not None else [], [o.pan_rad for o in run.observations],
-                           run.manifest.calibration, range_m=run.range_m, mount=run.mount)
-    plot_map(run.grid, out / "map.png", robot_path=path, fov_views=views,
-             planned_path=planned_path, ground_truth=run.ground_truth_map,
-             title=f"occupancy grid ({run.grid.config.fusion})")
-    if run.tiles is not None:           # the whole map that grew: its tiles and an overview image
-        run.tiles.save(out / "tiles.npz")
-        files.update(tiles=out / "tiles.npz", overview_yaml=out / "overview.yaml",
-                     overview_png=run.tiles.write_overview(out / "overview.yaml"))
-    return files
 
 
 def check_pair_streams(manifest: Manifest | FrameSource) -> list[str]:
