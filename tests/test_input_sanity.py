@@ -9,7 +9,6 @@ import shutil
 from pathlib import Path
 
 import cv2
-import numpy as np
 import pytest
 
 from mrstereo.cli import entry
@@ -146,34 +145,16 @@ def test_live_config_workers_are_bounded_by_the_cores():
 
 # ------------------------------------------------------------------------------------------ KITTI
 
-@pytest.fixture
-def kitti(tmp_path) -> Path:
-    """Two frames of the KITTI odometry sample, with its poses."""
-    from mrstereo.recordings.samples import data_root
-
-    source = data_root() / "kitti_odometry_06"
-    if not (source / "poses" / "06.txt").is_file():
-        pytest.skip("the KITTI odometry sample is not there (MRSTEREO_DATA)")
-    seq = tmp_path / "kitti" / "sequences" / "06"
-    for sub in ("image_0", "image_1"):
-        (seq / sub).mkdir(parents=True)
-        for name in ("000000.png", "000001.png"):
-            shutil.copy(source / "sequences" / "06" / sub / name, seq / sub / name)
-    for name in ("calib.txt", "times.txt"):
-        shutil.copy(source / "sequences" / "06" / name, seq / name)
-    (tmp_path / "kitti" / "poses").mkdir()
-    shutil.copy(source / "poses" / "06.txt", tmp_path / "kitti" / "poses" / "06.txt")
-    return tmp_path / "kitti"
-
-
-def test_kitti_image_names_must_be_frame_numbers(kitti, capsys):
+def test_kitti_image_names_must_be_frame_numbers(kitti_two_frames, capsys):
     """``-1.png`` was frame -1: the last line of times.txt and poses."""
+    kitti = kitti_two_frames
     for sub in ("image_0", "image_1"):
         (kitti / "sequences" / "06" / sub / "000001.png").rename(kitti / "sequences" / "06" / sub / "-1.png")
     _error(capsys, ["info", kitti], "-1.png: a KITTI image name must be its frame number")
 
 
-def test_kitti_poses_must_be_rotations(kitti, capsys):
+def test_kitti_poses_must_be_rotations(kitti_two_frames, capsys):
+    kitti = kitti_two_frames
     assert entry(["info", str(kitti)]) == 0
     capsys.readouterr()
     poses = kitti / "poses" / "06.txt"

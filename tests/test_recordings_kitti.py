@@ -169,20 +169,11 @@ def test_odometry_command_on_kitti(kitti, tmp_path, capsys):
     assert data["lost"] == 0 and data["reference"] == "true poses" and data["ate_percent"] < 0.5
 
 
-def test_map_command_on_a_kitti_folder(kitti, tmp_path, capsys):
+def test_map_command_on_a_kitti_folder(kitti_two_frames, tmp_path, capsys):
     """`mrstereo map` reads a KITTI folder directly (two frames of it here)."""
     from mrstereo.cli import entry
 
-    root = tmp_path / "kitti"              # the folder named: no output inside it
-    seq = root / "sequences" / "06"
-    for sub in ("image_0", "image_1"):
-        (seq / sub).mkdir(parents=True)
-        for name in ("000000.png", "000001.png"):
-            shutil.copy(kitti / "sequences" / "06" / sub / name, seq / sub / name)
-    for name in ("calib.txt", "times.txt"):
-        shutil.copy(kitti / "sequences" / "06" / name, seq / name)
-    (root / "poses").mkdir()
-    shutil.copy(kitti / "poses" / "06.txt", root / "poses" / "06.txt")
+    root = kitti_two_frames                # the folder named: no output inside it
     assert entry(["map", str(root), "-o", str(root / "map"), "--quiet"]) == 2
     assert "is inside the KITTI odometry recording" in capsys.readouterr().err
     code = entry(["map", str(root), "-o", str(tmp_path / "map"), "--size", "30,20", "--origin", "0,-10",

@@ -447,7 +447,7 @@ def _stereo_of_reader(reader, camera_info_topics: tuple[str, str]) -> StereoCame
     camera recalibrated or switched mid-bag) is a warning naming it, the first one still used."""
     infos: dict[str, object] = {}
     first: dict[str, tuple] = {}
-    body: dict[str, bytes] = {}          # a message after its stamp (12 bytes in: ROS 1 seq + stamp, CDR header + stamp)
+    body: dict[str, bytes] = {}      # a message after its stamp (12 bytes: ROS 1 seq + stamp, CDR header + stamp)
     count: dict[str, int] = {}
     changed: list[str] = []
     for conn, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic in camera_info_topics]):

@@ -16,7 +16,8 @@ import numpy as np
 from ..io import new_temporary_dir, remove_stale_temporaries
 from ..transforms import quaternion_from_rotation
 
-__all__ = ["BagWriter", "check_bag_stamps", "BAG_TOPICS", "LATCHED_TOPICS", "MAP_FRAME", "ODOM_FRAME", "BASE_FRAME", "CAMERA_FRAME"]
+__all__ = ["BagWriter", "check_bag_stamps", "BAG_TOPICS", "LATCHED_TOPICS", "MAP_FRAME", "ODOM_FRAME", "BASE_FRAME",
+           "CAMERA_FRAME"]
 
 MAP_FRAME, ODOM_FRAME, BASE_FRAME, CAMERA_FRAME = "map", "odom", "base_link", "camera_left_optical_frame"
 BAG_TOPICS = {"/scan": "sensor_msgs/msg/LaserScan", "/points": "sensor_msgs/msg/PointCloud2",
