@@ -508,6 +508,7 @@ LONG_COMMANDS = {       # the point where the signal lands: after a frame, with 
     "synth": (["synth", "--out", "{T}/S", "--frames", "3", "--width", "160", "--height", "120", "--quiet"],
               "frame:2", None),
     "map (threads)": (["map", "{DS}", "-o", "{T}/m", "--workers", "2", "--quiet"], "frame:1", None),
+    "odometry": (["odometry", "{DS}", "-o", "{T}/t.txt", "--quiet"], "frame:1", None),
     "batch (processes)": (["batch", "{DS}", "-o", "{T}/b", "--workers", "2", "--processes", "--quiet"], "frame:1",
                           "scale"),
     "disparity": (["disparity", "{DS}/left_rect/000000.png", "{DS}/right_rect/000000.png", "--max-disparity", "16",
@@ -554,6 +555,16 @@ def test_ctrl_c_during_a_slow_realtime_replay_stops_at_once(ds, tmp_path):
     assert code == 0 and "Traceback" not in err.decode(), err.decode()
     assert took < 5.0
     assert json.loads((out / "metrics.json").read_text())["frames_in"] == 1
+
+
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+def test_export_stops_with_one_line_and_leaves_no_dataset(ds, tmp_path, signame):
+    bag = _bag_of(ds, tmp_path / "b2", ros1=False)
+    out = tmp_path / "x"
+    code, err, took = _signalled(["export", "--bag", bag, "-o", out, "--quiet"], "frame:1", tmp_path, signame)
+    assert (code, _unwarned(err)) == (130, "mrstereo: interrupted\n")
+    assert took < 5.0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b2"]           # no dataset, no temporary
 
 
 def test_sigkill_during_synth_leaves_only_a_marked_temporary(tmp_path):

@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from .. import _checks, _limits
+from .._interrupt import reached
 from ..camera import CameraInfo, CameraMount, StereoCamera
 from ..io import check_output_dir, decode_image, note_inputs
 from ..transforms import R_BODY_FROM_OPTICAL, T_from_position_quaternion, rotation_from_quaternion, slerp, wrap_angle
@@ -781,6 +782,7 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, progress: 
             dataset.write(keys[1], k, right)
             dataset.add_frame(k, pose=source.poses[k], pan_rad=source.pans[k], stamp_s=source.stamps_ns[k] / 1e9)
             bar.update(1)
+            reached("frame")
     return BagExport(out_dir=Path(out_dir), n_frames=source.n_frames, n_left=source.n_left, n_right=source.n_right,
                      stamps_ns=source.stamps_ns, calibration=source.calibration, mount=source.mount,
                      mount_source=source.mount_source, pose_source=source.pose_source)
