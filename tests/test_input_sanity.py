@@ -115,7 +115,7 @@ def test_a_shorter_right_video_is_named_when_it_ends(ds, videos, tmp_path, capsy
 
 
 def test_an_error_of_the_source_ends_the_live_run_with_it(ds, tmp_path):
-    """A source failing after its first frame (a camera switching its size) was a run 'stopped' with exit 0."""
+    """A source failing at its first frame (two cameras of two sizes) was a run 'stopped' with exit 0."""
     from mrstereo.pipeline.live import LiveConfig, run_live
     from mrstereo.recordings import open_recording
     from mrstereo.recordings.sources import FrameSource
@@ -127,10 +127,10 @@ def test_an_error_of_the_source_ends_the_live_run_with_it(ds, tmp_path):
             self.ground_truth_map = None
 
         def __iter__(self):
-            yield next(iter(self.source))
-            raise ValueError("failing: frame 1 is 80x60, frame 0 was 160x120")
+            raise ValueError("failing: frame 0: the left image is 160x120, the right one 80x60")
+            yield
 
-    with open_recording(ds) as source, pytest.raises(ValueError, match="frame 1 is 80x60"):
+    with open_recording(ds) as source, pytest.raises(ValueError, match="the right one 80x60"):
         run_live(Failing(source), tmp_path / "o", live=LiveConfig())
     assert not (tmp_path / "o" / "map.yaml").exists()
 
