@@ -143,8 +143,9 @@ class BagWriter:
 
 
 def write_bag(path: Path, manifest, *, ros1: bool, storage: str = "sqlite3", odom: bool = True, tf: bool = False,
-              compressed: bool = False, frames=None, right_lag_ns: int = RIGHT_LAG_NS) -> Path:
-    """Write the raw pairs of a manifest as a bag (:data:`TOPICS`): images, camera_info, odometry and/or TF."""
+              compressed: bool = False, frames=None, right_lag_ns: int = RIGHT_LAG_NS, recalibrated=None) -> Path:
+    """Write the raw pairs of a manifest as a bag (:data:`TOPICS`): images, camera_info, odometry and/or TF;
+    ``recalibrated=(k, stereo)``: the camera_info of frame k on is that of ``stereo``."""
     img_type = "sensor_msgs/msg/CompressedImage" if compressed else "sensor_msgs/msg/Image"
     topics = {"/stereo/left/image_raw": img_type, "/stereo/right/image_raw": img_type,
               "/stereo/left/camera_info": "sensor_msgs/msg/CameraInfo",
@@ -161,6 +162,8 @@ def write_bag(path: Path, manifest, *, ros1: bool, storage: str = "sqlite3", odo
             bag.put("/tf_static", m.tf([("map", "odom", (0.0, 0.0, 0.0))], T0_NS - DT_NS), T0_NS - DT_NS)
         for k, rec in enumerate(records):
             t, t_right = T0_NS + k * DT_NS, T0_NS + k * DT_NS + right_lag_ns
+            if recalibrated is not None and k == recalibrated[0]:
+                cal = recalibrated[1]
             bag.put("/stereo/left/camera_info", m.camera_info(cal.left, t, "left"), t)
             bag.put("/stereo/right/camera_info", m.camera_info(cal.right, t_right, "right"), t_right)
             if odom:

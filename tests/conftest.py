@@ -199,3 +199,25 @@ def _digest(folder) -> dict[str, tuple[int, int]]:
     """Size and modification time of every file under ``folder``: what a test that writes into it changes."""
     return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
             for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture
+def kitti_two_frames(tmp_path):
+    """A KITTI odometry folder ``tmp_path/kitti`` with the first two frames of the sample's sequence 06, its
+    calib.txt, times.txt and poses (to change at will); skips without the sample."""
+    import shutil
+
+    source = data.data_root() / "kitti_odometry_06"
+    if not (source / "poses" / "06.txt").is_file():
+        pytest.skip(f"KITTI odometry sample not found under {source} (set {data.ENV_VAR})")
+    root = tmp_path / "kitti"
+    seq = root / "sequences" / "06"
+    for sub in ("image_0", "image_1"):
+        (seq / sub).mkdir(parents=True)
+        for name in ("000000.png", "000001.png"):
+            shutil.copy(source / "sequences" / "06" / sub / name, seq / sub / name)
+    for name in ("calib.txt", "times.txt"):
+        shutil.copy(source / "sequences" / "06" / name, seq / name)
+    (root / "poses").mkdir()
+    shutil.copy(source / "poses" / "06.txt", root / "poses" / "06.txt")
+    return root

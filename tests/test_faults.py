@@ -508,6 +508,7 @@ LONG_COMMANDS = {       # the point where the signal lands: after a frame, with 
     "synth": (["synth", "--out", "{T}/S", "--frames", "3", "--width", "160", "--height", "120", "--quiet"],
               "frame:2", None),
     "map (threads)": (["map", "{DS}", "-o", "{T}/m", "--workers", "2", "--quiet"], "frame:1", None),
+    "odometry": (["odometry", "{DS}", "-o", "{T}/t.txt", "--quiet"], "frame:1", None),
     "batch (processes)": (["batch", "{DS}", "-o", "{T}/b", "--workers", "2", "--processes", "--quiet"], "frame:1",
                           "scale"),
     "disparity": (["disparity", "{DS}/left_rect/000000.png", "{DS}/right_rect/000000.png", "--max-disparity", "16",
@@ -528,6 +529,42 @@ def test_every_long_command_stops_with_one_line(ds, tmp_path, command, signame):
         part.startswith(".") for part in p.relative_to(tmp_path).parts)]
     partial = [v for v in visible if v not in ("d.pfm",)] if command != "batch (processes)" else []
     assert not partial, partial
+
+
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("point", ["import:1", "start:1"], ids=["while loading", "handlers installed"])
+def test_a_signal_in_the_first_milliseconds_is_one_line_and_130(ds, tmp_path, point, signame):
+    """``import``: the first statement of the command line, before its imports (Python's own start-up comes
+    before it); ``start``: its handlers installed, before the command's imports."""
+    code, err, _ = _signalled(["info", ds], point, tmp_path, signame)
+    assert (code, err.decode()) == (130, "mrstereo: interrupted\n")
+
+
+def test_ctrl_c_during_a_slow_realtime_replay_stops_at_once(ds, tmp_path):
+    """``live --realtime`` on a video of a frame every 20 s: Ctrl-C after the first frame ends the wait for the
+    next one, and the run writes its outputs (the first Ctrl-C of live stops it: exit 0)."""
+    for side in ("left", "right"):
+        writer = cv2.VideoWriter(str(tmp_path / f"{side}.mkv"), cv2.VideoWriter_fourcc(*"FFV1"), 0.05, (160, 120),
+                                 isColor=False)
+        for k in range(3):
+            writer.write(cv2.imread(str(ds / side / f"{k:06d}.png"), cv2.IMREAD_GRAYSCALE))
+        writer.release()
+    out = tmp_path / "o"
+    code, err, took = _signalled(["live", tmp_path / "left.mkv", tmp_path / "right.mkv", "--calib",
+                                  ds / "calibration.yaml", "--realtime", "-o", out, "--quiet"], "frame:1", tmp_path)
+    assert code == 0 and "Traceback" not in err.decode(), err.decode()
+    assert took < 5.0
+    assert json.loads((out / "metrics.json").read_text())["frames_in"] == 1
+
+
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+def test_export_stops_with_one_line_and_leaves_no_dataset(ds, tmp_path, signame):
+    bag = _bag_of(ds, tmp_path / "b2", ros1=False)
+    out = tmp_path / "x"
+    code, err, took = _signalled(["export", "--bag", bag, "-o", out, "--quiet"], "frame:1", tmp_path, signame)
+    assert (code, _unwarned(err)) == (130, "mrstereo: interrupted\n")
+    assert took < 5.0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b2"]           # no dataset, no temporary
 
 
 def test_sigkill_during_synth_leaves_only_a_marked_temporary(tmp_path):
@@ -618,6 +655,57 @@ def test_a_datasets_files_are_inputs_wherever_they_lie(ds, tmp_path, capsys):
     os.link(calib, tmp_path / "hard.txt")
     _run(capsys, ["odometry", data, "-o", tmp_path / "hard.txt", "--quiet"], must="would overwrite the input")
     assert _digest(data) == before and calib.read_bytes() == before_calib
+
+
+@pytest.mark.sample_data("euroc-asl-sample")
+def test_a_euroc_recordings_files_are_inputs_for_every_command(sample_data, tmp_path, capsys):
+    """One rule for map, odometry, batch and live: no output over a frame (wherever data.csv puts it), none
+    inside the folder named as the recording (EuRoC's above mav0/) or inside mav0/."""
+    euroc = tmp_path / "euroc"
+    shutil.copytree(sample_data("euroc-asl-sample"), euroc)
+    out = tmp_path / "out"
+    out.mkdir()
+    csv = euroc / "mav0" / "cam0" / "data.csv"
+    first = csv.read_text().splitlines()[1].split(",")
+    shutil.copy(euroc / "mav0" / "cam0" / "data" / first[1], out / "map.png")      # a frame lying in -o
+    csv.write_text(csv.read_text().replace(f"{first[0]},{first[1]}", f"{first[0]},../../../../out/map.png"))
+    before, frame = _digest(euroc), (out / "map.png").read_bytes()
+    for args, must in ((["map", euroc, "-o", out], "would overwrite the input"),
+                       (["map", euroc, "-o", euroc / "out"], "is inside the EuRoC/ASL recording"),
+                       (["map", euroc, "-o", euroc], "is the EuRoC/ASL recording"),
+                       (["odometry", euroc, "-o", euroc / "mav0" / "t.txt"], "lies inside the EuRoC/ASL recording"),
+                       (["odometry", euroc, "-o", out / "t.txt", "--plot", out / "map.png"],
+                        "would overwrite the input"),
+                       (["batch", euroc, "-o", euroc / "out"], "choose a folder apart from it"),
+                       (["live", euroc, "-o", euroc / "out"], "choose a folder apart from it")):
+        _run(capsys, [*args, "--quiet"], must=must)
+    assert _digest(euroc) == before and (out / "map.png").read_bytes() == frame and not (euroc / "out").exists()
+
+
+def test_an_image_folder_recordings_frames_are_inputs(ds, tmp_path, capsys):
+    rec = tmp_path / "rec"
+    (rec / "left").mkdir(parents=True)
+    (rec / "right").mkdir()
+    for k in range(3):
+        shutil.copy(ds / "left" / f"{k:06d}.png", rec / "left" / f"{k:06d}.png")
+        shutil.copy(ds / "right" / f"{k:06d}.png", rec / "right" / f"{k:06d}.png")
+    shutil.copy(ds / "calibration.yaml", rec / "stereo.yaml")
+    os.link(rec / "left" / "000000.png", tmp_path / "map.png")      # the first frame, also named map.png
+    before = _digest(rec)
+    _run(capsys, ["map", rec, "-o", rec / "left", "--quiet"], must="is inside the image folders recording")
+    _run(capsys, ["map", rec, "-o", tmp_path, "--quiet"], must="would overwrite the input")
+    assert _digest(rec) == before
+
+
+def test_record_bag_removes_only_its_own_temporary(ds, tmp_path):
+    """The bag is built in a marked temporary: a user's folder named as the old temporary (.NAME.PID.tmp) stays."""
+    out = tmp_path / "m"
+    theirs = tmp_path / f".rbx.{os.getpid()}.tmp"
+    theirs.mkdir()
+    (theirs / "precious.txt").write_text("keep")
+    assert entry(["map", str(ds), "-o", str(out), "--record-bag", str(tmp_path / "rbx"), "--quiet"]) == 0
+    assert (theirs / "precious.txt").read_text() == "keep"
+    assert (tmp_path / "rbx" / "metadata.yaml").is_file() and not _no_temporaries(tmp_path)
 
 
 @pytest.mark.sample_data("openloris-sample")
@@ -832,6 +920,7 @@ def test_duplicated_or_swapped_streams_are_named(ds, tmp_path, capsys, case):
             right.rename(left)
             (data / "tmp").rename(right)
     for args in (["map", data, "-o", tmp_path / "m", "--quiet"], ["batch", data, "-o", tmp_path / "b", "--quiet"],
+                 ["live", data, "-o", tmp_path / "l", "--quiet"],        # live and map: one check
                  ["disparity", data / "left_rect" / "000000.png", data / "right_rect" / "000000.png",
                   "--max-disparity", "32", "-o", tmp_path / "d.pfm"]):
         entry([str(a) for a in args])

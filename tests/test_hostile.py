@@ -254,6 +254,19 @@ def test_a_png_bomb_inside_a_bag_is_refused(ros1, tmp_path):
             must="the image header claims 10000x10000 pixels")
 
 
+def test_a_huge_bag_metadata_file_is_refused_unparsed(ds, tmp_path):
+    """A ROS 2 bag whose metadata.yaml is padded to 4 MB (the reader's YAML parser would take a minute)."""
+    from _bags import write_bag
+
+    from mrstereo.recordings.manifest import read_manifest
+
+    bag = write_bag(tmp_path / "b2", read_manifest(ds), ros1=False, odom=True)
+    meta = bag / "metadata.yaml"
+    pad = "".join(f"  - x{i}\n" for i in range(400_000))
+    meta.write_text(meta.read_text().replace("  ros_distro:", "  padding:\n" + pad + "  ros_distro:"))
+    refused(["info", bag], tmp_path, must="metadata.yaml has more bytes")
+
+
 def _write_calibration(path: Path) -> None:
     from mrstereo.camera import write_stereo
     from mrstereo.world.render import default_stereo

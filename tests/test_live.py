@@ -136,6 +136,45 @@ def test_paced_hands_frames_out_at_their_stamps():
         list(paced(frames, speed=0.0))
 
 
+def test_paced_does_not_wait_out_a_jump_of_the_stamps():
+    """A bag whose clock jumps 15 years (forth, then back) is replayed with one warning per jump, not a wait of
+    years; the pacing restarts at the frame after the jump."""
+    now, slept = [0.0], []
+
+    def sleep(s):
+        slept.append(s)
+        now[0] += s
+
+    years = 15 * 365.25 * 86400.0
+    stamps = [0.0, 0.1, 0.1 + years, 0.2 + years, 0.3, 0.4]
+    frames = [StereoFrame(index=k, stamp_s=s, left=None, right=None) for k, s in enumerate(stamps)]
+    with pytest.warns(UserWarning, match=r"the stamps jump by") as caught:
+        out = list(paced(frames, clock=lambda: now[0], sleep=sleep))
+    assert [f.index for f in out] == list(range(6))
+    assert [str(w.message).split(" (")[0].rsplit(" s ", 1)[1] for w in caught] == [
+        "from frame 1 to frame 2", "from frame 3 to frame 4"]
+    np.testing.assert_allclose(slept, [0.1, 0.1, 0.1], atol=1e-6)
+
+
+def test_paced_stops_waiting_when_asked():
+    """A slow video (a frame every 50 s): setting ``stop`` ends the wait at once, and the replay."""
+    stop = threading.Event()
+    frames = [StereoFrame(index=k, stamp_s=50.0 * k, left=None, right=None) for k in range(3)]
+    got = []
+
+    def replay():
+        got.extend(f.index for f in paced(frames, stop=stop))
+
+    thread = threading.Thread(target=replay, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 30.0
+    while not got and time.monotonic() < deadline:
+        time.sleep(0.01)
+    stop.set()
+    thread.join(timeout=30.0)
+    assert not thread.is_alive() and got == [0]
+
+
 def test_latest_frame_slot_keeps_the_newest_and_counts_the_dropped():
     stop = threading.Event()
     slot = LatestFrame()

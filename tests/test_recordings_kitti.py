@@ -169,20 +169,14 @@ def test_odometry_command_on_kitti(kitti, tmp_path, capsys):
     assert data["lost"] == 0 and data["reference"] == "true poses" and data["ate_percent"] < 0.5
 
 
-def test_map_command_on_a_kitti_folder(kitti, tmp_path, capsys):
+def test_map_command_on_a_kitti_folder(kitti_two_frames, tmp_path, capsys):
     """`mrstereo map` reads a KITTI folder directly (two frames of it here)."""
     from mrstereo.cli import entry
 
-    seq = tmp_path / "sequences" / "06"
-    for sub in ("image_0", "image_1"):
-        (seq / sub).mkdir(parents=True)
-        for name in ("000000.png", "000001.png"):
-            shutil.copy(kitti / "sequences" / "06" / sub / name, seq / sub / name)
-    for name in ("calib.txt", "times.txt"):
-        shutil.copy(kitti / "sequences" / "06" / name, seq / name)
-    (tmp_path / "poses").mkdir()
-    shutil.copy(kitti / "poses" / "06.txt", tmp_path / "poses" / "06.txt")
-    code = entry(["map", str(tmp_path), "-o", str(tmp_path / "map"), "--size", "30,20", "--origin", "0,-10",
+    root = kitti_two_frames                # the folder named: no output inside it
+    assert entry(["map", str(root), "-o", str(root / "map"), "--quiet"]) == 2
+    assert "is inside the KITTI odometry recording" in capsys.readouterr().err
+    code = entry(["map", str(root), "-o", str(tmp_path / "map"), "--size", "30,20", "--origin", "0,-10",
                   "--resolution", "0.1", "--quiet"])
     assert code == 0, capsys.readouterr()
     assert "map of 2 frames" in capsys.readouterr().out and (tmp_path / "map" / "map.pgm").is_file()
@@ -195,7 +189,7 @@ def test_map_command_on_a_kitti_folder(kitti, tmp_path, capsys):
     config = PipelineConfig(obstacles=ObstacleConfig(max_range_m=30.0),
                             grid=GridSpec(width_m=30.0, height_m=20.0, resolution_m=0.1, origin_x_m=0.0,
                                           origin_y_m=-10.0))
-    run = build_map(tmp_path, config=config, progress=False)
+    run = build_map(root, config=config, progress=False)
     occupancy = run.grid.probability()
     assert (occupancy > 0.5).sum() > 20 and (occupancy < 0.5).sum() > 1000
     obstacles = np.concatenate([o.obstacle_points_world for o in run.observations])

@@ -7,7 +7,11 @@ disparity sign): docs/conventions.md.
 """
 from __future__ import annotations
 
-from ._limits import _hand_image_limit_to_opencv
+from ._interrupt import guard_start
+
+guard_start()                        # mrstereo's own process: Ctrl-C from here on is one line
+
+from ._limits import _hand_image_limit_to_opencv  # noqa: E402
 
 __version__ = "0.1.0"
 

@@ -17,6 +17,8 @@ LIMITS = {
     "MRSTEREO_MAX_YAML_NODES": (2_000_000, "values of one YAML file, aliases expanded"),
     "MRSTEREO_MAX_FRAMES": (100_000, "frames of one recording or one synthetic run"),
     "MRSTEREO_MAX_MESSAGE_BYTES": (512 << 20, "bytes of one bag message or decompressed chunk"),
+    "MRSTEREO_MAX_BAG_METADATA_BYTES": (256 << 10, "bytes of a ROS 2 bag's metadata.yaml (its reader parses about "
+                                                   "150 KB a second)"),
     "MRSTEREO_MAX_WORKERS": (0, "workers of one run; 0: the cores of this machine"),
 }
 """``name -> (default, what it bounds)``; the environment variable ``name`` overrides the default."""

@@ -15,6 +15,8 @@ import threading
 
 from .._interrupt import reached
 
+reached("import")
+
 # Only the standard library here: the console script imports this module first, and
 # entry() installs the interrupt handler before the commands (1.5 s of imports) load.
 # The commands are registered in cli/_main.py.
@@ -200,6 +202,7 @@ def _run(argv: list[str] | None) -> int:
         try:
             with main.make_context("mrstereo", args) as ctx, protecting_inputs(), warnings.catch_warnings():
                 warnings.showwarning = _show_warning
+                _shown_warnings.clear()
                 main.invoke(ctx)
         except click.exceptions.Exit as exc:           # --help, --version
             return exc.exit_code
@@ -245,10 +248,17 @@ def _run(argv: list[str] | None) -> int:
     return 0
 
 
+_shown_warnings: set[str] = set()
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """A warning of mrstereo as one line ``mrstereo: warning: ...``; those of other packages are dropped."""
+    """A warning of mrstereo as one line ``mrstereo: warning: ...``, each once (a recording read twice warns
+    once); those of other packages are dropped."""
     if issubclass(category, UserWarning) and f"{os.sep}mrstereo{os.sep}" in str(filename):
-        _say(f"mrstereo: warning: {' '.join(str(message).split())}")
+        text = f"mrstereo: warning: {' '.join(str(message).split())}"
+        if text not in _shown_warnings:
+            _shown_warnings.add(text)
+            _say(text)
 
 
 class _QuietPipe:

@@ -45,9 +45,10 @@ VIEW_SUFFIXES = {"rerun": ".rrd", "foxglove": ".mcap"}
 
 
 def check_sink_options(viewers, record_bag: Path | None, view_stem: Path, inputs, *,
-                       output_dirs=()) -> tuple[str, ...]:
+                       output_dirs=(), stamps_s=None) -> tuple[str, ...]:
     """Check ``--viewer`` (its package installed, its file ``view_stem`` + .rrd/.mcap) and ``--record-bag``
-    (a new folder apart from the inputs and the ``output_dirs``) before any work; the viewers asked for."""
+    (a new folder apart from the inputs and the ``output_dirs``; the recording's ``stamps_s`` when known, ones a
+    bag holds) before any work; the viewers asked for."""
     from ..io import check_output_dir, check_outputs
 
     viewers = tuple(dict.fromkeys(v for v in viewers if v != "none"))
@@ -65,6 +66,10 @@ def check_sink_options(viewers, record_bag: Path | None, view_stem: Path, inputs
         if record_bag.exists():
             raise click.BadParameter(f"{record_bag} exists; give a new folder (a bag is a folder of its own)",
                                      param_hint="--record-bag")
+        if stamps_s is not None:
+            from ..recordings.bag_writer import check_bag_stamps
+
+            check_bag_stamps(stamps_s)
     return viewers
 
 

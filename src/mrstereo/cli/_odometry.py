@@ -66,7 +66,8 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     outputs = {"--out": out_path, "--plot": plot_path, "--metrics": metrics_path}
     check_outputs(outputs, suffixes=OUTPUT_SUFFIXES)
     inputs = [p for p in (bag if dataset is None else dataset.root, calib) if p is not None]
-    viewers = check_sink_options(viewers, record_bag, out_path.with_suffix(""), inputs)
+    viewers = check_sink_options(viewers, record_bag, out_path.with_suffix(""), inputs,
+                                 stamps_s=None if dataset is None else dataset.stamps_s)
     opened = opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz, truth=truth)
     with opened as (recording, stereo, stamps):
         check_pair_streams(recording)

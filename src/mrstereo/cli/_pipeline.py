@@ -87,7 +87,8 @@ def map_command(manifest: Path | None, out_dir: Path, calib: Path | None, odomet
     check_output_dir("--out", out_dir, may_hold_inputs=True)
     check_outputs({f"--out {out_dir / name}": out_dir / name for name in MAP_FILES})     # (names the file)
     inputs = [p for p in (bag if dataset is None else dataset.root, calib) if p is not None]
-    viewers = check_sink_options(viewers, record_bag, out_dir / "view", inputs, output_dirs=[out_dir])
+    viewers = check_sink_options(viewers, record_bag, out_dir / "view", inputs, output_dirs=[out_dir],
+                                 stamps_s=None if dataset is None else dataset.stamps_s)
     with opened_dataset(dataset, bag, calib, quiet=quiet, bag_kw=bag_kw, rate_hz=rate_hz, truth=truth) as \
             (dataset, stereo, _):
         run = build_map(dataset, config=config, calibration=stereo, progress=not quiet, workers=workers,

@@ -25,6 +25,7 @@ from .. import _checks, _limits
 
 __all__ = ["Inputs", "protecting_inputs", "note_read", "note_inputs", "atomic_write", "refuse_overwrite_input",
            "check_outputs", "check_output_dir", "staged_dir", "staged_new_dir", "replace_dir", "temporary_dir",
+           "new_temporary_dir",
            "uninterruptible", "remove_stale_temporaries", "is_temporary", "no_space_error", "read_text", "parse_yaml",
            "read_yaml"]
 
@@ -341,6 +342,20 @@ def uninterruptible() -> Iterator[None]:
                 os.kill(os.getpid(), signum)
 
 
+def new_temporary_dir(folder: str | os.PathLike, *, prefix: str = "out") -> Path:
+    """Create and return a fresh hidden folder ``.mrstereo-tmp-PID-XXXXXXXX.PREFIX`` inside ``folder`` (created);
+    the caller removes it (:func:`temporary_dir` does both)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    while True:
+        tmp = folder / _temporary_name(prefix)
+        try:
+            tmp.mkdir()
+            return tmp
+        except FileExistsError:
+            continue
+
+
 @contextlib.contextmanager
 def temporary_dir(folder: str | os.PathLike, *, prefix: str = "out") -> Iterator[Path]:
     """A fresh hidden folder ``.mrstereo-tmp-PID-XXXXXXXX.PREFIX`` inside ``folder``, removed at the end
@@ -350,14 +365,7 @@ def temporary_dir(folder: str | os.PathLike, *, prefix: str = "out") -> Iterator
     ``OSError(ENOSPC)`` naming ``folder``.
     """
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    while True:
-        tmp = folder / _temporary_name(prefix)
-        try:
-            tmp.mkdir()
-            break
-        except FileExistsError:
-            continue
+    tmp = new_temporary_dir(folder, prefix=prefix)
     try:
         try:
             yield tmp

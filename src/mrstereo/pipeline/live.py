@@ -27,6 +27,7 @@ from ..geometry.pair import Observed
 from ..odometry import LOST
 from ..profiling import Profile, active, profiling, stage
 from ..recordings.sources import FrameSource, StereoFrame, paced
+from .. import _checks
 from .._interrupt import reached
 from .._executor import Growing, StreamThreads, Writer, peak_rss_mb, rss_mb
 from ..mapping.sinks import LiveFrame
@@ -74,8 +75,8 @@ class LiveConfig:
             raise ValueError(f"max_frames must be >= 1, got {self.max_frames!r}")
         if not (math.isfinite(self.speed) and self.speed > 0):
             raise ValueError(f"speed must be a finite number > 0, got {self.speed!r}")
-        if int(self.workers) < 1:
-            raise ValueError(f"workers must be >= 1, got {self.workers!r}")
+        if _checks.positive_int("workers", self.workers) > 2:    # (the default, 2, also on one core)
+            _checks.workers("workers", self.workers)
         if self.odometry not in (None, "visual", "given"):
             raise ValueError(f"odometry must be 'visual', 'given' or None, got {self.odometry!r}")
 
@@ -179,10 +180,11 @@ def run_live(source: FrameSource, out_dir: str | os.PathLike, *, calibration: St
     run = LiveRun(grid=mapper.grid, stamps_s=np.empty(0), T_world_from_base=np.empty((0, 4, 4)), source=source.name,
                   odometry=odometry)
     fuser = _Fuser(mapper, live, sinks, run)
-    frames = paced(source, speed=live.speed) if live.realtime and not source.realtime else source
+    stop = stop or threading.Event()
+    frames = paced(source, speed=live.speed, stop=stop) if live.realtime and not source.realtime else source
     threads = StreamThreads(frames, lambda frame: _Matched(frame=frame, arrival_s=time.perf_counter()),
                             _observe_with(mapper), workers=live.workers, lossless=not (source.realtime or live.realtime),
-                            max_items=live.max_frames, stop=stop or threading.Event())
+                            max_items=live.max_frames, stop=stop)
     clock = _Clock(profile=active() or Profile())
     writer = Writer(lambda snapshot: run.files.update(write_live_outputs(out, snapshot)))
     interrupted = None
@@ -244,6 +246,8 @@ def _fuse_in_order(threads: StreamThreads, fuser: _Fuser, writer: Writer, clock:
         if item is None:
             if threads.stop.is_set():
                 threads.slot.discard()
+            if threads.errors:              # the source failed (a frame of another size...)
+                raise threads.errors[0]
             if not threads.matching() and next_ticket >= threads.slot.tickets:
                 return
         else:

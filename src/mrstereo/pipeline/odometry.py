@@ -16,6 +16,7 @@ from ..recordings.frames import FrameSource, RecordingSource
 from ..recordings.layouts import read_recording
 from ..recordings.manifest import Manifest
 from .mapper import PipelineConfig, StereoMapper
+from .._interrupt import reached
 
 __all__ = ["odometry_from_manifest"]
 
@@ -67,6 +68,7 @@ def odometry_from_manifest(manifest, *, config: OdometryConfig | None = None, ca
                                   stamp_s=float(stamps[k]) if stamps is not None else
                                   k * mapper.config.odometry.frame_interval_s,
                                   T_world_from_base=records[k].T_world_from_base if initial_pose == "given" else None))
+        reached("frame")
     mapper.finish()
     if not mapper.vo_status:
         raise ValueError(f"{manifest.root} has no frames: visual odometry needs at least one")

@@ -146,9 +146,13 @@ def _mcap_records(path: Path, fh, size: int) -> None:
 
 def check_bag_file(path: str | os.PathLike) -> None:
     """Walk the records of a ROS 1 bag or an MCAP file (ROS 2 folders: each ``.mcap`` in them) and refuse,
-    naming the byte offset, a record longer than the file or a chunk beyond ``MRSTEREO_MAX_MESSAGE_BYTES``.
+    naming the byte offset, a record longer than the file or a chunk beyond ``MRSTEREO_MAX_MESSAGE_BYTES``;
+    a ROS 2 ``metadata.yaml`` beyond ``MRSTEREO_MAX_BAG_METADATA_BYTES``.
     Other files (sqlite3 storage) are left to the reader."""
     path = Path(path)
+    if path.is_dir() and (path / "metadata.yaml").is_file():       # parsed by rosbags' pure-Python YAML reader
+        _limits.within("MRSTEREO_MAX_BAG_METADATA_BYTES", (path / "metadata.yaml").stat().st_size,
+                       f"bag {path}: metadata.yaml has more bytes")
     files = sorted(path.glob("*.mcap")) if path.is_dir() else [path]
     for file in files:
         size = file.stat().st_size

@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import warnings
 import weakref
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -22,6 +23,7 @@ import cv2
 import numpy as np
 
 from .. import _checks, _limits
+from .._interrupt import reached
 from ..camera import CameraInfo, CameraMount, StereoCamera
 from ..io import check_output_dir, decode_image, note_inputs
 from ..transforms import R_BODY_FROM_OPTICAL, T_from_position_quaternion, rotation_from_quaternion, slerp, wrap_angle
@@ -435,14 +437,33 @@ def _camera_info_topics(topics: dict[str, str], left_topic: str, right_topic: st
     return tuple(camera_info_topics)
 
 
+def _info_values(msg) -> tuple:
+    """What a CameraInfo says of the camera (size, model, K, D, R, P): not its header."""
+    fields = [getattr(msg, name, None) if getattr(msg, name, None) is not None else getattr(msg, name.lower())
+              for name in ("K", "D", "R", "P")]
+    return (int(msg.width), int(msg.height), str(msg.distortion_model), *(tuple(np.ravel(f).tolist()) for f in fields))
+
+
 def _stereo_of_reader(reader, camera_info_topics: tuple[str, str]) -> StereoCamera:
-    """The calibration of the first left and right CameraInfo messages."""
+    """The calibration of the first left and right CameraInfo messages; a later message that says otherwise (a
+    camera recalibrated or switched mid-bag) is a warning naming it, the first one still used."""
     infos: dict[str, object] = {}
+    first: dict[str, tuple] = {}
+    body: dict[str, bytes] = {}      # a message after its stamp (12 bytes: ROS 1 seq + stamp, CDR header + stamp)
+    count: dict[str, int] = {}
+    changed: list[str] = []
     for conn, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic in camera_info_topics]):
+        count[conn.topic] = count.get(conn.topic, 0) + 1
+        if conn.topic in changed or bytes(raw[12:]) == body.get(conn.topic):
+            continue
+        msg = reader.deserialize(raw, conn.msgtype)
         if conn.topic not in infos:
-            infos[conn.topic] = reader.deserialize(raw, conn.msgtype)
-            if len(infos) == 2:
-                break
+            infos[conn.topic], first[conn.topic], body[conn.topic] = msg, _info_values(msg), bytes(raw[12:])
+        elif _info_values(msg) != first[conn.topic]:
+            changed.append(conn.topic)
+            warnings.warn(f"camera_info {conn.topic} changes at its message {count[conn.topic] - 1} (stamp "
+                          f"{msg.header.stamp.sec}.{msg.header.stamp.nanosec:09d} s): every frame is rectified with "
+                          "its first message; give --calib if the camera changed", stacklevel=2)
     missing = [t for t in camera_info_topics if t not in infos]
     if missing:
         raise ValueError(f"camera_info topic {missing[0]} has no messages")
@@ -795,6 +816,7 @@ def export_bag(bag: str | os.PathLike, out_dir: str | os.PathLike, *, progress: 
             dataset.write(keys[1], k, right)
             dataset.add_frame(k, pose=source.poses[k], pan_rad=source.pans[k], stamp_s=source.stamps_ns[k] / 1e9)
             bar.update(1)
+            reached("frame")
     return BagExport(out_dir=Path(out_dir), n_frames=source.n_frames, n_left=source.n_left, n_right=source.n_right,
                      stamps_ns=source.stamps_ns, calibration=source.calibration, mount=source.mount,
                      mount_source=source.mount_source, pose_source=source.pose_source)

@@ -13,9 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import new_temporary_dir, remove_stale_temporaries
 from ..transforms import quaternion_from_rotation
 
-__all__ = ["BagWriter", "BAG_TOPICS", "LATCHED_TOPICS", "MAP_FRAME", "ODOM_FRAME", "BASE_FRAME", "CAMERA_FRAME"]
+__all__ = ["BagWriter", "check_bag_stamps", "BAG_TOPICS", "LATCHED_TOPICS", "MAP_FRAME", "ODOM_FRAME", "BASE_FRAME",
+           "CAMERA_FRAME"]
 
 MAP_FRAME, ODOM_FRAME, BASE_FRAME, CAMERA_FRAME = "map", "odom", "base_link", "camera_left_optical_frame"
 BAG_TOPICS = {"/scan": "sensor_msgs/msg/LaserScan", "/points": "sensor_msgs/msg/PointCloud2",
@@ -31,6 +33,15 @@ is an int32: 2038-01-19)."""
 LATCHED_TOPICS = ("/tf_static", "/map")
 """Offered as transient local (latched), as robot_state_publisher and map_server offer them: a node that
 subscribes after ``ros2 bag play`` sent them still gets the last message."""
+
+
+def check_bag_stamps(stamps_s) -> None:
+    """Raise ``ValueError`` naming the first stamp [s] a ROS 2 bag cannot hold (:data:`MAX_STAMP_NS`)."""
+    for stamp in stamps_s:
+        if not 0 <= stamp * 1e9 < MAX_STAMP_NS:
+            raise ValueError(f"--record-bag: a time stamp of {stamp:.10g} s cannot be written to a ROS 2 bag (stamps "
+                             "from 0 to 2^31 s, before 2038-01-19): the recording's stamps are wrong; fix them or "
+                             "record no bag")
 
 
 def _qos(latched: bool) -> list:
@@ -60,10 +71,10 @@ class BagWriter:
         self.path = Path(path)
         if self.path.exists():
             raise ValueError(f"--record-bag: {self.path} already exists; choose a new folder")
-        # built in a hidden folder beside it under its own name (the storage file is named after the bag)
-        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        shutil.rmtree(self._tmp, ignore_errors=True)
-        self._tmp.mkdir(parents=True)
+        # built in a temporary folder of mrstereo's beside it (only those are ever removed), under its own name
+        # (the storage file is named after the bag)
+        remove_stale_temporaries(self.path.parent)
+        self._tmp = new_temporary_dir(self.path.parent, prefix=self.path.name)
         self.ts = get_typestore(Stores.ROS2_HUMBLE)
         self.T = self.ts.types
         self._writer = Writer(self._tmp / self.path.name, version=9, storage_plugin=StoragePlugin.MCAP)
@@ -96,10 +107,7 @@ class BagWriter:
                                                            w=float(q[3]))))
 
     def _write(self, topic: str, msg, stamp_ns: int) -> None:
-        if not 0 <= stamp_ns < MAX_STAMP_NS:
-            raise ValueError(f"--record-bag: a time stamp of {stamp_ns / 1e9:.10g} s cannot be written to a ROS 2 "
-                             "bag (stamps from 0 to 2^31 s, before 2038-01-19): the recording's stamps are wrong; "
-                             "fix them or record no bag")
+        check_bag_stamps([stamp_ns / 1e9])
         if topic not in self._conn:
             self._conn[topic] = self._writer.add_connection(topic, BAG_TOPICS[topic], typestore=self.ts,
                                                             offered_qos_profiles=_qos(topic in LATCHED_TOPICS))

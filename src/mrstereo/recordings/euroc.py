@@ -21,7 +21,7 @@ import numpy as np
 
 from ..camera import CameraMount
 from ..camera.formats import euroc_body_from_camera, import_calibration
-from ..io import read_text
+from ..io import note_inputs, read_text
 from ..transforms import quaternion_from_rotation
 from .bag import TransformTrack, pair_by_stamp
 from .manifest import FrameRecord, Manifest, pose_3d_of
@@ -56,6 +56,14 @@ def _csv_rows(path: Path, what: str) -> list[list[str]]:
     return rows
 
 
+def _stamp_ns(text: str, path: Path, row: int) -> int:
+    """A stamp in nanoseconds that numpy's int64 (and a ROS time) holds."""
+    stamp = int(text)
+    if not 0 <= stamp < 2**63:
+        raise ValueError(f"{path}: row {row} has the stamp {text} ns, beyond the 2^63 ns (year 2262) a stamp may be")
+    return stamp
+
+
 def _camera_list(cam: Path) -> tuple[np.ndarray, list[Path]]:
     """Stamps [ns] and image paths of ``cam/data.csv``."""
     csv = cam / "data.csv"
@@ -63,7 +71,11 @@ def _camera_list(cam: Path) -> tuple[np.ndarray, list[Path]]:
     for n, row in enumerate(_csv_rows(csv, "EuRoC camera list"), 1):
         if len(row) < 2 or not row[0].isdigit():
             raise ValueError(f"EuRoC camera list {csv}: row {n} must be 'timestamp_ns,filename', got {','.join(row)!r}")
-        stamps.append(int(row[0]))
+        stamp = _stamp_ns(row[0], csv, n)
+        if stamps and stamp <= stamps[-1]:
+            raise ValueError(f"EuRoC camera list {csv}: row {n} has the stamp {stamp} ns, not after row {n - 1}'s "
+                             f"{stamps[-1]} ns: the stamps must increase")
+        stamps.append(stamp)
         files.append(cam / "data" / row[1])
     if not stamps:
         raise ValueError(f"EuRoC camera list {csv} lists no image")
@@ -149,4 +161,6 @@ def read_euroc(path: str | os.PathLike, *, truth=None) -> Manifest:
                         ground_truth_map=None, frames=tuple(frames), layout="EuRoC/ASL", has_poses=track is not None,
                         pose_frame_mount=CameraMount(T_body_from_cam0) if track is not None else None,
                         notes=tuple(notes))
+    note_inputs(manifest.inputs().add(*sensors, mav / "cam0" / "data.csv", mav / "cam1" / "data.csv",
+                                      truth_csv if track is not None else None))
     return with_truth(manifest, truth, pose_frame_mount=CameraMount(T_body_from_cam0))

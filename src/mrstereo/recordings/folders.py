@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import StereoCamera, read_stereo
-from ..io import IMAGE_SUFFIXES
+from ..io import IMAGE_SUFFIXES, note_inputs
 from .manifest import FrameRecord, Manifest
 from .truth import camera_to_base, check_truth, with_truth
 
@@ -143,6 +143,7 @@ def read_image_folders(path: str | os.PathLike, *, calibration: StereoCamera | s
                         calibration_path=(calibration_path or root).resolve(), mount=stereo.mount,
                         ground_truth_map=None, frames=frames, layout="image folders", has_poses=False,
                         notes=tuple(notes))
+    note_inputs(manifest.inputs())
     if truth is None or truth is False:
         return manifest
     if stereo.mount is None:

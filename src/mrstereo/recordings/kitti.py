@@ -64,6 +64,17 @@ def is_kitti_odometry(path: str | os.PathLike) -> bool:
                for f in folders)
 
 
+def frame_numbers(images) -> list[int]:
+    """The frame numbers of KITTI image names (``000042.png``: 42); a name that is no number (``-1.png``,
+    ``a.png``) is an error naming the image."""
+    numbers = []
+    for p in images:
+        if not (p.stem.isascii() and p.stem.isdigit()):
+            raise ValueError(f"{p}: a KITTI image name must be its frame number (000042.png), got {p.name}")
+        numbers.append(int(p.stem))
+    return numbers
+
+
 def calib_rows(path: Path, sizes: dict[str, int], what: str = "KITTI calibration") -> dict[str, np.ndarray]:
     """The rows ``key: numbers`` of a KITTI calibration file named in ``sizes`` (key -> count of numbers);
     other lines (``calib_time: ...``) are not read. Raises ``ValueError`` naming the file, line and key."""
@@ -168,7 +179,7 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
         raise FileNotFoundError(f"KITTI calibration not found: {calib_path}")
     first = read_image(lefts[0])
     stereo = _calibration(calib_path, (first.shape[1], first.shape[0]))
-    indices = [int(p.stem) for p in lefts]
+    indices = frame_numbers(lefts)
     stamps = None
     if (seq / "times.txt").is_file():
         times = numbers_file(seq / "times.txt", 1, "KITTI times").ravel()
@@ -181,8 +192,13 @@ def read_kitti_odometry(path: str | os.PathLike, *, sequence: str | None = None,
         rows = numbers_file(poses_path, 12, "KITTI poses")
         if max(indices) >= len(rows):
             raise ValueError(f"{poses_path} has {len(rows)} poses but image_0 has frame {max(indices)}")
-        poses = [pose_3d_of(camera_to_base(np.vstack([rows[k].reshape(3, 4), [0.0, 0.0, 0.0, 1.0]]), mount))
-                 for k in indices]
+        poses = []
+        for k in indices:
+            R = rows[k].reshape(3, 4)[:, :3]
+            if not (np.allclose(R @ R.T, np.eye(3), atol=1e-3) and np.linalg.det(R) > 0):
+                raise ValueError(f"{poses_path}: line {k + 1} (frame {k}) is no pose: its 3x3 part is not a rotation "
+                                 f"(R R^T = I, det R = 1; det {np.linalg.det(R):.3g})")
+            poses.append(pose_3d_of(camera_to_base(np.vstack([rows[k].reshape(3, 4), [0.0, 0.0, 0.0, 1.0]]), mount)))
     origin = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
     frames = tuple(FrameRecord(pose=None, left_rect=left.resolve(), right_rect=right.resolve(),
                                stamp_s=None if stamps is None else float(stamps[i]),

@@ -35,7 +35,7 @@ from .. import _limits
 from ..camera.mount import CameraMount
 from ..io import note_inputs, read_image, read_text
 from ..transforms import T_from_R_t, rotation_from_rpy
-from .kitti import calib_rows, stereo_from_projections
+from .kitti import calib_rows, frame_numbers, stereo_from_projections
 from .manifest import FrameRecord, Manifest, pose_3d_of
 from .truth import camera_to_base, check_truth, with_truth
 
@@ -198,7 +198,7 @@ def read_kitti_raw(path: str | os.PathLike, *, drive: str | None = None, truth=N
                                      (first.shape[1], first.shape[0]), date / _CALIB_NAMES[0])
     T_base_from_imu = T_from_R_t(np.eye(3), [0.0, 0.0, OXTS_HEIGHT_M])
     mount = CameraMount(T_base_from_imu @ np.linalg.inv(_T_rect_from_imu(date)))
-    indices = [int(p.stem) for p in lefts]
+    indices = frame_numbers(lefts)
     stamps = _stamps_s(drive_dir / "image_00" / "timestamps.txt", max(indices) + 1)[indices]
     notes, poses = [], None
     if truth is None and (drive_dir / "oxts" / "data").is_dir():

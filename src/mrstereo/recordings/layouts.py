@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ..io import Inputs, note_inputs
 from .euroc import is_euroc, read_euroc
 from .folders import FOLDER_PAIRS, is_image_folders, read_image_folders
 from .kitti import is_kitti_odometry, read_kitti_odometry
@@ -91,16 +92,14 @@ def read_recording(path: str | os.PathLike, *, calibration=None, rate_hz: float 
     """
     check_truth(truth)
     layout = layout_of(path)
-    if layout == "dataset":
-        return with_truth(read_manifest(path), truth)
-    if layout == "KITTI odometry":
-        return read_kitti_odometry(path, truth=truth)
-    if layout == "KITTI raw":
-        return read_kitti_raw(path, truth=truth)
-    if layout == "EuRoC/ASL":
-        return read_euroc(path, truth=truth)
-    if layout == "image folders":
-        return read_image_folders(path, calibration=calibration, rate_hz=rate_hz, truth=truth)
+    readers = {"dataset": lambda p, truth: with_truth(read_manifest(p), truth), "KITTI odometry": read_kitti_odometry,
+               "KITTI raw": read_kitti_raw, "EuRoC/ASL": read_euroc}
+    if layout in readers or layout == "image folders":
+        manifest = readers[layout](path, truth=truth) if layout in readers else \
+            read_image_folders(path, calibration=calibration, rate_hz=rate_hz, truth=truth)
+        if Path(path).is_dir():         # the folder named (EuRoC's above mav0/, KITTI's above sequences/NN/)
+            note_inputs(Inputs(folders=[path], kind=manifest.kind))
+        return manifest
     raise ValueError(f"{path} is a ROS bag: open it with mrstereo.recordings.open_recording (read message by "
                      "message) or write it as a dataset with mrstereo.recordings.bag.export_bag")
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -102,6 +103,12 @@ def _T_of_3d(name: str, pose) -> np.ndarray:
     return T_from_position_quaternion(values[:3], values[3:])
 
 
+MAX_SPEED_M_S = 100.0
+"""The fastest step of given poses taken without a warning (360 km/h: no ground robot, no car on a road)."""
+MAX_STEP_M = 50.0
+"""Without stamps: the longest step of given poses from one frame to the next taken without a warning."""
+
+
 @dataclass(frozen=True)
 class Manifest:
     """A dataset read from ``manifest.yaml``.
@@ -145,18 +152,53 @@ class Manifest:
     pose_frame_mount: CameraMount | None = None
     notes: tuple[str, ...] = ()
 
+    def __post_init__(self) -> None:
+        previous = None
+        for k, frame in enumerate(self.frames):
+            s = frame.stamp_s
+            if s is None:
+                continue
+            if not math.isfinite(s):
+                raise ValueError(f"{self.kind} {self.root}: frame {k} has the stamp {s!r}: stamps are finite seconds")
+            if previous is not None and not s > previous[1]:
+                raise ValueError(f"{self.kind} {self.root}: frame {k} has the stamp {s:.9g} s, not after frame "
+                                 f"{previous[0]}'s {previous[1]:.9g} s: the stamps must increase")
+            previous = (k, s)
+        if self.has_poses and len(self.frames) > 1:
+            self._warn_pose_jump()
+
+    def _warn_pose_jump(self) -> None:
+        """A warning at the first step of the given poses faster than :data:`MAX_SPEED_M_S` (with stamps) or longer
+        than :data:`MAX_STEP_M` (without): a broken odometry, which the run would map as it is."""
+        xyz = np.array([f.pose_3d[:3] if f.pose_3d is not None else (*f.pose[:2], 0.0) for f in self.frames])
+        steps = np.linalg.norm(np.diff(xyz, axis=0), axis=1)
+        stamps = self.stamps_s
+        allowed = MAX_SPEED_M_S * np.diff(stamps) if stamps is not None else np.full(len(steps), MAX_STEP_M)
+        over = np.flatnonzero(~(steps <= allowed))
+        if over.size:
+            k = int(over[0])
+            speed = f", {steps[k] / (stamps[k + 1] - stamps[k]):.3g} m/s" if stamps is not None else ""
+            warnings.warn(f"{self.kind} {self.root}: the given poses jump {steps[k]:.4g} m from frame {k} to frame "
+                          f"{k + 1}{speed}: the odometry is broken there and the run maps it as it is (--odometry "
+                          "visual replaces it)")
+
     @property
     def stamps_s(self) -> np.ndarray | None:
         """Every frame's stamp (seconds), or None when a frame has none."""
         stamps = [f.stamp_s for f in self.frames]
         return None if any(s is None for s in stamps) else np.array(stamps, dtype=np.float64)
 
+    @property
+    def kind(self) -> str:
+        """What the recording is called in messages: ``"dataset"`` or ``"<layout> recording"``."""
+        return "dataset" if self.layout == "dataset" else f"{self.layout} recording"
+
     def inputs(self) -> Inputs:
         """What a run over the dataset reads: its folder (no output may go inside it), the manifest, the
         calibration, the ground-truth map and every frame's files (wherever they lie)."""
         from ..mapping.rosmap import ros_map_files
 
-        inputs = Inputs(folders=[self.root], kind="dataset")
+        inputs = Inputs(folders=[self.root], kind=self.kind)
         inputs.add(self.root / MANIFEST_NAME, self.calibration_path)
         if self.ground_truth_map is not None:
             inputs.add(*ros_map_files(self.ground_truth_map))

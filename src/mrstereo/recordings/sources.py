@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import os
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
@@ -23,7 +24,7 @@ from .frames import FrameSource, RecordingSource, StereoFrame, _gray, frame_imag
 from .layouts import open_recording
 
 __all__ = ["StereoFrame", "FrameSource", "VideoSource", "RecordingSource", "open_source", "paced", "is_camera",
-           "frame_image"]
+           "frame_image", "MAX_STAMP_GAP_S"]
 
 VIDEO_SUFFIXES = (".avi", ".mkv", ".mp4", ".mov", ".webm", ".mpg", ".mpeg", ".m4v", ".ogv", ".wmv", ".flv",
                   ".ts", ".mjpeg", ".mjpg", ".h264", ".h265")
@@ -34,6 +35,11 @@ def is_camera(spec: str | int) -> bool:
     """A camera index (``0``, ``"1"``) or a V4L2 device path (``/dev/video0``)."""
     text = str(spec)
     return text.isdigit() or text.startswith("/dev/")
+
+
+def _known(value: float) -> float | None:
+    """A capture property, None where the container or the driver does not know it (0, NaN)."""
+    return float(value) if math.isfinite(value) and value > 0 else None
 
 
 def _open_capture(spec: str | int) -> cv2.VideoCapture:
@@ -98,16 +104,40 @@ class VideoSource(FrameSource):
         except BaseException:
             self.close()
             raise
-        fps = self._captures[0].get(cv2.CAP_PROP_FPS)
-        self.rate_hz = float(fps) if math.isfinite(fps) and fps > 0 else None
-        n = self._captures[0].get(cv2.CAP_PROP_FRAME_COUNT)
-        self.n_frames = int(n) if not self.realtime and math.isfinite(n) and n > 0 else None
+        self._names = [str(s) for s in specs]
+        rates = [_known(c.get(cv2.CAP_PROP_FPS)) for c in self._captures]
+        self.rate_hz = rates[0]
+        n = _known(self._captures[0].get(cv2.CAP_PROP_FRAME_COUNT))
+        self.n_frames = int(n) if not self.realtime and n is not None else None
+        try:
+            self._check_pair(rates)
+        except BaseException:
+            self.close()
+            raise
+
+    def _check_pair(self, rates: list[float | None]) -> None:
+        """Two streams must be a pair: one image size, and (files) one frame rate -- they are paired frame by frame."""
+        if len(self._captures) != 2:
+            return
+        sizes = [tuple(int(_known(c.get(p)) or 0) for p in (cv2.CAP_PROP_FRAME_WIDTH, cv2.CAP_PROP_FRAME_HEIGHT))
+                 for c in self._captures]
+        if all(all(s) for s in sizes) and sizes[0] != sizes[1]:
+            raise ValueError(f"{self._names[0]} is {sizes[0][0]}x{sizes[0][1]} and {self._names[1]} "
+                             f"{sizes[1][0]}x{sizes[1][1]}: the left and right images of a stereo pair have one size")
+        if not self.realtime and None not in rates and abs(rates[0] - rates[1]) > 0.01 * max(rates):
+            raise ValueError(f"{self._names[0]} runs at {rates[0]:g} fps and {self._names[1]} at {rates[1]:g} fps: "
+                             "two videos are paired frame by frame, so they must have one frame rate")
 
     def __iter__(self) -> Iterator[StereoFrame]:
         index = 0
         while self._captures:
             with stage("read"):
-                if not all(c.grab() for c in self._captures):      # grab both first: exposures close in time
+                grabbed = [c.grab() for c in self._captures]      # grab both first: exposures close in time
+                if not all(grabbed):
+                    if any(grabbed) and not self.realtime:
+                        ended, other = (self._names[k] for k in ((0, 1) if not grabbed[0] else (1, 0)))
+                        warnings.warn(f"{ended} ended after {index} frames, {other} has more: the rest of "
+                                      f"{other} is not used", stacklevel=2)
                     return
                 stamp = time.monotonic() if self.realtime else self._file_stamp(index)
                 images = []
@@ -146,18 +176,41 @@ class VideoSource(FrameSource):
         self._captures = []
 
 
-def paced(frames, *, speed: float = 1.0, clock=time.monotonic, sleep=time.sleep) -> Iterator[StereoFrame]:
+MAX_STAMP_GAP_S = 60.0
+"""The longest wait :func:`paced` takes between two frames' stamps (at speed 1): a longer gap, or a stamp going
+back further, is a jump in the recording's clock, not time to wait."""
+
+
+def paced(frames, *, speed: float = 1.0, clock=time.monotonic, sleep=None, stop=None,
+          max_gap_s: float = MAX_STAMP_GAP_S) -> Iterator[StereoFrame]:
     """Hand out ``frames`` at the rate of their stamps (``speed`` times faster): frame k no earlier than
-    ``(stamp_k - stamp_0) / speed`` after the first. A reader that falls behind is not waited for."""
+    ``(stamp_k - stamp_0) / speed`` after the first. A reader that falls behind is not waited for.
+
+    ``stop`` (a ``threading.Event``) ends a wait at once and the replay with it. Two stamps more than
+    ``max_gap_s`` apart (or going back by more) are a jump of the recording's clock: a warning naming the
+    frames, no wait, and the pacing starts again from that frame.
+    """
     if not (math.isfinite(speed) and speed > 0):
         raise ValueError(f"speed must be a finite number > 0, got {speed!r}")
-    start = first = None
+    wait = sleep or (stop.wait if stop is not None else time.sleep)
+    start = first = previous = None
     for frame in frames:
+        if stop is not None and stop.is_set():
+            return
+        gap = None if previous is None else frame.stamp_s - previous.stamp_s
+        if gap is not None and not abs(gap) <= max_gap_s:
+            warnings.warn(f"the stamps jump by {gap:.6g} s from frame {previous.index} to frame {frame.index} "
+                          f"(more than {max_gap_s:g} s): replayed without waiting, the pacing restarts there",
+                          stacklevel=2)
+            start = None
         if start is None:
             start, first = clock(), frame.stamp_s
+        previous = frame
         delay = start + (frame.stamp_s - first) / speed - clock()
         if delay > 0:
-            sleep(delay)
+            wait(delay)
+            if stop is not None and stop.is_set():
+                return
         yield frame
 
 
