@@ -12,7 +12,8 @@ from mrstereo.cli import entry
 from mrstereo.geometry.ground import ground_from_mount
 from mrstereo.io import read_image
 from mrstereo.pipeline.mapper import StereoMapper
-from mrstereo.pipeline.run import build_map, recording_source
+from mrstereo.pipeline.run import build_map
+from mrstereo.recordings.sources import recording_source
 from mrstereo.recordings.bag import (TfTree, TransformTrack, bag_topics, camera_info_from_message, export_bag,
                                      image_from_message, pair_by_stamp, stereo_from_camera_info)
 from mrstereo.recordings.manifest import read_manifest, write_manifest

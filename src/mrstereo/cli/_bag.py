@@ -256,7 +256,7 @@ def export_command(bag: Path, out_dir: Path, quiet: bool, **options) -> None:
     Every command that reads a DATASET then reads the recording.
     """
     from ..io import check_output_dir
-    from ..pipeline.run import check_pair_streams
+    from ..recordings.sources import check_pair_streams
     from ..recordings.bag import export_bag
     from ..recordings.manifest import read_manifest
 

@@ -59,7 +59,7 @@ def odometry_command(manifest: Path | None, out_path: Path, plot_path: Path | No
     from ..io import check_outputs
     from ..camera import CameraMount
     from ..odometry.trajectory import moved_to_body, plot_trajectories, trajectory_metrics, write_tum
-    from ..pipeline.run import check_pair_streams
+    from ..recordings.sources import check_pair_streams
 
     recording_of(manifest, bag)                          # one of them
     dataset, bag = read_inputs(manifest, bag, calib, rate_hz=rate_hz, truth=truth)

@@ -18,8 +18,9 @@ import numpy as np
 from .grid import GridSpec
 from .occupancy import MappingConfig, OccupancyGrid, log_odds_from_probability
 from .rosmap import RosMap, array_on_grid, read_ros_map
+from .tiles import TiledOccupancyGrid
 
-__all__ = ["prior_log_odds", "prior_grid"]
+__all__ = ["seeded", "prior_log_odds", "prior_grid"]
 
 
 def prior_log_odds(ros_map: RosMap, config: MappingConfig) -> np.ndarray:
@@ -75,3 +76,16 @@ def prior_grid(prior, *, config: MappingConfig, resolution_m: float, grid: GridS
         raise ValueError(f"{where}: its origin ({spec.origin_x_m:g}, {spec.origin_y_m:g}) m is not a whole number "
                          f"of {resolution_m:g} m cells from the map's ({grid.origin_x_m:g}, {grid.origin_y_m:g}) m")
     return OccupancyGrid(grid, config=config, log_odds=placed)
+
+
+def seeded(grid, prior, *, config: MappingConfig, resolution_m: float, window: GridSpec | None = None):
+    """``grid`` (an :class:`OccupancyGrid` on ``window`` or a :class:`TiledOccupancyGrid`) started from the saved
+    map ``prior`` (:func:`prior_grid`): the tiles written with it, or the window's grid replaced by it."""
+    seed = prior_grid(prior, config=config, resolution_m=resolution_m, grid=window)
+    if not isinstance(grid, TiledOccupancyGrid):
+        return seed
+    try:
+        grid.seed(seed)
+    except ValueError as exc:
+        raise ValueError(f"prior {prior}: {exc} (give the map a window: --size/--origin)") from None
+    return grid

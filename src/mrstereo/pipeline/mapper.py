@@ -27,7 +27,7 @@ from ..geometry.scan import LaserScan
 from ..mapping import GridSpec
 from ..mapping.fusion import FrameObservation, fuse_step, world_observation
 from ..mapping.occupancy import MappingConfig, OccupancyGrid
-from ..mapping.prior import prior_grid
+from ..mapping.prior import seeded
 from ..mapping.tiles import TiledOccupancyGrid
 from ..matching.config import MatchingConfig
 from ..odometry import LOST, OdometryConfig, OdometryResult, StereoOdometry
@@ -235,15 +235,8 @@ class StereoMapper:
         else:
             self.grid = OccupancyGrid(self.config.grid, config=self.config.mapping)
         if prior is not None:
-            seed = prior_grid(prior, config=self.config.mapping, resolution_m=self.config.resolution_m,
-                              grid=self.config.grid)
-            if isinstance(self.grid, TiledOccupancyGrid):
-                try:
-                    self.grid.seed(seed)
-                except ValueError as exc:
-                    raise ValueError(f"prior {prior}: {exc} (give the map a window: --size/--origin)") from None
-            else:
-                self.grid = seed
+            self.grid = seeded(self.grid, prior, config=self.config.mapping, resolution_m=self.config.resolution_m,
+                               window=self.config.grid)
         self._vote = FloorVote(calibration, mount, check_mount=check_mount, name=name)
         self._held: list = []
         self.streams = StreamCheck(calibration, name)

@@ -24,24 +24,14 @@ from ..mapping.tiles import TiledOccupancyGrid
 from ..recordings.frames import FrameSource
 from ..recordings.layouts import read_recording
 from ..recordings.manifest import Manifest, pose_3d_of, rebased
-from ..rejection.streams import StreamCheck
+from ..recordings.sources import recording_source
 from ..transforms import T_from_planar
 from .._executor import read_ahead
 from .mapper import PipelineConfig, StereoMapper
 from .odometry import manifest_of
 
-__all__ = ["build_map", "map_frames", "finish_map", "map_from_observations", "recording_source",
-           "check_pair_streams", "with_visual_odometry", "config_for_recording"]
-
-
-
-def recording_source(recording, *, prefer_raw: bool = False):
-    """The :class:`~mrstereo.recordings.sources.FrameSource` of a recording (a Manifest or a path): the one
-    place a map run turns a recording into frames."""
-    from ..recordings.sources import RecordingSource
-
-    manifest = recording if isinstance(recording, Manifest) else read_recording(recording)
-    return RecordingSource(manifest, prefer_raw=prefer_raw)
+__all__ = ["build_map", "map_frames", "finish_map", "map_from_observations", "with_visual_odometry",
+           "config_for_recording"]
 
 
 def map_frames(mapper: StereoMapper, frames, *, workers: int | None = None, scheduler=None,
@@ -244,17 +234,3 @@ def map_from_observations(manifest: Manifest, observations: list[FrameObservatio
     run = finish_map(mapper, manifest, fusion=fusion)
     run.floor = floor
     return run
-
-
-def check_pair_streams(manifest: Manifest | FrameSource) -> list[str]:
-    """Warn (one ``mrstereo: warning:`` line on the command line) when the first frames of a recording (or a
-    source that can be read twice, a bag) show identical or swapped left and right streams
-    (:class:`~mrstereo.rejection.streams.StreamCheck`, as a :class:`StereoMapper` does); return the warnings."""
-    check = StreamCheck(manifest.calibration, f"dataset {manifest.root}")
-    try:
-        with recording_source(manifest) if isinstance(manifest, Manifest) else nullcontext(manifest) as source:
-            for frame in itertools.islice(source, check.n_frames):
-                check.add(frame.index, frame.left, frame.right, rectified=frame.rectified)
-    except (OSError, ValueError, TypeError):      # an unreadable frame: the run reports it itself
-        pass
-    return check.warn()

@@ -9,22 +9,26 @@ file at its recorded rate. The live loop: docs/live.md. Conventions: docs/conven
 """
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import time
 import warnings
 from collections.abc import Iterator, Sequence
+from contextlib import nullcontext
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from ..profiling import stage
+from ..rejection.streams import StreamCheck
 from .frames import FrameSource, RecordingSource, StereoFrame, _gray, frame_image
-from .layouts import open_recording
+from .layouts import open_recording, read_recording
+from .manifest import Manifest
 
 __all__ = ["StereoFrame", "FrameSource", "VideoSource", "RecordingSource", "open_source", "paced", "is_camera",
-           "frame_image", "MAX_STAMP_GAP_S"]
+           "frame_image", "MAX_STAMP_GAP_S", "recording_source", "check_pair_streams"]
 
 VIDEO_SUFFIXES = (".avi", ".mkv", ".mp4", ".mov", ".webm", ".mpg", ".mpeg", ".m4v", ".ogv", ".wmv", ".flv",
                   ".ts", ".mjpeg", ".mjpg", ".h264", ".h265")
@@ -257,3 +261,24 @@ def open_source(sources: Sequence[str | os.PathLike], *, side_by_side: bool = Fa
     if side_by_side:
         raise ValueError(f"side_by_side is for a camera or a video file, not a recording ({spec})")
     return open_recording(spec, prefer_raw=prefer_raw, truth=truth)
+
+
+def recording_source(recording, *, prefer_raw: bool = False):
+    """The :class:`~mrstereo.recordings.sources.FrameSource` of a recording (a Manifest or a path): the one
+    place a map run turns a recording into frames."""
+    manifest = recording if isinstance(recording, Manifest) else read_recording(recording)
+    return RecordingSource(manifest, prefer_raw=prefer_raw)
+
+
+def check_pair_streams(manifest: Manifest | FrameSource) -> list[str]:
+    """Warn (one ``mrstereo: warning:`` line on the command line) when the first frames of a recording (or a
+    source that can be read twice, a bag) show identical or swapped left and right streams
+    (:class:`~mrstereo.rejection.streams.StreamCheck`, as a :class:`~mrstereo.pipeline.mapper.StereoMapper` does); return the warnings."""
+    check = StreamCheck(manifest.calibration, f"dataset {manifest.root}")
+    try:
+        with recording_source(manifest) if isinstance(manifest, Manifest) else nullcontext(manifest) as source:
+            for frame in itertools.islice(source, check.n_frames):
+                check.add(frame.index, frame.left, frame.right, rectified=frame.rectified)
+    except (OSError, ValueError, TypeError):      # an unreadable frame: the run reports it itself
+        pass
+    return check.warn()
