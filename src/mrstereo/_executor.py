@@ -30,7 +30,8 @@ from . import _checks
 from ._interrupt import reached
 
 __all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory",
-           "LatestFrame", "Ordered", "Writer", "Growing", "rss_mb", "peak_rss_mb", "StreamThreads", "read_ahead"]
+           "LatestFrame", "Ordered", "Writer", "Growing", "rss_mb", "peak_rss_mb", "StreamThreads", "read_ahead",
+           "quiet_stderr"]
 
 _WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
@@ -206,7 +207,7 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
     # glibc's mmap threshold: every image-sized temporary would cost fresh page faults. The workers
     # tune malloc themselves (limit_threads -> keep_freed_memory).
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
-            _quiet_children():
+            quiet_stderr():
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=":0", env=env, silence_logs=logging.CRITICAL)
     with cluster, Client(cluster) as client:
@@ -223,8 +224,8 @@ def require_scale() -> None:
 
 
 @contextlib.contextmanager
-def _quiet_children() -> Iterator[None]:
-    """Worker processes started in the block write their stderr to /dev/null.
+def quiet_stderr() -> Iterator[None]:
+    """Processes started in the block (Dask workers, a viewer) write their stderr to /dev/null.
 
     Ctrl-C signals the whole process group: workers still importing would each print a traceback
     over the command's one line (their failures reach this process through Dask anyway).
