@@ -466,3 +466,36 @@ def test_foxglove_streams_the_scan_to_a_client_on_localhost():
         if client is not None:
             client.close()
         logger.close()
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize("display", [None, ":99"], ids=["served", "viewer-cannot-start"])
+def test_rerun_writes_no_line_of_its_own_on_stderr(dataset, tmp_path, display):
+    """Rerun's Rust logger (coloured lines) and a spawned viewer that cannot open its display ("Error:
+    winit ...") stay off the command's stderr: only mrstereo's own lines, the latter one error naming
+    --viewer rerun and no output."""
+    import subprocess
+
+    _need("rerun")
+    env = {k: v for k, v in os.environ.items() if k not in ("RUST_LOG", "DISPLAY", "WAYLAND_DISPLAY")}
+    if display is not None:
+        env["DISPLAY"] = display                     # a display nobody serves: the viewer cannot start
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, "-m", "mrstereo", "live", str(dataset), "-o", str(out), "--viewer",
+                          "rerun", "--viewer-port", str(_free_port()), "--quiet"], env=env, capture_output=True,
+                         text=True, timeout=300)
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert "\x1b" not in run.stderr, run.stderr
+    assert all(line.startswith("mrstereo: ") for line in lines), run.stderr
+    if display is None:
+        assert run.returncode == 0, run.stderr
+        assert (out / "view.rrd").stat().st_size > 0
+    else:
+        assert run.returncode == 2 and len(lines) == 1, run.stderr
+        assert lines[0].startswith("mrstereo: error: --viewer rerun: the Rerun viewer did not start"), lines
+        assert not any(p.is_file() for p in tmp_path.rglob("*")), sorted(tmp_path.rglob("*"))

@@ -283,3 +283,66 @@ def test_cli_map_with_worker_threads_starts_no_dask_cluster(dataset, tmp_path):
     local = build_map(dataset, progress=False)
     np.testing.assert_array_equal(np.load(tmp_path / "w" / "log_odds.npy"), local.grid.log_odds)
     assert (tmp_path / "w" / "map.png").stat().st_size > 1000
+
+
+@pytest.fixture
+def idle_cluster(monkeypatch):
+    """A real scheduler nobody joined (no workers), and a short wait for one."""
+    from conftest import extra_missing
+
+    if extra_missing("scale"):
+        pytest.skip(extra_missing("scale"))
+    import distributed
+
+    from mrstereo import _executor
+
+    monkeypatch.setattr(_executor, "WORKER_TIMEOUT_S", 0.5)
+    with distributed.LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1",
+                                  dashboard_address=":0") as cluster:
+        yield cluster
+
+
+@pytest.mark.parametrize("command", ["map", "batch"])
+def test_cli_on_a_scheduler_without_workers_is_one_line(command, dataset, idle_cluster, tmp_path, capsys):
+    from mrstereo.cli import entry
+
+    address = idle_cluster.scheduler_address
+    out = tmp_path / "out"
+    assert entry([command, str(dataset.root), "-o", str(out), "--quiet", "--scheduler", address]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines == [f"mrstereo: error: scheduler {address}: no worker joined in 0.5 s"], lines
+    assert not out.exists()
+
+
+def _sleep_then(x: int) -> int:
+    time.sleep(0.3)
+    return x
+
+
+def test_a_cluster_that_loses_all_its_workers_fails_naming_its_scheduler(monkeypatch):
+    """Its only worker leaves mid-run: the tasks would wait for a worker forever."""
+    from conftest import extra_missing
+
+    if extra_missing("scale"):
+        pytest.skip(extra_missing("scale"))
+    import threading
+
+    import distributed
+
+    from mrstereo import _executor
+
+    monkeypatch.setattr(_executor, "WORKER_TIMEOUT_S", 0.5)
+    monkeypatch.setattr(_executor, "_POLL_S", 0.1)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp://",
+                                  host="127.0.0.1", dashboard_address=":0") as cluster, \
+            distributed.Client(cluster) as client:
+        client.wait_for_workers(1)
+        leave = threading.Timer(0.5, lambda: cluster.scale(0))
+        leave.start()
+        try:
+            with pytest.raises(RuntimeError, match=rf"scheduler {cluster.scheduler_address}: all workers left "
+                                                   r"and none joined in 0.5 s"):
+                map_ordered(_sleep_then, range(40), scheduler=client, progress=False)
+        finally:
+            leave.join()
+        assert not client.scheduler_info()["workers"]

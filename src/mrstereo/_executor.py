@@ -30,7 +30,8 @@ from . import _checks
 from ._interrupt import reached
 
 __all__ = ["ItemFailure", "ItemError", "map_ordered", "dask_client", "limit_threads", "keep_freed_memory",
-           "LatestFrame", "Ordered", "Writer", "Growing", "rss_mb", "peak_rss_mb", "StreamThreads", "read_ahead"]
+           "LatestFrame", "Ordered", "Writer", "Growing", "rss_mb", "peak_rss_mb", "StreamThreads", "read_ahead",
+           "quiet_stderr"]
 
 _WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                "OPENBLAS_NUM_THREADS": "1"}
@@ -186,6 +187,7 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
         except (OSError, TimeoutError) as exc:
             raise OSError(f"cannot connect to the Dask scheduler at {scheduler}: {exc}") from None
         try:
+            _wait_for_workers(client, "no worker joined")
             yield client
         finally:
             client.close()
@@ -205,7 +207,7 @@ def dask_client(*, workers: int | None = None, scheduler=None, processes: bool =
     # glibc's mmap threshold: every image-sized temporary would cost fresh page faults. The workers
     # tune malloc themselves (limit_threads -> keep_freed_memory).
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
-            _quiet_children():
+            quiet_stderr():
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=":0", env=env, silence_logs=logging.CRITICAL)
     with cluster, Client(cluster) as client:
@@ -222,8 +224,8 @@ def require_scale() -> None:
 
 
 @contextlib.contextmanager
-def _quiet_children() -> Iterator[None]:
-    """Worker processes started in the block write their stderr to /dev/null.
+def quiet_stderr() -> Iterator[None]:
+    """Processes started in the block (Dask workers, a viewer) write their stderr to /dev/null.
 
     Ctrl-C signals the whole process group: workers still importing would each print a traceback
     over the command's one line (their failures reach this process through Dask anyway).
@@ -566,9 +568,41 @@ def _chunk_size(client, n_items: int) -> int:
     return max(1, min(8, n_items // (8 * threads)))
 
 
-def _map_dask(client, func, items: Sequence, bar, return_exceptions: bool, label, desc: str) -> list:
-    from distributed import as_completed
+WORKER_TIMEOUT_S = 30.0
+"""How long a Dask cluster may be without workers: before the first task (a scheduler nobody joined) and
+whenever all of its workers have left during a run. Then the run fails naming the scheduler."""
 
+_POLL_S = 1.0
+
+
+def _wait_for_workers(client, what: str) -> None:
+    """Return once the client's cluster has a worker; RuntimeError naming its scheduler after
+    ``WORKER_TIMEOUT_S`` without one (distributed would queue the tasks forever)."""
+    try:
+        client.wait_for_workers(1, timeout=WORKER_TIMEOUT_S)
+    except TimeoutError:
+        address = getattr(client.scheduler, "address", None) or "?"
+        raise RuntimeError(f"scheduler {address}: {what} in {WORKER_TIMEOUT_S:g} s") from None
+
+
+def _as_completed(client, futures: Sequence) -> Iterator:
+    """The futures as they finish; every ``_POLL_S`` without one, a cluster left without workers gets
+    ``WORKER_TIMEOUT_S`` to regain one (:func:`_wait_for_workers`)."""
+    from distributed import wait
+
+    pending = set(futures)
+    while pending:
+        try:
+            done, pending = wait(pending, timeout=_POLL_S, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            if not client.scheduler_info().get("workers"):
+                _wait_for_workers(client, "all workers left and none joined")
+            continue
+        yield from done
+
+
+def _map_dask(client, func, items: Sequence, bar, return_exceptions: bool, label, desc: str) -> list:
+    _wait_for_workers(client, "no worker joined")
     task = _Task(func)
     token = uuid.uuid4().hex[:12]
     size = _chunk_size(client, len(items))
@@ -578,7 +612,7 @@ def _map_dask(client, func, items: Sequence, bar, return_exceptions: bool, label
     first = {f.key: a for a, f in zip(starts, futures)}
     results: list = [None] * len(items)
     try:
-        for future in as_completed(futures):
+        for future in _as_completed(client, futures):
             a = first[future.key]
             n = min(size, len(items) - a)
             if future.status == "error":            # the chunk itself failed (e.g. a result that cannot be sent)

@@ -10,6 +10,7 @@ The layout and the resume rules: docs/scale-out.md ("Batch"). Conventions: docs/
 """
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import os
@@ -27,7 +28,7 @@ from ..recordings.bag import BagSource, bag_inputs
 from ..recordings.layouts import is_bag, read_recording
 from ..recordings.manifest import FrameRecord, Manifest, frame_pair, rebased
 from ..recordings.sources import StereoFrame
-from .._executor import ItemFailure, map_ordered
+from .._executor import ItemFailure, dask_client, map_ordered
 from .mapper import StereoMapper
 from .run import PipelineConfig, build_map, map_from_observations, with_visual_odometry
 
@@ -188,42 +189,45 @@ def run_batch(manifests, out_dir: str | os.PathLike, *, config: PipelineConfig =
     for name in names:
         check_output_dir(f"out_dir {out}: the dataset's output folder", out / name, inputs=inputs)
 
-    remove_stale_temporaries(out)
-    configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
-    plans = [_plan(m, name, out, configs[name], maps, check_mount)
-             for m, name in zip(datasets, names) if id(m) not in bags]
-    tasks, floors = [], {}
-    for p in plans:
-        complete = [p.loaded[k] is not None for k in range(len(p.manifest.frames))]
-        if not all(complete) or (maps and not p.map_kept):
-            floors[p.name], p.manifest = _mounted(p.manifest, configs[p.name], check_mount)
-        tasks += [FrameTask(record=record, index=k, stereo=p.manifest.calibration, observe=floors[p.name].observer(),
-                            frames_dir=p.folder / "frames", dataset=p.name, fingerprint=p.fingerprints[k])
-                  for k, record in enumerate(p.manifest.frames) if not complete[k]]
+    with contextlib.ExitStack() as stack:
+        if isinstance(scheduler, str):         # connected (a worker there) before any output is made
+            scheduler = stack.enter_context(dask_client(scheduler=scheduler))
+        remove_stale_temporaries(out)
+        configs = {name: config.for_rig(m.calibration) for name, m in zip(names, datasets)}
+        plans = [_plan(m, name, out, configs[name], maps, check_mount)
+                 for m, name in zip(datasets, names) if id(m) not in bags]
+        tasks, floors = [], {}
+        for p in plans:
+            complete = [p.loaded[k] is not None for k in range(len(p.manifest.frames))]
+            if not all(complete) or (maps and not p.map_kept):
+                floors[p.name], p.manifest = _mounted(p.manifest, configs[p.name], check_mount)
+            tasks += [FrameTask(record=record, index=k, stereo=p.manifest.calibration, observe=floors[p.name].observer(),
+                                frames_dir=p.folder / "frames", dataset=p.name, fingerprint=p.fingerprints[k])
+                      for k, record in enumerate(p.manifest.frames) if not complete[k]]
 
-    results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, processes=processes,
-                          progress=progress,
-                          desc="frames", unit="frame", return_exceptions=True, prefetch=_read_task,
-                          label=lambda t: f"{t.dataset} frame {t.index}")
-    failures = []
-    for task, result in zip(tasks, results):
-        if isinstance(result, ItemFailure):
-            failures.append({"dataset": task.dataset, "frame": task.index, "error": result.error})
-        else:
-            next(p for p in plans if p.name == task.dataset).loaded[task.index] = result
+        results = map_ordered(process_frame, tasks, workers=workers, scheduler=scheduler, processes=processes,
+                              progress=progress,
+                              desc="frames", unit="frame", return_exceptions=True, prefetch=_read_task,
+                              label=lambda t: f"{t.dataset} frame {t.index}")
+        failures = []
+        for task, result in zip(tasks, results):
+            if isinstance(result, ItemFailure):
+                failures.append({"dataset": task.dataset, "frame": task.index, "error": result.error})
+            else:
+                next(p for p in plans if p.name == task.dataset).loaded[task.index] = result
 
-    summaries = [_finish(p, tasks, failures, configs[p.name], maps, floors) for p in plans]
-    summaries += [_bag_map(bags[id(m)], out / name, config, maps, workers=workers, scheduler=scheduler,
-                           processes=processes, progress=progress, check_mount=check_mount)
-                  for m, name in zip(datasets, names) if id(m) in bags]
-    summaries.sort(key=lambda d: names.index(d.name))
-    path = out / SUMMARY_NAME
-    with atomic_write(path) as tmp:
-        tmp.write_text(json.dumps({"datasets": [s.to_dict() for s in summaries], "failures": failures,
-                                   "config": {"preset": config.preset, "fusion": config.mapping.fusion,
-                                              "fingerprint": digest(repr(config))}},
-                                  indent=1) + "\n")
-    return BatchSummary(path=path, datasets=tuple(summaries), failures=tuple(failures))
+        summaries = [_finish(p, tasks, failures, configs[p.name], maps, floors) for p in plans]
+        summaries += [_bag_map(bags[id(m)], out / name, config, maps, workers=workers, scheduler=scheduler,
+                               processes=processes, progress=progress, check_mount=check_mount)
+                      for m, name in zip(datasets, names) if id(m) in bags]
+        summaries.sort(key=lambda d: names.index(d.name))
+        path = out / SUMMARY_NAME
+        with atomic_write(path) as tmp:
+            tmp.write_text(json.dumps({"datasets": [s.to_dict() for s in summaries], "failures": failures,
+                                       "config": {"preset": config.preset, "fusion": config.mapping.fusion,
+                                                  "fingerprint": digest(repr(config))}},
+                                      indent=1) + "\n")
+        return BatchSummary(path=path, datasets=tuple(summaries), failures=tuple(failures))
 
 
 def _finish(p: _Dataset, tasks: list, failures: list, config: PipelineConfig, maps: bool,

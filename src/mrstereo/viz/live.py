@@ -19,6 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .._executor import quiet_stderr
 from ..transforms import quaternion_from_rotation
 
 __all__ = ["require_viewers", "check_port", "RerunLogger", "FoxgloveLogger", "disparity_colours", "scan_points", "MAP_FRAME", "BASE_FRAME",
@@ -36,6 +37,17 @@ def require_viewers(viewers) -> None:
         module, package = _PACKAGES[viewer]
         if importlib.util.find_spec(module) is None:
             raise RuntimeError(f"--viewer {viewer} needs {package}: pip install \"mrstereo[viz]\"")
+
+
+def _listening(port: int) -> bool:
+    """Whether something accepts connections on 127.0.0.1:``port``."""
+    import socket
+
+    try:
+        socket.create_connection(("127.0.0.1", int(port)), timeout=1.0).close()
+    except OSError:
+        return False
+    return True
 
 
 def check_port(port: int, option: str) -> int:
@@ -135,7 +147,12 @@ class RerunLogger:
         sinks = [] if self._tmp is None else [rr.FileSink(str(self._tmp))]
         self.url = None
         if mode == "spawn":
-            self.rec.spawn(port=grpc_port, connect=False)
+            with quiet_stderr():            # the viewer's own log lines (and its errors without a display)
+                self.rec.spawn(port=grpc_port, connect=False)
+            if not _listening(grpc_port):
+                display = os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+                raise OSError(f"--viewer rerun: the Rerun viewer did not start on display {display!r}: without "
+                              "DISPLAY (and WAYLAND_DISPLAY) its stream is served on --viewer-port instead")
             sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{grpc_port}/proxy"))
         elif mode in ("serve", "web"):
             server = rr.GrpcServerSink("127.0.0.1", grpc_port, server_memory_limit=memory_limit)
