@@ -89,11 +89,13 @@ class OdometryConfig:
         The refinement's Huber threshold and steps, and the distance from its landmark's projection
         beyond which an observation is dropped after it.
     calibrate_disparity_offset : bool
-        Learn the rig's disparity offset (a rectified principal point off) from the motion.
+        Learn the rig's disparity correction from the motion: an offset (a rectified principal point
+        off) and a term growing down the image (a right camera rolled), ``a + b (v - cy) / 100`` px.
     offset_prior_weight, min_disparity_offset_px, max_disparity_offset_px : float
-        The weight of the offset's 0 px start (in the units of a keyframe pair's cost curvature,
-        px^2 per px^2); the smallest learnt offset used (below it, 0: within the learner's own bias,
-        +0.06 to +0.12 px on synthetic rigs with none) and its largest size either way.
+        The weight of the correction's 0 start (in the units of a keyframe pair's cost curvature,
+        px^2 per px^2); the smallest correction a term makes at the image's edge for it to be used
+        (below it, 0: within the learner's own bias, about +0.07 px on synthetic rigs with none) and
+        each term's largest size either way.
     """
 
     max_features: int = 300
