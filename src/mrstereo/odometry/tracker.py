@@ -648,25 +648,27 @@ class StereoOdometry:
         uv_key, img = kf.uv[j][use].astype(np.float64), uv_now[use].astype(np.float64)
         d_raw = uv_key[:, 0] - kf.u_right[j][use] - self._disparity_slopes(uv_key, kf.disparity_slopes_px)
         rvec0, tvec0 = rvec_t_from_T(np.linalg.inv(T_world_from_cam) @ kf.T_world_from_cam)
-        h, m = 0.5, self._correction_mean
-        steps = [np.zeros(2), (h, 0.0), (-h, 0.0), (0.0, h), (0.0, -h), (h, h)]
-        costs = []
-        for step in steps:
-            p = m + step
-            obj = self._backproject(uv_key, d_raw + p[1] * (uv_key[:, 1] - self._K[1, 2]) / 100.0, p[0])
-            if not (obj[:, 2] > 0).all():
+        h, vertex = 0.5, self._correction_mean
+        for _ in range(3):                         # Newton steps of the pair's own cost, from the run's mean
+            m, costs = vertex, []
+            for step in (np.zeros(2), (h, 0.0), (-h, 0.0), (0.0, h), (0.0, -h), (h, h)):
+                p = m + step
+                obj = self._backproject(uv_key, d_raw + p[1] * (uv_key[:, 1] - self._K[1, 2]) / 100.0, p[0])
+                if not (obj[:, 2] > 0).all():
+                    return
+                rvec, tvec = cv2.solvePnPRefineLM(obj, img, self._K, None, rvec0.copy(), tvec0.copy())
+                proj, _ = cv2.projectPoints(obj, rvec, tvec, self._K, None)
+                err2 = np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1)
+                costs.append(float(np.minimum(err2, c.ransac_threshold_px ** 2).sum()))
+            f0, f = costs[0], np.array(costs[1:5]).reshape(2, 2)
+            grad = (f[:, 0] - f[:, 1]) / (2.0 * h)
+            H = np.diag((f[:, 0] - 2.0 * f0 + f[:, 1]) / (h * h))
+            H[0, 1] = H[1, 0] = (costs[5] - f[0, 0] - f[1, 0] + f0) / (h * h)
+            if not np.all(np.linalg.eigvalsh(H) > 0.0):
                 return
-            rvec, tvec = cv2.solvePnPRefineLM(obj, img, self._K, None, rvec0.copy(), tvec0.copy())
-            proj, _ = cv2.projectPoints(obj, rvec, tvec, self._K, None)
-            err2 = np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1)
-            costs.append(float(np.minimum(err2, c.ransac_threshold_px ** 2).sum()))
-        f0, f = costs[0], np.array(costs[1:5]).reshape(2, 2)
-        grad = (f[:, 0] - f[:, 1]) / (2.0 * h)
-        H = np.diag((f[:, 0] - 2.0 * f0 + f[:, 1]) / (h * h))
-        H[0, 1] = H[1, 0] = (costs[5] - f[0, 0] - f[1, 0] + f0) / (h * h)
-        if not np.all(np.linalg.eigvalsh(H) > 0.0):
-            return
-        vertex = np.clip(m - np.linalg.solve(H, grad), -c.max_disparity_offset_px, c.max_disparity_offset_px)
+            vertex = np.clip(m - np.linalg.solve(H, grad), -c.max_disparity_offset_px, c.max_disparity_offset_px)
+            if np.abs(vertex - m).max() < 0.05:
+                break
         self._correction_sum += H @ vertex
         self._correction_info += H
         self._correction_mean = np.linalg.solve(self._correction_info, self._correction_sum)
