@@ -628,15 +628,15 @@ class StereoOdometry:
 
         A rig whose rectified principal points are off by ``e`` px gives depths ``b f / (d + doffs)``
         wrong by the factor ``d / (d + e)``: far points much more than near ones, which no rigid
-        motion reconciles; a right camera rolled or scaled against the left adds a disparity error
-        growing along the rows or the columns. The correction is ``e(u, v) = a + b (v - cy) / 100 +
-        c (u - cx) / 100``: the keyframe's stereo points are re-made with the correction moved by
-        ``h`` along each term and along each pair of them (10 corrections around the mean), the pose
-        refined (``cv2.solvePnPRefineLM``) on this frame's tracks each time; the quadratic through
-        the (truncated) reprojection costs gives this pair's estimate (its vertex) and its
-        information (its Hessian), summed over the run from the prior ``offset_prior_weight`` at 0.
-        The offset alone, with the pose free, takes up part of a row term into the pose and stops
-        short (KITTI 01: +0.64 px for +0.85 px; a synthetic rig with +1 px and a roll: +0.63 px).
+        motion reconciles; a right camera rolled against the left adds a disparity error growing down
+        the image. The correction is ``e(u, v) = a + b (v - cy) / 100``: the keyframe's stereo points
+        are re-made with the correction moved by ``h`` along ``a``, ``b`` and both (6 corrections), the
+        pose refined (``cv2.solvePnPRefineLM``) on this frame's tracks each time; the quadratic through
+        the (truncated) reprojection costs gives a Newton step, repeated from its vertex (at most 3) to
+        the pair's own minimum: its estimate, with the last Hessian its information, summed over the
+        run from the prior ``offset_prior_weight`` at 0. The offset alone, with the pose free, takes
+        part of a row term into the pose and stops short (a synthetic rig with +1 px and a 5 mrad
+        roll: +0.63 px), and one step from a lagging mean stops short again.
         """
         c = self.config
         ids, uv_now = tracked
