@@ -207,8 +207,9 @@ class Keyframe:
     window), left ``image`` (dropped when it leaves the tracker's archive), and per feature its
     ``landmark`` id (-1: dropped as an outlier), left ``uv`` and right column ``u_right`` (NaN: no
     stereo match; corrected by the tracker's learnt disparity row and column terms,
-    ``disparity_slopes_px``, at the time). When it leaves the window, ``points_cam`` holds its valid features' landmarks in
-    its camera frame (the window drops them) and ``median_depth_m`` their median depth.
+    ``disparity_slopes_px``, at the time). When it leaves the window, ``points_cam`` holds its
+    valid features' landmarks in its camera frame (the window drops them) and ``median_depth_m``
+    their median depth.
     """
 
     frame: int
