@@ -254,7 +254,9 @@ def kitti_scale(path: Path) -> None:
     mounts = CameraMount.from_xyz_rpy((0, 0, 0), (0, 0, 0)).T_base_from_rectified(manifest.calibration.left.R)
     for left, right in _odometry_pairs(manifest):
         tracker.step(left, right, T_base_from_cam=mounts)
-    print(f"  learnt disparity offset {tracker._offset_mean_px:+.2f} px (used {tracker._offset_px:+.2f})")
+    a, b, c = tracker._correction_mean
+    print(f"  learnt disparity correction {a:+.2f} {b:+.3f} (v - cy)/100 {c:+.3f} (u - cx)/100 px (used "
+          f"{tracker._offset_px:+.2f} {tracker._slopes_px[0]:+.3f} {tracker._slopes_px[1]:+.3f})")
 
     def stereo_d(left, right):
         uv = tracker._corners(left, 300, np.empty((0, 2), np.float32))

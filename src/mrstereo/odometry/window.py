@@ -22,7 +22,7 @@ open-source SLAM system for monocular, stereo and RGB-D cameras. IEEE T-RO 33(5)
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -206,8 +206,10 @@ class Keyframe:
     """A keyframe of the window: its ``frame`` index, ``T_world_from_cam`` (refined while in the
     window), left ``image`` (dropped when it leaves the tracker's archive), and per feature its
     ``landmark`` id (-1: dropped as an outlier), left ``uv`` and right column ``u_right`` (NaN: no
-    stereo match). When it leaves the window, ``points_cam`` holds its valid features' landmarks in
-    its camera frame (the window drops them) and ``median_depth_m`` their median depth.
+    stereo match; corrected by the tracker's learnt disparity row and column terms,
+    ``disparity_slopes_px``, at the time). When it leaves the window, ``points_cam`` holds its
+    valid features' landmarks in its camera frame (the window drops them) and ``median_depth_m``
+    their median depth.
     """
 
     frame: int
@@ -218,6 +220,7 @@ class Keyframe:
     u_right: np.ndarray
     points_cam: np.ndarray | None = None
     median_depth_m: float = 0.0
+    disparity_slopes_px: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     @property
     def valid(self) -> np.ndarray:
