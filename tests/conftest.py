@@ -106,7 +106,7 @@ def sample_data():
 def pytest_configure(config):
     if hasattr(config, "workerinput"):           # an xdist worker: each kernel compiled by one worker only
         _lock_numba_cache_files(config.workerinput["testrunuid"])
-        _compile_each_kernel_once(config.workerinput["testrunuid"])
+        _compile_each_kernel_once()
 
 
 def _lock_numba_cache_files(run_id: str) -> None:
@@ -135,8 +135,9 @@ def _lock_numba_cache_files(run_id: str) -> None:
     IndexDataCacheFile.load = locked(IndexDataCacheFile.load)
 
 
-def _compile_each_kernel_once(run_id: str) -> None:
-    """A worker compiles a cached kernel only while it holds that kernel's lock file (shared by the run's workers).
+def _compile_each_kernel_once() -> None:
+    """A worker compiles a cached kernel only while it holds that kernel's lock file (``<index>.nbi.lock`` in
+    numba's cache folder, beside the kernel's cache index: one file per kernel, kept from run to run).
 
     On a cold cache both workers soon need the same kernels (the matcher's, the renderer's): without the lock
     each compiles every one of them itself, twice the compile time of the run. With it the second worker
@@ -147,7 +148,6 @@ def _compile_each_kernel_once(run_id: str) -> None:
     from numba.core.compiler_lock import global_compiler_lock
     from numba.core.dispatcher import Dispatcher
 
-    prefix = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"mrstereo-tests-{run_id}.numba.")
     fds: dict[str, int] = {}
     held: set[str] = set()
     compile_ = Dispatcher.compile
@@ -156,12 +156,12 @@ def _compile_each_kernel_once(run_id: str) -> None:
         cache_file = getattr(self._cache, "_cache_file", None)          # None: a kernel numba does not cache
         if cache_file is None:
             return compile_(self, sig)
-        name = cache_file._index_name
+        name = os.path.join(cache_file._cache_path, cache_file._index_name + ".lock")     # beside the kernel's index
         with global_compiler_lock:                                       # one thread of this process at a time
             if name in held:                                             # a kernel that calls itself
                 return compile_(self, sig)
             if name not in fds:
-                fds[name] = os.open(prefix + name + ".lock", os.O_RDWR | os.O_CREAT, 0o600)
+                fds[name] = os.open(name, os.O_RDWR | os.O_CREAT, 0o600)
             fcntl.flock(fds[name], fcntl.LOCK_EX)
             held.add(name)
             try:
