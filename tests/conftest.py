@@ -14,8 +14,9 @@
   skips them.
 * The suite runs on parallel workers (pytest-xdist, ``-n auto`` in pyproject.toml;
   ``-n 0`` runs it in one process). The workers share the synthetic datasets (each made once, under a file
-  lock, in the run's temporary root) and take turns to read and write numba's cache files (a kernel's cache
-  index and code are saved whole for the other worker).
+  lock, in the run's temporary root) and numba's compiled kernels: on a cold cache each kernel is compiled by
+  one worker, the other waits for it and loads it from the cache (a kernel's cache index and code are saved
+  whole for the other worker).
 
 Helpers for writing ROS bags live in ``_bags.py``.
 """
@@ -103,8 +104,9 @@ def sample_data():
 
 
 def pytest_configure(config):
-    if hasattr(config, "workerinput"):           # an xdist worker: numba's cache files in turns with the others
+    if hasattr(config, "workerinput"):           # an xdist worker: each kernel compiled by one worker only
         _lock_numba_cache_files(config.workerinput["testrunuid"])
+        _compile_each_kernel_once()
 
 
 def _lock_numba_cache_files(run_id: str) -> None:
@@ -131,6 +133,44 @@ def _lock_numba_cache_files(run_id: str) -> None:
 
     IndexDataCacheFile.save = locked(IndexDataCacheFile.save)
     IndexDataCacheFile.load = locked(IndexDataCacheFile.load)
+
+
+def _compile_each_kernel_once() -> None:
+    """A worker compiles a cached kernel only while it holds that kernel's lock file (``<index>.nbi.lock`` in
+    numba's cache folder, beside the kernel's cache index: one file per kernel, kept from run to run).
+
+    On a cold cache both workers soon need the same kernels (the matcher's, the renderer's): without the lock
+    each compiles every one of them itself, twice the compile time of the run. With it the second worker
+    waits for the first one's compile and then loads the kernel from numba's cache (``Dispatcher.compile``
+    looks in the cache before it compiles). A kernel's compile takes the locks of the kernels it calls while
+    it holds its own; kernels do not call each other in a cycle, so two workers never wait for each other.
+    """
+    from numba.core.compiler_lock import global_compiler_lock
+    from numba.core.dispatcher import Dispatcher
+
+    fds: dict[str, int] = {}
+    held: set[str] = set()
+    compile_ = Dispatcher.compile
+
+    def compile_once(self, sig):
+        cache_file = getattr(self._cache, "_cache_file", None)          # None: a kernel numba does not cache
+        if cache_file is None:
+            return compile_(self, sig)
+        name = os.path.join(cache_file._cache_path, cache_file._index_name + ".lock")     # beside the kernel's index
+        with global_compiler_lock:                                       # one thread of this process at a time
+            if name in held:                                             # a kernel that calls itself
+                return compile_(self, sig)
+            if name not in fds:
+                fds[name] = os.open(name, os.O_RDWR | os.O_CREAT, 0o600)
+            fcntl.flock(fds[name], fcntl.LOCK_EX)
+            held.add(name)
+            try:
+                return compile_(self, sig)
+            finally:
+                held.discard(name)
+                fcntl.flock(fds[name], fcntl.LOCK_UN)
+
+    Dispatcher.compile = compile_once
 
 
 @contextlib.contextmanager

@@ -47,8 +47,11 @@ sys.exit(os.waitstatus_to_exitcode(status))
 """
 
 
-def run_cli(args, workdir: Path, *, env: dict | None = None, timeout_s: float = 60.0):
-    """``(exit code, stderr, CPU seconds, peak MB)`` of ``python -m mrstereo ARGS`` in a fresh process."""
+def run_cli(args, workdir: Path, *, env: dict | None = None, timeout_s: float = 600.0):
+    """``(exit code, stderr, CPU seconds, peak MB)`` of ``python -m mrstereo ARGS`` in a fresh process.
+
+    ``timeout_s`` (wall clock) only ends a hung command; the limits checked are CPU time and memory (a busy
+    machine stretches the wall time of a 10 s refusal past a minute)."""
     environment = dict(os.environ, PYTHONPATH=str(SRC), MPLBACKEND="Agg", **(env or {}))
     out, err, usage = workdir / "stdout.txt", workdir / "stderr.txt", workdir / "usage.txt"
     with open(out, "wb") as fo, open(err, "wb") as fe:
