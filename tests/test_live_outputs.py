@@ -346,6 +346,28 @@ def test_rerun_serves_on_localhost_only_and_its_web_viewer_when_asked(tmp_path):
     assert (tmp_path / "view.rrd").is_file()
 
 
+def test_a_rerun_viewer_that_went_away_leaves_one_warning_and_no_temporary(tmp_path):
+    """rerun's flush fails when the spawned viewer was closed during the run: close() warns once, removes the
+    possibly incomplete stream, and raises nothing (the run's map and trajectory stand)."""
+    _need("rerun")
+    from mrstereo.viz.live import RerunLogger
+
+    logger = RerunLogger(rrd_path=tmp_path / "view.rrd", mode="serve", grpc_port=_free_port())
+    real = logger.rec
+
+    class Gone:                                      # the recording stream of a viewer that was closed
+        def flush(self):
+            raise RuntimeError("gRPC has been unable to connect for 8s\nmore detail")
+
+        def disconnect(self):
+            real.disconnect()
+
+    logger.rec = Gone()
+    with pytest.warns(UserWarning, match=r"viewer went away during the run \(gRPC has been unable to connect for 8s\)"):
+        logger.close()
+    assert list(tmp_path.iterdir()) == []           # no view.rrd, no .view.rrd.*.tmp
+
+
 def test_live_refuses_a_busy_viewer_port_in_one_line_before_any_work(dataset, tmp_path, capsys):
     for module in ("rerun", "foxglove"):
         _need(module)
@@ -499,3 +521,4 @@ def test_rerun_writes_no_line_of_its_own_on_stderr(dataset, tmp_path, display):
         assert run.returncode == 2 and len(lines) == 1, run.stderr
         assert lines[0].startswith("mrstereo: error: --viewer rerun: the Rerun viewer did not start"), lines
         assert not any(p.is_file() for p in tmp_path.rglob("*")), sorted(tmp_path.rglob("*"))
+        assert not out.exists()                      # not even an empty output folder

@@ -27,6 +27,7 @@ def open_sinks(stereo: StereoCamera, view_stem: str | os.PathLike, *, viewers: S
 
     require_viewers(viewers)
     stem = Path(view_stem)
+    made = not stem.parent.exists()
     stem.parent.mkdir(parents=True, exist_ok=True)
     sinks = []
     try:
@@ -51,5 +52,7 @@ def open_sinks(stereo: StereoCamera, view_stem: str | os.PathLike, *, viewers: S
     except BaseException:
         for sink in sinks:
             sink.discard()
+        if made and not any(stem.parent.iterdir()):     # the output folder made here, left empty: gone
+            stem.parent.rmdir()
         raise
     return sinks

@@ -14,6 +14,7 @@ localhost and in an MCAP file. Conventions: docs/conventions.md; user guide: doc
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import cv2
@@ -222,9 +223,17 @@ class RerunLogger:
         self.rec.set_time("frame", sequence=int(index))
 
     def close(self, *, keep: bool = True) -> None:
-        """Flush, stop serving, and move the saved stream into place (``keep=False``: remove it)."""
-        self.rec.flush()
-        self.rec.disconnect()
+        """Flush, stop serving, and move the saved stream into place (``keep=False``: remove it). A viewer that
+        went away during the run (closed by the user) makes rerun's flush fail: the stream, which may then be
+        incomplete, is removed with one warning, and the run's other outputs stand."""
+        try:
+            self.rec.flush()
+            self.rec.disconnect()
+        except Exception as exc:        # (rerun's own error types, raised from its Rust core)
+            keep = False
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            warnings.warn(f"--viewer rerun: the viewer went away during the run ({first}); "
+                          f"{self.path or 'the stream'} was not kept")
         _finish(self._tmp, self.path, keep)
 
     def discard(self) -> None:
