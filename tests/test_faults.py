@@ -202,6 +202,22 @@ def test_bad_inputs_are_one_line_errors(ds, tmp_path, capsys, case):
     assert not written, f"outputs written by a refused run: {written}"
 
 
+def test_a_pair_of_two_sizes_in_a_recording_is_named(ds, tmp_path, capsys):
+    bad = tmp_path / "DS"
+    shutil.copytree(ds, bad)
+    right = bad / "right_rect" / "000001.png"
+    cv2.imwrite(str(right), cv2.imread(str(right), cv2.IMREAD_UNCHANGED)[:100])
+    _run(capsys, ["map", bad, "-o", tmp_path / "out", "--quiet"], must=f"{right} must have the same size")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_pair_of_two_sizes_given_to_the_mapper_names_the_frame():
+    from mrstereo.recordings.sources import StereoFrame
+    with pytest.raises(ValueError, match=r"frame 7 \(stamp 1.500 s\): left and right must have the same size, "
+                                         r"got 160x120 and 160x100"):
+        StereoFrame(index=7, stamp_s=1.5, left=np.zeros((120, 160), np.uint8), right=np.zeros((100, 160), np.uint8))
+
+
 def test_no_args_shows_the_help(capsys):
     assert entry([]) == 0
     assert "Usage: mrstereo" in capsys.readouterr().out

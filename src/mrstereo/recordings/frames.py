@@ -14,6 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .. import _checks
 from ..camera import CameraMount, StereoCamera
 from ..io import matching_image, read_image
 from ..profiling import stage
@@ -52,6 +53,10 @@ class StereoFrame:
     T_world_from_base: np.ndarray | None = None
     pan_rad: float = 0.0
     T_world_from_base_true: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        _checks.same_shape(f"frame {self.index} (stamp {self.stamp_s:.3f} s): left", np.asarray(self.left),
+                           "right", np.asarray(self.right))
 
 
 class FrameSource:
@@ -178,6 +183,7 @@ class RecordingSource(FrameSource):
             paths = (record.left_rect, record.right_rect) if rectified else (record.left, record.right)
             with stage("read"):
                 left, right = (frame_image(read_image(p)) for p in paths)
+            _checks.same_shape(str(paths[0]), left, str(paths[1]), right)
             stamp = record.stamp_s if record.stamp_s is not None else \
                 (0.0 if last is None else last + 1.0 / self.rate_hz)
             last = stamp
