@@ -505,3 +505,72 @@ def keep_supported(cell, counts, min_points, keep):
         keep[i] = k
         n += k
     return n
+
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _flat_cell(points, i, origin_x, origin_y, resolution, rows, cols):
+    """Flat cell of point i (``floor((x - origin) / resolution)`` as ``GridSpec.cells_from_xy``), -1 when a
+    coordinate is not finite or the cell lies outside the grid."""
+    x = np.float64(points[i, 0])
+    y = np.float64(points[i, 1])
+    z = np.float64(points[i, 2])
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        return -1
+    c = math.floor((x - origin_x) / resolution)
+    r = math.floor((y - origin_y) / resolution)
+    if 0 <= r < rows and 0 <= c < cols:
+        return int(r) * cols + int(c)
+    return -1
+
+
+@njit(nogil=True, cache=True)
+def layer_points(points, slot, origin_x, origin_y, resolution, rows, cols, heights, counts):
+    """One view's points (N, 3) into the height layer, in one pass: each finite point inside the grid widens its
+    cell's lowest and highest height (``heights`` (rows*cols, 2) float32, NaN: none yet) and, with ``slot`` 0 or 1,
+    counts in ``counts[cell, slot]`` (int32 scratch, zero outside this view's cells). Returns the points inside."""
+    n = 0
+    for i in range(points.shape[0]):
+        k = _flat_cell(points, i, origin_x, origin_y, resolution, rows, cols)
+        if k < 0:
+            continue
+        z = np.float32(points[i, 2])
+        if not heights[k, 0] <= z:          # (NaN: the first point)
+            heights[k, 0] = z
+        if not heights[k, 1] >= z:
+            heights[k, 1] = z
+        if slot >= 0:
+            counts[k, slot] += 1
+        n += 1
+    return n
+
+
+@njit(nogil=True, cache=True)
+def drop_votes(floor, drops, origin_x, origin_y, resolution, rows, cols, counts, votes, min_points, clear_points,
+               max_votes):
+    """The drop votes of one view from the counts :func:`layer_points` left (floor points in slot 0, drop points in
+    slot 1): a cell with at least ``min_points`` drop points gains a vote (up to ``max_votes``), one with at least
+    ``clear_points`` floor points and no vote of this view loses one (down to 0); ``counts`` is zeroed again
+    at the view's cells. Returns the number of cells that got a vote."""
+    n = 0
+    for i in range(drops.shape[0]):
+        k = _flat_cell(drops, i, origin_x, origin_y, resolution, rows, cols)
+        if k >= 0 and counts[k, 1] >= min_points:
+            votes[k] = min(votes[k] + 1, max_votes)
+            counts[k, 1] = -1                       # voted: once per view, and no vote against
+            n += 1
+    for i in range(floor.shape[0]):
+        k = _flat_cell(floor, i, origin_x, origin_y, resolution, rows, cols)
+        if k >= 0 and counts[k, 0] >= clear_points:
+            if counts[k, 1] >= 0 and votes[k] > 0:
+                votes[k] -= 1
+            counts[k, 0] = 0                        # once per view
+    for i in range(floor.shape[0]):
+        k = _flat_cell(floor, i, origin_x, origin_y, resolution, rows, cols)
+        if k >= 0:
+            counts[k, 0] = 0
+    for i in range(drops.shape[0]):
+        k = _flat_cell(drops, i, origin_x, origin_y, resolution, rows, cols)
+        if k >= 0:
+            counts[k, 1] = 0
+    return n

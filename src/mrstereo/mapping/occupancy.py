@@ -209,6 +209,18 @@ def _points_xy(name: str, value) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64)
 
 
+def _layer_points(name: str, value) -> np.ndarray:
+    """(N, 3) float32 or float64 points for :meth:`OccupancyGrid.add_layers` (None: none)."""
+    if value is None:
+        return np.empty((0, 3), np.float32)
+    arr = np.asarray(value)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3), got {arr.shape}")
+    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise TypeError(f"{name} must hold numbers, got dtype {arr.dtype}")
+    return np.ascontiguousarray(arr, dtype=arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64)
+
+
 def _finite_bounds(*point_sets: np.ndarray) -> np.ndarray | None:
     """``(x_min, y_min, x_max, y_max)`` of the points with finite (x, y) of (N, 2 or 3) arrays (None: none)."""
     out = None
@@ -525,6 +537,7 @@ class OccupancyGrid:
         # the height layer (lowest, highest point height seen in the cell; NaN: none) and the drop votes
         self._heights_m = np.full(grid.shape + (2,), np.nan, np.float32)
         self._drop_votes = np.zeros(grid.shape, np.int16)
+        self._counts = None           # add_layers' per-view point counts (floor, drop) per cell, zero between views
         self.n_updates = 0
         self.points_outside = 0
         """Points of all updates so far whose ray was cut at the grid's border (they fell outside it)."""
@@ -572,40 +585,23 @@ class OccupancyGrid:
         one (``drop_points_world`` None: no drop test, no votes either way). Votes change only here and under the footprint (:meth:`clear_disc`), never by a ray passing
         over the cell. Returns the number of cells that got a vote.
         """
-        rows, cols = self.grid.shape
         c = self.config
-        drops = np.empty((0, 3)) if drop_points_world is None else drop_points_world
-        counts = []
+        g = self.grid
+        rows, cols = g.shape
+        sets = [_layer_points(name, p) for name, p in (("obstacle_points_world", obstacle_points_world),
+                                                          ("floor_points_world", floor_points_world),
+                                                          ("drop_points_world", drop_points_world))]
+        if self._counts is None:
+            self._counts = np.zeros((rows * cols, 2), np.int32)     # per-view scratch, zero between views
         heights = self._heights_m.reshape(-1, 2)
-        for points in (obstacle_points_world, floor_points_world, drops):
-            flat, z = self._flat_cells(points)
-            counts.append(flat)
-            if flat.size:
-                lo = np.full(rows * cols, np.inf, np.float32)
-                hi = np.full(rows * cols, -np.inf, np.float32)
-                np.minimum.at(lo, flat, z)
-                np.maximum.at(hi, flat, z)
-                seen = np.isfinite(lo)
-                heights[seen, 0] = np.fmin(heights[seen, 0], lo[seen])
-                heights[seen, 1] = np.fmax(heights[seen, 1], hi[seen])
-        if drop_points_world is None or not (counts[2].size or self._drop_votes.any()):
-            return 0                                    # (no drop test, or nothing to vote on)
-        votes = np.bincount(counts[2], minlength=rows * cols) >= c.drop_min_points
-        floor = np.bincount(counts[1], minlength=rows * cols) >= c.drop_clear_points
-        v = self._drop_votes.reshape(-1)
-        v[votes] = np.minimum(v[votes] + 1, c.drop_max_votes)
-        v[floor & ~votes & (v > 0)] -= 1
-        return int(votes.sum())
-
-    def _flat_cells(self, points_world) -> tuple[np.ndarray, np.ndarray]:
-        """Flat cell index and z (float32) of the finite points (N, 3) inside the grid."""
-        p = np.asarray(points_world)
-        if p.ndim != 2 or p.shape[1] != 3:
-            raise ValueError(f"points_world must have shape (N, 3), got {p.shape}")
-        p = p[np.isfinite(p).all(axis=1)]
-        row, col = self.grid.cells_from_xy(p[:, :2])
-        inside = self.grid.inside(row, col)
-        return row[inside] * self.grid.shape[1] + col[inside], p[inside, 2].astype(np.float32)
+        at = (float(g.origin_x_m), float(g.origin_y_m), float(g.resolution_m), rows, cols)
+        voting = drop_points_world is not None
+        for points, slot in zip(sets, (-1, 0 if voting else -1, 1)):
+            _kernels.layer_points(points, slot, *at, heights, self._counts)
+        if not voting:
+            return 0
+        return int(_kernels.drop_votes(sets[1], sets[2], *at, self._counts, self._drop_votes.reshape(-1),
+                                       c.drop_min_points, c.drop_clear_points, c.drop_max_votes))
 
     def known_occupied(self, p_min: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(mask, z_range_m)``: the cells held occupied with probability at least ``p_min`` (default
