@@ -525,10 +525,14 @@ def _flat_cell(points, i, origin_x, origin_y, resolution, rows, cols):
 
 
 @njit(nogil=True, cache=True)
-def layer_points(points, slot, origin_x, origin_y, resolution, rows, cols, heights, counts):
-    """One view's points (N, 3) into the height layer, in one pass: each finite point inside the grid widens its
-    cell's lowest and highest height (``heights`` (rows*cols, 2) float32, NaN: none yet) and, with ``slot`` 0 or 1,
-    counts in ``counts[cell, slot]`` (int32 scratch, zero outside this view's cells). Returns the points inside."""
+def layer_points(points, slot, origin_x, origin_y, resolution, rows, cols, heights, counts, stamp, view, votes,
+                 clear_points):
+    """One view's points (N, 3) into the height and drop layers, in one pass: each finite point inside the grid
+    widens its cell's lowest and highest height (``heights`` (rows*cols, 2) float32, NaN: none yet); with ``slot``
+    0 (floor points) or 1 (drop points) it counts in ``counts[cell, slot]`` (int32 scratch: a cell whose
+    ``stamp`` is not ``view`` starts from zero, so no pass clears it). A cell reaching ``clear_points`` floor
+    points without a vote of this view (``counts[cell, 1]`` >= 0; the drop points come first) loses a vote
+    (``votes``, down to 0). Returns the points inside."""
     n = 0
     for i in range(points.shape[0]):
         k = _flat_cell(points, i, origin_x, origin_y, resolution, rows, cols)
@@ -539,38 +543,29 @@ def layer_points(points, slot, origin_x, origin_y, resolution, rows, cols, heigh
             heights[k, 0] = z
         if not heights[k, 1] >= z:
             heights[k, 1] = z
-        if slot >= 0:
-            counts[k, slot] += 1
         n += 1
+        if slot < 0:
+            continue
+        if stamp[k] != view:
+            stamp[k] = view
+            counts[k, 0] = 0
+            counts[k, 1] = 0
+        counts[k, slot] += 1
+        if slot == 0 and counts[k, 0] == clear_points and counts[k, 1] >= 0 and votes[k] > 0:
+            votes[k] -= 1
     return n
 
 
 @njit(nogil=True, cache=True)
-def drop_votes(floor, drops, origin_x, origin_y, resolution, rows, cols, counts, votes, min_points, clear_points,
-               max_votes):
-    """The drop votes of one view from the counts :func:`layer_points` left (floor points in slot 0, drop points in
-    slot 1): a cell with at least ``min_points`` drop points gains a vote (up to ``max_votes``), one with at least
-    ``clear_points`` floor points and no vote of this view loses one (down to 0); ``counts`` is zeroed again
-    at the view's cells. Returns the number of cells that got a vote."""
+def drop_votes(drops, origin_x, origin_y, resolution, rows, cols, counts, votes, min_points, max_votes):
+    """The votes for drops of one view, after :func:`layer_points` counted its drop points: a cell with at least
+    ``min_points`` of them gains a vote (up to ``max_votes``) and its count becomes -1 (voted: once per view,
+    and the view's floor points do not vote against it). Returns the number of cells that got a vote."""
     n = 0
     for i in range(drops.shape[0]):
         k = _flat_cell(drops, i, origin_x, origin_y, resolution, rows, cols)
         if k >= 0 and counts[k, 1] >= min_points:
             votes[k] = min(votes[k] + 1, max_votes)
-            counts[k, 1] = -1                       # voted: once per view, and no vote against
+            counts[k, 1] = -1
             n += 1
-    for i in range(floor.shape[0]):
-        k = _flat_cell(floor, i, origin_x, origin_y, resolution, rows, cols)
-        if k >= 0 and counts[k, 0] >= clear_points:
-            if counts[k, 1] >= 0 and votes[k] > 0:
-                votes[k] -= 1
-            counts[k, 0] = 0                        # once per view
-    for i in range(floor.shape[0]):
-        k = _flat_cell(floor, i, origin_x, origin_y, resolution, rows, cols)
-        if k >= 0:
-            counts[k, 0] = 0
-    for i in range(drops.shape[0]):
-        k = _flat_cell(drops, i, origin_x, origin_y, resolution, rows, cols)
-        if k >= 0:
-            counts[k, 1] = 0
     return n

@@ -27,6 +27,7 @@ import numpy as np
 
 from .. import _checks
 from ..io import atomic_write
+from ..profiling import stage
 from . import _kernels
 from .grid import GridSpec
 from .rosmap import RosMap
@@ -211,14 +212,10 @@ def _points_xy(name: str, value) -> np.ndarray:
 
 def _layer_points(name: str, value) -> np.ndarray:
     """(N, 3) float32 or float64 points for :meth:`OccupancyGrid.add_layers` (None: none)."""
-    if value is None:
-        return np.empty((0, 3), np.float32)
-    arr = np.asarray(value)
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise ValueError(f"{name} must have shape (N, 3), got {arr.shape}")
-    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
-        raise TypeError(f"{name} must hold numbers, got dtype {arr.dtype}")
-    return np.ascontiguousarray(arr, dtype=arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64)
+    arr = _points_xy(name, value)
+    if len(arr) and arr.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3) (z is the height), got {arr.shape}")
+    return arr
 
 
 def _finite_bounds(*point_sets: np.ndarray) -> np.ndarray | None:
@@ -537,7 +534,8 @@ class OccupancyGrid:
         # the height layer (lowest, highest point height seen in the cell; NaN: none) and the drop votes
         self._heights_m = np.full(grid.shape + (2,), np.nan, np.float32)
         self._drop_votes = np.zeros(grid.shape, np.int16)
-        self._counts = None           # add_layers' per-view point counts (floor, drop) per cell, zero between views
+        self._counts = self._stamp = None       # add_layers' per-view point counts per cell, and their view
+        self._view = 0
         self.n_updates = 0
         self.points_outside = 0
         """Points of all updates so far whose ray was cut at the grid's border (they fell outside it)."""
@@ -585,23 +583,26 @@ class OccupancyGrid:
         one (``drop_points_world`` None: no drop test, no votes either way). Votes change only here and under the footprint (:meth:`clear_disc`), never by a ray passing
         over the cell. Returns the number of cells that got a vote.
         """
-        c = self.config
-        g = self.grid
-        rows, cols = g.shape
-        sets = [_layer_points(name, p) for name, p in (("obstacle_points_world", obstacle_points_world),
-                                                          ("floor_points_world", floor_points_world),
-                                                          ("drop_points_world", drop_points_world))]
-        if self._counts is None:
-            self._counts = np.zeros((rows * cols, 2), np.int32)     # per-view scratch, zero between views
-        heights = self._heights_m.reshape(-1, 2)
-        at = (float(g.origin_x_m), float(g.origin_y_m), float(g.resolution_m), rows, cols)
-        voting = drop_points_world is not None
-        for points, slot in zip(sets, (-1, 0 if voting else -1, 1)):
-            _kernels.layer_points(points, slot, *at, heights, self._counts)
-        if not voting:
-            return 0
-        return int(_kernels.drop_votes(sets[1], sets[2], *at, self._counts, self._drop_votes.reshape(-1),
-                                       c.drop_min_points, c.drop_clear_points, c.drop_max_votes))
+        with stage("grid.layers"):
+            c = self.config
+            g = self.grid
+            rows, cols = g.shape
+            sets = [_layer_points(name, p) for name, p in (("obstacle_points_world", obstacle_points_world),
+                                                              ("floor_points_world", floor_points_world),
+                                                              ("drop_points_world", drop_points_world))]
+            if self._counts is None:                # per-view scratch: counts of floor and drop points per cell
+                self._counts = np.zeros((rows * cols, 2), np.int32)
+                self._stamp = np.full(rows * cols, -1, np.int32)
+            self._view = (self._view + 1) % (1 << 31)           # the cells stamped with another view count from 0
+            heights = self._heights_m.reshape(-1, 2)
+            votes = self._drop_votes.reshape(-1)
+            at = (float(g.origin_x_m), float(g.origin_y_m), float(g.resolution_m), rows, cols)
+            scratch = (self._counts, self._stamp, self._view, votes, c.drop_clear_points)
+            _kernels.layer_points(sets[2], 1, *at, heights, *scratch)
+            voted = _kernels.drop_votes(sets[2], *at, self._counts, votes, c.drop_min_points, c.drop_max_votes)
+            _kernels.layer_points(sets[1], 0 if drop_points_world is not None else -1, *at, heights, *scratch)
+            _kernels.layer_points(sets[0], -1, *at, heights, *scratch)
+            return int(voted)
 
     def known_occupied(self, p_min: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(mask, z_range_m)``: the cells held occupied with probability at least ``p_min`` (default
