@@ -114,7 +114,8 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
     than a step plus a slope of ``tan_slope`` from the last floor-level point ``A`` before it (``-thr < z <
     low_m``; none measured: the floor under the camera, where the robot stands), or it starts with a face
     steeper than that slope over a step and floor follows it, spreading over ``edge_reach_m`` (a hole's far
-    wall, a stair riser; in a column without floor before the run, any face reaching floor level). Its sight
+    wall, a stair riser; in a column without floor before the run, a face reaching floor level whose foot
+    lies deeper than a step plus that slope from ``E``). Its sight
     line passes floor level at ``E``: no ``support`` floor-level points of the column may lie between ``E``
     and the run's first point beyond their depth noise (that floor would hide it: a mismatch). Points every
     ``spacing_m`` over the last ``edge_reach_m`` of ``A -> E`` go to ``out_edge``, the run's points to
@@ -153,23 +154,26 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
             if zp >= low_m or not _below(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
                 k += 1
                 continue
-            end = k                                  # the run of points below the floor
-            deepest = 0.0
-            while end < m and _below(points, rows[end], j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
-                q = rows[end]
-                sq = n_sigma * _sigma_h(points[q, j, 0], points[q, j, 1], points[q, j, 2], tx, ty, tz, sigma_per_m2)
-                d = math.sqrt((points[q, j, 0] - xa) ** 2 + (points[q, j, 1] - ya) ** 2)
-                deepest = max(deepest, za - points[q, j, 2] - math.sqrt(sa * sa + sq * sq) - tan_slope * d)
-                end += 1
             s = tz / (tz - zp)                       # the sight line to the run's first point at floor level
             ex, ey = tx + s * (xp - tx), ty + s * (yp - ty)
             r_low = math.sqrt((xp - tx) ** 2 + (yp - ty) ** 2)
+            end = k                                  # the run of points below the floor
+            deepest = 0.0                            # below a drivable slope from A
+            deepest_e = 0.0                          # below a drivable slope from E
+            while end < m and _below(points, rows[end], j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
+                q = rows[end]
+                xq, yq, zq = points[q, j, 0], points[q, j, 1], points[q, j, 2]
+                sq = n_sigma * _sigma_h(xq, yq, zq, tx, ty, tz, sigma_per_m2)
+                d = math.sqrt((xq - xa) ** 2 + (yq - ya) ** 2)
+                deepest = max(deepest, za - zq - math.sqrt(sa * sa + sq * sq) - tan_slope * d)
+                deepest_e = max(deepest_e, -zq - sq - tan_slope * math.sqrt((xq - ex) ** 2 + (yq - ey) ** 2))
+                end += 1
             # a steep face counts when floor follows it, spreading on (a hole's far wall up to its far rim, a
             # stair riser); in a column without floor before it, a face reaching floor level (a wall rising
-            # from a lower floor) too
+            # from a lower floor) whose foot no drivable slope from E reaches
             drop = deepest > max_step_m
             if not drop and end - k >= support:
-                drop = ((not seen_floor and end < m and points[rows[end], j, 2] < low_m)
+                drop = ((not seen_floor and deepest_e > max_step_m and end < m and points[rows[end], j, 2] < low_m)
                         or _flat_after(points, rows, j, end, m, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
                                        low_m, edge_reach_m)) and _steep(points, rows, j, k, end, max_step_m,
                                                                         tan_slope, sp)
