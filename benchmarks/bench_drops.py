@@ -4,7 +4,7 @@ Each frame is matched once and mapped twice, with and without the drop test (the
 the drop test's points, :mod:`mrstereo.geometry.drops`), so the two maps differ by the drop test only.
 
 Randomized worlds (``random_world(seed, drops=True)``: a ledge or a drivable ramp down, holes, stairwells,
-a kerb, a sunken step; the layer's rules chosen on seeds 0-4 and 100-109, reported on 200-209), the frames of ``write_synthetic_dataset``'s
+a kerb, a sunken step; the map layer's rules chosen on seeds 0-4 and 100-109, the drop test's on 100-119; reported on 200-209 and 300-309), the frames of ``write_synthetic_dataset``'s
 ``stops`` path (front, +45 and -45 degrees at each stop), per seed:
 
 * **edge recall**: the true drop-edge cells (``mrstereo.world.drop_edges``) whose floor some frame's true

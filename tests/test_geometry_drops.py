@@ -144,25 +144,54 @@ def test_the_robot_limits_decide_what_is_a_drop(ledge):
     assert w == ledge.stereo.size[0] and h == ledge.stereo.size[1]
 
 
-def test_a_flat_floor_has_no_drop():
-    """A flat floor seen by a tilted camera (analytic points plus noise): nothing below it is a drop."""
-    rng = np.random.default_rng(3)
-    h, w, f, height = 240, 320, 200.0, 0.5
+def _tilted_rig(h=240, w=320, f=200.0, height=0.5, tilt_deg=10.0):
+    """Rays (H, W, 3) in the robot frame of a camera ``height`` m above the floor tilted down by ``tilt_deg``,
+    its pose T_robot_from_cam, its ``b f`` (0.12 m baseline) and the rays' z in the camera (depth per metre)."""
     v, u = np.mgrid[0:h, 0:w].astype(float)
-    tilt = math.radians(10.0)
+    tilt = math.radians(tilt_deg)
     ray_cam = np.stack([(u - w / 2) / f, (v - h / 2) / f, np.ones_like(u)], -1)
     # camera x right, y down, z forward -> robot x forward, y left, z up, tilted down by `tilt`
     R = np.array([[0, -math.sin(tilt), math.cos(tilt)], [-1, 0, 0], [0, -math.cos(tilt), -math.sin(tilt)]])
-    rays = ray_cam @ R.T
-    t = np.array([0.0, 0.0, height])
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, (0.0, 0.0, height)
+    return ray_cam @ R.T, T, 0.12 * f
+
+
+def _surface(rays, T, height_of, rng=None, bf=24.0, reach_m=6.0):
+    """Points where the rays first meet the surface ``z = height_of(points)`` (marched in 2 mm steps), with a
+    disparity error of 0.25 px (sigma) when ``rng`` is given (each point moved along its ray); NaN where no
+    surface is met within ``reach_m`` horizontally."""
+    t = T[:3, 3]
+    flat = rays.reshape(-1, 3)
+    out = np.full(flat.shape, np.nan)
+    todo = flat[:, 2] < 0.0
+    for s in np.arange(0.01, 20.0, 0.002):
+        p = t + flat[todo] * s
+        hit = p[:, 2] <= height_of(p)
+        idx = np.nonzero(todo)[0]
+        out[idx[hit]] = p[hit]
+        todo[idx[hit | (np.hypot(p[:, 0], p[:, 1]) > reach_m)]] = False
+        if not todo.any():
+            break
+    out = out.reshape(rays.shape)
+    if rng is not None:
+        depth = (out - t) @ T[:3, :3][:, 2]                       # camera z of each point
+        noisy = depth + rng.normal(0, 1, depth.shape) * 0.25 * depth ** 2 / bf
+        out = t + (out - t) * (noisy / depth)[..., None]
+    return out
+
+
+def test_a_flat_floor_has_no_drop():
+    """A flat floor seen by a tilted camera (analytic points plus noise): nothing below it is a drop."""
+    rng = np.random.default_rng(3)
+    rays, T, bf = _tilted_rig()
+    t = T[:3, 3]
+    height = t[2]
     s = np.where(rays[..., 2] < -1e-6, height / -np.minimum(rays[..., 2], -1e-6), np.nan)
     points = t + rays * s[..., None]
-    bf = 0.12 * f
-    depth = s * ray_cam[..., 2]
-    points[..., 2] += rng.normal(0, 1, (h, w)) * 0.25 * depth ** 2 / bf * height / np.maximum(depth, 1e-9)
+    depth = s * (rays @ T[:3, :3])[..., 2]
+    points[..., 2] += rng.normal(0, 1, depth.shape) * 0.25 * depth ** 2 / bf * height / np.maximum(depth, 1e-9)
     points[np.hypot(points[..., 0], points[..., 1]) > 6.0] = np.nan
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, t
     assert len(find_drops(points, T, bf).points_robot) == 0
     flat = points.copy()
     # the same floor ending 1.5 m ahead, 0.5 m down: its edge is found (no 10 degree slope reaches the lower
@@ -172,12 +201,62 @@ def test_a_flat_floor_has_no_drop():
     points[beyond] = lower[beyond]
     found = find_drops(points, T, bf)
     assert len(found.edge_points_robot) and np.all(np.abs(found.edge_points_robot[:, 0] - 1.5) < 0.15)
-    assert np.count_nonzero(found.edge_columns) > 0.5 * w
+    assert np.count_nonzero(found.edge_columns) > 0.5 * points.shape[1]
     assert np.all(found.below_points_robot[:, 0] > 1.5)
     far = np.where((flat[..., 0] > 3.0)[..., None], t + rays * np.where(
         rays[..., 2] < 0, (height + 0.5) / -np.minimum(rays[..., 2], -1e-6), np.nan)[..., None], flat)
     far[np.hypot(far[..., 0], far[..., 1]) > 6.0] = np.nan
     assert len(find_drops(far, T, bf).edge_points_robot) == 0
+
+
+def test_a_ledge_is_found_within_a_cell_of_where_it_is():
+    """A floor ending 1.2 m ahead (straight across), 0.4 m above a lower floor, exact points: every edge mark
+    lies within one 5 cm cell of the edge (between the last floor point and where the next sight line passes
+    floor level), in nearly every column."""
+    rays, T, bf = _tilted_rig(h=120, w=160, f=100.0)
+    points = _surface(rays, T, lambda p: np.where(p[:, 0] < 1.2, 0.0, -0.4))
+    found = find_drops(points, T, bf)
+    x = found.edge_points_robot[:, 0]
+    assert len(x) > 100 and np.all(np.abs(x - 1.2) < 0.05), (x.min(), x.max())
+    assert np.all(found.edge_points_robot[:, 2] == 0.0)
+    assert np.count_nonzero(found.edge_columns) > 0.5 * points.shape[1]     # (farther out a slope may hide)
+
+
+@pytest.mark.parametrize("slope_deg, is_drop", [(6.0, False), (9.0, False), (30.0, True)])
+def test_a_ramp_within_the_slope_limit_is_no_drop(slope_deg, is_drop):
+    """A floor going down a ramp 1 m ahead (straight across) to 0.3 m lower, points with disparity noise: a
+    ramp within ``max_slope_deg`` (10) has no drop mark, a 30 degree one has."""
+    rng = np.random.default_rng(5)
+    rays, T, bf = _tilted_rig(h=120, w=160, f=100.0)
+    tan = math.tan(math.radians(slope_deg))
+    points = _surface(rays, T, lambda p: -np.clip((p[:, 0] - 1.0) * tan, 0.0, 0.3), rng=rng, bf=bf)
+    found = find_drops(points, T, bf)
+    if is_drop:
+        assert np.count_nonzero(found.edge_columns) > 0.5 * points.shape[1]
+    else:
+        assert len(found.points_robot) == 0, found.points_robot[:5]
+
+
+def test_a_textureless_or_mismatched_patch_of_floor_is_no_drop():
+    """A flat floor with a patch that has no points (texture-less) or whose points a mismatch put too far
+    along their rays (below the floor, the floor seen again right after it): no drop; the same patch with no
+    floor after it (a hole whose far side is not seen) is one."""
+    rng = np.random.default_rng(7)
+    rays, T, bf = _tilted_rig(h=120, w=160, f=100.0)
+    floor = _surface(rays, T, lambda p: np.zeros(len(p)), rng=rng, bf=bf)
+    r = np.hypot(floor[..., 0], floor[..., 1])
+    patch = (r > 1.2) & (r < 1.5) & (np.abs(floor[..., 1]) < 0.4)
+    holes = floor.copy()
+    holes[patch] = np.nan
+    assert len(find_drops(holes, T, bf).points_robot) == 0
+    t = T[:3, 3]
+    mismatched = floor.copy()
+    mismatched[patch] = t + (floor[patch] - t) * 2.0              # twice too far: 0.5 m below the floor
+    assert np.all(mismatched[patch][:, 2] < -0.4)
+    assert len(find_drops(mismatched, T, bf).points_robot) == 0
+    cut = mismatched.copy()
+    cut[(r >= 1.5) & (np.abs(floor[..., 1]) < 0.4)] = np.nan       # nothing seen after the patch
+    assert np.count_nonzero(find_drops(cut, T, bf).edge_columns) > 10
 
 
 def _layers_grid():

@@ -493,3 +493,56 @@ def test_a_view_depends_on_its_points_only_through_their_cells():
     for name in ("hit", "miss", "hit_z_m"):
         np.testing.assert_array_equal(getattr(small, name), getattr(full, name))
     assert small.occluded == full.occluded > 0 and len(full.hit) > 100 and len(full.miss) > 1000
+
+
+def _layers_by_numpy(grid: GridSpec, config: MappingConfig, views) -> tuple[np.ndarray, np.ndarray]:
+    """The height and drop layers of ``views`` ((obstacle, floor, drop) point sets) by the rules of
+    ``OccupancyGrid.add_layers``, per cell with numpy: heights by ``fmin.at`` / ``fmax.at``, votes by counts."""
+    rows, cols = grid.shape
+    heights = np.full((rows * cols, 2), np.nan, np.float32)
+    votes = np.zeros(rows * cols, np.int64)
+    for view in views:
+        counts = []
+        for points in view:
+            p = np.empty((0, 3)) if points is None else np.asarray(points, np.float64)
+            p = p[np.isfinite(p).all(axis=1)]
+            r, c = grid.cells_from_xy(p[:, :2])
+            inside = grid.inside(r, c)
+            flat = r[inside] * cols + c[inside]
+            z = p[inside, 2].astype(np.float32)
+            np.fmin.at(heights[:, 0], flat, z)
+            np.fmax.at(heights[:, 1], flat, z)
+            counts.append(np.bincount(flat, minlength=rows * cols))
+        if view[2] is None:
+            continue
+        voted = counts[2] >= config.drop_min_points
+        votes[voted] = np.minimum(votes[voted] + 1, config.drop_max_votes)
+        votes[(counts[1] >= config.drop_clear_points) & ~voted & (votes > 0)] -= 1
+    return heights.reshape(rows, cols, 2), votes.reshape(rows, cols)
+
+
+def test_height_and_drop_layers_equal_a_per_cell_count_of_random_views():
+    grid = GridSpec(width_m=3.0, height_m=2.0, resolution_m=0.1, origin_x_m=-0.5, origin_y_m=-1.0)
+    config = MappingConfig(drop_min_points=2, drop_clear_points=4)
+    rng = np.random.default_rng(3)
+    views = []
+    for k in range(25):
+        corner = rng.uniform([0.0, -0.5, -1.0], [0.7, 0.2, -1.0])      # the drop points in 0.3 m x 0.3 m of it
+        sets = [rng.uniform(low, high, (n, 3)).astype(dtype)
+                for low, high, n, dtype in (([-1.0, -1.5, -1.0], [3.0, 1.5, 1.0], 150, np.float32),
+                                            ([0.0, -0.5, -0.05], [1.0, 0.5, 0.05], 600, np.float32),
+                                            (corner, corner + [0.3, 0.3, 0.9], 60, np.float64))]
+        sets[0][::13] = np.nan                                    # points without a measurement are skipped
+        views.append((sets[0], sets[1], None if k % 6 == 5 else sets[2]))
+    occupancy = OccupancyGrid(grid, config=config)
+    voted = [occupancy.add_layers(*view) for view in views]
+    heights, votes = _layers_by_numpy(grid, config, views)
+    np.testing.assert_array_equal(occupancy.heights_m, heights)
+    np.testing.assert_array_equal(occupancy._drop_votes, votes)
+    assert 0 < votes.sum() and votes.max() == config.drop_max_votes and voted[5] == 0 and max(voted) > 0
+    assert (occupancy.drop == (votes > 0)).all()
+    # a view's counts do not leak into the next: one drop point in a cell per view never votes
+    single = OccupancyGrid(grid, config=config)
+    for _ in range(5):
+        single.add_layers(np.empty((0, 3)), np.empty((0, 3)), np.array([[0.05, 0.05, -0.5]]))
+    assert not single.drop.any() and single.heights_m[10, 5, 0] == pytest.approx(-0.5)

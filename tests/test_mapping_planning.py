@@ -245,3 +245,26 @@ def test_plan_starts_where_a_map_run_left_the_robot(synthetic_dataset, tmp_path,
     assert code == 0, capsys.readouterr().err
     record = json.loads((tmp_path / "p.json").read_text())
     assert record["start"] == pytest.approx([T[-1][0, 3], T[-1][1, 3]])
+
+
+@pytest.mark.parametrize("gap_m, passes", [(0.3, False), (0.8, True)])
+def test_plan_crosses_a_ledge_of_drop_cells_only_through_a_gap_wider_than_the_robot(gap_m, passes):
+    from mrstereo.mapping import MappingConfig, OccupancyGrid
+
+    grid = GridSpec(width_m=4.0, height_m=2.0, resolution_m=0.05, origin_x_m=0.0, origin_y_m=-1.0)
+    config = MappingConfig(footprint_radius_m=None)
+    occupancy = OccupancyGrid(grid, config=config, log_odds=np.full(grid.shape, config.l_min))   # all seen free
+    # a ledge at x = 2.0-2.05 m across the whole map, its edge found by the drop test but for a gap at y in [0, gap)
+    y = np.arange(-1.0, 1.0, 0.05) + 0.025
+    y = y[(y < 0.0) | (y > gap_m)]
+    edge = np.repeat(np.column_stack([np.full(len(y), 2.025), y, np.zeros(len(y))]), config.drop_min_points, axis=0)
+    floor = np.array([[x, -0.5, 0.0] for x in np.arange(0.5, 3.5, 0.05) for _ in range(5)])
+    for _ in range(3):                 # rays over the ledge (at y = -0.5) clear nothing of it: it stays lethal
+        occupancy.update(None, floor, (0.3, -0.5, 0.5), layers=(np.empty((0, 3)), floor, edge))
+    assert occupancy.drop.sum() == len(y) and not occupancy.free[occupancy.drop].any()
+    result = plan_path(occupancy, (0.5, 0.1), (3.5, 0.1), robot_radius_m=0.25, unknown_is_obstacle=False)
+    assert result.success == passes, result.message
+    if passes:                         # through the gap, never nearer a drop cell than the robot's radius
+        centres = grid.xy_from_cells(*np.nonzero(occupancy.drop))
+        gaps = np.linalg.norm(result.path_xy[:, None, :] - centres[None], axis=-1).min(axis=1)
+        assert gaps.min() >= 0.25 and (np.abs(result.path_xy[:, 0] - 2.025) < 0.03).any()

@@ -52,6 +52,58 @@ def _steep(points, rows, j, k0, k1, max_step_m, tan_slope, noise_m):
     return False
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _range(points, p, j, tx, ty):
+    """Horizontal distance of point ``(p, j)`` from the camera."""
+    return math.sqrt((points[p, j, 0] - tx) ** 2 + (points[p, j, 1] - ty) ** 2)
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _floor_level(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma, low_m):
+    """Is point ``(p, j)`` at floor level (within a step and its noise below, under ``low_m`` above)?"""
+    z = points[p, j, 2]
+    return -(max_step_m + n_sigma * _sigma_h(points[p, j, 0], points[p, j, 1], z, tx, ty, tz, sigma_per_m2)) < z < low_m
+
+
+@njit(nogil=True, cache=True)
+def _flat_after(points, rows, j, k, m, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma, low_m, reach_m):
+    """Does floor follow from ``rows[k]`` on: floor-level points spreading over more than ``reach_m`` plus
+    their depth noise horizontally (a far rim; not a wall rising through floor level)?"""
+    if k >= m:
+        return False
+    r0 = _range(points, rows[k], j, tx, ty)
+    noise = n_sigma * sigma_per_m2 * r0 * r0
+    q = k
+    while q < m and _floor_level(points, rows[q], j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma, low_m):
+        if abs(_range(points, rows[q], j, tx, ty) - r0) > reach_m + noise:
+            return True
+        q += 1
+    return False
+
+
+@njit(nogil=True, cache=True)
+def _seen_through(points, rows, j, k0, k1, m, r_cross, r_low, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
+                  low_m, support):
+    """Is the sight line of a run below the floor contradicted: do at least ``support`` floor-level points
+    of the column (other than the run ``rows[k0:k1]``) lie beyond where it passes floor level (``r_cross``)
+    and before its point (``r_low``), by more than their depth noise? Its ray would pass under that floor:
+    the run is a mismatch (a floor seen too far), not a drop."""
+    n = 0
+    for q in range(m):
+        if k0 <= q < k1:
+            continue
+        p = rows[q]
+        if not _floor_level(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma, low_m):
+            continue
+        r = _range(points, p, j, tx, ty)
+        margin = n_sigma * sigma_per_m2 * r * r
+        if r_cross + margin < r < r_low - margin:
+            n += 1
+            if n >= support:
+                return True
+    return False
+
+
 @njit(nogil=True, cache=True)
 def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m, support, edge_reach_m,
                  spacing_m, out_edge, out_below, edge_columns):
@@ -60,14 +112,16 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
     Up each column (from the image's bottom) a run of at least ``support`` measured points below the floor
     (``z < -(max_step + n_sigma sigma_h)``) is a drop when no drivable surface reaches it: it lies deeper
     than a step plus a slope of ``tan_slope`` from the last floor-level point ``A`` before it (``-thr < z <
-    low_m``; none measured: the floor under the camera, where the robot stands), or it
-    starts with a face steeper than that slope over a step and floor follows it (a hole's far wall, a stair
-    riser). Its edge lies before
-    ``E``, where the sight line to the run's first point passes floor level: points every ``spacing_m`` over
-    the last ``edge_reach_m`` of ``A -> E`` go to ``out_edge``, the run's points to ``out_below``, all at floor
-    level. A rise from a drop to supported floor-level points marks the first of them (a far rim). ``t``: the
-    camera in the robot frame. Returns the counts of ``out_edge`` and ``out_below``; ``edge_columns[j]``
-    counts column j's drops.
+    low_m``; none measured: the floor under the camera, where the robot stands), or it starts with a face
+    steeper than that slope over a step and floor follows it, spreading over ``edge_reach_m`` (a hole's far
+    wall, a stair riser; in a column without floor before the run, a face reaching floor level whose foot
+    lies deeper than a step plus that slope from ``E``). Its sight
+    line passes floor level at ``E``: no ``support`` floor-level points of the column may lie between ``E``
+    and the run's first point beyond their depth noise (that floor would hide it: a mismatch). Points every
+    ``spacing_m`` over the last ``edge_reach_m`` of ``A -> E`` go to ``out_edge``, the run's points to
+    ``out_below``. Floor spreading on after a drop marks its first point (a far rim). ``t``: the camera in
+    the robot frame. Returns the counts of ``out_edge`` and ``out_below``; ``edge_columns[j]`` counts
+    column j's drops.
     """
     H, W = points.shape[0], points.shape[1]
     tx, ty, tz = t[0], t[1], t[2]
@@ -81,6 +135,7 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
                 rows[m] = i
                 m += 1
         xa, ya, za, sa = tx, ty, 0.0, 0.0
+        seen_floor = False
         in_drop = False
         k = 0
         while k < m:
@@ -88,39 +143,45 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
             xp, yp, zp = points[p, j, 0], points[p, j, 1], points[p, j, 2]
             sp = n_sigma * _sigma_h(xp, yp, zp, tx, ty, tz, sigma_per_m2)
             if -(max_step_m + sp) < zp < low_m:
-                if in_drop:                          # back on the floor after a drop: its far rim
-                    end = k
-                    while end < m and end - k < support:
-                        q = rows[end]
-                        zq = points[q, j, 2]
-                        sq = n_sigma * _sigma_h(points[q, j, 0], points[q, j, 1], zq, tx, ty, tz, sigma_per_m2)
-                        if not -(max_step_m + sq) < zq < low_m:
-                            break
-                        end += 1
-                    if end - k >= support:
-                        n_edge = _emit(out_edge, n_edge, xp, yp)
-                        in_drop = False
+                if in_drop and _flat_after(points, rows, j, k, m, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
+                                           low_m, edge_reach_m):       # back on the floor after a drop: its far rim
+                    n_edge = _emit(out_edge, n_edge, xp, yp)
+                    in_drop = False
                 xa, ya, za, sa = xp, yp, zp, sp
+                seen_floor = True
                 k += 1
                 continue
             if zp >= low_m or not _below(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
                 k += 1
                 continue
+            s = tz / (tz - zp)                       # the sight line to the run's first point at floor level
+            ex, ey = tx + s * (xp - tx), ty + s * (yp - ty)
+            r_low = math.sqrt((xp - tx) ** 2 + (yp - ty) ** 2)
             end = k                                  # the run of points below the floor
-            deepest = 0.0
+            deepest = 0.0                            # below a drivable slope from A
+            deepest_e = 0.0                          # below a drivable slope from E
             while end < m and _below(points, rows[end], j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
                 q = rows[end]
-                sq = n_sigma * _sigma_h(points[q, j, 0], points[q, j, 1], points[q, j, 2], tx, ty, tz, sigma_per_m2)
-                d = math.sqrt((points[q, j, 0] - xa) ** 2 + (points[q, j, 1] - ya) ** 2)
-                deepest = max(deepest, za - points[q, j, 2] - math.sqrt(sa * sa + sq * sq) - tan_slope * d)
+                xq, yq, zq = points[q, j, 0], points[q, j, 1], points[q, j, 2]
+                sq = n_sigma * _sigma_h(xq, yq, zq, tx, ty, tz, sigma_per_m2)
+                d = math.sqrt((xq - xa) ** 2 + (yq - ya) ** 2)
+                deepest = max(deepest, za - zq - math.sqrt(sa * sa + sq * sq) - tan_slope * d)
+                deepest_e = max(deepest_e, -zq - sq - tan_slope * math.sqrt((xq - ex) ** 2 + (yq - ey) ** 2))
                 end += 1
-            # a steep face counts when floor follows it (a hole's far wall up to its far rim; a wall rising
-            # from a lower floor goes on above the floor)
-            rim = end < m and points[rows[end], j, 2] < low_m
-            if end - k >= support and (deepest > max_step_m or (
-                    rim and _steep(points, rows, j, k, end, max_step_m, tan_slope, sp))):
-                s = tz / (tz - zp)                   # the sight line to the run's first point at floor level
-                ex, ey = tx + s * (xp - tx), ty + s * (yp - ty)
+            # a steep face counts when floor follows it, spreading on (a hole's far wall up to its far rim, a
+            # stair riser); in a column without floor before it, a face reaching floor level (a wall rising
+            # from a lower floor) whose foot no drivable slope from E reaches
+            drop = deepest > max_step_m
+            if not drop and end - k >= support:
+                drop = ((not seen_floor and deepest_e > max_step_m and end < m and points[rows[end], j, 2] < low_m)
+                        or _flat_after(points, rows, j, end, m, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
+                                       low_m, edge_reach_m)) and _steep(points, rows, j, k, end, max_step_m,
+                                                                        tan_slope, sp)
+            # and its sight line does not pass under floor measured in the column (a mismatch: floor matched
+            # too far lies below the floor, and the floor goes on right after it)
+            if end - k >= support and drop and not _seen_through(
+                    points, rows, j, k, end, m, s * r_low, r_low, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
+                    low_m, support):
                 length = math.sqrt((ex - xa) ** 2 + (ey - ya) ** 2)
                 start = max(0.0, length - edge_reach_m)
                 n_steps = int((length - start) / spacing_m) + 1

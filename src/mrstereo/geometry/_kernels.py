@@ -148,3 +148,17 @@ def obstacle_points(disparity, doffs_px, too_near, near_limit_px, bf, focal_px, 
                 floor_points[n_floor, 2] = pz
                 n_floor += 1
     return n, n_obstacle, n_floor, n_floor_band, n_near
+
+
+@njit(nogil=True, cache=True)
+def scatter_points(points, pixels, out):
+    """``out`` (H * W, 3) float64 = NaN, then ``out[pixels[i]] = points[i]``: a point image from the listed points."""
+    for k in range(out.shape[0]):
+        out[k, 0] = np.nan
+        out[k, 1] = np.nan
+        out[k, 2] = np.nan
+    for i in range(pixels.shape[0]):
+        k = pixels[i]
+        out[k, 0] = points[i, 0]
+        out[k, 1] = points[i, 1]
+        out[k, 2] = points[i, 2]

@@ -3,7 +3,9 @@
 Beyond the paper, which marks only points above the floor. Up each column of the disparity image the
 floor's points are followed until the next measured point lies below the floor by more than the robot
 climbs (``max_step_m`` plus three times the point's height uncertainty) and no drivable slope
-(``max_slope_deg``) joins the two: the floor visibly ends there. The edge (between the last floor point
+(``max_slope_deg``) joins the two: the floor visibly ends there -- unless the sight line to the lower
+point passes under floor measured in the same column (a mismatch: floor matched too far lies below the
+floor). The edge (between the last floor point
 and where the sight line to the lower point passes floor level) and the lower points become obstacle
 points at floor level (z = 0, below any sight line, so the grid's occlusion tests never see through them), so
 the scan and the grid mark them like any obstacle; the far rim of a hole

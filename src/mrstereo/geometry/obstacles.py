@@ -129,8 +129,8 @@ class ObstacleResult:
     def points_robot_image(self) -> np.ndarray:
         """Robot-frame point of every pixel, (H, W, 3) float64, NaN where there is none (built on first use)."""
         h, w = self.obstacle_mask.shape
-        image = np.full((h * w, 3), np.nan)
-        image[self.pixels] = self.points_robot
+        image = np.empty((h * w, 3))
+        _kernels.scatter_points(self.points_robot, self.pixels, image)
         return image.reshape(h, w, 3)
 
 

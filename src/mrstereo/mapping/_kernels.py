@@ -505,3 +505,67 @@ def keep_supported(cell, counts, min_points, keep):
         keep[i] = k
         n += k
     return n
+
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _flat_cell(points, i, origin_x, origin_y, resolution, rows, cols):
+    """Flat cell of point i (``floor((x - origin) / resolution)`` as ``GridSpec.cells_from_xy``), -1 when a
+    coordinate is not finite or the cell lies outside the grid."""
+    x = np.float64(points[i, 0])
+    y = np.float64(points[i, 1])
+    z = np.float64(points[i, 2])
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        return -1
+    c = math.floor((x - origin_x) / resolution)
+    r = math.floor((y - origin_y) / resolution)
+    if 0 <= r < rows and 0 <= c < cols:
+        return int(r) * cols + int(c)
+    return -1
+
+
+@njit(nogil=True, cache=True)
+def layer_points(points, slot, origin_x, origin_y, resolution, rows, cols, heights, counts, stamp, view, votes,
+                 clear_points):
+    """One view's points (N, 3) into the height and drop layers, in one pass: each finite point inside the grid
+    widens its cell's lowest and highest height (``heights`` (rows*cols, 2) float32, NaN: none yet); with ``slot``
+    0 (floor points) or 1 (drop points) it counts in ``counts[cell, slot]`` (int32 scratch: a cell whose
+    ``stamp`` is not ``view`` starts from zero, so no pass clears it). A cell reaching ``clear_points`` floor
+    points without a vote of this view (``counts[cell, 1]`` >= 0; the drop points come first) loses a vote
+    (``votes``, down to 0). Returns the points inside."""
+    n = 0
+    for i in range(points.shape[0]):
+        k = _flat_cell(points, i, origin_x, origin_y, resolution, rows, cols)
+        if k < 0:
+            continue
+        z = np.float32(points[i, 2])
+        if not heights[k, 0] <= z:          # (NaN: the first point)
+            heights[k, 0] = z
+        if not heights[k, 1] >= z:
+            heights[k, 1] = z
+        n += 1
+        if slot < 0:
+            continue
+        if stamp[k] != view:
+            stamp[k] = view
+            counts[k, 0] = 0
+            counts[k, 1] = 0
+        counts[k, slot] += 1
+        if slot == 0 and counts[k, 0] == clear_points and counts[k, 1] >= 0 and votes[k] > 0:
+            votes[k] -= 1
+    return n
+
+
+@njit(nogil=True, cache=True)
+def drop_votes(drops, origin_x, origin_y, resolution, rows, cols, counts, votes, min_points, max_votes):
+    """The votes for drops of one view, after :func:`layer_points` counted its drop points: a cell with at least
+    ``min_points`` of them gains a vote (up to ``max_votes``) and its count becomes -1 (voted: once per view,
+    and the view's floor points do not vote against it). Returns the number of cells that got a vote."""
+    n = 0
+    for i in range(drops.shape[0]):
+        k = _flat_cell(drops, i, origin_x, origin_y, resolution, rows, cols)
+        if k >= 0 and counts[k, 1] >= min_points:
+            votes[k] = min(votes[k] + 1, max_votes)
+            counts[k, 1] = -1
+            n += 1
+    return n

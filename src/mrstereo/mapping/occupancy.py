@@ -27,6 +27,7 @@ import numpy as np
 
 from .. import _checks
 from ..io import atomic_write
+from ..profiling import stage
 from . import _kernels
 from .grid import GridSpec
 from .rosmap import RosMap
@@ -207,6 +208,14 @@ def _points_xy(name: str, value) -> np.ndarray:
         raise TypeError(f"{name} must hold numbers, got dtype {arr.dtype}")
     # float32 and float64 points as they are (the kernels take each coordinate as float64)
     return np.ascontiguousarray(arr, dtype=arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64)
+
+
+def _layer_points(name: str, value) -> np.ndarray:
+    """(N, 3) float32 or float64 points for :meth:`OccupancyGrid.add_layers` (None: none)."""
+    arr = _points_xy(name, value)
+    if len(arr) and arr.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3) (z is the height), got {arr.shape}")
+    return arr
 
 
 def _finite_bounds(*point_sets: np.ndarray) -> np.ndarray | None:
@@ -525,6 +534,8 @@ class OccupancyGrid:
         # the height layer (lowest, highest point height seen in the cell; NaN: none) and the drop votes
         self._heights_m = np.full(grid.shape + (2,), np.nan, np.float32)
         self._drop_votes = np.zeros(grid.shape, np.int16)
+        self._counts = self._stamp = None       # add_layers' per-view point counts per cell, and their view
+        self._view = 0
         self.n_updates = 0
         self.points_outside = 0
         """Points of all updates so far whose ray was cut at the grid's border (they fell outside it)."""
@@ -572,40 +583,26 @@ class OccupancyGrid:
         one (``drop_points_world`` None: no drop test, no votes either way). Votes change only here and under the footprint (:meth:`clear_disc`), never by a ray passing
         over the cell. Returns the number of cells that got a vote.
         """
-        rows, cols = self.grid.shape
-        c = self.config
-        drops = np.empty((0, 3)) if drop_points_world is None else drop_points_world
-        counts = []
-        heights = self._heights_m.reshape(-1, 2)
-        for points in (obstacle_points_world, floor_points_world, drops):
-            flat, z = self._flat_cells(points)
-            counts.append(flat)
-            if flat.size:
-                lo = np.full(rows * cols, np.inf, np.float32)
-                hi = np.full(rows * cols, -np.inf, np.float32)
-                np.minimum.at(lo, flat, z)
-                np.maximum.at(hi, flat, z)
-                seen = np.isfinite(lo)
-                heights[seen, 0] = np.fmin(heights[seen, 0], lo[seen])
-                heights[seen, 1] = np.fmax(heights[seen, 1], hi[seen])
-        if drop_points_world is None or not (counts[2].size or self._drop_votes.any()):
-            return 0                                    # (no drop test, or nothing to vote on)
-        votes = np.bincount(counts[2], minlength=rows * cols) >= c.drop_min_points
-        floor = np.bincount(counts[1], minlength=rows * cols) >= c.drop_clear_points
-        v = self._drop_votes.reshape(-1)
-        v[votes] = np.minimum(v[votes] + 1, c.drop_max_votes)
-        v[floor & ~votes & (v > 0)] -= 1
-        return int(votes.sum())
-
-    def _flat_cells(self, points_world) -> tuple[np.ndarray, np.ndarray]:
-        """Flat cell index and z (float32) of the finite points (N, 3) inside the grid."""
-        p = np.asarray(points_world)
-        if p.ndim != 2 or p.shape[1] != 3:
-            raise ValueError(f"points_world must have shape (N, 3), got {p.shape}")
-        p = p[np.isfinite(p).all(axis=1)]
-        row, col = self.grid.cells_from_xy(p[:, :2])
-        inside = self.grid.inside(row, col)
-        return row[inside] * self.grid.shape[1] + col[inside], p[inside, 2].astype(np.float32)
+        with stage("grid.layers"):
+            c = self.config
+            g = self.grid
+            rows, cols = g.shape
+            sets = [_layer_points(name, p) for name, p in (("obstacle_points_world", obstacle_points_world),
+                                                              ("floor_points_world", floor_points_world),
+                                                              ("drop_points_world", drop_points_world))]
+            if self._counts is None:                # per-view scratch: counts of floor and drop points per cell
+                self._counts = np.zeros((rows * cols, 2), np.int32)
+                self._stamp = np.full(rows * cols, -1, np.int32)
+            self._view = (self._view + 1) % (1 << 31)           # the cells stamped with another view count from 0
+            heights = self._heights_m.reshape(-1, 2)
+            votes = self._drop_votes.reshape(-1)
+            at = (float(g.origin_x_m), float(g.origin_y_m), float(g.resolution_m), rows, cols)
+            scratch = (self._counts, self._stamp, self._view, votes, c.drop_clear_points)
+            _kernels.layer_points(sets[2], 1, *at, heights, *scratch)
+            voted = _kernels.drop_votes(sets[2], *at, self._counts, votes, c.drop_min_points, c.drop_max_votes)
+            _kernels.layer_points(sets[1], 0 if drop_points_world is not None else -1, *at, heights, *scratch)
+            _kernels.layer_points(sets[0], -1, *at, heights, *scratch)
+            return int(voted)
 
     def known_occupied(self, p_min: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(mask, z_range_m)``: the cells held occupied with probability at least ``p_min`` (default
