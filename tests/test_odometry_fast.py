@@ -194,7 +194,7 @@ def test_rpe_matches_evo():
     -r trans_part`` (and ``-r angle_deg``), with ``--all_pairs`` and without (consecutive pairs), evo
     1.38.1 in its own venv, on the files in tests/data/odometry_rpe: the RMSE of the translation part
     (m) and of the angle (deg); with ``-a`` the same; ``evo_ape tum truth.txt estimate.txt -a``:
-    0.072291 m."""
+    0.072291 m. Per frame (``--delta 1 --delta_unit f``): 0.015335 m and 0.957781 deg."""
     _, Q = read_tum(DATA / "truth.txt")
     _, P = read_tum(DATA / "estimate.txt")
     for all_pairs, delta, trans_m, angle_deg in ((False, 1.0, 0.055587, 2.645370), (False, 0.5, 0.029358, 1.840143),
@@ -203,6 +203,13 @@ def test_rpe_matches_evo():
         assert m.rpe_translation_per_m * delta == pytest.approx(trans_m, abs=2e-6)
         assert m.rpe_rotation_deg_per_m * delta == pytest.approx(angle_deg, abs=2e-6)
     assert trajectory_metrics(P, Q).ate_rmse_m == pytest.approx(0.072291, abs=2e-6)
+    m = trajectory_metrics(P, Q)
+    assert m.rpe_translation_per_frame_m == pytest.approx(0.015335, abs=2e-6)
+    assert m.rpe_rotation_deg_per_frame == pytest.approx(0.957781, abs=2e-6)
+    steps = np.linalg.norm(np.diff(Q[:, :3, 3], axis=0), axis=1)
+    assert m.rpe_frame_percent == pytest.approx(100 * 0.015335 / steps.mean(), rel=2e-4)
+    single = trajectory_metrics(P[:1], Q[:1])
+    assert math.isnan(single.rpe_translation_per_frame_m) and single.to_dict()["rpe_frame_percent"] is None
     assert not trajectory_metrics(P, Q).all_pairs                                # the default
     assert rpe_pairs(Q[:3], 100.0) == [] and rpe_pairs(Q[:3], 100.0, all_pairs=True) == []
     # a car at 1.2 m per frame: no pair within 10 % of 1 m (evo: "empty index list"); consecutive ones
