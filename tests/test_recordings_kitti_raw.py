@@ -8,6 +8,7 @@ import json
 import math
 import shutil
 
+import cv2
 import numpy as np
 import pytest
 
@@ -186,6 +187,10 @@ def test_bad_drives_are_named(date, tmp_path):
     with pytest.raises(ValueError, match="2 KITTI raw drives.*0005.*0009"):
         read_kitti_raw(copy)
     assert read_kitti_raw(copy, drive="0009").root.name == "2011_09_26_drive_0009_sync"
+    raw = copy / "2011_09_26_drive_0009_sync" / "image_00" / "data" / "0000000000.png"
+    cv2.imwrite(str(raw), np.zeros((512, 1392), np.uint8))             # an _extract drive's unrectified image
+    with pytest.raises(ValueError, match="1392x512.*S_rect_00.*1242x375"):
+        read_kitti_raw(copy, drive="0009")
     (copy / DRIVE / "image_00" / "timestamps.txt").write_text("yesterday\n" * 5)
     with pytest.raises(ValueError, match="timestamps.txt"):
         read_kitti_raw(copy / DRIVE)

@@ -240,7 +240,11 @@ def read_kitti_raw(path: str | os.PathLike, *, drive: str | None = None, truth=N
     if missing:
         raise FileNotFoundError(f"right image not found: {missing[0]} (image_01 must match image_00)")
     first = read_image(lefts[0])
-    rows = calib_rows(date / _CALIB_NAMES[0], {"P_rect_00": 12, "P_rect_01": 12})
+    rows = calib_rows(date / _CALIB_NAMES[0], {"P_rect_00": 12, "P_rect_01": 12, "S_rect_00": 2})
+    if tuple(rows["S_rect_00"]) != (first.shape[1], first.shape[0]):
+        raise ValueError(f"{lefts[0]} is {first.shape[1]}x{first.shape[0]} but the rectified size S_rect_00 of "
+                         f"{date / _CALIB_NAMES[0]} is {rows['S_rect_00'][0]:g}x{rows['S_rect_00'][1]:g}: give a "
+                         "synced and rectified drive (DATE_drive_NNNN_sync), not the raw images of an _extract one")
     stereo = stereo_from_projections(rows["P_rect_00"].reshape(3, 4), rows["P_rect_01"].reshape(3, 4),
                                      (first.shape[1], first.shape[0]), date / _CALIB_NAMES[0])
     T_base_from_imu = T_from_R_t(np.eye(3), [0.0, 0.0, OXTS_HEIGHT_M])
