@@ -1,6 +1,7 @@
 """Visual odometry and drift-robust mapping on real and synthetic sequences (docs/odometry.md).
 
-    python benchmarks/bench_odometry.py --kitti [PATH]           # KITTI odometry 06 (the shared sample)
+    python benchmarks/bench_odometry.py --kitti [PATH] [--kitti-every 2 3]   # KITTI odometry 06 and 01
+    python benchmarks/bench_odometry.py --held-out [PATH]        # a KITTI raw drive (the shared sample)
     python benchmarks/bench_odometry.py --kitti-scale [PATH ...] # where 01's and 06's error comes from
     python benchmarks/bench_odometry.py --street [--street-seeds 100 101 102]
     python benchmarks/bench_odometry.py [--seeds 0 1 2] [--frames 91] [--data DIR]
@@ -175,8 +176,9 @@ def _compare_line(label: str, r: dict) -> str:
             f"{b.rpe_rotation_deg_per_m:.3f} deg/m, per frame {b.rpe_frame_percent:.1f} % {b.rpe_rotation_deg_per_frame:.3f} deg, failed {r['base_failed']}, {r['base_ms']:.1f} ms/frame CPU")
 
 
-def kitti(path: Path) -> None:
-    """KITTI 06 (the sequence the defaults were chosen on: all and halves) and 01 (a highway curve)."""
+def kitti(path: Path, every: list[int] = ()) -> None:
+    """KITTI 06 (the sequence the defaults were chosen on: all and halves) and 01 (a highway curve); with
+    ``every``, also every n-th frame from frames 0 and 1 (the real stamps: n times the speed per frame)."""
     paths = [path] if path.name != "kitti_odometry_06" else [path, path.with_name("kitti_odometry_01")]
     for root in paths:
         if not root.is_dir():
@@ -185,8 +187,10 @@ def kitti(path: Path) -> None:
         manifest = read_recording(root)
         n = len(manifest.frames)
         print(f"KITTI odometry {manifest.root}: {n} frames")
-        for label, frames in ((f"frames 0-{n - 1}", slice(None)), (f"frames 0-{n // 2}", slice(0, n // 2 + 1)),
-                              (f"frames {n // 2}-{n - 1}", slice(n // 2, None))):
+        runs = [(f"frames 0-{n - 1}", slice(None)), (f"frames 0-{n // 2}", slice(0, n // 2 + 1)),
+                (f"frames {n // 2}-{n - 1}", slice(n // 2, None))]
+        runs += [(f"every {k}th frame from {start}", slice(start, None, k)) for k in every for start in (0, 1)]
+        for label, frames in runs:
             r = compare(manifest, frames)
             print(_compare_line(label, r))
             lost = np.flatnonzero(~r["result"].tracked)
@@ -311,6 +315,20 @@ def kitti_raw(path: Path) -> None:
     T_imu = np.linalg.inv(B) @ truth @ B
     T_imu[:, :3, 3] = oxts_velocity_positions(records, manifest.stamps_s)
     by_velocity = B @ T_imu @ np.linalg.inv(B)
+    M = manifest.mount.T_base_from_rectified(manifest.calibration.left.R)
+    tracks = {"mrstereo": r["result"].T_world_from_base, "baseline": r["base_poses"], "OXTS positions": truth,
+              "OXTS velocities": by_velocity}
+    print("    per step, the left camera's motion: length [m], angle of its direction off the optical axis "
+          "(left +) [deg], rotation about the camera's y (yaw, left +) and x (pitch, down +) [deg]")
+    for name, T in tracks.items():
+        cam = T @ M
+        rows = []
+        for a, b in zip(cam[:-1], cam[1:]):
+            step = np.linalg.inv(a) @ b
+            t, rvec = step[:3, 3], cv2.Rodrigues(step[:3, :3])[0].ravel()
+            rows.append(f"{np.linalg.norm(t):.3f} {math.degrees(math.atan2(-t[0], t[2])):+.1f} "
+                        f"{math.degrees(-rvec[1]):+.2f} {math.degrees(rvec[0]):+.2f}")
+        print(f"    {name:16s} " + " | ".join(rows))
     for name, T in (("mrstereo", r["result"].T_world_from_base), ("baseline", r["base_poses"]), ("OXTS positions", truth)):
         m = trajectory_metrics(T, by_velocity)
         print(f"    {name} against the OXTS velocities integrated ({m.path_length_m:.3f} m): ATE {m.ate_percent:.2f} % "
@@ -454,6 +472,8 @@ def main() -> None:
     parser.add_argument("--speed-frames", type=int, default=30)
     parser.add_argument("--kitti", nargs="?", type=Path, const=Path(os.environ.get("MRSTEREO_DATA", "."))
                         / "kitti_odometry_06", help="a KITTI odometry folder (default: the shared sample)")
+    parser.add_argument("--kitti-every", type=int, nargs="+", default=[], metavar="N",
+                        help="with --kitti: also every N-th frame (from frames 0 and 1), N times as fast")
     parser.add_argument("--held-out", nargs="?", type=Path, const=Path(os.environ.get("MRSTEREO_DATA", "."))
                         / "kitti_raw_sample" / "2011_09_26",
                         help="a KITTI raw date folder or drive (default: the shared sample)")
@@ -476,7 +496,7 @@ def main() -> None:
         return
     if args.kitti is not None or args.held_out is not None:
         if args.kitti is not None:
-            kitti(args.kitti)
+            kitti(args.kitti, args.kitti_every)
         if args.held_out is not None:
             kitti_raw(args.held_out)
         return
