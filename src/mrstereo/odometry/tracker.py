@@ -500,8 +500,8 @@ class StereoOdometry:
         if T_retry is not None or result[3] < c.keyframe_inlier_fraction * len(valid):
             retry = self._track_from(left, self._T_measured if T_retry is None else T_retry, valid, points_key, kf,
                                      gate)
-            if retry[3] > result[3] or (retry[0] != LOST and result[0] == LOST):
-                result = retry
+            if retry[0] != LOST and (result[0] == LOST or retry[3] > result[3]):
+                result = retry              # (a pose the gate rejected is no better for its inliers)
         return result
 
     def _relocalize(self, left, right, disparity_px, T_pred, dt, lost):
