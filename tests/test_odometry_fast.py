@@ -189,6 +189,19 @@ def test_a_failed_reference_is_relocalized_then_retried_from_scratch(drive, monk
         assert err[10] < 0.1 and err.max() < 0.3
 
 
+def test_a_retry_the_gate_rejected_does_not_replace_a_tracked_pose(drive, monkeypatch):
+    """The first try places the frame (26 inliers: few, so the retry from the last pose runs); the retry's
+    pose has more inliers but the gate rejected it: the frame keeps the first try's pose."""
+    world, truth, pairs = drive
+    tracker = StereoOdometry(world.stereo, truth[0], OdometryConfig())
+    mount = world.stereo.mount.T_base_from_rectified(world.stereo.left.R)
+    tracker.step(*pairs[0], T_base_from_cam=mount, stamp_s=0.0)
+    placed = (TRACKED, np.eye(4), 110, 26, None)
+    tries = iter([placed, (LOST, None, 119, 56, None)])
+    monkeypatch.setattr(StereoOdometry, "_track_from", lambda self, *args: next(tries))
+    assert tracker._track(pairs[1][0], np.eye(4), 0.1) is placed
+
+
 @pytest.mark.slow
 def test_a_periodic_facade_tracked_one_period_off_is_not_the_motion():
     """The street world of seed 210 at 2.7 m per frame (97 km/h), frames 20-35 of its drive: the facades'
