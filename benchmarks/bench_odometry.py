@@ -1,6 +1,7 @@
 """Visual odometry and drift-robust mapping on real and synthetic sequences (docs/odometry.md).
 
-    python benchmarks/bench_odometry.py --kitti [PATH]           # KITTI odometry 06 (the shared sample)
+    python benchmarks/bench_odometry.py --kitti [PATH] [--kitti-every 2 3]   # KITTI odometry 06 and 01
+    python benchmarks/bench_odometry.py --held-out [PATH]        # a KITTI raw drive (the shared sample)
     python benchmarks/bench_odometry.py --kitti-scale [PATH ...] # where 01's and 06's error comes from
     python benchmarks/bench_odometry.py --street [--street-seeds 100 101 102]
     python benchmarks/bench_odometry.py [--seeds 0 1 2] [--frames 91] [--data DIR]
@@ -158,7 +159,7 @@ def compare_pairs(pairs, stereo, truth, mounts, stamps, config=None) -> dict:
             "vo_ms": 1000 * float(np.mean(vo.time_s)), "vo_ms_median": 1000 * float(np.median(vo.time_s)),
             "vo_wall_ms": 1000 * wall, "keyframes": vo.status.count("keyframe"),
             "vo_online": trajectory_metrics(vo.T_world_from_base_online, truth),
-            "base": trajectory_metrics(T_base, truth), "base_failed": failed,
+            "base": trajectory_metrics(T_base, truth), "base_failed": failed, "base_poses": T_base,
             "base_ms": 1000 * float(np.mean(base_times)), "size": stereo.size, "result": vo}
 
 
@@ -168,14 +169,16 @@ def _compare_line(label: str, r: dict) -> str:
             f"{v.ate_percent:.2f} % ({100 * v.ate_rmse_m:.1f} cm; online {r['vo_online'].ate_percent:.2f} %; path "
             f"x{r['vo_path_m'] / v.path_length_m:.3f}), "
             f"end {v.end_point_percent:.2f} %, RPE {100 * v.rpe_translation_per_m:.2f} % "
-            f"{v.rpe_rotation_deg_per_m:.3f} deg/m, lost {r['vo_lost']}, {r['keyframes']} keyframes, "
+            f"{v.rpe_rotation_deg_per_m:.3f} deg/m, per frame {v.rpe_frame_percent:.1f} % of the step "
+            f"{v.rpe_rotation_deg_per_frame:.3f} deg, lost {r['vo_lost']}, {r['keyframes']} keyframes, "
             f"{r['vo_ms']:.1f} ms/frame CPU (median {r['vo_ms_median']:.1f}) | baseline ORB+SGBM+PnP: ATE "
             f"{b.ate_percent:.2f} %, end {b.end_point_percent:.2f} %, RPE {100 * b.rpe_translation_per_m:.2f} % "
-            f"{b.rpe_rotation_deg_per_m:.3f} deg/m, failed {r['base_failed']}, {r['base_ms']:.1f} ms/frame CPU")
+            f"{b.rpe_rotation_deg_per_m:.3f} deg/m, per frame {b.rpe_frame_percent:.1f} % {b.rpe_rotation_deg_per_frame:.3f} deg, failed {r['base_failed']}, {r['base_ms']:.1f} ms/frame CPU")
 
 
-def kitti(path: Path) -> None:
-    """KITTI 06 (the sequence the defaults were chosen on: all and halves) and 01 (a highway curve)."""
+def kitti(path: Path, every: list[int] = ()) -> None:
+    """KITTI 06 (the sequence the defaults were chosen on: all and halves) and 01 (a highway curve); with
+    ``every``, also every n-th frame from frames 0 and 1 (the real stamps: n times the speed per frame)."""
     paths = [path] if path.name != "kitti_odometry_06" else [path, path.with_name("kitti_odometry_01")]
     for root in paths:
         if not root.is_dir():
@@ -184,8 +187,10 @@ def kitti(path: Path) -> None:
         manifest = read_recording(root)
         n = len(manifest.frames)
         print(f"KITTI odometry {manifest.root}: {n} frames")
-        for label, frames in ((f"frames 0-{n - 1}", slice(None)), (f"frames 0-{n // 2}", slice(0, n // 2 + 1)),
-                              (f"frames {n // 2}-{n - 1}", slice(n // 2, None))):
+        runs = [(f"frames 0-{n - 1}", slice(None)), (f"frames 0-{n // 2}", slice(0, n // 2 + 1)),
+                (f"frames {n // 2}-{n - 1}", slice(n // 2, None))]
+        runs += [(f"every {k}th frame from {start}", slice(start, None, k)) for k in every for start in (0, 1)]
+        for label, frames in runs:
             r = compare(manifest, frames)
             print(_compare_line(label, r))
             lost = np.flatnonzero(~r["result"].tracked)
@@ -291,79 +296,45 @@ def kitti_scale(path: Path) -> None:
           f"(v - cy)/100 {affine.x[2]:+.3f} (u - cx)/100 px, cost {affine.fun / offset.fun:.2f} of the offset's")
 
 
-def _oxts_poses(files) -> np.ndarray:
-    """``T_world_from_imu`` of OXTS records (the KITTI devkit's ``convertOxtsToPose``: Mercator
-    scale of the first latitude, roll-pitch-yaw of the IMU), the first pose the origin."""
-    rows = np.array([np.loadtxt(f)[:6] for f in files])
-    scale = math.cos(math.radians(rows[0, 0]))
-    earth = 6378137.0
-    poses = []
-    for lat, lon, alt, roll, pitch, yaw in rows:
-        t = [scale * lon * math.pi * earth / 180.0, scale * earth * math.log(math.tan(math.pi * (90.0 + lat) / 360.0)),
-             alt]
-        rx = cv2.Rodrigues(np.array([roll, 0.0, 0.0]))[0]
-        ry = cv2.Rodrigues(np.array([0.0, pitch, 0.0]))[0]
-        rz = cv2.Rodrigues(np.array([0.0, 0.0, yaw]))[0]
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = rz @ ry @ rx, t
-        poses.append(T)
-    return np.linalg.inv(poses[0]) @ np.stack(poses)
-
-
-def _calib_rows(path: Path) -> dict:
-    out = {}
-    for line in path.read_text().splitlines():
-        key, _, values = line.partition(":")
-        try:
-            out[key.strip()] = np.array([float(v) for v in values.split()])
-        except ValueError:
-            pass
-    return out
-
-
 def kitti_raw(path: Path) -> None:
-    """A KITTI raw drive read by this script (evaluation only): the rectified gray pair of
-    ``P_rect_00``/``P_rect_01``, the image stamps, and the OXTS poses moved to the rectified left
-    camera through imu -> velo -> cam0 -> R_rect_00; the base is that camera (REP 103 axes)."""
-    from mrstereo.camera import Camera, CameraInfo, StereoCamera
+    """A KITTI raw drive read by ``mrstereo.recordings.kitti_raw`` (the library's reader): against its truth
+    (the OXTS positions at the images' stamps) and against the OXTS records' velocities integrated over
+    the same stamps (the attitudes the same): the two truths' own difference is the truth's noise."""
+    from mrstereo.recordings.kitti_raw import OXTS_HEIGHT_M, _oxts_records, oxts_velocity_positions
 
-    drive = sorted(path.glob("**/*_drive_*_sync"))[0] if not path.name.endswith("_sync") else path
-    date = drive.parent
-    cam = _calib_rows(date / "calib_cam_to_cam.txt")
-    w, h = (int(v) for v in cam["S_rect_00"])
-    infos = []
-    for k in ("00", "01"):
-        P = cam[f"P_rect_{k}"].reshape(3, 4)
-        infos.append(CameraInfo(Camera(width=w, height=h, fx=P[0, 0], fy=P[1, 1], cx=P[0, 2], cy=P[1, 2]),
-                                R=np.eye(3), P=P))
-    stereo = StereoCamera(*infos)
-    def rigid(rows):
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = rows["R"].reshape(3, 3), rows["T"]
-        return T
-    T_velo_from_imu = rigid(_calib_rows(date / "calib_imu_to_velo.txt"))
-    T_cam0_from_velo = rigid(_calib_rows(date / "calib_velo_to_cam.txt"))
-    T_rect_from_cam0 = np.eye(4)
-    T_rect_from_cam0[:3, :3] = cam["R_rect_00"].reshape(3, 3)
-    T_imu_from_rect = np.linalg.inv(T_rect_from_cam0 @ T_cam0_from_velo @ T_velo_from_imu)
-    left = sorted((drive / "image_00" / "data").glob("*.png"))
-    right = sorted((drive / "image_01" / "data").glob("*.png"))
-    oxts = sorted((drive / "oxts" / "data").glob("*.txt"))
-    truth_cam = _oxts_poses(oxts) @ T_imu_from_rect
-    mount = CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)).T_base_from_rectified()
-    truth = truth_cam @ np.linalg.inv(mount)
-    import datetime
-    stamps = []
-    for line in (drive / "image_00" / "timestamps.txt").read_text().split("\n"):
-        if line.strip():
-            day, _, frac = line.strip().partition(".")
-            t = datetime.datetime.strptime(day, "%Y-%m-%d %H:%M:%S").timestamp()
-            stamps.append(t + float("0." + frac))
-    pairs = [(cv2.imread(str(a), cv2.IMREAD_GRAYSCALE), cv2.imread(str(b), cv2.IMREAD_GRAYSCALE))
-             for a, b in zip(left, right)]
-    r = compare_pairs(pairs, stereo, truth, np.stack([mount] * len(pairs)), np.array(stamps) - stamps[0])
-    print(f"KITTI raw {drive.name} (held out; read by this script, truth from OXTS):")
-    print(_compare_line(f"frames 0-{len(pairs) - 1}", r))
+    manifest = read_recording(path)
+    r = compare(manifest)
+    print(f"KITTI raw {manifest.root.name} (held out; the library's reader, truth from OXTS):")
+    print(_compare_line(f"frames 0-{len(manifest.frames) - 1}", r))
+    for note in manifest.notes:
+        print(f"    {note}")
+    records = _oxts_records(manifest.root, [f.left_rect.stem for f in manifest.frames])
+    B = T_from_planar(0.0, 0.0, 0.0)
+    B[2, 3] = OXTS_HEIGHT_M                                              # T_base_from_imu
+    truth = np.stack([f.T_world_from_base_true for f in manifest.frames])
+    T_imu = np.linalg.inv(B) @ truth @ B
+    T_imu[:, :3, 3] = oxts_velocity_positions(records, manifest.stamps_s)
+    by_velocity = B @ T_imu @ np.linalg.inv(B)
+    M = manifest.mount.T_base_from_rectified(manifest.calibration.left.R)
+    tracks = {"mrstereo": r["result"].T_world_from_base, "baseline": r["base_poses"], "OXTS positions": truth,
+              "OXTS velocities": by_velocity}
+    print("    per step, the left camera's motion: length [m], angle of its direction off the optical axis "
+          "(left +) [deg], rotation about the camera's y (yaw, left +) and x (pitch, down +) [deg]")
+    for name, T in tracks.items():
+        cam = T @ M
+        rows = []
+        for a, b in zip(cam[:-1], cam[1:]):
+            step = np.linalg.inv(a) @ b
+            t, rvec = step[:3, 3], cv2.Rodrigues(step[:3, :3])[0].ravel()
+            rows.append(f"{np.linalg.norm(t):.3f} {math.degrees(math.atan2(-t[0], t[2])):+.1f} "
+                        f"{math.degrees(-rvec[1]):+.2f} {math.degrees(rvec[0]):+.2f}")
+        print(f"    {name:16s} " + " | ".join(rows))
+    for name, T in (("mrstereo", r["result"].T_world_from_base), ("baseline", r["base_poses"]), ("OXTS positions", truth)):
+        m = trajectory_metrics(T, by_velocity)
+        print(f"    {name} against the OXTS velocities integrated ({m.path_length_m:.3f} m): ATE {m.ate_percent:.2f} % "
+              f"({100 * m.ate_rmse_m:.1f} cm), per frame {100 * m.rpe_translation_per_frame_m:.2f} cm "
+              f"({m.rpe_frame_percent:.1f} % of the step) {m.rpe_rotation_deg_per_frame:.3f} deg, end "
+              f"{100 * m.end_point_error_m:.1f} cm")
 
 
 def street(root: Path, seeds: list[int], frames: int, steps=(0.5, 1.0, 1.5)) -> None:
@@ -501,8 +472,11 @@ def main() -> None:
     parser.add_argument("--speed-frames", type=int, default=30)
     parser.add_argument("--kitti", nargs="?", type=Path, const=Path(os.environ.get("MRSTEREO_DATA", "."))
                         / "kitti_odometry_06", help="a KITTI odometry folder (default: the shared sample)")
+    parser.add_argument("--kitti-every", type=int, nargs="+", default=[], metavar="N",
+                        help="with --kitti: also every N-th frame (from frames 0 and 1), N times as fast")
     parser.add_argument("--held-out", nargs="?", type=Path, const=Path(os.environ.get("MRSTEREO_DATA", "."))
-                        / "kitti_raw_sample", help="a KITTI raw date folder or drive (default: the shared sample)")
+                        / "kitti_raw_sample" / "2011_09_26",
+                        help="a KITTI raw date folder or drive (default: the shared sample)")
     parser.add_argument("--kitti-scale", nargs="*", type=Path, default=None, metavar="PATH",
                         help="where KITTI's error comes from (default: the shared 01 and 06)")
     parser.add_argument("--street", action="store_true", help="the street sequences at car speed")
@@ -522,7 +496,7 @@ def main() -> None:
         return
     if args.kitti is not None or args.held_out is not None:
         if args.kitti is not None:
-            kitti(args.kitti)
+            kitti(args.kitti, args.kitti_every)
         if args.held_out is not None:
             kitti_raw(args.held_out)
         return

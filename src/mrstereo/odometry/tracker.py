@@ -47,6 +47,11 @@ __all__ = ["OdometryConfig", "FrameEstimate", "StereoOdometry", "TRACKED", "KEYF
 
 TRACKED, KEYFRAME, LOST = "tracked", "keyframe", "lost"
 
+SECOND_CONSENSUS_FRACTION = 0.5
+"""A pose the plausibility gate rejects is replaced by the second consensus of the same tracks (PnP-RANSAC
+on the first one's outliers) when that holds at least this fraction of the first one's inliers and passes
+the gate: the true motion beside a periodic structure's alias (docs/odometry.md, step 5)."""
+
 
 @dataclass(frozen=True)
 class OdometryConfig:
@@ -495,8 +500,8 @@ class StereoOdometry:
         if T_retry is not None or result[3] < c.keyframe_inlier_fraction * len(valid):
             retry = self._track_from(left, self._T_measured if T_retry is None else T_retry, valid, points_key, kf,
                                      gate)
-            if retry[3] > result[3] or (retry[0] != LOST and result[0] == LOST):
-                result = retry
+            if retry[0] != LOST and (result[0] == LOST or retry[3] > result[3]):
+                result = retry              # (a pose the gate rejected is no better for its inliers)
         return result
 
     def _relocalize(self, left, right, disparity_px, T_pred, dt, lost):
@@ -549,6 +554,7 @@ class StereoOdometry:
             return (np.linalg.norm(step[:3, 3]) <= c.max_speed_mps * elapsed
                     and rotation_angle_rad(step[:3, :3]) <= c.max_turn_rate_radps * elapsed)
 
+        found = []
         for _, k in sorted(near)[:3]:
             kf = self._archive[k]
             result = self._track(left, kf.T_world_from_cam, dt, kf, T_retry=T_pred, gate=gate)
@@ -559,6 +565,10 @@ class StereoOdometry:
                 if again[0] == LOST or again[3] <= result[3]:
                     break
                 result = again
+            found.append((float(np.linalg.norm(result[1][:3, 3] - kf.T_world_from_cam[:3, 3])), len(found), result))
+        if found:
+            # the keyframe nearest the place found saw it best (a periodic facade aliases long tracks)
+            result = min(found)[2]
             T_world_from_cam = result[1]
             self._velocity = np.linalg.inv(self._T_anchor) @ T_world_from_cam      # the mean motion over the gap
             self._velocity_dt, self._velocity_known = elapsed, True
@@ -718,7 +728,21 @@ class StereoOdometry:
         T_cam_from_key, inl = solved
         T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_cam_from_key)
         if not gate(T_world_from_cam):
-            return LOST, None, n_tracked, len(inl), None
+            # the largest consensus is implausible: a periodic structure (a facade's windows, a crash barrier's
+            # posts) tracked one period off agrees with a wrong motion. A second consensus among the tracks it
+            # left out, at least half as large (two comparable ones: an ambiguity, not a few stray tracks), may
+            # be the true motion; the gate judges it too, when it rests on the motion up to the last frame
+            # (after a lost frame the gate is wide and the motion model no guide)
+            if self._anchor_elapsed_s > 0.0 or not self._velocity_known:
+                return LOST, None, n_tracked, len(inl), None
+            rest = np.setdiff1d(np.arange(len(img)), inl)
+            second = self._solve_pnp(points_key[ok][rest], img[rest], T_guess_from_key)
+            if second is None or len(second[1]) < SECOND_CONSENSUS_FRACTION * len(inl):
+                return LOST, None, n_tracked, len(inl), None
+            T_cam_from_key, inl = second[0], rest[second[1]]
+            T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_cam_from_key)
+            if not gate(T_world_from_cam):
+                return LOST, None, n_tracked, len(inl), None
         tracked = (kf.landmark[valid][ok][inl], img[inl].astype(np.float32))
         return TRACKED, T_world_from_cam, n_tracked, len(inl), tracked
 

@@ -4,7 +4,8 @@ TUM format: one line ``t tx ty tz qx qy qz qw`` per pose (the base in the world)
 Metrics (:func:`trajectory_metrics`; definitions in docs/odometry.md, Metrics): ATE after a
 rigid Umeyama alignment (``evo_ape -a``) and unaligned, RPE per metre over consecutive segments of
 the true path (``evo_rpe --delta 1 --delta_unit m --pairs_from_reference``; with ``all_pairs``,
-``--all_pairs``; divided by the 1 m), end-point error. Conventions: docs/conventions.md.
+``--all_pairs``; divided by the 1 m), RPE per frame (``evo_rpe --delta 1 --delta_unit f``; also in % of
+the mean true step: meaningful on a drive of a few frames), end-point error. Conventions: docs/conventions.md.
 
 References
 ----------
@@ -120,7 +121,9 @@ class TrajectoryMetrics:
     ``ate_rmse_m`` after the ``alignment`` (no scale) and ``ate_rmse_unaligned_m`` from the common
     first pose; ``rpe_translation_per_m`` and ``rpe_rotation_deg_per_m`` over pairs ``delta_m`` apart
     (``all_pairs``: every frame starts one, else consecutive segments; NaN if the path is shorter);
-    ``end_point_error_m``; ``path_length_m`` of the true path; ``n_poses``.
+    ``rpe_translation_per_frame_m`` and ``rpe_rotation_deg_per_frame`` over consecutive frames (RMSE, as
+    ``evo_rpe --delta 1 --delta_unit f``; NaN for a single pose) and ``mean_step_m``, the true path's mean
+    step; ``end_point_error_m``; ``path_length_m`` of the true path; ``n_poses``.
     """
 
     ate_rmse_m: float
@@ -133,6 +136,19 @@ class TrajectoryMetrics:
     alignment: str
     delta_m: float
     all_pairs: bool = False
+    rpe_translation_per_frame_m: float = math.nan
+    rpe_rotation_deg_per_frame: float = math.nan
+
+    @property
+    def mean_step_m(self) -> float:
+        """The true path's mean step between frames [m] (NaN for a single pose)."""
+        return self.path_length_m / (self.n_poses - 1) if self.n_poses > 1 else math.nan
+
+    @property
+    def rpe_frame_percent(self) -> float:
+        """The RPE per frame in % of the mean true step (NaN when the truth does not move)."""
+        step = self.mean_step_m
+        return 100.0 * self.rpe_translation_per_frame_m / step if step > 0 else math.nan
 
     @property
     def ate_percent(self) -> float:
@@ -145,6 +161,7 @@ class TrajectoryMetrics:
     def to_dict(self) -> dict:
         out = asdict(self)
         out["ate_percent"], out["end_point_percent"] = self.ate_percent, self.end_point_percent
+        out["mean_step_m"], out["rpe_frame_percent"] = self.mean_step_m, self.rpe_frame_percent
         return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
 
     def describe(self) -> str:
@@ -158,6 +175,11 @@ class TrajectoryMetrics:
         rpe = (f"RPE {100 * self.rpe_translation_per_m:.2f} % / {self.rpe_rotation_deg_per_m:.2f} deg per m"
                if math.isfinite(self.rpe_translation_per_m) else
                f"RPE n/a (the path is shorter than {self.delta_m:g} m)")
+        if math.isfinite(self.rpe_translation_per_frame_m):
+            share = f" ({self.rpe_frame_percent:.1f} % of the {100 * self.mean_step_m:.1f} cm mean step)" \
+                if self.mean_step_m > 0 else ""
+            rpe += (f"; per frame {100 * self.rpe_translation_per_frame_m:.2f} cm{share} / "
+                    f"{self.rpe_rotation_deg_per_frame:.3f} deg")
         return (f"ATE RMSE {ate}, {self.alignment} aligned; {100 * self.ate_rmse_unaligned_m:.1f} cm unaligned), "
                 f"{rpe}, end point {end}")
 
@@ -242,19 +264,29 @@ def trajectory_metrics(T_estimated, T_true, *, delta_m: float = 1.0, alignment: 
         A = umeyama_alignment(p, q, planar=alignment == "se2")
         aligned = float(np.sqrt(np.mean(np.sum((p @ A[:3, :3].T + A[:3, 3] - q) ** 2, axis=1))))
     dist = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
+    t_err, r_err = _relative_errors(P, Q, rpe_pairs(Q, delta_m, all_pairs=all_pairs))
+    t_frame, r_frame = _relative_errors(P, Q, [(i, i + 1) for i in range(len(P) - 1)])
+
+    def rms(v, per=1.0):
+        return float(np.sqrt(np.mean(np.square(v)))) / per if len(v) else math.nan
+
+    return TrajectoryMetrics(ate_rmse_m=aligned, ate_rmse_unaligned_m=unaligned,
+                             rpe_translation_per_m=rms(t_err, delta_m), rpe_rotation_deg_per_m=rms(r_err, delta_m),
+                             end_point_error_m=float(np.linalg.norm(p[-1] - q[-1])),
+                             path_length_m=float(dist[-1]), n_poses=len(P), alignment=alignment,
+                             delta_m=float(delta_m), all_pairs=bool(all_pairs),
+                             rpe_translation_per_frame_m=rms(t_frame), rpe_rotation_deg_per_frame=rms(r_frame))
+
+
+def _relative_errors(P: np.ndarray, Q: np.ndarray, pairs) -> tuple[np.ndarray, np.ndarray]:
+    """For each pair ``(i, j)`` the error ``E = inv(inv(Q_i) Q_j) inv(P_i) P_j`` of the estimate's relative
+    pose: its translation [m] and angle [deg]."""
     t_err, r_err = [], []
-    for i, j in rpe_pairs(Q, delta_m, all_pairs=all_pairs):
+    for i, j in pairs:
         E = np.linalg.inv(np.linalg.inv(Q[i]) @ Q[j]) @ (np.linalg.inv(P[i]) @ P[j])
         t_err.append(np.linalg.norm(E[:3, 3]))
         r_err.append(math.degrees(rotation_angle_rad(E[:3, :3])))
-
-    def rms(v):
-        return float(np.sqrt(np.mean(np.square(v)))) / delta_m if v else math.nan
-
-    return TrajectoryMetrics(ate_rmse_m=aligned, ate_rmse_unaligned_m=unaligned, rpe_translation_per_m=rms(t_err),
-                             rpe_rotation_deg_per_m=rms(r_err), end_point_error_m=float(np.linalg.norm(p[-1] - q[-1])),
-                             path_length_m=float(dist[-1]), n_poses=len(P), alignment=alignment,
-                             delta_m=float(delta_m), all_pairs=bool(all_pairs))
+    return np.array(t_err), np.array(r_err)
 
 
 def plot_trajectories(path: str | os.PathLike, trajectories: dict, *, lost=None, title: str = "trajectory") -> Path:

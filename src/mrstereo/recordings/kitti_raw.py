@@ -10,8 +10,10 @@ cameras 0 and 1), ``image_00/timestamps.txt`` and ``oxts/data/*.txt`` (GPS/IMU r
 - the base: the OXTS unit's frame (x forward, y left, z up, as REP 103) moved down to the road by the
   unit's height (:data:`OXTS_HEIGHT_M`); its pose at every frame from the OXTS record as the KITTI
   devkit's ``convertOxtsToPose`` makes it (Mercator projection scaled by the cosine of the first
-  latitude, ``R = Rz(yaw) Ry(pitch) Rx(roll)``), relative to the first frame (the first pose is the
-  identity); these are the frames' given and true poses;
+  latitude, ``R = Rz(yaw) Ry(pitch) Rx(roll)``), moved from the record's stamp to the image's (the
+  synced records are the 100 Hz unit's nearest, up to 5 ms off: 14 cm at 100 km/h) along the record's
+  own velocity and angular rates, relative to the first frame (the first pose is the identity); these
+  are the frames' given and true poses;
 - the mount: the rectified left camera in that base, through the calibration chain
   ``T_rect_from_imu = R_rect_00 T_cam0_from_velo T_velo_from_imu``.
 
@@ -34,12 +36,13 @@ import numpy as np
 from .. import _limits
 from ..camera.mount import CameraMount
 from ..io import note_inputs, read_image, read_text
-from ..transforms import T_from_R_t, rotation_from_rpy
+from ..transforms import T_from_R_t, rotation_from_rpy, rotations_from_rvecs
 from .kitti import calib_rows, frame_numbers, stereo_from_projections
 from .manifest import FrameRecord, Manifest, pose_3d_of
 from .truth import camera_to_base, check_truth, with_truth
 
-__all__ = ["read_kitti_raw", "is_kitti_raw", "oxts_poses", "OXTS_HEIGHT_M", "EARTH_RADIUS_M"]
+__all__ = ["read_kitti_raw", "is_kitti_raw", "oxts_poses", "oxts_velocity_positions", "OXTS_HEIGHT_M",
+           "EARTH_RADIUS_M"]
 
 OXTS_HEIGHT_M = 0.93
 """Height of the OXTS RT 3003 unit above the road [m] (the KITTI car's sensor setup, Geiger et al. 2013)."""
@@ -99,12 +102,16 @@ def _T_rect_from_imu(date: Path) -> np.ndarray:
             @ _rigid(velo_imu["R"], velo_imu["T"]))
 
 
-def oxts_poses(records: np.ndarray) -> np.ndarray:
-    """``T_first_from_oxts`` (N, 4, 4) of OXTS records (N, >= 6: lat, lon [deg], alt [m], roll, pitch, yaw [rad]).
+def oxts_poses(records: np.ndarray, shift_s=None) -> np.ndarray:
+    """``T_first_from_oxts`` (N, 4, 4) of OXTS records (N, >= 6: lat, lon [deg], alt [m], roll, pitch, yaw [rad];
+    >= 20 with ``shift_s``: ... vn, ve [m/s] at 6, 7, vu at 10, wx, wy, wz [rad/s] at 17-19).
 
     The KITTI devkit's ``convertOxtsToPose``: the Mercator projection scaled by ``cos(lat_0)`` (metres
-    near the first latitude), altitude up, ``R = Rz(yaw) Ry(pitch) Rx(roll)``; every pose relative to the
-    first, which is the identity.
+    near the first latitude: x east, y north), altitude up, ``R = Rz(yaw) Ry(pitch) Rx(roll)``; every
+    pose relative to the first, which is the identity. ``shift_s`` (N,) [s]: each pose first moved that
+    far in time along its record's own motion, the position by ``(ve, vn, vu) shift``, the attitude by
+    ``Exp((wx, wy, wz) shift)`` (rates in the unit's axes): the pose at an image's stamp of a record
+    stamped a few ms from it.
     """
     records = np.asarray(records, dtype=np.float64)
     lat, lon, alt = records[:, 0], records[:, 1], records[:, 2]
@@ -113,11 +120,26 @@ def oxts_poses(records: np.ndarray) -> np.ndarray:
     y = scale * EARTH_RADIUS_M * np.log(np.tan(np.radians(90.0 + lat) / 2.0))
     R = rotation_from_rpy(records[:, 3], records[:, 4], records[:, 5])
     t = np.stack([x, y, alt], axis=1)
+    if shift_s is not None:
+        shift = np.asarray(shift_s, dtype=np.float64).reshape(-1, 1)
+        t = t + records[:, [7, 6, 10]] * shift                   # (ve, vn, vu): east, north, up
+        R = R @ rotations_from_rvecs(records[:, 17:20] * shift)
     T = np.zeros((len(records), 4, 4))
     T[:, :3, :3] = R[0].T @ R                                  # inv(T_0) T_k, the large offsets taken first
     T[:, :3, 3] = (t - t[0]) @ R[0]
     T[:, 3, 3] = 1.0
     return T
+
+
+def oxts_velocity_positions(records: np.ndarray, stamps_s) -> np.ndarray:
+    """The positions (N, 3) of :func:`oxts_poses` (in the first pose's axes) from the records' velocities
+    ``(ve, vn, vu)`` integrated over ``stamps_s`` (trapezoids) instead of their GPS positions: the unit's own
+    dead reckoning, to measure the positions' noise from frame to frame (their accuracy, ``pos_accuracy``,
+    is 2 cm with RTK and metres without; the velocities' some cm/s)."""
+    records = np.asarray(records, dtype=np.float64)
+    v = records[:, [7, 6, 10]] @ rotation_from_rpy(*records[0, 3:6])
+    steps = (v[1:] + v[:-1]) / 2.0 * np.diff(np.asarray(stamps_s, dtype=np.float64))[:, None]
+    return np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
 
 
 def _stamps_s(path: Path, count: int) -> np.ndarray:
@@ -147,6 +169,31 @@ def _oxts_records(drive: Path, names: list[str]) -> np.ndarray:
     return np.array(rows)
 
 
+def _oxts_truth(drive: Path, names: list[str], indices: list[int], stamps_s: np.ndarray, notes: list) -> np.ndarray:
+    """``T_first_from_oxts`` at the images' stamps (:func:`oxts_poses` shifted by image minus record stamp);
+    ``notes`` gets the shifts and the positions' noise from frame to frame against the records' velocities."""
+    records = _oxts_records(drive, names)
+    path = drive / "oxts" / "timestamps.txt"
+    if not path.is_file():
+        notes.append(f"no {path}: the OXTS poses are taken at the images' stamps")
+        return oxts_poses(records)
+    record_s = _stamps_s(path, max(indices) + 1)[indices]
+    shift = stamps_s - record_s
+    if len(records) > 1:
+        steps = np.diff(oxts_poses(records)[:, :3, 3], axis=0)
+        off = steps - np.diff(oxts_velocity_positions(records, record_s), axis=0)
+        mean_step = float(np.mean(np.linalg.norm(steps, axis=1)))
+        share = f" ({100 * _rms(off) / mean_step:.1f} % of the mean step)" if mean_step > 0 else ""
+        notes.append(f"OXTS positions against the records' velocities integrated: {100 * _rms(off):.1f} cm RMS per "
+                     f"frame{share}, the truth's own noise; poses moved to the images' stamps (records "
+                     f"{1000 * np.abs(shift).max():.1f} ms off at most)")
+    return oxts_poses(records, shift)
+
+
+def _rms(v: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum(np.square(v), axis=1))))
+
+
 def read_kitti_raw(path: str | os.PathLike, *, drive: str | None = None, truth=None) -> Manifest:
     """Read a KITTI raw drive as a recording (a :class:`Manifest`).
 
@@ -164,7 +211,7 @@ def read_kitti_raw(path: str | os.PathLike, *, drive: str | None = None, truth=N
     -------
     Manifest
         Frames (``left_rect``/``right_rect`` of ``image_00``/``image_01``, ``stamp_s``, ``pose_3d`` =
-        ``true_pose_3d`` = the base's OXTS pose; without ``oxts/``: the origin, no truth), the
+        ``true_pose_3d`` = the base's OXTS pose at the image's stamp; without ``oxts/``: the origin, no truth), the
         calibration of ``P_rect_00``/``P_rect_01``, the mount from the calibration chain,
         ``layout="KITTI raw"``.
 
@@ -193,7 +240,11 @@ def read_kitti_raw(path: str | os.PathLike, *, drive: str | None = None, truth=N
     if missing:
         raise FileNotFoundError(f"right image not found: {missing[0]} (image_01 must match image_00)")
     first = read_image(lefts[0])
-    rows = calib_rows(date / _CALIB_NAMES[0], {"P_rect_00": 12, "P_rect_01": 12})
+    rows = calib_rows(date / _CALIB_NAMES[0], {"P_rect_00": 12, "P_rect_01": 12, "S_rect_00": 2})
+    if tuple(rows["S_rect_00"]) != (first.shape[1], first.shape[0]):
+        raise ValueError(f"{lefts[0]} is {first.shape[1]}x{first.shape[0]} but the rectified size S_rect_00 of "
+                         f"{date / _CALIB_NAMES[0]} is {rows['S_rect_00'][0]:g}x{rows['S_rect_00'][1]:g}: give a "
+                         "synced and rectified drive (DATE_drive_NNNN_sync), not the raw images of an _extract one")
     stereo = stereo_from_projections(rows["P_rect_00"].reshape(3, 4), rows["P_rect_01"].reshape(3, 4),
                                      (first.shape[1], first.shape[0]), date / _CALIB_NAMES[0])
     T_base_from_imu = T_from_R_t(np.eye(3), [0.0, 0.0, OXTS_HEIGHT_M])
@@ -202,7 +253,7 @@ def read_kitti_raw(path: str | os.PathLike, *, drive: str | None = None, truth=N
     stamps = _stamps_s(drive_dir / "image_00" / "timestamps.txt", max(indices) + 1)[indices]
     notes, poses = [], None
     if truth is None and (drive_dir / "oxts" / "data").is_dir():
-        T_imu = oxts_poses(_oxts_records(drive_dir, [p.stem for p in lefts]))
+        T_imu = _oxts_truth(drive_dir, [p.stem for p in lefts], indices, stamps, notes)
         poses = [pose_3d_of(T_base_from_imu @ T @ np.linalg.inv(T_base_from_imu)) for T in T_imu]
     elif truth is None:
         notes.append(f"no OXTS records ({drive_dir / 'oxts' / 'data'}): poses from visual odometry")
