@@ -16,7 +16,8 @@
   ``-n 0`` runs it in one process). The workers share the synthetic datasets (each made once, under a file
   lock, in the run's temporary root) and numba's compiled kernels: on a cold cache each kernel is compiled by
   one worker, the other waits for it and loads it from the cache (a kernel's cache index and code are saved
-  whole for the other worker).
+  whole for the other worker). Before their first test the two workers compile the matcher's slow kernels
+  in two shares at once (``_compile_matcher_share``), not one after the other.
 
 Helpers for writing ROS bags live in ``_bags.py``.
 """
