@@ -134,7 +134,7 @@ def _matcher_parts():
     return ([lambda: match_checked(*pair(), d_lo=0, d_hi=8, **span, **checks),                  # band_checked
              lambda: refine_candidates(*pair(), coarse, dense, half_px=3, max_cost=0.6),        # refine_strips
              lambda: refine_candidates(*pair(), coarse, sparse, half_px=3, max_cost=0.6),       # refine_pixels
-             lambda: match_prepared(*pair(np.float64), d_lo=0, d_hi=8, **span, right_check=False)],   # match_band, floats
+             lambda: match_prepared(*pair(np.float64), d_lo=0, d_hi=8, **span, right_check=False)],  # float images
             [lambda: match_prepared(*pair(), d_lo=0, d_hi=8, **span, right_check=True),         # band_winners
              lambda: refine_candidates(*pair(), coarse, dense, half_px=3, max_cost=0.6,         # refine_boxes
                                        boxes=[(0, h, 0, w)]),
