@@ -16,7 +16,8 @@
   ``-n 0`` runs it in one process). The workers share the synthetic datasets (each made once, under a file
   lock, in the run's temporary root) and numba's compiled kernels: on a cold cache each kernel is compiled by
   one worker, the other waits for it and loads it from the cache (a kernel's cache index and code are saved
-  whole for the other worker).
+  whole for the other worker). Before their first test the two workers compile the matcher's slow kernels
+  in two shares at once (``_compile_matcher_share``), not one after the other.
 
 Helpers for writing ROS bags live in ``_bags.py``.
 """
@@ -107,6 +108,51 @@ def pytest_configure(config):
     if hasattr(config, "workerinput"):           # an xdist worker: each kernel compiled by one worker only
         _lock_numba_cache_files(config.workerinput["testrunuid"])
         _compile_each_kernel_once()
+        _compile_matcher_share(int(config.workerinput["workerid"].removeprefix("gw")),
+                               int(config.workerinput["workercount"]))
+
+
+def _matcher_parts():
+    """The matcher's slow kernels (tens of seconds each on a cold cache) in two shares of about equal
+    compile time, each a list of calls on a tiny pair: the same signatures as the tests' calls."""
+    from mrstereo.matching.cost import match_checked, match_prepared, prepare, prepare_gray, refine_candidates
+    from mrstereo.matching.warmup import warm_pair
+
+    images = [image.astype(np.float32) for image in warm_pair()]
+    h, w = images[0].shape
+    span = dict(rows=(0, h), cols=(0, w))
+    checks = dict(lr_max_diff_px=1.0, uniqueness_ratio=0.1, max_cost=0.6, subpixel=True)
+    coarse = np.full((h, w), 6.0, np.float32)
+    dense, sparse = np.ones((h, w), bool), np.zeros((h, w), bool)
+    sparse[10, 10:12] = True
+
+    def pair(dtype=None):
+        if dtype is None:                       # the default pre-filter: exact float32 sums
+            return [prepare_gray(image, kind="xsobel", cap=7, window=9, cost="zncc") for image in images]
+        return [prepare(image + 0.5, window=9, cost="zncc", dtype=dtype) for image in images]
+
+    return ([lambda: match_checked(*pair(), d_lo=0, d_hi=8, **span, **checks),                  # band_checked
+             lambda: refine_candidates(*pair(), coarse, dense, half_px=3, max_cost=0.6),        # refine_strips
+             lambda: refine_candidates(*pair(), coarse, sparse, half_px=3, max_cost=0.6),       # refine_pixels
+             lambda: match_prepared(*pair(np.float64), d_lo=0, d_hi=8, **span, right_check=False)],  # float images
+            [lambda: match_prepared(*pair(), d_lo=0, d_hi=8, **span, right_check=True),         # band_winners
+             lambda: refine_candidates(*pair(), coarse, dense, half_px=3, max_cost=0.6,         # refine_boxes
+                                       boxes=[(0, h, 0, w)]),
+             # band_checked's float64 twin last: a kernel's signatures compile one at a time (one lock)
+             lambda: match_checked(*pair(np.float64), d_lo=0, d_hi=8, **span, **checks)])
+
+
+def _compile_matcher_share(worker: int, workers: int) -> None:
+    """Before its first test, each of the first two workers compiles (or loads) one share of the matcher's
+    slow kernels (:func:`_matcher_parts`), so that both compile at once.
+
+    Nearly every test runs the matcher: on a cold cache, without this, the first worker to need a kernel
+    compiles it while the other waits on that kernel's lock (:func:`_compile_each_kernel_once`), kernel
+    after kernel, minutes in all. On a warm cache each share only loads (a second).
+    """
+    if worker < 2 and workers > 1:
+        for part in _matcher_parts()[worker]:
+            part()
 
 
 def _lock_numba_cache_files(run_id: str) -> None:

@@ -372,7 +372,7 @@ def _ray_ends(obstacles: np.ndarray, keep: np.ndarray | None, floor: np.ndarray,
     for points, selected, is_obstacle in ((obstacles, keep, True), (floor, None, False)):
         if len(points):
             outside += _kernels.mark_endpoints(points, every if selected is None else selected, sx, sy,
-                                               grid.origin_x_m, grid.origin_y_m,
+                                               float(grid.origin_x_m), float(grid.origin_y_m),     # one signature
                                                grid.resolution_m, max_range_cells, is_obstacle, margin_per_cell2,
                                                flags, ends, n_points, z_range)
     return flags, ends, n_points, z_range, outside

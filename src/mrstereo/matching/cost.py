@@ -482,7 +482,9 @@ def refine_candidates(left: PreparedImage, right: PreparedImage, coarse_px: np.n
     rows = (rows[0] + int(hit[0]), rows[0] + int(hit[-1]) + 1)      # only the rows holding pixels to refine
     if np.count_nonzero(want[rows[0]:rows[1]]) * SPARSE_REFINE_SHARE < (rows[1] - rows[0]) * w:
         ys, xs = np.nonzero(want[rows[0]:rows[1]])
-        _refine_kernels.refine_pixels(left.arrays, right.arrays, r, left.kind, center_pad, (ys + rows[0], xs),
+        # xs contiguous (nonzero may return a strided view): one signature of the kernel, compiled once
+        _refine_kernels.refine_pixels(left.arrays, right.arrays, r, left.kind, center_pad,
+                                      (ys + rows[0], np.ascontiguousarray(xs)),
                                       int(half_px), max_cost, _strips(n_strips, ys.size), (out, cost))
         return out, cost
     # a level's up-sampled field is constant over runs of pixels: products gathered along them, in the
