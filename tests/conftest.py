@@ -12,8 +12,8 @@
   skips without it, with the install command (CI installs them all: README, Quick start).
 * ``slow`` (pyproject.toml) marks the tests that take many seconds: ``python -m pytest -m "not slow"``
   skips them.
-* The suite runs on parallel workers (pytest-xdist, ``-n auto`` in pyproject.toml;
-  ``-n 0`` runs it in one process). The workers share the synthetic datasets (each made once, under a file
+* The suite runs on parallel workers (pytest-xdist, ``-n auto --dist worksteal`` in pyproject.toml: a worker
+  that runs out of tests takes some of the other's; ``-n 0`` runs it in one process), the ``slow`` tests first. The workers share the synthetic datasets (each made once, under a file
   lock, in the run's temporary root) and numba's compiled kernels: on a cold cache each kernel is compiled by
   one worker, the other waits for it and loads it from the cache (a kernel's cache index and code are saved
   whole for the other worker).
@@ -101,6 +101,12 @@ def sample_data():
             pytest.skip(reason)
         return data.local_path(name)
     return get
+
+
+def pytest_collection_modifyitems(config, items):
+    """The ``slow`` tests run first, the others in their order: the parallel workers start the longest tests
+    early and end together, instead of one running a long test alone at the end of the run."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 
 def pytest_configure(config):
