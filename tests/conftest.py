@@ -110,9 +110,20 @@ def pytest_collection_modifyitems(config, items):
 
 
 def pytest_configure(config):
+    _one_blas_thread()
     if hasattr(config, "workerinput"):           # an xdist worker: each kernel compiled by one worker only
         _lock_numba_cache_files(config.workerinput["testrunuid"])
         _compile_each_kernel_once()
+
+
+def _one_blas_thread() -> None:
+    """BLAS (OpenBLAS under numpy and scipy) on one thread, in this process and the commands it starts: the
+    parallel workers are the parallelism. Two workers with two BLAS threads each on two cores spend most of a
+    large solve in OpenBLAS's busy waits (the 54-view calibration's LSMR: 13 s of CPU, 4 s on one thread)."""
+    from threadpoolctl import threadpool_limits
+
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    threadpool_limits(limits=1, user_api="blas")
 
 
 def _lock_numba_cache_files(run_id: str) -> None:
