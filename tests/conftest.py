@@ -12,8 +12,8 @@
   skips without it, with the install command (CI installs them all: README, Quick start).
 * ``slow`` (pyproject.toml) marks the tests that take many seconds: ``python -m pytest -m "not slow"``
   skips them.
-* The suite runs on parallel workers (pytest-xdist, ``-n auto`` in pyproject.toml;
-  ``-n 0`` runs it in one process). The workers share the synthetic datasets (each made once, under a file
+* The suite runs on parallel workers (pytest-xdist, ``-n auto --dist worksteal`` in pyproject.toml: a worker
+  that runs out of tests takes some of the other's; ``-n 0`` runs it in one process), the ``slow`` tests first. The workers share the synthetic datasets (each made once, under a file
   lock, in the run's temporary root) and numba's compiled kernels: on a cold cache each kernel is compiled by
   one worker, the other waits for it and loads it from the cache (a kernel's cache index and code are saved
   whole for the other worker). Before their first test the two workers compile the matcher's slow kernels
@@ -104,7 +104,14 @@ def sample_data():
     return get
 
 
+def pytest_collection_modifyitems(config, items):
+    """The ``slow`` tests run first, the others in their order: the parallel workers start the longest tests
+    early and end together, instead of one running a long test alone at the end of the run."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 def pytest_configure(config):
+    _one_blas_thread()
     if hasattr(config, "workerinput"):           # an xdist worker: each kernel compiled by one worker only
         _lock_numba_cache_files(config.workerinput["testrunuid"])
         _compile_each_kernel_once()
@@ -153,6 +160,16 @@ def _compile_matcher_share(worker: int, workers: int) -> None:
     if worker < 2 and workers > 1:
         for part in _matcher_parts()[worker]:
             part()
+
+
+def _one_blas_thread() -> None:
+    """BLAS (OpenBLAS under numpy and scipy) on one thread, in this process and the commands it starts: the
+    parallel workers are the parallelism. Two workers with two BLAS threads each on two cores spend most of a
+    large solve in OpenBLAS's busy waits (the 54-view calibration's LSMR: 13 s of CPU, 4 s on one thread)."""
+    from threadpoolctl import threadpool_limits
+
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    threadpool_limits(limits=1, user_api="blas")
 
 
 def _lock_numba_cache_files(run_id: str) -> None:

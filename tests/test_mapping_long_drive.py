@@ -75,7 +75,7 @@ def _run_in_subprocess(length_m: float, out: Path) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.parametrize("length_m", [1000.0, 10000.0])
+@pytest.mark.parametrize("length_m", [1000.0, pytest.param(10000.0, marks=pytest.mark.slow)])
 def test_an_l_shaped_drive_maps_in_under_2_gb_as_tiles_and_an_overview(tmp_path, length_m):
     result = _run_in_subprocess(length_m, tmp_path)
     assert result["peak_bytes"] < 2 * 1024 ** 3, result

@@ -20,8 +20,8 @@ from ..camera import (MIN_BASELINE_M, StereoCamera, check_not_swapped, rectified
 from ..transforms import T_from_R_t, rotation_from_rpy
 from .calibrate import CalibrationResult, _rms, calibrate_camera, reprojection_residuals, zhang_init
 from .ga import GABounds, GAConfig
-from .refine import (CalibrationModel, calibration_model, fit_statistics, grouped_jacobian, pose_matrix, pose_vector,
-                     project_views)
+from .refine import (CalibrationModel, calibration_model, fit_statistics, grouped_jacobian, least_squares_fit,
+                     pose_matrix, pose_vector, project_views)
 from .targets import CalibrationView, agree_with_left
 
 __all__ = ["StereoCalibrationResult", "calibrate_stereo", "rectified_points", "rectified_vertical_error_px"]
@@ -194,10 +194,9 @@ def _refine_jointly(fit: _JointFit, cam_l, cam_r, poses_l, R, T, *, width: int, 
     Returns ``(cam_l, cam_r, poses_l, R, T, sigmas, success, message)``; the inputs unchanged
     (``success`` False) when the fit fails or increases the error.
     """
-    from scipy.optimize import least_squares  # lazy: slow to import, most commands never calibrate
-
     x0 = fit.pack(cam_l, cam_r, poses_l, R, T)
-    sol = least_squares(fit.residuals, x0, jac=fit.jacobian, method="lm", max_nfev=200)
+    sol = least_squares_fit(fit.residuals, x0, fit.jacobian,
+                            sum(2 * len(v.uv) for v in (*fit.left_views, *fit.right_views)))
     try:
         il, ir, pl, relT = fit.unpack(sol.x)
         new_l = fit.spec.camera(width, height, *il[:4], il[4:])
