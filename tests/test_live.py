@@ -464,6 +464,9 @@ def test_memory_stays_flat_over_hundreds_of_frames(synthetic_dataset, tmp_path):
     assert len(early) and len(late), samples
     frames = np.median(late[:, 0]) - np.median(early[:, 0])
     # MB per frame between the two stretches: a frame's disparity alone is 77 kB (160x120 float32); the
-    # trajectory (144 B a frame) is held by the loop, the run and the snapshot being written
-    assert (np.median(late[:, 1]) - np.median(early[:, 1])) / frames < 0.004, samples
+    # trajectory (144 B a frame) is held by the loop, the run and the snapshot being written. What is held
+    # is the floor under the samples (their 10th percentile): a sample also counts the arrays of the frames
+    # in flight in the other threads at that moment, which come and go (up to 20 MB)
+    held = [np.percentile(stretch[:, 1], 10) for stretch in (early, late)]
+    assert (held[1] - held[0]) / frames < 0.004, samples
     assert (np.median(late[:, 2]) - np.median(early[:, 2])) / frames < 0.1, samples
