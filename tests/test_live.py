@@ -445,7 +445,7 @@ def test_memory_stays_flat_over_hundreds_of_frames(synthetic_dataset, tmp_path):
 
     dataset = synthetic_dataset(n_frames=10, width=160, height=120, supersample=1, path="s-curve", step_m=0.05)
     manifest = read_recording(dataset)
-    n = 500
+    n = 300
     samples = []
     # what the loop keeps (numpy's arrays and Python's objects, as tracemalloc traces them) and the resident
     # memory, which also holds the kernels numba compiles on the way and the allocator's arenas
