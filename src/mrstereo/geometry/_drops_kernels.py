@@ -106,7 +106,7 @@ def _seen_through(points, rows, j, k0, k1, m, r_cross, r_low, tx, ty, tz, max_st
 
 @njit(nogil=True, cache=True)
 def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m, support, edge_reach_m,
-                 spacing_m, out_edge, out_below, edge_columns):
+                 spacing_m, out_edge, out_below, out_candidates, edge_columns):
     """Drop edges and negative obstacles of a robot-frame point image ``points`` (H, W, 3), NaN invalid.
 
     Up each column (from the image's bottom) a run of at least ``support`` measured points below the floor
@@ -119,14 +119,21 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
     line passes floor level at ``E``: no ``support`` floor-level points of the column may lie between ``E``
     and the run's first point beyond their depth noise (that floor would hide it: a mismatch). Points every
     ``spacing_m`` over the last ``edge_reach_m`` of ``A -> E`` go to ``out_edge``, the run's points to
-    ``out_below``. Floor spreading on after a drop marks its first point (a far rim). ``t``: the camera in
-    the robot frame. Returns the counts of ``out_edge`` and ``out_below``; ``edge_columns[j]`` counts
-    column j's drops.
+    ``out_below``. Floor spreading on after a drop marks its first point (a far rim). A run of ``support``
+    points below the floor that is neither (no floor measured near enough before it in the column: it could
+    be a ramp starting out of view) nor a mismatch is a *candidate* for the map to confirm with floor it
+    measured earlier (:func:`mrstereo.mapping._kernels.confirm_drops`): a row of ``out_candidates``
+    ``(sx, sy, ex, ey, qx, qy, qz, c0, tan_slope)``, the edge's start ``S`` (``edge_reach_m`` before ``E``),
+    ``E``, the run's point ``q`` deepest below a drivable slope from ``E`` at its measured height, and
+    ``c0 = z_q + n_sigma sigma_h(q) + max_step``: floor at height ``z_a`` a horizontal ``d`` from ``q`` with
+    ``z_a > c0 + tan_slope d`` confirms the drop. ``t``: the camera in the robot frame. Returns the counts
+    of ``out_edge``, ``out_below`` and ``out_candidates``; ``edge_columns[j]`` counts column j's drops.
     """
     H, W = points.shape[0], points.shape[1]
     tx, ty, tz = t[0], t[1], t[2]
     n_edge = 0
     n_below = 0
+    n_cand = 0
     rows = np.empty(H, np.int64)
     for j in range(W):
         m = 0
@@ -160,13 +167,17 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
             end = k                                  # the run of points below the floor
             deepest = 0.0                            # below a drivable slope from A
             deepest_e = 0.0                          # below a drivable slope from E
+            q_best = p
             while end < m and _below(points, rows[end], j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
                 q = rows[end]
                 xq, yq, zq = points[q, j, 0], points[q, j, 1], points[q, j, 2]
                 sq = n_sigma * _sigma_h(xq, yq, zq, tx, ty, tz, sigma_per_m2)
                 d = math.sqrt((xq - xa) ** 2 + (yq - ya) ** 2)
                 deepest = max(deepest, za - zq - math.sqrt(sa * sa + sq * sq) - tan_slope * d)
-                deepest_e = max(deepest_e, -zq - sq - tan_slope * math.sqrt((xq - ex) ** 2 + (yq - ey) ** 2))
+                below_e = -zq - sq - tan_slope * math.sqrt((xq - ex) ** 2 + (yq - ey) ** 2)
+                if below_e > deepest_e:
+                    deepest_e = below_e
+                    q_best = q
                 end += 1
             # a steep face counts when floor follows it, spreading on (a hole's far wall up to its far rim, a
             # stair riser); in a column without floor before it, a face reaching floor level (a wall rising
@@ -179,10 +190,22 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
                                                                         tan_slope, sp)
             # and its sight line does not pass under floor measured in the column (a mismatch: floor matched
             # too far lies below the floor, and the floor goes on right after it)
-            if end - k >= support and drop and not _seen_through(
-                    points, rows, j, k, end, m, s * r_low, r_low, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
-                    low_m, support):
-                length = math.sqrt((ex - xa) ** 2 + (ey - ya) ** 2)
+            if end - k < support or _seen_through(points, rows, j, k, end, m, s * r_low, r_low, tx, ty, tz,
+                                                  max_step_m, sigma_per_m2, n_sigma, low_m, support):
+                k = max(end, k + 1)
+                continue
+            length = math.sqrt((ex - xa) ** 2 + (ey - ya) ** 2)
+            if not drop:                             # a candidate for the map: floor it saw before E may confirm it
+                if deepest_e > max_step_m and n_cand < out_candidates.shape[0]:
+                    f = 0.0 if length <= 0.0 else max(0.0, 1.0 - edge_reach_m / length)
+                    xb, yb, zb = points[q_best, j, 0], points[q_best, j, 1], points[q_best, j, 2]
+                    row = out_candidates[n_cand]
+                    row[0], row[1], row[2], row[3] = xa + f * (ex - xa), ya + f * (ey - ya), ex, ey
+                    row[4], row[5], row[6] = xb, yb, zb
+                    row[7] = zb + n_sigma * _sigma_h(xb, yb, zb, tx, ty, tz, sigma_per_m2) + max_step_m
+                    row[8] = tan_slope
+                    n_cand += 1
+            else:
                 start = max(0.0, length - edge_reach_m)
                 n_steps = int((length - start) / spacing_m) + 1
                 for q in range(n_steps + 1):
@@ -198,4 +221,4 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
                 edge_columns[j] += 1
                 in_drop = True
             k = max(end, k + 1)
-    return n_edge, n_below
+    return n_edge, n_below, n_cand

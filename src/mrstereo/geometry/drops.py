@@ -15,14 +15,20 @@ is no drop. User guide: docs/obstacles.md, "Drops". Conventions: docs/convention
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import _checks
 from . import _drops_kernels
 
-__all__ = ["DropConfig", "DropResult", "find_drops"]
+__all__ = ["DropConfig", "DropResult", "find_drops", "transform_candidates", "CANDIDATE_COLUMNS"]
+
+CANDIDATE_COLUMNS = ("sx", "sy", "ex", "ey", "qx", "qy", "qz", "c0", "tan_slope")
+"""The columns of a drop candidate (:attr:`DropResult.candidates_robot`): the edge's start ``S`` and end ``E``
+(where the sight line to the run passes floor level), the run's point ``q`` deepest below a drivable slope
+from ``E``, and the confirming rule: floor measured ``d`` (horizontally) from ``q`` at a height above
+``c0 + tan_slope d`` makes it a drop (``c0 = z_q + 3 sigma_h(q) + max_step_m``)."""
 
 
 @dataclass(frozen=True)
@@ -60,11 +66,15 @@ class DropConfig:
 class DropResult:
     """Output of :func:`find_drops`: ``edge_points_robot`` (N, 3) the points on the drop edges (at floor
     level, z = 0), ``below_points_robot`` (M, 3) the measured points below the floor past an edge (their own
-    height), ``edge_columns`` (W,) the number of edges found in each image column."""
+    height), ``edge_columns`` (W,) the number of edges found in each image column, ``candidates_robot`` (K, 9)
+    the runs below the floor that one frame cannot tell from a ramp starting out of view (no floor measured
+    near enough before them in their column), for the map to confirm with the floor it measured before
+    (:data:`CANDIDATE_COLUMNS`; :meth:`mrstereo.mapping.OccupancyGrid.add_layers`)."""
 
     edge_points_robot: np.ndarray
     below_points_robot: np.ndarray
     edge_columns: np.ndarray
+    candidates_robot: np.ndarray = field(default_factory=lambda: np.empty((0, len(CANDIDATE_COLUMNS))))
 
     @property
     def points_robot(self) -> np.ndarray:
@@ -116,14 +126,31 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     per_edge = int(config.edge_reach_m / config.spacing_m) + 2
     out_edge = np.empty((4 * w * per_edge, 3))
     out_below = np.empty((h * w // 2 + 1, 3))
+    out_candidates = np.empty((4 * w, len(CANDIDATE_COLUMNS)))
     columns = np.zeros(w, np.int64)
     if t[2] <= 0.0:
         raise ValueError(f"T_robot_from_cam puts the camera {t[2]:.3f} m above the floor; it must be above it")
-    n_edge, n_below = _drops_kernels.column_drops(
+    n_edge, n_below, n_cand = _drops_kernels.column_drops(
         pts, t, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
         float(config.disparity_sigma_px) / bf, float(config.n_sigma), top, int(config.support),
-        float(config.edge_reach_m), float(config.spacing_m), out_edge, out_below, columns)
-    edge, below = out_edge[:n_edge], out_below[:n_below]
+        float(config.edge_reach_m), float(config.spacing_m), out_edge, out_below, out_candidates, columns)
+    edge, below, cand = out_edge[:n_edge], out_below[:n_below], out_candidates[:n_cand]
     edge = edge[np.hypot(edge[:, 0] - t[0], edge[:, 1] - t[1]) <= reach]
     below = below[np.hypot(below[:, 0] - t[0], below[:, 1] - t[1]) <= reach]
-    return DropResult(edge_points_robot=edge, below_points_robot=below, edge_columns=columns)
+    cand = cand[np.hypot(cand[:, 2] - t[0], cand[:, 3] - t[1]) <= reach]
+    return DropResult(edge_points_robot=edge, below_points_robot=below, edge_columns=columns, candidates_robot=cand)
+
+
+def transform_candidates(T, candidates) -> np.ndarray:
+    """Drop candidates (K, 9) (:data:`CANDIDATE_COLUMNS`) moved by the rigid ``T`` (4, 4) that keeps the floor
+    (a planar pose: a rotation about z and a shift; heights change by its z shift), float32."""
+    T = _checks.matrix("T", T, (4, 4))
+    rows = np.asarray(candidates, dtype=np.float64)
+    if rows.ndim != 2 or rows.shape[1] != len(CANDIDATE_COLUMNS):
+        raise ValueError(f"candidates must have shape (K, {len(CANDIDATE_COLUMNS)}), got {rows.shape}")
+    out = rows.copy()
+    R, t = T[:2, :2], T[:2, 3]
+    for a in (0, 2, 4):
+        out[:, a:a + 2] = rows[:, a:a + 2] @ R.T + t
+    out[:, 6:8] += T[2, 3]
+    return out.astype(np.float32)

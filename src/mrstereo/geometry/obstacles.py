@@ -20,7 +20,7 @@ import numpy as np
 from .. import _checks
 from ..camera import CameraMount, StereoCamera
 from . import _kernels
-from .drops import DropConfig, find_drops
+from .drops import CANDIDATE_COLUMNS, DropConfig, find_drops
 from .ground import FLOOR_FIT_RANGE_M, GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_mount
 
 __all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity",
@@ -117,6 +117,8 @@ class ObstacleResult:
     message: str
     too_near_mask: np.ndarray | None = None
     drop_points_robot: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
+    drop_candidates_robot: np.ndarray = field(default_factory=lambda: np.empty((0, len(CANDIDATE_COLUMNS))))
+    """The drop test's candidates for the map to confirm (:attr:`.drops.DropResult.candidates_robot`)."""
 
     @property
     def too_near_obstacle_mask(self) -> np.ndarray:
@@ -290,11 +292,11 @@ def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleCo
                        float(stereo.baseline_m) * float(stereo.focal_px), config=config.drops,
                        floor_top_m=config.min_obstacle_height_m, max_range_m=config.max_range_m)
     found = drops.points_robot
-    if not len(found):
+    if not len(found) and not len(drops.candidates_robot):
         return result
     out = replace(result, obstacle_points_robot=np.concatenate([result.obstacle_points_robot,
                                                                 drops.obstacle_points_robot]),
-                  drop_points_robot=found,
+                  drop_points_robot=found, drop_candidates_robot=drops.candidates_robot,
                   message=result.message + f"; {int(np.count_nonzero(drops.edge_columns))} columns with a drop")
     out.__dict__["points_robot_image"] = result.points_robot_image      # computed once
     return out

@@ -228,6 +228,8 @@ class Observed:
     floor_points_robot: np.ndarray | None = None
     drop_points_robot: np.ndarray | None = None
     """The drop test's points at their measured height (None: the test is off)."""
+    drop_candidates_robot: np.ndarray | None = None
+    """The drop test's candidates for the map (:attr:`.drops.DropResult.candidates_robot`; None: the test is off)."""
     n_valid_disparity: int = 0
     scan: LaserScan | None = None
     disparity_px: np.ndarray | None = None
@@ -283,6 +285,8 @@ def observe_pair(frame, stereo: StereoCamera, mount: CameraMount | None, config,
                     obstacle_points_robot=np.concatenate([obs.obstacle_points_robot, boundary]),
                     n_boundary=len(boundary), floor_points_robot=obs.floor_points_robot,
                     drop_points_robot=obs.drop_points_robot if config.obstacle_config.drops is not None else None,
+                    drop_candidates_robot=(obs.drop_candidates_robot if config.obstacle_config.drops is not None
+                                           else None),
                     n_valid_disparity=int(np.isfinite(pair.disparity_px).sum()),
                     scan=replace(result.scan, stamp_s=float(frame.stamp_s)),
                     disparity_px=pair.disparity_px if keep_images else None,

@@ -569,3 +569,74 @@ def drop_votes(drops, origin_x, origin_y, resolution, rows, cols, counts, votes,
             counts[k, 1] = -1
             n += 1
     return n
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _cell_at(x, y, origin_x, origin_y, resolution, rows, cols):
+    """Flat cell of the point ``(x, y)``, -1 outside the grid."""
+    c = math.floor((x - origin_x) / resolution)
+    r = math.floor((y - origin_y) / resolution)
+    if 0 <= r < rows and 0 <= c < cols:
+        return int(r) * cols + int(c)
+    return -1
+
+
+@njit(nogil=True, cache=True)
+def confirm_drops(candidates, origin_x, origin_y, resolution, rows, cols, heights, floor_tol, max_walk_m, out):
+    """The drop test's candidates (K, 9) (``mrstereo.geometry.drops.CANDIDATE_COLUMNS``) that the height layer
+    ``heights`` (rows*cols, 2: lowest, highest; the views before this one) confirms, as drop points in ``out``.
+
+    A candidate's sight line passes floor level at ``E``. It is confirmed when, walking back from ``E``
+    toward the camera (half a cell a step, at most ``max_walk_m``), a cell whose lowest point lies at floor
+    level (within ``floor_tol``) lies above ``c0 + tan_slope d`` (``d``: from the run's point ``q``): the
+    floor was measured there and no drivable slope from it reaches ``q``. It is not when a floor-level cell
+    lies between ``E`` and ``q`` more than a cell from both (its sight line would pass under measured floor:
+    a mismatch). A confirmed candidate puts its edge ``S -> E`` at floor level (a point every fifth of a
+    cell) and ``q`` at its height into ``out``. Returns the number of points written."""
+    n = 0
+    step = 0.5 * resolution
+    spacing = 0.2 * resolution
+    for i in range(candidates.shape[0]):
+        sx, sy, ex, ey = candidates[i, 0], candidates[i, 1], candidates[i, 2], candidates[i, 3]
+        qx, qy, qz, c0, tan = candidates[i, 4], candidates[i, 5], candidates[i, 6], candidates[i, 7], candidates[i, 8]
+        dq = math.sqrt((qx - ex) ** 2 + (qy - ey) ** 2)
+        if not dq > 0.0:
+            continue
+        vx, vy = (qx - ex) / dq, (qy - ey) / dq           # along the sight line, away from the camera
+        seen = False
+        s = resolution
+        while s < dq - resolution and not seen:
+            k = _cell_at(ex + vx * s, ey + vy * s, origin_x, origin_y, resolution, rows, cols)
+            seen = k >= 0 and abs(heights[k, 0]) <= floor_tol
+            s += step
+        if seen:
+            continue
+        confirmed = False
+        s = 0.0
+        while s <= max_walk_m:
+            x, y = ex - vx * s, ey - vy * s
+            level = c0 + tan * (dq + s)
+            if level >= floor_tol:
+                break
+            k = _cell_at(x, y, origin_x, origin_y, resolution, rows, cols)
+            if k >= 0 and abs(heights[k, 0]) <= floor_tol and heights[k, 0] > level:
+                confirmed = True
+                break
+            s += step
+        if not confirmed:
+            continue
+        length = math.sqrt((ex - sx) ** 2 + (ey - sy) ** 2)
+        m = int(length / spacing) + 1
+        for t in range(m + 1):
+            f = 1.0 if length <= 0.0 else min(1.0, t * spacing / length)
+            if n < out.shape[0]:
+                out[n, 0] = sx + f * (ex - sx)
+                out[n, 1] = sy + f * (ey - sy)
+                out[n, 2] = 0.0
+                n += 1
+        if n < out.shape[0]:
+            out[n, 0] = qx
+            out[n, 1] = qy
+            out[n, 2] = qz
+            n += 1
+    return n

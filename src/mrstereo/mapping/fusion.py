@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import _checks
 from ..camera import StereoCamera
+from ..geometry.drops import transform_candidates
 from ..profiling import stage
 from ..transforms import T_from_planar, transform_points
 from .grid import GridSpec
@@ -51,13 +52,17 @@ class FrameObservation:
     drop_points_world: np.ndarray | None = None
     """The drop test's points (:mod:`mrstereo.geometry.drops`) at their measured height, for the map's drop and
     height layers (their floor-level copies are among ``obstacle_points_world``); None: no drop test."""
+    drop_candidates_world: np.ndarray | None = None
+    """The drop test's candidates (K, 9) the map confirms with the floor it measured before
+    (:data:`mrstereo.geometry.drops.CANDIDATE_COLUMNS`); None: none."""
 
     @property
     def layers(self) -> tuple:
         """The arguments of :meth:`OccupancyGrid.add_layers`: the measured obstacle points (without the
-        boundary's), the floor points, the drop points."""
+        boundary's), the floor points, the drop points and candidates."""
         n = len(self.obstacle_points_world) - self.boundary_points
-        return self.obstacle_points_world[:n], self.floor_points_world, self.drop_points_world
+        return self.obstacle_points_world[:n], self.floor_points_world, self.drop_points_world, \
+            self.drop_candidates_world
 
     @property
     def sensor_origin_world(self) -> tuple[float, ...]:
@@ -140,10 +145,13 @@ def world_observation(observed, pose: tuple[float, float, float], stereo: Stereo
         floor = transform_points(T, observed.floor_points_robot).astype(np.float32)
         drops = None if observed.drop_points_robot is None else \
             transform_points(T, observed.drop_points_robot).astype(np.float32)
+        candidates = None if observed.drop_candidates_robot is None else \
+            transform_candidates(T, observed.drop_candidates_robot)
         ground = observed.ground
         height = float(ground.height_m) if ground.success else None
     return FrameObservation(index=observed.index, pose=pose, pan_rad=observed.pan_rad,
                             obstacle_points_world=obstacles, floor_points_world=floor,
                             n_valid_disparity=observed.n_valid_disparity, ground_message=ground.message,
                             baseline_focal_m_px=float(stereo.baseline_m * stereo.focal_px),
-                            sensor_height_m=height, boundary_points=observed.n_boundary, drop_points_world=drops)
+                            sensor_height_m=height, boundary_points=observed.n_boundary, drop_points_world=drops,
+                            drop_candidates_world=candidates)

@@ -126,7 +126,8 @@ def save_observation(path: str | os.PathLike, obs: FrameObservation, fingerprint
                  baseline_focal_m_px=np.nan if obs.baseline_focal_m_px is None else obs.baseline_focal_m_px,
                  sensor_height_m=np.nan if obs.sensor_height_m is None else obs.sensor_height_m,
                  boundary_points=obs.boundary_points,
-                 **({} if obs.drop_points_world is None else {"drop_points_world": obs.drop_points_world}))
+                 **({} if obs.drop_points_world is None else {"drop_points_world": obs.drop_points_world}),
+                 **({} if obs.drop_candidates_world is None else {"drop_candidates_world": obs.drop_candidates_world}))
 
 
 def observation_fingerprint(path: str | os.PathLike) -> str | None:
@@ -146,7 +147,9 @@ def load_observation(path: str | os.PathLike) -> FrameObservation:
                                 baseline_focal_m_px=_optional_float(z["baseline_focal_m_px"]),
                                 sensor_height_m=_optional_float(z["sensor_height_m"]),
                                 boundary_points=int(z["boundary_points"]),
-                                drop_points_world=z["drop_points_world"] if "drop_points_world" in z.files else None)
+                                drop_points_world=z["drop_points_world"] if "drop_points_world" in z.files else None,
+                                drop_candidates_world=(z["drop_candidates_world"] if "drop_candidates_world" in z.files
+                                                       else None))
 
 
 def _optional_float(value) -> float | None:

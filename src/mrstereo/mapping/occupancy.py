@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import _checks
+from ..geometry.drops import CANDIDATE_COLUMNS
 from ..io import atomic_write
 from ..profiling import stage
 from . import _kernels
@@ -36,6 +37,9 @@ __all__ = ["MappingConfig", "OccupancyGrid", "GridUpdate", "ViewCells", "view_ce
            "log_odds_from_probability", "probability_from_log_odds"]
 
 FUSIONS = ("log_odds", "union")
+
+CONFIRM_WALK_M = 4.0
+"""How far back from a drop candidate's edge the map looks for the floor that confirms it (:meth:`OccupancyGrid.add_layers`)."""
 
 
 def log_odds_from_probability(p) -> np.ndarray:
@@ -573,20 +577,33 @@ class OccupancyGrid:
             self.add_layers(*layers)
         return result
 
-    def add_layers(self, obstacle_points_world, floor_points_world, drop_points_world=None) -> int:
+    def add_layers(self, obstacle_points_world, floor_points_world, drop_points_world=None,
+                   drop_candidates_world=None) -> int:
         """The height and drop layers of one view (with its :meth:`update`, after :meth:`apply`).
 
         Every point (N, 3) (z above the floor: obstacle, floor and the drop test's points, the latter at their
-        measured height) widens its cell's lowest and highest height. A cell with at least
+        measured height) widens its cell's lowest and highest height. First the drop test's candidates (K, 9)
+        (:data:`mrstereo.geometry.drops.CANDIDATE_COLUMNS`: runs below the floor one frame cannot tell from a
+        ramp starting out of view) are checked against the floor the views before this one measured: floor
+        seen before a candidate's edge, higher than any drivable slope from it reaches, makes it a drop; floor
+        seen beyond its edge, under its sight line, makes it a mismatch (``_kernels.confirm_drops``); the
+        confirmed ones' edges join ``drop_points_world``. A cell with at least
         ``config.drop_min_points`` of ``drop_points_world`` gets a drop vote (up to ``drop_max_votes``); a
         cell with at least ``drop_clear_points`` of ``floor_points_world`` and no vote from this view loses
-        one (``drop_points_world`` None: no drop test, no votes either way). Votes change only here and under the footprint (:meth:`clear_disc`), never by a ray passing
-        over the cell. Returns the number of cells that got a vote.
+        one (``drop_points_world`` None: no drop test, no votes either way). Votes change only here and under
+        the footprint (:meth:`clear_disc`), never by a ray passing over the cell. Returns the number of cells
+        that got a vote.
         """
         with stage("grid.layers"):
             c = self.config
             g = self.grid
             rows, cols = g.shape
+            at = (float(g.origin_x_m), float(g.origin_y_m), float(g.resolution_m), rows, cols)
+            heights = self._heights_m.reshape(-1, 2)
+            if drop_candidates_world is not None and len(drop_candidates_world):
+                confirmed = self._confirm_drops(drop_candidates_world, at, heights)
+                drop_points_world = confirmed if drop_points_world is None else np.concatenate(
+                    [np.asarray(drop_points_world, dtype=confirmed.dtype).reshape(-1, 3), confirmed])
             sets = [_layer_points(name, p) for name, p in (("obstacle_points_world", obstacle_points_world),
                                                               ("floor_points_world", floor_points_world),
                                                               ("drop_points_world", drop_points_world))]
@@ -594,15 +611,25 @@ class OccupancyGrid:
                 self._counts = np.zeros((rows * cols, 2), np.int32)
                 self._stamp = np.full(rows * cols, -1, np.int32)
             self._view = (self._view + 1) % (1 << 31)           # the cells stamped with another view count from 0
-            heights = self._heights_m.reshape(-1, 2)
             votes = self._drop_votes.reshape(-1)
-            at = (float(g.origin_x_m), float(g.origin_y_m), float(g.resolution_m), rows, cols)
             scratch = (self._counts, self._stamp, self._view, votes, c.drop_clear_points)
             _kernels.layer_points(sets[2], 1, *at, heights, *scratch)
             voted = _kernels.drop_votes(sets[2], *at, self._counts, votes, c.drop_min_points, c.drop_max_votes)
             _kernels.layer_points(sets[1], 0 if drop_points_world is not None else -1, *at, heights, *scratch)
             _kernels.layer_points(sets[0], -1, *at, heights, *scratch)
             return int(voted)
+
+    def _confirm_drops(self, candidates, at, heights) -> np.ndarray:
+        """The drop points (N, 3) of the candidates the height layer confirms (:meth:`add_layers`)."""
+        rows = np.ascontiguousarray(candidates, dtype=np.float64)
+        if rows.ndim != 2 or rows.shape[1] != len(CANDIDATE_COLUMNS) or not np.isfinite(rows).all():
+            raise ValueError(f"drop_candidates_world must be finite with shape (K, {len(CANDIDATE_COLUMNS)}), "
+                             f"got {rows.shape}")
+        spacing = 0.2 * self.grid.resolution_m
+        longest = float(np.hypot(rows[:, 2] - rows[:, 0], rows[:, 3] - rows[:, 1]).max())
+        out = np.empty((len(rows) * (int(longest / spacing) + 4), 3), np.float32)
+        n = _kernels.confirm_drops(rows, *at, heights, float(self.config.height_tolerance_m), CONFIRM_WALK_M, out)
+        return out[:n]
 
     def known_occupied(self, p_min: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(mask, z_range_m)``: the cells held occupied with probability at least ``p_min`` (default
