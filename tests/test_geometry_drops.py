@@ -422,3 +422,80 @@ def test_drops_need_a_randomized_world(tmp_path):
     with pytest.raises(ValueError, match="drops applies to a randomized world"):
         write_synthetic_dataset(tmp_path / "x", drops=True, progress=False)
     assert not (tmp_path / "x").exists()
+
+
+def _two_frames(surface, rng):
+    """Frame k-1 at x = 0 sees the floor only up to 1.35 m (what lies beyond it unmatched); frame k at x = 0.5
+    sees nothing before 1.4 m (the floor there unmatched, as at the near end of the view) and ``surface`` from
+    there on. Both in the world frame (the robot frame of frame k-1), with frame k's drop test."""
+    rays, T, bf = _tilted_rig(h=120, w=160, f=100.0)
+    before = _surface(rays, T, lambda p: np.zeros(len(p)), rng=rng, bf=bf)
+    before[before[..., 0] > 1.35] = np.nan
+    shift = np.array([0.5, 0.0, 0.0])
+    after = _surface(rays, T, lambda p: surface(p + shift), rng=rng, bf=bf, reach_m=2.0)
+    after[after[..., 0] + 0.5 < 1.4] = np.nan
+    found = find_drops(after, T, bf)
+    floor_k = after[np.abs(after[..., 2]) < 0.05] + shift
+    move = T_from_planar(0.5, 0.0, 0.0)
+    from mrstereo.geometry.drops import transform_candidates
+
+    return (before[np.isfinite(before[..., 2])], found, floor_k, transform_candidates(move, found.candidates_robot),
+            found.points_robot + shift)
+
+
+def _map_of(frames):
+    from mrstereo.mapping import MappingConfig, OccupancyGrid
+
+    grid = GridSpec(width_m=4.0, height_m=3.0, resolution_m=0.05, origin_x_m=0.0, origin_y_m=-1.5)
+    occupancy = OccupancyGrid(grid, config=MappingConfig(footprint_radius_m=None))
+    for floor, drops, candidates in frames:
+        occupancy.add_layers(np.empty((0, 3)), floor, drops, candidates)
+    return occupancy
+
+
+def test_the_map_confirms_an_edge_seen_only_at_the_near_end_of_the_view_with_floor_it_saw_before():
+    """A ledge 0.2 m down 0.9 m ahead of frame k, the floor before it unmatched in frame k: one frame cannot
+    tell it from a ramp starting out of view (no drop mark, only candidates), and a map of frame k alone marks
+    nothing; floor measured up to it in frame k-1 confirms it: frame k makes its edge lethal, within a cell of
+    where it is (and the lower floor's deepest points past it). A drivable ramp (8 degrees) seen the same way (points with disparity noise) stays free."""
+    ledge = lambda p: np.where(p[:, 0] < 1.4, 0.0, -0.2)                          # noqa: E731
+    floor_before, found, floor_k, candidates, drop_points = _two_frames(ledge, None)     # exact points
+    assert len(found.edge_points_robot) == 0 and len(found.candidates_robot) > 20
+    alone = _map_of([(floor_k, drop_points, candidates)])
+    assert not alone.drop.any()
+    occupancy = _map_of([(floor_before, np.empty((0, 3)), None), (floor_k, drop_points, candidates)])
+    assert not _map_of([(floor_before, np.empty((0, 3)), None)]).drop.any()
+    drop = occupancy.drop
+    x = occupancy.grid.cell_centres()[..., 0][drop]
+    assert np.sum(np.abs(x - 1.4) <= 0.1) >= 10 and np.all(x > 1.3), x      # the edge, and the lower floor past it
+    assert np.all(occupancy.occupied[drop])
+    ramp = lambda p: -np.clip((p[:, 0] - 1.4) * math.tan(math.radians(8.0)), 0.0, 0.3)   # noqa: E731
+    floor_before, found, floor_k, candidates, drop_points = _two_frames(ramp, np.random.default_rng(11))
+    occupancy = _map_of([(floor_before, np.empty((0, 3)), None), (floor_k, drop_points, candidates)])
+    assert not occupancy.drop.any()
+
+
+def test_a_candidate_is_confirmed_only_by_floor_above_any_drivable_slope_and_not_under_measured_floor():
+    """Hand-made candidates: the edge E at x = 1.4, the run's point q 0.3 m further at ``z_q``; the floor the
+    map measured before E confirms it when it lies higher than a 10 degree slope from q reaches (a lower
+    floor 0.25 m down: yes; a floor 0.05 m down at 1.3 m, the top of a ramp: no), floor measured between E
+    and q rejects it (its sight line would pass under that floor: a mismatch)."""
+    tan = math.tan(math.radians(10.0))
+
+    def candidate(zq):
+        c0 = zq + 0.01 + 0.05                   # its noise and the robot's step
+        return np.array([[1.3, 0.0, 1.4, 0.0, 1.7, 0.0, zq, c0, tan]])
+
+    floor = np.array([[x, 0.0, z] for x in np.arange(0.6, 1.38, 0.02) for z in (0.0, 0.005)])
+    occupancy = _map_of([(floor, None, None), (np.empty((0, 3)), np.empty((0, 3)), candidate(-0.25))])
+    assert occupancy.drop[:, (occupancy.grid.cell_centres()[0, :, 0] > 1.29) &
+                          (occupancy.grid.cell_centres()[0, :, 0] < 1.41)].any()
+    # a ramp: the floor before E measured lower and lower toward it (5 cm down at 1.3 m), q 0.1 m down
+    ramp = floor.copy()
+    ramp[:, 2] -= np.clip(ramp[:, 0] - 1.0, 0.0, None) * (0.05 / 0.3)
+    assert not _map_of([(ramp, None, None), (np.empty((0, 3)), np.empty((0, 3)), candidate(-0.1))]).drop.any()
+    # floor measured beyond E, before q: a mismatch
+    beyond = np.concatenate([floor, [[1.55, 0.0, 0.0]] * 3])
+    assert not _map_of([(beyond, None, None), (np.empty((0, 3)), np.empty((0, 3)), candidate(-0.25))]).drop.any()
+    # no floor before E (none measured): nothing
+    assert not _map_of([(np.empty((0, 3)), np.empty((0, 3)), candidate(-0.25))]).drop.any()
