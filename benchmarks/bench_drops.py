@@ -124,7 +124,7 @@ def _seen_floor(manifest, grid, height: np.ndarray, range_m: float) -> np.ndarra
     return seen
 
 
-def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, config=None) -> dict:
+def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, config=None, drops=None) -> dict:
     """Render world ``seed`` with drops, map it with and without the drop test, score both (see the module)."""
     from scipy.ndimage import binary_dilation
 
@@ -140,7 +140,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
     manifest = read_manifest(ds)
     world = random_world(seed, drops=True)
     t0 = time.process_time()
-    run, plain = paired_maps(manifest, config=config)
+    run, plain = paired_maps(manifest, config=config, drops=drops)
     cpu = time.process_time() - t0
     grid = run.grid.grid
     step = DropConfig().max_step_m
@@ -189,7 +189,7 @@ def _goals(world) -> list[tuple[float, float]]:
     return goals
 
 
-def evaluate_real(frames: int, config=None) -> list[dict]:
+def evaluate_real(frames: int, config=None, drops=None) -> list[dict]:
     """Flat floors of real recordings: the share of free cells the drop test changes."""
     from mrstereo.mapping.rosmap import ros_map_on_grid
     from mrstereo.recordings import read_recording
@@ -202,7 +202,7 @@ def evaluate_real(frames: int, config=None) -> list[dict]:
             rows.append({"recording": name, "missing": str(root)})
             continue
         t0 = time.process_time()
-        run, plain = paired_maps(read_recording(root), frames=frames, config=config)
+        run, plain = paired_maps(read_recording(root), frames=frames, config=config, drops=drops)
         a, b = (r.grid.to_ros_map() for r in (run, plain))
         b = ros_map_on_grid(b, a.grid)           # the map with drops may reach farther: compare on its window
         free = b.free
@@ -335,6 +335,9 @@ def main() -> None:
     parser.add_argument("--drop-clear-points", type=int, default=None, help="MappingConfig.drop_clear_points")
     parser.add_argument("--drop-max-votes", type=int, default=None, help="MappingConfig.drop_max_votes")
     parser.add_argument("--drop-low", dest="drop_low_m", type=float, default=None, help="MappingConfig.drop_low_m")
+    parser.add_argument("--no-robot-floor", action="store_true",
+                        help="DropConfig(robot_floor=False): only the map's memory confirms a drop with no floor "
+                             "measured before it in its column")
     parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
     parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
     parser.add_argument("--speed", action="store_true", help="CPU time of a frame with and without the drop test")
@@ -347,6 +350,9 @@ def main() -> None:
         return
     from mrstereo.pipeline.run import PipelineConfig
 
+    from mrstereo.geometry.drops import DropConfig
+
+    drops = DropConfig(robot_floor=not args.no_robot_floor)
     tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m")
              if getattr(args, k) is not None}
     base = PipelineConfig()
@@ -358,7 +364,7 @@ def main() -> None:
                   flush=True)
         return
     if args.real:
-        for row in evaluate_real(args.frames, config):
+        for row in evaluate_real(args.frames, config, drops):
             print("  ".join(f"{k}: {v:.4f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()),
                   flush=True)
         return
@@ -366,7 +372,7 @@ def main() -> None:
     data.mkdir(parents=True, exist_ok=True)
     rows = []
     for seed in _parse_seeds(args.seeds):
-        row = evaluate_seed(seed, args.frames, data, args.view, config)
+        row = evaluate_seed(seed, args.frames, data, args.view, config, drops)
         rows.append(row)
         print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()), flush=True)
     edge = sum(r["edge cells in view"] for r in rows)

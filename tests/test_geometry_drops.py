@@ -484,7 +484,7 @@ def test_a_candidate_is_confirmed_only_by_floor_above_any_drivable_slope_and_not
 
     def candidate(zq):
         c0 = zq + 0.01 + 0.05                   # its noise and the robot's step
-        return np.array([[1.3, 0.0, 1.4, 0.0, 1.7, 0.0, zq, c0, tan]])
+        return np.array([[1.3, 0.0, 1.4, 0.0, 1.7, 0.0, zq, c0, tan, 0.0, 0.3]])
 
     floor = np.array([[x, 0.0, z] for x in np.arange(0.6, 1.38, 0.02) for z in (0.0, 0.005)])
     occupancy = _map_of([(floor, None, None), (np.empty((0, 3)), np.empty((0, 3)), candidate(-0.25))])
@@ -499,3 +499,22 @@ def test_a_candidate_is_confirmed_only_by_floor_above_any_drivable_slope_and_not
     assert not _map_of([(beyond, None, None), (np.empty((0, 3)), np.empty((0, 3)), candidate(-0.25))]).drop.any()
     # no floor before E (none measured): nothing
     assert not _map_of([(np.empty((0, 3)), np.empty((0, 3)), candidate(-0.25))]).drop.any()
+
+
+def test_a_floor_without_disparity_is_unknown_not_a_drop_without_the_robot_floor():
+    """A floor that gives no disparity but for a patch matched three times too far (1 m below the floor,
+    nothing measured around it): judged against the floor under the robot it is a drop; with ``robot_floor=False`` it
+    is only a candidate, and a map that never measured that floor marks nothing (unknown)."""
+    rays, T, bf = _tilted_rig(h=120, w=160, f=100.0)
+    floor = _surface(rays, T, lambda p: np.zeros(len(p)))
+    r = np.hypot(floor[..., 0], floor[..., 1])
+    patch = (r > 0.8) & (r < 1.0) & (np.abs(floor[..., 1]) < 0.4)
+    t = T[:3, 3]
+    points = np.full(floor.shape, np.nan)
+    points[patch] = t + (floor[patch] - t) * 3.0
+    assert np.count_nonzero(find_drops(points, T, bf).edge_columns) > 10
+    found = find_drops(points, T, bf, config=DropConfig(robot_floor=False))
+    assert len(found.points_robot) == 0 and len(found.candidates_robot) > 10
+    assert not _map_of([(np.empty((0, 3)), found.points_robot, found.candidates_robot)]).drop.any()
+    with pytest.raises(TypeError, match="robot_floor"):
+        DropConfig(robot_floor=1)

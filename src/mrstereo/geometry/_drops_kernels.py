@@ -106,28 +106,34 @@ def _seen_through(points, rows, j, k0, k1, m, r_cross, r_low, tx, ty, tz, max_st
 
 @njit(nogil=True, cache=True)
 def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m, support, edge_reach_m,
-                 spacing_m, out_edge, out_below, out_candidates, edge_columns):
+                 spacing_m, robot_floor, out_edge, out_below, out_candidates, edge_columns):
     """Drop edges and negative obstacles of a robot-frame point image ``points`` (H, W, 3), NaN invalid.
 
     Up each column (from the image's bottom) a run of at least ``support`` measured points below the floor
-    (``z < -(max_step + n_sigma sigma_h)``) is a drop when no drivable surface reaches it: it lies deeper
-    than a step plus a slope of ``tan_slope`` from the last floor-level point ``A`` before it (``-thr < z <
-    low_m``; none measured: the floor under the camera, where the robot stands), or it starts with a face
-    steeper than that slope over a step and floor follows it, spreading over ``edge_reach_m`` (a hole's far
-    wall, a stair riser; in a column without floor before the run, a face reaching floor level whose foot
-    lies deeper than a step plus that slope from ``E``). Its sight
+    (``z < -(max_step + n_sigma sigma_h)``) is a drop when no drivable surface reaches it: it lies deeper than
+    a step plus a slope of ``tan_slope`` below the last floor-level point ``A`` before it (``-thr < z <
+    low_m``; none measured and ``robot_floor``: the floor under the camera, where the robot stands), or it
+    starts with a face steeper than that slope over a step and floor follows it, spreading on over
+    ``edge_reach_m`` (a hole's far wall, a stair riser; in a column without floor before the run, with
+    ``robot_floor``, a face reaching floor level whose foot lies deeper than a step plus that slope from
+    ``E``). Its sight
     line passes floor level at ``E``: no ``support`` floor-level points of the column may lie between ``E``
     and the run's first point beyond their depth noise (that floor would hide it: a mismatch). Points every
     ``spacing_m`` over the last ``edge_reach_m`` of ``A -> E`` go to ``out_edge``, the run's points to
-    ``out_below``. Floor spreading on after a drop marks its first point (a far rim). A run of ``support``
-    points below the floor that is neither (no floor measured near enough before it in the column: it could
-    be a ramp starting out of view) nor a mismatch is a *candidate* for the map to confirm with floor it
-    measured earlier (:func:`mrstereo.mapping._kernels.confirm_drops`): a row of ``out_candidates``
-    ``(sx, sy, ex, ey, qx, qy, qz, c0, tan_slope)``, the edge's start ``S`` (``edge_reach_m`` before ``E``),
-    ``E``, the run's point ``q`` deepest below a drivable slope from ``E`` at its measured height, and
-    ``c0 = z_q + n_sigma sigma_h(q) + max_step``: floor at height ``z_a`` a horizontal ``d`` from ``q`` with
-    ``z_a > c0 + tan_slope d`` confirms the drop. ``t``: the camera in the robot frame. Returns the counts
-    of ``out_edge``, ``out_below`` and ``out_candidates``; ``edge_columns[j]`` counts column j's drops.
+    ``out_below``. Floor spreading on after a drop marks its first point (a far rim).
+
+    A run that is no mismatch but no drop either (the floor measured too far before it, or none measured in
+    its column -- the floor at the near end of the view unmatched, or a floor that gives no disparity: a
+    ramp could start out of view) and lies more than a step below a drivable slope from ``E``
+    is a *candidate* for the map to confirm with the floor it measured before
+    (:func:`mrstereo.mapping._kernels.confirm_drops`): a row of ``out_candidates``
+    ``(sx, sy, ex, ey, qx, qy, qz, c0, tan_slope, hide_from_m, hide_to_m)``, the edge's start ``S``
+    (``edge_reach_m`` before ``E``), ``E``, the run's point ``q`` deepest below a drivable slope from ``E`` at
+    its measured height, ``c0 = z_q + n_sigma sigma_h(q) + max_step`` (floor at height ``z_a`` a horizontal
+    ``d`` from ``q`` with ``z_a > c0 + tan_slope d`` confirms the drop) and the stretch beyond ``E`` (to the
+    run's first point, less its depth noise at both ends) where measured floor would hide the run (a
+    mismatch). ``t``: the camera in the robot frame. Returns the counts of ``out_edge``, ``out_below`` and
+    ``out_candidates``; ``edge_columns[j]`` counts column j's drops.
     """
     H, W = points.shape[0], points.shape[1]
     tx, ty, tz = t[0], t[1], t[2]
@@ -181,9 +187,11 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
                 end += 1
             # a steep face counts when floor follows it, spreading on (a hole's far wall up to its far rim, a
             # stair riser); in a column without floor before it, a face reaching floor level (a wall rising
-            # from a lower floor) whose foot no drivable slope from E reaches
-            drop = deepest > max_step_m
-            if not drop and end - k >= support:
+            # from a lower floor) whose foot no drivable slope from E reaches. Without floor measured in the
+            # column before the run and without ``robot_floor``, the map decides (a candidate)
+            judged = seen_floor or robot_floor
+            drop = judged and deepest > max_step_m
+            if judged and not drop and end - k >= support:
                 drop = ((not seen_floor and deepest_e > max_step_m and end < m and points[rows[end], j, 2] < low_m)
                         or _flat_after(points, rows, j, end, m, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
                                        low_m, edge_reach_m)) and _steep(points, rows, j, k, end, max_step_m,
@@ -204,6 +212,9 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
                     row[4], row[5], row[6] = xb, yb, zb
                     row[7] = zb + n_sigma * _sigma_h(xb, yb, zb, tx, ty, tz, sigma_per_m2) + max_step_m
                     row[8] = tan_slope
+                    margin = n_sigma * sigma_per_m2 * r_low * r_low       # the first point's depth noise
+                    row[9] = margin
+                    row[10] = math.sqrt((xp - ex) ** 2 + (yp - ey) ** 2) - margin
                     n_cand += 1
             else:
                 start = max(0.0, length - edge_reach_m)

@@ -10,7 +10,11 @@ and where the sight line to the lower point passes floor level) and the lower po
 points at floor level (z = 0, below any sight line, so the grid's occlusion tests never see through them), so
 the scan and the grid mark them like any obstacle; the far rim of a hole
 (a rise from below the floor back to it) too. A drivable ramp, a kerb or a sunken step within the limits
-is no drop. User guide: docs/obstacles.md, "Drops". Conventions: docs/conventions.md.
+is no drop. Points below the floor that one frame cannot tell from a ramp starting out of view (the floor
+measured too far before them in their column, or none: ``DropConfig.robot_floor`` judges those against the
+floor under the robot) are *candidates* that the map confirms with the floor it measured there before
+(:meth:`mrstereo.mapping.OccupancyGrid.add_layers`).
+User guide: docs/obstacles.md, "Drops". Conventions: docs/conventions.md.
 """
 from __future__ import annotations
 
@@ -24,11 +28,13 @@ from . import _drops_kernels
 
 __all__ = ["DropConfig", "DropResult", "find_drops", "transform_candidates", "CANDIDATE_COLUMNS"]
 
-CANDIDATE_COLUMNS = ("sx", "sy", "ex", "ey", "qx", "qy", "qz", "c0", "tan_slope")
+CANDIDATE_COLUMNS = ("sx", "sy", "ex", "ey", "qx", "qy", "qz", "c0", "tan_slope", "hide_from_m", "hide_to_m")
 """The columns of a drop candidate (:attr:`DropResult.candidates_robot`): the edge's start ``S`` and end ``E``
 (where the sight line to the run passes floor level), the run's point ``q`` deepest below a drivable slope
 from ``E``, and the confirming rule: floor measured ``d`` (horizontally) from ``q`` at a height above
-``c0 + tan_slope d`` makes it a drop (``c0 = z_q + 3 sigma_h(q) + max_step_m``)."""
+``c0 + tan_slope d`` makes it a drop (``c0 = z_q + 3 sigma_h(q) + max_step_m``); floor measured between
+``hide_from_m`` and ``hide_to_m`` beyond ``E`` (toward the run's first point, less its depth noise) would hide
+the run: a mismatch."""
 
 
 @dataclass(frozen=True)
@@ -39,7 +45,10 @@ class DropConfig:
     drives (``max_slope_deg``). The noise margin: ``n_sigma`` times a point's height uncertainty for a
     disparity error of ``disparity_sigma_px``. A drop needs ``support`` measured points below the floor
     after it in its column; its edge is marked over the last ``edge_reach_m`` before where the sight line
-    passes floor level, a point every ``spacing_m``.
+    passes floor level, a point every ``spacing_m``. ``robot_floor``: a run with no floor measured before it in
+    its column is judged against the floor under the robot (one frame finds a ledge whose near floor is not
+    matched); False: only the map's memory of the floor confirms it, so a floor that gives no disparity stays
+    unknown (docs/obstacles.md, "Drops").
     """
 
     max_step_m: float = 0.05
@@ -49,6 +58,7 @@ class DropConfig:
     support: int = 3
     edge_reach_m: float = 0.1
     spacing_m: float = 0.01
+    robot_floor: bool = True
 
     def __post_init__(self) -> None:
         _checks.finite_number("max_step_m", self.max_step_m, nonnegative=True)
@@ -58,6 +68,8 @@ class DropConfig:
         _checks.finite_number("disparity_sigma_px", self.disparity_sigma_px, nonnegative=True)
         _checks.finite_number("n_sigma", self.n_sigma, nonnegative=True)
         _checks.positive_int("support", self.support)
+        if not isinstance(self.robot_floor, bool):
+            raise TypeError(f"robot_floor must be a bool, got {type(self.robot_floor).__name__}")
         _checks.finite_number("edge_reach_m", self.edge_reach_m, nonnegative=True)
         _checks.finite_number("spacing_m", self.spacing_m, positive=True)
 
@@ -66,7 +78,7 @@ class DropConfig:
 class DropResult:
     """Output of :func:`find_drops`: ``edge_points_robot`` (N, 3) the points on the drop edges (at floor
     level, z = 0), ``below_points_robot`` (M, 3) the measured points below the floor past an edge (their own
-    height), ``edge_columns`` (W,) the number of edges found in each image column, ``candidates_robot`` (K, 9)
+    height), ``edge_columns`` (W,) the number of edges found in each image column, ``candidates_robot`` (K, 11)
     the runs below the floor that one frame cannot tell from a ramp starting out of view (no floor measured
     near enough before them in their column), for the map to confirm with the floor it measured before
     (:data:`CANDIDATE_COLUMNS`; :meth:`mrstereo.mapping.OccupancyGrid.add_layers`)."""
@@ -133,7 +145,8 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     n_edge, n_below, n_cand = _drops_kernels.column_drops(
         pts, t, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
         float(config.disparity_sigma_px) / bf, float(config.n_sigma), top, int(config.support),
-        float(config.edge_reach_m), float(config.spacing_m), out_edge, out_below, out_candidates, columns)
+        float(config.edge_reach_m), float(config.spacing_m), bool(config.robot_floor), out_edge, out_below,
+        out_candidates, columns)
     edge, below, cand = out_edge[:n_edge], out_below[:n_below], out_candidates[:n_cand]
     edge = edge[np.hypot(edge[:, 0] - t[0], edge[:, 1] - t[1]) <= reach]
     below = below[np.hypot(below[:, 0] - t[0], below[:, 1] - t[1]) <= reach]
@@ -142,7 +155,7 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
 
 
 def transform_candidates(T, candidates) -> np.ndarray:
-    """Drop candidates (K, 9) (:data:`CANDIDATE_COLUMNS`) moved by the rigid ``T`` (4, 4) that keeps the floor
+    """Drop candidates (K, 11) (:data:`CANDIDATE_COLUMNS`) moved by the rigid ``T`` (4, 4) that keeps the floor
     (a planar pose: a rotation about z and a shift; heights change by its z shift), float32."""
     T = _checks.matrix("T", T, (4, 4))
     rows = np.asarray(candidates, dtype=np.float64)

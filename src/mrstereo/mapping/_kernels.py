@@ -582,17 +582,17 @@ def _cell_at(x, y, origin_x, origin_y, resolution, rows, cols):
 
 
 @njit(nogil=True, cache=True)
-def confirm_drops(candidates, origin_x, origin_y, resolution, rows, cols, heights, floor_tol, max_walk_m, out):
-    """The drop test's candidates (K, 9) (``mrstereo.geometry.drops.CANDIDATE_COLUMNS``) that the height layer
+def confirm_drops(candidates, origin_x, origin_y, resolution, rows, cols, heights, votes, floor_tol, max_walk_m, out):
+    """The drop test's candidates (K, 11) (``mrstereo.geometry.drops.CANDIDATE_COLUMNS``) that the height layer
     ``heights`` (rows*cols, 2: lowest, highest; the views before this one) confirms, as drop points in ``out``.
 
     A candidate's sight line passes floor level at ``E``. It is confirmed when, walking back from ``E``
     toward the camera (half a cell a step, at most ``max_walk_m``), a cell whose lowest point lies at floor
     level (within ``floor_tol``) lies above ``c0 + tan_slope d`` (``d``: from the run's point ``q``): the
     floor was measured there and no drivable slope from it reaches ``q``. It is not when a floor-level cell
-    lies between ``E`` and ``q`` more than a cell from both (its sight line would pass under measured floor:
-    a mismatch). A confirmed candidate puts its edge ``S -> E`` at floor level (a point every fifth of a
-    cell) and ``q`` at its height into ``out``. Returns the number of points written."""
+    that is no drop cell (``votes``; a drop edge lies at floor level too) lies between ``hide_from_m`` (at least a cell)
+    and ``hide_to_m`` (less a cell) beyond ``E``: its sight line would pass under measured floor (a mismatch). A confirmed candidate puts its edge ``S -> E`` at floor level (a point every fifth of
+    a cell) and ``q`` at its height into ``out``. Returns the number of points written."""
     n = 0
     step = 0.5 * resolution
     spacing = 0.2 * resolution
@@ -604,10 +604,10 @@ def confirm_drops(candidates, origin_x, origin_y, resolution, rows, cols, height
             continue
         vx, vy = (qx - ex) / dq, (qy - ey) / dq           # along the sight line, away from the camera
         seen = False
-        s = resolution
-        while s < dq - resolution and not seen:
+        s = max(resolution, candidates[i, 9])
+        while s < candidates[i, 10] - resolution and not seen:
             k = _cell_at(ex + vx * s, ey + vy * s, origin_x, origin_y, resolution, rows, cols)
-            seen = k >= 0 and abs(heights[k, 0]) <= floor_tol
+            seen = k >= 0 and abs(heights[k, 0]) <= floor_tol and votes[k] == 0
             s += step
         if seen:
             continue

@@ -53,7 +53,7 @@ class FrameObservation:
     """The drop test's points (:mod:`mrstereo.geometry.drops`) at their measured height, for the map's drop and
     height layers (their floor-level copies are among ``obstacle_points_world``); None: no drop test."""
     drop_candidates_world: np.ndarray | None = None
-    """The drop test's candidates (K, 9) the map confirms with the floor it measured before
+    """The drop test's candidates (K, 11) the map confirms with the floor it measured before
     (:data:`mrstereo.geometry.drops.CANDIDATE_COLUMNS`); None: none."""
 
     @property

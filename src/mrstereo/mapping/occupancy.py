@@ -582,7 +582,7 @@ class OccupancyGrid:
         """The height and drop layers of one view (with its :meth:`update`, after :meth:`apply`).
 
         Every point (N, 3) (z above the floor: obstacle, floor and the drop test's points, the latter at their
-        measured height) widens its cell's lowest and highest height. First the drop test's candidates (K, 9)
+        measured height) widens its cell's lowest and highest height. First the drop test's candidates (K, 11)
         (:data:`mrstereo.geometry.drops.CANDIDATE_COLUMNS`: runs below the floor one frame cannot tell from a
         ramp starting out of view) are checked against the floor the views before this one measured: floor
         seen before a candidate's edge, higher than any drivable slope from it reaches, makes it a drop; floor
@@ -628,7 +628,8 @@ class OccupancyGrid:
         spacing = 0.2 * self.grid.resolution_m
         longest = float(np.hypot(rows[:, 2] - rows[:, 0], rows[:, 3] - rows[:, 1]).max())
         out = np.empty((len(rows) * (int(longest / spacing) + 4), 3), np.float32)
-        n = _kernels.confirm_drops(rows, *at, heights, float(self.config.height_tolerance_m), CONFIRM_WALK_M, out)
+        n = _kernels.confirm_drops(rows, *at, heights, self._drop_votes.reshape(-1), float(self.config.height_tolerance_m),
+                                   CONFIRM_WALK_M, out)
         return out[:n]
 
     def known_occupied(self, p_min: float | None = None) -> tuple[np.ndarray, np.ndarray]:
