@@ -457,7 +457,8 @@ def test_the_map_confirms_an_edge_seen_only_at_the_near_end_of_the_view_with_flo
     """A ledge 0.2 m down 0.9 m ahead of frame k, the floor before it unmatched in frame k: one frame cannot
     tell it from a ramp starting out of view (no drop mark, only candidates), and a map of frame k alone marks
     nothing; floor measured up to it in frame k-1 confirms it: frame k makes its edge lethal, within a cell of
-    where it is (and the lower floor's deepest points past it). A drivable ramp (8 degrees) seen the same way (points with disparity noise) stays free."""
+    where it is (and the lower floor's deepest points past it). A drivable ramp (8 degrees) seen the same way
+    (points with disparity noise) stays free."""
     ledge = lambda p: np.where(p[:, 0] < 1.4, 0.0, -0.2)                          # noqa: E731
     floor_before, found, floor_k, candidates, drop_points = _two_frames(ledge, None)     # exact points
     assert len(found.edge_points_robot) == 0 and len(found.candidates_robot) > 20

@@ -507,6 +507,16 @@ def keep_supported(cell, counts, min_points, keep):
     return n
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _cell_at(x, y, origin_x, origin_y, resolution, rows, cols):
+    """Flat cell of the point ``(x, y)`` (``floor((x - origin) / resolution)`` as ``GridSpec.cells_from_xy``), -1
+    outside the grid."""
+    c = math.floor((x - origin_x) / resolution)
+    r = math.floor((y - origin_y) / resolution)
+    if 0 <= r < rows and 0 <= c < cols:
+        return int(r) * cols + int(c)
+    return -1
+
 
 @njit(nogil=True, cache=True, inline="always")
 def _flat_cell(points, i, origin_x, origin_y, resolution, rows, cols):
@@ -517,11 +527,7 @@ def _flat_cell(points, i, origin_x, origin_y, resolution, rows, cols):
     z = np.float64(points[i, 2])
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
         return -1
-    c = math.floor((x - origin_x) / resolution)
-    r = math.floor((y - origin_y) / resolution)
-    if 0 <= r < rows and 0 <= c < cols:
-        return int(r) * cols + int(c)
-    return -1
+    return _cell_at(x, y, origin_x, origin_y, resolution, rows, cols)
 
 
 @njit(nogil=True, cache=True)
@@ -571,16 +577,6 @@ def drop_votes(drops, origin_x, origin_y, resolution, rows, cols, counts, votes,
     return n
 
 
-@njit(nogil=True, cache=True, inline="always")
-def _cell_at(x, y, origin_x, origin_y, resolution, rows, cols):
-    """Flat cell of the point ``(x, y)``, -1 outside the grid."""
-    c = math.floor((x - origin_x) / resolution)
-    r = math.floor((y - origin_y) / resolution)
-    if 0 <= r < rows and 0 <= c < cols:
-        return int(r) * cols + int(c)
-    return -1
-
-
 @njit(nogil=True, cache=True)
 def confirm_drops(candidates, origin_x, origin_y, resolution, rows, cols, heights, votes, floor_tol, max_walk_m, out):
     """The drop test's candidates (K, 11) (``mrstereo.geometry.drops.CANDIDATE_COLUMNS``) that the height layer
@@ -590,9 +586,10 @@ def confirm_drops(candidates, origin_x, origin_y, resolution, rows, cols, height
     toward the camera (half a cell a step, at most ``max_walk_m``), a cell whose lowest point lies at floor
     level (within ``floor_tol``) lies above ``c0 + tan_slope d`` (``d``: from the run's point ``q``): the
     floor was measured there and no drivable slope from it reaches ``q``. It is not when a floor-level cell
-    that is no drop cell (``votes``; a drop edge lies at floor level too) lies between ``hide_from_m`` (at least a cell)
-    and ``hide_to_m`` (less a cell) beyond ``E``: its sight line would pass under measured floor (a mismatch). A confirmed candidate puts its edge ``S -> E`` at floor level (a point every fifth of
-    a cell) and ``q`` at its height into ``out``. Returns the number of points written."""
+    that is no drop cell (``votes``; a drop edge lies at floor level too) lies between ``hide_from_m`` (at
+    least a cell) and ``hide_to_m`` (less a cell) beyond ``E``: its sight line would pass under measured
+    floor (a mismatch). A confirmed candidate puts its edge ``S -> E`` at floor level (a point every fifth
+    of a cell) and ``q`` at its height into ``out``. Returns the number of points written."""
     n = 0
     step = 0.5 * resolution
     spacing = 0.2 * resolution

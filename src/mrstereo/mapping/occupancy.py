@@ -39,7 +39,8 @@ __all__ = ["MappingConfig", "OccupancyGrid", "GridUpdate", "ViewCells", "view_ce
 FUSIONS = ("log_odds", "union")
 
 CONFIRM_WALK_M = 4.0
-"""How far back from a drop candidate's edge the map looks for the floor that confirms it (:meth:`OccupancyGrid.add_layers`)."""
+"""How far back from a drop candidate's edge the map looks for the floor that confirms it
+(:meth:`OccupancyGrid.add_layers`)."""
 
 
 def log_odds_from_probability(p) -> np.ndarray:
@@ -628,8 +629,8 @@ class OccupancyGrid:
         spacing = 0.2 * self.grid.resolution_m
         longest = float(np.hypot(rows[:, 2] - rows[:, 0], rows[:, 3] - rows[:, 1]).max())
         out = np.empty((len(rows) * (int(longest / spacing) + 4), 3), np.float32)
-        n = _kernels.confirm_drops(rows, *at, heights, self._drop_votes.reshape(-1), float(self.config.height_tolerance_m),
-                                   CONFIRM_WALK_M, out)
+        n = _kernels.confirm_drops(rows, *at, heights, self._drop_votes.reshape(-1),
+                                   float(self.config.height_tolerance_m), CONFIRM_WALK_M, out)
         return out[:n]
 
     def known_occupied(self, p_min: float | None = None) -> tuple[np.ndarray, np.ndarray]:
