@@ -519,3 +519,21 @@ def test_a_floor_without_disparity_is_unknown_not_a_drop_without_the_robot_floor
     assert not _map_of([(np.empty((0, 3)), found.points_robot, found.candidates_robot)]).drop.any()
     with pytest.raises(TypeError, match="robot_floor"):
         DropConfig(robot_floor=1)
+
+
+def test_an_observation_keeps_its_drop_candidates_through_its_file(tmp_path):
+    """A frame's observation saved by a batch run and loaded back keeps its drop candidates, so the map fused
+    from files confirms the same drops as the live one; one without keeps none."""
+    from dataclasses import replace
+
+    from mrstereo.mapping.fusion import FrameObservation
+    from mrstereo.mapping.observations import load_observation, save_observation
+
+    candidates = np.arange(22, dtype=np.float32).reshape(2, 11)
+    obs = FrameObservation(index=3, pose=(1.0, 2.0, 0.5), pan_rad=0.0, obstacle_points_world=np.zeros((1, 3)),
+                           floor_points_world=np.ones((2, 3)), n_valid_disparity=9, ground_message="m",
+                           drop_points_world=np.full((1, 3), -0.3, np.float32), drop_candidates_world=candidates)
+    for name, value in (("with", obs), ("without", replace(obs, drop_candidates_world=None))):
+        save_observation(tmp_path / f"{name}.obs.npz", value)
+    np.testing.assert_array_equal(load_observation(tmp_path / "with.obs.npz").layers[3], candidates)
+    assert load_observation(tmp_path / "without.obs.npz").drop_candidates_world is None
