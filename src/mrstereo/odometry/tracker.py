@@ -134,9 +134,10 @@ class OdometryConfig:
     refine_iterations: int = 10
     outlier_px: float = 3.0
     calibrate_disparity_offset: bool = True
-    offset_prior_weight: float = 20.0
+    offset_prior_weight: float = 10.0
     min_disparity_offset_px: float = 0.15
     max_disparity_offset_px: float = 3.0
+    correction_sigmas: float = 2.0
 
     def __post_init__(self) -> None:
         for name in ("max_features", "klt_window_px", "stereo_window_px", "klt_levels", "stereo_levels",
@@ -147,7 +148,7 @@ class OdometryConfig:
                      "min_disparity_px", "ransac_threshold_px", "keyframe_depth_fraction", "keyframe_angle_rad",
                      "max_speed_mps", "max_turn_rate_radps", "max_acceleration_mps2",
                      "max_angular_acceleration_radps2", "frame_interval_s", "huber_px", "outlier_px",
-                     "offset_prior_weight", "max_disparity_offset_px"):
+                     "offset_prior_weight", "max_disparity_offset_px", "correction_sigmas"):
             _checks.finite_number(name, getattr(self, name), positive=True)
         if not (isinstance(self.archive_keyframes, int) and not isinstance(self.archive_keyframes, bool)
                 and self.archive_keyframes >= 0):
@@ -225,10 +226,11 @@ class StereoOdometry:
         self._velocity_known = False
         # the disparity correction learnt from the motion, e(u, v) = offset + row and column slopes (px, px
         # per 100 px; the offset is added to the rig's doffs, the slopes to the matches), its mean, the
-        # sum of the keyframe pairs' information times their estimate and the information (prior included)
+        # sum of the keyframe pairs' information times their estimate and their information (the prior apart)
         self._offset_px, self._slopes_px = 0.0, np.zeros(2)
         self._correction_mean = np.zeros(2)
-        self._correction_sum, self._correction_info = np.zeros(2), c.offset_prior_weight * np.eye(2)
+        self._correction_sum, self._correction_info = np.zeros(2), np.zeros((2, 2))
+        self._correction_square, self._correction_pairs = 0.0, 0          # sum x' H x, and the pairs taken
         self._deviation = np.zeros(2)                          # mean squared model deviation (m^2, rad^2)
         self._n_deviation = 0
         self._stamp: float | None = None
@@ -679,15 +681,58 @@ class StereoOdometry:
             vertex = np.clip(m - np.linalg.solve(H, grad), -c.max_disparity_offset_px, c.max_disparity_offset_px)
             if np.abs(vertex - m).max() < 0.05:
                 break
+        self._add_correction_pair(vertex, H)
+
+    def _add_correction_pair(self, vertex: np.ndarray, H: np.ndarray) -> None:
+        """One keyframe pair's estimate of the disparity correction (``vertex``, information ``H``) into the
+        run's; the correction used is what the pairs support.
+
+        The pairs' estimates scatter more than their cost curvatures say (the same tracks, a pose refined
+        with them, model errors), so the unit of their information is measured from the scatter itself,
+        as a least-squares adjustment's variance factor: ``s0^2 = sum (x_i - m)' H_i (x_i - m) / (2 (n - 1))``,
+        the mean's covariance ``s0^2 inv(sum H_i)``. From the third pair on, a pair farther than the 99 %
+        ellipse from the mean (chi^2 with 2 degrees of freedom, 9.21) is left out, and a term is used only
+        when the mean is at least ``correction_sigmas`` standard deviations from 0 and the correction it
+        makes reaches ``min_disparity_offset_px`` at the image's edge; a term alone is taken at its mean
+        with the other held at 0 (the terms are correlated: one of a pair without the other is not the
+        least-squares correction). A short drive with one or two pairs learns nothing it then uses.
+        """
+        c = self.config
+        prior = c.offset_prior_weight * np.eye(2)
+        if self._correction_pairs >= 2:
+            s0 = max(self._correction_variance(), 1e-12)
+            cov_pair = s0 * (np.linalg.inv(H) + np.linalg.inv(self._correction_info))
+            off = vertex - np.linalg.solve(self._correction_info, self._correction_sum)
+            if float(off @ np.linalg.solve(cov_pair, off)) > 9.21:
+                return
         self._correction_sum += H @ vertex
         self._correction_info += H
-        self._correction_mean = np.linalg.solve(self._correction_info, self._correction_sum)
-        # a term is used once the correction it makes reaches min_disparity_offset_px at the image's edge
-        # (the principal point's distance from it: about half the image)
-        used = np.where(np.abs(self._correction_mean) * [1.0, self._K[1, 2] / 100.0] >= c.min_disparity_offset_px,
-                        self._correction_mean, 0.0)
+        self._correction_square += float(vertex @ H @ vertex)
+        self._correction_pairs += 1
+        info = self._correction_info + prior
+        self._correction_mean = np.linalg.solve(info, self._correction_sum)
+        used = np.zeros(2)
+        if self._correction_pairs >= 3:
+            sd = np.sqrt(self._correction_variance() * np.diag(np.linalg.inv(info)))
+            # the correction a term makes at the image's edge (the principal point's distance from it)
+            edge = np.abs(self._correction_mean) * [1.0, self._K[1, 2] / 100.0]
+            keep = (edge >= c.min_disparity_offset_px) & (np.abs(self._correction_mean) >= c.correction_sigmas * sd)
+            if keep.all():
+                used = self._correction_mean
+            elif keep.any():
+                k = int(np.flatnonzero(keep)[0])
+                used[k] = self._correction_sum[k] / info[k, k]
         self._offset_px, self._slopes_px = float(used[0]), np.array([used[1], 0.0])
         self._map.cx_right_px = float(self.stereo.right.P[0, 2]) + self._offset_px
+
+    def _correction_variance(self) -> float:
+        """The variance factor of the keyframe pairs' corrections about their own mean (the prior left
+        out), per degree of freedom: ``sum (x_i - m)' H_i (x_i - m) / (2 (n - 1))``."""
+        n = self._correction_pairs
+        if n < 2:
+            return math.inf
+        m = np.linalg.solve(self._correction_info, self._correction_sum)
+        return max(self._correction_square - float(m @ self._correction_sum), 0.0) / (2.0 * (n - 1))
 
     def _solve_pnp(self, obj, img, T_guess):
         """PnP-RANSAC from ``T_guess`` (camera from object), then LM on the inliers re-selected twice;
@@ -729,20 +774,30 @@ class StereoOdometry:
         T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_cam_from_key)
         if not gate(T_world_from_cam):
             # the largest consensus is implausible: a periodic structure (a facade's windows, a crash barrier's
-            # posts) tracked one period off agrees with a wrong motion. A second consensus among the tracks it
-            # left out, at least half as large (two comparable ones: an ambiguity, not a few stray tracks), may
-            # be the true motion; the gate judges it too, when it rests on the motion up to the last frame
-            # (after a lost frame the gate is wide and the motion model no guide)
+            # posts) tracked one period off agrees with a wrong motion. Tried, when the gate rests on the motion up
+            # to the last frame (after a lost frame the gate is wide and the motion model no guide): a second
+            # consensus among the tracks it left out, at least half as large (two comparable ones: an ambiguity,
+            # not a few stray tracks); then the tracks again from the guess on the full-resolution image alone
+            # (the pyramid's coarse levels, where a period is a few pixels, are where the tracks jumped it)
             if self._anchor_elapsed_s > 0.0 or not self._velocity_known:
                 return LOST, None, n_tracked, len(inl), None
             rest = np.setdiff1d(np.arange(len(img)), inl)
             second = self._solve_pnp(points_key[ok][rest], img[rest], T_guess_from_key)
-            if second is None or len(second[1]) < SECOND_CONSENSUS_FRACTION * len(inl):
-                return LOST, None, n_tracked, len(inl), None
-            T_cam_from_key, inl = second[0], rest[second[1]]
-            T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_cam_from_key)
-            if not gate(T_world_from_cam):
-                return LOST, None, n_tracked, len(inl), None
+            T_second = None
+            if second is not None and len(second[1]) >= SECOND_CONSENSUS_FRACTION * len(inl):
+                T_second = kf.T_world_from_cam @ np.linalg.inv(second[0])
+            if T_second is not None and gate(T_second):
+                T_world_from_cam, inl = T_second, rest[second[1]]
+            else:
+                uv, ok = self._klt(kf.image, left, kf.uv[valid], guess, 0, c.klt_window_px)
+                img = uv[ok].astype(np.float64)
+                fine = self._solve_pnp(points_key[ok], img, T_guess_from_key) if ok.sum() >= c.min_inliers else None
+                if fine is None:
+                    return LOST, None, n_tracked, len(inl), None
+                n_tracked, inl = int(ok.sum()), fine[1]
+                T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(fine[0])
+                if not gate(T_world_from_cam):
+                    return LOST, None, n_tracked, len(inl), None
         tracked = (kf.landmark[valid][ok][inl], img[inl].astype(np.float32))
         return TRACKED, T_world_from_cam, n_tracked, len(inl), tracked
 
