@@ -134,7 +134,7 @@ class OdometryConfig:
     refine_iterations: int = 10
     outlier_px: float = 3.0
     calibrate_disparity_offset: bool = True
-    offset_prior_weight: float = 10.0
+    offset_prior_weight: float = 20.0
     min_disparity_offset_px: float = 0.15
     max_disparity_offset_px: float = 3.0
     correction_sigmas: float = 2.0
