@@ -335,6 +335,22 @@ def kitti_raw(path: Path) -> None:
               f"({100 * m.ate_rmse_m:.1f} cm), per frame {100 * m.rpe_translation_per_frame_m:.2f} cm "
               f"({m.rpe_frame_percent:.1f} % of the step) {m.rpe_rotation_deg_per_frame:.3f} deg, end "
               f"{100 * m.end_point_error_m:.1f} cm")
+    # can the truth decide the scale? the same drive with the rig's disparity moved by a px (the right principal
+    # point, as the learnt correction moves it; the learner is off), against both truths
+    from mrstereo.odometry import OdometryConfig, visual_odometry
+
+    stereo, pairs = manifest.calibration, _odometry_pairs(manifest)
+    mounts = np.stack([M] * len(pairs))
+    for a in (0.0, 0.5, 1.0, 1.35):
+        P = stereo.right.P.copy()
+        P[0, 2] += a
+        moved = replace(stereo, right=replace(stereo.right, P=P))
+        vo = visual_odometry(pairs, moved, T_base_from_cam=mounts, T_world_from_base0=truth[0],
+                             stamps_s=manifest.stamps_s, config=OdometryConfig(calibrate_disparity_offset=False))
+        on_p, on_v = trajectory_metrics(vo.T_world_from_base, truth), trajectory_metrics(vo.T_world_from_base, by_velocity)
+        print(f"    disparity {a:+.2f} px: path {path_length_m(vo.T_world_from_base):.3f} m (OXTS positions "
+              f"{on_p.path_length_m:.3f}, velocities {on_v.path_length_m:.3f}); ATE {on_p.ate_percent:.2f} % against the "
+              f"positions, {on_v.ate_percent:.2f} % against the velocities")
 
 
 SUITE_TUNING = ("KITTI 06 0-50", "street 210-219")
