@@ -47,11 +47,6 @@ __all__ = ["OdometryConfig", "FrameEstimate", "StereoOdometry", "TRACKED", "KEYF
 
 TRACKED, KEYFRAME, LOST = "tracked", "keyframe", "lost"
 
-SECOND_CONSENSUS_FRACTION = 0.5
-"""A pose the plausibility gate rejects is replaced by the second consensus of the same tracks (PnP-RANSAC
-on the first one's outliers) when that holds at least this fraction of the first one's inliers and passes
-the gate: the true motion beside a periodic structure's alias (docs/odometry.md, step 5)."""
-
 
 @dataclass(frozen=True)
 class OdometryConfig:
@@ -773,31 +768,22 @@ class StereoOdometry:
         T_cam_from_key, inl = solved
         T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_cam_from_key)
         if not gate(T_world_from_cam):
-            # the largest consensus is implausible: a periodic structure (a facade's windows, a crash barrier's
-            # posts) tracked one period off agrees with a wrong motion. Tried, when the gate rests on the motion up
-            # to the last frame (after a lost frame the gate is wide and the motion model no guide): a second
-            # consensus among the tracks it left out, at least half as large (two comparable ones: an ambiguity,
-            # not a few stray tracks); then the tracks again from the guess on the full-resolution image alone
-            # (the pyramid's coarse levels, where a period is a few pixels, are where the tracks jumped it)
+            # the consensus is implausible: a periodic structure (a facade's windows, a crash barrier's posts)
+            # tracked one period off agrees with a wrong motion. The pyramid's coarse levels, where a period is a
+            # few pixels, are where the tracks jumped it: when the gate rests on the motion up to the last frame
+            # (after a lost frame the gate is wide and the motion model no guide), the tracks are made again from
+            # the guess on the full-resolution image alone, and their consensus is judged by the gate too
             if self._anchor_elapsed_s > 0.0 or not self._velocity_known:
                 return LOST, None, n_tracked, len(inl), None
-            rest = np.setdiff1d(np.arange(len(img)), inl)
-            second = self._solve_pnp(points_key[ok][rest], img[rest], T_guess_from_key)
-            T_second = None
-            if second is not None and len(second[1]) >= SECOND_CONSENSUS_FRACTION * len(inl):
-                T_second = kf.T_world_from_cam @ np.linalg.inv(second[0])
-            if T_second is not None and gate(T_second):
-                T_world_from_cam, inl = T_second, rest[second[1]]
-            else:
-                uv, ok = self._klt(kf.image, left, kf.uv[valid], guess, 0, c.klt_window_px)
-                img = uv[ok].astype(np.float64)
-                fine = self._solve_pnp(points_key[ok], img, T_guess_from_key) if ok.sum() >= c.min_inliers else None
-                if fine is None:
-                    return LOST, None, n_tracked, len(inl), None
-                n_tracked, inl = int(ok.sum()), fine[1]
-                T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(fine[0])
-                if not gate(T_world_from_cam):
-                    return LOST, None, n_tracked, len(inl), None
+            uv, ok = self._klt(kf.image, left, kf.uv[valid], guess, 0, c.klt_window_px)
+            img = uv[ok].astype(np.float64)
+            fine = self._solve_pnp(points_key[ok], img, T_guess_from_key)
+            if fine is None:
+                return LOST, None, n_tracked, len(inl), None
+            n_tracked, inl = int(ok.sum()), fine[1]
+            T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(fine[0])
+            if not gate(T_world_from_cam):
+                return LOST, None, n_tracked, len(inl), None
         tracked = (kf.landmark[valid][ok][inl], img[inl].astype(np.float32))
         return TRACKED, T_world_from_cam, n_tracked, len(inl), tracked
 
