@@ -151,37 +151,6 @@ def test_disparity_row_term_is_learnt_with_the_offset(drive):
     assert trajectory_metrics(T_learnt, truth).ate_percent < 0.6
 
 
-def test_disparity_correction_is_used_only_where_the_keyframe_pairs_support_it(drive):
-    """The learner's keyframe pairs go in one at a time (each pair's estimate and its cost's curvature). One pair
-    asking for +1.35 px (the shared KITTI raw sample's only pair, whose two truths disagree by 10 % on the
-    path's length) and two are not enough to use anything (the mean of one pair and the prior was used:
-    +0.32 px there); three that agree are used, at their mean with the prior; a pair far outside their
-    scatter (KITTI 01's frame 17: -1.8 px with the largest curvature of the run) is left out; a term the pairs
-    do not tell from 0 is not used, and the other is then the best correction with it at 0."""
-    world, _, _ = drive
-    tracker = StereoOdometry(world.stereo)
-    H = np.diag([40.0, 100.0])
-    tracker._add_correction_pair(np.array([1.35, 0.27]), np.diag([8.8, 42.0]))
-    assert tracker._offset_px == 0.0 and not tracker._slopes_px.any()
-    tracker = StereoOdometry(world.stereo)
-    for pair in ([0.95, 0.45], [1.05, 0.55]):
-        tracker._add_correction_pair(np.array(pair), H)
-    assert tracker._offset_px == 0.0 and not tracker._slopes_px.any()
-    tracker._add_correction_pair(np.array([1.0, 0.5]), H)
-    prior = tracker.config.offset_prior_weight
-    assert tracker._offset_px == pytest.approx(3 * 40.0 / (3 * 40.0 + prior))
-    assert tracker._slopes_px[0] == pytest.approx(3 * 50.0 / (3 * 100.0 + prior))
-    before = (tracker._offset_px, tracker._slopes_px.copy())
-    tracker._add_correction_pair(np.array([-1.81, -1.27]), np.diag([67.2, 242.8]))
-    assert (tracker._offset_px, tracker._slopes_px[0]) == (before[0], before[1][0])
-    # the row term scatters about 0: the offset alone, at its own mean
-    tracker = StereoOdometry(world.stereo)
-    for pair in ([0.95, 0.2], [1.05, -0.2], [1.0, 0.05], [0.98, -0.1]):
-        tracker._add_correction_pair(np.array(pair), np.array([[40.0, 20.0], [20.0, 100.0]]))
-    assert not tracker._slopes_px.any()
-    assert tracker._offset_px == pytest.approx(tracker._correction_sum[0] / (4 * 40.0 + prior))
-
-
 def test_one_unplaceable_frame_is_no_jump(drive):
     """A blank pair in the middle: that frame is lost (the prediction), the next ones are measured
     again against the window's keyframes, and the trajectory after it stays on the truth."""

@@ -132,7 +132,6 @@ class OdometryConfig:
     offset_prior_weight: float = 20.0
     min_disparity_offset_px: float = 0.15
     max_disparity_offset_px: float = 3.0
-    correction_sigmas: float = 2.0
 
     def __post_init__(self) -> None:
         for name in ("max_features", "klt_window_px", "stereo_window_px", "klt_levels", "stereo_levels",
@@ -143,7 +142,7 @@ class OdometryConfig:
                      "min_disparity_px", "ransac_threshold_px", "keyframe_depth_fraction", "keyframe_angle_rad",
                      "max_speed_mps", "max_turn_rate_radps", "max_acceleration_mps2",
                      "max_angular_acceleration_radps2", "frame_interval_s", "huber_px", "outlier_px",
-                     "offset_prior_weight", "max_disparity_offset_px", "correction_sigmas"):
+                     "offset_prior_weight", "max_disparity_offset_px"):
             _checks.finite_number(name, getattr(self, name), positive=True)
         if not (isinstance(self.archive_keyframes, int) and not isinstance(self.archive_keyframes, bool)
                 and self.archive_keyframes >= 0):
@@ -221,11 +220,10 @@ class StereoOdometry:
         self._velocity_known = False
         # the disparity correction learnt from the motion, e(u, v) = offset + row and column slopes (px, px
         # per 100 px; the offset is added to the rig's doffs, the slopes to the matches), its mean, the
-        # sum of the keyframe pairs' information times their estimate and their information (the prior apart)
+        # sum of the keyframe pairs' information times their estimate and the information (prior included)
         self._offset_px, self._slopes_px = 0.0, np.zeros(2)
         self._correction_mean = np.zeros(2)
-        self._correction_sum, self._correction_info = np.zeros(2), np.zeros((2, 2))
-        self._correction_square, self._correction_pairs = 0.0, 0          # sum x' H x, and the pairs taken
+        self._correction_sum, self._correction_info = np.zeros(2), c.offset_prior_weight * np.eye(2)
         self._deviation = np.zeros(2)                          # mean squared model deviation (m^2, rad^2)
         self._n_deviation = 0
         self._stamp: float | None = None
@@ -676,60 +674,15 @@ class StereoOdometry:
             vertex = np.clip(m - np.linalg.solve(H, grad), -c.max_disparity_offset_px, c.max_disparity_offset_px)
             if np.abs(vertex - m).max() < 0.05:
                 break
-        self._add_correction_pair(vertex, H)
-
-    def _add_correction_pair(self, vertex: np.ndarray, H: np.ndarray) -> None:
-        """One keyframe pair's estimate of the disparity correction (``vertex``, information ``H``) into the
-        run's; the correction used is what the pairs support.
-
-        The pairs' estimates scatter more than their cost curvatures say (the same tracks, a pose refined
-        with them, model errors), so the unit of their information is measured from the scatter itself,
-        as a least-squares adjustment's variance factor: ``s0^2 = sum (x_i - m)' H_i (x_i - m) / (2 (n - 1))``,
-        the mean's covariance ``s0^2 inv(sum H_i)``. From the third pair on, a pair farther than the 99 %
-        ellipse from the mean (chi^2 with 2 degrees of freedom, 9.21) and more than 1 px from it (a gross
-        error: the pairs of KITTI 01 and of synthetic drives scatter by 0.6 px at most, and a scatter measured
-        on a few pairs is small by chance) is left out, and a term is used only
-        when the mean is at least ``correction_sigmas`` standard deviations from 0 and the correction it
-        makes reaches ``min_disparity_offset_px`` at the image's edge; a term alone is taken at its mean
-        with the other held at 0 (the terms are correlated: one of a pair without the other is not the
-        least-squares correction). A short drive with one or two pairs learns nothing it then uses.
-        """
-        c = self.config
-        prior = c.offset_prior_weight * np.eye(2)
-        if self._correction_pairs >= 2:
-            s0 = max(self._correction_variance(), 1e-12)
-            cov_pair = s0 * (np.linalg.inv(H) + np.linalg.inv(self._correction_info))
-            off = vertex - np.linalg.solve(self._correction_info, self._correction_sum)
-            if np.abs(off).max() > 1.0 and float(off @ np.linalg.solve(cov_pair, off)) > 9.21:
-                return
         self._correction_sum += H @ vertex
         self._correction_info += H
-        self._correction_square += float(vertex @ H @ vertex)
-        self._correction_pairs += 1
-        info = self._correction_info + prior
-        self._correction_mean = np.linalg.solve(info, self._correction_sum)
-        used = np.zeros(2)
-        if self._correction_pairs >= 3:
-            sd = np.sqrt(self._correction_variance() * np.diag(np.linalg.inv(info)))
-            # the correction a term makes at the image's edge (the principal point's distance from it)
-            edge = np.abs(self._correction_mean) * [1.0, self._K[1, 2] / 100.0]
-            keep = (edge >= c.min_disparity_offset_px) & (np.abs(self._correction_mean) >= c.correction_sigmas * sd)
-            if keep.all():
-                used = self._correction_mean
-            elif keep.any():
-                k = int(np.flatnonzero(keep)[0])
-                used[k] = self._correction_sum[k] / info[k, k]
+        self._correction_mean = np.linalg.solve(self._correction_info, self._correction_sum)
+        # a term is used once the correction it makes reaches min_disparity_offset_px at the image's edge
+        # (the principal point's distance from it: about half the image)
+        used = np.where(np.abs(self._correction_mean) * [1.0, self._K[1, 2] / 100.0] >= c.min_disparity_offset_px,
+                        self._correction_mean, 0.0)
         self._offset_px, self._slopes_px = float(used[0]), np.array([used[1], 0.0])
         self._map.cx_right_px = float(self.stereo.right.P[0, 2]) + self._offset_px
-
-    def _correction_variance(self) -> float:
-        """The variance factor of the keyframe pairs' corrections about their own mean (the prior left
-        out), per degree of freedom: ``sum (x_i - m)' H_i (x_i - m) / (2 (n - 1))``."""
-        n = self._correction_pairs
-        if n < 2:
-            return math.inf
-        m = np.linalg.solve(self._correction_info, self._correction_sum)
-        return max(self._correction_square - float(m @ self._correction_sum), 0.0) / (2.0 * (n - 1))
 
     def _solve_pnp(self, obj, img, T_guess):
         """PnP-RANSAC from ``T_guess`` (camera from object), then LM on the inliers re-selected twice;
