@@ -1,5 +1,7 @@
 """Visual odometry and drift-robust mapping on real and synthetic sequences (docs/odometry.md).
 
+    python benchmarks/bench_odometry.py --suite [--suite-only TEXT] [--set NAME=VALUE ...] [--data DIR]
+                                                                 # every set in one table, tuning sets marked
     python benchmarks/bench_odometry.py --kitti [PATH] [--kitti-every 2 3]   # KITTI odometry 06 and 01
     python benchmarks/bench_odometry.py --held-out [PATH]        # a KITTI raw drive (the shared sample)
     python benchmarks/bench_odometry.py --kitti-scale [PATH ...] # where 01's and 06's error comes from
@@ -37,6 +39,11 @@ Then visual odometry alone on the straight ``front`` path (seed 0) and on random
 ``--random-seeds``. ``--vo-only`` skips the maps. ``--maps-randomized SEEDS``: the maps of
 randomized worlds with the drifted odometry (``map --align`` and ``--odometry visual`` against the
 true poses; mrstereo's settings are chosen on seeds 0-9, reported on 100-119).
+
+``--suite``: mrstereo's visual odometry alone on every evaluation set (KITTI 06 and 01 with their halves and
+every 2nd and 3rd frame, the KITTI raw sample against both OXTS truths, street seeds 210-219 at 1.0 and 2.7 m
+per frame and 230-239 at 1.0 m turning 8 deg and 2.5 m turning 4 deg per frame), one line per set, the
+tuning sets (``SUITE_TUNING``) marked ``*``.
 
 ``--speed``: the odometry stage alone at 640x480 on one thread (CPU time of the thread, and
 wall time), with the depth from the stereo search and from a given disparity map (the mapping
