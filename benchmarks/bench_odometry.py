@@ -1,5 +1,7 @@
 """Visual odometry and drift-robust mapping on real and synthetic sequences (docs/odometry.md).
 
+    python benchmarks/bench_odometry.py --suite [--suite-only TEXT] [--set NAME=VALUE ...] [--data DIR]
+                                                                 # every set in one table, tuning sets marked
     python benchmarks/bench_odometry.py --kitti [PATH] [--kitti-every 2 3]   # KITTI odometry 06 and 01
     python benchmarks/bench_odometry.py --held-out [PATH]        # a KITTI raw drive (the shared sample)
     python benchmarks/bench_odometry.py --kitti-scale [PATH ...] # where 01's and 06's error comes from
@@ -37,6 +39,11 @@ Then visual odometry alone on the straight ``front`` path (seed 0) and on random
 ``--random-seeds``. ``--vo-only`` skips the maps. ``--maps-randomized SEEDS``: the maps of
 randomized worlds with the drifted odometry (``map --align`` and ``--odometry visual`` against the
 true poses; mrstereo's settings are chosen on seeds 0-9, reported on 100-119).
+
+``--suite``: mrstereo's visual odometry alone on every evaluation set (KITTI 06 and 01 with their halves and
+every 2nd and 3rd frame, the KITTI raw sample against both OXTS truths, street seeds 210-219 at 1.0 and 2.7 m
+per frame and 230-239 at 1.0 m turning 8 deg and 2.5 m turning 4 deg per frame), one line per set, the
+tuning sets (``SUITE_TUNING``) marked ``*``.
 
 ``--speed``: the odometry stage alone at 640x480 on one thread (CPU time of the thread, and
 wall time), with the depth from the stereo search and from a given disparity map (the mapping
@@ -335,18 +342,129 @@ def kitti_raw(path: Path) -> None:
               f"({100 * m.ate_rmse_m:.1f} cm), per frame {100 * m.rpe_translation_per_frame_m:.2f} cm "
               f"({m.rpe_frame_percent:.1f} % of the step) {m.rpe_rotation_deg_per_frame:.3f} deg, end "
               f"{100 * m.end_point_error_m:.1f} cm")
+    # can the truth decide the scale? the same drive with the rig's disparity moved by a px (the right principal
+    # point, as the learnt correction moves it; the learner is off), against both truths
+    from mrstereo.odometry import OdometryConfig, visual_odometry
+
+    stereo, pairs = manifest.calibration, _odometry_pairs(manifest)
+    mounts = np.stack([M] * len(pairs))
+    for a in (0.0, 0.5, 1.0, 1.35):
+        P = stereo.right.P.copy()
+        P[0, 2] += a
+        moved = replace(stereo, right=replace(stereo.right, P=P))
+        vo = visual_odometry(pairs, moved, T_base_from_cam=mounts, T_world_from_base0=truth[0],
+                             stamps_s=manifest.stamps_s, config=OdometryConfig(calibrate_disparity_offset=False))
+        on_p, on_v = trajectory_metrics(vo.T_world_from_base, truth), trajectory_metrics(vo.T_world_from_base, by_velocity)
+        print(f"    disparity {a:+.2f} px: path {path_length_m(vo.T_world_from_base):.3f} m (OXTS positions "
+              f"{on_p.path_length_m:.3f}, velocities {on_v.path_length_m:.3f}); ATE {on_p.ate_percent:.2f} % against the "
+              f"positions, {on_v.ate_percent:.2f} % against the velocities")
 
 
-def street(root: Path, seeds: list[int], frames: int, steps=(0.5, 1.0, 1.5)) -> None:
+SUITE_TUNING = ("KITTI 06 0-50", "street 210-219")
+"""The sets the settings are chosen on (``--suite`` marks them); every other set is reported only."""
+
+
+def _suite_sets(data: Path, street_root: Path, only: str | None = None):
+    """``(name, manifest, frames, truth)`` of every set of ``--suite``: KITTI 06 and 01 (frames 0-50, the halves,
+    every 2nd and 3rd frame from 0 and 1), the KITTI raw sample (against the OXTS positions and the OXTS
+    velocities integrated), the street world seeds 210-219 at 1.0 and 2.7 m/frame (3 deg/frame) and seeds
+    230-239 at 1.0 m/frame turning up to 8 deg/frame and at 2.5 m/frame up to 4 deg/frame; with ``only``, the
+    sets whose name holds it."""
+    from mrstereo.recordings.kitti_raw import OXTS_HEIGHT_M, _oxts_records, oxts_velocity_positions
+
+    for seq in ("06", "01"):
+        root = data / f"kitti_odometry_{seq}"
+        if only and only not in f"KITTI {seq}":
+            continue
+        if not root.is_dir():
+            print(f"{root}: not found, skipped")
+            continue
+        manifest = read_recording(root)
+        n = len(manifest.frames)
+        yield f"KITTI {seq} 0-{n - 1}", manifest, slice(None), None
+        yield f"KITTI {seq} 0-{n // 2}", manifest, slice(0, n // 2 + 1), None
+        yield f"KITTI {seq} {n // 2}-{n - 1}", manifest, slice(n // 2, None), None
+        for k in (2, 3):
+            for start in (0, 1):
+                yield f"KITTI {seq} every {k}th from {start}", manifest, slice(start, None, k), None
+    raw = data / "kitti_raw_sample" / "2011_09_26"
+    if raw.is_dir() and (not only or only in "KITTI raw"):
+        manifest = read_recording(raw)
+        yield "KITTI raw 0005, OXTS positions", manifest, slice(None), None
+        records = _oxts_records(manifest.root, [f.left_rect.stem for f in manifest.frames])
+        B = np.eye(4)
+        B[2, 3] = OXTS_HEIGHT_M
+        truth = np.stack([f.T_world_from_base_true for f in manifest.frames])
+        T_imu = np.linalg.inv(B) @ truth @ B
+        T_imu[:, :3, 3] = oxts_velocity_positions(records, manifest.stamps_s)
+        yield "KITTI raw 0005, OXTS velocities", manifest, slice(None), B @ T_imu @ np.linalg.inv(B)
+    for seeds, step, turn in ((range(210, 220), 1.0, 3.0), (range(210, 220), 2.7, 3.0), (range(230, 240), 1.0, 8.0),
+                              (range(230, 240), 2.5, 4.0)):
+        label = f"street {seeds[0]}-{seeds[-1]}" + ("" if turn == 3.0 else f", {turn:g} deg") + f", {step} m"
+        if only and only not in label:
+            continue
+        for seed in seeds:
+            out = street_root / f"street-seed{seed}-step{step}{'' if turn == 3.0 else f'-turn{turn:g}'}-60"
+            if not (out / "manifest.yaml").is_file():
+                write_synthetic_dataset(out, seed=seed, n_frames=60, path="street", step_m=step, progress=False,
+                                        turn_rad_per_frame=math.radians(turn))
+            yield f"{label}|{seed}", read_manifest(out), slice(None), None
+
+
+def suite(data: Path, street_root: Path, config=None, only: str | None = None) -> None:
+    """mrstereo's visual odometry (``config``: the defaults) on every set of :func:`_suite_sets`, one line each
+    (the street seeds summed up per set: ATE mean and largest, lost frames); the tuning sets marked ``*``."""
+    from mrstereo.odometry import OdometryConfig, visual_odometry
+
+    config = config or OdometryConfig()
+    groups: dict[str, list] = {}
+    for name, manifest, frames, truth in _suite_sets(data, street_root, only):
+        records = manifest.frames[frames]
+        pairs = _odometry_pairs(replace(manifest, frames=records))
+        if truth is None:
+            truth = np.stack([f.T_world_from_base_true if f.true_pose is not None else f.T_world_from_base
+                              for f in records])
+        mount = manifest.mount or CameraMount.from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        mounts = np.stack([mount.T_base_from_rectified(manifest.calibration.left.R, f.pan_rad) for f in records])
+        stamps = [f.stamp_s for f in records]
+        vo = visual_odometry(pairs, manifest.calibration, T_base_from_cam=mounts, T_world_from_base0=truth[0],
+                             stamps_s=None if None in stamps else stamps, config=config)
+        m = trajectory_metrics(vo.T_world_from_base, truth)
+        group, _, seed = name.partition("|")
+        groups.setdefault(group, []).append((seed, m, vo))
+        if not seed:
+            lost = np.flatnonzero(~vo.tracked).tolist()
+            mark = "*" if group in SUITE_TUNING else " "
+            print(f"{mark} {group:34s} ATE {m.ate_percent:5.2f} % ({100 * m.ate_rmse_m:5.1f} cm of {m.path_length_m:5.1f} m)"
+                  f"  path x{path_length_m(vo.T_world_from_base) / m.path_length_m:.3f}  lost {len(lost)}"
+                  + (f" {lost}" if lost else ""), flush=True)
+    for group, rows in groups.items():
+        if rows[0][0]:
+            ate = np.array([r[1].ate_percent for r in rows])
+            lost = {r[0]: np.flatnonzero(~r[2].tracked).tolist() for r in rows if r[2].n_lost}
+            mark = "*" if group in SUITE_TUNING else " "
+            print(f"{mark} {group:34s} ATE mean {ate.mean():.2f} %, max {ate.max():.2f} % (seed "
+                  f"{rows[int(ate.argmax())][0]}); " + " ".join(f"{v:.2f}" for v in ate)
+                  + f"; lost {sum(len(v) for v in lost.values())}" + (f" {lost}" if lost else ""), flush=True)
+
+
+def street(root: Path, seeds: list[int], frames: int, steps=(0.5, 1.0, 1.5), turn_deg: float = 3.0) -> None:
+    """The street world from a standstill up to each of ``steps`` metres per frame, turning up to ``turn_deg``
+    degrees per frame (rendered once into ``root``, reused)."""
     rows = []
+    turn = "" if turn_deg == 3.0 else f"-turn{turn_deg:g}"
     for seed in seeds:
         for step in steps:
-            out = root / f"street-seed{seed}-step{step}-{frames}"
+            out = root / f"street-seed{seed}-step{step}{turn}-{frames}"
             if not (out / "manifest.yaml").is_file():
-                write_synthetic_dataset(out, seed=seed, n_frames=frames, path="street", step_m=step, progress=False)
+                write_synthetic_dataset(out, seed=seed, n_frames=frames, path="street", step_m=step, progress=False,
+                                        turn_rad_per_frame=math.radians(turn_deg))
             r = compare(read_manifest(out))
             rows.append(r)
-            print(_compare_line(f"street seed {seed}, {step} m/frame", r))
+            print(_compare_line(f"street seed {seed}, {step} m/frame, turning up to {turn_deg:g} deg/frame", r))
+            lost = np.flatnonzero(~r["result"].tracked)
+            if len(lost):
+                print(f"    lost frames: {lost.tolist()}")
     for key, name in (("vo", "mrstereo"), ("base", "baseline")):
         ate = [r[key].ate_percent for r in rows]
         print(f"{name}: ATE mean {np.mean(ate):.2f} %, max {np.max(ate):.2f} % over {len(rows)} sequences")
@@ -484,9 +602,24 @@ def main() -> None:
     parser.add_argument("--street-frames", type=int, default=60)
     parser.add_argument("--street-steps", type=float, nargs="+", default=[0.5, 1.0, 1.5],
                         help="metres per frame of the street sequences")
+    parser.add_argument("--street-turn", type=float, default=3.0, metavar="DEG",
+                        help="the street's largest turn per frame at full speed [deg]")
     parser.add_argument("--maps-randomized", type=str, default=None, metavar="SEEDS",
                         help="maps of randomized worlds with drifted odometry, e.g. 100-119 (settings chosen on 0-9)")
+    parser.add_argument("--suite", action="store_true",
+                        help="every evaluation set in one table (KITTI 06, 01, raw; street 210-219, 230-239)")
+    parser.add_argument("--suite-only", default=None, metavar="TEXT", help="with --suite: the sets whose name holds TEXT")
+    parser.add_argument("--set", nargs="+", default=[], metavar="NAME=VALUE",
+                        help="with --suite: OdometryConfig settings other than the defaults")
     args = parser.parse_args()
+    if args.suite:
+        from mrstereo.odometry import OdometryConfig
+
+        defaults = OdometryConfig()
+        settings = {k: v.lower() in ("1", "true") if isinstance(getattr(defaults, k), bool) else type(getattr(defaults, k))(v)
+                    for k, v in (item.split("=", 1) for item in args.set)}
+        suite(Path(os.environ.get("MRSTEREO_DATA", ".")), args.data, OdometryConfig(**settings), args.suite_only)
+        return
     if args.maps_randomized:
         a, _, b = args.maps_randomized.partition("-")
         maps_randomized(args.data, list(range(int(a), int(b or a) + 1)), args.random_frames)
@@ -506,7 +639,7 @@ def main() -> None:
             kitti_scale(root)
         return
     if args.street:
-        street(args.data, args.street_seeds, args.street_frames, args.street_steps)
+        street(args.data, args.street_seeds, args.street_frames, args.street_steps, args.street_turn)
         return
     rows, vo_rows = [], []
     for seed in args.seeds:

@@ -47,11 +47,6 @@ __all__ = ["OdometryConfig", "FrameEstimate", "StereoOdometry", "TRACKED", "KEYF
 
 TRACKED, KEYFRAME, LOST = "tracked", "keyframe", "lost"
 
-SECOND_CONSENSUS_FRACTION = 0.5
-"""A pose the plausibility gate rejects is replaced by the second consensus of the same tracks (PnP-RANSAC
-on the first one's outliers) when that holds at least this fraction of the first one's inliers and passes
-the gate: the true motion beside a periodic structure's alias (docs/odometry.md, step 5)."""
-
 
 @dataclass(frozen=True)
 class OdometryConfig:
@@ -728,19 +723,20 @@ class StereoOdometry:
         T_cam_from_key, inl = solved
         T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_cam_from_key)
         if not gate(T_world_from_cam):
-            # the largest consensus is implausible: a periodic structure (a facade's windows, a crash barrier's
-            # posts) tracked one period off agrees with a wrong motion. A second consensus among the tracks it
-            # left out, at least half as large (two comparable ones: an ambiguity, not a few stray tracks), may
-            # be the true motion; the gate judges it too, when it rests on the motion up to the last frame
-            # (after a lost frame the gate is wide and the motion model no guide)
+            # the consensus is implausible: a periodic structure (a facade's windows, a crash barrier's posts)
+            # tracked one period off agrees with a wrong motion. The pyramid's coarse levels, where a period is a
+            # few pixels, are where the tracks jumped it: when the gate rests on the motion up to the last frame
+            # (after a lost frame the gate is wide and the motion model no guide), the tracks are made again from
+            # the guess on the full-resolution image alone, and their consensus is judged by the gate too
             if self._anchor_elapsed_s > 0.0 or not self._velocity_known:
                 return LOST, None, n_tracked, len(inl), None
-            rest = np.setdiff1d(np.arange(len(img)), inl)
-            second = self._solve_pnp(points_key[ok][rest], img[rest], T_guess_from_key)
-            if second is None or len(second[1]) < SECOND_CONSENSUS_FRACTION * len(inl):
+            uv, ok = self._klt(kf.image, left, kf.uv[valid], guess, 0, c.klt_window_px)
+            img = uv[ok].astype(np.float64)
+            fine = self._solve_pnp(points_key[ok], img, T_guess_from_key)
+            if fine is None:
                 return LOST, None, n_tracked, len(inl), None
-            T_cam_from_key, inl = second[0], rest[second[1]]
-            T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(T_cam_from_key)
+            n_tracked, inl = int(ok.sum()), fine[1]
+            T_world_from_cam = kf.T_world_from_cam @ np.linalg.inv(fine[0])
             if not gate(T_world_from_cam):
                 return LOST, None, n_tracked, len(inl), None
         tracked = (kf.landmark[valid][ok][inl], img[inl].astype(np.float32))
