@@ -454,7 +454,8 @@ def learner(street_root: Path, only: str | None = None) -> None:
     """The disparity correction's offset on the street sets of ``--suite`` (rigs whose true offset is 0 px):
     per keyframe pair its estimate as the tracker makes it, again with the pair's tracks replaced by the true
     image of each keyframe feature (its true depth from the rendered disparity, the true poses), and with the
-    keyframe's stereo matches replaced by the rendered disparity; per sequence the means over its pairs and the
+    keyframe's stereo matches replaced by the rendered disparity, with both, and with both and 0.3 px of Gaussian
+    noise added to the disparities (seed 0); per sequence the means over its pairs and the
     offset the run ends with. The tracker itself runs unchanged: each variant is solved from the tracker's state
     before the pair and the state restored."""
     from mrstereo.io.images import read_pfm
@@ -494,15 +495,19 @@ def learner(street_root: Path, only: str | None = None) -> None:
         u_right = kf.u_right.copy()
         u_right[j] = np.where(ok & np.isfinite(kf.u_right[j]), uv[:, 0] - d_true
                               + self._disparity_slopes(uv, kf.disparity_slopes_px), np.nan)
+        tracks_true = (ids, np.where(ok[:, None], uv_true, uv_now).astype(np.float32))
+        noisy = u_right.copy()
+        noisy[j] -= 0.3 * run["rng"].standard_normal(len(j))
         run["pairs"].append((pair_offset(self, kf, tracked, T_world_from_cam),
-                             pair_offset(self, kf, (ids, np.where(ok[:, None], uv_true, uv_now).astype(np.float32)),
-                                         T_world_from_cam),
-                             pair_offset(self, replace(kf, u_right=u_right), tracked, T_world_from_cam)))
+                             pair_offset(self, kf, tracks_true, T_world_from_cam),
+                             pair_offset(self, replace(kf, u_right=u_right), tracked, T_world_from_cam),
+                             pair_offset(self, replace(kf, u_right=u_right), tracks_true, T_world_from_cam),
+                             pair_offset(self, replace(kf, u_right=noisy), tracks_true, T_world_from_cam)))
         learn(self, kf, tracked, T_world_from_cam)
         run["offset"] = float(self._correction_mean[0])
 
     print("learnt disparity offset on rigs with none (px): the run's own; per keyframe pair (mean): as tracked,"
-          " the tracks true, the stereo true")
+          " the tracks true, the stereo true, both, both with N(0, 0.3 px) added to the disparities")
     groups: dict[str, list] = {}
     Odometry._learn_offset = instrumented
     try:
@@ -512,19 +517,22 @@ def learner(street_root: Path, only: str | None = None) -> None:
                               for f in records])
             mounts = np.stack([manifest.mount.T_base_from_rectified(manifest.calibration.left.R, f.pan_rad)
                                for f in records])
-            run = {"gt": [read_pfm(f.gt_disparity) for f in records], "cam": truth @ mounts, "pairs": [], "offset": 0.0}
+            run = {"gt": [read_pfm(f.gt_disparity) for f in records], "cam": truth @ mounts, "pairs": [], "offset": 0.0,
+                   "rng": np.random.default_rng(0)}
             visual_odometry(_odometry_pairs(manifest), manifest.calibration, T_base_from_cam=mounts,
                             T_world_from_base0=truth[0], stamps_s=[f.stamp_s for f in records])
             pairs = np.nanmean(np.array(run["pairs"]), axis=0)
             groups.setdefault(name.partition("|")[0], []).append((run["offset"], *pairs))
             print(f"  {name.replace('|', ', seed '):40s} run {run['offset']:+.3f}   pairs {pairs[0]:+.3f}  "
-                  f"tracks true {pairs[1]:+.3f}  stereo true {pairs[2]:+.3f}  ({len(run['pairs'])} pairs)", flush=True)
+                  f"tracks true {pairs[1]:+.3f}  stereo true {pairs[2]:+.3f}  both {pairs[3]:+.3f}  "
+                  f"both, the disparities 0.3 px noisy {pairs[4]:+.3f}  ({len(run['pairs'])} pairs)", flush=True)
     finally:
         Odometry._learn_offset = learn
     for group, rows in groups.items():
         r = np.array(rows)
         print(f"{group:34s} run mean {r[:, 0].mean():+.3f} max {r[:, 0].max():+.3f}; pairs {r[:, 1].mean():+.3f}, "
-              f"tracks true {r[:, 2].mean():+.3f} (sd {r[:, 2].std():.3f}), stereo true {r[:, 3].mean():+.3f}")
+              f"tracks true {r[:, 2].mean():+.3f} (sd {r[:, 2].std():.3f}), stereo true {r[:, 3].mean():+.3f}, both "
+              f"{r[:, 4].mean():+.3f}, both with 0.3 px of disparity noise {r[:, 5].mean():+.3f}")
 
 
 def street(root: Path, seeds: list[int], frames: int, steps=(0.5, 1.0, 1.5), turn_deg: float = 3.0) -> None:
