@@ -2,6 +2,8 @@
 
     python benchmarks/bench_odometry.py --suite [--suite-only TEXT] [--set NAME=VALUE ...] [--data DIR]
                                                                  # every set in one table, tuning sets marked
+    python benchmarks/bench_odometry.py --learner [--suite-only TEXT] [--data DIR]
+                                                                 # what the disparity correction reads
     python benchmarks/bench_odometry.py --kitti [PATH] [--kitti-every 2 3]   # KITTI odometry 06 and 01
     python benchmarks/bench_odometry.py --held-out [PATH]        # a KITTI raw drive (the shared sample)
     python benchmarks/bench_odometry.py --kitti-scale [PATH ...] # where 01's and 06's error comes from
@@ -448,6 +450,91 @@ def suite(data: Path, street_root: Path, config=None, only: str | None = None) -
                   + f"; lost {sum(len(v) for v in lost.values())}" + (f" {lost}" if lost else ""), flush=True)
 
 
+def learner(street_root: Path, only: str | None = None) -> None:
+    """The disparity correction's offset on the street sets of ``--suite`` (rigs whose true offset is 0 px):
+    per keyframe pair its estimate as the tracker makes it, again with the pair's tracks replaced by the true
+    image of each keyframe feature (its true depth from the rendered disparity, the true poses), and with the
+    keyframe's stereo matches replaced by the rendered disparity, with both, and with both and 0.3 px of Gaussian
+    noise added to the disparities (seed 0); per sequence the means over its pairs and the
+    offset the run ends with. The tracker itself runs unchanged: each variant is solved from the tracker's state
+    before the pair and the state restored."""
+    from mrstereo.io.images import read_pfm
+    from mrstereo.odometry import tracker as tracker_module
+    from mrstereo.odometry import visual_odometry
+
+    Odometry = tracker_module.StereoOdometry
+    learn = Odometry._learn_offset
+    state = ("_correction_sum", "_correction_info", "_correction_mean", "_offset_px", "_slopes_px")
+
+    def pair_offset(self, kf, tracked, T_world_from_cam) -> float:
+        saved = [np.copy(getattr(self, k)) for k in state] + [self._map.cx_right_px]
+        info0 = self._correction_info.copy()
+        learn(self, kf, tracked, T_world_from_cam)
+        dH = self._correction_info - info0
+        est = np.linalg.solve(dH, self._correction_sum - saved[0])[0] if np.abs(dH).sum() else np.nan
+        for k, v in zip(state, saved):
+            setattr(self, k, v if k != "_offset_px" else float(v))
+        self._map.cx_right_px = saved[-1]
+        return est
+
+    def instrumented(self, kf, tracked, T_world_from_cam):
+        ids, uv_now = tracked
+        order = np.argsort(kf.landmark)
+        j = order[np.searchsorted(kf.landmark[order], ids)]
+        uv = kf.uv[j].astype(np.float64)
+        gt = run["gt"][kf.frame]
+        col, row = (np.clip(np.rint(uv[:, i]).astype(int), 0, gt.shape[1 - i] - 1) for i in (0, 1))
+        near = np.stack([gt[np.clip(row + a, 0, gt.shape[0] - 1), np.clip(col + b, 0, gt.shape[1] - 1)]
+                         for a in (-1, 0, 1) for b in (-1, 0, 1)])
+        d_true = np.where(np.ptp(near, axis=0) < 0.5, gt[row, col], np.nan)     # off depth edges only
+        points = self._backproject(uv, d_true, 0.0)
+        T_now_from_key = np.linalg.inv(run["cam"][self._n_frames]) @ run["cam"][kf.frame]
+        X = transform_points(T_now_from_key, points)
+        uv_true = X[:, :2] / X[:, 2:3] * np.diag(self._K)[:2] + self._K[:2, 2]
+        ok = np.isfinite(uv_true).all(axis=1)
+        u_right = kf.u_right.copy()
+        u_right[j] = np.where(ok & np.isfinite(kf.u_right[j]), uv[:, 0] - d_true
+                              + self._disparity_slopes(uv, kf.disparity_slopes_px), np.nan)
+        tracks_true = (ids, np.where(ok[:, None], uv_true, uv_now).astype(np.float32))
+        noisy = u_right.copy()
+        noisy[j] -= 0.3 * run["rng"].standard_normal(len(j))
+        run["pairs"].append((pair_offset(self, kf, tracked, T_world_from_cam),
+                             pair_offset(self, kf, tracks_true, T_world_from_cam),
+                             pair_offset(self, replace(kf, u_right=u_right), tracked, T_world_from_cam),
+                             pair_offset(self, replace(kf, u_right=u_right), tracks_true, T_world_from_cam),
+                             pair_offset(self, replace(kf, u_right=noisy), tracks_true, T_world_from_cam)))
+        learn(self, kf, tracked, T_world_from_cam)
+        run["offset"] = float(self._correction_mean[0])
+
+    print("learnt disparity offset on rigs with none (px): the run's own; per keyframe pair (mean): as tracked,"
+          " the tracks true, the stereo true, both, both with N(0, 0.3 px) added to the disparities")
+    groups: dict[str, list] = {}
+    Odometry._learn_offset = instrumented
+    try:
+        for name, manifest, _, _ in _suite_sets(Path("."), street_root, only or "street"):
+            records = manifest.frames
+            truth = np.stack([f.T_world_from_base_true if f.true_pose is not None else f.T_world_from_base
+                              for f in records])
+            mounts = np.stack([manifest.mount.T_base_from_rectified(manifest.calibration.left.R, f.pan_rad)
+                               for f in records])
+            run = {"gt": [read_pfm(f.gt_disparity) for f in records], "cam": truth @ mounts, "pairs": [], "offset": 0.0,
+                   "rng": np.random.default_rng(0)}
+            visual_odometry(_odometry_pairs(manifest), manifest.calibration, T_base_from_cam=mounts,
+                            T_world_from_base0=truth[0], stamps_s=[f.stamp_s for f in records])
+            pairs = np.nanmean(np.array(run["pairs"]), axis=0)
+            groups.setdefault(name.partition("|")[0], []).append((run["offset"], *pairs))
+            print(f"  {name.replace('|', ', seed '):40s} run {run['offset']:+.3f}   pairs {pairs[0]:+.3f}  "
+                  f"tracks true {pairs[1]:+.3f}  stereo true {pairs[2]:+.3f}  both {pairs[3]:+.3f}  "
+                  f"both, the disparities 0.3 px noisy {pairs[4]:+.3f}  ({len(run['pairs'])} pairs)", flush=True)
+    finally:
+        Odometry._learn_offset = learn
+    for group, rows in groups.items():
+        r = np.array(rows)
+        print(f"{group:34s} run mean {r[:, 0].mean():+.3f} max {r[:, 0].max():+.3f}; pairs {r[:, 1].mean():+.3f}, "
+              f"tracks true {r[:, 2].mean():+.3f} (sd {r[:, 2].std():.3f}), stereo true {r[:, 3].mean():+.3f}, both "
+              f"{r[:, 4].mean():+.3f}, both with 0.3 px of disparity noise {r[:, 5].mean():+.3f}")
+
+
 def street(root: Path, seeds: list[int], frames: int, steps=(0.5, 1.0, 1.5), turn_deg: float = 3.0) -> None:
     """The street world from a standstill up to each of ``steps`` metres per frame, turning up to ``turn_deg``
     degrees per frame (rendered once into ``root``, reused)."""
@@ -609,6 +696,8 @@ def main() -> None:
     parser.add_argument("--suite", action="store_true",
                         help="every evaluation set in one table (KITTI 06, 01, raw; street 210-219, 230-239)")
     parser.add_argument("--suite-only", default=None, metavar="TEXT", help="with --suite: the sets whose name holds TEXT")
+    parser.add_argument("--learner", action="store_true",
+                        help="what the disparity correction reads on the street sets (true offset 0 px)")
     parser.add_argument("--set", nargs="+", default=[], metavar="NAME=VALUE",
                         help="with --suite: OdometryConfig settings other than the defaults")
     args = parser.parse_args()
@@ -619,6 +708,9 @@ def main() -> None:
         settings = {k: v.lower() in ("1", "true") if isinstance(getattr(defaults, k), bool) else type(getattr(defaults, k))(v)
                     for k, v in (item.split("=", 1) for item in args.set)}
         suite(Path(os.environ.get("MRSTEREO_DATA", ".")), args.data, OdometryConfig(**settings), args.suite_only)
+        return
+    if args.learner:
+        learner(args.data, args.suite_only)
         return
     if args.maps_randomized:
         a, _, b = args.maps_randomized.partition("-")
