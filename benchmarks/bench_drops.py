@@ -184,7 +184,10 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
 
 
 CAUSES = ("a: out of disparity range", "a: image border", "a: uniform (eq. 13)", "a: matcher invalid",
-          "b: below-floor points near, judged drivable", "b: floor only, nothing below measured near",
+          "b: within a step plus a max_slope_deg slope of the floor before",
+          "b: within the noise margin (n_sigma sigma_h)", "b: a run shorter than support",
+          "b: other (the mismatch test, the far rim or face rules)",
+          "b: floor only, nothing below measured near",
           "c: candidate not confirmed", "d: detected in a frame, lost in the map")
 """The causes of a missed edge cell (:func:`missed_causes`), in the order they are tested (last first)."""
 
@@ -200,13 +203,18 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     * **c**: some frame's drop candidate had its edge ``S -> E`` there, but the map never confirmed it;
     * **b**: some frame measured a cell's pixel (a disparity after eq. 13): with points below the floor
       (``z < -2 max_step_m``) measured within ``near_m`` of the cell in that frame the column rule judged them
-      drivable or a mismatch; without, only the floor was measured, nothing below it near;
+      drivable or a mismatch: the same frame's drop test finds the cell with ``max_slope_deg = 0`` (the
+      allowance of a step plus a drivable slope from the floor before), else with ``n_sigma = 0`` (the noise
+      margin), else with ``support = 1`` (a run too short), else none (the mismatch test, the rules of a far
+      rim or a face); without, only the floor was
+      measured, nothing below it near;
     * **a**: no frame measured any of the cell's pixels; the reason most of its pixels share: the true
       disparity beyond the matcher's range (too near) or below 1 px, the pixel's match outside the right
       image (``x - d < 0``), the matcher's disparity rejected by eq. (13) (uniform), or none from the
       matcher (its left-right and uniqueness checks, occlusion).
     """
     from mrstereo.geometry import ground_from_mount, points_robot_from_disparity
+    from mrstereo.geometry.drops import find_drops
     from mrstereo.geometry.ground import T_robot_from_cam_ground
     from mrstereo.geometry.pair import scan_from_pair
     from mrstereo.io.images import read_pfm
@@ -223,7 +231,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     cells = np.argwhere(missed)
     n = len(cells)
     stats = {k: np.zeros(n, np.int64) for k in ("pixels", "range", "border", "uniform", "invalid", "measured",
-                                                 "below", "detected", "candidate")}
+                                                 "below", "detected", "candidate", "slope", "noise", "short")}
     near_cells = int(np.ceil(near_m / grid.resolution_m))
 
     def hits(world_xy, radius):
@@ -279,6 +287,12 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
         measured_now = stats["measured"] > 0
         stats["below"] += hits(world(low), near_cells) & measured_now
         stats["detected"] += hits(world(obs.drop_points_robot), 1)
+        bf = float(stereo.baseline_m) * float(stereo.focal_px)
+        for name, variant in (("slope", replace(drops, max_slope_deg=0.0)), ("noise", replace(drops, n_sigma=0.0)),
+                              ("short", replace(drops, support=1))):
+            found = find_drops(obs.points_robot_image, obs.T_robot_from_cam, bf, config=variant,
+                               floor_top_m=obstacles.min_obstacle_height_m, max_range_m=obstacles.max_range_m)
+            stats[name] += hits(world(found.points_robot), 1)
         cand = obs.drop_candidates_robot
         f = np.linspace(0.0, 1.0, 6)[:, None, None]
         edge = (cand[None, :, 0:2] + f * (cand[None, :, 2:4] - cand[None, :, 0:2])).reshape(-1, 2)
@@ -286,11 +300,14 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     counts = dict.fromkeys(CAUSES, 0)
     for i in range(n):
         if stats["detected"][i]:
-            counts[CAUSES[7]] += 1
+            counts[CAUSES[10]] += 1
         elif stats["candidate"][i]:
-            counts[CAUSES[6]] += 1
+            counts[CAUSES[9]] += 1
+        elif stats["measured"][i] and not stats["below"][i]:
+            counts[CAUSES[8]] += 1
         elif stats["measured"][i]:
-            counts[CAUSES[4] if stats["below"][i] else CAUSES[5]] += 1
+            rule = next((k for k, name in enumerate(("slope", "noise", "short")) if stats[name][i]), 3)
+            counts[CAUSES[4 + rule]] += 1
         else:
             share = [stats[k][i] for k in ("range", "border", "uniform", "invalid")]
             counts[CAUSES[int(np.argmax(share))]] += 1
