@@ -186,7 +186,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
 CAUSES = ("a: out of disparity range", "a: image border", "a: uniform (eq. 13)", "a: matcher invalid",
           "b: within a step plus a max_slope_deg slope of the floor before",
           "b: within the noise margin (n_sigma sigma_h)", "b: a run shorter than support",
-          "b: other (the mismatch test, the far rim or face rules)",
+          "b: the far rim not seen spreading over edge_reach_m", "b: other (the mismatch test, the face rules)",
           "b: floor only, nothing below measured near",
           "c: candidate not confirmed", "d: detected in a frame, lost in the map")
 """The causes of a missed edge cell (:func:`missed_causes`), in the order they are tested (last first)."""
@@ -205,8 +205,8 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
       (``z < -2 max_step_m``) measured within ``near_m`` of the cell in that frame the column rule judged them
       drivable or a mismatch: the same frame's drop test finds the cell with ``max_slope_deg = 0`` (the
       allowance of a step plus a drivable slope from the floor before), else with ``n_sigma = 0`` (the noise
-      margin), else with ``support = 1`` (a run too short), else none (the mismatch test, the rules of a far
-      rim or a face); without, only the floor was
+      margin), else with ``support = 1`` (a run too short), else with ``edge_reach_m = 0`` (the floor after a
+      steep face not seen spreading on: the far rim), else none (the mismatch test, the face rules); without, only the floor was
       measured, nothing below it near;
     * **a**: no frame measured any of the cell's pixels; the reason most of its pixels share: the true
       disparity beyond the matcher's range (too near) or below 1 px, the pixel's match outside the right
@@ -231,7 +231,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     cells = np.argwhere(missed)
     n = len(cells)
     stats = {k: np.zeros(n, np.int64) for k in ("pixels", "range", "border", "uniform", "invalid", "measured",
-                                                 "below", "detected", "candidate", "slope", "noise", "short")}
+                                                 "below", "detected", "candidate", "slope", "noise", "short", "rim")}
     near_cells = int(np.ceil(near_m / grid.resolution_m))
 
     def hits(world_xy, radius):
@@ -289,7 +289,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
         stats["detected"] += hits(world(obs.drop_points_robot), 1)
         bf = float(stereo.baseline_m) * float(stereo.focal_px)
         for name, variant in (("slope", replace(drops, max_slope_deg=0.0)), ("noise", replace(drops, n_sigma=0.0)),
-                              ("short", replace(drops, support=1))):
+                              ("short", replace(drops, support=1)), ("rim", replace(drops, edge_reach_m=0.0))):
             found = find_drops(obs.points_robot_image, obs.T_robot_from_cam, bf, config=variant,
                                floor_top_m=obstacles.min_obstacle_height_m, max_range_m=obstacles.max_range_m)
             stats[name] += hits(world(found.points_robot), 1)
@@ -300,13 +300,13 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     counts = dict.fromkeys(CAUSES, 0)
     for i in range(n):
         if stats["detected"][i]:
-            counts[CAUSES[10]] += 1
+            counts[CAUSES[11]] += 1
         elif stats["candidate"][i]:
-            counts[CAUSES[9]] += 1
+            counts[CAUSES[10]] += 1
         elif stats["measured"][i] and not stats["below"][i]:
-            counts[CAUSES[8]] += 1
+            counts[CAUSES[9]] += 1
         elif stats["measured"][i]:
-            rule = next((k for k, name in enumerate(("slope", "noise", "short")) if stats[name][i]), 3)
+            rule = next((k for k, name in enumerate(("slope", "noise", "short", "rim")) if stats[name][i]), 4)
             counts[CAUSES[4 + rule]] += 1
         else:
             share = [stats[k][i] for k in ("range", "border", "uniform", "invalid")]
