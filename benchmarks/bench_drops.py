@@ -183,7 +183,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
             **({"why": causes} if why else {})}
 
 
-CAUSES = ("a: out of disparity range", "a: image border", "a: uniform (eq. 13)", "a: matcher invalid",
+CAUSES = ("a: no pixel sees it", "a: out of disparity range", "a: image border", "a: uniform (eq. 13)", "a: matcher invalid",
           "b: within a step plus a max_slope_deg slope of the floor before",
           "b: within the noise margin (n_sigma sigma_h)", "b: a run shorter than support",
           "b: the far rim not seen spreading over edge_reach_m", "b: other (the mismatch test, the face rules)",
@@ -208,7 +208,8 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
       margin), else with ``support = 1`` (a run too short), else with ``edge_reach_m = 0`` (the floor after a
       steep face not seen spreading on: the far rim), else none (the mismatch test, the face rules); without, only the floor was
       measured, nothing below it near;
-    * **a**: no frame measured any of the cell's pixels; the reason most of its pixels share: the true
+    * **a**: no frame measured any of the cell's pixels (or no frame's true disparity has any: out of view);
+      the reason most of its pixels share: the true
       disparity beyond the matcher's range (too near) or below 1 px, the pixel's match outside the right
       image (``x - d < 0``), the matcher's disparity rejected by eq. (13) (uniform), or none from the
       matcher (its left-right and uniqueness checks, occlusion).
@@ -300,17 +301,17 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     counts = dict.fromkeys(CAUSES, 0)
     for i in range(n):
         if stats["detected"][i]:
-            counts[CAUSES[11]] += 1
+            counts[CAUSES[12]] += 1
         elif stats["candidate"][i]:
-            counts[CAUSES[10]] += 1
+            counts[CAUSES[11]] += 1
         elif stats["measured"][i] and not stats["below"][i]:
-            counts[CAUSES[9]] += 1
+            counts[CAUSES[10]] += 1
         elif stats["measured"][i]:
             rule = next((k for k, name in enumerate(("slope", "noise", "short", "rim")) if stats[name][i]), 4)
-            counts[CAUSES[4 + rule]] += 1
+            counts[CAUSES[5 + rule]] += 1
         else:
             share = [stats[k][i] for k in ("range", "border", "uniform", "invalid")]
-            counts[CAUSES[int(np.argmax(share))]] += 1
+            counts[CAUSES[1 + int(np.argmax(share)) if stats["pixels"][i] else 0]] += 1
     return counts
 
 
@@ -462,6 +463,8 @@ def _mapper_speed(repeats: int) -> dict:
 
 
 def main() -> None:
+    from mrstereo.geometry.drops import DropConfig as DropConfigDefaults
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", nargs="+", default=["200-209"], help="seeds, e.g. 0-4 or 200-209")
     parser.add_argument("--frames", type=int, default=24, help="frames per world or recording")
@@ -473,6 +476,7 @@ def main() -> None:
     parser.add_argument("--no-robot-floor", action="store_true",
                         help="DropConfig(robot_floor=False): only the map's memory confirms a drop with no floor "
                              "measured before it in its column")
+    parser.add_argument("--n-sigma", type=float, default=DropConfigDefaults.n_sigma, help="DropConfig.n_sigma")
     parser.add_argument("--why", action="store_true",
                         help="also the causes of the missed edge cells, per seed and summed (missed_causes)")
     parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
@@ -489,7 +493,7 @@ def main() -> None:
 
     from mrstereo.geometry.drops import DropConfig
 
-    drops = DropConfig(robot_floor=not args.no_robot_floor)
+    drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma)
     tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m")
              if getattr(args, k) is not None}
     base = PipelineConfig()
