@@ -185,7 +185,8 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
 
 CAUSES = ("a: no pixel sees it", "a: out of disparity range", "a: image border", "a: uniform (eq. 13)", "a: matcher invalid",
           "b: within a step plus a max_slope_deg slope of the floor before",
-          "b: within the noise margin (n_sigma sigma_h)", "b: a run shorter than support",
+          "b: within the noise margin (n_sigma sigma_h)", "b: within both (slope and noise) together",
+          "b: a run shorter than support",
           "b: the far rim not seen spreading over edge_reach_m", "b: other (the mismatch test, the face rules)",
           "b: floor only, nothing below measured near",
           "c: candidate not confirmed", "d: detected in a frame, lost in the map")
@@ -205,7 +206,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
       (``z < -2 max_step_m``) measured within ``near_m`` of the cell in that frame the column rule judged them
       drivable or a mismatch: the same frame's drop test finds the cell with ``max_slope_deg = 0`` (the
       allowance of a step plus a drivable slope from the floor before), else with ``n_sigma = 0`` (the noise
-      margin), else with ``support = 1`` (a run too short), else with ``edge_reach_m = 0`` (the floor after a
+      margin), else with both at 0, else with ``support = 1`` (a run too short), else with ``edge_reach_m = 0`` (the floor after a
       steep face not seen spreading on: the far rim), else none (the mismatch test, the face rules); without, only the floor was
       measured, nothing below it near;
     * **a**: no frame measured any of the cell's pixels (or no frame's true disparity has any: out of view);
@@ -232,7 +233,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     cells = np.argwhere(missed)
     n = len(cells)
     stats = {k: np.zeros(n, np.int64) for k in ("pixels", "range", "border", "uniform", "invalid", "measured",
-                                                 "below", "detected", "candidate", "slope", "noise", "short", "rim")}
+                                                 "below", "detected", "candidate", "slope", "noise", "both", "short", "rim")}
     near_cells = int(np.ceil(near_m / grid.resolution_m))
 
     def hits(world_xy, radius):
@@ -290,6 +291,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
         stats["detected"] += hits(world(obs.drop_points_robot), 1)
         bf = float(stereo.baseline_m) * float(stereo.focal_px)
         for name, variant in (("slope", replace(drops, max_slope_deg=0.0)), ("noise", replace(drops, n_sigma=0.0)),
+                              ("both", replace(drops, n_sigma=0.0, max_slope_deg=0.0)),
                               ("short", replace(drops, support=1)), ("rim", replace(drops, edge_reach_m=0.0))):
             found = find_drops(obs.points_robot_image, obs.T_robot_from_cam, bf, config=variant,
                                floor_top_m=obstacles.min_obstacle_height_m, max_range_m=obstacles.max_range_m)
@@ -301,13 +303,13 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     counts = dict.fromkeys(CAUSES, 0)
     for i in range(n):
         if stats["detected"][i]:
-            counts[CAUSES[12]] += 1
+            counts[CAUSES[13]] += 1
         elif stats["candidate"][i]:
-            counts[CAUSES[11]] += 1
+            counts[CAUSES[12]] += 1
         elif stats["measured"][i] and not stats["below"][i]:
-            counts[CAUSES[10]] += 1
+            counts[CAUSES[11]] += 1
         elif stats["measured"][i]:
-            rule = next((k for k, name in enumerate(("slope", "noise", "short", "rim")) if stats[name][i]), 4)
+            rule = next((k for k, name in enumerate(("slope", "noise", "both", "short", "rim")) if stats[name][i]), 5)
             counts[CAUSES[5 + rule]] += 1
         else:
             share = [stats[k][i] for k in ("range", "border", "uniform", "invalid")]
