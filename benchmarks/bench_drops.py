@@ -236,17 +236,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
                                                  "below", "detected", "candidate", "slope", "noise", "both", "short", "rim")}
     near_cells = int(np.ceil(near_m / grid.resolution_m))
 
-    def hits(world_xy, radius):
-        """Per missed cell: does some point of ``world_xy`` lie within ``radius`` cells of it?"""
-        if len(world_xy) == 0:
-            return np.zeros(n, bool)
-        r, c = grid.cells_from_xy(world_xy)
-        occupied = np.zeros((grid.shape[0] + 2 * radius + 2, grid.shape[1] + 2 * radius + 2), bool)
-        inside = (r >= -radius) & (r < grid.shape[0] + radius) & (c >= -radius) & (c < grid.shape[1] + radius)
-        occupied[r[inside] + radius, c[inside] + radius] = True
-        window = np.lib.stride_tricks.sliding_window_view(occupied, (2 * radius + 1, 2 * radius + 1))
-        return window[cells[:, 0], cells[:, 1]].any(axis=(1, 2))
-
+    hits = lambda world_xy, radius: _near(grid, cells, world_xy, radius)      # noqa: E731
     for record in manifest.frames:
         left, right, rectified = frame_pair(record)
         pair = scan_from_pair(left, right, stereo, rectified=rectified, mount=manifest.mount,
@@ -300,6 +290,24 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
         f = np.linspace(0.0, 1.0, 6)[:, None, None]
         edge = (cand[None, :, 0:2] + f * (cand[None, :, 2:4] - cand[None, :, 0:2])).reshape(-1, 2)
         stats["candidate"] += hits(world(edge), 1)
+    return _tally(stats)
+
+
+def _near(grid, cells: np.ndarray, world_xy: np.ndarray, radius: int) -> np.ndarray:
+    """Per cell of ``cells`` (K, 2): does some point of ``world_xy`` (N, 2) lie within ``radius`` cells of it?"""
+    if len(world_xy) == 0:
+        return np.zeros(len(cells), bool)
+    r, c = grid.cells_from_xy(world_xy)
+    occupied = np.zeros((grid.shape[0] + 2 * radius + 2, grid.shape[1] + 2 * radius + 2), bool)
+    inside = (r >= -radius) & (r < grid.shape[0] + radius) & (c >= -radius) & (c < grid.shape[1] + radius)
+    occupied[r[inside] + radius, c[inside] + radius] = True
+    window = np.lib.stride_tricks.sliding_window_view(occupied, (2 * radius + 1, 2 * radius + 1))
+    return window[cells[:, 0], cells[:, 1]].any(axis=(1, 2))
+
+
+def _tally(stats: dict[str, np.ndarray]) -> dict[str, int]:
+    """The cause of each cell from its counts over the frames (:func:`missed_causes`), counted per cause."""
+    n = len(stats["pixels"])
     counts = dict.fromkeys(CAUSES, 0)
     for i in range(n):
         if stats["detected"][i]:
