@@ -23,6 +23,10 @@ a kerb, a sunken step; the map layer's rules chosen on seeds 0-4 and 100-109, th
 without the drop test, interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480); and of a
 whole mapper step (the grid and its height and drop layers too) on corridor frames, with the layers' share.
 
+``--why``: also the causes of each seed's missed edge cells, and their sums (:func:`missed_causes`): not measured
+by any frame (and why), measured but no drop by the column rule (which of its margins), a candidate the map
+never confirmed, a frame's drop lost in the map.
+
 ``--real``: the first frames of the EuRoC ASL sample, KITTI odometry 06 and 01 and OpenLORIS: the share of cells
 free without the drop test that are not free with it (at most 0.5 % on these flat floors), and the drop cells.
 
@@ -32,6 +36,7 @@ clear) lethal beside the log-odds.
 Usage::
 
     python benchmarks/bench_drops.py --seeds 200-209 [--frames 24]
+    python benchmarks/bench_drops.py --seeds 0-4 100-109 --why
     python benchmarks/bench_drops.py --real [--frames 24]
     python benchmarks/bench_drops.py --speed [--repeats 15]
     python benchmarks/bench_drops.py --corridor [--data DIR]
