@@ -478,7 +478,7 @@ def _mapper_speed(repeats: int) -> dict:
 
 
 def main() -> None:
-    from mrstereo.geometry.drops import DropConfig as DropConfigDefaults
+    from mrstereo.geometry.drops import DropConfig
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", nargs="+", default=["200-209"], help="seeds, e.g. 0-4 or 200-209")
@@ -491,7 +491,7 @@ def main() -> None:
     parser.add_argument("--no-robot-floor", action="store_true",
                         help="DropConfig(robot_floor=False): only the map's memory confirms a drop with no floor "
                              "measured before it in its column")
-    parser.add_argument("--n-sigma", type=float, default=DropConfigDefaults.n_sigma, help="DropConfig.n_sigma")
+    parser.add_argument("--n-sigma", type=float, default=DropConfig.n_sigma, help="DropConfig.n_sigma")
     parser.add_argument("--why", action="store_true",
                         help="also the causes of the missed edge cells, per seed and summed (missed_causes)")
     parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
@@ -505,8 +505,6 @@ def main() -> None:
             print("  ".join(f"{k}: {v:.4f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()))
         return
     from mrstereo.pipeline.run import PipelineConfig
-
-    from mrstereo.geometry.drops import DropConfig
 
     drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma)
     tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m")
