@@ -23,6 +23,10 @@ a kerb, a sunken step; the map layer's rules chosen on seeds 0-4 and 100-109, th
 without the drop test, interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480); and of a
 whole mapper step (the grid and its height and drop layers too) on corridor frames, with the layers' share.
 
+``--why``: also the causes of each seed's missed edge cells, and their sums (:func:`missed_causes`): not measured
+by any frame (and why), measured but no drop by the column rule (which of its margins), a candidate the map
+never confirmed, a frame's drop lost in the map.
+
 ``--real``: the first frames of the EuRoC ASL sample, KITTI odometry 06 and 01 and OpenLORIS: the share of cells
 free without the drop test that are not free with it (at most 0.5 % on these flat floors), and the drop cells.
 
@@ -32,6 +36,7 @@ clear) lethal beside the log-odds.
 Usage::
 
     python benchmarks/bench_drops.py --seeds 200-209 [--frames 24]
+    python benchmarks/bench_drops.py --seeds 0-4 100-109 --why
     python benchmarks/bench_drops.py --real [--frames 24]
     python benchmarks/bench_drops.py --speed [--repeats 15]
     python benchmarks/bench_drops.py --corridor [--data DIR]
@@ -124,8 +129,10 @@ def _seen_floor(manifest, grid, height: np.ndarray, range_m: float) -> np.ndarra
     return seen
 
 
-def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, config=None, drops=None) -> dict:
-    """Render world ``seed`` with drops, map it with and without the drop test, score both (see the module)."""
+def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, config=None, drops=None,
+                  why: bool = False) -> dict:
+    """Render world ``seed`` with drops, map it with and without the drop test, score both (see the module).
+    ``why``: also the causes of the missed edge cells (:func:`missed_causes`) under ``"why"``."""
     from scipy.ndimage import binary_dilation
 
     from mrstereo.geometry.drops import DropConfig
@@ -168,6 +175,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
             r, c = grid.cells_from_xy(plan.path_xy)
             inside = grid.inside(r, c)
             crossings += int((free[r[inside], c[inside]] & ~drivable[r[inside], c[inside]]).any())
+    causes = missed_causes(manifest, grid, target & ~near_lethal, run.range_m, config, drops) if why else None
     return {"seed": seed, "edge cells in view": int(target.sum()),
             "recall": float((near_lethal & target).sum() / max(target.sum(), 1)),
             "recall 4 m": float((near_lethal & far).sum() / max(far.sum(), 1)),
@@ -176,7 +184,150 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
             "on ramps/kerbs": float((added & off_plain).sum() / max(off_plain.sum(), 1)),
             "crossings": crossings, "drop cells": int(run.grid.drop.sum()),
             "ramp/kerb cells": int(off_plain.sum()), "goals": len(goals), "cpu s": cpu,
-            "kinds": [world.summary["drops"]["end"]["kind"]] + [p["kind"] for p in world.summary["drops"]["patches"]]}
+            "kinds": [world.summary["drops"]["end"]["kind"]] + [p["kind"] for p in world.summary["drops"]["patches"]],
+            **({"why": causes} if why else {})}
+
+
+CAUSES = ("a: no pixel sees it", "a: out of disparity range", "a: image border", "a: uniform (eq. 13)", "a: matcher invalid",
+          "b: within a step plus a max_slope_deg slope of the floor before",
+          "b: within the noise margin (n_sigma sigma_h)", "b: within both (slope and noise) together",
+          "b: a run shorter than support",
+          "b: the far rim not seen spreading over edge_reach_m", "b: other (the mismatch test, the face rules)",
+          "b: floor only, nothing below measured near",
+          "c: candidate not confirmed", "d: detected in a frame, lost in the map")
+"""The causes of a missed edge cell (:func:`missed_causes`), in the order they are tested (last first)."""
+
+
+def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=None, drops=None,
+                  near_m: float = 0.4) -> dict[str, int]:
+    """Why each ``missed`` edge cell is not lethal in the map: each frame observed again (the mapper's chain,
+    :func:`mrstereo.geometry.pair.scan_from_pair`, the given mount and pose); the pixels whose TRUE point
+    (true disparity) lies in the cell or next to it are the cell's pixels. In the order tested:
+
+    * **d**: some frame's drop points (edge or below) fell in the cell or next to it, but the map lost them
+      (too few per cell for a vote, votes taken back by floor seen there later);
+    * **c**: some frame's drop candidate had its edge ``S -> E`` there, but the map never confirmed it;
+    * **b**: some frame measured a cell's pixel (a disparity after eq. 13): with points below the floor
+      (``z < -2 max_step_m``) measured within ``near_m`` of the cell in that frame the column rule judged them
+      drivable or a mismatch: the same frame's drop test finds the cell with ``max_slope_deg = 0`` (the
+      allowance of a step plus a drivable slope from the floor before), else with ``n_sigma = 0`` (the noise
+      margin), else with both at 0, else with ``support = 1`` (a run too short), else with ``edge_reach_m = 0`` (the floor after a
+      steep face not seen spreading on: the far rim), else none (the mismatch test, the face rules); without, only the floor was
+      measured, nothing below it near;
+    * **a**: no frame measured any of the cell's pixels (or no frame's true disparity has any: out of view);
+      the reason most of its pixels share: the true
+      disparity beyond the matcher's range (too near) or below 1 px, the pixel's match outside the right
+      image (``x - d < 0``), the matcher's disparity rejected by eq. (13) (uniform), or none from the
+      matcher (its left-right and uniqueness checks, occlusion).
+    """
+    from mrstereo.geometry import ground_from_mount, points_robot_from_disparity
+    from mrstereo.geometry.drops import find_drops
+    from mrstereo.geometry.ground import T_robot_from_cam_ground
+    from mrstereo.geometry.pair import scan_from_pair
+    from mrstereo.io.images import read_pfm
+    from mrstereo.pipeline.run import PipelineConfig
+    from mrstereo.recordings.manifest import frame_pair
+    from mrstereo.transforms import T_from_planar
+
+    config = PipelineConfig() if config is None else config
+    drops = drops if drops is not None else __import__("mrstereo.geometry.drops", fromlist=["DropConfig"]).DropConfig()
+    stereo = manifest.calibration
+    obstacles = replace(config.for_rig(stereo).obstacle_config, drops=drops)
+    options = {**replace(config, obstacles=obstacles).pair_options()}
+    floor = ground_from_mount(manifest.mount, R_rect_from_cam=stereo.left.R)
+    cells = np.argwhere(missed)
+    n = len(cells)
+    stats = {k: np.zeros(n, np.int64) for k in ("pixels", "range", "border", "uniform", "invalid", "measured",
+                                                 "below", "detected", "candidate", "slope", "noise", "both", "short", "rim")}
+    near_cells = int(np.ceil(near_m / grid.resolution_m))
+
+    hits = lambda world_xy, radius: _near(grid, cells, world_xy, radius)      # noqa: E731
+    for record in manifest.frames:
+        left, right, rectified = frame_pair(record)
+        pair = scan_from_pair(left, right, stereo, rectified=rectified, mount=manifest.mount,
+                              pan_rad=record.pan_rad, **options).frame
+        obs = pair.obstacles
+        T = T_from_planar(*record.pose)
+        world = lambda p: p[:, :2] @ T[:2, :2].T + T[:2, 3]           # noqa: E731
+        truth = read_pfm(record.gt_disparity)
+        T_cam = T_robot_from_cam_ground(floor, pan_rad=record.pan_rad)
+        true_xy = world(points_robot_from_disparity(truth, stereo, T_cam).reshape(-1, 3))
+        r, c = grid.cells_from_xy(true_xy)
+        ok = np.isfinite(true_xy).all(axis=1)
+        key = np.full(grid.shape, -1, np.int64)
+        cols = truth.shape[1]
+        x = np.arange(truth.size) % cols
+        measured = np.isfinite(pair.disparity_px).ravel()
+        raw = np.isfinite(pair.raw_disparity_px).ravel()
+        d = truth.ravel()
+        reason = {"range": (d > pair.max_disparity_px) | (d < 1.0), "border": x - d < 0,
+                  "uniform": raw & ~measured, "invalid": ~raw}
+        reason["border"] &= ~reason["range"]
+        reason["uniform"] &= ~reason["range"] & ~reason["border"]
+        reason["invalid"] &= ~reason["range"] & ~reason["border"]
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                key[:] = -1
+                rr, cc = cells[:, 0] + dr, cells[:, 1] + dc
+                inside = grid.inside(rr, cc)
+                key[rr[inside], cc[inside]] = np.flatnonzero(inside)
+                sel = ok & grid.inside(r, c)
+                k = np.full(len(d), -1, np.int64)
+                k[sel] = key[r[sel], c[sel]]
+                mine = k >= 0
+                stats["pixels"] += np.bincount(k[mine], minlength=n)
+                stats["measured"] += np.bincount(k[mine & measured], minlength=n)
+                for name, mask in reason.items():
+                    stats[name] += np.bincount(k[mine & mask], minlength=n)
+        pts = obs.points_robot
+        low = pts[pts[:, 2] < -2.0 * drops.max_step_m]
+        measured_now = stats["measured"] > 0
+        stats["below"] += hits(world(low), near_cells) & measured_now
+        stats["detected"] += hits(world(obs.drop_points_robot), 1)
+        bf = float(stereo.baseline_m) * float(stereo.focal_px)
+        for name, variant in (("slope", replace(drops, max_slope_deg=0.0)), ("noise", replace(drops, n_sigma=0.0)),
+                              ("both", replace(drops, n_sigma=0.0, max_slope_deg=0.0)),
+                              ("short", replace(drops, support=1)), ("rim", replace(drops, edge_reach_m=0.0))):
+            found = find_drops(obs.points_robot_image, obs.T_robot_from_cam, bf, config=variant,
+                               floor_top_m=obstacles.min_obstacle_height_m, max_range_m=obstacles.max_range_m)
+            stats[name] += hits(world(found.points_robot), 1)
+        cand = obs.drop_candidates_robot
+        f = np.linspace(0.0, 1.0, 6)[:, None, None]
+        edge = (cand[None, :, 0:2] + f * (cand[None, :, 2:4] - cand[None, :, 0:2])).reshape(-1, 2)
+        stats["candidate"] += hits(world(edge), 1)
+    return _tally(stats)
+
+
+def _near(grid, cells: np.ndarray, world_xy: np.ndarray, radius: int) -> np.ndarray:
+    """Per cell of ``cells`` (K, 2): does some point of ``world_xy`` (N, 2) lie within ``radius`` cells of it?"""
+    if len(world_xy) == 0:
+        return np.zeros(len(cells), bool)
+    r, c = grid.cells_from_xy(world_xy)
+    occupied = np.zeros((grid.shape[0] + 2 * radius + 2, grid.shape[1] + 2 * radius + 2), bool)
+    inside = (r >= -radius) & (r < grid.shape[0] + radius) & (c >= -radius) & (c < grid.shape[1] + radius)
+    occupied[r[inside] + radius, c[inside] + radius] = True
+    window = np.lib.stride_tricks.sliding_window_view(occupied, (2 * radius + 1, 2 * radius + 1))
+    return window[cells[:, 0], cells[:, 1]].any(axis=(1, 2))
+
+
+def _tally(stats: dict[str, np.ndarray]) -> dict[str, int]:
+    """The cause of each cell from its counts over the frames (:func:`missed_causes`), counted per cause."""
+    n = len(stats["pixels"])
+    counts = dict.fromkeys(CAUSES, 0)
+    for i in range(n):
+        if stats["detected"][i]:
+            counts[CAUSES[13]] += 1
+        elif stats["candidate"][i]:
+            counts[CAUSES[12]] += 1
+        elif stats["measured"][i] and not stats["below"][i]:
+            counts[CAUSES[11]] += 1
+        elif stats["measured"][i]:
+            rule = next((k for k, name in enumerate(("slope", "noise", "both", "short", "rim")) if stats[name][i]), 5)
+            counts[CAUSES[5 + rule]] += 1
+        else:
+            share = [stats[k][i] for k in ("range", "border", "uniform", "invalid")]
+            counts[CAUSES[1 + int(np.argmax(share)) if stats["pixels"][i] else 0]] += 1
+    return counts
 
 
 def _goals(world) -> list[tuple[float, float]]:
@@ -327,6 +478,8 @@ def _mapper_speed(repeats: int) -> dict:
 
 
 def main() -> None:
+    from mrstereo.geometry.drops import DropConfig
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", nargs="+", default=["200-209"], help="seeds, e.g. 0-4 or 200-209")
     parser.add_argument("--frames", type=int, default=24, help="frames per world or recording")
@@ -338,6 +491,9 @@ def main() -> None:
     parser.add_argument("--no-robot-floor", action="store_true",
                         help="DropConfig(robot_floor=False): only the map's memory confirms a drop with no floor "
                              "measured before it in its column")
+    parser.add_argument("--n-sigma", type=float, default=DropConfig.n_sigma, help="DropConfig.n_sigma")
+    parser.add_argument("--why", action="store_true",
+                        help="also the causes of the missed edge cells, per seed and summed (missed_causes)")
     parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
     parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
     parser.add_argument("--speed", action="store_true", help="CPU time of a frame with and without the drop test")
@@ -350,9 +506,7 @@ def main() -> None:
         return
     from mrstereo.pipeline.run import PipelineConfig
 
-    from mrstereo.geometry.drops import DropConfig
-
-    drops = DropConfig(robot_floor=not args.no_robot_floor)
+    drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma)
     tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m")
              if getattr(args, k) is not None}
     base = PipelineConfig()
@@ -372,7 +526,7 @@ def main() -> None:
     data.mkdir(parents=True, exist_ok=True)
     rows = []
     for seed in _parse_seeds(args.seeds):
-        row = evaluate_seed(seed, args.frames, data, args.view, config, drops)
+        row = evaluate_seed(seed, args.frames, data, args.view, config, drops, why=args.why)
         rows.append(row)
         print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()), flush=True)
     edge = sum(r["edge cells in view"] for r in rows)
@@ -382,6 +536,12 @@ def main() -> None:
           f"{max(r['false > 0.15 m'] for r in rows):.4f}), on ramps/kerbs max "
           f"{max(r['on ramps/kerbs'] for r in rows):.4f}, "
           f"crossings {sum(r['crossings'] for r in rows)} of {sum(r['goals'] for r in rows)} goals")
+    if args.why:
+        missed = sum(sum(r["why"].values()) for r in rows)
+        print(f"missed edge cells: {missed}")
+        for cause in CAUSES:
+            total = sum(r["why"][cause] for r in rows)
+            print(f"  {cause}: {total} ({total / max(missed, 1):.2f})")
 
 
 if __name__ == "__main__":
