@@ -110,10 +110,12 @@ def _wanted_columns(want, box):
 
 # One body: the product and cost gathers as inlined helpers measured 3-6 % slower (numba counts
 # the references of an inlined call's array arguments at every call, here per run and offset).
-@njit(nogil=True, cache=True, fastmath=FASTMATH, inline="always")
+# Not inlined into the parallel kernels: compiled once for both, and numba's parfor passes run
+# over a short loop (the cold compile takes a fraction of the time).
+@njit(nogil=True, cache=True, fastmath=FASTMATH)
 def _refine_box(left, right, radius, kind, center_pad, want, box, half, max_cost, by_runs, out):
-    """Re-score the wanted pixels of one box (:func:`refine_boxes`). ``by_runs`` (a constant of
-    each kernel) gathers the products ``I_L(p) I_R(p - c(p) - o)`` and the right terms along runs
+    """Re-score the wanted pixels of one box (:func:`refine_boxes`). ``by_runs`` (True for
+    :func:`refine_strips`) gathers the products ``I_L(p) I_R(p - c(p) - o)`` and the right terms along runs
     of constant ``c`` (contiguous reads) or pixel by pixel (the right column clamped to the
     padded row; no bookkeeping). The products of the rows inside the window are kept in a ring
     buffer, so each is gathered once."""
