@@ -32,7 +32,7 @@ CANDIDATE_COLUMNS = ("sx", "sy", "ex", "ey", "qx", "qy", "qz", "c0", "tan_slope"
 """The columns of a drop candidate (:attr:`DropResult.candidates_robot`): the edge's start ``S`` and end ``E``
 (where the sight line to the run passes floor level), the run's point ``q`` deepest below a drivable slope
 from ``E``, and the confirming rule: floor measured ``d`` (horizontally) from ``q`` at a height above
-``c0 + tan_slope d`` makes it a drop (``c0 = z_q + 3 sigma_h(q) + max_step_m``); floor measured between
+``c0 + tan_slope d`` makes it a drop (``c0 = z_q + n_sigma sigma_h(q) + max_step_m``); floor measured between
 ``hide_from_m`` and ``hide_to_m`` beyond ``E`` (toward the run's first point, less its depth noise) would hide
 the run: a mismatch."""
 
