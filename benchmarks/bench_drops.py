@@ -20,7 +20,7 @@ a kerb, a sunken step; the map layer's rules chosen on seeds 0-4 and 100-109, th
   start to a goal in each hole or beyond the ledge that enter an undrivable cell (0 is required).
 
 ``--speed``: the CPU time of a frame (``obstacles_from_pair``: rectify, match, reject, 3-D, free space) with and
-without the drop test, interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480); and of a
+without the drop test (and with it but without its weak points, ``weak_n_sigma=None``), interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480); and of a
 whole mapper step (the grid and its height and drop layers too) on corridor frames, with the layers' share.
 
 ``--why``: also the causes of each seed's missed edge cells, and their sums (:func:`missed_causes`): not measured
@@ -419,16 +419,18 @@ def measure_speed(repeats: int) -> list[dict]:
         inputs.append(("EuRoC 752x480", left, right, manifest.calibration, rectified, manifest.mount))
     rows = []
     for name, left, right, calib, rectified, mount in inputs:
-        times: dict[str, list[float]] = {"with": [], "without": []}
-        configs = {"with": ObstacleConfig(drops=DropConfig()), "without": ObstacleConfig()}
+        configs = {"with": ObstacleConfig(drops=DropConfig()), "without": ObstacleConfig(),
+                   "no weak": ObstacleConfig(drops=DropConfig(weak_n_sigma=None))}
+        times: dict[str, list[float]] = {key: [] for key in configs}
         for k in range(repeats + 1):
-            for key in ("with", "without") if k % 2 else ("without", "with"):
+            for key in list(configs)[::1 if k % 2 else -1]:
                 t0 = time.process_time()
                 obstacles_from_pair(left, right, calib, rectified=rectified, mount=mount, config=configs[key])
                 if k:                                           # the first round compiles
                     times[key].append(time.process_time() - t0)
-        a, b = (float(np.median(times[key])) for key in ("with", "without"))
-        rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": a / b})
+        a, b, c = (float(np.median(times[key])) for key in configs)
+        rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": a / b,
+                     "ratio without weak points": c / b})
     return rows + [_mapper_speed(repeats)]
 
 
@@ -488,10 +490,13 @@ def main() -> None:
     parser.add_argument("--drop-clear-points", type=int, default=None, help="MappingConfig.drop_clear_points")
     parser.add_argument("--drop-max-votes", type=int, default=None, help="MappingConfig.drop_max_votes")
     parser.add_argument("--drop-low", dest="drop_low_m", type=float, default=None, help="MappingConfig.drop_low_m")
+    parser.add_argument("--drop-weak-views", type=int, default=None, help="MappingConfig.drop_weak_views")
     parser.add_argument("--no-robot-floor", action="store_true",
                         help="DropConfig(robot_floor=False): only the map's memory confirms a drop with no floor "
                              "measured before it in its column")
     parser.add_argument("--n-sigma", type=float, default=DropConfig.n_sigma, help="DropConfig.n_sigma")
+    parser.add_argument("--weak-n-sigma", type=lambda v: None if v.lower() == "none" else float(v),
+                        default=DropConfig.weak_n_sigma, help="DropConfig.weak_n_sigma ('none': no weak votes)")
     parser.add_argument("--why", action="store_true",
                         help="also the causes of the missed edge cells, per seed and summed (missed_causes)")
     parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
@@ -506,9 +511,9 @@ def main() -> None:
         return
     from mrstereo.pipeline.run import PipelineConfig
 
-    drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma)
-    tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m")
-             if getattr(args, k) is not None}
+    drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma, weak_n_sigma=args.weak_n_sigma)
+    tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m",
+                                           "drop_weak_views") if getattr(args, k) is not None}
     base = PipelineConfig()
     config = replace(base, mapping=replace(base.mapping, **tuned))
     if args.corridor:

@@ -55,14 +55,17 @@ class FrameObservation:
     drop_candidates_world: np.ndarray | None = None
     """The drop test's candidates (K, 11) the map confirms with the floor it measured before
     (:data:`mrstereo.geometry.drops.CANDIDATE_COLUMNS`); None: none."""
+    drop_weak_points_world: np.ndarray | None = None
+    """The drop test's weak points (:attr:`mrstereo.geometry.drops.DropResult.weak_points_robot`), for the map's
+    weak votes; None: none."""
 
     @property
     def layers(self) -> tuple:
         """The arguments of :meth:`OccupancyGrid.add_layers`: the measured obstacle points (without the
-        boundary's), the floor points, the drop points and candidates."""
+        boundary's), the floor points, the drop points, candidates and weak points."""
         n = len(self.obstacle_points_world) - self.boundary_points
         return self.obstacle_points_world[:n], self.floor_points_world, self.drop_points_world, \
-            self.drop_candidates_world
+            self.drop_candidates_world, self.drop_weak_points_world
 
     @property
     def sensor_origin_world(self) -> tuple[float, ...]:
@@ -143,8 +146,8 @@ def world_observation(observed, pose: tuple[float, float, float], stereo: Stereo
         T = T_from_planar(*pose)
         obstacles = transform_points(T, observed.obstacle_points_robot).astype(np.float32)
         floor = transform_points(T, observed.floor_points_robot).astype(np.float32)
-        drops = None if observed.drop_points_robot is None else \
-            transform_points(T, observed.drop_points_robot).astype(np.float32)
+        drops, weak = (None if p is None else transform_points(T, p).astype(np.float32)
+                       for p in (observed.drop_points_robot, observed.drop_weak_points_robot))
         candidates = None if observed.drop_candidates_robot is None else \
             transform_candidates(T, observed.drop_candidates_robot)
         ground = observed.ground
@@ -154,4 +157,4 @@ def world_observation(observed, pose: tuple[float, float, float], stereo: Stereo
                             n_valid_disparity=observed.n_valid_disparity, ground_message=ground.message,
                             baseline_focal_m_px=float(stereo.baseline_m * stereo.focal_px),
                             sensor_height_m=height, boundary_points=observed.n_boundary, drop_points_world=drops,
-                            drop_candidates_world=candidates)
+                            drop_candidates_world=candidates, drop_weak_points_world=weak)

@@ -461,7 +461,8 @@ class StereoMapper:
                 obs, obstacle_points_world=obs.obstacle_points_world[:0].copy(),      # (copies: a view keeps it all)
                 floor_points_world=obs.floor_points_world[:0].copy(), cells=None,
                 drop_points_world=None if obs.drop_points_world is None else obs.drop_points_world[:0].copy(),
-                drop_candidates_world=None))
+                drop_candidates_world=None, drop_weak_points_world=(None if obs.drop_weak_points_world is None
+                                                                    else obs.drop_weak_points_world[:0].copy())))
         self._on_trajectory(obs.index, T_from_planar(*obs.pose) if T_world_from_base is None else T_world_from_base,
                             float(obs.index) * 0.1 if stamp_s is None else stamp_s, T_world_from_base_true, obs.pan_rad)
         self._count_outside(obs)
