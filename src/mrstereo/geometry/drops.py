@@ -61,7 +61,7 @@ class DropConfig:
     edge_reach_m: float = 0.1
     spacing_m: float = 0.01
     robot_floor: bool = True
-    weak_n_sigma: float | None = 1.0
+    weak_n_sigma: float | None = 0.75
 
     def __post_init__(self) -> None:
         _checks.finite_number("max_step_m", self.max_step_m, nonnegative=True)
