@@ -20,8 +20,11 @@ a kerb, a sunken step; the map layer's rules chosen on seeds 0-4 and 100-109, th
   start to a goal in each hole or beyond the ledge that enter an undrivable cell (0 is required).
 
 ``--speed``: the CPU time of a frame (``obstacles_from_pair``: rectify, match, reject, 3-D, free space) with and
-without the drop test (and with it but without its weak points, ``weak_n_sigma=None``), interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480); and of a
-whole mapper step (the grid and its height and drop layers too) on corridor frames, with the layers' share.
+without the drop test (and with it but without its weak points, ``weak_n_sigma=None``: "ratio without weak
+points"), interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480); and of a whole mapper
+step (the grid and its height and drop layers too) on corridor frames, with the layers' share.
+
+The weak votes (``--weak-n-sigma``, ``'none'``: off; ``--drop-weak-views``) were chosen on seeds 100-119.
 
 ``--why``: also the causes of each seed's missed edge cells, and their sums (:func:`missed_causes`): not measured
 by any frame (and why), measured but no drop by the column rule (which of its margins), a candidate the map
@@ -37,6 +40,7 @@ Usage::
 
     python benchmarks/bench_drops.py --seeds 200-209 [--frames 24]
     python benchmarks/bench_drops.py --seeds 0-4 100-109 --why
+    python benchmarks/bench_drops.py --seeds 100-119 --weak-n-sigma 1.0 --drop-weak-views 3
     python benchmarks/bench_drops.py --real [--frames 24]
     python benchmarks/bench_drops.py --speed [--repeats 15]
     python benchmarks/bench_drops.py --corridor [--data DIR]
@@ -204,8 +208,9 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     :func:`mrstereo.geometry.pair.scan_from_pair`, the given mount and pose); the pixels whose TRUE point
     (true disparity) lies in the cell or next to it are the cell's pixels. In the order tested:
 
-    * **d**: some frame's drop points (edge or below) fell in the cell or next to it, but the map lost them
-      (too few per cell for a vote, votes taken back by floor seen there later);
+    * **d**: some frame's drop points or weak points (edge or below) fell in the cell or next to it, but the map
+      lost them (too few per cell for a vote, weak points from too few views, votes taken back by floor seen
+      there later);
     * **c**: some frame's drop candidate had its edge ``S -> E`` there, but the map never confirmed it;
     * **b**: some frame measured a cell's pixel (a disparity after eq. 13): with points below the floor
       (``z < -2 max_step_m``) measured within ``near_m`` of the cell in that frame the column rule judged them
@@ -283,7 +288,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
         low = pts[pts[:, 2] < -2.0 * drops.max_step_m]
         measured_now = stats["measured"] > 0
         stats["below"] += hits(world(low), near_cells) & measured_now
-        stats["detected"] += hits(world(obs.drop_points_robot), 1)
+        stats["detected"] += hits(world(np.concatenate([obs.drop_points_robot, obs.drop_weak_points_robot])), 1)
         bf = float(stereo.baseline_m) * float(stereo.focal_px)
         for name, variant in (("slope", replace(drops, max_slope_deg=0.0)), ("noise", replace(drops, n_sigma=0.0)),
                               ("both", replace(drops, n_sigma=0.0, max_slope_deg=0.0)),

@@ -606,8 +606,9 @@ class OccupancyGrid:
         one (``drop_points_world`` None: no drop test, no votes either way). The drop test's weak points
         (``drop_weak_points_world``, N, 3; :attr:`mrstereo.geometry.drops.DropResult.weak_points_robot`) vote
         the same way in the weak layer (up to ``max(drop_max_votes, drop_weak_views)``, the floor taking one
-        back; none without ``drop_points_world``); they widen no height. Votes change only here and under the footprint (:meth:`clear_disc`), never
-        by a ray passing over the cell. Returns the number of cells that got a vote (of the drop test's points).
+        back; none without ``drop_points_world``); they widen no height. Votes change only here and under the
+        footprint (:meth:`clear_disc`), never by a ray passing over the cell. Returns the number of cells that
+        got a vote (of the drop test's points).
         """
         with stage("grid.layers"):
             c = self.config
@@ -722,8 +723,9 @@ class OccupancyGrid:
     @property
     def drop(self) -> np.ndarray:
         """The drop cells, occupied whatever the log-odds: those with a drop vote or weak votes from
-        ``config.drop_weak_views`` views (:meth:`add_layers`), and the floor's last cells before a lower one (the height layer: a cell with a point at floor level next to
-        a cell whose lowest point lies more than ``config.drop_low_m`` below the floor)."""
+        ``config.drop_weak_views`` views (:meth:`add_layers`), and the floor's last cells before a lower one
+        (the height layer: a cell with a point at floor level next to a cell whose lowest point lies more than
+        ``config.drop_low_m`` below the floor)."""
         from scipy.ndimage import binary_dilation
 
         voted = _voted(self._drop_votes, self.config)
