@@ -651,3 +651,26 @@ def test_the_weak_votes_survive_tiles_their_file_and_an_observation_file(tmp_pat
     np.testing.assert_array_equal(loaded.to_grid().drop, dense.drop)
     assert loaded.overview()[0][r, c] == 0                                # occupied in the overview
     assert load_observation(tmp_path / "0.obs.npz").drop_candidates_world is None
+
+
+def test_a_tiles_file_written_before_the_weak_votes_loads_with_none(tmp_path):
+    """A tiles file whose drop layers are (T, T) (the votes only, as written before the weak votes) loads: the
+    same votes, no weak votes."""
+    from mrstereo.mapping import MappingConfig
+    from mrstereo.mapping.tiles import TiledOccupancyGrid
+
+    tiles = TiledOccupancyGrid(0.1, config=MappingConfig(footprint_radius_m=None), view_reach_m=5.0, tile_cells=16)
+    edge = np.array([[2.05, 0.05, 0.0]] * 4)
+    weak = np.array([[1.05, 0.05, 0.0]] * 4)
+    for _ in range(2):
+        tiles.update(edge, np.empty((0, 3)), (0.2, 0.05, 0.5), layers=(edge, None, edge, None, weak))
+    tiles.save(tmp_path / "new.npz")
+    with np.load(tmp_path / "new.npz") as data:
+        old = {k: data[k][..., 0] if k.endswith("_drop") else data[k] for k in data.files}
+    assert sum(v.sum() for k, v in old.items() if k.endswith("_drop")) == 2          # the edge's two votes
+    np.savez_compressed(tmp_path / "old.npz", **old)
+    new = TiledOccupancyGrid.load(tmp_path / "new.npz").to_grid()
+    back = TiledOccupancyGrid.load(tmp_path / "old.npz").to_grid(new.grid)
+    assert new.drop.sum() == 2 and back.drop.sum() == 1                      # the weak-vote cell is gone
+    np.testing.assert_array_equal(back._drop_votes[..., 0], new._drop_votes[..., 0])
+    assert not back._drop_votes[..., 1].any()
