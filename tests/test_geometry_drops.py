@@ -674,3 +674,27 @@ def test_a_tiles_file_written_before_the_weak_votes_loads_with_none(tmp_path):
     assert new.drop.sum() == 2 and back.drop.sum() == 1                      # the weak-vote cell is gone
     np.testing.assert_array_equal(back._drop_votes[..., 0], new._drop_votes[..., 0])
     assert not back._drop_votes[..., 1].any()
+
+
+def test_weak_points_of_a_robot_standing_still_are_one_view():
+    """Frames from the same pose and pan (a robot standing still sees the same mismatches again) give one weak
+    vote, however many; a turn of the camera (another pan) or a move of a cell makes another view."""
+    from mrstereo.mapping import MappingConfig
+    from mrstereo.mapping.fusion import FrameObservation, fuse
+
+    grid = GridSpec(width_m=4.0, height_m=1.0, resolution_m=0.1, origin_x_m=0.0, origin_y_m=-0.5)
+    weak = np.array([[2.05, 0.05, 0.0]] * 4, np.float32)
+
+    def frame(k, pose, pan):
+        return FrameObservation(index=k, pose=pose, pan_rad=pan, obstacle_points_world=np.empty((0, 3)),
+                                floor_points_world=np.empty((0, 3)), n_valid_disparity=1, ground_message="m",
+                                drop_points_world=np.empty((0, 3), np.float32), drop_weak_points_world=weak)
+
+    config = MappingConfig(footprint_radius_m=None)
+    r, c = (int(v[0]) for v in grid.cells_from_xy(weak[:1, :2]))
+    still = fuse([frame(k, (0.5, 0.0, 0.0), 0.0) for k in range(5)], grid=grid, config=config)
+    assert not still.drop.any() and still._drop_votes[r, c, 1] == 1
+    for second in (frame(1, (0.5, 0.0, 0.0), 0.1), frame(1, (0.62, 0.0, 0.0), 0.0)):
+        two = fuse([frame(0, (0.5, 0.0, 0.0), 0.0), frame(1, (0.5, 0.0, 0.0), 0.0), second], grid=grid,
+                   config=config)
+        assert two.drop[r, c] and two.drop.sum() == 1

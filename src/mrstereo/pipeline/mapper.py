@@ -247,7 +247,7 @@ class StereoMapper:
             raise ValueError(f"odometry must be 'auto', 'given' or 'visual', got {odometry!r}")
         self.odometry: str | None = None if odometry == "auto" else odometry
         self._vo: StereoOdometry | None = None
-        self._previous_xy = None
+        self._previous_xy = self._weak_view = None    # the last frame's pose, the last weak drop votes' view
         self.observations: list[FrameObservation] = []
         self.trajectory_T: list[np.ndarray] = []
         self.trajectory_index: list[int] = []
@@ -453,7 +453,7 @@ class StereoMapper:
             stamp_s: float | None = None, T_world_from_base_true: np.ndarray | None = None) -> None:
         """Fuse a frame's world points (a :class:`~mrstereo.mapping.fusion.FrameObservation`, e.g. one stored
         by a batch run) into the map, after the frames before it; its pose joins the trajectory."""
-        fuse_step(self.grid, obs, self._previous_xy)
+        self._weak_view = fuse_step(self.grid, obs, self._previous_xy, self._weak_view)
         self._previous_xy = obs.pose
         self.n_points += len(obs.obstacle_points_world) + len(obs.floor_points_world)
         if self.keep_observations:
