@@ -20,8 +20,11 @@ a kerb, a sunken step; the map layer's rules chosen on seeds 0-4 and 100-109, th
   start to a goal in each hole or beyond the ledge that enter an undrivable cell (0 is required).
 
 ``--speed``: the CPU time of a frame (``obstacles_from_pair``: rectify, match, reject, 3-D, free space) with and
-without the drop test, interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480); and of a
-whole mapper step (the grid and its height and drop layers too) on corridor frames, with the layers' share.
+without the drop test (and with it but without its weak points, ``weak_n_sigma=None``: "ratio without weak
+points"), interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480); and of a whole mapper
+step (the grid and its height and drop layers too) on corridor frames, with the layers' share.
+
+The weak votes (``--weak-n-sigma``, ``'none'``: off; ``--drop-weak-views``) were chosen on seeds 100-119.
 
 ``--why``: also the causes of each seed's missed edge cells, and their sums (:func:`missed_causes`): not measured
 by any frame (and why), measured but no drop by the column rule (which of its margins), a candidate the map
@@ -42,6 +45,7 @@ Usage::
     python benchmarks/bench_drops.py --seeds 200-209 [--frames 24]
     python benchmarks/bench_drops.py --seeds 0-4 100-109 --why
     python benchmarks/bench_drops.py --seeds 200-209 --oracle [--n-sigma 1] [--why]
+    python benchmarks/bench_drops.py --seeds 100-119 --weak-n-sigma 1.0 --drop-weak-views 3
     python benchmarks/bench_drops.py --real [--frames 24]
     python benchmarks/bench_drops.py --speed [--repeats 15]
     python benchmarks/bench_drops.py --corridor [--data DIR]
@@ -257,8 +261,9 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     :func:`mrstereo.geometry.pair.scan_from_pair`, the given mount and pose); the pixels whose TRUE point
     (true disparity) lies in the cell or next to it are the cell's pixels. In the order tested:
 
-    * **d**: some frame's drop points (edge or below) fell in the cell or next to it, but the map lost them
-      (too few per cell for a vote, votes taken back by floor seen there later);
+    * **d**: some frame's drop points or weak points (edge or below) fell in the cell or next to it, but the map
+      lost them (too few per cell for a vote, weak points from too few views, votes taken back by floor seen
+      there later);
     * **c**: some frame's drop candidate had its edge ``S -> E`` there, but the map never confirmed it;
     * **b**: some frame measured a cell's pixel (a disparity after eq. 13): with points below the floor
       (``z < -2 max_step_m``) measured within ``near_m`` of the cell in that frame the column rule judged them
@@ -336,7 +341,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
         low = pts[pts[:, 2] < -2.0 * drops.max_step_m]
         measured_now = stats["measured"] > 0
         stats["below"] += hits(world(low), near_cells) & measured_now
-        stats["detected"] += hits(world(obs.drop_points_robot), 1)
+        stats["detected"] += hits(world(np.concatenate([obs.drop_points_robot, obs.drop_weak_points_robot])), 1)
         bf = float(stereo.baseline_m) * float(stereo.focal_px)
         for name, variant in (("slope", replace(drops, max_slope_deg=0.0)), ("noise", replace(drops, n_sigma=0.0)),
                               ("both", replace(drops, n_sigma=0.0, max_slope_deg=0.0)),
@@ -472,16 +477,18 @@ def measure_speed(repeats: int) -> list[dict]:
         inputs.append(("EuRoC 752x480", left, right, manifest.calibration, rectified, manifest.mount))
     rows = []
     for name, left, right, calib, rectified, mount in inputs:
-        times: dict[str, list[float]] = {"with": [], "without": []}
-        configs = {"with": ObstacleConfig(drops=DropConfig()), "without": ObstacleConfig()}
+        configs = {"with": ObstacleConfig(drops=DropConfig()), "without": ObstacleConfig(),
+                   "no weak": ObstacleConfig(drops=DropConfig(weak_n_sigma=None))}
+        times: dict[str, list[float]] = {key: [] for key in configs}
         for k in range(repeats + 1):
-            for key in ("with", "without") if k % 2 else ("without", "with"):
+            for key in list(configs)[::1 if k % 2 else -1]:
                 t0 = time.process_time()
                 obstacles_from_pair(left, right, calib, rectified=rectified, mount=mount, config=configs[key])
                 if k:                                           # the first round compiles
                     times[key].append(time.process_time() - t0)
-        a, b = (float(np.median(times[key])) for key in ("with", "without"))
-        rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": a / b})
+        a, b, c = (float(np.median(times[key])) for key in configs)
+        rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": a / b,
+                     "ratio without weak points": c / b})
     return rows + [_mapper_speed(repeats)]
 
 
@@ -541,10 +548,13 @@ def main() -> None:
     parser.add_argument("--drop-clear-points", type=int, default=None, help="MappingConfig.drop_clear_points")
     parser.add_argument("--drop-max-votes", type=int, default=None, help="MappingConfig.drop_max_votes")
     parser.add_argument("--drop-low", dest="drop_low_m", type=float, default=None, help="MappingConfig.drop_low_m")
+    parser.add_argument("--drop-weak-views", type=int, default=None, help="MappingConfig.drop_weak_views")
     parser.add_argument("--no-robot-floor", action="store_true",
                         help="DropConfig(robot_floor=False): only the map's memory confirms a drop with no floor "
                              "measured before it in its column")
     parser.add_argument("--n-sigma", type=float, default=DropConfig.n_sigma, help="DropConfig.n_sigma")
+    parser.add_argument("--weak-n-sigma", type=lambda v: None if v.lower() == "none" else float(v),
+                        default=DropConfig.weak_n_sigma, help="DropConfig.weak_n_sigma ('none': no weak votes)")
     parser.add_argument("--why", action="store_true",
                         help="also the causes of the missed edge cells, per seed and summed (missed_causes)")
     parser.add_argument("--oracle", action="store_true",
@@ -561,9 +571,9 @@ def main() -> None:
         return
     from mrstereo.pipeline.run import PipelineConfig
 
-    drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma)
-    tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m")
-             if getattr(args, k) is not None}
+    drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma, weak_n_sigma=args.weak_n_sigma)
+    tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m",
+                                           "drop_weak_views") if getattr(args, k) is not None}
     base = PipelineConfig()
     config = replace(base, mapping=replace(base.mapping, **tuned))
     if args.corridor:

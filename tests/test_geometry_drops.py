@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -312,7 +313,7 @@ def test_a_drop_cell_stays_lethal_under_rays_and_is_cleared_only_by_floor_measur
     # votes add up to drop_max_votes; a view voting for the drop is not counted against it
     for _ in range(5):
         occupancy.add_layers(np.empty((0, 3)), on_cell, edge)
-    assert occupancy._drop_votes[r, c] == occupancy.config.drop_max_votes
+    assert occupancy._drop_votes[r, c, 0] == occupancy.config.drop_max_votes
     # the robot's footprint clears it (it stood there)
     occupancy.clear_disc((2.05, 0.05), 0.1)
     assert not occupancy.drop.any()
@@ -412,8 +413,8 @@ def test_map_marks_the_ledge_lethal_writes_the_height_layer_and_plan_stops_short
         path = np.array(json.loads((tmp_path / "p.json").read_text())["path_xy"])
         r, c = grid.cells_from_xy(path)
         assert not drop[r[grid.inside(r, c)], c[grid.inside(r, c)]].any()
-    else:
-        assert "mrstereo: error:" in result.output
+    else:                                   # (the console script prints it as "mrstereo: error: no path ...")
+        assert isinstance(result.exception, RuntimeError) and "no path" in str(result.exception), result.output
 
 
 def test_drops_need_a_randomized_world(tmp_path):
@@ -537,3 +538,163 @@ def test_an_observation_keeps_its_drop_candidates_through_its_file(tmp_path):
         save_observation(tmp_path / f"{name}.obs.npz", value)
     np.testing.assert_array_equal(load_observation(tmp_path / "with.obs.npz").layers[3], candidates)
     assert load_observation(tmp_path / "without.obs.npz").drop_candidates_world is None
+
+
+def _ledge_column(depth_m=0.2, step_m=0.05):
+    """One image column (12, 1, 3) seen from a camera 0.5 m up: floor from 0.8 to 1.2 m, then three points of a
+    lower floor ``depth_m`` down from 1.7 m (past the ledge's sight line), and the disparity sigma [px] that
+    puts that floor 1.5 combined sigma (of the last floor point's and the first lower point's height noise)
+    below the floor and a step: the drop test's margin ``sqrt(sigma_a^2 + sigma_q^2)`` (with ``max_slope_deg``
+    0, ``b f`` = 20 m px)."""
+    x = np.concatenate([np.arange(0.8, 1.201, 0.05), [1.7, 1.72, 1.74]])
+    z = np.where(x < 1.5, 0.0, -depth_m)
+    column = np.stack([x, np.zeros_like(x), z], -1)[::-1, None, :]      # row 0 the farthest (image top)
+    T = np.eye(4)
+    T[2, 3] = 0.5
+    per_m2 = [abs(zz - 0.5) * math.sqrt(xx ** 2 + (zz - 0.5) ** 2) for xx, zz in ((1.2, 0.0), (1.7, -depth_m))]
+    sigma_px = (depth_m - step_m) / 1.5 / math.hypot(*per_m2) * 20.0
+    return column, T, sigma_px
+
+
+def test_a_drop_within_the_noise_margin_is_weak_not_strong():
+    """A lower floor 1.5 sigma beyond the step: no drop with the 3-sigma margin, a weak one with 1 sigma (its
+    edge from the last floor point to where the sight line passes floor level, its three points), none with
+    2 sigma; the strong result is the same with the weak test on or off (one pass)."""
+    column, T, sigma_px = _ledge_column()
+    config = DropConfig(max_slope_deg=0.0, disparity_sigma_px=sigma_px, weak_n_sigma=1.0)
+    found = find_drops(column, T, 20.0, config=config)
+    assert len(found.points_robot) == 0 and len(found.candidates_robot) == 0
+    weak = found.weak_points_robot
+    edge, below = weak[weak[:, 2] == 0.0], weak[weak[:, 2] < 0.0]
+    e = 1.7 * 0.5 / 0.7                                                  # the sight line to (1.7, -0.2) at z = 0
+    assert len(edge) >= 2 and np.all((edge[:, 0] >= 1.2 - 1e-9) & (edge[:, 0] <= e + 1e-9)), edge
+    np.testing.assert_allclose(below, [[1.7, 0.0, -0.2], [1.72, 0.0, -0.2], [1.74, 0.0, -0.2]])
+    assert len(find_drops(column, T, 20.0, config=replace(config, weak_n_sigma=2.0)).weak_points_robot) == 0
+    assert len(find_drops(column, T, 20.0, config=replace(config, weak_n_sigma=None)).weak_points_robot) == 0
+    deep = find_drops(column, T, 20.0, config=replace(config, disparity_sigma_px=sigma_px / 2.5))   # 3.75 sigma
+    assert len(deep.below_points_robot) == 3 and len(deep.edge_points_robot) >= 2
+    np.testing.assert_array_equal(deep.weak_points_robot, deep.points_robot)           # a drop by both margins
+    # noisy surfaces (a ledge, a ramp, a hole): the same strong result with or without the weak test
+    rng = np.random.default_rng(13)
+    rays, T, bf = _tilted_rig(h=120, w=160, f=100.0)
+    for height_of in (lambda p: np.where(p[:, 0] < 1.2, 0.0, -0.15),
+                      lambda p: -np.clip((p[:, 0] - 1.0) * 0.3, 0.0, 0.3),
+                      lambda p: np.where(np.abs(p[:, 0] - 1.5) < 0.2, -0.3, 0.0)):
+        points = _surface(rays, T, height_of, rng=rng, bf=bf)
+        a, b = (find_drops(points, T, bf, config=DropConfig(weak_n_sigma=w)) for w in (1.0, None))
+        for name in ("edge_points_robot", "below_points_robot", "edge_columns", "candidates_robot"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        assert len(a.weak_points_robot) >= len(a.points_robot) and len(b.weak_points_robot) == 0
+    with pytest.raises(ValueError, match="weak_n_sigma"):
+        DropConfig(weak_n_sigma=-1.0)
+
+
+def test_weak_points_of_two_views_make_a_cell_lethal_one_view_does_not_and_floor_takes_a_vote_back():
+    occupancy = _layers_grid()
+    grid = occupancy.grid
+    weak = np.array([[2.05, 0.05, 0.0]] * 3 + [[2.35, 0.05, -0.3]] * 2)   # 3 points in one cell, 2 in another
+    r, c = (int(v[0]) for v in grid.cells_from_xy(weak[:1, :2]))
+    none = np.empty((0, 3))
+    occupancy.add_layers(none, none, none, None, weak)
+    assert not occupancy.drop.any() and occupancy._drop_votes[r, c, 1] == 1
+    assert np.isnan(occupancy.heights_m).all()                            # weak points widen no height
+    occupancy.add_layers(none, none, none, None, weak)
+    assert occupancy.drop[r, c] and occupancy.occupied[r, c] and occupancy.drop.sum() == 1
+    assert occupancy._drop_votes[..., 0].sum() == 0                       # no vote of the drop test itself
+    copy = occupancy.copy()
+    # a view with its own weak vote there: its floor points do not vote against it
+    on_cell = np.array([[2.05, 0.05, 0.0]] * occupancy.config.drop_clear_points)
+    occupancy.add_layers(none, on_cell, none, None, weak)
+    assert occupancy._drop_votes[r, c, 1] == occupancy.config.drop_max_votes
+    for votes in (2, 1):                                                  # floor measured in the cell, no weak vote
+        occupancy.add_layers(none, on_cell, none, None, none)
+        assert occupancy._drop_votes[r, c, 1] == votes
+    assert not occupancy.drop[r, c]
+    assert copy.drop[r, c]                                                # (a copy keeps its own votes)
+    # without the drop test (no drop points) floor takes no vote back; the footprint clears them
+    copy.add_layers(none, on_cell, None, None, None)
+    assert copy.drop[r, c]
+    copy.clear_disc((2.05, 0.05), 0.1)
+    assert not copy.drop.any()
+    # one view is enough with drop_weak_views=1
+    from mrstereo.mapping import MappingConfig, OccupancyGrid
+
+    one = OccupancyGrid(grid, config=MappingConfig(footprint_radius_m=None, drop_weak_views=1))
+    one.add_layers(none, none, none, None, weak)
+    assert one.drop[r, c] and one.drop.sum() == 1
+    with pytest.raises(ValueError, match="drop_weak_views"):
+        MappingConfig(drop_weak_views=0)
+
+
+def test_the_weak_votes_survive_tiles_their_file_and_an_observation_file(tmp_path):
+    from mrstereo.mapping import MappingConfig
+    from mrstereo.mapping.fusion import FrameObservation
+    from mrstereo.mapping.observations import load_observation, save_observation
+    from mrstereo.mapping.tiles import TiledOccupancyGrid
+
+    tiles = TiledOccupancyGrid(0.1, config=MappingConfig(footprint_radius_m=None), view_reach_m=5.0, tile_cells=16)
+    weak = np.array([[2.05, 0.05, 0.0]] * 4, np.float32)
+    floor = np.array([[x, 0.05, 0.0] for x in np.linspace(0.5, 1.9, 15) for _ in range(6)], np.float32)
+    obs = FrameObservation(index=0, pose=(0.2, 0.05, 0.0), pan_rad=0.0, obstacle_points_world=np.empty((0, 3)),
+                           floor_points_world=floor, n_valid_disparity=9, ground_message="m",
+                           drop_points_world=np.empty((0, 3), np.float32), drop_weak_points_world=weak)
+    save_observation(tmp_path / "0.obs.npz", obs)
+    back = load_observation(tmp_path / "0.obs.npz")
+    np.testing.assert_array_equal(back.layers[4], weak)
+    for _ in range(2):
+        tiles.update(back.obstacle_points_world, back.floor_points_world, (0.2, 0.05, 0.5), layers=back.layers)
+    dense = tiles.to_grid()
+    r, c = (int(v[0]) for v in dense.grid.cells_from_xy(weak[:1, :2]))
+    assert dense.drop[r, c] and dense.drop.sum() == 1
+    tiles.save(tmp_path / "tiles.npz")
+    loaded = TiledOccupancyGrid.load(tmp_path / "tiles.npz")
+    np.testing.assert_array_equal(loaded.to_grid().drop, dense.drop)
+    assert loaded.overview()[0][r, c] == 0                                # occupied in the overview
+    assert load_observation(tmp_path / "0.obs.npz").drop_candidates_world is None
+
+
+def test_a_tiles_file_written_before_the_weak_votes_loads_with_none(tmp_path):
+    """A tiles file whose drop layers are (T, T) (the votes only, as written before the weak votes) loads: the
+    same votes, no weak votes."""
+    from mrstereo.mapping import MappingConfig
+    from mrstereo.mapping.tiles import TiledOccupancyGrid
+
+    tiles = TiledOccupancyGrid(0.1, config=MappingConfig(footprint_radius_m=None), view_reach_m=5.0, tile_cells=16)
+    edge = np.array([[2.05, 0.05, 0.0]] * 4)
+    weak = np.array([[1.05, 0.05, 0.0]] * 4)
+    for _ in range(2):
+        tiles.update(edge, np.empty((0, 3)), (0.2, 0.05, 0.5), layers=(edge, None, edge, None, weak))
+    tiles.save(tmp_path / "new.npz")
+    with np.load(tmp_path / "new.npz") as data:
+        old = {k: data[k][..., 0] if k.endswith("_drop") else data[k] for k in data.files}
+    assert sum(v.sum() for k, v in old.items() if k.endswith("_drop")) == 2          # the edge's two votes
+    np.savez_compressed(tmp_path / "old.npz", **old)
+    new = TiledOccupancyGrid.load(tmp_path / "new.npz").to_grid()
+    back = TiledOccupancyGrid.load(tmp_path / "old.npz").to_grid(new.grid)
+    assert new.drop.sum() == 2 and back.drop.sum() == 1                      # the weak-vote cell is gone
+    np.testing.assert_array_equal(back._drop_votes[..., 0], new._drop_votes[..., 0])
+    assert not back._drop_votes[..., 1].any()
+
+
+def test_weak_points_of_a_robot_standing_still_are_one_view():
+    """Frames from the same pose and pan (a robot standing still sees the same mismatches again) give one weak
+    vote, however many; a turn of the camera (another pan) or a move of a cell makes another view."""
+    from mrstereo.mapping import MappingConfig
+    from mrstereo.mapping.fusion import FrameObservation, fuse
+
+    grid = GridSpec(width_m=4.0, height_m=1.0, resolution_m=0.1, origin_x_m=0.0, origin_y_m=-0.5)
+    weak = np.array([[2.05, 0.05, 0.0]] * 4, np.float32)
+
+    def frame(k, pose, pan):
+        return FrameObservation(index=k, pose=pose, pan_rad=pan, obstacle_points_world=np.empty((0, 3)),
+                                floor_points_world=np.empty((0, 3)), n_valid_disparity=1, ground_message="m",
+                                drop_points_world=np.empty((0, 3), np.float32), drop_weak_points_world=weak)
+
+    config = MappingConfig(footprint_radius_m=None)
+    r, c = (int(v[0]) for v in grid.cells_from_xy(weak[:1, :2]))
+    still = fuse([frame(k, (0.5, 0.0, 0.0), 0.0) for k in range(5)], grid=grid, config=config)
+    assert not still.drop.any() and still._drop_votes[r, c, 1] == 1
+    for second in (frame(1, (0.5, 0.0, 0.0), 0.1), frame(1, (0.62, 0.0, 0.0), 0.0)):
+        two = fuse([frame(0, (0.5, 0.0, 0.0), 0.0), frame(1, (0.5, 0.0, 0.0), 0.0), second], grid=grid,
+                   config=config)
+        assert two.drop[r, c] and two.drop.sum() == 1

@@ -496,35 +496,39 @@ def test_a_view_depends_on_its_points_only_through_their_cells():
 
 
 def _layers_by_numpy(grid: GridSpec, config: MappingConfig, views) -> tuple[np.ndarray, np.ndarray]:
-    """The height and drop layers of ``views`` ((obstacle, floor, drop) point sets) by the rules of
-    ``OccupancyGrid.add_layers``, per cell with numpy: heights by ``fmin.at`` / ``fmax.at``, votes by counts."""
+    """The height and drop layers of ``views`` ((obstacle, floor, drop, candidates (None), weak drop) point sets)
+    by the rules of ``OccupancyGrid.add_layers``, per cell with numpy: heights by ``fmin.at`` / ``fmax.at`` (not
+    of the weak points), votes (the drop points', the weak points') by counts."""
     rows, cols = grid.shape
     heights = np.full((rows * cols, 2), np.nan, np.float32)
-    votes = np.zeros(rows * cols, np.int64)
+    votes = np.zeros((rows * cols, 2), np.int64)
     for view in views:
         counts = []
-        for points in view:
+        for k, points in enumerate(view):
             p = np.empty((0, 3)) if points is None else np.asarray(points, np.float64)
             p = p[np.isfinite(p).all(axis=1)]
             r, c = grid.cells_from_xy(p[:, :2])
             inside = grid.inside(r, c)
             flat = r[inside] * cols + c[inside]
-            z = p[inside, 2].astype(np.float32)
-            np.fmin.at(heights[:, 0], flat, z)
-            np.fmax.at(heights[:, 1], flat, z)
+            if k < 3:
+                z = p[inside, 2].astype(np.float32)
+                np.fmin.at(heights[:, 0], flat, z)
+                np.fmax.at(heights[:, 1], flat, z)
             counts.append(np.bincount(flat, minlength=rows * cols))
         if view[2] is None:
             continue
-        voted = counts[2] >= config.drop_min_points
-        votes[voted] = np.minimum(votes[voted] + 1, config.drop_max_votes)
-        votes[(counts[1] >= config.drop_clear_points) & ~voted & (votes > 0)] -= 1
-    return heights.reshape(rows, cols, 2), votes.reshape(rows, cols)
+        for v, (count, most) in enumerate(((counts[2], config.drop_max_votes),
+                                           (counts[4], max(config.drop_max_votes, config.drop_weak_views)))):
+            voted = count >= config.drop_min_points
+            votes[voted, v] = np.minimum(votes[voted, v] + 1, most)
+            votes[(counts[1] >= config.drop_clear_points) & ~voted & (votes[:, v] > 0), v] -= 1
+    return heights.reshape(rows, cols, 2), votes.reshape(rows, cols, 2)
 
 
 def test_height_and_drop_layers_equal_a_per_cell_count_of_random_views():
     grid = GridSpec(width_m=3.0, height_m=2.0, resolution_m=0.1, origin_x_m=-0.5, origin_y_m=-1.0)
-    config = MappingConfig(drop_min_points=2, drop_clear_points=4)
-    rng = np.random.default_rng(3)
+    config = MappingConfig(drop_min_points=2, drop_clear_points=4, drop_weak_views=4)
+    rng, weak_rng = np.random.default_rng(3), np.random.default_rng(4)
     views = []
     for k in range(25):
         corner = rng.uniform([0.0, -0.5, -1.0], [0.7, 0.2, -1.0])      # the drop points in 0.3 m x 0.3 m of it
@@ -532,15 +536,18 @@ def test_height_and_drop_layers_equal_a_per_cell_count_of_random_views():
                 for low, high, n, dtype in (([-1.0, -1.5, -1.0], [3.0, 1.5, 1.0], 150, np.float32),
                                             ([0.0, -0.5, -0.05], [1.0, 0.5, 0.05], 600, np.float32),
                                             (corner, corner + [0.3, 0.3, 0.9], 60, np.float64))]
+        sets.append(weak_rng.uniform(corner - 0.2, corner + [0.4, 0.4, 0.9], (90, 3)).astype(np.float32))
         sets[0][::13] = np.nan                                    # points without a measurement are skipped
-        views.append((sets[0], sets[1], None if k % 6 == 5 else sets[2]))
+        views.append((sets[0], sets[1], None if k % 6 == 5 else sets[2], None, sets[3]))
     occupancy = OccupancyGrid(grid, config=config)
     voted = [occupancy.add_layers(*view) for view in views]
     heights, votes = _layers_by_numpy(grid, config, views)
     np.testing.assert_array_equal(occupancy.heights_m, heights)
     np.testing.assert_array_equal(occupancy._drop_votes, votes)
-    assert 0 < votes.sum() and votes.max() == config.drop_max_votes and voted[5] == 0 and max(voted) > 0
-    assert (occupancy.drop == (votes > 0)).all()
+    assert 0 < votes[..., 0].sum() and votes[..., 0].max() == config.drop_max_votes and voted[5] == 0
+    assert votes[..., 1].max() == config.drop_weak_views and max(voted) > 0
+    weak_only = (votes[..., 1] >= config.drop_weak_views) & (votes[..., 0] == 0)
+    assert weak_only.any() and (occupancy.drop == ((votes[..., 0] > 0) | weak_only)).all()
     # a view's counts do not leak into the next: one drop point in a cell per view never votes
     single = OccupancyGrid(grid, config=config)
     for _ in range(5):

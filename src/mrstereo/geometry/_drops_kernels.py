@@ -105,8 +105,103 @@ def _seen_through(points, rows, j, k0, k1, m, r_cross, r_low, tx, ty, tz, max_st
 
 
 @njit(nogil=True, cache=True)
-def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m, support, edge_reach_m,
-                 spacing_m, robot_floor, out_edge, out_below, out_candidates, edge_columns):
+def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m, support,
+            edge_reach_m, spacing_m, robot_floor, out_edge, n_edge, out_below, n_below, out_candidates, n_cand,
+            edge_columns):
+    """The drop test of column ``j`` (its measured rows ``rows[:m]``, from the image's bottom up) with the margin
+    ``n_sigma`` (:func:`column_drops`); appends to the outputs from the counts given, returns the new counts."""
+    xa, ya, za, sa = tx, ty, 0.0, 0.0
+    seen_floor = False
+    in_drop = False
+    k = 0
+    while k < m:
+        p = rows[k]
+        xp, yp, zp = points[p, j, 0], points[p, j, 1], points[p, j, 2]
+        sp = n_sigma * _sigma_h(xp, yp, zp, tx, ty, tz, sigma_per_m2)
+        if -(max_step_m + sp) < zp < low_m:
+            if in_drop and _flat_after(points, rows, j, k, m, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
+                                       low_m, edge_reach_m):       # back on the floor after a drop: its far rim
+                n_edge = _emit(out_edge, n_edge, xp, yp)
+                in_drop = False
+            xa, ya, za, sa = xp, yp, zp, sp
+            seen_floor = True
+            k += 1
+            continue
+        if zp >= low_m or not _below(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
+            k += 1
+            continue
+        s = tz / (tz - zp)                       # the sight line to the run's first point at floor level
+        ex, ey = tx + s * (xp - tx), ty + s * (yp - ty)
+        r_low = math.sqrt((xp - tx) ** 2 + (yp - ty) ** 2)
+        end = k                                  # the run of points below the floor
+        deepest = 0.0                            # below a drivable slope from A
+        deepest_e = 0.0                          # below a drivable slope from E
+        q_best = p
+        while end < m and _below(points, rows[end], j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
+            q = rows[end]
+            xq, yq, zq = points[q, j, 0], points[q, j, 1], points[q, j, 2]
+            sq = n_sigma * _sigma_h(xq, yq, zq, tx, ty, tz, sigma_per_m2)
+            d = math.sqrt((xq - xa) ** 2 + (yq - ya) ** 2)
+            deepest = max(deepest, za - zq - math.sqrt(sa * sa + sq * sq) - tan_slope * d)
+            below_e = -zq - sq - tan_slope * math.sqrt((xq - ex) ** 2 + (yq - ey) ** 2)
+            if below_e > deepest_e:
+                deepest_e = below_e
+                q_best = q
+            end += 1
+        # a steep face counts when floor follows it, spreading on (a hole's far wall up to its far rim, a
+        # stair riser); in a column without floor before it, a face reaching floor level (a wall rising
+        # from a lower floor) whose foot no drivable slope from E reaches. Without floor measured in the
+        # column before the run and without ``robot_floor``, the map decides (a candidate)
+        judged = seen_floor or robot_floor
+        drop = judged and deepest > max_step_m
+        if judged and not drop and end - k >= support:
+            drop = ((not seen_floor and deepest_e > max_step_m and end < m and points[rows[end], j, 2] < low_m)
+                    or _flat_after(points, rows, j, end, m, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
+                                   low_m, edge_reach_m)) and _steep(points, rows, j, k, end, max_step_m,
+                                                                    tan_slope, sp)
+        # and its sight line does not pass under floor measured in the column (a mismatch: floor matched
+        # too far lies below the floor, and the floor goes on right after it)
+        if end - k < support or _seen_through(points, rows, j, k, end, m, s * r_low, r_low, tx, ty, tz,
+                                              max_step_m, sigma_per_m2, n_sigma, low_m, support):
+            k = max(end, k + 1)
+            continue
+        length = math.sqrt((ex - xa) ** 2 + (ey - ya) ** 2)
+        if not drop:                             # a candidate for the map: floor it saw before E may confirm it
+            if deepest_e > max_step_m and n_cand < out_candidates.shape[0]:
+                f = 0.0 if length <= 0.0 else max(0.0, 1.0 - edge_reach_m / length)
+                xb, yb, zb = points[q_best, j, 0], points[q_best, j, 1], points[q_best, j, 2]
+                row = out_candidates[n_cand]
+                row[0], row[1], row[2], row[3] = xa + f * (ex - xa), ya + f * (ey - ya), ex, ey
+                row[4], row[5], row[6] = xb, yb, zb
+                row[7] = zb + n_sigma * _sigma_h(xb, yb, zb, tx, ty, tz, sigma_per_m2) + max_step_m
+                row[8] = tan_slope
+                margin = n_sigma * sigma_per_m2 * r_low * r_low       # the first point's depth noise
+                row[9] = margin
+                row[10] = math.sqrt((xp - ex) ** 2 + (yp - ey) ** 2) - margin
+                n_cand += 1
+        else:
+            start = max(0.0, length - edge_reach_m)
+            n_steps = int((length - start) / spacing_m) + 1
+            for q in range(n_steps + 1):
+                f = 1.0 if length <= 0.0 else min(1.0, (start + q * spacing_m) / length)
+                n_edge = _emit(out_edge, n_edge, xa + f * (ex - xa), ya + f * (ey - ya))
+            for q in range(k, end):
+                r = rows[q]
+                if n_below < out_below.shape[0]:
+                    out_below[n_below, 0] = points[r, j, 0]
+                    out_below[n_below, 1] = points[r, j, 1]
+                    out_below[n_below, 2] = points[r, j, 2]
+                    n_below += 1
+            edge_columns[j] += 1
+            in_drop = True
+        k = max(end, k + 1)
+    return n_edge, n_below, n_cand
+
+
+@njit(nogil=True, cache=True)
+def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n_sigma, low_m, support,
+                 edge_reach_m, spacing_m, robot_floor, out_edge, out_below, out_candidates, edge_columns,
+                 weak_edge, weak_below, weak_columns):
     """Drop edges and negative obstacles of a robot-frame point image ``points`` (H, W, 3), NaN invalid.
 
     Up each column (from the image's bottom) a run of at least ``support`` measured points below the floor
@@ -132,104 +227,41 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
     its measured height, ``c0 = z_q + n_sigma sigma_h(q) + max_step`` (floor at height ``z_a`` a horizontal
     ``d`` from ``q`` with ``z_a > c0 + tan_slope d`` confirms the drop) and the stretch beyond ``E`` (to the
     run's first point, less its depth noise at both ends) where measured floor would hide the run (a
-    mismatch). ``t``: the camera in the robot frame. Returns the counts of ``out_edge``, ``out_below`` and
-    ``out_candidates``; ``edge_columns[j]`` counts column j's drops.
+    mismatch). ``t``: the camera in the robot frame.
+
+    ``weak_n_sigma`` >= 0 (negative: off): each column (its measured rows gathered once) is also tested with that
+    looser margin, the same rules (:func:`_column`), its drops' points into ``weak_edge`` / ``weak_below`` and
+    their count into ``weak_columns`` (no candidates): the map's weak votes. A column with no point below the
+    floor by the looser margin of the two is skipped (no run can start in it). Returns the counts of
+    ``out_edge``, ``out_below``, ``out_candidates``, ``weak_edge`` and ``weak_below``; ``edge_columns[j]``
+    counts column j's drops.
     """
     H, W = points.shape[0], points.shape[1]
     tx, ty, tz = t[0], t[1], t[2]
-    n_edge = 0
-    n_below = 0
-    n_cand = 0
+    n_edge = n_below = n_cand = 0
+    n_weak_edge = n_weak_below = 0
+    no_candidates = out_candidates[:0]
+    weak = weak_n_sigma >= 0.0
+    gate = min(n_sigma, weak_n_sigma) if weak else n_sigma
     rows = np.empty(H, np.int64)
     for j in range(W):
         m = 0
+        low = False             # a point below the floor by the looser margin: else no run, no drop in the column
         for i in range(H - 1, -1, -1):
-            if not math.isnan(points[i, j, 2]):
+            z = points[i, j, 2]
+            if not math.isnan(z):
                 rows[m] = i
                 m += 1
-        xa, ya, za, sa = tx, ty, 0.0, 0.0
-        seen_floor = False
-        in_drop = False
-        k = 0
-        while k < m:
-            p = rows[k]
-            xp, yp, zp = points[p, j, 0], points[p, j, 1], points[p, j, 2]
-            sp = n_sigma * _sigma_h(xp, yp, zp, tx, ty, tz, sigma_per_m2)
-            if -(max_step_m + sp) < zp < low_m:
-                if in_drop and _flat_after(points, rows, j, k, m, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
-                                           low_m, edge_reach_m):       # back on the floor after a drop: its far rim
-                    n_edge = _emit(out_edge, n_edge, xp, yp)
-                    in_drop = False
-                xa, ya, za, sa = xp, yp, zp, sp
-                seen_floor = True
-                k += 1
-                continue
-            if zp >= low_m or not _below(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
-                k += 1
-                continue
-            s = tz / (tz - zp)                       # the sight line to the run's first point at floor level
-            ex, ey = tx + s * (xp - tx), ty + s * (yp - ty)
-            r_low = math.sqrt((xp - tx) ** 2 + (yp - ty) ** 2)
-            end = k                                  # the run of points below the floor
-            deepest = 0.0                            # below a drivable slope from A
-            deepest_e = 0.0                          # below a drivable slope from E
-            q_best = p
-            while end < m and _below(points, rows[end], j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
-                q = rows[end]
-                xq, yq, zq = points[q, j, 0], points[q, j, 1], points[q, j, 2]
-                sq = n_sigma * _sigma_h(xq, yq, zq, tx, ty, tz, sigma_per_m2)
-                d = math.sqrt((xq - xa) ** 2 + (yq - ya) ** 2)
-                deepest = max(deepest, za - zq - math.sqrt(sa * sa + sq * sq) - tan_slope * d)
-                below_e = -zq - sq - tan_slope * math.sqrt((xq - ex) ** 2 + (yq - ey) ** 2)
-                if below_e > deepest_e:
-                    deepest_e = below_e
-                    q_best = q
-                end += 1
-            # a steep face counts when floor follows it, spreading on (a hole's far wall up to its far rim, a
-            # stair riser); in a column without floor before it, a face reaching floor level (a wall rising
-            # from a lower floor) whose foot no drivable slope from E reaches. Without floor measured in the
-            # column before the run and without ``robot_floor``, the map decides (a candidate)
-            judged = seen_floor or robot_floor
-            drop = judged and deepest > max_step_m
-            if judged and not drop and end - k >= support:
-                drop = ((not seen_floor and deepest_e > max_step_m and end < m and points[rows[end], j, 2] < low_m)
-                        or _flat_after(points, rows, j, end, m, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
-                                       low_m, edge_reach_m)) and _steep(points, rows, j, k, end, max_step_m,
-                                                                        tan_slope, sp)
-            # and its sight line does not pass under floor measured in the column (a mismatch: floor matched
-            # too far lies below the floor, and the floor goes on right after it)
-            if end - k < support or _seen_through(points, rows, j, k, end, m, s * r_low, r_low, tx, ty, tz,
-                                                  max_step_m, sigma_per_m2, n_sigma, low_m, support):
-                k = max(end, k + 1)
-                continue
-            length = math.sqrt((ex - xa) ** 2 + (ey - ya) ** 2)
-            if not drop:                             # a candidate for the map: floor it saw before E may confirm it
-                if deepest_e > max_step_m and n_cand < out_candidates.shape[0]:
-                    f = 0.0 if length <= 0.0 else max(0.0, 1.0 - edge_reach_m / length)
-                    xb, yb, zb = points[q_best, j, 0], points[q_best, j, 1], points[q_best, j, 2]
-                    row = out_candidates[n_cand]
-                    row[0], row[1], row[2], row[3] = xa + f * (ex - xa), ya + f * (ey - ya), ex, ey
-                    row[4], row[5], row[6] = xb, yb, zb
-                    row[7] = zb + n_sigma * _sigma_h(xb, yb, zb, tx, ty, tz, sigma_per_m2) + max_step_m
-                    row[8] = tan_slope
-                    margin = n_sigma * sigma_per_m2 * r_low * r_low       # the first point's depth noise
-                    row[9] = margin
-                    row[10] = math.sqrt((xp - ex) ** 2 + (yp - ey) ** 2) - margin
-                    n_cand += 1
-            else:
-                start = max(0.0, length - edge_reach_m)
-                n_steps = int((length - start) / spacing_m) + 1
-                for q in range(n_steps + 1):
-                    f = 1.0 if length <= 0.0 else min(1.0, (start + q * spacing_m) / length)
-                    n_edge = _emit(out_edge, n_edge, xa + f * (ex - xa), ya + f * (ey - ya))
-                for q in range(k, end):
-                    r = rows[q]
-                    if n_below < out_below.shape[0]:
-                        out_below[n_below, 0] = points[r, j, 0]
-                        out_below[n_below, 1] = points[r, j, 1]
-                        out_below[n_below, 2] = points[r, j, 2]
-                        n_below += 1
-                edge_columns[j] += 1
-                in_drop = True
-            k = max(end, k + 1)
-    return n_edge, n_below, n_cand
+                if z < -max_step_m and not low:
+                    low = _below(points, i, j, tx, ty, tz, max_step_m, sigma_per_m2, gate)
+        if not low:
+            continue
+        n_edge, n_below, n_cand = _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
+                                          n_sigma, low_m, support, edge_reach_m, spacing_m, robot_floor, out_edge,
+                                          n_edge, out_below, n_below, out_candidates, n_cand, edge_columns)
+        if weak:
+            n_weak_edge, n_weak_below, _ = _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope,
+                                                   sigma_per_m2, weak_n_sigma, low_m, support, edge_reach_m,
+                                                   spacing_m, robot_floor, weak_edge, n_weak_edge, weak_below,
+                                                   n_weak_below, no_candidates, 0, weak_columns)
+    return n_edge, n_below, n_cand, n_weak_edge, n_weak_below

@@ -48,7 +48,9 @@ class DropConfig:
     passes floor level, a point every ``spacing_m``. ``robot_floor``: a run with no floor measured before it in
     its column is judged against the floor under the robot (one frame finds a ledge whose near floor is not
     matched); False: only the map's memory of the floor confirms it, so a floor that gives no disparity stays
-    unknown (docs/obstacles.md, "Drops").
+    unknown (docs/obstacles.md, "Drops"). ``weak_n_sigma``: the same test with this looser margin too, in the same
+    pass; its drops are *weak* points (:attr:`DropResult.weak_points_robot`) that mark nothing alone: the map
+    makes a cell lethal where ``MappingConfig.drop_weak_views`` views put them (None: off).
     """
 
     max_step_m: float = 0.05
@@ -59,6 +61,7 @@ class DropConfig:
     edge_reach_m: float = 0.1
     spacing_m: float = 0.01
     robot_floor: bool = True
+    weak_n_sigma: float | None = 0.75
 
     def __post_init__(self) -> None:
         _checks.finite_number("max_step_m", self.max_step_m, nonnegative=True)
@@ -72,6 +75,8 @@ class DropConfig:
             raise TypeError(f"robot_floor must be a bool, got {type(self.robot_floor).__name__}")
         _checks.finite_number("edge_reach_m", self.edge_reach_m, nonnegative=True)
         _checks.finite_number("spacing_m", self.spacing_m, positive=True)
+        if self.weak_n_sigma is not None:
+            _checks.finite_number("weak_n_sigma", self.weak_n_sigma, nonnegative=True)
 
 
 @dataclass(frozen=True)
@@ -81,12 +86,15 @@ class DropResult:
     height), ``edge_columns`` (W,) the number of edges found in each image column, ``candidates_robot`` (K, 11)
     the runs below the floor that one frame cannot tell from a ramp starting out of view (no floor measured
     near enough before them in their column), for the map to confirm with the floor it measured before
-    (:data:`CANDIDATE_COLUMNS`; :meth:`mrstereo.mapping.OccupancyGrid.add_layers`)."""
+    (:data:`CANDIDATE_COLUMNS`; :meth:`mrstereo.mapping.OccupancyGrid.add_layers`), ``weak_points_robot``
+    (P, 3) the points of the drops of the test with ``DropConfig.weak_n_sigma`` (edges at floor level, then the
+    lower points; those of the drops above among them), for the map's weak votes (empty: off)."""
 
     edge_points_robot: np.ndarray
     below_points_robot: np.ndarray
     edge_columns: np.ndarray
     candidates_robot: np.ndarray = field(default_factory=lambda: np.empty((0, len(CANDIDATE_COLUMNS))))
+    weak_points_robot: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
 
     @property
     def points_robot(self) -> np.ndarray:
@@ -140,18 +148,24 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     out_below = np.empty((h * w // 2 + 1, 3))
     out_candidates = np.empty((4 * w, len(CANDIDATE_COLUMNS)))
     columns = np.zeros(w, np.int64)
+    weak = config.weak_n_sigma is not None
+    weak_edge, weak_below = (np.empty_like(out_edge), np.empty_like(out_below)) if weak else (out_edge[:0],
+                                                                                              out_below[:0])
     if t[2] <= 0.0:
         raise ValueError(f"T_robot_from_cam puts the camera {t[2]:.3f} m above the floor; it must be above it")
-    n_edge, n_below, n_cand = _drops_kernels.column_drops(
+    n_edge, n_below, n_cand, n_weak_edge, n_weak_below = _drops_kernels.column_drops(
         pts, t, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
-        float(config.disparity_sigma_px) / bf, float(config.n_sigma), top, int(config.support),
-        float(config.edge_reach_m), float(config.spacing_m), bool(config.robot_floor), out_edge, out_below,
-        out_candidates, columns)
-    edge, below, cand = out_edge[:n_edge], out_below[:n_below], out_candidates[:n_cand]
-    edge = edge[np.hypot(edge[:, 0] - t[0], edge[:, 1] - t[1]) <= reach]
-    below = below[np.hypot(below[:, 0] - t[0], below[:, 1] - t[1]) <= reach]
-    cand = cand[np.hypot(cand[:, 2] - t[0], cand[:, 3] - t[1]) <= reach]
-    return DropResult(edge_points_robot=edge, below_points_robot=below, edge_columns=columns, candidates_robot=cand)
+        float(config.disparity_sigma_px) / bf, float(config.n_sigma),
+        float(config.weak_n_sigma) if weak else -1.0, top, int(config.support), float(config.edge_reach_m),
+        float(config.spacing_m), bool(config.robot_floor), out_edge, out_below, out_candidates, columns,
+        weak_edge, weak_below, np.zeros(w, np.int64))
+    def near(a, x=0):               # the rows whose point (columns x, x + 1) lies within max_range_m
+        return a[np.hypot(a[:, x] - t[0], a[:, x + 1] - t[1]) <= reach]
+
+    return DropResult(edge_points_robot=near(out_edge[:n_edge]), below_points_robot=near(out_below[:n_below]),
+                      edge_columns=columns, candidates_robot=near(out_candidates[:n_cand], 2),
+                      weak_points_robot=np.concatenate([near(weak_edge[:n_weak_edge]),
+                                                        near(weak_below[:n_weak_below])]))
 
 
 def transform_candidates(T, candidates) -> np.ndarray:

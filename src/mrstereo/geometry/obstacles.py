@@ -100,7 +100,8 @@ class ObstacleResult:
     placements), raster order, with their flat pixel indices ``pixels``; ``obstacle_points_robot`` /
     ``floor_points_robot`` among them and the disjoint (H, W) ``obstacle_mask`` / ``floor_mask``;
     ``drop_points_robot`` the drop test's points (edges at floor level, then the lower points at their
-    measured height; :mod:`.drops`), which ``obstacle_points_robot`` ends with at floor level (z = 0);
+    measured height; :mod:`.drops`), which ``obstacle_points_robot`` ends with at floor level (z = 0), and its
+    weak points (``drop_weak_points_robot``, :attr:`.drops.DropResult.weak_points_robot`: for the map only);
     ``ground`` and ``T_robot_from_cam`` used; ``success`` False (empty masks) without a floor,
     ``message`` how it was obtained; ``too_near_mask`` the too-near pixels placed at the near limit.
     """
@@ -119,6 +120,7 @@ class ObstacleResult:
     drop_points_robot: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
     drop_candidates_robot: np.ndarray = field(default_factory=lambda: np.empty((0, len(CANDIDATE_COLUMNS))))
     """The drop test's candidates for the map to confirm (:attr:`.drops.DropResult.candidates_robot`)."""
+    drop_weak_points_robot: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
 
     @property
     def too_near_obstacle_mask(self) -> np.ndarray:
@@ -292,11 +294,12 @@ def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleCo
                        float(stereo.baseline_m) * float(stereo.focal_px), config=config.drops,
                        floor_top_m=config.min_obstacle_height_m, max_range_m=config.max_range_m)
     found = drops.points_robot
-    if not len(found) and not len(drops.candidates_robot):
+    if not len(found) and not len(drops.candidates_robot) and not len(drops.weak_points_robot):
         return result
     out = replace(result, obstacle_points_robot=np.concatenate([result.obstacle_points_robot,
                                                                 drops.obstacle_points_robot]),
                   drop_points_robot=found, drop_candidates_robot=drops.candidates_robot,
+                  drop_weak_points_robot=drops.weak_points_robot,
                   message=result.message + f"; {int(np.count_nonzero(drops.edge_columns))} columns with a drop")
     out.__dict__["points_robot_image"] = result.points_robot_image      # computed once
     return out

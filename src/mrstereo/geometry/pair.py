@@ -230,6 +230,8 @@ class Observed:
     """The drop test's points at their measured height (None: the test is off)."""
     drop_candidates_robot: np.ndarray | None = None
     """The drop test's candidates for the map (:attr:`.drops.DropResult.candidates_robot`; None: the test is off)."""
+    drop_weak_points_robot: np.ndarray | None = None
+    """The drop test's weak points for the map (:attr:`.drops.DropResult.weak_points_robot`; None: the test is off)."""
     n_valid_disparity: int = 0
     scan: LaserScan | None = None
     disparity_px: np.ndarray | None = None
@@ -243,6 +245,12 @@ class Observed:
     """The :class:`~mrstereo.recordings.sources.StereoFrame` itself while the floor is not known (kept to be
     mapped once it is)."""
     time_s: float = 0.0
+
+
+def _drop_data(obs, on: bool) -> dict:
+    """The drop test's data of an :class:`~.obstacles.ObstacleResult` as :class:`Observed` fields (None: off)."""
+    return {name: getattr(obs, name) if on else None
+            for name in ("drop_points_robot", "drop_candidates_robot", "drop_weak_points_robot")}
 
 
 def observe_pair(frame, stereo: StereoCamera, mount: CameraMount | None, config, *,
@@ -284,9 +292,7 @@ def observe_pair(frame, stereo: StereoCamera, mount: CameraMount | None, config,
     return Observed(**base, mount=mount, ground=obs.ground, floor_fit=floor_fit, frame=frame if fit_floor else None,
                     obstacle_points_robot=np.concatenate([obs.obstacle_points_robot, boundary]),
                     n_boundary=len(boundary), floor_points_robot=obs.floor_points_robot,
-                    drop_points_robot=obs.drop_points_robot if config.obstacle_config.drops is not None else None,
-                    drop_candidates_robot=(obs.drop_candidates_robot if config.obstacle_config.drops is not None
-                                           else None),
+                    **_drop_data(obs, config.obstacle_config.drops is not None),
                     n_valid_disparity=int(np.isfinite(pair.disparity_px).sum()),
                     scan=replace(result.scan, stamp_s=float(frame.stamp_s)),
                     disparity_px=pair.disparity_px if keep_images else None,

@@ -535,44 +535,51 @@ def layer_points(points, slot, origin_x, origin_y, resolution, rows, cols, heigh
                  clear_points):
     """One view's points (N, 3) into the height and drop layers, in one pass: each finite point inside the grid
     widens its cell's lowest and highest height (``heights`` (rows*cols, 2) float32, NaN: none yet); with ``slot``
-    0 (floor points) or 1 (drop points) it counts in ``counts[cell, slot]`` (int32 scratch: a cell whose
-    ``stamp`` is not ``view`` starts from zero, so no pass clears it). A cell reaching ``clear_points`` floor
-    points without a vote of this view (``counts[cell, 1]`` >= 0; the drop points come first) loses a vote
-    (``votes``, down to 0). Returns the points inside."""
+    0 (floor points), 1 (drop points) or 2 (weak drop points: they count, but widen no height) it counts in
+    ``counts[cell, slot]`` (int32 scratch: a cell whose ``stamp`` is not ``view`` starts from zero, so no pass
+    clears it). A cell reaching ``clear_points`` floor points loses a vote (``votes[cell, 0]``, down to 0) when
+    this view gave it none (``counts[cell, 1]`` >= 0; the drop points come first), and a weak vote
+    (``votes[cell, 1]``) when this view gave it no weak vote (``counts[cell, 2]`` >= 0). Returns the points
+    inside."""
     n = 0
     for i in range(points.shape[0]):
         k = _flat_cell(points, i, origin_x, origin_y, resolution, rows, cols)
         if k < 0:
             continue
-        z = np.float32(points[i, 2])
-        if not heights[k, 0] <= z:          # (NaN: the first point)
-            heights[k, 0] = z
-        if not heights[k, 1] >= z:
-            heights[k, 1] = z
         n += 1
+        if slot < 2:
+            z = np.float32(points[i, 2])
+            if not heights[k, 0] <= z:          # (NaN: the first point)
+                heights[k, 0] = z
+            if not heights[k, 1] >= z:
+                heights[k, 1] = z
         if slot < 0:
             continue
         if stamp[k] != view:
             stamp[k] = view
             counts[k, 0] = 0
             counts[k, 1] = 0
+            counts[k, 2] = 0
         counts[k, slot] += 1
-        if slot == 0 and counts[k, 0] == clear_points and counts[k, 1] >= 0 and votes[k] > 0:
-            votes[k] -= 1
+        if slot == 0 and counts[k, 0] == clear_points:
+            for v in range(2):
+                if counts[k, v + 1] >= 0 and votes[k, v] > 0:
+                    votes[k, v] -= 1
     return n
 
 
 @njit(nogil=True, cache=True)
-def drop_votes(drops, origin_x, origin_y, resolution, rows, cols, counts, votes, min_points, max_votes):
-    """The votes for drops of one view, after :func:`layer_points` counted its drop points: a cell with at least
-    ``min_points`` of them gains a vote (up to ``max_votes``) and its count becomes -1 (voted: once per view,
-    and the view's floor points do not vote against it). Returns the number of cells that got a vote."""
+def drop_votes(drops, slot, origin_x, origin_y, resolution, rows, cols, counts, votes, min_points, max_votes):
+    """The votes for drops of one view, after :func:`layer_points` counted its drop points (``slot`` 1) or weak
+    drop points (2): a cell with at least ``min_points`` of them gains a vote (``votes[cell, slot - 1]``, up to
+    ``max_votes``) and its count becomes -1 (voted: once per view, and the view's floor points do not vote
+    against it). Returns the number of cells that got a vote."""
     n = 0
     for i in range(drops.shape[0]):
         k = _flat_cell(drops, i, origin_x, origin_y, resolution, rows, cols)
-        if k >= 0 and counts[k, 1] >= min_points:
-            votes[k] = min(votes[k] + 1, max_votes)
-            counts[k, 1] = -1
+        if k >= 0 and counts[k, slot] >= min_points:
+            votes[k, slot - 1] = min(votes[k, slot - 1] + 1, max_votes)
+            counts[k, slot] = -1
             n += 1
     return n
 
@@ -586,7 +593,7 @@ def confirm_drops(candidates, origin_x, origin_y, resolution, rows, cols, height
     toward the camera (half a cell a step, at most ``max_walk_m``), a cell whose lowest point lies at floor
     level (within ``floor_tol``) lies above ``c0 + tan_slope d`` (``d``: from the run's point ``q``): the
     floor was measured there and no drivable slope from it reaches ``q``. It is not when a floor-level cell
-    that is no drop cell (``votes``; a drop edge lies at floor level too) lies between ``hide_from_m`` (at
+    that is no drop cell (``votes[:, 0]``; a drop edge lies at floor level too) lies between ``hide_from_m`` (at
     least a cell) and ``hide_to_m`` (less a cell) beyond ``E``: its sight line would pass under measured
     floor (a mismatch). A confirmed candidate puts its edge ``S -> E`` at floor level (a point every fifth
     of a cell) and ``q`` at its height into ``out``. Returns the number of points written."""
@@ -604,7 +611,7 @@ def confirm_drops(candidates, origin_x, origin_y, resolution, rows, cols, height
         s = max(resolution, candidates[i, 9])
         while s < candidates[i, 10] - resolution and not seen:
             k = _cell_at(ex + vx * s, ey + vy * s, origin_x, origin_y, resolution, rows, cols)
-            seen = k >= 0 and abs(heights[k, 0]) <= floor_tol and votes[k] == 0
+            seen = k >= 0 and abs(heights[k, 0]) <= floor_tol and votes[k, 0] == 0
             s += step
         if seen:
             continue

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -23,10 +23,15 @@ from .occupancy import MappingConfig, OccupancyGrid, ViewCells
 from .tiles import TiledOccupancyGrid
 
 __all__ = ["FrameObservation", "world_observation", "fuse", "fuse_step", "add_observation", "sweep_footprint",
-           "MAX_SWEEP_M"]
+           "MAX_SWEEP_M", "SAME_VIEW_TURN_RAD"]
 
 MAX_SWEEP_M = 2.0
 """Consecutive frames at most this far apart are joined by a straight sweep of the robot's footprint."""
+
+SAME_VIEW_TURN_RAD = math.radians(1.0)
+"""A frame whose robot lies within a cell of the last frame whose weak drop points the map counted, its camera
+turned less than this from that frame's, is the same view again (a robot standing still): its weak points do
+not vote (:func:`fuse_step`), as the map's weak votes must come from several views."""
 
 
 @dataclass(frozen=True)
@@ -55,14 +60,17 @@ class FrameObservation:
     drop_candidates_world: np.ndarray | None = None
     """The drop test's candidates (K, 11) the map confirms with the floor it measured before
     (:data:`mrstereo.geometry.drops.CANDIDATE_COLUMNS`); None: none."""
+    drop_weak_points_world: np.ndarray | None = None
+    """The drop test's weak points (:attr:`mrstereo.geometry.drops.DropResult.weak_points_robot`), for the map's
+    weak votes; None: none."""
 
     @property
     def layers(self) -> tuple:
         """The arguments of :meth:`OccupancyGrid.add_layers`: the measured obstacle points (without the
-        boundary's), the floor points, the drop points and candidates."""
+        boundary's), the floor points, the drop points, candidates and weak points."""
         n = len(self.obstacle_points_world) - self.boundary_points
         return self.obstacle_points_world[:n], self.floor_points_world, self.drop_points_world, \
-            self.drop_candidates_world
+            self.drop_candidates_world, self.drop_weak_points_world
 
     @property
     def sensor_origin_world(self) -> tuple[float, ...]:
@@ -92,29 +100,44 @@ def fuse(observations: Iterable[FrameObservation], *, grid: GridSpec | None = Gr
         occupancy = TiledOccupancyGrid(resolution_m, config=config, view_reach_m=view_reach_m)
     else:
         occupancy = OccupancyGrid(grid, config=config)
-    previous = None
+    previous = weak_view = None
     for obs in observations:
-        fuse_step(occupancy, obs, previous)
+        weak_view = fuse_step(occupancy, obs, previous, weak_view)
         previous = obs.pose
     return occupancy
 
 
-def fuse_step(occupancy: OccupancyGrid | TiledOccupancyGrid, obs: FrameObservation, previous_pose=None) -> None:
+def fuse_step(occupancy: OccupancyGrid | TiledOccupancyGrid, obs: FrameObservation, previous_pose=None,
+              weak_view=None) -> tuple[float, float, float] | None:
     """One step of :func:`fuse`: the robot's footprint swept from ``previous_pose`` (the frame before's, None
-    for the first) to the frame's pose, then the frame added (:func:`add_observation`)."""
+    for the first) to the frame's pose, then the frame added (:func:`add_observation`), without its weak drop
+    points when it is the same view (:data:`SAME_VIEW_TURN_RAD`) as ``weak_view``. Returns the view ``(x, y,
+    heading + pan)`` of the last frame whose weak points were added (``weak_view`` when not this one's): the
+    next step's ``weak_view``."""
     radius = occupancy.config.footprint_radius_m
     if radius:
         near = previous_pose is not None and math.dist(previous_pose[:2], obs.pose[:2]) <= MAX_SWEEP_M
         sweep_footprint(occupancy, previous_pose if near else obs.pose, obs.pose, radius)
+    if obs.drop_weak_points_world is not None:
+        view = (float(obs.pose[0]), float(obs.pose[1]), float(obs.pose[2]) + float(obs.pan_rad))
+        if weak_view is not None and math.dist(view[:2], weak_view[:2]) < _resolution(occupancy) and \
+                abs(math.remainder(view[2] - weak_view[2], math.tau)) < SAME_VIEW_TURN_RAD:
+            obs = replace(obs, drop_weak_points_world=None)
+        else:
+            weak_view = view
     add_observation(occupancy, obs)
+    return weak_view
+
+
+def _resolution(occupancy) -> float:
+    return occupancy.grid.resolution_m if isinstance(occupancy, OccupancyGrid) else occupancy.resolution_m
 
 
 def sweep_footprint(occupancy, start_xy, end_xy, radius_m: float) -> None:
     """Clear the cells a disc of ``radius_m`` touches on its way from ``start_xy`` to ``end_xy`` (discs at
     most a cell apart along the segment, :meth:`OccupancyGrid.clear_disc`)."""
     a, b = np.asarray(start_xy[:2], dtype=np.float64), np.asarray(end_xy[:2], dtype=np.float64)
-    resolution = occupancy.grid.resolution_m if isinstance(occupancy, OccupancyGrid) else occupancy.resolution_m
-    steps = max(1, int(np.ceil(np.linalg.norm(b - a) / resolution)))
+    steps = max(1, int(np.ceil(np.linalg.norm(b - a) / _resolution(occupancy))))
     for t in (np.linspace(0.0, 1.0, steps + 1) if np.any(a != b) else (1.0,)):
         occupancy.clear_disc(a + t * (b - a), radius_m)
 
@@ -143,8 +166,8 @@ def world_observation(observed, pose: tuple[float, float, float], stereo: Stereo
         T = T_from_planar(*pose)
         obstacles = transform_points(T, observed.obstacle_points_robot).astype(np.float32)
         floor = transform_points(T, observed.floor_points_robot).astype(np.float32)
-        drops = None if observed.drop_points_robot is None else \
-            transform_points(T, observed.drop_points_robot).astype(np.float32)
+        drops, weak = (None if p is None else transform_points(T, p).astype(np.float32)
+                       for p in (observed.drop_points_robot, observed.drop_weak_points_robot))
         candidates = None if observed.drop_candidates_robot is None else \
             transform_candidates(T, observed.drop_candidates_robot)
         ground = observed.ground
@@ -154,4 +177,4 @@ def world_observation(observed, pose: tuple[float, float, float], stereo: Stereo
                             n_valid_disparity=observed.n_valid_disparity, ground_message=ground.message,
                             baseline_focal_m_px=float(stereo.baseline_m * stereo.focal_px),
                             sensor_height_m=height, boundary_points=observed.n_boundary, drop_points_world=drops,
-                            drop_candidates_world=candidates)
+                            drop_candidates_world=candidates, drop_weak_points_world=weak)

@@ -117,6 +117,10 @@ def remove_stale_frames(frames_dir: str | os.PathLike, n_frames: int) -> list[Pa
 _FRAME_FILE = re.compile(r"(\d{6,})(\.pfm|\.ply|\.scan\.json|\.obs\.npz)")
 
 
+_DROP_DATA = ("drop_points_world", "drop_candidates_world", "drop_weak_points_world")
+"""The drop test's arrays of a :class:`FrameObservation` (saved when not None)."""
+
+
 def save_observation(path: str | os.PathLike, obs: FrameObservation, fingerprint: str = "") -> None:
     """Write ``obs`` (and ``fingerprint``) to ``path`` atomically."""
     with atomic_write(Path(path)) as tmp, open(tmp, "wb") as fh:
@@ -126,8 +130,7 @@ def save_observation(path: str | os.PathLike, obs: FrameObservation, fingerprint
                  baseline_focal_m_px=np.nan if obs.baseline_focal_m_px is None else obs.baseline_focal_m_px,
                  sensor_height_m=np.nan if obs.sensor_height_m is None else obs.sensor_height_m,
                  boundary_points=obs.boundary_points,
-                 **({} if obs.drop_points_world is None else {"drop_points_world": obs.drop_points_world}),
-                 **({} if obs.drop_candidates_world is None else {"drop_candidates_world": obs.drop_candidates_world}))
+                 **{name: getattr(obs, name) for name in _DROP_DATA if getattr(obs, name) is not None})
 
 
 def observation_fingerprint(path: str | os.PathLike) -> str | None:
@@ -147,9 +150,7 @@ def load_observation(path: str | os.PathLike) -> FrameObservation:
                                 baseline_focal_m_px=_optional_float(z["baseline_focal_m_px"]),
                                 sensor_height_m=_optional_float(z["sensor_height_m"]),
                                 boundary_points=int(z["boundary_points"]),
-                                drop_points_world=z["drop_points_world"] if "drop_points_world" in z.files else None,
-                                drop_candidates_world=(z["drop_candidates_world"] if "drop_candidates_world" in z.files
-                                                       else None))
+                                **{name: z[name] if name in z.files else None for name in _DROP_DATA})
 
 
 def _optional_float(value) -> float | None:

@@ -107,6 +107,10 @@ class MappingConfig:
         clears it, only floor measured in it (and the robot's footprint).
     drop_clear_points : int
     drop_max_votes : int
+    drop_weak_views : int
+        The drop test's weak points (``DropConfig.weak_n_sigma``: drops within the noise margin) vote the same
+        way in a layer of their own (up to ``max(drop_max_votes, drop_weak_views)``): a cell with weak votes
+        from at least this many views is lethal too (docs/mapping.md, "Height and drop layers").
     drop_low_m : float or None
         The height layer's edge: a cell with a point at floor level next to a cell whose lowest point lies
         more than this below the floor is a drop cell too (the floor ends there and the view goes on lower).
@@ -134,10 +138,11 @@ class MappingConfig:
     drop_min_points: int = 3
     drop_clear_points: int = 20
     drop_max_votes: int = 3
+    drop_weak_views: int = 2
     drop_low_m: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("drop_min_points", "drop_clear_points", "drop_max_votes"):
+        for name in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_weak_views"):
             _checks.positive_int(name, getattr(self, name))
         if self.drop_low_m is not None:
             _checks.finite_number("drop_low_m", self.drop_low_m, positive=True)
@@ -213,6 +218,12 @@ def _points_xy(name: str, value) -> np.ndarray:
         raise TypeError(f"{name} must hold numbers, got dtype {arr.dtype}")
     # float32 and float64 points as they are (the kernels take each coordinate as float64)
     return np.ascontiguousarray(arr, dtype=arr.dtype if arr.dtype in (np.float32, np.float64) else np.float64)
+
+
+def _voted(votes: np.ndarray, config: MappingConfig) -> np.ndarray:
+    """The cells of drop votes ``votes`` (..., 2: the drop test's, its weak points') that are drop cells: a vote,
+    or weak votes from ``config.drop_weak_views`` views (:meth:`OccupancyGrid.add_layers`)."""
+    return (votes[..., 0] > 0) | (votes[..., 1] >= config.drop_weak_views)
 
 
 def _layer_points(name: str, value) -> np.ndarray:
@@ -537,8 +548,9 @@ class OccupancyGrid:
         self._z_range_m[..., 0] = np.inf
         self._z_range_m[..., 1] = -np.inf
         # the height layer (lowest, highest point height seen in the cell; NaN: none) and the drop votes
+        # (the drop test's, its weak points')
         self._heights_m = np.full(grid.shape + (2,), np.nan, np.float32)
-        self._drop_votes = np.zeros(grid.shape, np.int16)
+        self._drop_votes = np.zeros(grid.shape + (2,), np.int16)
         self._counts = self._stamp = None       # add_layers' per-view point counts per cell, and their view
         self._view = 0
         self.n_updates = 0
@@ -579,7 +591,7 @@ class OccupancyGrid:
         return result
 
     def add_layers(self, obstacle_points_world, floor_points_world, drop_points_world=None,
-                   drop_candidates_world=None) -> int:
+                   drop_candidates_world=None, drop_weak_points_world=None) -> int:
         """The height and drop layers of one view (with its :meth:`update`, after :meth:`apply`).
 
         Every point (N, 3) (z above the floor: obstacle, floor and the drop test's points, the latter at their
@@ -591,9 +603,12 @@ class OccupancyGrid:
         confirmed ones' edges join ``drop_points_world``. A cell with at least
         ``config.drop_min_points`` of ``drop_points_world`` gets a drop vote (up to ``drop_max_votes``); a
         cell with at least ``drop_clear_points`` of ``floor_points_world`` and no vote from this view loses
-        one (``drop_points_world`` None: no drop test, no votes either way). Votes change only here and under
-        the footprint (:meth:`clear_disc`), never by a ray passing over the cell. Returns the number of cells
-        that got a vote.
+        one (``drop_points_world`` None: no drop test, no votes either way). The drop test's weak points
+        (``drop_weak_points_world``, N, 3; :attr:`mrstereo.geometry.drops.DropResult.weak_points_robot`) vote
+        the same way in the weak layer (up to ``max(drop_max_votes, drop_weak_views)``, the floor taking one
+        back; none without ``drop_points_world``); they widen no height. Votes change only here and under the
+        footprint (:meth:`clear_disc`), never by a ray passing over the cell. Returns the number of cells that
+        got a vote (of the drop test's points).
         """
         with stage("grid.layers"):
             c = self.config
@@ -607,15 +622,20 @@ class OccupancyGrid:
                     [np.asarray(drop_points_world, dtype=confirmed.dtype).reshape(-1, 3), confirmed])
             sets = [_layer_points(name, p) for name, p in (("obstacle_points_world", obstacle_points_world),
                                                               ("floor_points_world", floor_points_world),
-                                                              ("drop_points_world", drop_points_world))]
-            if self._counts is None:                # per-view scratch: counts of floor and drop points per cell
-                self._counts = np.zeros((rows * cols, 2), np.int32)
+                                                              ("drop_points_world", drop_points_world),
+                                                              ("drop_weak_points_world", drop_weak_points_world))]
+            if self._counts is None:    # per-view scratch: counts of floor, drop and weak drop points per cell
+                self._counts = np.zeros((rows * cols, 3), np.int32)
                 self._stamp = np.full(rows * cols, -1, np.int32)
             self._view = (self._view + 1) % (1 << 31)           # the cells stamped with another view count from 0
-            votes = self._drop_votes.reshape(-1)
+            votes = self._drop_votes.reshape(-1, 2)
             scratch = (self._counts, self._stamp, self._view, votes, c.drop_clear_points)
             _kernels.layer_points(sets[2], 1, *at, heights, *scratch)
-            voted = _kernels.drop_votes(sets[2], *at, self._counts, votes, c.drop_min_points, c.drop_max_votes)
+            voted = _kernels.drop_votes(sets[2], 1, *at, self._counts, votes, c.drop_min_points, c.drop_max_votes)
+            if drop_points_world is not None:
+                _kernels.layer_points(sets[3], 2, *at, heights, *scratch)
+                _kernels.drop_votes(sets[3], 2, *at, self._counts, votes, c.drop_min_points,
+                                    max(c.drop_max_votes, c.drop_weak_views))
             _kernels.layer_points(sets[1], 0 if drop_points_world is not None else -1, *at, heights, *scratch)
             _kernels.layer_points(sets[0], -1, *at, heights, *scratch)
             return int(voted)
@@ -629,7 +649,7 @@ class OccupancyGrid:
         spacing = 0.2 * self.grid.resolution_m
         longest = float(np.hypot(rows[:, 2] - rows[:, 0], rows[:, 3] - rows[:, 1]).max())
         out = np.empty((len(rows) * (int(longest / spacing) + 4), 3), np.float32)
-        n = _kernels.confirm_drops(rows, *at, heights, self._drop_votes.reshape(-1),
+        n = _kernels.confirm_drops(rows, *at, heights, self._drop_votes.reshape(-1, 2),
                                    float(self.config.height_tolerance_m), CONFIRM_WALK_M, out)
         return out[:n]
 
@@ -702,12 +722,13 @@ class OccupancyGrid:
 
     @property
     def drop(self) -> np.ndarray:
-        """The drop cells, occupied whatever the log-odds: those with a drop vote (:meth:`add_layers`), and the
-        floor's last cells before a lower one (the height layer: a cell with a point at floor level next to
-        a cell whose lowest point lies more than ``config.drop_low_m`` below the floor)."""
+        """The drop cells, occupied whatever the log-odds: those with a drop vote or weak votes from
+        ``config.drop_weak_views`` views (:meth:`add_layers`), and the floor's last cells before a lower one
+        (the height layer: a cell with a point at floor level next to a cell whose lowest point lies more than
+        ``config.drop_low_m`` below the floor)."""
         from scipy.ndimage import binary_dilation
 
-        voted = self._drop_votes > 0
+        voted = _voted(self._drop_votes, self.config)
         if self.config.drop_low_m is None:
             return voted
         low = np.nan_to_num(self._heights_m[..., 0], nan=0.0) < -self.config.drop_low_m

@@ -24,14 +24,14 @@ import numpy as np
 from .. import _checks
 from ..io import atomic_write, write_image
 from .grid import BYTES_PER_CELL, GridSpec
-from .occupancy import (GridUpdate, MappingConfig, OccupancyGrid, _finite_bounds, _points_xy, disc_cells,
+from .occupancy import (GridUpdate, MappingConfig, OccupancyGrid, _finite_bounds, _points_xy, _voted, disc_cells,
                         log_odds_from_probability)
 from .rosmap import FREE, OCCUPIED, UNKNOWN, write_map_yaml
 
 __all__ = ["TiledOccupancyGrid", "TILE_CELLS", "DENSE_MAP_MAX_CELLS", "OVERVIEW_MAX_PX"]
 
 TILE_CELLS = 128
-"""Cells along a tile's side (6.4 m at 5 cm): 416 KiB of log-odds, heights and drop votes per tile."""
+"""Cells along a tile's side (6.4 m at 5 cm): 448 KiB of log-odds, heights and drop votes per tile."""
 
 DENSE_MAP_MAX_CELLS = 2048 * 2048
 """The most cells of a map written whole as one dense grid (map.pgm, log_odds.npy, map.png, the metrics):
@@ -136,7 +136,7 @@ class TiledOccupancyGrid:
             z = np.empty((t, t, 2), np.float32)
             z[..., 0], z[..., 1] = np.inf, -np.inf
             self._tiles[key] = (np.full((t, t), np.nan), z, np.full((t, t, 2), np.nan, np.float32),
-                                np.zeros((t, t), np.int16))
+                                np.zeros((t, t, 2), np.int16))
         return self._tiles[key]
 
     def _store(self, grid: OccupancyGrid) -> None:
@@ -156,7 +156,7 @@ class TiledOccupancyGrid:
         rows, cols = [], []
         t = self.tile_cells
         for (ty, tx), (values, _, _, votes) in self._tiles.items():
-            known = ~np.isnan(values) | (votes > 0)
+            known = ~np.isnan(values) | _voted(votes, self.config)
             if known.any():
                 r, c = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
                 rows += [ty * t + r[0], ty * t + r[-1]]
@@ -212,7 +212,9 @@ class TiledOccupancyGrid:
             raise ValueError(f"sensor_origin_world must be 2 or 3 finite numbers (x, y[, z]), got {sensor_origin_world!r}")
         obstacles = _points_xy("points_obstacle_world", points_obstacle_world)
         floor = _points_xy("points_free_world", points_free_world)
-        window = self.to_grid(self.spec(*self._window((obstacles, floor), sensor[:2])))
+        # the drop test's weak points (no obstacle points, :meth:`OccupancyGrid.add_layers`) lie in the window too
+        weak = _points_xy("drop_weak_points_world", layers[4] if layers is not None and len(layers) > 4 else None)
+        window = self.to_grid(self.spec(*self._window((obstacles, floor, weak), sensor[:2])))
         window.points_outside = 0
         result = window.update(obstacles, floor, sensor_origin_world,
                                baseline_focal_m_px=baseline_focal_m_px, layers=layers)
@@ -305,6 +307,8 @@ class TiledOccupancyGrid:
                             if key not in data.files and saved in ("heights", "drop"):
                                 continue                    # (a map saved before the height and drop layers)
                             values = data[key]
+                            if saved == "drop" and values.shape == stored.shape[:2]:
+                                values = np.stack([values, np.zeros_like(values)], axis=-1)   # (no weak votes)
                             if values.shape != stored.shape:
                                 raise ValueError(f"tile {key} has shape {values.shape}, not {stored.shape}")
                             stored[...] = values
@@ -329,10 +333,11 @@ class TiledOccupancyGrid:
         threshold = float(log_odds_from_probability(self.config.occupied_thresh))
         t = self.tile_cells
         for (ty, tx), (values, _, _, votes) in self._tiles.items():
-            known = ~np.isnan(values) | (votes > 0)
+            known = ~np.isnan(values) | _voted(votes, self.config)
             if not known.any():
                 continue
-            cls = known.astype(np.uint8) + ((np.nan_to_num(values, nan=-np.inf) > threshold) | (votes > 0))
+            cls = known.astype(np.uint8) + ((np.nan_to_num(values, nan=-np.inf) > threshold)
+                                            | _voted(votes, self.config))
             # (known cells lie within the bounds, so every index below is inside ``level``)
             if t % k == 0:                                # whole blocks inside the tile: a reshape
                 block = cls.reshape(t // k, k, t // k, k).max(axis=(1, 3))

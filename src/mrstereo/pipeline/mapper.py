@@ -247,7 +247,7 @@ class StereoMapper:
             raise ValueError(f"odometry must be 'auto', 'given' or 'visual', got {odometry!r}")
         self.odometry: str | None = None if odometry == "auto" else odometry
         self._vo: StereoOdometry | None = None
-        self._previous_xy = None
+        self._previous_xy = self._weak_view = None    # the last frame's pose, the last weak drop votes' view
         self.observations: list[FrameObservation] = []
         self.trajectory_T: list[np.ndarray] = []
         self.trajectory_index: list[int] = []
@@ -453,7 +453,7 @@ class StereoMapper:
             stamp_s: float | None = None, T_world_from_base_true: np.ndarray | None = None) -> None:
         """Fuse a frame's world points (a :class:`~mrstereo.mapping.fusion.FrameObservation`, e.g. one stored
         by a batch run) into the map, after the frames before it; its pose joins the trajectory."""
-        fuse_step(self.grid, obs, self._previous_xy)
+        self._weak_view = fuse_step(self.grid, obs, self._previous_xy, self._weak_view)
         self._previous_xy = obs.pose
         self.n_points += len(obs.obstacle_points_world) + len(obs.floor_points_world)
         if self.keep_observations:
@@ -461,7 +461,8 @@ class StereoMapper:
                 obs, obstacle_points_world=obs.obstacle_points_world[:0].copy(),      # (copies: a view keeps it all)
                 floor_points_world=obs.floor_points_world[:0].copy(), cells=None,
                 drop_points_world=None if obs.drop_points_world is None else obs.drop_points_world[:0].copy(),
-                drop_candidates_world=None))
+                drop_candidates_world=None, drop_weak_points_world=(None if obs.drop_weak_points_world is None
+                                                                    else obs.drop_weak_points_world[:0].copy())))
         self._on_trajectory(obs.index, T_from_planar(*obs.pose) if T_world_from_base is None else T_world_from_base,
                             float(obs.index) * 0.1 if stamp_s is None else stamp_s, T_world_from_base_true, obs.pan_rad)
         self._count_outside(obs)
