@@ -27,6 +27,10 @@ whole mapper step (the grid and its height and drop layers too) on corridor fram
 by any frame (and why), measured but no drop by the column rule (which of its margins), a candidate the map
 never confirmed, a frame's drop lost in the map.
 
+``--oracle``: the same chain and maps with each frame's true disparity in place of the matcher's
+(:func:`oracle_disparity`; eq. (13) and all after it unchanged): what the drop test and the map reach with a
+perfect matcher, so a miss is the rules' or the geometry's, not the sensor noise's (with ``--why``, ``--n-sigma``).
+
 ``--real``: the first frames of the EuRoC ASL sample, KITTI odometry 06 and 01 and OpenLORIS: the share of cells
 free without the drop test that are not free with it (at most 0.5 % on these flat floors), and the drop cells.
 
@@ -37,6 +41,7 @@ Usage::
 
     python benchmarks/bench_drops.py --seeds 200-209 [--frames 24]
     python benchmarks/bench_drops.py --seeds 0-4 100-109 --why
+    python benchmarks/bench_drops.py --seeds 200-209 --oracle [--n-sigma 1] [--why]
     python benchmarks/bench_drops.py --real [--frames 24]
     python benchmarks/bench_drops.py --speed [--repeats 15]
     python benchmarks/bench_drops.py --corridor [--data DIR]
@@ -46,6 +51,7 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
+from contextlib import contextmanager, nullcontext
 from dataclasses import replace
 from pathlib import Path
 
@@ -74,6 +80,49 @@ def paired_maps(manifest, *, frames: int | None = None, config=None, drops=None)
     drops = DropConfig() if drops is None else drops
     return tuple(build_map(manifest, config=replace(config, obstacles=replace(obstacles, drops=d)), progress=False)
                  for d in (drops, None))
+
+
+@contextmanager
+def oracle_disparity(manifest):
+    """``--oracle``: while inside, the chain's matcher (:func:`mrstereo.matching.compute_disparity` as
+    :mod:`mrstereo.geometry.pair` calls it) returns the frame's TRUE disparity (its ``gt_disparity``, of the
+    rectified left image the chain receives, found by content among ``manifest``'s frames) where a perfect
+    matcher has a match: NaN where the match falls outside the right image or is hidden from the right
+    camera (a nearer pixel to its right lands on or left of it) or lies beyond the farthest searched
+    disparity, too near beyond the nearest. Eq. (13) and all after it run as usual. Yields the indices of the
+    frames substituted, one per call; an image of no frame raises. Maps built inside must run on one worker
+    (``build_map``'s default)."""
+    import hashlib
+
+    from mrstereo.geometry import pair
+    from mrstereo.io.images import read_pfm
+    from mrstereo.matching import DisparityResult, make_plan
+    from mrstereo.recordings.manifest import frame_pair
+
+    key = lambda image: hashlib.sha1(np.ascontiguousarray(image).tobytes()).digest()        # noqa: E731
+    truth = {key(frame_pair(r)[0]): (k, r.gt_disparity) for k, r in enumerate(manifest.frames)}
+    used: list[int] = []
+    matcher = pair.compute_disparity
+
+    def oracle(left, right, **kwargs):
+        index, path = truth[key(left)]
+        used.append(index)
+        d = read_pfm(path).astype(np.float32)
+        plan = make_plan((d.shape[1], d.shape[0]), **kwargs)
+        lo, hi = min(v.band_px[0] for v in plan.levels), max(v.band_px[1] for v in plan.levels)
+        x_right = np.arange(d.shape[1], dtype=np.float32) - d
+        ahead = np.minimum.accumulate(x_right[:, ::-1], axis=1)[:, ::-1]        # min over x' >= x
+        hidden = np.concatenate([ahead[:, 1:], np.full((d.shape[0], 1), np.inf, np.float32)], axis=1) <= x_right
+        too_near = d > hi
+        d = np.where(hidden | (x_right < 0) | (d < lo) | too_near, np.nan, d).astype(np.float32)
+        return DisparityResult(disparity_px=d, confidence=np.isfinite(d).astype(np.float32), plan=plan,
+                               levels=(d,), too_near=too_near & ~hidden & (x_right >= 0))
+
+    pair.compute_disparity = oracle
+    try:
+        yield used
+    finally:
+        pair.compute_disparity = matcher
 
 
 def _drivable(height: np.ndarray, free: np.ndarray, start: tuple[int, int], max_step_m: float) -> np.ndarray:
@@ -130,9 +179,11 @@ def _seen_floor(manifest, grid, height: np.ndarray, range_m: float) -> np.ndarra
 
 
 def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, config=None, drops=None,
-                  why: bool = False) -> dict:
+                  why: bool = False, oracle: bool = False) -> dict:
     """Render world ``seed`` with drops, map it with and without the drop test, score both (see the module).
-    ``why``: also the causes of the missed edge cells (:func:`missed_causes`) under ``"why"``."""
+    ``why``: also the causes of the missed edge cells (:func:`missed_causes`) under ``"why"``. ``oracle``: the
+    true disparity instead of the matcher's (:func:`oracle_disparity`; the frames substituted under
+    ``"oracle frames"``)."""
     from scipy.ndimage import binary_dilation
 
     from mrstereo.geometry.drops import DropConfig
@@ -147,7 +198,8 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
     manifest = read_manifest(ds)
     world = random_world(seed, drops=True)
     t0 = time.process_time()
-    run, plain = paired_maps(manifest, config=config, drops=drops)
+    with oracle_disparity(manifest) if oracle else nullcontext([]) as used:
+        run, plain = paired_maps(manifest, config=config, drops=drops)
     cpu = time.process_time() - t0
     grid = run.grid.grid
     step = DropConfig().max_step_m
@@ -175,7 +227,8 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
             r, c = grid.cells_from_xy(plan.path_xy)
             inside = grid.inside(r, c)
             crossings += int((free[r[inside], c[inside]] & ~drivable[r[inside], c[inside]]).any())
-    causes = missed_causes(manifest, grid, target & ~near_lethal, run.range_m, config, drops) if why else None
+    with oracle_disparity(manifest) if oracle else nullcontext([]):
+        causes = missed_causes(manifest, grid, target & ~near_lethal, run.range_m, config, drops) if why else None
     return {"seed": seed, "edge cells in view": int(target.sum()),
             "recall": float((near_lethal & target).sum() / max(target.sum(), 1)),
             "recall 4 m": float((near_lethal & far).sum() / max(far.sum(), 1)),
@@ -185,7 +238,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
             "crossings": crossings, "drop cells": int(run.grid.drop.sum()),
             "ramp/kerb cells": int(off_plain.sum()), "goals": len(goals), "cpu s": cpu,
             "kinds": [world.summary["drops"]["end"]["kind"]] + [p["kind"] for p in world.summary["drops"]["patches"]],
-            **({"why": causes} if why else {})}
+            **({"oracle frames": len(used)} if oracle else {}), **({"why": causes} if why else {})}
 
 
 CAUSES = ("a: no pixel sees it", "a: out of disparity range", "a: image border", "a: uniform (eq. 13)", "a: matcher invalid",
@@ -499,6 +552,8 @@ def main() -> None:
                         default=DropConfig.weak_n_sigma, help="DropConfig.weak_n_sigma ('none': no weak votes)")
     parser.add_argument("--why", action="store_true",
                         help="also the causes of the missed edge cells, per seed and summed (missed_causes)")
+    parser.add_argument("--oracle", action="store_true",
+                        help="the frames' true disparity instead of the matcher's (oracle_disparity)")
     parser.add_argument("--real", action="store_true", help="the real recordings instead of the worlds")
     parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
     parser.add_argument("--speed", action="store_true", help="CPU time of a frame with and without the drop test")
@@ -531,7 +586,7 @@ def main() -> None:
     data.mkdir(parents=True, exist_ok=True)
     rows = []
     for seed in _parse_seeds(args.seeds):
-        row = evaluate_seed(seed, args.frames, data, args.view, config, drops, why=args.why)
+        row = evaluate_seed(seed, args.frames, data, args.view, config, drops, why=args.why, oracle=args.oracle)
         rows.append(row)
         print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()), flush=True)
     edge = sum(r["edge cells in view"] for r in rows)

@@ -46,3 +46,35 @@ def test_missed_causes_tell_apart_cells_detected_unseen_and_plain_floor(first_st
         counts = missed_causes(manifest, grid, one, run.range_m)
         assert counts[cause] == 1, counts
     assert set(causes) == set(CAUSES)
+
+
+def test_oracle_disparity_feeds_the_chain_the_true_disparity(first_stop):
+    """Inside ``oracle_disparity`` the chain's disparity before eq. (13) is the frame's true one wherever it is
+    valid, NaN where the match falls outside the right image; outside it the matcher's again; an image of no
+    frame of the recording raises."""
+    from bench_drops import oracle_disparity
+
+    from mrstereo.geometry.pair import obstacles_from_pair
+    from mrstereo.io.images import read_pfm
+    from mrstereo.recordings.manifest import frame_pair
+
+    manifest, _ = first_stop
+    record = manifest.frames[1]
+    left, right, rectified = frame_pair(record)
+    truth = read_pfm(record.gt_disparity)
+    pair = lambda a, b: obstacles_from_pair(a, b, manifest.calibration, rectified=rectified,   # noqa: E731
+                                            mount=manifest.mount, pan_rad=record.pan_rad)
+    with oracle_disparity(manifest) as used:
+        frame = pair(left, right)
+        with pytest.raises(KeyError):
+            pair(right, left)
+    assert used == [1]
+    raw = frame.raw_disparity_px
+    valid = np.isfinite(raw)
+    assert valid.mean() > 0.8
+    np.testing.assert_array_equal(raw[valid], truth[valid])
+    assert not valid[np.arange(truth.shape[1])[None, :] - truth < 0].any()
+    assert np.isfinite(frame.disparity_px).sum() < valid.sum()          # eq. (13) still rejects
+    matched = pair(left, right).raw_disparity_px
+    both = np.isfinite(matched) & valid
+    assert not np.array_equal(matched[both], truth[both])
