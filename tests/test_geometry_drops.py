@@ -586,7 +586,7 @@ def test_a_drop_within_the_noise_margin_is_weak_not_strong():
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
         assert len(a.weak_points_robot) >= len(a.points_robot) and len(b.weak_points_robot) == 0
     with pytest.raises(ValueError, match="weak_n_sigma"):
-        DropConfig(weak_n_sigma=3.5)
+        DropConfig(weak_n_sigma=-1.0)
 
 
 def test_weak_points_of_two_views_make_a_cell_lethal_one_view_does_not_and_floor_takes_a_vote_back():

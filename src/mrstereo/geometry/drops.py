@@ -76,9 +76,7 @@ class DropConfig:
         _checks.finite_number("edge_reach_m", self.edge_reach_m, nonnegative=True)
         _checks.finite_number("spacing_m", self.spacing_m, positive=True)
         if self.weak_n_sigma is not None:
-            weak = _checks.finite_number("weak_n_sigma", self.weak_n_sigma, nonnegative=True)
-            if weak > self.n_sigma:
-                raise ValueError(f"weak_n_sigma must be at most n_sigma ({self.n_sigma}), got {weak}")
+            _checks.finite_number("weak_n_sigma", self.weak_n_sigma, nonnegative=True)
 
 
 @dataclass(frozen=True)
