@@ -38,8 +38,8 @@ def _below(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
 @njit(nogil=True, cache=True)
 def _steep(points, rows, j, k0, k1, max_step_m, tan_slope, noise_m):
     """Does the run ``rows[k0:k1]`` of column ``j`` start with a face steeper than the slope limit over a
-    step (the far wall of a pit, a stair riser; later in the run a wall rising from a lower floor that a
-    gentle slope led to)?"""
+    step (the far wall of a pit, a stair riser; later in the run a wall rising from the lower floor that the
+    rim before the run hid)?"""
     for a in range(k0, min(k0 + 4, k1)):
         pa = rows[a]
         for b in range(a + 1, min(a + 12, k1)):
@@ -86,8 +86,11 @@ def _seen_through(points, rows, j, k0, k1, m, r_cross, r_low, tx, ty, tz, max_st
                   low_m, support):
     """Is the sight line of a run below the floor contradicted: do at least ``support`` floor-level points
     of the column (other than the run ``rows[k0:k1]``) lie beyond where it passes floor level (``r_cross``)
-    and before its point (``r_low``), by more than their depth noise? Its ray would pass under that floor:
-    the run is a mismatch (a floor seen too far), not a drop."""
+    and before its point (``r_low``), by more than their depth noise, and nearer ``r_cross`` than ``r_low``?
+    Its ray would pass under that floor: the run is a mismatch (a floor seen too far: the true floor
+    follows it near ``r_cross``), not a drop. A face rising from the run through floor level (a far wall)
+    stays at the run's range: its points are no floor in between."""
+    r_mid = 0.5 * (r_cross + r_low)
     n = 0
     for q in range(m):
         if k0 <= q < k1:
@@ -97,7 +100,7 @@ def _seen_through(points, rows, j, k0, k1, m, r_cross, r_low, tx, ty, tz, max_st
             continue
         r = _range(points, p, j, tx, ty)
         margin = n_sigma * sigma_per_m2 * r * r
-        if r_cross + margin < r < r_low - margin:
+        if r_cross + margin < r < min(r_low - margin, r_mid):
             n += 1
             if n >= support:
                 return True
@@ -150,11 +153,13 @@ def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
             end += 1
         # a steep face counts when floor follows it, spreading on (a hole's far wall up to its far rim, a
         # stair riser); in a column without floor before it, a face reaching floor level (a wall rising
-        # from a lower floor) whose foot no drivable slope from E reaches. Without floor measured in the
-        # column before the run and without ``robot_floor``, the map decides (a candidate)
+        # from a lower floor) whose foot no drivable slope from E reaches; in both only when the run starts
+        # more than a step below A (the rim hid what lies between: a run entered within a step went down
+        # a drivable slope, a face rising from it is a step up). Without floor measured in the column
+        # before the run and without ``robot_floor``, the map decides (a candidate)
         judged = seen_floor or robot_floor
         drop = judged and deepest > max_step_m
-        if judged and not drop and end - k >= support:
+        if judged and not drop and end - k >= support and za - zp > max_step_m:
             drop = ((not seen_floor and deepest_e > max_step_m and end < m and points[rows[end], j, 2] < low_m)
                     or _flat_after(points, rows, j, end, m, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
                                    low_m, edge_reach_m)) and _steep(points, rows, j, k, end, max_step_m,
@@ -177,7 +182,8 @@ def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
                 row[8] = tan_slope
                 margin = n_sigma * sigma_per_m2 * r_low * r_low       # the first point's depth noise
                 row[9] = margin
-                row[10] = math.sqrt((xp - ex) ** 2 + (yp - ey) ** 2) - margin
+                gap = math.sqrt((xp - ex) ** 2 + (yp - ey) ** 2)
+                row[10] = min(gap - margin, 0.5 * gap)                  # nearer E than the run (_seen_through)
                 n_cand += 1
         else:
             start = max(0.0, length - edge_reach_m)
