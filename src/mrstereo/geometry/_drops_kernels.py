@@ -86,21 +86,29 @@ def _seen_through(points, rows, j, k0, k1, m, r_cross, r_low, tx, ty, tz, max_st
                   low_m, support):
     """Is the sight line of a run below the floor contradicted: do at least ``support`` floor-level points
     of the column (other than the run ``rows[k0:k1]``) lie beyond where it passes floor level (``r_cross``)
-    and before its point (``r_low``), by more than their depth noise, and nearer ``r_cross`` than ``r_low``?
-    Its ray would pass under that floor: the run is a mismatch (a floor seen too far: the true floor
-    follows it near ``r_cross``), not a drop. A face rising from the run through floor level (a far wall)
-    stays at the run's range: its points are no floor in between."""
-    r_mid = 0.5 * (r_cross + r_low)
+    and before its point (``r_low``), by more than their depth noise? Its ray would pass under that floor:
+    the run is a mismatch (a floor seen too far; the true floor follows it near where the sight line of its
+    last point passes floor level), not a drop. The points right after the run nearer its last point than
+    half way to that crossing are a face rising from it (a far wall through floor level, at the run's
+    range), no floor in between."""
+    pl = rows[k1 - 1]
+    r_last = _range(points, pl, j, tx, ty)
+    r_face = 0.5 * r_last * (1.0 + tz / (tz - points[pl, j, 2]))
+    face = True
     n = 0
     for q in range(m):
         if k0 <= q < k1:
             continue
         p = rows[q]
+        r = _range(points, p, j, tx, ty)
+        if face and q >= k1:
+            if r > r_face:
+                continue
+            face = False
         if not _floor_level(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma, low_m):
             continue
-        r = _range(points, p, j, tx, ty)
         margin = n_sigma * sigma_per_m2 * r * r
-        if r_cross + margin < r < min(r_low - margin, r_mid):
+        if r_cross + margin < r < r_low - margin:
             n += 1
             if n >= support:
                 return True
@@ -182,8 +190,7 @@ def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
                 row[8] = tan_slope
                 margin = n_sigma * sigma_per_m2 * r_low * r_low       # the first point's depth noise
                 row[9] = margin
-                gap = math.sqrt((xp - ex) ** 2 + (yp - ey) ** 2)
-                row[10] = min(gap - margin, 0.5 * gap)                  # nearer E than the run (_seen_through)
+                row[10] = math.sqrt((xp - ex) ** 2 + (yp - ey) ** 2) - margin
                 n_cand += 1
         else:
             start = max(0.0, length - edge_reach_m)
@@ -217,9 +224,10 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n
     starts with a face steeper than that slope over a step and floor follows it, spreading on over
     ``edge_reach_m`` (a hole's far wall, a stair riser; in a column without floor before the run, with
     ``robot_floor``, a face reaching floor level whose foot lies deeper than a step plus that slope from
-    ``E``). Its sight
+    ``E``; either face only when the run starts more than a step below ``A``). Its sight
     line passes floor level at ``E``: no ``support`` floor-level points of the column may lie between ``E``
-    and the run's first point beyond their depth noise (that floor would hide it: a mismatch). Points every
+    and the run's first point beyond their depth noise (that floor would hide it: a mismatch; a far wall
+    rising from the run right after it, at its range, is no such floor). Points every
     ``spacing_m`` over the last ``edge_reach_m`` of ``A -> E`` go to ``out_edge``, the run's points to
     ``out_below``. Floor spreading on after a drop marks its first point (a far rim).
 
