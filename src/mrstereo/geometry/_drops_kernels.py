@@ -100,13 +100,13 @@ def _seen_through(points, rows, j, k0, k1, m, r_cross, r_low, tx, ty, tz, max_st
         if k0 <= q < k1:
             continue
         p = rows[q]
-        r = _range(points, p, j, tx, ty)
         if face and q >= k1:
-            if r > r_face:
+            if _range(points, p, j, tx, ty) > r_face:
                 continue
             face = False
         if not _floor_level(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma, low_m):
             continue
+        r = _range(points, p, j, tx, ty)
         margin = n_sigma * sigma_per_m2 * r * r
         if r_cross + margin < r < r_low - margin:
             n += 1
