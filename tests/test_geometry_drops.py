@@ -698,3 +698,64 @@ def test_weak_points_of_a_robot_standing_still_are_one_view():
         two = fuse([frame(0, (0.5, 0.0, 0.0), 0.0), frame(1, (0.5, 0.0, 0.0), 0.0), second], grid=grid,
                    config=config)
         assert two.drop[r, c] and two.drop.sum() == 1
+
+
+def _column(x, z):
+    """One image column (N, 1, 3) of points at ``x`` (forward) and heights ``z``, given from the image's bottom
+    (the nearest) up, seen by a camera 0.5 m up; its pose. The drop test with exact points (``n_sigma`` 0)."""
+    column = np.stack([x, np.zeros_like(x), z], -1)[::-1, None, :]      # row 0 the farthest (image top)
+    T = np.eye(4)
+    T[2, 3] = 0.5
+    return column, T, DropConfig(n_sigma=0.0, weak_n_sigma=None)
+
+
+def test_a_far_wall_whose_points_lean_a_hair_nearer_than_the_run_is_no_floor_in_between():
+    """Floor to 1.2 m, a ledge 0.3 m down, its far wall at 2 m rising through floor level and leaning toward
+    the camera by 1e-5 m a point (its points at floor level a hair nearer than the run's first one): the wall
+    is no floor between the sight line's crossing of floor level (1.25 m) and the run, the drop is found,
+    its edge between the last floor point and that crossing; a floor patch matched too far stays a mismatch."""
+    floor = np.arange(0.8, 1.201, 0.05)
+    wall_z = np.arange(-0.3, 0.101, 0.02)
+    x = np.concatenate([floor, 2.0 - 1e-5 * np.arange(len(wall_z))])
+    z = np.concatenate([np.zeros_like(floor), wall_z])
+    column, T, config = _column(x, z)
+    found = find_drops(column, T, 20.0, config=config)
+    edge = found.edge_points_robot
+    assert len(edge) >= 2 and np.all((edge[:, 0] >= 1.2 - 1e-9) & (edge[:, 0] <= 1.25 + 1e-9)), edge
+    assert np.all(found.below_points_robot[:, 0] > 1.99) and found.edge_columns[0] == 1
+    # floor matched too far (0.3 m down on the sight lines of 1.3-1.4 m), the true floor after it from 1.45 m
+    near = np.arange(0.8, 1.251, 0.05)
+    true = np.array([1.3, 1.35, 1.4])
+    far = np.arange(1.45, 2.0, 0.05)
+    x = np.concatenate([near, true * 0.8 / 0.5, far])
+    z = np.concatenate([np.zeros_like(near), np.full(3, -0.3), np.zeros_like(far)])
+    column, T, config = _column(x, z)
+    assert len(find_drops(column, T, 20.0, config=config).points_robot) == 0
+
+
+def test_a_drivable_ramp_ending_at_a_rising_face_is_no_drop_a_hole_is():
+    """Floor to 1.2 m, an 8 degree ramp down to 2.15 m, a face rising there back to floor level and floor
+    after it: the run below the floor is entered within a step of the last floor point (down the ramp), the
+    face is a step up, not a drop at the ramp's start. A hole 0.4 m wide behind a rim (its far wall seen from
+    0.115 m down, within a step and a 10 degree slope of the rim) is one, found by the face rule."""
+    tan = math.tan(math.radians(8.0))
+    floor = np.arange(0.8, 1.201, 0.05)
+    ramp = np.array([1.3, 1.5, 1.7, 1.9, 2.1])
+    face_z = np.arange(-0.12, 0.001, 0.02)
+    after = np.arange(2.2, 2.61, 0.05)
+    x = np.concatenate([floor, ramp, np.full(len(face_z), 2.15), after])
+    z = np.concatenate([np.zeros_like(floor), -(ramp - 1.2) * tan, face_z, np.zeros_like(after)])
+    column, T, config = _column(x, z)
+    found = find_drops(column, T, 20.0, config=config)
+    assert len(found.points_robot) == 0 and len(found.candidates_robot) == 0
+    floor = np.arange(0.8, 1.501, 0.05)
+    face_z = np.arange(-0.115, 0.001, 0.01)
+    after = np.arange(1.95, 2.41, 0.05)
+    x = np.concatenate([floor, np.full(len(face_z), 1.9), after])
+    z = np.concatenate([np.zeros_like(floor), face_z, np.zeros_like(after)])
+    column, T, config = _column(x, z)
+    found = find_drops(column, T, 20.0, config=config)
+    assert found.edge_columns[0] == 1
+    e = 1.9 * 0.5 / 0.615                                              # the sight line to (1.9, -0.115) at z = 0
+    edge = found.edge_points_robot[found.edge_points_robot[:, 0] < 1.9]
+    assert len(edge) >= 2 and np.all((edge[:, 0] >= 1.5 - 1e-9) & (edge[:, 0] <= e + 1e-9)), edge

@@ -38,8 +38,8 @@ def _below(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
 @njit(nogil=True, cache=True)
 def _steep(points, rows, j, k0, k1, max_step_m, tan_slope, noise_m):
     """Does the run ``rows[k0:k1]`` of column ``j`` start with a face steeper than the slope limit over a
-    step (the far wall of a pit, a stair riser; later in the run a wall rising from a lower floor that a
-    gentle slope led to)?"""
+    step (the far wall of a pit, a stair riser; later in the run a wall rising from the lower floor that the
+    rim before the run hid)?"""
     for a in range(k0, min(k0 + 4, k1)):
         pa = rows[a]
         for b in range(a + 1, min(a + 12, k1)):
@@ -87,12 +87,23 @@ def _seen_through(points, rows, j, k0, k1, m, r_cross, r_low, tx, ty, tz, max_st
     """Is the sight line of a run below the floor contradicted: do at least ``support`` floor-level points
     of the column (other than the run ``rows[k0:k1]``) lie beyond where it passes floor level (``r_cross``)
     and before its point (``r_low``), by more than their depth noise? Its ray would pass under that floor:
-    the run is a mismatch (a floor seen too far), not a drop."""
+    the run is a mismatch (a floor seen too far; the true floor follows it near where the sight line of its
+    last point passes floor level), not a drop. The points right after the run nearer its last point than
+    half way to that crossing are a face rising from it (a far wall through floor level, at the run's
+    range), no floor in between."""
+    pl = rows[k1 - 1]
+    r_last = _range(points, pl, j, tx, ty)
+    r_face = 0.5 * r_last * (1.0 + tz / (tz - points[pl, j, 2]))
+    face = True
     n = 0
     for q in range(m):
         if k0 <= q < k1:
             continue
         p = rows[q]
+        if face and q >= k1:
+            if _range(points, p, j, tx, ty) > r_face:
+                continue
+            face = False
         if not _floor_level(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma, low_m):
             continue
         r = _range(points, p, j, tx, ty)
@@ -150,11 +161,13 @@ def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
             end += 1
         # a steep face counts when floor follows it, spreading on (a hole's far wall up to its far rim, a
         # stair riser); in a column without floor before it, a face reaching floor level (a wall rising
-        # from a lower floor) whose foot no drivable slope from E reaches. Without floor measured in the
-        # column before the run and without ``robot_floor``, the map decides (a candidate)
+        # from a lower floor) whose foot no drivable slope from E reaches; in both only when the run starts
+        # more than a step below A (the rim hid what lies between: a run entered within a step went down
+        # a drivable slope, a face rising from it is a step up). Without floor measured in the column
+        # before the run and without ``robot_floor``, the map decides (a candidate)
         judged = seen_floor or robot_floor
         drop = judged and deepest > max_step_m
-        if judged and not drop and end - k >= support:
+        if judged and not drop and end - k >= support and za - zp > max_step_m:
             drop = ((not seen_floor and deepest_e > max_step_m and end < m and points[rows[end], j, 2] < low_m)
                     or _flat_after(points, rows, j, end, m, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
                                    low_m, edge_reach_m)) and _steep(points, rows, j, k, end, max_step_m,
@@ -211,9 +224,10 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n
     starts with a face steeper than that slope over a step and floor follows it, spreading on over
     ``edge_reach_m`` (a hole's far wall, a stair riser; in a column without floor before the run, with
     ``robot_floor``, a face reaching floor level whose foot lies deeper than a step plus that slope from
-    ``E``). Its sight
+    ``E``; either face only when the run starts more than a step below ``A``). Its sight
     line passes floor level at ``E``: no ``support`` floor-level points of the column may lie between ``E``
-    and the run's first point beyond their depth noise (that floor would hide it: a mismatch). Points every
+    and the run's first point beyond their depth noise (that floor would hide it: a mismatch; a far wall
+    rising from the run right after it, at its range, is no such floor). Points every
     ``spacing_m`` over the last ``edge_reach_m`` of ``A -> E`` go to ``out_edge``, the run's points to
     ``out_below``. Floor spreading on after a drop marks its first point (a far rim).
 
