@@ -252,14 +252,14 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n
     """
     H, W = points.shape[0], points.shape[1]
     tx, ty, tz = t[0], t[1], t[2]
-    n_edge = n_below = n_cand = 0
-    n_weak_edge = n_weak_below = 0
+    # counts typed int64 from the start: a literal 0 would compile _column once more for it
+    n_edge = n_below = n_cand = n_weak_edge = n_weak_below = none = np.int64(0)
     no_candidates = out_candidates[:0]
     weak = weak_n_sigma >= 0.0
     gate = min(n_sigma, weak_n_sigma) if weak else n_sigma
     rows = np.empty(H, np.int64)
     for j in range(W):
-        m = 0
+        m = np.int64(0)
         low = False             # a point below the floor by the looser margin: else no run, no drop in the column
         for i in range(H - 1, -1, -1):
             z = points[i, j, 2]
@@ -277,5 +277,5 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n
             n_weak_edge, n_weak_below, _ = _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope,
                                                    sigma_per_m2, weak_n_sigma, low_m, support, edge_reach_m,
                                                    spacing_m, robot_floor, weak_edge, n_weak_edge, weak_below,
-                                                   n_weak_below, no_candidates, 0, weak_columns)
+                                                   n_weak_below, no_candidates, none, weak_columns)
     return n_edge, n_below, n_cand, n_weak_edge, n_weak_below
