@@ -257,19 +257,22 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n
     no_candidates = out_candidates[:0]
     weak = weak_n_sigma >= 0.0
     gate = min(n_sigma, weak_n_sigma) if weak else n_sigma
+    # low[j]: column j has a point below the floor by the looser margin (else no run, no drop in it), found
+    # in one pass along the image's rows (memory order; NaN compares false); only those columns are walked
+    low = np.zeros(W, np.bool_)
+    for i in range(H):
+        for j in range(W):
+            if points[i, j, 2] < -max_step_m and not low[j]:
+                low[j] = _below(points, i, j, tx, ty, tz, max_step_m, sigma_per_m2, gate)
     rows = np.empty(H, np.int64)
     for j in range(W):
+        if not low[j]:
+            continue
         m = np.int64(0)
-        low = False             # a point below the floor by the looser margin: else no run, no drop in the column
-        for i in range(H - 1, -1, -1):
-            z = points[i, j, 2]
-            if not math.isnan(z):
+        for i in range(H - 1, -1, -1):          # the column's measured rows from the bottom up
+            if not math.isnan(points[i, j, 2]):
                 rows[m] = i
                 m += 1
-                if z < -max_step_m and not low:
-                    low = _below(points, i, j, tx, ty, tz, max_step_m, sigma_per_m2, gate)
-        if not low:
-            continue
         n_edge, n_below, n_cand = _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
                                           n_sigma, low_m, support, edge_reach_m, spacing_m, robot_floor, out_edge,
                                           n_edge, out_below, n_below, out_candidates, n_cand, edge_columns)
