@@ -21,8 +21,10 @@ a kerb, a sunken step; the map layer's rules chosen on seeds 0-4 and 100-109, th
 
 ``--speed``: the CPU time of a frame (``obstacles_from_pair``: rectify, match, reject, 3-D, free space) with and
 without the drop test (and with it but without its weak points, ``weak_n_sigma=None``: "ratio without weak
-points"), interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480); and of a whole mapper
-step (the grid and its height and drop layers too) on corridor frames, with the layers' share.
+points"), interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480), and the drop test's
+own time within the frame (its point image, the column pass, the merge: "drop test share", which the two
+frames' noise does not blur); and of a whole mapper step (the grid and its height and drop layers too) on
+corridor frames, with the layers' share.
 
 The weak votes (``--weak-n-sigma``, ``'none'``: off; ``--drop-weak-views``) were chosen on seeds 100-119.
 
@@ -459,7 +461,7 @@ def evaluate_corridor(data_dir: Path) -> list[dict]:
 
 def measure_speed(repeats: int) -> list[dict]:
     """Median CPU seconds of one frame with and without the drop test (interleaved), per input."""
-    from mrstereo.geometry import ObstacleConfig
+    from mrstereo.geometry import ObstacleConfig, obstacles
     from mrstereo.geometry.drops import DropConfig
     from mrstereo.geometry.pair import obstacles_from_pair
     from mrstereo.recordings import read_recording
@@ -476,20 +478,44 @@ def measure_speed(repeats: int) -> list[dict]:
         left, right, rectified = frame_pair(manifest.frames[0])
         inputs.append(("EuRoC 752x480", left, right, manifest.calibration, rectified, manifest.mount))
     rows = []
-    for name, left, right, calib, rectified, mount in inputs:
-        configs = {"with": ObstacleConfig(drops=DropConfig()), "without": ObstacleConfig(),
-                   "no weak": ObstacleConfig(drops=DropConfig(weak_n_sigma=None))}
-        times: dict[str, list[float]] = {key: [] for key in configs}
-        for k in range(repeats + 1):
-            for key in list(configs)[::1 if k % 2 else -1]:
-                t0 = time.process_time()
-                obstacles_from_pair(left, right, calib, rectified=rectified, mount=mount, config=configs[key])
-                if k:                                           # the first round compiles
-                    times[key].append(time.process_time() - t0)
-        a, b, c = (float(np.median(times[key])) for key in configs)
-        rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": a / b,
-                     "ratio without weak points": c / b})
+    spent = [0.0]
+    with _timed(obstacles, "_with_drops", spent):
+        for name, left, right, calib, rectified, mount in inputs:
+            configs = {"with": ObstacleConfig(drops=DropConfig()), "without": ObstacleConfig(),
+                       "no weak": ObstacleConfig(drops=DropConfig(weak_n_sigma=None))}
+            times: dict[str, list[float]] = {key: [] for key in [*configs, "test"]}
+            for k in range(repeats + 1):
+                for key in list(configs)[::1 if k % 2 else -1]:
+                    spent[0] = 0.0
+                    t0 = time.process_time()
+                    obstacles_from_pair(left, right, calib, rectified=rectified, mount=mount, config=configs[key])
+                    if k:                                           # the first round compiles
+                        times[key].append(time.process_time() - t0)
+                        if key == "with":
+                            times["test"].append(spent[0])
+            a, b, c, test = (float(np.median(times[key])) for key in times)
+            rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": a / b,
+                         "ratio without weak points": c / b, "drop test cpu s": test, "drop test share": test / a})
     return rows + [_mapper_speed(repeats)]
+
+
+@contextmanager
+def _timed(owner, name: str, spent: list[float]):
+    """Within the block ``owner.name`` adds the CPU seconds of each call to ``spent[0]``."""
+    original = getattr(owner, name)
+
+    def timed(*args, **kwargs):
+        t0 = time.process_time()
+        try:
+            return original(*args, **kwargs)
+        finally:
+            spent[0] += time.process_time() - t0
+
+    setattr(owner, name, timed)
+    try:
+        yield
+    finally:
+        setattr(owner, name, original)
 
 
 def _mapper_speed(repeats: int) -> dict:
@@ -509,18 +535,8 @@ def _mapper_speed(repeats: int) -> dict:
     mappers = {key: StereoMapper(stereo, stereo.mount, PipelineConfig(drops=d), check_mount=False)
                for key, d in (("with", DropConfig()), ("without", None))}
     times: dict[str, list[float]] = {"with": [], "without": [], "layers": []}
-    original = OccupancyGrid.add_layers
     spent = [0.0]
-
-    def timed(self, *args, **kwargs):
-        t0 = time.process_time()
-        try:
-            return original(self, *args, **kwargs)
-        finally:
-            spent[0] += time.process_time() - t0
-
-    OccupancyGrid.add_layers = timed
-    try:
+    with _timed(OccupancyGrid, "add_layers", spent):
         for k, (pose, frame) in enumerate(zip(poses, frames)):
             for key in ("with", "without") if k % 2 else ("without", "with"):
                 spent[0] = 0.0
@@ -530,8 +546,6 @@ def _mapper_speed(repeats: int) -> dict:
                     times[key].append(time.process_time() - t0)
                     if key == "with":
                         times["layers"].append(spent[0])
-    finally:
-        OccupancyGrid.add_layers = original
     a, b, layers = (float(np.median(times[key])) for key in ("with", "without", "layers"))
     return {"input": "mapper step, corridor 320x240", "with drops cpu s": a, "without cpu s": b, "ratio": a / b,
             "layers cpu s": layers, "layers share": layers / a}
