@@ -17,7 +17,10 @@ a kerb, a sunken step; the map layer's rules chosen on seeds 0-4 and 100-109, th
   true edge); **on ramps/kerbs**: the same on the cells off
   the plain floor;
 * **crossings**: paths planned (``mrstereo.mapping.plan_path``, unknown cells allowed as Nav2 does) from the
-  start to a goal in each hole or beyond the ledge that enter an undrivable cell (0 is required).
+  start to a goal in each hole or beyond the ledge that enter an undrivable cell (0 is required);
+* **undrivable free**: the undrivable cells in view (inside a hole or stairwell, past the ledge; more than one
+  cell from a true edge) that the map calls free, with and without the drop test: where a planned path can
+  cross without touching a lethal cell.
 
 ``--speed``: the CPU time of a frame (``obstacles_from_pair``: rectify, match, reject, 3-D, free space) with and
 without the drop test (and with it but without its weak points, ``weak_n_sigma=None``: "ratio without weak
@@ -222,7 +225,9 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
     target, far = edges & seen, edges & seen_far
     ros_map = run.grid.to_ros_map()
     near_lethal = binary_dilation(ros_map.occupied, np.ones((3, 3), bool))
-    away = drivable & _in_view(grid, views) & ~binary_dilation(edges, np.ones((3, 3), bool))
+    in_view = _in_view(grid, views)
+    away = drivable & in_view & ~binary_dilation(edges, np.ones((3, 3), bool))
+    below = free & ~drivable & in_view & ~binary_dilation(edges, np.ones((3, 3), bool))   # inside holes, past ledges
     off_plain = away & (np.abs(np.nan_to_num(height)) > 1e-6)
     away_far = away & ~binary_dilation(edges, np.ones((7, 7), bool))
     added = ros_map.occupied & ~lethal_plain
@@ -241,7 +246,9 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
             "false drops": float((added & away).sum() / max(away.sum(), 1)),
             "false > 0.15 m": float((added & away_far).sum() / max(away_far.sum(), 1)),
             "on ramps/kerbs": float((added & off_plain).sum() / max(off_plain.sum(), 1)),
-            "crossings": crossings, "drop cells": int(run.grid.drop.sum()),
+            "crossings": crossings, "undrivable free": float((ros_map.free & below).sum() / max(below.sum(), 1)),
+            "undrivable free without": float((plain.grid.to_ros_map().free & below).sum() / max(below.sum(), 1)),
+            "drop cells": int(run.grid.drop.sum()),
             "ramp/kerb cells": int(off_plain.sum()), "goals": len(goals), "cpu s": cpu,
             "kinds": [world.summary["drops"]["end"]["kind"]] + [p["kind"] for p in world.summary["drops"]["patches"]],
             **({"oracle frames": len(used)} if oracle else {}), **({"why": causes} if why else {})}
@@ -614,7 +621,9 @@ def main() -> None:
           f"{max(r['false drops'] for r in rows):.4f} (> 0.15 m from an edge: "
           f"{max(r['false > 0.15 m'] for r in rows):.4f}), on ramps/kerbs max "
           f"{max(r['on ramps/kerbs'] for r in rows):.4f}, "
-          f"crossings {sum(r['crossings'] for r in rows)} of {sum(r['goals'] for r in rows)} goals")
+          f"crossings {sum(r['crossings'] for r in rows)} of {sum(r['goals'] for r in rows)} goals, undrivable "
+          f"cells free {np.mean([r['undrivable free'] for r in rows]):.3f} (without the test "
+          f"{np.mean([r['undrivable free without'] for r in rows]):.3f}; mean of the seeds)")
     if args.why:
         missed = sum(sum(r["why"].values()) for r in rows)
         print(f"missed edge cells: {missed}")
