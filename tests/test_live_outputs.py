@@ -282,6 +282,26 @@ def test_map_and_odometry_send_their_runs_to_the_same_outputs(dataset, tmp_path,
     assert frames == list(range(10))
 
 
+def test_a_replayed_map_run_shows_at_each_frame_the_map_fused_up_to_it(dataset):
+    from mrstereo.mapping import fuse
+    from mrstereo.mapping.sinks import replay_map_run
+    from mrstereo.pipeline.run import build_map
+
+    run = build_map(read_recording(dataset), config=CONFIG, progress=False)
+    shown = []
+
+    class Maps(_Kept):
+        def frame(self, frame) -> None:
+            shown.append(frame.grid.log_odds.copy())
+
+    replay_map_run(run, [Maps()], config=CONFIG)
+    assert len(shown) == len(run.observations) == 10
+    np.testing.assert_array_equal(shown[-1], run.grid.log_odds)                 # the map as written
+    for k in (0, 4, 8):                      # the robot's footprint swept along the path, as mapping.fuse does
+        expected = fuse(run.observations[:k + 1], grid=run.grid.grid, config=CONFIG.mapping)
+        np.testing.assert_array_equal(shown[k], expected.log_odds)
+
+
 @pytest.mark.parametrize("stamp_s", [-1.0, 1e12, 2.2e9])
 def test_a_stamp_a_bag_cannot_hold_is_one_error_and_no_bag(tmp_path, stamp_s):
     from mrstereo.recordings.bag_writer import BagWriter

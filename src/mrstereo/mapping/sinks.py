@@ -18,7 +18,7 @@ import numpy as np
 from ..camera import StereoCamera
 from ..geometry.scan import LaserScan, laser_scan_from_points, scan_angles_of_camera
 from ..transforms import T_from_planar, transform_points
-from .fusion import add_observation
+from .fusion import fuse_step
 from .occupancy import OccupancyGrid
 from .rosmap import occupancy_values
 
@@ -176,15 +176,19 @@ class BagSink:
 def replay_map_run(run, sinks: Sequence, *, config) -> None:
     """Send a finished map run (:class:`mrstereo.evaluation.outputs.MapRun`) to ``sinks`` frame by frame: the
     pose, the obstacle points back in the robot frame, the scan they make, the map as fused up to the
-    frame and, with the last frame, the run's map as written (the frames' images are not kept by a map run)."""
+    frame (:func:`mrstereo.mapping.fuse`'s steps: the footprint swept, a robot standing still one view of weak
+    drop points) and, with the last frame, the run's map as written (the frames' images are not kept by a map
+    run)."""
     stereo = run.manifest.calibration
     frames = run.manifest.frames
     grid = OccupancyGrid(run.grid.grid, config=config.mapping)        # the map's final window
     range_max = config.for_rig(stereo).obstacles.max_range_m
     mount = run.mount
     last = len(run.observations) - 1
+    previous = weak_view = None
     for k, obs in enumerate(run.observations):
-        add_observation(grid, obs)
+        weak_view = fuse_step(grid, obs, previous, weak_view)       # as the map was fused (mapping.fuse)
+        previous = obs.pose
         record = frames[obs.index]
         T = T_from_planar(*obs.pose)
         n = len(obs.obstacle_points_world) - obs.boundary_points
