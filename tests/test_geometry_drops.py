@@ -573,7 +573,10 @@ def test_a_drop_within_the_noise_margin_is_weak_not_strong():
     assert len(find_drops(column, T, 20.0, config=replace(config, weak_n_sigma=None)).weak_points_robot) == 0
     deep = find_drops(column, T, 20.0, config=replace(config, disparity_sigma_px=sigma_px / 2.5))   # 3.75 sigma
     assert len(deep.below_points_robot) == 3 and len(deep.edge_points_robot) >= 2
-    np.testing.assert_array_equal(deep.weak_points_robot, deep.points_robot)           # a drop by both margins
+    n = len(deep.points_robot)
+    np.testing.assert_array_equal(deep.weak_points_robot[:n], deep.points_robot)       # a drop by both margins
+    # then where the sight lines to its lower points pass floor level: no floor there
+    np.testing.assert_allclose(deep.weak_points_robot[n:], [[x * 0.5 / 0.7, 0.0, 0.0] for x in (1.7, 1.72, 1.74)])
     # noisy surfaces (a ledge, a ramp, a hole): the same strong result with or without the weak test
     rng = np.random.default_rng(13)
     rays, T, bf = _tilted_rig(h=120, w=160, f=100.0)
@@ -759,3 +762,39 @@ def test_a_drivable_ramp_ending_at_a_rising_face_is_no_drop_a_hole_is():
     e = 1.9 * 0.5 / 0.615                                              # the sight line to (1.9, -0.115) at z = 0
     edge = found.edge_points_robot[found.edge_points_robot[:, 0] < 1.9]
     assert len(edge) >= 2 and np.all((edge[:, 0] >= 1.5 - 1e-9) & (edge[:, 0] <= e + 1e-9)), edge
+
+
+def test_two_views_of_a_hole_make_its_inside_lethal_where_their_sight_lines_pass_floor_level():
+    """A stairwell 1.4 m long, 1 m deep, 1 m ahead (exact points, two views 0.2 m apart; the rim hides its
+    bottom): where the sight lines to its far wall pass floor level (weak points) no floor lies, so its inside is
+    lethal after two views from the near rim on, up to where the sight line to the far wall's point that lies a
+    step, its 3-sigma noise and a 10 degree slope (from there) below the floor passes floor level (1.6 m, worked
+    out by hand for the first view) -- without them only the near rim and the far wall's foot are -- and no
+    floor cell before or after it is."""
+    from mrstereo.mapping import MappingConfig, OccupancyGrid
+
+    rays, T, bf = _tilted_rig()
+    grid = GridSpec(width_m=4.0, height_m=3.0, resolution_m=0.05, origin_x_m=0.0, origin_y_m=-1.5)
+    maps = {k: OccupancyGrid(grid, config=MappingConfig(footprint_radius_m=None)) for k in ("with", "without")}
+    none = np.empty((0, 3))
+    t = T[:3, 3]
+    down = np.where(rays[..., 2] < 0, -1.0 / np.minimum(rays[..., 2], -1e-9), np.nan)[..., None]
+    for x0 in (0.0, 0.2):                    # the floor, else the bottom, else the far wall (x = 2.4 m)
+        near, far = 1.0 - x0, 2.4 - x0
+        points = t + rays * (t[2] * down)
+        bottom = t + rays * ((t[2] + 1.0) * down)
+        wall = t + rays * ((far - t[0]) / rays[..., :1])
+        in_hole = (points[..., 0] > near) & (points[..., 0] < far)
+        points[in_hole] = np.where((bottom[..., 0] < far)[..., None], bottom, wall)[in_hole]
+        points[np.hypot(points[..., 0], points[..., 1]) > 3.0] = np.nan
+        found = find_drops(points, T, bf)
+        shift = np.array([x0, 0.0, 0.0])
+        floor = points[np.abs(points[..., 2]) < 0.01] + shift
+        for key, weak in (("with", found.weak_points_robot), ("without", found.points_robot)):
+            maps[key].add_layers(none, floor, found.points_robot + shift, None, weak + shift)
+    centres = grid.cell_centres()
+    x, y = centres[..., 0], centres[..., 1]
+    inside = (x > 1.05) & (x < 1.55) & (np.abs(y) < 0.25)
+    floor_cells = ((x < 0.9) | (x > 2.5)) & (np.abs(y) < 0.25) & (x < 2.9)
+    assert maps["with"].drop[inside].all() and not maps["without"].drop[inside].any()
+    assert not maps["with"].drop[floor_cells].any()

@@ -13,7 +13,8 @@ the scan and the grid mark them like any obstacle; the far rim of a hole
 is no drop. Points below the floor that one frame cannot tell from a ramp starting out of view (the floor
 measured too far before them in their column, or none: ``DropConfig.robot_floor`` judges those against the
 floor under the robot) are *candidates* that the map confirms with the floor it measured there before
-(:meth:`mrstereo.mapping.OccupancyGrid.add_layers`).
+(:meth:`mrstereo.mapping.OccupancyGrid.add_layers`). Where a drop's sight lines pass floor level on their way
+to its lower points no floor lies (a hole's inside): weak points, which the map counts over views.
 User guide: docs/obstacles.md, "Drops". Conventions: docs/conventions.md.
 """
 from __future__ import annotations
@@ -50,7 +51,9 @@ class DropConfig:
     matched); False: only the map's memory of the floor confirms it, so a floor that gives no disparity stays
     unknown (docs/obstacles.md, "Drops"). ``weak_n_sigma``: the same test with this looser margin too, in the same
     pass; its drops are *weak* points (:attr:`DropResult.weak_points_robot`) that mark nothing alone: the map
-    makes a cell lethal where ``MappingConfig.drop_weak_views`` views put them (None: off).
+    makes a cell lethal where ``MappingConfig.drop_weak_views`` views put them (None: off). Where the sight
+    lines to the drops' lower points pass floor level (no floor there; points below any drivable slope from
+    there) are weak points too.
     """
 
     max_step_m: float = 0.05
@@ -88,7 +91,9 @@ class DropResult:
     near enough before them in their column), for the map to confirm with the floor it measured before
     (:data:`CANDIDATE_COLUMNS`; :meth:`mrstereo.mapping.OccupancyGrid.add_layers`), ``weak_points_robot``
     (P, 3) the points of the drops of the test with ``DropConfig.weak_n_sigma`` (edges at floor level, then the
-    lower points; those of the drops above among them), for the map's weak votes (empty: off)."""
+    lower points; those of the drops above among them), then where the sight lines to the lower points of the
+    drops above pass floor level (no floor there: a hole's inside, the space past a ledge), for the map's weak
+    votes (empty: off)."""
 
     edge_points_robot: np.ndarray
     below_points_robot: np.ndarray
@@ -162,10 +167,29 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     def near(a, x=0):               # the rows whose point (columns x, x + 1) lies within max_range_m
         return a[np.hypot(a[:, x] - t[0], a[:, x + 1] - t[1]) <= reach]
 
-    return DropResult(edge_points_robot=near(out_edge[:n_edge]), below_points_robot=near(out_below[:n_below]),
+    below = out_below[:n_below]
+    crossings = _floor_crossings(below, t, config, bf) if weak else below[:0]
+    return DropResult(edge_points_robot=near(out_edge[:n_edge]), below_points_robot=near(below),
                       edge_columns=columns, candidates_robot=near(out_candidates[:n_cand], 2),
                       weak_points_robot=np.concatenate([near(weak_edge[:n_weak_edge]),
-                                                        near(weak_below[:n_weak_below])]))
+                                                        near(weak_below[:n_weak_below]), near(crossings)]))
+
+
+def _floor_crossings(points_below, t, config: DropConfig, baseline_focal_m_px: float) -> np.ndarray:
+    """Where the sight lines from the camera ``t`` (3,) to the points below the floor ``points_below`` (N, 3)
+    pass floor level (M, 3; z = 0): the floor point each pixel would have seen were the floor there (it
+    depends on the pixel's direction only, not on its measured depth). The sight line goes on below floor
+    level, so no floor lies there (a hole's inside, the space past a ledge) -- for the points deeper than a
+    step, their height noise and a ``max_slope_deg`` slope from there (no drivable ramp starting there
+    reaches them: a ramp's own points are no evidence against the floor before them)."""
+    s = t[2] / (t[2] - points_below[:, 2])
+    out = np.zeros_like(points_below)
+    out[:, :2] = t[:2] + s[:, None] * (points_below[:, :2] - t[:2])
+    dist = np.linalg.norm(points_below - t, axis=1)
+    noise = config.n_sigma * (t[2] - points_below[:, 2]) * dist * config.disparity_sigma_px / baseline_focal_m_px
+    run = np.hypot(*(points_below[:, :2] - out[:, :2]).T)
+    deep = -points_below[:, 2] - noise - math.tan(math.radians(config.max_slope_deg)) * run > config.max_step_m
+    return out[deep]
 
 
 def transform_candidates(T, candidates) -> np.ndarray:
