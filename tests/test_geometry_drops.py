@@ -260,6 +260,34 @@ def test_a_textureless_or_mismatched_patch_of_floor_is_no_drop():
     assert np.count_nonzero(find_drops(cut, T, bf).edge_columns) > 10
 
 
+def test_points_below_the_floor_whose_floor_would_match_outside_the_right_image_are_no_drop():
+    """At the image's left border the floor on a pixel's sight line may match outside the right image
+    (``x - d_floor < 0``): no matcher finds it there, so a floor pixel matched too far (below the floor) is
+    likely. A patch of floor matched twice too far with nothing seen after it is a drop in every column but the
+    border's; the rig's disparity offset (``Z = b f / (d + doffs)``) moves the border."""
+    rays, T, bf = _tilted_rig(h=120, w=160, f=100.0)
+    floor = _surface(rays, T, lambda p: np.zeros(len(p)))
+    t = T[:3, 3]
+    r = np.hypot(floor[..., 0], floor[..., 1])
+    patch = (r > 1.2) & (r < 1.5)
+    points = floor.copy()
+    points[patch] = t + (floor[patch] - t) * 2.0                   # 0.5 m below the floor
+    points[r >= 1.5] = np.nan                                      # nothing seen after it
+    d_floor = bf / ((floor - t) @ T[:3, 2])                        # the floor's disparity, doffs 0
+    u = np.arange(floor.shape[1])
+    for doffs in (0.0, -30.0):
+        border = u < d_floor - doffs
+        inside = patch.any(axis=0) & np.all(border | ~patch, axis=0)           # all the patch's pixels
+        clear = patch.any(axis=0) & ~np.any(border & patch, axis=0)            # none of them
+        assert inside.sum() >= 5 - doffs and clear.sum() >= 100 + doffs
+        found = find_drops(points, T, bf, doffs_px=doffs)
+        assert not found.edge_columns[inside].any() and np.all(found.edge_columns[clear] > 0)
+        hidden = points[patch & border]                            # no lower point is a border pixel's
+        assert len(hidden) and not (found.below_points_robot[:, None] == hidden[None]).all(-1).any()
+    with pytest.raises(ValueError, match="doffs_px"):
+        find_drops(points, T, bf, doffs_px=float("nan"))
+
+
 def _layers_grid():
     from mrstereo.mapping import MappingConfig, OccupancyGrid
 

@@ -35,6 +35,18 @@ def _below(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
     return z < -(max_step_m + n_sigma * _sigma_h(points[p, j, 0], points[p, j, 1], z, tx, ty, tz, sigma_per_m2))
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _unmatchable(points, p, j, tx, ty, tz, axis, bf, doffs_px):
+    """Would the floor on the sight line of point ``(p, j)`` (below floor level) have its match outside the right
+    image (``j - d_floor < 0``, ``d_floor = b f / Z_floor - doffs``; ``axis``: the optical axis in the robot
+    frame; a point behind the camera, which no pixel sees, is not)? Then no matcher could have found the floor
+    there, and the point may be a floor pixel matched wrongly, too far: the image's left border, which the
+    matcher searches anyway (OpenCV leaves it invalid)."""
+    z = points[p, j, 2]
+    depth = (points[p, j, 0] - tx) * axis[0] + (points[p, j, 1] - ty) * axis[1] + (z - tz) * axis[2]
+    return depth > 0.0 and (j + doffs_px) * tz * depth < bf * (tz - z)
+
+
 @njit(nogil=True, cache=True)
 def _steep(points, rows, j, k0, k1, max_step_m, tan_slope, noise_m):
     """Does the run ``rows[k0:k1]`` of column ``j`` start with a face steeper than the slope limit over a
@@ -212,8 +224,8 @@ def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
 
 
 @njit(nogil=True, cache=True)
-def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n_sigma, low_m, support,
-                 edge_reach_m, spacing_m, robot_floor, out_edge, out_below, out_candidates, edge_columns,
+def column_drops(points, t, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n_sigma, low_m,
+                 support, edge_reach_m, spacing_m, robot_floor, out_edge, out_below, out_candidates, edge_columns,
                  weak_edge, weak_below, weak_columns):
     """Drop edges and negative obstacles of a robot-frame point image ``points`` (H, W, 3), NaN invalid.
 
@@ -243,6 +255,10 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n
     run's first point, less its depth noise at both ends) where measured floor would hide the run (a
     mismatch). ``t``: the camera in the robot frame.
 
+    A point more than a step below floor level counts as unmeasured where the floor on its sight line would
+    have its match outside the right image (:func:`_unmatchable`; ``axis``: the optical axis in the robot
+    frame, ``bf``: ``b f``, ``doffs_px``: the rig's disparity offset): no matcher can have found the floor there.
+
     ``weak_n_sigma`` >= 0 (negative: off): each column (its measured rows gathered once) is also tested with that
     looser margin, the same rules (:func:`_column`), its drops' points into ``weak_edge`` / ``weak_below`` and
     their count into ``weak_columns`` (no candidates): the map's weak votes. A column with no point below the
@@ -263,14 +279,17 @@ def column_drops(points, t, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n
     for i in range(H):
         for j in range(W):
             if points[i, j, 2] < -max_step_m and not low[j]:
-                low[j] = _below(points, i, j, tx, ty, tz, max_step_m, sigma_per_m2, gate)
+                low[j] = (_below(points, i, j, tx, ty, tz, max_step_m, sigma_per_m2, gate)
+                          and not _unmatchable(points, i, j, tx, ty, tz, axis, bf, doffs_px))
     rows = np.empty(H, np.int64)
     for j in range(W):
         if not low[j]:
             continue
         m = np.int64(0)
         for i in range(H - 1, -1, -1):          # the column's measured rows from the bottom up
-            if not math.isnan(points[i, j, 2]):
+            z = points[i, j, 2]
+            if not math.isnan(z) and not (z < -max_step_m and _unmatchable(points, i, j, tx, ty, tz, axis, bf,
+                                                                          doffs_px)):
                 rows[m] = i
                 m += 1
         n_edge, n_below, n_cand = _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,

@@ -5,7 +5,8 @@ floor's points are followed until the next measured point lies below the floor b
 climbs (``max_step_m`` plus three times the point's height uncertainty) and no drivable slope
 (``max_slope_deg``) joins the two: the floor visibly ends there -- unless the sight line to the lower
 point passes under floor measured in the same column (a mismatch: floor matched too far lies below the
-floor). The edge (between the last floor point
+floor); at the image's left border, where the floor on a point's sight line would match outside the right
+image, a point below the floor counts as unmeasured. The edge (between the last floor point
 and where the sight line to the lower point passes floor level) and the lower points become obstacle
 points at floor level (z = 0, below any sight line, so the grid's occlusion tests never see through them), so
 the scan and the grid mark them like any obstacle; the far rim of a hole
@@ -116,7 +117,8 @@ class DropResult:
 
 
 def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float, *,
-               config: DropConfig = DropConfig(), floor_top_m: float = 0.08, max_range_m: float = 8.0) -> DropResult:
+               config: DropConfig = DropConfig(), floor_top_m: float = 0.08, max_range_m: float = 8.0,
+               doffs_px: float = 0.0) -> DropResult:
     """Drop edges and negative obstacles of one frame's robot-frame points.
 
     Parameters
@@ -133,6 +135,12 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
         A drop's upper side lies below this height (an obstacle config's ``min_obstacle_height_m``).
     max_range_m : float
         Returned points lie within this horizontal range of the camera.
+    doffs_px : float
+        The rig's disparity offset (``Z = b f / (d + doffs)``; 0 for a rig rectified to zero disparity at
+        infinity). The point image's column ``x`` is the pixel's in the rectified left image: a point below the
+        floor counts as unmeasured where the floor on its sight line would match outside the right image
+        (``x - d_floor < 0``, the image's left border: no matcher finds the floor there, so a floor pixel
+        matched wrongly, too far, is likely).
 
     Returns
     -------
@@ -146,6 +154,7 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     bf = _checks.finite_number("baseline_focal_m_px", baseline_focal_m_px, positive=True)
     reach = _checks.finite_number("max_range_m", max_range_m, positive=True)
     top = _checks.finite_number("floor_top_m", floor_top_m, positive=True)
+    doffs = _checks.finite_number("doffs_px", doffs_px)
     t = np.ascontiguousarray(T[:3, 3], dtype=np.float64)
     h, w = pts.shape[:2]
     per_edge = int(config.edge_reach_m / config.spacing_m) + 2
@@ -158,8 +167,9 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
                                                                                               out_below[:0])
     if t[2] <= 0.0:
         raise ValueError(f"T_robot_from_cam puts the camera {t[2]:.3f} m above the floor; it must be above it")
+    axis = np.ascontiguousarray(T[:3, 2], dtype=np.float64)         # the optical axis in the robot frame
     n_edge, n_below, n_cand, n_weak_edge, n_weak_below = _drops_kernels.column_drops(
-        pts, t, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
+        pts, t, axis, bf, doffs, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
         float(config.disparity_sigma_px) / bf, float(config.n_sigma),
         float(config.weak_n_sigma) if weak else -1.0, top, int(config.support), float(config.edge_reach_m),
         float(config.spacing_m), bool(config.robot_floor), out_edge, out_below, out_candidates, columns,

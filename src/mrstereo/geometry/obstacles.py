@@ -292,7 +292,8 @@ def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleCo
     """``result`` with the drop test's obstacle points (:func:`.drops.find_drops` on its point image)."""
     drops = find_drops(result.points_robot_image, result.T_robot_from_cam,
                        float(stereo.baseline_m) * float(stereo.focal_px), config=config.drops,
-                       floor_top_m=config.min_obstacle_height_m, max_range_m=config.max_range_m)
+                       floor_top_m=config.min_obstacle_height_m, max_range_m=config.max_range_m,
+                       doffs_px=float(stereo.doffs_px))
     found = drops.points_robot
     if not len(found) and not len(drops.candidates_robot) and not len(drops.weak_points_robot):
         return result
