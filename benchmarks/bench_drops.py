@@ -5,7 +5,8 @@ the drop test's points, :mod:`mrstereo.geometry.drops`), so the two maps differ 
 
 Randomized worlds (``random_world(seed, drops=True)``: a ledge or a drivable ramp down, holes, stairwells,
 a kerb, a sunken step; the map layer's rules chosen on seeds 0-4 and 100-109, the drop test's on 100-119; reported on 200-209 and 300-309), the frames of ``write_synthetic_dataset``'s
-``stops`` path (front, +45 and -45 degrees at each stop), per seed:
+``stops`` path (front, +45 and -45 degrees at each stop; ``--path front``: a drive looking ahead, a frame every
+0.1 m or less, as a robot's camera sees it), per seed:
 
 * **edge recall**: the true drop-edge cells (``mrstereo.world.drop_edges``) whose floor some frame's true
   disparity shows within 2.5 m (``--view``; the robot must know an edge before it is near it) that are lethal in the map, a lethal
@@ -50,6 +51,7 @@ clear) lethal beside the log-odds.
 Usage::
 
     python benchmarks/bench_drops.py --seeds 200-209 [--frames 24]
+    python benchmarks/bench_drops.py --seeds 200-209 --path front --frames 100
     python benchmarks/bench_drops.py --seeds 0-4 100-109 --why
     python benchmarks/bench_drops.py --seeds 200-209 --oracle [--n-sigma 1] [--why]
     python benchmarks/bench_drops.py --seeds 100-119 --weak-n-sigma 1.0 --drop-weak-views 3
@@ -60,6 +62,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import math
 import tempfile
 import time
 from contextlib import contextmanager, nullcontext
@@ -190,11 +193,12 @@ def _seen_floor(manifest, grid, height: np.ndarray, range_m: float) -> np.ndarra
 
 
 def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, config=None, drops=None,
-                  why: bool = False, oracle: bool = False) -> dict:
+                  why: bool = False, oracle: bool = False, path: str = "stops") -> dict:
     """Render world ``seed`` with drops, map it with and without the drop test, score both (see the module).
     ``why``: also the causes of the missed edge cells (:func:`missed_causes`) under ``"why"``. ``oracle``: the
     true disparity instead of the matcher's (:func:`oracle_disparity`; the frames substituted under
-    ``"oracle frames"``)."""
+    ``"oracle frames"``). ``path``: ``"stops"`` (three views at each stop) or ``"front"`` (a drive looking ahead,
+    a frame every 0.1 m or less: as far as the world's path holds ``frames`` frames)."""
     from scipy.ndimage import binary_dilation
 
     from mrstereo.geometry.drops import DropConfig
@@ -203,11 +207,13 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
     from mrstereo.world import drop_edges, floor_heights, ground_truth_map, random_world, read_manifest
     from mrstereo.world import write_synthetic_dataset
 
-    ds = data_dir / f"drops_seed{seed}_{frames}f"
-    if not (ds / "manifest.yaml").is_file():
-        write_synthetic_dataset(ds, seed=seed, n_frames=frames, progress=False, randomize=True, drops=True)
-    manifest = read_manifest(ds)
     world = random_world(seed, drops=True)
+    ds = data_dir / f"drops_seed{seed}_{frames}f{'' if path == 'stops' else '_' + path}"
+    if not (ds / "manifest.yaml").is_file():
+        chords = np.hypot(*np.diff(world.waypoints_xy, axis=0).T).sum()      # (the path's curve is longer)
+        write_synthetic_dataset(ds, seed=seed, n_frames=frames, progress=False, randomize=True, drops=True,
+                                path=path, step_m=min(0.1, math.floor(1000 * chords / max(frames - 1, 1)) / 1000))
+    manifest = read_manifest(ds)
     t0 = time.process_time()
     with oracle_disparity(manifest) if oracle else nullcontext([]) as used:
         run, plain = paired_maps(manifest, config=config, drops=drops)
@@ -571,6 +577,9 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", default=["200-209"], help="seeds, e.g. 0-4 or 200-209")
     parser.add_argument("--frames", type=int, default=24, help="frames per world or recording")
     parser.add_argument("--view", type=float, default=2.5, help="range [m] of the edges the recall counts")
+    parser.add_argument("--path", choices=("stops", "front"), default="stops",
+                        help="the worlds' frames: three views at each stop, or a drive looking ahead (a frame "
+                             "every 0.1 m or less)")
     parser.add_argument("--drop-min-points", type=int, default=None, help="MappingConfig.drop_min_points")
     parser.add_argument("--drop-clear-points", type=int, default=None, help="MappingConfig.drop_clear_points")
     parser.add_argument("--drop-max-votes", type=int, default=None, help="MappingConfig.drop_max_votes")
@@ -618,7 +627,8 @@ def main() -> None:
     data.mkdir(parents=True, exist_ok=True)
     rows = []
     for seed in _parse_seeds(args.seeds):
-        row = evaluate_seed(seed, args.frames, data, args.view, config, drops, why=args.why, oracle=args.oracle)
+        row = evaluate_seed(seed, args.frames, data, args.view, config, drops, why=args.why, oracle=args.oracle,
+                            path=args.path)
         rows.append(row)
         print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()), flush=True)
     edge = sum(r["edge cells in view"] for r in rows)
