@@ -193,12 +193,13 @@ def _seen_floor(manifest, grid, height: np.ndarray, range_m: float) -> np.ndarra
 
 
 def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, config=None, drops=None,
-                  why: bool = False, oracle: bool = False, path: str = "stops") -> dict:
+                  why: bool = False, oracle: bool = False, path: str = "stops", every: int = 1) -> dict:
     """Render world ``seed`` with drops, map it with and without the drop test, score both (see the module).
     ``why``: also the causes of the missed edge cells (:func:`missed_causes`) under ``"why"``. ``oracle``: the
     true disparity instead of the matcher's (:func:`oracle_disparity`; the frames substituted under
     ``"oracle frames"``). ``path``: ``"stops"`` (three views at each stop) or ``"front"`` (a drive looking ahead,
-    a frame every 0.1 m or less: as far as the world's path holds ``frames`` frames)."""
+    a frame every 0.1 m or less: as far as the world's path holds ``frames`` frames). ``every``: only every
+    so many of the rendered frames (the same drive at a lower frame rate)."""
     from scipy.ndimage import binary_dilation
 
     from mrstereo.geometry.drops import DropConfig
@@ -214,6 +215,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
         write_synthetic_dataset(ds, seed=seed, n_frames=frames, progress=False, randomize=True, drops=True,
                                 path=path, step_m=min(0.1, math.floor(1000 * chords / max(frames - 1, 1)) / 1000))
     manifest = read_manifest(ds)
+    manifest = replace(manifest, frames=manifest.frames[::every])
     t0 = time.process_time()
     with oracle_disparity(manifest) if oracle else nullcontext([]) as used:
         run, plain = paired_maps(manifest, config=config, drops=drops)
@@ -581,11 +583,14 @@ def main() -> None:
     parser.add_argument("--path", choices=("stops", "front"), default="stops",
                         help="the worlds' frames: three views at each stop, or a drive looking ahead (a frame "
                              "every 0.1 m or less)")
+    parser.add_argument("--every", type=int, default=1,
+                        help="only every so many of the frames: the same path at a lower frame rate")
     parser.add_argument("--drop-min-points", type=int, default=None, help="MappingConfig.drop_min_points")
     parser.add_argument("--drop-clear-points", type=int, default=None, help="MappingConfig.drop_clear_points")
     parser.add_argument("--drop-max-votes", type=int, default=None, help="MappingConfig.drop_max_votes")
     parser.add_argument("--drop-low", dest="drop_low_m", type=float, default=None, help="MappingConfig.drop_low_m")
     parser.add_argument("--drop-weak-views", type=int, default=None, help="MappingConfig.drop_weak_views")
+    parser.add_argument("--drop-weak-share", type=float, default=None, help="MappingConfig.drop_weak_share")
     parser.add_argument("--no-robot-floor", action="store_true",
                         help="DropConfig(robot_floor=False): only the map's memory confirms a drop with no floor "
                              "measured before it in its column")
@@ -610,7 +615,7 @@ def main() -> None:
 
     drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma, weak_n_sigma=args.weak_n_sigma)
     tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m",
-                                           "drop_weak_views") if getattr(args, k) is not None}
+                                           "drop_weak_views", "drop_weak_share") if getattr(args, k) is not None}
     base = PipelineConfig()
     config = replace(base, mapping=replace(base.mapping, **tuned))
     if args.corridor:
@@ -629,7 +634,7 @@ def main() -> None:
     rows = []
     for seed in _parse_seeds(args.seeds):
         row = evaluate_seed(seed, args.frames, data, args.view, config, drops, why=args.why, oracle=args.oracle,
-                            path=args.path)
+                            path=args.path, every=args.every)
         rows.append(row)
         print("  ".join(f"{k}: {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()), flush=True)
     edge = sum(r["edge cells in view"] for r in rows)

@@ -657,6 +657,42 @@ def test_weak_points_of_two_views_make_a_cell_lethal_one_view_does_not_and_floor
         MappingConfig(drop_weak_views=0)
 
 
+def test_weak_votes_count_where_they_are_a_share_of_the_views_that_put_weak_votes_or_floor_there():
+    """Weak votes from two views make a cell lethal while they are at least ``drop_weak_share`` of the views
+    that put weak votes or floor points (no vote) there: far floor's noise gives a weak vote in a few of the many
+    views that see it, however many frames a drive gives. A frame without weak points (a robot standing still)
+    counts no view."""
+    from mrstereo.mapping import MappingConfig, OccupancyGrid
+
+    occupancy = _layers_grid()
+    share = occupancy.config.drop_weak_share
+    weak = np.array([[2.05, 0.05, 0.0]] * 3)
+    floor = weak[:1]                                  # one floor point: fewer than drop_clear_points, no take-back
+    r, c = (int(v[0]) for v in occupancy.grid.cells_from_xy(weak[:1, :2]))
+    none = np.empty((0, 3))
+    for _ in range(2):
+        occupancy.add_layers(none, floor, none, None, weak)          # a view with a weak vote: no floor view
+    assert occupancy.drop[r, c] and tuple(occupancy._drop_votes[r, c, 2:]) == (2, 0)
+    copy = occupancy.copy()
+    floor_views = 0
+    while occupancy.drop[r, c]:
+        occupancy.add_layers(none, floor, none, None, none)
+        floor_views += 1
+    assert floor_views == int(2 * (1 - share) / share) + 1 == 7 and occupancy._drop_votes[r, c, 1] == 2
+    occupancy.add_layers(none, floor, none, None, weak)              # a third weak view: lethal again
+    assert occupancy.drop[r, c] and tuple(occupancy._drop_votes[r, c, 2:]) == (3, 7)
+    for _ in range(10):                                             # frames whose weak points were left out
+        copy.add_layers(none, floor, none, None, None)
+    assert copy.drop[r, c] and tuple(copy._drop_votes[r, c, 2:]) == (2, 0)
+    off = OccupancyGrid(occupancy.grid, config=MappingConfig(footprint_radius_m=None, drop_weak_share=0.0))
+    for views in (weak, weak) + (none,) * 20:
+        off.add_layers(none, floor, none, None, views)
+    assert off.drop[r, c]
+    for bad in (1.0, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="drop_weak_share"):
+            MappingConfig(drop_weak_share=bad)
+
+
 def test_the_weak_votes_survive_tiles_their_file_and_an_observation_file(tmp_path):
     from mrstereo.mapping import MappingConfig
     from mrstereo.mapping.fusion import FrameObservation

@@ -498,10 +498,11 @@ def test_a_view_depends_on_its_points_only_through_their_cells():
 def _layers_by_numpy(grid: GridSpec, config: MappingConfig, views) -> tuple[np.ndarray, np.ndarray]:
     """The height and drop layers of ``views`` ((obstacle, floor, drop, candidates (None), weak drop) point sets)
     by the rules of ``OccupancyGrid.add_layers``, per cell with numpy: heights by ``fmin.at`` / ``fmax.at`` (not
-    of the weak points), votes (the drop points', the weak points') by counts."""
+    of the weak points), votes (the drop points', the weak points', the views of weak votes and of floor points
+    without a vote) by counts."""
     rows, cols = grid.shape
     heights = np.full((rows * cols, 2), np.nan, np.float32)
-    votes = np.zeros((rows * cols, 2), np.int64)
+    votes = np.zeros((rows * cols, 4), np.int64)
     for view in views:
         counts = []
         for k, points in enumerate(view):
@@ -522,7 +523,11 @@ def _layers_by_numpy(grid: GridSpec, config: MappingConfig, views) -> tuple[np.n
             voted = count >= config.drop_min_points
             votes[voted, v] = np.minimum(votes[voted, v] + 1, most)
             votes[(counts[1] >= config.drop_clear_points) & ~voted & (votes[:, v] > 0), v] -= 1
-    return heights.reshape(rows, cols, 2), votes.reshape(rows, cols, 2)
+        if view[4] is not None:
+            strong, weak = (counts[k] >= config.drop_min_points for k in (2, 4))
+            votes[weak, 2] += 1
+            votes[(counts[1] > 0) & ~strong & ~weak, 3] += 1
+    return heights.reshape(rows, cols, 2), votes.reshape(rows, cols, 4)
 
 
 def test_height_and_drop_layers_equal_a_per_cell_count_of_random_views():
@@ -547,7 +552,8 @@ def test_height_and_drop_layers_equal_a_per_cell_count_of_random_views():
     assert 0 < votes[..., 0].sum() and votes[..., 0].max() == config.drop_max_votes and voted[5] == 0
     assert votes[..., 1].max() == config.drop_weak_views and max(voted) > 0
     weak_only = (votes[..., 1] >= config.drop_weak_views) & (votes[..., 0] == 0)
-    assert weak_only.any() and (occupancy.drop == ((votes[..., 0] > 0) | weak_only)).all()
+    shared = (1 - config.drop_weak_share) * votes[..., 2] >= config.drop_weak_share * votes[..., 3]
+    assert (weak_only & shared).any() and (occupancy.drop == ((votes[..., 0] > 0) | (weak_only & shared))).all()
     # a view's counts do not leak into the next: one drop point in a cell per view never votes
     single = OccupancyGrid(grid, config=config)
     for _ in range(5):

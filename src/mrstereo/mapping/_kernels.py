@@ -532,14 +532,16 @@ def _flat_cell(points, i, origin_x, origin_y, resolution, rows, cols):
 
 @njit(nogil=True, cache=True)
 def layer_points(points, slot, origin_x, origin_y, resolution, rows, cols, heights, counts, stamp, view, votes,
-                 clear_points):
+                 clear_points, floor_views=False):
     """One view's points (N, 3) into the height and drop layers, in one pass: each finite point inside the grid
     widens its cell's lowest and highest height (``heights`` (rows*cols, 2) float32, NaN: none yet); with ``slot``
     0 (floor points), 1 (drop points) or 2 (weak drop points: they count, but widen no height) it counts in
     ``counts[cell, slot]`` (int32 scratch: a cell whose ``stamp`` is not ``view`` starts from zero, so no pass
     clears it). A cell reaching ``clear_points`` floor points loses a vote (``votes[cell, 0]``, down to 0) when
     this view gave it none (``counts[cell, 1]`` >= 0; the drop points come first), and a weak vote
-    (``votes[cell, 1]``) when this view gave it no weak vote (``counts[cell, 2]`` >= 0). Returns the points
+    (``votes[cell, 1]``) when this view gave it no weak vote (``counts[cell, 2]`` >= 0). With ``floor_views``,
+    a cell's first floor point of a view that gave it no vote of either kind counts the view in
+    ``votes[cell, 3]`` (:func:`drop_votes` counts the weak ones in ``votes[cell, 2]``). Returns the points
     inside."""
     n = 0
     for i in range(points.shape[0]):
@@ -561,6 +563,8 @@ def layer_points(points, slot, origin_x, origin_y, resolution, rows, cols, heigh
             counts[k, 1] = 0
             counts[k, 2] = 0
         counts[k, slot] += 1
+        if slot == 0 and floor_views and counts[k, 0] == 1 and counts[k, 1] >= 0 and counts[k, 2] >= 0:
+            _count_view(votes, k, 3)
         if slot == 0 and counts[k, 0] == clear_points:
             for v in range(2):
                 if counts[k, v + 1] >= 0 and votes[k, v] > 0:
@@ -572,16 +576,29 @@ def layer_points(points, slot, origin_x, origin_y, resolution, rows, cols, heigh
 def drop_votes(drops, slot, origin_x, origin_y, resolution, rows, cols, counts, votes, min_points, max_votes):
     """The votes for drops of one view, after :func:`layer_points` counted its drop points (``slot`` 1) or weak
     drop points (2): a cell with at least ``min_points`` of them gains a vote (``votes[cell, slot - 1]``, up to
-    ``max_votes``) and its count becomes -1 (voted: once per view, and the view's floor points do not vote
-    against it). Returns the number of cells that got a vote."""
+    ``max_votes``; a weak one is counted in ``votes[cell, 2]`` too, without that cap) and its count becomes -1
+    (voted: once per view, and the view's floor points do not vote against it). Returns the number of cells
+    that got a vote."""
     n = 0
     for i in range(drops.shape[0]):
         k = _flat_cell(drops, i, origin_x, origin_y, resolution, rows, cols)
         if k >= 0 and counts[k, slot] >= min_points:
             votes[k, slot - 1] = min(votes[k, slot - 1] + 1, max_votes)
+            if slot == 2:
+                _count_view(votes, k, 2)
             counts[k, slot] = -1
             n += 1
     return n
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _count_view(votes, k, column):
+    """One more view in ``votes[k, column]`` (2: weak votes, 3: floor views); at int16's top both counts halve,
+    keeping their ratio (:func:`mrstereo.mapping.occupancy._voted`)."""
+    if votes[k, column] >= 32767:
+        votes[k, 2] //= 2
+        votes[k, 3] //= 2
+    votes[k, column] += 1
 
 
 @njit(nogil=True, cache=True)

@@ -42,6 +42,10 @@ CONFIRM_WALK_M = 4.0
 """How far back from a drop candidate's edge the map looks for the floor that confirms it
 (:meth:`OccupancyGrid.add_layers`)."""
 
+DROP_COLUMNS = 4
+"""The drop votes per cell (int16): the drop test's votes, its weak points' votes, the views that put a weak vote
+and the views that put floor points and no vote (:meth:`OccupancyGrid.add_layers`)."""
+
 
 def log_odds_from_probability(p) -> np.ndarray:
     """``l = log(p / (1 - p))``."""
@@ -111,6 +115,11 @@ class MappingConfig:
         The drop test's weak points (``DropConfig.weak_n_sigma``: drops within the noise margin) vote the same
         way in a layer of their own (up to ``max(drop_max_votes, drop_weak_views)``): a cell with weak votes
         from at least this many views is lethal too (docs/mapping.md, "Height and drop layers").
+    drop_weak_share : float
+        ... and when those views are at least this share of all the views that put weak votes or floor points
+        (and no vote) in the cell: a drop below the noise margin shows in many of the views that see it, far
+        floor's noise in a few, however many frames see it (frames of a robot standing still are one view).
+        0: off. Chosen on a drive over the tuning worlds (docs/obstacles.md, "Drops").
     drop_low_m : float or None
         The height layer's edge: a cell with a point at floor level next to a cell whose lowest point lies
         more than this below the floor is a drop cell too (the floor ends there and the view goes on lower).
@@ -139,11 +148,14 @@ class MappingConfig:
     drop_clear_points: int = 20
     drop_max_votes: int = 3
     drop_weak_views: int = 2
+    drop_weak_share: float = 0.25
     drop_low_m: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_weak_views"):
             _checks.positive_int(name, getattr(self, name))
+        if not 0.0 <= _checks.finite_number("drop_weak_share", self.drop_weak_share) < 1.0:
+            raise ValueError(f"drop_weak_share must be in [0, 1), got {self.drop_weak_share}")
         if self.drop_low_m is not None:
             _checks.finite_number("drop_low_m", self.drop_low_m, positive=True)
         if self.footprint_radius_m is not None:
@@ -221,9 +233,14 @@ def _points_xy(name: str, value) -> np.ndarray:
 
 
 def _voted(votes: np.ndarray, config: MappingConfig) -> np.ndarray:
-    """The cells of drop votes ``votes`` (..., 2: the drop test's, its weak points') that are drop cells: a vote,
-    or weak votes from ``config.drop_weak_views`` views (:meth:`OccupancyGrid.add_layers`)."""
-    return (votes[..., 0] > 0) | (votes[..., 1] >= config.drop_weak_views)
+    """The cells of drop votes ``votes`` (..., 4: the drop test's, its weak points', the views that put weak
+    votes, those that put floor points and no vote) that are drop cells: a vote, or weak votes from
+    ``config.drop_weak_views`` views that are at least ``config.drop_weak_share`` of the views counted
+    (:meth:`OccupancyGrid.add_layers`)."""
+    share = config.drop_weak_share
+    weak = votes[..., 2].astype(np.float32)
+    return (votes[..., 0] > 0) | ((votes[..., 1] >= config.drop_weak_views)
+                                  & ((1.0 - share) * weak >= share * votes[..., 3]))
 
 
 def _layer_points(name: str, value) -> np.ndarray:
@@ -548,9 +565,9 @@ class OccupancyGrid:
         self._z_range_m[..., 0] = np.inf
         self._z_range_m[..., 1] = -np.inf
         # the height layer (lowest, highest point height seen in the cell; NaN: none) and the drop votes
-        # (the drop test's, its weak points')
+        # (the drop test's, its weak points', the views that put weak votes and those that put floor points)
         self._heights_m = np.full(grid.shape + (2,), np.nan, np.float32)
-        self._drop_votes = np.zeros(grid.shape + (2,), np.int16)
+        self._drop_votes = np.zeros(grid.shape + (DROP_COLUMNS,), np.int16)
         self._counts = self._stamp = None       # add_layers' per-view point counts per cell, and their view
         self._view = 0
         self.n_updates = 0
@@ -628,7 +645,7 @@ class OccupancyGrid:
                 self._counts = np.zeros((rows * cols, 3), np.int32)
                 self._stamp = np.full(rows * cols, -1, np.int32)
             self._view = (self._view + 1) % (1 << 31)           # the cells stamped with another view count from 0
-            votes = self._drop_votes.reshape(-1, 2)
+            votes = self._drop_votes.reshape(-1, DROP_COLUMNS)
             scratch = (self._counts, self._stamp, self._view, votes, c.drop_clear_points)
             _kernels.layer_points(sets[2], 1, *at, heights, *scratch)
             voted = _kernels.drop_votes(sets[2], 1, *at, self._counts, votes, c.drop_min_points, c.drop_max_votes)
@@ -636,7 +653,8 @@ class OccupancyGrid:
                 _kernels.layer_points(sets[3], 2, *at, heights, *scratch)
                 _kernels.drop_votes(sets[3], 2, *at, self._counts, votes, c.drop_min_points,
                                     max(c.drop_max_votes, c.drop_weak_views))
-            _kernels.layer_points(sets[1], 0 if drop_points_world is not None else -1, *at, heights, *scratch)
+            _kernels.layer_points(sets[1], 0 if drop_points_world is not None else -1, *at, heights, *scratch,
+                                  drop_weak_points_world is not None)
             _kernels.layer_points(sets[0], -1, *at, heights, *scratch)
             return int(voted)
 
@@ -649,7 +667,7 @@ class OccupancyGrid:
         spacing = 0.2 * self.grid.resolution_m
         longest = float(np.hypot(rows[:, 2] - rows[:, 0], rows[:, 3] - rows[:, 1]).max())
         out = np.empty((len(rows) * (int(longest / spacing) + 4), 3), np.float32)
-        n = _kernels.confirm_drops(rows, *at, heights, self._drop_votes.reshape(-1, 2),
+        n = _kernels.confirm_drops(rows, *at, heights, self._drop_votes.reshape(-1, DROP_COLUMNS),
                                    float(self.config.height_tolerance_m), CONFIRM_WALK_M, out)
         return out[:n]
 

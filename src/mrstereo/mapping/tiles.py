@@ -24,14 +24,14 @@ import numpy as np
 from .. import _checks
 from ..io import atomic_write, write_image
 from .grid import BYTES_PER_CELL, GridSpec
-from .occupancy import (GridUpdate, MappingConfig, OccupancyGrid, _finite_bounds, _points_xy, _voted, disc_cells,
-                        log_odds_from_probability)
+from .occupancy import (DROP_COLUMNS, GridUpdate, MappingConfig, OccupancyGrid, _finite_bounds, _points_xy, _voted,
+                        disc_cells, log_odds_from_probability)
 from .rosmap import FREE, OCCUPIED, UNKNOWN, write_map_yaml
 
 __all__ = ["TiledOccupancyGrid", "TILE_CELLS", "DENSE_MAP_MAX_CELLS", "OVERVIEW_MAX_PX"]
 
 TILE_CELLS = 128
-"""Cells along a tile's side (6.4 m at 5 cm): 448 KiB of log-odds, heights and drop votes per tile."""
+"""Cells along a tile's side (6.4 m at 5 cm): 512 KiB of log-odds, heights and drop votes per tile."""
 
 DENSE_MAP_MAX_CELLS = 2048 * 2048
 """The most cells of a map written whole as one dense grid (map.pgm, log_odds.npy, map.png, the metrics):
@@ -44,6 +44,13 @@ OVERVIEW_MAX_PX = 4096
 _LAYERS = ("_log_odds", "_z_range_m", "_heights_m", "_drop_votes")
 """The :class:`OccupancyGrid` arrays a tile holds, in order (saved as ``log_odds``, ``z``, ``heights``, ``drop``)."""
 _SAVED = ("log_odds", "z", "heights", "drop")
+
+
+def _padded(votes: np.ndarray, columns: int) -> np.ndarray:
+    """Drop votes of a map saved with fewer columns (T, T) or (T, T, c) as (T, T, ``columns``), the missing ones
+    zero (no weak votes, no views counted)."""
+    votes = votes.reshape(votes.shape[:2] + (-1,))
+    return np.concatenate([votes, np.zeros(votes.shape[:2] + (columns - votes.shape[2],), votes.dtype)], axis=-1)
 
 
 class TiledOccupancyGrid:
@@ -75,7 +82,7 @@ class TiledOccupancyGrid:
         _checks.fits_in_memory("resolution_m and view_reach_m", side * side * BYTES_PER_CELL,
                                f"one view's window of up to {side:.4g} x {side:.4g} cells of {self.resolution_m:g} m "
                                f"({self.view_reach_m:g} m each way from the sensor)")
-        _checks.fits_in_memory("tile_cells", 16.0 * self.tile_cells ** 2, f"a tile of {self.tile_cells} x "
+        _checks.fits_in_memory("tile_cells", 32.0 * self.tile_cells ** 2, f"a tile of {self.tile_cells} x "
                                f"{self.tile_cells} cells")
         self._tiles: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         self.n_updates = 0
@@ -136,7 +143,7 @@ class TiledOccupancyGrid:
             z = np.empty((t, t, 2), np.float32)
             z[..., 0], z[..., 1] = np.inf, -np.inf
             self._tiles[key] = (np.full((t, t), np.nan), z, np.full((t, t, 2), np.nan, np.float32),
-                                np.zeros((t, t, 2), np.int16))
+                                np.zeros((t, t, DROP_COLUMNS), np.int16))
         return self._tiles[key]
 
     def _store(self, grid: OccupancyGrid) -> None:
@@ -307,8 +314,8 @@ class TiledOccupancyGrid:
                             if key not in data.files and saved in ("heights", "drop"):
                                 continue                    # (a map saved before the height and drop layers)
                             values = data[key]
-                            if saved == "drop" and values.shape == stored.shape[:2]:
-                                values = np.stack([values, np.zeros_like(values)], axis=-1)   # (no weak votes)
+                            if saved == "drop" and values.shape[:2] == stored.shape[:2]:    # (a map saved before
+                                values = _padded(values, stored.shape[2])   # the weak votes, or their views)
                             if values.shape != stored.shape:
                                 raise ValueError(f"tile {key} has shape {values.shape}, not {stored.shape}")
                             stored[...] = values
