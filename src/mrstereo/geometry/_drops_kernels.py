@@ -301,3 +301,19 @@ def column_drops(points, t, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per
                                                    spacing_m, robot_floor, weak_edge, n_weak_edge, weak_below,
                                                    n_weak_below, no_candidates, none, weak_columns)
     return n_edge, n_below, n_cand, n_weak_edge, n_weak_below
+
+
+@njit(nogil=True, cache=True)
+def floor_crossings(points, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2, n_sigma, out):
+    """Where the sight lines from the camera ``(tx, ty, tz)`` to points below the floor (N, 3) pass floor level,
+    into ``out`` (N, 3; z = 0), for the points deeper than a step, their noise (``n_sigma`` sigma_h) and a
+    drivable slope (``tan_slope``) from there. Returns the number written."""
+    n = 0
+    for i in range(points.shape[0]):
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        s = tz / (tz - z)
+        ex, ey = tx + s * (x - tx), ty + s * (y - ty)
+        run = math.sqrt((x - ex) ** 2 + (y - ey) ** 2)
+        if -z - n_sigma * _sigma_h(x, y, z, tx, ty, tz, sigma_per_m2) - tan_slope * run > max_step_m:
+            n = _emit(out, n, ex, ey)
+    return n

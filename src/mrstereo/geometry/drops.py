@@ -191,15 +191,14 @@ def _floor_crossings(points_below, t, config: DropConfig, baseline_focal_m_px: f
     depends on the pixel's direction only, not on its measured depth). The sight line goes on below floor
     level, so no floor lies there (a hole's inside, the space past a ledge) -- for the points deeper than a
     step, their height noise and a ``max_slope_deg`` slope from there (no drivable ramp starting there
-    reaches them: a ramp's own points are no evidence against the floor before them)."""
-    s = t[2] / (t[2] - points_below[:, 2])
-    out = np.zeros_like(points_below)
-    out[:, :2] = t[:2] + s[:, None] * (points_below[:, :2] - t[:2])
-    dist = np.linalg.norm(points_below - t, axis=1)
-    noise = config.n_sigma * (t[2] - points_below[:, 2]) * dist * config.disparity_sigma_px / baseline_focal_m_px
-    run = np.hypot(*(points_below[:, :2] - out[:, :2]).T)
-    deep = -points_below[:, 2] - noise - math.tan(math.radians(config.max_slope_deg)) * run > config.max_step_m
-    return out[deep]
+    reaches them: a ramp's own points are no evidence against the floor before them;
+    ``_drops_kernels.floor_crossings``)."""
+    out = np.empty_like(points_below)
+    n = _drops_kernels.floor_crossings(points_below, *(float(v) for v in t), float(config.max_step_m),
+                                       math.tan(math.radians(config.max_slope_deg)),
+                                       float(config.disparity_sigma_px) / baseline_focal_m_px,
+                                       float(config.n_sigma), out)
+    return out[:n]
 
 
 def transform_candidates(T, candidates) -> np.ndarray:
