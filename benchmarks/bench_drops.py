@@ -482,7 +482,9 @@ def evaluate_corridor(data_dir: Path) -> list[dict]:
 
 
 def measure_speed(repeats: int) -> list[dict]:
-    """Median CPU seconds of one frame with and without the drop test (interleaved), per input."""
+    """Median CPU seconds of one frame with and without the drop test (interleaved), per input; the ratios are
+    medians of each round's ratio (a round runs every configuration once, so slow spells of the machine
+    cancel)."""
     from mrstereo.geometry import ObstacleConfig, obstacles
     from mrstereo.geometry.drops import DropConfig
     from mrstereo.geometry.pair import obstacles_from_pair
@@ -516,8 +518,9 @@ def measure_speed(repeats: int) -> list[dict]:
                         if key == "with":
                             times["test"].append(spent[0])
             a, b, c, test = (float(np.median(times[key])) for key in times)
-            rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": a / b,
-                         "ratio without weak points": c / b, "drop test cpu s": test, "drop test share": test / a})
+            paired = [float(np.median(np.divide(times[key], times["without"]))) for key in ("with", "no weak")]
+            rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": paired[0],
+                         "ratio without weak points": paired[1], "drop test cpu s": test, "drop test share": test / a})
     return rows + [_mapper_speed(repeats)]
 
 
@@ -569,7 +572,8 @@ def _mapper_speed(repeats: int) -> dict:
                     if key == "with":
                         times["layers"].append(spent[0])
     a, b, layers = (float(np.median(times[key])) for key in ("with", "without", "layers"))
-    return {"input": "mapper step, corridor 320x240", "with drops cpu s": a, "without cpu s": b, "ratio": a / b,
+    ratio = float(np.median(np.divide(times["with"], times["without"])))        # per round (see measure_speed)
+    return {"input": "mapper step, corridor 320x240", "with drops cpu s": a, "without cpu s": b, "ratio": ratio,
             "layers cpu s": layers, "layers share": layers / a}
 
 
