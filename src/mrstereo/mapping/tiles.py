@@ -314,8 +314,9 @@ class TiledOccupancyGrid:
                             if key not in data.files and saved in ("heights", "drop"):
                                 continue                    # (a map saved before the height and drop layers)
                             values = data[key]
-                            if saved == "drop" and values.shape[:2] == stored.shape[:2]:    # (a map saved before
-                                values = _padded(values, stored.shape[2])   # the weak votes, or their views)
+                            if saved == "drop" and values.shape[:2] == stored.shape[:2] and \
+                                    values.size < stored.size:  # (a map saved before the weak votes or their views)
+                                values = _padded(values, stored.shape[2])
                             if values.shape != stored.shape:
                                 raise ValueError(f"tile {key} has shape {values.shape}, not {stored.shape}")
                             stored[...] = values
