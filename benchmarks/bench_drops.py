@@ -601,6 +601,7 @@ def main() -> None:
     parser.add_argument("--n-sigma", type=float, default=DropConfig.n_sigma, help="DropConfig.n_sigma")
     parser.add_argument("--weak-n-sigma", type=lambda v: None if v.lower() == "none" else float(v),
                         default=DropConfig.weak_n_sigma, help="DropConfig.weak_n_sigma ('none': no weak votes)")
+    parser.add_argument("--fattening-px", type=int, default=DropConfig.fattening_px, help="DropConfig.fattening_px")
     parser.add_argument("--why", action="store_true",
                         help="also the causes of the missed edge cells, per seed and summed (missed_causes)")
     parser.add_argument("--oracle", action="store_true",
@@ -617,7 +618,8 @@ def main() -> None:
         return
     from mrstereo.pipeline.run import PipelineConfig
 
-    drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma, weak_n_sigma=args.weak_n_sigma)
+    drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma, weak_n_sigma=args.weak_n_sigma,
+                       fattening_px=args.fattening_px)
     tuned = {k: getattr(args, k) for k in ("drop_min_points", "drop_clear_points", "drop_max_votes", "drop_low_m",
                                            "drop_weak_views", "drop_weak_share") if getattr(args, k) is not None}
     base = PipelineConfig()

@@ -862,3 +862,49 @@ def test_two_views_of_a_hole_make_its_inside_lethal_where_their_sight_lines_pass
     floor_cells = ((x < 0.9) | (x > 2.5)) & (np.abs(y) < 0.25) & (x < 2.9)
     assert maps["with"].drop[inside].all() and not maps["without"].drop[inside].any()
     assert not maps["with"].drop[floor_cells].any()
+
+
+@pytest.mark.parametrize("side", [-1.0, 1.0])
+def test_the_side_of_a_hole_seen_along_it_is_marked_where_the_matcher_carried_the_floor_past_it(side):
+    """A hole 1 m deep beside the view (its side edge 0.3 m to the right, ``side`` -1, or to the left, running
+    straight ahead from 1 to 3 m), exact points, then as a matcher sees it: along each row the 8 pixels of the
+    hole next to the floor carry the floor's disparity (they triangulate onto the floor plane past the edge);
+    with the hole to the left, the pixels the right camera does not see (the floors' disparity difference, a
+    band left of the floor, wider than ``fattening_px`` here) are unmeasured beyond those. Up the columns the fattened floor pushes the edges into
+    the hole; along the rows (``fattening_px``) every 5 cm of the side from 1.3 to 2 m (where the bottom is seen
+    within 6 m) has a mark within a cell of it again, and none lies more than ``edge_reach_m`` into the floor."""
+    rays, T, _ = _tilted_rig()
+    bf = 60.0                               # a 0.3 m baseline: the hidden band is 20-30 px wide
+    y_edge = 0.3 * side
+    points = _surface(rays, T, lambda p: np.where((p[:, 0] > 1.0) & (p[:, 0] < 3.0) & (side * p[:, 1] > 0.3),
+                                                  -1.0, 0.0))
+    t = T[:3, 3]
+    floor = t + rays * (t[2] / -np.minimum(rays[..., 2], -1e-9))[..., None]
+    depth = lambda p: (p - t) @ T[:3, 2]                                            # noqa: E731
+    seen = points.copy()
+    low = points[..., 2] < -0.5
+    w = points.shape[1]
+    if side < 0:            # the hole right of the floor in the image: fattened, nothing hidden
+        for i, j in np.argwhere(low[:, 1:] & ~low[:, :-1]):
+            k = slice(j + 1, j + 9)
+            seen[i, k] = np.where(low[i, k, None], floor[i, k], points[i, k])
+    else:                   # the hole left of the floor: a band the right camera does not see, then fattened
+        for i, j in np.argwhere(low[:, :-1] & ~low[:, 1:]):
+            band = int(np.ceil(bf / depth(points[i, j + 1]) - bf / depth(points[i, j])))
+            for k in range(max(0, j - band), j + 1):
+                seen[i, k] = floor[i, k] if j - k < 8 else np.nan
+
+    def covered(pts, fattening_px):
+        edge = find_drops(pts, T, bf, config=DropConfig(fattening_px=fattening_px)).edge_points_robot
+        along = edge[(edge[:, 0] > 1.3) & (edge[:, 0] < 2.0)]
+        assert np.all(side * along[:, 1] > 0.3 - 0.1 - 1e-9), along[:, 1]
+        near = along[np.abs(along[:, 1] - y_edge) < 0.05, 0]
+        return np.isin(np.arange(14), np.floor((near - 1.3) / 0.05).astype(int))
+
+    assert covered(points, 0).all() and covered(points, 8).all()
+    assert not covered(seen, 0).all()
+    assert covered(seen, 8).all()
+    with pytest.raises(ValueError, match="fattening_px"):
+        DropConfig(fattening_px=-1)
+    with pytest.raises(TypeError, match="fattening_px"):
+        DropConfig(fattening_px=2.5)

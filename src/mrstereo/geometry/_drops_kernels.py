@@ -1,4 +1,5 @@
-"""Numba kernel of the drop test (:mod:`mrstereo.geometry.drops`): one pass up each image column.
+"""Numba kernel of the drop test (:mod:`mrstereo.geometry.drops`): one pass up each image column, one along
+the rows beside the drops found.
 
 Private: no validation, preallocated outputs. Conventions: docs/conventions.md.
 """
@@ -130,9 +131,10 @@ def _seen_through(points, rows, j, k0, k1, m, r_cross, r_low, tx, ty, tz, max_st
 @njit(nogil=True, cache=True)
 def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m, support,
             edge_reach_m, spacing_m, robot_floor, out_edge, n_edge, out_below, n_below, out_candidates, n_cand,
-            edge_columns):
+            edge_columns, dropped, dropped_rows):
     """The drop test of column ``j`` (its measured rows ``rows[:m]``, from the image's bottom up) with the margin
-    ``n_sigma`` (:func:`column_drops`); appends to the outputs from the counts given, returns the new counts."""
+    ``n_sigma`` (:func:`column_drops`); appends to the outputs from the counts given, returns the new counts;
+    ``dropped[i, j]`` set for the pixels of its drops' runs, ``dropped_rows[i]`` for their rows."""
     xa, ya, za, sa = tx, ty, 0.0, 0.0
     seen_floor = False
     in_drop = False
@@ -212,6 +214,8 @@ def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
                 n_edge = _emit(out_edge, n_edge, xa + f * (ex - xa), ya + f * (ey - ya))
             for q in range(k, end):
                 r = rows[q]
+                dropped[r, j] = True
+                dropped_rows[r] = True
                 if n_below < out_below.shape[0]:
                     out_below[n_below, 0] = points[r, j, 0]
                     out_below[n_below, 1] = points[r, j, 1]
@@ -223,10 +227,73 @@ def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
     return n_edge, n_below, n_cand
 
 
+@njit(nogil=True, cache=True, inline="always")
+def _disparity(points, i, j, tx, ty, tz, axis, bf, doffs_px):
+    """The disparity of point ``(i, j)`` (``b f / Z - doffs``, ``Z`` its depth along the optical axis ``axis``)."""
+    depth = (points[i, j, 0] - tx) * axis[0] + (points[i, j, 1] - ty) * axis[1] + (points[i, j, 2] - tz) * axis[2]
+    return bf / depth - doffs_px
+
+
+@njit(nogil=True, cache=True)
+def _sides(points, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per_m2,
+           n_sigma, low_m, fattening_px, edge_reach_m, out_edge, n_edge):
+    """The side edges of the drops found up the columns (a hole's or a stairwell's side seen along it, which no
+    column crosses). Along each image row, where a drop's run (``dropped``) meets a floor-level point ``A``
+    within ``fattening_px`` pixels (unmeasured ones between; on the run's right, where the right camera does not
+    see the run's pixels next to the floor, that many more as the disparities of ``A`` and the run's end differ)
+    and lies deeper than a step, both points' noise and a drivable slope below ``A``, the floor-level points from
+    ``A`` on into the floor, over ``fattening_px`` pixels and ``edge_reach_m``, are edge points: the matcher's
+    window carries the floor's disparity past the true edge onto the drop's side, and the floor's disparity is
+    the same along a row, so those pixels triangulate onto the floor; the true edge lies among them. Returns the
+    new count of ``out_edge``."""
+    H, W = dropped.shape
+    for i in range(H):
+        if not dropped_rows[i]:
+            continue
+        j = 0
+        while j < W:
+            if not dropped[i, j]:
+                j += 1
+                continue
+            j1 = j
+            while j1 + 1 < W and dropped[i, j1 + 1]:
+                j1 += 1
+            for side in (-1, 1):
+                q = j if side < 0 else j1
+                a = q + side
+                while 0 <= a < W and math.isnan(points[i, a, 2]):
+                    a += side
+                if not (0 <= a < W and _floor_level(points, i, a, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
+                                                    low_m)):
+                    continue
+                occluded = 0.0 if side < 0 else max(0.0, _disparity(points, i, a, tx, ty, tz, axis, bf, doffs_px)
+                                                    - _disparity(points, i, q, tx, ty, tz, axis, bf, doffs_px))
+                if abs(a - q) > fattening_px + occluded:
+                    continue
+                xa, ya, za = points[i, a, 0], points[i, a, 1], points[i, a, 2]
+                xq, yq, zq = points[i, q, 0], points[i, q, 1], points[i, q, 2]
+                sa = n_sigma * _sigma_h(xa, ya, za, tx, ty, tz, sigma_per_m2)
+                sq = n_sigma * _sigma_h(xq, yq, zq, tx, ty, tz, sigma_per_m2)
+                if za - zq - math.sqrt(sa * sa + sq * sq) - tan_slope * math.sqrt((xq - xa) ** 2 + (yq - ya) ** 2) \
+                        <= max_step_m:
+                    continue
+                b = a
+                while 0 <= b < W and abs(b - a) <= fattening_px:
+                    if not math.isnan(points[i, b, 2]):
+                        if not (_floor_level(points, i, b, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma, low_m)
+                                and math.sqrt((points[i, b, 0] - xa) ** 2 + (points[i, b, 1] - ya) ** 2)
+                                <= edge_reach_m):
+                            break
+                        n_edge = _emit(out_edge, n_edge, points[i, b, 0], points[i, b, 1])
+                    b += side
+            j = j1 + 1
+    return n_edge
+
+
 @njit(nogil=True, cache=True)
 def column_drops(points, t, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n_sigma, low_m,
-                 support, edge_reach_m, spacing_m, robot_floor, out_edge, out_below, out_candidates, edge_columns,
-                 weak_edge, weak_below, weak_columns):
+                 support, edge_reach_m, spacing_m, robot_floor, fattening_px, out_edge, out_below, out_candidates,
+                 edge_columns, weak_edge, weak_below, weak_columns):
     """Drop edges and negative obstacles of a robot-frame point image ``points`` (H, W, 3), NaN invalid.
 
     Up each column (from the image's bottom) a run of at least ``support`` measured points below the floor
@@ -259,6 +326,9 @@ def column_drops(points, t, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per
     have its match outside the right image (:func:`_unmatchable`; ``axis``: the optical axis in the robot
     frame, ``bf``: ``b f``, ``doffs_px``: the rig's disparity offset): no matcher can have found the floor there.
 
+    ``fattening_px`` > 0: then along each image row the sides of the drops found (:func:`_sides`) into
+    ``out_edge`` (and the weak drops' into ``weak_edge``).
+
     ``weak_n_sigma`` >= 0 (negative: off): each column (its measured rows gathered once) is also tested with that
     looser margin, the same rules (:func:`_column`), its drops' points into ``weak_edge`` / ``weak_below`` and
     their count into ``weak_columns`` (no candidates): the map's weak votes. A column with no point below the
@@ -282,6 +352,8 @@ def column_drops(points, t, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per
                 low[j] = (_below(points, i, j, tx, ty, tz, max_step_m, sigma_per_m2, gate)
                           and not _unmatchable(points, i, j, tx, ty, tz, axis, bf, doffs_px))
     rows = np.empty(H, np.int64)
+    dropped, dropped_rows = np.zeros((H, W), np.bool_), np.zeros(H, np.bool_)
+    weak_dropped, weak_rows = np.zeros((H, W), np.bool_), np.zeros(H, np.bool_)
     for j in range(W):
         if not low[j]:
             continue
@@ -294,12 +366,21 @@ def column_drops(points, t, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per
                 m += 1
         n_edge, n_below, n_cand = _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
                                           n_sigma, low_m, support, edge_reach_m, spacing_m, robot_floor, out_edge,
-                                          n_edge, out_below, n_below, out_candidates, n_cand, edge_columns)
+                                          n_edge, out_below, n_below, out_candidates, n_cand, edge_columns, dropped,
+                                          dropped_rows)
         if weak:
             n_weak_edge, n_weak_below, _ = _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope,
                                                    sigma_per_m2, weak_n_sigma, low_m, support, edge_reach_m,
                                                    spacing_m, robot_floor, weak_edge, n_weak_edge, weak_below,
-                                                   n_weak_below, no_candidates, none, weak_columns)
+                                                   n_weak_below, no_candidates, none, weak_columns, weak_dropped,
+                                                   weak_rows)
+    if fattening_px > 0:
+        n_edge = _sides(points, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m, tan_slope,
+                        sigma_per_m2, n_sigma, low_m, fattening_px, edge_reach_m, out_edge, n_edge)
+        if weak:
+            n_weak_edge = _sides(points, weak_dropped, weak_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m,
+                                 tan_slope, sigma_per_m2, weak_n_sigma, low_m, fattening_px, edge_reach_m, weak_edge,
+                                 n_weak_edge)
     return n_edge, n_below, n_cand, n_weak_edge, n_weak_below
 
 

@@ -9,8 +9,9 @@ floor); at the image's left border, where the floor on a point's sight line woul
 image, a point below the floor counts as unmeasured. The edge (between the last floor point
 and where the sight line to the lower point passes floor level) and the lower points become obstacle
 points at floor level (z = 0, below any sight line, so the grid's occlusion tests never see through them), so
-the scan and the grid mark them like any obstacle; the far rim of a hole
-(a rise from below the floor back to it) too. A drivable ramp, a kerb or a sunken step within the limits
+the scan and the grid mark them like any obstacle; the far rim of a hole (a rise from below the floor back to
+it) too, and along each image row the floor-level points beside a drop's run within the matcher's fattening (a
+hole's side seen along it, which no column crosses). A drivable ramp, a kerb or a sunken step within the limits
 is no drop. Points below the floor that one frame cannot tell from a ramp starting out of view (the floor
 measured too far before them in their column, or none: ``DropConfig.robot_floor`` judges those against the
 floor under the robot) are *candidates* that the map confirms with the floor it measured there before
@@ -54,7 +55,10 @@ class DropConfig:
     pass; its drops are *weak* points (:attr:`DropResult.weak_points_robot`) that mark nothing alone: the map
     makes a cell lethal where ``MappingConfig.drop_weak_views`` views put them (None: off). Where the sight
     lines to the drops' lower points pass floor level (no floor there; points below any drivable slope from
-    there) are weak points too.
+    there) are weak points too. ``fattening_px``: how far (pixels along an image row) the matcher's window
+    carries the floor's disparity past an edge (about half a window, more on a decimated level); along each row
+    the floor-level points within it beside a drop's run are edge points too (the sides of a hole seen along
+    them; 0: off).
     """
 
     max_step_m: float = 0.05
@@ -66,6 +70,7 @@ class DropConfig:
     spacing_m: float = 0.01
     robot_floor: bool = True
     weak_n_sigma: float | None = 0.75
+    fattening_px: int = 8
 
     def __post_init__(self) -> None:
         _checks.finite_number("max_step_m", self.max_step_m, nonnegative=True)
@@ -79,6 +84,7 @@ class DropConfig:
             raise TypeError(f"robot_floor must be a bool, got {type(self.robot_floor).__name__}")
         _checks.finite_number("edge_reach_m", self.edge_reach_m, nonnegative=True)
         _checks.finite_number("spacing_m", self.spacing_m, positive=True)
+        _checks.positive_int("fattening_px", self.fattening_px, minimum=0)
         if self.weak_n_sigma is not None:
             _checks.finite_number("weak_n_sigma", self.weak_n_sigma, nonnegative=True)
 
@@ -158,7 +164,7 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     t = np.ascontiguousarray(T[:3, 3], dtype=np.float64)
     h, w = pts.shape[:2]
     per_edge = int(config.edge_reach_m / config.spacing_m) + 2
-    out_edge = np.empty((4 * w * per_edge, 3))
+    out_edge = np.empty((4 * w * per_edge + 8 * h * (config.fattening_px + 1), 3))
     out_below = np.empty((h * w // 2 + 1, 3))
     out_candidates = np.empty((4 * w, len(CANDIDATE_COLUMNS)))
     columns = np.zeros(w, np.int64)
@@ -172,8 +178,8 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
         pts, t, axis, bf, doffs, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
         float(config.disparity_sigma_px) / bf, float(config.n_sigma),
         float(config.weak_n_sigma) if weak else -1.0, top, int(config.support), float(config.edge_reach_m),
-        float(config.spacing_m), bool(config.robot_floor), out_edge, out_below, out_candidates, columns,
-        weak_edge, weak_below, np.zeros(w, np.int64))
+        float(config.spacing_m), bool(config.robot_floor), int(config.fattening_px), out_edge, out_below,
+        out_candidates, columns, weak_edge, weak_below, np.zeros(w, np.int64))
     def near(a, x=0):               # the rows whose point (columns x, x + 1) lies within max_range_m
         return a[np.hypot(a[:, x] - t[0], a[:, x + 1] - t[1]) <= reach]
 
