@@ -78,3 +78,17 @@ def test_oracle_disparity_feeds_the_chain_the_true_disparity(first_stop):
     matched = pair(left, right).raw_disparity_px
     both = np.isfinite(matched) & valid
     assert not np.array_equal(matched[both], truth[both])
+
+
+@pytest.mark.parametrize("argv, name", [(["--drop-weak-share", "1.5"], "drop_weak_share"),
+                                        (["--fattening-px", "-2"], "fattening_px"),
+                                        (["--n-sigma", "nan"], "n_sigma")])
+def test_a_bad_tuning_value_is_one_line_naming_it_and_exit_2(monkeypatch, capsys, argv, name):
+    from bench_drops import main
+
+    monkeypatch.setattr(sys, "argv", ["bench_drops.py", "--seeds", "0", *argv])
+    with pytest.raises(SystemExit) as exit_:
+        main()
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("bench_drops.py: error: ") and name in err and "Traceback" not in err
