@@ -275,7 +275,8 @@ CAUSES = ("a: no pixel sees it", "a: out of disparity range", "a: image border",
           "b: a run shorter than support",
           "b: the far rim not seen spreading over edge_reach_m", "b: other (the mismatch test, the face rules)",
           "b: floor only, nothing below measured near",
-          "c: candidate not confirmed", "d: detected in a frame, lost in the map")
+          "c: candidate not confirmed", "d: weak points in a frame, too few views in the map",
+          "d: drop points in a frame, lost in the map")
 """The causes of a missed edge cell (:func:`missed_causes`), in the order they are tested (last first)."""
 
 
@@ -285,9 +286,9 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     :func:`mrstereo.geometry.pair.scan_from_pair`, the given mount and pose); the pixels whose TRUE point
     (true disparity) lies in the cell or next to it are the cell's pixels. In the order tested:
 
-    * **d**: some frame's drop points or weak points (edge or below) fell in the cell or next to it, but the map
-      lost them (too few per cell for a vote, weak points from too few views, votes taken back by floor seen
-      there later);
+    * **d**: some frame's drop points (edge or below) fell in the cell or next to it, but the map lost them (too
+      few per cell and view for a vote, votes taken back by floor seen there later); else some frame's weak
+      points did, from too few views (``drop_weak_views``, ``drop_weak_share``) for the map;
     * **c**: some frame's drop candidate had its edge ``S -> E`` there, but the map never confirmed it;
     * **b**: some frame measured a cell's pixel (a disparity after eq. 13): with points below the floor
       (``z < -2 max_step_m``) measured within ``near_m`` of the cell in that frame the column rule judged them
@@ -320,7 +321,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     cells = np.argwhere(missed)
     n = len(cells)
     stats = {k: np.zeros(n, np.int64) for k in ("pixels", "range", "border", "uniform", "invalid", "measured",
-                                                 "below", "detected", "candidate", "slope", "noise", "both", "short", "rim")}
+                                                 "below", "detected", "weak", "candidate", "slope", "noise", "both", "short", "rim")}
     near_cells = int(np.ceil(near_m / grid.resolution_m))
 
     hits = lambda world_xy, radius: _near(grid, cells, world_xy, radius)      # noqa: E731
@@ -365,7 +366,8 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
         low = pts[pts[:, 2] < -2.0 * drops.max_step_m]
         measured_now = stats["measured"] > 0
         stats["below"] += hits(world(low), near_cells) & measured_now
-        stats["detected"] += hits(world(np.concatenate([obs.drop_points_robot, obs.drop_weak_points_robot])), 1)
+        stats["detected"] += hits(world(obs.drop_points_robot), 1)
+        stats["weak"] += hits(world(obs.drop_weak_points_robot), 1)
         bf = float(stereo.baseline_m) * float(stereo.focal_px)
         for name, variant in (("slope", replace(drops, max_slope_deg=0.0)), ("noise", replace(drops, n_sigma=0.0)),
                               ("both", replace(drops, n_sigma=0.0, max_slope_deg=0.0)),
@@ -398,6 +400,8 @@ def _tally(stats: dict[str, np.ndarray]) -> dict[str, int]:
     counts = dict.fromkeys(CAUSES, 0)
     for i in range(n):
         if stats["detected"][i]:
+            counts[CAUSES[14]] += 1
+        elif stats["weak"][i]:
             counts[CAUSES[13]] += 1
         elif stats["candidate"][i]:
             counts[CAUSES[12]] += 1
