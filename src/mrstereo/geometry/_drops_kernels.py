@@ -37,6 +37,12 @@ def _below(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
 
 
 @njit(nogil=True, cache=True, inline="always")
+def _depth(points, i, j, tx, ty, tz, axis):
+    """Depth of point ``(i, j)`` along the optical axis ``axis`` (robot frame) from the camera ``(tx, ty, tz)``."""
+    return (points[i, j, 0] - tx) * axis[0] + (points[i, j, 1] - ty) * axis[1] + (points[i, j, 2] - tz) * axis[2]
+
+
+@njit(nogil=True, cache=True, inline="always")
 def _unmatchable(points, p, j, tx, ty, tz, axis, bf, doffs_px):
     """Would the floor on the sight line of point ``(p, j)`` (below floor level) have its match outside the right
     image (``j - d_floor < 0``, ``d_floor = b f / Z_floor - doffs``; ``axis``: the optical axis in the robot
@@ -44,7 +50,7 @@ def _unmatchable(points, p, j, tx, ty, tz, axis, bf, doffs_px):
     there, and the point may be a floor pixel matched wrongly, too far: the image's left border, which the
     matcher searches anyway (OpenCV leaves it invalid)."""
     z = points[p, j, 2]
-    depth = (points[p, j, 0] - tx) * axis[0] + (points[p, j, 1] - ty) * axis[1] + (z - tz) * axis[2]
+    depth = _depth(points, p, j, tx, ty, tz, axis)
     return depth > 0.0 and (j + doffs_px) * tz * depth < bf * (tz - z)
 
 
@@ -230,8 +236,7 @@ def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
 @njit(nogil=True, cache=True, inline="always")
 def _disparity(points, i, j, tx, ty, tz, axis, bf, doffs_px):
     """The disparity of point ``(i, j)`` (``b f / Z - doffs``, ``Z`` its depth along the optical axis ``axis``)."""
-    depth = (points[i, j, 0] - tx) * axis[0] + (points[i, j, 1] - ty) * axis[1] + (points[i, j, 2] - tz) * axis[2]
-    return bf / depth - doffs_px
+    return bf / _depth(points, i, j, tx, ty, tz, axis) - doffs_px
 
 
 @njit(nogil=True, cache=True)
