@@ -32,7 +32,9 @@ own time within the frame (its point image, the column pass, the merge: "drop te
 frames' noise does not blur); and of a whole mapper step (the grid and its height and drop layers too) on
 corridor frames, with the layers' share.
 
-The weak votes (``--weak-n-sigma``, ``'none'``: off; ``--drop-weak-views``) were chosen on seeds 100-119.
+The weak votes (``--weak-n-sigma``, ``'none'``: off; ``--drop-weak-views``) were chosen on seeds 100-119; the
+noise margin (``--n-sigma`` times the disparity error measured on each frame's floor; ``--disparity-sigma``: a
+fixed one instead, the former default 0.25 px with ``--n-sigma 3``) on seeds 100-119 and the drives 100-109.
 
 ``--why``: also the causes of each seed's missed edge cells, and their sums (:func:`missed_causes`): not measured
 by any frame (and why), measured but no drop by the column rule (which of its margins), a candidate the map
@@ -55,6 +57,7 @@ Usage::
     python benchmarks/bench_drops.py --seeds 0-4 100-109 --why
     python benchmarks/bench_drops.py --seeds 200-209 --oracle [--n-sigma 1] [--why]
     python benchmarks/bench_drops.py --seeds 100-119 --weak-n-sigma 1.0 --drop-weak-views 3
+    python benchmarks/bench_drops.py --seeds 200-209 --disparity-sigma 0.25 --n-sigma 3
     python benchmarks/bench_drops.py --real [--frames 24]
     python benchmarks/bench_drops.py --speed [--repeats 15]
     python benchmarks/bench_drops.py --corridor [--data DIR]
@@ -606,6 +609,9 @@ def main() -> None:
                         help="DropConfig(robot_floor=False): only the map's memory confirms a drop with no floor "
                              "measured before it in its column")
     parser.add_argument("--n-sigma", type=float, default=DropConfig.n_sigma, help="DropConfig.n_sigma")
+    parser.add_argument("--disparity-sigma", type=float, default=None,
+                        help="a fixed disparity error [px] for the noise margin (DropConfig.disparity_sigma_px with "
+                             "noise_from_floor=False); default: measured on each frame's floor")
     parser.add_argument("--weak-n-sigma", type=lambda v: None if v.lower() == "none" else float(v),
                         default=DropConfig.weak_n_sigma, help="DropConfig.weak_n_sigma ('none': no weak votes)")
     parser.add_argument("--fattening-px", type=int, default=DropConfig.fattening_px, help="DropConfig.fattening_px")
@@ -629,8 +635,10 @@ def main() -> None:
                                            "drop_weak_views", "drop_weak_share") if getattr(args, k) is not None}
     base = PipelineConfig()
     try:                                        # a bad tuning value: one line naming it, exit 2
+        fixed = {} if args.disparity_sigma is None else {"noise_from_floor": False,
+                                                         "disparity_sigma_px": args.disparity_sigma}
         drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma,
-                           weak_n_sigma=args.weak_n_sigma, fattening_px=args.fattening_px)
+                           weak_n_sigma=args.weak_n_sigma, fattening_px=args.fattening_px, **fixed)
         config = replace(base, mapping=replace(base.mapping, **tuned))
     except (TypeError, ValueError) as error:
         parser.error(str(error))

@@ -7,12 +7,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mrstereo.geometry.drops import DropConfig
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+FIXED = DropConfig(noise_from_floor=False, n_sigma=3.0)
+"""The drop test with a fixed noise margin (3 sigma of 0.25 px): the diagnostic's cases below hold for it."""
 
 
 @pytest.fixture(scope="module")
 def first_stop(tmp_path_factory):
-    """Tuning seed 0's world with drops, the three views of its first stop, mapped with the drop test."""
+    """Tuning seed 0's world with drops, the three views of its first stop, mapped with the drop test (its noise
+    margin fixed: :data:`FIXED`)."""
     from bench_drops import paired_maps
 
     from mrstereo.world import read_manifest, write_synthetic_dataset
@@ -20,7 +26,7 @@ def first_stop(tmp_path_factory):
     ds = tmp_path_factory.mktemp("drops") / "seed0"
     write_synthetic_dataset(ds, seed=0, n_frames=3, progress=False, randomize=True, drops=True)
     manifest = read_manifest(ds)
-    run, _ = paired_maps(manifest)
+    run, _ = paired_maps(manifest, drops=FIXED)
     return manifest, run
 
 
@@ -34,7 +40,7 @@ def test_missed_causes_tell_apart_cells_detected_unseen_and_plain_floor(first_st
     grid = run.grid.grid
     drop = run.grid.drop.copy()
     assert drop.sum() >= 5
-    causes = missed_causes(manifest, grid, drop, run.range_m)
+    causes = missed_causes(manifest, grid, drop, run.range_m, drops=FIXED)
     assert sum(causes.values()) == drop.sum()
     detected = sum(causes[k] for k in causes if k.startswith("d: "))
     assert detected + causes["c: candidate not confirmed"] == drop.sum()
@@ -45,7 +51,7 @@ def test_missed_causes_tell_apart_cells_detected_unseen_and_plain_floor(first_st
         one = np.zeros(grid.shape, bool)
         r, c = grid.cells_from_xy(np.array([xy]))
         one[r[0], c[0]] = True
-        counts = missed_causes(manifest, grid, one, run.range_m)
+        counts = missed_causes(manifest, grid, one, run.range_m, drops=FIXED)
         assert counts[cause] == 1, counts
     assert set(causes) == set(CAUSES)
 

@@ -213,10 +213,11 @@ def test_a_flat_floor_has_no_drop():
 def test_a_ledge_is_found_within_a_cell_of_where_it_is():
     """A floor ending 1.2 m ahead (straight across), 0.4 m above a lower floor, exact points: every edge mark
     lies within one 5 cm cell of the edge (between the last floor point and where the next sight line passes
-    floor level), in nearly every column."""
+    floor level), in nearly every column. (The points are exact: a margin for the matcher's noise, not the
+    floor's, which is nil.)"""
     rays, T, bf = _tilted_rig(h=120, w=160, f=100.0)
     points = _surface(rays, T, lambda p: np.where(p[:, 0] < 1.2, 0.0, -0.4))
-    found = find_drops(points, T, bf)
+    found = find_drops(points, T, bf, config=DropConfig(noise_from_floor=False))
     x = found.edge_points_robot[:, 0]
     assert len(x) > 100 and np.all(np.abs(x - 1.2) < 0.05), (x.min(), x.max())
     assert np.all(found.edge_points_robot[:, 2] == 0.0)
@@ -908,3 +909,55 @@ def test_the_side_of_a_hole_seen_along_it_is_marked_where_the_matcher_carried_th
         DropConfig(fattening_px=-1)
     with pytest.raises(TypeError, match="fattening_px"):
         DropConfig(fattening_px=2.5)
+
+
+def _noisy_disparity(points, T, bf, sigma_px, rng, block=8):
+    """``points`` moved along their sight lines by a disparity error of ``sigma_px`` (Gaussian), the same over each
+    ``block`` x ``block`` pixels (a matcher's errors come in patches, a window wide)."""
+    t = T[:3, 3]
+    depth = (points - t) @ T[:3, :3][:, 2]
+    h, w = depth.shape
+    error = np.kron(rng.normal(0.0, sigma_px, (-(-h // block), -(-w // block))), np.ones((block, block)))[:h, :w]
+    noisy = bf / (bf / depth + error)
+    return t + (points - t) * (noisy / depth)[..., None]
+
+
+def test_the_noise_margin_is_the_matchers_error_measured_on_the_floor():
+    """A floor matched with a known disparity error (0.1 and 0.6 px, in patches): the frame's floor gives it back
+    within 10 %, with a box standing on it and a ledge in view too (their points are not the floor's); the margin
+    built on it marks no drop on the noisy floor and still finds a ledge there; on the clean floor it finds a
+    shallow ledge the fixed 0.25 px mostly misses; too little floor falls back to ``disparity_sigma_px``."""
+    from mrstereo.geometry.drops import floor_disparity_sigma_px
+
+    rng = np.random.default_rng(7)
+    rays, T, bf = _tilted_rig()
+    flat = _surface(rays, T, lambda p: np.zeros(len(p)))
+    scene = _surface(rays, T, lambda p: np.where(p[:, 0] > 2.5, -0.5,
+                                                 np.where((np.abs(p[:, 0] - 1.5) < 0.2) & (p[:, 1] > 0.3), 0.4, 0.0)))
+    for sigma in (0.1, 0.6):
+        for points in (flat, scene):
+            noisy = _noisy_disparity(points, T, bf, sigma, rng)
+            assert floor_disparity_sigma_px(noisy, T, bf) == pytest.approx(sigma, rel=0.1)
+    noisy = _noisy_disparity(flat, T, bf, 0.6, rng)
+    measured = find_drops(noisy, T, bf)
+    assert len(measured.points_robot) == 0 and measured.disparity_sigma_px == pytest.approx(0.6, rel=0.1)
+    ledge = find_drops(_noisy_disparity(_surface(rays, T, lambda p: np.where(p[:, 0] < 1.2, 0.0, -0.4)), T, bf,
+                                        0.6, rng), T, bf)
+    assert np.count_nonzero(ledge.edge_columns) > 0.3 * rays.shape[1]
+    assert np.median(ledge.edge_points_robot[:, 0]) == pytest.approx(1.2, abs=0.1)
+    # a clean matcher (0.1 px) sees a 0.2 m ledge 1.5 m ahead in most columns; the fixed 0.25 px in a fifth
+    shallow = _noisy_disparity(_surface(rays, T, lambda p: np.where(p[:, 0] < 1.5, 0.0, -0.2)), T, bf, 0.1, rng)
+    fixed = find_drops(shallow, T, bf, config=DropConfig(noise_from_floor=False))
+    measured = find_drops(shallow, T, bf)
+    assert fixed.disparity_sigma_px == 0.25 and measured.disparity_sigma_px == pytest.approx(0.1, rel=0.1)
+    assert np.count_nonzero(measured.edge_columns) > 0.6 * rays.shape[1] > 3 * np.count_nonzero(fixed.edge_columns)
+    assert np.all(np.abs(measured.edge_points_robot[:, 0] - 1.5) < 0.15)
+    assert floor_disparity_sigma_px(noisy[:4, :4], T, bf, default_px=0.3) == 0.3           # no floor in view
+    with pytest.raises(ValueError, match="points_robot_image"):
+        floor_disparity_sigma_px(noisy[..., :2], T, bf)
+    below = T.copy()
+    below[2, 3] = -0.1
+    with pytest.raises(ValueError, match="above the floor"):
+        floor_disparity_sigma_px(noisy, below, bf)
+    with pytest.raises(TypeError, match="noise_from_floor"):
+        DropConfig(noise_from_floor=1)

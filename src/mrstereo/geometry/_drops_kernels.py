@@ -403,3 +403,25 @@ def floor_crossings(points, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2, n_s
         if -z - n_sigma * _sigma_h(x, y, z, tx, ty, tz, sigma_per_m2) - tan_slope * run > max_step_m:
             n = _emit(out, n, ex, ey)
     return n
+
+
+@njit(nogil=True, cache=True)
+def floor_residuals(points, tx, ty, tz, axis, bf, top_m, reach_m, max_px, out):
+    """The floor's disparity residuals (pixels) at every other row and column: a point at height ``z`` and depth
+    ``Z`` was measured at ``d + doffs = b f / Z`` (eq. 14), and the floor on its sight line, which passes floor
+    level ``t_z / (t_z - z)`` times as far, at ``(d + doffs)(t_z - z) / t_z``; their difference is
+    ``r = b f z / (t_z Z)``. Into ``out`` for the points within ``top_m`` of floor level and ``reach_m`` of the
+    camera (horizontally) whose ``|r| < max_px``. Returns the number written."""
+    n = 0
+    for i in range(0, points.shape[0], 2):
+        for j in range(0, points.shape[1], 2):
+            z = points[i, j, 2]
+            if not abs(z) < top_m or _range(points, i, j, tx, ty) > reach_m or n >= out.shape[0]:
+                continue
+            depth = _depth(points, i, j, tx, ty, tz, axis)
+            if depth > 0.0:
+                r = bf * z / (tz * depth)
+                if abs(r) < max_px:
+                    out[n] = r
+                    n += 1
+    return n

@@ -2,7 +2,8 @@
 
 Beyond the paper, which marks only points above the floor. Up each column of the disparity image the
 floor's points are followed until the next measured point lies below the floor by more than the robot
-climbs (``max_step_m`` plus three times the point's height uncertainty) and no drivable slope
+climbs (``max_step_m`` plus twice the point's height uncertainty, for the matcher's disparity error measured on
+the frame's floor) and no drivable slope
 (``max_slope_deg``) joins the two: the floor visibly ends there -- unless the sight line to the lower
 point passes under floor measured in the same column (a mismatch: floor matched too far lies below the
 floor); at the image's left border, where the floor on a point's sight line would match outside the right
@@ -29,7 +30,8 @@ import numpy as np
 from .. import _checks
 from . import _drops_kernels
 
-__all__ = ["DropConfig", "DropResult", "find_drops", "transform_candidates", "CANDIDATE_COLUMNS"]
+__all__ = ["DropConfig", "DropResult", "find_drops", "floor_disparity_sigma_px", "transform_candidates",
+           "CANDIDATE_COLUMNS"]
 
 CANDIDATE_COLUMNS = ("sx", "sy", "ex", "ey", "qx", "qy", "qz", "c0", "tan_slope", "hide_from_m", "hide_to_m")
 """The columns of a drop candidate (:attr:`DropResult.candidates_robot`): the edge's start ``S`` and end ``E``
@@ -45,10 +47,12 @@ class DropConfig:
     """Options of :func:`find_drops` (docs/obstacles.md, "Drops").
 
     The robot's limits: the highest step it climbs up or down (``max_step_m``) and the steepest slope it
-    drives (``max_slope_deg``). The noise margin: ``n_sigma`` times a point's height uncertainty for a
-    disparity error of ``disparity_sigma_px``. A drop needs ``support`` measured points below the floor
-    after it in its column; its edge is marked over the last ``edge_reach_m`` before where the sight line
-    passes floor level, a point every ``spacing_m``. ``robot_floor``: a run with no floor measured before it in
+    drives (``max_slope_deg``). The noise margin: ``n_sigma`` times a point's height uncertainty for the
+    matcher's disparity error. ``noise_from_floor``: that error is measured in each frame on its floor
+    (:func:`floor_disparity_sigma_px`), the matcher's noise on this camera and this floor, and
+    ``disparity_sigma_px`` serves a frame with too little floor; False: ``disparity_sigma_px`` always. A drop
+    needs ``support`` measured points below the floor after it in its column; its edge is marked over the last
+    ``edge_reach_m`` before where the sight line passes floor level, a point every ``spacing_m``. ``robot_floor``: a run with no floor measured before it in
     its column is judged against the floor under the robot (one frame finds a ledge whose near floor is not
     matched); False: only the map's memory of the floor confirms it, so a floor that gives no disparity stays
     unknown (docs/obstacles.md, "Drops"). ``weak_n_sigma``: the same test with this looser margin too, in the same
@@ -64,7 +68,8 @@ class DropConfig:
     max_step_m: float = 0.05
     max_slope_deg: float = 10.0
     disparity_sigma_px: float = 0.25
-    n_sigma: float = 3.0
+    noise_from_floor: bool = True
+    n_sigma: float = 2.0
     support: int = 3
     edge_reach_m: float = 0.1
     spacing_m: float = 0.01
@@ -80,8 +85,9 @@ class DropConfig:
         _checks.finite_number("disparity_sigma_px", self.disparity_sigma_px, nonnegative=True)
         _checks.finite_number("n_sigma", self.n_sigma, nonnegative=True)
         _checks.positive_int("support", self.support)
-        if not isinstance(self.robot_floor, bool):
-            raise TypeError(f"robot_floor must be a bool, got {type(self.robot_floor).__name__}")
+        for name in ("robot_floor", "noise_from_floor"):
+            if not isinstance(getattr(self, name), bool):
+                raise TypeError(f"{name} must be a bool, got {type(getattr(self, name)).__name__}")
         _checks.finite_number("edge_reach_m", self.edge_reach_m, nonnegative=True)
         _checks.finite_number("spacing_m", self.spacing_m, positive=True)
         _checks.positive_int("fattening_px", self.fattening_px, minimum=0)
@@ -100,13 +106,16 @@ class DropResult:
     (P, 3) the points of the drops of the test with ``DropConfig.weak_n_sigma`` (edges at floor level, then the
     lower points; those of the drops above among them), then where the sight lines to the lower points of the
     drops above pass floor level (no floor there: a hole's inside, the space past a ledge), for the map's weak
-    votes (empty: off)."""
+    votes (empty: off), and ``disparity_sigma_px`` the disparity error of the noise margins."""
 
     edge_points_robot: np.ndarray
     below_points_robot: np.ndarray
     edge_columns: np.ndarray
     candidates_robot: np.ndarray = field(default_factory=lambda: np.empty((0, len(CANDIDATE_COLUMNS))))
     weak_points_robot: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
+    disparity_sigma_px: float = DropConfig.disparity_sigma_px
+    """The disparity error (pixels) the noise margins used: the frame's floor's (``DropConfig.noise_from_floor``)
+    or the configured one."""
 
     @property
     def points_robot(self) -> np.ndarray:
@@ -174,9 +183,12 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     if t[2] <= 0.0:
         raise ValueError(f"T_robot_from_cam puts the camera {t[2]:.3f} m above the floor; it must be above it")
     axis = np.ascontiguousarray(T[:3, 2], dtype=np.float64)         # the optical axis in the robot frame
+    sigma = float(config.disparity_sigma_px)
+    if config.noise_from_floor:
+        sigma = floor_disparity_sigma_px(pts, T, bf, floor_top_m=top, max_range_m=reach, default_px=sigma)
     n_edge, n_below, n_cand, n_weak_edge, n_weak_below = _drops_kernels.column_drops(
         pts, t, axis, bf, doffs, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
-        float(config.disparity_sigma_px) / bf, float(config.n_sigma),
+        sigma / bf, float(config.n_sigma),
         float(config.weak_n_sigma) if weak else -1.0, top, int(config.support), float(config.edge_reach_m),
         float(config.spacing_m), bool(config.robot_floor), int(config.fattening_px), out_edge, out_below,
         out_candidates, columns, weak_edge, weak_below, np.zeros(w, np.int64))
@@ -184,27 +196,69 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
         return a[np.hypot(a[:, x] - t[0], a[:, x + 1] - t[1]) <= reach]
 
     below = out_below[:n_below]
-    crossings = _floor_crossings(below, t, config, bf) if weak else below[:0]
+    crossings = _floor_crossings(below, t, config, sigma / bf) if weak else below[:0]
     return DropResult(edge_points_robot=near(out_edge[:n_edge]), below_points_robot=near(below),
                       edge_columns=columns, candidates_robot=near(out_candidates[:n_cand], 2),
                       weak_points_robot=np.concatenate([near(weak_edge[:n_weak_edge]),
-                                                        near(weak_below[:n_weak_below]), near(crossings)]))
+                                                        near(weak_below[:n_weak_below]), near(crossings)]),
+                      disparity_sigma_px=sigma)
 
 
-def _floor_crossings(points_below, t, config: DropConfig, baseline_focal_m_px: float) -> np.ndarray:
+def _floor_crossings(points_below, t, config: DropConfig, sigma_per_m2: float) -> np.ndarray:
     """Where the sight lines from the camera ``t`` (3,) to the points below the floor ``points_below`` (N, 3)
     pass floor level (M, 3; z = 0): the floor point each pixel would have seen were the floor there (it
     depends on the pixel's direction only, not on its measured depth). The sight line goes on below floor
     level, so no floor lies there (a hole's inside, the space past a ledge) -- for the points deeper than a
     step, their height noise and a ``max_slope_deg`` slope from there (no drivable ramp starting there
-    reaches them: a ramp's own points are no evidence against the floor before them;
-    ``_drops_kernels.floor_crossings``)."""
+    reaches them: a ramp's own points are no evidence against the floor before them; ``sigma_per_m2``: the
+    disparity error over ``b f``; ``_drops_kernels.floor_crossings``)."""
     out = np.empty_like(points_below)
     n = _drops_kernels.floor_crossings(points_below, *(float(v) for v in t), float(config.max_step_m),
                                        math.tan(math.radians(config.max_slope_deg)),
-                                       float(config.disparity_sigma_px) / baseline_focal_m_px,
-                                       float(config.n_sigma), out)
+                                       sigma_per_m2, float(config.n_sigma), out)
     return out[:n]
+
+
+FLOOR_RESIDUAL_MAX_PX = 2.0
+""":func:`floor_disparity_sigma_px` counts the floor-level points whose disparity lies within this of the floor's."""
+
+FLOOR_MIN_POINTS = 100
+"""... and needs this many of them (at every other row and column), else the frame has too little floor."""
+
+
+def floor_disparity_sigma_px(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float, *,
+                             floor_top_m: float = 0.08, max_range_m: float = 8.0,
+                             default_px: float = DropConfig.disparity_sigma_px) -> float:
+    """The matcher's disparity error (pixels) on one frame's floor: 1.4826 times the median absolute deviation
+    of the disparity residuals of its floor-level points (within ``floor_top_m`` of floor level and
+    ``max_range_m`` of the camera; ``r = b f z / (t_z Z)``, the measured disparity less the floor's on the same
+    sight line, ``_drops_kernels.floor_residuals``) within :data:`FLOOR_RESIDUAL_MAX_PX` of the floor's.
+
+    The error differs by camera, floor and light, and the drop test's noise margin scales with it: on the
+    randomized worlds the matcher's error on true floor runs from 0.11 to 0.77 px (docs/obstacles.md, "The
+    noise margin"). Obstacles above ``floor_top_m`` and drops below it do not count (their bases and the
+    shallowest drops within it widen it somewhat). Returns ``default_px`` when fewer than
+    :data:`FLOOR_MIN_POINTS` points are at floor level.
+    """
+    pts = np.ascontiguousarray(points_robot_image, dtype=np.float64)
+    if pts.ndim != 3 or pts.shape[2] != 3:
+        raise ValueError(f"points_robot_image must have shape (H, W, 3), got {pts.shape}")
+    T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
+    bf = _checks.finite_number("baseline_focal_m_px", baseline_focal_m_px, positive=True)
+    top = _checks.finite_number("floor_top_m", floor_top_m, positive=True)
+    reach = _checks.finite_number("max_range_m", max_range_m, positive=True)
+    default = _checks.finite_number("default_px", default_px, nonnegative=True)
+    t = T[:3, 3]
+    if t[2] <= 0.0:
+        raise ValueError(f"T_robot_from_cam puts the camera {t[2]:.3f} m above the floor; it must be above it")
+    out = np.empty(((pts.shape[0] + 1) // 2) * ((pts.shape[1] + 1) // 2))
+    n = _drops_kernels.floor_residuals(pts, float(t[0]), float(t[1]), float(t[2]),
+                                       np.ascontiguousarray(T[:3, 2], dtype=np.float64), bf, top, reach,
+                                       FLOOR_RESIDUAL_MAX_PX, out)
+    if n < FLOOR_MIN_POINTS:
+        return default
+    r = out[:n]
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
 
 
 def transform_candidates(T, candidates) -> np.ndarray:
