@@ -162,13 +162,8 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     DropResult
     """
     _checks.instance("config", config, DropConfig)
-    pts = np.ascontiguousarray(points_robot_image, dtype=np.float64)
-    if pts.ndim != 3 or pts.shape[2] != 3:
-        raise ValueError(f"points_robot_image must have shape (H, W, 3), got {pts.shape}")
-    T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
-    bf = _checks.finite_number("baseline_focal_m_px", baseline_focal_m_px, positive=True)
-    reach = _checks.finite_number("max_range_m", max_range_m, positive=True)
-    top = _checks.finite_number("floor_top_m", floor_top_m, positive=True)
+    pts, T, bf, top, reach = _checked_frame(points_robot_image, T_robot_from_cam, baseline_focal_m_px,
+                                            floor_top_m, max_range_m)
     doffs = _checks.finite_number("doffs_px", doffs_px)
     t = np.ascontiguousarray(T[:3, 3], dtype=np.float64)
     h, w = pts.shape[:2]
@@ -180,12 +175,10 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     weak = config.weak_n_sigma is not None
     weak_edge, weak_below = (np.empty_like(out_edge), np.empty_like(out_below)) if weak else (out_edge[:0],
                                                                                               out_below[:0])
-    if t[2] <= 0.0:
-        raise ValueError(f"T_robot_from_cam puts the camera {t[2]:.3f} m above the floor; it must be above it")
     axis = np.ascontiguousarray(T[:3, 2], dtype=np.float64)         # the optical axis in the robot frame
     sigma = float(config.disparity_sigma_px)
     if config.noise_from_floor:
-        sigma = floor_disparity_sigma_px(pts, T, bf, floor_top_m=top, max_range_m=reach, default_px=sigma)
+        sigma = _floor_sigma(pts, T, bf, top, reach, sigma)
     n_edge, n_below, n_cand, n_weak_edge, n_weak_below = _drops_kernels.column_drops(
         pts, t, axis, bf, doffs, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
         sigma / bf, float(config.n_sigma),
@@ -240,17 +233,27 @@ def floor_disparity_sigma_px(points_robot_image, T_robot_from_cam, baseline_foca
     shallowest drops within it widen it somewhat). Returns ``default_px`` when fewer than
     :data:`FLOOR_MIN_POINTS` points are at floor level.
     """
+    frame = _checked_frame(points_robot_image, T_robot_from_cam, baseline_focal_m_px, floor_top_m, max_range_m)
+    return _floor_sigma(*frame, _checks.finite_number("default_px", default_px, nonnegative=True))
+
+
+def _checked_frame(points_robot_image, T_robot_from_cam, baseline_focal_m_px, floor_top_m, max_range_m):
+    """A frame's inputs to the drop test, checked: ``(points (H, W, 3) float64, T (4, 4), b f, floor_top_m,
+    max_range_m)``; the camera must be above the floor."""
     pts = np.ascontiguousarray(points_robot_image, dtype=np.float64)
     if pts.ndim != 3 or pts.shape[2] != 3:
         raise ValueError(f"points_robot_image must have shape (H, W, 3), got {pts.shape}")
     T = _checks.matrix("T_robot_from_cam", T_robot_from_cam, (4, 4))
-    bf = _checks.finite_number("baseline_focal_m_px", baseline_focal_m_px, positive=True)
-    top = _checks.finite_number("floor_top_m", floor_top_m, positive=True)
-    reach = _checks.finite_number("max_range_m", max_range_m, positive=True)
-    default = _checks.finite_number("default_px", default_px, nonnegative=True)
+    if T[2, 3] <= 0.0:
+        raise ValueError(f"T_robot_from_cam puts the camera {T[2, 3]:.3f} m above the floor; it must be above it")
+    return (pts, T, _checks.finite_number("baseline_focal_m_px", baseline_focal_m_px, positive=True),
+            _checks.finite_number("floor_top_m", floor_top_m, positive=True),
+            _checks.finite_number("max_range_m", max_range_m, positive=True))
+
+
+def _floor_sigma(pts, T, bf: float, top: float, reach: float, default: float) -> float:
+    """:func:`floor_disparity_sigma_px` of checked inputs."""
     t = T[:3, 3]
-    if t[2] <= 0.0:
-        raise ValueError(f"T_robot_from_cam puts the camera {t[2]:.3f} m above the floor; it must be above it")
     out = np.empty(((pts.shape[0] + 1) // 2) * ((pts.shape[1] + 1) // 2))
     n = _drops_kernels.floor_residuals(pts, float(t[0]), float(t[1]), float(t[2]),
                                        np.ascontiguousarray(T[:3, 2], dtype=np.float64), bf, top, reach,
