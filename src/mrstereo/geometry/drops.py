@@ -52,12 +52,13 @@ class DropConfig:
     (:func:`floor_disparity_sigma_px`), the matcher's noise on this camera and this floor, and
     ``disparity_sigma_px`` serves a frame with too little floor; False: ``disparity_sigma_px`` always. A drop
     needs ``support`` measured points below the floor after it in its column; its edge is marked over the last
-    ``edge_reach_m`` before where the sight line passes floor level, a point every ``spacing_m``. ``robot_floor``: a run with no floor measured before it in
-    its column is judged against the floor under the robot (one frame finds a ledge whose near floor is not
-    matched); False: only the map's memory of the floor confirms it, so a floor that gives no disparity stays
-    unknown (docs/obstacles.md, "Drops"). ``weak_n_sigma``: the same test with this looser margin too, in the same
-    pass; its drops are *weak* points (:attr:`DropResult.weak_points_robot`) that mark nothing alone: the map
-    makes a cell lethal where ``MappingConfig.drop_weak_views`` views put them (None: off). Where the sight
+    ``edge_reach_m`` before where the sight line passes floor level, a point every ``spacing_m``.
+    ``robot_floor``: a run with no floor measured before it in its column is judged against the floor under the
+    robot (one frame finds a ledge whose near floor is not matched); False: only the map's memory of the floor
+    confirms it, so a floor that gives no disparity stays unknown (docs/obstacles.md, "Drops"). ``weak_n_sigma``:
+    the same test with this looser margin too, in the same pass; its drops are *weak* points
+    (:attr:`DropResult.weak_points_robot`) that mark nothing alone: the map makes a cell lethal where
+    ``MappingConfig.drop_weak_views`` views put them (None: off). Where the sight
     lines to the drops' lower points pass floor level (no floor there; points below any drivable slope from
     there) are weak points too. ``fattening_px``: how far (pixels along an image row) the matcher's window
     carries the floor's disparity past an edge (about half a window, more on a decimated level); along each row
