@@ -27,14 +27,16 @@ a kerb, a sunken step; the map layer's rules chosen on seeds 0-4 and 100-109, th
 
 ``--speed``: the CPU time of a frame (``obstacles_from_pair``: rectify, match, reject, 3-D, free space) with and
 without the drop test (and with it but without its weak points, ``weak_n_sigma=None``: "ratio without weak
-points"), interleaved runs, on the default corridor (320x240) and a EuRoC frame (752x480), and the drop test's
-own time within the frame (its point image, the column pass, the merge: "drop test share", which the two
-frames' noise does not blur); and of a whole mapper step (the grid and its height and drop layers too) on
-corridor frames, with the layers' share.
+points"; "wall ratio": the same in wall-clock time), interleaved runs, on the default corridor (320x240) and a
+EuRoC frame (752x480), and the drop test's own time within the frame (the image's row texture, its point image,
+the column pass, the merge, CPU time of the thread it runs on: "drop test share", which the two frames' noise
+does not blur); and of a whole mapper step (the grid and its height and drop layers too) on corridor frames,
+with the layers' share.
 
 The weak votes (``--weak-n-sigma``, ``'none'``: off; ``--drop-weak-views``) were chosen on seeds 100-119; the
 noise margin (``--n-sigma`` times the disparity error measured on each frame's floor; ``--disparity-sigma``: a
-fixed one instead, the former default 0.25 px with ``--n-sigma 3``) on seeds 100-119 and the drives 100-109.
+fixed one instead, the former default 0.25 px with ``--n-sigma 3``) and the row-texture test
+(``--min-row-texture``, ``'none'``: off) on seeds 100-119 and the drives 100-109.
 
 ``--why``: also the causes of each seed's missed edge cells, and their sums (:func:`missed_causes`): not measured
 by any frame (and why), measured but no drop by the column rule (which of its margins), a candidate the map
@@ -45,7 +47,9 @@ never confirmed, a frame's drop lost in the map.
 perfect matcher, so a miss is the rules' or the geometry's, not the sensor noise's (with ``--why``, ``--n-sigma``).
 
 ``--real``: the first frames of the EuRoC ASL sample, KITTI odometry 06 and 01 and OpenLORIS: the share of cells
-free without the drop test that are not free with it (at most 0.5 % on these flat floors), and the drop cells.
+free without the drop test that are not free with it (at most 0.5 % on these flat floors), the drop cells, and
+the share of the floor's points (within 0.08 m of floor level) the row-texture test leaves out (median and
+largest over the frames).
 
 The map with the drop test is the pipeline's: its drop layer (``OccupancyGrid.drop``, votes that rays do not
 clear) lethal beside the log-odds.
@@ -273,6 +277,7 @@ def evaluate_seed(seed: int, frames: int, data_dir: Path, view_m: float = 2.5, c
 
 
 CAUSES = ("a: no pixel sees it", "a: out of disparity range", "a: image border", "a: uniform (eq. 13)", "a: matcher invalid",
+          "b: no texture along the rows (min_row_texture)",
           "b: within a step plus a max_slope_deg slope of the floor before",
           "b: within the noise margin (n_sigma sigma_h)", "b: within both (slope and noise) together",
           "b: a run shorter than support",
@@ -281,6 +286,8 @@ CAUSES = ("a: no pixel sees it", "a: out of disparity range", "a: image border",
           "c: candidate not confirmed", "d: weak points in a frame, too few views in the map",
           "d: drop points in a frame, lost in the map")
 """The causes of a missed edge cell (:func:`missed_causes`), in the order they are tested (last first)."""
+RULES = ("texture", "slope", "noise", "both", "short", "rim")
+"""The variants of the drop test that tell the "b" causes apart, in :data:`CAUSES`' order."""
 
 
 def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=None, drops=None,
@@ -313,6 +320,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     from mrstereo.io.images import read_pfm
     from mrstereo.pipeline.run import PipelineConfig
     from mrstereo.recordings.manifest import frame_pair
+    from mrstereo.rejection import row_texture
     from mrstereo.transforms import T_from_planar
 
     config = PipelineConfig() if config is None else config
@@ -324,7 +332,7 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
     cells = np.argwhere(missed)
     n = len(cells)
     stats = {k: np.zeros(n, np.int64) for k in ("pixels", "range", "border", "uniform", "invalid", "measured",
-                                                 "below", "detected", "weak", "candidate", "slope", "noise", "both", "short", "rim")}
+                                                 "below", "detected", "weak", "candidate", *RULES)}
     near_cells = int(np.ceil(near_m / grid.resolution_m))
 
     hits = lambda world_xy, radius: _near(grid, cells, world_xy, radius)      # noqa: E731
@@ -372,11 +380,15 @@ def missed_causes(manifest, grid, missed: np.ndarray, range_m: float, config=Non
         stats["detected"] += hits(world(obs.drop_points_robot), 1)
         stats["weak"] += hits(world(obs.drop_weak_points_robot), 1)
         bf = float(stereo.baseline_m) * float(stereo.focal_px)
-        for name, variant in (("slope", replace(drops, max_slope_deg=0.0)), ("noise", replace(drops, n_sigma=0.0)),
+        untextured = (None if drops.min_row_texture is None else
+                      row_texture(pair.left_rect, window_px=options["rejection"].window_px) < drops.min_row_texture)
+        for name, variant in (("texture", drops), ("slope", replace(drops, max_slope_deg=0.0)),
+                              ("noise", replace(drops, n_sigma=0.0)),
                               ("both", replace(drops, n_sigma=0.0, max_slope_deg=0.0)),
                               ("short", replace(drops, support=1)), ("rim", replace(drops, edge_reach_m=0.0))):
             found = find_drops(obs.points_robot_image, obs.T_robot_from_cam, bf, config=variant,
-                               floor_top_m=obstacles.min_obstacle_height_m, max_range_m=obstacles.max_range_m)
+                               floor_top_m=obstacles.min_obstacle_height_m, max_range_m=obstacles.max_range_m,
+                               untextured=None if name == "texture" else untextured)
             stats[name] += hits(world(found.points_robot), 1)
         cand = obs.drop_candidates_robot
         f = np.linspace(0.0, 1.0, 6)[:, None, None]
@@ -403,15 +415,15 @@ def _tally(stats: dict[str, np.ndarray]) -> dict[str, int]:
     counts = dict.fromkeys(CAUSES, 0)
     for i in range(n):
         if stats["detected"][i]:
-            counts[CAUSES[14]] += 1
+            counts[CAUSES[15]] += 1
         elif stats["weak"][i]:
-            counts[CAUSES[13]] += 1
+            counts[CAUSES[14]] += 1
         elif stats["candidate"][i]:
-            counts[CAUSES[12]] += 1
+            counts[CAUSES[13]] += 1
         elif stats["measured"][i] and not stats["below"][i]:
-            counts[CAUSES[11]] += 1
+            counts[CAUSES[12]] += 1
         elif stats["measured"][i]:
-            rule = next((k for k, name in enumerate(("slope", "noise", "both", "short", "rim")) if stats[name][i]), 5)
+            rule = next((k for k, name in enumerate(RULES) if stats[name][i]), len(RULES))
             counts[CAUSES[5 + rule]] += 1
         else:
             share = [stats[k][i] for k in ("range", "border", "uniform", "invalid")]
@@ -442,15 +454,42 @@ def evaluate_real(frames: int, config=None, drops=None) -> list[dict]:
             rows.append({"recording": name, "missing": str(root)})
             continue
         t0 = time.process_time()
-        run, plain = paired_maps(read_recording(root), frames=frames, config=config, drops=drops)
+        with _floor_left_out() as left_out:
+            run, plain = paired_maps(read_recording(root), frames=frames, config=config, drops=drops)
         a, b = (r.grid.to_ros_map() for r in (run, plain))
         b = ros_map_on_grid(b, a.grid)           # the map with drops may reach farther: compare on its window
         free = b.free
         changed = free & ~a.free
         rows.append({"recording": name, "free cells": int(free.sum()), "changed": int(changed.sum()),
                      "share changed": float(changed.sum() / max(free.sum(), 1)),
-                     "drop cells": int(run.grid.drop.sum()), "cpu s": time.process_time() - t0})
+                     "drop cells": int(run.grid.drop.sum()),
+                     "floor left out (median, max)": (f"{np.median(left_out):.3f}, {np.max(left_out):.3f}"
+                                                      if left_out else "-"),
+                     "cpu s": time.process_time() - t0})
     return rows
+
+
+@contextmanager
+def _floor_left_out(floor_top_m: float = 0.08):
+    """While inside, each frame's drop test records the share of its floor-level points (``|z| <
+    floor_top_m``) that the row-texture test leaves out (``DropConfig.min_row_texture``), for the frames with
+    more than 100 such points; yields the list of shares."""
+    from mrstereo.geometry import obstacles
+
+    shares: list[float] = []
+    find = obstacles.find_drops
+
+    def recorded(points, *args, untextured=None, **kwargs):
+        floor = np.abs(points[..., 2]) < floor_top_m          # (NaN: False)
+        if untextured is not None and floor.sum() > 100:
+            shares.append(float(untextured[floor].mean()))
+        return find(points, *args, untextured=untextured, **kwargs)
+
+    obstacles.find_drops = recorded
+    try:
+        yield shares
+    finally:
+        obstacles.find_drops = find
 
 
 REAL = (("EuRoC ASL sample", "euroc_asl_sample"), ("KITTI odometry 06", "kitti_odometry_06"),
@@ -489,10 +528,11 @@ def evaluate_corridor(data_dir: Path) -> list[dict]:
 
 
 def measure_speed(repeats: int) -> list[dict]:
-    """Median CPU seconds of one frame with and without the drop test (interleaved), per input; the ratios are
+    """Median CPU seconds of one frame with and without the drop test (interleaved), per input (the test's own
+    time: its pass over the points and the row texture of the image it needs); the ratios are
     medians of each round's ratio (a round runs every configuration once, so slow spells of the machine
     cancel)."""
-    from mrstereo.geometry import ObstacleConfig, obstacles
+    from mrstereo.geometry import ObstacleConfig, obstacles, pair
     from mrstereo.geometry.drops import DropConfig
     from mrstereo.geometry.pair import obstacles_from_pair
     from mrstereo.recordings import read_recording
@@ -510,38 +550,44 @@ def measure_speed(repeats: int) -> list[dict]:
         inputs.append(("EuRoC 752x480", left, right, manifest.calibration, rectified, manifest.mount))
     rows = []
     spent = [0.0]
-    with _timed(obstacles, "_with_drops", spent):
+    with _timed(obstacles, "_with_drops", spent), _timed(pair, "row_texture", spent):
         for name, left, right, calib, rectified, mount in inputs:
             configs = {"with": ObstacleConfig(drops=DropConfig()), "without": ObstacleConfig(),
                        "no weak": ObstacleConfig(drops=DropConfig(weak_n_sigma=None))}
             times: dict[str, list[float]] = {key: [] for key in [*configs, "test"]}
+            walls: dict[str, list[float]] = {key: [] for key in configs}
             for k in range(repeats + 1):
                 for key in list(configs)[::1 if k % 2 else -1]:
                     spent[0] = 0.0
-                    t0 = time.process_time()
+                    t0, w0 = time.process_time(), time.perf_counter()
                     obstacles_from_pair(left, right, calib, rectified=rectified, mount=mount, config=configs[key])
                     if k:                                           # the first round compiles
                         times[key].append(time.process_time() - t0)
+                        walls[key].append(time.perf_counter() - w0)
                         if key == "with":
                             times["test"].append(spent[0])
             a, b, c, test = (float(np.median(times[key])) for key in times)
             paired = [float(np.median(np.divide(times[key], times["without"]))) for key in ("with", "no weak")]
             rows.append({"input": name, "with drops cpu s": a, "without cpu s": b, "ratio": paired[0],
-                         "ratio without weak points": paired[1], "drop test cpu s": test, "drop test share": test / a})
+                         "ratio without weak points": paired[1],
+                         "wall ratio": float(np.median(np.divide(walls["with"], walls["without"]))),
+                         "drop test cpu s": test, "drop test share": test / a})
     return rows + [_mapper_speed(repeats)]
 
 
 @contextmanager
 def _timed(owner, name: str, spent: list[float]):
-    """Within the block ``owner.name`` adds the CPU seconds of each call to ``spent[0]``."""
+    """Within the block ``owner.name`` adds the CPU seconds of each call to ``spent[0]``: of the calling thread
+    (``time.thread_time``), where the call runs; the matcher's OpenMP workers spinning down after it (numba's
+    ``omp`` layer) would land in a process-wide clock and double a short call's time."""
     original = getattr(owner, name)
 
     def timed(*args, **kwargs):
-        t0 = time.process_time()
+        t0 = time.thread_time()
         try:
             return original(*args, **kwargs)
         finally:
-            spent[0] += time.process_time() - t0
+            spent[0] += time.thread_time() - t0
 
     setattr(owner, name, timed)
     try:
@@ -615,6 +661,9 @@ def main() -> None:
     parser.add_argument("--weak-n-sigma", type=lambda v: None if v.lower() == "none" else float(v),
                         default=DropConfig.weak_n_sigma, help="DropConfig.weak_n_sigma ('none': no weak votes)")
     parser.add_argument("--fattening-px", type=int, default=DropConfig.fattening_px, help="DropConfig.fattening_px")
+    parser.add_argument("--min-row-texture", type=lambda v: None if v.lower() == "none" else float(v),
+                        default=DropConfig.min_row_texture,
+                        help="DropConfig.min_row_texture ('none': every pixel takes part in the test)")
     parser.add_argument("--why", action="store_true",
                         help="also the causes of the missed edge cells, per seed and summed (missed_causes)")
     parser.add_argument("--oracle", action="store_true",
@@ -638,7 +687,8 @@ def main() -> None:
         fixed = {} if args.disparity_sigma is None else {"noise_from_floor": False,
                                                          "disparity_sigma_px": args.disparity_sigma}
         drops = DropConfig(robot_floor=not args.no_robot_floor, n_sigma=args.n_sigma,
-                           weak_n_sigma=args.weak_n_sigma, fattening_px=args.fattening_px, **fixed)
+                           weak_n_sigma=args.weak_n_sigma, fattening_px=args.fattening_px,
+                           min_row_texture=args.min_row_texture, **fixed)
         config = replace(base, mapping=replace(base.mapping, **tuned))
     except (TypeError, ValueError) as error:
         parser.error(str(error))

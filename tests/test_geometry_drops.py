@@ -961,3 +961,55 @@ def test_the_noise_margin_is_the_matchers_error_measured_on_the_floor():
         floor_disparity_sigma_px(noisy, below, bf)
     with pytest.raises(TypeError, match="noise_from_floor"):
         DropConfig(noise_from_floor=1)
+
+
+def _pixels_of(points_image, points) -> np.ndarray:
+    """Mask (H, W) of the pixels of ``points_image`` whose point is one of ``points`` (N, 3) exactly."""
+    wanted = {tuple(p) for p in np.asarray(points, dtype=np.float64)}
+    flat = points_image.reshape(-1, 3)
+    return np.array([tuple(p) in wanted for p in flat]).reshape(points_image.shape[:2])
+
+
+def test_a_floor_without_texture_along_the_rows_gives_no_drop(tmp_path):
+    """Tuning world 100's first 0.8 m of drive over a wood floor whose planks run across the view: the matcher
+    slides along the rows in streaks, and without the row-texture test floor pixels land below the floor as drops
+    in most frames; with it none of the true floor's pixels does. A ledge whose lower points lie in untextured
+    pixels is not found; a mask of the wrong shape is refused."""
+    import cv2
+
+    from mrstereo.geometry import points_robot_from_disparity
+    from mrstereo.geometry.pair import obstacles_from_pair
+    from mrstereo.io.images import read_pfm
+    from mrstereo.pipeline.run import PipelineConfig
+    from mrstereo.recordings.manifest import frame_pair
+    from mrstereo.world import read_manifest, write_synthetic_dataset
+
+    write_synthetic_dataset(tmp_path, seed=100, n_frames=9, progress=False, randomize=True, drops=True, path="front",
+                            step_m=0.096)
+    manifest = read_manifest(tmp_path)
+    options = PipelineConfig().for_rig(manifest.calibration).pair_options()
+    false_drops = {None: [], DropConfig.min_row_texture: []}
+    for record in manifest.frames:
+        left, right, rectified = frame_pair(record)
+        labels = cv2.imread(str(record.gt_labels), cv2.IMREAD_UNCHANGED)
+        for texture in false_drops:
+            config = replace(options["config"], drops=DropConfig(min_row_texture=texture))
+            frame = obstacles_from_pair(left, right, manifest.calibration, rectified=rectified, mount=manifest.mount,
+                                        pan_rad=record.pan_rad, **{**options, "config": config}).obstacles
+            true = points_robot_from_disparity(read_pfm(record.gt_disparity), manifest.calibration,
+                                               frame.T_robot_from_cam)
+            floor = (labels == LABEL_FLOOR) & (np.abs(true[..., 2]) < 0.01)
+            false_drops[texture].append(int((_pixels_of(frame.points_robot_image, frame.drop_points_robot)
+                                             & floor).sum()))
+    off = np.array(false_drops[None])
+    assert off.sum() > 50 and np.count_nonzero(off) >= 5, false_drops
+    assert sum(false_drops[DropConfig.min_row_texture]) == 0, false_drops
+    rays, T, bf = _tilted_rig(h=120, w=160, f=100.0)
+    points = _surface(rays, T, lambda p: np.where(p[:, 0] < 1.2, 0.0, -0.4))
+    assert np.count_nonzero(find_drops(points, T, bf).edge_columns) > 0.5 * rays.shape[1]
+    lower = points[..., 2] < -0.1
+    assert len(find_drops(points, T, bf, untextured=lower).points_robot) == 0
+    with pytest.raises(ValueError, match="untextured"):
+        find_drops(points, T, bf, untextured=lower[1:])
+    with pytest.raises(ValueError, match="min_row_texture"):
+        DropConfig(min_row_texture=-1.0)

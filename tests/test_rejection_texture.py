@@ -105,3 +105,26 @@ def test_bad_input():
         learn_floor_model(img, floor_mask=np.ones((3, 3), bool))
     with pytest.raises(ValueError, match="NaN or inf"):
         patch_statistics(np.full((5, 5), np.nan, np.float32))
+
+
+@pytest.mark.parametrize("sigma", [0.5, 2.0, 4.0])
+def test_row_texture_is_one_on_noise_along_the_rows_and_high_on_texture_across_them(sigma):
+    """Stripes along the rows plus Gaussian noise: the noise estimate is the noise (within 10 %, the stripes'
+    shading cancels) and the texture along the rows is the noise's alone (ratio 1 within 10 %); the same stripes
+    across the rows give a ratio many times higher; a constant image has the quantization noise."""
+    from mrstereo.rejection import image_noise_sigma, row_texture
+    from mrstereo.rejection.texture import QUANTIZATION_SIGMA
+
+    rng = np.random.default_rng(11)
+    y, x = np.mgrid[0:240, 0:320]
+    along = 128 + 40 * np.sin(y / 3.0) + rng.normal(0, sigma, y.shape)
+    across = 128 + 40 * np.sin(x / 3.0) + rng.normal(0, sigma, y.shape)
+    assert image_noise_sigma(along) == pytest.approx(sigma, rel=0.1)
+    assert np.median(row_texture(along)) == pytest.approx(1.0, rel=0.1)
+    assert np.percentile(row_texture(across), 5) > 4.0 * np.percentile(row_texture(along), 95)
+    assert image_noise_sigma(np.full((50, 60), 90, np.uint8)) == QUANTIZATION_SIGMA
+    assert row_texture(np.full((50, 60), 90, np.uint8)).max() == 0.0
+    with pytest.raises(ValueError, match="window_px"):
+        row_texture(along, window_px=8)
+    with pytest.raises(TypeError, match="image"):
+        row_texture([[1, 2], [3, 4]])

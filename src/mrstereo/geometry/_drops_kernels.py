@@ -19,6 +19,13 @@ def _sigma_h(x, y, z, tx, ty, tz, sigma_per_m2):
 
 
 @njit(nogil=True, cache=True, inline="always")
+def _unmeasured(points, untextured, i, j):
+    """Is pixel ``(i, j)`` without a point for the test: none measured, or left out (``untextured[i, j]``; an
+    empty ``untextured``: none left out)?"""
+    return math.isnan(points[i, j, 2]) or (untextured.shape[0] > 0 and untextured[i, j])
+
+
+@njit(nogil=True, cache=True, inline="always")
 def _emit(out, n, x, y):
     """Append the floor-level point ``(x, y, 0)`` to ``out`` (capacity permitting); the new count."""
     if n >= out.shape[0]:
@@ -240,8 +247,8 @@ def _disparity(points, i, j, tx, ty, tz, axis, bf, doffs_px):
 
 
 @njit(nogil=True, cache=True)
-def _sides(points, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per_m2,
-           n_sigma, low_m, fattening_px, edge_reach_m, out_edge, n_edge):
+def _sides(points, untextured, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m, tan_slope,
+           sigma_per_m2, n_sigma, low_m, fattening_px, edge_reach_m, out_edge, n_edge):
     """The side edges of the drops found up the columns (a hole's or a stairwell's side seen along it, which no
     column crosses). Along each image row, where a drop's run (``dropped``) meets a floor-level point ``A``
     within ``fattening_px`` pixels (unmeasured ones between; on the run's right, where the right camera does not
@@ -266,7 +273,7 @@ def _sides(points, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_st
             for side in (-1, 1):
                 q = j if side < 0 else j1
                 a = q + side
-                while 0 <= a < W and math.isnan(points[i, a, 2]):
+                while 0 <= a < W and _unmeasured(points, untextured, i, a):
                     a += side
                 if not (0 <= a < W and _floor_level(points, i, a, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
                                                     low_m)):
@@ -284,7 +291,7 @@ def _sides(points, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_st
                     continue
                 b = a
                 while 0 <= b < W and abs(b - a) <= fattening_px:
-                    if not math.isnan(points[i, b, 2]):
+                    if not _unmeasured(points, untextured, i, b):
                         if not (_floor_level(points, i, b, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma, low_m)
                                 and math.sqrt((points[i, b, 0] - xa) ** 2 + (points[i, b, 1] - ya) ** 2)
                                 <= edge_reach_m):
@@ -296,10 +303,11 @@ def _sides(points, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_st
 
 
 @njit(nogil=True, cache=True)
-def column_drops(points, t, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n_sigma, low_m,
-                 support, edge_reach_m, spacing_m, robot_floor, fattening_px, out_edge, out_below, out_candidates,
-                 edge_columns, weak_edge, weak_below, weak_columns):
-    """Drop edges and negative obstacles of a robot-frame point image ``points`` (H, W, 3), NaN invalid.
+def column_drops(points, untextured, t, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per_m2, n_sigma, weak_n_sigma,
+                 low_m, support, edge_reach_m, spacing_m, robot_floor, fattening_px, out_edge, out_below,
+                 out_candidates, edge_columns, weak_edge, weak_below, weak_columns):
+    """Drop edges and negative obstacles of a robot-frame point image ``points`` (H, W, 3), NaN invalid; the
+    pixels set in ``untextured`` (H, W; or empty: none) count as unmeasured.
 
     Up each column (from the image's bottom) a run of at least ``support`` measured points below the floor
     (``z < -(max_step + n_sigma sigma_h)``) is a drop when no drivable surface reaches it: it lies deeper than
@@ -353,7 +361,7 @@ def column_drops(points, t, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per
     low = np.zeros(W, np.bool_)
     for i in range(H):
         for j in range(W):
-            if points[i, j, 2] < -max_step_m and not low[j]:
+            if points[i, j, 2] < -max_step_m and not low[j] and not _unmeasured(points, untextured, i, j):
                 low[j] = (_below(points, i, j, tx, ty, tz, max_step_m, sigma_per_m2, gate)
                           and not _unmatchable(points, i, j, tx, ty, tz, axis, bf, doffs_px))
     rows = np.empty(H, np.int64)
@@ -365,8 +373,8 @@ def column_drops(points, t, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per
         m = np.int64(0)
         for i in range(H - 1, -1, -1):          # the column's measured rows from the bottom up
             z = points[i, j, 2]
-            if not math.isnan(z) and not (z < -max_step_m and _unmatchable(points, i, j, tx, ty, tz, axis, bf,
-                                                                          doffs_px)):
+            if not _unmeasured(points, untextured, i, j) and not (z < -max_step_m and _unmatchable(
+                    points, i, j, tx, ty, tz, axis, bf, doffs_px)):
                 rows[m] = i
                 m += 1
         n_edge, n_below, n_cand = _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
@@ -380,12 +388,12 @@ def column_drops(points, t, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per
                                                    n_weak_below, no_candidates, none, weak_columns, weak_dropped,
                                                    weak_rows)
     if fattening_px > 0:
-        n_edge = _sides(points, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m, tan_slope,
-                        sigma_per_m2, n_sigma, low_m, fattening_px, edge_reach_m, out_edge, n_edge)
+        n_edge = _sides(points, untextured, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m,
+                        tan_slope, sigma_per_m2, n_sigma, low_m, fattening_px, edge_reach_m, out_edge, n_edge)
         if weak:
-            n_weak_edge = _sides(points, weak_dropped, weak_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m,
-                                 tan_slope, sigma_per_m2, weak_n_sigma, low_m, fattening_px, edge_reach_m, weak_edge,
-                                 n_weak_edge)
+            n_weak_edge = _sides(points, untextured, weak_dropped, weak_rows, tx, ty, tz, axis, bf, doffs_px,
+                                 max_step_m, tan_slope, sigma_per_m2, weak_n_sigma, low_m, fattening_px, edge_reach_m,
+                                 weak_edge, n_weak_edge)
     return n_edge, n_below, n_cand, n_weak_edge, n_weak_below
 
 
@@ -406,17 +414,19 @@ def floor_crossings(points, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2, n_s
 
 
 @njit(nogil=True, cache=True)
-def floor_residuals(points, tx, ty, tz, axis, bf, top_m, reach_m, max_px, out):
+def floor_residuals(points, untextured, tx, ty, tz, axis, bf, top_m, reach_m, max_px, out):
     """The floor's disparity residuals (pixels) at every other row and column: a point at height ``z`` and depth
     ``Z`` was measured at ``d + doffs = b f / Z`` (eq. 14), and the floor on its sight line, which passes floor
     level ``t_z / (t_z - z)`` times as far, at ``(d + doffs)(t_z - z) / t_z``; their difference is
     ``r = b f z / (t_z Z)``. Into ``out`` for the points within ``top_m`` of floor level and ``reach_m`` of the
-    camera (horizontally) whose ``|r| < max_px``. Returns the number written."""
+    camera (horizontally) whose ``|r| < max_px``, but the pixels set in ``untextured`` (or empty: none). Returns the
+    number written."""
     n = 0
     for i in range(0, points.shape[0], 2):
         for j in range(0, points.shape[1], 2):
             z = points[i, j, 2]
-            if not abs(z) < top_m or _range(points, i, j, tx, ty) > reach_m or n >= out.shape[0]:
+            if (not abs(z) < top_m or _unmeasured(points, untextured, i, j) or _range(points, i, j, tx, ty) > reach_m
+                    or n >= out.shape[0]):
                 continue
             depth = _depth(points, i, j, tx, ty, tz, axis)
             if depth > 0.0:

@@ -63,7 +63,10 @@ class DropConfig:
     there) are weak points too. ``fattening_px``: how far (pixels along an image row) the matcher's window
     carries the floor's disparity past an edge (about half a window, more on a decimated level); along each row
     the floor-level points within it beside a drop's run are edge points too (the sides of a hole seen along
-    them; 0: off).
+    them; 0: off). ``min_row_texture``: the points of pixels whose window has less texture along the rows than
+    this many times the image noise's (:func:`mrstereo.rejection.row_texture`: plain floor, planks running
+    along the rows, where a match slides along the row by a pixel or two) take no part in the test; the chain
+    (:func:`mrstereo.geometry.obstacles_from_pair`) passes them as ``find_drops``' ``untextured`` (None: off).
     """
 
     max_step_m: float = 0.05
@@ -77,6 +80,7 @@ class DropConfig:
     robot_floor: bool = True
     weak_n_sigma: float | None = 0.75
     fattening_px: int = 8
+    min_row_texture: float | None = 1.2
 
     def __post_init__(self) -> None:
         _checks.finite_number("max_step_m", self.max_step_m, nonnegative=True)
@@ -94,6 +98,8 @@ class DropConfig:
         _checks.positive_int("fattening_px", self.fattening_px, minimum=0)
         if self.weak_n_sigma is not None:
             _checks.finite_number("weak_n_sigma", self.weak_n_sigma, nonnegative=True)
+        if self.min_row_texture is not None:
+            _checks.finite_number("min_row_texture", self.min_row_texture, nonnegative=True)
 
 
 @dataclass(frozen=True)
@@ -134,7 +140,7 @@ class DropResult:
 
 def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float, *,
                config: DropConfig = DropConfig(), floor_top_m: float = 0.08, max_range_m: float = 8.0,
-               doffs_px: float = 0.0) -> DropResult:
+               doffs_px: float = 0.0, untextured=None) -> DropResult:
     """Drop edges and negative obstacles of one frame's robot-frame points.
 
     Parameters
@@ -157,6 +163,9 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
         floor counts as unmeasured where the floor on its sight line would match outside the right image
         (``x - d_floor < 0``, the image's left border: no matcher finds the floor there, so a floor pixel
         matched wrongly, too far, is likely).
+    untextured : ndarray of shape (H, W), bool, optional
+        Pixels whose points take no part in the test (neither floor nor below it): those without texture along
+        the rows (``DropConfig.min_row_texture``), where the matcher's errors run to a pixel or two in streaks.
 
     Returns
     -------
@@ -166,6 +175,9 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     pts, T, bf, top, reach = _checked_frame(points_robot_image, T_robot_from_cam, baseline_focal_m_px,
                                             floor_top_m, max_range_m)
     doffs = _checks.finite_number("doffs_px", doffs_px)
+    mask = _NONE_LEFT_OUT if untextured is None else np.ascontiguousarray(untextured)
+    if untextured is not None and (mask.dtype != np.bool_ or mask.shape != pts.shape[:2]):
+        raise ValueError(f"untextured must be a bool array of shape {pts.shape[:2]}, got {mask.dtype} {mask.shape}")
     t = np.ascontiguousarray(T[:3, 3], dtype=np.float64)
     h, w = pts.shape[:2]
     per_edge = int(config.edge_reach_m / config.spacing_m) + 2
@@ -179,9 +191,9 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     axis = np.ascontiguousarray(T[:3, 2], dtype=np.float64)         # the optical axis in the robot frame
     sigma = float(config.disparity_sigma_px)
     if config.noise_from_floor:
-        sigma = _floor_sigma(pts, T, bf, top, reach, sigma)
+        sigma = _floor_sigma(pts, T, bf, top, reach, sigma, mask)
     n_edge, n_below, n_cand, n_weak_edge, n_weak_below = _drops_kernels.column_drops(
-        pts, t, axis, bf, doffs, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
+        pts, mask, t, axis, bf, doffs, float(config.max_step_m), math.tan(math.radians(config.max_slope_deg)),
         sigma / bf, float(config.n_sigma),
         float(config.weak_n_sigma) if weak else -1.0, top, int(config.support), float(config.edge_reach_m),
         float(config.spacing_m), bool(config.robot_floor), int(config.fattening_px), out_edge, out_below,
@@ -215,6 +227,9 @@ def _floor_crossings(points_below, t, config: DropConfig, sigma_per_m2: float) -
 
 FLOOR_RESIDUAL_MAX_PX = 2.0
 """:func:`floor_disparity_sigma_px` counts the floor-level points whose disparity lies within this of the floor's."""
+
+_NONE_LEFT_OUT = np.zeros((0, 0), np.bool_)
+"""The kernels' ``untextured`` when no pixel is left out."""
 
 FLOOR_MIN_POINTS = 100
 """... and needs this many of them (at every other row and column), else the frame has too little floor."""
@@ -252,11 +267,12 @@ def _checked_frame(points_robot_image, T_robot_from_cam, baseline_focal_m_px, fl
             _checks.finite_number("max_range_m", max_range_m, positive=True))
 
 
-def _floor_sigma(pts, T, bf: float, top: float, reach: float, default: float) -> float:
-    """:func:`floor_disparity_sigma_px` of checked inputs."""
+def _floor_sigma(pts, T, bf: float, top: float, reach: float, default: float, untextured=None) -> float:
+    """:func:`floor_disparity_sigma_px` of checked inputs (the pixels set in ``untextured`` left out)."""
     t = T[:3, 3]
     out = np.empty(((pts.shape[0] + 1) // 2) * ((pts.shape[1] + 1) // 2))
-    n = _drops_kernels.floor_residuals(pts, float(t[0]), float(t[1]), float(t[2]),
+    left_out = _NONE_LEFT_OUT if untextured is None else untextured
+    n = _drops_kernels.floor_residuals(pts, left_out, float(t[0]), float(t[1]), float(t[2]),
                                        np.ascontiguousarray(T[:3, 2], dtype=np.float64), bf, top, reach,
                                        FLOOR_RESIDUAL_MAX_PX, out)
     if n < FLOOR_MIN_POINTS:

@@ -203,7 +203,7 @@ def ground_for_frame(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
 def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount | None = None,
                      ground: GroundPlane | None = None, pan_rad: float = 0.0,
                      config: ObstacleConfig = ObstacleConfig(), too_near=None,
-                     near_limit_px: float | None = None) -> ObstacleResult:
+                     near_limit_px: float | None = None, untextured=None) -> ObstacleResult:
     """Split a disparity map into obstacle and floor points in the robot frame.
 
     Parameters
@@ -223,6 +223,9 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
         ``DisparityResult.too_near``: placed at ``near_limit_px`` along their rays, fail-safe.
     near_limit_px : float, optional
         ``DisparityResult.near_limit_px``; needed with ``too_near``.
+    untextured : ndarray of shape (H, W), bool, optional
+        Pixels without texture along the rows, left out of the drop test (``config.drops``;
+        :func:`.drops.find_drops`).
 
     Returns
     -------
@@ -285,15 +288,16 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
                                     + (f" ({n_near} obstacle points too near, placed at the near limit)"
                                        if n_near else ""),
                             too_near_mask=np.zeros((h, w), dtype=bool) if near is None else near)
-    return result if config.drops is None else _with_drops(result, stereo, config)
+    return result if config.drops is None else _with_drops(result, stereo, config, untextured)
 
 
-def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleConfig) -> ObstacleResult:
+def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleConfig,
+                untextured=None) -> ObstacleResult:
     """``result`` with the drop test's obstacle points (:func:`.drops.find_drops` on its point image)."""
     drops = find_drops(result.points_robot_image, result.T_robot_from_cam,
                        float(stereo.baseline_m) * float(stereo.focal_px), config=config.drops,
                        floor_top_m=config.min_obstacle_height_m, max_range_m=config.max_range_m,
-                       doffs_px=float(stereo.doffs_px))
+                       doffs_px=float(stereo.doffs_px), untextured=untextured)
     found = drops.points_robot
     if not len(found) and not len(drops.candidates_robot) and not len(drops.weak_points_robot):
         return result

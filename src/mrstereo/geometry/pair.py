@@ -22,7 +22,7 @@ from .obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_
 from .scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
 from ..matching import DisparityResult, compute_disparity
 from ..profiling import stage
-from ..rejection import FloorModel, RejectionConfig, RejectionResult, reject_uniform
+from ..rejection import FloorModel, RejectionConfig, RejectionResult, reject_uniform, row_texture
 
 __all__ = ["PairObstacles", "PairScan", "obstacles_from_pair", "scan_from_pair", "Observed", "observe_pair"]
 
@@ -153,8 +153,12 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
     with stage("3-D"):
         ground = ground_for_frame(result.disparity_px, stereo, mount=stereo.mount if mount is None else mount,
                                   config=config)
+        drops = config.drops
+        untextured = (None if drops is None or drops.min_row_texture is None
+                      else row_texture(left, window_px=rejection.window_px) < drops.min_row_texture)
         obstacles = detect_obstacles(rej.disparity_px, stereo, ground=ground, pan_rad=pan_rad,
-                                     config=config, too_near=result.too_near, near_limit_px=result.near_limit_px)
+                                     config=config, too_near=result.too_near, near_limit_px=result.near_limit_px,
+                                     untextured=untextured)
     boundary = None
     if free_space is not None:
         with stage("free space"):

@@ -2,8 +2,8 @@
 
 Conventions: docs/conventions.md.
 """
-from .texture import (FloorModel, PatchStatistics, RejectionConfig, RejectionResult, learn_floor_model,
-                      patch_statistics, reject_uniform)
+from .texture import (FloorModel, PatchStatistics, RejectionConfig, RejectionResult, image_noise_sigma,
+                      learn_floor_model, patch_statistics, reject_uniform, row_texture)
 
 __all__ = ["RejectionConfig", "PatchStatistics", "FloorModel", "RejectionResult", "patch_statistics",
-           "learn_floor_model", "reject_uniform"]
+           "learn_floor_model", "reject_uniform", "image_noise_sigma", "row_texture"]

@@ -59,3 +59,96 @@ def reject_uniform(sum1, sum2, scale, threshold, mean_lo, mean_hi, floor, dispar
             uniform[v, u] = flat
             rejected[v, u] = r
             out[v, u] = nan if r else d
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _reflect(k, n):
+    """Index ``k`` reflected into ``0 .. n - 1`` without repeating the border (OpenCV's BORDER_REFLECT_101)."""
+    if n == 1:
+        return 0
+    while k < 0 or k >= n:
+        k = -k if k < 0 else 2 * n - 2 - k
+    return k
+
+
+@njit(nogil=True, cache=True, inline="always")
+def _squared_sobel_x(gray, i, out):
+    """The squared 3x3 horizontal Sobel derivative of row ``i`` of ``gray`` into ``out`` (W,), borders reflected
+    (101: the first and last columns' derivative is 0)."""
+    h, w = gray.shape
+    u, d = _reflect(i - 1, h), _reflect(i + 1, h)
+    out[0] = 0.0
+    out[w - 1] = 0.0
+    for j in range(1, w - 1):
+        g = ((np.float32(gray[u, j + 1]) - np.float32(gray[u, j - 1]))
+             + np.float32(2.0) * (np.float32(gray[i, j + 1]) - np.float32(gray[i, j - 1]))
+             + (np.float32(gray[d, j + 1]) - np.float32(gray[d, j - 1])))
+        out[j] = g * g
+
+
+@njit(nogil=True, cache=True)
+def row_texture(gray, rows, cols, scale, out):
+    """``out`` (H, W) = ``scale`` times the RMS of the horizontal Sobel derivative of ``gray`` (H, W) over windows
+    of ``rows`` x ``cols`` pixels (odd; borders reflected, 101): window sums running down the rows (each column's;
+    a row's squared derivative added as the window reaches it, again dropped as it leaves: no image-sized
+    scratch) and, as differences of prefix sums, along them."""
+    h, w = gray.shape
+    hr, hc = rows // 2, cols // 2
+    root_scale = np.float32(scale / math.sqrt(rows * cols))
+    column_sums = np.zeros(w)
+    added, dropped = np.empty(w, np.float32), np.empty(w, np.float32)
+    prefix = np.zeros(w + 2 * hc + 1)
+    for k in range(-hr, hr + 1):
+        _squared_sobel_x(gray, _reflect(k, h), added)
+        for j in range(w):
+            column_sums[j] += added[j]
+    for i in range(h):
+        if i > 0:                                   # slide the rows' window down by one
+            _squared_sobel_x(gray, _reflect(i + hr, h), added)
+            _squared_sobel_x(gray, _reflect(i - 1 - hr, h), dropped)
+            for j in range(w):
+                column_sums[j] += np.float64(added[j]) - np.float64(dropped[j])
+        total = 0.0
+        for k in range(-hc, w + hc):                # the row's window sums, as differences of its prefix sums
+            total += column_sums[k] if 0 <= k < w else column_sums[_reflect(k, w)]
+            prefix[k + hc + 1] = total
+        row = out[i]
+        for j in range(w):
+            row[j] = prefix[j + cols] - prefix[j]
+        for j in range(w):                          # float32 square roots: vectorized
+            row[j] = root_scale * np.sqrt(max(row[j], np.float32(0.0)))
+
+
+@njit(nogil=True, cache=True)
+def noise_responses(gray, step, out):
+    """``|N * gray|`` at every ``step``-th row and column inside the border (``N``: the difference of two
+    Laplacians, [[1, -2, 1], [-2, 4, -2], [1, -2, 1]]) into ``out``; returns the number written."""
+    h, w = gray.shape
+    n = 0
+    for i in range(1, h - 1, step):
+        for j in range(1, w - 1, step):
+            r = (np.float64(gray[i - 1, j - 1]) + gray[i - 1, j + 1] + gray[i + 1, j - 1] + gray[i + 1, j + 1]
+                 - 2.0 * (np.float64(gray[i - 1, j]) + gray[i + 1, j] + gray[i, j - 1] + gray[i, j + 1])
+                 + 4.0 * gray[i, j])
+            out[n] = abs(r)
+            n += 1
+    return n
+
+
+@njit(nogil=True, cache=True)
+def integer_median(values, n, top):
+    """The median of the first ``n`` of ``values``, whole numbers in ``0 .. top`` (as ``np.median``: the mean of
+    the two middle ones for an even count), by counting: O(n + top)."""
+    counts = np.zeros(top + 1, np.int64)
+    for k in range(n):
+        counts[int(values[k])] += 1
+    lo_rank, hi_rank = (n - 1) // 2, n // 2
+    seen = 0
+    lo = -1
+    for v in range(top + 1):
+        seen += counts[v]
+        if lo < 0 and seen > lo_rank:
+            lo = v
+        if seen > hi_rank:
+            return 0.5 * (lo + v)
+    return 0.0

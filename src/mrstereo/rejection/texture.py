@@ -19,6 +19,7 @@ Environments, section 3.5, eq. (13).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -30,7 +31,7 @@ from . import _kernels
 
 __all__ = [
     "RejectionConfig", "PatchStatistics", "FloorModel", "RejectionResult", "patch_statistics",
-    "learn_floor_model", "reject_uniform",
+    "learn_floor_model", "reject_uniform", "image_noise_sigma", "row_texture",
 ]
 
 
@@ -178,6 +179,57 @@ def patch_statistics(image, *, window_px: int = 9) -> PatchStatistics:
     mean = cv2.boxFilter(gray, cv2.CV_64F, (w, w), normalize=True, borderType=cv2.BORDER_REFLECT_101)
     mean_sq = cv2.boxFilter(gray * gray, cv2.CV_64F, (w, w), normalize=True, borderType=cv2.BORDER_REFLECT_101)
     return PatchStatistics(sum1=mean, sum2=mean_sq, scale=1.0, window_px=w)
+
+
+QUANTIZATION_SIGMA = 12 ** -0.5
+"""The noise of rounding to whole gray levels (1 / sqrt(12)): the least noise :func:`image_noise_sigma` returns."""
+
+def _gray(image) -> np.ndarray:
+    """A checked image as the kernels take it: an 8-bit gray image as it is (no float copy), else float32 gray on
+    the 8-bit scale (:func:`mrstereo._checks.gray_float32`)."""
+    image = _checks.image("image", image)
+    if image.dtype == np.uint8 and image.ndim == 2:
+        return np.ascontiguousarray(image)
+    return _checks.gray_float32("image", image)
+
+
+NOISE_STEP = 4
+""":func:`image_noise_sigma` samples every this many rows and columns."""
+
+
+def image_noise_sigma(image) -> float:
+    """The image's noise (standard deviation, gray levels of the 8-bit scale): 1.4826 times the median absolute
+    response to the difference of two Laplacians, which cancels smooth shading (Immerkaer, "Fast noise variance
+    estimation", 1996; its sum of squared weights is 36), over every :data:`NOISE_STEP`-th row and column; at
+    least :data:`QUANTIZATION_SIGMA`. Texture raises it somewhat; on the randomized worlds it reads 1.1-1.3
+    times the noise they were rendered with (docs/obstacles.md, "Floors without texture along the rows")."""
+    gray = _gray(image)
+    out = np.empty(((gray.shape[0] - 2 + NOISE_STEP - 1) // NOISE_STEP) * ((gray.shape[1] - 2 + NOISE_STEP - 1)
+                                                                         // NOISE_STEP) if min(gray.shape) > 2 else 0)
+    n = _kernels.noise_responses(gray, NOISE_STEP, out) if len(out) else 0
+    if not n:
+        return QUANTIZATION_SIGMA
+    # 8-bit gray: the responses are whole numbers up to 16 * 255, counted (the same median, faster)
+    median = _kernels.integer_median(out, n, 16 * 255) if gray.dtype == np.uint8 else float(np.median(out[:n]))
+    return max(float(1.4826 * median / 6.0), QUANTIZATION_SIGMA)
+
+
+def row_texture(image, *, window_px: int = 9) -> np.ndarray:
+    """Texture along the rows, the only texture that fixes a disparity: the RMS of the horizontal Sobel
+    derivative over windows of ``window_px`` rows and ``2 window_px - 1`` columns (the matcher's window on a
+    level decimated by 2, where a mobile robot's floor within a few metres is matched), over the RMS the image's
+    noise alone gives it (``sqrt(12)`` :func:`image_noise_sigma`), float32 (H, W); borders reflected. About 1
+    where the window holds nothing but noise along its rows: plain floor, or planks and stripes that run along
+    the rows, on which a match slides along the epipolar line by a pixel or two in streaks (beyond the paper:
+    eq. (13) measures all texture, this only the texture across the epipolar line). One numba pass of running
+    window sums."""
+    gray = _gray(image)
+    w = _checks.positive_int("window_px", window_px)
+    if w % 2 == 0:
+        raise ValueError(f"window_px must be odd, got {w}")
+    out = np.empty(gray.shape, np.float32)
+    _kernels.row_texture(gray, w, 2 * w - 1, 1.0 / (math.sqrt(12.0) * image_noise_sigma(gray)), out)
+    return out
 
 
 def learn_floor_model(reference_image, *, floor_mask=None, window_px: int = 9) -> FloorModel:
