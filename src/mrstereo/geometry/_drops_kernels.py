@@ -19,10 +19,10 @@ def _sigma_h(x, y, z, tx, ty, tz, sigma_per_m2):
 
 
 @njit(nogil=True, cache=True, inline="always")
-def _unmeasured(points, untextured, i, j):
-    """Is pixel ``(i, j)`` without a point for the test: none measured, or left out (``untextured[i, j]``; an
-    empty ``untextured``: none left out)?"""
-    return math.isnan(points[i, j, 2]) or (untextured.shape[0] > 0 and untextured[i, j])
+def _untextured(untextured, i, j):
+    """Is pixel ``(i, j)`` without texture along the rows (``untextured[i, j]``; an empty ``untextured``: none is)?
+    Its point is floor where it lies at floor level, and never below the floor: no evidence of a drop."""
+    return untextured.shape[0] > 0 and untextured[i, j]
 
 
 @njit(nogil=True, cache=True, inline="always")
@@ -142,8 +142,8 @@ def _seen_through(points, rows, j, k0, k1, m, r_cross, r_low, tx, ty, tz, max_st
 
 
 @njit(nogil=True, cache=True)
-def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m, support,
-            edge_reach_m, spacing_m, robot_floor, out_edge, n_edge, out_below, n_below, out_candidates, n_cand,
+def _column(points, untextured, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2, n_sigma, low_m,
+            support, edge_reach_m, spacing_m, robot_floor, out_edge, n_edge, out_below, n_below, out_candidates, n_cand,
             edge_columns, dropped, dropped_rows):
     """The drop test of column ``j`` (its measured rows ``rows[:m]``, from the image's bottom up) with the margin
     ``n_sigma`` (:func:`column_drops`); appends to the outputs from the counts given, returns the new counts;
@@ -165,7 +165,8 @@ def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
             seen_floor = True
             k += 1
             continue
-        if zp >= low_m or not _below(points, p, j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
+        if zp >= low_m or _untextured(untextured, p, j) or not _below(points, p, j, tx, ty, tz, max_step_m,
+                                                                         sigma_per_m2, n_sigma):
             k += 1
             continue
         s = tz / (tz - zp)                       # the sight line to the run's first point at floor level
@@ -175,7 +176,8 @@ def _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
         deepest = 0.0                            # below a drivable slope from A
         deepest_e = 0.0                          # below a drivable slope from E
         q_best = p
-        while end < m and _below(points, rows[end], j, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma):
+        while end < m and not _untextured(untextured, rows[end], j) and _below(points, rows[end], j, tx, ty, tz,
+                                                                                max_step_m, sigma_per_m2, n_sigma):
             q = rows[end]
             xq, yq, zq = points[q, j, 0], points[q, j, 1], points[q, j, 2]
             sq = n_sigma * _sigma_h(xq, yq, zq, tx, ty, tz, sigma_per_m2)
@@ -247,7 +249,7 @@ def _disparity(points, i, j, tx, ty, tz, axis, bf, doffs_px):
 
 
 @njit(nogil=True, cache=True)
-def _sides(points, untextured, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m, tan_slope,
+def _sides(points, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m, tan_slope,
            sigma_per_m2, n_sigma, low_m, fattening_px, edge_reach_m, out_edge, n_edge):
     """The side edges of the drops found up the columns (a hole's or a stairwell's side seen along it, which no
     column crosses). Along each image row, where a drop's run (``dropped``) meets a floor-level point ``A``
@@ -273,7 +275,7 @@ def _sides(points, untextured, dropped, dropped_rows, tx, ty, tz, axis, bf, doff
             for side in (-1, 1):
                 q = j if side < 0 else j1
                 a = q + side
-                while 0 <= a < W and _unmeasured(points, untextured, i, a):
+                while 0 <= a < W and math.isnan(points[i, a, 2]):
                     a += side
                 if not (0 <= a < W and _floor_level(points, i, a, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma,
                                                     low_m)):
@@ -291,7 +293,7 @@ def _sides(points, untextured, dropped, dropped_rows, tx, ty, tz, axis, bf, doff
                     continue
                 b = a
                 while 0 <= b < W and abs(b - a) <= fattening_px:
-                    if not _unmeasured(points, untextured, i, b):
+                    if not math.isnan(points[i, b, 2]):
                         if not (_floor_level(points, i, b, tx, ty, tz, max_step_m, sigma_per_m2, n_sigma, low_m)
                                 and math.sqrt((points[i, b, 0] - xa) ** 2 + (points[i, b, 1] - ya) ** 2)
                                 <= edge_reach_m):
@@ -307,7 +309,7 @@ def column_drops(points, untextured, t, axis, bf, doffs_px, max_step_m, tan_slop
                  low_m, support, edge_reach_m, spacing_m, robot_floor, fattening_px, out_edge, out_below,
                  out_candidates, edge_columns, weak_edge, weak_below, weak_columns):
     """Drop edges and negative obstacles of a robot-frame point image ``points`` (H, W, 3), NaN invalid; the
-    pixels set in ``untextured`` (H, W; or empty: none) count as unmeasured.
+    points of the pixels set in ``untextured`` (H, W; or empty: none) are floor at floor level and never below it.
 
     Up each column (from the image's bottom) a run of at least ``support`` measured points below the floor
     (``z < -(max_step + n_sigma sigma_h)``) is a drop when no drivable surface reaches it: it lies deeper than
@@ -361,7 +363,7 @@ def column_drops(points, untextured, t, axis, bf, doffs_px, max_step_m, tan_slop
     low = np.zeros(W, np.bool_)
     for i in range(H):
         for j in range(W):
-            if points[i, j, 2] < -max_step_m and not low[j] and not _unmeasured(points, untextured, i, j):
+            if points[i, j, 2] < -max_step_m and not low[j] and not _untextured(untextured, i, j):
                 low[j] = (_below(points, i, j, tx, ty, tz, max_step_m, sigma_per_m2, gate)
                           and not _unmatchable(points, i, j, tx, ty, tz, axis, bf, doffs_px))
     rows = np.empty(H, np.int64)
@@ -373,27 +375,27 @@ def column_drops(points, untextured, t, axis, bf, doffs_px, max_step_m, tan_slop
         m = np.int64(0)
         for i in range(H - 1, -1, -1):          # the column's measured rows from the bottom up
             z = points[i, j, 2]
-            if not _unmeasured(points, untextured, i, j) and not (z < -max_step_m and _unmatchable(
-                    points, i, j, tx, ty, tz, axis, bf, doffs_px)):
+            if not math.isnan(z) and not (z < -max_step_m and _unmatchable(points, i, j, tx, ty, tz, axis, bf,
+                                                                          doffs_px)):
                 rows[m] = i
                 m += 1
-        n_edge, n_below, n_cand = _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
+        n_edge, n_below, n_cand = _column(points, untextured, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
                                           n_sigma, low_m, support, edge_reach_m, spacing_m, robot_floor, out_edge,
                                           n_edge, out_below, n_below, out_candidates, n_cand, edge_columns, dropped,
                                           dropped_rows)
         if weak:
-            n_weak_edge, n_weak_below, _ = _column(points, rows, m, j, tx, ty, tz, max_step_m, tan_slope,
+            n_weak_edge, n_weak_below, _ = _column(points, untextured, rows, m, j, tx, ty, tz, max_step_m, tan_slope,
                                                    sigma_per_m2, weak_n_sigma, low_m, support, edge_reach_m,
                                                    spacing_m, robot_floor, weak_edge, n_weak_edge, weak_below,
                                                    n_weak_below, no_candidates, none, weak_columns, weak_dropped,
                                                    weak_rows)
     if fattening_px > 0:
-        n_edge = _sides(points, untextured, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m,
-                        tan_slope, sigma_per_m2, n_sigma, low_m, fattening_px, edge_reach_m, out_edge, n_edge)
+        n_edge = _sides(points, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m, tan_slope,
+                        sigma_per_m2, n_sigma, low_m, fattening_px, edge_reach_m, out_edge, n_edge)
         if weak:
-            n_weak_edge = _sides(points, untextured, weak_dropped, weak_rows, tx, ty, tz, axis, bf, doffs_px,
-                                 max_step_m, tan_slope, sigma_per_m2, weak_n_sigma, low_m, fattening_px, edge_reach_m,
-                                 weak_edge, n_weak_edge)
+            n_weak_edge = _sides(points, weak_dropped, weak_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m,
+                                 tan_slope, sigma_per_m2, weak_n_sigma, low_m, fattening_px, edge_reach_m, weak_edge,
+                                 n_weak_edge)
     return n_edge, n_below, n_cand, n_weak_edge, n_weak_below
 
 
@@ -425,7 +427,7 @@ def floor_residuals(points, untextured, tx, ty, tz, axis, bf, top_m, reach_m, ma
     for i in range(0, points.shape[0], 2):
         for j in range(0, points.shape[1], 2):
             z = points[i, j, 2]
-            if (not abs(z) < top_m or _unmeasured(points, untextured, i, j) or _range(points, i, j, tx, ty) > reach_m
+            if (not abs(z) < top_m or _untextured(untextured, i, j) or _range(points, i, j, tx, ty) > reach_m
                     or n >= out.shape[0]):
                 continue
             depth = _depth(points, i, j, tx, ty, tz, axis)

@@ -65,7 +65,8 @@ class DropConfig:
     the floor-level points within it beside a drop's run are edge points too (the sides of a hole seen along
     them; 0: off). ``min_row_texture``: the points of pixels whose window has less texture along the rows than
     this many times the image noise's (:func:`mrstereo.rejection.row_texture`: plain floor, planks running
-    along the rows, where a match slides along the row by a pixel or two) take no part in the test; the chain
+    along the rows, where a match slides along the row by a pixel or two) are never below the floor for the test
+    (at floor level they are floor) and do not count in its noise margin; the chain
     (:func:`mrstereo.geometry.obstacles_from_pair`) passes them as ``find_drops``' ``untextured`` (None: off).
     """
 
@@ -164,8 +165,9 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
         (``x - d_floor < 0``, the image's left border: no matcher finds the floor there, so a floor pixel
         matched wrongly, too far, is likely).
     untextured : ndarray of shape (H, W), bool, optional
-        Pixels whose points take no part in the test (neither floor nor below it): those without texture along
-        the rows (``DropConfig.min_row_texture``), where the matcher's errors run to a pixel or two in streaks.
+        Pixels without texture along the rows (``DropConfig.min_row_texture``), where the matcher's errors run to a
+        pixel or two in streaks: their points are never below the floor for the test (no evidence of a drop; at
+        floor level they are floor, before a run or after it) and do not count in the floor's measured error.
 
     Returns
     -------
