@@ -1,4 +1,5 @@
 """Eq. (13) texture / ground suppression on hand-made images."""
+import cv2
 import numpy as np
 import pytest
 
@@ -122,6 +123,14 @@ def test_row_texture_is_one_on_noise_along_the_rows_and_high_on_texture_across_t
     assert image_noise_sigma(along) == pytest.approx(sigma, rel=0.1)
     assert np.median(row_texture(along)) == pytest.approx(1.0, rel=0.1)
     assert np.percentile(row_texture(across), 5) > 4.0 * np.percentile(row_texture(along), 95)
+    # OpenCV on the same input: the Sobel derivative's RMS over 9 x 17 windows, Immerkaer's noise from filter2D
+    image = np.clip(across, 0, 255).astype(np.uint8)
+    gray = image.astype(np.float32)
+    laplacians = cv2.filter2D(gray, cv2.CV_32F, np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32))
+    noise = 1.4826 * np.median(np.abs(laplacians[1:-1:4, 1:-1:4])) / 6.0
+    assert image_noise_sigma(image) == pytest.approx(noise, rel=1e-6)
+    rms = np.sqrt(cv2.sqrBoxFilter(cv2.Sobel(gray, cv2.CV_32F, 1, 0, ksize=3), cv2.CV_32F, (17, 9)))
+    np.testing.assert_allclose(row_texture(image), rms / (np.sqrt(12.0) * noise), rtol=1e-5, atol=1e-5)
     assert image_noise_sigma(np.full((50, 60), 90, np.uint8)) == QUANTIZATION_SIGMA
     assert row_texture(np.full((50, 60), 90, np.uint8)).max() == 0.0
     with pytest.raises(ValueError, match="window_px"):

@@ -379,10 +379,10 @@ def column_drops(points, untextured, t, axis, bf, doffs_px, max_step_m, tan_slop
                                                                           doffs_px)):
                 rows[m] = i
                 m += 1
-        n_edge, n_below, n_cand = _column(points, untextured, rows, m, j, tx, ty, tz, max_step_m, tan_slope, sigma_per_m2,
-                                          n_sigma, low_m, support, edge_reach_m, spacing_m, robot_floor, out_edge,
-                                          n_edge, out_below, n_below, out_candidates, n_cand, edge_columns, dropped,
-                                          dropped_rows)
+        n_edge, n_below, n_cand = _column(points, untextured, rows, m, j, tx, ty, tz, max_step_m, tan_slope,
+                                          sigma_per_m2, n_sigma, low_m, support, edge_reach_m, spacing_m, robot_floor,
+                                          out_edge, n_edge, out_below, n_below, out_candidates, n_cand, edge_columns,
+                                          dropped, dropped_rows)
         if weak:
             n_weak_edge, n_weak_below, _ = _column(points, untextured, rows, m, j, tx, ty, tz, max_step_m, tan_slope,
                                                    sigma_per_m2, weak_n_sigma, low_m, support, edge_reach_m,

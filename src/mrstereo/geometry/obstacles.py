@@ -224,8 +224,8 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     near_limit_px : float, optional
         ``DisparityResult.near_limit_px``; needed with ``too_near``.
     untextured : ndarray of shape (H, W), bool, optional
-        Pixels without texture along the rows, left out of the drop test (``config.drops``;
-        :func:`.drops.find_drops`).
+        Pixels without texture along the rows, whose points the drop test (``config.drops``;
+        :func:`.drops.find_drops`) never takes for below the floor.
 
     Returns
     -------

@@ -91,7 +91,8 @@ def row_texture(gray, rows, cols, scale, out):
     """``out`` (H, W) = ``scale`` times the RMS of the horizontal Sobel derivative of ``gray`` (H, W) over windows
     of ``rows`` x ``cols`` pixels (odd; borders reflected, 101): window sums running down the rows (each column's;
     a row's squared derivative added as the window reaches it, again dropped as it leaves: no image-sized
-    scratch) and, as differences of prefix sums, along them."""
+    scratch) and, as differences of prefix sums, along them. OpenCV's ``Sobel`` and ``sqrBoxFilter`` (the same
+    borders) give the same to float32 rounding."""
     h, w = gray.shape
     hr, hc = rows // 2, cols // 2
     root_scale = np.float32(scale / math.sqrt(rows * cols))
