@@ -1039,3 +1039,27 @@ def test_untextured_points_are_floor_at_floor_level(tmp_path):
     assert len(find_drops(points, T, bf, config=exact, untextured=untextured).points_robot) == 0
     left_out = np.where(untextured[..., None], np.nan, points)
     assert np.count_nonzero(find_drops(left_out, T, bf, config=exact).edge_columns) > 50
+
+
+def test_the_row_texture_is_computed_from_the_first_row_that_can_see_the_floor():
+    """A camera pitched down by 10 degrees sees its horizon ``f tan(10 deg)`` rows above the image centre: the
+    first floor row; level, at the centre row; a failed floor gives 0. Below that row the row texture is exactly
+    the whole image's, above it NaN (not computed)."""
+    from mrstereo import CameraMount, StereoCamera
+    from mrstereo.camera import Camera
+    from mrstereo.geometry import ground_from_mount
+    from mrstereo.geometry.obstacles import first_floor_row
+    from mrstereo.rejection import row_texture
+
+    stereo = StereoCamera.ideal(Camera(width=160, height=120, fx=100.0, fy=100.0, cx=80.0, cy=60.0), 0.1)
+    for tilt_deg, row in ((10.0, math.floor(60.0 - 100.0 * math.tan(math.radians(10.0)))), (0.0, 60)):
+        mount = CameraMount.from_xyz_rpy((0.0, 0.0, 0.5), (0.0, math.radians(tilt_deg), 0.0))
+        assert first_floor_row(stereo, ground_from_mount(mount)) == row
+    failed = replace(ground_from_mount(mount), success=False)
+    assert first_floor_row(stereo, failed) == 0
+    image = np.random.default_rng(2).integers(0, 255, (120, 160)).astype(np.uint8)
+    whole, part = row_texture(image), row_texture(image, first_row=42)
+    np.testing.assert_allclose(part[42:], whole[42:], rtol=1e-6)
+    assert np.isnan(part[:42]).all()
+    with pytest.raises(ValueError, match="first_row"):
+        row_texture(image, first_row=-1)

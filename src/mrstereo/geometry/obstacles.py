@@ -24,7 +24,7 @@ from .drops import CANDIDATE_COLUMNS, DropConfig, find_drops
 from .ground import FLOOR_FIT_RANGE_M, GroundPlane, T_robot_from_cam_ground, estimate_ground, ground_from_mount
 
 __all__ = ["ObstacleConfig", "ObstacleResult", "detect_obstacles", "ground_for_frame", "points_robot_from_disparity",
-           "MAPPING_MAX_RANGE_M", "MAPPING_RANGE_SIGMA_M", "mapping_range_m"]
+           "first_floor_row", "MAPPING_MAX_RANGE_M", "MAPPING_RANGE_SIGMA_M", "mapping_range_m"]
 
 MAPPING_MAX_RANGE_M = 4.0
 """The shortest mapping range (``ObstacleConfig.max_range_m`` of a map, :func:`mapping_range_m`): the paper tells floor
@@ -147,6 +147,26 @@ def _rectified_intrinsics(stereo: StereoCamera) -> dict:
     """Keyword arguments of the eq. (14)-(16) kernels: ``b f``, ``f``, ``cx``, ``cy``, ``fy``."""
     return {"bf": float(stereo.baseline_m) * float(stereo.focal_px), "focal_px": float(stereo.focal_px),
             "cx_px": float(stereo.cx_px), "cy_px": float(stereo.cy_px), "fy_px": float(stereo.left.P[1, 1])}
+
+
+def first_floor_row(stereo: StereoCamera, ground: GroundPlane, *, pan_rad: float = 0.0) -> int:
+    """The first (top) row of the rectified left image where some pixel's sight line points below the horizon
+    (for the floor ``ground`` and the head's pan): a sight line going up from the camera stays above floor level,
+    so the rows above it show no floor and nothing below it. 0 when the floor was not found or the camera's
+    rows run upward."""
+    _checks.instance("stereo", stereo, StereoCamera)
+    _checks.instance("ground", ground, GroundPlane)
+    if not ground.success:
+        return 0
+    R = T_robot_from_cam_ground(ground, pan_rad=_checks.finite_number("pan_rad", pan_rad))[:3, :3]
+    k = _rectified_intrinsics(stereo)
+    if R[2, 1] >= 0.0:
+        return 0
+    width, height = stereo.size
+    # a pixel's sight line in the robot frame has height R[2] . ((u - cx) / f, (v - cy) / fy, 1): 0 at the horizon
+    rows = [k["cy_px"] - k["fy_px"] * (R[2, 2] + R[2, 0] * (u - k["cx_px"]) / k["focal_px"]) / R[2, 1]
+            for u in (0.0, width - 1.0)]
+    return int(np.clip(np.floor(min(rows)), 0, height))
 
 
 def _disparity_image(disparity_px) -> np.ndarray:

@@ -18,7 +18,7 @@ from .. import _checks
 from ..camera import CameraMount, StereoCamera
 from .ground import GroundPlane
 from .freespace import FreeSpaceBoundary, FreeSpaceConfig, free_space_boundary
-from .obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, ground_for_frame
+from .obstacles import ObstacleConfig, ObstacleResult, detect_obstacles, first_floor_row, ground_for_frame
 from .scan import LaserScan, laser_scan_from_points, near_limit_range_m, scan_angles_of_camera
 from ..matching import DisparityResult, compute_disparity
 from ..profiling import stage
@@ -154,8 +154,10 @@ def obstacles_from_pair(left, right, stereo: StereoCamera, *, rectified: bool = 
         ground = ground_for_frame(result.disparity_px, stereo, mount=stereo.mount if mount is None else mount,
                                   config=config)
         drops = config.drops
-        untextured = (None if drops is None or drops.min_row_texture is None
-                      else row_texture(left, window_px=rejection.window_px) < drops.min_row_texture)
+        untextured = (None if drops is None or drops.min_row_texture is None or not ground.success
+                      else row_texture(left, window_px=rejection.window_px,
+                                       first_row=first_floor_row(stereo, ground, pan_rad=pan_rad))
+                      < drops.min_row_texture)
         obstacles = detect_obstacles(rej.disparity_px, stereo, ground=ground, pan_rad=pan_rad,
                                      config=config, too_near=result.too_near, near_limit_px=result.near_limit_px,
                                      untextured=untextured)

@@ -214,7 +214,7 @@ def image_noise_sigma(image) -> float:
     return max(float(1.4826 * median / 6.0), QUANTIZATION_SIGMA)
 
 
-def row_texture(image, *, window_px: int = 9) -> np.ndarray:
+def row_texture(image, *, window_px: int = 9, first_row: int = 0) -> np.ndarray:
     """Texture along the rows, the only texture that fixes a disparity: the RMS of the horizontal Sobel
     derivative over windows of ``window_px`` rows and ``2 window_px - 1`` columns (the matcher's window on a
     level decimated by 2, where a mobile robot's floor within a few metres is matched), over the RMS the image's
@@ -222,13 +222,15 @@ def row_texture(image, *, window_px: int = 9) -> np.ndarray:
     where the window holds nothing but noise along its rows: plain floor, or planks and stripes that run along
     the rows, on which a match slides along the epipolar line by a pixel or two in streaks (beyond the paper:
     eq. (13) measures all texture, this only the texture across the epipolar line). One numba pass of running
-    window sums."""
+    window sums; the rows above ``first_row`` are NaN, not computed (the rows above the horizon, which show no
+    floor: :func:`mrstereo.geometry.obstacles.first_floor_row`)."""
     gray = _gray(image)
     w = _checks.positive_int("window_px", window_px)
     if w % 2 == 0:
         raise ValueError(f"window_px must be odd, got {w}")
+    first = _checks.positive_int("first_row", first_row, minimum=0)
     out = np.empty(gray.shape, np.float32)
-    _kernels.row_texture(gray, w, 2 * w - 1, 1.0 / (math.sqrt(12.0) * image_noise_sigma(gray)), out)
+    _kernels.row_texture(gray, w, 2 * w - 1, 1.0 / (math.sqrt(12.0) * image_noise_sigma(gray)), first, out)
     return out
 
 
