@@ -48,7 +48,7 @@ perfect matcher, so a miss is the rules' or the geometry's, not the sensor noise
 
 ``--real``: the first frames of the EuRoC ASL sample, KITTI odometry 06 and 01 and OpenLORIS: the share of cells
 free without the drop test that are not free with it (at most 0.5 % on these flat floors), the drop cells, and
-the share of the floor's points (within 0.08 m of floor level) the row-texture test leaves out (median and
+the share of the floor's points (within 0.08 m of floor level) without texture along the rows (median and
 largest over the frames).
 
 The map with the drop test is the pipeline's: its drop layer (``OccupancyGrid.drop``, votes that rays do not
@@ -454,7 +454,7 @@ def evaluate_real(frames: int, config=None, drops=None) -> list[dict]:
             rows.append({"recording": name, "missing": str(root)})
             continue
         t0 = time.process_time()
-        with _floor_left_out() as left_out:
+        with _floor_untextured() as untextured:
             run, plain = paired_maps(read_recording(root), frames=frames, config=config, drops=drops)
         a, b = (r.grid.to_ros_map() for r in (run, plain))
         b = ros_map_on_grid(b, a.grid)           # the map with drops may reach farther: compare on its window
@@ -463,17 +463,17 @@ def evaluate_real(frames: int, config=None, drops=None) -> list[dict]:
         rows.append({"recording": name, "free cells": int(free.sum()), "changed": int(changed.sum()),
                      "share changed": float(changed.sum() / max(free.sum(), 1)),
                      "drop cells": int(run.grid.drop.sum()),
-                     "floor left out (median, max)": (f"{np.median(left_out):.3f}, {np.max(left_out):.3f}"
-                                                      if left_out else "-"),
+                     "floor untextured (median, max)": (f"{np.median(untextured):.3f}, {np.max(untextured):.3f}"
+                                                        if untextured else "-"),
                      "cpu s": time.process_time() - t0})
     return rows
 
 
 @contextmanager
-def _floor_left_out(floor_top_m: float = 0.08):
-    """While inside, each frame's drop test records the share of its floor-level points (``|z| <
-    floor_top_m``) that the row-texture test leaves out (``DropConfig.min_row_texture``), for the frames with
-    more than 100 such points; yields the list of shares."""
+def _floor_untextured(floor_top_m: float = 0.08):
+    """While inside, each frame's drop test records the share of its floor-level points (``|z| < floor_top_m``)
+    without texture along the rows (``DropConfig.min_row_texture``: never below the floor for the test, still
+    floor), for the frames with more than 100 such points; yields the list of shares."""
     from mrstereo.geometry import obstacles
 
     shares: list[float] = []
