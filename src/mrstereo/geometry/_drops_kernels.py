@@ -249,8 +249,8 @@ def _disparity(points, i, j, tx, ty, tz, axis, bf, doffs_px):
 
 
 @njit(nogil=True, cache=True)
-def _sides(points, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m, tan_slope,
-           sigma_per_m2, n_sigma, low_m, fattening_px, edge_reach_m, out_edge, n_edge):
+def _sides(points, dropped, dropped_rows, tx, ty, tz, axis, bf, doffs_px, max_step_m, tan_slope, sigma_per_m2,
+           n_sigma, low_m, fattening_px, edge_reach_m, out_edge, n_edge):
     """The side edges of the drops found up the columns (a hole's or a stairwell's side seen along it, which no
     column crosses). Along each image row, where a drop's run (``dropped``) meets a floor-level point ``A``
     within ``fattening_px`` pixels (unmeasured ones between; on the run's right, where the right camera does not
