@@ -25,6 +25,13 @@ measures, within 4 m of the robot, on 5 cm cells of the robot frame:
   range of equal work (``multi_range=False``, as many disparities as the
   multi-range plan evaluates per pixel);
 * the floor estimated by V-disparity and by a 3D plane against the true mount.
+
+``--floor-speed``: the time of the floor fit instead (``estimate_ground``, the 3-D plane: what every frame of
+a recording without a mount runs), on the first ``--frames`` frames of the shared real recordings
+(EuRoC, OpenLORIS, KITTI odometry 06: ``$MRSTEREO_DATA``), against OpenCV's ``StereoBM`` and mrstereo's
+matcher on the same rectified pair: medians per recording and the median of the per-frame ratios.
+
+    python benchmarks/bench_obstacles.py --floor-speed [--frames 10]
 """
 from __future__ import annotations
 
@@ -164,12 +171,50 @@ def _fmt(summ: dict) -> str:
             f"wall-cell recall {summ['wall']:.3f}, obstacle pixel recall {summ['pixel_recall']:.3f}")
 
 
+def floor_speed(n_frames: int) -> int:
+    """Print the median time of the 3-D plane floor fit per real recording, against StereoBM and the matcher."""
+    from mrstereo.evaluation.baselines import stereo_bm
+    from mrstereo.recordings import read_recording
+    from mrstereo.recordings.manifest import frame_pair
+    from mrstereo.recordings.samples import data_root
+    from mrstereo.rejection import reject_uniform as reject
+
+    print("| recording | frames | floor fit ms | StereoBM ms | matcher ms | fit / StereoBM | fit / matcher |")
+    print("|---|---|---|---|---|---|---|")
+    for name in ("euroc_asl_sample", "openloris_sample", "kitti_odometry_06"):
+        manifest = read_recording(data_root() / name)
+        stereo = manifest.calibration
+        times = {"fit": [], "bm": [], "match": []}
+        for k, record in enumerate(manifest.frames[:n_frames + 1]):
+            left, right, rectified = frame_pair(record)
+            if not rectified:
+                left, right = stereo.rectify(left, right)
+            t0 = time.perf_counter()
+            matched = compute_disparity(left, right, calibration=stereo, preset="mapping")
+            t1 = time.perf_counter()
+            stereo_bm(left, right, max_disparity_px=matched.near_limit_px)
+            t2 = time.perf_counter()
+            estimate_ground(reject(matched.disparity_px, left).disparity_px, stereo, method="plane", rng=0)
+            t3 = time.perf_counter()
+            if k:                                   # the first frame compiles
+                for key, dt in zip(times, (t3 - t2, t2 - t1, t1 - t0)):
+                    times[key].append(dt)
+        fit, bm, match = (np.array(v) for v in times.values())
+        print(f"| {name} {stereo.size[0]}x{stereo.size[1]} | {len(fit)} | {np.median(fit) * 1e3:.1f} | "
+              f"{np.median(bm) * 1e3:.1f} | {np.median(match) * 1e3:.1f} | {np.median(fit / bm):.2f} | "
+              f"{np.median(fit / match):.2f} |")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=6, help="frames to render (poses x pans)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="2 frames, 2 thresholds")
+    ap.add_argument("--floor-speed", action="store_true", help="the floor fit's time on real recordings")
     args = ap.parse_args(argv)
+    if args.floor_speed:
+        return floor_speed(args.frames)
     n_frames = 2 if args.quick else args.frames
 
     scene, stereo = default_scene(), default_stereo()

@@ -92,6 +92,28 @@ def test_plane_fit_recovers_roll_and_matches_the_transform():
     np.testing.assert_allclose(height_above_ground_m(floor, g), 0.0, atol=1e-9)
 
 
+def test_plane_fit_kernels_equal_the_numpy_expressions():
+    # the RANSAC score of each hypothesis (inliers less the points below the floor) and the points kept for the
+    # fit, as numpy computes them, on points that hold NaN, points behind the camera and points too far
+    from mrstereo.geometry import _kernels
+
+    rng = np.random.default_rng(3)
+    pts = rng.normal(0.0, 2.0, (5000, 3)) + [0.0, 1.0, 4.0]
+    pts[rng.random(len(pts)) < 0.1, rng.integers(0, 3)] = np.nan
+    normals = rng.normal(size=(300, 3)) + [0.0, 3.0, 1.0]
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    dists = rng.uniform(0.2, 2.0, 300)
+    ahead = np.empty_like(pts)
+    kept = ahead[:_kernels.points_ahead(pts, 8.0, ahead)]
+    np.testing.assert_array_equal(kept, pts[np.isfinite(pts).all(axis=1) & (pts[:, 2] > 0) & (pts[:, 2] <= 8.0)])
+    assert 0 < len(kept) < 0.9 * len(pts)
+    res = kept @ normals.T - dists
+    scores = np.empty(len(dists))
+    _kernels.plane_scores(*np.ascontiguousarray(kept.T), normals, dists, 0.03, 1.0, scores)
+    np.testing.assert_array_equal(scores, (np.abs(res) <= 0.03).sum(axis=0) - 1.0 * (res > 0.03).sum(axis=0))
+    assert len(np.unique(scores)) > 100
+
+
 def test_ground_fits_fail_cleanly_without_a_floor():
     d = np.full((H, W), np.nan, np.float32)
     assert not fit_ground_v_disparity(d, _stereo()).success

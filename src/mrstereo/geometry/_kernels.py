@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 
 @njit(nogil=True, cache=True)
@@ -162,3 +162,38 @@ def scatter_points(points, pixels, out):
         out[k, 0] = points[i, 0]
         out[k, 1] = points[i, 1]
         out[k, 2] = points[i, 2]
+
+
+
+
+@njit(nogil=True, cache=True)
+def points_ahead(points, max_depth_m, out):
+    """The rows of ``points`` (N, 3) that are finite with ``0 < z <= max_depth_m``, in order, into ``out``; their
+    number."""
+    n = 0
+    for i in range(points.shape[0]):
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        if math.isfinite(x) and math.isfinite(y) and 0.0 < z <= max_depth_m:
+            out[n, 0] = x
+            out[n, 1] = y
+            out[n, 2] = z
+            n += 1
+    return n
+
+
+@njit(nogil=True, parallel=True, cache=True)
+def plane_scores(x, y, z, normals, dists, threshold_m, below_penalty, out):
+    """RANSAC scores of the planes ``normals[k] . p = dists[k]`` on the points ``(x, y, z)`` (M,) each into ``out``
+    (K,): the points within ``threshold_m`` of a plane less ``below_penalty`` times those farther than that on
+    the side its normal points to (below the floor). A hypothesis per thread, its points in order. (It replaces
+    a matrix product, which BLAS may sum in another order: a point within a rounding error of the threshold
+    could count otherwise.)"""
+    for k in prange(normals.shape[0]):
+        nx, ny, nz, dist = normals[k, 0], normals[k, 1], normals[k, 2], dists[k]
+        inside = 0
+        beyond = 0
+        for i in range(x.shape[0]):
+            r = x[i] * nx + y[i] * ny + z[i] * nz - dist
+            inside += abs(r) <= threshold_m
+            beyond += r > threshold_m
+        out[k] = inside - below_penalty * beyond

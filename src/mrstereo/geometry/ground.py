@@ -24,6 +24,7 @@ import numpy as np
 from .. import _checks
 from ..camera import CameraMount, StereoCamera
 from ..transforms import T_from_R_t, T_robot_from_cam
+from . import _kernels
 from .triangulation import points_cam_from_disparity
 
 __all__ = [
@@ -318,7 +319,8 @@ def fit_ground_plane(points_cam, *, height_range_m: tuple[float, float] = (0.1, 
     iterations = _checks.positive_int("iterations", iterations)
     min_inliers = _checks.positive_int("min_inliers", min_inliers)
     rng = _checks.rng(rng)
-    p = p[np.isfinite(p).all(axis=1) & (p[:, 2] > 0) & (p[:, 2] <= max_range)]
+    ahead = np.empty_like(p)
+    p = ahead[:_kernels.points_ahead(p, max_range, ahead)]
     if p.shape[0] < max(min_inliers, 3):
         return _failed("plane", f"only {p.shape[0]} valid points", p.shape[0])
     n_all = p.shape[0]
@@ -340,10 +342,9 @@ def fit_ground_plane(points_cam, *, height_range_m: tuple[float, float] = (0.1, 
     if not ok2.any():
         return _failed("plane", "no plane below the camera with a floor-like normal", 0)
     n, dist = n[ok2], dist[ok2]
-    scores = np.zeros(n.shape[0], dtype=np.float64)
-    for start in range(0, n.shape[0], 32):
-        res = score_pts @ n[start:start + 32].T - dist[start:start + 32]
-        scores[start:start + 32] = (np.abs(res) <= thr).sum(axis=0) - _BELOW_PENALTY * (res > thr).sum(axis=0)
+    scores = np.empty(n.shape[0], dtype=np.float64)
+    _kernels.plane_scores(*np.ascontiguousarray(score_pts.T), np.ascontiguousarray(n), np.ascontiguousarray(dist),
+                          thr, _BELOW_PENALTY, scores)
     best = int(np.argmax(scores))
     normal, h = n[best], dist[best]
     for _ in range(3):                                        # total least squares on the inliers
