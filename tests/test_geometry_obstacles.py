@@ -114,6 +114,21 @@ def test_plane_fit_kernels_equal_the_numpy_expressions():
     assert len(np.unique(scores)) > 100
 
 
+def test_scatter_points_equals_numpy_in_any_order():
+    # in raster order (as detect_obstacles lists them: one pass), shuffled, and with a pixel listed twice (last wins)
+    from mrstereo.geometry import _kernels
+
+    rng = np.random.default_rng(4)
+    pixels = np.sort(rng.choice(1000, 300, replace=False))
+    points = rng.normal(size=(300, 3))
+    for order in (np.arange(300), rng.permutation(300), np.r_[np.arange(300), 7]):
+        out = np.zeros((1000, 3))
+        _kernels.scatter_points(points[order % 300], pixels[order % 300], out)
+        ref = np.full((1000, 3), np.nan)
+        ref[pixels[order % 300]] = points[order % 300]
+        np.testing.assert_array_equal(out, ref)
+
+
 def test_ground_fits_fail_cleanly_without_a_floor():
     d = np.full((H, W), np.nan, np.float32)
     assert not fit_ground_v_disparity(d, _stereo()).success

@@ -152,16 +152,25 @@ def obstacle_points(disparity, doffs_px, too_near, near_limit_px, bf, focal_px, 
 
 @njit(nogil=True, cache=True)
 def scatter_points(points, pixels, out):
-    """``out`` (H * W, 3) float64 = NaN, then ``out[pixels[i]] = points[i]``: a point image from the listed points."""
-    for k in range(out.shape[0]):
+    """``out`` (H * W, 3) float64 = NaN, then ``out[pixels[i]] = points[i]``: a point image from the listed points.
+    One pass over ``out`` when ``pixels`` increase (as :func:`obstacle_points` lists them); any order is right."""
+    k = 0
+    for i in range(pixels.shape[0]):
+        p = pixels[i]
+        while k < p:
+            out[k, 0] = np.nan
+            out[k, 1] = np.nan
+            out[k, 2] = np.nan
+            k += 1
+        out[p, 0] = points[i, 0]
+        out[p, 1] = points[i, 1]
+        out[p, 2] = points[i, 2]
+        k = max(k, p + 1)
+    while k < out.shape[0]:
         out[k, 0] = np.nan
         out[k, 1] = np.nan
         out[k, 2] = np.nan
-    for i in range(pixels.shape[0]):
-        k = pixels[i]
-        out[k, 0] = points[i, 0]
-        out[k, 1] = points[i, 1]
-        out[k, 2] = points[i, 2]
+        k += 1
 
 
 
