@@ -173,8 +173,6 @@ def scatter_points(points, pixels, out):
         k += 1
 
 
-
-
 @njit(nogil=True, cache=True)
 def points_ahead(points, max_depth_m, out):
     """The rows of ``points`` (N, 3) that are finite with ``0 < z <= max_depth_m``, in order, into ``out``; their
