@@ -182,6 +182,9 @@ def floor_speed(n_frames: int) -> int:
     print("| recording | frames | floor fit ms | StereoBM ms | matcher ms | fit / StereoBM | fit / matcher |")
     print("|---|---|---|---|---|---|---|")
     for name in ("euroc_asl_sample", "openloris_sample", "kitti_odometry_06"):
+        if not (data_root() / name).is_dir():
+            print(f"| {name} | not in {data_root()} (set $MRSTEREO_DATA) | | | | | |")
+            continue
         manifest = read_recording(data_root() / name)
         stereo = manifest.calibration
         times = {"fit": [], "bm": [], "match": []}
@@ -214,6 +217,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="2 frames, 2 thresholds")
     ap.add_argument("--floor-speed", action="store_true", help="the floor fit's time on real recordings")
     args = ap.parse_args(argv)
+    if args.frames < 1:
+        ap.error(f"--frames must be at least 1, got {args.frames}")
     if args.floor_speed:
         return floor_speed(args.frames)
     n_frames = 2 if args.quick else args.frames
