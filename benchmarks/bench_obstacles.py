@@ -173,12 +173,14 @@ def _fmt(summ: dict) -> str:
 
 def floor_speed(n_frames: int) -> int:
     """Print the median time of the 3-D plane floor fit per real recording, against StereoBM and the matcher."""
+    from mrstereo._executor import keep_freed_memory
     from mrstereo.evaluation.baselines import stereo_bm
     from mrstereo.recordings import read_recording
     from mrstereo.recordings.manifest import frame_pair
     from mrstereo.recordings.samples import data_root
     from mrstereo.rejection import reject_uniform as reject
 
+    keep_freed_memory()          # as the mrstereo command does: frame-sized arrays reused, not faulted in anew
     print("| recording | frames | floor fit ms | StereoBM ms | matcher ms | fit / StereoBM | fit / matcher |")
     print("|---|---|---|---|---|---|---|")
     for name in ("euroc_asl_sample", "openloris_sample", "kitti_odometry_06"):
