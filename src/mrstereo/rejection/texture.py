@@ -184,6 +184,7 @@ def patch_statistics(image, *, window_px: int = 9) -> PatchStatistics:
 QUANTIZATION_SIGMA = 12 ** -0.5
 """The noise of rounding to whole gray levels (1 / sqrt(12)): the least noise :func:`image_noise_sigma` returns."""
 
+
 def _gray(image) -> np.ndarray:
     """A checked image as the kernels take it: an 8-bit gray image as it is (no float copy), else float32 gray on
     the 8-bit scale (:func:`mrstereo._checks.gray_float32`)."""
