@@ -31,7 +31,9 @@ points"; "wall ratio": the same in wall-clock time), interleaved runs, on the de
 EuRoC frame (752x480), and the drop test's own time within the frame (the image's row texture, its point image,
 the column pass, the merge, CPU time of the thread it runs on: "drop test share", which the two frames' noise
 does not blur); and of a whole mapper step (the grid and its height and drop layers too) on corridor frames,
-with the layers' share.
+with the layers' share. ``--live N``: the live loop's rate (frames per second) with and without the test on the
+real EuRoC and OpenLORIS frames driven forth and back to N frames, as fast as they go (two matchers, visual odometry,
+the growing map; :func:`measure_live`): the speed of a frame where the robot uses it.
 
 The weak votes (``--weak-n-sigma``, ``'none'``: off; ``--drop-weak-views``) were chosen on seeds 100-119; the
 noise margin (``--n-sigma`` times the disparity error measured on each frame's floor; ``--disparity-sigma``: a
@@ -64,6 +66,7 @@ Usage::
     python benchmarks/bench_drops.py --seeds 200-209 --disparity-sigma 0.25 --n-sigma 3
     python benchmarks/bench_drops.py --real [--frames 24]
     python benchmarks/bench_drops.py --speed [--repeats 15]
+    python benchmarks/bench_drops.py --live 200 --repeats 5
     python benchmarks/bench_drops.py --corridor [--data DIR]
 """
 from __future__ import annotations
@@ -575,6 +578,47 @@ def measure_speed(repeats: int) -> list[dict]:
     return rows + [_mapper_speed(repeats)]
 
 
+def measure_live(repeats: int, n_frames: int) -> list[dict]:
+    """The live loop's rate with and without the drop test: the real frames of the EuRoC and OpenLORIS samples
+    driven forth and back to ``n_frames`` frames, as fast as they go (``mrstereo live`` without ``--realtime``:
+    two matchers busy, nothing dropped; visual odometry, the growing map), runs with and without it alternating;
+    the ratio is the median of each round's (without / with)."""
+    from bench_live import _Looped
+
+    from mrstereo.geometry.drops import DropConfig
+    from mrstereo.pipeline.live import LiveConfig, run_live
+    from mrstereo.pipeline.run import PipelineConfig
+    from mrstereo.recordings import read_recording
+    from mrstereo.recordings.samples import data_root
+    from mrstereo.recordings.sources import RecordingSource
+
+    rows = []
+    for name in ("euroc_asl_sample", "openloris_sample"):
+        if not (data_root() / name).exists():
+            print(f"{name} not found under {data_root()} (set MRSTEREO_DATA)")
+            continue
+        manifest = read_recording(data_root() / name)
+        frames = list(RecordingSource(manifest))
+        rates: dict[str, list[float]] = {"with": [], "without": []}
+        with tempfile.TemporaryDirectory(prefix="bench_drops_live_") as tmp:
+            for k in range(repeats + 1):
+                for key in ("with", "without") if k % 2 else ("without", "with"):
+                    source = _Looped(frames, n_frames, 20.0, calibration=manifest.calibration, mount=manifest.mount)
+                    run = run_live(source, Path(tmp) / f"{key}{k}", calibration=manifest.calibration,
+                                   mount=manifest.mount, config=PipelineConfig(drops=DropConfig() if key == "with"
+                                                                               else None),
+                                   live=LiveConfig(odometry="visual"))
+                    if k:                                           # the first round compiles
+                        rates[key].append(run.rate_hz)
+        ratios = np.divide(rates["without"], rates["with"])
+        size = "x".join(map(str, manifest.calibration.size))
+        rows.append({"input": f"live, {name} {size}, {len(frames)} frames to {n_frames}",
+                     "with drops Hz": float(np.median(rates["with"])),
+                     "without Hz": float(np.median(rates["without"])), "ratio": float(np.median(ratios)),
+                     "ratio min": float(ratios.min()), "ratio max": float(ratios.max())})
+    return rows
+
+
 @contextmanager
 def _timed(owner, name: str, spent: list[float]):
     """Within the block ``owner.name`` adds the CPU seconds of each call to ``spent[0]``: of the calling thread
@@ -672,14 +716,23 @@ def main() -> None:
     parser.add_argument("--data", default=None, help="keep rendered datasets here (reused when present)")
     parser.add_argument("--speed", action="store_true", help="CPU time of a frame with and without the drop test")
     parser.add_argument("--corridor", action="store_true", help="the corridor maps' precision with and without it")
-    parser.add_argument("--repeats", type=int, default=15, help="--speed: runs of each")
+    parser.add_argument("--live", type=int, default=0, metavar="N",
+                        help="the live loop's rate with and without it, N frames a run")
+    parser.add_argument("--repeats", type=int, default=15, help="--speed, --live: runs of each")
     args = parser.parse_args()
+    if args.live < 0 or args.repeats < 1:
+        parser.error("--live must be at least 0 and --repeats at least 1")
     if args.speed:
         from mrstereo._executor import keep_freed_memory
 
         keep_freed_memory()          # as the mrstereo command does: frame-sized arrays reused, not faulted in anew
         for row in measure_speed(args.repeats):
             print("  ".join(f"{k}: {v:.4f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()))
+        return
+    if args.live:
+        for row in measure_live(args.repeats, args.live):
+            print("  ".join(f"{k}: {v:.4f}" if isinstance(v, float) else f"{k}: {v}" for k, v in row.items()),
+                  flush=True)
         return
     from mrstereo.pipeline.run import PipelineConfig
 

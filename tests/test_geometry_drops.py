@@ -115,6 +115,17 @@ def test_exact_disparity_marks_the_ledge_and_not_the_ramp(ledge, ramp):
         at_floor = res.drop_points_robot.copy()
         at_floor[:, 2] = 0.0
         np.testing.assert_array_equal(res.obstacle_points_robot[-len(res.drop_points_robot):], at_floor)
+        # the chain leaves out the rows above the horizon: the same drops and noise margin as the test on the whole
+        # point image (a noisy disparity, so that the floor's residuals sampled at other rows would change them)
+        from mrstereo.geometry.obstacles import first_floor_row
+        noisy = frame.disparity_px + np.random.default_rng(5).normal(0.0, 0.3, frame.disparity_px.shape)
+        chain = detect_obstacles(noisy.astype(np.float32), world.stereo, config=ObstacleConfig(drops=DropConfig()))
+        assert first_floor_row(world.stereo, chain.ground) > 40
+        whole = find_drops(chain.points_robot_image, chain.T_robot_from_cam,
+                           world.stereo.baseline_m * world.stereo.focal_px, doffs_px=world.stereo.doffs_px)
+        assert whole.disparity_sigma_px > 0.2 and len(whole.points_robot) > 100
+        np.testing.assert_array_equal(whole.points_robot, chain.drop_points_robot)
+        np.testing.assert_array_equal(whole.weak_points_robot, chain.drop_weak_points_robot)
         off = detect_obstacles(frame.disparity_px, world.stereo, config=ObstacleConfig(drops=None))
         assert len(off.drop_points_robot) == 0
         assert len(off.obstacle_points_robot) == len(res.obstacle_points_robot) - len(res.drop_points_robot)

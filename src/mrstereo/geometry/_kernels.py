@@ -151,12 +151,15 @@ def obstacle_points(disparity, doffs_px, too_near, near_limit_px, bf, focal_px, 
 
 
 @njit(nogil=True, cache=True)
-def scatter_points(points, pixels, out):
-    """``out`` (H * W, 3) float64 = NaN, then ``out[pixels[i]] = points[i]``: a point image from the listed points.
-    One pass over ``out`` when ``pixels`` increase (as :func:`obstacle_points` lists them); any order is right."""
+def scatter_points(points, pixels, first, out):
+    """``out`` (N, 3) float64 = NaN, then ``out[pixels[i] - first] = points[i]`` for the pixels from ``first`` on: a
+    point image from the listed points (its rows from pixel ``first``'s). One pass over ``out`` when ``pixels``
+    increase (as :func:`obstacle_points` lists them); any order is right."""
     k = 0
     for i in range(pixels.shape[0]):
-        p = pixels[i]
+        p = pixels[i] - first
+        if p < 0 or p >= out.shape[0]:
+            continue
         while k < p:
             out[k, 0] = np.nan
             out[k, 1] = np.nan

@@ -132,10 +132,16 @@ class ObstacleResult:
     @cached_property
     def points_robot_image(self) -> np.ndarray:
         """Robot-frame point of every pixel, (H, W, 3) float64, NaN where there is none (built on first use)."""
+        return self._points_from_row(0)
+
+    def _points_from_row(self, first_row: int) -> np.ndarray:
+        """The rows of :attr:`points_robot_image` from ``first_row`` on (a view of it once built)."""
+        if "points_robot_image" in self.__dict__:
+            return self.__dict__["points_robot_image"][first_row:]
         h, w = self.obstacle_mask.shape
-        image = np.empty((h * w, 3))
-        _kernels.scatter_points(self.points_robot, self.pixels, image)
-        return image.reshape(h, w, 3)
+        image = np.empty(((h - first_row) * w, 3))
+        _kernels.scatter_points(self.points_robot, self.pixels, first_row * w, image)
+        return image.reshape(h - first_row, w, 3)
 
 
 def _rigid(T) -> tuple[np.ndarray, np.ndarray]:
@@ -158,7 +164,12 @@ def first_floor_row(stereo: StereoCamera, ground: GroundPlane, *, pan_rad: float
     _checks.instance("ground", ground, GroundPlane)
     if not ground.success:
         return 0
-    R = T_robot_from_cam_ground(ground, pan_rad=_checks.finite_number("pan_rad", pan_rad))[:3, :3]
+    return _horizon_row(stereo, T_robot_from_cam_ground(ground, pan_rad=_checks.finite_number("pan_rad", pan_rad)))
+
+
+def _horizon_row(stereo: StereoCamera, T_robot_from_cam) -> int:
+    """:func:`first_floor_row` of the camera placed by ``T_robot_from_cam``."""
+    R = T_robot_from_cam[:3, :3]
     k = _rectified_intrinsics(stereo)
     if R[2, 1] >= 0.0:
         return 0
@@ -313,11 +324,16 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
 
 def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleConfig,
                 untextured=None) -> ObstacleResult:
-    """``result`` with the drop test's obstacle points (:func:`.drops.find_drops` on its point image)."""
-    drops = find_drops(result.points_robot_image, result.T_robot_from_cam,
+    """``result`` with the drop test's obstacle points (:func:`.drops.find_drops` on its point image). The rows
+    above the horizon are left out: with the camera above ``min_obstacle_height_m`` their points lie higher than
+    it, neither floor nor below it (the same drops; from an even row, where the floor's residuals are sampled)."""
+    T = result.T_robot_from_cam
+    first = _horizon_row(stereo, T) if T[2, 3] > config.min_obstacle_height_m else 0
+    first -= first % 2
+    drops = find_drops(result._points_from_row(first), T,
                        float(stereo.baseline_m) * float(stereo.focal_px), config=config.drops,
                        floor_top_m=config.min_obstacle_height_m, max_range_m=config.max_range_m,
-                       doffs_px=float(stereo.doffs_px), untextured=untextured)
+                       doffs_px=float(stereo.doffs_px), untextured=None if untextured is None else untextured[first:])
     found = drops.points_robot
     if not len(found) and not len(drops.candidates_robot) and not len(drops.weak_points_robot):
         return result
@@ -326,5 +342,6 @@ def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleCo
                   drop_points_robot=found, drop_candidates_robot=drops.candidates_robot,
                   drop_weak_points_robot=drops.weak_points_robot,
                   message=result.message + f"; {int(np.count_nonzero(drops.edge_columns))} columns with a drop")
-    out.__dict__["points_robot_image"] = result.points_robot_image      # computed once
+    if "points_robot_image" in result.__dict__:
+        out.__dict__["points_robot_image"] = result.points_robot_image      # computed once
     return out
