@@ -91,26 +91,30 @@ def row_texture(gray, rows, cols, scale, first_row, out):
     """``out`` (H, W) = ``scale`` times the RMS of the horizontal Sobel derivative of ``gray`` (H, W) over windows
     of ``rows`` x ``cols`` pixels (odd; borders reflected, 101): window sums running down the rows (each column's;
     a row's squared derivative added as the window reaches it, again dropped as it leaves: no image-sized
-    scratch) and, as differences of prefix sums, along them. OpenCV's ``Sobel`` and ``sqrBoxFilter`` (the same
-    borders) give the same to float32 rounding. The rows above ``first_row`` are NaN, not computed."""
+    scratch but the window's rows, each computed once) and, as differences of prefix sums, along them. OpenCV's
+    ``Sobel`` and ``sqrBoxFilter`` (the same borders) give the same to float32 rounding. The rows above
+    ``first_row`` are NaN, not computed."""
     h, w = gray.shape
     hr, hc = rows // 2, cols // 2
     root_scale = np.float32(scale / math.sqrt(rows * cols))
     column_sums = np.zeros(w)
-    added, dropped = np.empty(w, np.float32), np.empty(w, np.float32)
+    window = np.empty((rows, w), np.float32)        # the window's rows' squared derivatives: row k in k % rows
+    added = np.empty(w, np.float32)
     prefix = np.zeros(w + 2 * hc + 1)
     for i in range(min(first_row, h)):
         out[i, :] = np.nan
     for k in range(first_row - hr, first_row + hr + 1):
-        _squared_sobel_x(gray, _reflect(k, h), added)
+        kept = window[k % rows]
+        _squared_sobel_x(gray, _reflect(k, h), kept)
         for j in range(w):
-            column_sums[j] += added[j]
+            column_sums[j] += kept[j]
     for i in range(first_row, h):
-        if i > first_row:                           # slide the rows' window down by one
-            _squared_sobel_x(gray, _reflect(i + hr, h), added)
-            _squared_sobel_x(gray, _reflect(i - 1 - hr, h), dropped)
+        if i > first_row:                           # slide the rows' window down by one: row i + hr replaces
+            _squared_sobel_x(gray, _reflect(i + hr, h), added)      # row i - 1 - hr in its place
+            kept = window[(i + hr) % rows]
             for j in range(w):
-                column_sums[j] += np.float64(added[j]) - np.float64(dropped[j])
+                column_sums[j] += np.float64(added[j]) - np.float64(kept[j])
+                kept[j] = added[j]
         total = 0.0
         for k in range(-hc, w + hc):                # the row's window sums, as differences of its prefix sums
             total += column_sums[k] if 0 <= k < w else column_sums[_reflect(k, w)]
