@@ -126,6 +126,15 @@ def test_exact_disparity_marks_the_ledge_and_not_the_ramp(ledge, ramp):
         assert whole.disparity_sigma_px > 0.2 and len(whole.points_robot) > 100
         np.testing.assert_array_equal(whole.points_robot, chain.drop_points_robot)
         np.testing.assert_array_equal(whole.weak_points_robot, chain.drop_weak_points_robot)
+        # the drop test's point image is written in the triangulation pass: with the camera below
+        # min_obstacle_height_m it is the whole image, the listed points scattered
+        from mrstereo.geometry import _kernels
+        low = detect_obstacles(noisy.astype(np.float32), world.stereo,
+                               config=ObstacleConfig(drops=DropConfig(), min_obstacle_height_m=1.0))
+        scattered = np.empty((noisy.size, 3))
+        _kernels.scatter_points(low.points_robot, low.pixels, scattered)
+        assert np.isfinite(low.points_robot_image).all(axis=-1).sum() == len(low.points_robot) > 10000
+        np.testing.assert_array_equal(low.points_robot_image, scattered.reshape(*noisy.shape, 3))
         off = detect_obstacles(frame.disparity_px, world.stereo, config=ObstacleConfig(drops=None))
         assert len(off.drop_points_robot) == 0
         assert len(off.obstacle_points_robot) == len(res.obstacle_points_robot) - len(res.drop_points_robot)

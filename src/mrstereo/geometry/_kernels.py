@@ -93,15 +93,17 @@ def count_points(disparity, doffs_px, too_near, near_limit_px):
 @njit(nogil=True, cache=True)
 def obstacle_points(disparity, doffs_px, too_near, near_limit_px, bf, focal_px, cx_px, cy_px, fy_px, R, t,
                     max_range_m, min_height_m, max_height_m, floor_tolerance_m,
-                    points, pixels, obstacle_points, floor_points, obstacle, floor):
+                    points, pixels, obstacle_points, floor_points, obstacle, floor, image, first_row):
     """Triangulation (eq. 14-16), robot transform and height band in one pass over the valid pixels.
 
     Each pixel with ``d + doffs > 0`` (a ``too_near`` pixel at ``near_limit_px``; ``too_near`` (H, W)
     or (0, 0)) and a finite point goes to ``points`` and its flat index to ``pixels`` (raster
     order); within ``max_range`` it is an obstacle for ``min_height < z <= max_height``, else floor
     for ``|z| <= floor_tolerance`` unless too near, copied to ``obstacle_points`` / ``floor_points``
-    and marked in the masks. Returns ``(n_points, n_obstacle, n_floor, n_floor_band,
-    n_obstacle_too_near)``, ``n_floor_band`` counted before obstacles and too-near pixels are removed.
+    and marked in the masks. ``image`` (H - ``first_row``, W, 3), or (0, W, 3) for none: the point
+    image of the rows from ``first_row`` on, NaN where no point. Returns ``(n_points, n_obstacle,
+    n_floor, n_floor_band, n_obstacle_too_near)``, ``n_floor_band`` counted before obstacles and
+    too-near pixels are removed.
     """
     h, w = disparity.shape
     has_near = too_near.shape[0] > 0
@@ -111,7 +113,13 @@ def obstacle_points(disparity, doffs_px, too_near, near_limit_px, bf, focal_px, 
     n_floor_band = 0
     n_near = 0
     for v in range(h):
+        row = v - first_row
+        imaged = 0 <= row < image.shape[0]
         for u in range(w):
+            if imaged:
+                image[row, u, 0] = np.nan
+                image[row, u, 1] = np.nan
+                image[row, u, 2] = np.nan
             near = has_near and too_near[v, u]
             d = (near_limit_px if near else np.float64(disparity[v, u])) + doffs_px
             obstacle[v, u] = False
@@ -126,6 +134,10 @@ def obstacle_points(disparity, doffs_px, too_near, near_limit_px, bf, focal_px, 
             points[n, 2] = pz
             pixels[n] = v * w + u
             n += 1
+            if imaged:
+                image[row, u, 0] = px
+                image[row, u, 1] = py
+                image[row, u, 2] = pz
             in_band = pz > min_height_m and pz <= max_height_m
             in_floor_band = abs(pz) <= floor_tolerance_m
             if not (in_band or in_floor_band):
@@ -151,15 +163,12 @@ def obstacle_points(disparity, doffs_px, too_near, near_limit_px, bf, focal_px, 
 
 
 @njit(nogil=True, cache=True)
-def scatter_points(points, pixels, first, out):
-    """``out`` (N, 3) float64 = NaN, then ``out[pixels[i] - first] = points[i]`` for the pixels from ``first`` on: a
-    point image from the listed points (its rows from pixel ``first``'s). One pass over ``out`` when ``pixels``
-    increase (as :func:`obstacle_points` lists them); any order is right."""
+def scatter_points(points, pixels, out):
+    """``out`` (H * W, 3) float64 = NaN, then ``out[pixels[i]] = points[i]``: a point image from the listed points.
+    One pass over ``out`` when ``pixels`` increase (as :func:`obstacle_points` lists them); any order is right."""
     k = 0
     for i in range(pixels.shape[0]):
-        p = pixels[i] - first
-        if p < 0 or p >= out.shape[0]:
-            continue
+        p = pixels[i]
         while k < p:
             out[k, 0] = np.nan
             out[k, 1] = np.nan

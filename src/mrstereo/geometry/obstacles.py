@@ -132,16 +132,10 @@ class ObstacleResult:
     @cached_property
     def points_robot_image(self) -> np.ndarray:
         """Robot-frame point of every pixel, (H, W, 3) float64, NaN where there is none (built on first use)."""
-        return self._points_from_row(0)
-
-    def _points_from_row(self, first_row: int) -> np.ndarray:
-        """The rows of :attr:`points_robot_image` from ``first_row`` on (a view of it once built)."""
-        if "points_robot_image" in self.__dict__:
-            return self.__dict__["points_robot_image"][first_row:]
         h, w = self.obstacle_mask.shape
-        image = np.empty(((h - first_row) * w, 3))
-        _kernels.scatter_points(self.points_robot, self.pixels, first_row * w, image)
-        return image.reshape(h - first_row, w, 3)
+        image = np.empty((h * w, 3))
+        _kernels.scatter_points(self.points_robot, self.pixels, image)
+        return image.reshape(h, w, 3)
 
 
 def _rigid(T) -> tuple[np.ndarray, np.ndarray]:
@@ -303,13 +297,21 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     obstacle_points, floor_points = np.empty((n, 3)), np.empty((n, 3))
     obstacle = np.empty((h, w), dtype=bool)
     floor = np.empty((h, w), dtype=bool)
+    # the drop test's point image, from the first row it needs (rows above the horizon hold nothing at floor level
+    # or below it when the camera is higher than min_obstacle_height_m; from an even row, where it samples the
+    # floor's residuals)
+    first = 0
+    if config.drops is not None and T[2, 3] > config.min_obstacle_height_m:
+        first = _horizon_row(stereo, T)
+        first -= first % 2
+    image = np.empty((h - first if config.drops is not None else 0, w, 3))
     # eq. (14)-(16), robot frame, height band and range limit, in one pass over the valid pixels
     n, n_obstacle, n_floor, n_floor_band, n_near = _kernels.obstacle_points(
         d, doffs, near_arg, limit, **_rectified_intrinsics(stereo), R=R, t=t,
         max_range_m=float(config.max_range_m), min_height_m=float(config.min_obstacle_height_m),
         max_height_m=float(config.max_obstacle_height_m), floor_tolerance_m=float(config.floor_tolerance_m),
         points=points, pixels=pixels, obstacle_points=obstacle_points, floor_points=floor_points, obstacle=obstacle,
-        floor=floor)
+        floor=floor, image=image, first_row=first)
     result = ObstacleResult(points_robot=points[:n], pixels=pixels[:n], obstacle_points_robot=obstacle_points[:n_obstacle],
                             floor_points_robot=floor_points[:n_floor], obstacle_mask=obstacle, floor_mask=floor,
                             ground=ground, T_robot_from_cam=T, success=True,
@@ -319,18 +321,19 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
                                     + (f" ({n_near} obstacle points too near, placed at the near limit)"
                                        if n_near else ""),
                             too_near_mask=np.zeros((h, w), dtype=bool) if near is None else near)
-    return result if config.drops is None else _with_drops(result, stereo, config, untextured)
+    if config.drops is None:
+        return result
+    if first == 0:
+        result.__dict__["points_robot_image"] = image       # the whole point image: computed once
+    return _with_drops(result, stereo, config, image, first, untextured)
 
 
-def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleConfig,
-                untextured=None) -> ObstacleResult:
-    """``result`` with the drop test's obstacle points (:func:`.drops.find_drops` on its point image). The rows
-    above the horizon are left out: with the camera above ``min_obstacle_height_m`` their points lie higher than
-    it, neither floor nor below it (the same drops; from an even row, where the floor's residuals are sampled)."""
+def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleConfig, image: np.ndarray,
+                first: int, untextured=None) -> ObstacleResult:
+    """``result`` with the drop test's obstacle points (:func:`.drops.find_drops` on its point ``image`` of the
+    rows from ``first`` on)."""
     T = result.T_robot_from_cam
-    first = _horizon_row(stereo, T) if T[2, 3] > config.min_obstacle_height_m else 0
-    first -= first % 2
-    drops = find_drops(result._points_from_row(first), T,
+    drops = find_drops(image, T,
                        float(stereo.baseline_m) * float(stereo.focal_px), config=config.drops,
                        floor_top_m=config.min_obstacle_height_m, max_range_m=config.max_range_m,
                        doffs_px=float(stereo.doffs_px), untextured=None if untextured is None else untextured[first:])
