@@ -297,14 +297,8 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     obstacle_points, floor_points = np.empty((n, 3)), np.empty((n, 3))
     obstacle = np.empty((h, w), dtype=bool)
     floor = np.empty((h, w), dtype=bool)
-    # the drop test's point image, from the first row it needs (rows above the horizon hold nothing at floor level
-    # or below it when the camera is higher than min_obstacle_height_m; from an even row, where it samples the
-    # floor's residuals)
-    first = 0
-    if config.drops is not None and T[2, 3] > config.min_obstacle_height_m:
-        first = _horizon_row(stereo, T)
-        first -= first % 2
-    image = np.empty((h - first if config.drops is not None else 0, w, 3))
+    first = 0 if config.drops is None else _drop_first_row(stereo, T, config)
+    image = np.empty((h - first if config.drops is not None else 0, w, 3))     # the drop test's point image
     # eq. (14)-(16), robot frame, height band and range limit, in one pass over the valid pixels
     n, n_obstacle, n_floor, n_floor_band, n_near = _kernels.obstacle_points(
         d, doffs, near_arg, limit, **_rectified_intrinsics(stereo), R=R, t=t,
@@ -328,6 +322,15 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
     return _with_drops(result, stereo, config, image, first, untextured)
 
 
+def _drop_first_row(stereo: StereoCamera, T_robot_from_cam, config: ObstacleConfig) -> int:
+    """The first row the drop test needs: the rows above the horizon hold nothing at floor level or below it when the
+    camera is higher than ``min_obstacle_height_m``; an even row, where it samples the floor's residuals."""
+    if T_robot_from_cam[2, 3] <= config.min_obstacle_height_m:
+        return 0
+    first = _horizon_row(stereo, T_robot_from_cam)
+    return first - first % 2
+
+
 def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleConfig, image: np.ndarray,
                 first: int, untextured=None) -> ObstacleResult:
     """``result`` with the drop test's obstacle points (:func:`.drops.find_drops` on its point ``image`` of the
@@ -340,8 +343,10 @@ def _with_drops(result: ObstacleResult, stereo: StereoCamera, config: ObstacleCo
     found = drops.points_robot
     if not len(found) and not len(drops.candidates_robot) and not len(drops.weak_points_robot):
         return result
+    # (weak points or candidates alone add no obstacle point: the frame's list is kept, not copied)
     out = replace(result, obstacle_points_robot=np.concatenate([result.obstacle_points_robot,
-                                                                drops.obstacle_points_robot]),
+                                                                drops.obstacle_points_robot])
+                  if len(found) else result.obstacle_points_robot,
                   drop_points_robot=found, drop_candidates_robot=drops.candidates_robot,
                   drop_weak_points_robot=drops.weak_points_robot,
                   message=result.message + f"; {int(np.count_nonzero(drops.edge_columns))} columns with a drop")
