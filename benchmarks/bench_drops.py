@@ -585,8 +585,8 @@ def measure_live(repeats: int, n_frames: int) -> list[dict]:
     """The live loop's rate with and without the drop test: the real frames of the EuRoC and OpenLORIS samples
     driven forth and back to ``n_frames`` frames, as fast as they go (``mrstereo live`` without ``--realtime``:
     two matchers busy, nothing dropped; visual odometry, the growing map; freed memory kept for reuse as the
-    command keeps it), runs with and without it alternating;
-    the ratio is the median of each round's (without / with)."""
+    command keeps it), runs with and without it alternating; the ratio is the median of each round's (without /
+    with), and the same for the process's CPU time per frame (with / without)."""
     from bench_live import _Looped
 
     from mrstereo.geometry.drops import DropConfig
@@ -604,6 +604,7 @@ def measure_live(repeats: int, n_frames: int) -> list[dict]:
         manifest = read_recording(data_root() / name)
         frames = list(RecordingSource(manifest))
         rates: dict[str, list[float]] = {"with": [], "without": []}
+        cpu: dict[str, list[float]] = {"with": [], "without": []}
         with tempfile.TemporaryDirectory(prefix="bench_drops_live_") as tmp:
             for k in range(repeats + 1):
                 for key in ("with", "without") if k % 2 else ("without", "with"):
@@ -614,12 +615,17 @@ def measure_live(repeats: int, n_frames: int) -> list[dict]:
                                    live=LiveConfig(odometry="visual"))
                     if k:                                           # the first round compiles
                         rates[key].append(run.rate_hz)
+                        metrics = run.metrics()
+                        cpu[key].append(1000.0 * metrics["cpu_s"]["process"] / max(metrics["frames_processed"], 1))
         ratios = np.divide(rates["without"], rates["with"])
         size = "x".join(map(str, manifest.calibration.size))
         rows.append({"input": f"live, {name} {size}, {len(frames)} frames to {n_frames}",
                      "with drops Hz": float(np.median(rates["with"])),
                      "without Hz": float(np.median(rates["without"])), "ratio": float(np.median(ratios)),
-                     "ratio min": float(ratios.min()), "ratio max": float(ratios.max())})
+                     "ratio min": float(ratios.min()), "ratio max": float(ratios.max()),
+                     "cpu ms per frame with": float(np.median(cpu["with"])),
+                     "without": float(np.median(cpu["without"])),
+                     "cpu ratio": float(np.median(np.divide(cpu["with"], cpu["without"])))})
     return rows
 
 

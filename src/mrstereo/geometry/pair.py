@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -243,14 +243,20 @@ class Observed:
     disparity_px: np.ndarray | None = None
     left_rect: np.ndarray | None = None
     right_rect: np.ndarray | None = None
-    points_robot_image: np.ndarray | None = None
-    """(H, W, 3) robot-frame point of every pixel (NaN: none), with ``keep_images``."""
+    _obstacles: ObstacleResult | None = field(default=None, repr=False)
+    """The frame's 3-D result with ``keep_images``: its point image is built only when asked for."""
     floor_fit: GroundPlane | None = None
     """The floor fitted without the mount (``fit_floor``: a given mount being checked)."""
     frame: object | None = None
     """The :class:`~mrstereo.recordings.sources.StereoFrame` itself while the floor is not known (kept to be
     mapped once it is)."""
     time_s: float = 0.0
+
+    @property
+    def points_robot_image(self) -> np.ndarray | None:
+        """(H, W, 3) robot-frame point of every pixel (NaN: none), with ``keep_images`` (built on first use: the
+        live loop and the map never need it)."""
+        return None if self._obstacles is None else self._obstacles.points_robot_image
 
 
 def _drop_data(obs, on: bool) -> dict:
@@ -303,5 +309,5 @@ def observe_pair(frame, stereo: StereoCamera, mount: CameraMount | None, config,
                     scan=replace(result.scan, stamp_s=float(frame.stamp_s)),
                     disparity_px=pair.disparity_px if keep_images else None,
                     left_rect=pair.left_rect if keep_images else None, right_rect=right if keep_images else None,
-                    points_robot_image=obs.points_robot_image if keep_images else None,
+                    _obstacles=obs if keep_images else None,
                     time_s=time.perf_counter() - start)
