@@ -1083,3 +1083,35 @@ def test_the_row_texture_is_computed_from_the_first_row_that_can_see_the_floor()
     assert np.isnan(part[:42]).all()
     with pytest.raises(ValueError, match="first_row"):
         row_texture(image, first_row=-1)
+
+
+def test_floor_nearer_than_the_near_limit_is_no_drop():
+    """A camera pitched down 35 degrees sees the floor nearer than the near limit in its bottom rows: the matcher
+    flags them too near, and placed at the near limit their points lie below the floor. The drop test never sees
+    them (no drop, candidate or weak point); the point cloud keeps them as before (fail-safe obstacle rule)."""
+    from mrstereo import CameraMount, StereoCamera
+    from mrstereo.camera import Camera
+    from mrstereo.geometry import ground_from_mount
+    from mrstereo.geometry.ground import T_robot_from_cam_ground
+
+    cam = Camera(width=160, height=120, fx=100.0, fy=100.0, cx=80.0, cy=60.0)
+    stereo = StereoCamera.ideal(cam, 0.12)
+    mount = CameraMount.from_xyz_rpy((0.0, 0.0, 0.5), (0.0, math.radians(35.0), 0.0))
+    T = T_robot_from_cam_ground(ground_from_mount(mount))
+    v, u = np.mgrid[0:120, 0:160].astype(float)
+    rays = np.stack([(u - 80.0) / 100.0, (v - 60.0) / 100.0, np.ones_like(u)], -1) @ T[:3, :3].T
+    depth = np.where(rays[..., 2] < 0, 0.5 / -np.minimum(rays[..., 2], -1e-9), np.nan)    # camera z = ray scale
+    truth = (0.12 * 100.0 / depth).astype(np.float32)
+    limit = 20.0                                                  # the near limit: 0.6 m of depth
+    too_near = truth > limit
+    assert 10 <= np.count_nonzero(too_near.any(axis=1)) < 60      # the bottom rows, floor nearer than 0.6 m
+    d = np.where(too_near, np.nan, truth).astype(np.float32)
+    config = ObstacleConfig(drops=DropConfig())
+    obs = detect_obstacles(d, stereo, mount=mount, config=config, too_near=too_near, near_limit_px=limit)
+    assert obs.success
+    assert len(obs.drop_points_robot) == 0 and len(obs.drop_candidates_robot) == 0
+    assert len(obs.drop_weak_points_robot) == 0
+    # the placements themselves lie below the floor, in the cloud as before
+    image = obs.points_robot_image
+    assert np.all(image[too_near][:, 2] < 0.0)
+    assert np.isfinite(image[~too_near & np.isfinite(d)]).all()

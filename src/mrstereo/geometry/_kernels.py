@@ -101,7 +101,9 @@ def obstacle_points(disparity, doffs_px, too_near, near_limit_px, bf, focal_px, 
     order); within ``max_range`` it is an obstacle for ``min_height < z <= max_height``, else floor
     for ``|z| <= floor_tolerance`` unless too near, copied to ``obstacle_points`` / ``floor_points``
     and marked in the masks. ``image`` (H - ``first_row``, W, 3), or (0, W, 3) for none: the point
-    image of the rows from ``first_row`` on, NaN where no point. Returns ``(n_points, n_obstacle,
+    image of the rows from ``first_row`` on, NaN where no point and where too near (placed at the near
+    limit, a too-near floor pixel lies below the floor: its surface is only known to lie nearer, no
+    evidence for the drop test). Returns ``(n_points, n_obstacle,
     n_floor, n_floor_band, n_obstacle_too_near)``, ``n_floor_band`` counted before obstacles and
     too-near pixels are removed.
     """
@@ -134,7 +136,7 @@ def obstacle_points(disparity, doffs_px, too_near, near_limit_px, bf, focal_px, 
             points[n, 2] = pz
             pixels[n] = v * w + u
             n += 1
-            if imaged:
+            if imaged and not near:
                 image[row, u, 0] = px
                 image[row, u, 1] = py
                 image[row, u, 2] = pz

@@ -148,7 +148,8 @@ def find_drops(points_robot_image, T_robot_from_cam, baseline_focal_m_px: float,
     ----------
     points_robot_image : ndarray of shape (H, W, 3)
         Robot-frame point of every pixel (z: height above the floor), NaN where none
-        (``ObstacleResult.points_robot_image``).
+        (``ObstacleResult.points_robot_image``; :func:`mrstereo.geometry.detect_obstacles` leaves out its
+        too-near pixels: placed at the near limit, a floor nearer than that would lie below the floor).
     T_robot_from_cam : ndarray of shape (4, 4)
         Places the camera (the sight lines' origin).
     baseline_focal_m_px : float

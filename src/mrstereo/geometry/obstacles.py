@@ -317,7 +317,7 @@ def detect_obstacles(disparity_px, stereo: StereoCamera, *, mount: CameraMount |
                             too_near_mask=np.zeros((h, w), dtype=bool) if near is None else near)
     if config.drops is None:
         return result
-    if first == 0:
+    if first == 0 and near is None:
         result.__dict__["points_robot_image"] = image       # the whole point image: computed once
     return _with_drops(result, stereo, config, image, first, untextured)
 
